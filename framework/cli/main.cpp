@@ -1,0 +1,145 @@
+// exid — command line.
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <iostream>
+#include <mutex>
+
+#include "commands.hpp"
+#include "exid/config.hpp"
+#include "exid/context.hpp"
+#include "exid/error.hpp"
+#include "exid/registry.hpp"
+#include "exid/runner.hpp"
+
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void onSignal(int) { g_stop = true; }
+
+/// A progress bar on a terminal; a line every few seconds otherwise.
+class ProgressPrinter {
+ public:
+  ProgressPrinter() : tty_(::isatty(STDERR_FILENO) != 0) {}
+  void operator()(const std::string& stage, double f, const std::string& text) {
+    if (exid::logLevel() < exid::LogLevel::Info) return;
+    std::lock_guard<std::mutex> lock(m_);
+    auto now = std::chrono::steady_clock::now();
+    if (tty_) {
+      const int width = 30;
+      int filled = static_cast<int>(f * width + 0.5);
+      filled = std::max(0, std::min(width, filled));
+      std::cerr << fmt::format("\r[exid] {:<14} [{}{}] {:3.0f}% {:<40}", stage, std::string(filled, '#'),
+                               std::string(width - filled, '.'), 100.0 * f, text.substr(0, 40));
+      if (f >= 1.0) std::cerr << '\n';
+      std::cerr.flush();
+    } else if (f >= 1.0 || now - last_ > std::chrono::seconds(2)) {
+      std::cerr << fmt::format("[exid] {} {:3.0f}% {}\n", stage, 100.0 * f, text);
+      last_ = now;
+    }
+  }
+
+ private:
+  bool tty_;
+  std::mutex m_;
+  std::chrono::steady_clock::time_point last_{};
+};
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  CLI::App app{"exid — experimental identification of robot and payload dynamics, and the "
+               "design of exciting trajectories"};
+  app.require_subcommand(1);
+  std::vector<std::string> plugin_paths;
+  bool verbose = false, quiet = false;
+  app.add_option("--plugin-path", plugin_paths, "extra directory with plugin libraries (searched first)")
+      ->take_all();
+  app.add_flag("-v,--verbose", verbose, "more log output");
+  app.add_flag("-q,--quiet", quiet, "only errors");
+
+  exid::Registry registry;
+  auto setup = [&]() {
+    exid::setLogLevel(quiet ? exid::LogLevel::Quiet : (verbose ? exid::LogLevel::Debug : exid::LogLevel::Info));
+    for (const auto& p : plugin_paths) registry.addSearchPath(p);
+    registry.scan();
+  };
+
+  // exid run
+  std::string study_file, out_dir;
+  auto* run = app.add_subcommand("run", "run a whole study");
+  run->add_option("study", study_file, "study YAML file")->required();
+  run->add_option("--out", out_dir, "output folder (default: out/<study name>)");
+
+  // exid validate
+  std::string validate_file;
+  auto* validate = app.add_subcommand("validate", "check a study file without running it");
+  validate->add_option("study", validate_file, "study YAML file")->required();
+
+  // exid plugins [KIND] | exid plugins info NAME
+  std::vector<std::string> plugins_args;
+  auto* plugins = app.add_subcommand("plugins", "list plugins: exid plugins [KIND] | exid plugins info NAME");
+  plugins->add_option("args", plugins_args, "KIND, or 'info NAME'");
+
+  exid::cli::Commands extra = exid::cli::addCommands(app, registry);
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    return app.exit(e);
+  }
+
+  std::signal(SIGINT, onSignal);
+  std::signal(SIGTERM, onSignal);
+
+  try {
+    setup();
+    if (*run || *validate) {
+      const std::string file = *run ? study_file : validate_file;
+      exid::StudyConfig cfg = exid::loadStudy(file, registry);
+      if (*validate) {
+        std::cout << fmt::format("{}: valid (configuration hash {})\n", file, cfg.hash());
+        std::cout << cfg.resolvedYaml();
+        return 0;
+      }
+      if (out_dir.empty()) out_dir = "out/" + cfg.name;
+      exid::RunOptions opt;
+      opt.out_dir = out_dir;
+      ProgressPrinter printer;
+      opt.progress = [&printer](const std::string& s, double f, const std::string& t) { printer(s, f, t); };
+      opt.cancelled = [] { return g_stop.load(); };
+      exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
+      exid::StudyResult r = exid::runStudy(cfg, registry, opt);
+      std::cout << exid::briefTable(r.summary);
+      if (!r.ok) {
+        std::cerr << fmt::format("exid: study '{}' failed: {}\n(details in {}/summary.json)\n", cfg.name,
+                                 r.message, out_dir);
+        return 1;
+      }
+      std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir, out_dir);
+      return 0;
+    }
+    if (*plugins) {
+      if (!plugins_args.empty() && plugins_args[0] == "info") {
+        if (plugins_args.size() != 2) throw exid::Error("usage: exid plugins info NAME");
+        std::cout << exid::cli::pluginInfoText(registry, plugins_args[1]);
+        return 0;
+      }
+      std::optional<exid::PluginKind> kind;
+      if (!plugins_args.empty()) kind = exid::pluginKindFromString(plugins_args[0]);
+      std::cout << exid::cli::pluginListText(registry, kind);
+      return registry.plugins().empty() ? 1 : 0;
+    }
+    return extra.run();
+  } catch (const exid::Error& e) {
+    std::cerr << "exid: " << e.what() << '\n';
+    return 2;
+  } catch (const std::exception& e) {
+    std::cerr << "exid: unexpected error: " << e.what() << '\n';
+    return 3;
+  }
+}

@@ -1,0 +1,79 @@
+// exid — study files. A study is a YAML file whose sections each name a plugin:
+//
+//   name: puma_demo            # optional
+//   seed: 1                    # optional, default 1
+//   robot:      {type: puma560, params: {...}}
+//   model:      {type: differential, params: {...}}      # or a list, each with `weight`
+//   excitation:                                          # optional
+//     trajectory: {type: fourier, params: {...}}
+//     criterion:  {type: cond}
+//     optimizer:  {type: nlopt, params: {...}}
+//   experiment: {type: simulate, params: {...}}
+//   estimator:  {type: batch_ls, params: {...}}
+//   validation: {type: simulate, params: {...}}          # optional: a second experiment
+//   report:     {type: standard, params: {...}}          # optional
+//
+// The whole file is validated before any work starts; every problem is reported at once, each
+// naming the file, the line and the key path, e.g.
+//   study.yaml:14: estimator.params.forgetting_factor = 1.2: must be in (0, 1]
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "exid/json.hpp"
+#include "exid/params.hpp"
+#include "exid/plugin.hpp"
+
+namespace exid {
+
+class Registry;
+
+struct PluginSpec {
+  PluginKind kind = PluginKind::Robot;
+  std::string type;      // plugin name
+  ParamSet params;       // resolved: defaults filled in, paths absolute
+  std::string key_path;  // "estimator", "model[1]", "excitation.optimizer"
+  int line = 0;          // 1-based line of the section in the file (0 = unknown)
+  double weight = 1.0;   // for stacked models
+};
+
+struct ReportOptions {
+  bool plots = true;
+  std::string title;
+};
+
+struct StudyConfig {
+  std::filesystem::path file;  // the study file ("" when parsed from text)
+  std::filesystem::path dir;   // relative paths resolve here
+  std::string name;
+  std::uint64_t seed = 1;
+  double budget_s = 0.0;  // whole-study wall-clock budget (0 = none)
+  std::optional<PluginSpec> robot;
+  std::vector<PluginSpec> models;
+  std::optional<PluginSpec> trajectory, criterion, optimizer;  // excitation (all or none)
+  std::optional<PluginSpec> experiment, estimator, validation;
+  ReportOptions report;
+
+  bool hasExcitation() const { return optimizer.has_value(); }
+  /// The resolved study as YAML text (every default filled in), and as JSON.
+  std::string resolvedYaml() const;
+  Json resolvedJson() const;
+  /// Hash (16 hex digits, FNV-1a 64) of the resolved study: identifies a configuration.
+  std::string hash() const;
+};
+
+/// Parses and validates. Throws exid::Error with every problem found, one per line.
+StudyConfig loadStudy(const std::filesystem::path& file, const Registry& registry);
+StudyConfig parseStudy(const std::string& yaml_text, const std::string& source_name,
+                       const std::filesystem::path& base_dir, const Registry& registry);
+
+/// Resolves a params mapping given as YAML text for one plugin (used by single-stage commands
+/// and matrices): "{max_iterations: 10}" -> ParamSet with defaults. Throws like parseStudy.
+ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
+                       const std::string& context, const std::filesystem::path& base_dir);
+
+}  // namespace exid

@@ -1,0 +1,54 @@
+// exid — the full actuator-side regressor: rigid-body columns mapped through the transmission,
+// plus drive columns (rotor inertia Ia, Coulomb Fc, viscous Fv, offset OFF) per measured
+// coordinate.
+//
+// Measured coordinates qm (motor-side or absolute angles) and joint coordinates q:
+//   q = T qm + q0,  qd = T qdm,  qdd = T qddm,  tau_m = T^T tau   (T = model.transmission)
+// Full parameter vector: the 10n standard inertial parameters, then for each measured
+// coordinate j the enabled drive parameters in the order Ia_j, Fc_j, Fv_j, OFF_j.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "exid/dynamics.hpp"
+
+namespace exid {
+
+struct DriveColumns {
+  bool rotor_inertia = false;
+  bool coulomb = false;
+  bool viscous = false;
+  bool offset = false;
+  int count() const { return rotor_inertia + coulomb + viscous + offset; }
+};
+
+std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
+Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
+int numParameters(const RobotModel& model, const DriveColumns& cols);
+
+/// Joint coordinates from measured ones (identity when the model has no transmission).
+void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm,
+                     const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm, Eigen::VectorXd* q,
+                     Eigen::VectorXd* qd, Eigen::VectorXd* qdd);
+/// Measured coordinates from joint ones (the transmission must be invertible).
+void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm,
+                     Eigen::VectorXd* qddm);
+
+/// Y (n x numParameters) in measured coordinates: tau_m = Y * parameterValues(model, cols).
+void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                       const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                       const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y);
+/// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative).
+void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                          const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                          const Eigen::VectorXd& qddm, const Eigen::MatrixXd& G,
+                          Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm);
+/// Full actuator torque with the model's own parameters (rigid body + drives).
+Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
+                               const DriveColumns& cols, const Eigen::VectorXd& qm,
+                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
+
+}  // namespace exid

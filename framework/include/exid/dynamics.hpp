@@ -1,0 +1,96 @@
+// exid — rigid-body algorithms on a RobotModel: regressors (torque, energy, payload wrench,
+// payload torque), their exact derivatives, inverse and forward dynamics, mass matrix.
+//
+// All functions are free functions f(model, data, ...) in the Pinocchio style: the RobotModel is
+// immutable and shared between threads; each thread owns a DynamicsData workspace.
+// Coordinates are JOINT coordinates of the tree (not the measured coordinates of a transmission;
+// see drive.hpp for those). Gravity is model.gravity, in the base frame.
+//
+// Parameter order per body (DESIGN.md §3): XX XY XZ YY YZ ZZ MX MY MZ M about the body frame
+// origin, in the body frame. The identity  tau = Y(q, qd, qdd) * pi  holds with
+// pi = model.inertialParameters().
+// Payload parameters phi (DESIGN.md §4): M MX MY MZ XX XY XZ YY YZ ZZ about the sensor frame
+// origin, in the sensor frame. Wrench order: fx fy fz mx my mz, in the sensor frame.
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+
+#include "exid/robot_model.hpp"
+
+namespace exid {
+
+/// Mutable workspace of the algorithms below. Create one per thread with makeDynamicsData().
+struct DynamicsData;
+struct DynamicsDataDeleter {
+  void operator()(DynamicsData* d) const;
+};
+using DynamicsDataPtr = std::unique_ptr<DynamicsData, DynamicsDataDeleter>;
+DynamicsDataPtr makeDynamicsData(const RobotModel& model);
+
+/// Joint-torque regressor: Y is n x 10n, tau = Y * pi. O(n^2).
+void torqueRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                     Eigen::Ref<Eigen::MatrixXd> Y);
+
+/// Energy regressors (1 x 10n each): kinetic energy T = kinetic * pi, potential energy
+/// U = potential * pi with U = -sum_j M_j g^T c_j (c_j the centre of mass in the base frame).
+void energyRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                     const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
+                     Eigen::Ref<Eigen::RowVectorXd> potential);
+
+/// Wrench (6 x 10) that the sensor measures from a payload rigidly attached to the sensor frame:
+/// w = A(omega, alpha, a - g) * phi, all expressed in the sensor frame. w is the wrench the
+/// robot exerts on the payload (force, then moment about the sensor origin).
+void wrenchRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                     Eigen::Ref<Eigen::Matrix<double, 6, 10>> A);
+
+/// The payload's contribution to the joint torques: n x 10, tau_payload = Yp * phi.
+void payloadTorqueRegressor(const RobotModel& model, DynamicsData& data,
+                            const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                            const Eigen::VectorXd& qdd, Eigen::Ref<Eigen::MatrixXd> Yp);
+
+/// Inverse dynamics by recursive Newton-Euler with the model's own parameters (or pi if given,
+/// 10n stacked standard parameters). Rigid body only, no drive terms.
+Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& data,
+                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi = nullptr);
+
+/// Joint-space mass matrix (composite rigid body algorithm), n x n.
+Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                           const Eigen::VectorXd* pi = nullptr);
+
+/// Forward dynamics qdd = M(q)^-1 (tau - h(q, qd)), rigid body only.
+Eigen::VectorXd forwardDynamics(const RobotModel& model, DynamicsData& data,
+                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                const Eigen::VectorXd& tau, const Eigen::VectorXd* pi = nullptr);
+
+/// Pose of body i's frame in the base frame.
+Pose bodyPose(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q, int body);
+
+/// Vector-Jacobian products (exact; what the adjoint optimiser needs at every sample).
+/// Given G with the shape of the regressor, these return the gradient of the scalar <G, Y>
+/// (sum of elementwise products) with respect to q, qd and qdd. Outputs may be null.
+void torqueRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                        const Eigen::MatrixXd& G, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                        Eigen::VectorXd* d_qdd);
+/// Gradient of <Gk, kinetic> + <Gu, potential> with respect to q and qd.
+void energyRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                        const Eigen::VectorXd& qd, const Eigen::RowVectorXd& Gk,
+                        const Eigen::RowVectorXd& Gu, Eigen::VectorXd* d_q,
+                        Eigen::VectorXd* d_qd);
+/// Gradient of <G, A> (G 6 x 10) with respect to q, qd, qdd.
+void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                        const Eigen::Matrix<double, 6, 10>& G, Eigen::VectorXd* d_q,
+                        Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd);
+/// Gradient of <G, Yp> (G n x 10) with respect to q, qd, qdd.
+void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& data,
+                               const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                               const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
+                               Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                               Eigen::VectorXd* d_qdd);
+
+}  // namespace exid

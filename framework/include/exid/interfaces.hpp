@@ -1,0 +1,189 @@
+// exid — the seven plugin interfaces. Each is a small abstract class with one or two pure
+// virtual methods and defaults for the rest (OMPL's Planner style). Plugins derive from one of
+// them and register with EXID_REGISTER_PLUGIN (plugin.hpp).
+#pragma once
+
+#include <Eigen/Core>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "exid/base_parameters.hpp"
+#include "exid/context.hpp"
+#include "exid/data.hpp"
+#include "exid/json.hpp"
+#include "exid/plugin.hpp"
+#include "exid/robot_model.hpp"
+
+namespace exid {
+
+// ---------------------------------------------------------------- robot
+/// Builds a RobotModel (from a file, or from data compiled into the plugin).
+class Robot : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Robot;
+  virtual std::shared_ptr<const RobotModel> build(const RunContext& ctx) = 0;
+};
+
+// ---------------------------------------------------------------- observation model
+/// Turns a Dataset (or, for excitation design, bare trajectory samples) into observation rows.
+/// A model works on FULL columns (fullNames); bind() finds its base parameters (QR with column
+/// pivoting over random samples) and the base-column methods below follow from that.
+class ObservationModel : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Model;
+
+  /// Binds the robot and computes the base parameters. Call once before anything else.
+  void bind(std::shared_ptr<const RobotModel> robot, const RunContext& ctx);
+  const RobotModel& robot() const { return *robot_; }
+  std::shared_ptr<const RobotModel> robotPtr() const { return robot_; }
+  const BaseParameters& base() const { return base_; }
+  int numBase() const { return base_.rank(); }
+
+  /// Names and nominal values (from the robot description) of the full parameter vector.
+  virtual std::vector<std::string> fullNames() const = 0;
+  virtual Eigen::VectorXd fullNominal() const = 0;
+  /// Full-column rows from a dataset (W_full * pi_full ~= y).
+  virtual Rows fullRows(const Dataset& data, const RunContext& ctx) const = 0;
+  /// Full-column design rows from trajectory samples (no measurements), for excitation design
+  /// and base-parameter detection.
+  virtual Eigen::MatrixXd fullDesign(const Samples& s) const = 0;
+  /// Given dJ/dW_full (shape of fullDesign(s)), the gradient with respect to s.q, s.qd, s.qdd
+  /// (written into grad, same shapes as s). Exact.
+  virtual void fullDesignVjp(const Samples& s, const Eigen::MatrixXd& dW, Samples* grad) const = 0;
+  /// Random samples within the robot's limits used by bind() to find the base parameters.
+  virtual Samples randomSamples(int count, std::uint64_t seed) const;
+  /// Which signals a dataset must carry ("q", "qd", "qdd", "tau", "wrench").
+  virtual std::vector<std::string> requiredSignals() const { return {"q", "qd", "qdd", "tau"}; }
+  virtual Json describe() const { return Json::object(); }
+
+  // Base-column forms (defined once here from the full forms).
+  Rows rows(const Dataset& data, const RunContext& ctx) const;
+  Eigen::MatrixXd design(const Samples& s) const;
+  void designVjp(const Samples& s, const Eigen::MatrixXd& dW_base, Samples* grad) const;
+  Eigen::VectorXd baseNominal() const { return base_.reduce(fullNominal()); }
+
+ protected:
+  /// Hook called by bind() before the base parameters are computed.
+  virtual void onBind(const RunContext&) {}
+  /// Samples and options used by bind(); models may override.
+  virtual int baseSamples() const { return 200; }
+  BaseParameterOptions base_options_;
+
+ private:
+  std::shared_ptr<const RobotModel> robot_;
+  BaseParameters base_;
+};
+
+// ---------------------------------------------------------------- criterion
+/// A scalar of the information matrix M = W^T W (base columns) and its exact gradient dJ/dM
+/// (symmetric). Smaller is better.
+class Criterion : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Criterion;
+  virtual double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dJ_dM) const = 0;
+};
+
+// ---------------------------------------------------------------- trajectory
+/// Decision variables z -> q, qd, qdd at the sample times (measured coordinates).
+class Trajectory : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Trajectory;
+  /// Binds the robot (dof, limits). Call once before anything else.
+  virtual void bind(std::shared_ptr<const RobotModel> robot, const RunContext& ctx) = 0;
+  virtual int numVariables() const = 0;
+  virtual Eigen::VectorXd initial() const = 0;
+  virtual Samples evaluate(const Eigen::VectorXd& z) const = 0;
+  /// Gradient with respect to z of <adj.q, q> + <adj.qd, qd> + <adj.qdd, qdd>.
+  virtual Eigen::VectorXd vjp(const Eigen::VectorXd& z, const Samples& adj) const = 0;
+  /// Bounds on z (infinite by default).
+  virtual void bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const;
+  /// Dense Jacobian d[vec(q); vec(qd); vec(qdd)]/dz (column-major vec), by default from vjp.
+  virtual Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const;
+  virtual Json describe() const { return Json::object(); }
+};
+
+// ---------------------------------------------------------------- optimizer
+/// The problem an optimiser sees: minimise J(z) subject to g(z) <= 0 and bounds. Built by the
+/// framework from a Trajectory, an ObservationModel and a Criterion.
+class ExcitationProblem {
+ public:
+  virtual ~ExcitationProblem() = default;
+  virtual int numVariables() const = 0;
+  virtual Eigen::VectorXd initial() const = 0;
+  virtual void bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const = 0;
+  /// Criterion value and (if grad) its exact gradient with respect to z.
+  virtual double value(const Eigen::VectorXd& z, Eigen::VectorXd* grad) = 0;
+  /// Inequality constraints g(z) <= 0 (joint, velocity, acceleration, torque limits; rest).
+  virtual int numConstraints() const = 0;
+  virtual void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) = 0;
+  virtual const Trajectory& trajectory() const = 0;
+  virtual const ObservationModel& model() const = 0;
+  virtual const Criterion& criterion() const = 0;
+  virtual long evaluations() const = 0;
+};
+
+struct OptimizerResult {
+  Eigen::VectorXd z;
+  double criterion_initial = 0.0, criterion_final = 0.0;
+  double max_violation = 0.0;  // of g(z) <= 0 at the returned point
+  int iterations = 0;
+  long evaluations = 0;
+  double wall_s = 0.0;
+  std::string stop_reason;
+  std::vector<double> history_t_s, history_value;  // criterion over wall time
+  Json details = Json::object();
+};
+
+class Optimizer : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Optimizer;
+  virtual OptimizerResult minimize(ExcitationProblem& problem, const RunContext& ctx) = 0;
+};
+
+// ---------------------------------------------------------------- experiment
+/// Produces a Dataset: simulated along a reference trajectory, or read from a recording.
+class Experiment : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Experiment;
+  /// reference: the excitation stage's trajectory, or null when the study has none.
+  virtual Dataset run(std::shared_ptr<const RobotModel> robot, const Samples* reference,
+                      const RunContext& ctx) = 0;
+};
+
+// ---------------------------------------------------------------- estimator
+struct Prior {
+  Eigen::VectorXd value;       // base parameters
+  Eigen::MatrixXd covariance;  // base x base
+};
+
+struct EstimatorSpecs {
+  bool recursive = false;       // produces a history
+  bool needs_raw_dataset = false;  // filters or differentiates the signals itself
+  bool accepts_prior = false;
+};
+
+struct Estimate {
+  std::vector<std::string> names;        // base parameter names
+  std::vector<std::string> expressions;  // their expressions in standard parameters
+  Eigen::VectorXd value, std;
+  Eigen::MatrixXd covariance;
+  double sigma = 0.0;         // residual standard deviation (weighted)
+  double cond_W = 0.0;        // of the (weighted) base regressor
+  double residual_rms = 0.0;  // unweighted
+  long rows = 0;
+  // Recursive estimators: estimate and diag(P) at each step (time in s).
+  Eigen::VectorXd history_t;
+  Eigen::MatrixXd history_value, history_pdiag;
+  Json details = Json::object();
+};
+
+class Estimator : public PluginObject {
+ public:
+  static constexpr PluginKind kKind = PluginKind::Estimator;
+  virtual EstimatorSpecs specs() const { return {}; }
+  virtual Estimate estimate(const ObservationModel& model, const Dataset& data,
+                            const Prior* prior, const RunContext& ctx) = 0;
+};
+
+}  // namespace exid

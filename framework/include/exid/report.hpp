@@ -1,0 +1,32 @@
+// exid — a study's report: report.md with the results of each stage, and the CSV tables
+// behind it (parameters.csv, estimate_history.csv). Built stage by stage by the runner.
+#pragma once
+
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "exid/config.hpp"
+#include "exid/interfaces.hpp"
+
+namespace exid {
+
+class Report {
+ public:
+  Report(const StudyConfig& cfg, std::filesystem::path out_dir);
+  void model(const ObservationModel& m);
+  void excitation(const Samples& initial, const Samples& optimal, const OptimizerResult& r,
+                  const ObservationModel& m);
+  void identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated);
+  void validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& summary);
+  /// Writes report.md and the tables (atomically).
+  void write(const Json& summary);
+
+ private:
+  const StudyConfig& cfg_;
+  std::filesystem::path dir_;
+  std::vector<std::string> sections_;
+  std::vector<std::pair<std::string, std::string>> files_;  // name, content
+};
+
+}  // namespace exid

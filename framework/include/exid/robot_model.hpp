@@ -1,0 +1,112 @@
+// exid — robot description: an immutable kinematic tree with standard inertial parameters,
+// limits and drive data. Algorithms are free functions (see dynamics.hpp); this is data only.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+namespace exid {
+
+enum class JointType { Revolute, Prismatic };
+
+/// Rigid transform of frame B relative to frame A: R = R_AB (columns are B's axes in A),
+/// p = p_AB (B's origin in A). A point x_B maps to x_A = R x_B + p.
+struct Pose {
+  Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
+  Eigen::Vector3d p = Eigen::Vector3d::Zero();
+  Pose operator*(const Pose& o) const { return {R * o.R, R * o.p + p}; }
+  Pose inverse() const { return {R.transpose(), -(R.transpose() * p)}; }
+  bool isIdentity(double tol = 0.0) const {
+    return (R - Eigen::Matrix3d::Identity()).cwiseAbs().maxCoeff() <= tol &&
+           p.cwiseAbs().maxCoeff() <= tol;
+  }
+};
+
+/// One moving body and the joint that moves it (fixed joints are merged into their parent by
+/// the loaders). Frames: parent body frame --pre--> joint frame --joint motion--> moved joint
+/// frame --post--> body frame. URDF and modified DH have post = identity; standard DH uses post
+/// to keep the published parameters in the published link frame.
+struct Body {
+  std::string name;        // link name
+  std::string joint_name;  // joint name
+  int parent = -1;         // index of the parent body, -1 for the fixed base; parent < own index
+  Pose pre;                // joint frame in the parent body frame (q = 0)
+  Pose post;               // body frame in the moved joint frame
+  JointType type = JointType::Revolute;
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();  // unit, in the joint frame
+  /// Standard inertial parameters about the body frame origin, in the body frame:
+  /// XX XY XZ YY YZ ZZ MX MY MZ M (second moments, first moments M*c, mass). SI.
+  Eigen::Matrix<double, 10, 1> inertia = Eigen::Matrix<double, 10, 1>::Zero();
+};
+
+/// Limits of one joint (joint coordinates), SI. Infinite where unknown.
+struct JointLimits {
+  double q_min = -1e300, q_max = 1e300;
+  double qd_max = 1e300, qdd_max = 1e300, tau_max = 1e300;
+};
+
+/// Drive of one actuated coordinate (measured coordinates, see RobotModel::transmission).
+/// tau_drive = Ia*qdd + Fc*sign(qd) + Fv*qd + OFF, added to the rigid-body torque.
+struct Drive {
+  double gear_ratio = 1.0;     // motor angle / joint angle (informative)
+  double rotor_inertia = 0.0;  // Ia, reflected to the coordinate [kg m^2 or kg]
+  double coulomb = 0.0;        // Fc [N m or N]
+  double viscous = 0.0;        // Fv [N m s/rad or N s/m]
+  double offset = 0.0;         // OFF [N m or N]
+};
+
+struct RobotModel {
+  std::string name;
+  std::string source;  // file it came from (for messages), or the plugin that built it
+  std::vector<Body> bodies;
+  std::vector<JointLimits> limits;  // one per body/joint, joint coordinates
+  std::vector<Drive> drives;        // one per measured coordinate
+  Eigen::Vector3d gravity{0.0, 0.0, -9.81};  // in the base frame [m/s^2]
+  /// Measured (motor or absolute) coordinates qm relate to joint coordinates by
+  /// q = transmission * qm + transmission_offset; torques by tau_m = transmission^T tau.
+  /// Empty means identity.
+  Eigen::MatrixXd transmission;
+  Eigen::VectorXd transmission_offset;
+  /// Frame of a wrist force/torque sensor (and payload), attached to body `sensor_body`.
+  int sensor_body = -1;  // -1: the last body
+  Pose sensor_pose;      // sensor frame in that body's frame
+
+  int dof() const { return static_cast<int>(bodies.size()); }
+  int numInertialParameters() const { return 10 * dof(); }
+  bool hasTransmission() const { return transmission.size() > 0; }
+  int sensorBody() const { return sensor_body < 0 ? dof() - 1 : sensor_body; }
+
+  /// Names of the standard inertial parameters, e.g. "XX1" ... "M1" (1-based body index).
+  std::vector<std::string> inertialParameterNames() const;
+  /// All standard inertial parameters, stacked body by body (10 * dof).
+  Eigen::VectorXd inertialParameters() const;
+  /// Throws exid::Error naming the body and rule if the structure is invalid
+  /// (parent order, unit axes, orthonormal rotations, finite numbers, sizes).
+  void validateStructure() const;
+};
+
+/// Parameter order of one body: XX XY XZ YY YZ ZZ MX MY MZ M.
+inline constexpr const char* kInertialNames[10] = {"XX", "XY", "XZ", "YY", "YZ",
+                                                   "ZZ", "MX", "MY", "MZ", "M"};
+
+/// Converts mass, centre of mass (in the body frame) and the inertia tensor about the centre of
+/// mass (axes of the body frame) into the 10 standard parameters about the body frame origin.
+Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,
+                                             const Eigen::Matrix3d& I_com);
+/// The inverse map; mass must be positive for the centre of mass to exist.
+void comFromInertial(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen::Vector3d* com,
+                     Eigen::Matrix3d* I_com);
+/// The standard parameters of the same body expressed in frame A, given frame B (where pi is
+/// expressed) relative to A.
+Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1>& pi_B,
+                                               const Pose& X_AB);
+
+/// Physical consistency of one body's parameters.
+struct InertiaCheck {
+  bool ok = true;
+  std::string rule;  // empty when ok: "negative mass", "inertia not positive semi-definite", ...
+};
+InertiaCheck checkPhysical(const Eigen::Matrix<double, 10, 1>& pi, double tol = 1e-12);
+
+}  // namespace exid

@@ -1,0 +1,517 @@
+#include "exid/config.hpp"
+
+#include <fmt/format.h>
+#include <yaml-cpp/yaml.h>
+
+#include <cmath>
+#include <fstream>
+#include <sstream>
+
+#include "exid/error.hpp"
+#include "exid/registry.hpp"
+
+namespace exid {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct Problems {
+  std::string source;
+  std::vector<std::string> items;
+  void add(const YAML::Node& at, const std::string& msg) {
+    int line = (at && at.Mark().line >= 0) ? at.Mark().line + 1 : 0;
+    add(line, msg);
+  }
+  void add(int line, const std::string& msg) {
+    items.push_back(line > 0 ? fmt::format("{}:{}: {}", source, line, msg)
+                             : fmt::format("{}: {}", source, msg));
+  }
+};
+
+std::string scalarText(const YAML::Node& n) {
+  if (n.IsScalar()) return n.Scalar();
+  if (n.IsSequence()) return "[...]";
+  if (n.IsMap()) return "{...}";
+  return "null";
+}
+
+std::optional<std::int64_t> toInt(const std::string& s) {
+  if (s.empty()) return std::nullopt;
+  std::size_t pos = 0;
+  try {
+    long long v = std::stoll(s, &pos, 10);
+    if (pos != s.size()) return std::nullopt;
+    return v;
+  } catch (...) {
+    return std::nullopt;
+  }
+}
+
+std::optional<double> toDouble(const std::string& s) {
+  if (s == ".inf" || s == "inf" || s == "+.inf") return HUGE_VAL;
+  if (s == "-.inf" || s == "-inf") return -HUGE_VAL;
+  if (s == ".nan" || s == "nan" || s == "NaN") return std::nan("");
+  if (s.empty()) return std::nullopt;
+  std::size_t pos = 0;
+  try {
+    double v = std::stod(s, &pos);
+    if (pos != s.size()) return std::nullopt;
+    return v;
+  } catch (...) {
+    return std::nullopt;
+  }
+}
+
+std::optional<bool> toBool(const std::string& s) {
+  if (s == "true" || s == "True" || s == "TRUE" || s == "yes" || s == "on") return true;
+  if (s == "false" || s == "False" || s == "FALSE" || s == "no" || s == "off") return false;
+  return std::nullopt;
+}
+
+// Converts a YAML node into the declared type; returns nullopt and sets why on failure.
+std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n,
+                                  const fs::path& base_dir, std::string* why) {
+  auto expect = [&](const char* what) {
+    *why = fmt::format("expected {}, found '{}'", what, scalarText(n));
+    return std::nullopt;
+  };
+  switch (d.type) {
+    case ParamType::Bool: {
+      if (!n.IsScalar()) return expect("true or false");
+      auto b = toBool(n.Scalar());
+      if (!b) return expect("true or false");
+      return ParamValue(*b);
+    }
+    case ParamType::Int: {
+      if (!n.IsScalar()) return expect("an integer");
+      auto i = toInt(n.Scalar());
+      if (!i) return expect("an integer");
+      return ParamValue(*i);
+    }
+    case ParamType::Double: {
+      if (!n.IsScalar()) return expect("a number");
+      auto v = toDouble(n.Scalar());
+      if (!v) return expect("a number");
+      return ParamValue(*v);
+    }
+    case ParamType::String: {
+      if (!n.IsScalar()) return expect("a string");
+      return ParamValue(n.Scalar());
+    }
+    case ParamType::Path: {
+      if (!n.IsScalar() || n.Scalar().empty()) return expect("a file path");
+      fs::path p(n.Scalar());
+      if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
+      return ParamValue(p.lexically_normal().string());
+    }
+    case ParamType::IntList: {
+      if (!n.IsSequence()) return expect("a list of integers");
+      std::vector<std::int64_t> out;
+      for (const auto& e : n) {
+        auto i = e.IsScalar() ? toInt(e.Scalar()) : std::nullopt;
+        if (!i) return expect("a list of integers");
+        out.push_back(*i);
+      }
+      return ParamValue(out);
+    }
+    case ParamType::DoubleList: {
+      if (!n.IsSequence()) return expect("a list of numbers");
+      std::vector<double> out;
+      for (const auto& e : n) {
+        auto v = e.IsScalar() ? toDouble(e.Scalar()) : std::nullopt;
+        if (!v) return expect("a list of numbers");
+        out.push_back(*v);
+      }
+      return ParamValue(out);
+    }
+    case ParamType::StringList: {
+      if (!n.IsSequence()) return expect("a list of strings");
+      std::vector<std::string> out;
+      for (const auto& e : n) {
+        if (!e.IsScalar()) return expect("a list of strings");
+        out.push_back(e.Scalar());
+      }
+      return ParamValue(out);
+    }
+  }
+  return std::nullopt;
+}
+
+std::vector<std::string> keysOf(const std::vector<ParamDecl>& decls) {
+  std::vector<std::string> k;
+  for (const auto& d : decls) k.push_back(d.name);
+  return k;
+}
+
+void unknownKey(Problems& pr, const YAML::Node& at, const std::string& path, const std::string& key,
+                const std::vector<std::string>& allowed) {
+  std::string msg = fmt::format("{}: unknown key '{}'; allowed: {}", path.empty() ? key : path + "." + key,
+                                key, allowed.empty() ? "(none)" : fmt::format("{}", fmt::join(allowed, ", ")));
+  std::string close = closestMatch(key, allowed);
+  if (!close.empty()) msg += fmt::format("; did you mean '{}'?", close);
+  pr.add(at, msg);
+}
+
+// Fills `out` from a params mapping node (may be null) and the declarations.
+void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::string& path,
+                 const fs::path& base_dir, Problems& pr, ParamSet& out) {
+  out.context = path;
+  if (params && !params.IsNull() && !params.IsMap()) {
+    pr.add(params, fmt::format("{}: expected a mapping of parameters, found '{}'", path, scalarText(params)));
+    return;
+  }
+  if (params && params.IsMap()) {
+    for (const auto& kv : params) {
+      const std::string key = kv.first.as<std::string>();
+      bool known = false;
+      for (const auto& d : info.params) known = known || d.name == key;
+      if (!known) unknownKey(pr, kv.first, path, key, keysOf(info.params));
+    }
+  }
+  for (const auto& d : info.params) {
+    YAML::Node v = (params && params.IsMap()) ? params[d.name] : YAML::Node();
+    if (v && !v.IsNull()) {
+      std::string why;
+      auto val = convert(d, v, base_dir, &why);
+      if (!val) {
+        pr.add(v, fmt::format("{}.{}: {}", path, d.name, why));
+        continue;
+      }
+      std::string rule = d.violation(*val);
+      if (!rule.empty()) {
+        pr.add(v, fmt::format("{}.{} = {}: {}", path, d.name, formatValue(*val), rule));
+        continue;
+      }
+      out.set(d.name, *val);
+    } else if (d.default_value) {
+      ParamValue def = *d.default_value;
+      if (d.type == ParamType::Path) {
+        fs::path p(std::get<std::string>(def));
+        if (!p.empty() && p.is_relative() && !base_dir.empty()) def = (base_dir / p).lexically_normal().string();
+      }
+      out.set(d.name, def);
+    } else {
+      pr.add(params ? params : YAML::Node(), fmt::format("{}.{}: required parameter is missing ({}{}{})", path,
+                                      d.name, toString(d.type), d.unit.empty() ? "" : ", " + d.unit,
+                                      d.doc.empty() ? "" : ": " + d.doc));
+    }
+  }
+}
+
+std::optional<PluginSpec> parseSpec(const YAML::Node& node, PluginKind kind, const std::string& path,
+                                    const fs::path& base_dir, const Registry& reg, Problems& pr,
+                                    bool allow_weight) {
+  if (!node.IsMap()) {
+    pr.add(node, fmt::format("{}: expected a mapping {{type: NAME, params: {{...}}}}, found '{}'",
+                             path, scalarText(node)));
+    return std::nullopt;
+  }
+  std::vector<std::string> allowed = {"type", "params"};
+  if (allow_weight) allowed.push_back("weight");
+  for (const auto& kv : node) {
+    const std::string key = kv.first.as<std::string>();
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+      unknownKey(pr, kv.first, path, key, allowed);
+  }
+  YAML::Node type = node["type"];
+  if (!type || !type.IsScalar()) {
+    pr.add(node, fmt::format("{}.type: missing; name a {} plugin", path, toString(kind)));
+    return std::nullopt;
+  }
+  PluginSpec spec;
+  spec.kind = kind;
+  spec.type = type.Scalar();
+  spec.key_path = path;
+  spec.line = node.Mark().line + 1;
+  if (allow_weight && node["weight"]) {
+    auto w = node["weight"].IsScalar() ? toDouble(node["weight"].Scalar()) : std::nullopt;
+    if (!w || !(*w > 0) || !std::isfinite(*w))
+      pr.add(node["weight"], fmt::format("{}.weight = {}: must be a number in (0, inf)", path,
+                                         scalarText(node["weight"])));
+    else
+      spec.weight = *w;
+  }
+  const PluginInfo* info = reg.find(kind, spec.type);
+  if (!info) {
+    pr.add(type, fmt::format("{}.type: {}", path, reg.unknownMessage(kind, spec.type)));
+    return std::nullopt;
+  }
+  resolveInto(*info, node["params"], path + ".params", base_dir, pr, spec.params);
+  return spec;
+}
+
+void emitValue(YAML::Emitter& e, const ParamValue& v) {
+  std::visit(
+      [&](const auto& x) {
+        using T = std::decay_t<decltype(x)>;
+        if constexpr (std::is_same_v<T, bool>) e << x;
+        else if constexpr (std::is_same_v<T, std::int64_t>) e << static_cast<long long>(x);
+        else if constexpr (std::is_same_v<T, double>) e << formatValue(ParamValue(x));
+        else if constexpr (std::is_same_v<T, std::string>) e << x;
+        else {
+          e << YAML::Flow << YAML::BeginSeq;
+          for (const auto& el : x) {
+            if constexpr (std::is_same_v<std::decay_t<decltype(el)>, double>) e << formatValue(ParamValue(el));
+            else if constexpr (std::is_same_v<std::decay_t<decltype(el)>, std::int64_t>) e << static_cast<long long>(el);
+            else e << el;
+          }
+          e << YAML::EndSeq;
+        }
+      },
+      v);
+}
+
+void emitSpec(YAML::Emitter& e, const PluginSpec& s, bool with_weight) {
+  e << YAML::BeginMap << YAML::Key << "type" << YAML::Value << s.type;
+  if (with_weight) e << YAML::Key << "weight" << YAML::Value << formatValue(ParamValue(s.weight));
+  e << YAML::Key << "params" << YAML::Value << YAML::BeginMap;
+  for (const auto& [k, v] : s.params.values()) {
+    e << YAML::Key << k << YAML::Value;
+    emitValue(e, v);
+  }
+  e << YAML::EndMap << YAML::EndMap;
+}
+
+Json specJson(const PluginSpec& s) {
+  Json j = Json::object();
+  j["type"] = s.type;
+  Json p = Json::object();
+  for (const auto& [k, v] : s.params.values()) {
+    std::visit(
+        [&](const auto& x) {
+          using T = std::decay_t<decltype(x)>;
+          if constexpr (std::is_same_v<T, std::vector<std::int64_t>>) {
+            Json a = Json::array();
+            for (auto i : x) a.push_back(Json(static_cast<long long>(i)));
+            p[k] = a;
+          } else if constexpr (std::is_same_v<T, std::int64_t>) {
+            p[k] = Json(static_cast<long long>(x));
+          } else {
+            p[k] = Json(x);
+          }
+        },
+        v);
+  }
+  j["params"] = p;
+  return j;
+}
+
+const std::vector<std::string> kTopKeys = {"name",       "description", "seed",      "budget_s",
+                                           "robot",      "model",       "excitation", "experiment",
+                                           "estimator",  "validation",  "report"};
+
+}  // namespace
+
+StudyConfig parseStudy(const std::string& text, const std::string& source_name,
+                       const fs::path& base_dir, const Registry& reg) {
+  Problems pr;
+  pr.source = source_name;
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", source_name, e.mark.line + 1, e.msg));
+  }
+  StudyConfig cfg;
+  cfg.dir = base_dir;
+  if (!root.IsMap()) {
+    throw Error(fmt::format("{}: expected a mapping with sections ({}), found '{}'", source_name,
+                            fmt::join(kTopKeys, ", "), scalarText(root)));
+  }
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (std::find(kTopKeys.begin(), kTopKeys.end(), key) == kTopKeys.end())
+      unknownKey(pr, kv.first, "", key, kTopKeys);
+  }
+  if (root["name"]) {
+    if (root["name"].IsScalar()) cfg.name = root["name"].Scalar();
+    else pr.add(root["name"], "name: expected a string");
+  }
+  if (root["seed"]) {
+    auto s = root["seed"].IsScalar() ? toInt(root["seed"].Scalar()) : std::nullopt;
+    if (!s || *s < 0) pr.add(root["seed"], fmt::format("seed = {}: must be a non-negative integer", scalarText(root["seed"])));
+    else cfg.seed = static_cast<std::uint64_t>(*s);
+  }
+  if (root["budget_s"]) {
+    auto b = root["budget_s"].IsScalar() ? toDouble(root["budget_s"].Scalar()) : std::nullopt;
+    if (!b || !(*b >= 0) || !std::isfinite(*b)) pr.add(root["budget_s"], fmt::format("budget_s = {}: must be in [0, inf)", scalarText(root["budget_s"])));
+    else cfg.budget_s = *b;
+  }
+  if (root["robot"]) cfg.robot = parseSpec(root["robot"], PluginKind::Robot, "robot", base_dir, reg, pr, false);
+  else pr.add(0, "robot: missing section; name a robot plugin ({type: puma560}) or a file ({type: urdf, params: {file: ...}})");
+
+  if (YAML::Node m = root["model"]) {
+    if (m.IsSequence()) {
+      for (std::size_t i = 0; i < m.size(); ++i)
+        if (auto s = parseSpec(m[i], PluginKind::Model, fmt::format("model[{}]", i), base_dir, reg, pr, true))
+          cfg.models.push_back(*s);
+      if (m.size() == 0) pr.add(m, "model: empty list");
+    } else if (auto s = parseSpec(m, PluginKind::Model, "model", base_dir, reg, pr, true)) {
+      cfg.models.push_back(*s);
+    }
+  }
+  if (YAML::Node x = root["excitation"]) {
+    if (!x.IsMap()) {
+      pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
+    } else {
+      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer"};
+      for (const auto& kv : x) {
+        const std::string key = kv.first.as<std::string>();
+        if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
+          unknownKey(pr, kv.first, "excitation", key, allowed);
+      }
+      if (x["trajectory"]) cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory", base_dir, reg, pr, false);
+      else pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
+      if (x["criterion"]) cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion", base_dir, reg, pr, false);
+      else pr.add(x, "excitation.criterion: missing; name a criterion plugin");
+      if (x["optimizer"]) cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer", base_dir, reg, pr, false);
+      else pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
+    }
+  }
+  if (root["experiment"]) cfg.experiment = parseSpec(root["experiment"], PluginKind::Experiment, "experiment", base_dir, reg, pr, false);
+  if (root["estimator"]) cfg.estimator = parseSpec(root["estimator"], PluginKind::Estimator, "estimator", base_dir, reg, pr, false);
+  if (root["validation"]) cfg.validation = parseSpec(root["validation"], PluginKind::Experiment, "validation", base_dir, reg, pr, false);
+  if (YAML::Node r = root["report"]) {
+    if (!r.IsMap()) {
+      pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
+    } else {
+      for (const auto& kv : r) {
+        const std::string key = kv.first.as<std::string>();
+        if (key != "type" && key != "params") unknownKey(pr, kv.first, "report", key, {"type", "params"});
+      }
+      if (r["type"] && (!r["type"].IsScalar() || r["type"].Scalar() != "standard"))
+        pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard", scalarText(r["type"])));
+      PluginInfo rep;
+      rep.name = "standard";
+      rep.params = {param_bool("plots", true, "draw plots with gnuplot when it is installed"),
+                    param_string("title", std::string(), "title of the report")};
+      ParamSet ps;
+      resolveInto(rep, r["params"], "report.params", base_dir, pr, ps);
+      if (ps.has("plots")) cfg.report.plots = ps.getBool("plots");
+      if (ps.has("title")) cfg.report.title = ps.getString("title");
+    }
+  }
+  // Which stages need which.
+  if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() && !root["model"])
+    pr.add(0, "model: missing section; the estimator, excitation and validation stages need an observation model");
+  if (cfg.estimator && !cfg.experiment && !root["experiment"])
+    pr.add(0, "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: csv, params: {file: ...}})");
+  if (cfg.validation && !cfg.estimator && !root["estimator"])
+    pr.add(0, "validation: needs an estimator section (the identified model is what is validated)");
+
+  if (!pr.items.empty()) {
+    std::string msg = fmt::format("{}: {} problem{} in the study:\n", source_name, pr.items.size(),
+                                  pr.items.size() == 1 ? "" : "s");
+    for (const auto& it : pr.items) msg += "  " + it + "\n";
+    msg.pop_back();
+    throw Error(msg);
+  }
+  return cfg;
+}
+
+StudyConfig loadStudy(const fs::path& file, const Registry& reg) {
+  std::ifstream in(file);
+  if (!in) throw Error(fmt::format("{}: cannot open the study file", file.string()));
+  std::stringstream ss;
+  ss << in.rdbuf();
+  fs::path abs = fs::absolute(file);
+  StudyConfig cfg = parseStudy(ss.str(), file.string(), abs.parent_path(), reg);
+  cfg.file = abs;
+  if (cfg.name.empty()) cfg.name = file.stem().string();
+  return cfg;
+}
+
+ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
+                       const std::string& context, const fs::path& base_dir) {
+  Problems pr;
+  pr.source = context;
+  YAML::Node node;
+  try {
+    node = YAML::Load(yaml_params.empty() ? "{}" : yaml_params);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}: malformed YAML: {}", context, e.msg));
+  }
+  ParamSet ps;
+  resolveInto(info, node, context, base_dir, pr, ps);
+  if (!pr.items.empty()) {
+    std::string msg;
+    for (const auto& it : pr.items) msg += (msg.empty() ? "" : "\n") + it;
+    throw Error(msg);
+  }
+  return ps;
+}
+
+std::string StudyConfig::resolvedYaml() const {
+  YAML::Emitter e;
+  e << YAML::BeginMap;
+  e << YAML::Key << "name" << YAML::Value << name;
+  e << YAML::Key << "seed" << YAML::Value << static_cast<unsigned long long>(seed);
+  if (budget_s > 0) e << YAML::Key << "budget_s" << YAML::Value << formatValue(ParamValue(budget_s));
+  if (robot) { e << YAML::Key << "robot" << YAML::Value; emitSpec(e, *robot, false); }
+  if (!models.empty()) {
+    e << YAML::Key << "model" << YAML::Value;
+    if (models.size() == 1) emitSpec(e, models[0], false);
+    else {
+      e << YAML::BeginSeq;
+      for (const auto& m : models) emitSpec(e, m, true);
+      e << YAML::EndSeq;
+    }
+  }
+  if (hasExcitation()) {
+    e << YAML::Key << "excitation" << YAML::Value << YAML::BeginMap;
+    e << YAML::Key << "trajectory" << YAML::Value; emitSpec(e, *trajectory, false);
+    e << YAML::Key << "criterion" << YAML::Value; emitSpec(e, *criterion, false);
+    e << YAML::Key << "optimizer" << YAML::Value; emitSpec(e, *optimizer, false);
+    e << YAML::EndMap;
+  }
+  if (experiment) { e << YAML::Key << "experiment" << YAML::Value; emitSpec(e, *experiment, false); }
+  if (estimator) { e << YAML::Key << "estimator" << YAML::Value; emitSpec(e, *estimator, false); }
+  if (validation) { e << YAML::Key << "validation" << YAML::Value; emitSpec(e, *validation, false); }
+  e << YAML::Key << "report" << YAML::Value << YAML::BeginMap << YAML::Key << "type" << YAML::Value
+    << "standard" << YAML::Key << "params" << YAML::Value << YAML::BeginMap << YAML::Key << "plots"
+    << YAML::Value << report.plots << YAML::Key << "title" << YAML::Value << report.title
+    << YAML::EndMap << YAML::EndMap;
+  e << YAML::EndMap;
+  return std::string(e.c_str()) + "\n";
+}
+
+Json StudyConfig::resolvedJson() const {
+  Json j = Json::object();
+  j["name"] = name;
+  j["seed"] = Json(static_cast<long long>(seed));
+  if (robot) j["robot"] = specJson(*robot);
+  if (!models.empty()) {
+    Json m = Json::array();
+    for (const auto& s : models) {
+      Json x = specJson(s);
+      x["weight"] = s.weight;
+      m.push_back(x);
+    }
+    j["model"] = m;
+  }
+  if (hasExcitation()) {
+    j["excitation"]["trajectory"] = specJson(*trajectory);
+    j["excitation"]["criterion"] = specJson(*criterion);
+    j["excitation"]["optimizer"] = specJson(*optimizer);
+  }
+  if (experiment) j["experiment"] = specJson(*experiment);
+  if (estimator) j["estimator"] = specJson(*estimator);
+  if (validation) j["validation"] = specJson(*validation);
+  return j;
+}
+
+std::string StudyConfig::hash() const {
+  // The name is not part of the configuration's identity.
+  StudyConfig copy = *this;
+  copy.name.clear();
+  const std::string text = copy.resolvedYaml();
+  std::uint64_t h = 1469598103934665603ull;
+  for (unsigned char c : text) {
+    h ^= c;
+    h *= 1099511628211ull;
+  }
+  return fmt::format("{:016x}", h);
+}
+
+}  // namespace exid

@@ -1,0 +1,45 @@
+#include "exid/context.hpp"
+
+#include <atomic>
+#include <iostream>
+#include <limits>
+#include <mutex>
+
+namespace exid {
+
+namespace {
+std::atomic<int> g_level{static_cast<int>(LogLevel::Info)};
+std::mutex g_log_mutex;
+void emit(const char* tag, const std::string& msg) {
+  std::lock_guard<std::mutex> lock(g_log_mutex);
+  std::cerr << "[exid] " << tag << msg << '\n';
+}
+}  // namespace
+
+void setLogLevel(LogLevel level) { g_level = static_cast<int>(level); }
+LogLevel logLevel() { return static_cast<LogLevel>(g_level.load()); }
+void logWarn(const std::string& msg) {
+  if (g_level >= static_cast<int>(LogLevel::Warn)) emit("warning: ", msg);
+}
+void logInfo(const std::string& msg) {
+  if (g_level >= static_cast<int>(LogLevel::Info)) emit("", msg);
+}
+void logDebug(const std::string& msg) {
+  if (g_level >= static_cast<int>(LogLevel::Debug)) emit("debug: ", msg);
+}
+
+Deadline::Deadline(double seconds) {
+  if (seconds > 0) {
+    active_ = true;
+    end_ = std::chrono::steady_clock::now() +
+           std::chrono::duration_cast<std::chrono::steady_clock::duration>(
+               std::chrono::duration<double>(seconds));
+  }
+}
+bool Deadline::expired() const { return active_ && std::chrono::steady_clock::now() >= end_; }
+double Deadline::remaining_s() const {
+  if (!active_) return std::numeric_limits<double>::infinity();
+  return std::chrono::duration<double>(end_ - std::chrono::steady_clock::now()).count();
+}
+
+}  // namespace exid

@@ -1,0 +1,104 @@
+#include "exid/interfaces.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <random>
+
+#include "exid/drive.hpp"
+#include "exid/error.hpp"
+
+namespace exid {
+
+void ObservationModel::bind(std::shared_ptr<const RobotModel> robot, const RunContext& ctx) {
+  check(robot != nullptr, "ObservationModel::bind: no robot");
+  robot_ = std::move(robot);
+  onBind(ctx);
+  const int samples = baseSamples();
+  Samples s = randomSamples(samples, ctx.seed ^ 0x9e3779b97f4a7c15ull);
+  Eigen::MatrixXd W = fullDesign(s);
+  base_ = computeBaseParameters(W, fullNames(), base_options_);
+  check(base_.rank() > 0, fmt::format("model '{}' on robot '{}': no identifiable parameter",
+                                      pluginName(), robot_->name));
+}
+
+Samples ObservationModel::randomSamples(int count, std::uint64_t seed) const {
+  const RobotModel& r = *robot_;
+  const int n = r.dof();
+  std::mt19937_64 rng(seed);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Samples s;
+  s.t = Eigen::VectorXd::LinSpaced(count, 0.0, count - 1.0);
+  s.q.resize(count, n);
+  s.qd.resize(count, n);
+  s.qdd.resize(count, n);
+  for (int k = 0; k < count; ++k) {
+    Eigen::VectorXd q(n), qd(n), qdd(n);
+    for (int j = 0; j < n; ++j) {
+      const JointLimits& L = r.limits.size() > static_cast<std::size_t>(j) ? r.limits[j] : JointLimits{};
+      double lo = L.q_min, hi = L.q_max;
+      if (!(std::isfinite(lo) && std::abs(lo) < 1e3)) lo = -M_PI;
+      if (!(std::isfinite(hi) && std::abs(hi) < 1e3)) hi = M_PI;
+      q(j) = 0.5 * (lo + hi) + 0.5 * (hi - lo) * u(rng);
+      double vmax = (std::isfinite(L.qd_max) && L.qd_max < 1e3) ? L.qd_max : 2.0;
+      double amax = (std::isfinite(L.qdd_max) && L.qdd_max < 1e4) ? L.qdd_max : 10.0;
+      qd(j) = vmax * u(rng);
+      qdd(j) = amax * u(rng);
+    }
+    Eigen::VectorXd qm, qdm, qddm;
+    jointToMeasured(r, q, qd, qdd, &qm, &qdm, &qddm);
+    s.q.row(k) = qm.transpose();
+    s.qd.row(k) = qdm.transpose();
+    s.qdd.row(k) = qddm.transpose();
+  }
+  return s;
+}
+
+Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
+  Rows full = fullRows(data, ctx);
+  Rows out;
+  out.W = base_.columns(full.W);
+  out.y = std::move(full.y);
+  out.equation = std::move(full.equation);
+  out.numEquations = full.numEquations;
+  return out;
+}
+
+Eigen::MatrixXd ObservationModel::design(const Samples& s) const {
+  return base_.columns(fullDesign(s));
+}
+
+void ObservationModel::designVjp(const Samples& s, const Eigen::MatrixXd& dW_base,
+                                 Samples* grad) const {
+  Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base_.numFull());
+  for (int i = 0; i < base_.rank(); ++i) dW.col(base_.independent[i]) = dW_base.col(i);
+  fullDesignVjp(s, dW, grad);
+}
+
+void Trajectory::bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const {
+  const int m = numVariables();
+  if (lower) *lower = Eigen::VectorXd::Constant(m, -HUGE_VAL);
+  if (upper) *upper = Eigen::VectorXd::Constant(m, HUGE_VAL);
+}
+
+Eigen::MatrixXd Trajectory::jacobian(const Eigen::VectorXd& z) const {
+  Samples s = evaluate(z);
+  const Eigen::Index K = s.q.rows(), n = s.q.cols();
+  const Eigen::Index rows = 3 * K * n;
+  Eigen::MatrixXd J(rows, numVariables());
+  Samples adj;
+  adj.t = s.t;
+  adj.q = Eigen::MatrixXd::Zero(K, n);
+  adj.qd = adj.q;
+  adj.qdd = adj.q;
+  for (Eigen::Index r = 0; r < rows; ++r) {
+    const Eigen::Index block = r / (K * n), idx = r % (K * n);
+    Eigen::MatrixXd& m = block == 0 ? adj.q : (block == 1 ? adj.qd : adj.qdd);
+    m(idx % K, idx / K) = 1.0;
+    J.row(r) = vjp(z, adj).transpose();
+    m(idx % K, idx / K) = 0.0;
+  }
+  return J;
+}
+
+}  // namespace exid

@@ -1,0 +1,513 @@
+#include "exid/runner.hpp"
+
+#include <fmt/format.h>
+
+#include <chrono>
+#include <cmath>
+#include <map>
+
+#include "exid/drive.hpp"
+#include "exid/error.hpp"
+#include "exid/excitation.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/registry.hpp"
+#include "exid/report.hpp"
+
+namespace exid {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+double seconds(std::chrono::steady_clock::time_point since) {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
+}
+
+/// Several observation models stacked into one (e.g. differential + load_wrench). Columns are
+/// the union of the models' full columns (matched by name); each block's rows (and
+/// measurements) are multiplied by its weight.
+class StackedModel final : public ObservationModel {
+ public:
+  StackedModel(std::vector<std::shared_ptr<ObservationModel>> parts, std::vector<double> weights)
+      : parts_(std::move(parts)), weights_(std::move(weights)) {
+    setPluginName("stack");
+  }
+  std::vector<std::string> fullNames() const override { return names_; }
+  Eigen::VectorXd fullNominal() const override {
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
+    for (std::size_t m = 0; m < parts_.size(); ++m) {
+      Eigen::VectorXd nm = parts_[m]->fullNominal();
+      for (std::size_t c = 0; c < map_[m].size(); ++c) v(map_[m][c]) = nm(static_cast<Eigen::Index>(c));
+    }
+    return v;
+  }
+  Rows fullRows(const Dataset& data, const RunContext& ctx) const override {
+    std::vector<Rows> blocks;
+    Eigen::Index rows = 0;
+    for (const auto& p : parts_) {
+      blocks.push_back(p->fullRows(data, ctx));
+      rows += blocks.back().W.rows();
+    }
+    Rows out;
+    out.W = Eigen::MatrixXd::Zero(rows, static_cast<Eigen::Index>(names_.size()));
+    out.y.resize(rows);
+    Eigen::Index r0 = 0;
+    int eq0 = 0;
+    for (std::size_t m = 0; m < blocks.size(); ++m) {
+      const Rows& b = blocks[m];
+      for (std::size_t c = 0; c < map_[m].size(); ++c)
+        out.W.block(r0, map_[m][c], b.W.rows(), 1) = weights_[m] * b.W.col(static_cast<Eigen::Index>(c));
+      out.y.segment(r0, b.y.size()) = weights_[m] * b.y;
+      for (int e : b.equation) out.equation.push_back(eq0 + e);
+      eq0 += b.numEquations;
+      r0 += b.W.rows();
+    }
+    out.numEquations = eq0;
+    return out;
+  }
+  Eigen::MatrixXd fullDesign(const Samples& s) const override {
+    std::vector<Eigen::MatrixXd> blocks;
+    Eigen::Index rows = 0;
+    for (const auto& p : parts_) {
+      blocks.push_back(p->fullDesign(s));
+      rows += blocks.back().rows();
+    }
+    Eigen::MatrixXd W = Eigen::MatrixXd::Zero(rows, static_cast<Eigen::Index>(names_.size()));
+    Eigen::Index r0 = 0;
+    for (std::size_t m = 0; m < blocks.size(); ++m) {
+      for (std::size_t c = 0; c < map_[m].size(); ++c)
+        W.block(r0, map_[m][c], blocks[m].rows(), 1) = weights_[m] * blocks[m].col(static_cast<Eigen::Index>(c));
+      r0 += blocks[m].rows();
+    }
+    return W;
+  }
+  void fullDesignVjp(const Samples& s, const Eigen::MatrixXd& dW, Samples* grad) const override {
+    grad->t = s.t;
+    grad->q = Eigen::MatrixXd::Zero(s.q.rows(), s.q.cols());
+    grad->qd = grad->q;
+    grad->qdd = grad->q;
+    Eigen::Index r0 = 0;
+    for (std::size_t m = 0; m < parts_.size(); ++m) {
+      const Eigen::Index rows = rowsPerDesign_[m] * s.size();
+      Eigen::MatrixXd sub(rows, static_cast<Eigen::Index>(map_[m].size()));
+      for (std::size_t c = 0; c < map_[m].size(); ++c)
+        sub.col(static_cast<Eigen::Index>(c)) = weights_[m] * dW.block(r0, map_[m][c], rows, 1);
+      Samples g;
+      parts_[m]->fullDesignVjp(s, sub, &g);
+      grad->q += g.q;
+      grad->qd += g.qd;
+      grad->qdd += g.qdd;
+      r0 += rows;
+    }
+  }
+  std::vector<std::string> requiredSignals() const override {
+    std::vector<std::string> out;
+    for (const auto& p : parts_)
+      for (const auto& s : p->requiredSignals())
+        if (std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
+    return out;
+  }
+  Json describe() const override {
+    Json j = Json::array();
+    for (std::size_t m = 0; m < parts_.size(); ++m) {
+      Json p = Json::object();
+      p["type"] = parts_[m]->pluginName();
+      p["weight"] = weights_[m];
+      p["details"] = parts_[m]->describe();
+      j.push_back(p);
+    }
+    return j;
+  }
+
+ protected:
+  void onBind(const RunContext& ctx) override {
+    names_.clear();
+    map_.clear();
+    rowsPerDesign_.clear();
+    Samples probe = randomSamples(1, ctx.seed);
+    for (const auto& p : parts_) {
+      p->bind(robotPtr(), ctx);
+      std::vector<int> idx;
+      for (const auto& n : p->fullNames()) {
+        auto it = std::find(names_.begin(), names_.end(), n);
+        if (it == names_.end()) {
+          names_.push_back(n);
+          idx.push_back(static_cast<int>(names_.size()) - 1);
+        } else {
+          idx.push_back(static_cast<int>(it - names_.begin()));
+        }
+      }
+      map_.push_back(idx);
+      rowsPerDesign_.push_back(static_cast<int>(p->fullDesign(probe).rows()));
+    }
+  }
+
+ private:
+  std::vector<std::shared_ptr<ObservationModel>> parts_;
+  std::vector<double> weights_;
+  std::vector<std::string> names_;
+  std::vector<std::vector<int>> map_;
+  std::vector<int> rowsPerDesign_;
+};
+
+Json vectorJson(const Eigen::VectorXd& v) {
+  return Json(std::vector<double>(v.data(), v.data() + v.size()));
+}
+
+std::vector<std::string> signalNames(const std::string& prefix, int n) {
+  std::vector<std::string> out;
+  for (int j = 1; j <= n; ++j) out.push_back(prefix + std::to_string(j));
+  return out;
+}
+
+void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationModel* model,
+                  const std::string& what) {
+  check(d.size() > 0, fmt::format("{} ({}): no samples", what, d.source));
+  check(d.q.rows() == d.size() && d.q.cols() == robot.dof(),
+        fmt::format("{} ({}): q has {} columns, the robot '{}' has {} joints", what, d.source,
+                    d.q.cols(), robot.name, robot.dof()));
+  for (int k = 1; k < d.size(); ++k)
+    check(d.t(k) > d.t(k - 1), fmt::format("{} ({}): time must increase; row {} has t = {} after {}",
+                                           what, d.source, k + 1, d.t(k), d.t(k - 1)));
+  if (!model) return;
+  for (const auto& sig : model->requiredSignals()) {
+    bool present = sig == "q" || (sig == "qd" && d.hasVelocity()) ||
+                   (sig == "qdd" && d.hasAcceleration()) || (sig == "tau" && d.hasTorque()) ||
+                   (sig == "wrench" && d.hasWrench());
+    check(present, fmt::format("{} ({}): the model '{}' needs the signal '{}', which the data "
+                               "lacks (columns {}1..{}{})",
+                               what, d.source, model->pluginName(), sig, sig, sig,
+                               sig == "wrench" ? "6" : std::to_string(robot.dof())));
+  }
+}
+
+}  // namespace
+
+CsvTable samplesTable(const Samples& s) {
+  CsvTable t;
+  const int n = s.dof();
+  t.columns = {"t"};
+  for (const char* p : {"q", "qd", "qdd"})
+    for (auto& c : signalNames(p, n)) t.columns.push_back(c);
+  t.data.resize(s.size(), 1 + 3 * n);
+  t.data.col(0) = s.t;
+  t.data.middleCols(1, n) = s.q;
+  t.data.middleCols(1 + n, n) = s.qd;
+  t.data.middleCols(1 + 2 * n, n) = s.qdd;
+  return t;
+}
+
+CsvTable datasetTable(const Dataset& d) {
+  CsvTable t;
+  const int n = d.dof();
+  std::vector<const Eigen::MatrixXd*> blocks;
+  t.columns = {"t"};
+  auto add = [&](const char* prefix, const Eigen::MatrixXd& m) {
+    if (m.cols() == 0) return;
+    for (auto& c : signalNames(prefix, static_cast<int>(m.cols()))) t.columns.push_back(c);
+    blocks.push_back(&m);
+  };
+  add("q", d.q);
+  add("qd", d.qd);
+  add("qdd", d.qdd);
+  add("tau", d.tau);
+  if (d.hasWrench()) {
+    for (const char* c : {"fx", "fy", "fz", "mx", "my", "mz"}) t.columns.push_back(c);
+    blocks.push_back(&d.wrench);
+  }
+  (void)n;
+  t.data.resize(d.size(), static_cast<Eigen::Index>(t.columns.size()));
+  t.data.col(0) = d.t;
+  Eigen::Index c0 = 1;
+  for (const auto* b : blocks) {
+    t.data.middleCols(c0, b->cols()) = *b;
+    c0 += b->cols();
+  }
+  return t;
+}
+
+StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptions& opt) {
+  const auto t_start = std::chrono::steady_clock::now();
+  StudyResult res;
+  Json& S = res.summary;
+  S = Json::object();
+  S["status"] = "running";
+  S["message"] = "";
+  S["study"] = cfg.name;
+  S["exid_version"] = EXID_VERSION_STRING;
+  S["build"] = Registry::fingerprintText();
+  S["config_hash"] = cfg.hash();
+  S["seed"] = Json(static_cast<long long>(cfg.seed));
+  const bool write = !opt.out_dir.empty();
+  Report report(cfg, opt.out_dir);
+  std::string stage = "setup";
+
+  RunContext ctx;
+  ctx.study_dir = cfg.dir;
+  ctx.out_dir = opt.out_dir;
+  ctx.seed = cfg.seed;
+  ctx.deadline = Deadline(cfg.budget_s);
+  ctx.cancelled = opt.cancelled;
+  auto progressFor = [&](const std::string& st) {
+    return [&opt, st](double f, const std::string& text) {
+      if (opt.progress) opt.progress(st, f, text);
+    };
+  };
+
+  try {
+    if (write) {
+      fs::create_directories(opt.out_dir);
+      writeFileAtomic(opt.out_dir / "study.resolved.yaml", cfg.resolvedYaml());
+    }
+    // ---------------------------------------------------------------- robot
+    stage = "robot";
+    auto t0 = std::chrono::steady_clock::now();
+    auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
+    std::shared_ptr<const RobotModel> robot = robotPlugin->build(ctx);
+    check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
+    Json& R = S["robot"];
+    R["type"] = cfg.robot->type;
+    R["name"] = robot->name;
+    R["dof"] = robot->dof();
+    R["n_parameters"] = robot->numInertialParameters();
+    R["wall_s"] = seconds(t0);
+
+    // ---------------------------------------------------------------- model
+    std::shared_ptr<ObservationModel> model;
+    if (!cfg.models.empty()) {
+      stage = "model";
+      t0 = std::chrono::steady_clock::now();
+      if (cfg.models.size() == 1) {
+        model = reg.create<ObservationModel>(cfg.models[0].type, cfg.models[0].params);
+      } else {
+        std::vector<std::shared_ptr<ObservationModel>> parts;
+        std::vector<double> weights;
+        for (const auto& m : cfg.models) {
+          parts.push_back(reg.create<ObservationModel>(m.type, m.params));
+          weights.push_back(m.weight);
+        }
+        model = std::make_shared<StackedModel>(std::move(parts), std::move(weights));
+      }
+      model->bind(robot, ctx);
+      R["n_parameters"] = model->base().numFull();
+      R["n_base_parameters"] = model->numBase();
+      Json& Mj = S["model"];
+      Mj["type"] = model->pluginName();
+      Mj["n_full"] = model->base().numFull();
+      Mj["n_base"] = model->numBase();
+      Mj["base_parameters"] = Json(model->base().names);
+      Mj["details"] = model->describe();
+      Mj["wall_s"] = seconds(t0);
+      report.model(*model);
+    }
+
+    // ---------------------------------------------------------------- excitation
+    std::optional<Samples> reference;
+    if (cfg.hasExcitation()) {
+      stage = "excitation";
+      t0 = std::chrono::steady_clock::now();
+      auto traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+      auto crit = reg.create<Criterion>(cfg.criterion->type, cfg.criterion->params);
+      auto optim = reg.create<Optimizer>(cfg.optimizer->type, cfg.optimizer->params);
+      traj->bind(robot, ctx);
+      auto problem = makeExcitationProblem(traj, model, crit);
+      RunContext xctx = ctx;
+      xctx.progress = progressFor("excitation");
+      Samples initial = traj->evaluate(traj->initial());
+      OptimizerResult r = optim->minimize(*problem, xctx);
+      Samples best = traj->evaluate(r.z);
+      Json& X = S["excitation"];
+      X["trajectory"] = cfg.trajectory->type;
+      X["criterion"] = cfg.criterion->type;
+      X["optimizer"] = cfg.optimizer->type;
+      X["criterion_initial"] = r.criterion_initial;
+      X["criterion_final"] = r.criterion_final;
+      X["cond_W_initial"] = conditionNumber(model->design(initial));
+      X["cond_W_final"] = conditionNumber(model->design(best));
+      X["max_constraint_violation"] = r.max_violation;
+      X["iterations"] = r.iterations;
+      X["evaluations"] = Json(static_cast<long long>(r.evaluations));
+      X["wall_s"] = r.wall_s;
+      X["stop_reason"] = r.stop_reason;
+      X["details"] = r.details;
+      if (write) {
+        writeCsvAtomic(opt.out_dir / "trajectory_initial.csv", samplesTable(initial));
+        writeCsvAtomic(opt.out_dir / "trajectory_optimal.csv", samplesTable(best));
+        CsvTable h;
+        h.columns = {"wall_s", "criterion"};
+        h.data.resize(static_cast<Eigen::Index>(r.history_value.size()), 2);
+        for (std::size_t i = 0; i < r.history_value.size(); ++i) {
+          h.data(static_cast<Eigen::Index>(i), 0) = i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
+          h.data(static_cast<Eigen::Index>(i), 1) = r.history_value[i];
+        }
+        writeCsvAtomic(opt.out_dir / "criterion_history.csv", h);
+        X["trajectory_csv"] = "trajectory_optimal.csv";
+      }
+      report.excitation(initial, best, r, *model);
+      reference = best;
+    }
+
+    // ---------------------------------------------------------------- experiment
+    std::optional<Dataset> data;
+    if (cfg.experiment) {
+      stage = "experiment";
+      t0 = std::chrono::steady_clock::now();
+      auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
+      RunContext ectx = ctx;
+      ectx.progress = progressFor("experiment");
+      data = exp->run(robot, reference ? &*reference : nullptr, ectx);
+      checkDataset(*data, *robot, model.get(), "experiment");
+      Json& E = S["experiment"];
+      E["type"] = cfg.experiment->type;
+      E["samples"] = data->size();
+      E["duration_s"] = data->t(data->size() - 1) - data->t(0);
+      E["wall_s"] = seconds(t0);
+      E["meta"] = data->meta;
+      if (write) {
+        writeCsvAtomic(opt.out_dir / "experiment.csv", datasetTable(*data));
+        E["csv"] = "experiment.csv";
+      }
+    }
+
+    // ---------------------------------------------------------------- estimator
+    std::optional<Estimate> est;
+    if (cfg.estimator) {
+      stage = "identification";
+      t0 = std::chrono::steady_clock::now();
+      auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+      RunContext ictx = ctx;
+      ictx.progress = progressFor("identification");
+      est = estimator->estimate(*model, *data, nullptr, ictx);
+      Json& I = S["identification"];
+      I["estimator"] = cfg.estimator->type;
+      I["wall_s"] = seconds(t0);
+      I["rows"] = Json(static_cast<long long>(est->rows));
+      I["cond_W"] = est->cond_W;
+      I["residual_rms"] = est->residual_rms;
+      I["sigma"] = est->sigma;
+      const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+      Eigen::VectorXd truth = model->baseNominal();
+      Json params = Json::array();
+      double err2 = 0, tru2 = 0;
+      for (Eigen::Index i = 0; i < est->value.size(); ++i) {
+        Json p = Json::object();
+        p["name"] = est->names[static_cast<std::size_t>(i)];
+        p["expression"] = est->expressions[static_cast<std::size_t>(i)];
+        p["value"] = est->value(i);
+        p["std"] = est->std.size() > i ? est->std(i) : NAN;
+        p["rel_std_percent"] = est->std.size() > i && est->value(i) != 0
+                                   ? 100.0 * est->std(i) / std::abs(est->value(i))
+                                   : NAN;
+        p["nominal"] = truth(i);
+        if (simulated) p["true"] = truth(i);
+        err2 += (est->value(i) - truth(i)) * (est->value(i) - truth(i));
+        tru2 += truth(i) * truth(i);
+        params.push_back(p);
+      }
+      if (simulated && tru2 > 0) I["param_rel_err"] = std::sqrt(err2 / tru2);
+      I["parameters"] = params;
+      I["details"] = est->details;
+      report.identification(*est, truth, simulated);
+    }
+
+    // ---------------------------------------------------------------- validation
+    if (cfg.validation) {
+      stage = "validation";
+      t0 = std::chrono::steady_clock::now();
+      auto exp = reg.create<Experiment>(cfg.validation->type, cfg.validation->params);
+      RunContext vctx = ctx;
+      vctx.seed = ctx.seed + 1000003;  // independent noise
+      Dataset vd = exp->run(robot, reference ? &*reference : nullptr, vctx);
+      checkDataset(vd, *robot, model.get(), "validation");
+      Rows rows = model->rows(vd, vctx);
+      Eigen::VectorXd pred = rows.W * est->value;
+      Eigen::VectorXd err = rows.y - pred;
+      Json& V = S["validation"];
+      V["type"] = cfg.validation->type;
+      V["samples"] = vd.size();
+      V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
+      std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
+          ref(rms.size(), 0.0);
+      for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
+        const auto e = static_cast<std::size_t>(rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)]);
+        rms[e] += err(r) * err(r);
+        ref[e] += rows.y(r) * rows.y(r);
+        cnt[e] += 1;
+      }
+      std::vector<double> relj(rms.size());
+      for (std::size_t e = 0; e < rms.size(); ++e) {
+        relj[e] = ref[e] > 0 ? std::sqrt(rms[e] / ref[e]) : NAN;
+        rms[e] = cnt[e] > 0 ? std::sqrt(rms[e] / cnt[e]) : NAN;
+      }
+      V["rms_per_joint"] = Json(rms);
+      V["relative_error_per_joint"] = Json(relj);
+      V["wall_s"] = seconds(t0);
+      if (write) {
+        CsvTable t;
+        t.columns = {"row", "equation", "measured", "predicted"};
+        t.data.resize(rows.y.size(), 4);
+        for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
+          t.data(r, 0) = static_cast<double>(r);
+          t.data(r, 1) = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
+          t.data(r, 2) = rows.y(r);
+          t.data(r, 3) = pred(r);
+        }
+        writeCsvAtomic(opt.out_dir / "validation.csv", t);
+      }
+      report.validation(rows, pred, V);
+    }
+    if (ctx.shouldStop()) throw Error(fmt::format("stopped: {}", ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
+    S["status"] = "ok";
+    res.ok = true;
+  } catch (const std::exception& e) {
+    res.ok = false;
+    res.message = fmt::format("stage '{}': {}", stage, e.what());
+    S["status"] = "failed";
+    S["failed_stage"] = stage;
+    S["message"] = res.message;
+  }
+  S["wall_s"] = seconds(t_start);
+  if (write) {
+    try {
+      if (res.ok) {
+        report.write(S);
+        S["report"] = (opt.out_dir / "report.md").string();
+      }
+      writeFileAtomic(opt.out_dir / "summary.json", S.dump(2) + "\n");
+    } catch (const std::exception& e) {
+      res.ok = false;
+      res.message += (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
+      S["status"] = "failed";
+      S["message"] = res.message;
+    }
+  }
+  return res;
+}
+
+std::string briefTable(const Json& S) {
+  std::string out;
+  auto row = [&](const std::string& k, const std::string& v) { out += fmt::format("| {} | {} |\n", k, v); };
+  auto num = [](const Json* j) { return j && j->isNumber() ? fmt::format("{:.6g}", j->asDouble()) : std::string("-"); };
+  out += "| quantity | value |\n|---|---|\n";
+  row("status", S.find("status") ? S.find("status")->asString() : "?");
+  if (const Json* r = S.find("robot")) {
+    row("robot", fmt::format("{} ({} dof)", r->find("name") ? r->find("name")->asString() : "?", num(r->find("dof"))));
+    if (r->find("n_base_parameters")) row("base parameters", fmt::format("{} of {}", num(r->find("n_base_parameters")), num(r->find("n_parameters"))));
+  }
+  if (const Json* x = S.find("excitation")) {
+    row("excitation criterion", fmt::format("{} -> {} ({} iterations, {} s)", num(x->find("criterion_initial")),
+                                            num(x->find("criterion_final")), num(x->find("iterations")), num(x->find("wall_s"))));
+    row("cond(W) of trajectory", fmt::format("{} -> {}", num(x->find("cond_W_initial")), num(x->find("cond_W_final"))));
+  }
+  if (const Json* e = S.find("experiment")) row("experiment samples", num(e->find("samples")));
+  if (const Json* i = S.find("identification")) {
+    row("estimator", i->find("estimator")->asString());
+    row("cond(W) of identification", num(i->find("cond_W")));
+    row("residual RMS", num(i->find("residual_rms")));
+    if (i->find("param_rel_err")) row("parameter relative error", num(i->find("param_rel_err")));
+  }
+  if (const Json* v = S.find("validation")) row("validation relative error", num(v->find("relative_error")));
+  return out;
+}
+
+}  // namespace exid

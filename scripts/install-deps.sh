@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages exid needs, only those missing. Run as root (or with sudo).
+set -euo pipefail
+pkgs=(build-essential cmake pkg-config
+      libeigen3-dev libboost-dev libboost-filesystem-dev libnlopt-cxx-dev libsundials-dev
+      libfmt-dev libyaml-cpp-dev liburdfdom-dev libcli11-dev libgtest-dev libgmock-dev
+      libbenchmark-dev libsqlite3-dev gnuplot-nox)
+missing=()
+for p in "${pkgs[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if [ ${#missing[@]} -eq 0 ]; then
+  echo "install-deps: all ${#pkgs[@]} packages present"
+  exit 0
+fi
+echo "install-deps: installing ${missing[*]}"
+SUDO=""
+if [ "$(id -u)" -ne 0 ]; then SUDO="sudo"; fi
+export DEBIAN_FRONTEND=noninteractive
+$SUDO apt-get update -qq
+$SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+echo "install-deps: done"

@@ -1,0 +1,1 @@
+// Keeps exid_test_support non-empty.
