@@ -126,12 +126,12 @@ int main(int argc, char** argv) {
     if (*plugins) {
       if (!plugins_args.empty() && plugins_args[0] == "info") {
         if (plugins_args.size() != 2) throw exid::Error("usage: exid plugins info NAME");
-        std::cout << exid::cli::pluginInfoText(registry, plugins_args[1]);
+        std::cout << exid::pluginInfoText(registry, plugins_args[1]);
         return 0;
       }
       std::optional<exid::PluginKind> kind;
       if (!plugins_args.empty()) kind = exid::pluginKindFromString(plugins_args[0]);
-      std::cout << exid::cli::pluginListText(registry, kind);
+      std::cout << exid::pluginListText(registry, kind);
       return registry.plugins().empty() ? 1 : 0;
     }
     return extra.run();

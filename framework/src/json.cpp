@@ -221,7 +221,7 @@ struct Parser {
     char* end = nullptr;
     double d = std::strtod(begin, &end);
     if (end == begin) fail("unexpected character");
-    std::string tok(begin, end);
+    std::string tok(begin, static_cast<std::size_t>(end - begin));
     i += static_cast<std::size_t>(end - begin);
     if (tok.find_first_of(".eE") == std::string::npos) return Json(static_cast<long long>(std::strtoll(tok.c_str(), nullptr, 10)));
     return Json(d);

@@ -150,9 +150,6 @@ class StackedModel final : public ObservationModel {
   std::vector<int> rowsPerDesign_;
 };
 
-Json vectorJson(const Eigen::VectorXd& v) {
-  return Json(std::vector<double>(v.data(), v.data() + v.size()));
-}
 
 std::vector<std::string> signalNames(const std::string& prefix, int n) {
   std::vector<std::string> out;
