@@ -1,0 +1,155 @@
+// exid — numerical base parameters (Gautier 1990). See base_parameters.hpp and
+// docs/base_parameters.md.
+//
+// Choice of the independent set: columns are visited in their natural order (body 1 first, XX
+// before YY, inertial before drive columns) and a column is kept when its residual after
+// projection on the columns already kept (sequential Householder QR) exceeds the tolerance.
+// This gives the lexicographically lowest independent set, which is the classical
+// Khalil/Gautier convention (YYj regrouped into XXjR, Mj+1 into ZZjR, MXj ...). A
+// column-pivoted QR (Eigen ColPivHouseholderQR) computes the rank independently; if both
+// disagree (ill-conditioned stack) the pivoted set is used instead.
+#include "exid/base_parameters.hpp"
+
+#include <Eigen/Householder>
+#include <Eigen/QR>
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+#include "exid/error.hpp"
+
+namespace exid {
+
+Eigen::MatrixXd BaseParameters::columns(const Eigen::MatrixXd& W_full) const {
+  check(W_full.cols() == numFull(), "BaseParameters::columns: the regressor has " + std::to_string(W_full.cols()) +
+                                        " columns (expected " + std::to_string(numFull()) + ")");
+  Eigen::MatrixXd W(W_full.rows(), rank());
+  for (int k = 0; k < rank(); ++k) W.col(k) = W_full.col(independent[static_cast<size_t>(k)]);
+  return W;
+}
+
+namespace {
+
+std::string formatCoef(double c) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.6g", c);
+  return buf;
+}
+
+}  // namespace
+
+BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector<std::string>& names,
+                                     const BaseParameterOptions& opt) {
+  const Eigen::Index p = W.cols(), N = W.rows();
+  check(static_cast<Eigen::Index>(names.size()) == p,
+        "computeBaseParameters: " + std::to_string(names.size()) + " names for " + std::to_string(p) + " columns");
+  check(W.allFinite(), "computeBaseParameters: the stacked regressor contains non-finite numbers");
+  check(opt.tolerance > 0.0 && opt.tolerance < 1.0, "computeBaseParameters: tolerance must be in (0, 1)");
+  BaseParameters bp;
+  bp.full_names = names;
+  bp.tolerance = opt.tolerance;
+
+  Eigen::VectorXd norms = W.colwise().norm().transpose();
+  const double max_norm = p > 0 ? norms.maxCoeff() : 0.0;
+  std::vector<bool> zero(static_cast<size_t>(p), false);
+  for (Eigen::Index k = 0; k < p; ++k) zero[static_cast<size_t>(k)] = !(norms[k] > opt.tolerance * max_norm) || max_norm == 0.0;
+
+  Eigen::MatrixXd A(N, p);
+  for (Eigen::Index k = 0; k < p; ++k) {
+    const double s = (opt.normalize_columns && !zero[static_cast<size_t>(k)]) ? 1.0 / norms[k] : 1.0;
+    A.col(k) = zero[static_cast<size_t>(k)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(k) * s);
+  }
+
+  // Sequential Householder QR, keeping a column when |R_kk| > tol * |R_00|.
+  std::vector<int> ind;
+  {
+    Eigen::MatrixXd B = A;
+    Eigen::VectorXd ess(N);
+    double r00 = -1.0;
+    Eigen::Index r = 0;
+    for (Eigen::Index k = 0; k < p && r < N; ++k) {
+      if (zero[static_cast<size_t>(k)]) continue;
+      const double res = B.col(k).tail(N - r).norm();
+      if (r00 < 0.0) {
+        if (res == 0.0) continue;
+        r00 = res;
+      }
+      if (!(res > opt.tolerance * r00)) continue;
+      double tau = 0.0, beta = 0.0;
+      Eigen::VectorXd essential(N - r - 1);
+      B.col(k).tail(N - r).makeHouseholder(essential, tau, beta);
+      if (k + 1 < p) {
+        Eigen::VectorXd work(p);
+        B.block(r, k + 1, N - r, p - k - 1).applyHouseholderOnTheLeft(essential, tau, work.data());
+      }
+      ind.push_back(static_cast<int>(k));
+      ++r;
+    }
+  }
+  // Independent check of the rank by column-pivoted QR.
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> cpqr(A);
+  int rank_cp = 0;
+  {
+    const Eigen::MatrixXd& R = cpqr.matrixQR();
+    const Eigen::Index m = std::min(N, p);
+    const double R00 = m > 0 ? std::abs(R(0, 0)) : 0.0;
+    for (Eigen::Index k = 0; k < m; ++k)
+      if (std::abs(R(k, k)) > opt.tolerance * R00 && R00 > 0.0) ++rank_cp;
+  }
+  if (rank_cp != static_cast<int>(ind.size())) {
+    ind.clear();
+    for (int k = 0; k < rank_cp; ++k) ind.push_back(static_cast<int>(cpqr.colsPermutation().indices()[k]));
+    std::sort(ind.begin(), ind.end());
+  }
+  bp.independent = ind;
+  std::vector<bool> is_ind(static_cast<size_t>(p), false);
+  for (int k : ind) is_ind[static_cast<size_t>(k)] = true;
+  for (Eigen::Index k = 0; k < p; ++k)
+    if (!is_ind[static_cast<size_t>(k)]) bp.dependent.push_back(static_cast<int>(k));
+
+  const int r = bp.rank(), nd = static_cast<int>(bp.dependent.size());
+  Eigen::MatrixXd W1(N, r), W2(N, nd);
+  for (int k = 0; k < r; ++k) W1.col(k) = W.col(ind[static_cast<size_t>(k)]);
+  for (int k = 0; k < nd; ++k) {
+    const int c = bp.dependent[static_cast<size_t>(k)];
+    W2.col(k) = zero[static_cast<size_t>(c)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(c));
+  }
+  // beta from R11 beta = R12 (least squares in the original scaling, exact when W2 = W1 beta).
+  bp.beta = r > 0 ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2)) : Eigen::MatrixXd(0, nd);
+  for (Eigen::Index i = 0; i < bp.beta.size(); ++i)
+    if (std::abs(bp.beta.data()[i]) < 1e-10) bp.beta.data()[i] = 0.0;
+
+  bp.K = Eigen::MatrixXd::Zero(r, p);
+  for (int k = 0; k < r; ++k) bp.K(k, ind[static_cast<size_t>(k)]) = 1.0;
+  for (int k = 0; k < nd; ++k) bp.K.col(bp.dependent[static_cast<size_t>(k)]) = bp.beta.col(k);
+
+  for (int k = 0; k < r; ++k) {
+    const std::string& base = names[static_cast<size_t>(ind[static_cast<size_t>(k)])];
+    std::string expr = base;
+    bool regrouped = false;
+    for (int c = 0; c < nd; ++c) {
+      const double b = bp.beta(k, c);
+      if (std::abs(b) < 1e-10) continue;
+      regrouped = true;
+      const std::string& nm = names[static_cast<size_t>(bp.dependent[static_cast<size_t>(c)])];
+      const double a = std::abs(b);
+      expr += b < 0 ? " - " : " + ";
+      const std::string num = formatCoef(a);
+      expr += num == "1" ? nm : num + "*" + nm;
+    }
+    bp.names.push_back(regrouped ? base + "R" : base);
+    bp.expressions.push_back(expr);
+  }
+  return bp;
+}
+
+BaseParameters computeBaseParameters(int samples, int rows_per_sample,
+                                     const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
+                                     const std::vector<std::string>& names, const BaseParameterOptions& opt) {
+  check(samples > 0 && rows_per_sample > 0, "computeBaseParameters: samples and rows_per_sample must be positive");
+  Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * rows_per_sample, static_cast<Eigen::Index>(names.size()));
+  for (int k = 0; k < samples; ++k) rows(k, W.middleRows(static_cast<Eigen::Index>(k) * rows_per_sample, rows_per_sample));
+  return computeBaseParameters(W, names, opt);
+}
+
+}  // namespace exid

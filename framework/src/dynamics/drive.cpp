@@ -1,0 +1,198 @@
+// exid — actuator-side regressor: rigid-body columns through the transmission plus drive columns.
+#include "exid/drive.hpp"
+
+#include <Eigen/LU>
+#include <string>
+
+#include "exid/error.hpp"
+#include "internal.hpp"
+
+namespace exid {
+
+namespace {
+
+inline double sgn(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
+
+void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* what, const char* fn) {
+  check(x.size() == m.dof(), std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
+                                 " entries (expected " + std::to_string(m.dof()) + ")");
+}
+
+}  // namespace
+
+std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols) {
+  std::vector<std::string> names = model.inertialParameterNames();
+  for (int j = 0; j < model.dof(); ++j) {
+    const std::string k = std::to_string(j + 1);
+    if (cols.rotor_inertia) names.push_back("Ia" + k);
+    if (cols.coulomb) names.push_back("Fc" + k);
+    if (cols.viscous) names.push_back("Fv" + k);
+    if (cols.offset) names.push_back("OFF" + k);
+  }
+  return names;
+}
+
+int numParameters(const RobotModel& model, const DriveColumns& cols) {
+  return model.numInertialParameters() + cols.count() * model.dof();
+}
+
+Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols) {
+  const int n = model.dof();
+  Eigen::VectorXd v(numParameters(model, cols));
+  v.head(10 * n) = model.inertialParameters();
+  int c = 10 * n;
+  for (int j = 0; j < n; ++j) {
+    const Drive dr = j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
+    if (cols.rotor_inertia) v[c++] = dr.rotor_inertia;
+    if (cols.coulomb) v[c++] = dr.coulomb;
+    if (cols.viscous) v[c++] = dr.viscous;
+    if (cols.offset) v[c++] = dr.offset;
+  }
+  return v;
+}
+
+void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                     const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd) {
+  const bool T = model.hasTransmission();
+  if (q) {
+    checkMeasured(model, qm, "qm", "measuredToJoint");
+    if (T)
+      q->noalias() = model.transmission * qm;
+    else
+      *q = qm;
+    if (model.transmission_offset.size() == qm.size()) *q += model.transmission_offset;
+  }
+  if (qd) {
+    checkMeasured(model, qdm, "qdm", "measuredToJoint");
+    if (T)
+      qd->noalias() = model.transmission * qdm;
+    else
+      *qd = qdm;
+  }
+  if (qdd) {
+    checkMeasured(model, qddm, "qddm", "measuredToJoint");
+    if (T)
+      qdd->noalias() = model.transmission * qddm;
+    else
+      *qdd = qddm;
+  }
+}
+
+void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                     const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm) {
+  if (!model.hasTransmission()) {
+    if (qm) *qm = model.transmission_offset.size() == q.size() ? Eigen::VectorXd(q - model.transmission_offset) : q;
+    if (qdm) *qdm = qd;
+    if (qddm) *qddm = qdd;
+    return;
+  }
+  Eigen::FullPivLU<Eigen::MatrixXd> lu(model.transmission);
+  check(lu.isInvertible(), "jointToMeasured: the transmission matrix of robot '" + model.name +
+                               "' is singular (expected an invertible n x n matrix)");
+  if (qm) {
+    checkMeasured(model, q, "q", "jointToMeasured");
+    *qm = lu.solve(model.transmission_offset.size() == q.size() ? Eigen::VectorXd(q - model.transmission_offset) : q);
+  }
+  if (qdm) {
+    checkMeasured(model, qd, "qd", "jointToMeasured");
+    *qdm = lu.solve(qd);
+  }
+  if (qddm) {
+    checkMeasured(model, qdd, "qdd", "jointToMeasured");
+    *qddm = lu.solve(qdd);
+  }
+}
+
+void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                       const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                       Eigen::Ref<Eigen::MatrixXd> Y) {
+  const int n = model.dof();
+  check(Y.rows() == n && Y.cols() == numParameters(model, cols),
+        "actuatorRegressor: Y must be n x numParameters(model, cols)");
+  checkMeasured(model, qm, "qm", "actuatorRegressor");
+  checkMeasured(model, qdm, "qdm", "actuatorRegressor");
+  checkMeasured(model, qddm, "qddm", "actuatorRegressor");
+  if (model.hasTransmission() || model.transmission_offset.size() == n) {
+    Eigen::VectorXd& q = detail::scratchVector(data, 0);
+    Eigen::VectorXd& qd = detail::scratchVector(data, 1);
+    Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+    if (model.hasTransmission()) {
+      Eigen::MatrixXd& Yj = detail::scratchMatrix(data, 0);
+      Yj.resize(n, 10 * n);
+      torqueRegressor(model, data, q, qd, qdd, Yj);
+      Y.leftCols(10 * n).noalias() = model.transmission.transpose() * Yj;
+    } else {
+      torqueRegressor(model, data, q, qd, qdd, Y.leftCols(10 * n));
+    }
+  } else {
+    torqueRegressor(model, data, qm, qdm, qddm, Y.leftCols(10 * n));
+  }
+  const int k = cols.count();
+  if (k == 0) return;
+  Y.rightCols(k * n).setZero();
+  for (int j = 0; j < n; ++j) {
+    int c = 10 * n + k * j;
+    if (cols.rotor_inertia) Y(j, c++) = qddm[j];
+    if (cols.coulomb) Y(j, c++) = sgn(qdm[j]);
+    if (cols.viscous) Y(j, c++) = qdm[j];
+    if (cols.offset) Y(j, c++) = 1.0;
+  }
+}
+
+void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                          const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                          const Eigen::MatrixXd& G, Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm,
+                          Eigen::VectorXd* d_qddm) {
+  const int n = model.dof();
+  check(G.rows() == n && G.cols() == numParameters(model, cols),
+        "actuatorRegressorVjp: G must be n x numParameters(model, cols)");
+  Eigen::VectorXd& q = detail::scratchVector(data, 0);
+  Eigen::VectorXd& qd = detail::scratchVector(data, 1);
+  Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
+  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+  const bool T = model.hasTransmission();
+  Eigen::MatrixXd& Gj = detail::scratchMatrix(data, 1);
+  if (T)
+    Gj.noalias() = model.transmission * G.leftCols(10 * n);  // <G, T^T Y> = <T G, Y>
+  else
+    Gj = G.leftCols(10 * n);
+  torqueRegressorVjp(model, data, q, qd, qdd, Gj, d_qm, d_qdm, d_qddm);
+  if (T) {
+    Eigen::VectorXd& tmp = detail::scratchVector(data, 3);
+    for (Eigen::VectorXd* x : {d_qm, d_qdm, d_qddm})
+      if (x) {
+        tmp.noalias() = model.transmission.transpose() * *x;
+        *x = tmp;
+      }
+  }
+  const int k = cols.count();
+  for (int j = 0; j < n && k > 0; ++j) {
+    int c = 10 * n + k * j;
+    if (cols.rotor_inertia) {
+      if (d_qddm) (*d_qddm)[j] += G(j, c);
+      ++c;
+    }
+    if (cols.coulomb) ++c;
+    if (cols.viscous && d_qdm) (*d_qdm)[j] += G(j, c);
+  }
+}
+
+Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                               const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm) {
+  const int n = model.dof();
+  Eigen::VectorXd q, qd, qdd;
+  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+  const Eigen::VectorXd tau = inverseDynamics(model, data, q, qd, qdd);
+  Eigen::VectorXd tm = model.hasTransmission() ? Eigen::VectorXd(model.transmission.transpose() * tau) : tau;
+  for (int j = 0; j < n; ++j) {
+    const Drive dr = j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
+    if (cols.rotor_inertia) tm[j] += dr.rotor_inertia * qddm[j];
+    if (cols.coulomb) tm[j] += dr.coulomb * sgn(qdm[j]);
+    if (cols.viscous) tm[j] += dr.viscous * qdm[j];
+    if (cols.offset) tm[j] += dr.offset;
+  }
+  return tm;
+}
+
+}  // namespace exid
