@@ -1,0 +1,52 @@
+// exid — robot loaders: private helpers shared by the loaders (not installed).
+#pragma once
+
+#include <Eigen/Geometry>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+#include "exid/error.hpp"
+#include "exid/robot_model.hpp"
+
+namespace exid::detail {
+
+inline std::string readTextFile(const std::filesystem::path& file, const char* what) {
+  std::ifstream in(file, std::ios::binary);
+  if (!in) {
+    throw Error(file.string() + ": cannot open the " + what + " file (" +
+                (std::filesystem::exists(file) ? "not readable" : "no such file") + ")");
+  }
+  std::ostringstream ss;
+  ss << in.rdbuf();
+  return ss.str();
+}
+
+/// URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).
+inline Eigen::Matrix3d rpyToMatrix(double roll, double pitch, double yaw) {
+  return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *
+          Eigen::AngleAxisd(pitch, Eigen::Vector3d::UnitY()) *
+          Eigen::AngleAxisd(roll, Eigen::Vector3d::UnitX()))
+      .toRotationMatrix();
+}
+
+/// Interval hull of q = T qm + q0 for qm in the box [lo, hi] (infinite bounds propagate).
+inline void transmissionHull(const Eigen::MatrixXd& T, const Eigen::VectorXd& q0,
+                             const Eigen::VectorXd& lo, const Eigen::VectorXd& hi,
+                             Eigen::VectorXd* qlo, Eigen::VectorXd* qhi) {
+  const Eigen::Index n = T.rows();
+  *qlo = q0;
+  *qhi = q0;
+  for (Eigen::Index i = 0; i < n; ++i) {
+    for (Eigen::Index j = 0; j < T.cols(); ++j) {
+      const double t = T(i, j);
+      if (t == 0.0) continue;
+      const double a = t * lo(j), b = t * hi(j);
+      (*qlo)(i) += std::min(a, b);
+      (*qhi)(i) += std::max(a, b);
+    }
+  }
+}
+
+}  // namespace exid::detail

@@ -1,0 +1,548 @@
+// exid — URDF robot descriptions (urdfdom for the values, TinyXML for structure checks with line
+// numbers and for the <exid> extension element). Format: docs/robots.md.
+#include <console_bridge/console.h>
+#include <tinyxml.h>
+#include <urdf_parser/urdf_parser.h>
+
+#include <Eigen/Geometry>
+#include <cerrno>
+#include <cmath>
+#include <cstdlib>
+#include <map>
+#include <mutex>
+#include <set>
+#include <sstream>
+
+#include "exid/error.hpp"
+#include "exid/robot_loaders.hpp"
+#include "read_text.hpp"
+
+namespace exid {
+namespace {
+
+constexpr double kInf = 1e300;
+
+std::string at(const std::string& source, const TiXmlNode* node) {
+  return node && node->Row() > 0 ? source + ":" + std::to_string(node->Row()) : source;
+}
+
+// ------------------------------------------------------------------ structure (TinyXML pass)
+struct XJoint {
+  std::string name, type, parent, child;
+  int line = 0;
+};
+struct XLink {
+  std::string name;
+  int line = 0;
+};
+struct XRobot {
+  std::string name;
+  std::vector<XLink> links;
+  std::vector<XJoint> joints;  // document order
+  const TiXmlElement* exid = nullptr;
+  std::string root;
+  std::map<std::string, std::vector<int>> children;  // link -> joint indices (document order)
+};
+
+std::string attr(const TiXmlElement* e, const char* name) {
+  const char* v = e->Attribute(name);
+  return v ? std::string(v) : std::string();
+}
+
+/// Checks that attribute `name` of e (when present) holds `count` finite numbers.
+void checkNumbers(const TiXmlElement* e, const char* name, int count, const std::string& src,
+                  const std::string& owner) {
+  const char* v = e->Attribute(name);
+  if (!v) return;
+  std::istringstream ss(v);
+  std::string tok;
+  int found = 0;
+  while (ss >> tok) {
+    errno = 0;
+    char* end = nullptr;
+    const double d = std::strtod(tok.c_str(), &end);
+    const std::string where = at(src, e) + ": " + owner + ": <" + e->Value() + "> attribute '" +
+                              name + "': ";
+    if (end == tok.c_str() || *end != '\0' || errno == ERANGE) {
+      throw Error(where + "expected a number, found '" + tok + "'");
+    }
+    if (!std::isfinite(d)) throw Error(where + "expected a finite number, found '" + tok + "'");
+    ++found;
+  }
+  if (found != count) {
+    throw Error(at(src, e) + ": " + owner + ": <" + e->Value() + "> attribute '" + name +
+                "': expected " + std::to_string(count) + " number(s), found " +
+                std::to_string(found));
+  }
+}
+
+/// Numbers of the elements exid reads, checked with their line (urdfdom's own checks are
+/// incomplete: e.g. a bad <mass> only logs an error and leaves the mass zero).
+void checkLinkNumbers(const TiXmlElement* link, const std::string& src, const std::string& owner) {
+  for (const TiXmlElement* in = link->FirstChildElement("inertial"); in;
+       in = in->NextSiblingElement("inertial")) {
+    if (const TiXmlElement* o = in->FirstChildElement("origin")) {
+      checkNumbers(o, "xyz", 3, src, owner);
+      checkNumbers(o, "rpy", 3, src, owner);
+    }
+    const TiXmlElement* mass = in->FirstChildElement("mass");
+    if (!mass || !mass->Attribute("value")) {
+      throw Error(at(src, in) + ": " + owner + ": <inertial> without <mass value=\"...\"/>");
+    }
+    checkNumbers(mass, "value", 1, src, owner);
+    const TiXmlElement* I = in->FirstChildElement("inertia");
+    if (!I) throw Error(at(src, in) + ": " + owner + ": <inertial> without <inertia .../>");
+    for (const char* k : {"ixx", "ixy", "ixz", "iyy", "iyz", "izz"}) {
+      if (!I->Attribute(k)) {
+        throw Error(at(src, I) + ": " + owner + ": <inertia> without attribute '" + k + "'");
+      }
+      checkNumbers(I, k, 1, src, owner);
+    }
+  }
+}
+
+void checkJointNumbers(const TiXmlElement* j, const std::string& src, const std::string& owner) {
+  if (const TiXmlElement* o = j->FirstChildElement("origin")) {
+    checkNumbers(o, "xyz", 3, src, owner);
+    checkNumbers(o, "rpy", 3, src, owner);
+  }
+  if (const TiXmlElement* a = j->FirstChildElement("axis")) checkNumbers(a, "xyz", 3, src, owner);
+  if (const TiXmlElement* l = j->FirstChildElement("limit")) {
+    for (const char* k : {"lower", "upper", "effort", "velocity"}) checkNumbers(l, k, 1, src, owner);
+  }
+  if (const TiXmlElement* d = j->FirstChildElement("dynamics")) {
+    for (const char* k : {"damping", "friction"}) checkNumbers(d, k, 1, src, owner);
+  }
+}
+
+XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
+  const TiXmlElement* robot = doc.RootElement();
+  if (!robot || std::string(robot->Value()) != "robot") {
+    throw Error(at(src, robot) + ": the root element must be <robot>, found <" +
+                (robot ? robot->Value() : "nothing") + ">");
+  }
+  XRobot x;
+  x.name = attr(robot, "name");
+  std::map<std::string, int> link_line, joint_line;
+  for (const TiXmlElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
+    const std::string tag = e->Value();
+    if (tag == "link") {
+      XLink l{attr(e, "name"), e->Row()};
+      if (l.name.empty()) throw Error(at(src, e) + ": <link> without a name attribute");
+      if (link_line.count(l.name)) {
+        throw Error(at(src, e) + ": link '" + l.name + "': duplicate link (first at line " +
+                    std::to_string(link_line[l.name]) + ")");
+      }
+      link_line[l.name] = l.line;
+      checkLinkNumbers(e, src, "link '" + l.name + "'");
+      x.links.push_back(l);
+    } else if (tag == "joint") {
+      XJoint j;
+      j.name = attr(e, "name");
+      j.type = attr(e, "type");
+      j.line = e->Row();
+      if (j.name.empty()) throw Error(at(src, e) + ": <joint> without a name attribute");
+      if (joint_line.count(j.name)) {
+        throw Error(at(src, e) + ": joint '" + j.name + "': duplicate joint (first at line " +
+                    std::to_string(joint_line[j.name]) + ")");
+      }
+      joint_line[j.name] = j.line;
+      static const std::set<std::string> kSupported = {"revolute", "continuous", "prismatic",
+                                                       "fixed"};
+      if (!kSupported.count(j.type)) {
+        throw Error(at(src, e) + ": joint '" + j.name + "': " +
+                    (j.type.empty() ? std::string("missing type") : j.type + " joints are") +
+                    " not supported (only revolute, continuous, prismatic and fixed; a "
+                    "floating base is not modelled, fix the base link to the world instead)");
+      }
+      if (e->FirstChildElement("mimic")) {
+        throw Error(at(src, e) + ": joint '" + j.name +
+                    "': <mimic> is not supported (use the <exid><transmission> matrix)");
+      }
+      const TiXmlElement* p = e->FirstChildElement("parent");
+      const TiXmlElement* c = e->FirstChildElement("child");
+      if (!p || attr(p, "link").empty()) {
+        throw Error(at(src, e) + ": joint '" + j.name + "': missing <parent link=\"...\"/>");
+      }
+      if (!c || attr(c, "link").empty()) {
+        throw Error(at(src, e) + ": joint '" + j.name + "': missing <child link=\"...\"/>");
+      }
+      checkJointNumbers(e, src, "joint '" + j.name + "'");
+      j.parent = attr(p, "link");
+      j.child = attr(c, "link");
+      x.joints.push_back(j);
+    } else if (tag == "exid") {
+      if (x.exid) throw Error(at(src, e) + ": a second <exid> element (one is allowed)");
+      x.exid = e;
+    }
+  }
+  if (x.links.empty()) throw Error(src + ": no <link> in the robot");
+
+  // Every joint names existing links; every link has at most one parent joint.
+  std::map<std::string, int> parent_joint;
+  for (size_t k = 0; k < x.joints.size(); ++k) {
+    const XJoint& j = x.joints[k];
+    for (const auto* l : {&j.parent, &j.child}) {
+      if (!link_line.count(*l)) {
+        throw Error(src + ":" + std::to_string(j.line) + ": joint '" + j.name +
+                    "': unknown link '" + *l + "' (missing <link name=\"" + *l + "\">)");
+      }
+    }
+    if (j.parent == j.child) {
+      throw Error(src + ":" + std::to_string(j.line) + ": joint '" + j.name +
+                  "': kinematic loop: link '" + j.parent + "' is its own parent");
+    }
+    auto it = parent_joint.find(j.child);
+    if (it != parent_joint.end()) {
+      const XJoint& o = x.joints[static_cast<size_t>(it->second)];
+      throw Error(src + ":" + std::to_string(j.line) + ": joint '" + j.name +
+                  "': kinematic loop: link '" + j.child + "' already is the child of joint '" +
+                  o.name + "' (line " + std::to_string(o.line) +
+                  "); a URDF must be a tree (closed chains are not supported)");
+    }
+    parent_joint[j.child] = static_cast<int>(k);
+    x.children[j.parent].push_back(static_cast<int>(k));
+  }
+  // Cycles: walk up from every link.
+  for (const auto& l : x.links) {
+    std::vector<std::string> path{l.name};
+    std::set<std::string> seen{l.name};
+    std::string cur = l.name;
+    while (parent_joint.count(cur)) {
+      cur = x.joints[static_cast<size_t>(parent_joint[cur])].parent;
+      path.push_back(cur);
+      if (!seen.insert(cur).second) {
+        std::string chain;
+        for (const auto& s : path) chain += (chain.empty() ? "" : " -> ") + s;
+        throw Error(src + ": link '" + l.name + "': kinematic loop (" + chain +
+                    "); a URDF must be a tree");
+      }
+    }
+  }
+  std::vector<std::string> roots;
+  for (const auto& l : x.links) {
+    if (!parent_joint.count(l.name)) roots.push_back(l.name);
+  }
+  if (roots.size() != 1) {
+    std::string list;
+    for (const auto& s : roots) list += (list.empty() ? "'" : ", '") + s + "'";
+    throw Error(src + ": several root links (" + list +
+                "): every link but one must be the child of a joint");
+  }
+  x.root = roots.front();
+  return x;
+}
+
+// ------------------------------------------------------------------ urdfdom with captured errors
+class CaptureHandler : public console_bridge::OutputHandler {
+ public:
+  void log(const std::string& text, console_bridge::LogLevel level, const char*, int) override {
+    if (level >= console_bridge::CONSOLE_BRIDGE_LOG_ERROR) {
+      errors += (errors.empty() ? "" : "; ") + text;
+    }
+  }
+  std::string errors;
+};
+
+urdf::ModelInterfaceSharedPtr parseWithUrdfdom(const std::string& xml, const std::string& src) {
+  static std::mutex mutex;  // console_bridge's handler is process-wide
+  std::lock_guard<std::mutex> lock(mutex);
+  CaptureHandler handler;
+  console_bridge::OutputHandler* previous = console_bridge::getOutputHandler();
+  console_bridge::useOutputHandler(&handler);
+  urdf::ModelInterfaceSharedPtr model;
+  std::string exception;
+  try {
+    model = urdf::parseURDF(xml);
+  } catch (const std::exception& e) {
+    exception = e.what();
+  }
+  console_bridge::useOutputHandler(previous);
+  if (!model || !handler.errors.empty()) {
+    std::string why = handler.errors;
+    if (!exception.empty()) why += (why.empty() ? "" : "; ") + exception;
+    throw Error(src + ": invalid URDF (urdfdom): " + (why.empty() ? "unknown error" : why));
+  }
+  return model;
+}
+
+// ------------------------------------------------------------------ conversions
+Pose toPose(const urdf::Pose& u) {
+  Pose P;
+  double x = 0, y = 0, z = 0, w = 1;
+  u.rotation.getQuaternion(x, y, z, w);
+  P.R = Eigen::Quaterniond(w, x, y, z).normalized().toRotationMatrix();
+  P.p = Eigen::Vector3d(u.position.x, u.position.y, u.position.z);
+  return P;
+}
+
+bool finitePose(const Pose& P) { return P.R.allFinite() && P.p.allFinite(); }
+
+Eigen::Matrix<double, 10, 1> linkInertial(const urdf::Link& link, const std::string& src) {
+  Eigen::Matrix<double, 10, 1> pi = Eigen::Matrix<double, 10, 1>::Zero();
+  if (!link.inertial) return pi;
+  const urdf::Inertial& in = *link.inertial;
+  Eigen::Matrix3d I;
+  I << in.ixx, in.ixy, in.ixz, in.ixy, in.iyy, in.iyz, in.ixz, in.iyz, in.izz;
+  const Pose X = toPose(in.origin);  // centre-of-mass frame in the link frame
+  if (!std::isfinite(in.mass) || !I.allFinite() || !finitePose(X)) {
+    throw Error(src + ": link '" + link.name + "': <inertial>: non-finite number");
+  }
+  return transformInertial(inertialFromCom(in.mass, Eigen::Vector3d::Zero(), I), X);
+}
+
+// ------------------------------------------------------------------ <exid> extension
+struct ExtReader {
+  std::string src;
+  [[noreturn]] void fail(const TiXmlElement* e, const std::string& rule) const {
+    throw Error(at(src, e) + ": <exid><" + e->Value() + ">: " + rule);
+  }
+  void allow(const TiXmlElement* e, const std::set<std::string>& names) const {
+    for (const TiXmlAttribute* a = e->FirstAttribute(); a; a = a->Next()) {
+      if (!names.count(a->Name())) {
+        std::string list;
+        for (const auto& s : names) list += (list.empty() ? "" : ", ") + s;
+        fail(e, std::string("unknown attribute '") + a->Name() + "' (allowed: " + list + ")");
+      }
+    }
+  }
+  std::vector<double> numbers(const TiXmlElement* e, const char* name, int size) const {
+    const char* v = e->Attribute(name);
+    std::vector<double> out;
+    if (!v) return out;
+    std::istringstream ss(v);
+    std::string tok;
+    while (ss >> tok) {
+      errno = 0;
+      char* end = nullptr;
+      const double d = std::strtod(tok.c_str(), &end);
+      if (end == tok.c_str() || *end != '\0' || errno == ERANGE) {
+        fail(e, std::string("attribute '") + name + "': expected numbers, found '" + tok + "'");
+      }
+      if (!std::isfinite(d)) {
+        fail(e, std::string("attribute '") + name + "': non-finite number '" + tok + "'");
+      }
+      out.push_back(d);
+    }
+    if (size >= 0 && static_cast<int>(out.size()) != size) {
+      fail(e, std::string("attribute '") + name + "': expected " + std::to_string(size) +
+                  " numbers, found " + std::to_string(out.size()));
+    }
+    return out;
+  }
+  bool number(const TiXmlElement* e, const char* name, double* out) const {
+    auto v = numbers(e, name, -1);
+    if (v.empty()) {
+      if (e->Attribute(name)) fail(e, std::string("attribute '") + name + "' is empty");
+      return false;
+    }
+    if (v.size() != 1) fail(e, std::string("attribute '") + name + "': expected one number");
+    *out = v.front();
+    return true;
+  }
+};
+
+struct LinkPlace {
+  int body = -1;  // -1: the fixed base
+  Pose X;         // link frame in that body's frame
+};
+
+void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel* m,
+                    const std::map<std::string, int>& joint_body,
+                    const std::map<std::string, LinkPlace>& link_place,
+                    const LoadOptions& options) {
+  const ExtReader r{src};
+  const int n = m->dof();
+  auto bodyOfJoint = [&](const TiXmlElement* e) {
+    const std::string j = attr(e, "joint");
+    if (j.empty()) r.fail(e, "missing attribute 'joint'");
+    auto it = joint_body.find(j);
+    if (it == joint_body.end()) {
+      r.fail(e, "joint '" + j + "': no such movable joint in the robot");
+    }
+    return it->second;
+  };
+  bool had_transmission = false;
+  for (const TiXmlElement* e = ext->FirstChildElement(); e; e = e->NextSiblingElement()) {
+    const std::string tag = e->Value();
+    if (tag == "drive") {
+      r.allow(e, {"joint", "gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous",
+                  "offset"});
+      Drive& d = m->drives[static_cast<size_t>(bodyOfJoint(e))];
+      r.number(e, "gear_ratio", &d.gear_ratio);
+      if (d.gear_ratio == 0.0) r.fail(e, "gear_ratio must not be zero");
+      double jm = 0;
+      const bool has_jm = r.number(e, "motor_inertia", &jm);
+      const bool has_ia = r.number(e, "rotor_inertia", &d.rotor_inertia);
+      if (has_jm && has_ia) {
+        r.fail(e, "give either motor_inertia (motor side, reflected as Jm*G^2) or "
+                  "rotor_inertia (reflected), not both");
+      }
+      if (has_jm) d.rotor_inertia = jm * d.gear_ratio * d.gear_ratio;
+      r.number(e, "coulomb", &d.coulomb);
+      r.number(e, "viscous", &d.viscous);
+      r.number(e, "offset", &d.offset);
+    } else if (tag == "limit") {
+      r.allow(e, {"joint", "q_min", "q_max", "qd_max", "qdd_max", "tau_max"});
+      JointLimits& L = m->limits[static_cast<size_t>(bodyOfJoint(e))];
+      r.number(e, "q_min", &L.q_min);
+      r.number(e, "q_max", &L.q_max);
+      r.number(e, "qd_max", &L.qd_max);
+      r.number(e, "qdd_max", &L.qdd_max);
+      r.number(e, "tau_max", &L.tau_max);
+      if (L.q_min >= L.q_max) r.fail(e, "q_min must be below q_max");
+      if (L.qd_max <= 0 || L.qdd_max <= 0 || L.tau_max <= 0) {
+        r.fail(e, "qd_max, qdd_max and tau_max must be positive");
+      }
+    } else if (tag == "gravity") {
+      r.allow(e, {"xyz"});
+      auto g = r.numbers(e, "xyz", 3);
+      m->gravity = Eigen::Vector3d(g[0], g[1], g[2]);
+    } else if (tag == "transmission") {
+      r.allow(e, {"matrix", "offset"});
+      if (had_transmission) r.fail(e, "a second <transmission>");
+      had_transmission = true;
+      auto T = r.numbers(e, "matrix", n * n);
+      if (T.empty()) r.fail(e, "missing attribute 'matrix' (row-major, dof x dof)");
+      m->transmission = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
+                                                       Eigen::RowMajor>>(T.data(), n, n);
+      if (!Eigen::FullPivLU<Eigen::MatrixXd>(m->transmission).isInvertible()) {
+        r.fail(e, "the matrix is singular (not invertible)");
+      }
+      auto off = r.numbers(e, "offset", e->Attribute("offset") ? n : -1);
+      m->transmission_offset =
+          off.empty() ? Eigen::VectorXd::Zero(n)
+                      : Eigen::VectorXd(Eigen::Map<const Eigen::VectorXd>(off.data(), n));
+    } else if (tag == "sensor") {
+      r.allow(e, {"link", "xyz", "rpy"});
+      const std::string l = attr(e, "link");
+      auto it = link_place.find(l);
+      if (it == link_place.end()) r.fail(e, "link '" + l + "': no such link");
+      if (it->second.body < 0) r.fail(e, "link '" + l + "' is fixed to the base (no motion)");
+      Pose P;
+      auto xyz = r.numbers(e, "xyz", e->Attribute("xyz") ? 3 : -1);
+      auto rpy = r.numbers(e, "rpy", e->Attribute("rpy") ? 3 : -1);
+      if (!xyz.empty()) P.p = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+      if (!rpy.empty()) P.R = detail::rpyToMatrix(rpy[0], rpy[1], rpy[2]);
+      m->sensor_body = it->second.body;
+      m->sensor_pose = it->second.X * P;
+    } else {
+      r.fail(e, "unknown element (allowed: drive, limit, gravity, transmission, sensor)");
+    }
+  }
+  (void)options;
+}
+
+}  // namespace
+
+RobotModel loadUrdfString(const std::string& xml, const std::string& src,
+                          const LoadOptions& options) {
+  TiXmlDocument doc;
+  doc.Parse(xml.c_str());
+  if (doc.Error()) {
+    throw Error(src + ":" + std::to_string(doc.ErrorRow()) + ": invalid XML: " + doc.ErrorDesc());
+  }
+  const XRobot x = readStructure(doc, src);
+  const urdf::ModelInterfaceSharedPtr u = parseWithUrdfdom(xml, src);
+
+  RobotModel m;
+  m.name = x.name.empty() ? "robot" : x.name;
+  m.source = src;
+  std::map<std::string, int> joint_body;
+  std::map<std::string, LinkPlace> link_place;
+
+  // Depth first from the root, children in document order: parents get lower indices.
+  struct Item {
+    std::string link;
+    LinkPlace place;
+  };
+  std::vector<Item> stack{{x.root, LinkPlace{}}};
+  while (!stack.empty()) {
+    const Item it = stack.back();
+    stack.pop_back();
+    link_place[it.link] = it.place;
+    auto ch = x.children.find(it.link);
+    if (ch == x.children.end()) continue;
+    std::vector<Item> next;
+    for (int k : ch->second) {
+      const XJoint& xj = x.joints[static_cast<size_t>(k)];
+      const urdf::JointConstSharedPtr j = u->getJoint(xj.name);
+      const urdf::LinkConstSharedPtr child = u->getLink(xj.child);
+      const std::string jw = src + ":" + std::to_string(xj.line) + ": joint '" + xj.name + "'";
+      if (!j || !child) throw Error(jw + ": not found by urdfdom");
+      const Pose origin = toPose(j->parent_to_joint_origin_transform);
+      if (!finitePose(origin)) throw Error(jw + ": <origin>: non-finite number");
+      const Pose X = it.place.X * origin;  // child link frame in the owning body's frame
+      const Eigen::Matrix<double, 10, 1> pi = linkInertial(*child, src);
+      if (j->type == urdf::Joint::FIXED) {
+        // Merged into the owning body (nothing moves between them).
+        if (it.place.body >= 0) {
+          m.bodies[static_cast<size_t>(it.place.body)].inertia += transformInertial(pi, X);
+        }
+        next.push_back({xj.child, LinkPlace{it.place.body, X}});
+        continue;
+      }
+      Body b;
+      b.name = xj.child;
+      b.joint_name = xj.name;
+      b.parent = it.place.body;
+      b.pre = X;
+      b.type = j->type == urdf::Joint::PRISMATIC ? JointType::Prismatic : JointType::Revolute;
+      const Eigen::Vector3d axis(j->axis.x, j->axis.y, j->axis.z);
+      if (!axis.allFinite() || axis.norm() < 1e-12) {
+        throw Error(jw + ": <axis>: expected a non-zero finite vector");
+      }
+      b.axis = axis.normalized();
+      b.inertia = pi;
+      JointLimits lim;
+      if (j->limits) {
+        const auto& L = *j->limits;
+        if (!std::isfinite(L.lower) || !std::isfinite(L.upper) || !std::isfinite(L.effort) ||
+            !std::isfinite(L.velocity)) {
+          throw Error(jw + ": <limit>: non-finite number");
+        }
+        if (j->type != urdf::Joint::CONTINUOUS) {
+          if (L.lower >= L.upper) throw Error(jw + ": <limit>: lower must be below upper");
+          lim.q_min = L.lower;
+          lim.q_max = L.upper;
+        }
+        if (L.velocity > 0) lim.qd_max = L.velocity;
+        if (L.effort > 0) lim.tau_max = L.effort;
+      }
+      Drive drv;
+      if (j->dynamics) {
+        if (!std::isfinite(j->dynamics->damping) || !std::isfinite(j->dynamics->friction)) {
+          throw Error(jw + ": <dynamics>: non-finite number");
+        }
+        drv.viscous = j->dynamics->damping;
+        drv.coulomb = j->dynamics->friction;
+      }
+      const int index = m.dof();
+      m.bodies.push_back(b);
+      m.limits.push_back(lim);
+      m.drives.push_back(drv);
+      joint_body[xj.name] = index;
+      next.push_back({xj.child, LinkPlace{index, Pose{}}});
+    }
+    // Push in reverse so that the first child in document order is visited first.
+    for (auto r = next.rbegin(); r != next.rend(); ++r) stack.push_back(*r);
+  }
+  if (m.dof() == 0) {
+    throw Error(src + ": no movable joint (revolute, continuous or prismatic) in the robot");
+  }
+  if (x.exid) applyExtension(x.exid, src, &m, joint_body, link_place, options);
+
+  try {
+    m.validateStructure();
+  } catch (const Error& e) {
+    throw Error(src + ": " + e.what());
+  }
+  checkModelPhysical(m, options);
+  return m;
+}
+
+RobotModel loadUrdf(const std::filesystem::path& file, const LoadOptions& options) {
+  return loadUrdfString(detail::readTextFile(file, "URDF"), file.string(), options);
+}
+
+}  // namespace exid

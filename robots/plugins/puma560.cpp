@@ -1,0 +1,46 @@
+// exid — robot plugin `puma560`: Unimation PUMA 560, standard DH (Corke's toolbox parameters),
+// or the same robot from its URDF. Both description files are embedded at build time.
+#include "robot_plugin_common.hpp"
+
+extern const char* const exid_embedded_puma560_yaml;
+extern const char* const exid_embedded_puma560_urdf;
+
+namespace {
+
+class Puma560Robot : public exid::Robot {
+ public:
+  static constexpr const char* kName = "puma560";
+  static constexpr const char* kVersion = "1.0.0";
+  static constexpr const char* kDoc =
+      "Unimation PUMA 560 (Corke/Armstrong-Khatib-Burdick parameters, reflected motor inertias, "
+      "link-side friction); loads with warnings (published data violate the triangle inequality)";
+  static std::vector<exid::ParamDecl> params() {
+    auto p = exid::robots::commonParams();
+    p.push_back(exid::param_string("variant", std::string("standard_dh"),
+                                   "which description: the DH table or the URDF of the same robot",
+                                   {"standard_dh", "urdf"}));
+    return p;
+  }
+  explicit Puma560Robot(const exid::ParamSet& p) : opt_(p), variant_(p.getString("variant")) {}
+
+  std::shared_ptr<const exid::RobotModel> build(const exid::RunContext&) override {
+    if (variant_ == "urdf") {
+      return opt_.build([](const exid::LoadOptions& o) {
+        return exid::loadUrdfString(exid_embedded_puma560_urdf,
+                                    "puma560.urdf (embedded in plugin puma560)", o);
+      });
+    }
+    return opt_.build([](const exid::LoadOptions& o) {
+      return exid::loadDhYamlString(exid_embedded_puma560_yaml,
+                                    "puma560.yaml (embedded in plugin puma560)", o);
+    });
+  }
+
+ private:
+  exid::robots::CommonOptions opt_;
+  std::string variant_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(Puma560Robot)
