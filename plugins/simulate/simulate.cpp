@@ -1,0 +1,623 @@
+// exid — experiment `simulate`: closed-loop forward dynamics of the TRUE robot, integrated by
+// SUNDIALS (CVODE BDF with a dense Newton solver, or ARKODE explicit Runge-Kutta), sampled at a
+// fixed period, with optional payload, wrist wrench, measurement noise and encoder quantisation.
+//
+// Plant, in measured coordinates qm (q = T qm + q0, tau_m = T^T tau):
+//   Mm(q) qddm + hm(q, qd, qdm) = tau_m
+//   Mm = T^T M(q) T + diag(Ia),  hm = T^T h(q, qd) + Fc s(qdm) + Fv qdm + OFF
+// M, h from exid::massMatrix / exid::inverseDynamics (gravity included in h) with the payload
+// merged into the sensor body; s = sign (exact, default) or tanh(qdm / v_s).
+// Controllers (reference qr, qdr, qddr in measured coordinates):
+//   computed_torque: tau_m = Mm (qddr + kd (qdr - qdm) + kp (qr - qm)) + hm   (true model)
+//   pd_feedforward:  tau_m = tau_ff(qr, qdr, qddr) + D0 (kp (qr - qm) + kd (qdr - qdm)),
+//                    tau_ff from the robot description WITHOUT payload (all drive terms),
+//                    D0 = diag(Mm) at the start of the reference.
+#include <arkode/arkode_erkstep.h>
+#include <cvode/cvode.h>
+#include <fmt/format.h>
+#include <nvector/nvector_serial.h>
+#include <sundials/sundials_config.h>
+#include <sundials/sundials_context.h>
+#include <sunlinsol/sunlinsol_dense.h>
+#include <sunmatrix/sunmatrix_dense.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Core>
+#include <chrono>
+#include <cmath>
+#include <memory>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "exid/drive.hpp"
+#include "exid/dynamics.hpp"
+#include "exid/error.hpp"
+#include "exid/interfaces.hpp"
+#include "model_common.hpp"
+
+namespace {
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+// ---------------------------------------------------------------- references
+struct Reference {
+  virtual ~Reference() = default;
+  virtual void eval(double t, VectorXd* q, VectorXd* qd, VectorXd* qdd) const = 0;
+  virtual double t0() const = 0;
+  virtual double t1() const = 0;  // last time the reference is defined
+};
+
+/// Quintic Hermite interpolation of samples (q, qd, qdd at every knot): C2 and exact at knots.
+struct SampledReference : Reference {
+  exid::Samples s;
+  explicit SampledReference(const exid::Samples& r) : s(r) {}
+  double t0() const override { return s.t[0]; }
+  double t1() const override { return s.t[s.size() - 1]; }
+  void eval(double t, VectorXd* q, VectorXd* qd, VectorXd* qdd) const override {
+    const int K = s.size();
+    int i = 0;
+    if (K > 1) {
+      const double* b = s.t.data();
+      i = static_cast<int>(std::upper_bound(b, b + K, t) - b) - 1;
+      i = std::max(0, std::min(i, K - 2));
+    }
+    if (K == 1) {
+      *q = s.q.row(0).transpose();
+      *qd = s.qd.row(0).transpose();
+      *qdd = s.qdd.row(0).transpose();
+      return;
+    }
+    const double h = s.t[i + 1] - s.t[i], x = (t - s.t[i]) / h;
+    const int n = s.dof();
+    q->resize(n);
+    qd->resize(n);
+    qdd->resize(n);
+    for (int j = 0; j < n; ++j) {
+      const double p0 = s.q(i, j), v0 = s.qd(i, j), a0 = s.qdd(i, j);
+      const double p1 = s.q(i + 1, j), v1 = s.qd(i + 1, j), a1 = s.qdd(i + 1, j);
+      const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
+                   A = (a1 - a0) * h * h;
+      const double c[6] = {p0, v0 * h, 0.5 * a0 * h * h, 10 * P - 4 * V + 0.5 * A,
+                           -15 * P + 7 * V - A, 6 * P - 3 * V + 0.5 * A};
+      (*q)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
+      (*qd)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
+      (*qdd)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
+    }
+  }
+};
+
+/// q_j(t) = c_j + sum_l a_jl sin(l w t) + b_jl cos(l w t) in JOINT coordinates, mapped to
+/// measured coordinates through the transmission.
+struct FourierReference : Reference {
+  const exid::RobotModel* robot = nullptr;
+  double period = 10.0, w = 0.0, duration = 0.0;
+  VectorXd c;
+  MatrixXd a, b;  // n x H
+  double t0() const override { return 0.0; }
+  double t1() const override { return duration; }
+  void evalJoint(double t, VectorXd* q, VectorXd* qd, VectorXd* qdd) const {
+    const int n = static_cast<int>(c.size()), H = static_cast<int>(a.cols());
+    *q = c;
+    qd->setZero(n);
+    qdd->setZero(n);
+    for (int l = 1; l <= H; ++l) {
+      const double wl = l * w, sn = std::sin(wl * t), cs = std::cos(wl * t);
+      for (int j = 0; j < n; ++j) {
+        const double A = a(j, l - 1), B = b(j, l - 1);
+        (*q)[j] += A * sn + B * cs;
+        (*qd)[j] += wl * (A * cs - B * sn);
+        (*qdd)[j] += -wl * wl * (A * sn + B * cs);
+      }
+    }
+  }
+  void eval(double t, VectorXd* q, VectorXd* qd, VectorXd* qdd) const override {
+    VectorXd qj, qdj, qddj;
+    evalJoint(t, &qj, &qdj, &qddj);
+    exid::jointToMeasured(*robot, qj, qdj, qddj, q, qd, qdd);
+  }
+};
+
+double finiteOr(double x, double limit, double fallback) {
+  return (std::isfinite(x) && std::abs(x) < limit) ? x : fallback;
+}
+
+// ---------------------------------------------------------------- the experiment
+class SimulateExperiment : public exid::Experiment {
+ public:
+  static constexpr const char* kName = "simulate";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "closed-loop forward dynamics of the true robot (rigid body + drives + payload), SUNDIALS "
+      "CVODE BDF or ARKODE ERK, tracking the excitation trajectory or, without one, a seeded "
+      "finite Fourier series per joint (q = c + sum_l a_l sin(l w t) + b_l cos(l w t), "
+      "a_l, b_l ~ U(-1,1)/l scaled to amplitude_fraction of the half range about the centre c of "
+      "the joint limits and within velocity_fraction of the velocity limits); noise, quantisation";
+
+  static std::vector<exid::ParamDecl> params() {
+    using namespace exid;
+    std::vector<ParamDecl> p = {
+        param_string("integrator", std::string("cvode"),
+                     "cvode: CVODE BDF with dense Newton solver; arkode: ARKODE explicit "
+                     "Runge-Kutta (ERKStep, default order 4 table)",
+                     {"cvode", "arkode"}),
+        param_double("rtol", 1e-8, "", "relative tolerance of the integrator", 0.0, 1.0, true),
+        param_double("atol", 1e-10, "", "absolute tolerance of the integrator (rad, rad/s)", 0.0,
+                     std::nullopt, true),
+        param_int("max_steps", 100000, "maximum internal steps between two samples", 1),
+        param_string("controller", std::string("computed_torque"),
+                     "computed_torque (true model, perfect tracking from a state on the "
+                     "reference) or pd_feedforward (feedforward from the description without "
+                     "payload, PD scaled by the start mass-matrix diagonal)",
+                     {"computed_torque", "pd_feedforward"}),
+        param_double("kp", 100.0, "1/s^2", "position gain (closed-loop stiffness per unit inertia)",
+                     0.0),
+        param_double("kd", 20.0, "1/s", "velocity gain (closed-loop damping per unit inertia)", 0.0),
+        param_bool("drive_terms", true,
+                   "include the robot's drive terms (rotor inertia, Coulomb, viscous, offset) in "
+                   "the plant"),
+        param_string("coulomb", std::string("sign"),
+                     "Coulomb friction law of the plant: sign (exact, as the models) or tanh "
+                     "(smooth, tanh(qd / coulomb_velocity_scale))",
+                     {"sign", "tanh"}),
+        param_double("coulomb_velocity_scale", 1e-3, "rad/s",
+                     "velocity scale of the tanh Coulomb law", 0.0, std::nullopt, true),
+        param_double("period_s", 10.0, "s", "own reference: period of the Fourier series", 0.0,
+                     std::nullopt, true),
+        param_int("harmonics", 5, "own reference: harmonics per joint", 1, 100),
+        param_double("amplitude_fraction", 0.5, "",
+                     "own reference: peak excursion as a fraction of the half range of each joint",
+                     0.0, 1.0, true),
+        param_double("velocity_fraction", 0.8, "",
+                     "own reference: peak speed as a fraction of each joint's velocity limit", 0.0,
+                     1.0, true),
+        param_double("sample_period_s", 0.01, "s", "sampling period of the recorded data", 0.0,
+                     std::nullopt, true),
+        param_double("duration_s", 0.0, "s",
+                     "recorded duration; 0: one period (own reference) or the reference's duration",
+                     0.0),
+        param_bool("wrench", false, "record the wrist wrench fx..mz (sensor frame)"),
+        param_double("noise_q_rad", 0.0, "rad", "std of Gaussian noise on the recorded q", 0.0),
+        param_double("noise_tau_Nm", 0.0, "N m", "std of Gaussian noise on the recorded tau", 0.0),
+        param_doubles("noise_wrench", std::vector<double>{0.0}, "N, N m",
+                      "std of Gaussian noise on the wrench: [all], [force, moment] or six values",
+                      1, 6),
+        param_double("encoder_resolution_rad", 0.0, "rad",
+                     "quantisation step of the recorded q (after noise); 0: none", 0.0),
+        param_bool("output_qd_qdd", true,
+                   "record the true qd and qdd; false: only t, q, tau (and wrench), as on a real "
+                   "robot"),
+    };
+    for (auto& d : exid::models::payloadParams("payload attached to the sensor frame"))
+      p.push_back(d);
+    return p;
+  }
+
+  explicit SimulateExperiment(const exid::ParamSet& p)
+      : P_(p), payload_(exid::models::Payload::fromParams(p)) {
+    const auto nw = p.getDoubles("noise_wrench");
+    exid::check(nw.size() == 1 || nw.size() == 2 || nw.size() == 6,
+                fmt::format("{}: noise_wrench: expected 1, 2 or 6 numbers, found {}", p.context,
+                            nw.size()));
+    for (int e = 0; e < 6; ++e)
+      noise_w_[e] = nw.size() == 1 ? nw[0] : (nw.size() == 2 ? nw[e < 3 ? 0 : 1] : nw[static_cast<std::size_t>(e)]);
+  }
+
+  exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* reference,
+                    const exid::RunContext& ctx) override {
+    exid::check(robot != nullptr, "experiment 'simulate': no robot");
+    const auto wall0 = std::chrono::steady_clock::now();
+    nominal_ = robot;
+    const int n = robot->dof();
+    n_ = n;
+    // The true robot: the description with the payload merged into the sensor body.
+    truth_ = *robot;
+    if (!payload_.empty()) {
+      const int b = truth_.sensorBody();
+      truth_.bodies[static_cast<std::size_t>(b)].inertia +=
+          exid::transformInertial(payload_.pi(), truth_.sensor_pose);
+    }
+    data_ = exid::makeDynamicsData(truth_);
+    nominal_data_ = exid::makeDynamicsData(*robot);
+    drive_terms_ = P_.getBool("drive_terms");
+    tanh_ = P_.getString("coulomb") == "tanh";
+    vs_ = P_.getDouble("coulomb_velocity_scale");
+    computed_torque_ = P_.getString("controller") == "computed_torque";
+    kp_ = P_.getDouble("kp");
+    kd_ = P_.getDouble("kd");
+
+    // Reference.
+    exid::Json refmeta = exid::Json::object();
+    double duration = P_.getDouble("duration_s");
+    if (reference) {
+      exid::check(reference->size() >= 1 && reference->dof() == n &&
+                      reference->qd.cols() == n && reference->qdd.cols() == n &&
+                      reference->qd.rows() == reference->size() &&
+                      reference->qdd.rows() == reference->size(),
+                  fmt::format("experiment 'simulate': the reference trajectory must have q, qd, qdd "
+                              "with {} columns (found q {} x {}, qd {} x {}, qdd {} x {})",
+                              n, reference->q.rows(), reference->q.cols(), reference->qd.rows(),
+                              reference->qd.cols(), reference->qdd.rows(), reference->qdd.cols()));
+      for (int k = 1; k < reference->size(); ++k)
+        exid::check(reference->t[k] > reference->t[k - 1],
+                    fmt::format("experiment 'simulate': reference time must increase (sample {} "
+                                "has t = {} after {})",
+                                k + 1, reference->t[k], reference->t[k - 1]));
+      ref_ = std::make_unique<SampledReference>(*reference);
+      const double span = ref_->t1() - ref_->t0();
+      if (duration == 0.0) duration = span;
+      exid::check(duration <= span * (1 + 1e-12) + 1e-12,
+                  fmt::format("experiment 'simulate': duration_s = {} exceeds the reference "
+                              "trajectory's duration {} s",
+                              duration, span));
+      refmeta["type"] = "excitation trajectory (quintic Hermite through its samples)";
+      refmeta["samples"] = reference->size();
+    } else {
+      auto F = buildFourier(*robot, ctx.seed);
+      if (duration == 0.0) duration = F->period;
+      F->duration = duration;
+      refmeta["type"] = "fourier";
+      refmeta["period_s"] = F->period;
+      refmeta["harmonics"] = static_cast<int>(F->a.cols());
+      refmeta["amplitude_fraction"] = P_.getDouble("amplitude_fraction");
+      refmeta["velocity_fraction"] = P_.getDouble("velocity_fraction");
+      refmeta["seed"] = exid::Json(static_cast<long long>(ctx.seed));
+      ref_ = std::move(F);
+    }
+    exid::check(duration > 0.0, "experiment 'simulate': the duration is zero (a reference with one "
+                                "sample needs duration_s)");
+
+    // D0 for the PD controller.
+    {
+      VectorXd q, qd, qdd;
+      ref_->eval(ref_->t0(), &q, &qd, &qdd);
+      MatrixXd Mm;
+      VectorXd hm;
+      plantTerms(q, qd, &Mm, &hm);
+      D0_ = Mm.diagonal();
+    }
+
+    // Sample times.
+    const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
+    const int N = static_cast<int>(std::floor(duration / dt + 1e-9)) + 1;
+    exid::check(N >= 2, fmt::format("experiment 'simulate': duration {} s holds fewer than two "
+                                    "samples of {} s",
+                                    duration, dt));
+
+    exid::Dataset d;
+    d.t.resize(N);
+    d.q.resize(N, n);
+    MatrixXd qd(N, n), qdd(N, n);
+    d.tau.resize(N, n);
+    const bool want_wrench = P_.getBool("wrench");
+    if (want_wrench) d.wrench.resize(N, 6);
+
+    // Integrate.
+    VectorXd x(2 * n), qr, qdr, qddr;
+    ref_->eval(t0, &qr, &qdr, &qddr);
+    x << qr, qdr;
+    Integrator integ(this, x, t0, P_.getString("integrator"), P_.getDouble("rtol"),
+                     P_.getDouble("atol"), P_.getInt("max_steps"));
+    double max_err = 0.0;
+    int recorded = 0;
+    bool stopped = false;
+    for (int k = 0; k < N; ++k) {
+      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
+      if (k > 0) {
+        if (ctx.shouldStop()) {
+          stopped = true;
+          break;
+        }
+        integ.advance(tk, &x);
+      }
+      const VectorXd qm = x.head(n), qdm = x.tail(n);
+      VectorXd tau, acc;
+      control(tk, qm, qdm, &tau, &acc);
+      ref_->eval(tk, &qr, &qdr, &qddr);
+      max_err = std::max(max_err, (qr - qm).cwiseAbs().maxCoeff());
+      d.t[k] = tk;
+      d.q.row(k) = qm.transpose();
+      qd.row(k) = qdm.transpose();
+      qdd.row(k) = acc.transpose();
+      d.tau.row(k) = tau.transpose();
+      if (want_wrench) {
+        VectorXd q, v, a;
+        exid::measuredToJoint(truth_, qm, qdm, acc, &q, &v, &a);
+        Eigen::Matrix<double, 6, 10> A;
+        exid::wrenchRegressor(truth_, *data_, q, v, a, A);
+        d.wrench.row(k) = (A * payload_.phi()).transpose();
+      }
+      ++recorded;
+      if (k % 50 == 0 || k == N - 1)
+        ctx.report(static_cast<double>(k + 1) / N, fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
+    }
+    if (recorded < N) {
+      d.t.conservativeResize(recorded);
+      d.q.conservativeResize(recorded, n);
+      qd.conservativeResize(recorded, n);
+      qdd.conservativeResize(recorded, n);
+      d.tau.conservativeResize(recorded, n);
+      if (want_wrench) d.wrench.conservativeResize(recorded, 6);
+      exid::logWarn(fmt::format("experiment 'simulate': stopped (cancelled or out of time) after "
+                                "{} of {} samples",
+                                recorded, N));
+    }
+
+    // Measurement noise and quantisation.
+    std::mt19937_64 rng(ctx.seed ^ 0x5DEECE66Dull);
+    std::normal_distribution<double> nd(0.0, 1.0);
+    const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
+                 res = P_.getDouble("encoder_resolution_rad");
+    for (int k = 0; k < recorded; ++k) {
+      for (int j = 0; j < n; ++j) {
+        if (sq > 0) d.q(k, j) += sq * nd(rng);
+        if (res > 0) d.q(k, j) = res * std::round(d.q(k, j) / res);
+        if (st > 0) d.tau(k, j) += st * nd(rng);
+      }
+      if (want_wrench)
+        for (int e = 0; e < 6; ++e)
+          if (noise_w_[e] > 0) d.wrench(k, e) += noise_w_[e] * nd(rng);
+    }
+    if (P_.getBool("output_qd_qdd")) {
+      d.qd = std::move(qd);
+      d.qdd = std::move(qdd);
+    }
+
+    d.source = fmt::format("simulate ({}, seed {})", robot->name, ctx.seed);
+    exid::Json& m = d.meta;
+    m["simulated"] = true;
+    m["robot"] = robot->name;
+    m["seed"] = exid::Json(static_cast<long long>(ctx.seed));
+    m["integrator"] = integ.description();
+    m["sundials_version"] = SUNDIALS_VERSION;
+    m["rtol"] = P_.getDouble("rtol");
+    m["atol"] = P_.getDouble("atol");
+    m["steps"] = exid::Json(static_cast<long long>(integ.steps()));
+    m["rhs_evaluations"] = exid::Json(static_cast<long long>(integ.rhsEvals() + rhs_calls_extra_));
+    m["controller"] = P_.getString("controller");
+    m["kp"] = kp_;
+    m["kd"] = kd_;
+    m["drive_terms"] = drive_terms_;
+    m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
+    m["reference"] = refmeta;
+    m["sample_period_s"] = dt;
+    m["samples"] = recorded;
+    m["stopped_early"] = stopped;
+    m["max_tracking_error_rad"] = max_err;
+    m["payload"] = payload_.json();
+    exid::Json& nz = m["noise"];
+    nz = exid::Json::object();
+    nz["q_rad"] = sq;
+    nz["tau_Nm"] = st;
+    nz["wrench"] = exid::Json(std::vector<double>(noise_w_, noise_w_ + 6));
+    nz["encoder_resolution_rad"] = res;
+    m["recorded"] = P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)"
+                                                : "t q tau (noisy q)";
+    m["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+    return d;
+  }
+
+  // ---------------------------------------------------------------- dynamics
+  // Mm, hm of the plant at measured state (qm, qdm).
+  void plantTerms(const VectorXd& qm, const VectorXd& qdm, MatrixXd* Mm, VectorXd* hm) {
+    const exid::RobotModel& R = truth_;
+    VectorXd q, qd;
+    exid::measuredToJoint(R, qm, qdm, qdm, &q, &qd, nullptr);
+    const MatrixXd M = exid::massMatrix(R, *data_, q);
+    const VectorXd h = exid::inverseDynamics(R, *data_, q, qd, VectorXd::Zero(n_));
+    if (R.hasTransmission()) {
+      *Mm = R.transmission.transpose() * M * R.transmission;
+      *hm = R.transmission.transpose() * h;
+    } else {
+      *Mm = M;
+      *hm = h;
+    }
+    if (!drive_terms_) return;
+    for (int j = 0; j < n_; ++j) {
+      const exid::Drive D = j < static_cast<int>(R.drives.size()) ? R.drives[static_cast<std::size_t>(j)] : exid::Drive{};
+      const double v = qdm[j];
+      const double s = tanh_ ? std::tanh(v / vs_) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
+      (*Mm)(j, j) += D.rotor_inertia;
+      (*hm)[j] += D.coulomb * s + D.viscous * v + D.offset;
+    }
+  }
+
+  // Controller torque and the resulting plant acceleration at (t, qm, qdm).
+  void control(double t, const VectorXd& qm, const VectorXd& qdm, VectorXd* tau, VectorXd* acc) {
+    VectorXd qr, qdr, qddr;
+    ref_->eval(std::min(t, ref_->t1()), &qr, &qdr, &qddr);
+    MatrixXd Mm;
+    VectorXd hm;
+    plantTerms(qm, qdm, &Mm, &hm);
+    if (computed_torque_) {
+      *tau = Mm * (qddr + kd_ * (qdr - qdm) + kp_ * (qr - qm)) + hm;
+    } else {
+      exid::DriveColumns cols;
+      cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = drive_terms_;
+      *tau = exid::actuatorTorque(*nominal_, *nominal_data_, cols, qr, qdr, qddr) +
+             D0_.cwiseProduct(kp_ * (qr - qm) + kd_ * (qdr - qdm));
+    }
+    Eigen::LLT<MatrixXd> llt(Mm);
+    exid::check(llt.info() == Eigen::Success,
+                fmt::format("experiment 'simulate': the mass matrix of robot '{}' is not positive "
+                            "definite at t = {} s (check masses, inertias and rotor inertias)",
+                            truth_.name, t));
+    *acc = llt.solve(*tau - hm);
+  }
+
+  // x = [qm; qdm] -> xdot = [qdm; qddm]
+  void rhs(double t, const double* x, double* xd) {
+    Eigen::Map<const VectorXd> X(x, 2 * n_);
+    VectorXd tau, acc;
+    control(t, X.head(n_), X.tail(n_), &tau, &acc);
+    for (int j = 0; j < n_; ++j) {
+      xd[j] = x[n_ + j];
+      xd[n_ + j] = acc[j];
+    }
+  }
+
+ private:
+  // ---------------------------------------------------------------- SUNDIALS wrapper
+  class Integrator {
+   public:
+    Integrator(SimulateExperiment* self, const VectorXd& x0, double t0, const std::string& kind,
+               double rtol, double atol, std::int64_t max_steps)
+        : self_(self), cvode_(kind == "cvode"), n2_(static_cast<int>(x0.size())), t_(t0) {
+      check(SUNContext_Create(nullptr, &sctx_), "SUNContext_Create");
+      y_ = N_VNew_Serial(n2_, sctx_);
+      for (int i = 0; i < n2_; ++i) NV_Ith_S(y_, i) = x0[i];
+      if (cvode_) {
+        mem_ = CVodeCreate(CV_BDF, sctx_);
+        exid::check(mem_ != nullptr, "experiment 'simulate': CVodeCreate failed");
+        check(CVodeInit(mem_, &Integrator::f, t0, y_), "CVodeInit");
+        check(CVodeSStolerances(mem_, rtol, atol), "CVodeSStolerances");
+        check(CVodeSetUserData(mem_, this), "CVodeSetUserData");
+        A_ = SUNDenseMatrix(n2_, n2_, sctx_);
+        LS_ = SUNLinSol_Dense(y_, A_, sctx_);
+        check(CVodeSetLinearSolver(mem_, LS_, A_), "CVodeSetLinearSolver");
+        check(CVodeSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "CVodeSetMaxNumSteps");
+      } else {
+        mem_ = ERKStepCreate(&Integrator::f, t0, y_, sctx_);
+        exid::check(mem_ != nullptr, "experiment 'simulate': ERKStepCreate failed");
+        check(ERKStepSStolerances(mem_, rtol, atol), "ERKStepSStolerances");
+        check(ERKStepSetUserData(mem_, this), "ERKStepSetUserData");
+        check(ERKStepSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "ERKStepSetMaxNumSteps");
+      }
+    }
+    ~Integrator() {
+      if (cvode_) {
+        CVodeFree(&mem_);
+      } else {
+        ERKStepFree(&mem_);
+      }
+      if (LS_) SUNLinSolFree(LS_);
+      if (A_) SUNMatDestroy(A_);
+      N_VDestroy(y_);
+      SUNContext_Free(&sctx_);
+    }
+    Integrator(const Integrator&) = delete;
+    Integrator& operator=(const Integrator&) = delete;
+
+    void advance(double tout, VectorXd* x) {
+      double tret = t_;
+      const int flag = cvode_ ? CVode(mem_, tout, y_, &tret, CV_NORMAL)
+                              : ERKStepEvolve(mem_, tout, y_, &tret, ARK_NORMAL);
+      if (!error_.empty()) throw exid::Error(error_);
+      exid::check(flag >= 0, fmt::format("experiment 'simulate': the integrator ({}) failed at "
+                                         "t = {} s with flag {} (try larger tolerances, max_steps, "
+                                         "or the other integrator)",
+                                         cvode_ ? "CVODE" : "ARKODE", tret, flag));
+      t_ = tret;
+      for (int i = 0; i < n2_; ++i) (*x)[i] = NV_Ith_S(y_, i);
+    }
+    long steps() const {
+      long s = 0;
+      if (cvode_)
+        CVodeGetNumSteps(mem_, &s);
+      else
+        ERKStepGetNumSteps(mem_, &s);
+      return s;
+    }
+    long rhsEvals() const {
+      long s = 0;
+      if (cvode_)
+        CVodeGetNumRhsEvals(mem_, &s);
+      else
+        ERKStepGetNumRhsEvals(mem_, &s);
+      return s;
+    }
+    std::string description() const {
+      return cvode_ ? "CVODE BDF (variable order 1-5), dense Newton, difference-quotient Jacobian"
+                    : "ARKODE ERKStep explicit Runge-Kutta (default order-4 table), adaptive step";
+    }
+
+   private:
+    static int f(realtype t, N_Vector y, N_Vector ydot, void* user) {
+      auto* self = static_cast<Integrator*>(user);
+      try {
+        self->self_->rhs(t, N_VGetArrayPointer(y), N_VGetArrayPointer(ydot));
+        return 0;
+      } catch (const std::exception& e) {
+        self->error_ = e.what();
+        return -1;
+      }
+    }
+    static void check(int flag, const char* what) {
+      exid::check(flag >= 0, fmt::format("experiment 'simulate': {} failed (flag {})", what, flag));
+    }
+    SimulateExperiment* self_;
+    bool cvode_;
+    int n2_;
+    double t_;
+    SUNContext sctx_ = nullptr;
+    N_Vector y_ = nullptr;
+    void* mem_ = nullptr;
+    SUNMatrix A_ = nullptr;
+    SUNLinearSolver LS_ = nullptr;
+    std::string error_;
+  };
+
+  std::unique_ptr<FourierReference> buildFourier(const exid::RobotModel& R, std::uint64_t seed) const {
+    const int n = R.dof(), H = static_cast<int>(P_.getInt("harmonics"));
+    auto F = std::make_unique<FourierReference>();
+    F->robot = &R;
+    F->period = P_.getDouble("period_s");
+    F->w = 2.0 * M_PI / F->period;
+    F->c.resize(n);
+    F->a.resize(n, H);
+    F->b.resize(n, H);
+    std::mt19937_64 rng(seed);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    const double af = P_.getDouble("amplitude_fraction"), vf = P_.getDouble("velocity_fraction");
+    const int G = 2000;
+    for (int j = 0; j < n; ++j) {
+      const exid::JointLimits L = j < static_cast<int>(R.limits.size()) ? R.limits[static_cast<std::size_t>(j)] : exid::JointLimits{};
+      double lo = finiteOr(L.q_min, 1e3, -M_PI), hi = finiteOr(L.q_max, 1e3, M_PI);
+      if (!(hi > lo)) {
+        lo = -M_PI;
+        hi = M_PI;
+      }
+      F->c[j] = 0.5 * (lo + hi);
+      for (int l = 1; l <= H; ++l) {
+        F->a(j, l - 1) = u(rng) / l;
+        F->b(j, l - 1) = u(rng) / l;
+      }
+      double pmax = 0.0, vmax = 0.0;
+      for (int g = 0; g < G; ++g) {
+        const double t = F->period * g / G;
+        double p = 0.0, v = 0.0;
+        for (int l = 1; l <= H; ++l) {
+          const double wl = l * F->w;
+          p += F->a(j, l - 1) * std::sin(wl * t) + F->b(j, l - 1) * std::cos(wl * t);
+          v += wl * (F->a(j, l - 1) * std::cos(wl * t) - F->b(j, l - 1) * std::sin(wl * t));
+        }
+        pmax = std::max(pmax, std::abs(p));
+        vmax = std::max(vmax, std::abs(v));
+      }
+      double s = pmax > 0 ? af * 0.5 * (hi - lo) / pmax : 0.0;
+      const double vlim = finiteOr(L.qd_max, 1e3, HUGE_VAL);
+      if (std::isfinite(vlim) && vmax > 0) s = std::min(s, vf * vlim / vmax);
+      F->a.row(j) *= s;
+      F->b.row(j) *= s;
+    }
+    return F;
+  }
+
+  exid::ParamSet P_;
+  exid::models::Payload payload_;
+  double noise_w_[6] = {0, 0, 0, 0, 0, 0};
+  std::shared_ptr<const exid::RobotModel> nominal_;
+  exid::RobotModel truth_;
+  exid::DynamicsDataPtr data_, nominal_data_;
+  std::unique_ptr<Reference> ref_;
+  int n_ = 0;
+  bool drive_terms_ = true, tanh_ = false, computed_torque_ = true;
+  double vs_ = 1e-3, kp_ = 100.0, kd_ = 20.0;
+  VectorXd D0_;
+  long rhs_calls_extra_ = 0;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(SimulateExperiment)
