@@ -1,0 +1,307 @@
+// exid — experiment `csv`: a recorded (or previously written) dataset read from a CSV file with
+// the columns of DESIGN.md §3: t, q1..qn, qd1..qdn, qdd1..qddn, tau1..taun, fx fy fz mx my mz.
+// q is required; every other group is optional but complete when present (all n joints, or all
+// six wrench components). Absent qd/qdd stay absent: estimators decide how to differentiate.
+// The file written by the runner (experiment.csv, exid::datasetTable) reads back exactly.
+#include <fmt/format.h>
+
+#include <Eigen/Core>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+#include <vector>
+
+#include "exid/drive.hpp"
+#include "exid/error.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/io.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+std::string trimmed(const std::string& s) {
+  const std::size_t a = s.find_first_not_of(" \t\r\"");
+  if (a == std::string::npos) return "";
+  const std::size_t b = s.find_last_not_of(" \t\r\"");
+  return s.substr(a, b - a + 1);
+}
+
+class CsvExperiment : public exid::Experiment {
+ public:
+  static constexpr const char* kName = "csv";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "recorded data from a CSV file with columns t, q1..qn, qd.., qdd.., tau.. (or motor "
+      "currents), fx..mz; optional segment, joint signs and offsets, bad-row dropping";
+
+  static std::vector<exid::ParamDecl> params() {
+    using namespace exid;
+    return {
+        param_path("file", std::nullopt, "the CSV file (relative paths: to the study file)"),
+        param_bool("drop_bad_rows", false,
+                   "drop rows with missing or non-finite values in the columns used (counted in "
+                   "meta); false: such a row is an error naming its line and column"),
+        param_double("sample_period_s", 0.01, "s",
+                     "sampling period, used only when the file has no t column (t = row * period)",
+                     0.0, std::nullopt, true),
+        param_double("t_start_s", 0.0, "s",
+                     "segment start, in seconds after the first sample's time", 0.0),
+        param_double("t_end_s", 0.0, "s",
+                     "segment end, in seconds after the first sample's time; 0: to the end", 0.0),
+        param_string("torque_from", std::string("tau"),
+                     "tau: columns tau1..taun; current: columns <current_prefix>1..n times "
+                     "torque_constants_Nm_per_A",
+                     {"tau", "current"}),
+        param_string("current_prefix", std::string("i"), "prefix of the motor current columns"),
+        param_doubles("torque_constants_Nm_per_A", std::vector<double>{}, "N m/A",
+                      "per joint: torque per ampere of current j, referred to the coordinate "
+                      "named by current_frame (gear ratio included)"),
+        param_string("current_frame", std::string("measured"),
+                     "measured: tau_m = Kt .* i directly; joint: the products act on the joint "
+                     "coordinates and tau_m = T^T (Kt .* i) with the robot's transmission T",
+                     {"measured", "joint"}),
+        param_doubles("sign", std::vector<double>{},
+                      "", "per joint +1 or -1, applied to q, qd, qdd and tau of that joint; empty: "
+                      "all +1"),
+        param_doubles("offset_rad", std::vector<double>{}, "rad",
+                      "per joint, added to q after the sign; empty: zeros"),
+    };
+  }
+
+  explicit CsvExperiment(const exid::ParamSet& p) : P_(p) {}
+
+  exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples*,
+                    const exid::RunContext& ctx) override {
+    exid::check(robot != nullptr, "experiment 'csv': no robot");
+    const int n = robot->dof();
+    fs::path path = P_.getString("file");
+    if (path.is_relative() && !ctx.study_dir.empty()) path = ctx.study_dir / path;
+    const std::string file = path.string();
+
+    // Raw text, and the line number of every data row (as parseCsv counts them).
+    std::ifstream in(path, std::ios::binary);
+    exid::check(static_cast<bool>(in), fmt::format("experiment 'csv': {}: cannot open the file", file));
+    std::stringstream ss;
+    ss << in.rdbuf();
+    const std::string text = ss.str();
+    std::vector<int> line_of;
+    {
+      std::istringstream ls(text);
+      std::string line;
+      int lineno = 0;
+      bool header = false;
+      while (std::getline(ls, line)) {
+        ++lineno;
+        if (!line.empty() && line.back() == '\r') line.pop_back();
+        if (trimmed(line).empty() || line[0] == '#') continue;
+        if (!header) {
+          header = true;
+          continue;
+        }
+        line_of.push_back(lineno);
+      }
+    }
+    exid::CsvReadOptions opt;
+    opt.allow_non_finite = true;  // checked below, only in the columns used
+    const exid::CsvTable T = exid::parseCsv(text, file, opt);
+    const int rows = static_cast<int>(T.data.rows());
+    exid::check(rows > 0, fmt::format("experiment 'csv': {}: no data rows after the header", file));
+
+    // Column groups.
+    auto group = [&](const std::string& prefix, bool required, const char* what) -> std::vector<int> {
+      std::vector<int> idx;
+      int found = 0;
+      while (T.has(prefix + std::to_string(found + 1))) ++found;
+      if (found == 0) {
+        exid::check(!required, fmt::format("experiment 'csv': {}: missing column '{}1' ({}; "
+                                           "expected columns {}1..{}{} for the {} joints of robot "
+                                           "'{}'; found columns: {})",
+                                           file, prefix, what, prefix, prefix, n, n, robot->name,
+                                           fmt::join(T.columns, ", ")));
+        return idx;
+      }
+      exid::check(found == n,
+                  fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
+                              "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
+                              file, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
+      for (int j = 1; j <= n; ++j) idx.push_back(T.col(prefix + std::to_string(j)));
+      return idx;
+    };
+    const std::vector<int> cq = group("q", true, "joint positions are required");
+    const std::vector<int> cqd = group("qd", false, "");
+    const std::vector<int> cqdd = group("qdd", false, "");
+    const std::string tfrom = P_.getString("torque_from");
+    std::vector<int> ctau;
+    std::vector<double> Kt;
+    if (tfrom == "tau") {
+      ctau = group("tau", false, "");
+    } else {
+      const std::string pre = P_.getString("current_prefix");
+      ctau = group(pre, true, "torque_from: current needs the motor currents");
+      Kt = P_.getDoubles("torque_constants_Nm_per_A");
+      exid::check(static_cast<int>(Kt.size()) == n,
+                  fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values (one "
+                              "per joint of robot '{}'), found {}",
+                              n, robot->name, Kt.size()));
+    }
+    std::vector<int> cw;
+    {
+      const char* wn[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
+      int present = 0;
+      for (const char* c : wn) present += T.has(c);
+      if (present > 0) {
+        std::vector<std::string> missing;
+        for (const char* c : wn)
+          if (!T.has(c)) missing.push_back(c);
+        exid::check(missing.empty(),
+                    fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
+                                "(expected all of fx fy fz mx my mz, or none)",
+                                file, fmt::join(missing, ", ")));
+        for (const char* c : wn) cw.push_back(T.col(c));
+      }
+    }
+    const int ct = T.col("t");
+
+    // Per-joint sign and offset.
+    std::vector<double> sign = P_.getDoubles("sign"), off = P_.getDoubles("offset_rad");
+    if (sign.empty()) sign.assign(static_cast<std::size_t>(n), 1.0);
+    if (off.empty()) off.assign(static_cast<std::size_t>(n), 0.0);
+    exid::check(static_cast<int>(sign.size()) == n,
+                fmt::format("experiment 'csv': sign: expected {} values (one per joint), found {}", n,
+                            sign.size()));
+    exid::check(static_cast<int>(off.size()) == n,
+                fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), found {}",
+                            n, off.size()));
+    for (int j = 0; j < n; ++j)
+      exid::check(sign[static_cast<std::size_t>(j)] == 1.0 || sign[static_cast<std::size_t>(j)] == -1.0,
+                  fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
+                              sign[static_cast<std::size_t>(j)]));
+
+    // Rows: bad values in the used columns, time.
+    std::vector<int> used = cq;
+    for (const std::vector<int>* g : {&cqd, &cqdd, static_cast<const std::vector<int>*>(&ctau), static_cast<const std::vector<int>*>(&cw)}) used.insert(used.end(), g->begin(), g->end());
+    if (ct >= 0) used.push_back(ct);
+    const bool drop = P_.getBool("drop_bad_rows");
+    const double dt = P_.getDouble("sample_period_s");
+    std::vector<int> keep;
+    std::vector<double> tk;
+    int dropped = 0;
+    auto lineText = [&](int r) {
+      return r < static_cast<int>(line_of.size()) ? fmt::format("line {}", line_of[static_cast<std::size_t>(r)])
+                                                  : fmt::format("data row {}", r + 1);
+    };
+    for (int r = 0; r < rows; ++r) {
+      int bad = -1;
+      for (int c : used)
+        if (!std::isfinite(T.data(r, c))) {
+          bad = c;
+          break;
+        }
+      if (bad >= 0) {
+        if (drop) {
+          ++dropped;
+          continue;
+        }
+        throw exid::Error(fmt::format(
+            "experiment 'csv': {}: {} (data row {}): column '{}': missing or non-finite value (set "
+            "drop_bad_rows: true to drop such rows)",
+            file, lineText(r), r + 1, T.columns[static_cast<std::size_t>(bad)]));
+      }
+      const double t = ct >= 0 ? T.data(r, ct) : r * dt;
+      if (!keep.empty())
+        exid::check(t > tk.back(),
+                    fmt::format("experiment 'csv': {}: {} (data row {}): column 't': time must "
+                                "strictly increase; t = {} after t = {} at {}",
+                                file, lineText(r), r + 1, t, tk.back(), lineText(keep.back())));
+      keep.push_back(r);
+      tk.push_back(t);
+    }
+    exid::check(!keep.empty(), fmt::format("experiment 'csv': {}: every row was dropped ({} with bad "
+                                           "values)",
+                                           file, dropped));
+
+    // Segment.
+    const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
+    exid::check(te == 0.0 || te > ts,
+                fmt::format("experiment 'csv': t_end_s = {} must be after t_start_s = {} (or 0 for "
+                            "the end)",
+                            te, ts));
+    const double tfirst = tk.front();
+    std::vector<int> sel;
+    for (std::size_t i = 0; i < keep.size(); ++i) {
+      const double rel = tk[i] - tfirst;
+      if (rel < ts) continue;
+      if (te > 0.0 && rel > te) break;
+      sel.push_back(static_cast<int>(i));
+    }
+    exid::check(!sel.empty(), fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
+                                          "after the first sample (t = {} s; the file spans {} s)",
+                                          file, ts, te, tfirst, tk.back() - tfirst));
+
+    // Fill the dataset.
+    const int K = static_cast<int>(sel.size());
+    exid::Dataset d;
+    d.t.resize(K);
+    d.q.resize(K, n);
+    if (!cqd.empty()) d.qd.resize(K, n);
+    if (!cqdd.empty()) d.qdd.resize(K, n);
+    if (!ctau.empty()) d.tau.resize(K, n);
+    if (!cw.empty()) d.wrench.resize(K, 6);
+    const bool joint_frame = P_.getString("current_frame") == "joint";
+    for (int k = 0; k < K; ++k) {
+      const std::size_t i = static_cast<std::size_t>(sel[static_cast<std::size_t>(k)]);
+      const int r = keep[i];
+      d.t[k] = tk[i];
+      for (int j = 0; j < n; ++j) {
+        const double s = sign[static_cast<std::size_t>(j)];
+        d.q(k, j) = s * T.data(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
+        if (!cqd.empty()) d.qd(k, j) = s * T.data(r, cqd[static_cast<std::size_t>(j)]);
+        if (!cqdd.empty()) d.qdd(k, j) = s * T.data(r, cqdd[static_cast<std::size_t>(j)]);
+      }
+      if (!ctau.empty()) {
+        VectorXd tau(n);
+        for (int j = 0; j < n; ++j) {
+          double v = T.data(r, ctau[static_cast<std::size_t>(j)]);
+          if (!Kt.empty()) v *= Kt[static_cast<std::size_t>(j)];
+          tau[j] = v;
+        }
+        if (!Kt.empty() && joint_frame && robot->hasTransmission())
+          tau = robot->transmission.transpose() * tau;
+        for (int j = 0; j < n; ++j) d.tau(k, j) = sign[static_cast<std::size_t>(j)] * tau[j];
+      }
+      for (std::size_t e = 0; e < cw.size(); ++e) d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
+    }
+
+    d.source = file;
+    exid::Json& m = d.meta;
+    m["simulated"] = false;
+    m["file"] = file;
+    m["rows_in_file"] = rows;
+    m["dropped_rows"] = dropped;
+    m["samples"] = K;
+    m["time_column"] = ct >= 0;
+    if (ct < 0) m["sample_period_s"] = dt;
+    m["segment_s"] = exid::Json(std::vector<double>{ts, te});
+    m["torque_from"] = tfrom;
+    std::vector<std::string> sig = {"q"};
+    if (!cqd.empty()) sig.push_back("qd");
+    if (!cqdd.empty()) sig.push_back("qdd");
+    if (!ctau.empty()) sig.push_back("tau");
+    if (!cw.empty()) sig.push_back("wrench");
+    m["signals"] = exid::Json(sig);
+    ctx.report(1.0, fmt::format("{} samples from {}", K, file));
+    return d;
+  }
+
+ private:
+  exid::ParamSet P_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(CsvExperiment)
