@@ -93,4 +93,31 @@ void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& data,
                                Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
                                Eigen::VectorXd* d_qdd);
 
+/// Information-matrix accumulation M = sum_k W_k^T W_k over many small row blocks W_k (e.g. one
+/// regressor per sample), much faster than a rank update per block: rows are grouped by their
+/// first non-zero column (the torque regressor of a chain is block upper triangular), buffered,
+/// and added in batches by a cache-friendly kernel (AVX2/FMA when the CPU has it, chosen at run
+/// time). Not thread-safe; use one accumulator per thread and add the matrices.
+class GramAccumulator {
+ public:
+  explicit GramAccumulator(int cols = 0);
+  ~GramAccumulator();
+  GramAccumulator(GramAccumulator&&) noexcept;
+  GramAccumulator& operator=(GramAccumulator&&) noexcept;
+  /// Clears the sum; a non-negative `cols` also changes the number of columns.
+  void reset(int cols = -1);
+  /// Adds rows^T rows (rows.cols() must equal cols()).
+  void add(const Eigen::Ref<const Eigen::MatrixXd>& rows);
+  /// Adds w * rows^T rows (w >= 0, e.g. weights of weighted least squares).
+  void addWeighted(const Eigen::Ref<const Eigen::MatrixXd>& rows, double w);
+  /// The full symmetric sum so far (flushes the buffers).
+  const Eigen::MatrixXd& matrix();
+  int cols() const;
+  long rowsAdded() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
 }  // namespace exid
