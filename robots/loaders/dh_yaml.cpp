@@ -299,10 +299,9 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
       if (D["viscous"]) drv.viscous = r.number(D["viscous"], w + ".viscous");
       if (D["offset"]) drv.offset = r.number(D["offset"], w + ".offset");
       if (drv.rotor_inertia < 0 || drv.coulomb < 0 || drv.viscous < 0) {
-        const std::string msg = r.source() + ":" + std::to_string(D.Mark().line + 1) + ": " + w +
-                                ": negative rotor inertia or friction coefficient";
-        if (options.strict) throw Error(msg + " (strict mode)");
-        reportWarning(options, msg);
+        // Published identified models contain such values (Panda fv6): always a warning.
+        reportWarning(options, r.source() + ":" + std::to_string(D.Mark().line + 1) + ": " + w +
+                                   ": negative rotor inertia or friction coefficient");
       }
     }
 

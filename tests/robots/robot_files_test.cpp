@@ -266,6 +266,8 @@ TEST(RobotFiles, PandaModifiedDh) {
   // Feasible parameters: the only warning is the published negative viscous friction of joint 6.
   ASSERT_EQ(w.size(), 1u);
   EXPECT_NE(w[0].find("link6"), std::string::npos) << w[0];
+  EXPECT_NE(w[0].find("negative"), std::string::npos) << w[0];
+  EXPECT_NO_THROW(load("panda/panda.yaml", nullptr, true));  // inertias are consistent
 }
 
 TEST(RobotFiles, EmbeddedStringVariantsNameTheirSource) {
