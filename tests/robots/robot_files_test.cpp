@@ -192,6 +192,19 @@ TEST(RobotFiles, PumaUrdfEqualsDh) {
   }
 }
 
+TEST(RobotFiles, PumaGravityLoadMatchesTheToolbox) {
+  // Corke, Robotics, Vision and Control (2011), sec. 9.2: p560.gravload(qn) with
+  // qn = [0, pi/4, pi, 0, pi/4, 0] gives [0, 31.6399, 6.0351, 0, 0.0283, 0] N m.
+  const RobotModel m = load("puma560/puma560.yaml");
+  auto d = exid::makeDynamicsData(m);
+  const Eigen::VectorXd qn =
+      (Eigen::VectorXd(6) << 0, M_PI / 4, M_PI, 0, M_PI / 4, 0).finished();
+  const Eigen::VectorXd z = Eigen::VectorXd::Zero(6);
+  const Eigen::VectorXd tau = exid::inverseDynamics(m, *d, qn, z, z);
+  const Eigen::VectorXd expected = (Eigen::VectorXd(6) << 0, 31.6399, 6.0351, 0, 0.0283, 0).finished();
+  EXPECT_LT((tau - expected).cwiseAbs().maxCoeff(), 1e-3) << tau.transpose();
+}
+
 TEST(RobotFiles, Irp6Transmission) {
   const RobotModel m = load("irp6/irp6.yaml");
   ASSERT_TRUE(m.hasTransmission());
