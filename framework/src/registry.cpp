@@ -144,16 +144,16 @@ struct Registry::Impl {
     if (!lib->has("exid_plugin_manifest"))
       return "has no 'exid_plugin_manifest' entry point (not an exid plugin; build it with "
              "exid_add_plugin and EXID_REGISTER_PLUGIN)";
-    auto entry = lib->get<const exid_plugin_manifest*()>("exid_plugin_manifest");
-    const exid_plugin_manifest* m = entry();
+    auto entry = lib->get<const exid_manifest*()>("exid_plugin_manifest");
+    const exid_manifest* m = entry();
     if (m == nullptr) return "its entry point returned no manifest";
     if (m->abi_version != EXID_PLUGIN_ABI_VERSION)
       return fmt::format("plugin ABI version mismatch: expected {}, found {} (rebuild the plugin "
                          "against this exid)",
                          EXID_PLUGIN_ABI_VERSION, m->abi_version);
-    if (m->manifest_size != sizeof(exid_plugin_manifest))
+    if (m->manifest_size != sizeof(exid_manifest))
       return fmt::format("manifest size mismatch: expected {}, found {}",
-                         sizeof(exid_plugin_manifest), m->manifest_size);
+                         sizeof(exid_manifest), m->manifest_size);
     const exid_build_fingerprint core = coreFingerprint();
     const exid_build_fingerprint& f = m->fingerprint;
     auto same = [](const char* a, const char* b) {

@@ -307,7 +307,12 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       auto crit = reg.create<Criterion>(cfg.criterion->type, cfg.criterion->params);
       auto optim = reg.create<Optimizer>(cfg.optimizer->type, cfg.optimizer->params);
       traj->bind(robot, ctx);
-      auto problem = makeExcitationProblem(traj, model, crit);
+      ExcitationOptions xo;
+      xo.position_margin = traj->positionMargin();
+      xo.velocity_limits = traj->velocityLimits();
+      xo.acceleration_limits = traj->accelerationLimits();
+      xo.scale_columns = crit->scaleColumns();
+      auto problem = makeExcitationProblem(traj, model, crit, xo);
       RunContext xctx = ctx;
       xctx.progress = progressFor("excitation");
       Samples initial = traj->evaluate(traj->initial());

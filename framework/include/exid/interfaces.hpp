@@ -82,6 +82,8 @@ class Criterion : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Criterion;
   virtual double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dJ_dM) const = 0;
+  /// Whether the base columns are scaled by the nominal parameter magnitudes before M is formed.
+  virtual bool scaleColumns() const { return false; }
 };
 
 // ---------------------------------------------------------------- trajectory
@@ -101,6 +103,11 @@ class Trajectory : public PluginObject {
   /// Dense Jacobian d[vec(q); vec(qd); vec(qdd)]/dz (column-major vec), by default from vjp.
   virtual Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const;
   virtual Json describe() const { return Json::object(); }
+  /// Margin kept inside the position limits, and whether velocity/acceleration limits are
+  /// imposed as constraints by the excitation problem.
+  virtual double positionMargin() const { return 0.0; }
+  virtual bool velocityLimits() const { return true; }
+  virtual bool accelerationLimits() const { return true; }
 };
 
 // ---------------------------------------------------------------- optimizer

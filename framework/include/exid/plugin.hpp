@@ -91,15 +91,15 @@ struct exid_build_fingerprint {
   const char* exid_version;   // e.g. "0.1.0"
 };
 
-struct exid_plugin_manifest {
+struct exid_manifest {
   int abi_version;            // EXID_PLUGIN_ABI_VERSION of the library
-  unsigned manifest_size;     // sizeof(exid_plugin_manifest) of the library
+  unsigned manifest_size;     // sizeof(exid_manifest) of the library
   exid_build_fingerprint fingerprint;
   /// Fills *out (an exid::PluginList*) with the plugins inside. Called only after the checks.
   void (*list_plugins)(void* out);
 };
 
-typedef const exid_plugin_manifest* (*exid_plugin_manifest_fn)(void);
+typedef const exid_manifest* (*exid_plugin_manifest_fn)(void);
 }
 
 #define EXID_STRINGIFY2(x) #x
@@ -147,10 +147,10 @@ typedef const exid_plugin_manifest* (*exid_plugin_manifest_fn)(void);
   }                                                                                     \
   void exid_list_plugins(void* out) { exid_list_plugins_impl<__VA_ARGS__>(out); }       \
   }                                                                                     \
-  extern "C" __attribute__((visibility("default"))) const exid_plugin_manifest*         \
+  extern "C" __attribute__((visibility("default"))) const exid_manifest*         \
   exid_plugin_manifest() {                                                              \
-    static const exid_plugin_manifest m{EXID_PLUGIN_ABI_OVERRIDE,                       \
-                                        sizeof(exid_plugin_manifest),                   \
+    static const exid_manifest m{EXID_PLUGIN_ABI_OVERRIDE,                              \
+                                        sizeof(exid_manifest),                          \
                                         EXID_BUILD_FINGERPRINT, &exid_list_plugins};    \
     return &m;                                                                          \
   }

@@ -1,0 +1,29 @@
+// Criterion `log_det`: D-optimality, J = -log det M. dJ/dM = -M^-1.
+#include <cmath>
+
+#include "exid/interfaces.hpp"
+#include "spectrum.hpp"
+
+namespace {
+
+class LogDet final : public exid::Criterion {
+ public:
+  static constexpr const char* kName = "log_det";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc = "D-optimality: -log det(W^T W)";
+  static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
+  explicit LogDet(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
+  bool scaleColumns() const override { return scale_; }
+  double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
+    auto s = exid::criteria::spectrum(M, kName);
+    if (dM) *dM = -(s.V * s.lambda.cwiseInverse().asDiagonal() * s.V.transpose());
+    return -s.lambda.array().log().sum();
+  }
+
+ private:
+  bool scale_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(LogDet)

@@ -1,0 +1,147 @@
+// Files and values: atomic writes, CSV with errors that name file/line/column, JSON.
+#include <gtest/gtest.h>
+#include <sys/stat.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+
+#include "exid/error.hpp"
+#include "exid/io.hpp"
+#include "exid/json.hpp"
+#include "exid/params.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+std::string errorOf(const std::function<void()>& f) {
+  try {
+    f();
+  } catch (const exid::Error& e) {
+    return e.what();
+  }
+  return "";
+}
+fs::path tempDir() {
+  fs::path d = fs::temp_directory_path() / ("exid_io_test_" + std::to_string(::getpid()));
+  fs::create_directories(d);
+  return d;
+}
+}  // namespace
+
+TEST(AtomicWrite, ReplacesWholeFileAndLeavesNoTemporary) {
+  fs::path d = tempDir();
+  exid::writeFileAtomic(d / "a.txt", "first");
+  exid::writeFileAtomic(d / "a.txt", "second");
+  std::ifstream in(d / "a.txt");
+  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(s, "second");
+  int files = 0;
+  for (auto& e : fs::directory_iterator(d)) files += e.is_regular_file();
+  EXPECT_EQ(files, 1);
+  fs::remove_all(d);
+}
+
+TEST(AtomicWrite, FailureLeavesTheOldFileAndNamesThePath) {
+  if (::geteuid() == 0) {
+    // root ignores directory permissions; use a path whose parent is a file instead
+    fs::path d = tempDir();
+    exid::writeFileAtomic(d / "plain", "x");
+    std::string msg = errorOf([&] { exid::writeFileAtomic(d / "plain" / "child.txt", "y"); });
+    EXPECT_NE(msg.find("child.txt"), std::string::npos) << msg;
+    fs::remove_all(d);
+    return;
+  }
+  fs::path d = tempDir();
+  exid::writeFileAtomic(d / "keep.txt", "old");
+  ::chmod(d.c_str(), 0500);
+  std::string msg = errorOf([&] { exid::writeFileAtomic(d / "keep.txt", "new"); });
+  ::chmod(d.c_str(), 0700);
+  EXPECT_NE(msg.find("keep.txt"), std::string::npos) << msg;
+  std::ifstream in(d / "keep.txt");
+  std::string s((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(s, "old");
+  fs::remove_all(d);
+}
+
+TEST(AtomicWrite, UnwritableTargetIsReportedAndNothingIsLeft) {
+  // A target that cannot be created: the error names it and nothing is left behind.
+  std::string msg = errorOf([&] { exid::writeFileAtomic("/proc/exid_cannot_write_here.txt", "data"); });
+  EXPECT_NE(msg.find("/proc/exid_cannot_write_here.txt"), std::string::npos) << msg;
+  EXPECT_FALSE(fs::exists("/proc/exid_cannot_write_here.txt"));
+}
+
+TEST(Csv, RoundTripKeepsFullPrecision) {
+  exid::CsvTable t;
+  t.columns = {"t", "q1"};
+  t.data.resize(2, 2);
+  t.data << 0.1, 1.0 / 3.0, 0.2, -2e-17;
+  exid::CsvTable back = exid::parseCsv(exid::toCsv(t), "mem.csv");
+  EXPECT_EQ(back.columns, t.columns);
+  EXPECT_EQ(back.data, t.data);
+}
+
+TEST(Csv, ErrorsNameFileLineAndColumn) {
+  std::string msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,abc\n", "run.csv"); });
+  EXPECT_NE(msg.find("run.csv:3: column 'q1': 'abc' is not a number"), std::string::npos) << msg;
+  msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,nan\n", "run.csv"); });
+  EXPECT_NE(msg.find("run.csv:3: column 'q1': non-finite (nan) value"), std::string::npos) << msg;
+  msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,\n", "run.csv"); });
+  EXPECT_NE(msg.find("run.csv:3: column 'q1': missing value"), std::string::npos) << msg;
+  msg = errorOf([] { exid::parseCsv("t,q1\n0,1,2\n", "run.csv"); });
+  EXPECT_NE(msg.find("run.csv:2: expected 2 values"), std::string::npos) << msg;
+  msg = errorOf([] { exid::parseCsv("t,t\n0,1\n", "run.csv"); });
+  EXPECT_NE(msg.find("duplicate column 't'"), std::string::npos) << msg;
+  msg = errorOf([] { exid::readCsv("/nonexistent/file.csv"); });
+  EXPECT_NE(msg.find("/nonexistent/file.csv: cannot open"), std::string::npos) << msg;
+}
+
+TEST(Csv, DropsBadRowsWhenAskedAndCountsThem) {
+  exid::CsvReadOptions o;
+  o.drop_non_finite_rows = true;
+  int dropped = 0;
+  exid::CsvTable t = exid::parseCsv("t;q1\n0;1\n0.1;nan\n0.2;3\n", "x.csv", o, &dropped);
+  EXPECT_EQ(dropped, 1);
+  ASSERT_EQ(t.data.rows(), 2);
+  EXPECT_EQ(t.data(1, 1), 3.0);
+}
+
+TEST(Json, DumpParseRoundTrip) {
+  exid::Json j = exid::Json::object();
+  j["status"] = "ok";
+  j["n"] = 3;
+  j["x"] = 0.25;
+  j["nan"] = std::nan("");
+  j["list"] = std::vector<double>{1, 2.5};
+  j["nested"]["s"] = "a \"quoted\"\nline";
+  exid::Json back = exid::Json::parse(j.dump());
+  EXPECT_EQ(back.find("status")->asString(), "ok");
+  EXPECT_EQ(back.find("n")->asInt(), 3);
+  EXPECT_DOUBLE_EQ(back.find("x")->asDouble(), 0.25);
+  EXPECT_TRUE(back.find("nan")->isNull());
+  EXPECT_DOUBLE_EQ(back.find("list")->at(1).asDouble(), 2.5);
+  EXPECT_EQ(back.find("nested")->find("s")->asString(), "a \"quoted\"\nline");
+  EXPECT_EQ(j.items().front().first, "status");  // insertion order kept
+  std::string msg = errorOf([] { exid::Json::parse("{\"a\": }"); });
+  EXPECT_NE(msg.find("offset"), std::string::npos);
+}
+
+TEST(Params, RangeTextAndViolations) {
+  auto d = exid::param_double("ff", 1.0, "", "forgetting factor", 0.0, 1.0, true, false);
+  EXPECT_EQ(d.rangeText(), "(0, 1]");
+  EXPECT_EQ(d.violation(exid::ParamValue(0.0)), "must be in (0, 1]");
+  EXPECT_EQ(d.violation(exid::ParamValue(1.0)), "");
+  EXPECT_EQ(d.violation(exid::ParamValue(std::nan(""))), "must be in (0, 1]");
+  auto l = exid::param_doubles("w", std::nullopt, "N m", "weights", 2, 3);
+  EXPECT_NE(l.violation(exid::ParamValue(std::vector<double>{1.0})).find("at least 2"), std::string::npos);
+  exid::ParamSet ps;
+  ps.context = "estimator.params";
+  ps.set("n", exid::ParamValue(std::int64_t{3}));
+  EXPECT_DOUBLE_EQ(ps.getDouble("n"), 3.0);
+  std::string msg = errorOf([&] { ps.getString("n"); });
+  EXPECT_NE(msg.find("estimator.params.n: expected a string"), std::string::npos) << msg;
+  msg = errorOf([&] { ps.getDouble("absent"); });
+  EXPECT_NE(msg.find("'absent' is not set"), std::string::npos) << msg;
+}
