@@ -1,3 +1,4 @@
+// exid — stage commands: robot info, eval, excite, simulate, identify.
 #include "commands.hpp"
 
 #include <fmt/format.h>
@@ -5,13 +6,256 @@
 #include <iostream>
 #include <memory>
 
+#include "exid/config.hpp"
+#include "exid/drive.hpp"
+#include "exid/dynamics.hpp"
+#include "exid/error.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/io.hpp"
+#include "exid/runner.hpp"
+
 namespace exid::cli {
 
+namespace fs = std::filesystem;
+
+namespace {
+
+/// ROBOT is a robot plugin name or a path to a .urdf or DH .yaml file.
+std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::string& robot) {
+  std::string type = robot, params = "{}";
+  const fs::path p(robot);
+  const std::string ext = p.extension().string();
+  if (ext == ".urdf" || ext == ".yaml" || ext == ".yml") {
+    if (!fs::exists(p)) throw Error(fmt::format("{}: no such robot file", robot));
+    type = ext == ".urdf" ? "urdf" : "dh";
+    params = fmt::format("{{file: '{}'}}", fs::absolute(p).string());
+  }
+  const PluginInfo& info = reg.get(PluginKind::Robot, type);
+  ParamSet ps = resolveParams(info, params, "robot " + type, fs::current_path());
+  RunContext ctx;
+  return reg.create<Robot>(type, ps)->build(ctx);
+}
+
+int robotInfo(const Registry& reg, const std::string& robot, const std::string& model_name,
+              const std::string& model_params, bool json) {
+  auto r = loadRobot(reg, robot);
+  const PluginInfo& info = reg.get(PluginKind::Model, model_name);
+  auto model = reg.create<ObservationModel>(
+      model_name, resolveParams(info, model_params, "model " + model_name, fs::current_path()));
+  RunContext ctx;
+  model->bind(r, ctx);
+  const BaseParameters& b = model->base();
+  Eigen::VectorXd nominal = model->fullNominal();
+  Eigen::VectorXd base = model->baseNominal();
+  if (json) {
+    Json j = Json::object();
+    j["name"] = r->name;
+    j["source"] = r->source;
+    j["dof"] = r->dof();
+    j["model"] = model_name;
+    j["parameters"] = Json(b.full_names);
+    j["values"] = Json(std::vector<double>(nominal.data(), nominal.data() + nominal.size()));
+    Json bp = Json::array();
+    for (int i = 0; i < b.rank(); ++i) {
+      Json e = Json::object();
+      e["name"] = b.names[static_cast<std::size_t>(i)];
+      e["expression"] = b.expressions[static_cast<std::size_t>(i)];
+      e["value"] = base(i);
+      bp.push_back(e);
+    }
+    j["base_parameters"] = bp;
+    j["tolerance"] = b.tolerance;
+    std::cout << j.dump(2) << '\n';
+    return 0;
+  }
+  std::cout << fmt::format("robot {} ({} joints) from {}\n", r->name, r->dof(), r->source);
+  for (int i = 0; i < r->dof(); ++i) {
+    const Body& body = r->bodies[static_cast<std::size_t>(i)];
+    const JointLimits& L = r->limits[static_cast<std::size_t>(i)];
+    std::cout << fmt::format("  {} {:<12} {:<9} parent {:>2}  q in [{:.4g}, {:.4g}]  |qd| <= {:.4g}\n",
+                             i + 1, body.joint_name,
+                             body.type == JointType::Revolute ? "revolute" : "prismatic",
+                             body.parent + 1, L.q_min, L.q_max, L.qd_max);
+  }
+  std::cout << fmt::format("\nmodel {}: {} standard parameters, {} base parameters (tolerance {:g})\n\n",
+                           model_name, b.numFull(), b.rank(), b.tolerance);
+  std::cout << "standard parameters:\n";
+  for (int i = 0; i < b.numFull(); ++i)
+    std::cout << fmt::format("  {:<6} {:>14.6g}{}", b.full_names[static_cast<std::size_t>(i)], nominal(i),
+                             (i + 1) % 4 == 0 ? "\n" : "");
+  std::cout << "\n\nbase parameters:\n";
+  for (int i = 0; i < b.rank(); ++i)
+    std::cout << fmt::format("  {:<8} = {:<60} = {:.6g}\n", b.names[static_cast<std::size_t>(i)],
+                             b.expressions[static_cast<std::size_t>(i)], base(i));
+  return 0;
+}
+
+int evalCommand(const Registry& reg, const std::string& robot, const std::string& samples,
+                const std::string& what, const std::string& out) {
+  auto r = loadRobot(reg, robot);
+  const int n = r->dof();
+  CsvTable in = readCsv(samples);
+  auto column = [&](const std::string& name, bool required) -> Eigen::VectorXd {
+    int c = in.col(name);
+    if (c < 0) {
+      if (required)
+        throw Error(fmt::format("{}: missing column '{}' (expected q1..q{}, qd1..qd{}, qdd1..qdd{})",
+                                samples, name, n, n, n));
+      return Eigen::VectorXd::Zero(in.data.rows());
+    }
+    return in.data.col(c);
+  };
+  const Eigen::Index K = in.data.rows();
+  Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+  const bool needs_qdd = what != "energy" && what != "energy_regressor";
+  for (int j = 0; j < n; ++j) {
+    Q.col(j) = column(fmt::format("q{}", j + 1), true);
+    QD.col(j) = column(fmt::format("qd{}", j + 1), true);
+    QDD.col(j) = column(fmt::format("qdd{}", j + 1), needs_qdd);
+  }
+  auto data = makeDynamicsData(*r);
+  CsvTable t;
+  std::vector<std::string> names = r->inertialParameterNames();
+  if (what == "torque") {
+    for (int j = 0; j < n; ++j) t.columns.push_back(fmt::format("tau{}", j + 1));
+    t.data.resize(K, n);
+  } else if (what == "regressor") {
+    t.columns = names;
+    t.data.resize(K * n, static_cast<Eigen::Index>(names.size()));
+  } else if (what == "energy") {
+    t.columns = {"kinetic", "potential", "total"};
+    t.data.resize(K, 3);
+  } else if (what == "energy_regressor") {
+    for (const auto& nm : names) t.columns.push_back("T_" + nm);
+    for (const auto& nm : names) t.columns.push_back("U_" + nm);
+    t.data.resize(K, 2 * static_cast<Eigen::Index>(names.size()));
+  } else if (what == "wrench_regressor") {
+    t.columns = {"M", "MX", "MY", "MZ", "XX", "XY", "XZ", "YY", "YZ", "ZZ"};
+    t.data.resize(K * 6, 10);
+  } else {
+    throw Error(fmt::format("--what {}: expected one of torque, regressor, energy, energy_regressor, "
+                            "wrench_regressor", what));
+  }
+  const Eigen::VectorXd pi = r->inertialParameters();
+  const Eigen::Index p = static_cast<Eigen::Index>(names.size());
+  Eigen::MatrixXd Y(n, p);
+  Eigen::RowVectorXd kin(p), pot(p);
+  Eigen::Matrix<double, 6, 10> A;
+  for (Eigen::Index k = 0; k < K; ++k) {
+    Eigen::VectorXd qm = Q.row(k).transpose(), qdm = QD.row(k).transpose(), qddm = QDD.row(k).transpose();
+    Eigen::VectorXd q, qd, qdd;
+    measuredToJoint(*r, qm, qdm, qddm, &q, &qd, &qdd);
+    if (what == "torque") {
+      Eigen::VectorXd tau = inverseDynamics(*r, *data, q, qd, qdd);
+      if (r->hasTransmission()) tau = r->transmission.transpose() * tau;
+      t.data.row(k) = tau.transpose();
+    } else if (what == "regressor") {
+      torqueRegressor(*r, *data, q, qd, qdd, Y);
+      if (r->hasTransmission()) Y = r->transmission.transpose() * Y;
+      t.data.middleRows(k * n, n) = Y;
+    } else if (what == "energy" || what == "energy_regressor") {
+      energyRegressor(*r, *data, q, qd, kin, pot);
+      if (what == "energy") {
+        t.data(k, 0) = kin.dot(pi);
+        t.data(k, 1) = pot.dot(pi);
+        t.data(k, 2) = t.data(k, 0) + t.data(k, 1);
+      } else {
+        t.data.block(k, 0, 1, p) = kin;
+        t.data.block(k, p, 1, p) = pot;
+      }
+    } else {
+      wrenchRegressor(*r, *data, q, qd, qdd, A);
+      t.data.middleRows(k * 6, 6) = A;
+    }
+  }
+  writeCsvAtomic(out, t);
+  std::cout << fmt::format("{}: {} rows x {} columns ({} of {} on {} samples)\n", out, t.data.rows(),
+                           t.data.cols(), what, r->name, K);
+  return 0;
+}
+
+/// Single stages run through the study runner on a trimmed copy of the study.
+int stageCommand(const Registry& reg, const std::string& stage, const std::string& study,
+                 const std::string& data_file, std::string out) {
+  StudyConfig cfg = loadStudy(study, reg);
+  if (stage == "excite") {
+    if (!cfg.hasExcitation()) throw Error(fmt::format("{}: no excitation section", study));
+    cfg.experiment.reset();
+    cfg.estimator.reset();
+    cfg.validation.reset();
+  } else if (stage == "simulate") {
+    if (!cfg.experiment) throw Error(fmt::format("{}: no experiment section", study));
+    cfg.estimator.reset();
+    cfg.validation.reset();
+  } else if (stage == "identify") {
+    if (!cfg.estimator) throw Error(fmt::format("{}: no estimator section", study));
+    cfg.trajectory.reset();
+    cfg.criterion.reset();
+    cfg.optimizer.reset();
+    cfg.validation.reset();
+    if (!data_file.empty()) {
+      PluginSpec spec;
+      spec.kind = PluginKind::Experiment;
+      spec.type = "csv";
+      spec.key_path = "experiment";
+      spec.params = resolveParams(reg.get(PluginKind::Experiment, "csv"),
+                                  fmt::format("{{file: '{}'}}", fs::absolute(data_file).string()),
+                                  "experiment.params", fs::current_path());
+      cfg.experiment = spec;
+    }
+    if (!cfg.experiment) throw Error(fmt::format("{}: no experiment section and no --data file", study));
+  }
+  if (out.empty()) out = "out/" + cfg.name + "_" + stage;
+  RunOptions opt;
+  opt.out_dir = out;
+  StudyResult r = runStudy(cfg, reg, opt);
+  std::cout << briefTable(r.summary);
+  if (!r.ok) {
+    std::cerr << fmt::format("exid {}: failed: {}\n", stage, r.message);
+    return 1;
+  }
+  std::cout << fmt::format("\nResults in {}/ (summary.json, report.md)\n", out);
+  return 0;
+}
+
+}  // namespace
+
 Commands addCommands(CLI::App& app, Registry& registry) {
-  (void)app;
-  (void)registry;
+  struct State {
+    std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
+    bool json = false;
+  };
+  auto st = std::make_shared<State>();
+
+  auto* robot = app.add_subcommand("robot", "robot descriptions: exid robot info ROBOT");
+  auto* info = robot->add_subcommand("info", "parameters, base parameters and their expressions");
+  robot->require_subcommand(1);
+  info->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
+  info->add_option("--model", st->model, "observation model that defines the columns (default differential)");
+  info->add_option("--model-params", st->model_params, "its parameters as YAML, e.g. '{rotor_inertia: true}'");
+  info->add_flag("--json", st->json, "print JSON");
+
+  auto* eval = app.add_subcommand("eval", "evaluate torque, regressors or energy on a CSV of samples");
+  eval->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
+  eval->add_option("--samples", st->samples, "CSV with q1..qn qd1..qdn qdd1..qddn")->required();
+  eval->add_option("--what", st->what, "torque|regressor|energy|energy_regressor|wrench_regressor")->required();
+  eval->add_option("--out", st->out, "output CSV")->required();
+
+  std::vector<CLI::App*> stages;
+  for (const char* name : {"excite", "simulate", "identify"}) {
+    auto* s = app.add_subcommand(name, fmt::format("run only the {} stage of a study", name));
+    s->add_option("study", st->study, "study YAML file")->required();
+    s->add_option("--out", st->out, "output folder");
+    if (std::string(name) == "identify") s->add_option("--data", st->data, "recorded CSV (replaces the experiment)");
+    stages.push_back(s);
+  }
+
   Commands c;
-  c.run = [] {
+  c.run = [st, info, eval, stages, &registry]() -> int {
+    if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
+    if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out);
+    for (auto* s : stages)
+      if (*s) return stageCommand(registry, s->get_name(), st->study, st->data, st->out);
     std::cerr << "exid: no command chosen (see exid --help)\n";
     return 2;
   };
