@@ -129,8 +129,9 @@ TEST(Conformance, ObservationModelsBindAndTheirGradientsMatchFiniteDifferences) 
     EXPECT_GT(model->numBase(), 0);
     EXPECT_EQ(static_cast<int>(model->fullNames().size()), model->base().numFull());
     EXPECT_EQ(model->fullNominal().size(), model->base().numFull());
-    exid::Samples s = model->randomSamples(12, 5);
-    s.t = Eigen::VectorXd::LinSpaced(12, 0.0, 0.11);
+    // 61 samples over 1.2 s: long enough for the default windows of the integral model.
+    exid::Samples s = model->randomSamples(61, 5);
+    s.t = Eigen::VectorXd::LinSpaced(61, 0.0, 1.2);
     Eigen::MatrixXd W = model->design(s);
     ASSERT_GT(W.rows(), 0);
     Eigen::MatrixXd G = Eigen::MatrixXd::Random(W.rows(), W.cols());
