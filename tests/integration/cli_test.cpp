@@ -1,0 +1,155 @@
+// The exid program end to end: a study runs and writes its files; a failure exits non-zero with
+// a message, records why in summary.json and leaves no half-written file.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+
+#include "exid/json.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CmdResult {
+  int code = -1;
+  std::string out;  // stdout and stderr
+};
+
+CmdResult runExid(const std::string& args) {
+  std::string cmd = std::string(EXID_EXE) + " " + args + " 2>&1";
+  CmdResult r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf{};
+  while (p && std::fgets(buf.data(), buf.size(), p)) r.out += buf.data();
+  int status = p ? ::pclose(p) : -1;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+std::string slurp(const fs::path& p) {
+  std::ifstream in(p);
+  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+}
+
+fs::path tempDir(const std::string& name) {
+  fs::path d = fs::temp_directory_path() / ("exid_cli_" + name + "_" + std::to_string(::getpid()));
+  fs::remove_all(d);
+  fs::create_directories(d);
+  return d;
+}
+
+bool noTemporaries(const fs::path& dir) {
+  for (auto& e : fs::recursive_directory_iterator(dir))
+    if (e.path().string().find(".tmp.") != std::string::npos) return false;
+  return true;
+}
+
+}  // namespace
+
+TEST(Cli, DefaultStudyRunsAndWritesItsResults) {
+  fs::path out = tempDir("default");
+  CmdResult r = runExid("-q run " + std::string(EXID_SOURCE_DIR) + "/examples/default.yaml --out " + out.string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("| status | ok |"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("report.md"), std::string::npos) << r.out;
+  for (const char* f : {"summary.json", "report.md", "study.resolved.yaml", "experiment.csv", "parameters.csv",
+                        "validation.csv"})
+    EXPECT_TRUE(fs::exists(out / f)) << f;
+  exid::Json s = exid::Json::parse(slurp(out / "summary.json"));
+  EXPECT_EQ(s.find("status")->asString(), "ok");
+  EXPECT_EQ(s.find("config_hash")->asString().size(), 16u);
+  const exid::Json* id = s.find("identification");
+  ASSERT_NE(id, nullptr);
+  // Noise 0.05 N m on the torques: the residual RMS is the noise level, the estimate is close.
+  EXPECT_NEAR(id->find("residual_rms")->asDouble(), 0.05, 0.005);
+  EXPECT_LT(id->find("param_rel_err")->asDouble(), 0.01);
+  EXPECT_LT(s.find("validation")->find("relative_error")->asDouble(), 0.01);
+  EXPECT_EQ(s.find("robot")->find("dof")->asInt(), 6);
+  EXPECT_TRUE(noTemporaries(out));
+  fs::remove_all(out);
+}
+
+TEST(Cli, AFailingStudyExitsNonZeroAndSaysWhyInSummary) {
+  fs::path dir = tempDir("failing");
+  std::ofstream(dir / "bad.yaml") << "robot: {type: puma560}\nmodel: {type: differential}\n"
+                                      "experiment: {type: csv, params: {file: missing.csv}}\n"
+                                      "estimator: {type: batch_ls}\n";
+  CmdResult r = runExid("-q run " + (dir / "bad.yaml").string() + " --out " + (dir / "out").string());
+  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_NE(r.out.find("missing.csv"), std::string::npos) << r.out;
+  exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
+  EXPECT_EQ(s.find("status")->asString(), "failed");
+  EXPECT_EQ(s.find("failed_stage")->asString(), "experiment");
+  EXPECT_NE(s.find("message")->asString().find("missing.csv"), std::string::npos);
+  EXPECT_FALSE(fs::exists(dir / "out" / "report.md"));  // no report of a failed study
+  EXPECT_FALSE(fs::exists(dir / "out" / "experiment.csv"));
+  EXPECT_TRUE(noTemporaries(dir));
+  fs::remove_all(dir);
+}
+
+TEST(Cli, ConfigErrorsAreReportedBeforeAnyWork) {
+  fs::path dir = tempDir("config");
+  std::ofstream(dir / "typo.yaml") << "robot: {type: puma560}\nmodel: {type: differential}\n"
+                                       "experiment: {type: simulate}\n"
+                                       "estimator: {type: rls, params: {forgetting_factor: 1.2}}\n";
+  CmdResult r = runExid("run " + (dir / "typo.yaml").string() + " --out " + (dir / "out").string());
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("typo.yaml:4: estimator.params.forgetting_factor = 1.2: must be in (0, 1]"),
+            std::string::npos)
+      << r.out;
+  EXPECT_FALSE(fs::exists(dir / "out"));  // nothing started
+  std::ofstream(dir / "unknown.yaml") << "robot: {type: puma561}\n";
+  r = runExid("validate " + (dir / "unknown.yaml").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("did you mean 'puma560'?"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
+TEST(Cli, PluginsListsEveryKindWithParameters) {
+  CmdResult r = runExid("plugins");
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const char* k : {"robot (", "model (", "criterion (", "trajectory (", "optimizer (", "experiment (",
+                        "estimator ("})
+    EXPECT_NE(r.out.find(k), std::string::npos) << k;
+  EXPECT_NE(r.out.find("forgetting_factor"), std::string::npos);
+  EXPECT_EQ(r.out.find("refused"), std::string::npos) << r.out;
+  r = runExid("plugins info batch_ls");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("estimator 'batch_ls'"), std::string::npos) << r.out;
+  r = runExid("plugins info bach_ls");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("did you mean 'batch_ls'?"), std::string::npos) << r.out;
+  r = runExid("plugins estimater");
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("did you mean 'estimator'?"), std::string::npos) << r.out;
+}
+
+TEST(Cli, RobotInfoPrintsBaseParametersAsJson) {
+  CmdResult r = runExid("-q robot info puma560 --json --model-params '{rotor_inertia: false, coulomb: false, viscous: false}'");
+  ASSERT_EQ(r.code, 0) << r.out;
+  exid::Json j = exid::Json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_EQ(j.find("dof")->asInt(), 6);
+  EXPECT_EQ(j.find("parameters")->size(), 60u);
+  EXPECT_EQ(j.find("base_parameters")->size(), 36u);  // the classical PUMA 560 count
+}
+
+TEST(Cli, SimulateThenIdentifyReadsTheCsvBack) {
+  fs::path dir = tempDir("stages");
+  std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\nmodel: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}\n"
+                                     "experiment: {type: simulate, params: {duration_s: 5}}\n"
+                                     "estimator: {type: batch_ls}\n";
+  CmdResult r = runExid("-q simulate " + (dir / "s.yaml").string() + " --out " + (dir / "sim").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  ASSERT_TRUE(fs::exists(dir / "sim" / "experiment.csv"));
+  r = runExid("-q identify " + (dir / "s.yaml").string() + " --data " + (dir / "sim" / "experiment.csv").string() +
+           " --out " + (dir / "id").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  exid::Json s = exid::Json::parse(slurp(dir / "id" / "summary.json"));
+  EXPECT_LT(s.find("identification")->find("residual_rms")->asDouble(), 1e-9);
+  fs::remove_all(dir);
+}
