@@ -1,0 +1,177 @@
+// exid — numerical code shared by the estimator plugins (static library
+// exid_estimators_common). One implementation of each piece, reused by batch_ls, rls,
+// filtered_ls and wls. See docs/estimators.md for the equations and the choices.
+#pragma once
+
+#include <Eigen/Core>
+#include <array>
+#include <complex>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "exid/context.hpp"
+#include "exid/data.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/json.hpp"
+
+namespace exid::est {
+
+// ============================================================== least squares
+
+/// Streaming compression of the augmented rows [W y] (p + 1 columns) into a square factor F
+/// with F^T F = [W y]^T [W y]. Memory is O(p^2 + buffer), independent of the number of rows.
+///
+/// Method::Qr (default): F is the upper-triangular R of a Householder QR of [R_prev; new rows]
+///   (rows are buffered and compressed in blocks). cond(F) = cond([W y]): nothing is squared.
+/// Method::Normal: accumulates the Gram matrix [W y]^T [W y] (a symmetric rank-k update,
+///   about half the flops of the QR), and F comes from its eigendecomposition. Squares
+///   cond(W): digits are lost when cond(W) > ~1e5. Offered for speed comparison only.
+class RowAccumulator {
+ public:
+  enum class Method { Qr, Normal };
+  RowAccumulator() = default;
+  explicit RowAccumulator(int p, Method method = Method::Qr, int block_rows = 1024);
+
+  /// Adds rows (W: r x p, y: r), each multiplied by `scale` (a weight sqrt(w)).
+  void add(const Eigen::Ref<const Eigen::MatrixXd>& W, const Eigen::Ref<const Eigen::VectorXd>& y,
+           double scale = 1.0);
+  /// Adds one row.
+  void addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale = 1.0);
+  /// Adds everything another accumulator holds, multiplied by scale.
+  void merge(const RowAccumulator& other, double scale = 1.0);
+
+  int cols() const { return p_; }
+  long rows() const { return m_; }
+  Method method() const { return method_; }
+  /// (p+1) x (p+1) factor with F^T F = [W y]^T [W y] (compresses pending rows first).
+  const Eigen::MatrixXd& factor() const;
+  /// ||y - W theta||^2, exact from the factor: ||F [theta; -1]||^2.
+  double residualSquared(const Eigen::VectorXd& theta) const;
+  /// Euclidean norm of each column of W (p).
+  Eigen::VectorXd columnNorms() const;
+
+ private:
+  void compress() const;
+  int p_ = 0;
+  Method method_ = Method::Qr;
+  long m_ = 0;
+  int block_rows_ = 1024;
+  mutable Eigen::MatrixXd buf_;   // Qr: rows [R; pending]; Normal: pending rows
+  mutable int fill_ = 0;          // rows used in buf_
+  mutable Eigen::MatrixXd gram_;  // Normal: (p+1)^2 lower triangle
+  mutable Eigen::MatrixXd F_;     // cached factor
+  mutable bool dirty_ = true;
+};
+
+struct SolveOptions {
+  /// A direction is unidentifiable when its singular value of the column-scaled W is below
+  /// rank_tolerance * the largest (same convention as the base parameters, 1e-8).
+  double rank_tolerance = 1e-8;
+  /// How many standard parameters to name per unidentifiable direction.
+  int explain_terms = 4;
+};
+
+struct LsSolution {
+  Eigen::VectorXd theta, std, rel_std_percent;
+  Eigen::MatrixXd covariance;
+  Eigen::VectorXd singular_values;         // of W (unscaled), descending
+  Eigen::VectorXd singular_values_scaled;  // of W with unit-norm columns, descending
+  double rss = 0.0;      // ||y - W theta||^2
+  double sigma2 = 0.0;   // rss / (m - p)
+  double cond_W = 0.0;   // sigma_max / sigma_min of W
+  double cond_W_scaled = 0.0;
+  long m = 0;
+  int p = 0;
+};
+
+/// Rank-revealing least squares on an accumulated factor: SVD of the column-scaled factor
+/// (Jacobi, p x p), refuses a rank-deficient problem with exid::Error naming the directions
+/// (explainNullSpace). Covariance sigma^2 (W^T W)^-1 with sigma^2 = rss / (m - p).
+/// `who` prefixes messages ("batch_ls").
+LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::string>& names,
+                             const SolveOptions& opt, const std::string& who);
+
+/// Text naming the unidentifiable directions: for each null-space vector v (of the
+/// column-scaled problem), its largest components as "0.71 Fc1 - 0.71 OFF1".
+std::string explainNullSpace(const Eigen::MatrixXd& null_vectors, const Eigen::VectorXd& ratios,
+                             const std::vector<std::string>& names, int terms);
+
+/// 100 * std / |value| (Gautier's relative standard deviation); +inf when value == 0.
+Eigen::VectorXd relativeStdPercent(const Eigen::VectorXd& value, const Eigen::VectorXd& std);
+
+/// Fills names, expressions, value, std, covariance, sigma, cond_W, rows and the common details
+/// (per-parameter table with rel_std_percent, singular values, dof). residual_rms is set from
+/// the unweighted residual sum of squares `rss_unweighted` over `m_unweighted` rows.
+void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& s,
+                  double rss_unweighted, long m_unweighted);
+/// The per-parameter table of details: [{name, expression, value, std, rel_std_percent}].
+Json parameterTable(const Estimate& e);
+
+// ============================================================== streaming rows
+
+/// Rows [begin, end) of a dataset (every signal that is present).
+Dataset sliceDataset(const Dataset& d, int begin, int end);
+
+/// Whether model.rows() may be computed on consecutive slices of a dataset and stacked, i.e.
+/// the rows of sample k depend on sample k only. True for the models known to be per sample
+/// (differential, load_wrench, load_torque) and for any model whose describe() has
+/// "per_sample": true; false when describe() has "per_sample": false or the model is unknown.
+bool modelIsPerSample(const ObservationModel& model);
+
+/// Streams a dataset through the model: calls fn(rows, begin, end) on consecutive slices of at
+/// most chunk_samples samples (the whole dataset at once when the model is not per sample).
+/// Reports progress in [lo, hi] of the stage and throws exid::Error when ctx.shouldStop().
+void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_samples,
+                  const RunContext& ctx, const std::string& who, double lo, double hi,
+                  const std::function<void(const Rows&, int begin, int end)>& fn);
+
+/// For rows computed from `samples` consecutive samples: the sample (0-based, within them) of
+/// each row, and an order of the rows in time (stable within a sample). Recognises sample-major
+/// (equation = i % r) and equation-major (equation = i / samples) layouts; otherwise spreads the
+/// rows evenly in the given order.
+void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row,
+                  std::vector<int>* order);
+
+/// Throws exid::Error when the rows are not finite or shapes disagree with the model.
+void checkRows(const Rows& rows, int p, const std::string& who, int begin);
+
+// ============================================================== signals
+
+/// Second-order sections b0 b1 b2 1 a1 a2 (transposed direct form II).
+struct Sos {
+  std::vector<std::array<double, 6>> sections;
+  int order = 0;
+};
+
+/// Digital Butterworth low-pass of `order` with -3 dB at cutoff_hz (single pass), designed by
+/// the bilinear transform with pre-warping; unit DC gain. Throws unless 0 < cutoff < fs/2.
+Sos butterworthLowpass(int order, double cutoff_hz, double fs_hz);
+/// Frequency response at f (Hz).
+std::complex<double> sosResponse(const Sos& sos, double f_hz, double fs_hz);
+/// Causal filtering in place with initial state zi (2 per section); zi updated.
+void sosFilter(const Sos& sos, Eigen::Ref<Eigen::VectorXd> x, std::vector<double>* zi);
+/// Steady-state state for a unit step input (scipy's sosfilt_zi).
+std::vector<double> sosStepState(const Sos& sos);
+/// Zero-phase forward-backward filtering (as scipy's sosfiltfilt): odd extension at each end
+/// (point reflection, keeps value and slope continuous) of 10 time constants of the slowest
+/// pole (at least 3 (2 sections + 1) samples), steady-state initial conditions. Magnitude |H|^2.
+Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>& x);
+/// filtfilt of every column.
+Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X);
+
+/// Sampling rate 1 / median(dt); *jitter = max |dt - median| / median. Throws on < 3 samples
+/// or non-increasing t.
+double samplingRate(const Eigen::VectorXd& t, double* jitter);
+/// First derivative by three-point central differences (non-uniform t allowed), second-order
+/// one-sided three-point formulas at the ends.
+Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X);
+/// Second derivative by the three-point central formula; ends linearly extrapolated.
+Eigen::MatrixXd centralSecondDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X);
+
+/// Parallel decimation (Gautier): for each equation, its rows form a time series; every
+/// column of W and y is low-pass filtered with `sos` (zero phase) and one row in `factor` is
+/// kept. Equations keep their identity; output rows are sample-major.
+Rows decimateRows(const Rows& rows, int factor, const Sos& sos);
+
+}  // namespace exid::est

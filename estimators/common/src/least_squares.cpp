@@ -1,0 +1,273 @@
+// Streaming QR / normal-equation accumulation and the rank-revealing least-squares solve.
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <numeric>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+
+namespace exid::est {
+
+namespace {
+std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
+}  // namespace
+
+// ---------------------------------------------------------------- RowAccumulator
+RowAccumulator::RowAccumulator(int p, Method method, int block_rows)
+    : p_(p), method_(method), block_rows_(std::max(block_rows, 8)) {
+  check(p > 0, "RowAccumulator: no parameter column");
+  const int a = p + 1;
+  if (method_ == Method::Qr) {
+    buf_ = Eigen::MatrixXd::Zero(a + block_rows_, a);
+    fill_ = a;  // the top a rows hold R (zero at first)
+  } else {
+    buf_ = Eigen::MatrixXd::Zero(block_rows_, a);
+    gram_ = Eigen::MatrixXd::Zero(a, a);
+    fill_ = 0;
+  }
+}
+
+void RowAccumulator::compress() const {
+  const int a = p_ + 1;
+  if (method_ == Method::Qr) {
+    if (fill_ == a) return;
+    Eigen::Ref<Eigen::MatrixXd> block = buf_.topRows(fill_);
+    Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qr(block);  // in place
+    buf_.topRows(a).triangularView<Eigen::StrictlyLower>().setZero();
+    buf_.middleRows(a, fill_ - a).setZero();
+    fill_ = a;
+  } else {
+    if (fill_ == 0) return;
+    gram_.selfadjointView<Eigen::Lower>().rankUpdate(buf_.topRows(fill_).transpose());
+    fill_ = 0;
+  }
+  dirty_ = true;
+}
+
+void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                         const Eigen::Ref<const Eigen::VectorXd>& y, double scale) {
+  check(W.cols() == p_, fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
+  check(W.rows() == y.size(), fmt::format("RowAccumulator: {} rows of W but {} of y", W.rows(), y.size()));
+  const Eigen::Index r = W.rows();
+  const Eigen::Index cap = buf_.rows();
+  Eigen::Index i = 0;
+  while (i < r) {
+    if (fill_ == cap) compress();
+    const Eigen::Index take = std::min<Eigen::Index>(r - i, cap - fill_);
+    if (scale == 1.0) {
+      buf_.block(fill_, 0, take, p_) = W.middleRows(i, take);
+      buf_.block(fill_, p_, take, 1) = y.segment(i, take);
+    } else {
+      buf_.block(fill_, 0, take, p_) = scale * W.middleRows(i, take);
+      buf_.block(fill_, p_, take, 1) = scale * y.segment(i, take);
+    }
+    fill_ += static_cast<int>(take);
+    i += take;
+  }
+  m_ += r;
+  dirty_ = true;
+}
+
+void RowAccumulator::addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale) {
+  check(w.size() == p_, fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));
+  if (fill_ == buf_.rows()) compress();
+  buf_.block(fill_, 0, 1, p_) = scale * w;
+  buf_(fill_, p_) = scale * y;
+  ++fill_;
+  ++m_;
+  dirty_ = true;
+}
+
+void RowAccumulator::merge(const RowAccumulator& other, double scale) {
+  check(other.p_ == p_, "RowAccumulator::merge: different numbers of columns");
+  const Eigen::MatrixXd& F = other.factor();
+  const long m = m_ + other.m_;
+  add(F.leftCols(p_), F.col(p_), scale);
+  m_ = m;
+}
+
+const Eigen::MatrixXd& RowAccumulator::factor() const {
+  compress();
+  if (!dirty_) return F_;
+  const int a = p_ + 1;
+  if (method_ == Method::Qr) {
+    F_ = buf_.topRows(a);
+  } else {
+    Eigen::MatrixXd G = gram_.selfadjointView<Eigen::Lower>();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(G);
+    Eigen::VectorXd l = es.eigenvalues().cwiseMax(0.0).cwiseSqrt();
+    F_ = l.asDiagonal() * es.eigenvectors().transpose();
+  }
+  dirty_ = false;
+  return F_;
+}
+
+double RowAccumulator::residualSquared(const Eigen::VectorXd& theta) const {
+  const Eigen::MatrixXd& F = factor();
+  return (F.leftCols(p_) * theta - F.col(p_)).squaredNorm();
+}
+
+Eigen::VectorXd RowAccumulator::columnNorms() const {
+  return factor().leftCols(p_).colwise().norm().transpose();
+}
+
+// ---------------------------------------------------------------- solve
+Eigen::VectorXd relativeStdPercent(const Eigen::VectorXd& value, const Eigen::VectorXd& std) {
+  Eigen::VectorXd r(value.size());
+  for (Eigen::Index i = 0; i < value.size(); ++i)
+    r(i) = value(i) != 0.0 ? 100.0 * std(i) / std::abs(value(i))
+                           : std::numeric_limits<double>::infinity();
+  return r;
+}
+
+std::string explainNullSpace(const Eigen::MatrixXd& null_vectors, const Eigen::VectorXd& ratios,
+                             const std::vector<std::string>& names, int terms) {
+  std::string out;
+  for (Eigen::Index d = 0; d < null_vectors.cols(); ++d) {
+    Eigen::VectorXd v = null_vectors.col(d);
+    v /= v.norm();
+    std::vector<int> idx(static_cast<std::size_t>(v.size()));
+    std::iota(idx.begin(), idx.end(), 0);
+    std::stable_sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(v(a)) > std::abs(v(b)); });
+    // sign convention: largest component positive
+    if (v(idx[0]) < 0) v = -v;
+    std::string expr;
+    int shown = 0;
+    for (int i : idx) {
+      if (shown >= terms || (shown > 0 && std::abs(v(i)) < 0.05)) break;
+      const std::string nm = i < static_cast<int>(names.size()) ? names[static_cast<std::size_t>(i)]
+                                                                 : fmt::format("theta{}", i + 1);
+      const double c = v(i);
+      if (shown == 0)
+        expr += fmt::format("{:.3g} {}", c, nm);
+      else
+        expr += fmt::format(" {} {:.3g} {}", c < 0 ? "-" : "+", std::abs(c), nm);
+      ++shown;
+    }
+    int rest = 0;
+    for (Eigen::Index i = 0; i < v.size(); ++i) rest += std::abs(v(i)) >= 0.05 ? 1 : 0;
+    if (rest > shown) expr += fmt::format(" + ... ({} more)", rest - shown);
+    out += fmt::format("{}[{}] {} (sigma/sigma_max = {:.2g})", d ? "; " : "", d + 1, expr,
+                       ratios.size() > d ? ratios(d) : 0.0);
+  }
+  return out;
+}
+
+LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::string>& names,
+                             const SolveOptions& opt, const std::string& who) {
+  const int p = acc.cols();
+  const long m = acc.rows();
+  check(m > p, fmt::format("{}: {} observation rows for {} base parameters; least squares needs "
+                           "more rows than parameters (a longer experiment)",
+                           who, m, p));
+  const Eigen::MatrixXd& F = acc.factor();
+  const Eigen::MatrixXd Fw = F.leftCols(p);
+  const Eigen::VectorXd fy = F.col(p);
+
+  // Column scaling: the rank decision and the null-space directions do not depend on units.
+  Eigen::VectorXd d = Fw.colwise().norm().transpose();
+  for (Eigen::Index j = 0; j < p; ++j)
+    if (!(d(j) > 0.0)) d(j) = 1.0;  // zero column: stays zero, found as a null direction
+  const Eigen::MatrixXd Fs = Fw * d.cwiseInverse().asDiagonal();
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  const Eigen::VectorXd s = svd.singularValues();
+  check(s(0) > 0.0, fmt::format("{}: the regressor is identically zero (no excitation at all)", who));
+  const double smax = s(0);
+  std::vector<int> null_idx;
+  for (int i = 0; i < p; ++i)
+    if (!(s(i) > opt.rank_tolerance * smax)) null_idx.push_back(i);
+  if (!null_idx.empty()) {
+    Eigen::MatrixXd N(p, static_cast<Eigen::Index>(null_idx.size()));
+    Eigen::VectorXd ratios(static_cast<Eigen::Index>(null_idx.size()));
+    for (std::size_t k = 0; k < null_idx.size(); ++k) {
+      N.col(static_cast<Eigen::Index>(k)) = svd.matrixV().col(null_idx[k]);
+      ratios(static_cast<Eigen::Index>(k)) = s(null_idx[k]) / smax;
+    }
+    throw Error(fmt::format(
+        "{}: the data do not identify all {} base parameters (numerical rank {} of {} at "
+        "tolerance {:g} on the column-scaled regressor, {} rows). Unidentifiable directions "
+        "(unit-norm combinations of the column-scaled base parameters that leave W theta "
+        "unchanged): {}. The experiment does not excite these combinations: move every joint in "
+        "both directions with varied velocities and accelerations, or remove the parameters "
+        "involved from the model.",
+        who, p, p - static_cast<int>(null_idx.size()), p, opt.rank_tolerance, m,
+        explainNullSpace(N, ratios, names, opt.explain_terms)));
+  }
+
+  LsSolution out;
+  out.m = m;
+  out.p = p;
+  const Eigen::MatrixXd& V = svd.matrixV();
+  const Eigen::VectorXd sinv = s.cwiseInverse();
+  const Eigen::VectorXd theta_s = V * (sinv.asDiagonal() * (svd.matrixU().transpose() * fy));
+  out.theta = theta_s.cwiseQuotient(d);
+  out.rss = (Fw * out.theta - fy).squaredNorm();
+  out.sigma2 = out.rss / static_cast<double>(m - p);
+  const Eigen::MatrixXd Vs = d.cwiseInverse().asDiagonal() * V * sinv.asDiagonal();  // (W^T W)^-1 = Vs Vs^T
+  out.covariance = out.sigma2 * (Vs * Vs.transpose());
+  out.std = out.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+  out.rel_std_percent = relativeStdPercent(out.theta, out.std);
+  out.singular_values_scaled = s;
+  out.cond_W_scaled = smax / s(p - 1);
+  out.singular_values = Eigen::JacobiSVD<Eigen::MatrixXd>(Fw).singularValues();
+  out.cond_W = out.singular_values(0) / out.singular_values(p - 1);
+  return out;
+}
+
+// ---------------------------------------------------------------- Estimate
+Json parameterTable(const Estimate& e) {
+  Json t = Json::array();
+  for (Eigen::Index i = 0; i < e.value.size(); ++i) {
+    Json p = Json::object();
+    const auto k = static_cast<std::size_t>(i);
+    p["name"] = k < e.names.size() ? e.names[k] : fmt::format("theta{}", i + 1);
+    p["expression"] = k < e.expressions.size() ? e.expressions[k] : std::string();
+    p["value"] = e.value(i);
+    const double sd = e.std.size() > i ? e.std(i) : NAN;
+    p["std"] = sd;
+    p["rel_std_percent"] = e.value(i) != 0.0 ? 100.0 * sd / std::abs(e.value(i)) : INFINITY;
+    t.push_back(p);
+  }
+  return t;
+}
+
+void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& s,
+                  double rss_unweighted, long m_unweighted) {
+  const BaseParameters& b = model.base();
+  e->names.clear();
+  e->expressions.clear();
+  for (int i = 0; i < s.p; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    e->names.push_back(k < b.names.size() ? b.names[k] : fmt::format("theta{}", i + 1));
+    e->expressions.push_back(k < b.expressions.size() ? b.expressions[k] : e->names.back());
+  }
+  e->value = s.theta;
+  e->std = s.std;
+  e->covariance = s.covariance;
+  e->sigma = std::sqrt(s.sigma2);
+  e->cond_W = s.cond_W;
+  e->residual_rms = m_unweighted > 0 ? std::sqrt(rss_unweighted / static_cast<double>(m_unweighted)) : 0.0;
+  e->rows = s.m;
+  Json& d = e->details;
+  if (!d.isObject()) d = Json::object();
+  d["parameters"] = parameterTable(*e);
+  d["rows"] = Json(static_cast<long long>(s.m));
+  d["dof"] = Json(static_cast<long long>(s.m - s.p));
+  d["sigma2"] = s.sigma2;
+  d["rss"] = s.rss;
+  d["cond_W"] = s.cond_W;
+  d["cond_W_scaled"] = s.cond_W_scaled;
+  d["cond_W_definition"] =
+      "sigma_max / sigma_min of the (weighted) base regressor W; cond_W_scaled: same with every "
+      "column scaled to unit norm; cond(W^T W) = cond_W^2";
+  d["singular_values"] = Json(toStd(s.singular_values));
+  d["covariance_definition"] = "sigma^2 (W^T W)^-1, sigma^2 = ||y - W theta||^2 / (m - p)";
+}
+
+}  // namespace exid::est

@@ -1,0 +1,218 @@
+// Butterworth design (bilinear transform), zero-phase filtering, central differences,
+// parallel decimation.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <map>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+
+namespace exid::est {
+
+Sos butterworthLowpass(int order, double cutoff_hz, double fs_hz) {
+  check(order >= 1 && order <= 20, fmt::format("Butterworth order must be in [1, 20], got {}", order));
+  check(fs_hz > 0 && std::isfinite(fs_hz), fmt::format("sampling rate must be positive, got {} Hz", fs_hz));
+  check(cutoff_hz > 0 && cutoff_hz < 0.5 * fs_hz,
+        fmt::format("Butterworth cutoff must be in (0, fs/2) = (0, {:g}) Hz, got {:g} Hz", 0.5 * fs_hz, cutoff_hz));
+  // Analog prototype poles p_k = exp(i pi (2k + N + 1) / (2N)) (left half plane, |p| = 1),
+  // pre-warped cutoff 2 fs tan(pi fc / fs); the bilinear transform s = 2 fs (z - 1) / (z + 1)
+  // maps them to z = (1 + K p) / (1 - K p), K = tan(pi fc / fs); the N zeros go to z = -1.
+  const double K = std::tan(M_PI * cutoff_hz / fs_hz);
+  Sos sos;
+  sos.order = order;
+  for (int k = 0; k < order / 2; ++k) {
+    const std::complex<double> p = std::polar(1.0, M_PI * (2.0 * k + order + 1.0) / (2.0 * order));
+    const std::complex<double> z = (1.0 + K * p) / (1.0 - K * p);
+    const double a1 = -2.0 * z.real(), a2 = std::norm(z);
+    const double g = (1.0 + a1 + a2) / 4.0;  // unit gain at DC (z = 1)
+    sos.sections.push_back({g, 2.0 * g, g, 1.0, a1, a2});
+  }
+  if (order % 2 == 1) {
+    const double z = (1.0 - K) / (1.0 + K);  // p = -1
+    const double a1 = -z;
+    const double g = (1.0 + a1) / 2.0;
+    sos.sections.push_back({g, g, 0.0, 1.0, a1, 0.0});
+  }
+  return sos;
+}
+
+std::complex<double> sosResponse(const Sos& sos, double f_hz, double fs_hz) {
+  const std::complex<double> zi = std::polar(1.0, -2.0 * M_PI * f_hz / fs_hz);  // z^-1
+  std::complex<double> h = 1.0;
+  for (const auto& s : sos.sections)
+    h *= (s[0] + s[1] * zi + s[2] * zi * zi) / (s[3] + s[4] * zi + s[5] * zi * zi);
+  return h;
+}
+
+std::vector<double> sosStepState(const Sos& sos) {
+  std::vector<double> zi;
+  double u = 1.0;  // input level of this section
+  for (const auto& s : sos.sections) {
+    const double g = (s[0] + s[1] + s[2]) / (1.0 + s[4] + s[5]);
+    const double z1 = (s[2] - s[5] * g) * u;
+    const double z0 = (s[1] - s[4] * g) * u + z1;
+    zi.push_back(z0);
+    zi.push_back(z1);
+    u *= g;
+  }
+  return zi;
+}
+
+void sosFilter(const Sos& sos, Eigen::Ref<Eigen::VectorXd> x, std::vector<double>* zi) {
+  check(zi->size() == 2 * sos.sections.size(), "sosFilter: state size");
+  for (std::size_t k = 0; k < sos.sections.size(); ++k) {
+    const auto& s = sos.sections[k];
+    double z0 = (*zi)[2 * k], z1 = (*zi)[2 * k + 1];
+    const double b0 = s[0], b1 = s[1], b2 = s[2], a1 = s[4], a2 = s[5];
+    for (Eigen::Index i = 0; i < x.size(); ++i) {
+      const double xi = x(i);
+      const double yi = b0 * xi + z0;
+      z0 = b1 * xi - a1 * yi + z1;
+      z1 = b2 * xi - a2 * yi;
+      x(i) = yi;
+    }
+    (*zi)[2 * k] = z0;
+    (*zi)[2 * k + 1] = z1;
+  }
+}
+
+Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>& x) {
+  const Eigen::Index n = x.size();
+  check(n >= 2, fmt::format("filtfilt: needs at least 2 samples, got {}", n));
+  // Pad long enough for the initial-condition transient to die out before the data start:
+  // 10 time constants of the slowest pole (at least scipy's 3 (2 sections + 1)).
+  double rmax = 0.0;
+  for (const auto& s : sos.sections) {
+    const double a1 = s[4], a2 = s[5], disc = a1 * a1 - 4.0 * a2;
+    const double r = disc < 0 ? std::sqrt(a2) : 0.5 * (std::abs(a1) + std::sqrt(disc));
+    rmax = std::max(rmax, r);
+  }
+  const double tau = rmax > 0 && rmax < 1 ? -1.0 / std::log(rmax) : 0.0;
+  const Eigen::Index padlen = std::min<Eigen::Index>(
+      std::max<Eigen::Index>(3 * (2 * static_cast<Eigen::Index>(sos.sections.size()) + 1),
+                             static_cast<Eigen::Index>(std::ceil(10.0 * tau))),
+      n - 1);
+  Eigen::VectorXd ext(n + 2 * padlen);
+  for (Eigen::Index i = 0; i < padlen; ++i) ext(i) = 2.0 * x(0) - x(padlen - i);
+  ext.segment(padlen, n) = x;
+  for (Eigen::Index i = 0; i < padlen; ++i) ext(padlen + n + i) = 2.0 * x(n - 1) - x(n - 2 - i);
+  const std::vector<double> z = sosStepState(sos);
+  std::vector<double> zi(z.size());
+  for (std::size_t i = 0; i < z.size(); ++i) zi[i] = z[i] * ext(0);
+  sosFilter(sos, ext, &zi);
+  ext.reverseInPlace();
+  for (std::size_t i = 0; i < z.size(); ++i) zi[i] = z[i] * ext(0);
+  sosFilter(sos, ext, &zi);
+  ext.reverseInPlace();
+  return ext.segment(padlen, n);
+}
+
+Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X) {
+  Eigen::MatrixXd Y(X.rows(), X.cols());
+  for (Eigen::Index j = 0; j < X.cols(); ++j) Y.col(j) = filtfilt(sos, X.col(j));
+  return Y;
+}
+
+double samplingRate(const Eigen::VectorXd& t, double* jitter) {
+  const Eigen::Index n = t.size();
+  check(n >= 3, fmt::format("a sampled signal needs at least 3 samples, got {}", n));
+  std::vector<double> dt(static_cast<std::size_t>(n - 1));
+  for (Eigen::Index i = 0; i + 1 < n; ++i) {
+    dt[static_cast<std::size_t>(i)] = t(i + 1) - t(i);
+    check(dt[static_cast<std::size_t>(i)] > 0,
+          fmt::format("time must increase strictly: t[{}] = {} then t[{}] = {}", i, t(i), i + 1, t(i + 1)));
+  }
+  std::vector<double> sorted = dt;
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2), sorted.end());
+  const double med = sorted[sorted.size() / 2];
+  double jit = 0.0;
+  for (double d : dt) jit = std::max(jit, std::abs(d - med) / med);
+  if (jitter) *jitter = jit;
+  return 1.0 / med;
+}
+
+Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X) {
+  const Eigen::Index n = X.rows();
+  check(n >= 3 && t.size() == n, "central differences need at least 3 samples and one time per sample");
+  Eigen::MatrixXd D(n, X.cols());
+  for (Eigen::Index k = 1; k + 1 < n; ++k) {
+    const double h1 = t(k) - t(k - 1), h2 = t(k + 1) - t(k);
+    D.row(k) = (-h2 / (h1 * (h1 + h2))) * X.row(k - 1) + ((h2 - h1) / (h1 * h2)) * X.row(k) +
+               (h1 / (h2 * (h1 + h2))) * X.row(k + 1);
+  }
+  {  // one-sided, second order, at the start: nodes 0, 1, 2
+    const double h1 = t(1) - t(0), h2 = t(2) - t(1);
+    D.row(0) = (-(2 * h1 + h2) / (h1 * (h1 + h2))) * X.row(0) + ((h1 + h2) / (h1 * h2)) * X.row(1) +
+               (-h1 / (h2 * (h1 + h2))) * X.row(2);
+  }
+  {  // at the end: nodes n-3, n-2, n-1
+    const double h1 = t(n - 2) - t(n - 3), h2 = t(n - 1) - t(n - 2);
+    D.row(n - 1) = (h2 / (h1 * (h1 + h2))) * X.row(n - 3) + (-(h1 + h2) / (h1 * h2)) * X.row(n - 2) +
+                   ((h1 + 2 * h2) / (h2 * (h1 + h2))) * X.row(n - 1);
+  }
+  return D;
+}
+
+Eigen::MatrixXd centralSecondDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X) {
+  const Eigen::Index n = X.rows();
+  check(n >= 4 && t.size() == n, "second differences need at least 4 samples and one time per sample");
+  Eigen::MatrixXd D(n, X.cols());
+  for (Eigen::Index k = 1; k + 1 < n; ++k) {
+    const double h1 = t(k) - t(k - 1), h2 = t(k + 1) - t(k);
+    D.row(k) = 2.0 * (X.row(k - 1) / (h1 * (h1 + h2)) - X.row(k) / (h1 * h2) + X.row(k + 1) / (h2 * (h1 + h2)));
+  }
+  // Linear extrapolation of the second derivative to the ends.
+  const double a0 = (t(0) - t(1)) / (t(2) - t(1));
+  D.row(0) = D.row(1) + a0 * (D.row(2) - D.row(1));
+  const double a1 = (t(n - 1) - t(n - 2)) / (t(n - 2) - t(n - 3));
+  D.row(n - 1) = D.row(n - 2) + a1 * (D.row(n - 2) - D.row(n - 3));
+  return D;
+}
+
+Rows decimateRows(const Rows& rows, int factor, const Sos& sos) {
+  check(factor >= 1, fmt::format("decimation factor must be >= 1, got {}", factor));
+  if (factor == 1) return rows;
+  const auto R = static_cast<int>(rows.y.size());
+  std::map<int, std::vector<int>> groups;
+  for (int i = 0; i < R; ++i)
+    groups[rows.equation.size() == static_cast<std::size_t>(R) ? rows.equation[static_cast<std::size_t>(i)] : 0].push_back(i);
+  const Eigen::Index p = rows.W.cols();
+  std::vector<Eigen::MatrixXd> dec;  // per equation: kept rows of [W y]
+  std::vector<int> labels;
+  std::size_t total = 0, longest = 0;
+  for (const auto& [label, idx] : groups) {
+    const auto L = static_cast<Eigen::Index>(idx.size());
+    Eigen::MatrixXd A(L, p + 1);
+    for (Eigen::Index i = 0; i < L; ++i) {
+      A.row(i).head(p) = rows.W.row(idx[static_cast<std::size_t>(i)]);
+      A(i, p) = rows.y(idx[static_cast<std::size_t>(i)]);
+    }
+    if (L >= 2) A = filtfiltColumns(sos, A);
+    const Eigen::Index kept = (L + factor - 1) / factor;
+    Eigen::MatrixXd K(kept, p + 1);
+    for (Eigen::Index i = 0; i < kept; ++i) K.row(i) = A.row(i * factor);
+    total += static_cast<std::size_t>(kept);
+    longest = std::max(longest, static_cast<std::size_t>(kept));
+    dec.push_back(std::move(K));
+    labels.push_back(label);
+  }
+  Rows out;
+  out.W.resize(static_cast<Eigen::Index>(total), p);
+  out.y.resize(static_cast<Eigen::Index>(total));
+  out.equation.reserve(total);
+  out.numEquations = rows.numEquations;
+  Eigen::Index r = 0;
+  for (std::size_t j = 0; j < longest; ++j)
+    for (std::size_t g = 0; g < dec.size(); ++g)
+      if (j < static_cast<std::size_t>(dec[g].rows())) {
+        out.W.row(r) = dec[g].row(static_cast<Eigen::Index>(j)).head(p);
+        out.y(r) = dec[g](static_cast<Eigen::Index>(j), p);
+        out.equation.push_back(labels[g]);
+        ++r;
+      }
+  return out;
+}
+
+}  // namespace exid::est

@@ -1,0 +1,110 @@
+// Streaming a dataset through an observation model in chunks of samples.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+
+namespace exid::est {
+
+namespace {
+Eigen::MatrixXd rowsOf(const Eigen::MatrixXd& M, int begin, int end) {
+  if (M.cols() == 0 || M.rows() == 0) return Eigen::MatrixXd(0, 0);
+  return M.middleRows(begin, end - begin);
+}
+}  // namespace
+
+Dataset sliceDataset(const Dataset& d, int begin, int end) {
+  check(0 <= begin && begin <= end && end <= d.size(),
+        fmt::format("sliceDataset: rows [{}, {}) outside a dataset of {}", begin, end, d.size()));
+  Dataset s;
+  s.t = d.t.segment(begin, end - begin);
+  s.q = rowsOf(d.q, begin, end);
+  s.qd = rowsOf(d.qd, begin, end);
+  s.qdd = rowsOf(d.qdd, begin, end);
+  s.tau = rowsOf(d.tau, begin, end);
+  s.wrench = rowsOf(d.wrench, begin, end);
+  s.source = d.source;
+  s.meta = d.meta;
+  return s;
+}
+
+bool modelIsPerSample(const ObservationModel& model) {
+  const Json desc = model.describe();
+  if (const Json* ps = desc.isObject() ? desc.find("per_sample") : nullptr)
+    if (ps->type() == Json::Type::Bool) return ps->asBool();
+  const std::string& n = model.pluginName();
+  return n == "differential" || n == "load_wrench" || n == "load_torque";
+}
+
+void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
+  check(rows.W.cols() == p, fmt::format("{}: the model returned {} columns, expected {} base parameters",
+                                        who, rows.W.cols(), p));
+  check(rows.W.rows() == rows.y.size(),
+        fmt::format("{}: the model returned {} rows of W but {} measurements", who, rows.W.rows(), rows.y.size()));
+  check(rows.equation.empty() || rows.equation.size() == static_cast<std::size_t>(rows.y.size()),
+        fmt::format("{}: the model returned {} equation labels for {} rows", who, rows.equation.size(), rows.y.size()));
+  if (!rows.W.allFinite() || !rows.y.allFinite()) {
+    for (Eigen::Index i = 0; i < rows.W.rows(); ++i)
+      if (!rows.W.row(i).allFinite() || !std::isfinite(rows.y(i)))
+        throw Error(fmt::format("{}: observation row {} (computed from samples starting at {}) is not "
+                                "finite (NaN or inf in the data?)",
+                                who, i, begin));
+  }
+}
+
+void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_samples,
+                  const RunContext& ctx, const std::string& who, double lo, double hi,
+                  const std::function<void(const Rows&, int, int)>& fn) {
+  const int K = data.size();
+  check(K > 0, fmt::format("{}: the dataset '{}' is empty", who, data.source));
+  const int chunk = modelIsPerSample(model) ? std::max(1, chunk_samples) : K;
+  for (int b = 0; b < K; b += chunk) {
+    if (ctx.shouldStop())
+      throw Error(fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
+                              ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
+    const int e = std::min(K, b + chunk);
+    Rows r = (b == 0 && e == K) ? model.rows(data, ctx) : model.rows(sliceDataset(data, b, e), ctx);
+    checkRows(r, model.numBase(), who, b);
+    fn(r, b, e);
+    ctx.report(lo + (hi - lo) * static_cast<double>(e) / K, fmt::format("{}: {} / {} samples", who, e, K));
+  }
+}
+
+void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row, std::vector<int>* order) {
+  const auto R = static_cast<int>(rows.y.size());
+  sample_of_row->assign(static_cast<std::size_t>(R), 0);
+  order->resize(static_cast<std::size_t>(R));
+  std::iota(order->begin(), order->end(), 0);
+  if (R == 0 || samples <= 0) return;
+  const bool labelled = rows.equation.size() == static_cast<std::size_t>(R);
+  if (R % samples == 0 && labelled) {
+    const int r = R / samples;
+    bool sample_major = true, equation_major = true;
+    for (int i = 0; i < R && (sample_major || equation_major); ++i) {
+      const int eq = rows.equation[static_cast<std::size_t>(i)];
+      if (sample_major && rows.equation[static_cast<std::size_t>(i)] != rows.equation[static_cast<std::size_t>(i % r)]) sample_major = false;
+      if (equation_major && eq != rows.equation[static_cast<std::size_t>((i / samples) * samples)]) equation_major = false;
+    }
+    // A layout with one row per sample is both; distinct labels inside a sample decide.
+    if (sample_major) {
+      for (int i = 0; i < R; ++i) (*sample_of_row)[static_cast<std::size_t>(i)] = i / r;
+      return;
+    }
+    if (equation_major) {
+      for (int i = 0; i < R; ++i) (*sample_of_row)[static_cast<std::size_t>(i)] = i % samples;
+      std::stable_sort(order->begin(), order->end(), [&](int a, int b) {
+        return (*sample_of_row)[static_cast<std::size_t>(a)] < (*sample_of_row)[static_cast<std::size_t>(b)];
+      });
+      return;
+    }
+  }
+  for (int i = 0; i < R; ++i)
+    (*sample_of_row)[static_cast<std::size_t>(i)] =
+        std::min(samples - 1, static_cast<int>((static_cast<long long>(i) * samples) / R));
+}
+
+}  // namespace exid::est

@@ -1,0 +1,234 @@
+// exid — estimator `rls`: recursive least squares, the paper's eqns 6-7, row by row in time
+// order, with initial covariance P0 = p0 I (or a prior) and a forgetting factor lambda:
+//   g = P phi,  s = phi^T g,  k = g / (lambda + s)            (k = P_{k+1} phi of eqn 6)
+//   theta <- theta + k (y - phi^T theta)                       (eqn 6)
+//   P <- [(I - k phi^T) P (I - k phi^T)^T + lambda k k^T] / lambda
+//      = [P - k g^T - g k^T + (lambda + s) k k^T] / lambda      (Joseph form; = eqn 7 for lambda = 1)
+// P is stored as its lower triangle and updated by symmetric rank-one/two updates, so it is
+// exactly symmetric; the Joseph form is first-order insensitive to rounding errors in k.
+// P is the normalised covariance ((W^T W + P0^-1)^-1 for lambda = 1); the reported covariance is
+// sigma^2 P with sigma^2 = ||y - W theta||^2 / (m - p) (see docs/estimators.md).
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/Eigenvalues>
+#include <chrono>
+#include <cmath>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+#include "exid/interfaces.hpp"
+
+namespace {
+
+class Rls : public exid::Estimator {
+ public:
+  static constexpr const char* kName = "rls";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "recursive least squares (paper eqns 6-7), P0 = p0 I or a prior, forgetting factor, "
+      "Joseph-form symmetric update, history of the estimate and diag(P)";
+
+  static std::vector<exid::ParamDecl> params() {
+    return {
+        exid::param_double("p0", 1e6, "", "initial covariance P0 = p0 I (normalised by the noise variance)",
+                           0.0, std::nullopt, true),
+        exid::param_double("forgetting_factor", 1.0, "",
+                           "lambda in (0, 1]: weight lambda^(K-k) on row k; 1 = no forgetting", 0.0, 1.0,
+                           true, false),
+        exid::param_int("history_stride", 1,
+                        "record the estimate and diag(P) every N samples (the last one always)", 1.0, 1e12),
+        exid::param_string("update", std::string("joseph"),
+                           "joseph: symmetric Joseph form (robust to rounding); standard: eqn 7 as written "
+                           "(P - g g^T / (lambda + s)), also kept symmetric",
+                           {"joseph", "standard"}),
+        exid::param_double("noise_std", 0.0, "units of y",
+                           "standard deviation of one measurement, converts a prior covariance into "
+                           "P0 = Sigma0 / noise_std^2; 0: P0 = Sigma0",
+                           0.0),
+        exid::param_bool("residual_pass", false,
+                         "recompute the final residuals in a second pass over the data (always done "
+                         "when forgetting_factor < 1)"),
+        exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
+    };
+  }
+
+  explicit Rls(const exid::ParamSet& p)
+      : p0_(p.getDouble("p0")),
+        lambda_(p.getDouble("forgetting_factor")),
+        stride_(p.getInt("history_stride")),
+        joseph_(p.getString("update") == "joseph"),
+        noise_std_(p.getDouble("noise_std")),
+        residual_pass_(p.getBool("residual_pass")),
+        chunk_(static_cast<int>(p.getInt("chunk_samples"))) {}
+
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.recursive = true;
+    s.accepts_prior = true;
+    return s;
+  }
+
+  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const int p = model.numBase();
+    const int K = data.size();
+    exid::check(K > 0, fmt::format("rls: the dataset '{}' is empty", data.source));
+
+    // ---- initial state
+    Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(p);
+    Eigen::MatrixXd P = Eigen::MatrixXd::Zero(p, p);  // lower triangle used
+    Eigen::MatrixXd P0inv;                            // for the residual identity
+    if (prior) {
+      exid::check(prior->value.size() == p && prior->covariance.rows() == p && prior->covariance.cols() == p,
+                  fmt::format("rls: the prior has {} values and a {}x{} covariance; the model has {} base "
+                              "parameters",
+                              prior->value.size(), prior->covariance.rows(), prior->covariance.cols(), p));
+      const double scale = noise_std_ > 0 ? 1.0 / (noise_std_ * noise_std_) : 1.0;
+      Eigen::MatrixXd S = 0.5 * (prior->covariance + prior->covariance.transpose()) * scale;
+      Eigen::LLT<Eigen::MatrixXd> llt(S);
+      exid::check(llt.info() == Eigen::Success && S.allFinite(),
+                  "rls: the prior covariance is not symmetric positive definite");
+      theta0 = prior->value;
+      P = S;
+      P0inv = llt.solve(Eigen::MatrixXd::Identity(p, p));
+    } else {
+      P.diagonal().setConstant(p0_);
+      P0inv = Eigen::MatrixXd::Identity(p, p) / p0_;
+    }
+    Eigen::VectorXd theta = theta0;
+
+    // ---- history
+    const long n_hist = (K - 1) / stride_ + 1 + ((K - 1) % stride_ != 0 ? 1 : 0);
+    exid::Estimate e;
+    e.history_t.resize(n_hist);
+    e.history_value.resize(n_hist, p);
+    e.history_pdiag.resize(n_hist, p);
+    long h = 0;
+
+    // ---- recursion
+    Eigen::VectorXd g(p), k(p);
+    double V = 0.0;  // weighted a-priori cost: V <- lambda V + e^2 / (lambda + s)
+    long m = 0;
+    double m_eff = 0.0;  // sum of the weights lambda^(K-k)
+    std::vector<int> sample_of_row, order;
+    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
+                            [&](const exid::Rows& r, int begin, int end) {
+      const Eigen::MatrixXd Wt = r.W.transpose();
+      exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
+      const auto R = static_cast<int>(order.size());
+      for (int idx = 0; idx < R; ++idx) {
+        const int i = order[static_cast<std::size_t>(idx)];
+        const auto phi = Wt.col(i);
+        g.noalias() = P.selfadjointView<Eigen::Lower>() * phi;
+        const double s = phi.dot(g);
+        const double den = lambda_ + s;
+        k = g / den;
+        const double err = r.y(i) - phi.dot(theta);
+        theta.noalias() += err * k;
+        V = lambda_ * V + err * err / den;
+        m_eff = lambda_ * m_eff + 1.0;
+        if (joseph_) {
+          P.selfadjointView<Eigen::Lower>().rankUpdate(k, g, -1.0);
+          P.selfadjointView<Eigen::Lower>().rankUpdate(k, den);
+        } else {
+          P.selfadjointView<Eigen::Lower>().rankUpdate(g, -1.0 / den);
+        }
+        if (lambda_ != 1.0) P.triangularView<Eigen::Lower>() *= 1.0 / lambda_;
+        // history after the last row of a sample
+        const int smp = sample_of_row[static_cast<std::size_t>(i)];
+        const bool last_of_sample =
+            idx + 1 == R || sample_of_row[static_cast<std::size_t>(order[static_cast<std::size_t>(idx + 1)])] != smp;
+        const long global = begin + smp;
+        if (last_of_sample && (global % stride_ == 0 || global == K - 1) && h < n_hist) {
+          e.history_t(h) = data.t(global);
+          e.history_value.row(h) = theta.transpose();
+          e.history_pdiag.row(h) = P.diagonal().transpose();
+          ++h;
+        }
+      }
+      m += R;
+    });
+    e.history_t.conservativeResize(h);
+    e.history_value.conservativeResize(h, p);
+    e.history_pdiag.conservativeResize(h, p);
+    exid::check(theta.allFinite() && P.allFinite(), "rls: the recursion diverged (non-finite estimate); "
+                                                      "lower p0 or check the data scaling");
+
+    // ---- residuals
+    double rss = 0.0;
+    std::string rss_method;
+    if (residualPass()) {
+      exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.5, 0.95,
+                              [&](const exid::Rows& r, int, int) { rss += (r.y - r.W * theta).squaredNorm(); });
+      rss_method = "second pass over the data with the final estimate";
+    } else {
+      // lambda = 1: RLS minimises ||y - W theta||^2 + (theta - theta0)^T P0^-1 (theta - theta0),
+      // whose minimum is V; so ||y - W theta_K||^2 = V - (theta_K - theta0)^T P0^-1 (theta_K - theta0).
+      const Eigen::VectorXd dth = theta - theta0;
+      rss = std::max(0.0, V - dth.dot(P0inv * dth));
+      rss_method = "exact identity V_K - (theta_K - theta0)^T P0^-1 (theta_K - theta0) (lambda = 1)";
+    }
+    exid::check(m > p, fmt::format("rls: {} observation rows for {} base parameters; the estimate is the "
+                                   "prior's pull, not the data's (need more rows than parameters)",
+                                   m, p));
+
+    // ---- result
+    const Eigen::MatrixXd Pfull = P.selfadjointView<Eigen::Lower>();
+    const double sigma2 = rss / static_cast<double>(m - p);
+    const exid::BaseParameters& b = model.base();
+    for (int i = 0; i < p; ++i) {
+      const auto u = static_cast<std::size_t>(i);
+      e.names.push_back(u < b.names.size() ? b.names[u] : fmt::format("theta{}", i + 1));
+      e.expressions.push_back(u < b.expressions.size() ? b.expressions[u] : e.names.back());
+    }
+    e.value = theta;
+    e.covariance = sigma2 * Pfull;
+    e.std = e.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+    e.sigma = std::sqrt(sigma2);
+    e.residual_rms = std::sqrt(rss / static_cast<double>(m));
+    e.rows = m;
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Pfull, Eigen::EigenvaluesOnly);
+    const double lmin = es.eigenvalues()(0), lmax = es.eigenvalues()(p - 1);
+    e.cond_W = lmin > 0 ? std::sqrt(lmax / lmin) : INFINITY;
+    exid::Json& d = e.details;
+    d["estimator"] = kName;
+    d["parameters"] = exid::est::parameterTable(e);
+    d["rows"] = Json(static_cast<long long>(m));
+    d["dof"] = Json(static_cast<long long>(m - p));
+    d["effective_rows"] = m_eff;
+    d["p0"] = prior ? Json(nullptr) : Json(p0_);
+    d["prior"] = prior != nullptr;
+    d["forgetting_factor"] = lambda_;
+    d["update"] = joseph_ ? "joseph" : "standard";
+    d["sigma2"] = sigma2;
+    d["rss"] = rss;
+    d["rss_method"] = rss_method;
+    d["std_definition"] =
+        "covariance = sigma^2 P_K, sigma^2 = ||y - W theta_K||^2 / (m - p); with forgetting "
+        "(lambda < 1) this over-states the covariance of theta_K (conservative)";
+    d["cond_W_definition"] =
+        "sqrt(cond(P_K)); P_K^-1 = W^T W + P0^-1 for lambda = 1, so ~ cond(W) when P0 is large";
+    d["min_eig_P"] = lmin;
+    d["history_stride"] = Json(static_cast<long long>(stride_));
+    d["history_records"] = Json(static_cast<long long>(h));
+    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ctx.report(1.0, "rls: done");
+    return e;
+  }
+
+ private:
+  using Json = exid::Json;
+  bool residualPass() const { return residual_pass_ || lambda_ != 1.0; }
+  double p0_, lambda_;
+  long stride_;
+  bool joseph_;
+  double noise_std_;
+  bool residual_pass_;
+  int chunk_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(Rls)

@@ -1,0 +1,308 @@
+// Estimator plugins (batch_ls, rls, wls, filtered_ls) on a test model with known columns.
+#include <gtest/gtest.h>
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <Eigen/LU>
+#include <cmath>
+
+#include "estimator_test_model.hpp"
+#include "exid/error.hpp"
+#include "exid_test.hpp"
+
+namespace {
+
+using est_test::DataOptions;
+using est_test::makeData;
+using est_test::makeModel;
+
+std::shared_ptr<exid::Estimator> make(const std::string& name, const std::string& params = "{}") {
+  return exid_test::create<exid::Estimator>(name, params);
+}
+
+double maxRelErr(const Eigen::VectorXd& a, const Eigen::VectorXd& truth) {
+  return (a - truth).cwiseAbs().maxCoeff() / truth.cwiseAbs().maxCoeff();
+}
+
+void expectFilled(const exid::Estimate& e, const exid::ObservationModel& m) {
+  const int p = m.numBase();
+  ASSERT_EQ(e.value.size(), p);
+  EXPECT_EQ(e.names, m.base().names);
+  EXPECT_EQ(e.expressions, m.base().expressions);
+  EXPECT_EQ(e.std.size(), p);
+  EXPECT_EQ(e.covariance.rows(), p);
+  EXPECT_EQ(e.covariance.cols(), p);
+  EXPECT_GT(e.rows, p);
+  EXPECT_GT(e.cond_W, 1.0);
+  const exid::Json* t = e.details.find("parameters");
+  ASSERT_NE(t, nullptr);
+  ASSERT_EQ(t->size(), static_cast<std::size_t>(p));
+  EXPECT_TRUE(t->at(0).contains("rel_std_percent"));
+  EXPECT_TRUE((e.covariance - e.covariance.transpose()).cwiseAbs().maxCoeff() <=
+              1e-12 * e.covariance.cwiseAbs().maxCoeff());
+}
+
+TEST(Estimators, BaseNamesRegroupRotorInertia) {
+  auto m = makeModel(1);
+  EXPECT_EQ(m->numBase(), 6);  // ZZ1 and Ia1 regrouped
+  bool regrouped = false;
+  for (const auto& x : m->base().expressions) regrouped |= x.find("Ia1") != std::string::npos && x.find("ZZ1") != std::string::npos;
+  EXPECT_TRUE(regrouped);
+}
+
+TEST(Estimators, NoiseFreeAllReturnTruth) {
+  const int n = 2;
+  auto m = makeModel(n);
+  DataOptions o;
+  exid::Dataset d = makeData(*m, n, o);
+  const Eigen::VectorXd truth = m->baseNominal();
+  exid::RunContext ctx;
+  for (const std::string name : {"batch_ls", "wls"}) {
+    exid::Estimate e = make(name)->estimate(*m, d, nullptr, ctx);
+    expectFilled(e, *m);
+    EXPECT_LE(maxRelErr(e.value, truth), 1e-8) << name;
+    EXPECT_LE(e.residual_rms, 1e-8) << name;
+  }
+  // filtered_ls with the position filter off: the parallel decimation filters W and y alike, so
+  // noise-free linear data stay exact.
+  exid::Estimate f = make("filtered_ls", "{cutoff_hz: 0, decimation: 5}")->estimate(*m, d, nullptr, ctx);
+  expectFilled(f, *m);
+  EXPECT_LE(maxRelErr(f.value, truth), 1e-8);
+  EXPECT_EQ(f.details.find("decimation")->asInt(), 5);
+  // rls: the prior P0 = p0 I pulls by ~ (W^T W)^-1 theta / p0.
+  exid::Estimate r = make("rls", "{p0: 1e8}")->estimate(*m, d, nullptr, ctx);
+  expectFilled(r, *m);
+  EXPECT_LE(maxRelErr(r.value, truth), 1e-8);
+}
+
+TEST(Estimators, BatchLsChunkingAndAccumulationAgree) {
+  const int n = 2;
+  auto m = makeModel(n);
+  DataOptions o;
+  o.tau_noise = {0.05, 0.05};
+  exid::Dataset d = makeData(*m, n, o);
+  exid::RunContext ctx;
+  exid::Estimate a = make("batch_ls", "{chunk_samples: 7}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate b = make("batch_ls", "{chunk_samples: 100000}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate c = make("batch_ls", "{accumulate: normal}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_LE(maxRelErr(a.value, b.value), 1e-11);
+  EXPECT_LE(maxRelErr(a.std, b.std), 1e-9);
+  EXPECT_LE(maxRelErr(c.value, b.value), 1e-8);
+  EXPECT_NEAR(a.sigma, 0.05, 0.005);
+  // Direct dense solution for reference.
+  exid::Rows r = m->rows(d, ctx);
+  Eigen::VectorXd ref = r.W.colPivHouseholderQr().solve(r.y);
+  EXPECT_LE(maxRelErr(a.value, ref), 1e-11);
+  Eigen::MatrixXd cov = a.sigma * a.sigma * (r.W.transpose() * r.W).inverse();
+  EXPECT_LE((cov - a.covariance).cwiseAbs().maxCoeff(), 1e-8 * cov.cwiseAbs().maxCoeff());
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(r.W);
+  EXPECT_NEAR(a.cond_W, svd.singularValues()(0) / svd.singularValues()(m->numBase() - 1), 1e-8 * a.cond_W);
+}
+
+TEST(Estimators, BatchLsRefusesRankDeficientNamingDirections) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.qd_offset = 10.0;  // the joint never reverses: sign(qd) = 1 = the offset's column
+  o.tau_noise = {0.01};
+  exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  for (const std::string name : {"batch_ls", "wls", "filtered_ls"}) {
+    try {
+      make(name, name == "filtered_ls" ? "{cutoff_hz: 0}" : "{}")->estimate(*m, d, nullptr, ctx);
+      ADD_FAILURE() << name << " accepted a rank-deficient problem";
+    } catch (const exid::Error& e) {
+      const std::string msg = e.what();
+      EXPECT_NE(msg.find("Fc1"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("OFF1"), std::string::npos) << msg;
+      EXPECT_NE(msg.find("rank 5 of 6"), std::string::npos) << msg;
+      EXPECT_EQ(msg.find("MX1"), std::string::npos) << msg;
+    }
+  }
+}
+
+TEST(Estimators, RlsConvergesToBatchLs) {
+  const int n = 2;
+  auto m = makeModel(n);
+  DataOptions o;
+  o.tau_noise = {0.1, 0.1};
+  exid::Dataset d = makeData(*m, n, o);
+  exid::RunContext ctx;
+  exid::Estimate b = make("batch_ls")->estimate(*m, d, nullptr, ctx);
+  for (const std::string upd : {"joseph", "standard"}) {
+    exid::Estimate r = make("rls", "{p0: 1e8, update: " + upd + "}")->estimate(*m, d, nullptr, ctx);
+    EXPECT_LE(((r.value - b.value).cwiseQuotient(b.std)).cwiseAbs().maxCoeff(), 1e-4) << upd;
+    EXPECT_LE(maxRelErr(r.std, b.std), 1e-3) << upd;
+    EXPECT_NEAR(r.residual_rms, b.residual_rms, 1e-6 * b.residual_rms) << upd;
+    EXPECT_NEAR(r.cond_W / b.cond_W, 1.0, 1e-3) << upd;
+    // History: every sample, time stamps, final value, diag(P) shrinking.
+    ASSERT_EQ(r.history_t.size(), d.size());
+    EXPECT_DOUBLE_EQ(r.history_t(d.size() - 1), d.t(d.size() - 1));
+    EXPECT_LE((r.history_value.row(d.size() - 1).transpose() - r.value).norm(), 1e-12 * r.value.norm());
+    EXPECT_LT(r.history_pdiag(d.size() - 1, 0), 1e-3 * r.history_pdiag(0, 0));
+    EXPECT_EQ(r.history_pdiag.cols(), m->numBase());
+  }
+  // The default p0 = 1e6 is close too (bias ~ (W^T W)^-1 theta / p0).
+  exid::Estimate r6 = make("rls")->estimate(*m, d, nullptr, ctx);
+  EXPECT_LE(((r6.value - b.value).cwiseQuotient(b.std)).cwiseAbs().maxCoeff(), 1e-2);
+}
+
+TEST(Estimators, RlsHistoryStride) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 1001;
+  exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  exid::Estimate r = make("rls", "{history_stride: 100}")->estimate(*m, d, nullptr, ctx);
+  ASSERT_EQ(r.history_t.size(), 11);  // samples 0, 100, ..., 1000
+  EXPECT_DOUBLE_EQ(r.history_t(1), d.t(100));
+  exid::Estimate r2 = make("rls", "{history_stride: 300}")->estimate(*m, d, nullptr, ctx);
+  ASSERT_EQ(r2.history_t.size(), 5);  // 0, 300, 600, 900 and the last
+  EXPECT_DOUBLE_EQ(r2.history_t(4), d.t(1000));
+}
+
+TEST(Estimators, RlsForgettingTracksAChange) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 3000;
+  o.tau_noise = {0.01};
+  exid::Dataset d1 = makeData(*m, 1, o);
+  Eigen::VectorXd pi2 = m->fullNominal();
+  pi2(1) *= 1.5;  // MX1 changes (a payload)
+  o.pi = pi2;
+  o.t0 = d1.t(o.samples - 1) + o.dt;
+  exid::Dataset d2 = makeData(*m, 1, o);
+  exid::Dataset d = d1;
+  d.t.resize(2 * o.samples);
+  d.t << d1.t, d2.t;
+  auto stack = [](const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+    Eigen::MatrixXd s(a.rows() + b.rows(), a.cols());
+    s << a, b;
+    return s;
+  };
+  d.q = stack(d1.q, d2.q);
+  d.qd = stack(d1.qd, d2.qd);
+  d.qdd = stack(d1.qdd, d2.qdd);
+  d.tau = stack(d1.tau, d2.tau);
+  exid::RunContext ctx;
+  const Eigen::VectorXd truth2 = m->base().reduce(pi2);
+  exid::Estimate forget = make("rls", "{forgetting_factor: 0.995, history_stride: 1000}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate plain = make("rls")->estimate(*m, d, nullptr, ctx);
+  EXPECT_LT(maxRelErr(forget.value, truth2), 0.01);
+  EXPECT_GT(maxRelErr(plain.value, truth2), 0.1);
+  EXPECT_EQ(forget.details.find("rss_method")->asString().rfind("second pass", 0), 0u);
+}
+
+TEST(Estimators, RlsPriorSeedsThetaAndP) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 50;
+  o.tau_noise = {0.1};
+  exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  const int p = m->numBase();
+  exid::Prior prior;
+  prior.value = m->baseNominal();
+  prior.covariance = 1e-12 * Eigen::MatrixXd::Identity(p, p);
+  auto rls = make("rls", "{noise_std: 0.1}");
+  EXPECT_TRUE(rls->specs().accepts_prior);
+  EXPECT_TRUE(rls->specs().recursive);
+  exid::Estimate r = rls->estimate(*m, d, &prior, ctx);
+  EXPECT_LE(maxRelErr(r.value, prior.value), 1e-6);  // a very confident prior dominates
+  EXPECT_LE(maxRelErr(r.history_value.row(0).transpose(), prior.value), 1e-6);
+  exid::Prior bad;
+  bad.value = Eigen::VectorXd::Zero(p - 1);
+  bad.covariance = Eigen::MatrixXd::Identity(p - 1, p - 1);
+  EXPECT_THROW(rls->estimate(*m, d, &bad, ctx), exid::Error);
+}
+
+TEST(Estimators, WlsWeightsPerEquationAndReportsOls) {
+  const int n = 2;
+  auto m = makeModel(n);
+  DataOptions o;
+  o.tau_noise = {0.02, 0.5};
+  exid::Dataset d = makeData(*m, n, o);
+  exid::RunContext ctx;
+  exid::Estimate w = make("wls")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate b = make("batch_ls")->estimate(*m, d, nullptr, ctx);
+  expectFilled(w, *m);
+  const exid::Json* eqs = w.details.find("equations");
+  ASSERT_NE(eqs, nullptr);
+  ASSERT_EQ(eqs->size(), 2u);
+  const double s0 = eqs->at(0).find("residual_std")->asDouble(), s1 = eqs->at(1).find("residual_std")->asDouble();
+  EXPECT_NEAR(s0, 0.02, 0.01);  // OLS residuals spread the noise a little
+  EXPECT_NEAR(s1, 0.5, 0.05);
+  EXPECT_NEAR(eqs->at(0).find("weight")->asDouble() * s0, 1.0, 1e-12);
+  EXPECT_EQ(eqs->at(0).find("parameters_in_equation")->asInt(), m->numBase() - 1);  // OFF2 absent
+  // One Gautier pass: sigma_0 from OLS residuals is inflated by the OLS misfit, so the weighted
+  // residuals have a variance a little under 1; iterating the weights brings it to 1.
+  EXPECT_GT(w.sigma, 0.6);
+  EXPECT_LT(w.sigma, 1.1);
+  exid::Estimate w3 = make("wls", "{iterations: 4}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_NEAR(w3.sigma, 1.0, 0.05);
+  EXPECT_NEAR(w3.details.find("equations")->at(0).find("residual_std")->asDouble(), 0.02, 0.002);
+  // Reported precision of the shared parameters is better than OLS's.
+  for (int i = 0; i < 5; ++i) EXPECT_LT(w.std(i), 0.5 * b.std(i)) << w.names[static_cast<std::size_t>(i)];
+  EXPECT_TRUE(w.details.contains("ols"));
+}
+
+TEST(Estimators, FilteredLsRecoversFromNoisyPositionsWithinItsSigma) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 20000;
+  o.dt = 0.001;  // 1 kHz, 20 s
+  o.q_noise = 1e-4;
+  o.tau_noise = {0.02};
+  o.derivatives = false;  // only q and tau recorded
+  exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  auto f = make("filtered_ls", "{cutoff_hz: 10, filter_order: 4}");
+  EXPECT_TRUE(f->specs().needs_raw_dataset);
+  exid::Estimate e = f->estimate(*m, d, nullptr, ctx);
+  expectFilled(e, *m);
+  const Eigen::VectorXd truth = m->baseNominal();
+  for (int i = 0; i < m->numBase(); ++i)
+    EXPECT_LE(std::abs(e.value(i) - truth(i)), 3.0 * e.std(i))
+        << e.names[static_cast<std::size_t>(i)] << " " << e.value(i) << " vs " << truth(i) << " std " << e.std(i);
+  EXPECT_EQ(e.details.find("decimation")->asInt(), 20);  // auto: floor(0.2 * 1000 / 10)
+  EXPECT_LT(e.details.find("parameters")->at(1).find("rel_std_percent")->asDouble(), 5.0);
+  // Without filtering, differentiating noisy positions destroys the accelerations.
+  exid::Estimate raw = make("filtered_ls", "{cutoff_hz: 0, decimation: 1}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_GT(std::abs(raw.value(0) - truth(0)), 10 * std::abs(e.value(0) - truth(0)));
+}
+
+TEST(Estimators, FilteredLsNoiseFreeWithFilterIsClose) {
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 10000;
+  o.dt = 0.001;
+  o.derivatives = false;
+  exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  exid::Estimate e = make("filtered_ls", "{cutoff_hz: 20}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_LE(maxRelErr(e.value, m->baseNominal()), 1e-3);
+}
+
+TEST(Estimators, StopRequestIsHonoured) {
+  auto m = makeModel(1);
+  exid::Dataset d = makeData(*m, 1, DataOptions{});
+  exid::RunContext ctx;
+  ctx.cancelled = [] { return true; };
+  for (const std::string name : {"batch_ls", "rls", "wls", "filtered_ls"})
+    EXPECT_THROW(make(name)->estimate(*m, d, nullptr, ctx), exid::Error) << name;
+}
+
+TEST(Estimators, ProgressIsReported) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 10000;
+  exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  std::vector<double> seen;
+  ctx.progress = [&](double f, const std::string&) { seen.push_back(f); };
+  make("batch_ls", "{chunk_samples: 1000}")->estimate(*m, d, nullptr, ctx);
+  ASSERT_GE(seen.size(), 10u);
+  EXPECT_DOUBLE_EQ(seen.back(), 1.0);
+  for (std::size_t i = 1; i < seen.size(); ++i) EXPECT_GE(seen[i], seen[i - 1]);
+}
+
+}  // namespace
