@@ -1,0 +1,165 @@
+// Experiment `csv`: reads back exactly what the runner writes (exid::datasetTable), and bad
+// files give clear errors naming the file, the line and the column.
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "../models/model_test_util.hpp"
+#include "exid/io.hpp"
+#include "exid/runner.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path tmpDir() {
+  fs::path p = fs::temp_directory_path() / ("exid_csv_test_" + std::to_string(::getpid()));
+  fs::create_directories(p);
+  return p;
+}
+
+fs::path writeText(const std::string& name, const std::string& text) {
+  const fs::path p = tmpDir() / name;
+  std::ofstream(p) << text;
+  return p;
+}
+
+exid::Dataset readCsv(const fs::path& file, const std::string& extra = "",
+                      std::shared_ptr<const exid::RobotModel> r = nullptr) {
+  if (!r) r = mtest::robot("puma560");
+  auto e = exid_test::create<exid::Experiment>("csv", "{file: " + file.string() + (extra.empty() ? "" : ", " + extra) + "}");
+  return e->run(r, nullptr, mtest::context());
+}
+
+std::string errorOf(const fs::path& file, const std::string& extra = "") {
+  try {
+    readCsv(file, extra);
+  } catch (const exid::Error& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+// Six joints, header of a two-joint-short file etc.
+std::string header(int n, bool t = true) {
+  std::string h = t ? "t" : "";
+  for (const char* p : {"q", "tau"})
+    for (int j = 1; j <= n; ++j) h += (h.empty() ? "" : ",") + std::string(p) + std::to_string(j);
+  return h + "\n";
+}
+std::string row(double t, int n, double v, bool with_t = true) {
+  std::string s = with_t ? std::to_string(t) : "";
+  for (int c = 0; c < 2 * n; ++c) s += (s.empty() ? "" : ",") + std::to_string(v + 0.01 * c);
+  return s + "\n";
+}
+
+TEST(Csv, ReadsBackWhatTheRunnerWritesExactly) {
+  auto r = mtest::robot("puma560");
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 1, wrench: true, payload_mass_kg: 1.5, noise_q_rad: 1e-3, noise_tau_Nm: 0.1}");
+  const fs::path f = tmpDir() / "experiment.csv";
+  exid::writeCsvAtomic(f, exid::datasetTable(d));
+  const exid::Dataset b = readCsv(f);
+  ASSERT_EQ(b.size(), d.size());
+  EXPECT_EQ(b.t, d.t);
+  EXPECT_EQ(b.q, d.q);
+  EXPECT_EQ(b.qd, d.qd);
+  EXPECT_EQ(b.qdd, d.qdd);
+  EXPECT_EQ(b.tau, d.tau);
+  EXPECT_EQ(b.wrench, d.wrench);
+  EXPECT_EQ(b.source, f.string());
+}
+
+TEST(Csv, AbsentSignalsStayAbsent) {
+  auto r = mtest::robot("puma560");
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 0.5, output_qd_qdd: false}");
+  const fs::path f = tmpDir() / "q_tau_only.csv";
+  exid::writeCsvAtomic(f, exid::datasetTable(d));
+  const exid::Dataset b = readCsv(f);
+  EXPECT_FALSE(b.hasVelocity());
+  EXPECT_FALSE(b.hasAcceleration());
+  EXPECT_FALSE(b.hasWrench());
+  EXPECT_EQ(b.tau, d.tau);
+}
+
+TEST(Csv, SegmentSignOffsetAndNoTimeColumn) {
+  std::string text = header(6, false);
+  for (int k = 0; k < 10; ++k) text += row(0, 6, k, false);
+  const fs::path f = writeText("no_t.csv", text);
+  const exid::Dataset d = readCsv(f, "sample_period_s: 0.1, t_start_s: 0.2, t_end_s: 0.5, "
+                                     "sign: [1, -1, 1, 1, 1, 1], offset_rad: [0, 0.5, 0, 0, 0, 0]");
+  ASSERT_EQ(d.size(), 4);  // t = 0.2, 0.3, 0.4, 0.5
+  EXPECT_NEAR(d.t[0], 0.2, 1e-12);
+  EXPECT_NEAR(d.q(0, 0), 2.0, 1e-12);
+  EXPECT_NEAR(d.q(0, 1), -2.01 + 0.5, 1e-12);
+  EXPECT_NEAR(d.tau(0, 1), -(2.0 + 0.07), 1e-12);
+}
+
+TEST(Csv, TorqueFromCurrents) {
+  std::string text = "t,q1,q2,q3,q4,q5,q6,i1,i2,i3,i4,i5,i6\n";
+  text += "0,0,0,0,0,0,0,1,2,3,4,5,6\n0.01,0,0,0,0,0,0,1,1,1,1,1,1\n";
+  const fs::path f = writeText("currents.csv", text);
+  const exid::Dataset d = readCsv(f, "torque_from: current, torque_constants_Nm_per_A: [10, 20, 30, 40, 50, 60]");
+  EXPECT_NEAR(d.tau(0, 2), 90.0, 1e-12);
+  EXPECT_NEAR(d.tau(1, 5), 60.0, 1e-12);
+  EXPECT_NE(errorOf(f, "torque_from: current").find("torque_constants_Nm_per_A: expected 6"), std::string::npos);
+}
+
+TEST(Csv, UnsortedTimeNamesTheLine) {
+  std::string text = "# a comment line\n" + header(6);
+  text += row(0.0, 6, 1) + row(0.01, 6, 1) + row(0.005, 6, 1);
+  const fs::path f = writeText("unsorted.csv", text);
+  const std::string e = errorOf(f);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find(f.string()), std::string::npos) << e;
+  EXPECT_NE(e.find("line 5"), std::string::npos) << e;
+  EXPECT_NE(e.find("strictly increase"), std::string::npos) << e;
+}
+
+TEST(Csv, NanIsAnErrorOrDropped) {
+  std::string text = header(6) + row(0.0, 6, 1) + row(0.01, 6, 1);
+  text += "0.02,1,2,3,nan,5,6,1,2,3,4,5,6\n";
+  text += "0.03,1,2,3,4,5,6,1,2,3,4,,6\n";
+  text += row(0.04, 6, 1);
+  const fs::path f = writeText("nan.csv", text);
+  const std::string e = errorOf(f);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find("line 4"), std::string::npos) << e;
+  EXPECT_NE(e.find("'q4'"), std::string::npos) << e;
+  EXPECT_NE(e.find("drop_bad_rows"), std::string::npos) << e;
+  const exid::Dataset d = readCsv(f, "drop_bad_rows: true");
+  EXPECT_EQ(d.size(), 3);
+  EXPECT_EQ(d.meta.find("dropped_rows")->asInt(), 2);
+}
+
+TEST(Csv, MissingColumnAndWrongJointCount) {
+  std::string text = "t,q1,q2,q3,q4,q5,tau1,tau2,tau3,tau4,tau5\n0,1,2,3,4,5,1,2,3,4,5\n";
+  const fs::path five = writeText("five.csv", text);
+  std::string e = errorOf(five);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find(five.string()), std::string::npos) << e;
+  EXPECT_NE(e.find("wrong joint count"), std::string::npos) << e;
+  EXPECT_NE(e.find("expected q1..q6"), std::string::npos) << e;
+
+  const fs::path noq = writeText("noq.csv", "t,tau1,tau2,tau3,tau4,tau5,tau6\n0,1,2,3,4,5,6\n");
+  e = errorOf(noq);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find("missing column 'q1'"), std::string::npos) << e;
+
+  const fs::path partw = writeText("partial_wrench.csv", "t,q1,q2,q3,q4,q5,q6,fx,fy,fz\n0,1,2,3,4,5,6,1,2,3\n");
+  e = errorOf(partw);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find("mx, my, mz"), std::string::npos) << e;
+
+  const fs::path ragged = writeText("ragged.csv", header(6) + "0,1,2\n");
+  e = errorOf(ragged);
+  std::printf("%s\n", e.c_str());
+  EXPECT_NE(e.find(":2:"), std::string::npos) << e;
+}
+
+TEST(Csv, MissingFile) {
+  const std::string e = errorOf(tmpDir() / "does_not_exist.csv");
+  EXPECT_NE(e.find("cannot open"), std::string::npos) << e;
+}
+
+}  // namespace
