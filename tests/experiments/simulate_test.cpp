@@ -131,8 +131,8 @@ TEST(Simulate, ErrorsAreClear) {
 TEST(Simulate, IntegralRowsOnArkodeData) {
   // The energy balance holds on ARKODE data too (the integrator's accuracy shows in the rows).
   auto r = mtest::robot("puma560");
-  const exid::Dataset d = mtest::simulate(r, "{duration_s: 4, integrator: arkode, rtol: 1e-11, atol: 1e-12, sample_period_s: 0.005}");
-  auto m = mtest::model("integral", "{offset: true, window_s: 0.04}", r);
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 10, integrator: arkode, rtol: 1e-11, atol: 1e-12, sample_period_s: 0.005}");
+  auto m = mtest::model("integral", "{offset: true, window_s: 0.1}", r);
   const mtest::Recovery rec = mtest::recover(*m, d);
   mtest::print("integral on ARKODE data", rec);
   EXPECT_LT(rec.rows_rel, 1e-8);

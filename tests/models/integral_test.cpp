@@ -38,6 +38,23 @@ TEST(Integral, LongSlidingWindowsSimpsonExact) {
   check("{window: long, window_s: 0.1, overlap: sliding, offset: true}", 1e-8, 1e-6);
 }
 
+TEST(Integral, PandaAndIrp6Exact) {
+  // IRp-6: absolute angles for joints 2-4 (a coupled transmission) exercise the coordinate maps.
+  for (const char* name : {"panda", "irp6"}) {
+    auto r = mtest::robot(name);
+    if (!r) continue;
+    // 20 s without repetition (period 20 s, 10 harmonics), 1 kHz: the Panda's energy rows are
+    // less well conditioned (cond(W) ~ 1e7), so the quadrature error must be smaller.
+    const exid::Dataset d = mtest::simulate(
+        r, "{rtol: 1e-12, atol: 1e-14, duration_s: 20, period_s: 20, harmonics: 10, sample_period_s: 0.001}");
+    auto m = mtest::model("integral", "{window: short, window_s: 0.05, offset: true}", r);
+    const mtest::Recovery rec = mtest::recover(*m, d);
+    mtest::print((std::string(name) + " integral short 0.05 s").c_str(), rec);
+    EXPECT_LT(rec.rows_rel, 1e-8) << name;
+    EXPECT_LT(rec.est_rel, 1e-6) << name;
+  }
+}
+
 TEST(Integral, TrapezoidIsSecondOrder) {
   // Same data, trapezoid rule: the error of the work integral is O(dt^2) (printed); the estimate
   // is still close.
