@@ -1,0 +1,257 @@
+// Optimizer `adjoint_gradient`: the paper's method (section 3, eqns 10-16). Each iteration is a
+// forward pass (trajectory -> samples -> design rows -> M -> J) and a backward pass: dJ/dM from
+// the criterion, dJ/dW = 2 W dJ/dM, the model's VJP to dJ/d(q, qd, qdd), and the trajectory's
+// VJP — for `pointwise` the costate recursion lambda_k = dJ/dX_k + A^T lambda_{k+1},
+// g_k = dJ/du_k + B^T lambda_{k+1} — giving the gradient with respect to every variable
+// (ExcitationProblem::value(z, &grad)).
+//
+// Step rules (`step`):
+//   paper — z <- z - gain * grad / max|grad| (the paper's mu = 1/max|lambda|), the gain halved
+//           while the merit increases (backtracking) and grown by 1.5 after a success;
+//   lbfgs — (default) L-BFGS two-loop recursion (memory `memory`), Armijo backtracking line
+//           search; the pair (s, y) is kept only when the curvature condition s'y > 0 holds.
+// Limits (`constraints`), g(z) <= 0 at every sample (plus the trajectory's own caps):
+//   augmented_lagrangian — (default) PHR augmented Lagrangian
+//           L = J + 1/(2 rho) sum(max(0, mu + rho g)^2 - mu^2), multipliers mu <- max(0, mu + rho g)
+//           after each inner solve, rho x10 when the violation did not fall by 4;
+//   penalty — quadratic penalty rho/2 sum max(0, g)^2 (bounds on z too), rho x10 per outer pass
+//           while infeasible;
+//   projection — bounds on z by clipping (projection) and sample limits by a quadratic penalty
+//           of fixed weight.
+// Bounds on z are always enforced by projection except with `penalty`. The best FEASIBLE point
+// evaluated is returned.
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+#include <deque>
+
+#include "exid/error.hpp"
+#include "optim_common.hpp"
+
+namespace {
+
+using exid::optim::Limits;
+using exid::optim::Tracker;
+
+class AdjointGradient final : public exid::Optimizer {
+ public:
+  static constexpr const char* kName = "adjoint_gradient";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "the paper's adjoint (costate) gradient method: exact gradient by a backward sweep; step: "
+      "lbfgs (default, L-BFGS + Armijo) or paper (gain/max|gradient| with backtracking); "
+      "constraints: augmented_lagrangian (default), penalty, or projection (bounds clipped, "
+      "sample limits penalised)";
+
+  static std::vector<exid::ParamDecl> params() {
+    auto p = exid::optim::budgetParams(60.0, 0);
+    p.push_back(exid::param_string("step", std::string("lbfgs"), "step rule", {"lbfgs", "paper"}));
+    p.push_back(exid::param_string("constraints", std::string("augmented_lagrangian"),
+                                   "how the limits are handled", {"augmented_lagrangian", "penalty", "projection"}));
+    p.push_back(exid::param_int("max_iterations", 2000, "iterations (accepted steps) in total", 1.0));
+    p.push_back(exid::param_int("inner_iterations", 40, "iterations per augmented-Lagrangian/penalty pass", 1.0));
+    p.push_back(exid::param_int("memory", 10, "L-BFGS memory", 1.0, 100.0));
+    p.push_back(exid::param_double("step_gain", 1.0, "",
+                                   "largest change of any variable in the first (lbfgs) or every "
+                                   "(paper) step: gain / max|gradient| (the paper's mu = 1/max|lambda|)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("penalty_weight", 100.0, "",
+                                   "initial rho as a multiple of |J(z0)| (per unit violation squared)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("ftol_rel", 1e-7, "", "stop when an outer pass improves J by less than this (relative)", 0.0));
+    p.push_back(exid::param_double("gtol", 1e-8, "", "inner stop: max|projected gradient| <= gtol max(1, |merit|)", 0.0));
+    return p;
+  }
+
+  explicit AdjointGradient(const exid::ParamSet& p)
+      : budget_(exid::optim::readBudget(p)), paper_(p.getString("step") == "paper"),
+        mode_(p.getString("constraints")), max_iter_(static_cast<int>(p.getInt("max_iterations"))),
+        inner_(static_cast<int>(p.getInt("inner_iterations"))), mem_(static_cast<int>(p.getInt("memory"))),
+        gain_(p.getDouble("step_gain")), rho_rel_(p.getDouble("penalty_weight")),
+        ftol_(p.getDouble("ftol_rel")), gtol_(p.getDouble("gtol")) {}
+
+  exid::OptimizerResult minimize(exid::ExcitationProblem& problem, const exid::RunContext& ctx) override {
+    Limits lim(problem);
+    Tracker tr(problem, lim, ctx, budget_, "adjoint_gradient");
+    problem.bounds(&lo_, &hi_);
+    paper_gain_ = gain_;
+    Eigen::VectorXd z = project(problem.initial());
+    const double J0 = tr.evaluateAndOffer(problem.initial());
+    const int m = lim.size();
+    mu_ = Eigen::VectorXd::Zero(m);
+    rho_ = rho_rel_ * std::max(1e-12, std::abs(J0));
+    int iters = 0;
+    std::string reason = "max_iterations";
+    double prev_J = HUGE_VAL, prev_v = HUGE_VAL;
+    for (int outer = 0; iters < max_iter_; ++outer) {
+      if (tr.shouldStop()) { reason = tr.stopCause(); break; }
+      const bool inner_converged = innerSolve(problem, lim, tr, &z, &iters);
+      if (tr.shouldStop()) { reason = tr.stopCause(); break; }
+      Eigen::VectorXd g;
+      lim.eval(z, &g);
+      const double v = m ? std::max(0.0, g.maxCoeff()) : 0.0;
+      const double J = cur_J_;
+      tr.progress(fmt::format("pass {} J {:.6g} violation {:.3g} rho {:.3g}", outer + 1, J, v, rho_));
+      const bool feasible = v <= budget_.feasibility_tol;
+      if (mode_ == "augmented_lagrangian" && m) {
+        mu_ = (mu_ + rho_ * g).cwiseMax(0.0);
+        if (v > 0.25 * prev_v && !feasible) rho_ *= 10.0;
+      } else if (m && !feasible) {
+        rho_ *= 10.0;
+      }
+      if (feasible && std::abs(prev_J - J) <= ftol_ * std::max(1.0, std::abs(J)) && inner_converged) {
+        reason = "converged (ftol_rel)";
+        break;
+      }
+      prev_J = feasible ? J : prev_J;
+      prev_v = v;
+      if (m == 0 && inner_converged) { reason = "converged (gtol)"; break; }
+    }
+    auto r = tr.finish(J0, iters, reason);
+    r.details["step"] = paper_ ? "paper" : "lbfgs";
+    r.details["constraints"] = mode_;
+    r.details["rho"] = rho_;
+    return r;
+  }
+
+ private:
+  Eigen::VectorXd project(const Eigen::VectorXd& z) const {
+    if (mode_ == "penalty") return z;
+    return z.cwiseMax(lo_).cwiseMin(hi_);
+  }
+
+  // Merit phi(z) = J + constraint term and its gradient; offers (J, violation) to the tracker.
+  double merit(exid::ExcitationProblem& p, Limits& lim, Tracker& tr, const Eigen::VectorXd& z,
+               Eigen::VectorXd* grad) {
+    Eigen::VectorXd gJ;
+    double J;
+    try {
+      J = p.value(z, &gJ);
+    } catch (const exid::Error&) {
+      return HUGE_VAL;
+    }
+    if (!std::isfinite(J)) return HUGE_VAL;
+    Eigen::VectorXd g;
+    double phi = J;
+    *grad = gJ;
+    double v = 0.0;
+    if (lim.size()) {
+      lim.eval(z, &g);
+      v = std::max(0.0, g.maxCoeff());
+      Eigen::VectorXd w;  // dphi/dg
+      if (mode_ == "augmented_lagrangian") {
+        Eigen::VectorXd a = (mu_ + rho_ * g).cwiseMax(0.0);
+        phi += (a.squaredNorm() - mu_.squaredNorm()) / (2.0 * rho_);
+        w = a;
+      } else {
+        Eigen::VectorXd a = g.cwiseMax(0.0);
+        phi += 0.5 * rho_ * a.squaredNorm();
+        w = rho_ * a;
+      }
+      if ((w.array() != 0.0).any()) grad->noalias() += lim.jacobian(z).transpose() * w;
+    }
+    if (mode_ == "penalty") {  // bounds as penalty too
+      Eigen::VectorXd a = (z - hi_).cwiseMax(0.0), b = (lo_ - z).cwiseMax(0.0);
+      a = a.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+      b = b.unaryExpr([](double x) { return std::isfinite(x) ? x : 0.0; });
+      phi += 0.5 * rho_ * (a.squaredNorm() + b.squaredNorm());
+      *grad += rho_ * (a - b);
+      v = std::max({v, a.size() ? a.maxCoeff() : 0.0, b.size() ? b.maxCoeff() : 0.0});
+    }
+    tr.offer(z, J, v);
+    cur_J_trial_ = J;
+    return phi;
+  }
+
+  // Gradient projected on the box (components pushing out of an active bound are zeroed).
+  Eigen::VectorXd projectedGradient(const Eigen::VectorXd& z, const Eigen::VectorXd& g) const {
+    Eigen::VectorXd pg = g;
+    if (mode_ == "penalty") return pg;
+    for (Eigen::Index i = 0; i < z.size(); ++i)
+      if ((z(i) <= lo_(i) && g(i) > 0) || (z(i) >= hi_(i) && g(i) < 0)) pg(i) = 0.0;
+    return pg;
+  }
+
+  // One pass of at most inner_ iterations on the current merit. Returns true when converged.
+  bool innerSolve(exid::ExcitationProblem& p, Limits& lim, Tracker& tr, Eigen::VectorXd* zp, int* iters) {
+    Eigen::VectorXd& z = *zp;
+    Eigen::VectorXd g;
+    double phi = merit(p, lim, tr, z, &g);
+    cur_J_ = cur_J_trial_;
+    if (!std::isfinite(phi)) return true;
+    std::deque<Eigen::VectorXd> S, Y;
+    std::deque<double> R;
+    for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
+      if (tr.shouldStop()) return false;
+      Eigen::VectorXd pg = projectedGradient(z, g);
+      const double gmax = pg.cwiseAbs().maxCoeff();
+      if (gmax <= gtol_ * std::max(1.0, std::abs(phi))) return true;
+      Eigen::VectorXd d;
+      double alpha;
+      if (paper_ || S.empty()) {
+        d = -pg;
+        alpha = (paper_ ? paper_gain_ : gain_) / gmax;
+      } else {
+        // two-loop recursion
+        Eigen::VectorXd q = pg;
+        std::vector<double> a(S.size());
+        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
+          a[static_cast<std::size_t>(i)] = R[static_cast<std::size_t>(i)] * S[static_cast<std::size_t>(i)].dot(q);
+          q -= a[static_cast<std::size_t>(i)] * Y[static_cast<std::size_t>(i)];
+        }
+        q *= S.back().dot(Y.back()) / Y.back().squaredNorm();
+        for (std::size_t i = 0; i < S.size(); ++i) {
+          const double b = R[i] * Y[i].dot(q);
+          q += (a[i] - b) * S[i];
+        }
+        d = -q;
+        if (d.dot(pg) >= 0) {  // not a descent direction: restart
+          S.clear(); Y.clear(); R.clear();
+          d = -pg;
+          alpha = gain_ / gmax;
+        } else {
+          alpha = 1.0;
+        }
+      }
+      // backtracking (Armijo on the projected step)
+      bool accepted = false;
+      Eigen::VectorXd zn, gn;
+      double phin = HUGE_VAL;
+      for (int ls = 0; ls < 40; ++ls) {
+        zn = project(z + alpha * d);
+        phin = merit(p, lim, tr, zn, &gn);
+        const double decrease = g.dot(zn - z);
+        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(decrease, 0.0) && phin < phi) { accepted = true; break; }
+        if (tr.shouldStop()) return false;
+        alpha *= 0.5;
+        if (paper_) paper_gain_ *= 0.5;
+      }
+      if (!accepted) return true;  // no decrease possible along the direction
+      ++*iters;
+      if (paper_) paper_gain_ = std::min(paper_gain_ * 1.5, 1e6 * gain_);
+      const Eigen::VectorXd s = zn - z, y = gn - g;
+      const double sy = s.dot(y);
+      if (sy > 1e-12 * s.norm() * y.norm()) {
+        S.push_back(s); Y.push_back(y); R.push_back(1.0 / sy);
+        if (static_cast<int>(S.size()) > mem_) { S.pop_front(); Y.pop_front(); R.pop_front(); }
+      }
+      const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
+      z = zn; g = gn; phi = phin;
+      cur_J_ = cur_J_trial_;
+      if (rel < 1e-12) return true;
+    }
+    return false;
+  }
+
+  exid::optim::Budget budget_;
+  bool paper_;
+  std::string mode_;
+  int max_iter_, inner_, mem_;
+  double gain_, rho_rel_, ftol_, gtol_;
+  double paper_gain_ = 1.0;
+  Eigen::VectorXd lo_, hi_, mu_;
+  double rho_ = 1.0, cur_J_ = 0.0, cur_J_trial_ = 0.0;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(AdjointGradient)

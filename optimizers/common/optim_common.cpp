@@ -1,0 +1,248 @@
+#include "optim_common.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+#include <cmath>
+
+#include "exid/error.hpp"
+
+namespace exid::optim {
+
+// ---------------------------------------------------------------- Limits
+Limits::Limits(ExcitationProblem& p) : p_(p) {
+  m_problem_ = p.numConstraints();
+  const Json d = p.trajectory().describe();
+  if (const Json* l = d.find("linear")) linear_ = l->asBool();
+  Samples s = p.trajectory().evaluate(p.initial());
+  K_ = s.size();
+  n_ = s.dof();
+  if (const Json* x = d.find("extra_limits")) {
+    for (int sig = 1; sig <= 2; ++sig) {
+      const Json* v = x->find(sig == 1 ? "qd_max" : "qdd_max");
+      if (!v) continue;
+      for (std::size_t j = 0; j < v->size() && static_cast<int>(j) < n_; ++j) {
+        const double b = v->at(j).asDouble();
+        if (b > 0 && std::isfinite(b)) {
+          extra_.push_back({sig, static_cast<int>(j), +1.0, b});
+          extra_.push_back({sig, static_cast<int>(j), -1.0, b});
+        }
+      }
+    }
+  }
+}
+
+void Limits::eval(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) {
+  const int m = size(), nz = static_cast<int>(z.size());
+  if (g) {
+    g->resize(m);
+    Eigen::VectorXd gp;
+    if (m_problem_ > 0) {
+      p_.constraints(z, &gp, nullptr);
+      g->head(m_problem_) = gp;
+    }
+    if (!extra_.empty()) {
+      Samples s = p_.trajectory().evaluate(z);
+      int row = m_problem_;
+      for (const auto& c : extra_) {
+        const Eigen::MatrixXd& sig = c.signal == 1 ? s.qd : s.qdd;
+        for (int k = 0; k < K_; ++k, ++row) (*g)(row) = c.sign * sig(k, c.joint) - c.bound;
+      }
+    }
+  }
+  if (jac) *jac = jacobian(z);
+  (void)nz;
+}
+
+const Eigen::MatrixXd& Limits::jacobian(const Eigen::VectorXd& z) {
+  if (jac_valid_ && linear_) return jac_;
+  const int m = size(), nz = static_cast<int>(z.size());
+  jac_.resize(m, nz);
+  if (m_problem_ > 0) {
+    Eigen::MatrixXd jp;
+    p_.constraints(z, nullptr, &jp);
+    jac_.topRows(m_problem_) = jp;
+  }
+  if (!extra_.empty()) {
+    const Eigen::MatrixXd Jt = p_.trajectory().jacobian(z);
+    const Eigen::Index Kn = static_cast<Eigen::Index>(K_) * n_;
+    int row = m_problem_;
+    for (const auto& c : extra_)
+      for (int k = 0; k < K_; ++k, ++row)
+        jac_.row(row) = c.sign * Jt.row(c.signal * Kn + static_cast<Eigen::Index>(c.joint) * K_ + k);
+  }
+  jac_valid_ = true;
+  return jac_;
+}
+
+double Limits::maxViolation(const Eigen::VectorXd& z) {
+  if (size() == 0) return 0.0;
+  Eigen::VectorXd g;
+  eval(z, &g);
+  return std::max(0.0, g.maxCoeff());
+}
+
+// ---------------------------------------------------------------- budget
+std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals) {
+  return {
+      param_double("max_time_s", default_time_s, "s", "wall-time budget (0: none; the study deadline still applies)", 0.0),
+      param_int("max_evaluations", default_evals, "criterion evaluations budget (0: none)", 0.0),
+      param_double("feasibility_tol", 1e-9, "rad",
+                   "a point is feasible when every g(z) <= this (limits in rad, rad/s, rad/s^2)", 0.0),
+  };
+}
+
+Budget readBudget(const ParamSet& p) {
+  Budget b;
+  b.max_time_s = p.getDouble("max_time_s");
+  b.max_evaluations = p.getInt("max_evaluations");
+  b.feasibility_tol = p.getDouble("feasibility_tol");
+  return b;
+}
+
+// ---------------------------------------------------------------- Tracker
+Tracker::Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b, std::string who)
+    : p_(p), lim_(lim), ctx_(ctx), b_(b), who_(std::move(who)), t0_(std::chrono::steady_clock::now()),
+      evals0_(p.evaluations()) {}
+
+double Tracker::elapsed() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
+}
+
+double Tracker::remaining() const {
+  double r = ctx_.deadline.remaining_s();
+  if (b_.max_time_s > 0) r = std::min(r, b_.max_time_s - elapsed());
+  return r;
+}
+
+bool Tracker::offer(const Eigen::VectorXd& z, double J, double v) {
+  if (!std::isfinite(J)) return false;
+  const bool feasible = v <= b_.feasibility_tol;
+  bool improved = false;
+  if (feasible && J < best_J_) {
+    best_J_ = J;
+    best_z_ = z;
+    have_feasible_ = true;
+    improved = true;
+  } else if (!have_feasible_ && (v < best_inf_v_ || (v == best_inf_v_ && J < best_inf_J_))) {
+    best_inf_v_ = v;
+    best_inf_J_ = J;
+    best_inf_z_ = z;
+    improved = !have_any_;
+  }
+  have_any_ = true;
+  if (improved) {
+    ht_.push_back(elapsed());
+    hv_.push_back(bestValue());
+  }
+  return improved;
+}
+
+double Tracker::evaluateAndOffer(const Eigen::VectorXd& z) {
+  double J;
+  try {
+    J = p_.value(z, nullptr);
+  } catch (const Error&) {
+    J = HUGE_VAL;  // singular information matrix
+  }
+  offer(z, J, lim_.maxViolation(z));
+  return J;
+}
+
+std::string Tracker::stopCause() const {
+  if (ctx_.cancelled && ctx_.cancelled()) return "cancelled";
+  if (ctx_.deadline.expired()) return "deadline";
+  if (b_.max_time_s > 0 && elapsed() >= b_.max_time_s) return "max_time_s";
+  if (b_.max_evaluations > 0 && p_.evaluations() - evals0_ >= b_.max_evaluations) return "max_evaluations";
+  return "";
+}
+
+bool Tracker::shouldStop() const { return !stopCause().empty(); }
+
+void Tracker::progress(const std::string& text) const {
+  double f = 0.0;
+  if (b_.max_time_s > 0) f = std::min(1.0, elapsed() / b_.max_time_s);
+  if (b_.max_evaluations > 0)
+    f = std::max(f, std::min(1.0, static_cast<double>(p_.evaluations() - evals0_) / static_cast<double>(b_.max_evaluations)));
+  ctx_.report(f, fmt::format("{}: best {:.6g}{} {}", who_, bestValue(), have_feasible_ ? "" : " (infeasible)", text));
+}
+
+OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reason) {
+  OptimizerResult r;
+  check(have_any_, fmt::format("{}: no point could be evaluated", who_));
+  r.z = best();
+  r.criterion_initial = J0;
+  r.criterion_final = bestValue();
+  r.max_violation = lim_.maxViolation(r.z);
+  r.iterations = iterations;
+  r.evaluations = p_.evaluations() - evals0_;
+  r.wall_s = elapsed();
+  if (!have_feasible_) stop_reason += " (no feasible point found; least violation returned)";
+  r.stop_reason = std::move(stop_reason);
+  r.history_t_s = ht_;
+  r.history_value = hv_;
+  r.details["feasible"] = have_feasible_;
+  r.details["constraints"] = lim_.size();
+  r.details["extra_constraints"] = lim_.extraSize();
+  return r;
+}
+
+// ---------------------------------------------------------------- starts and bounds
+Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
+                               double perturbation, std::mt19937_64& rng) {
+  Eigen::VectorXd lo, hi;
+  p.bounds(&lo, &hi);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const double zinf = std::max(1.0, z0.cwiseAbs().maxCoeff());
+  Eigen::VectorXd z = z0;
+  for (Eigen::Index i = 0; i < z.size(); ++i) {
+    const bool fin = std::isfinite(lo(i)) && std::isfinite(hi(i));
+    const double w = fin ? 0.5 * (hi(i) - lo(i)) : zinf;
+    z(i) = std::clamp(z0(i) + perturbation * w * U(rng), lo(i), hi(i));
+  }
+  if (lim.size() == 0 || lim.maxViolation(z0) > 0) return z;
+  double a = 1.0;
+  Eigen::VectorXd zt = z;
+  for (int it = 0; it < 30 && lim.maxViolation(zt) > 0; ++it) {
+    a *= 0.5;
+    zt = z0 + a * (z - z0);
+  }
+  return zt;
+}
+
+Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0, double scale,
+                            std::mt19937_64& rng) {
+  Eigen::VectorXd lo, hi;
+  p.bounds(&lo, &hi);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const double zinf = std::max(1.0, z0.cwiseAbs().maxCoeff());
+  Eigen::VectorXd c = z0, d(z0.size());
+  for (Eigen::Index i = 0; i < z0.size(); ++i) {
+    const bool fin = std::isfinite(lo(i)) && std::isfinite(hi(i));
+    if (fin) c(i) = 0.5 * (lo(i) + hi(i));
+    d(i) = U(rng) * (fin ? 0.5 * (hi(i) - lo(i)) : zinf);
+  }
+  if (lim.size() > 0 && lim.maxViolation(c) > 0) return perturbedStart(p, lim, z0, scale, rng);
+  double a = 0.0, b = 1.0;
+  if (lim.size() > 0 && lim.maxViolation(c + d) > 0) {
+    for (int it = 0; it < 40; ++it) {
+      const double mid = 0.5 * (a + b);
+      (lim.maxViolation(c + mid * d) > 0 ? b : a) = mid;
+    }
+  } else {
+    a = 1.0;
+  }
+  return c + scale * a * d;
+}
+
+void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale, Eigen::VectorXd* lo,
+                  Eigen::VectorXd* hi) {
+  p.bounds(lo, hi);
+  for (Eigen::Index i = 0; i < z0.size(); ++i) {
+    const double w = scale * std::max(1.0, std::abs(z0(i)));
+    if (!std::isfinite((*lo)(i))) (*lo)(i) = z0(i) - w;
+    if (!std::isfinite((*hi)(i))) (*hi)(i) = z0(i) + w;
+  }
+}
+
+}  // namespace exid::optim

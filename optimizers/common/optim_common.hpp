@@ -1,0 +1,112 @@
+// Shared by the optimiser plugins (nlopt, adjoint_gradient): the full constraint set, the
+// best-feasible tracker (history, budget, progress) and small helpers.
+#pragma once
+
+#include <Eigen/Core>
+#include <chrono>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "exid/interfaces.hpp"
+
+namespace exid::optim {
+
+/// g(z) <= 0: the problem's constraints (joint limits less the margin, velocity and
+/// acceleration limits at every sample) followed by the trajectory's own caps (describe():
+/// "extra_limits": {"qd_max": [...], "qdd_max": [...]}, 0 = none; |qd_j| <= cap, |qdd_j| <= cap
+/// at every sample, measured coordinates). The dense Jacobian is computed once and cached when
+/// the trajectory says it is linear (describe(): "linear": true).
+class Limits {
+ public:
+  explicit Limits(ExcitationProblem& p);
+  int size() const { return m_problem_ + static_cast<int>(extra_.size()) * K_; }
+  int problemSize() const { return m_problem_; }
+  int extraSize() const { return static_cast<int>(extra_.size()) * K_; }
+  /// Rows come in groups of K consecutive samples (one limit of one joint per group).
+  int samples() const { return K_; }
+  int groups() const { return K_ > 0 ? size() / K_ : 0; }
+  /// g(z) (and the Jacobian, size() x numVariables, when jac is given).
+  void eval(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac = nullptr);
+  /// The Jacobian (reference to the cache when linear).
+  const Eigen::MatrixXd& jacobian(const Eigen::VectorXd& z);
+  /// max(0, max_i g_i(z)).
+  double maxViolation(const Eigen::VectorXd& z);
+  bool linear() const { return linear_; }
+
+ private:
+  struct Cap { int signal; int joint; double sign; double bound; };  // signal 1 qd, 2 qdd
+  ExcitationProblem& p_;
+  int m_problem_ = 0, K_ = 0, n_ = 0;
+  bool linear_ = false;
+  std::vector<Cap> extra_;
+  Eigen::MatrixXd jac_;
+  bool jac_valid_ = false;
+};
+
+/// Common optimiser settings (parameters every exid optimiser declares).
+struct Budget {
+  double max_time_s = 0;    // 0: none (the study's deadline still applies)
+  long max_evaluations = 0; // 0: none
+  double feasibility_tol = 1e-9;
+};
+std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals);
+Budget readBudget(const ParamSet& p);
+
+/// Keeps the best feasible point seen (and the best infeasible one with the least violation,
+/// returned only when no feasible point was found), the history and the stopping rules.
+class Tracker {
+ public:
+  Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b, std::string who);
+  /// Records an evaluated point (J at z, violation v). Returns true when it is a new best.
+  bool offer(const Eigen::VectorXd& z, double J, double violation);
+  /// Evaluates J (no gradient) and the violation at z, then offers it.
+  double evaluateAndOffer(const Eigen::VectorXd& z);
+  bool shouldStop() const;   // time budget, evaluations, ctx.shouldStop()
+  std::string stopCause() const;  // "max_time_s", "max_evaluations", "cancelled" or ""
+  double elapsed() const;
+  double remaining() const;  // seconds left (inf without a budget)
+  bool hasFeasible() const { return have_feasible_; }
+  double bestValue() const { return have_feasible_ ? best_J_ : best_inf_J_; }
+  const Eigen::VectorXd& best() const { return have_feasible_ ? best_z_ : best_inf_z_; }
+  void progress(const std::string& text) const;
+  /// Fills the result: z, criterion_final (re-evaluated), max_violation, wall, history.
+  OptimizerResult finish(double J0, int iterations, std::string stop_reason);
+  const Budget& budget() const { return b_; }
+  ExcitationProblem& problem() { return p_; }
+  Limits& limits() { return lim_; }
+  long evaluations0() const { return evals0_; }
+
+ private:
+  ExcitationProblem& p_;
+  Limits& lim_;
+  const RunContext& ctx_;
+  Budget b_;
+  std::string who_;
+  std::chrono::steady_clock::time_point t0_;
+  long evals0_ = 0;
+  bool have_feasible_ = false, have_any_ = false;
+  double best_J_ = HUGE_VAL, best_inf_J_ = HUGE_VAL, best_inf_v_ = HUGE_VAL;
+  Eigen::VectorXd best_z_, best_inf_z_;
+  std::vector<double> ht_, hv_;
+};
+
+/// A start point: z0 + perturbation * width * U(-1, 1) (width = half the bound range when
+/// finite, else max(1, |z0|_inf)), clipped to the bounds, then pulled back towards z0
+/// (z0 + alpha (z - z0), alpha halved) until it satisfies g <= 0 when z0 does.
+Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
+                               double perturbation, std::mt19937_64& rng);
+
+/// A random start: from the centre c of the bound box (z0 where a bound is infinite) along a
+/// random direction d (U(-1, 1) times half the bound range), c + scale * s_max * d, with s_max
+/// <= 1 the largest feasible step (bisection; feasible set convex along the ray for linear
+/// trajectories). Falls back to perturbedStart when c is infeasible.
+Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0, double scale,
+                            std::mt19937_64& rng);
+
+/// Finite bounds for algorithms that need them: the problem's, with infinite entries replaced
+/// by z0 -+ scale * max(1, |z0_i|).
+void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale,
+                  Eigen::VectorXd* lo, Eigen::VectorXd* hi);
+
+}  // namespace exid::optim

@@ -1,0 +1,227 @@
+#include "traj_common.hpp"
+
+#include <fmt/format.h>
+
+#include <cmath>
+
+#include "exid/error.hpp"
+
+namespace exid::traj {
+
+namespace {
+constexpr double kInf = HUGE_VAL;
+bool finite(double x) { return std::isfinite(x) && std::abs(x) < 1e299; }
+}  // namespace
+
+std::vector<ParamDecl> commonParams() {
+  return {
+      param_double("sample_period_s", 0.1, "s", "sample period of the design grid", 0.0, std::nullopt, true),
+      param_int("samples", 0, "number of samples (0: from the period/duration and sample_period_s)", 0.0),
+      param_double("position_margin_rad", 0.0, "rad", "margin kept inside the joint position limits", 0.0),
+      param_bool("velocity_limits", true, "impose the joint velocity limits at every sample"),
+      param_bool("acceleration_limits", true, "impose the joint acceleration limits at every sample"),
+      param_double("velocity_limit_rad_s", 0.0, "rad/s",
+                   "own velocity cap |qd| <= value at every sample (0: none); applied by the exid "
+                   "optimisers as extra constraints, also on robots without velocity limits", 0.0),
+      param_double("acceleration_limit_rad_s2", 0.0, "rad/s^2",
+                   "own acceleration cap |qdd| <= value (0: none), as velocity_limit_rad_s", 0.0),
+      param_ints("joints", std::vector<std::int64_t>{},
+                 "1-based joints that move (empty: all); the others stay at rest_position_rad", 1.0),
+      param_doubles("rest_position_rad", std::vector<double>{}, "rad",
+                    "positions of the joints that do not move (one value per joint or one for all; "
+                    "empty: the centre of their range)"),
+  };
+}
+
+CommonOptions readCommon(const ParamSet& p) {
+  CommonOptions o;
+  o.sample_period = p.getDouble("sample_period_s");
+  o.samples = static_cast<int>(p.getInt("samples"));
+  o.margin = p.getDouble("position_margin_rad");
+  o.velocity_limits = p.getBool("velocity_limits");
+  o.acceleration_limits = p.getBool("acceleration_limits");
+  o.velocity_cap = p.getDouble("velocity_limit_rad_s");
+  o.acceleration_cap = p.getDouble("acceleration_limit_rad_s2");
+  o.joints = p.getInts("joints");
+  o.rest = p.getDoubles("rest_position_rad");
+  return o;
+}
+
+bool JointSpace::hasCaps() const {
+  for (int j = 0; j < n; ++j)
+    if (std::isfinite(qd_cap(j)) || std::isfinite(qdd_cap(j))) return true;
+  return false;
+}
+
+JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std::string& who) {
+  JointSpace js;
+  js.n = r.dof();
+  const int n = js.n;
+  if (o.joints.empty()) {
+    for (int j = 0; j < n; ++j) js.moving.push_back(j);
+  } else {
+    std::vector<bool> seen(static_cast<std::size_t>(n), false);
+    for (auto j1 : o.joints) {
+      check(j1 >= 1 && j1 <= n, fmt::format("{}: joints: {} is not a joint of the {}-dof robot", who, j1, n));
+      check(!seen[static_cast<std::size_t>(j1 - 1)], fmt::format("{}: joints: {} given twice", who, j1));
+      seen[static_cast<std::size_t>(j1 - 1)] = true;
+      js.moving.push_back(static_cast<int>(j1 - 1));
+    }
+  }
+  js.q_lo = Eigen::VectorXd::Constant(n, -kInf);
+  js.q_hi = Eigen::VectorXd::Constant(n, kInf);
+  js.qd_max = Eigen::VectorXd::Constant(n, kInf);
+  js.qdd_max = Eigen::VectorXd::Constant(n, kInf);
+  js.qd_cap = Eigen::VectorXd::Constant(n, kInf);
+  js.qdd_cap = Eigen::VectorXd::Constant(n, kInf);
+  js.centre = Eigen::VectorXd::Zero(n);
+  // Limits are given in joint coordinates; with a diagonal (or identity) transmission they map
+  // one to one onto measured coordinates. Otherwise only the caps and the centre are used.
+  const bool diag = !r.hasTransmission() ||
+                    (r.transmission.rows() == n && r.transmission.cols() == n &&
+                     r.transmission.isDiagonal() && (r.transmission.diagonal().array() != 0).all());
+  for (int j = 0; j < n; ++j) {
+    const JointLimits L = j < static_cast<int>(r.limits.size()) ? r.limits[static_cast<std::size_t>(j)] : JointLimits{};
+    double lo = finite(L.q_min) ? L.q_min + o.margin : -kInf;
+    double hi = finite(L.q_max) ? L.q_max - o.margin : kInf;
+    double vd = (o.velocity_limits && finite(L.qd_max)) ? L.qd_max : kInf;
+    double ad = (o.acceleration_limits && finite(L.qdd_max)) ? L.qdd_max : kInf;
+    if (r.hasTransmission()) {
+      if (!diag) { lo = -kInf; hi = kInf; vd = kInf; ad = kInf; }
+      else {
+        const double d = r.transmission(j, j);
+        const double off = r.transmission_offset.size() ? r.transmission_offset(j) : 0.0;
+        double a = (lo - off) / d, b = (hi - off) / d;
+        lo = std::min(a, b); hi = std::max(a, b);
+        vd /= std::abs(d); ad /= std::abs(d);
+      }
+    }
+    check(!(lo > hi), fmt::format("{}: joint {}: position margin {} leaves no range", who, j + 1, o.margin));
+    js.q_lo(j) = lo;
+    js.q_hi(j) = hi;
+    if (o.velocity_cap > 0) js.qd_cap(j) = o.velocity_cap;
+    if (o.acceleration_cap > 0) js.qdd_cap(j) = o.acceleration_cap;
+    js.qd_max(j) = std::min(vd, js.qd_cap(j));
+    js.qdd_max(j) = std::min(ad, js.qdd_cap(j));
+    if (std::isfinite(lo) && std::isfinite(hi)) js.centre(j) = 0.5 * (lo + hi);
+    else if (std::isfinite(lo)) js.centre(j) = lo + 1.0;
+    else if (std::isfinite(hi)) js.centre(j) = hi - 1.0;
+  }
+  js.rest = js.centre;
+  if (!o.rest.empty()) {
+    check(o.rest.size() == 1 || static_cast<int>(o.rest.size()) == n,
+          fmt::format("{}: rest_position_rad has {} values (expected 1 or {})", who, o.rest.size(), n));
+    for (int j = 0; j < n; ++j) js.rest(j) = o.rest.size() == 1 ? o.rest[0] : o.rest[static_cast<std::size_t>(j)];
+  }
+  return js;
+}
+
+Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear) {
+  Json d = Json::object();
+  d["linear"] = linear;
+  std::vector<double> moving;
+  for (int j : js.moving) moving.push_back(j + 1);
+  d["joints"] = Json(moving);
+  d["position_margin_rad"] = o.margin;
+  if (js.hasCaps()) {
+    Json caps = Json::object();
+    std::vector<double> v(js.qd_cap.data(), js.qd_cap.data() + js.n), a(js.qdd_cap.data(), js.qdd_cap.data() + js.n);
+    for (auto& x : v) if (!std::isfinite(x)) x = 0.0;  // 0: none
+    for (auto& x : a) if (!std::isfinite(x)) x = 0.0;
+    caps["qd_max"] = Json(v);
+    caps["qdd_max"] = Json(a);
+    d["extra_limits"] = caps;
+  }
+  return d;
+}
+
+int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who) {
+  if (o.samples > 0) return o.samples;
+  const double r = T / o.sample_period;
+  int K = static_cast<int>(std::lround(r));
+  check(K >= 2, fmt::format("{}: {} s at {} s per sample gives fewer than 2 samples", who, T, o.sample_period));
+  return include_end ? K + 1 : K;
+}
+
+// ---------------------------------------------------------------- BasisTrajectory
+void BasisTrajectory::setBasis(Eigen::VectorXd t, Eigen::MatrixXd Bq, Eigen::MatrixXd Bqd,
+                               Eigen::MatrixXd Bqdd) {
+  t_ = std::move(t);
+  Bq_ = std::move(Bq);
+  Bqd_ = std::move(Bqd);
+  Bqdd_ = std::move(Bqdd);
+  m_ = static_cast<int>(Bq_.cols());
+  J_.resize(0, 0);
+}
+
+Samples BasisTrajectory::evaluate(const Eigen::VectorXd& z) const {
+  check(z.size() == numVariables(), fmt::format("trajectory '{}': {} variables given, {} expected",
+                                                pluginName(), z.size(), numVariables()));
+  const Eigen::Index K = t_.size();
+  Samples s;
+  s.t = t_;
+  s.q = Eigen::MatrixXd::Zero(K, js_.n);
+  s.qd = s.q;
+  s.qdd = s.q;
+  for (int j = 0; j < js_.n; ++j) s.q.col(j).setConstant(js_.rest(j));
+  for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+    const int j = js_.moving[i];
+    auto zj = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
+    s.q.col(j).noalias() = Bq_ * zj;
+    s.qd.col(j).noalias() = Bqd_ * zj;
+    s.qdd.col(j).noalias() = Bqdd_ * zj;
+  }
+  return s;
+}
+
+Eigen::VectorXd BasisTrajectory::vjp(const Eigen::VectorXd&, const Samples& adj) const {
+  Eigen::VectorXd g(numVariables());
+  for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+    const int j = js_.moving[i];
+    auto gj = g.segment(static_cast<Eigen::Index>(i) * m_, m_);
+    gj.noalias() = Bq_.transpose() * adj.q.col(j);
+    gj.noalias() += Bqd_.transpose() * adj.qd.col(j);
+    gj.noalias() += Bqdd_.transpose() * adj.qdd.col(j);
+  }
+  return g;
+}
+
+Eigen::MatrixXd BasisTrajectory::jacobian(const Eigen::VectorXd&) const {
+  if (J_.size() == 0) {
+    const Eigen::Index K = t_.size(), n = js_.n, Kn = K * n;
+    J_ = Eigen::MatrixXd::Zero(3 * Kn, numVariables());
+    for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+      const Eigen::Index j = js_.moving[i], c = static_cast<Eigen::Index>(i) * m_;
+      J_.block(j * K, c, K, m_) = Bq_;
+      J_.block(Kn + j * K, c, K, m_) = Bqd_;
+      J_.block(2 * Kn + j * K, c, K, m_) = Bqdd_;
+    }
+  }
+  return J_;
+}
+
+Json BasisTrajectory::describe() const {
+  Json d = describeCommon(js_, opt_, true);
+  d["samples"] = static_cast<long>(t_.size());
+  d["variables_per_joint"] = m_;
+  return d;
+}
+
+void BasisTrajectory::scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd& zref, double fraction) const {
+  for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+    const int j = js_.moving[i];
+    const Eigen::Index c = static_cast<Eigen::Index>(i) * m_;
+    Eigen::VectorXd dz = z->segment(c, m_) - zref.segment(c, m_);
+    const double dq = (Bq_ * dz).cwiseAbs().maxCoeff(), dv = (Bqd_ * dz).cwiseAbs().maxCoeff(),
+                 da = (Bqdd_ * dz).cwiseAbs().maxCoeff();
+    const double half = std::min(js_.q_hi(j) - js_.centre(j), js_.centre(j) - js_.q_lo(j));
+    double s = kInf;
+    if (dq > 0 && std::isfinite(half)) s = std::min(s, half / dq);
+    if (dv > 0 && std::isfinite(js_.qd_max(j))) s = std::min(s, js_.qd_max(j) / dv);
+    if (da > 0 && std::isfinite(js_.qdd_max(j))) s = std::min(s, js_.qdd_max(j) / da);
+    if (!std::isfinite(s)) s = dq > 0 ? 1.0 / dq : 1.0;  // unlimited joint: 1 rad amplitude
+    z->segment(c, m_) = zref.segment(c, m_) + fraction * s * dz;
+  }
+}
+
+}  // namespace exid::traj

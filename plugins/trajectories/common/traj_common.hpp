@@ -1,0 +1,85 @@
+// Shared by the trajectory plugins (pointwise, fourier, spline): the common parameters, the
+// joint set that moves, effective limits (robot limits less the margin, optionally capped by
+// the trajectory's own velocity/acceleration caps), and a base class for trajectories that are
+// a constant plus a per-joint linear basis (fourier, spline): q_j = c_j + Bq z_j, etc.
+#pragma once
+
+#include <Eigen/Core>
+#include <cstdint>
+#include <string>
+#include <vector>
+
+#include "exid/interfaces.hpp"
+
+namespace exid::traj {
+
+/// Parameters every trajectory declares: sample_period_s, samples, position_margin_rad,
+/// velocity_limits, acceleration_limits, velocity_limit_rad_s, acceleration_limit_rad_s2,
+/// joints, rest_position_rad.
+std::vector<ParamDecl> commonParams();
+
+struct CommonOptions {
+  double sample_period = 0.1;
+  int samples = 0;  // 0: from the period/duration and sample_period
+  double margin = 0.0;
+  bool velocity_limits = true, acceleration_limits = true;
+  double velocity_cap = 0.0, acceleration_cap = 0.0;  // 0: none
+  std::vector<std::int64_t> joints;                   // 1-based; empty: all
+  std::vector<double> rest;                           // per joint or one value; empty: centre
+};
+CommonOptions readCommon(const ParamSet& p);
+
+/// Resolved at bind(): measured coordinates, limits as the excitation problem applies them
+/// (margin included) and the caps.
+struct JointSpace {
+  int n = 0;
+  std::vector<int> moving;           // 0-based indices of the joints that move
+  Eigen::VectorXd rest;              // n: positions of every joint when it does not move
+  Eigen::VectorXd centre;            // n: centre of the (margined) range, or 0 if unlimited
+  Eigen::VectorXd q_lo, q_hi;        // n: position range less the margin (+-inf if none)
+  Eigen::VectorXd qd_max, qdd_max;   // n: effective limits (+inf if none or not imposed)
+  Eigen::VectorXd qd_cap, qdd_cap;   // n: the trajectory's own caps (+inf if none)
+  bool hasCaps() const;
+};
+JointSpace resolveJoints(const RobotModel& robot, const CommonOptions& o, const std::string& who);
+
+/// What describe() says about the caps, read by the optimisers (extra constraints
+/// |qd| <= qd_cap, |qdd| <= qdd_cap in measured coordinates at every sample). Also "linear".
+Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
+
+/// Sample count for a window of length T [s]: `samples` if set, else round(T / dt) (+1 when the
+/// end point is included).
+int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who);
+
+/// Trajectory whose signals are a constant plus a basis shared by every moving joint:
+/// q(:, j) = rest_j + Bq z_j, qd(:, j) = Bqd z_j, qdd(:, j) = Bqdd z_j (z_j: m variables per
+/// moving joint, stored joint after joint). Held joints stay at rest. Exact, cached Jacobian.
+class BasisTrajectory : public Trajectory {
+ public:
+  int numVariables() const override { return m_ * static_cast<int>(js_.moving.size()); }
+  Samples evaluate(const Eigen::VectorXd& z) const override;
+  Eigen::VectorXd vjp(const Eigen::VectorXd& z, const Samples& adj) const override;
+  Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const override;
+  double positionMargin() const override { return opt_.margin; }
+  bool velocityLimits() const override { return opt_.velocity_limits; }
+  bool accelerationLimits() const override { return opt_.acceleration_limits; }
+  Json describe() const override;
+  const JointSpace& joints() const { return js_; }
+
+ protected:
+  /// Called by subclasses' bind().
+  void setBasis(Eigen::VectorXd t, Eigen::MatrixXd Bq, Eigen::MatrixXd Bqd, Eigen::MatrixXd Bqdd);
+  /// z <- zref + s_j (z - zref) per moving joint j, s_j chosen so that the deviation from the
+  /// reference (whose signals are the constant centre_j) uses `fraction` of the tightest of the
+  /// joint's half position range (about the centre), velocity and acceleration limits.
+  void scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd& zref, double fraction) const;
+
+  CommonOptions opt_;
+  JointSpace js_;
+  Eigen::VectorXd t_;
+  Eigen::MatrixXd Bq_, Bqd_, Bqdd_;
+  int m_ = 0;
+  mutable Eigen::MatrixXd J_;  // cached dense Jacobian
+};
+
+}  // namespace exid::traj

@@ -1,0 +1,166 @@
+// Trajectory `spline`: per moving joint a cubic (C2) or quintic (C4) spline through `knots`
+// uniformly spaced knots over `duration_s`. Decision variables: the knot values. boundary:
+// rest — the motion starts and ends at rest (qd = 0, and for the quintic also qdd = 0, at both
+// ends; the cubic is the clamped spline); periodic — q, and derivatives 1..degree-1 continuous
+// across the period end (the last knot equals the first, knots - 1 variables per joint).
+// The map knot values -> spline coefficients is linear (one banded system, solved once for
+// every unit vector at bind()), so the signals at the samples are a constant basis times z.
+#include <fmt/format.h>
+
+#include <Eigen/LU>
+#include <cmath>
+#include <random>
+
+#include "exid/error.hpp"
+#include "traj_common.hpp"
+
+namespace {
+
+class Spline final : public exid::traj::BasisTrajectory {
+ public:
+  static constexpr const char* kName = "spline";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "cubic (C2) or quintic (C4) interpolating splines through uniformly spaced knots per joint; "
+      "variables: knot values; boundary rest (starts and ends at rest) or periodic";
+
+  static std::vector<exid::ParamDecl> params() {
+    auto p = exid::traj::commonParams();
+    p.push_back(exid::param_double("duration_s", 10.0, "s", "duration (the period when periodic)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_int("knots", 10, "number of knots, both ends included", 3.0, 10000.0));
+    p.push_back(exid::param_int("degree", 3, "3: cubic (C2); 5: quintic (C4)", 3.0, 5.0));
+    p.push_back(exid::param_string("boundary", std::string("rest"),
+                                   "rest: qd = 0 (quintic: and qdd = 0) at both ends; periodic",
+                                   {"rest", "periodic"}));
+    p.push_back(exid::param_string("init", std::string("random"),
+                                   "start: random knots (seed) scaled to init_scale of the limits "
+                                   "about the centre; knots: init_knots", {"random", "knots"}));
+    p.push_back(exid::param_double("init_scale", 0.5, "", "fraction of the tightest limit the random start uses", 0.0, 1.0, true));
+    p.push_back(exid::param_int("seed", 0, "seed of the random start (0: the study seed)", 0.0));
+    p.push_back(exid::param_doubles("init_knots", std::vector<double>{}, "rad",
+                                    "with init: knots, z itself (moving joint after joint)"));
+    return p;
+  }
+
+  explicit Spline(const exid::ParamSet& p)
+      : D_(p.getDouble("duration_s")), knots_(static_cast<int>(p.getInt("knots"))),
+        degree_(static_cast<int>(p.getInt("degree"))), periodic_(p.getString("boundary") == "periodic"),
+        init_(p.getString("init")), init_scale_(p.getDouble("init_scale")),
+        seed_(static_cast<std::uint64_t>(p.getInt("seed"))), init_knots_(p.getDoubles("init_knots")) {
+    opt_ = exid::traj::readCommon(p);
+    exid::check(degree_ == 3 || degree_ == 5, fmt::format("trajectory 'spline': degree {} (use 3 or 5)", degree_));
+  }
+
+  void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
+    const std::string who = "trajectory 'spline'";
+    js_ = exid::traj::resolveJoints(*robot, opt_, who);
+    const int S = knots_ - 1, d = degree_, nc = d + 1;
+    const int nv = periodic_ ? knots_ - 1 : knots_;  // variables per joint
+    const double h = D_ / S;
+    // derivative factor: d^r/dtau^r tau^p = p!/(p-r)! tau^(p-r)
+    auto dpow = [](int p, int r, double tau) {
+      if (r > p) return 0.0;
+      double f = 1.0;
+      for (int i = 0; i < r; ++i) f *= p - i;
+      return f * std::pow(tau, p - r);
+    };
+    const int N = nc * S;
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, nv);
+    int row = 0;
+    auto knotVar = [&](int i) { return periodic_ ? i % nv : i; };
+    for (int i = 0; i < S; ++i) {
+      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, 0.0);
+      R(row++, knotVar(i)) = 1.0;
+      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, h);
+      R(row++, knotVar(i + 1)) = 1.0;
+    }
+    for (int i = 1; i < S; ++i)
+      for (int r = 1; r < d; ++r, ++row)
+        for (int p = 0; p <= d; ++p) {
+          A(row, (i - 1) * nc + p) += dpow(p, r, h);
+          A(row, i * nc + p) -= dpow(p, r, 0.0);
+        }
+    if (periodic_) {
+      for (int r = 1; r < d; ++r, ++row)
+        for (int p = 0; p <= d; ++p) {
+          A(row, (S - 1) * nc + p) += dpow(p, r, h);
+          A(row, p) -= dpow(p, r, 0.0);
+        }
+    } else {
+      for (int r = 1; r <= (d - 1) / 2; ++r) {
+        for (int p = 0; p <= d; ++p) A(row, p) = dpow(p, r, 0.0);
+        ++row;
+        for (int p = 0; p <= d; ++p) A(row, (S - 1) * nc + p) = dpow(p, r, h);
+        ++row;
+      }
+    }
+    exid::check(row == N, "trajectory 'spline': internal: system size");
+    Eigen::MatrixXd C = A.fullPivLu().solve(R);  // coefficients per unit knot vector
+    const int K = exid::traj::sampleCount(opt_, D_, !periodic_, who);
+    const double dt = opt_.samples > 0 ? D_ / (periodic_ ? K : K - 1) : opt_.sample_period;
+    Eigen::VectorXd t(K);
+    Eigen::MatrixXd Bq(K, nv), Bqd(K, nv), Bqdd(K, nv);
+    for (int k = 0; k < K; ++k) {
+      t(k) = k * dt;
+      int i = std::min(S - 1, static_cast<int>(std::floor(t(k) / h + 1e-12)));
+      i = std::max(i, 0);
+      const double tau = t(k) - i * h;
+      for (int r = 0; r < 3; ++r) {
+        Eigen::RowVectorXd e(nc);
+        for (int p = 0; p <= d; ++p) e(p) = dpow(p, r, tau);
+        Eigen::RowVectorXd row_r = e * C.middleRows(i * nc, nc);
+        (r == 0 ? Bq : (r == 1 ? Bqd : Bqdd)).row(k) = row_r;
+      }
+    }
+    setBasis(t, Bq, Bqd, Bqdd);
+    const int n_all = numVariables();
+    Eigen::VectorXd zref(n_all);
+    for (std::size_t i = 0; i < js_.moving.size(); ++i)
+      zref.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.centre(js_.moving[i]));
+    if (init_ == "knots") {
+      exid::check(static_cast<int>(init_knots_.size()) == n_all,
+                  fmt::format("{}: init_knots has {} values (expected {})", who, init_knots_.size(), n_all));
+      z0_ = Eigen::Map<const Eigen::VectorXd>(init_knots_.data(), n_all);
+    } else {
+      std::mt19937_64 rng(seed_ ? seed_ : ctx.seed);
+      std::uniform_real_distribution<double> U(-1.0, 1.0);
+      z0_ = zref;
+      for (Eigen::Index i = 0; i < n_all; ++i) z0_(i) += U(rng);
+      scaleIntoLimits(&z0_, zref, init_scale_);
+    }
+    lo_.resize(n_all);
+    hi_.resize(n_all);
+    for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+      lo_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_lo(js_.moving[i]));
+      hi_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_hi(js_.moving[i]));
+    }
+  }
+
+  Eigen::VectorXd initial() const override { return z0_; }
+  void bounds(Eigen::VectorXd* lo, Eigen::VectorXd* hi) const override {
+    if (lo) *lo = lo_;
+    if (hi) *hi = hi_;
+  }
+  exid::Json describe() const override {
+    exid::Json d = BasisTrajectory::describe();
+    d["duration_s"] = D_;
+    d["knots"] = knots_;
+    d["degree"] = degree_;
+    d["boundary"] = periodic_ ? "periodic" : "rest";
+    return d;
+  }
+
+ private:
+  double D_;
+  int knots_, degree_;
+  bool periodic_;
+  std::string init_;
+  double init_scale_;
+  std::uint64_t seed_;
+  std::vector<double> init_knots_;
+  Eigen::VectorXd z0_, lo_, hi_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(Spline)
