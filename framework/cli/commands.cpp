@@ -4,7 +4,9 @@
 #include <fmt/format.h>
 
 #include <iostream>
+#include <functional>
 #include <memory>
+#include <sstream>
 
 #include "exid/config.hpp"
 #include "exid/drive.hpp"
@@ -12,6 +14,7 @@
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/matrix.hpp"
 #include "exid/runner.hpp"
 
 namespace exid::cli {
@@ -218,12 +221,76 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   return 0;
 }
 
+std::vector<std::string> splitComma(const std::string& s) {
+  std::vector<std::string> out;
+  std::stringstream ss(s);
+  std::string item;
+  while (std::getline(ss, item, ','))
+    if (!item.empty()) out.push_back(item);
+  return out;
+}
+
+int matrixCommand(const Registry& reg, const std::vector<std::string>& args, const std::string& out_arg,
+                  int jobs, const std::string& shard, bool retry, const std::string& rows,
+                  const std::string& cols, const std::string& metric, const std::function<bool()>& cancelled) {
+  if (args.empty()) throw Error("usage: exid matrix MATRIX.yaml --out DIR [-j N] | exid matrix table DIR ... | exid matrix merge DEST SRC...");
+  if (args[0] == "table") {
+    if (args.size() != 2) throw Error("usage: exid matrix table DIR --rows A,B --cols C --metric NAME");
+    const fs::path db = fs::path(args[1]) / "results.sqlite";
+    if (metric.empty()) {
+      std::cout << "metrics:\n";
+      for (const auto& m : matrixMetrics(db)) std::cout << "  " << m << "\n";
+      return 0;
+    }
+    MatrixTable t = matrixTable(db, splitComma(rows), splitComma(cols), metric);
+    std::cout << t.markdown;
+    std::string safe = metric;
+    for (char& c : safe)
+      if (!std::isalnum(static_cast<unsigned char>(c)) && c != '_') c = '_';
+    const fs::path csv = fs::path(args[1]) / ("table_" + safe + ".csv");
+    writeFileAtomic(csv, t.csv);
+    std::cout << fmt::format("\n(CSV: {})\n", csv.string());
+    return 0;
+  }
+  if (args[0] == "merge") {
+    if (args.size() < 3) throw Error("usage: exid matrix merge DEST_DIR SRC_DIR...");
+    std::vector<fs::path> srcs;
+    for (std::size_t i = 2; i < args.size(); ++i) srcs.push_back(fs::path(args[i]) / "results.sqlite");
+    int n = mergeMatrixDatabases(fs::path(args[1]) / "results.sqlite", srcs);
+    std::cout << fmt::format("merged {} runs into {}/results.sqlite\n", n, args[1]);
+    return 0;
+  }
+  if (args.size() != 1) throw Error("usage: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N]");
+  MatrixSpec spec = loadMatrix(args[0], reg);
+  MatrixOptions opt;
+  opt.out_dir = out_arg.empty() ? fs::path("out") / spec.name : fs::path(out_arg);
+  opt.jobs = std::max(1, jobs);
+  opt.retry_failed = retry;
+  opt.cancelled = cancelled;
+  if (!shard.empty()) {
+    auto slash = shard.find('/');
+    if (slash == std::string::npos) throw Error(fmt::format("--shard {}: expected i/N", shard));
+    opt.shard_index = std::stoi(shard.substr(0, slash));
+    opt.shard_count = std::stoi(shard.substr(slash + 1));
+  }
+  MatrixRunSummary s = runMatrix(spec, reg, opt);
+  std::cout << fmt::format("matrix {}: {} cells: {} ok, {} failed, {} timeout, {} skipped (finished before), {} not run; "
+                           "{:.2f} s\nresults: {}/results.sqlite\n",
+                           spec.name, s.total, s.ok, s.failed, s.timeout, s.skipped, s.not_run, s.wall_s,
+                           opt.out_dir.string());
+  return s.not_run > 0 ? 130 : 0;
+}
+
 }  // namespace
 
 Commands addCommands(CLI::App& app, Registry& registry) {
   struct State {
     std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
     bool json = false;
+    std::vector<std::string> matrix_args;
+    int jobs = 1;
+    std::string shard, rows, cols, metric;
+    bool retry = false;
   };
   auto st = std::make_shared<State>();
 
@@ -250,8 +317,23 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     stages.push_back(s);
   }
 
+  auto* matrix = app.add_subcommand(
+      "matrix", "comparison matrices: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N] | "
+                "exid matrix table DIR --rows A,B --cols C --metric M | exid matrix merge DEST SRC...");
+  matrix->add_option("args", st->matrix_args, "MATRIX.yaml, or 'table DIR', or 'merge DEST SRC...'");
+  matrix->add_option("--out", st->out, "output folder (results.sqlite, cells/)");
+  matrix->add_option("-j,--jobs", st->jobs, "cells run in parallel");
+  matrix->add_option("--shard", st->shard, "run every N-th cell: i/N with 0 <= i < N");
+  matrix->add_flag("--retry-failed", st->retry, "re-run cells that failed or timed out");
+  matrix->add_option("--rows", st->rows, "table: axes of the rows, comma-separated");
+  matrix->add_option("--cols", st->cols, "table: axes of the columns, comma-separated");
+  matrix->add_option("--metric", st->metric, "table: the metric (without: list the metrics)");
+
   Commands c;
-  c.run = [st, info, eval, stages, &registry]() -> int {
+  c.run = [st, info, eval, stages, matrix, &registry]() -> int {
+    if (*matrix)
+      return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry, st->rows, st->cols,
+                           st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
     if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out);
     for (auto* s : stages)

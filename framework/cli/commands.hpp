@@ -14,4 +14,7 @@ struct Commands {
 
 Commands addCommands(CLI::App& app, Registry& registry);
 
+/// True once SIGINT or SIGTERM was received (set up by main).
+std::function<bool()> cancelled();
+
 }  // namespace exid::cli

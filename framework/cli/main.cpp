@@ -51,6 +51,10 @@ class ProgressPrinter {
 
 }  // namespace
 
+std::function<bool()> exid::cli::cancelled() {
+  return [] { return g_stop.load(); };
+}
+
 int main(int argc, char** argv) {
   CLI::App app{"exid — experimental identification of robot and payload dynamics, and the "
                "design of exciting trajectories"};

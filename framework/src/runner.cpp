@@ -332,6 +332,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       X["wall_s"] = r.wall_s;
       X["stop_reason"] = r.stop_reason;
       X["details"] = r.details;
+      X["history"]["t_s"] = Json(r.history_t_s);
+      X["history"]["value"] = Json(r.history_value);
       if (write) {
         writeCsvAtomic(opt.out_dir / "trajectory_initial.csv", samplesTable(initial));
         writeCsvAtomic(opt.out_dir / "trajectory_optimal.csv", samplesTable(best));
@@ -467,6 +469,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     S["status"] = "failed";
     S["failed_stage"] = stage;
     S["message"] = res.message;
+    if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
   }
   S["wall_s"] = seconds(t_start);
   if (write) {

@@ -1,0 +1,86 @@
+// exid — comparison matrices: a base study plus axes; the cells are their product (or an
+// explicit list). Every cell runs isolated in its own process (an exception, a crash or a
+// numerical failure becomes status `failed`, a cell over its budget `timeout`; the others go
+// on), N at a time. Results go to a SQLite database (schema in docs/matrix.md), one
+// transaction per cell; re-running skips finished cells (keyed by the hash of the resolved
+// configuration); a run killed part-way loses only the cells in flight.
+//
+//   name: ci
+//   base: ../default.yaml          # a study file (relative to this file), or `study: {...}` inline
+//   cell_budget_s: 60              # wall-clock budget of one cell (0 = none)
+//   axes:                          # product of the axes, in this order
+//     robot: [{type: puma560}, {type: planar2r}]          # a section replaced whole
+//     estimator: [{type: batch_ls}, {type: rls}]
+//     experiment.params.noise_tau_Nm: [0.0, 0.05]         # any parameter by key path
+//     seed: [1, 2, 3]
+//     "@model":                    # a composite axis (named "model"): each value sets several
+//       - {label: wrench, model: {type: load_wrench}, experiment.params.wrench: true}
+//   cells:                         # or: an explicit list of overrides (instead of axes)
+//     - {estimator: {type: rls}, seed: 2}
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <string>
+#include <vector>
+
+#include "exid/config.hpp"
+#include "exid/json.hpp"
+
+namespace exid {
+
+class Registry;
+
+struct MatrixCell {
+  int index = 0;
+  std::vector<std::pair<std::string, std::string>> coords;  // axis -> short value label
+  std::string label;                                         // "robot=puma560 estimator=rls"
+  std::string yaml;                                          // the cell's study text
+  std::string hash;                                          // of the resolved configuration
+  StudyConfig config;
+};
+
+struct MatrixSpec {
+  std::string name;
+  std::filesystem::path file;
+  double cell_budget_s = 0.0;
+  std::vector<std::string> axes;  // axis names in order
+  std::vector<MatrixCell> cells;
+};
+
+/// Parses a matrix file and validates EVERY cell's study before anything runs (errors name
+/// the matrix file, the cell and the study problem).
+MatrixSpec loadMatrix(const std::filesystem::path& file, const Registry& registry);
+
+struct MatrixOptions {
+  std::filesystem::path out_dir;
+  int jobs = 1;
+  int shard_index = 0, shard_count = 1;  // run cells with index % count == index
+  bool retry_failed = false;             // re-run cells whose status is failed/timeout
+  bool write_cell_files = true;          // each cell's study outputs under out/cells/<hash>
+  std::function<bool()> cancelled;
+  std::string database = "results.sqlite";
+};
+
+struct MatrixRunSummary {
+  int total = 0, skipped = 0, ok = 0, failed = 0, timeout = 0, not_run = 0;
+  double wall_s = 0.0;
+};
+
+MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& registry, const MatrixOptions& opt);
+
+/// Markdown table of a metric (mean over the cells that share the row/column keys); also
+/// returns the CSV text. Rows/cols are axis names; metric is a metric name (exact, or the
+/// last component: "param_rel_err" matches "identification.param_rel_err").
+struct MatrixTable {
+  std::string markdown, csv;
+};
+MatrixTable matrixTable(const std::filesystem::path& db, const std::vector<std::string>& rows,
+                        const std::vector<std::string>& cols, const std::string& metric);
+/// Every metric name in the database.
+std::vector<std::string> matrixMetrics(const std::filesystem::path& db);
+/// Copies the runs of the source databases into dest (created if needed), skipping hashes
+/// already present. Returns the number of runs copied.
+int mergeMatrixDatabases(const std::filesystem::path& dest, const std::vector<std::filesystem::path>& sources);
+
+}  // namespace exid

@@ -1,0 +1,698 @@
+#include "exid/matrix.hpp"
+
+#include <fcntl.h>
+#include <fmt/format.h>
+#include <poll.h>
+#include <signal.h>
+#include <sqlite3.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <yaml-cpp/yaml.h>
+
+#include <chrono>
+#include <cmath>
+#include <ctime>
+#include <fstream>
+#include <map>
+#include <set>
+#include <sstream>
+
+#include "exid/context.hpp"
+#include "exid/error.hpp"
+#include "exid/registry.hpp"
+#include "exid/runner.hpp"
+
+namespace exid {
+
+namespace fs = std::filesystem;
+
+// ------------------------------------------------------------------ parsing
+
+namespace {
+
+std::string flowText(const YAML::Node& n) {
+  YAML::Emitter e;
+  e << YAML::Flow << n;
+  return e.c_str();
+}
+
+std::string valueLabel(const YAML::Node& n) {
+  if (n.IsScalar()) return n.Scalar();
+  if (n.IsMap() && n["type"] && n["type"].IsScalar()) {
+    if (n["params"] && n["params"].IsMap() && n["params"].size() > 0)
+      return n["type"].Scalar() + flowText(n["params"]);
+    return n["type"].Scalar();
+  }
+  return flowText(n);
+}
+
+void setPath(YAML::Node root, const std::string& path, const YAML::Node& value) {
+  std::vector<std::string> keys;
+  std::stringstream ss(path);
+  std::string k;
+  while (std::getline(ss, k, '.')) keys.push_back(k);
+  if (keys.empty()) throw Error("empty axis name");
+  YAML::Node cur = root;
+  for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
+    if (!cur[keys[i]] || cur[keys[i]].IsNull()) cur[keys[i]] = YAML::Node(YAML::NodeType::Map);
+    YAML::Node next = cur[keys[i]];
+    if (!next.IsMap()) throw Error(fmt::format("'{}': '{}' is not a mapping in the base study", path, keys[i]));
+    cur.reset(next);
+  }
+  cur[keys.back()] = YAML::Clone(value);
+}
+
+std::string isoNow() {
+  std::time_t t = std::time(nullptr);
+  char buf[32];
+  std::strftime(buf, sizeof buf, "%Y-%m-%dT%H:%M:%SZ", std::gmtime(&t));
+  return buf;
+}
+
+}  // namespace
+
+MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(file.string());
+  } catch (const YAML::BadFile&) {
+    throw Error(fmt::format("{}: cannot open the matrix file", file.string()));
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", file.string(), e.mark.line + 1, e.msg));
+  }
+  if (!root.IsMap()) throw Error(fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
+  const std::vector<std::string> allowed = {"name", "base", "study", "axes", "cells", "cell_budget_s", "description"};
+  for (const auto& kv : root) {
+    const std::string key = kv.first.as<std::string>();
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
+      std::string close = closestMatch(key, allowed);
+      throw Error(fmt::format("{}:{}: unknown key '{}'; allowed: {}{}", file.string(), kv.first.Mark().line + 1, key,
+                              fmt::join(allowed, ", "), close.empty() ? "" : "; did you mean '" + close + "'?"));
+    }
+  }
+  MatrixSpec spec;
+  spec.file = fs::absolute(file);
+  spec.name = root["name"] ? root["name"].as<std::string>() : file.stem().string();
+  if (root["cell_budget_s"]) {
+    try {
+      spec.cell_budget_s = root["cell_budget_s"].as<double>();
+    } catch (...) {
+      throw Error(fmt::format("{}: cell_budget_s: expected a number", file.string()));
+    }
+  }
+  YAML::Node base;
+  fs::path base_dir = spec.file.parent_path();
+  std::string base_name;
+  if (root["base"] && root["study"]) throw Error(fmt::format("{}: give either base (a file) or study (inline), not both", file.string()));
+  if (root["base"]) {
+    fs::path bp = root["base"].as<std::string>();
+    if (bp.is_relative()) bp = base_dir / bp;
+    try {
+      base = YAML::LoadFile(bp.string());
+    } catch (const YAML::Exception& e) {
+      throw Error(fmt::format("{}: base study {}: {}", file.string(), bp.string(), e.what()));
+    }
+    base_dir = fs::absolute(bp).parent_path();
+    base_name = bp.string();
+  } else if (root["study"]) {
+    base = YAML::Clone(root["study"]);
+    base_name = file.string() + ":study";
+  } else {
+    throw Error(fmt::format("{}: missing 'base' (a study file) or 'study' (an inline study)", file.string()));
+  }
+  if (!base.IsMap()) throw Error(fmt::format("{}: the base study is not a mapping", base_name));
+
+  std::vector<YAML::Node> overrides;  // one map {axis: value} per cell
+  if (root["axes"] && root["cells"]) throw Error(fmt::format("{}: give either axes or cells, not both", file.string()));
+  if (root["axes"]) {
+    YAML::Node axes = root["axes"];
+    if (!axes.IsMap() || axes.size() == 0) throw Error(fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
+    overrides.push_back(YAML::Node(YAML::NodeType::Map));
+    for (const auto& kv : axes) {
+      const std::string axis = kv.first.as<std::string>();
+      if (!kv.second.IsSequence() || kv.second.size() == 0)
+        throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values", file.string(), kv.second.Mark().line + 1, axis));
+      spec.axes.push_back(axis);
+      std::vector<YAML::Node> next;
+      for (const auto& o : overrides)
+        for (const auto& v : kv.second) {
+          YAML::Node c = YAML::Clone(o);
+          c[axis] = YAML::Clone(v);
+          next.push_back(c);
+        }
+      overrides = std::move(next);
+    }
+  } else if (root["cells"]) {
+    if (!root["cells"].IsSequence()) throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
+    for (const auto& c : root["cells"]) {
+      if (!c.IsMap()) throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(), c.Mark().line + 1));
+      for (const auto& kv : c) {
+        const std::string axis = kv.first.as<std::string>();
+        if (std::find(spec.axes.begin(), spec.axes.end(), axis) == spec.axes.end()) spec.axes.push_back(axis);
+      }
+      overrides.push_back(YAML::Clone(c));
+    }
+  } else {
+    overrides.push_back(YAML::Node(YAML::NodeType::Map));  // the base study alone
+  }
+
+  std::vector<std::string> problems;
+  std::set<std::string> hashes;
+  for (std::size_t i = 0; i < overrides.size(); ++i) {
+    MatrixCell cell;
+    cell.index = static_cast<int>(i);
+    YAML::Node study = YAML::Clone(base);
+    for (const auto& kv : overrides[i]) {
+      const std::string axis = kv.first.as<std::string>();
+      try {
+        if (!axis.empty() && axis[0] == '@') {
+          // A composite axis: each value is a mapping of overrides, with an optional label.
+          if (!kv.second.IsMap())
+            throw Error(fmt::format("axis '{}': each value must be a mapping {{label: ..., path: value, ...}}", axis));
+          std::string label;
+          for (const auto& o : kv.second) {
+            const std::string path = o.first.as<std::string>();
+            if (path == "label") label = o.second.as<std::string>();
+            else setPath(study, path, o.second);
+          }
+          cell.coords.emplace_back(axis.substr(1), label.empty() ? flowText(kv.second) : label);
+          continue;
+        }
+        setPath(study, axis, kv.second);
+      } catch (const Error& e) {
+        problems.push_back(fmt::format("cell {}: {}", i, e.what()));
+      }
+      cell.coords.emplace_back(axis, valueLabel(kv.second));
+    }
+    for (const auto& [a, v] : cell.coords) cell.label += (cell.label.empty() ? "" : " ") + a + "=" + v;
+    if (cell.label.empty()) cell.label = "base";
+    study["name"] = fmt::format("{}_{}", spec.name, i);
+    YAML::Emitter e;
+    e << study;
+    cell.yaml = std::string(e.c_str()) + "\n";
+    try {
+      cell.config = parseStudy(cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
+      cell.hash = cell.config.hash();
+      if (!hashes.insert(cell.hash).second)
+        problems.push_back(fmt::format("cell {} ({}): same configuration as an earlier cell", i, cell.label));
+    } catch (const Error& err) {
+      problems.push_back(err.what());
+    }
+    spec.cells.push_back(std::move(cell));
+  }
+  if (!problems.empty()) {
+    std::string msg = fmt::format("{}: {} problem{} in the matrix:", file.string(), problems.size(), problems.size() == 1 ? "" : "s");
+    for (const auto& p : problems) msg += "\n  " + p;
+    throw Error(msg);
+  }
+  return spec;
+}
+
+// ------------------------------------------------------------------ database
+
+namespace {
+
+class Db {
+ public:
+  explicit Db(const fs::path& path) : path_(path.string()) {
+    if (sqlite3_open(path_.c_str(), &db_) != SQLITE_OK) {
+      std::string m = db_ ? sqlite3_errmsg(db_) : "out of memory";
+      sqlite3_close(db_);
+      throw Error(fmt::format("{}: cannot open the database: {}", path_, m));
+    }
+    sqlite3_busy_timeout(db_, 10000);
+    exec("PRAGMA journal_mode=WAL");
+    exec("PRAGMA synchronous=NORMAL");
+    exec(R"(CREATE TABLE IF NOT EXISTS matrices(
+              id INTEGER PRIMARY KEY, name TEXT, file TEXT, started TEXT, exid_version TEXT, axes TEXT);
+            CREATE TABLE IF NOT EXISTS configs(hash TEXT PRIMARY KEY, yaml TEXT, json TEXT);
+            CREATE TABLE IF NOT EXISTS runs(
+              id INTEGER PRIMARY KEY, matrix TEXT, cell INTEGER, hash TEXT UNIQUE, label TEXT,
+              status TEXT, message TEXT, wall_s REAL, started TEXT, finished TEXT, summary TEXT);
+            CREATE TABLE IF NOT EXISTS axes(run_id INTEGER, axis TEXT, value TEXT);
+            CREATE TABLE IF NOT EXISTS metrics(run_id INTEGER, name TEXT, type TEXT, real REAL, text TEXT);
+            CREATE TABLE IF NOT EXISTS progress(run_id INTEGER, series TEXT, t REAL, value REAL);
+            CREATE INDEX IF NOT EXISTS metrics_by_name ON metrics(name);
+            CREATE INDEX IF NOT EXISTS axes_by_run ON axes(run_id);)");
+  }
+  ~Db() { sqlite3_close(db_); }
+  Db(const Db&) = delete;
+  Db& operator=(const Db&) = delete;
+
+  void exec(const std::string& sql) {
+    char* err = nullptr;
+    if (sqlite3_exec(db_, sql.c_str(), nullptr, nullptr, &err) != SQLITE_OK) {
+      std::string m = err ? err : "?";
+      sqlite3_free(err);
+      throw Error(fmt::format("{}: {}", path_, m));
+    }
+  }
+
+  struct Stmt {
+    sqlite3_stmt* s = nullptr;
+    Db* db;
+    Stmt(Db* d, const std::string& sql) : db(d) {
+      if (sqlite3_prepare_v2(d->db_, sql.c_str(), -1, &s, nullptr) != SQLITE_OK)
+        throw Error(fmt::format("{}: {}", d->path_, sqlite3_errmsg(d->db_)));
+    }
+    ~Stmt() { sqlite3_finalize(s); }
+    Stmt& bind(int i, const std::string& v) { sqlite3_bind_text(s, i, v.c_str(), -1, SQLITE_TRANSIENT); return *this; }
+    Stmt& bind(int i, double v) { if (std::isfinite(v)) sqlite3_bind_double(s, i, v); else sqlite3_bind_null(s, i); return *this; }
+    Stmt& bind(int i, long long v) { sqlite3_bind_int64(s, i, v); return *this; }
+    Stmt& bindNull(int i) { sqlite3_bind_null(s, i); return *this; }
+    bool step() {
+      int rc = sqlite3_step(s);
+      if (rc == SQLITE_ROW) return true;
+      if (rc == SQLITE_DONE) return false;
+      throw Error(fmt::format("{}: {}", db->path_, sqlite3_errmsg(db->db_)));
+    }
+    void reset() { sqlite3_reset(s); sqlite3_clear_bindings(s); }
+    std::string text(int c) const { auto* t = sqlite3_column_text(s, c); return t ? reinterpret_cast<const char*>(t) : ""; }
+    double real(int c) const { return sqlite3_column_type(s, c) == SQLITE_NULL ? NAN : sqlite3_column_double(s, c); }
+    long long integer(int c) const { return sqlite3_column_int64(s, c); }
+  };
+
+  long long lastId() const { return sqlite3_last_insert_rowid(db_); }
+  sqlite3* raw() { return db_; }
+
+ private:
+  std::string path_;
+  sqlite3* db_ = nullptr;
+};
+
+void flatten(const Json& j, const std::string& prefix, std::vector<std::pair<std::string, const Json*>>& out) {
+  if (j.isObject()) {
+    for (const auto& [k, v] : j.items()) flatten(v, prefix.empty() ? k : prefix + "." + k, out);
+  } else if (!j.isArray()) {
+    out.emplace_back(prefix, &j);
+  }
+}
+
+void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std::string& status,
+               const std::string& message, double wall_s, const std::string& started, const Json& summary) {
+  db.exec("BEGIN IMMEDIATE");
+  try {
+    Db::Stmt(&db, "INSERT OR REPLACE INTO configs(hash, yaml, json) VALUES(?,?,?)")
+        .bind(1, cell.hash).bind(2, cell.config.resolvedYaml()).bind(3, cell.config.resolvedJson().dump(-1)).step();
+    Db::Stmt(&db, "DELETE FROM metrics WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
+    Db::Stmt(&db, "DELETE FROM axes WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
+    Db::Stmt(&db, "DELETE FROM progress WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
+    Db::Stmt(&db, "DELETE FROM runs WHERE hash = ?").bind(1, cell.hash).step();
+    Db::Stmt(&db, "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, finished, summary) "
+                  "VALUES(?,?,?,?,?,?,?,?,?,?)")
+        .bind(1, spec.name).bind(2, static_cast<long long>(cell.index)).bind(3, cell.hash).bind(4, cell.label)
+        .bind(5, status).bind(6, message).bind(7, wall_s).bind(8, started).bind(9, isoNow())
+        .bind(10, summary.dump(-1)).step();
+    const long long run = db.lastId();
+    {
+      Db::Stmt ax(&db, "INSERT INTO axes(run_id, axis, value) VALUES(?,?,?)");
+      for (const auto& [a, v] : cell.coords) {
+        ax.bind(1, run).bind(2, a).bind(3, v).step();
+        ax.reset();
+      }
+    }
+    {
+      std::vector<std::pair<std::string, const Json*>> flat;
+      flatten(summary, "", flat);
+      Db::Stmt m(&db, "INSERT INTO metrics(run_id, name, type, real, text) VALUES(?,?,?,?,?)");
+      for (const auto& [name, v] : flat) {
+        m.bind(1, run).bind(2, name);
+        if (v->isNumber()) m.bind(3, std::string(v->type() == Json::Type::Int ? "int" : "real")).bind(4, v->asDouble()).bindNull(5);
+        else if (v->isString()) m.bind(3, std::string("text")).bindNull(4).bind(5, v->asString());
+        else if (v->type() == Json::Type::Bool) m.bind(3, std::string("bool")).bind(4, v->asBool() ? 1.0 : 0.0).bindNull(5);
+        else { m.reset(); continue; }
+        m.step();
+        m.reset();
+      }
+      // Short aliases of the most used metrics.
+      auto alias = [&](const char* name, const char* path) {
+        for (const auto& [n, v] : flat)
+          if (n == path && v->isNumber()) {
+            m.bind(1, run).bind(2, std::string(name)).bind(3, std::string("real")).bind(4, v->asDouble()).bindNull(5).step();
+            m.reset();
+          }
+      };
+      alias("param_rel_err", "identification.param_rel_err");
+      alias("cond_W", "identification.cond_W");
+      alias("residual_rms", "identification.residual_rms");
+      alias("validation_rel_err", "validation.relative_error");
+      alias("criterion_final", "excitation.criterion_final");
+      alias("cond_W_final", "excitation.cond_W_final");
+    }
+    if (const Json* x = summary.find("excitation")) {
+      const Json* h = x->find("history");
+      if (h && h->find("t_s") && h->find("value")) {
+        Db::Stmt p(&db, "INSERT INTO progress(run_id, series, t, value) VALUES(?,?,?,?)");
+        const Json& ts = *h->find("t_s");
+        const Json& vs = *h->find("value");
+        for (std::size_t i = 0; i < std::min(ts.size(), vs.size()); ++i) {
+          p.bind(1, run).bind(2, std::string("criterion")).bind(3, ts.at(i).asDouble()).bind(4, vs.at(i).asDouble()).step();
+          p.reset();
+        }
+      }
+    }
+    db.exec("COMMIT");
+  } catch (...) {
+    db.exec("ROLLBACK");
+    throw;
+  }
+}
+
+struct Child {
+  pid_t pid = -1;
+  int fd = -1;
+  const MatrixCell* cell = nullptr;
+  std::string output;
+  std::chrono::steady_clock::time_point start;
+  std::string started;
+  bool killed_for_time = false;
+};
+
+}  // namespace
+
+MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const MatrixOptions& opt) {
+  const auto t0 = std::chrono::steady_clock::now();
+  check(opt.shard_count >= 1 && opt.shard_index >= 0 && opt.shard_index < opt.shard_count,
+        fmt::format("--shard {}/{}: expected 0 <= i < N", opt.shard_index, opt.shard_count));
+  fs::create_directories(opt.out_dir);
+  Db db(opt.out_dir / opt.database);
+  {
+    Db::Stmt(&db, "INSERT INTO matrices(name, file, started, exid_version, axes) VALUES(?,?,?,?,?)")
+        .bind(1, spec.name).bind(2, spec.file.string()).bind(3, isoNow()).bind(4, std::string(EXID_VERSION_STRING))
+        .bind(5, fmt::format("{}", fmt::join(spec.axes, ","))).step();
+  }
+  std::map<std::string, std::string> done;  // hash -> status
+  {
+    Db::Stmt s(&db, "SELECT hash, status FROM runs");
+    while (s.step()) done[s.text(0)] = s.text(1);
+  }
+  MatrixRunSummary sum;
+  std::vector<const MatrixCell*> todo;
+  for (const auto& c : spec.cells) {
+    if (c.index % opt.shard_count != opt.shard_index) continue;
+    ++sum.total;
+    auto it = done.find(c.hash);
+    if (it != done.end() && (it->second == "ok" || !opt.retry_failed)) {
+      ++sum.skipped;
+      continue;
+    }
+    todo.push_back(&c);
+  }
+  logInfo(fmt::format("matrix '{}': {} cells in this shard, {} already finished, {} to run on {} job{}", spec.name,
+                      sum.total, sum.skipped, todo.size(), opt.jobs, opt.jobs == 1 ? "" : "s"));
+
+  std::vector<Child> running;
+  std::size_t next = 0;
+  const double grace_s = 5.0;
+  auto finish = [&](Child& ch, int status) {
+    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+    std::string st, msg;
+    Json summary = Json::object();
+    if (ch.killed_for_time) {
+      st = "timeout";
+      msg = fmt::format("over the cell budget of {} s (killed after {:.1f} s)", spec.cell_budget_s, wall);
+    } else if (WIFSIGNALED(status)) {
+      st = "failed";
+      msg = fmt::format("the cell's process died with signal {} ({})", WTERMSIG(status), strsignal(WTERMSIG(status)));
+    } else {
+      try {
+        summary = Json::parse(ch.output);
+        st = summary.find("status") ? summary.find("status")->asString() : "failed";
+        msg = summary.find("message") ? summary.find("message")->asString() : "";
+        const Json* to = summary.find("timed_out");
+        if (st != "ok" && to && to->asBool()) st = "timeout";
+      } catch (const std::exception& e) {
+        st = "failed";
+        msg = fmt::format("the cell's process gave no summary (exit {}): {}", WIFEXITED(status) ? WEXITSTATUS(status) : -1, e.what());
+      }
+    }
+    recordRun(db, spec, *ch.cell, st, msg, wall, ch.started, summary);
+    if (st == "ok") ++sum.ok;
+    else if (st == "timeout") ++sum.timeout;
+    else ++sum.failed;
+    logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall, ch.cell->label,
+                        st == "ok" ? "" : "  (" + msg + ")"));
+  };
+
+  while ((next < todo.size() || !running.empty())) {
+    const bool stop = opt.cancelled && opt.cancelled();
+    while (!stop && next < todo.size() && static_cast<int>(running.size()) < std::max(1, opt.jobs)) {
+      const MatrixCell* cell = todo[next++];
+      int fds[2];
+      if (::pipe(fds) != 0) throw Error("matrix: cannot create a pipe");
+      Child ch;
+      ch.cell = cell;
+      ch.start = std::chrono::steady_clock::now();
+      ch.started = isoNow();
+      std::fflush(nullptr);
+      pid_t pid = ::fork();
+      if (pid < 0) throw Error("matrix: fork failed");
+      if (pid == 0) {
+        ::close(fds[0]);
+        ::signal(SIGINT, SIG_IGN);  // the parent decides
+        ::signal(SIGTERM, SIG_DFL);
+        setLogLevel(LogLevel::Quiet);
+        std::string text;
+        try {
+          StudyConfig cfg = cell->config;
+          cfg.budget_s = spec.cell_budget_s;
+          RunOptions ro;
+          if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
+          StudyResult r = runStudy(cfg, reg, ro);
+          text = r.summary.dump(-1);
+        } catch (const std::exception& e) {
+          Json j = Json::object();
+          j["status"] = "failed";
+          j["message"] = e.what();
+          text = j.dump(-1);
+        }
+        std::size_t off = 0;
+        while (off < text.size()) {
+          ssize_t n = ::write(fds[1], text.data() + off, text.size() - off);
+          if (n <= 0) break;
+          off += static_cast<std::size_t>(n);
+        }
+        ::_exit(0);
+      }
+      ::close(fds[1]);
+      ::fcntl(fds[0], F_SETFL, O_NONBLOCK);
+      ch.pid = pid;
+      ch.fd = fds[0];
+      running.push_back(std::move(ch));
+    }
+    if (stop) {
+      for (auto& ch : running) ::kill(ch.pid, SIGTERM);
+      for (auto& ch : running) {
+        ::waitpid(ch.pid, nullptr, 0);
+        ::close(ch.fd);
+      }
+      sum.not_run = static_cast<int>(todo.size() - next + running.size());
+      running.clear();
+      logWarn(fmt::format("matrix '{}': interrupted; {} cells not run (finished cells are saved)", spec.name, sum.not_run));
+      break;
+    }
+    std::vector<pollfd> pfds;
+    for (auto& ch : running) pfds.push_back({ch.fd, POLLIN, 0});
+    ::poll(pfds.data(), pfds.size(), 50);
+    for (std::size_t i = 0; i < running.size();) {
+      Child& ch = running[i];
+      char buf[65536];
+      while (true) {
+        ssize_t n = ::read(ch.fd, buf, sizeof buf);
+        if (n > 0) ch.output.append(buf, static_cast<std::size_t>(n));
+        else break;
+      }
+      const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+      if (spec.cell_budget_s > 0 && !ch.killed_for_time && age > spec.cell_budget_s + grace_s) {
+        ch.killed_for_time = true;
+        ::kill(ch.pid, SIGKILL);
+      }
+      int status = 0;
+      pid_t w = ::waitpid(ch.pid, &status, WNOHANG);
+      if (w == ch.pid) {
+        while (true) {
+          ssize_t n = ::read(ch.fd, buf, sizeof buf);
+          if (n > 0) ch.output.append(buf, static_cast<std::size_t>(n));
+          else break;
+        }
+        ::close(ch.fd);
+        finish(ch, status);
+        running.erase(running.begin() + static_cast<std::ptrdiff_t>(i));
+        continue;
+      }
+      ++i;
+    }
+  }
+  sum.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  return sum;
+}
+
+// ------------------------------------------------------------------ tables and merging
+
+std::vector<std::string> matrixMetrics(const fs::path& path) {
+  check(fs::exists(path), fmt::format("{}: no such database", path.string()));
+  Db db(path);
+  std::vector<std::string> out;
+  Db::Stmt s(&db, "SELECT DISTINCT name FROM metrics ORDER BY name");
+  while (s.step()) out.push_back(s.text(0));
+  return out;
+}
+
+MatrixTable matrixTable(const fs::path& path, const std::vector<std::string>& rows,
+                        const std::vector<std::string>& cols, const std::string& metric) {
+  check(fs::exists(path), fmt::format("{}: no such database (run exid matrix first)", path.string()));
+  Db db(path);
+  // Resolve the metric name.
+  std::vector<std::string> names;
+  {
+    Db::Stmt s(&db, "SELECT DISTINCT name FROM metrics");
+    while (s.step()) names.push_back(s.text(0));
+  }
+  std::string name;
+  for (const auto& n : names)
+    if (n == metric) name = n;
+  if (name.empty())
+    for (const auto& n : names) {
+      auto dot = n.rfind('.');
+      if (dot != std::string::npos && n.substr(dot + 1) == metric) {
+        name = n;
+        break;
+      }
+    }
+  if (name.empty()) {
+    std::string close = closestMatch(metric, names);
+    throw Error(fmt::format("unknown metric '{}'{}; available: {}", metric,
+                            close.empty() ? "" : "; did you mean '" + close + "'?", fmt::join(names, ", ")));
+  }
+  std::set<std::string> axes;
+  {
+    Db::Stmt s(&db, "SELECT DISTINCT axis FROM axes");
+    while (s.step()) axes.insert(s.text(0));
+  }
+  for (const auto& a : rows) check(axes.count(a) > 0, fmt::format("--rows {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
+  for (const auto& a : cols) check(axes.count(a) > 0, fmt::format("--cols {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
+  struct Cell { double sum = 0; int n = 0; int bad = 0; };
+  std::map<std::string, std::map<std::string, Cell>> table;
+  std::vector<std::string> row_keys, col_keys;
+  Db::Stmt runs(&db, "SELECT id, status FROM runs ORDER BY cell");
+  Db::Stmt ax(&db, "SELECT axis, value FROM axes WHERE run_id = ?");
+  Db::Stmt mv(&db, "SELECT real FROM metrics WHERE run_id = ? AND name = ?");
+  while (runs.step()) {
+    const long long id = runs.integer(0);
+    const std::string status = runs.text(1);
+    std::map<std::string, std::string> coord;
+    ax.bind(1, id);
+    while (ax.step()) coord[ax.text(0)] = ax.text(1);
+    ax.reset();
+    auto key = [&](const std::vector<std::string>& keys) {
+      std::string k;
+      for (const auto& a : keys) k += (k.empty() ? "" : ", ") + coord[a];
+      return k.empty() ? std::string("all") : k;
+    };
+    const std::string rk = key(rows), ck = key(cols);
+    if (std::find(row_keys.begin(), row_keys.end(), rk) == row_keys.end()) row_keys.push_back(rk);
+    if (std::find(col_keys.begin(), col_keys.end(), ck) == col_keys.end()) col_keys.push_back(ck);
+    Cell& c = table[rk][ck];
+    double v = NAN;
+    mv.bind(1, id).bind(2, name);
+    if (mv.step()) v = mv.real(0);
+    mv.reset();
+    if (status == "ok" && std::isfinite(v)) {
+      c.sum += v;
+      ++c.n;
+    } else {
+      ++c.bad;
+    }
+  }
+  MatrixTable out;
+  const std::string corner = rows.empty() ? std::string("") : fmt::format("{}", fmt::join(rows, ", "));
+  out.markdown = fmt::format("{} (mean over cells; `n/a`: failed or missing)\n\n| {} \\ {} |", name, corner,
+                             cols.empty() ? std::string("") : fmt::format("{}", fmt::join(cols, ", ")));
+  out.csv = "\"" + corner + "\"";
+  for (const auto& ck : col_keys) {
+    out.markdown += " " + ck + " |";
+    out.csv += ",\"" + ck + "\"";
+  }
+  out.markdown += "\n|---|";
+  for (std::size_t i = 0; i < col_keys.size(); ++i) out.markdown += "---|";
+  out.markdown += "\n";
+  out.csv += "\n";
+  for (const auto& rk : row_keys) {
+    out.markdown += "| " + rk + " |";
+    out.csv += "\"" + rk + "\"";
+    for (const auto& ck : col_keys) {
+      auto it = table[rk].find(ck);
+      std::string cell = "";
+      std::string csv = "";
+      if (it != table[rk].end()) {
+        const Cell& c = it->second;
+        if (c.n > 0) {
+          cell = fmt::format("{:.4g}", c.sum / c.n);
+          csv = fmt::format("{}", c.sum / c.n);
+          if (c.n > 1) cell += fmt::format(" (n={})", c.n);
+          if (c.bad > 0) cell += fmt::format(" [{} failed]", c.bad);
+        } else {
+          cell = "n/a";
+        }
+      }
+      out.markdown += " " + cell + " |";
+      out.csv += "," + csv;
+    }
+    out.markdown += "\n";
+    out.csv += "\n";
+  }
+  return out;
+}
+
+int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sources) {
+  if (dest.has_parent_path()) fs::create_directories(dest.parent_path());
+  Db db(dest);
+  int copied = 0;
+  for (const auto& src : sources) {
+    check(fs::exists(src), fmt::format("{}: no such database", src.string()));
+    Db in(src);
+    Db::Stmt runs(&in, "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, finished, summary FROM runs");
+    while (runs.step()) {
+      const std::string hash = runs.text(3);
+      {
+        Db::Stmt exists(&db, "SELECT 1 FROM runs WHERE hash = ?");
+        exists.bind(1, hash);
+        if (exists.step()) continue;
+      }
+      db.exec("BEGIN IMMEDIATE");
+      try {
+        Db::Stmt(&db, "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, finished, summary) "
+                      "VALUES(?,?,?,?,?,?,?,?,?,?)")
+            .bind(1, runs.text(1)).bind(2, runs.integer(2)).bind(3, hash).bind(4, runs.text(4)).bind(5, runs.text(5))
+            .bind(6, runs.text(6)).bind(7, runs.real(7)).bind(8, runs.text(8)).bind(9, runs.text(9)).bind(10, runs.text(10)).step();
+        const long long id = db.lastId();
+        const long long old = runs.integer(0);
+        Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
+        ax.bind(1, old);
+        while (ax.step()) Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)").bind(1, id).bind(2, ax.text(0)).bind(3, ax.text(1)).step();
+        Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
+        mt.bind(1, old);
+        while (mt.step()) {
+          Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
+          ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
+          if (std::isfinite(mt.real(2))) ins.bind(4, mt.real(2)); else ins.bindNull(4);
+          ins.bind(5, mt.text(3)).step();
+        }
+        Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
+        pr.bind(1, old);
+        while (pr.step()) Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)").bind(1, id).bind(2, pr.text(0)).bind(3, pr.real(1)).bind(4, pr.real(2)).step();
+        Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
+        cf.bind(1, hash);
+        if (cf.step()) Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)").bind(1, hash).bind(2, cf.text(0)).bind(3, cf.text(1)).step();
+        db.exec("COMMIT");
+        ++copied;
+      } catch (...) {
+        db.exec("ROLLBACK");
+        throw;
+      }
+    }
+  }
+  return copied;
+}
+
+}  // namespace exid
