@@ -32,9 +32,10 @@ class Wls : public exid::Estimator {
 
   static std::vector<exid::ParamDecl> params() {
     return {
-        exid::param_int("iterations", 1,
-                        "re-weighting passes (1 = Gautier's OLS -> sigma_e -> WLS; more re-estimate "
-                        "sigma_e from the WLS residuals; all on the compressed data)",
+        exid::param_int("iterations", 2,
+                        "weighting passes: 1 = Gautier's OLS -> sigma_e -> WLS; 2 (default) "
+                        "re-estimates sigma_e from the first WLS residuals, which removes the OLS "
+                        "misfit from sigma_e of precise equations (cheap: on the compressed data)",
                         1.0, 50.0),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
         exid::param_int("max_equations", 1000,

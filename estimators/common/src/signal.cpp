@@ -215,4 +215,27 @@ Rows decimateRows(const Rows& rows, int factor, const Sos& sos) {
   return out;
 }
 
+double decimationVarianceFactor(const Sos& sos, int factor) {
+  check(factor >= 1, "decimationVarianceFactor: factor must be >= 1");
+  // Impulse response of the zero-phase filter, long enough to have decayed.
+  double rmax = 0.0;
+  for (const auto& s : sos.sections) {
+    const double a1 = s[4], a2 = s[5], disc = a1 * a1 - 4.0 * a2;
+    rmax = std::max(rmax, disc < 0 ? std::sqrt(a2) : 0.5 * (std::abs(a1) + std::sqrt(disc)));
+  }
+  const double tau = rmax > 0 && rmax < 1 ? -1.0 / std::log(rmax) : 1.0;
+  const Eigen::Index half = static_cast<Eigen::Index>(std::ceil(60.0 * tau)) + 10 * factor;
+  Eigen::VectorXd x = Eigen::VectorXd::Zero(2 * half + 1);
+  x(half) = 1.0;
+  const Eigen::VectorXd h = filtfilt(sos, x);
+  auto g = [&](Eigen::Index lag) {
+    const Eigen::Index n = h.size() - lag;
+    return n > 0 ? h.head(n).dot(h.tail(n)) : 0.0;
+  };
+  const double g0 = g(0);
+  double sum = g0;
+  for (Eigen::Index j = 1; j * factor < h.size(); ++j) sum += 2.0 * g(j * factor);
+  return sum / g0;
+}
+
 }  // namespace exid::est

@@ -174,4 +174,11 @@ Eigen::MatrixXd centralSecondDerivative(const Eigen::VectorXd& t, const Eigen::M
 /// kept. Equations keep their identity; output rows are sample-major.
 Rows decimateRows(const Rows& rows, int factor, const Sos& sos);
 
+/// White noise of variance s^2 passed through filtfilt(sos) and kept one sample in `factor` is
+/// correlated; its long-run variance (sum of its autocovariances, what the precision of a
+/// least-squares fit with slowly varying regressors depends on) is kappa times its marginal
+/// variance (what the residuals show). Returns kappa = sum_j g(j factor) / g(0), g the
+/// autocorrelation of the filtfilt impulse response.
+double decimationVarianceFactor(const Sos& sos, int factor);
+
 }  // namespace exid::est
