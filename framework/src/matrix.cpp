@@ -456,6 +456,7 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
         try {
           StudyConfig cfg = cell->config;
           cfg.budget_s = spec.cell_budget_s;
+          cfg.report.plots = false;  // a cell's plots would dominate the matrix's overhead
           RunOptions ro;
           if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
           StudyResult r = runStudy(cfg, reg, ro);

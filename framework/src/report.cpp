@@ -3,7 +3,10 @@
 #include <fmt/format.h>
 
 #include <Eigen/SVD>
+#include <algorithm>
 #include <cmath>
+#include <fstream>
+#include <sstream>
 
 #include "exid/io.hpp"
 #include "exid/runner.hpp"
@@ -24,10 +27,48 @@ void Report::model(const ObservationModel& m) {
   sections_.push_back(s);
 }
 
+namespace {
+std::vector<double> vec(const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); }
+}  // namespace
+
 void Report::excitation(const Samples& initial, const Samples& optimal, const OptimizerResult& r,
                         const ObservationModel& m) {
-  (void)initial;
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(m.design(optimal));
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd0(m.design(initial));
+  const std::size_t sec = sections_.size();
+  for (int j = 0; j < optimal.dof(); ++j) {
+    PlotSpec p;
+    p.name = fmt::format("trajectory_joint{}", j + 1);
+    p.title = fmt::format("Starting and optimal trajectories, joint {}", j + 1);
+    p.xlabel = "t [s]";
+    p.ylabel = fmt::format("q{} [rad or m]", j + 1);
+    p.series.push_back({"starting", vec(initial.t), vec(initial.q.col(j)), "lines", {}, {}});
+    p.series.push_back({"optimal", vec(optimal.t), vec(optimal.q.col(j)), "lines", {}, {}});
+    plots_.emplace_back(sec, p);
+  }
+  if (!r.history_value.empty()) {
+    PlotSpec p;
+    p.name = "criterion_history";
+    p.title = "Criterion during the optimisation";
+    p.xlabel = "wall time [s]";
+    p.ylabel = "criterion";
+    p.log_y = true;
+    p.series.push_back({"criterion", r.history_t_s, r.history_value, "linespoints", {}, {}});
+    plots_.emplace_back(sec, p);
+  }
+  {
+    PlotSpec p;
+    p.name = "singular_values";
+    p.title = "Singular values of the base regressor W";
+    p.xlabel = "index";
+    p.ylabel = "sigma";
+    p.log_y = true;
+    std::vector<double> idx;
+    for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i) idx.push_back(static_cast<double>(i + 1));
+    p.series.push_back({"starting", idx, vec(svd0.singularValues()), "linespoints", {}, {}});
+    p.series.push_back({"optimal", idx, vec(svd.singularValues()), "linespoints", {}, {}});
+    plots_.emplace_back(sec, p);
+  }
   std::string s = fmt::format(
       "## Excitation\n\nCriterion `{}`: {:.6g} -> {:.6g} in {} iterations, {} evaluations, {:.3g} s "
       "({}).\nLargest constraint violation at the optimum: {:.3g}.\n\nSingular values of the base "
@@ -74,13 +115,72 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
     h.data.middleCols(1, e.value.size()) = e.history_value;
     h.data.middleCols(1 + e.value.size(), e.value.size()) = e.history_pdiag;
     files_.emplace_back("estimate_history.csv", toCsv(h));
-    s += "\nEstimate history (recursive): `estimate_history.csv`.\n";
+    s += "\nEstimate history (recursive): `estimate_history.csv`; bands are +-2 sigma, sigma_i(t) = "
+         "sigma * sqrt(P_ii(t)).\n";
+    const Eigen::Index shown = std::min<Eigen::Index>(e.value.size(), 8);
+    for (Eigen::Index i = 0; i < shown; ++i) {
+      PlotSpec p;
+      p.name = fmt::format("estimate_{}", i + 1);
+      p.title = fmt::format("Estimate of {} against time", e.names[static_cast<std::size_t>(i)]);
+      p.xlabel = "t [s]";
+      p.ylabel = e.names[static_cast<std::size_t>(i)];
+      std::vector<double> lo, hi;
+      for (Eigen::Index k = 0; k < e.history_t.size(); ++k) {
+        const double sd = e.sigma * std::sqrt(std::max(0.0, e.history_pdiag(k, i)));
+        lo.push_back(e.history_value(k, i) - 2 * sd);
+        hi.push_back(e.history_value(k, i) + 2 * sd);
+      }
+      p.series.push_back({"+-2 sigma", vec(e.history_t), {}, "band", lo, hi});
+      p.series.push_back({"estimate", vec(e.history_t), vec(e.history_value.col(i)), "lines", {}, {}});
+      p.series.push_back({simulated ? "true" : "nominal", {e.history_t(0), e.history_t(e.history_t.size() - 1)},
+                          {nominal(i), nominal(i)}, "lines", {}, {}});
+      plots_.emplace_back(sections_.size(), p);
+    }
+    if (e.value.size() > shown)
+      s += fmt::format("\n(Plots of the first {} of {} parameters; all are in the CSV.)\n", shown, e.value.size());
   }
   sections_.push_back(s);
 }
 
 void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& v) {
-  (void)predicted;
+  const std::size_t sec = sections_.size();
+  for (int eq = 0; eq < rows.numEquations; ++eq) {
+    PlotSpec p;
+    p.name = fmt::format("validation_equation{}", eq + 1);
+    p.title = fmt::format("Validation: measured and predicted, equation {}", eq + 1);
+    p.xlabel = "sample";
+    p.ylabel = "y (torque [N m], wrench or energy)";
+    std::vector<double> x, ym, yp;
+    for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
+      const int e = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
+      if (e != eq) continue;
+      x.push_back(static_cast<double>(x.size()));
+      ym.push_back(rows.y(r));
+      yp.push_back(predicted(r));
+    }
+    p.series.push_back({"measured", x, ym, "lines", {}, {}});
+    p.series.push_back({"predicted", x, yp, "lines", {}, {}});
+    plots_.emplace_back(sec, p);
+  }
+  {
+    Eigen::VectorXd res = rows.y - predicted;
+    const double lo = res.minCoeff(), hi = res.maxCoeff();
+    const int bins = 40;
+    const double w = hi > lo ? (hi - lo) / bins : 1.0;
+    std::vector<double> centers(bins), counts(bins, 0.0);
+    for (int b = 0; b < bins; ++b) centers[static_cast<std::size_t>(b)] = lo + (b + 0.5) * w;
+    for (Eigen::Index r = 0; r < res.size(); ++r) {
+      int b = static_cast<int>((res(r) - lo) / w);
+      counts[static_cast<std::size_t>(std::clamp(b, 0, bins - 1))] += 1;
+    }
+    PlotSpec p;
+    p.name = "residual_histogram";
+    p.title = "Validation residuals y - y_hat";
+    p.xlabel = "residual";
+    p.ylabel = "count";
+    p.series.push_back({"residuals", centers, counts, "boxes", {}, {}});
+    plots_.emplace_back(sec, p);
+  }
   std::string s = fmt::format("## Validation\n\n{} rows; relative error ||y - y_hat|| / ||y|| = {:.4g}.\n\n"
                               "| equation | RMS error | relative |\n|---|---|---|\n",
                               rows.y.size(), v.find("relative_error")->asDouble());
@@ -92,16 +192,136 @@ void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted, cons
   sections_.push_back(s);
 }
 
-void Report::write(const Json& summary) {
-  if (dir_.empty()) return;
+namespace {
+
+std::string htmlEscape(const std::string& s) {
+  std::string o;
+  for (char c : s) {
+    if (c == '<') o += "&lt;";
+    else if (c == '>') o += "&gt;";
+    else if (c == '&') o += "&amp;";
+    else o += c;
+  }
+  return o;
+}
+
+std::string inlineCode(const std::string& s) {
+  std::string o, esc = htmlEscape(s);
+  bool in = false;
+  for (char c : esc) {
+    if (c == '`') {
+      o += in ? "</code>" : "<code>";
+      in = !in;
+    } else {
+      o += c;
+    }
+  }
+  if (in) o += "</code>";
+  return o;
+}
+
+// Markdown (the subset the report uses) to self-contained HTML; images become inline SVG.
+std::string toHtml(const std::string& md, const std::filesystem::path& dir, const std::string& title) {
+  std::string h = "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + htmlEscape(title) +
+                  "</title>\n<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;padding:0 1em}"
+                  "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%}"
+                  "pre{background:#f4f4f4;padding:.5em;overflow:auto}svg{max-width:100%;height:auto}</style>"
+                  "</head><body>\n";
+  std::istringstream in(md);
+  std::string line;
+  bool table = false, pre = false, header_row = false;
+  while (std::getline(in, line)) {
+    if (line.rfind("```", 0) == 0) {
+      h += pre ? "</pre>\n" : "<pre>";
+      pre = !pre;
+      continue;
+    }
+    if (pre) {
+      h += htmlEscape(line) + "\n";
+      continue;
+    }
+    if (!line.empty() && line[0] == '|') {
+      if (!table) {
+        h += "<table>\n";
+        table = true;
+        header_row = true;
+      }
+      if (line.find("|---") == 0) continue;
+      std::vector<std::string> cells;
+      std::string cur;
+      for (std::size_t i = 1; i < line.size(); ++i) {
+        if (line[i] == '|' && line[i - 1] != '\\') {
+          cells.push_back(cur);
+          cur.clear();
+        } else {
+          cur += line[i];
+        }
+      }
+      h += "<tr>";
+      for (auto& c : cells) h += (header_row ? "<th>" : "<td>") + inlineCode(c) + (header_row ? "</th>" : "</td>");
+      h += "</tr>\n";
+      header_row = false;
+      continue;
+    }
+    if (table) {
+      h += "</table>\n";
+      table = false;
+    }
+    if (line.rfind("![", 0) == 0) {
+      auto a = line.find("](");
+      auto b = line.rfind(')');
+      std::string path = line.substr(a + 2, b - a - 2);
+      std::ifstream svg(dir / path);
+      std::string content((std::istreambuf_iterator<char>(svg)), std::istreambuf_iterator<char>());
+      auto start = content.find("<svg");
+      h += start == std::string::npos ? "<p>(missing picture " + htmlEscape(path) + ")</p>\n"
+                                      : "<figure>" + content.substr(start) + "</figure>\n";
+      continue;
+    }
+    if (line.rfind("### ", 0) == 0) h += "<h3>" + inlineCode(line.substr(4)) + "</h3>\n";
+    else if (line.rfind("## ", 0) == 0) h += "<h2>" + inlineCode(line.substr(3)) + "</h2>\n";
+    else if (line.rfind("# ", 0) == 0) h += "<h1>" + inlineCode(line.substr(2)) + "</h1>\n";
+    else if (line.rfind("- ", 0) == 0) h += "<li>" + inlineCode(line.substr(2)) + "</li>\n";
+    else if (!line.empty()) h += "<p>" + inlineCode(line) + "</p>\n";
+  }
+  if (table) h += "</table>\n";
+  if (pre) h += "</pre>\n";
+  return h + "</body></html>\n";
+}
+
+}  // namespace
+
+std::string Report::write(const Json& summary) {
+  if (dir_.empty()) return "";
   for (const auto& [name, text] : files_) writeFileAtomic(dir_ / name, text);
-  std::string md = fmt::format("# {}\n\n", cfg_.report.title.empty() ? "exid study: " + cfg_.name : cfg_.report.title);
+  // Plots, grouped under their sections.
+  std::vector<std::string> plot_md(sections_.size() + 1);
+  std::vector<std::string> missing;
+  if (cfg_.report.plots) {
+    for (const auto& [sec, spec] : plots_) {
+      PlotOutcome o = drawPlot(spec, dir_);
+      if (!o.svg.empty()) plot_md[sec] += fmt::format("\n![{}]({})\n", spec.title, o.svg);
+      else missing.push_back(fmt::format("`{}` ({}; data in `{}`)", spec.name, o.missing_why, o.csv));
+    }
+  } else if (!plots_.empty()) {
+    missing.push_back(fmt::format("all {} plots (report.params.plots is false)", plots_.size()));
+  }
+  const std::string title = cfg_.report.title.empty() ? "exid study: " + cfg_.name : cfg_.report.title;
+  std::string md = fmt::format("# {}\n\n", title);
   md += fmt::format("Configuration hash `{}`; resolved study in `study.resolved.yaml`; machine-readable "
                     "results in `summary.json`.\n\n",
                     cfg_.hash());
   md += briefTable(summary) + "\n";
-  for (const auto& s : sections_) md += s + "\n";
+  for (std::size_t i = 0; i < sections_.size(); ++i) md += sections_[i] + plot_md[i] + "\n";
+  std::string missing_text;
+  if (!missing.empty()) {
+    md += "## Missing plots\n\n";
+    for (const auto& m : missing) md += "- " + m + "\n";
+    missing_text = fmt::format("{} plot(s) not drawn: {}", missing.size(), missing.front());
+  }
   writeFileAtomic(dir_ / "report.md", md);
+  writeFileAtomic(dir_ / "report.html", toHtml(md, dir_, title));
+  return missing_text;
 }
 
 }  // namespace exid

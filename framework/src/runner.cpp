@@ -475,8 +475,9 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   if (write) {
     try {
       if (res.ok) {
-        report.write(S);
+        const std::string missing = report.write(S);
         S["report"] = (opt.out_dir / "report.md").string();
+        if (!missing.empty()) S["report_missing_plots"] = missing;
       }
       writeFileAtomic(opt.out_dir / "summary.json", S.dump(2) + "\n");
     } catch (const std::exception& e) {

@@ -8,6 +8,7 @@
 
 #include "exid/config.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/plot.hpp"
 
 namespace exid {
 
@@ -19,13 +20,15 @@ class Report {
                   const ObservationModel& m);
   void identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated);
   void validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& summary);
-  /// Writes report.md and the tables (atomically).
-  void write(const Json& summary);
+  /// Writes report.md, report.html, the plots (gnuplot, SVG + PNG, data as CSV) and the
+  /// tables, each atomically. Returns what the report says about missing plots ("" if none).
+  std::string write(const Json& summary);
 
  private:
   const StudyConfig& cfg_;
   std::filesystem::path dir_;
-  std::vector<std::string> sections_;
+  std::vector<std::string> sections_;  // markdown; "@@PLOTS:<section index>@@" placeholders
+  std::vector<std::pair<std::size_t, PlotSpec>> plots_;  // section index, plot
   std::vector<std::pair<std::string, std::string>> files_;  // name, content
 };
 
