@@ -153,3 +153,30 @@ TEST(Cli, SimulateThenIdentifyReadsTheCsvBack) {
   EXPECT_LT(s.find("identification")->find("residual_rms")->asDouble(), 1e-9);
   fs::remove_all(dir);
 }
+
+TEST(Cli, ReportHasPlotsOrSaysWhyNot) {
+  fs::path dir = tempDir("report");
+  std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\n"
+                                     "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}\n"
+                                     "experiment: {type: simulate, params: {duration_s: 4, noise_tau_Nm: 0.01, drive_terms: false}}\n"
+                                     "estimator: {type: rls, params: {history_stride: 10}}\n"
+                                     "validation: {type: simulate, params: {duration_s: 2, drive_terms: false}}\n";
+  CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "with").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  for (const char* f : {"plots/estimate_1.svg", "plots/estimate_1.png", "plots/estimate_1.csv",
+                        "plots/validation_equation1.svg", "plots/residual_histogram.png", "estimate_history.csv"})
+    EXPECT_TRUE(fs::exists(dir / "with" / f)) << f;
+  const std::string html = slurp(dir / "with" / "report.html");
+  EXPECT_NE(html.find("<svg"), std::string::npos);  // self-contained: pictures inline
+  EXPECT_EQ(slurp(dir / "with" / "report.md").find("Missing plots"), std::string::npos);
+  // Without gnuplot the study still succeeds and the report says which plots are missing and why.
+  ASSERT_EQ(::setenv("EXID_GNUPLOT", "none", 1), 0);
+  r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "without").string());
+  ::unsetenv("EXID_GNUPLOT");
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string md = slurp(dir / "without" / "report.md");
+  EXPECT_NE(md.find("## Missing plots"), std::string::npos) << md;
+  EXPECT_NE(md.find("gnuplot is not installed"), std::string::npos) << md;
+  EXPECT_TRUE(fs::exists(dir / "without" / "plots" / "estimate_1.csv"));  // the data is still there
+  fs::remove_all(dir);
+}
