@@ -4,11 +4,13 @@
 //   tau_j = (ZZ1 + Ia1) qdd_j + g (MX1 cos q_j - MY1 sin q_j) + Fv1 qd_j + Fc1 sign(qd_j) + OFFj
 // ZZ1 and Ia1 share the column qdd_j, so the base parameters regroup them (ZZ1R = ZZ1 + Ia1):
 // the names and expressions must come from model.base(). Rows are sample-major (k * n + j),
-// equation j. Optional extra random columns (`extra`) make p larger for the benchmark.
+// equation j. Optional extra pseudo-random columns (`extra`) make p larger for the benchmark.
 #pragma once
 
 #include <Eigen/Core>
 #include <cmath>
+#include <cstdint>
+#include <cstring>
 #include <memory>
 #include <random>
 #include <string>
@@ -39,8 +41,7 @@ inline std::shared_ptr<const exid::RobotModel> makeRobot(int n) {
 class PendulumModel : public exid::ObservationModel {
  public:
   static constexpr double kG = 9.81;
-  /// n joints; `extra` additional columns sin((c+2) q_j) * qd_j (c = 0..extra-1) with
-  /// parameters X1..Xextra.
+  /// n joints; `extra` additional pseudo-random columns (hashUnit) with parameters X1..Xextra.
   explicit PendulumModel(int n = 1, int extra = 0) : n_(n), extra_(extra) { setPluginName("test_pendulum"); }
 
   std::vector<std::string> fullNames() const override {
@@ -68,7 +69,22 @@ class PendulumModel : public exid::ObservationModel {
     w(4) = qd > 0 ? 1.0 : (qd < 0 ? -1.0 : 0.0);
     w(5) = qdd;
     w(6 + j) = 1.0;
-    for (int c = 0; c < extra_; ++c) w(6 + n_ + c) = std::sin((c + 2) * q) * qd;
+    for (int c = 0; c < extra_; ++c) w(6 + n_ + c) = hashUnit(c, q, qd, qdd);
+  }
+
+  /// A deterministic pseudo-random number in [-1, 1) from (c, q, qd, qdd): columns of a random
+  /// linear system (independent, unlike smooth functions of q on a periodic path).
+  static double hashUnit(int c, double q, double qd, double qdd) {
+    std::uint64_t h = 0x9e3779b97f4a7c15ull * static_cast<std::uint64_t>(c + 1);
+    for (double v : {q, qd, qdd}) {
+      std::uint64_t b;
+      std::memcpy(&b, &v, sizeof b);
+      h ^= b + 0x9e3779b97f4a7c15ull + (h << 6) + (h >> 2);
+      h = (h ^ (h >> 30)) * 0xbf58476d1ce4e5b9ull;
+      h = (h ^ (h >> 27)) * 0x94d049bb133111ebull;
+      h ^= h >> 31;
+    }
+    return static_cast<double>(h >> 11) * 0x1.0p-52 - 1.0;
   }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
