@@ -4,7 +4,7 @@ set -euo pipefail
 pkgs=(build-essential cmake pkg-config
       libeigen3-dev libboost-dev libboost-filesystem-dev libnlopt-cxx-dev libsundials-dev
       libfmt-dev libyaml-cpp-dev liburdfdom-dev libcli11-dev libgtest-dev libgmock-dev
-      libbenchmark-dev libsqlite3-dev gnuplot-nox)
+      libbenchmark-dev libsqlite3-dev gnuplot-nox libopenmpi-dev openmpi-bin)
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -264,6 +264,33 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args, con
   MatrixSpec spec = loadMatrix(args[0], reg);
   MatrixOptions opt;
   opt.out_dir = out_arg.empty() ? fs::path("out") / spec.name : fs::path(out_arg);
+  if (underMpiLauncher()) {
+    if (!mpiAvailable())
+      throw Error("exid runs under an MPI launcher but was built without MPI (install libopenmpi-dev and rebuild), "
+                  "or run shards with --shard i/N");
+    if (!shard.empty()) throw Error("--shard and MPI both split the matrix; use one of them");
+    MpiSession mpi;
+    opt.jobs = std::max(1, jobs);
+    opt.retry_failed = retry;
+    opt.cancelled = cancelled;
+    opt.shard_index = mpi.rank;
+    opt.shard_count = mpi.size;
+    opt.database = fmt::format("shard-{}-of-{}.sqlite", mpi.rank, mpi.size);
+    MatrixRunSummary s = runMatrix(spec, reg, opt);
+    const int ok = mpi.sumInt(s.ok), failed = mpi.sumInt(s.failed), timeout = mpi.sumInt(s.timeout),
+              skipped = mpi.sumInt(s.skipped), not_run = mpi.sumInt(s.not_run), total = mpi.sumInt(s.total);
+    mpi.barrier();  // every shard database is complete
+    if (mpi.rank == 0) {
+      std::vector<fs::path> shards;
+      for (int r = 0; r < mpi.size; ++r) shards.push_back(opt.out_dir / fmt::format("shard-{}-of-{}.sqlite", r, mpi.size));
+      const int merged = mergeMatrixDatabases(opt.out_dir / "results.sqlite", shards);
+      std::cout << fmt::format("matrix {} on {} MPI ranks: {} cells: {} ok, {} failed, {} timeout, {} skipped, {} not run; "
+                               "{} new runs gathered into {}/results.sqlite\n",
+                               spec.name, mpi.size, total, ok, failed, timeout, skipped, not_run, merged,
+                               opt.out_dir.string());
+    }
+    return not_run > 0 ? 130 : 0;
+  }
   opt.jobs = std::max(1, jobs);
   opt.retry_failed = retry;
   opt.cancelled = cancelled;

@@ -14,6 +14,21 @@ struct Commands {
 
 Commands addCommands(CLI::App& app, Registry& registry);
 
+/// MPI (optional at build time): a session is active when the program was started by an MPI
+/// launcher and exid was built with MPI.
+bool underMpiLauncher();
+bool mpiAvailable();
+struct MpiSession {
+  MpiSession();
+  ~MpiSession();
+  MpiSession(const MpiSession&) = delete;
+  MpiSession& operator=(const MpiSession&) = delete;
+  void barrier();
+  int sumInt(int v);
+  int rank = 0, size = 1;
+  bool active = false;
+};
+
 /// True once SIGINT or SIGTERM was received (set up by main).
 std::function<bool()> cancelled();
 
