@@ -1,9 +1,19 @@
 #!/usr/bin/env bash
 # Install, build and run the whole test suite (ctest). Extra arguments go to ctest
-# (e.g. -L unit, -LE slow).
+# (e.g. -L unit, -LE slow). Afterwards the CI matrix's tables are printed when it ran.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${EXID_BUILD_DIR:-$root/build}
 bash "$root/scripts/build.sh" -DEXID_BUILD_TESTS=ON
 cd "$build"
-ctest --output-on-failure -j "${EXID_JOBS:-$(nproc)}" --timeout 900 "$@"
+status=0
+ctest --output-on-failure -j "${EXID_JOBS:-$(nproc)}" --timeout 900 "$@" || status=$?
+if [ -f "$build/ci_matrix/results.sqlite" ]; then
+  echo
+  echo "== CI matrix (examples/matrix/ci.yaml) =="
+  for metric in param_rel_err validation_rel_err wall_s; do
+    "$build/bin/exid" matrix table "$build/ci_matrix" --rows robot,model --cols estimator --metric "$metric" || true
+    echo
+  done
+fi
+exit $status

@@ -48,6 +48,7 @@ struct Ctx {
   Tracker* tr;
   double tighten;
   int slots = 0;  // per group of K samples: the `slots` largest g values (0: every sample)
+  const std::vector<int>* rows = nullptr;  // working set: only these rows of g
   long evals = 0;
 };
 
@@ -81,6 +82,15 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
   Eigen::VectorXd zz = z, g;
   c->lim->eval(zz, &g);
   using RM = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  if (c->rows) {
+    const Eigen::MatrixXd* J = grad ? &c->lim->jacobian(zz) : nullptr;
+    for (unsigned i = 0; i < m; ++i) {
+      const int row = (*c->rows)[i];
+      result[i] = g(row) + c->tighten;
+      if (grad) Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(i) * n, n) = J->row(row);
+    }
+    return;
+  }
   if (static_cast<int>(m) == c->lim->size()) {
     Eigen::Map<Eigen::VectorXd>(result, m) = g.array() + c->tighten;
     if (grad) Eigen::Map<RM>(grad, m, n) = c->lim->jacobian(zz);
@@ -135,6 +145,13 @@ class NloptOptimizer final : public exid::Optimizer {
     p.push_back(exid::param_double("constraint_tightening", 1e-7, "rad",
                                    "the optimiser sees g(z) + this <= 0, so that its nearly-feasible "
                                    "iterates are feasible", 0.0));
+    p.push_back(exid::param_string("constraint_mode", std::string("all"),
+                                   "how g reaches NLopt: all — every sample; slots — per limit and "
+                                   "joint the constraint_slots largest values; working_set — rows "
+                                   "within working_set_margin of their limit, grown and re-run "
+                                   "while the result violates others (the returned point is always "
+                                   "checked at every sample)", {"all", "slots", "working_set"}));
+    p.push_back(exid::param_double("working_set_margin", 0.3, "rad", "working_set: rows with g > -this join", 0.0));
     p.push_back(exid::param_int("constraint_slots", 10,
                                    "NLopt sees, per limit and joint, the this-many largest g over the "
                                    "samples (order statistics; the largest is the exact max) instead "
@@ -151,7 +168,8 @@ class NloptOptimizer final : public exid::Optimizer {
         seed_(static_cast<std::uint64_t>(p.getInt("seed"))), xtol_(p.getDouble("xtol_rel")),
         ftol_(p.getDouble("ftol_rel")), bound_scale_(p.getDouble("bound_scale")),
         tighten_(p.getDouble("constraint_tightening")),
-        slots_(static_cast<int>(p.getInt("constraint_slots"))),
+        cmode_(p.getString("constraint_mode")), ws_margin_(p.getDouble("working_set_margin")),
+        slots_(p.getString("constraint_mode") == "slots" ? static_cast<int>(p.getInt("constraint_slots")) : 0),
         start_evals_(p.getInt("start_evaluations")) {
     alg_ = algorithmFromName(alg_name_, "algorithm");
     local_ = algorithmFromName(local_name_, "local_algorithm");
@@ -198,8 +216,50 @@ class NloptOptimizer final : public exid::Optimizer {
   // One NLopt run from x0 with a share of the remaining budget. Returns a short result text.
   std::string run(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
                   const std::string& name, const Eigen::VectorXd& x0, double share, int* iterations) {
+    if (cmode_ != "working_set" || lim.size() == 0) return runOnce(problem, lim, tr, alg, name, x0, share, iterations, nullptr, nullptr);
+    // Working set: NLopt sees the rows with g > -working_set_margin at the start of a round
+    // (and every row seen so far); a round that ends infeasible adds the rows then near or
+    // above their limit and runs again from there.
+    std::vector<int> rows;
+    std::vector<bool> in(static_cast<std::size_t>(lim.size()), false);
+    Eigen::VectorXd x = x0, g;
+    std::string r;
+    const double t_end = tr.elapsed() + (std::isfinite(tr.remaining()) ? tr.remaining() * share : HUGE_VAL);
+    for (int round = 0; round < 30; ++round) {
+      lim.eval(x, &g);
+      const std::size_t before = rows.size();
+      for (int i = 0; i < lim.size(); ++i)
+        if (!in[static_cast<std::size_t>(i)] && g(i) > -ws_margin_) { in[static_cast<std::size_t>(i)] = true; rows.push_back(i); }
+      if (rows.empty()) {  // nothing near: the maximum of every group
+        const int K = lim.samples();
+        for (int grp = 0; grp < lim.groups(); ++grp) {
+          Eigen::Index k;
+          g.segment(static_cast<Eigen::Index>(grp) * K, K).maxCoeff(&k);
+          rows.push_back(grp * K + static_cast<int>(k));
+          in[static_cast<std::size_t>(rows.back())] = true;
+        }
+      }
+      if (round > 0 && rows.size() == before) break;  // feasible, or nothing new to add
+      const double left = t_end - tr.elapsed();
+      if (left <= 0 || tr.shouldStop()) break;
+      const double sh = std::isfinite(left) && std::isfinite(tr.remaining()) ? std::min(1.0, left / std::max(1e-9, tr.remaining())) : share;
+      r = runOnce(problem, lim, tr, alg, name, x, sh, iterations, &rows, &x);
+      if (lim.maxViolation(x) <= budget_.feasibility_tol && r != "roundoff_limited") {
+        lim.eval(x, &g);
+        bool near_new = false;
+        for (int i = 0; i < lim.size() && !near_new; ++i) near_new = !in[static_cast<std::size_t>(i)] && g(i) > -0.1 * ws_margin_;
+        if (!near_new) break;
+      }
+    }
+    return r + fmt::format(" (working set {} of {} rows)", rows.size(), lim.size());
+  }
+
+  std::string runOnce(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
+                      const std::string& name, const Eigen::VectorXd& x0, double share, int* iterations,
+                      const std::vector<int>* rows, Eigen::VectorXd* xout) {
     const unsigned n = static_cast<unsigned>(x0.size());
     Ctx c{&problem, &lim, &tr, tighten_, slots_};
+    c.rows = rows;
     Eigen::VectorXd lo, hi;
     if (isGlobal(name)) exid::optim::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
     else problem.bounds(&lo, &hi);
@@ -220,7 +280,7 @@ class NloptOptimizer final : public exid::Optimizer {
     }
     nlopt::opt* top = &main;
     nlopt::opt wrapper;
-    const int m = nloptConstraints(lim, slots_);
+    const int m = rows ? static_cast<int>(rows->size()) : nloptConstraints(lim, slots_);
     std::vector<double> tol(static_cast<std::size_t>(m), 0.0);
     if (m > 0) {
       try {
@@ -261,6 +321,7 @@ class NloptOptimizer final : public exid::Optimizer {
       r = std::string("failure: ") + e.what();
     }
     *iterations += static_cast<int>(c.evals);
+    if (xout) *xout = Eigen::Map<const Eigen::VectorXd>(x.data(), n);
     return r;
   }
 
@@ -273,6 +334,8 @@ class NloptOptimizer final : public exid::Optimizer {
   double perturb_;
   std::uint64_t seed_;
   double xtol_, ftol_, bound_scale_, tighten_;
+  std::string cmode_;
+  double ws_margin_;
   int slots_;
   long start_evals_;
 };

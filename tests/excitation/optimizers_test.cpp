@@ -1,0 +1,221 @@
+// Excitation problem gradient (through the real differential model and every criterion) against
+// finite differences; the optimisers reduce cond and return feasible points.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <cstdlib>
+#include <random>
+
+#include "exid/error.hpp"
+#include "exid/excitation.hpp"
+#include "exid/interfaces.hpp"
+#include "exid_test.hpp"
+
+namespace {
+
+struct XSetup {
+  std::shared_ptr<const exid::RobotModel> robot;
+  std::shared_ptr<exid::Trajectory> traj;
+  std::shared_ptr<exid::ObservationModel> model;
+  std::shared_ptr<exid::Criterion> crit;
+  std::unique_ptr<exid::ExcitationProblem> problem;
+};
+
+XSetup make(const std::string& robot, const std::string& traj, const std::string& tparams,
+           const std::string& crit = "cond", const std::string& mparams = "{coulomb: false}") {
+  XSetup s;
+  exid::RunContext ctx;
+  ctx.seed = 11;
+  s.robot = exid_test::robot(robot);
+  s.model = exid_test::create<exid::ObservationModel>("differential", mparams);
+  s.model->bind(s.robot, ctx);
+  s.traj = exid_test::create<exid::Trajectory>(traj, tparams);
+  s.traj->bind(s.robot, ctx);
+  s.crit = exid_test::create<exid::Criterion>(crit, "{}");
+  exid::ExcitationOptions xo;
+  xo.position_margin = s.traj->positionMargin();
+  xo.velocity_limits = s.traj->velocityLimits();
+  xo.acceleration_limits = s.traj->accelerationLimits();
+  xo.scale_columns = s.crit->scaleColumns();
+  s.problem = exid::makeExcitationProblem(s.traj, s.model, s.crit, xo);
+  return s;
+}
+
+// Largest violation of the robot's limits (and the caps) recomputed from the samples.
+double violation(const exid::Samples& s, const exid::RobotModel& r, double margin, bool vel, bool acc,
+                 double vcap = 0) {
+  double v = 0;
+  for (int j = 0; j < s.dof(); ++j) {
+    const auto& L = r.limits[static_cast<std::size_t>(j)];
+    v = std::max(v, s.q.col(j).maxCoeff() - (L.q_max - margin));
+    v = std::max(v, (L.q_min + margin) - s.q.col(j).minCoeff());
+    if (vel && L.qd_max < 1e299) v = std::max(v, s.qd.col(j).cwiseAbs().maxCoeff() - L.qd_max);
+    if (acc && L.qdd_max < 1e299) v = std::max(v, s.qdd.col(j).cwiseAbs().maxCoeff() - L.qdd_max);
+    if (vcap > 0) v = std::max(v, s.qd.col(j).cwiseAbs().maxCoeff() - vcap);
+  }
+  return v;
+}
+
+struct GradCase {
+  std::string robot, traj, tparams, crit;
+};
+
+class GradientTest : public ::testing::TestWithParam<GradCase> {};
+
+TEST_P(GradientTest, MatchesCentralDifferences) {
+  const auto& c = GetParam();
+  XSetup s = make(c.robot, c.traj, c.tparams, c.crit);
+  const Eigen::VectorXd z = s.problem->initial();
+  Eigen::VectorXd g;
+  const double J = s.problem->value(z, &g);
+  ASSERT_TRUE(std::isfinite(J));
+  ASSERT_EQ(g.size(), z.size());
+  const double hstep = std::getenv("EXID_FD_H") ? std::atof(std::getenv("EXID_FD_H")) : 1e-5;
+  // pointwise starts are badly conditioned (cond(M) ~ 1e8+): central differences are accurate to
+  // ~1e-4 only there (error minimal near h = 1e-5, roundoff below, truncation above); the
+  // pointwise VJP itself is checked to 1e-10 in trajectories_test.
+  const double rtol = c.traj == "pointwise" ? 2e-3 : 1e-5;
+  // random directions and a few coordinates
+  std::mt19937_64 rng(2);
+  std::normal_distribution<double> N(0.0, 1.0);
+  for (int trial = 0; trial < 4; ++trial) {
+    Eigen::VectorXd d(z.size());
+    for (Eigen::Index i = 0; i < d.size(); ++i) d(i) = N(rng);
+    d /= d.norm();
+    const double h = hstep * std::max(1.0, z.cwiseAbs().maxCoeff());
+    const double fd = (s.problem->value(z + h * d, nullptr) - s.problem->value(z - h * d, nullptr)) / (2 * h);
+    EXPECT_NEAR(g.dot(d), fd, rtol * std::max(std::abs(fd), 1e-3 * g.norm())) << c.crit << " direction " << trial;
+  }
+  for (Eigen::Index i : {Eigen::Index(0), z.size() / 2, z.size() - 1}) {
+    const double h = hstep * std::max(1.0, std::abs(z(i)));
+    Eigen::VectorXd zp = z, zm = z;
+    zp(i) += h;
+    zm(i) -= h;
+    const double fd = (s.problem->value(zp, nullptr) - s.problem->value(zm, nullptr)) / (2 * h);
+    EXPECT_NEAR(g(i), fd, rtol * std::max(std::abs(fd), 1e-3 * g.cwiseAbs().maxCoeff())) << c.crit << " variable " << i;
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(
+    All, GradientTest,
+    ::testing::Values(
+        GradCase{"planar2r", "fourier", "{period_s: 4, harmonics: 3}", "cond"},
+        GradCase{"planar2r", "fourier", "{period_s: 4, harmonics: 3}", "min_sv"},
+        GradCase{"planar2r", "fourier", "{period_s: 4, harmonics: 3}", "frobenius_cond"},
+        GradCase{"planar2r", "fourier", "{period_s: 4, harmonics: 3}", "log_det"},
+        GradCase{"planar2r", "pointwise", "{duration_s: 4, sample_period_s: 0.05}", "cond"},
+        GradCase{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 5}", "log_det"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "cond"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "min_sv"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "frobenius_cond"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "log_det"},
+        GradCase{"puma560", "pointwise", "{duration_s: 4, sample_period_s: 0.05, init_frequency_hz: 0.25}", "cond"},
+        GradCase{"puma560", "pointwise", "{duration_s: 4, sample_period_s: 0.05, init_frequency_hz: 0.25}", "log_det"}),
+    [](const auto& info) { return info.param.robot + "_" + info.param.traj + "_" + info.param.crit; });
+
+TEST(Limits, OptimisersSeeTheProblemsConstraintsAndTheCaps) {
+  // the caps of a trajectory (velocity_limit_rad_s) are imposed by the exid optimisers
+  XSetup s = make("puma560", "fourier", "{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, init_scale: 0.9}",
+                 "cond", "{rotor_inertia: false, viscous: false, coulomb: false}");
+  auto opt = exid_test::create<exid::Optimizer>("nlopt", "{algorithm: LD_SLSQP, max_time_s: 20}");
+  exid::RunContext ctx;
+  auto r = opt->minimize(*s.problem, ctx);
+  const exid::Samples best = s.traj->evaluate(r.z);
+  EXPECT_LE(best.qd.cwiseAbs().maxCoeff(), 0.5 + 1e-9);
+  EXPECT_LE(violation(best, *s.robot, 0, true, true, 0.5), 1e-9);
+  EXPECT_LE(r.max_violation, 1e-9);
+  EXPECT_LT(r.criterion_final, r.criterion_initial);
+}
+
+struct OptCase {
+  std::string optimizer, params, traj, tparams;
+};
+
+class OptimizerTest : public ::testing::TestWithParam<OptCase> {};
+
+TEST_P(OptimizerTest, ReducesCondAndReturnsAFeasiblePoint) {
+  const auto& c = GetParam();
+  XSetup s = make("planar2r", c.traj, c.tparams, "cond", "{}");
+  auto opt = exid_test::create<exid::Optimizer>(c.optimizer, c.params);
+  exid::RunContext ctx;
+  ctx.seed = 3;
+  std::vector<double> progress;
+  ctx.progress = [&](double f, const std::string&) { progress.push_back(f); };
+  const double J0 = s.problem->value(s.problem->initial(), nullptr);
+  {
+    Eigen::VectorXd g0;
+    s.problem->constraints(s.problem->initial(), &g0, nullptr);
+    ASSERT_LE(g0.maxCoeff(), 0.0) << "initial point infeasible";
+  }
+  auto r = opt->minimize(*s.problem, ctx);
+  EXPECT_NEAR(r.criterion_initial, J0, 1e-9 * J0);
+  EXPECT_LT(r.criterion_final, 0.8 * J0) << c.optimizer << " " << c.params << ": " << r.stop_reason << " history0 " << r.history_value.front() << " n " << r.history_value.size() << " viol0 " << r.details.dump(0);
+  // the reported value is the criterion at the returned point
+  EXPECT_NEAR(s.problem->value(r.z, nullptr), r.criterion_final, 1e-9 * r.criterion_final);
+  // feasible: recomputed from the trajectory at every sample
+  const exid::Samples best = s.traj->evaluate(r.z);
+  EXPECT_LE(violation(best, *s.robot, s.traj->positionMargin(), s.traj->velocityLimits(), s.traj->accelerationLimits()), 1e-9);
+  EXPECT_LE(r.max_violation, 1e-9);
+  EXPECT_GT(r.evaluations, 0);
+  EXPECT_FALSE(r.stop_reason.empty());
+  ASSERT_FALSE(r.history_value.empty());
+  EXPECT_EQ(r.history_value.size(), r.history_t_s.size());
+  EXPECT_NEAR(r.history_value.back(), r.criterion_final, 1e-9 * r.criterion_final);
+  for (std::size_t i = 1; i < r.history_value.size(); ++i) EXPECT_LE(r.history_value[i], r.history_value[i - 1]);
+  EXPECT_FALSE(progress.empty());
+}
+
+const char* kFourier = "{period_s: 4, harmonics: 3, sample_period_s: 0.05, position_margin_rad: 0.1}";
+
+INSTANTIATE_TEST_SUITE_P(
+    All, OptimizerTest,
+    ::testing::Values(
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_MMA, max_time_s: 5, max_evaluations: 300}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_time_s: 5, max_evaluations: 400}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
+        OptCase{"adjoint_gradient", "{max_time_s: 10}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{constraints: penalty, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{constraints: projection, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{max_time_s: 10}", "pointwise", "{duration_s: 4, sample_period_s: 0.05}"},
+        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "pointwise",
+                "{duration_s: 4, sample_period_s: 0.05}"}),
+    [](const auto& info) { return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index); });
+
+TEST(Nlopt, UnknownAlgorithmListsTheValidOnes) {
+  try {
+    exid_test::create<exid::Optimizer>("nlopt", "{algorithm: LD_NOPE}");
+    FAIL() << "no error";
+  } catch (const exid::Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("LD_NOPE"), std::string::npos) << m;
+    EXPECT_NE(m.find("LD_SLSQP"), std::string::npos) << m;
+    EXPECT_NE(m.find("GN_ISRES"), std::string::npos) << m;
+  }
+}
+
+TEST(Optimizers, RespectTheTimeBudgetAndCancellation) {
+  XSetup s = make("planar2r", "fourier", kFourier, "cond", "{}");
+  for (const char* name : {"nlopt", "adjoint_gradient"}) {
+    auto opt = exid_test::create<exid::Optimizer>(name, "{max_time_s: 0.3}");
+    (void)opt;
+  }
+  auto opt = exid_test::create<exid::Optimizer>("nlopt", "{algorithm: GN_ISRES, max_time_s: 0.3}");
+  exid::RunContext ctx;
+  auto t0 = std::chrono::steady_clock::now();
+  auto r = opt->minimize(*s.problem, ctx);
+  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_LT(wall, 1.5);
+  EXPECT_LE(r.max_violation, 1e-9);
+  int calls = 0;
+  ctx.cancelled = [&] { return ++calls > 5; };
+  auto opt2 = exid_test::create<exid::Optimizer>("adjoint_gradient", "{max_time_s: 30}");
+  auto r2 = opt2->minimize(*s.problem, ctx);
+  EXPECT_NE(r2.stop_reason.find("cancelled"), std::string::npos) << r2.stop_reason;
+}
+
+}  // namespace
