@@ -11,7 +11,7 @@ ctest --output-on-failure -j "${EXID_JOBS:-$(nproc)}" --timeout 900 "$@" || stat
 if [ -f "$build/ci_matrix/results.sqlite" ]; then
   echo
   echo "== CI matrix (examples/matrix/ci.yaml) =="
-  for metric in param_rel_err validation_rel_err wall_s; do
+  for metric in param_rel_err cond_W wall_s; do
     "$build/bin/exid" matrix table "$build/ci_matrix" --rows robot,model --cols estimator --metric "$metric" || true
     echo
   done
