@@ -9,8 +9,11 @@ install(DIRECTORY ${PROJECT_SOURCE_DIR}/framework/include/exid DESTINATION ${CMA
 install(FILES ${CMAKE_BINARY_DIR}/generated/include/exid/version.hpp
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid)
 set(EXID_EXPORTED_TARGETS exid_dynamics exid_core)
+set_target_properties(exid_dynamics PROPERTIES EXPORT_NAME dynamics)   # exid::dynamics
+set_target_properties(exid_core PROPERTIES EXPORT_NAME core)           # exid::core
 if(TARGET exid_robots)
   list(APPEND EXID_EXPORTED_TARGETS exid_robots)
+  set_target_properties(exid_robots PROPERTIES EXPORT_NAME robots)     # exid::robots
 endif()
 install(TARGETS ${EXID_EXPORTED_TARGETS} EXPORT exidTargets
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}

@@ -27,8 +27,11 @@ class Problem final : public ExcitationProblem {
     const RobotModel& r = model_->robot();
     // Limits in measured coordinates equal joint limits when there is no transmission; with a
     // transmission, the joint-space limits are applied to q = T qm + q0 below.
+    std::vector<JointLimits> limits = r.limits;
+    limits.resize(static_cast<std::size_t>(n_));
+    traj_->adjustLimits(&limits);
     for (int j = 0; j < n_; ++j) {
-      const JointLimits L = j < static_cast<int>(r.limits.size()) ? r.limits[j] : JointLimits{};
+      const JointLimits L = limits[static_cast<std::size_t>(j)];
       if (L.q_max < 1e299) active_.push_back({0, j, +1, L.q_max - opt_.position_margin});
       if (L.q_min > -1e299) active_.push_back({0, j, -1, -(L.q_min + opt_.position_margin)});
       if (opt_.velocity_limits && L.qd_max < 1e299) {

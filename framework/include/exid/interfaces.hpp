@@ -35,6 +35,14 @@ class ObservationModel : public PluginObject {
 
   /// Binds the robot and computes the base parameters. Call once before anything else.
   void bind(std::shared_ptr<const RobotModel> robot, const RunContext& ctx);
+  /// Restricts the motion from which bind() finds the base parameters: the measured
+  /// coordinates not in `moving` (0-based) are held at `held` (zero velocity and acceleration),
+  /// so the base parameters are those a motion of the `moving` joints alone can identify (the
+  /// paper's one-joint-at-a-time experiments). Empty `moving` (the default): every coordinate
+  /// moves. Call before bind(); the runner sets it from the excitation trajectory's joints.
+  void restrictMotion(std::vector<int> moving, Eigen::VectorXd held);
+  const std::vector<int>& movingJoints() const { return moving_; }
+  const Eigen::VectorXd& heldPositions() const { return held_; }
   const RobotModel& robot() const { return *robot_; }
   std::shared_ptr<const RobotModel> robotPtr() const { return robot_; }
   const BaseParameters& base() const { return base_; }
@@ -73,6 +81,8 @@ class ObservationModel : public PluginObject {
  private:
   std::shared_ptr<const RobotModel> robot_;
   BaseParameters base_;
+  std::vector<int> moving_;
+  Eigen::VectorXd held_;
 };
 
 // ---------------------------------------------------------------- criterion
@@ -106,6 +116,9 @@ class Trajectory : public PluginObject {
   /// Margin kept inside the position limits, and whether velocity/acceleration limits are
   /// imposed as constraints by the excitation problem.
   virtual double positionMargin() const { return 0.0; }
+  /// Lets a trajectory tighten the joint limits the excitation problem imposes (e.g. a velocity
+  /// cap below the robot's own limit). Called with the robot's limits (joint coordinates).
+  virtual void adjustLimits(std::vector<JointLimits>* limits) const { (void)limits; }
   virtual bool velocityLimits() const { return true; }
   virtual bool accelerationLimits() const { return true; }
 };
