@@ -157,8 +157,10 @@ std::vector<std::string> signalNames(const std::string& prefix, int n) {
   return out;
 }
 
+// raw: the estimator filters and differentiates the signals itself (EstimatorSpecs::
+// needs_raw_dataset), so qd and qdd may be absent.
 void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationModel* model,
-                  const std::string& what) {
+                  const std::string& what, bool raw = false) {
   check(d.size() > 0, fmt::format("{} ({}): no samples", what, d.source));
   check(d.q.rows() == d.size() && d.q.cols() == robot.dof(),
         fmt::format("{} ({}): q has {} columns, the robot '{}' has {} joints", what, d.source,
@@ -168,6 +170,7 @@ void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationMo
                                            what, d.source, k + 1, d.t(k), d.t(k - 1)));
   if (!model) return;
   for (const auto& sig : model->requiredSignals()) {
+    if (raw && (sig == "qd" || sig == "qdd")) continue;
     bool present = sig == "q" || (sig == "qd" && d.hasVelocity()) ||
                    (sig == "qdd" && d.hasAcceleration()) || (sig == "tau" && d.hasTorque()) ||
                    (sig == "wrench" && d.hasWrench());
@@ -360,7 +363,9 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       RunContext ectx = ctx;
       ectx.progress = progressFor("experiment");
       data = exp->run(robot, reference ? &*reference : nullptr, ectx);
-      checkDataset(*data, *robot, model.get(), "experiment");
+      const bool raw = cfg.estimator &&
+                       reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs().needs_raw_dataset;
+      checkDataset(*data, *robot, model.get(), "experiment", raw);
       Json& E = S["experiment"];
       E["type"] = cfg.experiment->type;
       E["samples"] = data->size();

@@ -3,7 +3,11 @@
 // q is required; every other group is optional but complete when present (all n joints, or all
 // six wrench components). Absent qd/qdd stay absent: estimators decide how to differentiate.
 // The file written by the runner (experiment.csv, exid::datasetTable) reads back exactly.
+// Extensions for recordings as published (docs/experiments.md): other column names
+// (q_columns, tau_columns), torques from a second row-aligned file (torque_file), and optional
+// zero-phase low-pass + central differences (+ decimation) of the segment.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 
 #include <Eigen/Core>
 #include <cmath>
@@ -14,6 +18,7 @@
 #include <vector>
 
 #include "exid/drive.hpp"
+#include "exid/estimators/common.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
@@ -70,6 +75,31 @@ class CsvExperiment : public exid::Experiment {
                       "all +1"),
         param_doubles("offset_rad", std::vector<double>{}, "rad",
                       "per joint, added to q after the sign; empty: zeros"),
+        param_strings("q_columns", std::vector<std::string>{},
+                      "names of the n position columns (in file), instead of q1..qn"),
+        param_path("torque_file", std::string(),
+                   "a second CSV holding the torque (or current) columns, row-aligned with file "
+                   "(same number of data rows); empty: file"),
+        param_strings("tau_columns", std::vector<std::string>{},
+                      "names of the n torque columns (or currents with torque_from: current), "
+                      "instead of tau1..taun / <current_prefix>1..n"),
+        param_double("differentiate_cutoff_hz", 0.0, "Hz",
+                     "> 0: q of the segment is low-passed (zero-phase Butterworth, filter_order) "
+                     "and qd, qdd are its central differences (replacing qd/qdd columns); 0: off",
+                     0.0),
+        param_int("filter_order", 4, "order of that Butterworth filter (per pass)", 1, 12),
+        param_bool("filter_torque", false,
+                   "with differentiate_cutoff_hz: tau (and the wrench) pass through the same "
+                   "zero-phase filter"),
+        param_int("decimation", 1,
+                  "keep one sample in this many after filtering (> 1 needs "
+                  "differentiate_cutoff_hz and filter_torque, and the cut-off below the new "
+                  "Nyquist frequency)",
+                  1),
+        param_int("trim_edges", -1,
+                  "samples dropped at each end of the segment after filtering; -1: "
+                  "ceil(2 fs / cutoff) when filtering, else 0",
+                  -1),
     };
   }
 
@@ -79,18 +109,23 @@ class CsvExperiment : public exid::Experiment {
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'csv': no robot");
     const int n = robot->dof();
-    fs::path path = P_.getString("file");
-    if (path.is_relative() && !ctx.study_dir.empty()) path = ctx.study_dir / path;
-    const std::string file = path.string();
 
-    // Raw text, and the line number of every data row (as parseCsv counts them).
-    std::ifstream in(path, std::ios::binary);
-    exid::check(static_cast<bool>(in), fmt::format("experiment 'csv': {}: cannot open the file", file));
-    std::stringstream ss;
-    ss << in.rdbuf();
-    const std::string text = ss.str();
-    std::vector<int> line_of;
-    {
+    // Raw text and the line number of every data row (as parseCsv counts them), per file.
+    struct Source {
+      std::string file;
+      std::vector<int> line_of;
+      exid::CsvTable T;
+    };
+    auto readSource = [&](fs::path p) {
+      if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
+      Source src;
+      src.file = p.string();
+      std::ifstream in(p, std::ios::binary);
+      exid::check(static_cast<bool>(in),
+                  fmt::format("experiment 'csv': {}: cannot open the file", src.file));
+      std::stringstream ss;
+      ss << in.rdbuf();
+      const std::string text = ss.str();
       std::istringstream ls(text);
       std::string line;
       int lineno = 0;
@@ -103,46 +138,91 @@ class CsvExperiment : public exid::Experiment {
           header = true;
           continue;
         }
-        line_of.push_back(lineno);
+        src.line_of.push_back(lineno);
       }
-    }
-    exid::CsvReadOptions opt;
-    opt.allow_non_finite = true;  // checked below, only in the columns used
-    const exid::CsvTable T = exid::parseCsv(text, file, opt);
+      exid::CsvReadOptions opt;
+      opt.allow_non_finite = true;  // checked below, only in the columns used
+      src.T = exid::parseCsv(text, src.file, opt);
+      exid::check(src.T.data.rows() > 0,
+                  fmt::format("experiment 'csv': {}: no data rows after the header", src.file));
+      return src;
+    };
+    std::vector<Source> srcs;
+    srcs.reserve(2);  // references into srcs[0] are taken below
+    srcs.push_back(readSource(P_.getString("file")));
+    const std::string file = srcs[0].file;
+    const exid::CsvTable& T = srcs[0].T;
     const int rows = static_cast<int>(T.data.rows());
-    exid::check(rows > 0, fmt::format("experiment 'csv': {}: no data rows after the header", file));
+    int fq = 0, ftau = 0;  // which source holds q / the torques
+    if (!P_.getString("torque_file").empty()) {
+      srcs.push_back(readSource(P_.getString("torque_file")));
+      ftau = 1;
+      exid::check(srcs[1].T.data.rows() == rows,
+                  fmt::format("experiment 'csv': torque_file {} has {} data rows, file {} has {}: "
+                              "the two files must be row-aligned",
+                              srcs[1].file, srcs[1].T.data.rows(), file, rows));
+    }
+    // Columns as (source, column) references, flattened: ref = source * kStride + column.
+    constexpr int kStride = 1 << 20;
+    auto value = [&](int r, int ref) { return srcs[static_cast<std::size_t>(ref / kStride)].T.data(r, ref % kStride); };
+    auto colName = [&](int ref) {
+      const Source& sr = srcs[static_cast<std::size_t>(ref / kStride)];
+      return srcs.size() > 1 ? fmt::format("{}' of {}", sr.T.columns[static_cast<std::size_t>(ref % kStride)], sr.file)
+                             : sr.T.columns[static_cast<std::size_t>(ref % kStride)] + "'";
+    };
+    auto named = [&](int f, const char* key) -> std::vector<int> {
+      std::vector<int> idx;
+      const std::vector<std::string> names = P_.getStrings(key);
+      if (names.empty()) return idx;
+      const Source& sr = srcs[static_cast<std::size_t>(f)];
+      exid::check(static_cast<int>(names.size()) == n,
+                  fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
+                              "'{}'), found {}",
+                              key, n, robot->name, names.size()));
+      for (const auto& c : names) {
+        const int i = sr.T.col(c);
+        exid::check(i >= 0, fmt::format("experiment 'csv': {}: {}: no column '{}' (found columns: {})",
+                                        sr.file, key, c, fmt::join(sr.T.columns, ", ")));
+        idx.push_back(f * kStride + i);
+      }
+      return idx;
+    };
 
     // Column groups.
-    auto group = [&](const std::string& prefix, bool required, const char* what) -> std::vector<int> {
+    auto group = [&](const std::string& prefix, bool required, const char* what, int f = 0) -> std::vector<int> {
+      const exid::CsvTable& Tg = srcs[static_cast<std::size_t>(f)].T;
+      const std::string& fileg = srcs[static_cast<std::size_t>(f)].file;
       std::vector<int> idx;
       int found = 0;
-      while (T.has(prefix + std::to_string(found + 1))) ++found;
+      while (Tg.has(prefix + std::to_string(found + 1))) ++found;
       if (found == 0) {
         exid::check(!required, fmt::format("experiment 'csv': {}: missing column '{}1' ({}; "
                                            "expected columns {}1..{}{} for the {} joints of robot "
                                            "'{}'; found columns: {})",
-                                           file, prefix, what, prefix, prefix, n, n, robot->name,
-                                           fmt::join(T.columns, ", ")));
+                                           fileg, prefix, what, prefix, prefix, n, n, robot->name,
+                                           fmt::join(Tg.columns, ", ")));
         return idx;
       }
       exid::check(found == n,
                   fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
                               "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
-                              file, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
-      for (int j = 1; j <= n; ++j) idx.push_back(T.col(prefix + std::to_string(j)));
+                              fileg, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
+      for (int j = 1; j <= n; ++j) idx.push_back(f * kStride + Tg.col(prefix + std::to_string(j)));
       return idx;
     };
-    const std::vector<int> cq = group("q", true, "joint positions are required");
+    std::vector<int> cq = named(fq, "q_columns");
+    if (cq.empty()) cq = group("q", true, "joint positions are required", fq);
     const std::vector<int> cqd = group("qd", false, "");
     const std::vector<int> cqdd = group("qdd", false, "");
     const std::string tfrom = P_.getString("torque_from");
     std::vector<int> ctau;
     std::vector<double> Kt;
+    ctau = named(ftau, "tau_columns");
     if (tfrom == "tau") {
-      ctau = group("tau", false, "");
+      if (ctau.empty()) ctau = group("tau", ftau > 0, "torque_file is given", ftau);
     } else {
       const std::string pre = P_.getString("current_prefix");
-      ctau = group(pre, true, "torque_from: current needs the motor currents");
+      if (ctau.empty()) ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
       Kt = P_.getDoubles("torque_constants_Nm_per_A");
       exid::check(static_cast<int>(Kt.size()) == n,
                   fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values (one "
@@ -162,7 +242,7 @@ class CsvExperiment : public exid::Experiment {
                     fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
                                 "(expected all of fx fy fz mx my mz, or none)",
                                 file, fmt::join(missing, ", ")));
-        for (const char* c : wn) cw.push_back(T.col(c));
+        for (const char* c : wn) cw.push_back(T.col(c));  // source 0
       }
     }
     const int ct = T.col("t");
@@ -191,14 +271,15 @@ class CsvExperiment : public exid::Experiment {
     std::vector<int> keep;
     std::vector<double> tk;
     int dropped = 0;
-    auto lineText = [&](int r) {
+    auto lineText = [&](int r, int f = 0) {
+      const std::vector<int>& line_of = srcs[static_cast<std::size_t>(f)].line_of;
       return r < static_cast<int>(line_of.size()) ? fmt::format("line {}", line_of[static_cast<std::size_t>(r)])
                                                   : fmt::format("data row {}", r + 1);
     };
     for (int r = 0; r < rows; ++r) {
       int bad = -1;
       for (int c : used)
-        if (!std::isfinite(T.data(r, c))) {
+        if (!std::isfinite(value(r, c))) {
           bad = c;
           break;
         }
@@ -207,10 +288,11 @@ class CsvExperiment : public exid::Experiment {
           ++dropped;
           continue;
         }
+        const int bf = bad / kStride;
         throw exid::Error(fmt::format(
-            "experiment 'csv': {}: {} (data row {}): column '{}': missing or non-finite value (set "
+            "experiment 'csv': {}: {} (data row {}): column '{}: missing or non-finite value (set "
             "drop_bad_rows: true to drop such rows)",
-            file, lineText(r), r + 1, T.columns[static_cast<std::size_t>(bad)]));
+            srcs[static_cast<std::size_t>(bf)].file, lineText(r, bf), r + 1, colName(bad)));
       }
       const double t = ct >= 0 ? T.data(r, ct) : r * dt;
       if (!keep.empty())
@@ -259,14 +341,14 @@ class CsvExperiment : public exid::Experiment {
       d.t[k] = tk[i];
       for (int j = 0; j < n; ++j) {
         const double s = sign[static_cast<std::size_t>(j)];
-        d.q(k, j) = s * T.data(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
-        if (!cqd.empty()) d.qd(k, j) = s * T.data(r, cqd[static_cast<std::size_t>(j)]);
-        if (!cqdd.empty()) d.qdd(k, j) = s * T.data(r, cqdd[static_cast<std::size_t>(j)]);
+        d.q(k, j) = s * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
+        if (!cqd.empty()) d.qd(k, j) = s * value(r, cqd[static_cast<std::size_t>(j)]);
+        if (!cqdd.empty()) d.qdd(k, j) = s * value(r, cqdd[static_cast<std::size_t>(j)]);
       }
       if (!ctau.empty()) {
         VectorXd tau(n);
         for (int j = 0; j < n; ++j) {
-          double v = T.data(r, ctau[static_cast<std::size_t>(j)]);
+          double v = value(r, ctau[static_cast<std::size_t>(j)]);
           if (!Kt.empty()) v *= Kt[static_cast<std::size_t>(j)];
           tau[j] = v;
         }
@@ -276,6 +358,7 @@ class CsvExperiment : public exid::Experiment {
       }
       for (std::size_t e = 0; e < cw.size(); ++e) d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
     }
+    const Preprocessed pp = preprocess(&d, file);
 
     d.source = file;
     exid::Json& m = d.meta;
@@ -294,11 +377,90 @@ class CsvExperiment : public exid::Experiment {
     if (!ctau.empty()) sig.push_back("tau");
     if (!cw.empty()) sig.push_back("wrench");
     m["signals"] = exid::Json(sig);
-    ctx.report(1.0, fmt::format("{} samples from {}", K, file));
+    if (srcs.size() > 1) m["torque_file"] = srcs[1].file;
+    if (pp.cutoff_hz > 0) {
+      m["differentiated"] = exid::Json::object();
+      m["differentiated"]["cutoff_hz"] = pp.cutoff_hz;
+      m["differentiated"]["filter_order"] = pp.order;
+      m["differentiated"]["filter_torque"] = pp.filter_torque;
+      m["differentiated"]["trimmed_samples_each_end"] = pp.trim;
+      m["differentiated"]["decimation"] = pp.decimation;
+      m["differentiated"]["sample_rate_hz"] = pp.fs;
+    }
+    m["samples"] = d.size();
+    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), file));
     return d;
   }
 
  private:
+  struct Preprocessed {
+    double cutoff_hz = 0, fs = 0;
+    int order = 0, trim = 0, decimation = 1;
+    bool filter_torque = false;
+  };
+
+  /// Optional: zero-phase low-pass of q (and tau, wrench), central differences, trim, decimate.
+  Preprocessed preprocess(exid::Dataset* d, const std::string& file) const {
+    namespace est = exid::est;
+    Preprocessed pp;
+    pp.cutoff_hz = P_.getDouble("differentiate_cutoff_hz");
+    pp.order = static_cast<int>(P_.getInt("filter_order"));
+    pp.filter_torque = P_.getBool("filter_torque");
+    pp.decimation = static_cast<int>(P_.getInt("decimation"));
+    if (pp.cutoff_hz <= 0) {
+      exid::check(pp.decimation == 1 && !pp.filter_torque,
+                  "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");
+      return pp;
+    }
+    exid::check(pp.decimation == 1 || pp.filter_torque,
+                "experiment 'csv': decimation > 1 needs filter_torque: true (the torque must be "
+                "low-passed before samples are dropped)");
+    const Eigen::Index K = d->size();
+    exid::check(K >= 8, fmt::format("experiment 'csv': {}: {} samples in the segment are too few to "
+                                    "filter and differentiate",
+                                    file, K));
+    double jitter = 0;
+    pp.fs = est::samplingRate(d->t, &jitter);
+    exid::check(pp.cutoff_hz < 0.5 * pp.fs,
+                fmt::format("experiment 'csv': differentiate_cutoff_hz = {} Hz must be below the "
+                            "Nyquist frequency {} Hz of the data",
+                            pp.cutoff_hz, 0.5 * pp.fs));
+    exid::check(pp.decimation == 1 || pp.cutoff_hz < 0.5 * pp.fs / pp.decimation,
+                fmt::format("experiment 'csv': decimation {} leaves a Nyquist frequency of {} Hz, "
+                            "below differentiate_cutoff_hz = {} Hz (aliasing)",
+                            pp.decimation, 0.5 * pp.fs / pp.decimation, pp.cutoff_hz));
+    const est::Sos sos = est::butterworthLowpass(pp.order, pp.cutoff_hz, pp.fs);
+    d->q = est::filtfiltColumns(sos, d->q);
+    d->qd = est::centralFirstDerivative(d->t, d->q);
+    d->qdd = est::centralSecondDerivative(d->t, d->q);
+    if (pp.filter_torque) {
+      if (d->hasTorque()) d->tau = est::filtfiltColumns(sos, d->tau);
+      if (d->hasWrench()) d->wrench = est::filtfiltColumns(sos, d->wrench);
+    }
+    const std::int64_t trim_p = P_.getInt("trim_edges");
+    pp.trim = trim_p >= 0 ? static_cast<int>(trim_p) : static_cast<int>(std::ceil(2.0 * pp.fs / pp.cutoff_hz));
+    exid::check(K - 2 * pp.trim >= 2,
+                fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
+                            "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
+                            file, pp.trim, K));
+    std::vector<Eigen::Index> keep;
+    for (Eigen::Index k = pp.trim; k < K - pp.trim; k += pp.decimation) keep.push_back(k);
+    auto pick = [&](const Eigen::MatrixXd& M) {
+      Eigen::MatrixXd out(static_cast<Eigen::Index>(keep.size()), M.cols());
+      for (std::size_t i = 0; i < keep.size(); ++i) out.row(static_cast<Eigen::Index>(i)) = M.row(keep[i]);
+      return out;
+    };
+    Eigen::VectorXd t(static_cast<Eigen::Index>(keep.size()));
+    for (std::size_t i = 0; i < keep.size(); ++i) t[static_cast<Eigen::Index>(i)] = d->t[keep[i]];
+    d->t = t;
+    d->q = pick(d->q);
+    d->qd = pick(d->qd);
+    d->qdd = pick(d->qdd);
+    if (d->tau.rows() > 0) d->tau = pick(d->tau);
+    if (d->wrench.rows() > 0) d->wrench = pick(d->wrench);
+    return pp;
+  }
+
   exid::ParamSet P_;
 };
 

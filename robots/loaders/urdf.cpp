@@ -531,6 +531,28 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
     throw Error(src + ": no movable joint (revolute, continuous or prismatic) in the robot");
   }
   if (x.exid) applyExtension(x.exid, src, &m, joint_body, link_place, options);
+  if (!options.urdf_extension.empty()) {
+    const std::string esrc = options.urdf_extension.string();
+    if (x.exid) {
+      throw Error(at(src, x.exid) + ": the URDF has its own <exid> element and a companion " +
+                  esrc + " is given as well (use one of them)");
+    }
+    const std::string ext_text = detail::readTextFile(options.urdf_extension, "URDF companion (<exid>)");
+    TiXmlDocument ext;
+    ext.Parse(ext_text.c_str());
+    if (ext.Error()) {
+      throw Error(esrc + ":" + std::to_string(ext.ErrorRow()) + ": invalid XML: " + ext.ErrorDesc());
+    }
+    const TiXmlElement* root = ext.RootElement();
+    if (!root || std::string(root->Value()) != "exid") {
+      throw Error(at(esrc, root) + ": the root element of a URDF companion must be <exid>, found " +
+                  (root ? "<" + std::string(root->Value()) + ">" : std::string("no element")));
+    }
+    if (root->NextSiblingElement()) {
+      throw Error(at(esrc, root->NextSiblingElement()) + ": a second root element (one <exid> is allowed)");
+    }
+    applyExtension(root, esrc, &m, joint_body, link_place, options);
+  }
 
   try {
     m.validateStructure();

@@ -14,18 +14,30 @@ class UrdfRobot : public exid::Robot {
     auto p = exid::robots::commonParams();
     p.insert(p.begin(), exid::param_path("file", std::nullopt,
                                          "the URDF file (relative paths: to the study file)"));
+    p.insert(p.begin() + 1,
+             exid::param_path("extension", std::string(),
+                                "optional companion XML file whose root is an <exid> element "
+                                "(drives, transmission, sensor, ...) for a URDF kept as published "
+                                "(relative paths: to the study file); empty: none"));
     return p;
   }
-  explicit UrdfRobot(const exid::ParamSet& p) : file_(p.getString("file")), opt_(p) {}
+  explicit UrdfRobot(const exid::ParamSet& p)
+      : file_(p.getString("file")), extension_(p.getString("extension")), opt_(p) {}
 
   std::shared_ptr<const exid::RobotModel> build(const exid::RunContext& ctx) override {
     std::filesystem::path f(file_);
     if (f.is_relative() && !ctx.study_dir.empty()) f = ctx.study_dir / f;
-    return opt_.build([&](const exid::LoadOptions& o) { return exid::loadUrdf(f, o); });
+    std::filesystem::path e(extension_);
+    if (!e.empty() && e.is_relative() && !ctx.study_dir.empty()) e = ctx.study_dir / e;
+    return opt_.build([&](const exid::LoadOptions& o) {
+      exid::LoadOptions oe = o;
+      oe.urdf_extension = e;
+      return exid::loadUrdf(f, oe);
+    });
   }
 
  private:
-  std::string file_;
+  std::string file_, extension_;
   exid::robots::CommonOptions opt_;
 };
 

@@ -28,6 +28,10 @@ struct LoadOptions {
   bool strict = false;
   /// Where warnings go (one line each, "source: link 'x': rule"). Null: printed to stderr.
   std::vector<std::string>* warnings = nullptr;
+  /// URDF only: a companion file whose root element is <exid> (same content as the <exid>
+  /// extension element, docs/robots.md), for a URDF that must stay as published. Empty: none.
+  /// A URDF that has its own <exid> element and a companion is an error.
+  std::filesystem::path urdf_extension;
 };
 
 /// A DH (standard or modified) YAML table. See docs/robots.md for the keys.
