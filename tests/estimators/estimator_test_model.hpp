@@ -8,6 +8,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -90,6 +91,7 @@ class PendulumModel : public exid::ObservationModel {
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     exid::check(d.hasVelocity() && d.hasAcceleration() && d.hasTorque(), "test model: needs q, qd, qdd, tau");
     const int K = d.size();
+    max_samples_per_call = std::max(max_samples_per_call, K);
     exid::Rows r;
     r.W.resize(static_cast<Eigen::Index>(K) * n_, numFullCols());
     r.y.resize(static_cast<Eigen::Index>(K) * n_);
@@ -120,6 +122,9 @@ class PendulumModel : public exid::ObservationModel {
   void fullDesignVjp(const exid::Samples&, const Eigen::MatrixXd&, exid::Samples*) const override {
     throw exid::Error("test model: no VJP");
   }
+  /// The largest number of samples one fullRows() call has seen (streaming check).
+  mutable int max_samples_per_call = 0;
+
   exid::Json describe() const override {
     exid::Json j = exid::Json::object();
     j["per_sample"] = true;

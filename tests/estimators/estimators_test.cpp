@@ -99,6 +99,34 @@ TEST(Estimators, BatchLsChunkingAndAccumulationAgree) {
   EXPECT_NEAR(a.cond_W, svd.singularValues()(0) / svd.singularValues()(m->numBase() - 1), 1e-8 * a.cond_W);
 }
 
+TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 20000;
+  o.tau_noise = {0.1, 0.1};
+  exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  for (const std::string name : {"batch_ls", "rls", "wls"}) {
+    m->max_samples_per_call = 0;
+    exid::Estimate e = make(name, "{chunk_samples: 500}")->estimate(*m, d, nullptr, ctx);
+    EXPECT_EQ(m->max_samples_per_call, 500) << name;  // rows never materialised for all samples
+    EXPECT_EQ(e.rows, 40000) << name;
+  }
+  // A model that does not declare per-sample rows gets the whole dataset at once.
+  struct Windowed : est_test::PendulumModel {
+    using PendulumModel::PendulumModel;
+    exid::Json describe() const override {
+      exid::Json j = exid::Json::object();
+      j["per_sample"] = false;
+      return j;
+    }
+  };
+  auto w = std::make_shared<Windowed>(2);
+  w->bind(est_test::makeRobot(2), ctx);
+  make("batch_ls", "{chunk_samples: 500}")->estimate(*w, d, nullptr, ctx);
+  EXPECT_EQ(w->max_samples_per_call, 20000);
+}
+
 TEST(Estimators, BatchLsRefusesRankDeficientNamingDirections) {
   auto m = makeModel(1);
   DataOptions o;
