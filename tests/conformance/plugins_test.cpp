@@ -50,6 +50,11 @@ TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
   const std::vector<std::pair<exid::PluginKind, std::vector<std::string>>> expected = {
       {exid::PluginKind::Robot, {"urdf", "dh", "planar2r", "puma560", "irp6", "stanford", "panda"}},
       {exid::PluginKind::Criterion, {"cond", "min_sv", "frobenius_cond", "log_det"}},
+      {exid::PluginKind::Model, {"differential", "integral", "load_wrench", "load_torque"}},
+      {exid::PluginKind::Trajectory, {"pointwise", "fourier", "spline"}},
+      {exid::PluginKind::Optimizer, {"adjoint_gradient", "nlopt"}},
+      {exid::PluginKind::Experiment, {"simulate", "csv"}},
+      {exid::PluginKind::Estimator, {"rls", "batch_ls", "filtered_ls", "wls"}},
   };
   for (const auto& [kind, names] : expected)
     for (const auto& n : names) EXPECT_NE(reg.find(kind, n), nullptr) << exid::toString(kind) << " " << n;
@@ -152,4 +157,46 @@ TEST(Conformance, ObservationModelsBindAndTheirGradientsMatchFiniteDifferences) 
       EXPECT_NEAR(an, fd, 1e-5 * (1 + std::abs(fd))) << "signal " << which;
     }
   }
+}
+
+#include "dyn_reference.hpp"
+#include "exid/dynamics.hpp"
+
+// Every shipped robot (as its plugin builds it): Y * pi equals an independent Newton-Euler
+// (tests/support/dyn_reference.cpp, no code shared with the library), and the energy regressor
+// equals the reference energy.
+TEST(Conformance, EveryShippedRobotsRegressorMatchesIndependentNewtonEuler) {
+  auto& reg = exid_test::registry();
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  int robots = 0;
+  for (const exid::PluginInfo* p : reg.plugins(exid::PluginKind::Robot)) {
+    if (!allDefaulted(*p)) continue;
+    SCOPED_TRACE(p->name);
+    exid::RunContext ctx;
+    auto model = reg.create<exid::Robot>(p->name, defaults(*p))->build(ctx);
+    const int n = model->dof();
+    auto data = exid::makeDynamicsData(*model);
+    const Eigen::VectorXd pi = model->inertialParameters();
+    Eigen::MatrixXd Y(n, 10 * n);
+    Eigen::RowVectorXd kin(10 * n), pot(10 * n);
+    for (int k = 0; k < 10; ++k) {
+      Eigen::VectorXd q(n), qd(n), qdd(n);
+      for (int j = 0; j < n; ++j) {
+        q(j) = 1.5 * u(rng);
+        qd(j) = u(rng);
+        qdd(j) = 2 * u(rng);
+      }
+      exid::torqueRegressor(*model, *data, q, qd, qdd, Y);
+      const Eigen::VectorXd ref = exid::testing::refTorques(*model, q, qd, qdd, pi);
+      EXPECT_LT((Y * pi - ref).norm(), 1e-10 * (1 + ref.norm())) << "config " << k;
+      exid::energyRegressor(*model, *data, q, qd, kin, pot);
+      double T = 0, U = 0;
+      exid::testing::refEnergy(*model, q, qd, pi, &T, &U);
+      EXPECT_NEAR(kin.dot(pi), T, 1e-10 * (1 + std::abs(T)));
+      EXPECT_NEAR(pot.dot(pi), U, 1e-10 * (1 + std::abs(U)));
+    }
+    ++robots;
+  }
+  EXPECT_GE(robots, 5);
 }

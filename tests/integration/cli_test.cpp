@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <sstream>
 
 #include "exid/json.hpp"
 
@@ -178,5 +179,52 @@ TEST(Cli, ReportHasPlotsOrSaysWhyNot) {
   EXPECT_NE(md.find("## Missing plots"), std::string::npos) << md;
   EXPECT_NE(md.find("gnuplot is not installed"), std::string::npos) << md;
   EXPECT_TRUE(fs::exists(dir / "without" / "plots" / "estimate_1.csv"));  // the data is still there
+  fs::remove_all(dir);
+}
+
+TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
+  fs::path dir = tempDir("eval");
+  {
+    std::ofstream s(dir / "samples.csv");
+    s << "q1,q2,qd1,qd2,qdd1,qdd2\n0.1,0.2,0.3,-0.4,1.0,2.0\n-0.5,1.1,0.0,0.7,-1.5,0.25\n";
+  }
+  for (const char* what : {"torque", "regressor", "energy", "energy_regressor", "wrench_regressor"}) {
+    CmdResult r = runExid("-q eval planar2r --samples " + (dir / "samples.csv").string() + " --what " + what +
+                          " --out " + (dir / (std::string(what) + ".csv")).string());
+    ASSERT_EQ(r.code, 0) << what << ": " << r.out;
+  }
+  // tau = Y pi: the regressor rows times the robot's parameters (from robot info) give the torques.
+  CmdResult info = runExid("-q robot info planar2r --json --model-params '{rotor_inertia: false, coulomb: false, viscous: false}'");
+  exid::Json j = exid::Json::parse(info.out.substr(info.out.find('{')));
+  const exid::Json& values = *j.find("values");
+  std::ifstream reg(dir / "regressor.csv"), tau(dir / "torque.csv"), en(dir / "energy.csv");
+  std::string header, line;
+  std::getline(reg, header);
+  std::getline(tau, line);
+  std::vector<double> torques;
+  while (std::getline(tau, line)) {
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) torques.push_back(std::stod(cell));
+  }
+  ASSERT_EQ(torques.size(), 4u);
+  for (std::size_t row = 0; row < 4; ++row) {
+    ASSERT_TRUE(std::getline(reg, line));
+    std::stringstream ss(line);
+    std::string cell;
+    double sum = 0;
+    std::size_t c = 0;
+    while (std::getline(ss, cell, ',')) sum += std::stod(cell) * values.at(c++).asDouble();
+    EXPECT_NEAR(sum, torques[row], 1e-9 * (1 + std::abs(sum)));
+  }
+  std::getline(en, header);
+  EXPECT_EQ(header, "kinetic,potential,total");
+  // A missing column is an error naming the file and the column.
+  std::ofstream(dir / "bad.csv") << "q1,q2\n0,0\n";
+  CmdResult r = runExid("-q eval planar2r --samples " + (dir / "bad.csv").string() + " --what torque --out " +
+                        (dir / "x.csv").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("missing column 'qd1'"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "x.csv"));
   fs::remove_all(dir);
 }
