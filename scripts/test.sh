@@ -1,10 +1,12 @@
 #!/usr/bin/env bash
 # Install, build and run the whole test suite (ctest). Extra arguments go to ctest
-# (e.g. -L unit, -LE slow). Afterwards the CI matrix's tables are printed when it ran.
+# (e.g. -L unit, -LE slow); EXID_CMAKE_ARGS (whitespace-separated) go to cmake (e.g.
+# "-DEXID_SANITIZE=ON"). Afterwards the CI matrix's tables are printed when it ran.
 set -euo pipefail
 root=$(cd "$(dirname "$0")/.." && pwd)
 build=${EXID_BUILD_DIR:-$root/build}
-bash "$root/scripts/build.sh" -DEXID_BUILD_TESTS=ON
+# shellcheck disable=SC2086
+bash "$root/scripts/build.sh" -DEXID_BUILD_TESTS=ON ${EXID_CMAKE_ARGS:-}
 cd "$build"
 status=0
 ctest --output-on-failure -j "${EXID_JOBS:-$(nproc)}" --timeout 900 "$@" || status=$?

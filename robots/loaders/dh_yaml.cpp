@@ -120,9 +120,13 @@ Eigen::Matrix3d readInertia(const Reader& r, const YAML::Node& n, const std::str
   for (const char* k : {"xx", "yy", "zz"}) {
     if (!n[k]) r.fail(n, where, std::string("missing key '") + k + "'");
   }
+  // Read every value before the comma initialiser: a throw inside `I << a, b, ...` unwinds
+  // through Eigen's CommaInitializer destructor, which asserts (aborts) on too few coefficients
+  // (found by tests/fuzz/fuzz_dh).
+  const double xx = get("xx"), xy = get("xy"), xz = get("xz"), yy = get("yy"), yz = get("yz"),
+               zz = get("zz");
   Eigen::Matrix3d I;
-  I << get("xx"), get("xy"), get("xz"), get("xy"), get("yy"), get("yz"), get("xz"), get("yz"),
-      get("zz");
+  I << xx, xy, xz, xy, yy, yz, xz, yz, zz;
   return I;
 }
 

@@ -1,0 +1,97 @@
+// Real data: the Staubli TX40 recording (../shared/data/staubli_tx40, FIGAROH) identified by
+// examples/real/tx40_{filtered_ls,wls}.yaml and validated on the held-out segment 6 - 7.6 s.
+// A regression guard: the bounds are the errors measured when the studies were written
+// (docs/real_data.md) plus about 15 %. Skipped when the data folder is absent.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <array>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <map>
+
+#include "exid/json.hpp"
+#include "exid_test.hpp"
+
+namespace fs = std::filesystem;
+
+namespace {
+
+fs::path dataDir() { return exid_test::sharedDir() / "data/staubli_tx40"; }
+
+struct Run {
+  int code = -1;
+  std::string out;
+  exid::Json summary;
+};
+
+Run runStudy(const std::string& study) {
+  const fs::path out = fs::temp_directory_path() / ("exid_real_" + study + "_" + std::to_string(::getpid()));
+  fs::remove_all(out);
+  const std::string cmd = std::string(EXID_EXE) + " -q run " +
+                          (exid_test::sourceDir() / "examples/real" / (study + ".yaml")).string() +
+                          " --out " + out.string() + " 2>&1";
+  Run r;
+  FILE* p = ::popen(cmd.c_str(), "r");
+  std::array<char, 4096> buf{};
+  while (p && std::fgets(buf.data(), buf.size(), p)) r.out += buf.data();
+  const int status = p ? ::pclose(p) : -1;
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  std::ifstream in(out / "summary.json");
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  if (!text.empty()) r.summary = exid::Json::parse(text);
+  fs::remove_all(out);
+  return r;
+}
+
+std::map<std::string, std::pair<double, double>> params(const exid::Json& s) {
+  std::map<std::string, std::pair<double, double>> m;
+  const exid::Json& ps = *s.find("identification")->find("parameters");
+  for (std::size_t i = 0; i < ps.size(); ++i)
+    m[ps.at(i).find("name")->asString()] = {ps.at(i).find("value")->asDouble(), ps.at(i).find("std")->asDouble()};
+  return m;
+}
+
+void check(const std::string& study, const std::array<double, 6>& bound, double bound_all) {
+  if (!fs::exists(dataDir() / "data/pos_read_data.csv")) GTEST_SKIP() << "no data in " << dataDir();
+  const Run r = runStudy(study);
+  ASSERT_EQ(r.code, 0) << r.out;
+  const exid::Json& s = r.summary;
+  EXPECT_EQ(s.find("robot")->find("n_base_parameters")->asInt(), 58);
+  const exid::Json& v = *s.find("validation");
+  const exid::Json& rel = *v.find("relative_error_per_joint");
+  ASSERT_EQ(rel.size(), 6u);
+  for (std::size_t j = 0; j < 6; ++j) {
+    EXPECT_LT(rel.at(j).asDouble(), bound[j]) << study << ": joint " << j + 1;
+    std::printf("%s: joint %zu validation relative error %.4f (bound %.2f)\n", study.c_str(), j + 1,
+                rel.at(j).asDouble(), bound[j]);
+  }
+  EXPECT_LT(v.find("relative_error")->asDouble(), bound_all) << study;
+  // Well-identified rigid-body base parameters agree with FIGAROH's OLS values
+  // (results/TX40_bp_5.csv; same regrouping) within 2.5 combined standard deviations.
+  const auto p = params(s);
+  const std::map<std::string, std::pair<double, double>> figaroh = {
+      {"ZZ1R", {1.247943, 0.0098}}, {"XX2R", {-0.46452, 0.0218}}, {"XZ2R", {-0.157168, 0.0336}},
+      {"ZZ2R", {1.07996, 0.0084}},  {"MX2R", {2.241472, 0.0191}}, {"MY3R", {-0.592391, 0.0206}}};
+  for (const auto& [name, ref] : figaroh) {
+    ASSERT_TRUE(p.count(name)) << name;
+    const auto [value, std] = p.at(name);
+    const double comb = std::hypot(std, std::abs(ref.first) * ref.second);
+    EXPECT_LT(std::abs(value - ref.first), 2.5 * comb) << study << ": " << name << " = " << value << " vs " << ref.first;
+  }
+}
+
+}  // namespace
+
+// Measured (2025, this commit): filtered_ls 0.0857 0.0745 0.1406 0.1568 0.2200 0.2156, all 0.0893.
+TEST(RealTx40, FilteredLsValidatesOnTheHeldOutSegment) {
+  check("tx40_filtered_ls", {0.10, 0.09, 0.17, 0.18, 0.25, 0.25}, 0.105);
+}
+
+// Measured: wls 0.0877 0.0774 0.1456 0.1544 0.2211 0.2127, all 0.0916.
+TEST(RealTx40, WlsValidatesOnTheHeldOutSegment) {
+  check("tx40_wls", {0.10, 0.09, 0.17, 0.18, 0.25, 0.25}, 0.105);
+}
