@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 #include <random>
 
@@ -16,10 +17,25 @@ void ObservationModel::bind(std::shared_ptr<const RobotModel> robot, const RunCo
   onBind(ctx);
   const int samples = baseSamples();
   Samples s = randomSamples(samples, ctx.seed ^ 0x9e3779b97f4a7c15ull);
+  if (!moving_.empty()) {
+    check(held_.size() == s.dof(), fmt::format("model '{}': restrictMotion: {} held positions for a "
+                                               "{}-dof robot", pluginName(), held_.size(), s.dof()));
+    for (int j = 0; j < s.dof(); ++j) {
+      if (std::find(moving_.begin(), moving_.end(), j) != moving_.end()) continue;
+      s.q.col(j).setConstant(held_(j));
+      s.qd.col(j).setZero();
+      s.qdd.col(j).setZero();
+    }
+  }
   Eigen::MatrixXd W = fullDesign(s);
   base_ = computeBaseParameters(W, fullNames(), base_options_);
   check(base_.rank() > 0, fmt::format("model '{}' on robot '{}': no identifiable parameter",
                                       pluginName(), robot_->name));
+}
+
+void ObservationModel::restrictMotion(std::vector<int> moving, Eigen::VectorXd held) {
+  moving_ = std::move(moving);
+  held_ = std::move(held);
 }
 
 Samples ObservationModel::randomSamples(int count, std::uint64_t seed) const {

@@ -126,6 +126,7 @@ class StackedModel final : public ObservationModel {
     rowsPerDesign_.clear();
     Samples probe = randomSamples(1, ctx.seed);
     for (const auto& p : parts_) {
+      if (!movingJoints().empty()) p->restrictMotion(movingJoints(), heldPositions());
       p->bind(robotPtr(), ctx);
       std::vector<int> idx;
       for (const auto& n : p->fullNames()) {
@@ -274,6 +275,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
 
     // ---------------------------------------------------------------- model
     std::shared_ptr<ObservationModel> model;
+    std::shared_ptr<Trajectory> traj;
     if (!cfg.models.empty()) {
       stage = "model";
       t0 = std::chrono::steady_clock::now();
@@ -288,6 +290,19 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         }
         model = std::make_shared<StackedModel>(std::move(parts), std::move(weights));
       }
+      // Joints the excitation trajectory holds still: the base parameters are those the motion
+      // of the moving joints can identify (paper section 4, one joint at a time).
+      if (cfg.hasExcitation()) {
+        traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+        traj->bind(robot, ctx);
+        const Json d = traj->describe();
+        if (const Json* js = d.find("joints"); js && js->isArray() && static_cast<int>(js->size()) < robot->dof()) {
+          std::vector<int> moving;
+          for (std::size_t i = 0; i < js->size(); ++i) moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+          const Samples s0 = traj->evaluate(traj->initial());
+          model->restrictMotion(moving, s0.q.row(0).transpose());
+        }
+      }
       model->bind(robot, ctx);
       R["n_parameters"] = model->base().numFull();
       R["n_base_parameters"] = model->numBase();
@@ -297,6 +312,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       Mj["n_base"] = model->numBase();
       Mj["base_parameters"] = Json(model->base().names);
       Mj["details"] = model->describe();
+      if (!model->movingJoints().empty()) {  // base parameters of the restricted motion
+        std::vector<double> mj;
+        for (int j : model->movingJoints()) mj.push_back(j + 1);
+        Mj["moving_joints"] = Json(mj);
+      }
       Mj["wall_s"] = seconds(t0);
       report.model(*model);
     }
@@ -306,10 +326,12 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     if (cfg.hasExcitation()) {
       stage = "excitation";
       t0 = std::chrono::steady_clock::now();
-      auto traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+      if (!traj) {
+        traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+        traj->bind(robot, ctx);
+      }
       auto crit = reg.create<Criterion>(cfg.criterion->type, cfg.criterion->params);
       auto optim = reg.create<Optimizer>(cfg.optimizer->type, cfg.optimizer->params);
-      traj->bind(robot, ctx);
       ExcitationOptions xo;
       xo.position_margin = traj->positionMargin();
       xo.velocity_limits = traj->velocityLimits();
