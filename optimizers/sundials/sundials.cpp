@@ -1,0 +1,766 @@
+// Optimizer `sundials`: excitation design in CONTINUOUS time with CVODES.
+//
+// The trajectory is read as a function of time, q(t; z), rest + b(t) z_j per moving joint. The
+// parameterisations of the `fourier` and `spline` trajectory plugins are RE-IMPLEMENTED here
+// (the Trajectory interface only evaluates on its own sample grid); at the start the
+// re-implementation is checked against the plugin's samples and the optimiser refuses to run
+// when they differ (other trajectories, e.g. `pointwise`, are refused with a message).
+//
+// Forward problem (CVODES, Adams, fixed-point iteration), state y = [q; qd] of the moving
+// joints driven by the parameterised acceleration:
+//     y' = f(t, y; z) = [qd; qdd(t; z)],    y(0) = [q(0; z); qd(0; z)],
+// with the information matrix as quadratures under error control:
+//     M = (1/dt) int_0^T S Phi(t) Phi(t)^T S dt,    Phi^T = model.design(one sample at t)
+// (dt = the trajectory's sample period, so that M matches sum_k Phi_k Phi_k^T of the discrete
+// problem; S = the criterion's optional column scaling). J = F(M) (the criterion plugin).
+//
+// Gradient by CVODES's adjoint sensitivity (CVodeAdjInit, checkpoints, Hermite interpolation of
+// the forward solution). With G = dF/dM and w(t) = <G, S Phi Phi^T S>/dt, the costate
+//     lambda' = -(df/dy)^T lambda - (dw/dy)^T,  lambda(T) = 0   (lambda = [lq; lqd]:
+//     lq' = -dw/dq, lqd' = -lq - dw/dqd)
+// and the backward quadrature give
+//     dJ/dz = lambda(0)^T dy0/dz + int_0^T (dw/dqdd + lqd)^T dqdd/dz dt,
+// dw/d(q, qd, qdd) being the model's exact VJP with dW = 2 W S G S / dt. This is the
+// continuous-time form of the paper's costate recursion (eqn 15).
+//
+// Update: projected L-BFGS with Armijo backtracking on the merit J + rho/2 sum max(0, g)^2,
+// g(z) <= 0 the excitation problem's limits at the sample grid plus the trajectory's own caps
+// (exid::optim::Limits); rho grows x10 per pass while the point is infeasible. Bounds on z by
+// projection. The best FEASIBLE point is returned.
+#include <cvodes/cvodes.h>
+#include <fmt/format.h>
+#include <nvector/nvector_serial.h>
+#include <sundials/sundials_context.h>
+#include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
+
+#include <Eigen/LU>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <deque>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "exid/error.hpp"
+#include "optim_common.hpp"
+
+namespace {
+
+// ---------------------------------------------------------------- continuous parameterisation
+/// q_j(t) = rest_j + bq(t) z_j (moving joints), the same for qd, qdd; held joints at rest.
+class Parameterisation {
+ public:
+  void build(const exid::Trajectory& traj, const std::string& who) {
+    const std::string name = traj.pluginName();
+    const exid::Json d = traj.describe();
+    auto num = [&](const char* key) {
+      const exid::Json* v = d.find(key);
+      exid::check(v && v->isNumber(), fmt::format("{}: trajectory '{}' does not describe '{}'", who, name, key));
+      return v->asDouble();
+    };
+    const exid::Json* js = d.find("joints");
+    exid::check(js && js->isArray(), fmt::format("{}: trajectory '{}' does not list its moving joints", who, name));
+    moving_.clear();
+    for (std::size_t i = 0; i < js->size(); ++i) moving_.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+    const Eigen::VectorXd z0 = traj.initial();
+    s0_ = traj.evaluate(z0);
+    n_ = s0_.dof();
+    exid::check(s0_.size() >= 2, fmt::format("{}: the trajectory has fewer than 2 samples", who));
+    dt_ = s0_.t(1) - s0_.t(0);
+    rest_ = s0_.q.row(0).transpose();
+    if (name == "fourier") {
+      kind_ = Kind::Fourier;
+      T_ = num("period_s");
+      L_ = static_cast<int>(num("harmonics"));
+      w_ = 2.0 * M_PI / T_;
+      m_ = 1 + 2 * L_;
+    } else if (name == "spline") {
+      kind_ = Kind::Spline;
+      T_ = num("duration_s");
+      const int knots = static_cast<int>(num("knots"));
+      d_ = static_cast<int>(num("degree"));
+      const exid::Json* b = d.find("boundary");
+      periodic_ = b && b->isString() && b->asString() == "periodic";
+      buildSpline(knots);
+    } else {
+      throw exid::Error(fmt::format(
+          "{}: trajectory '{}' is not supported: the continuous-time optimiser re-implements the "
+          "'fourier' and 'spline' parameterisations only (for 'pointwise' use adjoint_gradient or nlopt)",
+          who, name));
+    }
+    exid::check(static_cast<int>(moving_.size()) * m_ == traj.numVariables(),
+                fmt::format("{}: trajectory '{}' has {} variables, the re-implementation {}", who, name,
+                            traj.numVariables(), static_cast<int>(moving_.size()) * m_));
+    // The re-implementation must reproduce the plugin's samples (at z0 and at a perturbed z).
+    Eigen::VectorXd z1 = z0;
+    for (Eigen::Index i = 0; i < z1.size(); ++i) z1(i) += 0.01 * std::sin(1.0 + 3.7 * static_cast<double>(i));
+    for (const Eigen::VectorXd* z : {&z0, static_cast<const Eigen::VectorXd*>(&z1)}) {
+      const exid::Samples s = traj.evaluate(*z);
+      const exid::Samples r = samplesAt(s.t, *z);
+      const double scale = 1.0 + s.q.cwiseAbs().maxCoeff() + s.qd.cwiseAbs().maxCoeff() + s.qdd.cwiseAbs().maxCoeff();
+      const double err = std::max({(s.q - r.q).cwiseAbs().maxCoeff(), (s.qd - r.qd).cwiseAbs().maxCoeff(),
+                                   (s.qdd - r.qdd).cwiseAbs().maxCoeff()});
+      exid::check(err <= 1e-8 * scale,
+                  fmt::format("{}: the continuous re-implementation of trajectory '{}' differs from the "
+                              "plugin's samples by {:.3g} (parameters not understood)", who, name, err));
+    }
+  }
+
+  int m() const { return m_; }
+  int n() const { return n_; }
+  int nm() const { return static_cast<int>(moving_.size()); }
+  const std::vector<int>& moving() const { return moving_; }
+  double duration() const { return T_; }
+  double dt() const { return dt_; }
+  const Eigen::VectorXd& rest() const { return rest_; }
+
+  /// Basis rows at time t (m values each).
+  void basis(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd, Eigen::RowVectorXd* bqdd) const {
+    bq->setZero(m_);
+    bqd->setZero(m_);
+    bqdd->setZero(m_);
+    if (kind_ == Kind::Fourier) {
+      (*bq)(0) = 1.0;
+      for (int l = 1; l <= L_; ++l) {
+        const double wl = w_ * l, s = std::sin(wl * t), c = std::cos(wl * t);
+        (*bq)(l) = s / wl;
+        (*bq)(L_ + l) = -c / wl;
+        (*bqd)(l) = c;
+        (*bqd)(L_ + l) = s;
+        (*bqdd)(l) = -wl * s;
+        (*bqdd)(L_ + l) = wl * c;
+      }
+      return;
+    }
+    const int nc = d_ + 1;
+    int i = std::min(S_ - 1, static_cast<int>(std::floor(t / h_ + 1e-12)));
+    i = std::max(i, 0);
+    const double tau = t - i * h_;
+    Eigen::RowVectorXd e(nc);
+    for (int r = 0; r < 3; ++r) {
+      for (int p = 0; p <= d_; ++p) e(p) = dpow(p, r, tau);
+      (r == 0 ? *bq : (r == 1 ? *bqd : *bqdd)) = e * C_.middleRows(i * nc, nc);
+    }
+  }
+
+  /// Samples at arbitrary times (for the check and for tests).
+  exid::Samples samplesAt(const Eigen::VectorXd& t, const Eigen::VectorXd& z) const {
+    exid::Samples s;
+    s.t = t;
+    const Eigen::Index K = t.size();
+    s.q = rest_.transpose().replicate(K, 1);
+    s.qd = Eigen::MatrixXd::Zero(K, n_);
+    s.qdd = Eigen::MatrixXd::Zero(K, n_);
+    Eigen::RowVectorXd bq, bqd, bqdd;
+    for (Eigen::Index k = 0; k < K; ++k) {
+      basis(t(k), &bq, &bqd, &bqdd);
+      for (int i = 0; i < nm(); ++i) {
+        const int j = moving_[static_cast<std::size_t>(i)];
+        const auto zi = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
+        s.q(k, j) = bq.dot(zi);
+        s.qd(k, j) = bqd.dot(zi);
+        s.qdd(k, j) = bqdd.dot(zi);
+      }
+    }
+    return s;
+  }
+
+ private:
+  enum class Kind { Fourier, Spline };
+  static double dpow(int p, int r, double tau) {
+    if (r > p) return 0.0;
+    double f = 1.0;
+    for (int i = 0; i < r; ++i) f *= p - i;
+    return f * std::pow(tau, p - r);
+  }
+  // Same linear system as the `spline` plugin: knot interpolation, C^(d-1) continuity inside,
+  // rest (clamped) or periodic ends; C = coefficients per unit knot vector.
+  void buildSpline(int knots) {
+    S_ = knots - 1;
+    const int d = d_, nc = d + 1;
+    m_ = periodic_ ? knots - 1 : knots;
+    h_ = T_ / S_;
+    const int N = nc * S_;
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, m_);
+    int row = 0;
+    auto knotVar = [&](int i) { return periodic_ ? i % m_ : i; };
+    for (int i = 0; i < S_; ++i) {
+      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, 0.0);
+      R(row++, knotVar(i)) = 1.0;
+      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, h_);
+      R(row++, knotVar(i + 1)) = 1.0;
+    }
+    for (int i = 1; i < S_; ++i)
+      for (int r = 1; r < d; ++r, ++row)
+        for (int p = 0; p <= d; ++p) {
+          A(row, (i - 1) * nc + p) += dpow(p, r, h_);
+          A(row, i * nc + p) -= dpow(p, r, 0.0);
+        }
+    if (periodic_) {
+      for (int r = 1; r < d; ++r, ++row)
+        for (int p = 0; p <= d; ++p) {
+          A(row, (S_ - 1) * nc + p) += dpow(p, r, h_);
+          A(row, p) -= dpow(p, r, 0.0);
+        }
+    } else {
+      for (int r = 1; r <= (d - 1) / 2; ++r) {
+        for (int p = 0; p <= d; ++p) A(row, p) = dpow(p, r, 0.0);
+        ++row;
+        for (int p = 0; p <= d; ++p) A(row, (S_ - 1) * nc + p) = dpow(p, r, h_);
+        ++row;
+      }
+    }
+    exid::check(row == N, "optimizer 'sundials': internal: spline system size");
+    C_ = A.fullPivLu().solve(R);
+  }
+
+  Kind kind_ = Kind::Fourier;
+  std::vector<int> moving_;
+  int n_ = 0, m_ = 0, L_ = 0, S_ = 0, d_ = 3;
+  double T_ = 0, w_ = 0, h_ = 0, dt_ = 0.1;
+  bool periodic_ = false;
+  Eigen::VectorXd rest_;
+  Eigen::MatrixXd C_;
+  exid::Samples s0_;
+};
+
+// ---------------------------------------------------------------- CVODES forward + adjoint
+struct CvodesSettings {
+  double rtol = 1e-6, atol_state = 1e-9, atol_quad_rel = 1e-9;
+  int checkpoint_steps = 200;
+  long max_steps = 200000;
+};
+
+class ContinuousCriterion {
+ public:
+  ContinuousCriterion(const exid::ExcitationProblem& p, const Parameterisation& par, CvodesSettings cs)
+      : model_(p.model()), crit_(p.criterion()), par_(par), cs_(cs) {
+    nb_ = model_.numBase();
+    scale_ = Eigen::VectorXd::Ones(nb_);
+    if (crit_.scaleColumns()) {  // as framework/src/excitation.cpp
+      Eigen::VectorXd nom = model_.baseNominal().cwiseAbs();
+      const double floor = std::max(1e-6, 1e-3 * nom.maxCoeff());
+      for (int i = 0; i < nb_; ++i) scale_(i) = std::max(nom(i), floor);
+    }
+    nq_ = nb_ * (nb_ + 1) / 2;
+    exid::check(SUNContext_Create(nullptr, &sctx_) == 0, "optimizer 'sundials': SUNContext_Create failed");
+    sample_.t = Eigen::VectorXd::Zero(1);
+    sample_.q = par_.rest().transpose();
+    sample_.qd = Eigen::MatrixXd::Zero(1, par_.n());
+    sample_.qdd = Eigen::MatrixXd::Zero(1, par_.n());
+    // One sample must give design rows (models with one row set per instant).
+    const Eigen::MatrixXd W = model_.design(sample_);
+    exid::check(W.rows() > 0 && W.cols() == nb_,
+                fmt::format("optimizer 'sundials': the model '{}' gives no design rows for a single "
+                            "instant (the integral model's rows are windows): use adjoint_gradient or nlopt",
+                            model_.pluginName()));
+  }
+  ~ContinuousCriterion() { SUNContext_Free(&sctx_); }
+  ContinuousCriterion(const ContinuousCriterion&) = delete;
+  ContinuousCriterion& operator=(const ContinuousCriterion&) = delete;
+
+  /// Magnitude of M's diagonal, for the quadrature tolerances.
+  void setQuadScale(double s) { quad_scale_ = std::max(s, 1e-300); }
+  long stepsForward() const { return steps_f_; }
+  long stepsBackward() const { return steps_b_; }
+
+  /// J(z) and (if grad) dJ/dz by the adjoint. Throws exid::Error when CVODES fails.
+  double evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* grad, Eigen::MatrixXd* M_out = nullptr) {
+    z_ = z;
+    const int nm = par_.nm(), ny = 2 * nm;
+    const double T = par_.duration();
+    Holder h;
+    h.y = N_VNew_Serial(std::max(ny, 1), sctx_);
+    h.q = N_VNew_Serial(nq_, sctx_);
+    Eigen::RowVectorXd bq, bqd, bqdd;
+    par_.basis(0.0, &bq, &bqd, &bqdd);
+    double* y = N_VGetArrayPointer(h.y);
+    for (int i = 0; i < nm; ++i) {
+      const auto zi = z.segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m());
+      y[i] = bq.dot(zi);
+      y[nm + i] = bqd.dot(zi);
+    }
+    if (ny == 0) y[0] = 0.0;
+    N_VConst(0.0, h.q);
+    h.mem = CVodeCreate(CV_ADAMS, sctx_);
+    check(h.mem != nullptr, "CVodeCreate");
+    check(CVodeInit(h.mem, &ContinuousCriterion::rhs, 0.0, h.y), "CVodeInit");
+    check(CVodeSetUserData(h.mem, this), "CVodeSetUserData");
+    check(CVodeSStolerances(h.mem, cs_.rtol, cs_.atol_state), "CVodeSStolerances");
+    check(CVodeSetMaxNumSteps(h.mem, cs_.max_steps), "CVodeSetMaxNumSteps");
+    h.nls = SUNNonlinSol_FixedPoint(h.y, 0, sctx_);
+    check(CVodeSetNonlinearSolver(h.mem, h.nls), "CVodeSetNonlinearSolver");
+    check(CVodeQuadInit(h.mem, &ContinuousCriterion::rhsQuad, h.q), "CVodeQuadInit");
+    check(CVodeQuadSStolerances(h.mem, cs_.rtol, cs_.atol_quad_rel * quad_scale_), "CVodeQuadSStolerances");
+    check(CVodeSetQuadErrCon(h.mem, SUNTRUE), "CVodeSetQuadErrCon");
+    check(CVodeSetStopTime(h.mem, T), "CVodeSetStopTime");
+    if (grad) check(CVodeAdjInit(h.mem, cs_.checkpoint_steps, CV_HERMITE), "CVodeAdjInit");
+    double t = 0.0;
+    int ncheck = 0;
+    const int flag = grad ? CVodeF(h.mem, T, h.y, &t, CV_NORMAL, &ncheck) : CVode(h.mem, T, h.y, &t, CV_NORMAL);
+    check(flag >= 0, grad ? "CVodeF" : "CVode", flag);
+    check(CVodeGetQuad(h.mem, &t, h.q) >= 0, "CVodeGetQuad");
+    long ns = 0;
+    CVodeGetNumSteps(h.mem, &ns);
+    steps_f_ += ns;
+    const double* q = N_VGetArrayPointer(h.q);
+    Eigen::MatrixXd M(nb_, nb_);
+    for (int c = 0, idx = 0; c < nb_; ++c)
+      for (int r = 0; r <= c; ++r, ++idx) M(r, c) = M(c, r) = q[idx];
+    if (M_out) *M_out = M;
+    Eigen::MatrixXd dM;
+    const double J = crit_.evaluate(M, grad ? &dM : nullptr);
+    if (!grad) return J;
+    G_ = 0.5 * (dM + dM.transpose());
+    // backward problem
+    const int nz = static_cast<int>(z.size());
+    h.yB = N_VNew_Serial(std::max(ny, 1), sctx_);
+    h.qB = N_VNew_Serial(std::max(nz, 1), sctx_);
+    N_VConst(0.0, h.yB);
+    N_VConst(0.0, h.qB);
+    int which = -1;
+    check(CVodeCreateB(h.mem, CV_ADAMS, &which), "CVodeCreateB");
+    check(CVodeInitB(h.mem, which, &ContinuousCriterion::rhsB, T, h.yB), "CVodeInitB");
+    check(CVodeSetUserDataB(h.mem, which, this), "CVodeSetUserDataB");
+    check(CVodeSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))), "CVodeSStolerancesB");
+    check(CVodeSetMaxNumStepsB(h.mem, which, cs_.max_steps), "CVodeSetMaxNumStepsB");
+    h.nlsB = SUNNonlinSol_FixedPoint(h.yB, 0, sctx_);
+    check(CVodeSetNonlinearSolverB(h.mem, which, h.nlsB), "CVodeSetNonlinearSolverB");
+    check(CVodeQuadInitB(h.mem, which, &ContinuousCriterion::rhsQuadB, h.qB), "CVodeQuadInitB");
+    check(CVodeQuadSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))), "CVodeQuadSStolerancesB");
+    check(CVodeSetQuadErrConB(h.mem, which, SUNTRUE), "CVodeSetQuadErrConB");
+    check(CVodeB(h.mem, 0.0, CV_NORMAL) >= 0, "CVodeB");
+    check(CVodeGetB(h.mem, which, &t, h.yB) >= 0, "CVodeGetB");
+    check(CVodeGetQuadB(h.mem, which, &t, h.qB) >= 0, "CVodeGetQuadB");
+    void* memB = CVodeGetAdjCVodeBmem(h.mem, which);
+    if (memB) {
+      CVodeGetNumSteps(memB, &ns);
+      steps_b_ += ns;
+    }
+    const double* lam = N_VGetArrayPointer(h.yB);
+    const double* qb = N_VGetArrayPointer(h.qB);
+    grad->resize(nz);
+    for (int i = 0; i < nz; ++i) (*grad)(i) = qb[i];
+    for (int i = 0; i < nm; ++i)
+      grad->segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()) += lam[i] * bq.transpose() + lam[nm + i] * bqd.transpose();
+    return J;
+  }
+
+ private:
+  struct Holder {
+    ~Holder() {
+      if (mem) CVodeFree(&mem);
+      if (nls) SUNNonlinSolFree(nls);
+      if (nlsB) SUNNonlinSolFree(nlsB);
+      for (N_Vector v : {y, q, yB, qB})
+        if (v) N_VDestroy(v);
+    }
+    void* mem = nullptr;
+    SUNNonlinearSolver nls = nullptr, nlsB = nullptr;
+    N_Vector y = nullptr, q = nullptr, yB = nullptr, qB = nullptr;
+  };
+  static void check(int flag, const char* what, int code = 0) {
+    if (flag < 0) throw exid::Error(fmt::format("optimizer 'sundials': {} failed (flag {})", what, code ? code : flag));
+  }
+  static void check(bool ok, const char* what) {
+    if (!ok) throw exid::Error(fmt::format("optimizer 'sundials': {} failed", what));
+  }
+
+  // Fills sample_ (moving joints from y and the basis) and the basis rows at t.
+  void fillSample(double t, const double* y) {
+    par_.basis(t, &bq_, &bqd_, &bqdd_);
+    const int nm = par_.nm();
+    sample_.t(0) = t;
+    for (int i = 0; i < nm; ++i) {
+      const int j = par_.moving()[static_cast<std::size_t>(i)];
+      sample_.q(0, j) = y[i];
+      sample_.qd(0, j) = y[nm + i];
+      sample_.qdd(0, j) = bqdd_.dot(z_.segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()));
+    }
+  }
+
+  static int rhs(double t, N_Vector yv, N_Vector ydv, void* ud) {
+    auto* self = static_cast<ContinuousCriterion*>(ud);
+    const int nm = self->par_.nm();
+    const double* y = N_VGetArrayPointer(yv);
+    double* yd = N_VGetArrayPointer(ydv);
+    if (nm == 0) { yd[0] = 0.0; return 0; }
+    self->par_.basis(t, &self->bq_, &self->bqd_, &self->bqdd_);
+    for (int i = 0; i < nm; ++i) {
+      yd[i] = y[nm + i];
+      yd[nm + i] = self->bqdd_.dot(self->z_.segment(static_cast<Eigen::Index>(i) * self->par_.m(), self->par_.m()));
+    }
+    return 0;
+  }
+
+  static int rhsQuad(double t, N_Vector yv, N_Vector qdv, void* ud) {
+    auto* self = static_cast<ContinuousCriterion*>(ud);
+    try {
+      self->fillSample(t, N_VGetArrayPointer(yv));
+      const Eigen::MatrixXd W = self->model_.design(self->sample_) * self->scale_.asDiagonal();
+      const Eigen::MatrixXd P = (W.transpose() * W) / self->par_.dt();
+      double* qd = N_VGetArrayPointer(qdv);
+      for (int c = 0, idx = 0; c < self->nb_; ++c)
+        for (int r = 0; r <= c; ++r, ++idx) qd[idx] = P(r, c);
+    } catch (...) {
+      return -1;
+    }
+    return 0;
+  }
+
+  // The model's VJP at (t, y), cached for the pair rhsB / rhsQuadB at the same point.
+  void adjointAt(double t, const double* y) {
+    const int ny = 2 * par_.nm();
+    bool same = have_adj_ && t == adj_t_;
+    for (int i = 0; same && i < ny; ++i) same = adj_y_[static_cast<std::size_t>(i)] == y[i];
+    if (same) return;
+    fillSample(t, y);
+    const Eigen::MatrixXd W = model_.design(sample_) * scale_.asDiagonal();
+    const Eigen::MatrixXd dW = (2.0 / par_.dt()) * W * G_ * scale_.asDiagonal();
+    model_.designVjp(sample_, dW, &adj_);
+    adj_t_ = t;
+    adj_y_.assign(y, y + ny);
+    have_adj_ = true;
+  }
+
+  static int rhsB(double t, N_Vector yv, N_Vector yBv, N_Vector yBdv, void* ud) {
+    auto* self = static_cast<ContinuousCriterion*>(ud);
+    const int nm = self->par_.nm();
+    const double* lam = N_VGetArrayPointer(yBv);
+    double* out = N_VGetArrayPointer(yBdv);
+    if (nm == 0) { out[0] = 0.0; return 0; }
+    try {
+      self->adjointAt(t, N_VGetArrayPointer(yv));
+    } catch (...) {
+      return -1;
+    }
+    for (int i = 0; i < nm; ++i) {
+      const int j = self->par_.moving()[static_cast<std::size_t>(i)];
+      out[i] = -self->adj_.q(0, j);
+      out[nm + i] = -lam[i] - self->adj_.qd(0, j);
+    }
+    return 0;
+  }
+
+  static int rhsQuadB(double t, N_Vector yv, N_Vector yBv, N_Vector qBdv, void* ud) {
+    auto* self = static_cast<ContinuousCriterion*>(ud);
+    const int nm = self->par_.nm(), m = self->par_.m();
+    const double* lam = N_VGetArrayPointer(yBv);
+    double* out = N_VGetArrayPointer(qBdv);
+    try {
+      self->adjointAt(t, N_VGetArrayPointer(yv));
+    } catch (...) {
+      return -1;
+    }
+    self->par_.basis(t, &self->bq_, &self->bqd_, &self->bqdd_);
+    for (int i = 0; i < nm; ++i) {
+      const int j = self->par_.moving()[static_cast<std::size_t>(i)];
+      const double a = self->adj_.qdd(0, j) + lam[nm + i];
+      for (int c = 0; c < m; ++c) out[i * m + c] = -a * self->bqdd_(c);
+    }
+    return 0;
+  }
+
+  const exid::ObservationModel& model_;
+  const exid::Criterion& crit_;
+  const Parameterisation& par_;
+  CvodesSettings cs_;
+  SUNContext sctx_ = nullptr;
+  int nb_ = 0, nq_ = 0;
+  double quad_scale_ = 1.0;
+  Eigen::VectorXd scale_, z_;
+  Eigen::MatrixXd G_;
+  exid::Samples sample_, adj_;
+  Eigen::RowVectorXd bq_, bqd_, bqdd_;
+  bool have_adj_ = false;
+  double adj_t_ = 0.0;
+  std::vector<double> adj_y_;
+  long steps_f_ = 0, steps_b_ = 0;
+};
+
+// ---------------------------------------------------------------- the plugin
+class SundialsOptimizer final : public exid::Optimizer {
+ public:
+  static constexpr const char* kName = "sundials";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "continuous-time design: trajectory ODE and information matrix int Phi Phi^T dt by CVODES "
+      "(quadratures with error control), gradient by CVODES adjoint sensitivity, projected "
+      "L-BFGS + Armijo; limits by a quadratic penalty; trajectories fourier and spline "
+      "(re-implemented in continuous time), models with rows per instant";
+
+  static std::vector<exid::ParamDecl> params() {
+    auto p = exid::optim::budgetParams(60.0, 0);
+    p.push_back(exid::param_int("max_iterations", 500, "accepted steps in total (0: evaluate the start only)", 0.0));
+    p.push_back(exid::param_int("inner_iterations", 60, "iterations per penalty pass", 1.0));
+    p.push_back(exid::param_int("memory", 10, "L-BFGS memory", 1.0, 100.0));
+    p.push_back(exid::param_double("rtol", 1e-6, "", "CVODES relative tolerance (state, quadratures, adjoint)", 0.0, 1.0, true));
+    p.push_back(exid::param_double("step_gain", 0.1, "",
+                                   "largest change of any variable in the first step: gain / max|gradient|", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("penalty_weight", 100.0, "", "initial rho as a multiple of |J(z0)|", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("ftol_rel", 1e-7, "", "stop when a pass improves J by less than this (relative)", 0.0));
+    p.push_back(exid::param_int("checkpoint_steps", 200, "CVODES adjoint: steps between checkpoints", 1.0));
+    p.push_back(exid::param_bool("check_gradient", false,
+                                 "at the start, compare the adjoint gradient with central finite "
+                                 "differences of the continuous criterion and time J vs J + gradient "
+                                 "(details: gradient_check)"));
+    p.push_back(exid::param_double("fd_step", 1e-5, "", "check_gradient: relative central-difference step", 0.0, std::nullopt, true));
+    return p;
+  }
+
+  explicit SundialsOptimizer(const exid::ParamSet& p)
+      : budget_(exid::optim::readBudget(p)), max_iter_(static_cast<int>(p.getInt("max_iterations"))),
+        inner_(static_cast<int>(p.getInt("inner_iterations"))), mem_(static_cast<int>(p.getInt("memory"))),
+        gain_(p.getDouble("step_gain")), rho_rel_(p.getDouble("penalty_weight")), ftol_(p.getDouble("ftol_rel")),
+        check_grad_(p.getBool("check_gradient")), fd_step_(p.getDouble("fd_step")) {
+    cs_.rtol = p.getDouble("rtol");
+    cs_.checkpoint_steps = static_cast<int>(p.getInt("checkpoint_steps"));
+  }
+
+  exid::OptimizerResult minimize(exid::ExcitationProblem& problem, const exid::RunContext& ctx) override {
+    t0_ = std::chrono::steady_clock::now();
+    ctx_ = &ctx;
+    evals_ = 0;
+    grads_ = 0;
+    Parameterisation par;
+    par.build(problem.trajectory(), "optimizer 'sundials'");
+    ContinuousCriterion cc(problem, par, cs_);
+    exid::optim::Limits lim(problem);
+    problem.bounds(&lo_, &hi_);
+    const Eigen::VectorXd zs = problem.initial();
+    // quadrature tolerance scale from the discrete M at the start
+    {
+      const exid::Samples s = problem.trajectory().evaluate(zs);
+      const Eigen::MatrixXd W = problem.model().design(s);
+      cc.setQuadScale((W.transpose() * W).diagonal().cwiseAbs().maxCoeff());
+    }
+    Eigen::VectorXd z = project(zs);
+    Json gcheck;
+    if (check_grad_) gcheck = gradientCheck(cc, zs);
+    const double J0 = cc.evaluate(zs, nullptr);
+    ++evals_;
+    offer(zs, J0, lim.size() ? std::max(0.0, maxOf(lim, zs)) : 0.0);
+    rho_ = rho_rel_ * std::max(1e-12, std::abs(J0));
+    int iters = 0;
+    std::string reason = max_iter_ == 0 ? "max_iterations (0: start evaluated only)" : "max_iterations";
+    double prev_J = HUGE_VAL;
+    for (int outer = 0; iters < max_iter_; ++outer) {
+      if (stop()) { reason = stopCause(); break; }
+      const bool converged = inner(cc, lim, &z, &iters);
+      if (stop()) { reason = stopCause(); break; }
+      const double v = lim.size() ? std::max(0.0, maxOf(lim, z)) : 0.0;
+      const bool feasible = v <= budget_.feasibility_tol;
+      ctx.report(std::min(1.0, static_cast<double>(iters) / std::max(1, max_iter_)),
+                 fmt::format("sundials pass {} J {:.6g} violation {:.3g}", outer + 1, cur_J_, v));
+      if (!feasible) rho_ *= 10.0;
+      if (feasible && converged && std::abs(prev_J - cur_J_) <= ftol_ * std::max(1.0, std::abs(cur_J_))) {
+        reason = "converged (ftol_rel)";
+        break;
+      }
+      if (feasible && converged && lim.size() == 0) { reason = "converged"; break; }
+      if (feasible) prev_J = cur_J_;
+      if (outer > 50) { reason = "outer passes"; break; }
+    }
+    exid::OptimizerResult r;
+    r.z = have_feasible_ ? best_z_ : best_inf_z_;
+    r.criterion_initial = J0;
+    r.criterion_final = have_feasible_ ? best_J_ : best_inf_J_;
+    r.max_violation = lim.size() ? std::max(0.0, maxOf(lim, r.z)) : 0.0;
+    r.iterations = iters;
+    r.evaluations = evals_;
+    r.wall_s = elapsed();
+    r.stop_reason = have_feasible_ ? reason : reason + " (no feasible point found)";
+    r.history_t_s = ht_;
+    r.history_value = hv_;
+    r.details["continuous"] = true;
+    r.details["criterion_is"] = "F((1/dt) int_0^T S Phi Phi^T S dt), CVODES quadratures";
+    r.details["gradient_evaluations"] = Json(static_cast<long long>(grads_));
+    r.details["cvodes_steps_forward"] = Json(static_cast<long long>(cc.stepsForward()));
+    r.details["cvodes_steps_backward"] = Json(static_cast<long long>(cc.stepsBackward()));
+    r.details["rtol"] = cs_.rtol;
+    r.details["rho"] = rho_;
+    if (check_grad_) r.details["gradient_check"] = gcheck;
+    r.details["discrete_criterion_initial"] = problem.value(zs, nullptr);
+    r.details["discrete_criterion_final"] = problem.value(r.z, nullptr);
+    return r;
+  }
+
+ private:
+  using Json = exid::Json;
+  double elapsed() const {
+    return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
+  }
+  bool stop() const { return !stopCause().empty(); }
+  std::string stopCause() const {
+    if (budget_.max_time_s > 0 && elapsed() >= budget_.max_time_s) return "max_time_s";
+    if (budget_.max_evaluations > 0 && evals_ >= budget_.max_evaluations) return "max_evaluations";
+    if (ctx_ && ctx_->shouldStop()) return "cancelled";
+    return "";
+  }
+  // Adjoint gradient vs central differences; cost of J + gradient relative to J alone.
+  Json gradientCheck(ContinuousCriterion& cc, const Eigen::VectorXd& z) {
+    using clock = std::chrono::steady_clock;
+    Eigen::VectorXd g;
+    const int reps = 3;
+    auto t0 = clock::now();
+    for (int i = 0; i < reps; ++i) cc.evaluate(z, nullptr);
+    const double tJ = std::chrono::duration<double>(clock::now() - t0).count() / reps;
+    t0 = clock::now();
+    for (int i = 0; i < reps; ++i) cc.evaluate(z, &g);
+    const double tG = std::chrono::duration<double>(clock::now() - t0).count() / reps;
+    Eigen::VectorXd fd(z.size());
+    for (Eigen::Index i = 0; i < z.size(); ++i) {
+      const double h = fd_step_ * std::max(1.0, std::abs(z(i)));
+      Eigen::VectorXd zp = z, zm = z;
+      zp(i) += h;
+      zm(i) -= h;
+      fd(i) = (cc.evaluate(zp, nullptr) - cc.evaluate(zm, nullptr)) / (2.0 * h);
+    }
+    evals_ += 2 * reps + 2 * z.size();
+    Json j = Json::object();
+    const double gmax = std::max(1e-300, fd.cwiseAbs().maxCoeff());
+    j["max_abs_error"] = (g - fd).cwiseAbs().maxCoeff();
+    j["max_rel_error"] = (g - fd).cwiseAbs().maxCoeff() / gmax;
+    j["max_abs_gradient"] = gmax;
+    j["adjoint"] = Json(std::vector<double>(g.data(), g.data() + g.size()));
+    j["finite_difference"] = Json(std::vector<double>(fd.data(), fd.data() + fd.size()));
+    j["time_value_s"] = tJ;
+    j["time_value_and_gradient_s"] = tG;
+    j["cost_ratio"] = tG / std::max(1e-300, tJ);
+    return j;
+  }
+
+  static double maxOf(exid::optim::Limits& lim, const Eigen::VectorXd& z) {
+    Eigen::VectorXd g;
+    lim.eval(z, &g);
+    return g.size() ? g.maxCoeff() : 0.0;
+  }
+  Eigen::VectorXd project(const Eigen::VectorXd& z) const { return z.cwiseMax(lo_).cwiseMin(hi_); }
+  void offer(const Eigen::VectorXd& z, double J, double v) {
+    if (!std::isfinite(J)) return;
+    if (v <= budget_.feasibility_tol) {
+      if (!have_feasible_ || J < best_J_) {
+        have_feasible_ = true;
+        best_J_ = J;
+        best_z_ = z;
+        ht_.push_back(elapsed());
+        hv_.push_back(J);
+      }
+    } else if (!have_feasible_ && v < best_inf_v_) {
+      best_inf_v_ = v;
+      best_inf_J_ = J;
+      best_inf_z_ = z;
+    }
+  }
+
+  double merit(ContinuousCriterion& cc, exid::optim::Limits& lim, const Eigen::VectorXd& z, Eigen::VectorXd* grad) {
+    double J;
+    try {
+      J = cc.evaluate(z, grad);
+    } catch (const exid::Error&) {
+      return HUGE_VAL;
+    }
+    ++evals_;
+    ++grads_;
+    if (!std::isfinite(J)) return HUGE_VAL;
+    double phi = J, v = 0.0;
+    if (lim.size()) {
+      Eigen::VectorXd g;
+      lim.eval(z, &g);
+      v = std::max(0.0, g.maxCoeff());
+      const Eigen::VectorXd a = g.cwiseMax(0.0);
+      phi += 0.5 * rho_ * a.squaredNorm();
+      if ((a.array() > 0.0).any()) grad->noalias() += rho_ * (lim.jacobian(z).transpose() * a);
+    }
+    offer(z, J, v);
+    trial_J_ = J;
+    return phi;
+  }
+
+  bool inner(ContinuousCriterion& cc, exid::optim::Limits& lim, Eigen::VectorXd* zp, int* iters) {
+    Eigen::VectorXd& z = *zp;
+    Eigen::VectorXd g;
+    double phi = merit(cc, lim, z, &g);
+    cur_J_ = trial_J_;
+    if (!std::isfinite(phi)) return true;
+    std::deque<Eigen::VectorXd> S, Y;
+    std::deque<double> R;
+    for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
+      if (stop()) return false;
+      Eigen::VectorXd pg = g;
+      for (Eigen::Index i = 0; i < z.size(); ++i)
+        if ((z(i) <= lo_(i) && g(i) > 0) || (z(i) >= hi_(i) && g(i) < 0)) pg(i) = 0.0;
+      const double gmax = pg.cwiseAbs().maxCoeff();
+      if (gmax <= 1e-12 * std::max(1.0, std::abs(phi))) return true;
+      Eigen::VectorXd d;
+      double alpha = 1.0;
+      if (S.empty()) {
+        d = -pg;
+        alpha = gain_ / gmax;
+      } else {
+        Eigen::VectorXd q = pg;
+        std::vector<double> a(S.size());
+        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
+          const auto u = static_cast<std::size_t>(i);
+          a[u] = R[u] * S[u].dot(q);
+          q -= a[u] * Y[u];
+        }
+        q *= S.back().dot(Y.back()) / Y.back().squaredNorm();
+        for (std::size_t i = 0; i < S.size(); ++i) q += (a[i] - R[i] * Y[i].dot(q)) * S[i];
+        d = -q;
+        if (d.dot(pg) >= 0) {
+          S.clear(); Y.clear(); R.clear();
+          d = -pg;
+          alpha = gain_ / gmax;
+        }
+      }
+      bool accepted = false;
+      Eigen::VectorXd zn, gn;
+      double phin = HUGE_VAL;
+      for (int ls = 0; ls < 30; ++ls) {
+        zn = project(z + alpha * d);
+        phin = merit(cc, lim, zn, &gn);
+        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(g.dot(zn - z), 0.0) && phin < phi) {
+          accepted = true;
+          break;
+        }
+        if (stop()) return false;
+        alpha *= 0.5;
+      }
+      if (!accepted) return true;
+      ++*iters;
+      const Eigen::VectorXd s = zn - z, y = gn - g;
+      const double sy = s.dot(y);
+      if (sy > 1e-12 * s.norm() * y.norm()) {
+        S.push_back(s); Y.push_back(y); R.push_back(1.0 / sy);
+        if (static_cast<int>(S.size()) > mem_) { S.pop_front(); Y.pop_front(); R.pop_front(); }
+      }
+      const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
+      z = zn; g = gn; phi = phin;
+      cur_J_ = trial_J_;
+      if (rel < 1e-12) return true;
+    }
+    return false;
+  }
+
+  exid::optim::Budget budget_;
+  int max_iter_, inner_, mem_;
+  double gain_, rho_rel_, ftol_;
+  bool check_grad_;
+  double fd_step_;
+  CvodesSettings cs_;
+  std::chrono::steady_clock::time_point t0_;
+  const exid::RunContext* ctx_ = nullptr;
+  long evals_ = 0, grads_ = 0;
+  Eigen::VectorXd lo_, hi_;
+  double rho_ = 1.0, cur_J_ = 0.0, trial_J_ = 0.0;
+  bool have_feasible_ = false;
+  double best_J_ = HUGE_VAL, best_inf_J_ = HUGE_VAL, best_inf_v_ = HUGE_VAL;
+  Eigen::VectorXd best_z_, best_inf_z_;
+  std::vector<double> ht_, hv_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(SundialsOptimizer)
