@@ -92,15 +92,20 @@ class DifferentialModel : public exid::ObservationModel {
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     exid::models::requireSamples(s, n, true, "model 'differential'");
     const int P = exid::numParameters(R, cols_);
-    Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, P);
+    // Filled transposed (one contiguous column per row of W), then transposed once: no heap
+    // allocation per sample.
+    Eigen::MatrixXd Wt(P, static_cast<Eigen::Index>(K) * m);
     Eigen::MatrixXd Y(n, P);
+    Eigen::VectorXd q(n), qd(n), qdd(n);
     auto data = exid::makeDynamicsData(R);
     for (int k = 0; k < K; ++k) {
-      exid::actuatorRegressor(R, *data, cols_, s.q.row(k).transpose(), s.qd.row(k).transpose(),
-                              s.qdd.row(k).transpose(), Y);
-      for (int i = 0; i < m; ++i) W.row(k * m + i) = Y.row(sel_[static_cast<std::size_t>(i)]);
+      q = s.q.row(k).transpose();
+      qd = s.qd.row(k).transpose();
+      qdd = s.qdd.row(k).transpose();
+      exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
+      for (int i = 0; i < m; ++i) Wt.col(k * m + i) = Y.row(sel_[static_cast<std::size_t>(i)]).transpose();
     }
-    return W;
+    return Wt.transpose();
   }
 
   void fullDesignVjp(const exid::Samples& s, const Eigen::MatrixXd& dW,

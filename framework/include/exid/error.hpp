@@ -16,5 +16,9 @@ class Error : public std::runtime_error {
 inline void check(bool cond, const std::string& message) {
   if (!cond) throw Error(message);
 }
+/// The same for a literal message: no string is built unless the check fails (hot paths).
+inline void check(bool cond, const char* message) {
+  if (!cond) throw Error(message);
+}
 
 }  // namespace exid

@@ -14,8 +14,9 @@ namespace {
 inline double sgn(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
 
 void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* what, const char* fn) {
-  check(x.size() == m.dof(), std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
-                                 " entries (expected " + std::to_string(m.dof()) + ")");
+  if (x.size() != m.dof())  // the message is built only on failure (hot path)
+    throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) + " entries (expected " +
+                std::to_string(m.dof()) + ")");
 }
 
 }  // namespace

@@ -157,8 +157,9 @@ void GramAccumulator::reset(int cols) {
 void GramAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& rows) { addWeighted(rows, 1.0); }
 
 void GramAccumulator::addWeighted(const Eigen::Ref<const Eigen::MatrixXd>& rows, double w) {
-  check(rows.cols() == impl_->c, "GramAccumulator::add: " + std::to_string(rows.cols()) + " columns (expected " +
-                                     std::to_string(impl_->c) + ")");
+  if (rows.cols() != impl_->c)  // the message is built only on failure (hot path)
+    throw Error("GramAccumulator::add: " + std::to_string(rows.cols()) + " columns (expected " +
+                std::to_string(impl_->c) + ")");
   check(w >= 0.0, "GramAccumulator::addWeighted: negative weight");
   const double sw = std::sqrt(w);
   const long stride = rows.outerStride();  // column-major: element (r, j) at r + j*stride
