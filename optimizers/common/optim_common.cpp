@@ -2,6 +2,8 @@
 
 #include <fmt/format.h>
 
+#include <time.h>
+
 #include <algorithm>
 #include <cmath>
 
@@ -11,66 +13,24 @@ namespace exid::optim {
 
 // ---------------------------------------------------------------- Limits
 Limits::Limits(ExcitationProblem& p) : p_(p) {
-  m_problem_ = p.numConstraints();
+  m_ = p.numConstraints();
   const Json d = p.trajectory().describe();
   if (const Json* l = d.find("linear")) linear_ = l->asBool();
-  Samples s = p.trajectory().evaluate(p.initial());
-  K_ = s.size();
-  n_ = s.dof();
-  if (const Json* x = d.find("extra_limits")) {
-    for (int sig = 1; sig <= 2; ++sig) {
-      const Json* v = x->find(sig == 1 ? "qd_max" : "qdd_max");
-      if (!v) continue;
-      for (std::size_t j = 0; j < v->size() && static_cast<int>(j) < n_; ++j) {
-        const double b = v->at(j).asDouble();
-        if (b > 0 && std::isfinite(b)) {
-          extra_.push_back({sig, static_cast<int>(j), +1.0, b});
-          extra_.push_back({sig, static_cast<int>(j), -1.0, b});
-        }
-      }
-    }
-  }
+  K_ = p.trajectory().evaluate(p.initial()).size();
 }
 
 void Limits::eval(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) {
-  const int m = size(), nz = static_cast<int>(z.size());
   if (g) {
-    g->resize(m);
-    Eigen::VectorXd gp;
-    if (m_problem_ > 0) {
-      p_.constraints(z, &gp, nullptr);
-      g->head(m_problem_) = gp;
-    }
-    if (!extra_.empty()) {
-      Samples s = p_.trajectory().evaluate(z);
-      int row = m_problem_;
-      for (const auto& c : extra_) {
-        const Eigen::MatrixXd& sig = c.signal == 1 ? s.qd : s.qdd;
-        for (int k = 0; k < K_; ++k, ++row) (*g)(row) = c.sign * sig(k, c.joint) - c.bound;
-      }
-    }
+    if (m_ > 0) p_.constraints(z, g, nullptr);
+    else g->resize(0);
   }
   if (jac) *jac = jacobian(z);
-  (void)nz;
 }
 
 const Eigen::MatrixXd& Limits::jacobian(const Eigen::VectorXd& z) {
   if (jac_valid_ && linear_) return jac_;
-  const int m = size(), nz = static_cast<int>(z.size());
-  jac_.resize(m, nz);
-  if (m_problem_ > 0) {
-    Eigen::MatrixXd jp;
-    p_.constraints(z, nullptr, &jp);
-    jac_.topRows(m_problem_) = jp;
-  }
-  if (!extra_.empty()) {
-    const Eigen::MatrixXd Jt = p_.trajectory().jacobian(z);
-    const Eigen::Index Kn = static_cast<Eigen::Index>(K_) * n_;
-    int row = m_problem_;
-    for (const auto& c : extra_)
-      for (int k = 0; k < K_; ++k, ++row)
-        jac_.row(row) = c.sign * Jt.row(c.signal * Kn + static_cast<Eigen::Index>(c.joint) * K_ + k);
-  }
+  if (m_ > 0) p_.constraints(z, nullptr, &jac_);
+  else jac_.resize(0, z.size());
   jac_valid_ = true;
   return jac_;
 }
@@ -86,6 +46,9 @@ double Limits::maxViolation(const Eigen::VectorXd& z) {
 std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals) {
   return {
       param_double("max_time_s", default_time_s, "s", "wall-time budget (0: none; the study deadline still applies)", 0.0),
+      param_double("max_cpu_s", 0.0, "s",
+                   "CPU-time budget of the optimising thread (0: none); with a loaded machine this "
+                   "is the budget that means 'on one core'", 0.0),
       param_int("max_evaluations", default_evals, "criterion evaluations budget (0: none)", 0.0),
       param_double("feasibility_tol", 1e-9, "rad",
                    "a point is feasible when every g(z) <= this (limits in rad, rad/s, rad/s^2)", 0.0),
@@ -95,6 +58,7 @@ std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals) {
 Budget readBudget(const ParamSet& p) {
   Budget b;
   b.max_time_s = p.getDouble("max_time_s");
+  b.max_cpu_s = p.getDouble("max_cpu_s");
   b.max_evaluations = p.getInt("max_evaluations");
   b.feasibility_tol = p.getDouble("feasibility_tol");
   return b;
@@ -103,17 +67,29 @@ Budget readBudget(const ParamSet& p) {
 // ---------------------------------------------------------------- Tracker
 Tracker::Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b, std::string who)
     : p_(p), lim_(lim), ctx_(ctx), b_(b), who_(std::move(who)), t0_(std::chrono::steady_clock::now()),
-      evals0_(p.evaluations()) {}
+      cpu0_(threadCpuSeconds()), evals0_(p.evaluations()) {}
+
+double threadCpuSeconds() {
+  timespec ts{};
+  if (clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts) != 0) return 0.0;
+  return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
+}
 
 double Tracker::elapsed() const {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
 }
 
-double Tracker::remaining() const {
+double Tracker::cpuElapsed() const { return threadCpuSeconds() - cpu0_; }
+
+double Tracker::wallRemaining() const {
   double r = ctx_.deadline.remaining_s();
   if (b_.max_time_s > 0) r = std::min(r, b_.max_time_s - elapsed());
   return r;
 }
+
+double Tracker::cpuRemaining() const { return b_.max_cpu_s > 0 ? b_.max_cpu_s - cpuElapsed() : HUGE_VAL; }
+
+double Tracker::remaining() const { return std::min(wallRemaining(), cpuRemaining()); }
 
 bool Tracker::offer(const Eigen::VectorXd& z, double J, double v) {
   if (!std::isfinite(J)) return false;
@@ -133,6 +109,7 @@ bool Tracker::offer(const Eigen::VectorXd& z, double J, double v) {
   have_any_ = true;
   if (improved) {
     ht_.push_back(elapsed());
+    hc_.push_back(cpuElapsed());
     hv_.push_back(bestValue());
   }
   return improved;
@@ -153,6 +130,7 @@ std::string Tracker::stopCause() const {
   if (ctx_.cancelled && ctx_.cancelled()) return "cancelled";
   if (ctx_.deadline.expired()) return "deadline";
   if (b_.max_time_s > 0 && elapsed() >= b_.max_time_s) return "max_time_s";
+  if (b_.max_cpu_s > 0 && cpuElapsed() >= b_.max_cpu_s) return "max_cpu_s";
   if (b_.max_evaluations > 0 && p_.evaluations() - evals0_ >= b_.max_evaluations) return "max_evaluations";
   return "";
 }
@@ -162,6 +140,7 @@ bool Tracker::shouldStop() const { return !stopCause().empty(); }
 void Tracker::progress(const std::string& text) const {
   double f = 0.0;
   if (b_.max_time_s > 0) f = std::min(1.0, elapsed() / b_.max_time_s);
+  if (b_.max_cpu_s > 0) f = std::max(f, std::min(1.0, cpuElapsed() / b_.max_cpu_s));
   if (b_.max_evaluations > 0)
     f = std::max(f, std::min(1.0, static_cast<double>(p_.evaluations() - evals0_) / static_cast<double>(b_.max_evaluations)));
   ctx_.report(f, fmt::format("{}: best {:.6g}{} {}", who_, bestValue(), have_feasible_ ? "" : " (infeasible)", text));
@@ -182,8 +161,9 @@ OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reas
   r.history_t_s = ht_;
   r.history_value = hv_;
   r.details["feasible"] = have_feasible_;
+  r.details["cpu_s"] = cpuElapsed();
+  r.details["history_cpu_s"] = Json(hc_);
   r.details["constraints"] = lim_.size();
-  r.details["extra_constraints"] = lim_.extraSize();
   return r;
 }
 

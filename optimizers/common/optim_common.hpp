@@ -13,16 +13,13 @@
 namespace exid::optim {
 
 /// g(z) <= 0: the problem's constraints (joint limits less the margin, velocity and
-/// acceleration limits at every sample) followed by the trajectory's own caps (describe():
-/// "extra_limits": {"qd_max": [...], "qdd_max": [...]}, 0 = none; |qd_j| <= cap, |qdd_j| <= cap
-/// at every sample, measured coordinates). The dense Jacobian is computed once and cached when
-/// the trajectory says it is linear (describe(): "linear": true).
+/// acceleration limits at every sample; a trajectory's own caps are part of them through
+/// Trajectory::adjustLimits). The dense Jacobian is computed once and cached when the trajectory
+/// says it is linear (describe(): "linear": true).
 class Limits {
  public:
   explicit Limits(ExcitationProblem& p);
-  int size() const { return m_problem_ + static_cast<int>(extra_.size()) * K_; }
-  int problemSize() const { return m_problem_; }
-  int extraSize() const { return static_cast<int>(extra_.size()) * K_; }
+  int size() const { return m_; }
   /// Rows come in groups of K consecutive samples (one limit of one joint per group).
   int samples() const { return K_; }
   int groups() const { return K_ > 0 ? size() / K_ : 0; }
@@ -35,11 +32,9 @@ class Limits {
   bool linear() const { return linear_; }
 
  private:
-  struct Cap { int signal; int joint; double sign; double bound; };  // signal 1 qd, 2 qdd
   ExcitationProblem& p_;
-  int m_problem_ = 0, K_ = 0, n_ = 0;
+  int m_ = 0, K_ = 0;
   bool linear_ = false;
-  std::vector<Cap> extra_;
   Eigen::MatrixXd jac_;
   bool jac_valid_ = false;
 };
@@ -47,6 +42,7 @@ class Limits {
 /// Common optimiser settings (parameters every exid optimiser declares).
 struct Budget {
   double max_time_s = 0;    // 0: none (the study's deadline still applies)
+  double max_cpu_s = 0;     // CPU time of the calling thread; 0: none
   long max_evaluations = 0; // 0: none
   double feasibility_tol = 1e-9;
 };
@@ -64,8 +60,11 @@ class Tracker {
   double evaluateAndOffer(const Eigen::VectorXd& z);
   bool shouldStop() const;   // time budget, evaluations, ctx.shouldStop()
   std::string stopCause() const;  // "max_time_s", "max_evaluations", "cancelled" or ""
-  double elapsed() const;
-  double remaining() const;  // seconds left (inf without a budget)
+  double elapsed() const;     // wall time since construction [s]
+  double cpuElapsed() const;  // CPU time of the calling thread since construction [s]
+  double remaining() const;  // seconds left: min(wallRemaining, cpuRemaining)
+  double wallRemaining() const;  // max_time_s and the study deadline (inf without)
+  double cpuRemaining() const;   // max_cpu_s (inf without)
   bool hasFeasible() const { return have_feasible_; }
   double bestValue() const { return have_feasible_ ? best_J_ : best_inf_J_; }
   const Eigen::VectorXd& best() const { return have_feasible_ ? best_z_ : best_inf_z_; }
@@ -84,12 +83,16 @@ class Tracker {
   Budget b_;
   std::string who_;
   std::chrono::steady_clock::time_point t0_;
+  double cpu0_ = 0.0;
   long evals0_ = 0;
   bool have_feasible_ = false, have_any_ = false;
   double best_J_ = HUGE_VAL, best_inf_J_ = HUGE_VAL, best_inf_v_ = HUGE_VAL;
   Eigen::VectorXd best_z_, best_inf_z_;
-  std::vector<double> ht_, hv_;
+  std::vector<double> ht_, hv_, hc_;
 };
+
+/// CPU time of the calling thread [s] (CLOCK_THREAD_CPUTIME_ID).
+double threadCpuSeconds();
 
 /// A start point: z0 + perturbation * width * U(-1, 1) (width = half the bound range when
 /// finite, else max(1, |z0|_inf)), clipped to the bounds, then pulled back towards z0

@@ -2,6 +2,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <cmath>
 
 #include "exid/error.hpp"
@@ -21,8 +22,9 @@ std::vector<ParamDecl> commonParams() {
       param_bool("velocity_limits", true, "impose the joint velocity limits at every sample"),
       param_bool("acceleration_limits", true, "impose the joint acceleration limits at every sample"),
       param_double("velocity_limit_rad_s", 0.0, "rad/s",
-                   "own velocity cap |qd| <= value at every sample (0: none); applied by the exid "
-                   "optimisers as extra constraints, also on robots without velocity limits", 0.0),
+                   "own velocity cap |qd| <= value at every sample (0: none); part of the "
+                   "excitation problem's limits (Trajectory::adjustLimits), also on robots without "
+                   "velocity limits and with velocity_limits: false", 0.0),
       param_double("acceleration_limit_rad_s2", 0.0, "rad/s^2",
                    "own acceleration cap |qdd| <= value (0: none), as velocity_limit_rad_s", 0.0),
       param_ints("joints", std::vector<std::int64_t>{},
@@ -47,10 +49,20 @@ CommonOptions readCommon(const ParamSet& p) {
   return o;
 }
 
-bool JointSpace::hasCaps() const {
-  for (int j = 0; j < n; ++j)
-    if (std::isfinite(qd_cap(j)) || std::isfinite(qdd_cap(j))) return true;
-  return false;
+bool JointSpace::hasCaps() const { return hasVelocityCap() || hasAccelerationCap(); }
+bool JointSpace::hasVelocityCap() const { return qd_cap.size() && qd_cap.array().isFinite().any(); }
+bool JointSpace::hasAccelerationCap() const { return qdd_cap.size() && qdd_cap.array().isFinite().any(); }
+
+void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o, std::vector<JointLimits>* limits) {
+  if (!limits) return;
+  const int n = std::min(js.n, static_cast<int>(limits->size()));
+  for (int j = 0; j < n; ++j) {
+    JointLimits& L = (*limits)[static_cast<std::size_t>(j)];
+    if (!o.velocity_limits) L.qd_max = kInf;
+    if (!o.acceleration_limits) L.qdd_max = kInf;
+    if (std::isfinite(js.qd_cap_joint(j))) L.qd_max = finite(L.qd_max) ? std::min(L.qd_max, js.qd_cap_joint(j)) : js.qd_cap_joint(j);
+    if (std::isfinite(js.qdd_cap_joint(j))) L.qdd_max = finite(L.qdd_max) ? std::min(L.qdd_max, js.qdd_cap_joint(j)) : js.qdd_cap_joint(j);
+  }
 }
 
 JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std::string& who) {
@@ -74,6 +86,8 @@ JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std:
   js.qdd_max = Eigen::VectorXd::Constant(n, kInf);
   js.qd_cap = Eigen::VectorXd::Constant(n, kInf);
   js.qdd_cap = Eigen::VectorXd::Constant(n, kInf);
+  js.qd_cap_joint = js.qd_cap;
+  js.qdd_cap_joint = js.qdd_cap;
   js.centre = Eigen::VectorXd::Zero(n);
   // Limits are given in joint coordinates; with a diagonal (or identity) transmission they map
   // one to one onto measured coordinates. Otherwise only the caps and the centre are used.
@@ -101,6 +115,9 @@ JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std:
     js.q_hi(j) = hi;
     if (o.velocity_cap > 0) js.qd_cap(j) = o.velocity_cap;
     if (o.acceleration_cap > 0) js.qdd_cap(j) = o.acceleration_cap;
+    const double tj = diag && r.hasTransmission() ? std::abs(r.transmission(j, j)) : 1.0;
+    js.qd_cap_joint(j) = js.qd_cap(j) * tj;
+    js.qdd_cap_joint(j) = js.qdd_cap(j) * tj;
     js.qd_max(j) = std::min(vd, js.qd_cap(j));
     js.qdd_max(j) = std::min(ad, js.qdd_cap(j));
     if (std::isfinite(lo) && std::isfinite(hi)) js.centre(j) = 0.5 * (lo + hi);
@@ -130,7 +147,8 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear) {
     for (auto& x : a) if (!std::isfinite(x)) x = 0.0;
     caps["qd_max"] = Json(v);
     caps["qdd_max"] = Json(a);
-    d["extra_limits"] = caps;
+    caps["imposed_by"] = "Trajectory::adjustLimits (the excitation problem's g)";
+    d["caps"] = caps;
   }
   return d;
 }

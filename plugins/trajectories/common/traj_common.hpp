@@ -1,7 +1,8 @@
 // Shared by the trajectory plugins (pointwise, fourier, spline): the common parameters, the
 // joint set that moves, effective limits (robot limits less the margin, optionally capped by
-// the trajectory's own velocity/acceleration caps), and a base class for trajectories that are
-// a constant plus a per-joint linear basis (fourier, spline): q_j = c_j + Bq z_j, etc.
+// the trajectory's own velocity/acceleration caps, which reach the excitation problem through
+// Trajectory::adjustLimits), and a base class for trajectories that are a constant plus a
+// per-joint linear basis (fourier, spline): q_j = c_j + Bq z_j, etc.
 #pragma once
 
 #include <Eigen/Core>
@@ -39,12 +40,20 @@ struct JointSpace {
   Eigen::VectorXd q_lo, q_hi;        // n: position range less the margin (+-inf if none)
   Eigen::VectorXd qd_max, qdd_max;   // n: effective limits (+inf if none or not imposed)
   Eigen::VectorXd qd_cap, qdd_cap;   // n: the trajectory's own caps (+inf if none)
+  // n: the caps in joint coordinates (the excitation problem's limits): cap x |T_jj| with a
+  // diagonal transmission, else the cap itself (then a joint-coordinate cap).
+  Eigen::VectorXd qd_cap_joint, qdd_cap_joint;
   bool hasCaps() const;
+  bool hasVelocityCap() const;
+  bool hasAccelerationCap() const;
 };
 JointSpace resolveJoints(const RobotModel& robot, const CommonOptions& o, const std::string& who);
 
-/// What describe() says about the caps, read by the optimisers (extra constraints
-/// |qd| <= qd_cap, |qdd| <= qdd_cap in measured coordinates at every sample). Also "linear".
+/// Trajectory::adjustLimits for every trajectory plugin: velocity/acceleration limits the
+/// trajectory does not impose are dropped (+inf), and its caps tighten the rest (or stand alone).
+void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o, std::vector<JointLimits>* limits);
+
+/// What describe() says: "linear", the moving joints, the margin and (informative) the caps.
 Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
 
 /// Sample count for a window of length T [s]: `samples` if set, else round(T / dt) (+1 when the
@@ -61,8 +70,10 @@ class BasisTrajectory : public Trajectory {
   Eigen::VectorXd vjp(const Eigen::VectorXd& z, const Samples& adj) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const override;
   double positionMargin() const override { return opt_.margin; }
-  bool velocityLimits() const override { return opt_.velocity_limits; }
-  bool accelerationLimits() const override { return opt_.acceleration_limits; }
+  // A cap is imposed even when the robot's own limits are not (adjustLimits drops those).
+  bool velocityLimits() const override { return opt_.velocity_limits || js_.hasVelocityCap(); }
+  bool accelerationLimits() const override { return opt_.acceleration_limits || js_.hasAccelerationCap(); }
+  void adjustLimits(std::vector<JointLimits>* limits) const override { adjustLimitsCommon(js_, opt_, limits); }
   Json describe() const override;
   const JointSpace& joints() const { return js_; }
 

@@ -168,8 +168,11 @@ class Pointwise final : public exid::Trajectory {
   }
 
   double positionMargin() const override { return opt_.margin; }
-  bool velocityLimits() const override { return opt_.velocity_limits; }
-  bool accelerationLimits() const override { return opt_.acceleration_limits; }
+  bool velocityLimits() const override { return opt_.velocity_limits || js_.hasVelocityCap(); }
+  bool accelerationLimits() const override { return opt_.acceleration_limits || js_.hasAccelerationCap(); }
+  void adjustLimits(std::vector<exid::JointLimits>* limits) const override {
+    exid::traj::adjustLimitsCommon(js_, opt_, limits);
+  }
   exid::Json describe() const override {
     exid::Json d = exid::traj::describeCommon(js_, opt_, true);
     d["samples"] = K_;
