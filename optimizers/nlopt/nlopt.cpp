@@ -49,18 +49,24 @@ struct Ctx {
   double tighten;
   int slots = 0;  // per group of K samples: the `slots` largest g values (0: every sample)
   const std::vector<int>* rows = nullptr;  // working set: only these rows of g
+  double ks_rho = 0;  // > 0: one Kreisselmeier-Steinhauser aggregate per group
+  bool log_objective = false;
+  double wall_end = HUGE_VAL, cpu_end = HUGE_VAL;  // this run's share of the budget
   long evals = 0;
 };
 
 // Number of constraints NLopt sees.
-int nloptConstraints(const Limits& lim, int slots) {
-  if (slots <= 0 || lim.size() == 0 || slots >= lim.samples()) return lim.size();
+int nloptConstraints(const Limits& lim, int slots, double ks_rho) {
+  if (lim.size() == 0) return 0;
+  if (ks_rho > 0) return lim.groups();
+  if (slots <= 0 || slots >= lim.samples()) return lim.size();
   return lim.groups() * slots;
 }
 
 double objective(unsigned n, const double* x, double* grad, void* data) {
   auto* c = static_cast<Ctx*>(data);
-  if (c->tr->shouldStop()) throw nlopt::forced_stop();
+  if (c->tr->shouldStop() || c->tr->elapsed() >= c->wall_end || c->tr->cpuElapsed() >= c->cpu_end)
+    throw nlopt::forced_stop();
   Eigen::Map<const Eigen::VectorXd> z(x, n);
   Eigen::VectorXd zz = z, g;
   double J;
@@ -70,9 +76,14 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
     J = 1e30;  // singular information matrix: a very bad point
     g = Eigen::VectorXd::Zero(n);
   }
-  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
   c->tr->offer(zz, J, c->lim->maxViolation(zz));
   ++c->evals;
+  if (c->log_objective && J > 0 && J < 1e30) {
+    // log J: the same minimisers, better scaled (cond spans decades between starts and optima)
+    if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g / J;
+    return std::log(J);
+  }
+  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
   return J;
 }
 
@@ -88,6 +99,26 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
       const int row = (*c->rows)[i];
       result[i] = g(row) + c->tighten;
       if (grad) Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(i) * n, n) = J->row(row);
+    }
+    return;
+  }
+  if (c->ks_rho > 0) {
+    // Kreisselmeier-Steinhauser aggregate per group (one limit of one joint over the K samples):
+    // KS = max + log(sum exp(rho (g_i - max))) / rho, smooth, and max <= KS <= max + log(K)/rho,
+    // so KS <= 0 implies g <= 0 at every sample (conservative by at most log(K)/rho).
+    const int K = c->lim->samples();
+    const double rho = c->ks_rho;
+    const Eigen::MatrixXd* J = grad ? &c->lim->jacobian(zz) : nullptr;
+    Eigen::VectorXd w(K);
+    for (int grp = 0; grp < c->lim->groups(); ++grp) {
+      auto gg = g.segment(static_cast<Eigen::Index>(grp) * K, K);
+      const double gmax = gg.maxCoeff();
+      w = ((gg.array() - gmax) * rho).exp();
+      const double S = w.sum();
+      result[grp] = gmax + std::log(S) / rho + c->tighten;
+      if (grad)
+        Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(grp) * n, n) =
+            (w / S).transpose() * J->middleRows(static_cast<Eigen::Index>(grp) * K, K);
     }
     return;
   }
@@ -150,7 +181,20 @@ class NloptOptimizer final : public exid::Optimizer {
                                    "joint the constraint_slots largest values; working_set — rows "
                                    "within working_set_margin of their limit, grown and re-run "
                                    "while the result violates others (the returned point is always "
-                                   "checked at every sample)", {"all", "slots", "working_set"}));
+                                   "checked at every sample); aggregated — per limit and joint one "
+                                   "smooth Kreisselmeier-Steinhauser aggregate of the K samples "
+                                   "(conservative: KS <= 0 implies every sample within its limit), "
+                                   "then a polish of the best point with every sample (final_polish)",
+                                   {"all", "slots", "working_set", "aggregated"}));
+    p.push_back(exid::param_double("ks_rho", 100.0, "1/rad",
+                                   "aggregated: KS sharpness rho; the aggregate exceeds the largest "
+                                   "g by at most log(K)/rho (limits in rad, rad/s, rad/s^2)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("final_polish", 0.1, "",
+                                   "aggregated: share of the budget kept for polishing the best "
+                                   "point with every sample's constraint (0: none)", 0.0, 0.9));
+    p.push_back(exid::param_string("objective", std::string("value"),
+                                   "what NLopt minimises: value — J; log — log J (same minimisers, "
+                                   "better scaled for cond); the reported criterion is J", {"value", "log"}));
     p.push_back(exid::param_double("working_set_margin", 0.3, "rad", "working_set: rows with g > -this join", 0.0));
     p.push_back(exid::param_int("constraint_slots", 10,
                                    "NLopt sees, per limit and joint, the this-many largest g over the "
@@ -170,7 +214,8 @@ class NloptOptimizer final : public exid::Optimizer {
         tighten_(p.getDouble("constraint_tightening")),
         cmode_(p.getString("constraint_mode")), ws_margin_(p.getDouble("working_set_margin")),
         slots_(p.getString("constraint_mode") == "slots" ? static_cast<int>(p.getInt("constraint_slots")) : 0),
-        start_evals_(p.getInt("start_evaluations")) {
+        start_evals_(p.getInt("start_evaluations")), ks_rho_(p.getDouble("ks_rho")),
+        final_polish_(p.getDouble("final_polish")), log_objective_(p.getString("objective") == "log") {
     alg_ = algorithmFromName(alg_name_, "algorithm");
     local_ = algorithmFromName(local_name_, "local_algorithm");
   }
@@ -186,37 +231,76 @@ class NloptOptimizer final : public exid::Optimizer {
     std::string reason = "converged";
     int iterations = 0;
     exid::Json runs = exid::Json::array();
+    const bool aggregated = cmode_ == "aggregated" && lim.size() > 0;
+    // Time: the starts run one after the other in (1 - final_polish) of the budget (aggregated
+    // mode keeps final_polish of it for the polish of the best point); later starts are skipped
+    // when that time is used up.
+    const double W0 = tr.wallRemaining(), C0 = tr.cpuRemaining();
+    const double f_starts = aggregated && final_polish_ > 0 ? 1.0 - final_polish_ : 1.0;
     for (int s = 0; s < starts_; ++s) {
       if (tr.shouldStop()) { reason = tr.stopCause(); break; }
+      if ((std::isfinite(W0) && tr.elapsed() >= f_starts * W0) || (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0)) break;
       Eigen::VectorXd x0 = s == 0 ? z0
                            : (random_starts_ ? exid::optim::randomStart(problem, lim, z0, perturb_, rng)
                                              : exid::optim::perturbedStart(problem, lim, z0, perturb_, rng));
-      const double share = 1.0 / (starts_ - s);
-      std::string r = run(problem, lim, tr, alg_, alg_name_, x0, share, &iterations);
+      // A start may use up to max(1/starts, 0.3) of the starts' time (a local run usually
+      // converges well before), never beyond the starts' time.
+      // With start_evaluations the starts are bounded by evaluations (reproducible) instead.
+      const double cap = start_evals_ > 0 ? f_starts : f_starts * std::max(1.0 / starts_, 0.3);
+      RunEnd end{std::isfinite(W0) ? std::min(f_starts * W0, tr.elapsed() + cap * W0) : HUGE_VAL,
+                 std::isfinite(C0) ? std::min(f_starts * C0, tr.cpuElapsed() + cap * C0) : HUGE_VAL,
+                 1.0 / (starts_ - s)};
+      std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations, aggregated ? ks_rho_ : 0.0);
       exid::Json run_info = exid::Json::object();
       run_info["start"] = s;
       run_info["result"] = r;
       if (isGlobal(alg_name_) && polish_ && !tr.shouldStop() && tr.hasFeasible()) {
-        r = run(problem, lim, tr, local_, local_name_, tr.best(), share, &iterations);
+        r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations, aggregated ? ks_rho_ : 0.0);
         run_info["polish"] = r;
       }
       run_info["best_so_far"] = tr.bestValue();
+      run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
       tr.progress(fmt::format("start {}/{} {}", s + 1, starts_, r));
-      if (r == "cancelled" || r == "max_time_s" || r == "deadline" || r == "max_evaluations") reason = r;
+      if (r == "cancelled" || r == "max_time_s" || r == "max_cpu_s" || r == "deadline" || r == "max_evaluations") reason = r;
+    }
+    if (aggregated && final_polish_ > 0 && !tr.shouldStop() && tr.hasFeasible()) {
+      // The KS aggregate keeps the iterates a little inside the limits (up to log(K)/rho):
+      // polish the best point first with a 10x sharper aggregate (half the polish time), then
+      // with every sample's constraint (the exact feasible set) in the time left.
+      const double f_mid = 1.0 - 0.5 * final_polish_;
+      const RunEnd mid{std::isfinite(W0) ? f_mid * W0 : HUGE_VAL, std::isfinite(C0) ? f_mid * C0 : HUGE_VAL, 0.5};
+      const RunEnd last{HUGE_VAL, HUGE_VAL, 1.0};
+      exid::Json run_info = exid::Json::object();
+      run_info["polish_sharper_ks"] =
+          runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid, &iterations, nullptr, nullptr, 10.0 * ks_rho_);
+      if (!tr.shouldStop())
+        run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last, &iterations, nullptr, nullptr, 0.0);
+      run_info["best_so_far"] = tr.bestValue();
+      run_info["cpu_s"] = tr.cpuElapsed();
+      runs.push_back(run_info);
     }
     if (tr.shouldStop()) reason = tr.stopCause();
     auto res = tr.finish(J0, iterations, reason);
     res.details["algorithm"] = alg_name_;
+    res.details["constraint_mode"] = cmode_;
     res.details["runs"] = runs;
     return res;
   }
 
  private:
-  // One NLopt run from x0 with a share of the remaining budget. Returns a short result text.
+  // When a run must end: wall and CPU time since the tracker started (inf: no limit), and the
+  // share of the remaining evaluation budget it may use.
+  struct RunEnd {
+    double wall = HUGE_VAL, cpu = HUGE_VAL, eval_share = 1.0;
+  };
+
+  // One NLopt run from x0 until `end`. Returns a short result text.
   std::string run(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
-                  const std::string& name, const Eigen::VectorXd& x0, double share, int* iterations) {
-    if (cmode_ != "working_set" || lim.size() == 0) return runOnce(problem, lim, tr, alg, name, x0, share, iterations, nullptr, nullptr);
+                  const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end, int* iterations,
+                  double ks_rho) {
+    if (cmode_ != "working_set" || lim.size() == 0)
+      return runOnce(problem, lim, tr, alg, name, x0, end, iterations, nullptr, nullptr, ks_rho);
     // Working set: NLopt sees the rows with g > -working_set_margin at the start of a round
     // (and every row seen so far); a round that ends infeasible adds the rows then near or
     // above their limit and runs again from there.
@@ -224,7 +308,6 @@ class NloptOptimizer final : public exid::Optimizer {
     std::vector<bool> in(static_cast<std::size_t>(lim.size()), false);
     Eigen::VectorXd x = x0, g;
     std::string r;
-    const double t_end = tr.elapsed() + (std::isfinite(tr.remaining()) ? tr.remaining() * share : HUGE_VAL);
     for (int round = 0; round < 30; ++round) {
       lim.eval(x, &g);
       const std::size_t before = rows.size();
@@ -240,10 +323,8 @@ class NloptOptimizer final : public exid::Optimizer {
         }
       }
       if (round > 0 && rows.size() == before) break;  // feasible, or nothing new to add
-      const double left = t_end - tr.elapsed();
-      if (left <= 0 || tr.shouldStop()) break;
-      const double sh = std::isfinite(left) && std::isfinite(tr.remaining()) ? std::min(1.0, left / std::max(1e-9, tr.remaining())) : share;
-      r = runOnce(problem, lim, tr, alg, name, x, sh, iterations, &rows, &x);
+      if (tr.elapsed() >= end.wall || tr.cpuElapsed() >= end.cpu || tr.shouldStop()) break;
+      r = runOnce(problem, lim, tr, alg, name, x, end, iterations, &rows, &x, 0.0);
       if (lim.maxViolation(x) <= budget_.feasibility_tol && r != "roundoff_limited") {
         lim.eval(x, &g);
         bool near_new = false;
@@ -255,11 +336,15 @@ class NloptOptimizer final : public exid::Optimizer {
   }
 
   std::string runOnce(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
-                      const std::string& name, const Eigen::VectorXd& x0, double share, int* iterations,
-                      const std::vector<int>* rows, Eigen::VectorXd* xout) {
+                      const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end, int* iterations,
+                      const std::vector<int>* rows, Eigen::VectorXd* xout, double ks_rho) {
     const unsigned n = static_cast<unsigned>(x0.size());
-    Ctx c{&problem, &lim, &tr, tighten_, slots_};
+    Ctx c{&problem, &lim, &tr, tighten_, rows || ks_rho > 0 ? 0 : slots_};
     c.rows = rows;
+    c.ks_rho = rows ? 0.0 : ks_rho;
+    c.log_objective = log_objective_;
+    c.wall_end = end.wall;
+    c.cpu_end = end.cpu;
     Eigen::VectorXd lo, hi;
     if (isGlobal(name)) exid::optim::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
     else problem.bounds(&lo, &hi);
@@ -280,7 +365,7 @@ class NloptOptimizer final : public exid::Optimizer {
     }
     nlopt::opt* top = &main;
     nlopt::opt wrapper;
-    const int m = rows ? static_cast<int>(rows->size()) : nloptConstraints(lim, slots_);
+    const int m = rows ? static_cast<int>(rows->size()) : nloptConstraints(lim, c.slots, c.ks_rho);
     std::vector<double> tol(static_cast<std::size_t>(m), 0.0);
     if (m > 0) {
       try {
@@ -297,14 +382,16 @@ class NloptOptimizer final : public exid::Optimizer {
         top = &wrapper;
       }
     }
-    const double left = tr.remaining();
-    if (std::isfinite(left)) top->set_maxtime(std::max(1e-3, left * share));
+    // Wall-time limit for NLopt itself (the objective also stops at the run's wall/CPU end).
+    const double left = std::min(tr.wallRemaining(), end.wall - tr.elapsed());
+    if (std::isfinite(left)) top->set_maxtime(std::max(1e-3, left));
+    const bool time_limited = std::isfinite(left) || std::isfinite(std::min(tr.cpuRemaining(), end.cpu));
     long evals_left = 0;
     if (budget_.max_evaluations > 0)
-      evals_left = std::max<long>(1, static_cast<long>((budget_.max_evaluations - (problem.evaluations() - tr.evaluations0())) * share));
+      evals_left = std::max<long>(1, static_cast<long>((budget_.max_evaluations - (problem.evaluations() - tr.evaluations0())) * end.eval_share));
     if (start_evals_ > 0) evals_left = evals_left > 0 ? std::min<long>(evals_left, start_evals_) : start_evals_;
     if (evals_left > 0) top->set_maxeval(static_cast<int>(evals_left));
-    if (isGlobal(name) && evals_left <= 0 && !std::isfinite(left))
+    if (isGlobal(name) && evals_left <= 0 && !time_limited)
       throw exid::Error(fmt::format("optimizer 'nlopt': global algorithm {} needs max_time_s or max_evaluations", name));
     std::vector<double> x(x0.data(), x0.data() + n);
     for (unsigned i = 0; i < n; ++i) x[i] = std::clamp(x[i], vlo[i], vhi[i]);
@@ -314,7 +401,7 @@ class NloptOptimizer final : public exid::Optimizer {
       nlopt::result res = top->optimize(x, f);
       r = nlopt_result_to_string(static_cast<nlopt_result>(res));
     } catch (const nlopt::forced_stop&) {
-      r = tr.stopCause().empty() ? "forced_stop" : tr.stopCause();
+      r = tr.stopCause().empty() ? "run time share used" : tr.stopCause();
     } catch (const nlopt::roundoff_limited&) {
       r = "roundoff_limited";
     } catch (const std::runtime_error& e) {
@@ -338,6 +425,8 @@ class NloptOptimizer final : public exid::Optimizer {
   double ws_margin_;
   int slots_;
   long start_evals_;
+  double ks_rho_, final_polish_;
+  bool log_objective_;
 };
 
 }  // namespace
