@@ -13,6 +13,7 @@
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
+#include "exid/estimators/consistent.hpp"
 #include "exid/interfaces.hpp"
 
 namespace {
@@ -48,19 +49,46 @@ class BatchLs : public exid::Estimator {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
-  exid::EstimatorSpecs specs() const override { return {}; }
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.accepts_prior = true;
+    return s;
+  }
 
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
-                          const exid::Prior* /*prior*/, const exid::RunContext& ctx) override {
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int p = model.numBase();
     exid::est::RowAccumulator acc(p, method_);
     exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, 0.95,
                             [&](const exid::Rows& r, int, int) { acc.add(r.W, r.y); });
     ctx.report(0.97, "batch_ls: solving");
-    const exid::est::LsSolution s = exid::est::solveLeastSquares(acc, model.base().names, opt_, kName);
     exid::Estimate e;
-    exid::est::fillEstimate(&e, model, s, s.rss, s.m);
+    if (!prior) {
+      const exid::est::LsSolution s = exid::est::solveLeastSquares(acc, model.base().names, opt_, kName);
+      exid::est::fillEstimate(&e, model, s, s.rss, s.m);
+    } else {
+      // Regularised least squares: the data rows divided by their noise std (from the
+      // rank-tolerant fit), stacked with the prior's pseudo-observations S (theta - theta0) = 0,
+      // S^T S = Sigma^-1. Directions the data do not excite fall back to the prior.
+      const double noise = exid::est::noiseStdForPrior(acc, opt_.rank_tolerance);
+      exid::est::RowAccumulator tot(p);
+      tot.merge(acc, 1.0 / noise);
+      exid::est::addPriorRows(&tot, *prior, kName);
+      exid::est::SolveOptions o = opt_;
+      o.unit_variance = true;
+      // The prior makes the problem positive definite: no rank decision (noise-free data with
+      // a prior are legitimately ill-conditioned: tiny noise std, large weights).
+      o.rank_tolerance = 0.0;
+      const exid::est::LsSolution s = exid::est::solveLeastSquares(tot, model.base().names, o, kName);
+      exid::est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
+      e.rows = acc.rows();
+      e.details["noise_std"] = noise;
+      e.details["prior"] = exid::est::priorDetails(*prior, s.theta, s.std);
+      e.details["covariance_definition"] =
+          "posterior (W^T W / noise_std^2 + Sigma_prior^-1)^-1, noise_std^2 = rss / (m - rank) of "
+          "the rank-tolerant fit of the data alone";
+    }
     exid::Json& d = e.details;
     d["estimator"] = kName;
     d["method"] = method_ == exid::est::RowAccumulator::Method::Qr

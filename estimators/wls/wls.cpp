@@ -16,6 +16,7 @@
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
+#include "exid/estimators/consistent.hpp"
 #include "exid/interfaces.hpp"
 
 namespace {
@@ -54,8 +55,14 @@ class Wls : public exid::Estimator {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.accepts_prior = true;
+    return s;
+  }
+
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
-                          const exid::Prior* /*prior*/, const exid::RunContext& ctx) override {
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int p = model.numBase();
     std::map<int, RowAccumulator> acc;
@@ -88,7 +95,19 @@ class Wls : public exid::Estimator {
     RowAccumulator all(p);
     for (const auto& [eq, a] : acc) all.merge(a);
     const std::vector<std::string>& names = model.base().names;
-    const exid::est::LsSolution ols = exid::est::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
+    // With a prior, the data alone may not identify every direction: the first pass is the
+    // rank-tolerant (minimum-norm) fit, whose residuals give the weights.
+    exid::est::LsSolution ols;
+    if (prior) {
+      int rank = 0;
+      ols.theta = exid::est::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+      ols.std = Eigen::VectorXd::Constant(p, NAN);
+      ols.rss = all.residualSquared(ols.theta);
+      ols.sigma2 = ols.rss / static_cast<double>(std::max<long>(1, all.rows() - rank));
+      ols.cond_W = NAN;
+    } else {
+      ols = exid::est::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
+    }
     const long m = all.rows();
 
     // ---- 2-3. weights and WLS
@@ -113,7 +132,9 @@ class Wls : public exid::Estimator {
         smax = std::max(smax, sigma[eq]);
       }
       // Floor: an equation fitted exactly (noise-free data) must not get an infinite weight.
-      const double floor = smax > 0 ? 1e-6 * smax : 1.0;
+      double floor = smax > 0 ? 1e-6 * smax : 1.0;
+      // With a prior the weights' absolute size matters: not above 1e9 / rms(y) (as batch_ls).
+      if (prior) floor = std::max(floor, 1e-9 * all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m))));
       RowAccumulator weighted(p);
       eq_table = exid::Json::array();
       for (const auto& [eq, a] : acc) {
@@ -127,7 +148,18 @@ class Wls : public exid::Estimator {
         row["weight"] = 1.0 / s;
         eq_table.push_back(row);
       }
-      sol = exid::est::solveLeastSquares(weighted, names, opt_, kName);
+      if (prior) {
+        // Weighted rows are in units of their noise std: stack the prior's pseudo-observations.
+        exid::est::addPriorRows(&weighted, *prior, kName);
+        exid::est::SolveOptions o = opt_;
+        o.unit_variance = true;
+      // The prior makes the problem positive definite: no rank decision (noise-free data with
+      // a prior are legitimately ill-conditioned: tiny noise std, large weights).
+      o.rank_tolerance = 0.0;
+        sol = exid::est::solveLeastSquares(weighted, names, o, kName);
+      } else {
+        sol = exid::est::solveLeastSquares(weighted, names, opt_, kName);
+      }
       theta = sol.theta;
     }
     double rss_unweighted = 0.0;
@@ -135,6 +167,12 @@ class Wls : public exid::Estimator {
 
     exid::Estimate e;
     exid::est::fillEstimate(&e, model, sol, rss_unweighted, m);
+    if (prior) {
+      e.rows = m;
+      e.details["prior"] = exid::est::priorDetails(*prior, theta, sol.std);
+      e.details["covariance_definition"] =
+          "posterior (W^T S^-1 W + Sigma_prior^-1)^-1 of the weighted rows stacked with the prior";
+    }
     exid::Json& d = e.details;
     d["estimator"] = kName;
     d["equations"] = eq_table;

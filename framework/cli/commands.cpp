@@ -1,8 +1,9 @@
-// exid — stage commands: robot info, eval, excite, simulate, identify.
+// exid — stage commands: robot info, eval, excite, simulate, identify, export.
 #include "commands.hpp"
 
 #include <fmt/format.h>
 
+#include <fstream>
 #include <iostream>
 #include <functional>
 #include <memory>
@@ -16,6 +17,7 @@
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
 #include "exid/runner.hpp"
+#include "exid/urdf_writer.hpp"
 
 namespace exid::cli {
 
@@ -221,6 +223,95 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   return 0;
 }
 
+/// exid export: the identified consistent standard parameters (consistent_ls writes them into
+/// summary.json identification.details.standard_parameters) written into a URDF with the
+/// robot's kinematics, limits and drives (docs/consistent.md).
+int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
+                  const std::string& out) {
+  const fs::path dir(study_dir);
+  std::ifstream in(dir / "summary.json");
+  if (!in) throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
+  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const Json S = Json::parse(text);
+  const Json* I = S.find("identification");
+  const Json* d = I ? I->find("details") : nullptr;
+  const Json* sp = d ? d->find("standard_parameters") : nullptr;
+  if (!sp || !sp->find("names") || !sp->find("values"))
+    throw Error(fmt::format("{}/summary.json: no identification.details.standard_parameters; only an estimator "
+                            "that identifies physically consistent STANDARD parameters (consistent_ls) can be "
+                            "exported (base parameters alone do not define a robot)",
+                            dir.string()));
+  std::shared_ptr<const RobotModel> base;
+  if (!robot.empty()) {
+    base = loadRobot(reg, robot);
+  } else {
+    // Only the robot section of the resolved study (its paths are absolute).
+    std::ifstream ry(dir / "study.resolved.yaml");
+    if (!ry) throw Error(fmt::format("{}: no study.resolved.yaml; name the robot (exid export ROBOT ...)", dir.string()));
+    std::string line, section;
+    bool in_robot = false;
+    while (std::getline(ry, line)) {
+      if (!line.empty() && line[0] != ' ' && line[0] != '#') in_robot = line.rfind("robot:", 0) == 0;
+      if (in_robot) section += line + "\n";
+    }
+    StudyConfig cfg = parseStudy(section, (dir / "study.resolved.yaml").string(), dir, reg);
+    RunContext ctx;
+    ctx.study_dir = cfg.dir;
+    base = reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
+  }
+  RobotModel m = *base;
+  const Json& names = *sp->find("names");
+  const Json& values = *sp->find("values");
+  check(names.size() == values.size(), "standard_parameters: names and values differ in length");
+  const std::vector<std::string> inertial = m.inertialParameterNames();
+  int set = 0;
+  std::vector<std::string> ignored;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    const std::string n = names.at(i).asString();
+    const double v = values.at(i).asDouble();
+    auto it = std::find(inertial.begin(), inertial.end(), n);
+    if (it != inertial.end()) {
+      const auto k = static_cast<std::size_t>(it - inertial.begin());
+      m.bodies[k / 10].inertia(static_cast<Eigen::Index>(k % 10)) = v;
+      ++set;
+      continue;
+    }
+    bool done = false;
+    for (const char* pre : {"Ia", "Fc", "Fv", "OFF"}) {
+      const std::string p(pre);
+      if (n.size() <= p.size() || n.compare(0, p.size(), p) != 0) continue;
+      const std::string rest = n.substr(p.size());
+      if (rest.find_first_not_of("0123456789") != std::string::npos) continue;
+      const int j = std::stoi(rest) - 1;
+      if (j < 0 || j >= static_cast<int>(m.drives.size())) continue;
+      Drive& dr = m.drives[static_cast<std::size_t>(j)];
+      (p == "Ia" ? dr.rotor_inertia : p == "Fc" ? dr.coulomb : p == "Fv" ? dr.viscous : dr.offset) = v;
+      done = true;
+      ++set;
+    }
+    if (!done) ignored.push_back(n);
+  }
+  for (int j = 0; j < m.dof(); ++j) {
+    const InertiaCheck c = checkPhysical(m.bodies[static_cast<std::size_t>(j)].inertia);
+    if (!c.ok)
+      throw Error(fmt::format("body {} ('{}'): {}; the identified parameters are not physically consistent "
+                              "and cannot be written as URDF",
+                              j + 1, m.bodies[static_cast<std::size_t>(j)].name, c.rule));
+  }
+  UrdfWriteOptions wo;
+  wo.comment = fmt::format("  {}: identified by exid {} ({}), study {} ({}).\n  Inertial parameters and drives "
+                           "from identification.details.standard_parameters; kinematics, limits and transmission "
+                           "from {}.",
+                           m.name, EXID_VERSION_STRING, I->find("estimator") ? I->find("estimator")->asString() : "?",
+                           S.find("study") ? S.find("study")->asString() : "?", dir.string(), base->source);
+  m.name = m.name + "_identified";
+  writeFileAtomic(out, writeUrdf(m, wo));
+  std::cout << fmt::format("{}: {} ({} joints), {} identified parameters written{}\n", out, m.name, m.dof(), set,
+                           ignored.empty() ? std::string()
+                                           : fmt::format("; not part of the robot, ignored: {}", fmt::join(ignored, ", ")));
+  return 0;
+}
+
 std::vector<std::string> splitComma(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -344,6 +435,12 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     stages.push_back(s);
   }
 
+  auto* exp = app.add_subcommand("export", "write identified consistent parameters into a URDF: "
+                                           "exid export [ROBOT] --study DIR --out robot_identified.urdf");
+  exp->add_option("robot", st->robot, "robot plugin name or .urdf / DH .yaml file (default: the study's robot)");
+  exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")->required();
+  exp->add_option("--out", st->out, "URDF file to write")->required();
+
   auto* matrix = app.add_subcommand(
       "matrix", "comparison matrices: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N] | "
                 "exid matrix table DIR --rows A,B --cols C --metric M | exid matrix merge DEST SRC...");
@@ -357,12 +454,13 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   matrix->add_option("--metric", st->metric, "table: the metric (without: list the metrics)");
 
   Commands c;
-  c.run = [st, info, eval, stages, matrix, &registry]() -> int {
+  c.run = [st, info, eval, exp, stages, matrix, &registry]() -> int {
     if (*matrix)
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry, st->rows, st->cols,
                            st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
     if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out);
+    if (*exp) return exportCommand(registry, st->robot, st->study, st->out);
     for (auto* s : stages)
       if (*s) return stageCommand(registry, s->get_name(), st->study, st->data, st->out);
     std::cerr << "exid: no command chosen (see exid --help)\n";

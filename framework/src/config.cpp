@@ -299,7 +299,65 @@ Json specJson(const PluginSpec& s) {
 
 const std::vector<std::string> kTopKeys = {"name",       "description", "seed",      "budget_s",
                                            "robot",      "model",       "excitation", "experiment",
-                                           "estimator",  "validation",  "report"};
+                                           "estimator",  "validation",  "report",   "prior"};
+
+std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_dir, Problems& pr) {
+  if (!n.IsMap()) {
+    pr.add(n, fmt::format("prior: expected a mapping {{from: robot, relative_std: 0.3, absolute_std: 1e-3}} "
+                          "or {{from: study, study: DIR, scale: 1}}, found '{}'",
+                          scalarText(n)));
+    return std::nullopt;
+  }
+  PriorSpec spec;
+  spec.line = n.Mark().line + 1;
+  YAML::Node from = n["from"];
+  if (!from || !from.IsScalar() || (from.Scalar() != "robot" && from.Scalar() != "study")) {
+    pr.add(from ? from : n, fmt::format("prior.from: expected 'robot' or 'study', found '{}'",
+                                        from ? scalarText(from) : std::string("nothing")));
+    return std::nullopt;
+  }
+  spec.from = from.Scalar();
+  const std::vector<std::string> allowed = spec.from == "robot"
+                                               ? std::vector<std::string>{"from", "relative_std", "absolute_std"}
+                                               : std::vector<std::string>{"from", "study", "scale"};
+  bool bad = false;
+  for (const auto& kv : n) {
+    const std::string key = kv.first.as<std::string>();
+    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
+      unknownKey(pr, kv.first, "prior", key, allowed);
+      bad = true;
+    }
+  }
+  auto number = [&](const char* key, double lo, bool lo_open, double* out) {
+    YAML::Node v = n[key];
+    if (!v) return;
+    auto d = v.IsScalar() ? toDouble(v.Scalar()) : std::nullopt;
+    if (!d || !std::isfinite(*d) || (lo_open ? !(*d > lo) : !(*d >= lo))) {
+      pr.add(v, fmt::format("prior.{} = {}: must be a number in {}{}, inf)", key, scalarText(v),
+                            lo_open ? "(" : "[", lo));
+      bad = true;
+      return;
+    }
+    *out = *d;
+  };
+  if (spec.from == "robot") {
+    number("relative_std", 0.0, false, &spec.relative_std);
+    number("absolute_std", 0.0, false, &spec.absolute_std);
+  } else {
+    number("scale", 0.0, true, &spec.scale);
+    YAML::Node st = n["study"];
+    if (!st || !st.IsScalar() || st.Scalar().empty()) {
+      pr.add(st ? st : n, "prior.study: missing; the output folder of a study (its parameters.csv is read)");
+      bad = true;
+    } else {
+      fs::path d(st.Scalar());
+      if (d.is_relative() && !base_dir.empty()) d = base_dir / d;
+      spec.study = d.lexically_normal();
+    }
+  }
+  if (bad) return std::nullopt;
+  return spec;
+}
 
 }  // namespace
 
@@ -392,11 +450,14 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
       if (ps.has("title")) cfg.report.title = ps.getString("title");
     }
   }
+  if (root["prior"]) cfg.prior = parsePrior(root["prior"], base_dir, pr);
   // Which stages need which.
   if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() && !root["model"])
     pr.add(0, "model: missing section; the estimator, excitation and validation stages need an observation model");
   if (cfg.estimator && !cfg.experiment && !root["experiment"])
     pr.add(0, "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: csv, params: {file: ...}})");
+  if (root["prior"] && !cfg.estimator && !root["estimator"])
+    pr.add(root["prior"], "prior: needs an estimator section (the prior is the estimator's)");
   if (cfg.validation && !cfg.estimator && !root["estimator"])
     pr.add(0, "validation: needs an estimator section (the identified model is what is validated)");
 
@@ -468,6 +529,17 @@ std::string StudyConfig::resolvedYaml() const {
   if (experiment) { e << YAML::Key << "experiment" << YAML::Value; emitSpec(e, *experiment, false); }
   if (estimator) { e << YAML::Key << "estimator" << YAML::Value; emitSpec(e, *estimator, false); }
   if (validation) { e << YAML::Key << "validation" << YAML::Value; emitSpec(e, *validation, false); }
+  if (prior) {
+    e << YAML::Key << "prior" << YAML::Value << YAML::BeginMap << YAML::Key << "from" << YAML::Value << prior->from;
+    if (prior->from == "robot") {
+      e << YAML::Key << "relative_std" << YAML::Value << formatValue(ParamValue(prior->relative_std));
+      e << YAML::Key << "absolute_std" << YAML::Value << formatValue(ParamValue(prior->absolute_std));
+    } else {
+      e << YAML::Key << "study" << YAML::Value << prior->study.string();
+      e << YAML::Key << "scale" << YAML::Value << formatValue(ParamValue(prior->scale));
+    }
+    e << YAML::EndMap;
+  }
   e << YAML::Key << "report" << YAML::Value << YAML::BeginMap << YAML::Key << "type" << YAML::Value
     << "standard" << YAML::Key << "params" << YAML::Value << YAML::BeginMap << YAML::Key << "plots"
     << YAML::Value << report.plots << YAML::Key << "title" << YAML::Value << report.title
@@ -498,6 +570,18 @@ Json StudyConfig::resolvedJson() const {
   if (experiment) j["experiment"] = specJson(*experiment);
   if (estimator) j["estimator"] = specJson(*estimator);
   if (validation) j["validation"] = specJson(*validation);
+  if (prior) {
+    Json p = Json::object();
+    p["from"] = prior->from;
+    if (prior->from == "robot") {
+      p["relative_std"] = prior->relative_std;
+      p["absolute_std"] = prior->absolute_std;
+    } else {
+      p["study"] = prior->study.string();
+      p["scale"] = prior->scale;
+    }
+    j["prior"] = p;
+  }
   return j;
 }
 

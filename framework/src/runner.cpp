@@ -408,9 +408,18 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
       RunContext ictx = ctx;
       ictx.progress = progressFor("identification");
-      est = estimator->estimate(*model, *data, nullptr, ictx);
+      std::optional<Prior> prior;
+      if (cfg.prior) {
+        check(estimator->specs().accepts_prior,
+              fmt::format("prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
+                          "and rls do)",
+                          cfg.estimator->type));
+        prior = buildPrior(*cfg.prior, *model);
+      }
+      est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
       Json& I = S["identification"];
       I["estimator"] = cfg.estimator->type;
+      if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
       I["wall_s"] = seconds(t0);
       I["rows"] = Json(static_cast<long long>(est->rows));
       I["cond_W"] = est->cond_W;

@@ -210,7 +210,7 @@ LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::s
   out.rss = (Fw * out.theta - fy).squaredNorm();
   out.sigma2 = out.rss / static_cast<double>(m - p);
   const Eigen::MatrixXd Vs = d.cwiseInverse().asDiagonal() * V * sinv.asDiagonal();  // (W^T W)^-1 = Vs Vs^T
-  out.covariance = out.sigma2 * (Vs * Vs.transpose());
+  out.covariance = (opt.unit_variance ? 1.0 : out.sigma2) * (Vs * Vs.transpose());
   out.std = out.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   out.rel_std_percent = relativeStdPercent(out.theta, out.std);
   out.singular_values_scaled = s;

@@ -12,6 +12,8 @@
 //   estimator:  {type: batch_ls, params: {...}}
 //   validation: {type: simulate, params: {...}}          # optional: a second experiment
 //   report:     {type: standard, params: {...}}          # optional
+//   prior:      {from: robot, relative_std: 0.3, absolute_std: 1e-3}   # optional, or
+//               {from: study, study: path/to/out_dir, scale: 1.0}
 //
 // The whole file is validated before any work starts; every problem is reported at once, each
 // naming the file, the line and the key path, e.g.
@@ -41,6 +43,21 @@ struct PluginSpec {
   double weight = 1.0;   // for stacked models
 };
 
+/// A prior on the base parameters for the estimator (docs/consistent.md):
+///   from: robot  -- the robot description's standard values pi0 with independent standard
+///                   deviations sqrt((relative_std |pi0_i|)^2 + absolute_std^2), mapped to the
+///                   base parameters: theta0 = K pi0, Sigma = K diag(std^2) K^T;
+///   from: study  -- another study's identified base parameters (DIR/parameters.csv: value and
+///                   std, matched by name), standard deviations multiplied by `scale`.
+struct PriorSpec {
+  std::string from;  // "robot" | "study"
+  double relative_std = 0.3;
+  double absolute_std = 0.0;
+  std::filesystem::path study;  // from: study (absolute)
+  double scale = 1.0;
+  int line = 0;
+};
+
 struct ReportOptions {
   bool plots = true;
   std::string title;
@@ -57,6 +74,7 @@ struct StudyConfig {
   std::optional<PluginSpec> trajectory, criterion, optimizer;  // excitation (all or none)
   std::optional<PluginSpec> experiment, estimator, validation;
   ReportOptions report;
+  std::optional<PriorSpec> prior;
 
   bool hasExcitation() const { return optimizer.has_value(); }
   /// The resolved study as YAML text (every default filled in), and as JSON.

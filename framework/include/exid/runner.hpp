@@ -16,6 +16,8 @@
 namespace exid {
 
 class Registry;
+class ObservationModel;
+struct Prior;
 
 struct RunOptions {
   std::filesystem::path out_dir;  // "" = write nothing
@@ -31,6 +33,10 @@ struct StudyResult {
 
 /// Never throws for failures inside the study: they come back as ok = false.
 StudyResult runStudy(const StudyConfig& cfg, const Registry& registry, const RunOptions& options);
+
+/// The prior a study asks for (StudyConfig::prior) on the model's (bound) base parameters.
+/// Throws exid::Error when it cannot be built (missing file or names, zero variances).
+Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 
 /// Dataset <-> CSV table (DESIGN.md §3 column names).
 CsvTable datasetTable(const Dataset& d);

@@ -70,6 +70,9 @@ struct SolveOptions {
   double rank_tolerance = 1e-8;
   /// How many standard parameters to name per unidentifiable direction.
   int explain_terms = 4;
+  /// The rows are already in units of the noise standard deviation (weighted rows, or data
+  /// stacked with a prior): covariance (W^T W)^-1 without the factor sigma^2.
+  bool unit_variance = false;
 };
 
 struct LsSolution {

@@ -1,0 +1,614 @@
+// exid — estimator `consistent_ls`: (weighted) least squares of the base parameters with the
+// STANDARD parameters behind them physically consistent by construction.
+//
+//   theta_b = K pi(z),  pi(z): per body the log-Cholesky map of the pseudo-inertia (J = U U^T,
+//   U upper triangular with exp on the diagonal: mass > 0, inertia about the COM positive
+//   definite, triangle inequalities), rotor inertias and friction coefficients Ia, Fc, Fv >= 0
+//   (scaled, bound-constrained), offsets and any other column free (scaled);
+//   minimise ||F_w K pi(z) - f_y||^2 (+ prior)
+// where [F_w f_y] is the QR-compressed factor of the (noise-normalised) rows [W y] stacked with
+// the prior's pseudo-observations, so one evaluation costs O(p * n_full), not O(rows). NLopt
+// (LD_LBFGS by default) with exact gradients, then a Levenberg-Marquardt polish with the exact
+// Jacobian. See docs/consistent.md.
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <chrono>
+#include <cmath>
+#include <limits>
+#include <map>
+#include <nlopt.hpp>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+#include "exid/estimators/consistent.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/io.hpp"
+
+namespace {
+
+using exid::Json;
+using exid::est::RowAccumulator;
+using exid::est::Vec10;
+
+std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
+
+/// The map z -> full standard parameter vector (model.fullNames() order).
+class StandardMap {
+ public:
+  StandardMap(const std::vector<std::string>& names, const Eigen::VectorXd& nominal) : nfull_(static_cast<int>(names.size())) {
+    std::map<int, std::array<int, 10>> groups;
+    std::vector<int> group_of(names.size(), -1);
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      int k = -1;
+      int body = -1;
+      // two-letter prefixes first ("MX1" before "M1")
+      for (int pass = 0; pass < 2 && k < 0; ++pass) {
+        for (int c = 0; c < 10; ++c) {
+          const std::string pre = exid::kInertialNames[c];
+          if (static_cast<int>(pre.size()) != 2 - pass) continue;
+          if (names[i].size() > pre.size() && names[i].compare(0, pre.size(), pre) == 0) {
+            const std::string rest = names[i].substr(pre.size());
+            if (rest.find_first_not_of("0123456789") == std::string::npos && rest[0] != '0') {
+              k = c;
+              body = std::stoi(rest);
+              break;
+            }
+          }
+        }
+      }
+      if (k >= 0) {
+        auto it = groups.find(body);
+        if (it == groups.end()) {
+          std::array<int, 10> a;
+          a.fill(-1);
+          it = groups.emplace(body, a).first;
+        }
+        it->second[static_cast<std::size_t>(k)] = static_cast<int>(i);
+      }
+    }
+    std::vector<bool> used(names.size(), false);
+    for (const auto& [body, idx] : groups) {
+      bool complete = true;
+      for (int v : idx) complete = complete && v >= 0;
+      if (!complete) continue;
+      bodies_.push_back(idx);
+      body_numbers_.push_back(body);
+      for (int v : idx) used[static_cast<std::size_t>(v)] = true;
+    }
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (used[i]) continue;
+      const std::string& n = names[i];
+      auto starts = [&](const char* pre) {
+        const std::string p(pre);
+        return n.size() > p.size() && n.compare(0, p.size(), p) == 0 &&
+               n.substr(p.size()).find_first_not_of("0123456789") == std::string::npos;
+      };
+      scalars_.push_back(static_cast<int>(i));
+      nonneg_.push_back(starts("Ia") || starts("Fc") || starts("Fv"));
+      const double v = std::abs(nominal(static_cast<Eigen::Index>(i)));
+      scale_.push_back(v > 0 && std::isfinite(v) ? v : 1.0);
+    }
+    nz_ = 10 * static_cast<int>(bodies_.size()) + static_cast<int>(scalars_.size());
+    // Lower bound on log U_kk: keeps J strictly positive definite by a margin ~ (1e-5)^2 of the
+    // body's own size (log-Cholesky reaches the semi-definite boundary only at -inf, where the
+    // optimiser would crawl and rounding would break the strict inequalities).
+    for (const auto& idx : bodies_) {
+      Vec10 p;
+      for (int k = 0; k < 10; ++k) p(k) = nominal(idx[static_cast<std::size_t>(k)]);
+      const double tr = exid::est::pseudoInertia(p).trace();
+      diag_floor_.push_back(std::log(1e-5 * std::sqrt(std::max(std::isfinite(tr) ? tr : 0.0, 1e-6))));
+    }
+  }
+
+  int nz() const { return nz_; }
+  int nfull() const { return nfull_; }
+  int numBodies() const { return static_cast<int>(bodies_.size()); }
+  int bodyNumber(int b) const { return body_numbers_[static_cast<std::size_t>(b)]; }
+  const std::array<int, 10>& bodyIndices(int b) const { return bodies_[static_cast<std::size_t>(b)]; }
+  int numScalars() const { return static_cast<int>(scalars_.size()); }
+  bool nonneg(int s) const { return nonneg_[static_cast<std::size_t>(s)]; }
+  int scalarIndex(int s) const { return scalars_[static_cast<std::size_t>(s)]; }
+  int zOfScalar(int s) const { return 10 * numBodies() + s; }
+
+  void lowerBounds(std::vector<double>* lb) const {
+    lb->assign(static_cast<std::size_t>(nz_), -HUGE_VAL);
+    for (int b = 0; b < numBodies(); ++b)
+      for (int k = 0; k < 4; ++k) (*lb)[static_cast<std::size_t>(10 * b + k)] = diag_floor_[static_cast<std::size_t>(b)];
+    for (int s = 0; s < numScalars(); ++s)
+      if (nonneg(s)) (*lb)[static_cast<std::size_t>(zOfScalar(s))] = 0.0;
+  }
+
+  Eigen::VectorXd pi(const Eigen::VectorXd& z) const {
+    Eigen::VectorXd out = Eigen::VectorXd::Zero(nfull_);
+    for (int b = 0; b < numBodies(); ++b) {
+      const Vec10 p = exid::est::logCholeskyToInertial(z.segment<10>(10 * b));
+      for (int k = 0; k < 10; ++k) out(bodyIndices(b)[static_cast<std::size_t>(k)]) = p(k);
+    }
+    for (int s = 0; s < numScalars(); ++s) out(scalarIndex(s)) = scale_[static_cast<std::size_t>(s)] * z(zOfScalar(s));
+    return out;
+  }
+
+  /// dpi/dz (n_full x nz).
+  Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const {
+    Eigen::MatrixXd Jz = Eigen::MatrixXd::Zero(nfull_, nz_);
+    for (int b = 0; b < numBodies(); ++b) {
+      const Eigen::Matrix<double, 10, 10> J = exid::est::logCholeskyJacobian(z.segment<10>(10 * b));
+      for (int k = 0; k < 10; ++k) Jz.block(bodyIndices(b)[static_cast<std::size_t>(k)], 10 * b, 1, 10) = J.row(k);
+    }
+    for (int s = 0; s < numScalars(); ++s) Jz(scalarIndex(s), zOfScalar(s)) = scale_[static_cast<std::size_t>(s)];
+    return Jz;
+  }
+
+  /// g_z = (dpi/dz)^T g_pi.
+  Eigen::VectorXd vjp(const Eigen::VectorXd& z, const Eigen::VectorXd& g) const {
+    Eigen::VectorXd out(nz_);
+    for (int b = 0; b < numBodies(); ++b) {
+      Vec10 gb;
+      for (int k = 0; k < 10; ++k) gb(k) = g(bodyIndices(b)[static_cast<std::size_t>(k)]);
+      out.segment<10>(10 * b) = exid::est::logCholeskyVjp(z.segment<10>(10 * b), gb);
+    }
+    for (int s = 0; s < numScalars(); ++s) out(zOfScalar(s)) = scale_[static_cast<std::size_t>(s)] * g(scalarIndex(s));
+    return out;
+  }
+
+  /// z of the nearest consistent point to a full standard vector (bodies: eigenvalues of J
+  /// raised to eig_floor; non-negative scalars clamped at 0).
+  Eigen::VectorXd fromStandard(const Eigen::VectorXd& pi, double eig_floor, int* projected) const {
+    Eigen::VectorXd z(nz_);
+    int count = 0;
+    for (int b = 0; b < numBodies(); ++b) {
+      Vec10 p;
+      for (int k = 0; k < 10; ++k) p(k) = pi(bodyIndices(b)[static_cast<std::size_t>(k)]);
+      bool proj = false;
+      z.segment<10>(10 * b) = exid::est::logCholeskyFromInertial(p, eig_floor, &proj);
+      count += proj ? 1 : 0;
+    }
+    for (int s = 0; s < numScalars(); ++s) {
+      double v = pi(scalarIndex(s)) / scale_[static_cast<std::size_t>(s)];
+      if (nonneg(s) && v < 0) {
+        v = 0;
+        ++count;
+      }
+      z(zOfScalar(s)) = v;
+    }
+    if (projected) *projected = count;
+    return z;
+  }
+
+  /// A floor for the eigenvalues of the pseudo-inertias: relative to the largest body.
+  double eigFloor(const Eigen::VectorXd& pi) const {
+    double big = 0.0;
+    for (int b = 0; b < numBodies(); ++b) {
+      Vec10 p;
+      for (int k = 0; k < 10; ++k) p(k) = pi(bodyIndices(b)[static_cast<std::size_t>(k)]);
+      big = std::max(big, exid::est::pseudoInertia(p).trace());
+    }
+    return std::max(1e-8 * big, 1e-12);
+  }
+
+ private:
+  int nfull_ = 0, nz_ = 0;
+  std::vector<std::array<int, 10>> bodies_;
+  std::vector<int> body_numbers_;
+  std::vector<int> scalars_;
+  std::vector<bool> nonneg_;
+  std::vector<double> scale_;
+  std::vector<double> diag_floor_;
+};
+
+/// f(z) = ||A pi(z) - b||^2.
+struct Problem {
+  const StandardMap* map = nullptr;
+  Eigen::MatrixXd A;  // (p+1) x n_full: F_w K
+  Eigen::VectorXd b;
+  long evaluations = 0;
+  double best_f = HUGE_VAL;
+  Eigen::VectorXd best_z;
+  const exid::RunContext* ctx = nullptr;
+
+  double value(const Eigen::VectorXd& z, Eigen::VectorXd* grad) {
+    ++evaluations;
+    const Eigen::VectorXd r = A * map->pi(z) - b;
+    const double f = r.squaredNorm();
+    if (grad) *grad = map->vjp(z, 2.0 * (A.transpose() * r));
+    if (std::isfinite(f) && f < best_f) {
+      best_f = f;
+      best_z = z;
+    }
+    return f;
+  }
+};
+
+double nloptObjective(unsigned n, const double* x, double* grad, void* data) {
+  auto* P = static_cast<Problem*>(data);
+  if (P->ctx && P->ctx->shouldStop()) throw nlopt::forced_stop();
+  const Eigen::Map<const Eigen::VectorXd> z(x, n);
+  Eigen::VectorXd g;
+  const double f = P->value(z, grad ? &g : nullptr);
+  if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
+  return std::isfinite(f) ? f : HUGE_VAL;
+}
+
+nlopt::algorithm algorithmFromName(const std::string& a) {
+  if (a == "LD_LBFGS") return nlopt::LD_LBFGS;
+  if (a == "LD_SLSQP") return nlopt::LD_SLSQP;
+  if (a == "LD_MMA") return nlopt::LD_MMA;
+  if (a == "LD_TNEWTON_PRECOND_RESTART") return nlopt::LD_TNEWTON_PRECOND_RESTART;
+  return nlopt::LD_VAR2;
+}
+
+class ConsistentLs : public exid::Estimator {
+ public:
+  static constexpr const char* kName = "consistent_ls";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "least squares of the base parameters with physically consistent standard parameters behind "
+      "them (log-Cholesky pseudo-inertia per body, Ia/Fc/Fv >= 0), per-equation weights, optional "
+      "prior; NLopt with exact gradients + Levenberg-Marquardt polish";
+
+  static std::vector<exid::ParamDecl> params() {
+    return {
+        exid::param_string("weighting", std::string("equation"),
+                           "equation: each equation's rows divided by its residual std (wls, Gautier); "
+                           "none: one std for all rows (OLS)",
+                           {"equation", "none"}),
+        exid::param_string("algorithm", std::string("LD_LBFGS"),
+                           "NLopt algorithm (exact gradients); none: Levenberg-Marquardt only",
+                           {"LD_LBFGS", "LD_SLSQP", "LD_MMA", "LD_TNEWTON_PRECOND_RESTART", "none"}),
+        exid::param_int("max_evaluations", 3000, "NLopt evaluations (each O(p n_full))", 1.0, 1e8),
+        exid::param_int("polish_iterations", 300, "Levenberg-Marquardt iterations after NLopt (0: none)", 0.0, 1e6),
+        exid::param_string("start", std::string("best"),
+                           "nominal: the robot description projected to consistency; unconstrained: "
+                           "the (prior-regularised) least-squares solution completed with the nominal "
+                           "values and projected; best: whichever fits better",
+                           {"nominal", "unconstrained", "best"}),
+        exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
+        exid::param_int("max_equations", 1000, "refuse more distinct equations than this", 1.0, 1e6),
+        exid::param_double("rank_tolerance", 1e-8, "",
+                           "a direction is unidentifiable when its singular value of the column-scaled "
+                           "W is below this times the largest",
+                           0.0, 1.0, true, true),
+    };
+  }
+
+  explicit ConsistentLs(const exid::ParamSet& p)
+      : weighting_(p.getString("weighting")),
+        algorithm_(p.getString("algorithm")),
+        start_(p.getString("start")),
+        max_eval_(static_cast<int>(p.getInt("max_evaluations"))),
+        polish_(static_cast<int>(p.getInt("polish_iterations"))),
+        chunk_(static_cast<int>(p.getInt("chunk_samples"))),
+        max_eq_(static_cast<int>(p.getInt("max_equations"))) {
+    opt_.rank_tolerance = p.getDouble("rank_tolerance");
+  }
+
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.accepts_prior = true;
+    return s;
+  }
+
+  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const int p = model.numBase();
+    const exid::BaseParameters& base = model.base();
+    const std::vector<std::string>& names = base.names;
+
+    // ---- rows compressed per equation
+    std::map<int, RowAccumulator> acc;
+    std::map<int, std::vector<int>> idx;
+    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int, int) {
+      for (auto& [eq, v] : idx) v.clear();
+      const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
+      for (Eigen::Index i = 0; i < r.y.size(); ++i)
+        idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(static_cast<int>(i));
+      exid::check(static_cast<int>(idx.size()) <= max_eq_,
+                  fmt::format("{}: the model labels more than max_equations = {} distinct equations", kName, max_eq_));
+      for (const auto& [eq, v] : idx) {
+        if (v.empty()) continue;
+        const auto n = static_cast<Eigen::Index>(v.size());
+        Eigen::MatrixXd W(n, p);
+        Eigen::VectorXd y(n);
+        for (Eigen::Index k = 0; k < n; ++k) {
+          W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
+          y(k) = r.y(v[static_cast<std::size_t>(k)]);
+        }
+        auto it = acc.find(eq);
+        if (it == acc.end()) it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
+        it->second.add(W, y);
+      }
+    });
+    RowAccumulator all(p);
+    for (const auto& [eq, a] : acc) all.merge(a);
+    const long m = all.rows();
+    if (!prior) {
+      // Without a prior every base parameter must be identified by the data (the message names
+      // the directions that are not); with one, they fall back to it.
+      (void)exid::est::solveLeastSquares(all, names, opt_, kName);
+    }
+
+    // ---- noise-normalised rows (+ prior): one factor
+    int rank = 0;
+    const Eigen::VectorXd theta_mn = exid::est::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+    RowAccumulator total(p);
+    Json eq_table = Json::array();
+    {
+      std::map<int, double> sigma;
+      double smax = 0.0;
+      const double global = std::sqrt(std::max(0.0, all.residualSquared(theta_mn)) /
+                                      static_cast<double>(std::max<long>(1, m - rank)));
+      for (const auto& [eq, a] : acc) {
+        double s = global;
+        if (weighting_ == "equation") {
+          const Eigen::VectorXd nrm = a.columnNorms();
+          const double big = nrm.maxCoeff();
+          int pe = 0;
+          for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
+          double dof = static_cast<double>(a.rows() - pe);
+          if (dof <= 0) dof = static_cast<double>(a.rows()) * static_cast<double>(std::max<long>(1, m - rank)) / static_cast<double>(m);
+          s = std::sqrt(std::max(0.0, a.residualSquared(theta_mn)) / std::max(dof, 1e-300));
+        }
+        sigma[eq] = s;
+        smax = std::max(smax, s);
+      }
+      // Floor: exactly fitted (noise-free) data must not get infinite weights.
+      double yrms = all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
+      const double floor = std::max(smax > 0 ? 1e-6 * smax : 0.0, (prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
+      for (const auto& [eq, a] : acc) {
+        const double s = std::max(sigma[eq], floor);
+        total.merge(a, 1.0 / s);
+        Json row = Json::object();
+        row["equation"] = eq;
+        row["rows"] = Json(static_cast<long long>(a.rows()));
+        row["residual_std"] = sigma[eq];
+        row["weight"] = 1.0 / s;
+        eq_table.push_back(row);
+      }
+    }
+    if (prior) exid::est::addPriorRows(&total, *prior, kName);
+    exid::est::SolveOptions uo = opt_;
+    uo.unit_variance = true;
+    if (prior) uo.rank_tolerance = 0.0;  // positive definite with the prior
+    const exid::est::LsSolution unc = exid::est::solveLeastSquares(total, names, uo, kName);
+    const Eigen::MatrixXd& F = total.factor();
+    const Eigen::MatrixXd Fw = F.leftCols(p);
+    const Eigen::VectorXd fy = F.col(p);
+
+    // ---- the consistent problem
+    const StandardMap map(base.full_names, model.fullNominal());
+    Problem P;
+    P.map = &map;
+    P.A = Fw * base.K;
+    P.b = fy;
+    P.ctx = &ctx;
+    const Eigen::VectorXd pi0 = model.fullNominal();
+    const double floor = map.eigFloor(pi0);
+    int projected_nominal = 0, projected_unc = 0;
+    const Eigen::VectorXd z_nom = map.fromStandard(pi0, floor, &projected_nominal);
+    Eigen::VectorXd z0 = z_nom;
+    std::string started = "nominal";
+    if (start_ != "nominal") {
+      // pi0 + K^+ (theta_u - K pi0): the unconstrained solution completed with the nominal values.
+      const Eigen::VectorXd dpi = base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
+      const Eigen::VectorXd z_unc = map.fromStandard(pi0 + dpi, floor, &projected_unc);
+      if (start_ == "unconstrained" || P.value(z_unc, nullptr) < P.value(z_nom, nullptr)) {
+        z0 = z_unc;
+        started = "unconstrained";
+      }
+    }
+    P.best_f = HUGE_VAL;
+    const double f_start = P.value(z0, nullptr);
+    const double f_unc = (Fw * unc.theta - fy).squaredNorm();
+    ctx.report(0.85, fmt::format("{}: optimising {} variables", kName, map.nz()));
+
+    std::vector<double> lb;
+    map.lowerBounds(&lb);
+    for (int k = 0; k < map.nz(); ++k) z0(k) = std::max(z0(k), lb[static_cast<std::size_t>(k)]);
+    std::string stop = "not run";
+    if (algorithm_ != "none") {
+      nlopt::opt o(algorithmFromName(algorithm_), static_cast<unsigned>(map.nz()));
+      o.set_lower_bounds(lb);
+      o.set_min_objective(nloptObjective, &P);
+      o.set_maxeval(max_eval_);
+      o.set_ftol_rel(1e-14);
+      o.set_xtol_rel(1e-12);
+      std::vector<double> x(z0.data(), z0.data() + z0.size());
+      double fx = 0;
+      try {
+        const nlopt::result r = o.optimize(x, fx);
+        stop = fmt::format("nlopt result {}", static_cast<int>(r));
+      } catch (const nlopt::forced_stop&) {
+        throw exid::Error(fmt::format("{}: stopped", kName));
+      } catch (const std::exception& e) {
+        stop = fmt::format("nlopt: {} (best point kept)", e.what());
+      }
+    }
+    Eigen::VectorXd z = P.best_z.size() == map.nz() ? P.best_z : z0;
+    const long nlopt_evals = P.evaluations;
+    const int lm_iters = polishLm(P, lb, &z);
+    if (ctx.shouldStop()) throw exid::Error(fmt::format("{}: stopped", kName));
+
+    // ---- results
+    const Eigen::VectorXd pi = map.pi(z);
+    const Eigen::VectorXd theta = base.K * pi;
+    const Eigen::VectorXd r = Fw * theta - fy;
+    const double f_final = r.squaredNorm();
+    // Linearised covariance: theta = K pi(z), the variables at an active bound held fixed.
+    Eigen::MatrixXd Jb = base.K * map.jacobian(z);
+    {
+      Eigen::VectorXd g = map.vjp(z, 2.0 * (P.A.transpose() * (P.A * pi - P.b)));
+      for (int k = 0; k < map.nz(); ++k)
+        if (std::isfinite(lb[static_cast<std::size_t>(k)]) && z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
+          Jb.col(k).setZero();
+    }
+    const Eigen::MatrixXd JA = Fw * Jb;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(JA, Eigen::ComputeThinV);
+    const Eigen::VectorXd sv = svd.singularValues();
+    Eigen::VectorXd sinv2 = Eigen::VectorXd::Zero(sv.size());
+    int lin_rank = 0;
+    for (Eigen::Index i = 0; i < sv.size(); ++i)
+      if (sv(0) > 0 && sv(i) > 1e-9 * sv(0)) {
+        sinv2(i) = 1.0 / (sv(i) * sv(i));
+        ++lin_rank;
+      }
+    const Eigen::MatrixXd JV = Jb * svd.matrixV();
+    Eigen::MatrixXd cov = JV * sinv2.asDiagonal() * JV.transpose();
+    cov = 0.5 * (cov + cov.transpose());
+
+    double rss_c = 0.0, rss_u = 0.0;
+    for (const auto& [eq, a] : acc) {
+      rss_c += a.residualSquared(theta);
+      rss_u += a.residualSquared(unc.theta);
+    }
+    const double rms_c = std::sqrt(rss_c / static_cast<double>(m));
+    const double rms_u = std::sqrt(rss_u / static_cast<double>(m));
+
+    exid::est::LsSolution sol = unc;
+    sol.theta = theta;
+    sol.covariance = cov;
+    sol.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+    sol.rss = f_final;
+    sol.sigma2 = f_final / static_cast<double>(std::max<long>(1, total.rows() - p));
+    exid::Estimate e;
+    exid::est::fillEstimate(&e, model, sol, rss_c, m);
+    e.rows = m;
+    Json& d = e.details;
+    d["estimator"] = kName;
+    d["weighting"] = weighting_;
+    d["equations"] = eq_table;
+    d["covariance_definition"] =
+        "linearised: J (J^T F^T F J)^+ J^T with J = K dpi/dz at the estimate (variables at an active "
+        "bound fixed), F the factor of the noise-normalised rows" +
+        std::string(prior ? " stacked with the prior" : "") +
+        "; equals the unconstrained covariance when no constraint is active";
+    d["residual_rms_unconstrained"] = rms_u;
+    d["residual_rms_ratio"] = rms_u > 0 ? rms_c / rms_u : 1.0;
+    // Distance from the unconstrained (prior-regularised) least-squares solution in units of its
+    // covariance: sqrt((theta - theta_u)^T Cov_u^-1 (theta - theta_u)) = ||F_w (theta - theta_u)||.
+    d["mahalanobis_from_unconstrained"] = (Fw * (theta - unc.theta)).norm();
+    Json u = Json::object();
+    u["value"] = Json(toStd(unc.theta));
+    u["std"] = Json(toStd(unc.std));
+    u["cost"] = f_unc;
+    d["unconstrained"] = u;
+    Json o = Json::object();
+    o["algorithm"] = algorithm_;
+    o["start"] = started;
+    o["bodies_projected_at_start"] = started == "nominal" ? projected_nominal : projected_unc;
+    o["cost_start"] = f_start;
+    o["cost_final"] = f_final;
+    o["cost_unconstrained"] = f_unc;
+    o["nlopt_evaluations"] = Json(static_cast<long long>(nlopt_evals));
+    o["nlopt_stop"] = stop;
+    o["lm_iterations"] = lm_iters;
+    o["variables"] = map.nz();
+    o["linearised_rank"] = lin_rank;
+    d["optimization"] = o;
+    if (prior) d["prior"] = exid::est::priorDetails(*prior, theta, sol.std);
+
+    // Consistent standard parameters (exid export writes them into a URDF).
+    Json sp = Json::object();
+    sp["names"] = Json(base.full_names);
+    sp["values"] = Json(toStd(pi));
+    d["standard_parameters"] = sp;
+    Json bodies = Json::array();
+    bool all_ok = true;
+    for (int b = 0; b < map.numBodies(); ++b) {
+      Vec10 pb;
+      for (int k = 0; k < 10; ++k) pb(k) = pi(map.bodyIndices(b)[static_cast<std::size_t>(k)]);
+      const exid::InertiaCheck chk = exid::checkPhysical(pb, 0.0);
+      const double lmin = exid::est::pseudoInertiaMinEigenvalue(pb);
+      all_ok = all_ok && lmin > 0;
+      Json jb = Json::object();
+      jb["body"] = map.bodyNumber(b);
+      jb["mass"] = pb(9);
+      jb["com"] = Json(std::vector<double>{pb(6) / pb(9), pb(7) / pb(9), pb(8) / pb(9)});
+      jb["pseudo_inertia_min_eigenvalue"] = lmin;
+      jb["check"] = chk.ok ? std::string("ok") : chk.rule;
+      bodies.push_back(jb);
+    }
+    for (int s = 0; s < map.numScalars(); ++s)
+      if (map.nonneg(s)) all_ok = all_ok && pi(map.scalarIndex(s)) >= 0.0;
+    d["bodies"] = bodies;
+    d["consistent"] = all_ok;
+    d["samples"] = data.size();
+    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+
+    if (!ctx.out_dir.empty()) {
+      std::string csv = "name,value\n";
+      for (Eigen::Index i = 0; i < pi.size(); ++i)
+        csv += fmt::format("{},{:.17g}\n", base.full_names[static_cast<std::size_t>(i)], pi(i));
+      try {
+        exid::writeFileAtomic(ctx.out_dir / "standard_parameters.csv", csv);
+        d["standard_parameters_csv"] = "standard_parameters.csv";
+      } catch (const std::exception&) {
+      }
+    }
+    ctx.report(1.0, fmt::format("{}: done", kName));
+    return e;
+  }
+
+ private:
+  /// Levenberg-Marquardt on r(z) = A pi(z) - b with the exact Jacobian A dpi/dz; variables with
+  /// a lower bound stay feasible (projected steps, active bounds held). Returns the iterations.
+  int polishLm(Problem& P, const std::vector<double>& lb, Eigen::VectorXd* z) const {
+    if (polish_ <= 0) return 0;
+    const StandardMap& map = *P.map;
+    const int n = map.nz();
+    double f = P.value(*z, nullptr);
+    double lambda = 1e-6;
+    int it = 0, small = 0;
+    for (; it < polish_ && small < 3; ++it) {
+      if (P.ctx && P.ctx->shouldStop()) break;
+      const Eigen::VectorXd r = P.A * map.pi(*z) - P.b;
+      const Eigen::MatrixXd Jr = P.A * map.jacobian(*z);
+      const Eigen::VectorXd g = Jr.transpose() * r;
+      std::vector<bool> fixed(static_cast<std::size_t>(n), false);
+      for (int k = 0; k < n; ++k)
+        fixed[static_cast<std::size_t>(k)] = std::isfinite(lb[static_cast<std::size_t>(k)]) &&
+                                              (*z)(k) <= lb[static_cast<std::size_t>(k)] && g(k) > 0;
+      Eigen::MatrixXd H = Jr.transpose() * Jr;
+      const double hmax = std::max(H.diagonal().maxCoeff(), 1e-300);
+      bool accepted = false;
+      for (int tries = 0; tries < 30 && !accepted; ++tries) {
+        Eigen::MatrixXd Hd = H;
+        for (int k = 0; k < n; ++k) Hd(k, k) += lambda * (H(k, k) + 1e-12 * hmax);
+        Eigen::VectorXd rhs = -g;
+        for (int k = 0; k < n; ++k)
+          if (fixed[static_cast<std::size_t>(k)]) {
+            Hd.row(k).setZero();
+            Hd.col(k).setZero();
+            Hd(k, k) = 1.0;
+            rhs(k) = 0.0;
+          }
+        const Eigen::VectorXd step = Hd.ldlt().solve(rhs);
+        Eigen::VectorXd zn = *z + step;
+        for (int k = 0; k < n; ++k) zn(k) = std::max(zn(k), lb[static_cast<std::size_t>(k)]);
+        const double fn = P.value(zn, nullptr);
+        if (std::isfinite(fn) && fn <= f) {
+          small = (f - fn) <= 1e-12 * f ? small + 1 : 0;
+          *z = zn;
+          f = fn;
+          lambda = std::max(lambda / 3.0, 1e-15);
+          accepted = true;
+        } else {
+          lambda *= 4.0;
+        }
+      }
+      if (!accepted) break;
+    }
+    return it;
+  }
+
+  std::string weighting_, algorithm_, start_;
+  int max_eval_, polish_, chunk_, max_eq_;
+  exid::est::SolveOptions opt_;
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(ConsistentLs)
