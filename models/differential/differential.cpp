@@ -92,20 +92,26 @@ class DifferentialModel : public exid::ObservationModel {
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     exid::models::requireSamples(s, n, true, "model 'differential'");
     const int P = exid::numParameters(R, cols_);
-    // Filled transposed (one contiguous column per row of W), then transposed once: no heap
-    // allocation per sample.
-    Eigen::MatrixXd Wt(P, static_cast<Eigen::Index>(K) * m);
+    // One sample's rows are a block of m consecutive rows of W: each column receives m
+    // contiguous numbers (cache friendly), and nothing is allocated per sample.
+    Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, P);
     Eigen::MatrixXd Y(n, P);
     Eigen::VectorXd q(n), qd(n), qdd(n);
+    bool all = m == n;
+    for (int i = 0; all && i < m; ++i) all = sel_[static_cast<std::size_t>(i)] == i;
     auto data = exid::makeDynamicsData(R);
     for (int k = 0; k < K; ++k) {
       q = s.q.row(k).transpose();
       qd = s.qd.row(k).transpose();
       qdd = s.qdd.row(k).transpose();
       exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
-      for (int i = 0; i < m; ++i) Wt.col(k * m + i) = Y.row(sel_[static_cast<std::size_t>(i)]).transpose();
+      if (all) {
+        W.middleRows(static_cast<Eigen::Index>(k) * m, m) = Y;
+      } else {
+        for (int i = 0; i < m; ++i) W.row(k * m + i) = Y.row(sel_[static_cast<std::size_t>(i)]);
+      }
     }
-    return Wt.transpose();
+    return W;
   }
 
   void fullDesignVjp(const exid::Samples& s, const Eigen::MatrixXd& dW,
