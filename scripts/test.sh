@@ -18,4 +18,10 @@ if [ -f "$build/ci_matrix/results.sqlite" ]; then
     echo
   done
 fi
+if [ -f "$build/ci_excitation/results.sqlite" ]; then
+  echo "== CI excitation matrix (examples/matrix/ci_excitation.yaml) =="
+  "$build/bin/exid" matrix table "$build/ci_excitation" --rows robot,excitation.criterion --cols optimizer \
+    --metric excitation.cond_W_final || true
+  echo
+fi
 exit $status
