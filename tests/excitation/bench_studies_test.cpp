@@ -116,13 +116,4 @@ TEST(BenchStudies, Puma560Fourier) {
 
 namespace {
 // Tuning aid: EXID_BENCH_STUDY=<yaml> EXID_BENCH_VCAP=<rad/s> runs another study the same way.
-TEST(BenchStudies, FromEnvironment) {
-  const char* f = std::getenv("EXID_BENCH_STUDY");
-  if (!f) GTEST_SKIP() << "EXID_BENCH_STUDY not set";
-  const char* v = std::getenv("EXID_BENCH_VCAP");
-  const auto path = std::filesystem::absolute(f);
-  const auto rel = std::filesystem::relative(path, exid_test::sourceDir() / "examples" / "bench");
-  Outcome o = runBench(rel.string(), v ? std::atof(v) : 0.0);
-  EXPECT_LE(o.violation, 1e-9);
-}
 }  // namespace

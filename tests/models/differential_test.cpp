@@ -9,7 +9,7 @@ const char* kSim = "{rtol: 1e-10, atol: 1e-12, duration_s: 10}";
 void checkRobot(const std::string& name, const std::string& params, int expect_base = -1) {
   auto r = mtest::robot(name);
   if (!r) {
-    GTEST_SKIP() << "robot " << name << " unavailable";
+    FAIL() << "robot " << name << " unavailable (its plugin did not load)";
   }
   const exid::Dataset d = mtest::simulate(r, kSim);
   auto m = mtest::model("differential", params, r);
