@@ -2,7 +2,7 @@
 // Baseline measured in the same run: the plain RNEA inverseDynamics (BM_Baseline_InverseDynamics).
 //
 // PUMA 560: standard DH and inertial data as in Corke's Robotics Toolbox (mdl_puma560.m; copied in
-// /work/shared/reference/robots/puma560.yaml): I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
+// ../shared/reference/robots/puma560.yaml): I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Core>
