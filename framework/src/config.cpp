@@ -100,7 +100,14 @@ std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n,
       return ParamValue(n.Scalar());
     }
     case ParamType::Path: {
-      if (!n.IsScalar() || n.Scalar().empty()) return expect("a file path");
+      if (!n.IsScalar()) return expect("a file path");
+      // An empty path means "none" where the plugin's default is empty (optional files); it must
+      // survive a round trip through the resolved study.
+      if (n.Scalar().empty()) {
+        const auto* def = d.default_value ? std::get_if<std::string>(&*d.default_value) : nullptr;
+        if (def && def->empty()) return ParamValue(std::string());
+        return expect("a file path");
+      }
       fs::path p(n.Scalar());
       if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
       return ParamValue(p.lexically_normal().string());

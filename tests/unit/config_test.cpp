@@ -158,3 +158,21 @@ TEST(StudyConfig, StackedModelsTakeWeights) {
   std::string msg = problems("robot: {type: test_throws}\nmodel:\n  - {type: test_model, weight: -1}\n");
   EXPECT_NE(msg.find("model[0].weight = -1: must be a number in (0, inf)"), std::string::npos) << msg;
 }
+
+TEST(StudyConfig, EmptyOptionalPathsSurviveTheResolvedStudy) {
+  // test_experiment's `file` is required; an optional path with an empty default round-trips.
+  exid::PluginInfo info;
+  info.name = "x";
+  info.params = {exid::param_path("extra", std::string(), "optional file")};
+  exid::ParamSet ps = exid::resolveParams(info, "{extra: ''}", "x.params", "/base");
+  EXPECT_EQ(ps.getString("extra"), "");
+  ps = exid::resolveParams(info, "{}", "x.params", "/base");
+  EXPECT_EQ(ps.getString("extra"), "");
+  // A required path may not be empty.
+  std::string msg = problems("robot: {type: test_throws}\nmodel: {type: test_model}\n"
+                             "experiment: {type: test_experiment, params: {file: ''}}\nestimator: {type: test_estimator}\n");
+  EXPECT_NE(msg.find("experiment.params.file: expected a file path"), std::string::npos) << msg;
+  // Every resolved study parses again to the same configuration.
+  exid::StudyConfig c = exid::parseStudy(kGood, "s.yaml", "/base", reg());
+  EXPECT_EQ(exid::parseStudy(c.resolvedYaml(), "r.yaml", "/base", reg()).hash(), c.hash());
+}
