@@ -115,7 +115,9 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector
     W2.col(k) = zero[static_cast<size_t>(c)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(c));
   }
   // beta from R11 beta = R12 (least squares in the original scaling, exact when W2 = W1 beta).
-  bp.beta = r > 0 ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2)) : Eigen::MatrixXd(0, nd);
+  // (No solve with an empty right-hand side: Eigen binds a reference to its null data pointer.)
+  bp.beta = (r > 0 && nd > 0) ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2))
+                              : Eigen::MatrixXd(Eigen::MatrixXd::Zero(r, nd));
   for (Eigen::Index i = 0; i < bp.beta.size(); ++i)
     if (std::abs(bp.beta.data()[i]) < 1e-10) bp.beta.data()[i] = 0.0;
 
