@@ -62,7 +62,8 @@ const Setup& puma() {
       auto robot = create<exid::Robot>("puma560")->build(ctx);
       x.model = create<exid::ObservationModel>("differential");
       x.model->bind(robot, ctx);
-      x.data = create<exid::Experiment>("simulate", "{sample_period_s: 0.001, duration_s: 20, noise_tau_Nm: 0.2}")
+      x.data = create<exid::Experiment>(
+                   "simulate", "{sample_period_s: 0.001, duration_s: 20, noise_tau_Nm: 0.2}")
                    ->run(robot, nullptr, ctx);
     } catch (const std::exception& e) {
       x.error = e.what();
@@ -73,7 +74,8 @@ const Setup& puma() {
   return s;
 }
 
-void run(benchmark::State& state, const Setup& s, const std::string& est, const std::string& params) {
+void run(benchmark::State& state, const Setup& s, const std::string& est,
+         const std::string& params) {
   if (!s.model) {
     state.SkipWithError(("setup failed: " + s.error).c_str());
     return;
@@ -109,17 +111,40 @@ void rowsOnly(benchmark::State& state, const Setup& s) {
 
 }  // namespace
 
-BENCHMARK_CAPTURE(run, puma_batch_ls, puma(), "batch_ls", "{}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, puma_batch_ls_normal, puma(), "batch_ls", "{accumulate: normal}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, puma_rls, puma(), "rls", "{history_stride: 1000}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, puma_rls_standard, puma(), "rls", "{history_stride: 1000, update: standard}")->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(run, puma_batch_ls, puma(), "batch_ls", "{}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, puma_batch_ls_normal, puma(), "batch_ls", "{accumulate: normal}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, puma_rls, puma(), "rls", "{history_stride: 1000}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, puma_rls_standard, puma(), "rls", "{history_stride: 1000, update: standard}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 BENCHMARK_CAPTURE(run, puma_wls, puma(), "wls", "{}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(rowsOnly, puma_model_rows_only, puma())->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, testmodel_batch_ls, testModel(), "batch_ls", "{}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, testmodel_batch_ls_normal, testModel(), "batch_ls", "{accumulate: normal}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, testmodel_rls, testModel(), "rls", "{history_stride: 1000}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, testmodel_rls_standard, testModel(), "rls", "{history_stride: 1000, update: standard}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(run, testmodel_wls, testModel(), "wls", "{}")->Unit(benchmark::kMillisecond)->UseRealTime();
-BENCHMARK_CAPTURE(rowsOnly, testmodel_rows_only, testModel())->Unit(benchmark::kMillisecond)->UseRealTime();
+BENCHMARK_CAPTURE(rowsOnly, puma_model_rows_only, puma())
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, testmodel_batch_ls, testModel(), "batch_ls", "{}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, testmodel_batch_ls_normal, testModel(), "batch_ls", "{accumulate: normal}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, testmodel_rls, testModel(), "rls", "{history_stride: 1000}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, testmodel_rls_standard, testModel(), "rls",
+                  "{history_stride: 1000, update: standard}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(run, testmodel_wls, testModel(), "wls", "{}")
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
+BENCHMARK_CAPTURE(rowsOnly, testmodel_rows_only, testModel())
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime();
 
 BENCHMARK_MAIN();

@@ -24,7 +24,9 @@ exid::Registry& registry() {
     auto* r = new exid::Registry();
     char buf[4096];
     const ssize_t len = readlink("/proc/self/exe", buf, sizeof(buf) - 1);
-    std::filesystem::path exe = len > 0 ? std::filesystem::path(std::string(buf, static_cast<std::size_t>(len))) : std::filesystem::path(".");
+    std::filesystem::path exe =
+        len > 0 ? std::filesystem::path(std::string(buf, static_cast<std::size_t>(len)))
+                : std::filesystem::path(".");
     r->addSearchPath(exe.parent_path().parent_path() / "plugins");
     r->scan();
     return r;
@@ -35,7 +37,8 @@ exid::Registry& registry() {
 template <class T>
 std::shared_ptr<T> create(const std::string& name, const std::string& params) {
   const exid::PluginInfo& info = registry().get(T::kKind, name);
-  exid::ParamSet ps = exid::resolveParams(info, params, name, std::filesystem::path(EXID_SOURCE_DIR));
+  exid::ParamSet ps =
+      exid::resolveParams(info, params, name, std::filesystem::path(EXID_SOURCE_DIR));
   return registry().create<T>(name, ps);
 }
 
@@ -44,8 +47,8 @@ struct Problem {
   std::unique_ptr<exid::ExcitationProblem> problem;
 };
 
-Problem make(const std::string& robot, int n_keep, const std::string& model_params, const std::string& traj,
-             const std::string& traj_params) {
+Problem make(const std::string& robot, int n_keep, const std::string& model_params,
+             const std::string& traj, const std::string& traj_params) {
   exid::RunContext ctx;
   auto r0 = create<exid::Robot>(robot, "{}")->build(ctx);
   auto r = std::make_shared<exid::RobotModel>(*r0);
@@ -100,13 +103,17 @@ void BM_Pointwise_K300_n6(benchmark::State& state) {
   run(state, p, state.range(0) != 0);
 }
 void BM_Fourier_Panda(benchmark::State& state) {
-  static Problem p = make("panda", 0, "{rotor_inertia: false, viscous: true, coulomb: true, offset: false}", "fourier",
-                          "{period_s: 10, harmonics: 5, sample_period_s: 0.1, position_margin_rad: 0.1, acceleration_limits: false}");
+  static Problem p = make(
+      "panda", 0, "{rotor_inertia: false, viscous: true, coulomb: true, offset: false}", "fourier",
+      "{period_s: 10, harmonics: 5, sample_period_s: 0.1, position_margin_rad: 0.1, "
+      "acceleration_limits: false}");
   run(state, p, state.range(0) != 0);
 }
 void BM_Constraints_Panda(benchmark::State& state) {
-  static Problem p = make("panda", 0, "{rotor_inertia: false, viscous: true, coulomb: true, offset: false}", "fourier",
-                          "{period_s: 10, harmonics: 5, sample_period_s: 0.1, position_margin_rad: 0.1, acceleration_limits: false}");
+  static Problem p = make(
+      "panda", 0, "{rotor_inertia: false, viscous: true, coulomb: true, offset: false}", "fourier",
+      "{period_s: 10, harmonics: 5, sample_period_s: 0.1, position_margin_rad: 0.1, "
+      "acceleration_limits: false}");
   Eigen::VectorXd z = p.problem->initial(), g;
   Eigen::MatrixXd J;
   for (auto _ : state) {

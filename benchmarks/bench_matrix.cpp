@@ -39,7 +39,8 @@ void BM_MatrixOverheadPerCell(benchmark::State& state) {
   exid::setLogLevel(exid::LogLevel::Quiet);
   std::string seeds;
   for (int i = 0; i < 50; ++i) seeds += (i ? ", " : "") + std::to_string(i);
-  fs::path file = writeMatrix("overhead", "name: o\nstudy: {robot: {type: planar2r}}\naxes: {seed: [" + seeds + "]}\n");
+  fs::path file = writeMatrix(
+      "overhead", "name: o\nstudy: {robot: {type: planar2r}}\naxes: {seed: [" + seeds + "]}\n");
   for (auto _ : state) {
     exid::MatrixSpec spec = exid::loadMatrix(file, reg());
     exid::MatrixOptions opt;
@@ -49,8 +50,9 @@ void BM_MatrixOverheadPerCell(benchmark::State& state) {
     opt.write_cell_files = false;
     exid::runMatrix(spec, reg(), opt);
   }
-  state.counters["s_per_cell"] = benchmark::Counter(50.0 * static_cast<double>(state.iterations()),
-                                                    benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
+  state.counters["s_per_cell"] =
+      benchmark::Counter(50.0 * static_cast<double>(state.iterations()),
+                         benchmark::Counter::kIsRate | benchmark::Counter::kInvert);
 }
 BENCHMARK(BM_MatrixOverheadPerCell)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(3);
 
@@ -74,7 +76,12 @@ axes: {seed: [1, 2, 3, 4, 5, 6, 7, 8]}
     exid::runMatrix(spec, reg(), opt);
   }
 }
-BENCHMARK(BM_MatrixCpuBound)->Arg(1)->Arg(2)->Unit(benchmark::kMillisecond)->UseRealTime()->Iterations(2);
+BENCHMARK(BM_MatrixCpuBound)
+    ->Arg(1)
+    ->Arg(2)
+    ->Unit(benchmark::kMillisecond)
+    ->UseRealTime()
+    ->Iterations(2);
 
 }  // namespace
 

@@ -28,9 +28,10 @@ class BatchLs : public exid::Estimator {
 
   static std::vector<exid::ParamDecl> params() {
     return {
-        exid::param_int("chunk_samples", 4096,
-                        "samples per chunk passed to the model (memory ~ chunk x rows per sample x p)",
-                        1.0, 1e9),
+        exid::param_int(
+            "chunk_samples", 4096,
+            "samples per chunk passed to the model (memory ~ chunk x rows per sample x p)", 1.0,
+            1e9),
         exid::param_string("accumulate", std::string("qr"),
                            "qr: incremental Householder QR of [W y] (cond not squared); normal: "
                            "accumulate W^T W (faster, squares cond(W); for comparison)",
@@ -65,7 +66,8 @@ class BatchLs : public exid::Estimator {
     ctx.report(0.97, "batch_ls: solving");
     exid::Estimate e;
     if (!prior) {
-      const exid::est::LsSolution s = exid::est::solveLeastSquares(acc, model.base().names, opt_, kName);
+      const exid::est::LsSolution s =
+          exid::est::solveLeastSquares(acc, model.base().names, opt_, kName);
       exid::est::fillEstimate(&e, model, s, s.rss, s.m);
     } else {
       // Regularised least squares: the data rows divided by their noise std (from the
@@ -80,7 +82,8 @@ class BatchLs : public exid::Estimator {
       // The prior makes the problem positive definite: no rank decision (noise-free data with
       // a prior are legitimately ill-conditioned: tiny noise std, large weights).
       o.rank_tolerance = 0.0;
-      const exid::est::LsSolution s = exid::est::solveLeastSquares(tot, model.base().names, o, kName);
+      const exid::est::LsSolution s =
+          exid::est::solveLeastSquares(tot, model.base().names, o, kName);
       exid::est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
       e.rows = acc.rows();
       e.details["noise_std"] = noise;

@@ -38,7 +38,8 @@ std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data()
 /// The map z -> full standard parameter vector (model.fullNames() order).
 class StandardMap {
  public:
-  StandardMap(const std::vector<std::string>& names, const Eigen::VectorXd& nominal) : nfull_(static_cast<int>(names.size())) {
+  StandardMap(const std::vector<std::string>& names, const Eigen::VectorXd& nominal)
+      : nfull_(static_cast<int>(names.size())) {
     std::map<int, std::array<int, 10>> groups;
     std::vector<int> group_of(names.size(), -1);
     for (std::size_t i = 0; i < names.size(); ++i) {
@@ -99,7 +100,8 @@ class StandardMap {
       Vec10 p;
       for (int k = 0; k < 10; ++k) p(k) = nominal(idx[static_cast<std::size_t>(k)]);
       const double tr = exid::est::pseudoInertia(p).trace();
-      diag_floor_.push_back(std::log(1e-5 * std::sqrt(std::max(std::isfinite(tr) ? tr : 0.0, 1e-6))));
+      diag_floor_.push_back(
+          std::log(1e-5 * std::sqrt(std::max(std::isfinite(tr) ? tr : 0.0, 1e-6))));
     }
   }
 
@@ -107,7 +109,9 @@ class StandardMap {
   int nfull() const { return nfull_; }
   int numBodies() const { return static_cast<int>(bodies_.size()); }
   int bodyNumber(int b) const { return body_numbers_[static_cast<std::size_t>(b)]; }
-  const std::array<int, 10>& bodyIndices(int b) const { return bodies_[static_cast<std::size_t>(b)]; }
+  const std::array<int, 10>& bodyIndices(int b) const {
+    return bodies_[static_cast<std::size_t>(b)];
+  }
   int numScalars() const { return static_cast<int>(scalars_.size()); }
   bool nonneg(int s) const { return nonneg_[static_cast<std::size_t>(s)]; }
   int scalarIndex(int s) const { return scalars_[static_cast<std::size_t>(s)]; }
@@ -116,7 +120,8 @@ class StandardMap {
   void lowerBounds(std::vector<double>* lb) const {
     lb->assign(static_cast<std::size_t>(nz_), -HUGE_VAL);
     for (int b = 0; b < numBodies(); ++b)
-      for (int k = 0; k < 4; ++k) (*lb)[static_cast<std::size_t>(10 * b + k)] = diag_floor_[static_cast<std::size_t>(b)];
+      for (int k = 0; k < 4; ++k)
+        (*lb)[static_cast<std::size_t>(10 * b + k)] = diag_floor_[static_cast<std::size_t>(b)];
     for (int s = 0; s < numScalars(); ++s)
       if (nonneg(s)) (*lb)[static_cast<std::size_t>(zOfScalar(s))] = 0.0;
   }
@@ -127,7 +132,8 @@ class StandardMap {
       const Vec10 p = exid::est::logCholeskyToInertial(z.segment<10>(10 * b));
       for (int k = 0; k < 10; ++k) out(bodyIndices(b)[static_cast<std::size_t>(k)]) = p(k);
     }
-    for (int s = 0; s < numScalars(); ++s) out(scalarIndex(s)) = scale_[static_cast<std::size_t>(s)] * z(zOfScalar(s));
+    for (int s = 0; s < numScalars(); ++s)
+      out(scalarIndex(s)) = scale_[static_cast<std::size_t>(s)] * z(zOfScalar(s));
     return out;
   }
 
@@ -136,9 +142,11 @@ class StandardMap {
     Eigen::MatrixXd Jz = Eigen::MatrixXd::Zero(nfull_, nz_);
     for (int b = 0; b < numBodies(); ++b) {
       const Eigen::Matrix<double, 10, 10> J = exid::est::logCholeskyJacobian(z.segment<10>(10 * b));
-      for (int k = 0; k < 10; ++k) Jz.block(bodyIndices(b)[static_cast<std::size_t>(k)], 10 * b, 1, 10) = J.row(k);
+      for (int k = 0; k < 10; ++k)
+        Jz.block(bodyIndices(b)[static_cast<std::size_t>(k)], 10 * b, 1, 10) = J.row(k);
     }
-    for (int s = 0; s < numScalars(); ++s) Jz(scalarIndex(s), zOfScalar(s)) = scale_[static_cast<std::size_t>(s)];
+    for (int s = 0; s < numScalars(); ++s)
+      Jz(scalarIndex(s), zOfScalar(s)) = scale_[static_cast<std::size_t>(s)];
     return Jz;
   }
 
@@ -150,7 +158,8 @@ class StandardMap {
       for (int k = 0; k < 10; ++k) gb(k) = g(bodyIndices(b)[static_cast<std::size_t>(k)]);
       out.segment<10>(10 * b) = exid::est::logCholeskyVjp(z.segment<10>(10 * b), gb);
     }
-    for (int s = 0; s < numScalars(); ++s) out(zOfScalar(s)) = scale_[static_cast<std::size_t>(s)] * g(scalarIndex(s));
+    for (int s = 0; s < numScalars(); ++s)
+      out(zOfScalar(s)) = scale_[static_cast<std::size_t>(s)] * g(scalarIndex(s));
     return out;
   }
 
@@ -251,26 +260,32 @@ class ConsistentLs : public exid::Estimator {
 
   static std::vector<exid::ParamDecl> params() {
     return {
-        exid::param_string("weighting", std::string("equation"),
-                           "equation: each equation's rows divided by its residual std (wls, Gautier); "
-                           "none: one std for all rows (OLS)",
-                           {"equation", "none"}),
-        exid::param_string("algorithm", std::string("LD_LBFGS"),
-                           "NLopt algorithm (exact gradients); none: Levenberg-Marquardt only",
-                           {"LD_LBFGS", "LD_SLSQP", "LD_MMA", "LD_TNEWTON_PRECOND_RESTART", "none"}),
+        exid::param_string(
+            "weighting", std::string("equation"),
+            "equation: each equation's rows divided by its residual std (wls, Gautier); "
+            "none: one std for all rows (OLS)",
+            {"equation", "none"}),
+        exid::param_string(
+            "algorithm", std::string("LD_LBFGS"),
+            "NLopt algorithm (exact gradients); none: Levenberg-Marquardt only",
+            {"LD_LBFGS", "LD_SLSQP", "LD_MMA", "LD_TNEWTON_PRECOND_RESTART", "none"}),
         exid::param_int("max_evaluations", 3000, "NLopt evaluations (each O(p n_full))", 1.0, 1e8),
-        exid::param_int("polish_iterations", 300, "Levenberg-Marquardt iterations after NLopt (0: none)", 0.0, 1e6),
-        exid::param_string("start", std::string("best"),
-                           "nominal: the robot description projected to consistency; unconstrained: "
-                           "the (prior-regularised) least-squares solution completed with the nominal "
-                           "values and projected; best: whichever fits better",
-                           {"nominal", "unconstrained", "best"}),
+        exid::param_int("polish_iterations", 300,
+                        "Levenberg-Marquardt iterations after NLopt (0: none)", 0.0, 1e6),
+        exid::param_string(
+            "start", std::string("best"),
+            "nominal: the robot description projected to consistency; unconstrained: "
+            "the (prior-regularised) least-squares solution completed with the nominal "
+            "values and projected; best: whichever fits better",
+            {"nominal", "unconstrained", "best"}),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
-        exid::param_int("max_equations", 1000, "refuse more distinct equations than this", 1.0, 1e6),
-        exid::param_double("rank_tolerance", 1e-8, "",
-                           "a direction is unidentifiable when its singular value of the column-scaled "
-                           "W is below this times the largest",
-                           0.0, 1.0, true, true),
+        exid::param_int("max_equations", 1000, "refuse more distinct equations than this", 1.0,
+                        1e6),
+        exid::param_double(
+            "rank_tolerance", 1e-8, "",
+            "a direction is unidentifiable when its singular value of the column-scaled "
+            "W is below this times the largest",
+            0.0, 1.0, true, true),
     };
   }
 
@@ -301,27 +316,32 @@ class ConsistentLs : public exid::Estimator {
     // ---- rows compressed per equation
     std::map<int, RowAccumulator> acc;
     std::map<int, std::vector<int>> idx;
-    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int, int) {
-      for (auto& [eq, v] : idx) v.clear();
-      const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
-      for (Eigen::Index i = 0; i < r.y.size(); ++i)
-        idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(static_cast<int>(i));
-      exid::check(static_cast<int>(idx.size()) <= max_eq_,
-                  fmt::format("{}: the model labels more than max_equations = {} distinct equations", kName, max_eq_));
-      for (const auto& [eq, v] : idx) {
-        if (v.empty()) continue;
-        const auto n = static_cast<Eigen::Index>(v.size());
-        Eigen::MatrixXd W(n, p);
-        Eigen::VectorXd y(n);
-        for (Eigen::Index k = 0; k < n; ++k) {
-          W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
-          y(k) = r.y(v[static_cast<std::size_t>(k)]);
-        }
-        auto it = acc.find(eq);
-        if (it == acc.end()) it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
-        it->second.add(W, y);
-      }
-    });
+    exid::est::forEachChunk(
+        model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int, int) {
+          for (auto& [eq, v] : idx) v.clear();
+          const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
+          for (Eigen::Index i = 0; i < r.y.size(); ++i)
+            idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
+                static_cast<int>(i));
+          exid::check(
+              static_cast<int>(idx.size()) <= max_eq_,
+              fmt::format("{}: the model labels more than max_equations = {} distinct equations",
+                          kName, max_eq_));
+          for (const auto& [eq, v] : idx) {
+            if (v.empty()) continue;
+            const auto n = static_cast<Eigen::Index>(v.size());
+            Eigen::MatrixXd W(n, p);
+            Eigen::VectorXd y(n);
+            for (Eigen::Index k = 0; k < n; ++k) {
+              W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
+              y(k) = r.y(v[static_cast<std::size_t>(k)]);
+            }
+            auto it = acc.find(eq);
+            if (it == acc.end())
+              it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
+            it->second.add(W, y);
+          }
+        });
     RowAccumulator all(p);
     for (const auto& [eq, a] : acc) all.merge(a);
     const long m = all.rows();
@@ -349,15 +369,19 @@ class ConsistentLs : public exid::Estimator {
           int pe = 0;
           for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
           double dof = static_cast<double>(a.rows() - pe);
-          if (dof <= 0) dof = static_cast<double>(a.rows()) * static_cast<double>(std::max<long>(1, m - rank)) / static_cast<double>(m);
+          if (dof <= 0)
+            dof = static_cast<double>(a.rows()) * static_cast<double>(std::max<long>(1, m - rank)) /
+                  static_cast<double>(m);
           s = std::sqrt(std::max(0.0, a.residualSquared(theta_mn)) / std::max(dof, 1e-300));
         }
         sigma[eq] = s;
         smax = std::max(smax, s);
       }
       // Floor: exactly fitted (noise-free) data must not get infinite weights.
-      double yrms = all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
-      const double floor = std::max(smax > 0 ? 1e-6 * smax : 0.0, (prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
+      double yrms =
+          all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
+      const double floor =
+          std::max(smax > 0 ? 1e-6 * smax : 0.0, (prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
       for (const auto& [eq, a] : acc) {
         const double s = std::max(sigma[eq], floor);
         total.merge(a, 1.0 / s);
@@ -393,7 +417,8 @@ class ConsistentLs : public exid::Estimator {
     std::string started = "nominal";
     if (start_ != "nominal") {
       // pi0 + K^+ (theta_u - K pi0): the unconstrained solution completed with the nominal values.
-      const Eigen::VectorXd dpi = base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
+      const Eigen::VectorXd dpi =
+          base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
       const Eigen::VectorXd z_unc = map.fromStandard(pi0 + dpi, floor, &projected_unc);
       if (start_ == "unconstrained" || P.value(z_unc, nullptr) < P.value(z_nom, nullptr)) {
         z0 = z_unc;
@@ -442,7 +467,8 @@ class ConsistentLs : public exid::Estimator {
     {
       Eigen::VectorXd g = map.vjp(z, 2.0 * (P.A.transpose() * (P.A * pi - P.b)));
       for (int k = 0; k < map.nz(); ++k)
-        if (std::isfinite(lb[static_cast<std::size_t>(k)]) && z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
+        if (std::isfinite(lb[static_cast<std::size_t>(k)]) &&
+            z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
           Jb.col(k).setZero();
     }
     const Eigen::MatrixXd JA = Fw * Jb;
@@ -481,7 +507,8 @@ class ConsistentLs : public exid::Estimator {
     d["weighting"] = weighting_;
     d["equations"] = eq_table;
     d["covariance_definition"] =
-        "linearised: J (J^T F^T F J)^+ J^T with J = K dpi/dz at the estimate (variables at an active "
+        "linearised: J (J^T F^T F J)^+ J^T with J = K dpi/dz at the estimate (variables at an "
+        "active "
         "bound fixed), F the factor of the noise-normalised rows" +
         std::string(prior ? " stacked with the prior" : "") +
         "; equals the unconstrained covariance when no constraint is active";
@@ -570,7 +597,7 @@ class ConsistentLs : public exid::Estimator {
       std::vector<bool> fixed(static_cast<std::size_t>(n), false);
       for (int k = 0; k < n; ++k)
         fixed[static_cast<std::size_t>(k)] = std::isfinite(lb[static_cast<std::size_t>(k)]) &&
-                                              (*z)(k) <= lb[static_cast<std::size_t>(k)] && g(k) > 0;
+                                             (*z)(k) <= lb[static_cast<std::size_t>(k)] && g(k) > 0;
       Eigen::MatrixXd H = Jr.transpose() * Jr;
       const double hmax = std::max(H.diagonal().maxCoeff(), 1e-300);
       bool accepted = false;

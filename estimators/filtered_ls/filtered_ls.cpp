@@ -35,21 +35,24 @@ class FilteredLs : public exid::Estimator {
 
   static std::vector<exid::ParamDecl> params() {
     return {
-        exid::param_double("cutoff_hz", 10.0, "Hz",
-                           "cutoff (-3 dB per pass) of the position low-pass; 0: positions not filtered",
-                           0.0),
+        exid::param_double(
+            "cutoff_hz", 10.0, "Hz",
+            "cutoff (-3 dB per pass) of the position low-pass; 0: positions not filtered", 0.0),
         exid::param_int("filter_order", 4, "order of the position Butterworth filter", 1.0, 20.0),
-        exid::param_bool("differentiate", false,
-                         "always compute qd, qdd by central differences of the filtered q (otherwise "
-                         "only when the data lack them)"),
+        exid::param_bool(
+            "differentiate", false,
+            "always compute qd, qdd by central differences of the filtered q (otherwise "
+            "only when the data lack them)"),
         exid::param_int("decimation", 0,
                         "parallel decimation factor; 0: automatic (floor(0.2 fs / cutoff_hz), 1 "
                         "without a position filter); 1: none",
                         0.0, 1e6),
-        exid::param_int("decimation_order", 8, "order of the decimation Butterworth filter", 1.0, 20.0),
-        exid::param_double("decimation_cutoff_ratio", 0.8, "",
-                           "decimation filter cutoff as a fraction of the decimated Nyquist frequency",
-                           0.0, 1.0, true, true),
+        exid::param_int("decimation_order", 8, "order of the decimation Butterworth filter", 1.0,
+                        20.0),
+        exid::param_double(
+            "decimation_cutoff_ratio", 0.8, "",
+            "decimation filter cutoff as a fraction of the decimated Nyquist frequency", 0.0, 1.0,
+            true, true),
         exid::param_bool("correct_correlation", true,
                          "scale the covariance by kappa, the long-run / marginal variance ratio of "
                          "white noise after the decimation filter (the decimated residuals are "
@@ -87,21 +90,24 @@ class FilteredLs : public exid::Estimator {
                           const exid::Prior* /*prior*/, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int K = data.size();
-    exid::check(K >= 8, fmt::format("filtered_ls: dataset '{}' has {} samples; filtering needs at least 8",
-                                    data.source, K));
+    exid::check(K >= 8,
+                fmt::format("filtered_ls: dataset '{}' has {} samples; filtering needs at least 8",
+                            data.source, K));
     exid::check(data.q.rows() == K && data.q.cols() > 0,
                 fmt::format("filtered_ls: dataset '{}' has no positions q", data.source));
     double jitter = 0.0;
     const double fs = est::samplingRate(data.t, &jitter);
     if (jitter > 0.05)
-      exid::logWarn(fmt::format("filtered_ls: sampling of '{}' is not uniform (max |dt - median| = {:.0f} % "
-                                "of the median); filters assume fs = {:g} Hz",
-                                data.source, 100 * jitter, fs));
+      exid::logWarn(
+          fmt::format("filtered_ls: sampling of '{}' is not uniform (max |dt - median| = {:.0f} % "
+                      "of the median); filters assume fs = {:g} Hz",
+                      data.source, 100 * jitter, fs));
     const bool filter_q = cutoff_ > 0.0;
     if (filter_q)
-      exid::check(cutoff_ < 0.5 * fs, fmt::format("filtered_ls: cutoff_hz = {:g} Hz must be below the Nyquist "
-                                                  "frequency fs/2 = {:g} Hz of '{}'",
-                                                  cutoff_, 0.5 * fs, data.source));
+      exid::check(cutoff_ < 0.5 * fs,
+                  fmt::format("filtered_ls: cutoff_hz = {:g} Hz must be below the Nyquist "
+                              "frequency fs/2 = {:g} Hz of '{}'",
+                              cutoff_, 0.5 * fs, data.source));
 
     // ---- 1-2. filtering and differentiation
     ctx.report(0.0, "filtered_ls: filtering");
@@ -119,7 +125,8 @@ class FilteredLs : public exid::Estimator {
       f.qd = est::filtfiltColumns(sos, data.qd);
     }
     if (diff_qdd) {
-      f.qdd = diff_qd ? est::centralSecondDerivative(data.t, f.q) : est::centralFirstDerivative(data.t, f.qd);
+      f.qdd = diff_qd ? est::centralSecondDerivative(data.t, f.q)
+                      : est::centralFirstDerivative(data.t, f.qd);
     } else if (filter_q) {
       f.qdd = est::filtfiltColumns(sos, data.qdd);
     }
@@ -127,10 +134,13 @@ class FilteredLs : public exid::Estimator {
 
     // ---- 3. trim
     long trim = trim_;
-    if (trim < 0) trim = filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_)) : ((diff_qd || diff_qdd) ? 1 : 0);
-    exid::check(K - 2 * trim >= 8, fmt::format("filtered_ls: trimming {} samples at each end of {} leaves too few; "
-                                               "lower trim_edges or raise cutoff_hz",
-                                               trim, K));
+    if (trim < 0)
+      trim = filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_))
+                      : ((diff_qd || diff_qdd) ? 1 : 0);
+    exid::check(K - 2 * trim >= 8,
+                fmt::format("filtered_ls: trimming {} samples at each end of {} leaves too few; "
+                            "lower trim_edges or raise cutoff_hz",
+                            trim, K));
     if (trim > 0) f = est::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
 
     // ---- 4. rows and parallel decimation
@@ -140,10 +150,12 @@ class FilteredLs : public exid::Estimator {
     const long rows_before = rows.y.size();
     int R = decimation_;
     std::string dec_note;
-    if (R == 0) R = filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
+    if (R == 0)
+      R = filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
     if (R > 1 && !est::modelIsPerSample(model)) {
-      dec_note = fmt::format("decimation {} skipped: the model '{}' does not give one row per sample and equation",
-                             R, model.pluginName());
+      dec_note = fmt::format(
+          "decimation {} skipped: the model '{}' does not give one row per sample and equation", R,
+          model.pluginName());
       exid::logWarn("filtered_ls: " + dec_note);
       R = 1;
     }
@@ -175,8 +187,10 @@ class FilteredLs : public exid::Estimator {
     d["sampling_jitter"] = jitter;
     d["cutoff_hz"] = filter_q ? exid::Json(cutoff_) : exid::Json(nullptr);
     d["filter_order"] = order_;
-    d["filter"] = filter_q ? "Butterworth (bilinear), forward-backward (zero phase, |H|^2)" : "none";
-    d["qd_source"] = diff_qd ? "central differences of filtered q" : (filter_q ? "measured, filtered" : "measured");
+    d["filter"] =
+        filter_q ? "Butterworth (bilinear), forward-backward (zero phase, |H|^2)" : "none";
+    d["qd_source"] = diff_qd ? "central differences of filtered q"
+                             : (filter_q ? "measured, filtered" : "measured");
     d["qdd_source"] = diff_qdd ? (diff_qd ? "central second differences of filtered q"
                                           : "central differences of filtered qd")
                                : (filter_q ? "measured, filtered" : "measured");

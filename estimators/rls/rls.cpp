@@ -3,7 +3,8 @@
 //   g = P phi,  s = phi^T g,  k = g / (lambda + s)            (k = P_{k+1} phi of eqn 6)
 //   theta <- theta + k (y - phi^T theta)                       (eqn 6)
 //   P <- [(I - k phi^T) P (I - k phi^T)^T + lambda k k^T] / lambda
-//      = [P - k g^T - g k^T + (lambda + s) k k^T] / lambda      (Joseph form; = eqn 7 for lambda = 1)
+//      = [P - k g^T - g k^T + (lambda + s) k k^T] / lambda      (Joseph form; = eqn 7 for lambda =
+//      1)
 // P is stored as its lower triangle and updated by symmetric rank-one/two updates, so it is
 // exactly symmetric; the Joseph form is first-order insensitive to rounding errors in k.
 // P is the normalised covariance ((W^T W + P0^-1)^-1 for lambda = 1); the reported covariance is
@@ -31,24 +32,29 @@ class Rls : public exid::Estimator {
 
   static std::vector<exid::ParamDecl> params() {
     return {
-        exid::param_double("p0", 1e6, "", "initial covariance P0 = p0 I (normalised by the noise variance)",
-                           0.0, std::nullopt, true),
+        exid::param_double("p0", 1e6, "",
+                           "initial covariance P0 = p0 I (normalised by the noise variance)", 0.0,
+                           std::nullopt, true),
         exid::param_double("forgetting_factor", 1.0, "",
-                           "lambda in (0, 1]: weight lambda^(K-k) on row k; 1 = no forgetting", 0.0, 1.0,
-                           true, false),
+                           "lambda in (0, 1]: weight lambda^(K-k) on row k; 1 = no forgetting", 0.0,
+                           1.0, true, false),
         exid::param_int("history_stride", 1,
-                        "record the estimate and diag(P) every N samples (the last one always)", 1.0, 1e12),
-        exid::param_string("update", std::string("joseph"),
-                           "joseph: symmetric Joseph form (robust to rounding); standard: eqn 7 as written "
-                           "(P - g g^T / (lambda + s)), also kept symmetric",
-                           {"joseph", "standard"}),
-        exid::param_double("noise_std", 0.0, "units of y",
-                           "standard deviation of one measurement, converts a prior covariance into "
-                           "P0 = Sigma0 / noise_std^2; 0: P0 = Sigma0",
-                           0.0),
-        exid::param_bool("residual_pass", false,
-                         "recompute the final residuals in a second pass over the data (always done "
-                         "when forgetting_factor < 1)"),
+                        "record the estimate and diag(P) every N samples (the last one always)",
+                        1.0, 1e12),
+        exid::param_string(
+            "update", std::string("joseph"),
+            "joseph: symmetric Joseph form (robust to rounding); standard: eqn 7 as written "
+            "(P - g g^T / (lambda + s)), also kept symmetric",
+            {"joseph", "standard"}),
+        exid::param_double(
+            "noise_std", 0.0, "units of y",
+            "standard deviation of one measurement, converts a prior covariance into "
+            "P0 = Sigma0 / noise_std^2; 0: P0 = Sigma0",
+            0.0),
+        exid::param_bool(
+            "residual_pass", false,
+            "recompute the final residuals in a second pass over the data (always done "
+            "when forgetting_factor < 1)"),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
     };
   }
@@ -81,10 +87,12 @@ class Rls : public exid::Estimator {
     Eigen::MatrixXd P = Eigen::MatrixXd::Zero(p, p);  // lower triangle used
     Eigen::MatrixXd P0inv;                            // for the residual identity
     if (prior) {
-      exid::check(prior->value.size() == p && prior->covariance.rows() == p && prior->covariance.cols() == p,
-                  fmt::format("rls: the prior has {} values and a {}x{} covariance; the model has {} base "
-                              "parameters",
-                              prior->value.size(), prior->covariance.rows(), prior->covariance.cols(), p));
+      exid::check(
+          prior->value.size() == p && prior->covariance.rows() == p &&
+              prior->covariance.cols() == p,
+          fmt::format("rls: the prior has {} values and a {}x{} covariance; the model has {} base "
+                      "parameters",
+                      prior->value.size(), prior->covariance.rows(), prior->covariance.cols(), p));
       const double scale = noise_std_ > 0 ? 1.0 / (noise_std_ * noise_std_) : 1.0;
       Eigen::MatrixXd S = 0.5 * (prior->covariance + prior->covariance.transpose()) * scale;
       Eigen::LLT<Eigen::MatrixXd> llt(S);
@@ -113,66 +121,74 @@ class Rls : public exid::Estimator {
     long m = 0;
     double m_eff = 0.0;  // sum of the weights lambda^(K-k)
     std::vector<int> sample_of_row, order;
-    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
-                            [&](const exid::Rows& r, int begin, int end) {
-      const Eigen::MatrixXd Wt = r.W.transpose();
-      exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
-      const auto R = static_cast<int>(order.size());
-      for (int idx = 0; idx < R; ++idx) {
-        const int i = order[static_cast<std::size_t>(idx)];
-        const auto phi = Wt.col(i);
-        g.noalias() = P.selfadjointView<Eigen::Lower>() * phi;
-        const double s = phi.dot(g);
-        const double den = lambda_ + s;
-        k = g / den;
-        const double err = r.y(i) - phi.dot(theta);
-        theta.noalias() += err * k;
-        V = lambda_ * V + err * err / den;
-        m_eff = lambda_ * m_eff + 1.0;
-        if (joseph_) {
-          P.selfadjointView<Eigen::Lower>().rankUpdate(k, g, -1.0);
-          P.selfadjointView<Eigen::Lower>().rankUpdate(k, den);
-        } else {
-          P.selfadjointView<Eigen::Lower>().rankUpdate(g, -1.0 / den);
-        }
-        if (lambda_ != 1.0) P.triangularView<Eigen::Lower>() *= 1.0 / lambda_;
-        // history after the last row of a sample
-        const int smp = sample_of_row[static_cast<std::size_t>(i)];
-        const bool last_of_sample =
-            idx + 1 == R || sample_of_row[static_cast<std::size_t>(order[static_cast<std::size_t>(idx + 1)])] != smp;
-        const long global = begin + smp;
-        if (last_of_sample && (global % stride_ == 0 || global == K - 1) && h < n_hist) {
-          e.history_t(h) = data.t(global);
-          e.history_value.row(h) = theta.transpose();
-          e.history_pdiag.row(h) = P.diagonal().transpose();
-          ++h;
-        }
-      }
-      m += R;
-    });
+    exid::est::forEachChunk(
+        model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
+        [&](const exid::Rows& r, int begin, int end) {
+          const Eigen::MatrixXd Wt = r.W.transpose();
+          exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
+          const auto R = static_cast<int>(order.size());
+          for (int idx = 0; idx < R; ++idx) {
+            const int i = order[static_cast<std::size_t>(idx)];
+            const auto phi = Wt.col(i);
+            g.noalias() = P.selfadjointView<Eigen::Lower>() * phi;
+            const double s = phi.dot(g);
+            const double den = lambda_ + s;
+            k = g / den;
+            const double err = r.y(i) - phi.dot(theta);
+            theta.noalias() += err * k;
+            V = lambda_ * V + err * err / den;
+            m_eff = lambda_ * m_eff + 1.0;
+            if (joseph_) {
+              P.selfadjointView<Eigen::Lower>().rankUpdate(k, g, -1.0);
+              P.selfadjointView<Eigen::Lower>().rankUpdate(k, den);
+            } else {
+              P.selfadjointView<Eigen::Lower>().rankUpdate(g, -1.0 / den);
+            }
+            if (lambda_ != 1.0) P.triangularView<Eigen::Lower>() *= 1.0 / lambda_;
+            // history after the last row of a sample
+            const int smp = sample_of_row[static_cast<std::size_t>(i)];
+            const bool last_of_sample =
+                idx + 1 == R ||
+                sample_of_row[static_cast<std::size_t>(order[static_cast<std::size_t>(idx + 1)])] !=
+                    smp;
+            const long global = begin + smp;
+            if (last_of_sample && (global % stride_ == 0 || global == K - 1) && h < n_hist) {
+              e.history_t(h) = data.t(global);
+              e.history_value.row(h) = theta.transpose();
+              e.history_pdiag.row(h) = P.diagonal().transpose();
+              ++h;
+            }
+          }
+          m += R;
+        });
     e.history_t.conservativeResize(h);
     e.history_value.conservativeResize(h, p);
     e.history_pdiag.conservativeResize(h, p);
-    exid::check(theta.allFinite() && P.allFinite(), "rls: the recursion diverged (non-finite estimate); "
-                                                      "lower p0 or check the data scaling");
+    exid::check(theta.allFinite() && P.allFinite(),
+                "rls: the recursion diverged (non-finite estimate); "
+                "lower p0 or check the data scaling");
 
     // ---- residuals
     double rss = 0.0;
     std::string rss_method;
     if (residualPass()) {
-      exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.5, 0.95,
-                              [&](const exid::Rows& r, int, int) { rss += (r.y - r.W * theta).squaredNorm(); });
+      exid::est::forEachChunk(
+          model, data, chunk_, ctx, kName, 0.5, 0.95,
+          [&](const exid::Rows& r, int, int) { rss += (r.y - r.W * theta).squaredNorm(); });
       rss_method = "second pass over the data with the final estimate";
     } else {
       // lambda = 1: RLS minimises ||y - W theta||^2 + (theta - theta0)^T P0^-1 (theta - theta0),
-      // whose minimum is V; so ||y - W theta_K||^2 = V - (theta_K - theta0)^T P0^-1 (theta_K - theta0).
+      // whose minimum is V; so ||y - W theta_K||^2 = V - (theta_K - theta0)^T P0^-1 (theta_K -
+      // theta0).
       const Eigen::VectorXd dth = theta - theta0;
       rss = std::max(0.0, V - dth.dot(P0inv * dth));
-      rss_method = "exact identity V_K - (theta_K - theta0)^T P0^-1 (theta_K - theta0) (lambda = 1)";
+      rss_method =
+          "exact identity V_K - (theta_K - theta0)^T P0^-1 (theta_K - theta0) (lambda = 1)";
     }
-    exid::check(m > p, fmt::format("rls: {} observation rows for {} base parameters; the estimate is the "
-                                   "prior's pull, not the data's (need more rows than parameters)",
-                                   m, p));
+    exid::check(m > p,
+                fmt::format("rls: {} observation rows for {} base parameters; the estimate is the "
+                            "prior's pull, not the data's (need more rows than parameters)",
+                            m, p));
 
     // ---- result
     const Eigen::MatrixXd Pfull = P.selfadjointView<Eigen::Lower>();

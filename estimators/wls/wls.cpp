@@ -40,7 +40,8 @@ class Wls : public exid::Estimator {
                         1.0, 50.0),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
         exid::param_int("max_equations", 1000,
-                        "refuse more distinct equations than this (each keeps a (p+1)^2 factor)", 1.0, 1e6),
+                        "refuse more distinct equations than this (each keeps a (p+1)^2 factor)",
+                        1.0, 1e6),
         exid::param_double("rank_tolerance", 1e-8, "",
                            "a direction is unidentifiable when its singular value of the "
                            "column-scaled W is below this times the largest",
@@ -67,29 +68,33 @@ class Wls : public exid::Estimator {
     const int p = model.numBase();
     std::map<int, RowAccumulator> acc;
     std::map<int, std::vector<int>> idx;
-    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int, int) {
-      for (auto& [eq, v] : idx) v.clear();
-      const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
-      for (Eigen::Index i = 0; i < r.y.size(); ++i)
-        idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(static_cast<int>(i));
-      exid::check(static_cast<int>(idx.size()) <= max_eq_,
-                  fmt::format("wls: the model labels more than max_equations = {} distinct equations; "
-                              "per-equation weighting needs many rows per equation",
-                              max_eq_));
-      for (const auto& [eq, v] : idx) {
-        if (v.empty()) continue;
-        const auto n = static_cast<Eigen::Index>(v.size());
-        Eigen::MatrixXd W(n, p);
-        Eigen::VectorXd y(n);
-        for (Eigen::Index k = 0; k < n; ++k) {
-          W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
-          y(k) = r.y(v[static_cast<std::size_t>(k)]);
-        }
-        auto it = acc.find(eq);
-        if (it == acc.end()) it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
-        it->second.add(W, y);
-      }
-    });
+    exid::est::forEachChunk(
+        model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int, int) {
+          for (auto& [eq, v] : idx) v.clear();
+          const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
+          for (Eigen::Index i = 0; i < r.y.size(); ++i)
+            idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
+                static_cast<int>(i));
+          exid::check(
+              static_cast<int>(idx.size()) <= max_eq_,
+              fmt::format("wls: the model labels more than max_equations = {} distinct equations; "
+                          "per-equation weighting needs many rows per equation",
+                          max_eq_));
+          for (const auto& [eq, v] : idx) {
+            if (v.empty()) continue;
+            const auto n = static_cast<Eigen::Index>(v.size());
+            Eigen::MatrixXd W(n, p);
+            Eigen::VectorXd y(n);
+            for (Eigen::Index k = 0; k < n; ++k) {
+              W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
+              y(k) = r.y(v[static_cast<std::size_t>(k)]);
+            }
+            auto it = acc.find(eq);
+            if (it == acc.end())
+              it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
+            it->second.add(W, y);
+          }
+        });
 
     // ---- 1. OLS
     RowAccumulator all(p);
@@ -125,7 +130,8 @@ class Wls : public exid::Estimator {
         int pe = 0;
         for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
         double dof = static_cast<double>(a.rows() - pe);
-        if (dof <= 0) dof = static_cast<double>(a.rows()) * static_cast<double>(m - p) / static_cast<double>(m);
+        if (dof <= 0)
+          dof = static_cast<double>(a.rows()) * static_cast<double>(m - p) / static_cast<double>(m);
         const double rss = a.residualSquared(theta);
         sigma[eq] = std::sqrt(std::max(rss, 0.0) / std::max(dof, 1e-300));
         params_in[eq] = pe;
@@ -134,7 +140,9 @@ class Wls : public exid::Estimator {
       // Floor: an equation fitted exactly (noise-free data) must not get an infinite weight.
       double floor = smax > 0 ? 1e-6 * smax : 1.0;
       // With a prior the weights' absolute size matters: not above 1e9 / rms(y) (as batch_ls).
-      if (prior) floor = std::max(floor, 1e-9 * all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m))));
+      if (prior)
+        floor = std::max(floor, 1e-9 * all.factor().col(p).norm() /
+                                    std::sqrt(static_cast<double>(std::max<long>(1, m))));
       RowAccumulator weighted(p);
       eq_table = exid::Json::array();
       for (const auto& [eq, a] : acc) {
@@ -153,9 +161,9 @@ class Wls : public exid::Estimator {
         exid::est::addPriorRows(&weighted, *prior, kName);
         exid::est::SolveOptions o = opt_;
         o.unit_variance = true;
-      // The prior makes the problem positive definite: no rank decision (noise-free data with
-      // a prior are legitimately ill-conditioned: tiny noise std, large weights).
-      o.rank_tolerance = 0.0;
+        // The prior makes the problem positive definite: no rank decision (noise-free data with
+        // a prior are legitimately ill-conditioned: tiny noise std, large weights).
+        o.rank_tolerance = 0.0;
         sol = exid::est::solveLeastSquares(weighted, names, o, kName);
       } else {
         sol = exid::est::solveLeastSquares(weighted, names, opt_, kName);
@@ -178,10 +186,12 @@ class Wls : public exid::Estimator {
     d["equations"] = eq_table;
     d["iterations"] = iterations_;
     d["weighting"] =
-        "rows of equation e divided by sigma_e = sqrt(||y_e - W_e theta||^2 / (m_e - p_e)), theta from "
+        "rows of equation e divided by sigma_e = sqrt(||y_e - W_e theta||^2 / (m_e - p_e)), theta "
+        "from "
         "the previous pass (OLS first)";
     exid::Json o = exid::Json::object();
-    o["value"] = exid::Json(std::vector<double>(ols.theta.data(), ols.theta.data() + ols.theta.size()));
+    o["value"] =
+        exid::Json(std::vector<double>(ols.theta.data(), ols.theta.data() + ols.theta.size()));
     o["std"] = exid::Json(std::vector<double>(ols.std.data(), ols.std.data() + ols.std.size()));
     o["sigma"] = std::sqrt(ols.sigma2);
     o["cond_W"] = ols.cond_W;

@@ -11,9 +11,11 @@ class AOptimal final : public exid::Criterion {
  public:
   static constexpr const char* kName = "a_optimal";
   static constexpr const char* kVersion = "1.0";
-  static constexpr const char* kDoc = "A-optimality: trace((W^T W)^-1) (example out-of-tree plugin)";
+  static constexpr const char* kDoc =
+      "A-optimality: trace((W^T W)^-1) (example out-of-tree plugin)";
   static std::vector<exid::ParamDecl> params() {
-    return {exid::param_double("weight", 1.0, "", "multiplier of the criterion", 0.0, std::nullopt, true)};
+    return {exid::param_double("weight", 1.0, "", "multiplier of the criterion", 0.0, std::nullopt,
+                               true)};
   }
   explicit AOptimal(const exid::ParamSet& p) : weight_(p.getDouble("weight")) {}
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {

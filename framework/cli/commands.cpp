@@ -4,8 +4,8 @@
 #include <fmt/format.h>
 
 #include <fstream>
-#include <iostream>
 #include <functional>
+#include <iostream>
 #include <memory>
 #include <sstream>
 
@@ -77,17 +77,18 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
   for (int i = 0; i < r->dof(); ++i) {
     const Body& body = r->bodies[static_cast<std::size_t>(i)];
     const JointLimits& L = r->limits[static_cast<std::size_t>(i)];
-    std::cout << fmt::format("  {} {:<12} {:<9} parent {:>2}  q in [{:.4g}, {:.4g}]  |qd| <= {:.4g}\n",
-                             i + 1, body.joint_name,
-                             body.type == JointType::Revolute ? "revolute" : "prismatic",
-                             body.parent + 1, L.q_min, L.q_max, L.qd_max);
+    std::cout << fmt::format(
+        "  {} {:<12} {:<9} parent {:>2}  q in [{:.4g}, {:.4g}]  |qd| <= {:.4g}\n", i + 1,
+        body.joint_name, body.type == JointType::Revolute ? "revolute" : "prismatic",
+        body.parent + 1, L.q_min, L.q_max, L.qd_max);
   }
-  std::cout << fmt::format("\nmodel {}: {} standard parameters, {} base parameters (tolerance {:g})\n\n",
-                           model_name, b.numFull(), b.rank(), b.tolerance);
+  std::cout << fmt::format(
+      "\nmodel {}: {} standard parameters, {} base parameters (tolerance {:g})\n\n", model_name,
+      b.numFull(), b.rank(), b.tolerance);
   std::cout << "standard parameters:\n";
   for (int i = 0; i < b.numFull(); ++i)
-    std::cout << fmt::format("  {:<6} {:>14.6g}{}", b.full_names[static_cast<std::size_t>(i)], nominal(i),
-                             (i + 1) % 4 == 0 ? "\n" : "");
+    std::cout << fmt::format("  {:<6} {:>14.6g}{}", b.full_names[static_cast<std::size_t>(i)],
+                             nominal(i), (i + 1) % 4 == 0 ? "\n" : "");
   std::cout << "\n\nbase parameters:\n";
   for (int i = 0; i < b.rank(); ++i)
     std::cout << fmt::format("  {:<8} = {:<60} = {:.6g}\n", b.names[static_cast<std::size_t>(i)],
@@ -104,8 +105,9 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     int c = in.col(name);
     if (c < 0) {
       if (required)
-        throw Error(fmt::format("{}: missing column '{}' (expected q1..q{}, qd1..qd{}, qdd1..qdd{})",
-                                samples, name, n, n, n));
+        throw Error(
+            fmt::format("{}: missing column '{}' (expected q1..q{}, qd1..qd{}, qdd1..qdd{})",
+                        samples, name, n, n, n));
       return Eigen::VectorXd::Zero(in.data.rows());
     }
     return in.data.col(c);
@@ -138,8 +140,10 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     t.columns = {"M", "MX", "MY", "MZ", "XX", "XY", "XZ", "YY", "YZ", "ZZ"};
     t.data.resize(K * 6, 10);
   } else {
-    throw Error(fmt::format("--what {}: expected one of torque, regressor, energy, energy_regressor, "
-                            "wrench_regressor", what));
+    throw Error(
+        fmt::format("--what {}: expected one of torque, regressor, energy, energy_regressor, "
+                    "wrench_regressor",
+                    what));
   }
   const Eigen::VectorXd pi = r->inertialParameters();
   const Eigen::Index p = static_cast<Eigen::Index>(names.size());
@@ -147,7 +151,8 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
   Eigen::RowVectorXd kin(p), pot(p);
   Eigen::Matrix<double, 6, 10> A;
   for (Eigen::Index k = 0; k < K; ++k) {
-    Eigen::VectorXd qm = Q.row(k).transpose(), qdm = QD.row(k).transpose(), qddm = QDD.row(k).transpose();
+    Eigen::VectorXd qm = Q.row(k).transpose(), qdm = QD.row(k).transpose(),
+                    qddm = QDD.row(k).transpose();
     Eigen::VectorXd q, qd, qdd;
     measuredToJoint(*r, qm, qdm, qddm, &q, &qd, &qdd);
     if (what == "torque") {
@@ -174,8 +179,8 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     }
   }
   writeCsvAtomic(out, t);
-  std::cout << fmt::format("{}: {} rows x {} columns ({} of {} on {} samples)\n", out, t.data.rows(),
-                           t.data.cols(), what, r->name, K);
+  std::cout << fmt::format("{}: {} rows x {} columns ({} of {} on {} samples)\n", out,
+                           t.data.rows(), t.data.cols(), what, r->name, K);
   return 0;
 }
 
@@ -208,7 +213,8 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
                                   "experiment.params", fs::current_path());
       cfg.experiment = spec;
     }
-    if (!cfg.experiment) throw Error(fmt::format("{}: no experiment section and no --data file", study));
+    if (!cfg.experiment)
+      throw Error(fmt::format("{}: no experiment section and no --data file", study));
   }
   if (out.empty()) out = "out/" + cfg.name + "_" + stage;
   RunOptions opt;
@@ -230,28 +236,33 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
                   const std::string& out) {
   const fs::path dir(study_dir);
   std::ifstream in(dir / "summary.json");
-  if (!in) throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
+  if (!in)
+    throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
   const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
   const Json S = Json::parse(text);
   const Json* I = S.find("identification");
   const Json* d = I ? I->find("details") : nullptr;
   const Json* sp = d ? d->find("standard_parameters") : nullptr;
   if (!sp || !sp->find("names") || !sp->find("values"))
-    throw Error(fmt::format("{}/summary.json: no identification.details.standard_parameters; only an estimator "
-                            "that identifies physically consistent STANDARD parameters (consistent_ls) can be "
-                            "exported (base parameters alone do not define a robot)",
-                            dir.string()));
+    throw Error(fmt::format(
+        "{}/summary.json: no identification.details.standard_parameters; only an estimator "
+        "that identifies physically consistent STANDARD parameters (consistent_ls) can be "
+        "exported (base parameters alone do not define a robot)",
+        dir.string()));
   std::shared_ptr<const RobotModel> base;
   if (!robot.empty()) {
     base = loadRobot(reg, robot);
   } else {
     // Only the robot section of the resolved study (its paths are absolute).
     std::ifstream ry(dir / "study.resolved.yaml");
-    if (!ry) throw Error(fmt::format("{}: no study.resolved.yaml; name the robot (exid export ROBOT ...)", dir.string()));
+    if (!ry)
+      throw Error(fmt::format("{}: no study.resolved.yaml; name the robot (exid export ROBOT ...)",
+                              dir.string()));
     std::string line, section;
     bool in_robot = false;
     while (std::getline(ry, line)) {
-      if (!line.empty() && line[0] != ' ' && line[0] != '#') in_robot = line.rfind("robot:", 0) == 0;
+      if (!line.empty() && line[0] != ' ' && line[0] != '#')
+        in_robot = line.rfind("robot:", 0) == 0;
       if (in_robot) section += line + "\n";
     }
     StudyConfig cfg = parseStudy(section, (dir / "study.resolved.yaml").string(), dir, reg);
@@ -285,7 +296,10 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
       const int j = std::stoi(rest) - 1;
       if (j < 0 || j >= static_cast<int>(m.drives.size())) continue;
       Drive& dr = m.drives[static_cast<std::size_t>(j)];
-      (p == "Ia" ? dr.rotor_inertia : p == "Fc" ? dr.coulomb : p == "Fv" ? dr.viscous : dr.offset) = v;
+      (p == "Ia"   ? dr.rotor_inertia
+       : p == "Fc" ? dr.coulomb
+       : p == "Fv" ? dr.viscous
+                   : dr.offset) = v;
       done = true;
       ++set;
     }
@@ -294,21 +308,25 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   for (int j = 0; j < m.dof(); ++j) {
     const InertiaCheck c = checkPhysical(m.bodies[static_cast<std::size_t>(j)].inertia);
     if (!c.ok)
-      throw Error(fmt::format("body {} ('{}'): {}; the identified parameters are not physically consistent "
-                              "and cannot be written as URDF",
-                              j + 1, m.bodies[static_cast<std::size_t>(j)].name, c.rule));
+      throw Error(
+          fmt::format("body {} ('{}'): {}; the identified parameters are not physically consistent "
+                      "and cannot be written as URDF",
+                      j + 1, m.bodies[static_cast<std::size_t>(j)].name, c.rule));
   }
   UrdfWriteOptions wo;
-  wo.comment = fmt::format("  {}: identified by exid {} ({}), study {} ({}).\n  Inertial parameters and drives "
-                           "from identification.details.standard_parameters; kinematics, limits and transmission "
-                           "from {}.",
-                           m.name, EXID_VERSION_STRING, I->find("estimator") ? I->find("estimator")->asString() : "?",
-                           S.find("study") ? S.find("study")->asString() : "?", dir.string(), base->source);
+  wo.comment = fmt::format(
+      "  {}: identified by exid {} ({}), study {} ({}).\n  Inertial parameters and drives "
+      "from identification.details.standard_parameters; kinematics, limits and transmission "
+      "from {}.",
+      m.name, EXID_VERSION_STRING, I->find("estimator") ? I->find("estimator")->asString() : "?",
+      S.find("study") ? S.find("study")->asString() : "?", dir.string(), base->source);
   m.name = m.name + "_identified";
   writeFileAtomic(out, writeUrdf(m, wo));
-  std::cout << fmt::format("{}: {} ({} joints), {} identified parameters written{}\n", out, m.name, m.dof(), set,
-                           ignored.empty() ? std::string()
-                                           : fmt::format("; not part of the robot, ignored: {}", fmt::join(ignored, ", ")));
+  std::cout << fmt::format(
+      "{}: {} ({} joints), {} identified parameters written{}\n", out, m.name, m.dof(), set,
+      ignored.empty()
+          ? std::string()
+          : fmt::format("; not part of the robot, ignored: {}", fmt::join(ignored, ", ")));
   return 0;
 }
 
@@ -321,12 +339,17 @@ std::vector<std::string> splitComma(const std::string& s) {
   return out;
 }
 
-int matrixCommand(const Registry& reg, const std::vector<std::string>& args, const std::string& out_arg,
-                  int jobs, const std::string& shard, bool retry, const std::string& rows,
-                  const std::string& cols, const std::string& metric, const std::function<bool()>& cancelled) {
-  if (args.empty()) throw Error("usage: exid matrix MATRIX.yaml --out DIR [-j N] | exid matrix table DIR ... | exid matrix merge DEST SRC...");
+int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
+                  const std::string& out_arg, int jobs, const std::string& shard, bool retry,
+                  const std::string& rows, const std::string& cols, const std::string& metric,
+                  const std::function<bool()>& cancelled) {
+  if (args.empty())
+    throw Error(
+        "usage: exid matrix MATRIX.yaml --out DIR [-j N] | exid matrix table DIR ... | exid matrix "
+        "merge DEST SRC...");
   if (args[0] == "table") {
-    if (args.size() != 2) throw Error("usage: exid matrix table DIR --rows A,B --cols C --metric NAME");
+    if (args.size() != 2)
+      throw Error("usage: exid matrix table DIR --rows A,B --cols C --metric NAME");
     const fs::path db = fs::path(args[1]) / "results.sqlite";
     if (metric.empty()) {
       std::cout << "metrics:\n";
@@ -346,19 +369,23 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args, con
   if (args[0] == "merge") {
     if (args.size() < 3) throw Error("usage: exid matrix merge DEST_DIR SRC_DIR...");
     std::vector<fs::path> srcs;
-    for (std::size_t i = 2; i < args.size(); ++i) srcs.push_back(fs::path(args[i]) / "results.sqlite");
+    for (std::size_t i = 2; i < args.size(); ++i)
+      srcs.push_back(fs::path(args[i]) / "results.sqlite");
     int n = mergeMatrixDatabases(fs::path(args[1]) / "results.sqlite", srcs);
     std::cout << fmt::format("merged {} runs into {}/results.sqlite\n", n, args[1]);
     return 0;
   }
-  if (args.size() != 1) throw Error("usage: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N]");
+  if (args.size() != 1)
+    throw Error("usage: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N]");
   MatrixSpec spec = loadMatrix(args[0], reg);
   MatrixOptions opt;
   opt.out_dir = out_arg.empty() ? fs::path("out") / spec.name : fs::path(out_arg);
   if (underMpiLauncher()) {
     if (!mpiAvailable())
-      throw Error("exid runs under an MPI launcher but was built without MPI (install libopenmpi-dev and rebuild), "
-                  "or run shards with --shard i/N");
+      throw Error(
+          "exid runs under an MPI launcher but was built without MPI (install libopenmpi-dev and "
+          "rebuild), "
+          "or run shards with --shard i/N");
     if (!shard.empty()) throw Error("--shard and MPI both split the matrix; use one of them");
     MpiSession mpi;
     opt.jobs = std::max(1, jobs);
@@ -369,16 +396,20 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args, con
     opt.database = fmt::format("shard-{}-of-{}.sqlite", mpi.rank, mpi.size);
     MatrixRunSummary s = runMatrix(spec, reg, opt);
     const int ok = mpi.sumInt(s.ok), failed = mpi.sumInt(s.failed), timeout = mpi.sumInt(s.timeout),
-              skipped = mpi.sumInt(s.skipped), not_run = mpi.sumInt(s.not_run), total = mpi.sumInt(s.total);
+              skipped = mpi.sumInt(s.skipped), not_run = mpi.sumInt(s.not_run),
+              total = mpi.sumInt(s.total);
     mpi.barrier();  // every shard database is complete
     if (mpi.rank == 0) {
       std::vector<fs::path> shards;
-      for (int r = 0; r < mpi.size; ++r) shards.push_back(opt.out_dir / fmt::format("shard-{}-of-{}.sqlite", r, mpi.size));
+      for (int r = 0; r < mpi.size; ++r)
+        shards.push_back(opt.out_dir / fmt::format("shard-{}-of-{}.sqlite", r, mpi.size));
       const int merged = mergeMatrixDatabases(opt.out_dir / "results.sqlite", shards);
-      std::cout << fmt::format("matrix {} on {} MPI ranks: {} cells: {} ok, {} failed, {} timeout, {} skipped, {} not run; "
-                               "{} new runs gathered into {}/results.sqlite\n",
-                               spec.name, mpi.size, total, ok, failed, timeout, skipped, not_run, merged,
-                               opt.out_dir.string());
+      std::cout << fmt::format(
+          "matrix {} on {} MPI ranks: {} cells: {} ok, {} failed, {} timeout, {} skipped, {} not "
+          "run; "
+          "{} new runs gathered into {}/results.sqlite\n",
+          spec.name, mpi.size, total, ok, failed, timeout, skipped, not_run, merged,
+          opt.out_dir.string());
     }
     return not_run > 0 ? 130 : 0;
   }
@@ -392,10 +423,12 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args, con
     opt.shard_count = std::stoi(shard.substr(slash + 1));
   }
   MatrixRunSummary s = runMatrix(spec, reg, opt);
-  std::cout << fmt::format("matrix {}: {} cells: {} ok, {} failed, {} timeout, {} skipped (finished before), {} not run; "
-                           "{:.2f} s\nresults: {}/results.sqlite\n",
-                           spec.name, s.total, s.ok, s.failed, s.timeout, s.skipped, s.not_run, s.wall_s,
-                           opt.out_dir.string());
+  std::cout << fmt::format(
+      "matrix {}: {} cells: {} ok, {} failed, {} timeout, {} skipped (finished before), {} not "
+      "run; "
+      "{:.2f} s\nresults: {}/results.sqlite\n",
+      spec.name, s.total, s.ok, s.failed, s.timeout, s.skipped, s.not_run, s.wall_s,
+      opt.out_dir.string());
   return s.not_run > 0 ? 130 : 0;
 }
 
@@ -416,14 +449,18 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   auto* info = robot->add_subcommand("info", "parameters, base parameters and their expressions");
   robot->require_subcommand(1);
   info->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
-  info->add_option("--model", st->model, "observation model that defines the columns (default differential)");
-  info->add_option("--model-params", st->model_params, "its parameters as YAML, e.g. '{rotor_inertia: true}'");
+  info->add_option("--model", st->model,
+                   "observation model that defines the columns (default differential)");
+  info->add_option("--model-params", st->model_params,
+                   "its parameters as YAML, e.g. '{rotor_inertia: true}'");
   info->add_flag("--json", st->json, "print JSON");
 
-  auto* eval = app.add_subcommand("eval", "evaluate torque, regressors or energy on a CSV of samples");
+  auto* eval =
+      app.add_subcommand("eval", "evaluate torque, regressors or energy on a CSV of samples");
   eval->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
   eval->add_option("--samples", st->samples, "CSV with q1..qn qd1..qdn qdd1..qddn")->required();
-  eval->add_option("--what", st->what, "torque|regressor|energy|energy_regressor|wrench_regressor")->required();
+  eval->add_option("--what", st->what, "torque|regressor|energy|energy_regressor|wrench_regressor")
+      ->required();
   eval->add_option("--out", st->out, "output CSV")->required();
 
   std::vector<CLI::App*> stages;
@@ -431,20 +468,26 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     auto* s = app.add_subcommand(name, fmt::format("run only the {} stage of a study", name));
     s->add_option("study", st->study, "study YAML file")->required();
     s->add_option("--out", st->out, "output folder");
-    if (std::string(name) == "identify") s->add_option("--data", st->data, "recorded CSV (replaces the experiment)");
+    if (std::string(name) == "identify")
+      s->add_option("--data", st->data, "recorded CSV (replaces the experiment)");
     stages.push_back(s);
   }
 
-  auto* exp = app.add_subcommand("export", "write identified consistent parameters into a URDF: "
-                                           "exid export [ROBOT] --study DIR --out robot_identified.urdf");
-  exp->add_option("robot", st->robot, "robot plugin name or .urdf / DH .yaml file (default: the study's robot)");
-  exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")->required();
+  auto* exp = app.add_subcommand("export",
+                                 "write identified consistent parameters into a URDF: "
+                                 "exid export [ROBOT] --study DIR --out robot_identified.urdf");
+  exp->add_option("robot", st->robot,
+                  "robot plugin name or .urdf / DH .yaml file (default: the study's robot)");
+  exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")
+      ->required();
   exp->add_option("--out", st->out, "URDF file to write")->required();
 
   auto* matrix = app.add_subcommand(
-      "matrix", "comparison matrices: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N] | "
-                "exid matrix table DIR --rows A,B --cols C --metric M | exid matrix merge DEST SRC...");
-  matrix->add_option("args", st->matrix_args, "MATRIX.yaml, or 'table DIR', or 'merge DEST SRC...'");
+      "matrix",
+      "comparison matrices: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N] | "
+      "exid matrix table DIR --rows A,B --cols C --metric M | exid matrix merge DEST SRC...");
+  matrix->add_option("args", st->matrix_args,
+                     "MATRIX.yaml, or 'table DIR', or 'merge DEST SRC...'");
   matrix->add_option("--out", st->out, "output folder (results.sqlite, cells/)");
   matrix->add_option("-j,--jobs", st->jobs, "cells run in parallel");
   matrix->add_option("--shard", st->shard, "run every N-th cell: i/N with 0 <= i < N");
@@ -456,8 +499,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   Commands c;
   c.run = [st, info, eval, exp, stages, matrix, &registry]() -> int {
     if (*matrix)
-      return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry, st->rows, st->cols,
-                           st->metric, cancelled());
+      return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
+                           st->rows, st->cols, st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
     if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out);
     if (*exp) return exportCommand(registry, st->robot, st->study, st->out);

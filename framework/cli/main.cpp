@@ -33,8 +33,9 @@ class ProgressPrinter {
       const int width = 30;
       int filled = static_cast<int>(f * width + 0.5);
       filled = std::max(0, std::min(width, filled));
-      std::cerr << fmt::format("\r[exid] {:<14} [{}{}] {:3.0f}% {:<40}", stage, std::string(filled, '#'),
-                               std::string(width - filled, '.'), 100.0 * f, text.substr(0, 40));
+      std::cerr << fmt::format("\r[exid] {:<14} [{}{}] {:3.0f}% {:<40}", stage,
+                               std::string(filled, '#'), std::string(width - filled, '.'),
+                               100.0 * f, text.substr(0, 40));
       if (f >= 1.0) std::cerr << '\n';
       std::cerr.flush();
     } else if (f >= 1.0 || now - last_ > std::chrono::seconds(2)) {
@@ -56,19 +57,22 @@ std::function<bool()> exid::cli::cancelled() {
 }
 
 int main(int argc, char** argv) {
-  CLI::App app{"exid — experimental identification of robot and payload dynamics, and the "
-               "design of exciting trajectories"};
+  CLI::App app{
+      "exid — experimental identification of robot and payload dynamics, and the "
+      "design of exciting trajectories"};
   app.require_subcommand(1);
   std::vector<std::string> plugin_paths;
   bool verbose = false, quiet = false;
-  app.add_option("--plugin-path", plugin_paths, "extra directory with plugin libraries (searched first)")
+  app.add_option("--plugin-path", plugin_paths,
+                 "extra directory with plugin libraries (searched first)")
       ->take_all();
   app.add_flag("-v,--verbose", verbose, "more log output");
   app.add_flag("-q,--quiet", quiet, "only errors");
 
   exid::Registry registry;
   auto setup = [&]() {
-    exid::setLogLevel(quiet ? exid::LogLevel::Quiet : (verbose ? exid::LogLevel::Debug : exid::LogLevel::Info));
+    exid::setLogLevel(quiet ? exid::LogLevel::Quiet
+                            : (verbose ? exid::LogLevel::Debug : exid::LogLevel::Info));
     for (const auto& p : plugin_paths) registry.addSearchPath(p);
     registry.scan();
   };
@@ -86,7 +90,8 @@ int main(int argc, char** argv) {
 
   // exid plugins [KIND] | exid plugins info NAME
   std::vector<std::string> plugins_args;
-  auto* plugins = app.add_subcommand("plugins", "list plugins: exid plugins [KIND] | exid plugins info NAME");
+  auto* plugins =
+      app.add_subcommand("plugins", "list plugins: exid plugins [KIND] | exid plugins info NAME");
   plugins->add_option("args", plugins_args, "KIND, or 'info NAME'");
 
   exid::cli::Commands extra = exid::cli::addCommands(app, registry);
@@ -114,17 +119,20 @@ int main(int argc, char** argv) {
       exid::RunOptions opt;
       opt.out_dir = out_dir;
       ProgressPrinter printer;
-      opt.progress = [&printer](const std::string& s, double f, const std::string& t) { printer(s, f, t); };
+      opt.progress = [&printer](const std::string& s, double f, const std::string& t) {
+        printer(s, f, t);
+      };
       opt.cancelled = [] { return g_stop.load(); };
       exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
       exid::StudyResult r = exid::runStudy(cfg, registry, opt);
       std::cout << exid::briefTable(r.summary);
       if (!r.ok) {
-        std::cerr << fmt::format("exid: study '{}' failed: {}\n(details in {}/summary.json)\n", cfg.name,
-                                 r.message, out_dir);
+        std::cerr << fmt::format("exid: study '{}' failed: {}\n(details in {}/summary.json)\n",
+                                 cfg.name, r.message, out_dir);
         return 1;
       }
-      std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir, out_dir);
+      std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir,
+                               out_dir);
       return 0;
     }
     if (*plugins) {

@@ -2,9 +2,9 @@
 // was built with MPI, rank r runs shard r/N of the matrix into its own database; rank 0 then
 // gathers every shard into DIR/results.sqlite. Without MPI (or without a launcher) nothing here
 // is used and the matrix runs in one process.
-#include "commands.hpp"
-
 #include <cstdlib>
+
+#include "commands.hpp"
 
 #ifdef EXID_WITH_MPI
 #include <mpi.h>

@@ -70,8 +70,8 @@ std::optional<bool> toBool(const std::string& s) {
 }
 
 // Converts a YAML node into the declared type; returns nullopt and sets why on failure.
-std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n,
-                                  const fs::path& base_dir, std::string* why) {
+std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const fs::path& base_dir,
+                                  std::string* why) {
   auto expect = [&](const char* what) {
     *why = fmt::format("expected {}, found '{}'", what, scalarText(n));
     return std::nullopt;
@@ -153,8 +153,9 @@ std::vector<std::string> keysOf(const std::vector<ParamDecl>& decls) {
 
 void unknownKey(Problems& pr, const YAML::Node& at, const std::string& path, const std::string& key,
                 const std::vector<std::string>& allowed) {
-  std::string msg = fmt::format("{}: unknown key '{}'; allowed: {}", path.empty() ? key : path + "." + key,
-                                key, allowed.empty() ? "(none)" : fmt::format("{}", fmt::join(allowed, ", ")));
+  std::string msg =
+      fmt::format("{}: unknown key '{}'; allowed: {}", path.empty() ? key : path + "." + key, key,
+                  allowed.empty() ? "(none)" : fmt::format("{}", fmt::join(allowed, ", ")));
   std::string close = closestMatch(key, allowed);
   if (!close.empty()) msg += fmt::format("; did you mean '{}'?", close);
   pr.add(at, msg);
@@ -165,7 +166,8 @@ void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::st
                  const fs::path& base_dir, Problems& pr, ParamSet& out) {
   out.context = path;
   if (params && !params.IsNull() && !params.IsMap()) {
-    pr.add(params, fmt::format("{}: expected a mapping of parameters, found '{}'", path, scalarText(params)));
+    pr.add(params, fmt::format("{}: expected a mapping of parameters, found '{}'", path,
+                               scalarText(params)));
     return;
   }
   if (params && params.IsMap()) {
@@ -195,20 +197,22 @@ void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::st
       ParamValue def = *d.default_value;
       if (d.type == ParamType::Path) {
         fs::path p(std::get<std::string>(def));
-        if (!p.empty() && p.is_relative() && !base_dir.empty()) def = (base_dir / p).lexically_normal().string();
+        if (!p.empty() && p.is_relative() && !base_dir.empty())
+          def = (base_dir / p).lexically_normal().string();
       }
       out.set(d.name, def);
     } else {
-      pr.add(params ? params : YAML::Node(), fmt::format("{}.{}: required parameter is missing ({}{}{})", path,
-                                      d.name, toString(d.type), d.unit.empty() ? "" : ", " + d.unit,
-                                      d.doc.empty() ? "" : ": " + d.doc));
+      pr.add(params ? params : YAML::Node(),
+             fmt::format("{}.{}: required parameter is missing ({}{}{})", path, d.name,
+                         toString(d.type), d.unit.empty() ? "" : ", " + d.unit,
+                         d.doc.empty() ? "" : ": " + d.doc));
     }
   }
 }
 
-std::optional<PluginSpec> parseSpec(const YAML::Node& node, PluginKind kind, const std::string& path,
-                                    const fs::path& base_dir, const Registry& reg, Problems& pr,
-                                    bool allow_weight) {
+std::optional<PluginSpec> parseSpec(const YAML::Node& node, PluginKind kind,
+                                    const std::string& path, const fs::path& base_dir,
+                                    const Registry& reg, Problems& pr, bool allow_weight) {
   if (!node.IsMap()) {
     pr.add(node, fmt::format("{}: expected a mapping {{type: NAME, params: {{...}}}}, found '{}'",
                              path, scalarText(node)));
@@ -252,16 +256,23 @@ void emitValue(YAML::Emitter& e, const ParamValue& v) {
   std::visit(
       [&](const auto& x) {
         using T = std::decay_t<decltype(x)>;
-        if constexpr (std::is_same_v<T, bool>) e << x;
-        else if constexpr (std::is_same_v<T, std::int64_t>) e << static_cast<long long>(x);
-        else if constexpr (std::is_same_v<T, double>) e << formatValue(ParamValue(x));
-        else if constexpr (std::is_same_v<T, std::string>) e << x;
+        if constexpr (std::is_same_v<T, bool>)
+          e << x;
+        else if constexpr (std::is_same_v<T, std::int64_t>)
+          e << static_cast<long long>(x);
+        else if constexpr (std::is_same_v<T, double>)
+          e << formatValue(ParamValue(x));
+        else if constexpr (std::is_same_v<T, std::string>)
+          e << x;
         else {
           e << YAML::Flow << YAML::BeginSeq;
           for (const auto& el : x) {
-            if constexpr (std::is_same_v<std::decay_t<decltype(el)>, double>) e << formatValue(ParamValue(el));
-            else if constexpr (std::is_same_v<std::decay_t<decltype(el)>, std::int64_t>) e << static_cast<long long>(el);
-            else e << el;
+            if constexpr (std::is_same_v<std::decay_t<decltype(el)>, double>)
+              e << formatValue(ParamValue(el));
+            else if constexpr (std::is_same_v<std::decay_t<decltype(el)>, std::int64_t>)
+              e << static_cast<long long>(el);
+            else
+              e << el;
           }
           e << YAML::EndSeq;
         }
@@ -304,15 +315,17 @@ Json specJson(const PluginSpec& s) {
   return j;
 }
 
-const std::vector<std::string> kTopKeys = {"name",       "description", "seed",      "budget_s",
-                                           "robot",      "model",       "excitation", "experiment",
-                                           "estimator",  "validation",  "report",   "prior"};
+const std::vector<std::string> kTopKeys = {"name",      "description", "seed",       "budget_s",
+                                           "robot",     "model",       "excitation", "experiment",
+                                           "estimator", "validation",  "report",     "prior"};
 
 std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_dir, Problems& pr) {
   if (!n.IsMap()) {
-    pr.add(n, fmt::format("prior: expected a mapping {{from: robot, relative_std: 0.3, absolute_std: 1e-3}} "
-                          "or {{from: study, study: DIR, scale: 1}}, found '{}'",
-                          scalarText(n)));
+    pr.add(n,
+           fmt::format(
+               "prior: expected a mapping {{from: robot, relative_std: 0.3, absolute_std: 1e-3}} "
+               "or {{from: study, study: DIR, scale: 1}}, found '{}'",
+               scalarText(n)));
     return std::nullopt;
   }
   PriorSpec spec;
@@ -324,9 +337,9 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
     return std::nullopt;
   }
   spec.from = from.Scalar();
-  const std::vector<std::string> allowed = spec.from == "robot"
-                                               ? std::vector<std::string>{"from", "relative_std", "absolute_std"}
-                                               : std::vector<std::string>{"from", "study", "scale"};
+  const std::vector<std::string> allowed =
+      spec.from == "robot" ? std::vector<std::string>{"from", "relative_std", "absolute_std"}
+                           : std::vector<std::string>{"from", "study", "scale"};
   bool bad = false;
   for (const auto& kv : n) {
     const std::string key = kv.first.as<std::string>();
@@ -354,7 +367,8 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
     number("scale", 0.0, true, &spec.scale);
     YAML::Node st = n["study"];
     if (!st || !st.IsScalar() || st.Scalar().empty()) {
-      pr.add(st ? st : n, "prior.study: missing; the output folder of a study (its parameters.csv is read)");
+      pr.add(st ? st : n,
+             "prior.study: missing; the output folder of a study (its parameters.csv is read)");
       bad = true;
     } else {
       fs::path d(st.Scalar());
@@ -390,26 +404,39 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
       unknownKey(pr, kv.first, "", key, kTopKeys);
   }
   if (root["name"]) {
-    if (root["name"].IsScalar()) cfg.name = root["name"].Scalar();
-    else pr.add(root["name"], "name: expected a string");
+    if (root["name"].IsScalar())
+      cfg.name = root["name"].Scalar();
+    else
+      pr.add(root["name"], "name: expected a string");
   }
   if (root["seed"]) {
     auto s = root["seed"].IsScalar() ? toInt(root["seed"].Scalar()) : std::nullopt;
-    if (!s || *s < 0) pr.add(root["seed"], fmt::format("seed = {}: must be a non-negative integer", scalarText(root["seed"])));
-    else cfg.seed = static_cast<std::uint64_t>(*s);
+    if (!s || *s < 0)
+      pr.add(root["seed"],
+             fmt::format("seed = {}: must be a non-negative integer", scalarText(root["seed"])));
+    else
+      cfg.seed = static_cast<std::uint64_t>(*s);
   }
   if (root["budget_s"]) {
     auto b = root["budget_s"].IsScalar() ? toDouble(root["budget_s"].Scalar()) : std::nullopt;
-    if (!b || !(*b >= 0) || !std::isfinite(*b)) pr.add(root["budget_s"], fmt::format("budget_s = {}: must be in [0, inf)", scalarText(root["budget_s"])));
-    else cfg.budget_s = *b;
+    if (!b || !(*b >= 0) || !std::isfinite(*b))
+      pr.add(root["budget_s"],
+             fmt::format("budget_s = {}: must be in [0, inf)", scalarText(root["budget_s"])));
+    else
+      cfg.budget_s = *b;
   }
-  if (root["robot"]) cfg.robot = parseSpec(root["robot"], PluginKind::Robot, "robot", base_dir, reg, pr, false);
-  else pr.add(0, "robot: missing section; name a robot plugin ({type: puma560}) or a file ({type: urdf, params: {file: ...}})");
+  if (root["robot"])
+    cfg.robot = parseSpec(root["robot"], PluginKind::Robot, "robot", base_dir, reg, pr, false);
+  else
+    pr.add(0,
+           "robot: missing section; name a robot plugin ({type: puma560}) or a file ({type: urdf, "
+           "params: {file: ...}})");
 
   if (YAML::Node m = root["model"]) {
     if (m.IsSequence()) {
       for (std::size_t i = 0; i < m.size(); ++i)
-        if (auto s = parseSpec(m[i], PluginKind::Model, fmt::format("model[{}]", i), base_dir, reg, pr, true))
+        if (auto s = parseSpec(m[i], PluginKind::Model, fmt::format("model[{}]", i), base_dir, reg,
+                               pr, true))
           cfg.models.push_back(*s);
       if (m.size() == 0) pr.add(m, "model: empty list");
     } else if (auto s = parseSpec(m, PluginKind::Model, "model", base_dir, reg, pr, true)) {
@@ -426,27 +453,44 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
         if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
           unknownKey(pr, kv.first, "excitation", key, allowed);
       }
-      if (x["trajectory"]) cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory", base_dir, reg, pr, false);
-      else pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
-      if (x["criterion"]) cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion", base_dir, reg, pr, false);
-      else pr.add(x, "excitation.criterion: missing; name a criterion plugin");
-      if (x["optimizer"]) cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer", base_dir, reg, pr, false);
-      else pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
+      if (x["trajectory"])
+        cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory",
+                                   base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
+      if (x["criterion"])
+        cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion",
+                                  base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.criterion: missing; name a criterion plugin");
+      if (x["optimizer"])
+        cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer",
+                                  base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
     }
   }
-  if (root["experiment"]) cfg.experiment = parseSpec(root["experiment"], PluginKind::Experiment, "experiment", base_dir, reg, pr, false);
-  if (root["estimator"]) cfg.estimator = parseSpec(root["estimator"], PluginKind::Estimator, "estimator", base_dir, reg, pr, false);
-  if (root["validation"]) cfg.validation = parseSpec(root["validation"], PluginKind::Experiment, "validation", base_dir, reg, pr, false);
+  if (root["experiment"])
+    cfg.experiment = parseSpec(root["experiment"], PluginKind::Experiment, "experiment", base_dir,
+                               reg, pr, false);
+  if (root["estimator"])
+    cfg.estimator =
+        parseSpec(root["estimator"], PluginKind::Estimator, "estimator", base_dir, reg, pr, false);
+  if (root["validation"])
+    cfg.validation = parseSpec(root["validation"], PluginKind::Experiment, "validation", base_dir,
+                               reg, pr, false);
   if (YAML::Node r = root["report"]) {
     if (!r.IsMap()) {
       pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
     } else {
       for (const auto& kv : r) {
         const std::string key = kv.first.as<std::string>();
-        if (key != "type" && key != "params") unknownKey(pr, kv.first, "report", key, {"type", "params"});
+        if (key != "type" && key != "params")
+          unknownKey(pr, kv.first, "report", key, {"type", "params"});
       }
       if (r["type"] && (!r["type"].IsScalar() || r["type"].Scalar() != "standard"))
-        pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard", scalarText(r["type"])));
+        pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard",
+                                      scalarText(r["type"])));
       PluginInfo rep;
       rep.name = "standard";
       rep.params = {param_bool("plots", true, "draw plots with gnuplot when it is installed"),
@@ -459,10 +503,15 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
   }
   if (root["prior"]) cfg.prior = parsePrior(root["prior"], base_dir, pr);
   // Which stages need which.
-  if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() && !root["model"])
-    pr.add(0, "model: missing section; the estimator, excitation and validation stages need an observation model");
+  if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() &&
+      !root["model"])
+    pr.add(0,
+           "model: missing section; the estimator, excitation and validation stages need an "
+           "observation model");
   if (cfg.estimator && !cfg.experiment && !root["experiment"])
-    pr.add(0, "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: csv, params: {file: ...}})");
+    pr.add(0,
+           "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: "
+           "csv, params: {file: ...}})");
   if (root["prior"] && !cfg.estimator && !root["estimator"])
     pr.add(root["prior"], "prior: needs an estimator section (the prior is the estimator's)");
   if (cfg.validation && !cfg.estimator && !root["estimator"])
@@ -515,11 +564,16 @@ std::string StudyConfig::resolvedYaml() const {
   e << YAML::BeginMap;
   e << YAML::Key << "name" << YAML::Value << name;
   e << YAML::Key << "seed" << YAML::Value << static_cast<unsigned long long>(seed);
-  if (budget_s > 0) e << YAML::Key << "budget_s" << YAML::Value << formatValue(ParamValue(budget_s));
-  if (robot) { e << YAML::Key << "robot" << YAML::Value; emitSpec(e, *robot, false); }
+  if (budget_s > 0)
+    e << YAML::Key << "budget_s" << YAML::Value << formatValue(ParamValue(budget_s));
+  if (robot) {
+    e << YAML::Key << "robot" << YAML::Value;
+    emitSpec(e, *robot, false);
+  }
   if (!models.empty()) {
     e << YAML::Key << "model" << YAML::Value;
-    if (models.size() == 1) emitSpec(e, models[0], false);
+    if (models.size() == 1)
+      emitSpec(e, models[0], false);
     else {
       e << YAML::BeginSeq;
       for (const auto& m : models) emitSpec(e, m, true);
@@ -528,19 +582,34 @@ std::string StudyConfig::resolvedYaml() const {
   }
   if (hasExcitation()) {
     e << YAML::Key << "excitation" << YAML::Value << YAML::BeginMap;
-    e << YAML::Key << "trajectory" << YAML::Value; emitSpec(e, *trajectory, false);
-    e << YAML::Key << "criterion" << YAML::Value; emitSpec(e, *criterion, false);
-    e << YAML::Key << "optimizer" << YAML::Value; emitSpec(e, *optimizer, false);
+    e << YAML::Key << "trajectory" << YAML::Value;
+    emitSpec(e, *trajectory, false);
+    e << YAML::Key << "criterion" << YAML::Value;
+    emitSpec(e, *criterion, false);
+    e << YAML::Key << "optimizer" << YAML::Value;
+    emitSpec(e, *optimizer, false);
     e << YAML::EndMap;
   }
-  if (experiment) { e << YAML::Key << "experiment" << YAML::Value; emitSpec(e, *experiment, false); }
-  if (estimator) { e << YAML::Key << "estimator" << YAML::Value; emitSpec(e, *estimator, false); }
-  if (validation) { e << YAML::Key << "validation" << YAML::Value; emitSpec(e, *validation, false); }
+  if (experiment) {
+    e << YAML::Key << "experiment" << YAML::Value;
+    emitSpec(e, *experiment, false);
+  }
+  if (estimator) {
+    e << YAML::Key << "estimator" << YAML::Value;
+    emitSpec(e, *estimator, false);
+  }
+  if (validation) {
+    e << YAML::Key << "validation" << YAML::Value;
+    emitSpec(e, *validation, false);
+  }
   if (prior) {
-    e << YAML::Key << "prior" << YAML::Value << YAML::BeginMap << YAML::Key << "from" << YAML::Value << prior->from;
+    e << YAML::Key << "prior" << YAML::Value << YAML::BeginMap << YAML::Key << "from" << YAML::Value
+      << prior->from;
     if (prior->from == "robot") {
-      e << YAML::Key << "relative_std" << YAML::Value << formatValue(ParamValue(prior->relative_std));
-      e << YAML::Key << "absolute_std" << YAML::Value << formatValue(ParamValue(prior->absolute_std));
+      e << YAML::Key << "relative_std" << YAML::Value
+        << formatValue(ParamValue(prior->relative_std));
+      e << YAML::Key << "absolute_std" << YAML::Value
+        << formatValue(ParamValue(prior->absolute_std));
     } else {
       e << YAML::Key << "study" << YAML::Value << prior->study.string();
       e << YAML::Key << "scale" << YAML::Value << formatValue(ParamValue(prior->scale));

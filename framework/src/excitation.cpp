@@ -100,7 +100,9 @@ class Problem final : public ExcitationProblem {
           jac->row(row).setZero();
           for (int i = 0; i < n_; ++i) {
             const double t = T_(c.joint, i);
-            if (t != 0.0) jac->row(row) += c.sign * t * Jt.row(c.signal * Kn + static_cast<Eigen::Index>(i) * K_ + k);
+            if (t != 0.0)
+              jac->row(row) +=
+                  c.sign * t * Jt.row(c.signal * Kn + static_cast<Eigen::Index>(i) * K_ + k);
           }
         }
       }

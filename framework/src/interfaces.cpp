@@ -18,8 +18,10 @@ void ObservationModel::bind(std::shared_ptr<const RobotModel> robot, const RunCo
   const int samples = baseSamples();
   Samples s = randomSamples(samples, ctx.seed ^ 0x9e3779b97f4a7c15ull);
   if (!moving_.empty()) {
-    check(held_.size() == s.dof(), fmt::format("model '{}': restrictMotion: {} held positions for a "
-                                               "{}-dof robot", pluginName(), held_.size(), s.dof()));
+    check(held_.size() == s.dof(),
+          fmt::format("model '{}': restrictMotion: {} held positions for a "
+                      "{}-dof robot",
+                      pluginName(), held_.size(), s.dof()));
     for (int j = 0; j < s.dof(); ++j) {
       if (std::find(moving_.begin(), moving_.end(), j) != moving_.end()) continue;
       s.q.col(j).setConstant(held_(j));
@@ -51,7 +53,8 @@ Samples ObservationModel::randomSamples(int count, std::uint64_t seed) const {
   for (int k = 0; k < count; ++k) {
     Eigen::VectorXd q(n), qd(n), qdd(n);
     for (int j = 0; j < n; ++j) {
-      const JointLimits& L = r.limits.size() > static_cast<std::size_t>(j) ? r.limits[j] : JointLimits{};
+      const JointLimits& L =
+          r.limits.size() > static_cast<std::size_t>(j) ? r.limits[j] : JointLimits{};
       double lo = L.q_min, hi = L.q_max;
       if (!(std::isfinite(lo) && std::abs(lo) < 1e3)) lo = -M_PI;
       if (!(std::isfinite(hi) && std::abs(hi) < 1e3)) hi = M_PI;

@@ -21,8 +21,7 @@ void writeFileAtomic(const fs::path& path, const std::string& text) {
   if (path.has_parent_path()) fs::create_directories(path.parent_path(), ec);
   const fs::path tmp = path.string() + fmt::format(".tmp.{}", ::getpid());
   int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0)
-    throw Error(fmt::format("{}: cannot write: {}", path.string(), std::strerror(errno)));
+  if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", path.string(), std::strerror(errno)));
   std::size_t done = 0;
   while (done < text.size()) {
     ssize_t n = ::write(fd, text.data() + done, text.size() - done);
@@ -101,8 +100,10 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
   if (d == 0) {
     d = ',';
     if (header.find(',') == std::string::npos) {
-      if (header.find(';') != std::string::npos) d = ';';
-      else if (header.find('\t') != std::string::npos) d = '\t';
+      if (header.find(';') != std::string::npos)
+        d = ';';
+      else if (header.find('\t') != std::string::npos)
+        d = '\t';
     }
   }
   CsvTable t;

@@ -57,14 +57,26 @@ void escape(std::string& out, const std::string& s) {
   out += '"';
   for (unsigned char c : s) {
     switch (c) {
-      case '"': out += "\\\""; break;
-      case '\\': out += "\\\\"; break;
-      case '\n': out += "\\n"; break;
-      case '\r': out += "\\r"; break;
-      case '\t': out += "\\t"; break;
+      case '"':
+        out += "\\\"";
+        break;
+      case '\\':
+        out += "\\\\";
+        break;
+      case '\n':
+        out += "\\n";
+        break;
+      case '\r':
+        out += "\\r";
+        break;
+      case '\t':
+        out += "\\t";
+        break;
       default:
-        if (c < 0x20) out += fmt::format("\\u{:04x}", c);
-        else out += static_cast<char>(c);
+        if (c < 0x20)
+          out += fmt::format("\\u{:04x}", c);
+        else
+          out += static_cast<char>(c);
     }
   }
   out += '"';
@@ -78,14 +90,24 @@ void Json::dumpTo(std::string& out, int indent, int depth) const {
     out.append(static_cast<std::size_t>(indent * d), ' ');
   };
   switch (type_) {
-    case Type::Null: out += "null"; break;
-    case Type::Bool: out += b_ ? "true" : "false"; break;
-    case Type::Int: out += std::to_string(i_); break;
-    case Type::Double:
-      if (std::isfinite(d_)) out += fmt::format("{}", d_);
-      else out += "null";
+    case Type::Null:
+      out += "null";
       break;
-    case Type::String: escape(out, s_); break;
+    case Type::Bool:
+      out += b_ ? "true" : "false";
+      break;
+    case Type::Int:
+      out += std::to_string(i_);
+      break;
+    case Type::Double:
+      if (std::isfinite(d_))
+        out += fmt::format("{}", d_);
+      else
+        out += "null";
+      break;
+    case Type::String:
+      escape(out, s_);
+      break;
     case Type::Array:
     case Type::Object: {
       const bool obj = type_ == Type::Object;
@@ -148,16 +170,27 @@ struct Parser {
         if (i >= s.size()) fail("bad escape");
         char e = s[i++];
         switch (e) {
-          case 'n': r += '\n'; break;
-          case 't': r += '\t'; break;
-          case 'r': r += '\r'; break;
-          case 'b': r += '\b'; break;
-          case 'f': r += '\f'; break;
+          case 'n':
+            r += '\n';
+            break;
+          case 't':
+            r += '\t';
+            break;
+          case 'r':
+            r += '\r';
+            break;
+          case 'b':
+            r += '\b';
+            break;
+          case 'f':
+            r += '\f';
+            break;
           case 'u': {
             if (i + 4 > s.size()) fail("bad \\u escape");
             unsigned cp = static_cast<unsigned>(std::strtoul(s.substr(i, 4).c_str(), nullptr, 16));
             i += 4;
-            if (cp < 0x80) r += static_cast<char>(cp);
+            if (cp < 0x80)
+              r += static_cast<char>(cp);
             else if (cp < 0x800) {
               r += static_cast<char>(0xC0 | (cp >> 6));
               r += static_cast<char>(0x80 | (cp & 0x3F));
@@ -168,7 +201,8 @@ struct Parser {
             }
             break;
           }
-          default: r += e;
+          default:
+            r += e;
         }
       } else {
         r += c;
@@ -186,7 +220,10 @@ struct Parser {
       ++i;
       Json o = Json::object();
       ws();
-      if (s[i] == '}') { ++i; return o; }
+      if (s[i] == '}') {
+        ++i;
+        return o;
+      }
       while (true) {
         ws();
         std::string k = str();
@@ -195,8 +232,14 @@ struct Parser {
         ++i;
         o[k] = value();
         ws();
-        if (i < s.size() && s[i] == ',') { ++i; continue; }
-        if (i < s.size() && s[i] == '}') { ++i; return o; }
+        if (i < s.size() && s[i] == ',') {
+          ++i;
+          continue;
+        }
+        if (i < s.size() && s[i] == '}') {
+          ++i;
+          return o;
+        }
         fail("expected ',' or '}'");
       }
     }
@@ -204,12 +247,21 @@ struct Parser {
       ++i;
       Json a = Json::array();
       ws();
-      if (s[i] == ']') { ++i; return a; }
+      if (s[i] == ']') {
+        ++i;
+        return a;
+      }
       while (true) {
         a.push_back(value());
         ws();
-        if (i < s.size() && s[i] == ',') { ++i; continue; }
-        if (i < s.size() && s[i] == ']') { ++i; return a; }
+        if (i < s.size() && s[i] == ',') {
+          ++i;
+          continue;
+        }
+        if (i < s.size() && s[i] == ']') {
+          ++i;
+          return a;
+        }
         fail("expected ',' or ']'");
       }
     }
@@ -223,7 +275,8 @@ struct Parser {
     if (end == begin) fail("unexpected character");
     std::string tok(begin, static_cast<std::size_t>(end - begin));
     i += static_cast<std::size_t>(end - begin);
-    if (tok.find_first_of(".eE") == std::string::npos) return Json(static_cast<long long>(std::strtoll(tok.c_str(), nullptr, 10)));
+    if (tok.find_first_of(".eE") == std::string::npos)
+      return Json(static_cast<long long>(std::strtoll(tok.c_str(), nullptr, 10)));
     return Json(d);
   }
 };

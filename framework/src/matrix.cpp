@@ -56,7 +56,8 @@ void setPath(YAML::Node root, const std::string& path, const YAML::Node& value) 
   for (std::size_t i = 0; i + 1 < keys.size(); ++i) {
     if (!cur[keys[i]] || cur[keys[i]].IsNull()) cur[keys[i]] = YAML::Node(YAML::NodeType::Map);
     YAML::Node next = cur[keys[i]];
-    if (!next.IsMap()) throw Error(fmt::format("'{}': '{}' is not a mapping in the base study", path, keys[i]));
+    if (!next.IsMap())
+      throw Error(fmt::format("'{}': '{}' is not a mapping in the base study", path, keys[i]));
     cur.reset(next);
   }
   cur[keys.back()] = YAML::Clone(value);
@@ -80,14 +81,18 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
   } catch (const YAML::Exception& e) {
     throw Error(fmt::format("{}:{}: malformed YAML: {}", file.string(), e.mark.line + 1, e.msg));
   }
-  if (!root.IsMap()) throw Error(fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
-  const std::vector<std::string> allowed = {"name", "base", "study", "axes", "cells", "cell_budget_s", "description"};
+  if (!root.IsMap())
+    throw Error(
+        fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
+  const std::vector<std::string> allowed = {"name",  "base",          "study",      "axes",
+                                            "cells", "cell_budget_s", "description"};
   for (const auto& kv : root) {
     const std::string key = kv.first.as<std::string>();
     if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
       std::string close = closestMatch(key, allowed);
-      throw Error(fmt::format("{}:{}: unknown key '{}'; allowed: {}{}", file.string(), kv.first.Mark().line + 1, key,
-                              fmt::join(allowed, ", "), close.empty() ? "" : "; did you mean '" + close + "'?"));
+      throw Error(fmt::format("{}:{}: unknown key '{}'; allowed: {}{}", file.string(),
+                              kv.first.Mark().line + 1, key, fmt::join(allowed, ", "),
+                              close.empty() ? "" : "; did you mean '" + close + "'?"));
     }
   }
   MatrixSpec spec;
@@ -103,7 +108,9 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
   YAML::Node base;
   fs::path base_dir = spec.file.parent_path();
   std::string base_name;
-  if (root["base"] && root["study"]) throw Error(fmt::format("{}: give either base (a file) or study (inline), not both", file.string()));
+  if (root["base"] && root["study"])
+    throw Error(
+        fmt::format("{}: give either base (a file) or study (inline), not both", file.string()));
   if (root["base"]) {
     fs::path bp = root["base"].as<std::string>();
     if (bp.is_relative()) bp = base_dir / bp;
@@ -118,20 +125,25 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
     base = YAML::Clone(root["study"]);
     base_name = file.string() + ":study";
   } else {
-    throw Error(fmt::format("{}: missing 'base' (a study file) or 'study' (an inline study)", file.string()));
+    throw Error(fmt::format("{}: missing 'base' (a study file) or 'study' (an inline study)",
+                            file.string()));
   }
   if (!base.IsMap()) throw Error(fmt::format("{}: the base study is not a mapping", base_name));
 
   std::vector<YAML::Node> overrides;  // one map {axis: value} per cell
-  if (root["axes"] && root["cells"]) throw Error(fmt::format("{}: give either axes or cells, not both", file.string()));
+  if (root["axes"] && root["cells"])
+    throw Error(fmt::format("{}: give either axes or cells, not both", file.string()));
   if (root["axes"]) {
     YAML::Node axes = root["axes"];
-    if (!axes.IsMap() || axes.size() == 0) throw Error(fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
+    if (!axes.IsMap() || axes.size() == 0)
+      throw Error(
+          fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
     overrides.push_back(YAML::Node(YAML::NodeType::Map));
     for (const auto& kv : axes) {
       const std::string axis = kv.first.as<std::string>();
       if (!kv.second.IsSequence() || kv.second.size() == 0)
-        throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values", file.string(), kv.second.Mark().line + 1, axis));
+        throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values",
+                                file.string(), kv.second.Mark().line + 1, axis));
       spec.axes.push_back(axis);
       std::vector<YAML::Node> next;
       for (const auto& o : overrides)
@@ -143,12 +155,16 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
       overrides = std::move(next);
     }
   } else if (root["cells"]) {
-    if (!root["cells"].IsSequence()) throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
+    if (!root["cells"].IsSequence())
+      throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
     for (const auto& c : root["cells"]) {
-      if (!c.IsMap()) throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(), c.Mark().line + 1));
+      if (!c.IsMap())
+        throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(),
+                                c.Mark().line + 1));
       for (const auto& kv : c) {
         const std::string axis = kv.first.as<std::string>();
-        if (std::find(spec.axes.begin(), spec.axes.end(), axis) == spec.axes.end()) spec.axes.push_back(axis);
+        if (std::find(spec.axes.begin(), spec.axes.end(), axis) == spec.axes.end())
+          spec.axes.push_back(axis);
       }
       overrides.push_back(YAML::Clone(c));
     }
@@ -168,12 +184,15 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
         if (!axis.empty() && axis[0] == '@') {
           // A composite axis: each value is a mapping of overrides, with an optional label.
           if (!kv.second.IsMap())
-            throw Error(fmt::format("axis '{}': each value must be a mapping {{label: ..., path: value, ...}}", axis));
+            throw Error(fmt::format(
+                "axis '{}': each value must be a mapping {{label: ..., path: value, ...}}", axis));
           std::string label;
           for (const auto& o : kv.second) {
             const std::string path = o.first.as<std::string>();
-            if (path == "label") label = o.second.as<std::string>();
-            else setPath(study, path, o.second);
+            if (path == "label")
+              label = o.second.as<std::string>();
+            else
+              setPath(study, path, o.second);
           }
           cell.coords.emplace_back(axis.substr(1), label.empty() ? flowText(kv.second) : label);
           continue;
@@ -184,24 +203,28 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
       }
       cell.coords.emplace_back(axis, valueLabel(kv.second));
     }
-    for (const auto& [a, v] : cell.coords) cell.label += (cell.label.empty() ? "" : " ") + a + "=" + v;
+    for (const auto& [a, v] : cell.coords)
+      cell.label += (cell.label.empty() ? "" : " ") + a + "=" + v;
     if (cell.label.empty()) cell.label = "base";
     study["name"] = fmt::format("{}_{}", spec.name, i);
     YAML::Emitter e;
     e << study;
     cell.yaml = std::string(e.c_str()) + "\n";
     try {
-      cell.config = parseStudy(cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
+      cell.config = parseStudy(
+          cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
       cell.hash = cell.config.hash();
       if (!hashes.insert(cell.hash).second)
-        problems.push_back(fmt::format("cell {} ({}): same configuration as an earlier cell", i, cell.label));
+        problems.push_back(
+            fmt::format("cell {} ({}): same configuration as an earlier cell", i, cell.label));
     } catch (const Error& err) {
       problems.push_back(err.what());
     }
     spec.cells.push_back(std::move(cell));
   }
   if (!problems.empty()) {
-    std::string msg = fmt::format("{}: {} problem{} in the matrix:", file.string(), problems.size(), problems.size() == 1 ? "" : "s");
+    std::string msg = fmt::format("{}: {} problem{} in the matrix:", file.string(), problems.size(),
+                                  problems.size() == 1 ? "" : "s");
     for (const auto& p : problems) msg += "\n  " + p;
     throw Error(msg);
   }
@@ -256,19 +279,42 @@ class Db {
         throw Error(fmt::format("{}: {}", d->path_, sqlite3_errmsg(d->db_)));
     }
     ~Stmt() { sqlite3_finalize(s); }
-    Stmt& bind(int i, const std::string& v) { sqlite3_bind_text(s, i, v.c_str(), -1, SQLITE_TRANSIENT); return *this; }
-    Stmt& bind(int i, double v) { if (std::isfinite(v)) sqlite3_bind_double(s, i, v); else sqlite3_bind_null(s, i); return *this; }
-    Stmt& bind(int i, long long v) { sqlite3_bind_int64(s, i, v); return *this; }
-    Stmt& bindNull(int i) { sqlite3_bind_null(s, i); return *this; }
+    Stmt& bind(int i, const std::string& v) {
+      sqlite3_bind_text(s, i, v.c_str(), -1, SQLITE_TRANSIENT);
+      return *this;
+    }
+    Stmt& bind(int i, double v) {
+      if (std::isfinite(v))
+        sqlite3_bind_double(s, i, v);
+      else
+        sqlite3_bind_null(s, i);
+      return *this;
+    }
+    Stmt& bind(int i, long long v) {
+      sqlite3_bind_int64(s, i, v);
+      return *this;
+    }
+    Stmt& bindNull(int i) {
+      sqlite3_bind_null(s, i);
+      return *this;
+    }
     bool step() {
       int rc = sqlite3_step(s);
       if (rc == SQLITE_ROW) return true;
       if (rc == SQLITE_DONE) return false;
       throw Error(fmt::format("{}: {}", db->path_, sqlite3_errmsg(db->db_)));
     }
-    void reset() { sqlite3_reset(s); sqlite3_clear_bindings(s); }
-    std::string text(int c) const { auto* t = sqlite3_column_text(s, c); return t ? reinterpret_cast<const char*>(t) : ""; }
-    double real(int c) const { return sqlite3_column_type(s, c) == SQLITE_NULL ? NAN : sqlite3_column_double(s, c); }
+    void reset() {
+      sqlite3_reset(s);
+      sqlite3_clear_bindings(s);
+    }
+    std::string text(int c) const {
+      auto* t = sqlite3_column_text(s, c);
+      return t ? reinterpret_cast<const char*>(t) : "";
+    }
+    double real(int c) const {
+      return sqlite3_column_type(s, c) == SQLITE_NULL ? NAN : sqlite3_column_double(s, c);
+    }
     long long integer(int c) const { return sqlite3_column_int64(s, c); }
   };
 
@@ -280,7 +326,8 @@ class Db {
   sqlite3* db_ = nullptr;
 };
 
-void flatten(const Json& j, const std::string& prefix, std::vector<std::pair<std::string, const Json*>>& out) {
+void flatten(const Json& j, const std::string& prefix,
+             std::vector<std::pair<std::string, const Json*>>& out) {
   if (j.isObject()) {
     for (const auto& [k, v] : j.items()) flatten(v, prefix.empty() ? k : prefix + "." + k, out);
   } else if (!j.isArray()) {
@@ -289,20 +336,40 @@ void flatten(const Json& j, const std::string& prefix, std::vector<std::pair<std
 }
 
 void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std::string& status,
-               const std::string& message, double wall_s, const std::string& started, const Json& summary) {
+               const std::string& message, double wall_s, const std::string& started,
+               const Json& summary) {
   db.exec("BEGIN IMMEDIATE");
   try {
     Db::Stmt(&db, "INSERT OR REPLACE INTO configs(hash, yaml, json) VALUES(?,?,?)")
-        .bind(1, cell.hash).bind(2, cell.config.resolvedYaml()).bind(3, cell.config.resolvedJson().dump(-1)).step();
-    Db::Stmt(&db, "DELETE FROM metrics WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
-    Db::Stmt(&db, "DELETE FROM axes WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
-    Db::Stmt(&db, "DELETE FROM progress WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)").bind(1, cell.hash).step();
+        .bind(1, cell.hash)
+        .bind(2, cell.config.resolvedYaml())
+        .bind(3, cell.config.resolvedJson().dump(-1))
+        .step();
+    Db::Stmt(&db, "DELETE FROM metrics WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)")
+        .bind(1, cell.hash)
+        .step();
+    Db::Stmt(&db, "DELETE FROM axes WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)")
+        .bind(1, cell.hash)
+        .step();
+    Db::Stmt(&db, "DELETE FROM progress WHERE run_id IN (SELECT id FROM runs WHERE hash = ?)")
+        .bind(1, cell.hash)
+        .step();
     Db::Stmt(&db, "DELETE FROM runs WHERE hash = ?").bind(1, cell.hash).step();
-    Db::Stmt(&db, "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, finished, summary) "
-                  "VALUES(?,?,?,?,?,?,?,?,?,?)")
-        .bind(1, spec.name).bind(2, static_cast<long long>(cell.index)).bind(3, cell.hash).bind(4, cell.label)
-        .bind(5, status).bind(6, message).bind(7, wall_s).bind(8, started).bind(9, isoNow())
-        .bind(10, summary.dump(-1)).step();
+    Db::Stmt(&db,
+             "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
+             "finished, summary) "
+             "VALUES(?,?,?,?,?,?,?,?,?,?)")
+        .bind(1, spec.name)
+        .bind(2, static_cast<long long>(cell.index))
+        .bind(3, cell.hash)
+        .bind(4, cell.label)
+        .bind(5, status)
+        .bind(6, message)
+        .bind(7, wall_s)
+        .bind(8, started)
+        .bind(9, isoNow())
+        .bind(10, summary.dump(-1))
+        .step();
     const long long run = db.lastId();
     {
       Db::Stmt ax(&db, "INSERT INTO axes(run_id, axis, value) VALUES(?,?,?)");
@@ -317,10 +384,18 @@ void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std
       Db::Stmt m(&db, "INSERT INTO metrics(run_id, name, type, real, text) VALUES(?,?,?,?,?)");
       for (const auto& [name, v] : flat) {
         m.bind(1, run).bind(2, name);
-        if (v->isNumber()) m.bind(3, std::string(v->type() == Json::Type::Int ? "int" : "real")).bind(4, v->asDouble()).bindNull(5);
-        else if (v->isString()) m.bind(3, std::string("text")).bindNull(4).bind(5, v->asString());
-        else if (v->type() == Json::Type::Bool) m.bind(3, std::string("bool")).bind(4, v->asBool() ? 1.0 : 0.0).bindNull(5);
-        else { m.reset(); continue; }
+        if (v->isNumber())
+          m.bind(3, std::string(v->type() == Json::Type::Int ? "int" : "real"))
+              .bind(4, v->asDouble())
+              .bindNull(5);
+        else if (v->isString())
+          m.bind(3, std::string("text")).bindNull(4).bind(5, v->asString());
+        else if (v->type() == Json::Type::Bool)
+          m.bind(3, std::string("bool")).bind(4, v->asBool() ? 1.0 : 0.0).bindNull(5);
+        else {
+          m.reset();
+          continue;
+        }
         m.step();
         m.reset();
       }
@@ -328,7 +403,12 @@ void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std
       auto alias = [&](const char* name, const char* path) {
         for (const auto& [n, v] : flat)
           if (n == path && v->isNumber()) {
-            m.bind(1, run).bind(2, std::string(name)).bind(3, std::string("real")).bind(4, v->asDouble()).bindNull(5).step();
+            m.bind(1, run)
+                .bind(2, std::string(name))
+                .bind(3, std::string("real"))
+                .bind(4, v->asDouble())
+                .bindNull(5)
+                .step();
             m.reset();
           }
       };
@@ -346,7 +426,11 @@ void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std
         const Json& ts = *h->find("t_s");
         const Json& vs = *h->find("value");
         for (std::size_t i = 0; i < std::min(ts.size(), vs.size()); ++i) {
-          p.bind(1, run).bind(2, std::string("criterion")).bind(3, ts.at(i).asDouble()).bind(4, vs.at(i).asDouble()).step();
+          p.bind(1, run)
+              .bind(2, std::string("criterion"))
+              .bind(3, ts.at(i).asDouble())
+              .bind(4, vs.at(i).asDouble())
+              .step();
           p.reset();
         }
       }
@@ -378,8 +462,12 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
   Db db(opt.out_dir / opt.database);
   {
     Db::Stmt(&db, "INSERT INTO matrices(name, file, started, exid_version, axes) VALUES(?,?,?,?,?)")
-        .bind(1, spec.name).bind(2, spec.file.string()).bind(3, isoNow()).bind(4, std::string(EXID_VERSION_STRING))
-        .bind(5, fmt::format("{}", fmt::join(spec.axes, ","))).step();
+        .bind(1, spec.name)
+        .bind(2, spec.file.string())
+        .bind(3, isoNow())
+        .bind(4, std::string(EXID_VERSION_STRING))
+        .bind(5, fmt::format("{}", fmt::join(spec.axes, ",")))
+        .step();
   }
   std::map<std::string, std::string> done;  // hash -> status
   {
@@ -398,22 +486,26 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
     }
     todo.push_back(&c);
   }
-  logInfo(fmt::format("matrix '{}': {} cells in this shard, {} already finished, {} to run on {} job{}", spec.name,
-                      sum.total, sum.skipped, todo.size(), opt.jobs, opt.jobs == 1 ? "" : "s"));
+  logInfo(fmt::format(
+      "matrix '{}': {} cells in this shard, {} already finished, {} to run on {} job{}", spec.name,
+      sum.total, sum.skipped, todo.size(), opt.jobs, opt.jobs == 1 ? "" : "s"));
 
   std::vector<Child> running;
   std::size_t next = 0;
   const double grace_s = 5.0;
   auto finish = [&](Child& ch, int status) {
-    const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+    const double wall =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
     std::string st, msg;
     Json summary = Json::object();
     if (ch.killed_for_time) {
       st = "timeout";
-      msg = fmt::format("over the cell budget of {} s (killed after {:.1f} s)", spec.cell_budget_s, wall);
+      msg = fmt::format("over the cell budget of {} s (killed after {:.1f} s)", spec.cell_budget_s,
+                        wall);
     } else if (WIFSIGNALED(status)) {
       st = "failed";
-      msg = fmt::format("the cell's process died with signal {} ({})", WTERMSIG(status), strsignal(WTERMSIG(status)));
+      msg = fmt::format("the cell's process died with signal {} ({})", WTERMSIG(status),
+                        strsignal(WTERMSIG(status)));
     } else {
       try {
         summary = Json::parse(ch.output);
@@ -423,20 +515,25 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
         if (st != "ok" && to && to->asBool()) st = "timeout";
       } catch (const std::exception& e) {
         st = "failed";
-        msg = fmt::format("the cell's process gave no summary (exit {}): {}", WIFEXITED(status) ? WEXITSTATUS(status) : -1, e.what());
+        msg = fmt::format("the cell's process gave no summary (exit {}): {}",
+                          WIFEXITED(status) ? WEXITSTATUS(status) : -1, e.what());
       }
     }
     recordRun(db, spec, *ch.cell, st, msg, wall, ch.started, summary);
-    if (st == "ok") ++sum.ok;
-    else if (st == "timeout") ++sum.timeout;
-    else ++sum.failed;
-    logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall, ch.cell->label,
-                        st == "ok" ? "" : "  (" + msg + ")"));
+    if (st == "ok")
+      ++sum.ok;
+    else if (st == "timeout")
+      ++sum.timeout;
+    else
+      ++sum.failed;
+    logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall,
+                        ch.cell->label, st == "ok" ? "" : "  (" + msg + ")"));
   };
 
   while ((next < todo.size() || !running.empty())) {
     const bool stop = opt.cancelled && opt.cancelled();
-    while (!stop && next < todo.size() && static_cast<int>(running.size()) < std::max(1, opt.jobs)) {
+    while (!stop && next < todo.size() &&
+           static_cast<int>(running.size()) < std::max(1, opt.jobs)) {
       const MatrixCell* cell = todo[next++];
       int fds[2];
       if (::pipe(fds) != 0) throw Error("matrix: cannot create a pipe");
@@ -489,7 +586,8 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
       }
       sum.not_run = static_cast<int>(todo.size() - next + running.size());
       running.clear();
-      logWarn(fmt::format("matrix '{}': interrupted; {} cells not run (finished cells are saved)", spec.name, sum.not_run));
+      logWarn(fmt::format("matrix '{}': interrupted; {} cells not run (finished cells are saved)",
+                          spec.name, sum.not_run));
       break;
     }
     std::vector<pollfd> pfds;
@@ -500,10 +598,13 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
       char buf[65536];
       while (true) {
         ssize_t n = ::read(ch.fd, buf, sizeof buf);
-        if (n > 0) ch.output.append(buf, static_cast<std::size_t>(n));
-        else break;
+        if (n > 0)
+          ch.output.append(buf, static_cast<std::size_t>(n));
+        else
+          break;
       }
-      const double age = std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+      const double age =
+          std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
       if (spec.cell_budget_s > 0 && !ch.killed_for_time && age > spec.cell_budget_s + grace_s) {
         ch.killed_for_time = true;
         ::kill(ch.pid, SIGKILL);
@@ -513,8 +614,10 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
       if (w == ch.pid) {
         while (true) {
           ssize_t n = ::read(ch.fd, buf, sizeof buf);
-          if (n > 0) ch.output.append(buf, static_cast<std::size_t>(n));
-          else break;
+          if (n > 0)
+            ch.output.append(buf, static_cast<std::size_t>(n));
+          else
+            break;
         }
         ::close(ch.fd);
         finish(ch, status);
@@ -541,7 +644,8 @@ std::vector<std::string> matrixMetrics(const fs::path& path) {
 
 MatrixTable matrixTable(const fs::path& path, const std::vector<std::string>& rows,
                         const std::vector<std::string>& cols, const std::string& metric) {
-  check(fs::exists(path), fmt::format("{}: no such database (run exid matrix first)", path.string()));
+  check(fs::exists(path),
+        fmt::format("{}: no such database (run exid matrix first)", path.string()));
   Db db(path);
   // Resolve the metric name.
   std::vector<std::string> names;
@@ -563,16 +667,25 @@ MatrixTable matrixTable(const fs::path& path, const std::vector<std::string>& ro
   if (name.empty()) {
     std::string close = closestMatch(metric, names);
     throw Error(fmt::format("unknown metric '{}'{}; available: {}", metric,
-                            close.empty() ? "" : "; did you mean '" + close + "'?", fmt::join(names, ", ")));
+                            close.empty() ? "" : "; did you mean '" + close + "'?",
+                            fmt::join(names, ", ")));
   }
   std::set<std::string> axes;
   {
     Db::Stmt s(&db, "SELECT DISTINCT axis FROM axes");
     while (s.step()) axes.insert(s.text(0));
   }
-  for (const auto& a : rows) check(axes.count(a) > 0, fmt::format("--rows {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
-  for (const auto& a : cols) check(axes.count(a) > 0, fmt::format("--cols {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
-  struct Cell { double sum = 0; int n = 0; int bad = 0; };
+  for (const auto& a : rows)
+    check(axes.count(a) > 0,
+          fmt::format("--rows {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
+  for (const auto& a : cols)
+    check(axes.count(a) > 0,
+          fmt::format("--cols {}: not an axis of this matrix; axes: {}", a, fmt::join(axes, ", ")));
+  struct Cell {
+    double sum = 0;
+    int n = 0;
+    int bad = 0;
+  };
   std::map<std::string, std::map<std::string, Cell>> table;
   std::vector<std::string> row_keys, col_keys;
   Db::Stmt runs(&db, "SELECT id, status FROM runs ORDER BY cell");
@@ -606,9 +719,11 @@ MatrixTable matrixTable(const fs::path& path, const std::vector<std::string>& ro
     }
   }
   MatrixTable out;
-  const std::string corner = rows.empty() ? std::string("") : fmt::format("{}", fmt::join(rows, ", "));
-  out.markdown = fmt::format("{} (mean over cells; `n/a`: failed or missing)\n\n| {} \\ {} |", name, corner,
-                             cols.empty() ? std::string("") : fmt::format("{}", fmt::join(cols, ", ")));
+  const std::string corner =
+      rows.empty() ? std::string("") : fmt::format("{}", fmt::join(rows, ", "));
+  out.markdown =
+      fmt::format("{} (mean over cells; `n/a`: failed or missing)\n\n| {} \\ {} |", name, corner,
+                  cols.empty() ? std::string("") : fmt::format("{}", fmt::join(cols, ", ")));
   out.csv = "\"" + corner + "\"";
   for (const auto& ck : col_keys) {
     out.markdown += " " + ck + " |";
@@ -652,7 +767,9 @@ int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sour
   for (const auto& src : sources) {
     check(fs::exists(src), fmt::format("{}: no such database", src.string()));
     Db in(src);
-    Db::Stmt runs(&in, "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, finished, summary FROM runs");
+    Db::Stmt runs(&in,
+                  "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, "
+                  "finished, summary FROM runs");
     while (runs.step()) {
       const std::string hash = runs.text(3);
       {
@@ -662,29 +779,59 @@ int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sour
       }
       db.exec("BEGIN IMMEDIATE");
       try {
-        Db::Stmt(&db, "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, finished, summary) "
-                      "VALUES(?,?,?,?,?,?,?,?,?,?)")
-            .bind(1, runs.text(1)).bind(2, runs.integer(2)).bind(3, hash).bind(4, runs.text(4)).bind(5, runs.text(5))
-            .bind(6, runs.text(6)).bind(7, runs.real(7)).bind(8, runs.text(8)).bind(9, runs.text(9)).bind(10, runs.text(10)).step();
+        Db::Stmt(&db,
+                 "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
+                 "finished, summary) "
+                 "VALUES(?,?,?,?,?,?,?,?,?,?)")
+            .bind(1, runs.text(1))
+            .bind(2, runs.integer(2))
+            .bind(3, hash)
+            .bind(4, runs.text(4))
+            .bind(5, runs.text(5))
+            .bind(6, runs.text(6))
+            .bind(7, runs.real(7))
+            .bind(8, runs.text(8))
+            .bind(9, runs.text(9))
+            .bind(10, runs.text(10))
+            .step();
         const long long id = db.lastId();
         const long long old = runs.integer(0);
         Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
         ax.bind(1, old);
-        while (ax.step()) Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)").bind(1, id).bind(2, ax.text(0)).bind(3, ax.text(1)).step();
+        while (ax.step())
+          Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)")
+              .bind(1, id)
+              .bind(2, ax.text(0))
+              .bind(3, ax.text(1))
+              .step();
         Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
         mt.bind(1, old);
         while (mt.step()) {
           Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
           ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
-          if (std::isfinite(mt.real(2))) ins.bind(4, mt.real(2)); else ins.bindNull(4);
+          if (std::isfinite(mt.real(2)))
+            ins.bind(4, mt.real(2));
+          else
+            ins.bindNull(4);
           ins.bind(5, mt.text(3)).step();
         }
         Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
         pr.bind(1, old);
-        while (pr.step()) Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)").bind(1, id).bind(2, pr.text(0)).bind(3, pr.real(1)).bind(4, pr.real(2)).step();
+        while (pr.step())
+          Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)")
+              .bind(1, id)
+              .bind(2, pr.text(0))
+              .bind(3, pr.real(1))
+              .bind(4, pr.real(2))
+              .step();
         Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
         cf.bind(1, hash);
-        if (cf.step()) Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)").bind(1, hash).bind(2, cf.text(0)).bind(3, cf.text(1)).step();
+        if (cf.step())
+          Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)")
+              .bind(1, hash)
+              .bind(2, cf.text(0))
+              .bind(3, cf.text(1))
+              .step();
         db.exec("COMMIT");
         ++copied;
       } catch (...) {

@@ -12,14 +12,22 @@ namespace exid {
 
 const char* toString(ParamType t) {
   switch (t) {
-    case ParamType::Bool: return "bool";
-    case ParamType::Int: return "int";
-    case ParamType::Double: return "double";
-    case ParamType::String: return "string";
-    case ParamType::Path: return "path";
-    case ParamType::IntList: return "list of int";
-    case ParamType::DoubleList: return "list of double";
-    case ParamType::StringList: return "list of string";
+    case ParamType::Bool:
+      return "bool";
+    case ParamType::Int:
+      return "int";
+    case ParamType::Double:
+      return "double";
+    case ParamType::String:
+      return "string";
+    case ParamType::Path:
+      return "path";
+    case ParamType::IntList:
+      return "list of int";
+    case ParamType::DoubleList:
+      return "list of double";
+    case ParamType::StringList:
+      return "list of string";
   }
   return "?";
 }
@@ -34,9 +42,12 @@ std::string joinList(const std::vector<T>& v) {
   std::string s = "[";
   for (std::size_t i = 0; i < v.size(); ++i) {
     if (i) s += ", ";
-    if constexpr (std::is_same_v<T, double>) s += fmtDouble(v[i]);
-    else if constexpr (std::is_same_v<T, std::string>) s += v[i];
-    else s += std::to_string(v[i]);
+    if constexpr (std::is_same_v<T, double>)
+      s += fmtDouble(v[i]);
+    else if constexpr (std::is_same_v<T, std::string>)
+      s += v[i];
+    else
+      s += std::to_string(v[i]);
   }
   return s + "]";
 }
@@ -46,11 +57,16 @@ std::string formatValue(const ParamValue& v) {
   return std::visit(
       [](const auto& x) -> std::string {
         using T = std::decay_t<decltype(x)>;
-        if constexpr (std::is_same_v<T, bool>) return x ? "true" : "false";
-        else if constexpr (std::is_same_v<T, std::int64_t>) return std::to_string(x);
-        else if constexpr (std::is_same_v<T, double>) return fmtDouble(x);
-        else if constexpr (std::is_same_v<T, std::string>) return x;
-        else return joinList(x);
+        if constexpr (std::is_same_v<T, bool>)
+          return x ? "true" : "false";
+        else if constexpr (std::is_same_v<T, std::int64_t>)
+          return std::to_string(x);
+        else if constexpr (std::is_same_v<T, double>)
+          return fmtDouble(x);
+        else if constexpr (std::is_same_v<T, std::string>)
+          return x;
+        else
+          return joinList(x);
       },
       v);
 }
@@ -80,7 +96,8 @@ std::string ParamDecl::violation(const ParamValue& v) const {
     return r.empty() ? std::string("must be finite") : "must be in " + r;
   };
   auto sizeMsg = [&](std::size_t n) -> std::string {
-    if (static_cast<int>(n) < min_size) return fmt::format("must have at least {} elements (has {})", min_size, n);
+    if (static_cast<int>(n) < min_size)
+      return fmt::format("must have at least {} elements (has {})", min_size, n);
     if (max_size >= 0 && static_cast<int>(n) > max_size)
       return fmt::format("must have at most {} elements (has {})", max_size, n);
     return "";
@@ -92,7 +109,8 @@ std::string ParamDecl::violation(const ParamValue& v) const {
     return false;
   };
   if (auto* d = std::get_if<double>(&v)) return numberOk(*d) ? "" : rangeMsg();
-  if (auto* i = std::get_if<std::int64_t>(&v)) return numberOk(static_cast<double>(*i)) ? "" : rangeMsg();
+  if (auto* i = std::get_if<std::int64_t>(&v))
+    return numberOk(static_cast<double>(*i)) ? "" : rangeMsg();
   if (auto* s = std::get_if<std::string>(&v)) return choiceOk(*s) ? "" : "must be " + rangeText();
   if (auto* dl = std::get_if<std::vector<double>>(&v)) {
     if (auto m = sizeMsg(dl->size()); !m.empty()) return m;
@@ -103,7 +121,8 @@ std::string ParamDecl::violation(const ParamValue& v) const {
   if (auto* il = std::get_if<std::vector<std::int64_t>>(&v)) {
     if (auto m = sizeMsg(il->size()); !m.empty()) return m;
     for (std::size_t k = 0; k < il->size(); ++k)
-      if (!numberOk(static_cast<double>((*il)[k]))) return fmt::format("element {} {}", k, rangeMsg());
+      if (!numberOk(static_cast<double>((*il)[k])))
+        return fmt::format("element {} {}", k, rangeMsg());
     return "";
   }
   if (auto* sl = std::get_if<std::vector<std::string>>(&v)) {
@@ -167,8 +186,8 @@ ParamDecl param_path(std::string name, std::optional<std::string> def, std::stri
   d.doc = std::move(doc);
   return d;
 }
-ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def,
-                        std::string unit, std::string doc, int min_size, int max_size) {
+ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def, std::string unit,
+                        std::string doc, int min_size, int max_size) {
   ParamDecl d;
   d.name = std::move(name);
   d.type = ParamType::DoubleList;
@@ -214,8 +233,8 @@ template <class T>
 const T& getAs(const ParamSet& ps, const std::string& name, const char* what) {
   const ParamValue& v = ps.at(name);
   if (auto* p = std::get_if<T>(&v)) return *p;
-  throw Error(fmt::format("{}.{}: expected {}, found '{}'", ps.context.empty() ? "params" : ps.context,
-                          name, what, formatValue(v)));
+  throw Error(fmt::format("{}.{}: expected {}, found '{}'",
+                          ps.context.empty() ? "params" : ps.context, name, what, formatValue(v)));
 }
 }  // namespace
 

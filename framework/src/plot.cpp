@@ -93,8 +93,10 @@ PlotOutcome drawPlot(const PlotSpec& spec, const fs::path& dir) {
     for (std::size_t i = 0; i < spec.series.size(); ++i) {
       const auto& s = spec.series[i];
       if (i) csv += ",";
-      if (s.style == "band") csv += num(s.x, r) + "," + num(s.y_low, r) + "," + num(s.y_high, r);
-      else csv += num(s.x, r) + "," + num(s.y, r);
+      if (s.style == "band")
+        csv += num(s.x, r) + "," + num(s.y_low, r) + "," + num(s.y_high, r);
+      else
+        csv += num(s.x, r) + "," + num(s.y, r);
     }
     csv += "\n";
   }
@@ -112,19 +114,24 @@ PlotOutcome drawPlot(const PlotSpec& spec, const fs::path& dir) {
     const int c = first_col[i];
     std::string item;
     if (s.style == "band")
-      item = fmt::format("{} using {}:{}:{} with filledcurves fs transparent solid 0.25 noborder title {}",
-                         quote((plots / (spec.name + ".csv")).string()), c, c + 1, c + 2, quote(s.title));
+      item = fmt::format(
+          "{} using {}:{}:{} with filledcurves fs transparent solid 0.25 noborder title {}",
+          quote((plots / (spec.name + ".csv")).string()), c, c + 1, c + 2, quote(s.title));
     else
-      item = fmt::format("{} using {}:{} with {} title {}", quote((plots / (spec.name + ".csv")).string()), c,
-                         c + 1, s.style == "boxes" ? "boxes fs solid 0.5" : s.style, quote(s.title));
+      item = fmt::format("{} using {}:{} with {} title {}",
+                         quote((plots / (spec.name + ".csv")).string()), c, c + 1,
+                         s.style == "boxes" ? "boxes fs solid 0.5" : s.style, quote(s.title));
     plot_cmd += (i ? ", \\\n  " : "") + item;
   }
   auto script = [&](const std::string& terminal, const fs::path& file) {
-    std::string g = "set datafile separator ','\nset key autotitle columnhead\nset key outside bottom center horizontal\n";
+    std::string g =
+        "set datafile separator ','\nset key autotitle columnhead\nset key outside bottom center "
+        "horizontal\n";
     g += "set terminal " + terminal + "\n";
     g += "set output " + quote(file.string()) + "\n";
     g += "set title " + quote(spec.title) + " noenhanced\n";
-    g += "set xlabel " + quote(spec.xlabel) + " noenhanced\nset ylabel " + quote(spec.ylabel) + " noenhanced\n";
+    g += "set xlabel " + quote(spec.xlabel) + " noenhanced\nset ylabel " + quote(spec.ylabel) +
+         " noenhanced\n";
     g += "set grid\n";
     if (spec.log_y) g += "set logscale y\n";
     g += "plot " + plot_cmd + "\n";
@@ -142,7 +149,8 @@ PlotOutcome drawPlot(const PlotSpec& spec, const fs::path& dir) {
     std::error_code ec;
     if (rc != 0 || !fs::exists(tmp) || fs::file_size(tmp, ec) == 0) {
       fs::remove(tmp, ec);
-      out.missing_why = fmt::format("gnuplot ({}) failed with exit code {} for the {} picture", program, rc, ext);
+      out.missing_why =
+          fmt::format("gnuplot ({}) failed with exit code {} for the {} picture", program, rc, ext);
       continue;
     }
     fs::rename(tmp, final_file, ec);

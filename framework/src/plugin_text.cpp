@@ -9,7 +9,8 @@ std::string paramLine(const ParamDecl& d) {
   std::string def = d.default_value ? formatValue(*d.default_value) : std::string("(required)");
   std::string range = d.rangeText();
   return fmt::format("      {:<22} {:<15} default {:<12}{}{}  {}\n", d.name, toString(d.type), def,
-                     d.unit.empty() ? "" : " [" + d.unit + "]", range.empty() ? "" : " " + range, d.doc);
+                     d.unit.empty() ? "" : " [" + d.unit + "]", range.empty() ? "" : " " + range,
+                     d.doc);
 }
 }  // namespace
 

@@ -46,19 +46,23 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
     if (llt.info() != Eigen::Success || !(prior.covariance.diagonal().minCoeff() > 0)) {
       std::string zero;
       for (int i = 0; i < p; ++i)
-        if (!(prior.covariance(i, i) > 0)) zero += (zero.empty() ? "" : ", ") + b.names[static_cast<std::size_t>(i)];
-      throw Error(fmt::format("prior (from: robot): the prior covariance of the base parameters is not positive "
-                              "definite (zero variance: {}); the robot's nominal values of these are zero, "
-                              "give prior.absolute_std > 0",
-                              zero.empty() ? "none" : zero));
+        if (!(prior.covariance(i, i) > 0))
+          zero += (zero.empty() ? "" : ", ") + b.names[static_cast<std::size_t>(i)];
+      throw Error(fmt::format(
+          "prior (from: robot): the prior covariance of the base parameters is not positive "
+          "definite (zero variance: {}); the robot's nominal values of these are zero, "
+          "give prior.absolute_std > 0",
+          zero.empty() ? "none" : zero));
     }
     return prior;
   }
   // from: study -- parameters.csv of an earlier study (name, value, std by base parameter)
   const auto file = spec.study / "parameters.csv";
   std::ifstream in(file);
-  check(static_cast<bool>(in), fmt::format("prior (from: study): cannot read {} (the output folder of a study "
-                                           "with an estimator)", file.string()));
+  check(static_cast<bool>(in),
+        fmt::format("prior (from: study): cannot read {} (the output folder of a study "
+                    "with an estimator)",
+                    file.string()));
   std::string line;
   check(static_cast<bool>(std::getline(in, line)), fmt::format("{}: empty file", file.string()));
   const auto head = splitCsvLine(line);
@@ -90,13 +94,16 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   for (int i = 0; i < p; ++i) {
     const std::string& n = b.names[static_cast<std::size_t>(i)];
     auto it = rows.find(n);
-    check(it != rows.end(), fmt::format("prior (from: study): {} has no base parameter '{}' (the studies must "
-                                        "share the robot and the observation model)",
-                                        file.string(), n));
-    check(std::isfinite(it->second.first) && std::isfinite(it->second.second) && it->second.second > 0,
-          fmt::format("prior (from: study): {}: '{}' needs a finite value and a positive finite std "
-                      "(found {} and {})",
-                      file.string(), n, it->second.first, it->second.second));
+    check(it != rows.end(),
+          fmt::format("prior (from: study): {} has no base parameter '{}' (the studies must "
+                      "share the robot and the observation model)",
+                      file.string(), n));
+    check(
+        std::isfinite(it->second.first) && std::isfinite(it->second.second) &&
+            it->second.second > 0,
+        fmt::format("prior (from: study): {}: '{}' needs a finite value and a positive finite std "
+                    "(found {} and {})",
+                    file.string(), n, it->second.first, it->second.second));
     prior.value(i) = it->second.first;
     sd(i) = spec.scale * it->second.second;
   }

@@ -17,19 +17,26 @@ namespace fs = std::filesystem;
 
 const char* toString(PluginKind k) {
   switch (k) {
-    case PluginKind::Robot: return "robot";
-    case PluginKind::Model: return "model";
-    case PluginKind::Criterion: return "criterion";
-    case PluginKind::Trajectory: return "trajectory";
-    case PluginKind::Optimizer: return "optimizer";
-    case PluginKind::Experiment: return "experiment";
-    case PluginKind::Estimator: return "estimator";
+    case PluginKind::Robot:
+      return "robot";
+    case PluginKind::Model:
+      return "model";
+    case PluginKind::Criterion:
+      return "criterion";
+    case PluginKind::Trajectory:
+      return "trajectory";
+    case PluginKind::Optimizer:
+      return "optimizer";
+    case PluginKind::Experiment:
+      return "experiment";
+    case PluginKind::Estimator:
+      return "estimator";
   }
   return "?";
 }
 
 std::vector<PluginKind> allPluginKinds() {
-  return {PluginKind::Robot,     PluginKind::Model,      PluginKind::Criterion,
+  return {PluginKind::Robot,      PluginKind::Model,     PluginKind::Criterion,
           PluginKind::Trajectory, PluginKind::Optimizer, PluginKind::Experiment,
           PluginKind::Estimator};
 }
@@ -109,7 +116,7 @@ struct Registry::Impl {
     }
     fs::path exe = executableDir();
     if (!exe.empty()) {
-      out.push_back(exe.parent_path() / "plugins");                 // build tree: build/bin/exid
+      out.push_back(exe.parent_path() / "plugins");                   // build tree: build/bin/exid
       out.push_back(exe.parent_path() / "lib" / "exid" / "plugins");  // install: prefix/bin/exid
     }
     out.emplace_back(EXID_PLUGIN_BUILD_DIR);
@@ -136,8 +143,8 @@ struct Registry::Impl {
     if (library_of.count(key)) return "";
     auto lib = std::make_shared<boost::dll::shared_library>();
     try {
-      lib->load(boost::dll::fs::path(file), boost::dll::load_mode::rtld_now |
-                                                boost::dll::load_mode::rtld_local);
+      lib->load(boost::dll::fs::path(file),
+                boost::dll::load_mode::rtld_now | boost::dll::load_mode::rtld_local);
     } catch (const std::exception& e) {
       return fmt::format("cannot be loaded: {}", e.what());
     }
@@ -148,12 +155,13 @@ struct Registry::Impl {
     const exid_manifest* m = entry();
     if (m == nullptr) return "its entry point returned no manifest";
     if (m->abi_version != EXID_PLUGIN_ABI_VERSION)
-      return fmt::format("plugin ABI version mismatch: expected {}, found {} (rebuild the plugin "
-                         "against this exid)",
-                         EXID_PLUGIN_ABI_VERSION, m->abi_version);
+      return fmt::format(
+          "plugin ABI version mismatch: expected {}, found {} (rebuild the plugin "
+          "against this exid)",
+          EXID_PLUGIN_ABI_VERSION, m->abi_version);
     if (m->manifest_size != sizeof(exid_manifest))
-      return fmt::format("manifest size mismatch: expected {}, found {}",
-                         sizeof(exid_manifest), m->manifest_size);
+      return fmt::format("manifest size mismatch: expected {}, found {}", sizeof(exid_manifest),
+                         m->manifest_size);
     const exid_build_fingerprint core = coreFingerprint();
     const exid_build_fingerprint& f = m->fingerprint;
     auto same = [](const char* a, const char* b) {
@@ -269,8 +277,9 @@ const PluginInfo* Registry::find(PluginKind kind, const std::string& name) const
 std::string Registry::unknownMessage(PluginKind kind, const std::string& name) const {
   std::vector<std::string> names;
   for (const PluginInfo* p : plugins(kind)) names.push_back(p->name);
-  std::string msg = fmt::format("unknown {} '{}'; available: {}", toString(kind), name,
-                                names.empty() ? std::string("(none found)") : fmt::format("{}", fmt::join(names, ", ")));
+  std::string msg = fmt::format(
+      "unknown {} '{}'; available: {}", toString(kind), name,
+      names.empty() ? std::string("(none found)") : fmt::format("{}", fmt::join(names, ", ")));
   std::string close = closestMatch(name, names);
   if (!close.empty()) msg += fmt::format("; did you mean '{}'?", close);
   if (names.empty()) {
@@ -296,13 +305,14 @@ std::shared_ptr<PluginObject> Registry::createObject(const PluginInfo& info,
   try {
     obj = info.factory(params);
   } catch (const std::exception& e) {
-    throw Error(fmt::format("{} '{}' could not be created: {}", toString(info.kind), info.name,
-                            e.what()));
+    throw Error(
+        fmt::format("{} '{}' could not be created: {}", toString(info.kind), info.name, e.what()));
   } catch (...) {
-    throw Error(fmt::format("{} '{}' could not be created: unknown exception",
-                            toString(info.kind), info.name));
+    throw Error(fmt::format("{} '{}' could not be created: unknown exception", toString(info.kind),
+                            info.name));
   }
-  if (!obj) throw Error(fmt::format("{} '{}': factory returned nothing", toString(info.kind), info.name));
+  if (!obj)
+    throw Error(fmt::format("{} '{}': factory returned nothing", toString(info.kind), info.name));
   obj->setPluginName(info.name);
   // The deleter holds the library: it stays loaded while the object lives.
   return std::shared_ptr<PluginObject>(obj.release(), [lib](PluginObject* p) { delete p; });

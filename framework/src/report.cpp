@@ -18,17 +18,21 @@ Report::Report(const StudyConfig& cfg, std::filesystem::path out_dir)
 
 void Report::model(const ObservationModel& m) {
   const BaseParameters& b = m.base();
-  std::string s = fmt::format("## Observation model `{}`\n\n{} full parameters, {} base parameters "
-                              "(QR with column pivoting over random samples, tolerance {:g}).\n\n"
-                              "| base parameter | expression |\n|---|---|\n",
-                              m.pluginName(), b.numFull(), b.rank(), b.tolerance);
+  std::string s = fmt::format(
+      "## Observation model `{}`\n\n{} full parameters, {} base parameters "
+      "(QR with column pivoting over random samples, tolerance {:g}).\n\n"
+      "| base parameter | expression |\n|---|---|\n",
+      m.pluginName(), b.numFull(), b.rank(), b.tolerance);
   for (int i = 0; i < b.rank(); ++i)
-    s += fmt::format("| {} | {} |\n", b.names[static_cast<std::size_t>(i)], b.expressions[static_cast<std::size_t>(i)]);
+    s += fmt::format("| {} | {} |\n", b.names[static_cast<std::size_t>(i)],
+                     b.expressions[static_cast<std::size_t>(i)]);
   sections_.push_back(s);
 }
 
 namespace {
-std::vector<double> vec(const Eigen::VectorXd& v) { return std::vector<double>(v.data(), v.data() + v.size()); }
+std::vector<double> vec(const Eigen::VectorXd& v) {
+  return std::vector<double>(v.data(), v.data() + v.size());
+}
 }  // namespace
 
 void Report::excitation(const Samples& initial, const Samples& optimal, const OptimizerResult& r,
@@ -64,13 +68,15 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
     p.ylabel = "sigma";
     p.log_y = true;
     std::vector<double> idx;
-    for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i) idx.push_back(static_cast<double>(i + 1));
+    for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i)
+      idx.push_back(static_cast<double>(i + 1));
     p.series.push_back({"starting", idx, vec(svd0.singularValues()), "linespoints", {}, {}});
     p.series.push_back({"optimal", idx, vec(svd.singularValues()), "linespoints", {}, {}});
     plots_.emplace_back(sec, p);
   }
   std::string s = fmt::format(
-      "## Excitation\n\nCriterion `{}`: {:.6g} -> {:.6g} in {} iterations, {} evaluations, {:.3g} s "
+      "## Excitation\n\nCriterion `{}`: {:.6g} -> {:.6g} in {} iterations, {} evaluations, {:.3g} "
+      "s "
       "({}).\nLargest constraint violation at the optimum: {:.3g}.\n\nSingular values of the base "
       "design matrix W at the optimum (cond(W) = sigma_max / sigma_min = {:.6g}):\n\n",
       cfg_.criterion ? cfg_.criterion->type : "?", r.criterion_initial, r.criterion_final,
@@ -79,7 +85,8 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
   s += "```\n";
   for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i)
     s += fmt::format("{:.6g}{}", svd.singularValues()(i), (i + 1) % 8 == 0 ? "\n" : " ");
-  s += "\n```\n\nTables: `trajectory_initial.csv`, `trajectory_optimal.csv`, `criterion_history.csv`.\n";
+  s += "\n```\n\nTables: `trajectory_initial.csv`, `trajectory_optimal.csv`, "
+       "`criterion_history.csv`.\n";
   sections_.push_back(s);
 }
 
@@ -94,13 +101,14 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
   for (Eigen::Index i = 0; i < e.value.size(); ++i) {
     const double sd = e.std.size() > i ? e.std(i) : NAN;
     const double rel = e.value(i) != 0 ? 100.0 * sd / std::abs(e.value(i)) : NAN;
-    s += fmt::format("| {} | {:.6g} | {:.3g} | {:.3g} | {:.6g} |\n", e.names[static_cast<std::size_t>(i)],
-                     e.value(i), sd, rel, nominal(i));
+    s += fmt::format("| {} | {:.6g} | {:.3g} | {:.3g} | {:.6g} |\n",
+                     e.names[static_cast<std::size_t>(i)], e.value(i), sd, rel, nominal(i));
     t.data.row(i) << static_cast<double>(i), e.value(i), sd, rel, nominal(i);
   }
   std::string csv = "name," + toCsv(t);
   // prepend names column
-  std::string named = "name,index,value,std,rel_std_percent," + std::string(simulated ? "true" : "nominal") + "\n";
+  std::string named =
+      "name,index,value,std,rel_std_percent," + std::string(simulated ? "true" : "nominal") + "\n";
   for (Eigen::Index i = 0; i < e.value.size(); ++i)
     named += fmt::format("{},{},{},{},{},{}\n", e.names[static_cast<std::size_t>(i)], i, e.value(i),
                          t.data(i, 2), t.data(i, 3), t.data(i, 4));
@@ -115,8 +123,9 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
     h.data.middleCols(1, e.value.size()) = e.history_value;
     h.data.middleCols(1 + e.value.size(), e.value.size()) = e.history_pdiag;
     files_.emplace_back("estimate_history.csv", toCsv(h));
-    s += "\nEstimate history (recursive): `estimate_history.csv`; bands are +-2 sigma, sigma_i(t) = "
-         "sigma * sqrt(P_ii(t)).\n";
+    s +=
+        "\nEstimate history (recursive): `estimate_history.csv`; bands are +-2 sigma, sigma_i(t) = "
+        "sigma * sqrt(P_ii(t)).\n";
     const Eigen::Index shown = std::min<Eigen::Index>(e.value.size(), 8);
     for (Eigen::Index i = 0; i < shown; ++i) {
       PlotSpec p;
@@ -131,13 +140,19 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
         hi.push_back(e.history_value(k, i) + 2 * sd);
       }
       p.series.push_back({"+-2 sigma", vec(e.history_t), {}, "band", lo, hi});
-      p.series.push_back({"estimate", vec(e.history_t), vec(e.history_value.col(i)), "lines", {}, {}});
-      p.series.push_back({simulated ? "true" : "nominal", {e.history_t(0), e.history_t(e.history_t.size() - 1)},
-                          {nominal(i), nominal(i)}, "lines", {}, {}});
+      p.series.push_back(
+          {"estimate", vec(e.history_t), vec(e.history_value.col(i)), "lines", {}, {}});
+      p.series.push_back({simulated ? "true" : "nominal",
+                          {e.history_t(0), e.history_t(e.history_t.size() - 1)},
+                          {nominal(i), nominal(i)},
+                          "lines",
+                          {},
+                          {}});
       plots_.emplace_back(sections_.size(), p);
     }
     if (e.value.size() > shown)
-      s += fmt::format("\n(Plots of the first {} of {} parameters; all are in the CSV.)\n", shown, e.value.size());
+      s += fmt::format("\n(Plots of the first {} of {} parameters; all are in the CSV.)\n", shown,
+                       e.value.size());
   }
   sections_.push_back(s);
 }
@@ -181,13 +196,15 @@ void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted, cons
     p.series.push_back({"residuals", centers, counts, "boxes", {}, {}});
     plots_.emplace_back(sec, p);
   }
-  std::string s = fmt::format("## Validation\n\n{} rows; relative error ||y - y_hat|| / ||y|| = {:.4g}.\n\n"
-                              "| equation | RMS error | relative |\n|---|---|---|\n",
-                              rows.y.size(), v.find("relative_error")->asDouble());
+  std::string s = fmt::format(
+      "## Validation\n\n{} rows; relative error ||y - y_hat|| / ||y|| = {:.4g}.\n\n"
+      "| equation | RMS error | relative |\n|---|---|---|\n",
+      rows.y.size(), v.find("relative_error")->asDouble());
   const Json* rms = v.find("rms_per_joint");
   const Json* rel = v.find("relative_error_per_joint");
   for (std::size_t i = 0; rms && i < rms->size(); ++i)
-    s += fmt::format("| {} | {:.4g} | {:.4g} |\n", i + 1, rms->at(i).asDouble(), rel->at(i).asDouble());
+    s += fmt::format("| {} | {:.4g} | {:.4g} |\n", i + 1, rms->at(i).asDouble(),
+                     rel->at(i).asDouble());
   s += "\nMeasured vs predicted: `validation.csv`.\n";
   sections_.push_back(s);
 }
@@ -197,10 +214,14 @@ namespace {
 std::string htmlEscape(const std::string& s) {
   std::string o;
   for (char c : s) {
-    if (c == '<') o += "&lt;";
-    else if (c == '>') o += "&gt;";
-    else if (c == '&') o += "&amp;";
-    else o += c;
+    if (c == '<')
+      o += "&lt;";
+    else if (c == '>')
+      o += "&gt;";
+    else if (c == '&')
+      o += "&amp;";
+    else
+      o += c;
   }
   return o;
 }
@@ -221,12 +242,14 @@ std::string inlineCode(const std::string& s) {
 }
 
 // Markdown (the subset the report uses) to self-contained HTML; images become inline SVG.
-std::string toHtml(const std::string& md, const std::filesystem::path& dir, const std::string& title) {
-  std::string h = "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + htmlEscape(title) +
-                  "</title>\n<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;padding:0 1em}"
-                  "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%}"
-                  "pre{background:#f4f4f4;padding:.5em;overflow:auto}svg{max-width:100%;height:auto}</style>"
-                  "</head><body>\n";
+std::string toHtml(const std::string& md, const std::filesystem::path& dir,
+                   const std::string& title) {
+  std::string h =
+      "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + htmlEscape(title) +
+      "</title>\n<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;padding:0 1em}"
+      "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%}"
+      "pre{background:#f4f4f4;padding:.5em;overflow:auto}svg{max-width:100%;height:auto}</style>"
+      "</head><body>\n";
   std::istringstream in(md);
   std::string line;
   bool table = false, pre = false, header_row = false;
@@ -258,7 +281,8 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir, cons
         }
       }
       h += "<tr>";
-      for (auto& c : cells) h += (header_row ? "<th>" : "<td>") + inlineCode(c) + (header_row ? "</th>" : "</td>");
+      for (auto& c : cells)
+        h += (header_row ? "<th>" : "<td>") + inlineCode(c) + (header_row ? "</th>" : "</td>");
       h += "</tr>\n";
       header_row = false;
       continue;
@@ -278,11 +302,16 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir, cons
                                       : "<figure>" + content.substr(start) + "</figure>\n";
       continue;
     }
-    if (line.rfind("### ", 0) == 0) h += "<h3>" + inlineCode(line.substr(4)) + "</h3>\n";
-    else if (line.rfind("## ", 0) == 0) h += "<h2>" + inlineCode(line.substr(3)) + "</h2>\n";
-    else if (line.rfind("# ", 0) == 0) h += "<h1>" + inlineCode(line.substr(2)) + "</h1>\n";
-    else if (line.rfind("- ", 0) == 0) h += "<li>" + inlineCode(line.substr(2)) + "</li>\n";
-    else if (!line.empty()) h += "<p>" + inlineCode(line) + "</p>\n";
+    if (line.rfind("### ", 0) == 0)
+      h += "<h3>" + inlineCode(line.substr(4)) + "</h3>\n";
+    else if (line.rfind("## ", 0) == 0)
+      h += "<h2>" + inlineCode(line.substr(3)) + "</h2>\n";
+    else if (line.rfind("# ", 0) == 0)
+      h += "<h1>" + inlineCode(line.substr(2)) + "</h1>\n";
+    else if (line.rfind("- ", 0) == 0)
+      h += "<li>" + inlineCode(line.substr(2)) + "</li>\n";
+    else if (!line.empty())
+      h += "<p>" + inlineCode(line) + "</p>\n";
   }
   if (table) h += "</table>\n";
   if (pre) h += "</pre>\n";
@@ -300,17 +329,21 @@ std::string Report::write(const Json& summary) {
   if (cfg_.report.plots) {
     for (const auto& [sec, spec] : plots_) {
       PlotOutcome o = drawPlot(spec, dir_);
-      if (!o.svg.empty()) plot_md[sec] += fmt::format("\n![{}]({})\n", spec.title, o.svg);
-      else missing.push_back(fmt::format("`{}` ({}; data in `{}`)", spec.name, o.missing_why, o.csv));
+      if (!o.svg.empty())
+        plot_md[sec] += fmt::format("\n![{}]({})\n", spec.title, o.svg);
+      else
+        missing.push_back(fmt::format("`{}` ({}; data in `{}`)", spec.name, o.missing_why, o.csv));
     }
   } else if (!plots_.empty()) {
     missing.push_back(fmt::format("all {} plots (report.params.plots is false)", plots_.size()));
   }
-  const std::string title = cfg_.report.title.empty() ? "exid study: " + cfg_.name : cfg_.report.title;
+  const std::string title =
+      cfg_.report.title.empty() ? "exid study: " + cfg_.name : cfg_.report.title;
   std::string md = fmt::format("# {}\n\n", title);
-  md += fmt::format("Configuration hash `{}`; resolved study in `study.resolved.yaml`; machine-readable "
-                    "results in `summary.json`.\n\n",
-                    cfg_.hash());
+  md += fmt::format(
+      "Configuration hash `{}`; resolved study in `study.resolved.yaml`; machine-readable "
+      "results in `summary.json`.\n\n",
+      cfg_.hash());
   md += briefTable(summary) + "\n";
   for (std::size_t i = 0; i < sections_.size(); ++i) md += sections_[i] + plot_md[i] + "\n";
   std::string missing_text;

@@ -37,7 +37,8 @@ class StackedModel final : public ObservationModel {
     Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
     for (std::size_t m = 0; m < parts_.size(); ++m) {
       Eigen::VectorXd nm = parts_[m]->fullNominal();
-      for (std::size_t c = 0; c < map_[m].size(); ++c) v(map_[m][c]) = nm(static_cast<Eigen::Index>(c));
+      for (std::size_t c = 0; c < map_[m].size(); ++c)
+        v(map_[m][c]) = nm(static_cast<Eigen::Index>(c));
     }
     return v;
   }
@@ -56,7 +57,8 @@ class StackedModel final : public ObservationModel {
     for (std::size_t m = 0; m < blocks.size(); ++m) {
       const Rows& b = blocks[m];
       for (std::size_t c = 0; c < map_[m].size(); ++c)
-        out.W.block(r0, map_[m][c], b.W.rows(), 1) = weights_[m] * b.W.col(static_cast<Eigen::Index>(c));
+        out.W.block(r0, map_[m][c], b.W.rows(), 1) =
+            weights_[m] * b.W.col(static_cast<Eigen::Index>(c));
       out.y.segment(r0, b.y.size()) = weights_[m] * b.y;
       for (int e : b.equation) out.equation.push_back(eq0 + e);
       eq0 += b.numEquations;
@@ -76,7 +78,8 @@ class StackedModel final : public ObservationModel {
     Eigen::Index r0 = 0;
     for (std::size_t m = 0; m < blocks.size(); ++m) {
       for (std::size_t c = 0; c < map_[m].size(); ++c)
-        W.block(r0, map_[m][c], blocks[m].rows(), 1) = weights_[m] * blocks[m].col(static_cast<Eigen::Index>(c));
+        W.block(r0, map_[m][c], blocks[m].rows(), 1) =
+            weights_[m] * blocks[m].col(static_cast<Eigen::Index>(c));
       r0 += blocks[m].rows();
     }
     return W;
@@ -151,7 +154,6 @@ class StackedModel final : public ObservationModel {
   std::vector<int> rowsPerDesign_;
 };
 
-
 std::vector<std::string> signalNames(const std::string& prefix, int n) {
   std::vector<std::string> out;
   for (int j = 1; j <= n; ++j) out.push_back(prefix + std::to_string(j));
@@ -167,8 +169,9 @@ void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationMo
         fmt::format("{} ({}): q has {} columns, the robot '{}' has {} joints", what, d.source,
                     d.q.cols(), robot.name, robot.dof()));
   for (int k = 1; k < d.size(); ++k)
-    check(d.t(k) > d.t(k - 1), fmt::format("{} ({}): time must increase; row {} has t = {} after {}",
-                                           what, d.source, k + 1, d.t(k), d.t(k - 1)));
+    check(d.t(k) > d.t(k - 1),
+          fmt::format("{} ({}): time must increase; row {} has t = {} after {}", what, d.source,
+                      k + 1, d.t(k), d.t(k - 1)));
   if (!model) return;
   for (const auto& sig : model->requiredSignals()) {
     if (raw && (sig == "qd" || sig == "qdd")) continue;
@@ -296,9 +299,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
         traj->bind(robot, ctx);
         const Json d = traj->describe();
-        if (const Json* js = d.find("joints"); js && js->isArray() && static_cast<int>(js->size()) < robot->dof()) {
+        if (const Json* js = d.find("joints");
+            js && js->isArray() && static_cast<int>(js->size()) < robot->dof()) {
           std::vector<int> moving;
-          for (std::size_t i = 0; i < js->size(); ++i) moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+          for (std::size_t i = 0; i < js->size(); ++i)
+            moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
           const Samples s0 = traj->evaluate(traj->initial());
           model->restrictMotion(moving, s0.q.row(0).transpose());
         }
@@ -366,7 +371,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         h.columns = {"wall_s", "criterion"};
         h.data.resize(static_cast<Eigen::Index>(r.history_value.size()), 2);
         for (std::size_t i = 0; i < r.history_value.size(); ++i) {
-          h.data(static_cast<Eigen::Index>(i), 0) = i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
+          h.data(static_cast<Eigen::Index>(i), 0) =
+              i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
           h.data(static_cast<Eigen::Index>(i), 1) = r.history_value[i];
         }
         writeCsvAtomic(opt.out_dir / "criterion_history.csv", h);
@@ -385,8 +391,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       RunContext ectx = ctx;
       ectx.progress = progressFor("experiment");
       data = exp->run(robot, reference ? &*reference : nullptr, ectx);
-      const bool raw = cfg.estimator &&
-                       reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs().needs_raw_dataset;
+      const bool raw =
+          cfg.estimator && reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)
+                               ->specs()
+                               .needs_raw_dataset;
       checkDataset(*data, *robot, model.get(), "experiment", raw);
       Json& E = S["experiment"];
       E["type"] = cfg.experiment->type;
@@ -411,9 +419,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       std::optional<Prior> prior;
       if (cfg.prior) {
         check(estimator->specs().accepts_prior,
-              fmt::format("prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
-                          "and rls do)",
-                          cfg.estimator->type));
+              fmt::format(
+                  "prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
+                  "and rls do)",
+                  cfg.estimator->type));
         prior = buildPrior(*cfg.prior, *model);
       }
       est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
@@ -466,10 +475,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       V["type"] = cfg.validation->type;
       V["samples"] = vd.size();
       V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
-      std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
-          ref(rms.size(), 0.0);
+      std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0),
+          cnt(rms.size(), 0.0), ref(rms.size(), 0.0);
       for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
-        const auto e = static_cast<std::size_t>(rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)]);
+        const auto e = static_cast<std::size_t>(
+            rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)]);
         rms[e] += err(r) * err(r);
         ref[e] += rows.y(r) * rows.y(r);
         cnt[e] += 1;
@@ -496,7 +506,9 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       }
       report.validation(rows, pred, V);
     }
-    if (ctx.shouldStop()) throw Error(fmt::format("stopped: {}", ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
+    if (ctx.shouldStop())
+      throw Error(fmt::format("stopped: {}",
+                              ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
     S["status"] = "ok";
     res.ok = true;
   } catch (const std::exception& e) {
@@ -518,7 +530,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       writeFileAtomic(opt.out_dir / "summary.json", S.dump(2) + "\n");
     } catch (const std::exception& e) {
       res.ok = false;
-      res.message += (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
+      res.message +=
+          (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
       S["status"] = "failed";
       S["message"] = res.message;
     }
@@ -528,18 +541,28 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
 
 std::string briefTable(const Json& S) {
   std::string out;
-  auto row = [&](const std::string& k, const std::string& v) { out += fmt::format("| {} | {} |\n", k, v); };
-  auto num = [](const Json* j) { return j && j->isNumber() ? fmt::format("{:.6g}", j->asDouble()) : std::string("-"); };
+  auto row = [&](const std::string& k, const std::string& v) {
+    out += fmt::format("| {} | {} |\n", k, v);
+  };
+  auto num = [](const Json* j) {
+    return j && j->isNumber() ? fmt::format("{:.6g}", j->asDouble()) : std::string("-");
+  };
   out += "| quantity | value |\n|---|---|\n";
   row("status", S.find("status") ? S.find("status")->asString() : "?");
   if (const Json* r = S.find("robot")) {
-    row("robot", fmt::format("{} ({} dof)", r->find("name") ? r->find("name")->asString() : "?", num(r->find("dof"))));
-    if (r->find("n_base_parameters")) row("base parameters", fmt::format("{} of {}", num(r->find("n_base_parameters")), num(r->find("n_parameters"))));
+    row("robot", fmt::format("{} ({} dof)", r->find("name") ? r->find("name")->asString() : "?",
+                             num(r->find("dof"))));
+    if (r->find("n_base_parameters"))
+      row("base parameters",
+          fmt::format("{} of {}", num(r->find("n_base_parameters")), num(r->find("n_parameters"))));
   }
   if (const Json* x = S.find("excitation")) {
-    row("excitation criterion", fmt::format("{} -> {} ({} iterations, {} s)", num(x->find("criterion_initial")),
-                                            num(x->find("criterion_final")), num(x->find("iterations")), num(x->find("wall_s"))));
-    row("cond(W) of trajectory", fmt::format("{} -> {}", num(x->find("cond_W_initial")), num(x->find("cond_W_final"))));
+    row("excitation criterion",
+        fmt::format("{} -> {} ({} iterations, {} s)", num(x->find("criterion_initial")),
+                    num(x->find("criterion_final")), num(x->find("iterations")),
+                    num(x->find("wall_s"))));
+    row("cond(W) of trajectory",
+        fmt::format("{} -> {}", num(x->find("cond_W_initial")), num(x->find("cond_W_final"))));
   }
   if (const Json* e = S.find("experiment")) row("experiment samples", num(e->find("samples")));
   if (const Json* i = S.find("identification")) {
@@ -548,7 +571,8 @@ std::string briefTable(const Json& S) {
     row("residual RMS", num(i->find("residual_rms")));
     if (i->find("param_rel_err")) row("parameter relative error", num(i->find("param_rel_err")));
   }
-  if (const Json* v = S.find("validation")) row("validation relative error", num(v->find("relative_error")));
+  if (const Json* v = S.find("validation"))
+    row("validation relative error", num(v->find("relative_error")));
   return out;
 }
 

@@ -61,10 +61,12 @@ struct Payload {
     L.mass = p.getDouble("payload_mass_kg");
     const auto c = p.getDoubles("payload_com_m");
     const auto I = p.getDoubles("payload_inertia_kg_m2");
-    check(c.size() == 3, fmt::format("{}: payload_com_m: expected 3 numbers, found {}", p.context, c.size()));
+    check(c.size() == 3,
+          fmt::format("{}: payload_com_m: expected 3 numbers, found {}", p.context, c.size()));
     check(I.size() == 6,
-          fmt::format("{}: payload_inertia_kg_m2: expected 6 numbers [xx, xy, xz, yy, yz, zz], found {}",
-                      p.context, I.size()));
+          fmt::format(
+              "{}: payload_inertia_kg_m2: expected 6 numbers [xx, xy, xz, yy, yz, zz], found {}",
+              p.context, I.size()));
     L.com = Eigen::Vector3d(c[0], c[1], c[2]);
     L.I_com << I[0], I[1], I[2], I[1], I[3], I[4], I[2], I[4], I[5];
     return L;
@@ -93,8 +95,9 @@ inline std::vector<int> selectJoints(const std::vector<std::int64_t>& joints, in
     return out;
   }
   for (std::int64_t j : joints) {
-    check(j >= 1 && j <= dof, fmt::format("{}: joints: {} is out of range (the robot has joints 1..{})",
-                                          where, j, dof));
+    check(
+        j >= 1 && j <= dof,
+        fmt::format("{}: joints: {} is out of range (the robot has joints 1..{})", where, j, dof));
     for (int o : out)
       check(o != j - 1, fmt::format("{}: joints: joint {} is listed twice", where, j));
     out.push_back(static_cast<int>(j - 1));
@@ -110,13 +113,14 @@ inline void jointGradToMeasured(const RobotModel& r, Eigen::VectorXd* g) {
 /// Checks that a dataset carries a signal with the expected number of columns and rows.
 inline void requireSignal(const Dataset& d, const Eigen::MatrixXd& m, const char* name, int cols,
                           const std::string& who) {
-  check(m.cols() > 0, fmt::format("{}: the dataset ({}) has no '{}' signal (columns {}1..{}{}); "
-                                  "record it, or use an estimator that differentiates q",
-                                  who, d.source.empty() ? "unnamed" : d.source, name, name, name,
-                                  cols));
+  check(m.cols() > 0,
+        fmt::format("{}: the dataset ({}) has no '{}' signal (columns {}1..{}{}); "
+                    "record it, or use an estimator that differentiates q",
+                    who, d.source.empty() ? "unnamed" : d.source, name, name, name, cols));
   check(m.cols() == cols && m.rows() == d.size(),
         fmt::format("{}: the dataset ({}) signal '{}' is {} x {} (expected {} x {})", who,
-                    d.source.empty() ? "unnamed" : d.source, name, m.rows(), m.cols(), d.size(), cols));
+                    d.source.empty() ? "unnamed" : d.source, name, m.rows(), m.cols(), d.size(),
+                    cols));
 }
 
 inline void requireSamples(const Samples& s, int n, bool need_qdd, const std::string& who) {

@@ -42,8 +42,9 @@ class DifferentialModel : public exid::ObservationModel {
                            {"model", "subtract", "none"}),
         exid::param_bool("rotor_inertia", true,
                          "identify the rotor inertia Ia_j (column qddm_j) of every drive"),
-        exid::param_bool("coulomb", true,
-                         "with friction: model, identify Coulomb friction Fc_j (column sign(qdm_j))"),
+        exid::param_bool(
+            "coulomb", true,
+            "with friction: model, identify Coulomb friction Fc_j (column sign(qdm_j))"),
         exid::param_bool("viscous", true,
                          "with friction: model, identify viscous friction Fv_j (column qdm_j)"),
         exid::param_bool("offset", false, "identify a torque offset OFF_j (column 1) per drive"),
@@ -58,7 +59,9 @@ class DifferentialModel : public exid::ObservationModel {
     cols_.offset = p.getBool("offset");
   }
 
-  std::vector<std::string> fullNames() const override { return exid::parameterNames(robot(), cols_); }
+  std::vector<std::string> fullNames() const override {
+    return exid::parameterNames(robot(), cols_);
+  }
   Eigen::VectorXd fullNominal() const override { return exid::parameterValues(robot(), cols_); }
 
   std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "tau"}; }
@@ -163,7 +166,8 @@ class DifferentialModel : public exid::ObservationModel {
  private:
   double frictionTorque(int j, double qdm) const {
     const auto& dr = robot().drives;
-    const exid::Drive D = j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
+    const exid::Drive D =
+        j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
     const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
     return D.coulomb * sg + D.viscous * qdm + (cols_.offset ? 0.0 : D.offset);
   }

@@ -27,8 +27,8 @@ namespace {
 using exid::models::requireSignal;
 
 struct Window {
-  int a = 0, b = 0;              // first and last sample
-  std::vector<double> w;         // quadrature weights of samples a..b
+  int a = 0, b = 0;       // first and last sample
+  std::vector<double> w;  // quadrature weights of samples a..b
 };
 
 class IntegralModel : public exid::ObservationModel {
@@ -82,11 +82,14 @@ class IntegralModel : public exid::ObservationModel {
     cols_.viscous = p.getBool("friction");
     cols_.offset = p.getBool("offset");
     exid::check(!(subtract_ && cols_.coulomb),
-                p.context + ": subtract_friction: true needs friction: false (friction is either "
-                            "identified or subtracted, not both)");
+                p.context +
+                    ": subtract_friction: true needs friction: false (friction is either "
+                    "identified or subtracted, not both)");
   }
 
-  std::vector<std::string> fullNames() const override { return exid::parameterNames(robot(), cols_); }
+  std::vector<std::string> fullNames() const override {
+    return exid::parameterNames(robot(), cols_);
+  }
   Eigen::VectorXd fullNominal() const override { return exid::parameterValues(robot(), cols_); }
   std::vector<std::string> requiredSignals() const override { return {"q", "qd", "tau"}; }
 
@@ -147,7 +150,8 @@ class IntegralModel : public exid::ObservationModel {
       const Window& w = win[static_cast<std::size_t>(i)];
       dE.row(w.b) += dW.row(i);
       dE.row(w.a) -= dW.row(i);
-      for (int k = w.a; k <= w.b; ++k) dF.row(k) += w.w[static_cast<std::size_t>(k - w.a)] * dW.row(i);
+      for (int k = w.a; k <= w.b; ++k)
+        dF.row(k) += w.w[static_cast<std::size_t>(k - w.a)] * dW.row(i);
     }
     auto data = exid::makeDynamicsData(Rb);
     Eigen::VectorXd qm, qdm, q, qd, gq, gqd;
@@ -177,7 +181,9 @@ class IntegralModel : public exid::ObservationModel {
     j["equation"] =
         "int_{t1}^{t2} tau_m^T qdm dt = (h(t2) - h(t1)) pi + sum_j Fc_j int |qdm_j| dt + "
         "Fv_j int qdm_j^2 dt + OFF_j (qm_j(t2) - qm_j(t1)) (paper eqn 2)";
-    j["energy"] = "h = kinetic + potential energy regressor in joint coordinates, plus 1/2 Ia_j qdm_j^2 per drive";
+    j["energy"] =
+        "h = kinetic + potential energy regressor in joint coordinates, plus 1/2 Ia_j qdm_j^2 per "
+        "drive";
     j["window"] = long_ ? "long" : "short";
     j["window_s"] = window_s_;
     j["overlap"] = sliding_ ? "sliding" : "disjoint";
@@ -207,7 +213,8 @@ class IntegralModel : public exid::ObservationModel {
  private:
   double frictionTorque(int j, double qdm) const {
     const auto& dr = robot().drives;
-    const exid::Drive D = j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
+    const exid::Drive D =
+        j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
     const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
     return D.coulomb * sg + D.viscous * qdm + (cols_.offset ? 0.0 : D.offset);
   }
@@ -245,8 +252,9 @@ class IntegralModel : public exid::ObservationModel {
   std::vector<Window> windows(const Eigen::VectorXd& t, const std::string& who) const {
     const int K = static_cast<int>(t.size());
     for (int k = 1; k < K; ++k)
-      exid::check(t[k] > t[k - 1], fmt::format("{}: time must increase; sample {} has t = {} after {}",
-                                               who, k + 1, t[k], t[k - 1]));
+      exid::check(t[k] > t[k - 1],
+                  fmt::format("{}: time must increase; sample {} has t = {} after {}", who, k + 1,
+                              t[k], t[k - 1]));
     const double eps = 1e-9 * window_s_;
     std::vector<Window> out;
     auto add = [&](int a, int b) {
@@ -311,7 +319,8 @@ class IntegralModel : public exid::ObservationModel {
     for (int i = 0; i < R; ++i) {
       const Window& w = win[static_cast<std::size_t>(i)];
       W.row(i) = E.row(w.b) - E.row(w.a);
-      for (int k = w.a; k <= w.b; ++k) W.row(i) += w.w[static_cast<std::size_t>(k - w.a)] * F.row(k);
+      for (int k = w.a; k <= w.b; ++k)
+        W.row(i) += w.w[static_cast<std::size_t>(k - w.a)] * F.row(k);
     }
     return W;
   }

@@ -32,7 +32,8 @@ class LoadTorqueModel : public exid::ObservationModel {
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::models::payloadParams("payload (nominal values of the parameters)");
     p.push_back(exid::param_ints("joints", std::vector<std::int64_t>{},
-                                 "1-based joints whose torque equations are used; empty: all", 1.0));
+                                 "1-based joints whose torque equations are used; empty: all",
+                                 1.0));
     return p;
   }
 
@@ -60,8 +61,8 @@ class LoadTorqueModel : public exid::ObservationModel {
     exid::DriveColumns all{true, true, true, true};
     auto data = exid::makeDynamicsData(R);
     for (int k = 0; k < K; ++k) {
-      const Eigen::VectorXd tr = exid::actuatorTorque(R, *data, all, d.q.row(k).transpose(),
-                                                      d.qd.row(k).transpose(), d.qdd.row(k).transpose());
+      const Eigen::VectorXd tr = exid::actuatorTorque(
+          R, *data, all, d.q.row(k).transpose(), d.qd.row(k).transpose(), d.qdd.row(k).transpose());
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];
         r.y[k * m + i] = d.tau(k, j) - tr[j];
@@ -126,10 +127,12 @@ class LoadTorqueModel : public exid::ObservationModel {
   exid::Json describe() const override {
     exid::Json j = exid::Json::object();
     j["equation"] = "tau_m,i - tau_robot,i = [T^T Yp(q, qd, qdd)]_i phi";
-    j["known_robot"] = "the robot description's inertial parameters and all its drive terms "
-                       "(Ia, Fc, Fv, OFF)";
-    j["parameters"] = "phi = M MX MY MZ XX XY XZ YY YZ ZZ of the payload about the sensor origin, "
-                      "sensor axes";
+    j["known_robot"] =
+        "the robot description's inertial parameters and all its drive terms "
+        "(Ia, Fc, Fv, OFF)";
+    j["parameters"] =
+        "phi = M MX MY MZ XX XY XZ YY YZ ZZ of the payload about the sensor origin, "
+        "sensor axes";
     j["joints"] = exid::models::intsJson(sel_, 1);
     j["equation_index"] = "position of the joint in 'joints' (0-based)";
     j["nominal_payload"] = payload_.json();

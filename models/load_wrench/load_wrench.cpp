@@ -32,8 +32,8 @@ class LoadWrenchModel : public exid::ObservationModel {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::models::payloadParams("payload (nominal values of the parameters)");
-    p.push_back(exid::param_bool("sensor_offset", false,
-                                 "identify a constant sensor offset: six columns OFF_FX .. OFF_MZ"));
+    p.push_back(exid::param_bool(
+        "sensor_offset", false, "identify a constant sensor offset: six columns OFF_FX .. OFF_MZ"));
     return p;
   }
 
@@ -43,7 +43,8 @@ class LoadWrenchModel : public exid::ObservationModel {
   std::vector<std::string> fullNames() const override {
     auto names = exid::models::payloadNames();
     if (offset_)
-      for (const char* c : {"OFF_FX", "OFF_FY", "OFF_FZ", "OFF_MX", "OFF_MY", "OFF_MZ"}) names.push_back(c);
+      for (const char* c : {"OFF_FX", "OFF_FY", "OFF_FZ", "OFF_MX", "OFF_MY", "OFF_MZ"})
+        names.push_back(c);
     return names;
   }
   Eigen::VectorXd fullNominal() const override {
@@ -121,10 +122,12 @@ class LoadWrenchModel : public exid::ObservationModel {
   exid::Json describe() const override {
     exid::Json j = exid::Json::object();
     j["equation"] = "w = A(omega, alpha, a - g) phi (+ w0)";
-    j["wrench"] = "fx fy fz mx my mz: wrench exerted by the sensor on the payload, sensor frame, "
-                  "moment about the sensor origin";
-    j["parameters"] = "phi = M MX MY MZ XX XY XZ YY YZ ZZ of the payload about the sensor origin, "
-                      "sensor axes";
+    j["wrench"] =
+        "fx fy fz mx my mz: wrench exerted by the sensor on the payload, sensor frame, "
+        "moment about the sensor origin";
+    j["parameters"] =
+        "phi = M MX MY MZ XX XY XZ YY YZ ZZ of the payload about the sensor origin, "
+        "sensor axes";
     j["sensor_offset"] = offset_;
     j["nominal_payload"] = payload_.json();
     j["equation_index"] = "wrench component 0..5 (fx fy fz mx my mz)";

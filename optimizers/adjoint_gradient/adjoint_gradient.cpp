@@ -12,8 +12,8 @@
 //           search; the pair (s, y) is kept only when the curvature condition s'y > 0 holds.
 // Limits (`constraints`), g(z) <= 0 at every sample (plus the trajectory's own caps):
 //   augmented_lagrangian — (default) PHR augmented Lagrangian
-//           L = J + 1/(2 rho) sum(max(0, mu + rho g)^2 - mu^2), multipliers mu <- max(0, mu + rho g)
-//           after each inner solve, rho x10 when the violation did not fall by 4;
+//           L = J + 1/(2 rho) sum(max(0, mu + rho g)^2 - mu^2), multipliers mu <- max(0, mu + rho
+//           g) after each inner solve, rho x10 when the violation did not fall by 4;
 //   penalty — quadratic penalty rho/2 sum max(0, g)^2 (bounds on z too), rho x10 per outer pass
 //           while infeasible;
 //   projection — bounds on z by clipping (projection) and sample limits by a quadratic penalty
@@ -28,9 +28,9 @@
 // A dz = 0 of those samples (projected gradient, L-BFGS memory reset) for the rest of the pass.
 #include <fmt/format.h>
 
+#include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
-#include <Eigen/QR>
 #include <deque>
 
 #include "exid/error.hpp"
@@ -55,28 +55,44 @@ class AdjointGradient final : public exid::Optimizer {
     auto p = exid::optim::budgetParams(60.0, 0);
     p.push_back(exid::param_string("step", std::string("lbfgs"), "step rule", {"lbfgs", "paper"}));
     p.push_back(exid::param_string("constraints", std::string("augmented_lagrangian"),
-                                   "how the limits are handled", {"augmented_lagrangian", "penalty", "projection"}));
-    p.push_back(exid::param_int("max_iterations", 2000, "iterations (accepted steps) in total", 1.0));
-    p.push_back(exid::param_int("inner_iterations", 40, "iterations per augmented-Lagrangian/penalty pass", 1.0));
+                                   "how the limits are handled",
+                                   {"augmented_lagrangian", "penalty", "projection"}));
+    p.push_back(
+        exid::param_int("max_iterations", 2000, "iterations (accepted steps) in total", 1.0));
+    p.push_back(exid::param_int("inner_iterations", 40,
+                                "iterations per augmented-Lagrangian/penalty pass", 1.0));
     p.push_back(exid::param_int("memory", 10, "L-BFGS memory", 1.0, 100.0));
-    p.push_back(exid::param_double("step_gain", 1.0, "",
-                                   "largest change of any variable in the first (lbfgs) or every "
-                                   "(paper) step: gain / max|gradient| (the paper's mu = 1/max|lambda|)", 0.0, std::nullopt, true));
-    p.push_back(exid::param_double("penalty_weight", 100.0, "",
-                                   "initial rho as a multiple of |J(z0)| (per unit violation squared)", 0.0, std::nullopt, true));
-    p.push_back(exid::param_double("ftol_rel", 1e-7, "", "stop when an outer pass improves J by less than this (relative)", 0.0));
-    p.push_back(exid::param_double("gtol", 1e-8, "", "inner stop: max|projected gradient| <= gtol max(1, |merit|)", 0.0));
+    p.push_back(
+        exid::param_double("step_gain", 1.0, "",
+                           "largest change of any variable in the first (lbfgs) or every "
+                           "(paper) step: gain / max|gradient| (the paper's mu = 1/max|lambda|)",
+                           0.0, std::nullopt, true));
+    p.push_back(
+        exid::param_double("penalty_weight", 100.0, "",
+                           "initial rho as a multiple of |J(z0)| (per unit violation squared)", 0.0,
+                           std::nullopt, true));
+    p.push_back(
+        exid::param_double("ftol_rel", 1e-7, "",
+                           "stop when an outer pass improves J by less than this (relative)", 0.0));
+    p.push_back(exid::param_double(
+        "gtol", 1e-8, "", "inner stop: max|projected gradient| <= gtol max(1, |merit|)", 0.0));
     return p;
   }
 
   explicit AdjointGradient(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)), paper_(p.getString("step") == "paper"),
-        mode_(p.getString("constraints")), max_iter_(static_cast<int>(p.getInt("max_iterations"))),
-        inner_(static_cast<int>(p.getInt("inner_iterations"))), mem_(static_cast<int>(p.getInt("memory"))),
-        gain_(p.getDouble("step_gain")), rho_rel_(p.getDouble("penalty_weight")),
-        ftol_(p.getDouble("ftol_rel")), gtol_(p.getDouble("gtol")) {}
+      : budget_(exid::optim::readBudget(p)),
+        paper_(p.getString("step") == "paper"),
+        mode_(p.getString("constraints")),
+        max_iter_(static_cast<int>(p.getInt("max_iterations"))),
+        inner_(static_cast<int>(p.getInt("inner_iterations"))),
+        mem_(static_cast<int>(p.getInt("memory"))),
+        gain_(p.getDouble("step_gain")),
+        rho_rel_(p.getDouble("penalty_weight")),
+        ftol_(p.getDouble("ftol_rel")),
+        gtol_(p.getDouble("gtol")) {}
 
-  exid::OptimizerResult minimize(exid::ExcitationProblem& problem, const exid::RunContext& ctx) override {
+  exid::OptimizerResult minimize(exid::ExcitationProblem& problem,
+                                 const exid::RunContext& ctx) override {
     Limits lim(problem);
     Tracker tr(problem, lim, ctx, budget_, "adjoint_gradient");
     problem.bounds(&lo_, &hi_);
@@ -90,14 +106,21 @@ class AdjointGradient final : public exid::Optimizer {
     std::string reason = "max_iterations";
     double prev_J = HUGE_VAL, prev_v = HUGE_VAL;
     for (int outer = 0; iters < max_iter_; ++outer) {
-      if (tr.shouldStop()) { reason = tr.stopCause(); break; }
+      if (tr.shouldStop()) {
+        reason = tr.stopCause();
+        break;
+      }
       const bool inner_converged = innerSolve(problem, lim, tr, &z, &iters);
-      if (tr.shouldStop()) { reason = tr.stopCause(); break; }
+      if (tr.shouldStop()) {
+        reason = tr.stopCause();
+        break;
+      }
       Eigen::VectorXd g;
       lim.eval(z, &g);
       const double v = m ? std::max(0.0, g.maxCoeff()) : 0.0;
       const double J = cur_J_;
-      tr.progress(fmt::format("pass {} J {:.6g} violation {:.3g} rho {:.3g}", outer + 1, J, v, rho_));
+      tr.progress(
+          fmt::format("pass {} J {:.6g} violation {:.3g} rho {:.3g}", outer + 1, J, v, rho_));
       const bool feasible = v <= budget_.feasibility_tol;
       if (mode_ == "augmented_lagrangian" && m) {
         mu_ = (mu_ + rho_ * g).cwiseMax(0.0);
@@ -105,13 +128,17 @@ class AdjointGradient final : public exid::Optimizer {
       } else if (m && !feasible) {
         rho_ *= 10.0;
       }
-      if (feasible && std::abs(prev_J - J) <= ftol_ * std::max(1.0, std::abs(J)) && inner_converged) {
+      if (feasible && std::abs(prev_J - J) <= ftol_ * std::max(1.0, std::abs(J)) &&
+          inner_converged) {
         reason = "converged (ftol_rel)";
         break;
       }
       prev_J = feasible ? J : prev_J;
       prev_v = v;
-      if (m == 0 && inner_converged) { reason = "converged (gtol)"; break; }
+      if (m == 0 && inner_converged) {
+        reason = "converged (gtol)";
+        break;
+      }
     }
     auto r = tr.finish(J0, iters, reason);
     r.details["step"] = paper_ ? "paper" : "lbfgs";
@@ -198,20 +225,25 @@ class AdjointGradient final : public exid::Optimizer {
     for (Eigen::Index j = 0; j < n; ++j)
       for (Eigen::Index k = 0; k < K; ++k) {
         const double va = a.qd(k, j), vb = b.qd(k, j);
-        if ((va > 0) != (vb > 0) && std::abs(va) <= 1e-6 * std::abs(vb - va)) rows.push_back(K * n + j * K + k);
+        if ((va > 0) != (vb > 0) && std::abs(va) <= 1e-6 * std::abs(vb - va))
+          rows.push_back(K * n + j * K + k);
       }
     if (rows.empty()) return false;
     const Eigen::MatrixXd Jt = p.trajectory().jacobian(z);
     const Eigen::Index r0 = A->rows();
     A->conservativeResize(r0 + static_cast<Eigen::Index>(rows.size()), Eigen::NoChange);
-    for (std::size_t i = 0; i < rows.size(); ++i) A->row(r0 + static_cast<Eigen::Index>(i)) = Jt.row(rows[i]);
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      A->row(r0 + static_cast<Eigen::Index>(i)) = Jt.row(rows[i]);
     // drop rows that add nothing (already held, or zero for joints that do not move)
     Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A->transpose());
-    return qr.rank() > (r0 > 0 ? Eigen::ColPivHouseholderQR<Eigen::MatrixXd>(A->topRows(r0).transpose()).rank() : 0);
+    return qr.rank() >
+           (r0 > 0 ? Eigen::ColPivHouseholderQR<Eigen::MatrixXd>(A->topRows(r0).transpose()).rank()
+                   : 0);
   }
 
   // One pass of at most inner_ iterations on the current merit. Returns true when converged.
-  bool innerSolve(exid::ExcitationProblem& p, Limits& lim, Tracker& tr, Eigen::VectorXd* zp, int* iters) {
+  bool innerSolve(exid::ExcitationProblem& p, Limits& lim, Tracker& tr, Eigen::VectorXd* zp,
+                  int* iters) {
     Eigen::VectorXd& z = *zp;
     Eigen::VectorXd g;
     double phi = merit(p, lim, tr, z, &g);
@@ -235,7 +267,8 @@ class AdjointGradient final : public exid::Optimizer {
         Eigen::VectorXd q = pg;
         std::vector<double> a(S.size());
         for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
-          a[static_cast<std::size_t>(i)] = R[static_cast<std::size_t>(i)] * S[static_cast<std::size_t>(i)].dot(q);
+          a[static_cast<std::size_t>(i)] =
+              R[static_cast<std::size_t>(i)] * S[static_cast<std::size_t>(i)].dot(q);
           q -= a[static_cast<std::size_t>(i)] * Y[static_cast<std::size_t>(i)];
         }
         q *= S.back().dot(Y.back()) / Y.back().squaredNorm();
@@ -245,7 +278,9 @@ class AdjointGradient final : public exid::Optimizer {
         }
         d = -tangent(A, q);
         if (d.dot(pg) >= 0) {  // not a descent direction: restart
-          S.clear(); Y.clear(); R.clear();
+          S.clear();
+          Y.clear();
+          R.clear();
           d = -pg;
           alpha = gain_ / gmax;
         } else {
@@ -261,7 +296,10 @@ class AdjointGradient final : public exid::Optimizer {
         zn = project(z + alpha * d);
         phin = merit(p, lim, tr, zn, &gn);
         const double decrease = g.dot(zn - z);
-        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(decrease, 0.0) && phin < phi) { accepted = true; break; }
+        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(decrease, 0.0) && phin < phi) {
+          accepted = true;
+          break;
+        }
         if (tr.shouldStop()) return false;
         alpha *= 0.5;
         if (paper_) paper_gain_ *= 0.5;
@@ -271,7 +309,9 @@ class AdjointGradient final : public exid::Optimizer {
         // velocity crossing zero), backtracking walks up to the jump and stalls there with a
         // large gradient. Hold the velocities that sit on the jump (tangent space) and go on.
         if (holdVelocitySigns(p, z, z + alpha0 * d, &A)) {
-          S.clear(); Y.clear(); R.clear();
+          S.clear();
+          Y.clear();
+          R.clear();
           continue;
         }
         return true;  // no decrease possible along the direction
@@ -281,11 +321,19 @@ class AdjointGradient final : public exid::Optimizer {
       const Eigen::VectorXd s = zn - z, y = gn - g;
       const double sy = s.dot(y);
       if (sy > 1e-12 * s.norm() * y.norm()) {
-        S.push_back(s); Y.push_back(y); R.push_back(1.0 / sy);
-        if (static_cast<int>(S.size()) > mem_) { S.pop_front(); Y.pop_front(); R.pop_front(); }
+        S.push_back(s);
+        Y.push_back(y);
+        R.push_back(1.0 / sy);
+        if (static_cast<int>(S.size()) > mem_) {
+          S.pop_front();
+          Y.pop_front();
+          R.pop_front();
+        }
       }
       const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
-      z = zn; g = gn; phi = phin;
+      z = zn;
+      g = gn;
+      phi = phin;
       cur_J_ = cur_J_trial_;
       if (rel < 1e-12) return true;
     }

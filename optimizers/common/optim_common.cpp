@@ -1,7 +1,6 @@
 #include "optim_common.hpp"
 
 #include <fmt/format.h>
-
 #include <time.h>
 
 #include <algorithm>
@@ -21,16 +20,20 @@ Limits::Limits(ExcitationProblem& p) : p_(p) {
 
 void Limits::eval(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) {
   if (g) {
-    if (m_ > 0) p_.constraints(z, g, nullptr);
-    else g->resize(0);
+    if (m_ > 0)
+      p_.constraints(z, g, nullptr);
+    else
+      g->resize(0);
   }
   if (jac) *jac = jacobian(z);
 }
 
 const Eigen::MatrixXd& Limits::jacobian(const Eigen::VectorXd& z) {
   if (jac_valid_ && linear_) return jac_;
-  if (m_ > 0) p_.constraints(z, nullptr, &jac_);
-  else jac_.resize(0, z.size());
+  if (m_ > 0)
+    p_.constraints(z, nullptr, &jac_);
+  else
+    jac_.resize(0, z.size());
   jac_valid_ = true;
   return jac_;
 }
@@ -45,13 +48,16 @@ double Limits::maxViolation(const Eigen::VectorXd& z) {
 // ---------------------------------------------------------------- budget
 std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals) {
   return {
-      param_double("max_time_s", default_time_s, "s", "wall-time budget (0: none; the study deadline still applies)", 0.0),
+      param_double("max_time_s", default_time_s, "s",
+                   "wall-time budget (0: none; the study deadline still applies)", 0.0),
       param_double("max_cpu_s", 0.0, "s",
                    "CPU-time budget of the optimising thread (0: none); with a loaded machine this "
-                   "is the budget that means 'on one core'", 0.0),
+                   "is the budget that means 'on one core'",
+                   0.0),
       param_int("max_evaluations", default_evals, "criterion evaluations budget (0: none)", 0.0),
       param_double("feasibility_tol", 1e-9, "rad",
-                   "a point is feasible when every g(z) <= this (limits in rad, rad/s, rad/s^2)", 0.0),
+                   "a point is feasible when every g(z) <= this (limits in rad, rad/s, rad/s^2)",
+                   0.0),
   };
 }
 
@@ -65,9 +71,16 @@ Budget readBudget(const ParamSet& p) {
 }
 
 // ---------------------------------------------------------------- Tracker
-Tracker::Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b, std::string who)
-    : p_(p), lim_(lim), ctx_(ctx), b_(b), who_(std::move(who)), t0_(std::chrono::steady_clock::now()),
-      cpu0_(threadCpuSeconds()), evals0_(p.evaluations()) {}
+Tracker::Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b,
+                 std::string who)
+    : p_(p),
+      lim_(lim),
+      ctx_(ctx),
+      b_(b),
+      who_(std::move(who)),
+      t0_(std::chrono::steady_clock::now()),
+      cpu0_(threadCpuSeconds()),
+      evals0_(p.evaluations()) {}
 
 double threadCpuSeconds() {
   timespec ts{};
@@ -87,7 +100,9 @@ double Tracker::wallRemaining() const {
   return r;
 }
 
-double Tracker::cpuRemaining() const { return b_.max_cpu_s > 0 ? b_.max_cpu_s - cpuElapsed() : HUGE_VAL; }
+double Tracker::cpuRemaining() const {
+  return b_.max_cpu_s > 0 ? b_.max_cpu_s - cpuElapsed() : HUGE_VAL;
+}
 
 double Tracker::remaining() const { return std::min(wallRemaining(), cpuRemaining()); }
 
@@ -131,7 +146,8 @@ std::string Tracker::stopCause() const {
   if (ctx_.deadline.expired()) return "deadline";
   if (b_.max_time_s > 0 && elapsed() >= b_.max_time_s) return "max_time_s";
   if (b_.max_cpu_s > 0 && cpuElapsed() >= b_.max_cpu_s) return "max_cpu_s";
-  if (b_.max_evaluations > 0 && p_.evaluations() - evals0_ >= b_.max_evaluations) return "max_evaluations";
+  if (b_.max_evaluations > 0 && p_.evaluations() - evals0_ >= b_.max_evaluations)
+    return "max_evaluations";
   return "";
 }
 
@@ -142,8 +158,10 @@ void Tracker::progress(const std::string& text) const {
   if (b_.max_time_s > 0) f = std::min(1.0, elapsed() / b_.max_time_s);
   if (b_.max_cpu_s > 0) f = std::max(f, std::min(1.0, cpuElapsed() / b_.max_cpu_s));
   if (b_.max_evaluations > 0)
-    f = std::max(f, std::min(1.0, static_cast<double>(p_.evaluations() - evals0_) / static_cast<double>(b_.max_evaluations)));
-  ctx_.report(f, fmt::format("{}: best {:.6g}{} {}", who_, bestValue(), have_feasible_ ? "" : " (infeasible)", text));
+    f = std::max(f, std::min(1.0, static_cast<double>(p_.evaluations() - evals0_) /
+                                      static_cast<double>(b_.max_evaluations)));
+  ctx_.report(f, fmt::format("{}: best {:.6g}{} {}", who_, bestValue(),
+                             have_feasible_ ? "" : " (infeasible)", text));
 }
 
 OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reason) {
@@ -190,8 +208,8 @@ Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::V
   return zt;
 }
 
-Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0, double scale,
-                            std::mt19937_64& rng) {
+Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
+                            double scale, std::mt19937_64& rng) {
   Eigen::VectorXd lo, hi;
   p.bounds(&lo, &hi);
   std::uniform_real_distribution<double> U(-1.0, 1.0);
@@ -215,8 +233,8 @@ Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::Vect
   return c + scale * a * d;
 }
 
-void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale, Eigen::VectorXd* lo,
-                  Eigen::VectorXd* hi) {
+void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale,
+                  Eigen::VectorXd* lo, Eigen::VectorXd* hi) {
   p.bounds(lo, hi);
   for (Eigen::Index i = 0; i < z0.size(); ++i) {
     const double w = scale * std::max(1.0, std::abs(z0(i)));

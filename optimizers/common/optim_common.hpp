@@ -41,9 +41,9 @@ class Limits {
 
 /// Common optimiser settings (parameters every exid optimiser declares).
 struct Budget {
-  double max_time_s = 0;    // 0: none (the study's deadline still applies)
-  double max_cpu_s = 0;     // CPU time of the calling thread; 0: none
-  long max_evaluations = 0; // 0: none
+  double max_time_s = 0;     // 0: none (the study's deadline still applies)
+  double max_cpu_s = 0;      // CPU time of the calling thread; 0: none
+  long max_evaluations = 0;  // 0: none
   double feasibility_tol = 1e-9;
 };
 std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals);
@@ -53,18 +53,19 @@ Budget readBudget(const ParamSet& p);
 /// returned only when no feasible point was found), the history and the stopping rules.
 class Tracker {
  public:
-  Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b, std::string who);
+  Tracker(ExcitationProblem& p, Limits& lim, const RunContext& ctx, const Budget& b,
+          std::string who);
   /// Records an evaluated point (J at z, violation v). Returns true when it is a new best.
   bool offer(const Eigen::VectorXd& z, double J, double violation);
   /// Evaluates J (no gradient) and the violation at z, then offers it.
   double evaluateAndOffer(const Eigen::VectorXd& z);
-  bool shouldStop() const;   // time budget, evaluations, ctx.shouldStop()
+  bool shouldStop() const;        // time budget, evaluations, ctx.shouldStop()
   std::string stopCause() const;  // "max_time_s", "max_evaluations", "cancelled" or ""
-  double elapsed() const;     // wall time since construction [s]
-  double cpuElapsed() const;  // CPU time of the calling thread since construction [s]
-  double remaining() const;  // seconds left: min(wallRemaining, cpuRemaining)
-  double wallRemaining() const;  // max_time_s and the study deadline (inf without)
-  double cpuRemaining() const;   // max_cpu_s (inf without)
+  double elapsed() const;         // wall time since construction [s]
+  double cpuElapsed() const;      // CPU time of the calling thread since construction [s]
+  double remaining() const;       // seconds left: min(wallRemaining, cpuRemaining)
+  double wallRemaining() const;   // max_time_s and the study deadline (inf without)
+  double cpuRemaining() const;    // max_cpu_s (inf without)
   bool hasFeasible() const { return have_feasible_; }
   double bestValue() const { return have_feasible_ ? best_J_ : best_inf_J_; }
   const Eigen::VectorXd& best() const { return have_feasible_ ? best_z_ : best_inf_z_; }
@@ -104,8 +105,8 @@ Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::V
 /// random direction d (U(-1, 1) times half the bound range), c + scale * s_max * d, with s_max
 /// <= 1 the largest feasible step (bisection; feasible set convex along the ray for linear
 /// trajectories). Falls back to perturbedStart when c is infeasible.
-Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0, double scale,
-                            std::mt19937_64& rng);
+Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
+                            double scale, std::mt19937_64& rng);
 
 /// Finite bounds for algorithms that need them: the problem's, with infinite entries replaced
 /// by z0 -+ scale * max(1, |z0_i|).

@@ -36,11 +36,14 @@ std::string validNames() {
 nlopt::algorithm algorithmFromName(const std::string& name, const char* param) {
   const nlopt_algorithm a = nlopt_algorithm_from_string(name.c_str());
   exid::check(static_cast<int>(a) >= 0 && static_cast<int>(a) < NLOPT_NUM_ALGORITHMS,
-              fmt::format("optimizer 'nlopt': {}: unknown NLopt algorithm '{}'; valid: {}", param, name, validNames()));
+              fmt::format("optimizer 'nlopt': {}: unknown NLopt algorithm '{}'; valid: {}", param,
+                          name, validNames()));
   return static_cast<nlopt::algorithm>(a);
 }
 
-bool isGlobal(const std::string& name) { return name.rfind("GN_", 0) == 0 || name.rfind("GD_", 0) == 0 || name.rfind("G_", 0) == 0; }
+bool isGlobal(const std::string& name) {
+  return name.rfind("GN_", 0) == 0 || name.rfind("GD_", 0) == 0 || name.rfind("G_", 0) == 0;
+}
 
 struct Ctx {
   exid::ExcitationProblem* p;
@@ -49,7 +52,7 @@ struct Ctx {
   double tighten;
   int slots = 0;  // per group of K samples: the `slots` largest g values (0: every sample)
   const std::vector<int>* rows = nullptr;  // working set: only these rows of g
-  double ks_rho = 0;  // > 0: one Kreisselmeier-Steinhauser aggregate per group
+  double ks_rho = 0;                       // > 0: one Kreisselmeier-Steinhauser aggregate per group
   bool log_objective = false;
   double wall_end = HUGE_VAL, cpu_end = HUGE_VAL;  // this run's share of the budget
   long evals = 0;
@@ -87,7 +90,8 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   return J;
 }
 
-void mconstraint(unsigned m, double* result, unsigned n, const double* x, double* grad, void* data) {
+void mconstraint(unsigned m, double* result, unsigned n, const double* x, double* grad,
+                 void* data) {
   auto* c = static_cast<Ctx*>(data);
   Eigen::Map<const Eigen::VectorXd> z(x, n);
   Eigen::VectorXd zz = z, g;
@@ -98,7 +102,8 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
     for (unsigned i = 0; i < m; ++i) {
       const int row = (*c->rows)[i];
       result[i] = g(row) + c->tighten;
-      if (grad) Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(i) * n, n) = J->row(row);
+      if (grad)
+        Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(i) * n, n) = J->row(row);
     }
     return;
   }
@@ -135,11 +140,14 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
   std::vector<int> idx(static_cast<std::size_t>(K));
   for (int grp = 0; grp < c->lim->groups(); ++grp) {
     for (int k = 0; k < K; ++k) idx[static_cast<std::size_t>(k)] = grp * K + k;
-    std::partial_sort(idx.begin(), idx.begin() + r, idx.end(), [&](int a, int b) { return g(a) > g(b); });
+    std::partial_sort(idx.begin(), idx.begin() + r, idx.end(),
+                      [&](int a, int b) { return g(a) > g(b); });
     for (int i = 0; i < r; ++i) {
       const int row = idx[static_cast<std::size_t>(i)], out = grp * r + i;
       result[out] = g(row) + c->tighten;
-      if (grad) Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(out) * n, n) = J->row(row);
+      if (grad)
+        Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(out) * n, n) =
+            J->row(row);
     }
   }
 }
@@ -155,72 +163,102 @@ class NloptOptimizer final : public exid::Optimizer {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::optim::budgetParams(60.0, 0);
-    p.push_back(exid::param_string("algorithm", std::string("LD_SLSQP"),
-                                   "NLopt algorithm name (NLOPT_ prefix dropped); an unknown name lists the valid ones"));
-    p.push_back(exid::param_string("local_algorithm", std::string("LD_SLSQP"),
-                                   "local algorithm for the polish after a global one (and MLSL's local searches)"));
-    p.push_back(exid::param_bool("polish", true, "after a global algorithm, polish its best point with local_algorithm"));
-    p.push_back(exid::param_int("starts", 1, "starts: the initial point, then perturbed ones; the best feasible is kept", 1.0));
-    p.push_back(exid::param_string("start_mode", std::string("random"),
-                                   "later starts: random — from the centre of the bound box along a "
-                                   "random direction, start_perturbation times the largest feasible "
-                                   "step; perturb — the initial point plus start_perturbation times "
-                                   "half the bound range, pulled back towards it until feasible",
-                                   {"random", "perturb"}));
+    p.push_back(exid::param_string(
+        "algorithm", std::string("LD_SLSQP"),
+        "NLopt algorithm name (NLOPT_ prefix dropped); an unknown name lists the valid ones"));
+    p.push_back(exid::param_string(
+        "local_algorithm", std::string("LD_SLSQP"),
+        "local algorithm for the polish after a global one (and MLSL's local searches)"));
+    p.push_back(exid::param_bool(
+        "polish", true, "after a global algorithm, polish its best point with local_algorithm"));
+    p.push_back(exid::param_int(
+        "starts", 1, "starts: the initial point, then perturbed ones; the best feasible is kept",
+        1.0));
+    p.push_back(
+        exid::param_string("start_mode", std::string("random"),
+                           "later starts: random — from the centre of the bound box along a "
+                           "random direction, start_perturbation times the largest feasible "
+                           "step; perturb — the initial point plus start_perturbation times "
+                           "half the bound range, pulled back towards it until feasible",
+                           {"random", "perturb"}));
     p.push_back(exid::param_double("start_perturbation", 0.5, "", "see start_mode", 0.0));
-    p.push_back(exid::param_int("seed", 0, "nlopt::srand and the start perturbations (0: the study seed)", 0.0));
+    p.push_back(exid::param_int(
+        "seed", 0, "nlopt::srand and the start perturbations (0: the study seed)", 0.0));
     p.push_back(exid::param_double("xtol_rel", 1e-6, "", "relative tolerance on z (0: off)", 0.0));
     p.push_back(exid::param_double("ftol_rel", 1e-9, "", "relative tolerance on J (0: off)", 0.0));
-    p.push_back(exid::param_double("bound_scale", 2.0, "",
-                                   "global algorithms: infinite bounds become z0 -+ bound_scale max(1, |z0_i|)", 0.0, std::nullopt, true));
-    p.push_back(exid::param_double("constraint_tightening", 1e-7, "rad",
-                                   "the optimiser sees g(z) + this <= 0, so that its nearly-feasible "
-                                   "iterates are feasible", 0.0));
-    p.push_back(exid::param_string("constraint_mode", std::string("all"),
-                                   "how g reaches NLopt: all — every sample; slots — per limit and "
-                                   "joint the constraint_slots largest values; working_set — rows "
-                                   "within working_set_margin of their limit, grown and re-run "
-                                   "while the result violates others (the returned point is always "
-                                   "checked at every sample); aggregated — per limit and joint one "
-                                   "smooth Kreisselmeier-Steinhauser aggregate of the K samples "
-                                   "(conservative: KS <= 0 implies every sample within its limit), "
-                                   "then a polish of the best point with every sample (final_polish)",
-                                   {"all", "slots", "working_set", "aggregated"}));
-    p.push_back(exid::param_double("ks_rho", 100.0, "1/rad",
-                                   "aggregated: KS sharpness rho; the aggregate exceeds the largest "
-                                   "g by at most log(K)/rho (limits in rad, rad/s, rad/s^2)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double(
+        "bound_scale", 2.0, "",
+        "global algorithms: infinite bounds become z0 -+ bound_scale max(1, |z0_i|)", 0.0,
+        std::nullopt, true));
+    p.push_back(
+        exid::param_double("constraint_tightening", 1e-7, "rad",
+                           "the optimiser sees g(z) + this <= 0, so that its nearly-feasible "
+                           "iterates are feasible",
+                           0.0));
+    p.push_back(
+        exid::param_string("constraint_mode", std::string("all"),
+                           "how g reaches NLopt: all — every sample; slots — per limit and "
+                           "joint the constraint_slots largest values; working_set — rows "
+                           "within working_set_margin of their limit, grown and re-run "
+                           "while the result violates others (the returned point is always "
+                           "checked at every sample); aggregated — per limit and joint one "
+                           "smooth Kreisselmeier-Steinhauser aggregate of the K samples "
+                           "(conservative: KS <= 0 implies every sample within its limit), "
+                           "then a polish of the best point with every sample (final_polish)",
+                           {"all", "slots", "working_set", "aggregated"}));
+    p.push_back(
+        exid::param_double("ks_rho", 100.0, "1/rad",
+                           "aggregated: KS sharpness rho; the aggregate exceeds the largest "
+                           "g by at most log(K)/rho (limits in rad, rad/s, rad/s^2)",
+                           0.0, std::nullopt, true));
     p.push_back(exid::param_double("final_polish", 0.1, "",
                                    "aggregated: share of the budget kept for polishing the best "
-                                   "point with every sample's constraint (0: none)", 0.0, 0.9));
+                                   "point with every sample's constraint (0: none)",
+                                   0.0, 0.9));
     p.push_back(exid::param_string("objective", std::string("value"),
                                    "what NLopt minimises: value — J; log — log J (same minimisers, "
-                                   "better scaled for cond); the reported criterion is J", {"value", "log"}));
-    p.push_back(exid::param_double("working_set_margin", 0.3, "rad", "working_set: rows with g > -this join", 0.0));
+                                   "better scaled for cond); the reported criterion is J",
+                                   {"value", "log"}));
+    p.push_back(exid::param_double("working_set_margin", 0.3, "rad",
+                                   "working_set: rows with g > -this join", 0.0));
     p.push_back(exid::param_int("constraint_slots", 10,
-                                   "NLopt sees, per limit and joint, the this-many largest g over the "
-                                   "samples (order statistics; the largest is the exact max) instead "
-                                   "of every sample: far smaller SQP subproblems. 0: every sample", 0.0));
-    p.push_back(exid::param_int("start_evaluations", 0, "evaluations per start (0: the budget split evenly)", 0.0));
+                                "NLopt sees, per limit and joint, the this-many largest g over the "
+                                "samples (order statistics; the largest is the exact max) instead "
+                                "of every sample: far smaller SQP subproblems. 0: every sample",
+                                0.0));
+    p.push_back(exid::param_int("start_evaluations", 0,
+                                "evaluations per start (0: the budget split evenly)", 0.0));
     return p;
   }
 
   explicit NloptOptimizer(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)), alg_name_(p.getString("algorithm")),
-        local_name_(p.getString("local_algorithm")), polish_(p.getBool("polish")),
-        starts_(static_cast<int>(p.getInt("starts"))), random_starts_(p.getString("start_mode") == "random"),
+      : budget_(exid::optim::readBudget(p)),
+        alg_name_(p.getString("algorithm")),
+        local_name_(p.getString("local_algorithm")),
+        polish_(p.getBool("polish")),
+        starts_(static_cast<int>(p.getInt("starts"))),
+        random_starts_(p.getString("start_mode") == "random"),
         perturb_(p.getDouble("start_perturbation")),
-        seed_(static_cast<std::uint64_t>(p.getInt("seed"))), xtol_(p.getDouble("xtol_rel")),
-        ftol_(p.getDouble("ftol_rel")), bound_scale_(p.getDouble("bound_scale")),
+        seed_(static_cast<std::uint64_t>(p.getInt("seed"))),
+        xtol_(p.getDouble("xtol_rel")),
+        ftol_(p.getDouble("ftol_rel")),
+        bound_scale_(p.getDouble("bound_scale")),
         tighten_(p.getDouble("constraint_tightening")),
-        cmode_(p.getString("constraint_mode")), ws_margin_(p.getDouble("working_set_margin")),
-        slots_(p.getString("constraint_mode") == "slots" ? static_cast<int>(p.getInt("constraint_slots")) : 0),
-        start_evals_(p.getInt("start_evaluations")), ks_rho_(p.getDouble("ks_rho")),
-        final_polish_(p.getDouble("final_polish")), log_objective_(p.getString("objective") == "log") {
+        cmode_(p.getString("constraint_mode")),
+        ws_margin_(p.getDouble("working_set_margin")),
+        slots_(p.getString("constraint_mode") == "slots"
+                   ? static_cast<int>(p.getInt("constraint_slots"))
+                   : 0),
+        start_evals_(p.getInt("start_evaluations")),
+        ks_rho_(p.getDouble("ks_rho")),
+        final_polish_(p.getDouble("final_polish")),
+        log_objective_(p.getString("objective") == "log") {
     alg_ = algorithmFromName(alg_name_, "algorithm");
     local_ = algorithmFromName(local_name_, "local_algorithm");
   }
 
-  exid::OptimizerResult minimize(exid::ExcitationProblem& problem, const exid::RunContext& ctx) override {
+  exid::OptimizerResult minimize(exid::ExcitationProblem& problem,
+                                 const exid::RunContext& ctx) override {
     Limits lim(problem);
     Tracker tr(problem, lim, ctx, budget_, "nlopt");
     const Eigen::VectorXd z0 = problem.initial();
@@ -238,11 +276,17 @@ class NloptOptimizer final : public exid::Optimizer {
     const double W0 = tr.wallRemaining(), C0 = tr.cpuRemaining();
     const double f_starts = aggregated && final_polish_ > 0 ? 1.0 - final_polish_ : 1.0;
     for (int s = 0; s < starts_; ++s) {
-      if (tr.shouldStop()) { reason = tr.stopCause(); break; }
-      if ((std::isfinite(W0) && tr.elapsed() >= f_starts * W0) || (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0)) break;
-      Eigen::VectorXd x0 = s == 0 ? z0
-                           : (random_starts_ ? exid::optim::randomStart(problem, lim, z0, perturb_, rng)
-                                             : exid::optim::perturbedStart(problem, lim, z0, perturb_, rng));
+      if (tr.shouldStop()) {
+        reason = tr.stopCause();
+        break;
+      }
+      if ((std::isfinite(W0) && tr.elapsed() >= f_starts * W0) ||
+          (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0))
+        break;
+      Eigen::VectorXd x0 =
+          s == 0 ? z0
+                 : (random_starts_ ? exid::optim::randomStart(problem, lim, z0, perturb_, rng)
+                                   : exid::optim::perturbedStart(problem, lim, z0, perturb_, rng));
       // A start may use up to max(1/starts, 0.3) of the starts' time (a local run usually
       // converges well before), never beyond the starts' time.
       // With start_evaluations the starts are bounded by evaluations (reproducible) instead.
@@ -250,32 +294,38 @@ class NloptOptimizer final : public exid::Optimizer {
       RunEnd end{std::isfinite(W0) ? std::min(f_starts * W0, tr.elapsed() + cap * W0) : HUGE_VAL,
                  std::isfinite(C0) ? std::min(f_starts * C0, tr.cpuElapsed() + cap * C0) : HUGE_VAL,
                  1.0 / (starts_ - s)};
-      std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations, aggregated ? ks_rho_ : 0.0);
+      std::string r =
+          run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations, aggregated ? ks_rho_ : 0.0);
       exid::Json run_info = exid::Json::object();
       run_info["start"] = s;
       run_info["result"] = r;
       if (isGlobal(alg_name_) && polish_ && !tr.shouldStop() && tr.hasFeasible()) {
-        r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations, aggregated ? ks_rho_ : 0.0);
+        r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations,
+                aggregated ? ks_rho_ : 0.0);
         run_info["polish"] = r;
       }
       run_info["best_so_far"] = tr.bestValue();
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
       tr.progress(fmt::format("start {}/{} {}", s + 1, starts_, r));
-      if (r == "cancelled" || r == "max_time_s" || r == "max_cpu_s" || r == "deadline" || r == "max_evaluations") reason = r;
+      if (r == "cancelled" || r == "max_time_s" || r == "max_cpu_s" || r == "deadline" ||
+          r == "max_evaluations")
+        reason = r;
     }
     if (aggregated && final_polish_ > 0 && !tr.shouldStop() && tr.hasFeasible()) {
       // The KS aggregate keeps the iterates a little inside the limits (up to log(K)/rho):
       // polish the best point first with a 10x sharper aggregate (half the polish time), then
       // with every sample's constraint (the exact feasible set) in the time left.
       const double f_mid = 1.0 - 0.5 * final_polish_;
-      const RunEnd mid{std::isfinite(W0) ? f_mid * W0 : HUGE_VAL, std::isfinite(C0) ? f_mid * C0 : HUGE_VAL, 0.5};
+      const RunEnd mid{std::isfinite(W0) ? f_mid * W0 : HUGE_VAL,
+                       std::isfinite(C0) ? f_mid * C0 : HUGE_VAL, 0.5};
       const RunEnd last{HUGE_VAL, HUGE_VAL, 1.0};
       exid::Json run_info = exid::Json::object();
-      run_info["polish_sharper_ks"] =
-          runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid, &iterations, nullptr, nullptr, 10.0 * ks_rho_);
+      run_info["polish_sharper_ks"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid,
+                                              &iterations, nullptr, nullptr, 10.0 * ks_rho_);
       if (!tr.shouldStop())
-        run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last, &iterations, nullptr, nullptr, 0.0);
+        run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last,
+                                           &iterations, nullptr, nullptr, 0.0);
       run_info["best_so_far"] = tr.bestValue();
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
@@ -297,8 +347,8 @@ class NloptOptimizer final : public exid::Optimizer {
 
   // One NLopt run from x0 until `end`. Returns a short result text.
   std::string run(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
-                  const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end, int* iterations,
-                  double ks_rho) {
+                  const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end,
+                  int* iterations, double ks_rho) {
     if (cmode_ != "working_set" || lim.size() == 0)
       return runOnce(problem, lim, tr, alg, name, x0, end, iterations, nullptr, nullptr, ks_rho);
     // Working set: NLopt sees the rows with g > -working_set_margin at the start of a round
@@ -312,7 +362,10 @@ class NloptOptimizer final : public exid::Optimizer {
       lim.eval(x, &g);
       const std::size_t before = rows.size();
       for (int i = 0; i < lim.size(); ++i)
-        if (!in[static_cast<std::size_t>(i)] && g(i) > -ws_margin_) { in[static_cast<std::size_t>(i)] = true; rows.push_back(i); }
+        if (!in[static_cast<std::size_t>(i)] && g(i) > -ws_margin_) {
+          in[static_cast<std::size_t>(i)] = true;
+          rows.push_back(i);
+        }
       if (rows.empty()) {  // nothing near: the maximum of every group
         const int K = lim.samples();
         for (int grp = 0; grp < lim.groups(); ++grp) {
@@ -328,16 +381,18 @@ class NloptOptimizer final : public exid::Optimizer {
       if (lim.maxViolation(x) <= budget_.feasibility_tol && r != "roundoff_limited") {
         lim.eval(x, &g);
         bool near_new = false;
-        for (int i = 0; i < lim.size() && !near_new; ++i) near_new = !in[static_cast<std::size_t>(i)] && g(i) > -0.1 * ws_margin_;
+        for (int i = 0; i < lim.size() && !near_new; ++i)
+          near_new = !in[static_cast<std::size_t>(i)] && g(i) > -0.1 * ws_margin_;
         if (!near_new) break;
       }
     }
     return r + fmt::format(" (working set {} of {} rows)", rows.size(), lim.size());
   }
 
-  std::string runOnce(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
-                      const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end, int* iterations,
-                      const std::vector<int>* rows, Eigen::VectorXd* xout, double ks_rho) {
+  std::string runOnce(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr,
+                      nlopt::algorithm alg, const std::string& name, const Eigen::VectorXd& x0,
+                      const RunEnd& end, int* iterations, const std::vector<int>* rows,
+                      Eigen::VectorXd* xout, double ks_rho) {
     const unsigned n = static_cast<unsigned>(x0.size());
     Ctx c{&problem, &lim, &tr, tighten_, rows || ks_rho > 0 ? 0 : slots_};
     c.rows = rows;
@@ -346,8 +401,10 @@ class NloptOptimizer final : public exid::Optimizer {
     c.wall_end = end.wall;
     c.cpu_end = end.cpu;
     Eigen::VectorXd lo, hi;
-    if (isGlobal(name)) exid::optim::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
-    else problem.bounds(&lo, &hi);
+    if (isGlobal(name))
+      exid::optim::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
+    else
+      problem.bounds(&lo, &hi);
     std::vector<double> vlo(lo.data(), lo.data() + n), vhi(hi.data(), hi.data() + n);
     auto configure = [&](nlopt::opt& o) {
       o.set_lower_bounds(vlo);
@@ -385,14 +442,20 @@ class NloptOptimizer final : public exid::Optimizer {
     // Wall-time limit for NLopt itself (the objective also stops at the run's wall/CPU end).
     const double left = std::min(tr.wallRemaining(), end.wall - tr.elapsed());
     if (std::isfinite(left)) top->set_maxtime(std::max(1e-3, left));
-    const bool time_limited = std::isfinite(left) || std::isfinite(std::min(tr.cpuRemaining(), end.cpu));
+    const bool time_limited =
+        std::isfinite(left) || std::isfinite(std::min(tr.cpuRemaining(), end.cpu));
     long evals_left = 0;
     if (budget_.max_evaluations > 0)
-      evals_left = std::max<long>(1, static_cast<long>((budget_.max_evaluations - (problem.evaluations() - tr.evaluations0())) * end.eval_share));
-    if (start_evals_ > 0) evals_left = evals_left > 0 ? std::min<long>(evals_left, start_evals_) : start_evals_;
+      evals_left =
+          std::max<long>(1, static_cast<long>((budget_.max_evaluations -
+                                               (problem.evaluations() - tr.evaluations0())) *
+                                              end.eval_share));
+    if (start_evals_ > 0)
+      evals_left = evals_left > 0 ? std::min<long>(evals_left, start_evals_) : start_evals_;
     if (evals_left > 0) top->set_maxeval(static_cast<int>(evals_left));
     if (isGlobal(name) && evals_left <= 0 && !time_limited)
-      throw exid::Error(fmt::format("optimizer 'nlopt': global algorithm {} needs max_time_s or max_evaluations", name));
+      throw exid::Error(fmt::format(
+          "optimizer 'nlopt': global algorithm {} needs max_time_s or max_evaluations", name));
     std::vector<double> x(x0.data(), x0.data() + n);
     for (unsigned i = 0; i < n; ++i) x[i] = std::clamp(x[i], vlo[i], vhi[i]);
     double f = 0;

@@ -56,13 +56,16 @@ class Parameterisation {
     const exid::Json d = traj.describe();
     auto num = [&](const char* key) {
       const exid::Json* v = d.find(key);
-      exid::check(v && v->isNumber(), fmt::format("{}: trajectory '{}' does not describe '{}'", who, name, key));
+      exid::check(v && v->isNumber(),
+                  fmt::format("{}: trajectory '{}' does not describe '{}'", who, name, key));
       return v->asDouble();
     };
     const exid::Json* js = d.find("joints");
-    exid::check(js && js->isArray(), fmt::format("{}: trajectory '{}' does not list its moving joints", who, name));
+    exid::check(js && js->isArray(),
+                fmt::format("{}: trajectory '{}' does not list its moving joints", who, name));
     moving_.clear();
-    for (std::size_t i = 0; i < js->size(); ++i) moving_.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+    for (std::size_t i = 0; i < js->size(); ++i)
+      moving_.push_back(static_cast<int>(js->at(i).asInt()) - 1);
     const Eigen::VectorXd z0 = traj.initial();
     s0_ = traj.evaluate(z0);
     n_ = s0_.dof();
@@ -86,24 +89,30 @@ class Parameterisation {
     } else {
       throw exid::Error(fmt::format(
           "{}: trajectory '{}' is not supported: the continuous-time optimiser re-implements the "
-          "'fourier' and 'spline' parameterisations only (for 'pointwise' use adjoint_gradient or nlopt)",
+          "'fourier' and 'spline' parameterisations only (for 'pointwise' use adjoint_gradient or "
+          "nlopt)",
           who, name));
     }
     exid::check(static_cast<int>(moving_.size()) * m_ == traj.numVariables(),
-                fmt::format("{}: trajectory '{}' has {} variables, the re-implementation {}", who, name,
-                            traj.numVariables(), static_cast<int>(moving_.size()) * m_));
+                fmt::format("{}: trajectory '{}' has {} variables, the re-implementation {}", who,
+                            name, traj.numVariables(), static_cast<int>(moving_.size()) * m_));
     // The re-implementation must reproduce the plugin's samples (at z0 and at a perturbed z).
     Eigen::VectorXd z1 = z0;
-    for (Eigen::Index i = 0; i < z1.size(); ++i) z1(i) += 0.01 * std::sin(1.0 + 3.7 * static_cast<double>(i));
+    for (Eigen::Index i = 0; i < z1.size(); ++i)
+      z1(i) += 0.01 * std::sin(1.0 + 3.7 * static_cast<double>(i));
     for (const Eigen::VectorXd* z : {&z0, static_cast<const Eigen::VectorXd*>(&z1)}) {
       const exid::Samples s = traj.evaluate(*z);
       const exid::Samples r = samplesAt(s.t, *z);
-      const double scale = 1.0 + s.q.cwiseAbs().maxCoeff() + s.qd.cwiseAbs().maxCoeff() + s.qdd.cwiseAbs().maxCoeff();
-      const double err = std::max({(s.q - r.q).cwiseAbs().maxCoeff(), (s.qd - r.qd).cwiseAbs().maxCoeff(),
-                                   (s.qdd - r.qdd).cwiseAbs().maxCoeff()});
-      exid::check(err <= 1e-8 * scale,
-                  fmt::format("{}: the continuous re-implementation of trajectory '{}' differs from the "
-                              "plugin's samples by {:.3g} (parameters not understood)", who, name, err));
+      const double scale = 1.0 + s.q.cwiseAbs().maxCoeff() + s.qd.cwiseAbs().maxCoeff() +
+                           s.qdd.cwiseAbs().maxCoeff();
+      const double err =
+          std::max({(s.q - r.q).cwiseAbs().maxCoeff(), (s.qd - r.qd).cwiseAbs().maxCoeff(),
+                    (s.qdd - r.qdd).cwiseAbs().maxCoeff()});
+      exid::check(
+          err <= 1e-8 * scale,
+          fmt::format("{}: the continuous re-implementation of trajectory '{}' differs from the "
+                      "plugin's samples by {:.3g} (parameters not understood)",
+                      who, name, err));
     }
   }
 
@@ -116,7 +125,8 @@ class Parameterisation {
   const Eigen::VectorXd& rest() const { return rest_; }
 
   /// Basis rows at time t (m values each).
-  void basis(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd, Eigen::RowVectorXd* bqdd) const {
+  void basis(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd,
+             Eigen::RowVectorXd* bqdd) const {
     bq->setZero(m_);
     bqd->setZero(m_);
     bqdd->setZero(m_);
@@ -234,7 +244,8 @@ struct CvodesSettings {
 
 class ContinuousCriterion {
  public:
-  ContinuousCriterion(const exid::ExcitationProblem& p, const Parameterisation& par, CvodesSettings cs)
+  ContinuousCriterion(const exid::ExcitationProblem& p, const Parameterisation& par,
+                      CvodesSettings cs)
       : model_(p.model()), crit_(p.criterion()), par_(par), cs_(cs) {
     nb_ = model_.numBase();
     scale_ = Eigen::VectorXd::Ones(nb_);
@@ -244,17 +255,20 @@ class ContinuousCriterion {
       for (int i = 0; i < nb_; ++i) scale_(i) = std::max(nom(i), floor);
     }
     nq_ = nb_ * (nb_ + 1) / 2;
-    exid::check(SUNContext_Create(nullptr, &sctx_) == 0, "optimizer 'sundials': SUNContext_Create failed");
+    exid::check(SUNContext_Create(nullptr, &sctx_) == 0,
+                "optimizer 'sundials': SUNContext_Create failed");
     sample_.t = Eigen::VectorXd::Zero(1);
     sample_.q = par_.rest().transpose();
     sample_.qd = Eigen::MatrixXd::Zero(1, par_.n());
     sample_.qdd = Eigen::MatrixXd::Zero(1, par_.n());
     // One sample must give design rows (models with one row set per instant).
     const Eigen::MatrixXd W = model_.design(sample_);
-    exid::check(W.rows() > 0 && W.cols() == nb_,
-                fmt::format("optimizer 'sundials': the model '{}' gives no design rows for a single "
-                            "instant (the integral model's rows are windows): use adjoint_gradient or nlopt",
-                            model_.pluginName()));
+    exid::check(
+        W.rows() > 0 && W.cols() == nb_,
+        fmt::format(
+            "optimizer 'sundials': the model '{}' gives no design rows for a single "
+            "instant (the integral model's rows are windows): use adjoint_gradient or nlopt",
+            model_.pluginName()));
   }
   ~ContinuousCriterion() { SUNContext_Free(&sctx_); }
   ContinuousCriterion(const ContinuousCriterion&) = delete;
@@ -266,7 +280,8 @@ class ContinuousCriterion {
   long stepsBackward() const { return steps_b_; }
 
   /// J(z) and (if grad) dJ/dz by the adjoint. Throws exid::Error when CVODES fails.
-  double evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* grad, Eigen::MatrixXd* M_out = nullptr) {
+  double evaluate(const Eigen::VectorXd& z, Eigen::VectorXd* grad,
+                  Eigen::MatrixXd* M_out = nullptr) {
     z_ = z;
     const int nm = par_.nm(), ny = 2 * nm;
     const double T = par_.duration();
@@ -292,13 +307,15 @@ class ContinuousCriterion {
     h.nls = SUNNonlinSol_FixedPoint(h.y, 0, sctx_);
     check(CVodeSetNonlinearSolver(h.mem, h.nls), "CVodeSetNonlinearSolver");
     check(CVodeQuadInit(h.mem, &ContinuousCriterion::rhsQuad, h.q), "CVodeQuadInit");
-    check(CVodeQuadSStolerances(h.mem, cs_.rtol, cs_.atol_quad_rel * quad_scale_), "CVodeQuadSStolerances");
+    check(CVodeQuadSStolerances(h.mem, cs_.rtol, cs_.atol_quad_rel * quad_scale_),
+          "CVodeQuadSStolerances");
     check(CVodeSetQuadErrCon(h.mem, SUNTRUE), "CVodeSetQuadErrCon");
     check(CVodeSetStopTime(h.mem, T), "CVodeSetStopTime");
     if (grad) check(CVodeAdjInit(h.mem, cs_.checkpoint_steps, CV_HERMITE), "CVodeAdjInit");
     double t = 0.0;
     int ncheck = 0;
-    const int flag = grad ? CVodeF(h.mem, T, h.y, &t, CV_NORMAL, &ncheck) : CVode(h.mem, T, h.y, &t, CV_NORMAL);
+    const int flag =
+        grad ? CVodeF(h.mem, T, h.y, &t, CV_NORMAL, &ncheck) : CVode(h.mem, T, h.y, &t, CV_NORMAL);
     check(flag >= 0, grad ? "CVodeF" : "CVode", flag);
     check(CVodeGetQuad(h.mem, &t, h.q) >= 0, "CVodeGetQuad");
     long ns = 0;
@@ -323,12 +340,15 @@ class ContinuousCriterion {
     check(CVodeCreateB(h.mem, CV_ADAMS, &which), "CVodeCreateB");
     check(CVodeInitB(h.mem, which, &ContinuousCriterion::rhsB, T, h.yB), "CVodeInitB");
     check(CVodeSetUserDataB(h.mem, which, this), "CVodeSetUserDataB");
-    check(CVodeSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))), "CVodeSStolerancesB");
+    check(CVodeSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))),
+          "CVodeSStolerancesB");
     check(CVodeSetMaxNumStepsB(h.mem, which, cs_.max_steps), "CVodeSetMaxNumStepsB");
     h.nlsB = SUNNonlinSol_FixedPoint(h.yB, 0, sctx_);
     check(CVodeSetNonlinearSolverB(h.mem, which, h.nlsB), "CVodeSetNonlinearSolverB");
     check(CVodeQuadInitB(h.mem, which, &ContinuousCriterion::rhsQuadB, h.qB), "CVodeQuadInitB");
-    check(CVodeQuadSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))), "CVodeQuadSStolerancesB");
+    check(
+        CVodeQuadSStolerancesB(h.mem, which, cs_.rtol, cs_.atol_state * std::max(1.0, std::abs(J))),
+        "CVodeQuadSStolerancesB");
     check(CVodeSetQuadErrConB(h.mem, which, SUNTRUE), "CVodeSetQuadErrConB");
     check(CVodeB(h.mem, 0.0, CV_NORMAL) >= 0, "CVodeB");
     check(CVodeGetB(h.mem, which, &t, h.yB) >= 0, "CVodeGetB");
@@ -343,7 +363,8 @@ class ContinuousCriterion {
     grad->resize(nz);
     for (int i = 0; i < nz; ++i) (*grad)(i) = qb[i];
     for (int i = 0; i < nm; ++i)
-      grad->segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()) += lam[i] * bq.transpose() + lam[nm + i] * bqd.transpose();
+      grad->segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()) +=
+          lam[i] * bq.transpose() + lam[nm + i] * bqd.transpose();
     return J;
   }
 
@@ -361,7 +382,9 @@ class ContinuousCriterion {
     N_Vector y = nullptr, q = nullptr, yB = nullptr, qB = nullptr;
   };
   static void check(int flag, const char* what, int code = 0) {
-    if (flag < 0) throw exid::Error(fmt::format("optimizer 'sundials': {} failed (flag {})", what, code ? code : flag));
+    if (flag < 0)
+      throw exid::Error(
+          fmt::format("optimizer 'sundials': {} failed (flag {})", what, code ? code : flag));
   }
   static void check(bool ok, const char* what) {
     if (!ok) throw exid::Error(fmt::format("optimizer 'sundials': {} failed", what));
@@ -385,11 +408,15 @@ class ContinuousCriterion {
     const int nm = self->par_.nm();
     const double* y = N_VGetArrayPointer(yv);
     double* yd = N_VGetArrayPointer(ydv);
-    if (nm == 0) { yd[0] = 0.0; return 0; }
+    if (nm == 0) {
+      yd[0] = 0.0;
+      return 0;
+    }
     self->par_.basis(t, &self->bq_, &self->bqd_, &self->bqdd_);
     for (int i = 0; i < nm; ++i) {
       yd[i] = y[nm + i];
-      yd[nm + i] = self->bqdd_.dot(self->z_.segment(static_cast<Eigen::Index>(i) * self->par_.m(), self->par_.m()));
+      yd[nm + i] = self->bqdd_.dot(
+          self->z_.segment(static_cast<Eigen::Index>(i) * self->par_.m(), self->par_.m()));
     }
     return 0;
   }
@@ -429,7 +456,10 @@ class ContinuousCriterion {
     const int nm = self->par_.nm();
     const double* lam = N_VGetArrayPointer(yBv);
     double* out = N_VGetArrayPointer(yBdv);
-    if (nm == 0) { out[0] = 0.0; return 0; }
+    if (nm == 0) {
+      out[0] = 0.0;
+      return 0;
+    }
     try {
       self->adjointAt(t, N_VGetArrayPointer(yv));
     } catch (...) {
@@ -492,33 +522,51 @@ class SundialsOptimizer final : public exid::Optimizer {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::optim::budgetParams(60.0, 0);
-    p.push_back(exid::param_int("max_iterations", 500, "accepted steps in total (0: evaluate the start only)", 0.0));
+    p.push_back(exid::param_int("max_iterations", 500,
+                                "accepted steps in total (0: evaluate the start only)", 0.0));
     p.push_back(exid::param_int("inner_iterations", 60, "iterations per penalty pass", 1.0));
     p.push_back(exid::param_int("memory", 10, "L-BFGS memory", 1.0, 100.0));
-    p.push_back(exid::param_double("rtol", 1e-6, "", "CVODES relative tolerance (state, quadratures, adjoint)", 0.0, 1.0, true));
-    p.push_back(exid::param_double("step_gain", 0.1, "",
-                                   "largest change of any variable in the first step: gain / max|gradient|", 0.0, std::nullopt, true));
-    p.push_back(exid::param_double("penalty_weight", 100.0, "", "initial rho as a multiple of |J(z0)|", 0.0, std::nullopt, true));
-    p.push_back(exid::param_double("ftol_rel", 1e-7, "", "stop when a pass improves J by less than this (relative)", 0.0));
-    p.push_back(exid::param_int("checkpoint_steps", 200, "CVODES adjoint: steps between checkpoints", 1.0));
-    p.push_back(exid::param_bool("check_gradient", false,
-                                 "at the start, compare the adjoint gradient with central finite "
-                                 "differences of the continuous criterion and time J vs J + gradient "
-                                 "(details: gradient_check)"));
-    p.push_back(exid::param_double("fd_step", 1e-5, "", "check_gradient: relative central-difference step", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("rtol", 1e-6, "",
+                                   "CVODES relative tolerance (state, quadratures, adjoint)", 0.0,
+                                   1.0, true));
+    p.push_back(
+        exid::param_double("step_gain", 0.1, "",
+                           "largest change of any variable in the first step: gain / max|gradient|",
+                           0.0, std::nullopt, true));
+    p.push_back(exid::param_double("penalty_weight", 100.0, "",
+                                   "initial rho as a multiple of |J(z0)|", 0.0, std::nullopt,
+                                   true));
+    p.push_back(exid::param_double(
+        "ftol_rel", 1e-7, "", "stop when a pass improves J by less than this (relative)", 0.0));
+    p.push_back(
+        exid::param_int("checkpoint_steps", 200, "CVODES adjoint: steps between checkpoints", 1.0));
+    p.push_back(
+        exid::param_bool("check_gradient", false,
+                         "at the start, compare the adjoint gradient with central finite "
+                         "differences of the continuous criterion and time J vs J + gradient "
+                         "(details: gradient_check)"));
+    p.push_back(exid::param_double("fd_step", 1e-5, "",
+                                   "check_gradient: relative central-difference step", 0.0,
+                                   std::nullopt, true));
     return p;
   }
 
   explicit SundialsOptimizer(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)), max_iter_(static_cast<int>(p.getInt("max_iterations"))),
-        inner_(static_cast<int>(p.getInt("inner_iterations"))), mem_(static_cast<int>(p.getInt("memory"))),
-        gain_(p.getDouble("step_gain")), rho_rel_(p.getDouble("penalty_weight")), ftol_(p.getDouble("ftol_rel")),
-        check_grad_(p.getBool("check_gradient")), fd_step_(p.getDouble("fd_step")) {
+      : budget_(exid::optim::readBudget(p)),
+        max_iter_(static_cast<int>(p.getInt("max_iterations"))),
+        inner_(static_cast<int>(p.getInt("inner_iterations"))),
+        mem_(static_cast<int>(p.getInt("memory"))),
+        gain_(p.getDouble("step_gain")),
+        rho_rel_(p.getDouble("penalty_weight")),
+        ftol_(p.getDouble("ftol_rel")),
+        check_grad_(p.getBool("check_gradient")),
+        fd_step_(p.getDouble("fd_step")) {
     cs_.rtol = p.getDouble("rtol");
     cs_.checkpoint_steps = static_cast<int>(p.getInt("checkpoint_steps"));
   }
 
-  exid::OptimizerResult minimize(exid::ExcitationProblem& problem, const exid::RunContext& ctx) override {
+  exid::OptimizerResult minimize(exid::ExcitationProblem& problem,
+                                 const exid::RunContext& ctx) override {
     t0_ = std::chrono::steady_clock::now();
     ctx_ = &ctx;
     evals_ = 0;
@@ -543,24 +591,38 @@ class SundialsOptimizer final : public exid::Optimizer {
     offer(zs, J0, lim.size() ? std::max(0.0, maxOf(lim, zs)) : 0.0);
     rho_ = rho_rel_ * std::max(1e-12, std::abs(J0));
     int iters = 0;
-    std::string reason = max_iter_ == 0 ? "max_iterations (0: start evaluated only)" : "max_iterations";
+    std::string reason =
+        max_iter_ == 0 ? "max_iterations (0: start evaluated only)" : "max_iterations";
     double prev_J = HUGE_VAL;
     for (int outer = 0; iters < max_iter_; ++outer) {
-      if (stop()) { reason = stopCause(); break; }
+      if (stop()) {
+        reason = stopCause();
+        break;
+      }
       const bool converged = inner(cc, lim, &z, &iters);
-      if (stop()) { reason = stopCause(); break; }
+      if (stop()) {
+        reason = stopCause();
+        break;
+      }
       const double v = lim.size() ? std::max(0.0, maxOf(lim, z)) : 0.0;
       const bool feasible = v <= budget_.feasibility_tol;
       ctx.report(std::min(1.0, static_cast<double>(iters) / std::max(1, max_iter_)),
                  fmt::format("sundials pass {} J {:.6g} violation {:.3g}", outer + 1, cur_J_, v));
       if (!feasible) rho_ *= 10.0;
-      if (feasible && converged && std::abs(prev_J - cur_J_) <= ftol_ * std::max(1.0, std::abs(cur_J_))) {
+      if (feasible && converged &&
+          std::abs(prev_J - cur_J_) <= ftol_ * std::max(1.0, std::abs(cur_J_))) {
         reason = "converged (ftol_rel)";
         break;
       }
-      if (feasible && converged && lim.size() == 0) { reason = "converged"; break; }
+      if (feasible && converged && lim.size() == 0) {
+        reason = "converged";
+        break;
+      }
       if (feasible) prev_J = cur_J_;
-      if (outer > 50) { reason = "outer passes"; break; }
+      if (outer > 50) {
+        reason = "outer passes";
+        break;
+      }
     }
     exid::OptimizerResult r;
     r.z = have_feasible_ ? best_z_ : best_inf_z_;
@@ -654,7 +716,8 @@ class SundialsOptimizer final : public exid::Optimizer {
     }
   }
 
-  double merit(ContinuousCriterion& cc, exid::optim::Limits& lim, const Eigen::VectorXd& z, Eigen::VectorXd* grad) {
+  double merit(ContinuousCriterion& cc, exid::optim::Limits& lim, const Eigen::VectorXd& z,
+               Eigen::VectorXd* grad) {
     double J;
     try {
       J = cc.evaluate(z, grad);
@@ -710,7 +773,9 @@ class SundialsOptimizer final : public exid::Optimizer {
         for (std::size_t i = 0; i < S.size(); ++i) q += (a[i] - R[i] * Y[i].dot(q)) * S[i];
         d = -q;
         if (d.dot(pg) >= 0) {
-          S.clear(); Y.clear(); R.clear();
+          S.clear();
+          Y.clear();
+          R.clear();
           d = -pg;
           alpha = gain_ / gmax;
         }
@@ -721,7 +786,8 @@ class SundialsOptimizer final : public exid::Optimizer {
       for (int ls = 0; ls < 30; ++ls) {
         zn = project(z + alpha * d);
         phin = merit(cc, lim, zn, &gn);
-        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(g.dot(zn - z), 0.0) && phin < phi) {
+        if (std::isfinite(phin) && phin <= phi + 1e-4 * std::min(g.dot(zn - z), 0.0) &&
+            phin < phi) {
           accepted = true;
           break;
         }
@@ -733,11 +799,19 @@ class SundialsOptimizer final : public exid::Optimizer {
       const Eigen::VectorXd s = zn - z, y = gn - g;
       const double sy = s.dot(y);
       if (sy > 1e-12 * s.norm() * y.norm()) {
-        S.push_back(s); Y.push_back(y); R.push_back(1.0 / sy);
-        if (static_cast<int>(S.size()) > mem_) { S.pop_front(); Y.pop_front(); R.pop_front(); }
+        S.push_back(s);
+        Y.push_back(y);
+        R.push_back(1.0 / sy);
+        if (static_cast<int>(S.size()) > mem_) {
+          S.pop_front();
+          Y.pop_front();
+          R.pop_front();
+        }
       }
       const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
-      z = zn; g = gn; phi = phin;
+      z = zn;
+      g = gn;
+      phi = phin;
       cur_J_ = trial_J_;
       if (rel < 1e-12) return true;
     }

@@ -12,7 +12,8 @@ class Cond final : public exid::Criterion {
  public:
   static constexpr const char* kName = "cond";
   static constexpr const char* kVersion = "1.0";
-  static constexpr const char* kDoc = "condition number of W: sigma_max/sigma_min (cond(M) is its square)";
+  static constexpr const char* kDoc =
+      "condition number of W: sigma_max/sigma_min (cond(M) is its square)";
   static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
   explicit Cond(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
   bool scaleColumns() const override { return scale_; }

@@ -21,7 +21,8 @@ class FrobeniusCond final : public exid::Criterion {
     const double tri = s.lambda.cwiseInverse().sum();
     const double J = std::sqrt(tr * tri);
     if (dM) {
-      Eigen::MatrixXd Minv2 = s.V * s.lambda.cwiseInverse().cwiseAbs2().asDiagonal() * s.V.transpose();
+      Eigen::MatrixXd Minv2 =
+          s.V * s.lambda.cwiseInverse().cwiseAbs2().asDiagonal() * s.V.transpose();
       *dM = 0.5 * J * (Eigen::MatrixXd::Identity(M.rows(), M.cols()) / tr - Minv2 / tri);
     }
     return J;

@@ -10,8 +10,8 @@ namespace exid::criteria {
 
 Spectrum spectrum(const Eigen::MatrixXd& M, const char* who) {
   check(M.rows() == M.cols() && M.rows() > 0,
-        fmt::format("criterion {}: information matrix must be square and non-empty, found {}x{}", who,
-                    M.rows(), M.cols()));
+        fmt::format("criterion {}: information matrix must be square and non-empty, found {}x{}",
+                    who, M.rows(), M.cols()));
   check(M.allFinite(), fmt::format("criterion {}: information matrix has non-finite entries", who));
   Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(0.5 * (M + M.transpose()));
   check(es.info() == Eigen::Success, fmt::format("criterion {}: eigen-decomposition failed", who));
@@ -24,8 +24,9 @@ Spectrum spectrum(const Eigen::MatrixXd& M, const char* who) {
 }
 
 ParamDecl scaleColumnsParam() {
-  return param_bool("scale_columns", false,
-                    "scale each base column by the magnitude of its nominal parameter before forming M");
+  return param_bool(
+      "scale_columns", false,
+      "scale each base column by the magnitude of its nominal parameter before forming M");
 }
 
 }  // namespace exid::criteria

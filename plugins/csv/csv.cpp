@@ -18,8 +18,8 @@
 #include <vector>
 
 #include "exid/drive.hpp"
-#include "exid/estimators/common.hpp"
 #include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 
@@ -70,8 +70,8 @@ class CsvExperiment : public exid::Experiment {
                      "measured: tau_m = Kt .* i directly; joint: the products act on the joint "
                      "coordinates and tau_m = T^T (Kt .* i) with the robot's transmission T",
                      {"measured", "joint"}),
-        param_doubles("sign", std::vector<double>{},
-                      "", "per joint +1 or -1, applied to q, qd, qdd and tau of that joint; empty: "
+        param_doubles("sign", std::vector<double>{}, "",
+                      "per joint +1 or -1, applied to q, qd, qdd and tau of that joint; empty: "
                       "all +1"),
         param_doubles("offset_rad", std::vector<double>{}, "rad",
                       "per joint, added to q after the sign; empty: zeros"),
@@ -164,11 +164,15 @@ class CsvExperiment : public exid::Experiment {
     }
     // Columns as (source, column) references, flattened: ref = source * kStride + column.
     constexpr int kStride = 1 << 20;
-    auto value = [&](int r, int ref) { return srcs[static_cast<std::size_t>(ref / kStride)].T.data(r, ref % kStride); };
+    auto value = [&](int r, int ref) {
+      return srcs[static_cast<std::size_t>(ref / kStride)].T.data(r, ref % kStride);
+    };
     auto colName = [&](int ref) {
       const Source& sr = srcs[static_cast<std::size_t>(ref / kStride)];
-      return srcs.size() > 1 ? fmt::format("{}' of {}", sr.T.columns[static_cast<std::size_t>(ref % kStride)], sr.file)
-                             : sr.T.columns[static_cast<std::size_t>(ref % kStride)] + "'";
+      return srcs.size() > 1
+                 ? fmt::format("{}' of {}", sr.T.columns[static_cast<std::size_t>(ref % kStride)],
+                               sr.file)
+                 : sr.T.columns[static_cast<std::size_t>(ref % kStride)] + "'";
     };
     auto named = [&](int f, const char* key) -> std::vector<int> {
       std::vector<int> idx;
@@ -181,15 +185,17 @@ class CsvExperiment : public exid::Experiment {
                               key, n, robot->name, names.size()));
       for (const auto& c : names) {
         const int i = sr.T.col(c);
-        exid::check(i >= 0, fmt::format("experiment 'csv': {}: {}: no column '{}' (found columns: {})",
-                                        sr.file, key, c, fmt::join(sr.T.columns, ", ")));
+        exid::check(i >= 0,
+                    fmt::format("experiment 'csv': {}: {}: no column '{}' (found columns: {})",
+                                sr.file, key, c, fmt::join(sr.T.columns, ", ")));
         idx.push_back(f * kStride + i);
       }
       return idx;
     };
 
     // Column groups.
-    auto group = [&](const std::string& prefix, bool required, const char* what, int f = 0) -> std::vector<int> {
+    auto group = [&](const std::string& prefix, bool required, const char* what,
+                     int f = 0) -> std::vector<int> {
       const exid::CsvTable& Tg = srcs[static_cast<std::size_t>(f)].T;
       const std::string& fileg = srcs[static_cast<std::size_t>(f)].file;
       std::vector<int> idx;
@@ -203,10 +209,11 @@ class CsvExperiment : public exid::Experiment {
                                            fmt::join(Tg.columns, ", ")));
         return idx;
       }
-      exid::check(found == n,
-                  fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
-                              "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
-                              fileg, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
+      exid::check(
+          found == n,
+          fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
+                      "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
+                      fileg, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
       for (int j = 1; j <= n; ++j) idx.push_back(f * kStride + Tg.col(prefix + std::to_string(j)));
       return idx;
     };
@@ -222,12 +229,14 @@ class CsvExperiment : public exid::Experiment {
       if (ctau.empty()) ctau = group("tau", ftau > 0, "torque_file is given", ftau);
     } else {
       const std::string pre = P_.getString("current_prefix");
-      if (ctau.empty()) ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
+      if (ctau.empty())
+        ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
       Kt = P_.getDoubles("torque_constants_Nm_per_A");
-      exid::check(static_cast<int>(Kt.size()) == n,
-                  fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values (one "
-                              "per joint of robot '{}'), found {}",
-                              n, robot->name, Kt.size()));
+      exid::check(
+          static_cast<int>(Kt.size()) == n,
+          fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values (one "
+                      "per joint of robot '{}'), found {}",
+                      n, robot->name, Kt.size()));
     }
     std::vector<int> cw;
     {
@@ -252,19 +261,23 @@ class CsvExperiment : public exid::Experiment {
     if (sign.empty()) sign.assign(static_cast<std::size_t>(n), 1.0);
     if (off.empty()) off.assign(static_cast<std::size_t>(n), 0.0);
     exid::check(static_cast<int>(sign.size()) == n,
-                fmt::format("experiment 'csv': sign: expected {} values (one per joint), found {}", n,
-                            sign.size()));
-    exid::check(static_cast<int>(off.size()) == n,
-                fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), found {}",
-                            n, off.size()));
+                fmt::format("experiment 'csv': sign: expected {} values (one per joint), found {}",
+                            n, sign.size()));
+    exid::check(
+        static_cast<int>(off.size()) == n,
+        fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), found {}", n,
+                    off.size()));
     for (int j = 0; j < n; ++j)
-      exid::check(sign[static_cast<std::size_t>(j)] == 1.0 || sign[static_cast<std::size_t>(j)] == -1.0,
-                  fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
-                              sign[static_cast<std::size_t>(j)]));
+      exid::check(
+          sign[static_cast<std::size_t>(j)] == 1.0 || sign[static_cast<std::size_t>(j)] == -1.0,
+          fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
+                      sign[static_cast<std::size_t>(j)]));
 
     // Rows: bad values in the used columns, time.
     std::vector<int> used = cq;
-    for (const std::vector<int>* g : {&cqd, &cqdd, static_cast<const std::vector<int>*>(&ctau), static_cast<const std::vector<int>*>(&cw)}) used.insert(used.end(), g->begin(), g->end());
+    for (const std::vector<int>* g : {&cqd, &cqdd, static_cast<const std::vector<int>*>(&ctau),
+                                      static_cast<const std::vector<int>*>(&cw)})
+      used.insert(used.end(), g->begin(), g->end());
     if (ct >= 0) used.push_back(ct);
     const bool drop = P_.getBool("drop_bad_rows");
     const double dt = P_.getDouble("sample_period_s");
@@ -273,8 +286,9 @@ class CsvExperiment : public exid::Experiment {
     int dropped = 0;
     auto lineText = [&](int r, int f = 0) {
       const std::vector<int>& line_of = srcs[static_cast<std::size_t>(f)].line_of;
-      return r < static_cast<int>(line_of.size()) ? fmt::format("line {}", line_of[static_cast<std::size_t>(r)])
-                                                  : fmt::format("data row {}", r + 1);
+      return r < static_cast<int>(line_of.size())
+                 ? fmt::format("line {}", line_of[static_cast<std::size_t>(r)])
+                 : fmt::format("data row {}", r + 1);
     };
     for (int r = 0; r < rows; ++r) {
       int bad = -1;
@@ -303,9 +317,10 @@ class CsvExperiment : public exid::Experiment {
       keep.push_back(r);
       tk.push_back(t);
     }
-    exid::check(!keep.empty(), fmt::format("experiment 'csv': {}: every row was dropped ({} with bad "
-                                           "values)",
-                                           file, dropped));
+    exid::check(!keep.empty(),
+                fmt::format("experiment 'csv': {}: every row was dropped ({} with bad "
+                            "values)",
+                            file, dropped));
 
     // Segment.
     const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
@@ -321,9 +336,10 @@ class CsvExperiment : public exid::Experiment {
       if (te > 0.0 && rel > te) break;
       sel.push_back(static_cast<int>(i));
     }
-    exid::check(!sel.empty(), fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
-                                          "after the first sample (t = {} s; the file spans {} s)",
-                                          file, ts, te, tfirst, tk.back() - tfirst));
+    exid::check(!sel.empty(),
+                fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
+                            "after the first sample (t = {} s; the file spans {} s)",
+                            file, ts, te, tfirst, tk.back() - tfirst));
 
     // Fill the dataset.
     const int K = static_cast<int>(sel.size());
@@ -341,7 +357,8 @@ class CsvExperiment : public exid::Experiment {
       d.t[k] = tk[i];
       for (int j = 0; j < n; ++j) {
         const double s = sign[static_cast<std::size_t>(j)];
-        d.q(k, j) = s * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
+        d.q(k, j) =
+            s * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
         if (!cqd.empty()) d.qd(k, j) = s * value(r, cqd[static_cast<std::size_t>(j)]);
         if (!cqdd.empty()) d.qdd(k, j) = s * value(r, cqdd[static_cast<std::size_t>(j)]);
       }
@@ -356,7 +373,8 @@ class CsvExperiment : public exid::Experiment {
           tau = robot->transmission.transpose() * tau;
         for (int j = 0; j < n; ++j) d.tau(k, j) = sign[static_cast<std::size_t>(j)] * tau[j];
       }
-      for (std::size_t e = 0; e < cw.size(); ++e) d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
+      for (std::size_t e = 0; e < cw.size(); ++e)
+        d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
     }
     const Preprocessed pp = preprocess(&d, file);
 
@@ -408,17 +426,19 @@ class CsvExperiment : public exid::Experiment {
     pp.filter_torque = P_.getBool("filter_torque");
     pp.decimation = static_cast<int>(P_.getInt("decimation"));
     if (pp.cutoff_hz <= 0) {
-      exid::check(pp.decimation == 1 && !pp.filter_torque,
-                  "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");
+      exid::check(
+          pp.decimation == 1 && !pp.filter_torque,
+          "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");
       return pp;
     }
     exid::check(pp.decimation == 1 || pp.filter_torque,
                 "experiment 'csv': decimation > 1 needs filter_torque: true (the torque must be "
                 "low-passed before samples are dropped)");
     const Eigen::Index K = d->size();
-    exid::check(K >= 8, fmt::format("experiment 'csv': {}: {} samples in the segment are too few to "
-                                    "filter and differentiate",
-                                    file, K));
+    exid::check(K >= 8,
+                fmt::format("experiment 'csv': {}: {} samples in the segment are too few to "
+                            "filter and differentiate",
+                            file, K));
     double jitter = 0;
     pp.fs = est::samplingRate(d->t, &jitter);
     exid::check(pp.cutoff_hz < 0.5 * pp.fs,
@@ -438,16 +458,19 @@ class CsvExperiment : public exid::Experiment {
       if (d->hasWrench()) d->wrench = est::filtfiltColumns(sos, d->wrench);
     }
     const std::int64_t trim_p = P_.getInt("trim_edges");
-    pp.trim = trim_p >= 0 ? static_cast<int>(trim_p) : static_cast<int>(std::ceil(2.0 * pp.fs / pp.cutoff_hz));
-    exid::check(K - 2 * pp.trim >= 2,
-                fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
-                            "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
-                            file, pp.trim, K));
+    pp.trim = trim_p >= 0 ? static_cast<int>(trim_p)
+                          : static_cast<int>(std::ceil(2.0 * pp.fs / pp.cutoff_hz));
+    exid::check(
+        K - 2 * pp.trim >= 2,
+        fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
+                    "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
+                    file, pp.trim, K));
     std::vector<Eigen::Index> keep;
     for (Eigen::Index k = pp.trim; k < K - pp.trim; k += pp.decimation) keep.push_back(k);
     auto pick = [&](const Eigen::MatrixXd& M) {
       Eigen::MatrixXd out(static_cast<Eigen::Index>(keep.size()), M.cols());
-      for (std::size_t i = 0; i < keep.size(); ++i) out.row(static_cast<Eigen::Index>(i)) = M.row(keep[i]);
+      for (std::size_t i = 0; i < keep.size(); ++i)
+        out.row(static_cast<Eigen::Index>(i)) = M.row(keep[i]);
       return out;
     };
     Eigen::VectorXd t(static_cast<Eigen::Index>(keep.size()));

@@ -79,8 +79,12 @@ struct SampledReference : Reference {
       const double p1 = s.q(i + 1, j), v1 = s.qd(i + 1, j), a1 = s.qdd(i + 1, j);
       const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
                    A = (a1 - a0) * h * h;
-      const double c[6] = {p0, v0 * h, 0.5 * a0 * h * h, 10 * P - 4 * V + 0.5 * A,
-                           -15 * P + 7 * V - A, 6 * P - 3 * V + 0.5 * A};
+      const double c[6] = {p0,
+                           v0 * h,
+                           0.5 * a0 * h * h,
+                           10 * P - 4 * V + 0.5 * A,
+                           -15 * P + 7 * V - A,
+                           6 * P - 3 * V + 0.5 * A};
       (*q)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
       (*qd)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
       (*qdd)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
@@ -153,7 +157,8 @@ class SimulateExperiment : public exid::Experiment {
                      {"computed_torque", "pd_feedforward"}),
         param_double("kp", 100.0, "1/s^2", "position gain (closed-loop stiffness per unit inertia)",
                      0.0),
-        param_double("kd", 20.0, "1/s", "velocity gain (closed-loop damping per unit inertia)", 0.0),
+        param_double("kd", 20.0, "1/s", "velocity gain (closed-loop damping per unit inertia)",
+                     0.0),
         param_bool("drive_terms", true,
                    "include the robot's drive terms (rotor inertia, Coulomb, viscous, offset) in "
                    "the plant"),
@@ -201,7 +206,9 @@ class SimulateExperiment : public exid::Experiment {
                 fmt::format("{}: noise_wrench: expected 1, 2 or 6 numbers, found {}", p.context,
                             nw.size()));
     for (int e = 0; e < 6; ++e)
-      noise_w_[e] = nw.size() == 1 ? nw[0] : (nw.size() == 2 ? nw[e < 3 ? 0 : 1] : nw[static_cast<std::size_t>(e)]);
+      noise_w_[e] = nw.size() == 1
+                        ? nw[0]
+                        : (nw.size() == 2 ? nw[e < 3 ? 0 : 1] : nw[static_cast<std::size_t>(e)]);
   }
 
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* reference,
@@ -231,14 +238,14 @@ class SimulateExperiment : public exid::Experiment {
     exid::Json refmeta = exid::Json::object();
     double duration = P_.getDouble("duration_s");
     if (reference) {
-      exid::check(reference->size() >= 1 && reference->dof() == n &&
-                      reference->qd.cols() == n && reference->qdd.cols() == n &&
-                      reference->qd.rows() == reference->size() &&
-                      reference->qdd.rows() == reference->size(),
-                  fmt::format("experiment 'simulate': the reference trajectory must have q, qd, qdd "
-                              "with {} columns (found q {} x {}, qd {} x {}, qdd {} x {})",
-                              n, reference->q.rows(), reference->q.cols(), reference->qd.rows(),
-                              reference->qd.cols(), reference->qdd.rows(), reference->qdd.cols()));
+      exid::check(
+          reference->size() >= 1 && reference->dof() == n && reference->qd.cols() == n &&
+              reference->qdd.cols() == n && reference->qd.rows() == reference->size() &&
+              reference->qdd.rows() == reference->size(),
+          fmt::format("experiment 'simulate': the reference trajectory must have q, qd, qdd "
+                      "with {} columns (found q {} x {}, qd {} x {}, qdd {} x {})",
+                      n, reference->q.rows(), reference->q.cols(), reference->qd.rows(),
+                      reference->qd.cols(), reference->qdd.rows(), reference->qdd.cols()));
       for (int k = 1; k < reference->size(); ++k)
         exid::check(reference->t[k] > reference->t[k - 1],
                     fmt::format("experiment 'simulate': reference time must increase (sample {} "
@@ -265,8 +272,9 @@ class SimulateExperiment : public exid::Experiment {
       refmeta["seed"] = exid::Json(static_cast<long long>(ctx.seed));
       ref_ = std::move(F);
     }
-    exid::check(duration > 0.0, "experiment 'simulate': the duration is zero (a reference with one "
-                                "sample needs duration_s)");
+    exid::check(duration > 0.0,
+                "experiment 'simulate': the duration is zero (a reference with one "
+                "sample needs duration_s)");
 
     // D0 for the PD controller.
     {
@@ -330,7 +338,8 @@ class SimulateExperiment : public exid::Experiment {
       }
       ++recorded;
       if (k % 50 == 0 || k == N - 1)
-        ctx.report(static_cast<double>(k + 1) / N, fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
+        ctx.report(static_cast<double>(k + 1) / N,
+                   fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
     }
     if (recorded < N) {
       d.t.conservativeResize(recorded);
@@ -339,9 +348,10 @@ class SimulateExperiment : public exid::Experiment {
       qdd.conservativeResize(recorded, n);
       d.tau.conservativeResize(recorded, n);
       if (want_wrench) d.wrench.conservativeResize(recorded, 6);
-      exid::logWarn(fmt::format("experiment 'simulate': stopped (cancelled or out of time) after "
-                                "{} of {} samples",
-                                recorded, N));
+      exid::logWarn(
+          fmt::format("experiment 'simulate': stopped (cancelled or out of time) after "
+                      "{} of {} samples",
+                      recorded, N));
     }
 
     // Measurement noise and quantisation.
@@ -392,8 +402,8 @@ class SimulateExperiment : public exid::Experiment {
     nz["tau_Nm"] = st;
     nz["wrench"] = exid::Json(std::vector<double>(noise_w_, noise_w_ + 6));
     nz["encoder_resolution_rad"] = res;
-    m["recorded"] = P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)"
-                                                : "t q tau (noisy q)";
+    m["recorded"] =
+        P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)" : "t q tau (noisy q)";
     m["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
   }
@@ -415,7 +425,9 @@ class SimulateExperiment : public exid::Experiment {
     }
     if (!drive_terms_) return;
     for (int j = 0; j < n_; ++j) {
-      const exid::Drive D = j < static_cast<int>(R.drives.size()) ? R.drives[static_cast<std::size_t>(j)] : exid::Drive{};
+      const exid::Drive D = j < static_cast<int>(R.drives.size())
+                                ? R.drives[static_cast<std::size_t>(j)]
+                                : exid::Drive{};
       const double v = qdm[j];
       const double s = tanh_ ? std::tanh(v / vs_) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
       (*Mm)(j, j) += D.rotor_inertia;
@@ -558,7 +570,8 @@ class SimulateExperiment : public exid::Experiment {
     std::string error_;
   };
 
-  std::unique_ptr<FourierReference> buildFourier(const exid::RobotModel& R, std::uint64_t seed) const {
+  std::unique_ptr<FourierReference> buildFourier(const exid::RobotModel& R,
+                                                 std::uint64_t seed) const {
     const int n = R.dof(), H = static_cast<int>(P_.getInt("harmonics"));
     auto F = std::make_unique<FourierReference>();
     F->robot = &R;
@@ -572,7 +585,9 @@ class SimulateExperiment : public exid::Experiment {
     const double af = P_.getDouble("amplitude_fraction"), vf = P_.getDouble("velocity_fraction");
     const int G = 2000;
     for (int j = 0; j < n; ++j) {
-      const exid::JointLimits L = j < static_cast<int>(R.limits.size()) ? R.limits[static_cast<std::size_t>(j)] : exid::JointLimits{};
+      const exid::JointLimits L = j < static_cast<int>(R.limits.size())
+                                      ? R.limits[static_cast<std::size_t>(j)]
+                                      : exid::JointLimits{};
       double lo = finiteOr(L.q_min, 1e3, -M_PI), hi = finiteOr(L.q_max, 1e3, M_PI);
       if (!(hi > lo)) {
         lo = -M_PI;

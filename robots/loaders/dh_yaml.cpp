@@ -101,8 +101,9 @@ class Reader {
     }
     if (deg) {
       if (!degrees_allowed) {
-        fail(deg, where, "'" + key + "_deg' is for revolute joints (a prismatic joint's " +
-                             "coordinate is a length in m)");
+        fail(deg, where,
+             "'" + key + "_deg' is for revolute joints (a prismatic joint's " +
+                 "coordinate is a length in m)");
       }
       *out = number(deg, where + "." + key + "_deg") * kDeg;
       return true;
@@ -184,10 +185,10 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
   for (int i = 0; i < n; ++i) {
     const YAML::Node L = links[static_cast<size_t>(i)];
     const std::string where = "links[" + std::to_string(i) + "]";
-    r.requireMap(L, where,
-                 {"name", "joint", "type", "parent", "a", "alpha", "alpha_deg", "d", "theta",
-                  "theta_deg", "mass", "com", "inertia_com", "inertia_origin", "limits", "drive",
-                  "notes"});
+    r.requireMap(
+        L, where,
+        {"name", "joint", "type", "parent", "a", "alpha", "alpha_deg", "d", "theta", "theta_deg",
+         "mass", "com", "inertia_com", "inertia_origin", "limits", "drive", "notes"});
     const int line = L.Mark().line + 1;
     const std::string name =
         L["name"] ? r.text(L["name"], where + ".name") : "link" + std::to_string(i + 1);
@@ -202,8 +203,7 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     } else if (type == "prismatic") {
       row.type = JointType::Prismatic;
     } else {
-      r.fail(L["type"], lw + ".type",
-             "expected 'revolute' or 'prismatic', found '" + type + "'");
+      r.fail(L["type"], lw + ".type", "expected 'revolute' or 'prismatic', found '" + type + "'");
     }
     const bool revolute = row.type == JointType::Revolute;
     if (L["a"]) row.a = r.number(L["a"], lw + ".a");
@@ -231,12 +231,14 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     b.name = name;
     b.joint_name = joint_name;
     if (link_line.count(b.name)) {
-      r.fail(L, where, "duplicate link name '" + b.name + "' (first at line " +
-                           std::to_string(link_line[b.name]) + ")");
+      r.fail(L, where,
+             "duplicate link name '" + b.name + "' (first at line " +
+                 std::to_string(link_line[b.name]) + ")");
     }
     if (joint_line.count(b.joint_name)) {
-      r.fail(L, where, "duplicate joint name '" + b.joint_name + "' (first at line " +
-                           std::to_string(joint_line[b.joint_name]) + ")");
+      r.fail(L, where,
+             "duplicate joint name '" + b.joint_name + "' (first at line " +
+                 std::to_string(joint_line[b.joint_name]) + ")");
     }
     link_line[b.name] = line;
     joint_line[b.joint_name] = line;
@@ -267,8 +269,8 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     if (const YAML::Node Y = L["limits"]) {
       const std::string w = lw + ".limits";
       r.requireMap(Y, w,
-                   {"q_min", "q_max", "q_min_deg", "q_max_deg", "qd_max", "qd_max_deg",
-                    "qdd_max", "qdd_max_deg", "tau_max"});
+                   {"q_min", "q_max", "q_min_deg", "q_max_deg", "qd_max", "qd_max_deg", "qdd_max",
+                    "qdd_max_deg", "tau_max"});
       r.angle(Y, "q_min", w, revolute, &lim.q_min);
       r.angle(Y, "q_max", w, revolute, &lim.q_max);
       r.angle(Y, "qd_max", w, revolute, &lim.qd_max);
@@ -284,9 +286,8 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     Drive drv;
     if (const YAML::Node D = L["drive"]) {
       const std::string w = lw + ".drive";
-      r.requireMap(D, w,
-                   {"gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous",
-                    "offset"});
+      r.requireMap(
+          D, w, {"gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous", "offset"});
       if (D["gear_ratio"]) drv.gear_ratio = r.number(D["gear_ratio"], w + ".gear_ratio");
       if (drv.gear_ratio == 0.0) r.fail(D["gear_ratio"], w, "gear_ratio must not be zero");
       if (D["motor_inertia"] && D["rotor_inertia"]) {
@@ -295,10 +296,11 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
                "'rotor_inertia' (already reflected to the joint), not both");
       }
       if (D["motor_inertia"]) {
-        drv.rotor_inertia = r.number(D["motor_inertia"], w + ".motor_inertia") *
-                            drv.gear_ratio * drv.gear_ratio;
+        drv.rotor_inertia =
+            r.number(D["motor_inertia"], w + ".motor_inertia") * drv.gear_ratio * drv.gear_ratio;
       }
-      if (D["rotor_inertia"]) drv.rotor_inertia = r.number(D["rotor_inertia"], w + ".rotor_inertia");
+      if (D["rotor_inertia"])
+        drv.rotor_inertia = r.number(D["rotor_inertia"], w + ".rotor_inertia");
       if (D["coulomb"]) drv.coulomb = r.number(D["coulomb"], w + ".coulomb");
       if (D["viscous"]) drv.viscous = r.number(D["viscous"], w + ".viscous");
       if (D["offset"]) drv.offset = r.number(D["offset"], w + ".offset");
@@ -347,8 +349,8 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
         *out = r.vector(T[kd], w + "." + kd, n) * kDeg;
         for (int i = 0; i < n; ++i) {
           if (model.bodies[static_cast<size_t>(i)].type == JointType::Prismatic) {
-            r.fail(T[kd], w + "." + kd, "degrees given for prismatic joint " +
-                                            std::to_string(i + 1));
+            r.fail(T[kd], w + "." + kd,
+                   "degrees given for prismatic joint " + std::to_string(i + 1));
           }
         }
       } else {
@@ -371,8 +373,9 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
         L.q_min = std::max(L.q_min, std::max(qlo(i), -kInf));
         L.q_max = std::min(L.q_max, std::min(qhi(i), kInf));
         if (L.q_min >= L.q_max) {
-          r.fail(T, w, "joint " + std::to_string(i + 1) +
-                           ": the link's limits and the measured limits do not overlap");
+          r.fail(T, w,
+                 "joint " + std::to_string(i + 1) +
+                     ": the link's limits and the measured limits do not overlap");
         }
       }
     }
@@ -391,8 +394,8 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
         try {
           k = S["link"].as<int>();
         } catch (const YAML::Exception&) {
-          r.fail(S["link"], "sensor.link", "unknown link '" + l + "' (a link name or 1.." +
-                                               std::to_string(n) + ")");
+          r.fail(S["link"], "sensor.link",
+                 "unknown link '" + l + "' (a link name or 1.." + std::to_string(n) + ")");
         }
         if (k < 1 || k > n) {
           r.fail(S["link"], "sensor.link",

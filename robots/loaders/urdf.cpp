@@ -61,8 +61,8 @@ void checkNumbers(const TiXmlElement* e, const char* name, int count, const std:
     errno = 0;
     char* end = nullptr;
     const double d = std::strtod(tok.c_str(), &end);
-    const std::string where = at(src, e) + ": " + owner + ": <" + e->Value() + "> attribute '" +
-                              name + "': ";
+    const std::string where =
+        at(src, e) + ": " + owner + ": <" + e->Value() + "> attribute '" + name + "': ";
     if (end == tok.c_str() || *end != '\0' || errno == ERANGE) {
       throw Error(where + "expected a number, found '" + tok + "'");
     }
@@ -108,7 +108,8 @@ void checkJointNumbers(const TiXmlElement* j, const std::string& src, const std:
   }
   if (const TiXmlElement* a = j->FirstChildElement("axis")) checkNumbers(a, "xyz", 3, src, owner);
   if (const TiXmlElement* l = j->FirstChildElement("limit")) {
-    for (const char* k : {"lower", "upper", "effort", "velocity"}) checkNumbers(l, k, 1, src, owner);
+    for (const char* k : {"lower", "upper", "effort", "velocity"})
+      checkNumbers(l, k, 1, src, owner);
   }
   if (const TiXmlElement* d = j->FirstChildElement("dynamics")) {
     for (const char* k : {"damping", "friction"}) checkNumbers(d, k, 1, src, owner);
@@ -375,8 +376,9 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
       const bool has_jm = r.number(e, "motor_inertia", &jm);
       const bool has_ia = r.number(e, "rotor_inertia", &d.rotor_inertia);
       if (has_jm && has_ia) {
-        r.fail(e, "give either motor_inertia (motor side, reflected as Jm*G^2) or "
-                  "rotor_inertia (reflected), not both");
+        r.fail(e,
+               "give either motor_inertia (motor side, reflected as Jm*G^2) or "
+               "rotor_inertia (reflected), not both");
       }
       if (has_jm) d.rotor_inertia = jm * d.gear_ratio * d.gear_ratio;
       r.number(e, "coulomb", &d.coulomb);
@@ -404,8 +406,9 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
       had_transmission = true;
       auto T = r.numbers(e, "matrix", n * n);
       if (T.empty()) r.fail(e, "missing attribute 'matrix' (row-major, dof x dof)");
-      m->transmission = Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic,
-                                                       Eigen::RowMajor>>(T.data(), n, n);
+      m->transmission =
+          Eigen::Map<const Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>>(
+              T.data(), n, n);
       if (!Eigen::FullPivLU<Eigen::MatrixXd>(m->transmission).isInvertible()) {
         r.fail(e, "the matrix is singular (not invertible)");
       }
@@ -537,11 +540,13 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
       throw Error(at(src, x.exid) + ": the URDF has its own <exid> element and a companion " +
                   esrc + " is given as well (use one of them)");
     }
-    const std::string ext_text = detail::readTextFile(options.urdf_extension, "URDF companion (<exid>)");
+    const std::string ext_text =
+        detail::readTextFile(options.urdf_extension, "URDF companion (<exid>)");
     TiXmlDocument ext;
     ext.Parse(ext_text.c_str());
     if (ext.Error()) {
-      throw Error(esrc + ":" + std::to_string(ext.ErrorRow()) + ": invalid XML: " + ext.ErrorDesc());
+      throw Error(esrc + ":" + std::to_string(ext.ErrorRow()) +
+                  ": invalid XML: " + ext.ErrorDesc());
     }
     const TiXmlElement* root = ext.RootElement();
     if (!root || std::string(root->Value()) != "exid") {
@@ -549,7 +554,8 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
                   (root ? "<" + std::string(root->Value()) + ">" : std::string("no element")));
     }
     if (root->NextSiblingElement()) {
-      throw Error(at(esrc, root->NextSiblingElement()) + ": a second root element (one <exid> is allowed)");
+      throw Error(at(esrc, root->NextSiblingElement()) +
+                  ": a second root element (one <exid> is allowed)");
     }
     applyExtension(root, esrc, &m, joint_body, link_place, options);
   }

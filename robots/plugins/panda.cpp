@@ -1,5 +1,6 @@
-// exid — robot plugin `panda`: Franka Emika Panda, modified DH, Gaz et al. RA-L 2019 feasible parameters and linear friction
-// The description file robots/panda/panda.yaml is embedded at build time (works when installed).
+// exid — robot plugin `panda`: Franka Emika Panda, modified DH, Gaz et al. RA-L 2019 feasible
+// parameters and linear friction The description file robots/panda/panda.yaml is embedded at build
+// time (works when installed).
 #include "robot_plugin_common.hpp"
 
 extern const char* const exid_embedded_panda_yaml;
@@ -10,13 +11,16 @@ class PandaRobot : public exid::Robot {
  public:
   static constexpr const char* kName = "panda";
   static constexpr const char* kVersion = "1.0.0";
-  static constexpr const char* kDoc = "Franka Emika Panda, modified DH, Gaz et al. RA-L 2019 feasible parameters and linear friction";
+  static constexpr const char* kDoc =
+      "Franka Emika Panda, modified DH, Gaz et al. RA-L 2019 feasible parameters and linear "
+      "friction";
   static std::vector<exid::ParamDecl> params() { return exid::robots::commonParams(); }
   explicit PandaRobot(const exid::ParamSet& p) : opt_(p) {}
 
   std::shared_ptr<const exid::RobotModel> build(const exid::RunContext&) override {
     return opt_.build([](const exid::LoadOptions& o) {
-      return exid::loadDhYamlString(exid_embedded_panda_yaml, "panda.yaml (embedded in plugin panda)", o);
+      return exid::loadDhYamlString(exid_embedded_panda_yaml,
+                                    "panda.yaml (embedded in plugin panda)", o);
     });
   }
 

@@ -16,9 +16,9 @@ class UrdfRobot : public exid::Robot {
                                          "the URDF file (relative paths: to the study file)"));
     p.insert(p.begin() + 1,
              exid::param_path("extension", std::string(),
-                                "optional companion XML file whose root is an <exid> element "
-                                "(drives, transmission, sensor, ...) for a URDF kept as published "
-                                "(relative paths: to the study file); empty: none"));
+                              "optional companion XML file whose root is an <exid> element "
+                              "(drives, transmission, sensor, ...) for a URDF kept as published "
+                              "(relative paths: to the study file); empty: none"));
     return p;
   }
   explicit UrdfRobot(const exid::ParamSet& p)

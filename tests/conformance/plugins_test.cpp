@@ -40,9 +40,11 @@ TEST(Conformance, EveryShippedPluginLibraryLoads) {
   auto& reg = exid_test::registry();
   for (const auto& r : reg.refused()) ADD_FAILURE() << "refused: " << r.path << ": " << r.reason;
   std::set<std::string> loaded;
-  for (const auto& p : reg.plugins()) loaded.insert(std::filesystem::path(p.library).filename().string());
+  for (const auto& p : reg.plugins())
+    loaded.insert(std::filesystem::path(p.library).filename().string());
   for (const auto& target : split(EXID_PLUGIN_TARGET_LIST, ','))
-    EXPECT_TRUE(loaded.count("lib" + target + ".so")) << target << " was built but provides no plugin";
+    EXPECT_TRUE(loaded.count("lib" + target + ".so"))
+        << target << " was built but provides no plugin";
 }
 
 TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
@@ -57,7 +59,8 @@ TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
       {exid::PluginKind::Estimator, {"rls", "batch_ls", "filtered_ls", "wls"}},
   };
   for (const auto& [kind, names] : expected)
-    for (const auto& n : names) EXPECT_NE(reg.find(kind, n), nullptr) << exid::toString(kind) << " " << n;
+    for (const auto& n : names)
+      EXPECT_NE(reg.find(kind, n), nullptr) << exid::toString(kind) << " " << n;
 }
 
 TEST(Conformance, ParameterDeclarationsAreWellFormed) {
@@ -70,8 +73,12 @@ TEST(Conformance, ParameterDeclarationsAreWellFormed) {
       SCOPED_TRACE(d.name);
       EXPECT_TRUE(names.insert(d.name).second) << "duplicate parameter";
       EXPECT_FALSE(d.doc.empty()) << "parameter without a one-line doc";
-      for (char c : d.name) EXPECT_TRUE(std::islower(static_cast<unsigned char>(c)) || std::isdigit(static_cast<unsigned char>(c)) || c == '_' || std::isupper(static_cast<unsigned char>(c)));
-      if (d.default_value) EXPECT_EQ(d.violation(*d.default_value), "") << "default breaks its own range";
+      for (char c : d.name)
+        EXPECT_TRUE(std::islower(static_cast<unsigned char>(c)) ||
+                    std::isdigit(static_cast<unsigned char>(c)) || c == '_' ||
+                    std::isupper(static_cast<unsigned char>(c)));
+      if (d.default_value)
+        EXPECT_EQ(d.violation(*d.default_value), "") << "default breaks its own range";
     }
   }
 }
@@ -111,7 +118,8 @@ TEST(Conformance, CriteriaGradientsMatchFiniteDifferences) {
     for (int i = 0; i < D.size(); ++i) D.data()[i] = nd(rng);
     D = 0.5 * (D + D.transpose());
     const double h = 1e-6;
-    const double fd = (crit->evaluate(M + h * D, nullptr) - crit->evaluate(M - h * D, nullptr)) / (2 * h);
+    const double fd =
+        (crit->evaluate(M + h * D, nullptr) - crit->evaluate(M - h * D, nullptr)) / (2 * h);
     const double an = (G.array() * D.array()).sum();
     EXPECT_NEAR(an, fd, 1e-6 * (1 + std::abs(fd)));
     // A singular information matrix is an error, not a number.
@@ -151,7 +159,8 @@ TEST(Conformance, ObservationModelsBindAndTheirGradientsMatchFiniteDifferences) 
       Eigen::MatrixXd& xm = which == 0 ? sm.q : (which == 1 ? sm.qd : sm.qdd);
       xp += h * dir;
       xm -= h * dir;
-      const double fd = ((model->design(sp) - model->design(sm)).array() * G.array()).sum() / (2 * h);
+      const double fd =
+          ((model->design(sp) - model->design(sm)).array() * G.array()).sum() / (2 * h);
       const Eigen::MatrixXd& gx = which == 0 ? g.q : (which == 1 ? g.qd : g.qdd);
       const double an = (gx.array() * dir.array()).sum();
       EXPECT_NEAR(an, fd, 1e-5 * (1 + std::abs(fd))) << "signal " << which;

@@ -1,4 +1,6 @@
 // Numerical base parameters (Gautier 1990): counts against theory / literature, exactness.
+#include "exid/base_parameters.hpp"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -6,7 +8,6 @@
 
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
-#include "exid/base_parameters.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 
@@ -26,12 +27,14 @@ Eigen::VectorXd randomInLimits(const RobotModel& m, std::mt19937& rng) {
 }
 
 // Stacked actuator regressor over random samples (qd away from zero so sign(qd) is excited).
-Eigen::MatrixXd stack(const RobotModel& m, const DriveColumns& cols, int samples, std::mt19937& rng) {
+Eigen::MatrixXd stack(const RobotModel& m, const DriveColumns& cols, int samples,
+                      std::mt19937& rng) {
   auto d = makeDynamicsData(m);
   const int n = m.dof(), p = numParameters(m, cols);
   Eigen::MatrixXd W(samples * n, p);
   for (int s = 0; s < samples; ++s) {
-    const Eigen::VectorXd q = randomInLimits(m, rng), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
+    const Eigen::VectorXd q = randomInLimits(m, rng), qd = randomVec(rng, n, 2.0),
+                          qdd = randomVec(rng, n, 5.0);
     actuatorRegressor(m, *d, cols, q, qd, qdd, W.middleRows(s * n, n));
   }
   return W;
@@ -41,7 +44,8 @@ BaseParameters base(const RobotModel& m, const DriveColumns& cols, std::mt19937&
   return computeBaseParameters(stack(m, cols, 150, rng), parameterNames(m, cols));
 }
 
-void checkExact(const RobotModel& m, const DriveColumns& cols, const BaseParameters& bp, std::mt19937& rng) {
+void checkExact(const RobotModel& m, const DriveColumns& cols, const BaseParameters& bp,
+                std::mt19937& rng) {
   const Eigen::MatrixXd W = stack(m, cols, 30, rng);
   const Eigen::VectorXd pi = randomVec(rng, numParameters(m, cols), 1.0);
   const Eigen::VectorXd full = W * pi, red = bp.columns(W) * bp.reduce(pi);
@@ -91,7 +95,8 @@ TEST(BaseParameters, Planar2R) {
   const BaseParameters bv = base(planar2R(true), {}, rng);
   EXPECT_EQ(bv.rank(), 6);
   EXPECT_EQ(bv.names, (std::vector<std::string>{"ZZ1R", "MX1R", "MY1", "ZZ2R", "MX2R", "MY2"}));
-  for (size_t k = 0; k < bv.names.size(); ++k) std::cout << bv.names[k] << " = " << bv.expressions[k] << "\n";
+  for (size_t k = 0; k < bv.names.size(); ++k)
+    std::cout << bv.names[k] << " = " << bv.expressions[k] << "\n";
   checkExact(planar2R(true), {}, bv, rng);
   const BaseParameters bh = base(planar2R(false), {}, rng);
   EXPECT_EQ(bh.rank(), 4);

@@ -1,4 +1,6 @@
 // Actuator-side regressor: transmission and drive columns.
+#include "exid/drive.hpp"
+
 #include <gtest/gtest.h>
 
 #include <random>
@@ -6,7 +8,6 @@
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
 #include "exid/dh.hpp"
-#include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 
 using namespace exid;
@@ -15,7 +16,8 @@ using namespace exid::testing;
 namespace {
 RobotModel coupled3() {
   // Vertical planar 3R with absolute-angle measurement: q1 = qm1, q2 = qm2 - qm1, q3 = qm3 - qm2.
-  RobotModel m = serialDh({{JointType::Revolute, 0.5, 0, 0, 0}, {JointType::Revolute, 0.4, 0, 0, 0},
+  RobotModel m = serialDh({{JointType::Revolute, 0.5, 0, 0, 0},
+                           {JointType::Revolute, 0.4, 0, 0, 0},
                            {JointType::Revolute, 0.3, 0, 0, 0.2}},
                           DhConvention::Standard);
   m.gravity = Eigen::Vector3d(0, -9.81, 0);
@@ -59,7 +61,8 @@ TEST(Drive, CoupledTransmission) {
   Eigen::MatrixXd Y(3, numParameters(m, all));
   const Eigen::MatrixXd& T = m.transmission;
   for (int s = 0; s < 20; ++s) {
-    const Eigen::VectorXd qm = randomVec(rng, 3, 3.0), qdm = randomVec(rng, 3, 2.0), qddm = randomVec(rng, 3, 5.0);
+    const Eigen::VectorXd qm = randomVec(rng, 3, 3.0), qdm = randomVec(rng, 3, 2.0),
+                          qddm = randomVec(rng, 3, 5.0);
     Eigen::VectorXd q, qd, qdd;
     measuredToJoint(m, qm, qdm, qddm, &q, &qd, &qdd);
     EXPECT_LT((q - (T * qm + m.transmission_offset)).norm(), 1e-14);
@@ -70,14 +73,16 @@ TEST(Drive, CoupledTransmission) {
     Eigen::VectorXd expect = T.transpose() * tau;
     for (int j = 0; j < 3; ++j) {
       const Drive& dr = m.drives[static_cast<size_t>(j)];
-      expect[j] += dr.rotor_inertia * qddm[j] + dr.coulomb * (qdm[j] > 0 ? 1 : -1) + dr.viscous * qdm[j] + dr.offset;
+      expect[j] += dr.rotor_inertia * qddm[j] + dr.coulomb * (qdm[j] > 0 ? 1 : -1) +
+                   dr.viscous * qdm[j] + dr.offset;
     }
     const Eigen::VectorXd tm = actuatorTorque(m, *d, all, qm, qdm, qddm);
     EXPECT_LT((tm - expect).cwiseAbs().maxCoeff(), 1e-10);
     actuatorRegressor(m, *d, all, qm, qdm, qddm, Y);
     EXPECT_LT((Y * parameterValues(m, all) - expect).cwiseAbs().maxCoeff(), 1e-10);
     // VJP vs finite differences
-    const Eigen::MatrixXd G = Eigen::MatrixXd::NullaryExpr(3, Y.cols(), [&] { return randomVec(rng, 1)[0]; });
+    const Eigen::MatrixXd G =
+        Eigen::MatrixXd::NullaryExpr(3, Y.cols(), [&] { return randomVec(rng, 1)[0]; });
     Eigen::VectorXd gq, gqd, gqdd;
     actuatorRegressorVjp(m, *d, all, qm, qdm, qddm, G, &gq, &gqd, &gqdd);
     const double h = 1e-6;

@@ -1,4 +1,5 @@
-// Energy regressor: against the reference energies, 1/2 qd^T M qd, and power balance dH/dt = tau^T qd.
+// Energy regressor: against the reference energies, 1/2 qd^T M qd, and power balance dH/dt = tau^T
+// qd.
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -45,7 +46,8 @@ TEST(EnergyRegressor, PowerBalanceAlongSmoothTrajectory) {
     auto d = makeDynamicsData(m);
     const int n = m.dof();
     const Eigen::VectorXd pi = m.inertialParameters();
-    const Eigen::VectorXd A = randomVec(rng, n, 1.0), w = randomVec(rng, n, 3.0), ph = randomVec(rng, n, 3.0);
+    const Eigen::VectorXd A = randomVec(rng, n, 1.0), w = randomVec(rng, n, 3.0),
+                          ph = randomVec(rng, n, 3.0);
     auto traj = [&](double t, Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd) {
       *q = *qd = *qdd = Eigen::VectorXd(n);
       for (int j = 0; j < n; ++j) {

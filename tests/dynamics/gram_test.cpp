@@ -30,7 +30,8 @@ TEST(GramAccumulator, MatchesDenseProduct) {
   // more rows after reading, weights, odd sizes, reset
   const Eigen::MatrixXd R = Eigen::MatrixXd::Random(7, 60);
   acc.addWeighted(R, 2.5);
-  EXPECT_LT((acc.matrix() - (ref + 2.5 * R.transpose() * R)).cwiseAbs().maxCoeff(), 1e-12 * ref.cwiseAbs().maxCoeff());
+  EXPECT_LT((acc.matrix() - (ref + 2.5 * R.transpose() * R)).cwiseAbs().maxCoeff(),
+            1e-12 * ref.cwiseAbs().maxCoeff());
   acc.reset(13);
   Eigen::MatrixXd S = Eigen::MatrixXd::Random(301, 13);
   S.topLeftCorner(100, 5).setZero();

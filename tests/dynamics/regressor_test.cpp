@@ -18,13 +18,15 @@ double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
   return (a - b).cwiseAbs().maxCoeff() / (1.0 + b.cwiseAbs().maxCoeff());
 }
 
-void checkRobot(const RobotModel& m, std::mt19937& rng, int samples, double vel = 2.0, double acc = 5.0) {
+void checkRobot(const RobotModel& m, std::mt19937& rng, int samples, double vel = 2.0,
+                double acc = 5.0) {
   auto d = makeDynamicsData(m);
   const int n = m.dof();
   const Eigen::VectorXd pi = m.inertialParameters();
   Eigen::MatrixXd Y(n, 10 * n);
   for (int s = 0; s < samples; ++s) {
-    const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, vel), qdd = randomVec(rng, n, acc);
+    const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, vel),
+                          qdd = randomVec(rng, n, acc);
     torqueRegressor(m, *d, q, qd, qdd, Y);
     const Eigen::VectorXd ref = refTorques(m, q, qd, qdd, pi);
     EXPECT_LT(relErr(Y * pi, ref), 1e-10) << m.name << " sample " << s;
@@ -34,7 +36,8 @@ void checkRobot(const RobotModel& m, std::mt19937& rng, int samples, double vel 
         Eigen::VectorXd e = Eigen::VectorXd::Zero(10 * n);
         e[c] = 1.0;
         // reference needs m != 0 for its COM form, fine: massless branch handles it
-        EXPECT_LT(relErr(Y.col(c), refTorques(m, q, qd, qdd, e)), 1e-10) << m.name << " column " << c;
+        EXPECT_LT(relErr(Y.col(c), refTorques(m, q, qd, qdd, e)), 1e-10)
+            << m.name << " column " << c;
       }
     }
     const Eigen::VectorXd tau = inverseDynamics(m, *d, q, qd, qdd);
@@ -127,7 +130,8 @@ TEST(TorqueRegressor, SharedWorkspaceAcrossModels) {
   const RobotModel a = puma560Standard(), b = panda();
   auto d = makeDynamicsData(a);
   std::mt19937 rng(7);
-  const Eigen::VectorXd q = randomVec(rng, 7, 1.0), qd = randomVec(rng, 7, 1.0), qdd = randomVec(rng, 7, 1.0);
+  const Eigen::VectorXd q = randomVec(rng, 7, 1.0), qd = randomVec(rng, 7, 1.0),
+                        qdd = randomVec(rng, 7, 1.0);
   const Eigen::VectorXd tau = inverseDynamics(b, *d, q, qd, qdd);
   EXPECT_LT(relErr(tau, refTorques(b, q, qd, qdd, b.inertialParameters())), 1e-10);
   EXPECT_THROW(inverseDynamics(a, *d, q, qd, qdd), Error);

@@ -20,10 +20,26 @@ Eigen::Matrix4d H(const Pose& P) {
   T.topRightCorner<3, 1>() = P.p;
   return T;
 }
-Eigen::Matrix4d rz(double t) { Eigen::Matrix4d T = Eigen::Matrix4d::Identity(); T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(t, Eigen::Vector3d::UnitZ()).toRotationMatrix(); return T; }
-Eigen::Matrix4d rx(double t) { Eigen::Matrix4d T = Eigen::Matrix4d::Identity(); T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(t, Eigen::Vector3d::UnitX()).toRotationMatrix(); return T; }
-Eigen::Matrix4d tz(double d) { Eigen::Matrix4d T = Eigen::Matrix4d::Identity(); T(2, 3) = d; return T; }
-Eigen::Matrix4d tx(double d) { Eigen::Matrix4d T = Eigen::Matrix4d::Identity(); T(0, 3) = d; return T; }
+Eigen::Matrix4d rz(double t) {
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(t, Eigen::Vector3d::UnitZ()).toRotationMatrix();
+  return T;
+}
+Eigen::Matrix4d rx(double t) {
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T.topLeftCorner<3, 3>() = Eigen::AngleAxisd(t, Eigen::Vector3d::UnitX()).toRotationMatrix();
+  return T;
+}
+Eigen::Matrix4d tz(double d) {
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T(2, 3) = d;
+  return T;
+}
+Eigen::Matrix4d tx(double d) {
+  Eigen::Matrix4d T = Eigen::Matrix4d::Identity();
+  T(0, 3) = d;
+  return T;
+}
 }  // namespace
 
 TEST(Dh, ForwardKinematicsMatchesTheDhProducts) {
@@ -32,7 +48,8 @@ TEST(Dh, ForwardKinematicsMatchesTheDhProducts) {
     std::vector<DhRow> rows;
     for (int j = 0; j < 6; ++j) {
       const Eigen::VectorXd r = randomVec(rng, 4, 1.5);
-      rows.push_back({j == 2 || j == 4 ? JointType::Prismatic : JointType::Revolute, r[0], r[1], r[2], r[3]});
+      rows.push_back(
+          {j == 2 || j == 4 ? JointType::Prismatic : JointType::Revolute, r[0], r[1], r[2], r[3]});
     }
     const RobotModel m = serialDh(rows, conv);
     EXPECT_NO_THROW(m.validateStructure());
@@ -79,23 +96,28 @@ TEST(Inertial, ComRoundTripAndTransform) {
     // composition and inverse
     const auto p1 = transformInertial(transformInertial(pi, B), A);
     EXPECT_LT((p1 - transformInertial(pi, A * B)).cwiseAbs().maxCoeff(), 1e-12);
-    EXPECT_LT((transformInertial(transformInertial(pi, A), A.inverse()) - pi).cwiseAbs().maxCoeff(), 1e-12);
+    EXPECT_LT((transformInertial(transformInertial(pi, A), A.inverse()) - pi).cwiseAbs().maxCoeff(),
+              1e-12);
     // against the COM path
-    const Eigen::Matrix<double, 10, 1> viaCom = inertialFromCom(m, A.R * c + A.p, A.R * Ic * A.R.transpose());
+    const Eigen::Matrix<double, 10, 1> viaCom =
+        inertialFromCom(m, A.R * c + A.p, A.R * Ic * A.R.transpose());
     EXPECT_LT((transformInertial(pi, A) - viaCom).cwiseAbs().maxCoeff(), 1e-12);
     EXPECT_TRUE(checkPhysical(pi).ok);
   }
-  EXPECT_THROW(comFromInertial(Eigen::Matrix<double, 10, 1>::Zero(), nullptr, nullptr, nullptr), Error);
+  EXPECT_THROW(comFromInertial(Eigen::Matrix<double, 10, 1>::Zero(), nullptr, nullptr, nullptr),
+               Error);
 }
 
 TEST(Inertial, CheckPhysicalRules) {
-  Eigen::Matrix<double, 10, 1> p = inertialFromCom(1.0, {0.1, 0, 0}, Eigen::Vector3d(1, 1, 1).asDiagonal());
+  Eigen::Matrix<double, 10, 1> p =
+      inertialFromCom(1.0, {0.1, 0, 0}, Eigen::Vector3d(1, 1, 1).asDiagonal());
   EXPECT_TRUE(checkPhysical(p).ok);
   auto neg = p;
   neg[9] = -1;
   EXPECT_EQ(checkPhysical(neg).rule, "negative mass");
   const auto notpsd = inertialFromCom(1.0, {0, 0, 0}, Eigen::Vector3d(1, 1, -0.1).asDiagonal());
-  EXPECT_EQ(checkPhysical(notpsd).rule, "inertia about the centre of mass not positive semi-definite");
+  EXPECT_EQ(checkPhysical(notpsd).rule,
+            "inertia about the centre of mass not positive semi-definite");
   const auto tri = inertialFromCom(1.0, {0, 0, 0}, Eigen::Vector3d(0.1, 0.1, 1.0).asDiagonal());
   EXPECT_FALSE(checkPhysical(tri).ok);
   EXPECT_NE(checkPhysical(tri).rule.find("triangle"), std::string::npos);

@@ -21,7 +21,8 @@ std::vector<RobotModel> robots(std::mt19937& rng) {
 }
 
 // f(q, qd, qdd) scalar; checks gradient g (3 blocks, any may be empty = not checked).
-void checkGrad(const std::function<double(const Eigen::VectorXd&, const Eigen::VectorXd&, const Eigen::VectorXd&)>& f,
+void checkGrad(const std::function<double(const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                          const Eigen::VectorXd&)>& f,
                const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                const Eigen::VectorXd* gq, const Eigen::VectorXd* gqd, const Eigen::VectorXd* gqdd,
                const std::string& what) {
@@ -38,7 +39,8 @@ void checkGrad(const std::function<double(const Eigen::VectorXd&, const Eigen::V
       x[which][k] += h;
       y[which][k] -= h;
       const double fd = (f(x[0], x[1], x[2]) - f(y[0], y[1], y[2])) / (2 * h);
-      EXPECT_NEAR((*grads[which])[k], fd, 1e-6 * scale) << what << " block " << which << " coordinate " << k;
+      EXPECT_NEAR((*grads[which])[k], fd, 1e-6 * scale)
+          << what << " block " << which << " coordinate " << k;
     }
   }
 }
@@ -52,8 +54,10 @@ TEST(Vjp, TorqueRegressor) {
     const int n = m.dof();
     Eigen::MatrixXd Y(n, 10 * n);
     for (int s = 0; s < 4; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
-      const Eigen::MatrixXd G = Eigen::MatrixXd::NullaryExpr(n, 10 * n, [&] { return randomVec(rng, 1)[0]; });
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            qdd = randomVec(rng, n, 5.0);
+      const Eigen::MatrixXd G =
+          Eigen::MatrixXd::NullaryExpr(n, 10 * n, [&] { return randomVec(rng, 1)[0]; });
       Eigen::VectorXd gq, gqd, gqdd;
       torqueRegressorVjp(m, *d, q, qd, qdd, G, &gq, &gqd, &gqdd);
       auto f = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd& c) {
@@ -76,8 +80,10 @@ TEST(Vjp, EnergyRegressor) {
     const int n = m.dof();
     Eigen::RowVectorXd K(10 * n), U(10 * n);
     for (int s = 0; s < 4; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), z = Eigen::VectorXd::Zero(n);
-      const Eigen::RowVectorXd Gk = randomVec(rng, 10 * n).transpose(), Gu = randomVec(rng, 10 * n).transpose();
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            z = Eigen::VectorXd::Zero(n);
+      const Eigen::RowVectorXd Gk = randomVec(rng, 10 * n).transpose(),
+                               Gu = randomVec(rng, 10 * n).transpose();
       Eigen::VectorXd gq, gqd;
       energyRegressorVjp(m, *d, q, qd, Gk, Gu, &gq, &gqd);
       auto f = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd&) {
@@ -96,7 +102,8 @@ TEST(Vjp, WrenchRegressor) {
     const int n = m.dof();
     Eigen::Matrix<double, 6, 10> A;
     for (int s = 0; s < 4; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            qdd = randomVec(rng, n, 5.0);
       Eigen::Matrix<double, 6, 10> G;
       for (int k = 0; k < 60; ++k) G.data()[k] = randomVec(rng, 1)[0];
       Eigen::VectorXd gq, gqd, gqdd;
@@ -117,8 +124,10 @@ TEST(Vjp, PayloadTorqueRegressor) {
     const int n = m.dof();
     Eigen::MatrixXd Yp(n, 10);
     for (int s = 0; s < 4; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
-      const Eigen::MatrixXd G = Eigen::MatrixXd::NullaryExpr(n, 10, [&] { return randomVec(rng, 1)[0]; });
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            qdd = randomVec(rng, n, 5.0);
+      const Eigen::MatrixXd G =
+          Eigen::MatrixXd::NullaryExpr(n, 10, [&] { return randomVec(rng, 1)[0]; });
       Eigen::VectorXd gq, gqd, gqdd;
       payloadTorqueRegressorVjp(m, *d, q, qd, qdd, G, &gq, &gqd, &gqdd);
       auto f = [&](const Eigen::VectorXd& a, const Eigen::VectorXd& b, const Eigen::VectorXd& c) {

@@ -11,7 +11,8 @@ using namespace exid;
 using namespace exid::testing;
 
 namespace {
-Eigen::Matrix<double, 10, 1> toPi(const Eigen::Matrix<double, 10, 1>& phi) {  // payload order -> pi order
+Eigen::Matrix<double, 10, 1> toPi(
+    const Eigen::Matrix<double, 10, 1>& phi) {  // payload order -> pi order
   Eigen::Matrix<double, 10, 1> p;
   p << phi.segment<6>(4), phi.segment<3>(1), phi[0];
   return p;
@@ -37,11 +38,13 @@ TEST(WrenchRegressor, EqualsNewtonEulerOfTheRigidPayload) {
     const int n = m.dof();
     Eigen::Matrix<double, 6, 10> A;
     for (int s = 0; s < 20; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            qdd = randomVec(rng, n, 5.0);
       const Eigen::Matrix<double, 10, 1> phi = randomPhi(rng);
       wrenchRegressor(m, *d, q, qd, qdd, A);
       const Eigen::Matrix<double, 6, 1> ref = refPayloadWrench(m, q, qd, qdd, phi);
-      EXPECT_LT((A * phi - ref).cwiseAbs().maxCoeff(), 1e-10 * (1 + ref.cwiseAbs().maxCoeff())) << m.name;
+      EXPECT_LT((A * phi - ref).cwiseAbs().maxCoeff(), 1e-10 * (1 + ref.cwiseAbs().maxCoeff()))
+          << m.name;
     }
   }
 }
@@ -64,14 +67,17 @@ TEST(PayloadTorqueRegressor, EqualsTorquesWithPayloadMergedIntoSensorBody) {
     const int n = m.dof();
     Eigen::MatrixXd Yp(n, 10);
     for (int s = 0; s < 20; ++s) {
-      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0), qdd = randomVec(rng, n, 5.0);
+      const Eigen::VectorXd q = randomVec(rng, n, 3.0), qd = randomVec(rng, n, 2.0),
+                            qdd = randomVec(rng, n, 5.0);
       const Eigen::Matrix<double, 10, 1> phi = randomPhi(rng);
       payloadTorqueRegressor(m, *d, q, qd, qdd, Yp);
       RobotModel merged = m;
-      merged.bodies[static_cast<size_t>(m.sensorBody())].inertia += transformInertial(toPi(phi), m.sensor_pose);
+      merged.bodies[static_cast<size_t>(m.sensorBody())].inertia +=
+          transformInertial(toPi(phi), m.sensor_pose);
       const Eigen::VectorXd ref = refTorques(merged, q, qd, qdd, merged.inertialParameters()) -
                                   refTorques(m, q, qd, qdd, m.inertialParameters());
-      EXPECT_LT((Yp * phi - ref).cwiseAbs().maxCoeff(), 1e-9 * (1 + ref.cwiseAbs().maxCoeff())) << m.name;
+      EXPECT_LT((Yp * phi - ref).cwiseAbs().maxCoeff(), 1e-9 * (1 + ref.cwiseAbs().maxCoeff()))
+          << m.name;
     }
   }
 }

@@ -1,5 +1,7 @@
 // Physically consistent identification (consistent_ls), priors (batch_ls, wls, consistent_ls)
 // and the identified robot written back as URDF (exid export). docs/consistent.md.
+#include "exid/estimators/consistent.hpp"
+
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -18,7 +20,6 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
-#include "exid/estimators/consistent.hpp"
 #include "exid/io.hpp"
 #include "exid/urdf_writer.hpp"
 #include "exid_test.hpp"
@@ -42,7 +43,8 @@ TEST(LogCholesky, EveryPointIsConsistentAndTheMapInverts) {
     const Vec10 pi = exid::est::logCholeskyToInertial(t);
     EXPECT_TRUE(exid::checkPhysical(pi, 0.0).ok) << exid::checkPhysical(pi, 0.0).rule;
     EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(pi), 0.0);
-    EXPECT_LE((exid::est::inertialFromPseudo(exid::est::pseudoInertia(pi)) - pi).norm(), 1e-12 * pi.norm());
+    EXPECT_LE((exid::est::inertialFromPseudo(exid::est::pseudoInertia(pi)) - pi).norm(),
+              1e-12 * pi.norm());
     bool projected = true;
     const Vec10 back = exid::est::logCholeskyFromInertial(pi, 1e-300, &projected);
     EXPECT_FALSE(projected);
@@ -73,7 +75,8 @@ TEST(LogCholesky, GradientMatchesFiniteDifferences) {
       b(k) -= h;
       const double fd = (f(a) - f(b)) / (2 * h);
       EXPECT_NEAR(grad(k), fd, 1e-6 * std::max(1.0, std::abs(fd))) << "coordinate " << k;
-      const Vec10 dpi = (exid::est::logCholeskyToInertial(a) - exid::est::logCholeskyToInertial(b)) / (2 * h);
+      const Vec10 dpi =
+          (exid::est::logCholeskyToInertial(a) - exid::est::logCholeskyToInertial(b)) / (2 * h);
       EXPECT_LE((J.col(k) - dpi).norm(), 1e-6 * std::max(1.0, dpi.norm())) << "column " << k;
     }
   }
@@ -90,7 +93,10 @@ TEST(LogCholesky, ProjectionRepairsAnInconsistentBody) {
   EXPECT_TRUE(exid::checkPhysical(exid::est::logCholeskyToInertial(t), 0.0).ok);
   Vec10 neg = Vec10::Zero();
   neg(9) = -1.0;
-  EXPECT_TRUE(exid::checkPhysical(exid::est::logCholeskyToInertial(exid::est::logCholeskyFromInertial(neg, 1e-6)), 0.0).ok);
+  EXPECT_TRUE(
+      exid::checkPhysical(
+          exid::est::logCholeskyToInertial(exid::est::logCholeskyFromInertial(neg, 1e-6)), 0.0)
+          .ok);
 }
 
 // ---------------------------------------------------------------- priors
@@ -133,8 +139,9 @@ TEST(Priors, UnexcitedDirectionsFallBackToThePrior) {
     // the data: every excited combination equals the truth
     EXPECT_LE((rows.W * (e.value - truth)).norm(), 1e-6 * (rows.W * truth).norm());
     // the prior: along v, the prior's value
-    EXPECT_LE(std::abs(v.dot(Sinv * (e.value - prior.value))) / (Sinv * (e.value - prior.value)).norm(),
-              name == "consistent_ls" ? 1e-4 : 1e-6);
+    EXPECT_LE(
+        std::abs(v.dot(Sinv * (e.value - prior.value))) / (Sinv * (e.value - prior.value)).norm(),
+        name == "consistent_ls" ? 1e-4 : 1e-6);
     // far from the truth along v (the prior was wrong there), so the test means something
     EXPECT_GT(std::abs(v.dot(e.value - truth)), 0.01);
     // posterior std along the unexcited combination ~ the prior's
@@ -145,22 +152,25 @@ TEST(Priors, UnexcitedDirectionsFallBackToThePrior) {
 
 TEST(Priors, StudyConfigValidatesThePriorSection) {
   const std::string head =
-      "robot: {type: panda}\nmodel: {type: differential}\nexperiment: {type: csv, params: {file: x.csv}}\n"
+      "robot: {type: panda}\nmodel: {type: differential}\nexperiment: {type: csv, params: {file: "
+      "x.csv}}\n"
       "estimator: {type: wls}\n";
-  const exid::StudyConfig cfg = exid::parseStudy(head + "prior: {from: robot, relative_std: 0.2, absolute_std: 1e-3}\n",
-                                                 "s.yaml", exid_test::sourceDir(), exid_test::registry());
+  const exid::StudyConfig cfg =
+      exid::parseStudy(head + "prior: {from: robot, relative_std: 0.2, absolute_std: 1e-3}\n",
+                       "s.yaml", exid_test::sourceDir(), exid_test::registry());
   ASSERT_TRUE(cfg.prior.has_value());
   EXPECT_EQ(cfg.prior->from, "robot");
   EXPECT_DOUBLE_EQ(cfg.prior->relative_std, 0.2);
   EXPECT_DOUBLE_EQ(cfg.prior->absolute_std, 1e-3);
   EXPECT_NE(cfg.resolvedYaml().find("prior"), std::string::npos);
-  const exid::StudyConfig cfg2 = exid::parseStudy(head + "prior: {from: study, study: out/a, scale: 2}\n", "s.yaml",
-                                                  exid_test::sourceDir(), exid_test::registry());
+  const exid::StudyConfig cfg2 =
+      exid::parseStudy(head + "prior: {from: study, study: out/a, scale: 2}\n", "s.yaml",
+                       exid_test::sourceDir(), exid_test::registry());
   EXPECT_EQ(cfg2.prior->study, exid_test::sourceDir() / "out/a");
   EXPECT_NE(cfg.hash(), cfg2.hash());
   try {
-    exid::parseStudy(head + "prior: {from: robot, relative_std: -1, bogus: 2}\n", "s.yaml", exid_test::sourceDir(),
-                     exid_test::registry());
+    exid::parseStudy(head + "prior: {from: robot, relative_std: -1, bogus: 2}\n", "s.yaml",
+                     exid_test::sourceDir(), exid_test::registry());
     FAIL() << "accepted";
   } catch (const exid::Error& e) {
     const std::string m = e.what();
@@ -168,10 +178,13 @@ TEST(Priors, StudyConfigValidatesThePriorSection) {
     EXPECT_NE(m.find("unknown key 'bogus'"), std::string::npos) << m;
   }
   try {
-    exid::parseStudy("robot: {type: panda}\nprior: {from: moon}\n", "s.yaml", exid_test::sourceDir(), exid_test::registry());
+    exid::parseStudy("robot: {type: panda}\nprior: {from: moon}\n", "s.yaml",
+                     exid_test::sourceDir(), exid_test::registry());
     FAIL() << "accepted";
   } catch (const exid::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("prior.from: expected 'robot' or 'study'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("prior.from: expected 'robot' or 'study'"),
+              std::string::npos)
+        << e.what();
   }
 }
 
@@ -206,7 +219,8 @@ Panda panda() {
     d.coulomb = std::abs(d.coulomb);
     d.rotor_inertia = 0.05 + 0.01 * static_cast<double>(j);
   }
-  for (const auto& b : p.truth->bodies) EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(b.inertia), 0.0) << b.name;
+  for (const auto& b : p.truth->bodies)
+    EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(b.inertia), 0.0) << b.name;
   p.model = exid_test::create<exid::ObservationModel>("differential", "{}");
   exid::RunContext ctx;
   ctx.seed = 3;
@@ -215,7 +229,8 @@ Panda panda() {
 }
 
 /// Sum-of-sines motion about the middle of the joint ranges; torques by inverse dynamics.
-exid::Dataset pandaData(const exid::RobotModel& r, double noise, std::uint64_t seed, int samples = 1500) {
+exid::Dataset pandaData(const exid::RobotModel& r, double noise, std::uint64_t seed,
+                        int samples = 1500) {
   const int n = r.dof();
   exid::Dataset d;
   d.t = Eigen::VectorXd::LinSpaced(samples, 0.0, 0.01 * (samples - 1));
@@ -236,7 +251,8 @@ exid::Dataset pandaData(const exid::RobotModel& r, double noise, std::uint64_t s
     for (int k = 0; k < samples; ++k) {
       double q = mid, qd = 0, qdd = 0;
       for (int h = 0; h < 3; ++h) {
-        const double a = amp * (1 + 0.3 * (j % 2)), s = std::sin(w[h] * (1 + 0.1 * j) * d.t(k) + phase[h]);
+        const double a = amp * (1 + 0.3 * (j % 2)),
+                     s = std::sin(w[h] * (1 + 0.1 * j) * d.t(k) + phase[h]);
         const double c = std::cos(w[h] * (1 + 0.1 * j) * d.t(k) + phase[h]);
         const double ww = w[h] * (1 + 0.1 * j);
         q += a * s;
@@ -252,8 +268,8 @@ exid::Dataset pandaData(const exid::RobotModel& r, double noise, std::uint64_t s
   exid::DriveColumns cols;
   cols.rotor_inertia = cols.coulomb = cols.viscous = true;
   for (int k = 0; k < samples; ++k) {
-    const Eigen::VectorXd tau = exid::actuatorTorque(r, *dyn, cols, d.q.row(k).transpose(), d.qd.row(k).transpose(),
-                                                     d.qdd.row(k).transpose());
+    const Eigen::VectorXd tau = exid::actuatorTorque(
+        r, *dyn, cols, d.q.row(k).transpose(), d.qd.row(k).transpose(), d.qdd.row(k).transpose());
     for (int j = 0; j < n; ++j) d.tau(k, j) = tau(j) + noise * nz(rng);
   }
   d.source = "panda (test)";
@@ -269,9 +285,11 @@ void expectConsistent(const exid::Estimate& e) {
   ASSERT_EQ(names.size(), values.size());
   for (std::size_t i = 0; i + 10 <= 70; i += 10) {
     Vec10 pi;
-    for (std::size_t k = 0; k < 10; ++k) pi(static_cast<Eigen::Index>(k)) = values.at(i + k).asDouble();
+    for (std::size_t k = 0; k < 10; ++k)
+      pi(static_cast<Eigen::Index>(k)) = values.at(i + k).asDouble();
     EXPECT_EQ(names.at(i + 9).asString(), "M" + std::to_string(i / 10 + 1));
-    EXPECT_TRUE(exid::checkPhysical(pi, 0.0).ok) << "body " << i / 10 + 1 << ": " << exid::checkPhysical(pi, 0.0).rule;
+    EXPECT_TRUE(exid::checkPhysical(pi, 0.0).ok)
+        << "body " << i / 10 + 1 << ": " << exid::checkPhysical(pi, 0.0).rule;
     EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(pi), 0.0) << "body " << i / 10 + 1;
   }
   for (std::size_t i = 70; i < names.size(); ++i) {
@@ -290,17 +308,21 @@ TEST(ConsistentLs, PandaNoiseFreeMatchesOls) {
   const exid::Estimate c = make("consistent_ls")->estimate(*p.model, d, nullptr, ctx);
   expectConsistent(c);
   const Eigen::VectorXd truth = p.model->base().K * [&] {
-    Eigen::VectorXd v = exid::parameterValues(*p.truth, exid::DriveColumns{true, true, true, false});
+    Eigen::VectorXd v =
+        exid::parameterValues(*p.truth, exid::DriveColumns{true, true, true, false});
     return v;
   }();
   const double scale = ols.value.cwiseAbs().maxCoeff();
   double worst = 0.0, worst_rel = 0.0;
   for (Eigen::Index i = 0; i < ols.value.size(); ++i) {
     worst = std::max(worst, std::abs(c.value(i) - ols.value(i)) / scale);
-    worst_rel = std::max(worst_rel, std::abs(c.value(i) - ols.value(i)) / std::max(std::abs(ols.value(i)), 1e-3 * scale));
+    worst_rel = std::max(worst_rel, std::abs(c.value(i) - ols.value(i)) /
+                                        std::max(std::abs(ols.value(i)), 1e-3 * scale));
   }
-  std::printf("panda noise-free: max |consistent - ols| / max|ols| = %.3g, per parameter %.3g; ols vs truth %.3g\n",
-              worst, worst_rel, (ols.value - truth).cwiseAbs().maxCoeff() / scale);
+  std::printf(
+      "panda noise-free: max |consistent - ols| / max|ols| = %.3g, per parameter %.3g; ols vs "
+      "truth %.3g\n",
+      worst, worst_rel, (ols.value - truth).cwiseAbs().maxCoeff() / scale);
   EXPECT_LE(worst_rel, 1e-6);
   EXPECT_LE((c.value - truth).norm(), 1e-6 * truth.norm());
 }
@@ -316,8 +338,10 @@ TEST(ConsistentLs, PandaConsistentAtEveryNoiseLevel) {
     expectConsistent(c);
     const double ratio = c.details.find("residual_rms_ratio")->asDouble();
     const double maha = c.details.find("mahalanobis_from_unconstrained")->asDouble();
-    std::printf("panda noise %.2g N m: residual rms ratio %.4f, Mahalanobis distance from OLS %.3g (p = %d)\n", noise,
-                ratio, maha, p.model->numBase());
+    std::printf(
+        "panda noise %.2g N m: residual rms ratio %.4f, Mahalanobis distance from OLS %.3g (p = "
+        "%d)\n",
+        noise, ratio, maha, p.model->numBase());
     EXPECT_GE(ratio, 1.0 - 1e-9);
     // Linearised std: zero only for a base parameter pinned by an active bound (e.g. Fc = 0).
     EXPECT_TRUE(c.std.allFinite());
@@ -358,40 +382,48 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
   exid::writeCsvAtomic(dir / "data.csv", t);
   {
     std::ofstream s(dir / "study.yaml");
-    s << "robot: {type: panda}\nmodel: {type: differential}\nexperiment: {type: csv, params: {file: data.csv}}\n"
-         "estimator: {type: consistent_ls}\nprior: {from: robot, relative_std: 1.0, absolute_std: 0.1}\n"
+    s << "robot: {type: panda}\nmodel: {type: differential}\nexperiment: {type: csv, params: "
+         "{file: data.csv}}\n"
+         "estimator: {type: consistent_ls}\nprior: {from: robot, relative_std: 1.0, absolute_std: "
+         "0.1}\n"
          "report: {type: standard, params: {plots: false}}\n";
   }
   const Cmd r = run("-q run " + (dir / "study.yaml").string() + " --out " + (dir / "out").string());
   ASSERT_EQ(r.code, 0) << r.out;
-  const Cmd x = run("export --study " + (dir / "out").string() + " --out " + (dir / "identified.urdf").string());
+  const Cmd x = run("export --study " + (dir / "out").string() + " --out " +
+                    (dir / "identified.urdf").string());
   ASSERT_EQ(x.code, 0) << x.out;
 
   // The identified model: the panda with the identified standard parameters.
   std::ifstream in(dir / "out/summary.json");
-  const exid::Json S = exid::Json::parse(std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()));
+  const exid::Json S = exid::Json::parse(
+      std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>()));
   const exid::Json& I = *S.find("identification");
   const exid::Json& sp = *I.find("details")->find("standard_parameters");
   exid::RobotModel ident = *exid_test::robot("panda");
   Eigen::VectorXd pi(static_cast<Eigen::Index>(sp.find("values")->size()));
-  for (std::size_t i = 0; i < sp.find("values")->size(); ++i) pi(static_cast<Eigen::Index>(i)) = sp.find("values")->at(i).asDouble();
+  for (std::size_t i = 0; i < sp.find("values")->size(); ++i)
+    pi(static_cast<Eigen::Index>(i)) = sp.find("values")->at(i).asDouble();
   for (int j = 0; j < 7; ++j) {
     ident.bodies[static_cast<std::size_t>(j)].inertia = pi.segment<10>(10 * j);
     ident.drives[static_cast<std::size_t>(j)].rotor_inertia = pi(70 + 3 * j);
     ident.drives[static_cast<std::size_t>(j)].coulomb = pi(71 + 3 * j);
     ident.drives[static_cast<std::size_t>(j)].viscous = pi(72 + 3 * j);
   }
-  const auto loaded = exid_test::robot("urdf", "{file: '" + (dir / "identified.urdf").string() + "', strict: true}");
+  const auto loaded = exid_test::robot(
+      "urdf", "{file: '" + (dir / "identified.urdf").string() + "', strict: true}");
   ASSERT_EQ(loaded->dof(), 7);
   auto da = exid::makeDynamicsData(ident);
   auto db = exid::makeDynamicsData(*loaded);
   exid::DriveColumns cols{true, true, true, false};
   double worst = 0.0;
   for (int k = 0; k < d.size(); k += 37) {
-    const Eigen::VectorXd q = d.q.row(k).transpose(), qd = d.qd.row(k).transpose(), qdd = d.qdd.row(k).transpose();
+    const Eigen::VectorXd q = d.q.row(k).transpose(), qd = d.qd.row(k).transpose(),
+                          qdd = d.qdd.row(k).transpose();
     const Eigen::VectorXd ta = exid::actuatorTorque(ident, *da, cols, q, qd, qdd);
     const Eigen::VectorXd tb = exid::actuatorTorque(*loaded, *db, cols, q, qd, qdd);
-    worst = std::max(worst, (ta - tb).cwiseAbs().maxCoeff() / std::max(1.0, ta.cwiseAbs().maxCoeff()));
+    worst =
+        std::max(worst, (ta - tb).cwiseAbs().maxCoeff() / std::max(1.0, ta.cwiseAbs().maxCoeff()));
   }
   EXPECT_LE(worst, 1e-9);
   // Its base parameters are the identified ones.
@@ -405,7 +437,8 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
   for (std::size_t i = 0; i < ps.size(); ++i) {
     EXPECT_EQ(m2->base().names[i], ps.at(i).find("name")->asString());
     const double v = ps.at(i).find("value")->asDouble();
-    EXPECT_NEAR(b2(static_cast<Eigen::Index>(i)), v, 1e-8 * std::max(1.0, std::abs(v))) << ps.at(i).find("name")->asString();
+    EXPECT_NEAR(b2(static_cast<Eigen::Index>(i)), v, 1e-8 * std::max(1.0, std::abs(v)))
+        << ps.at(i).find("name")->asString();
   }
   // `exid eval` on the exported file gives the identified rigid-body torques.
   exid::CsvTable s;
@@ -413,16 +446,20 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
   for (const char* c : {"q", "qd", "qdd"})
     for (int j = 1; j <= 7; ++j) s.columns.push_back(c + std::to_string(j));
   s.data.resize(5, 21);
-  for (int k = 0; k < 5; ++k) s.data.row(k) << d.q.row(100 * k), d.qd.row(100 * k), d.qdd.row(100 * k);
+  for (int k = 0; k < 5; ++k)
+    s.data.row(k) << d.q.row(100 * k), d.qd.row(100 * k), d.qdd.row(100 * k);
   exid::writeCsvAtomic(dir / "samples.csv", s);
-  const Cmd ev = run("eval " + (dir / "identified.urdf").string() + " --samples " + (dir / "samples.csv").string() +
-                     " --what torque --out " + (dir / "tau.csv").string());
+  const Cmd ev =
+      run("eval " + (dir / "identified.urdf").string() + " --samples " +
+          (dir / "samples.csv").string() + " --what torque --out " + (dir / "tau.csv").string());
   ASSERT_EQ(ev.code, 0) << ev.out;
   const exid::CsvTable tau = exid::readCsv(dir / "tau.csv");
   for (int k = 0; k < 5; ++k) {
-    const Eigen::VectorXd ref = exid::inverseDynamics(ident, *da, d.q.row(100 * k).transpose(),
-                                                      d.qd.row(100 * k).transpose(), d.qdd.row(100 * k).transpose());
-    EXPECT_LE((tau.data.row(k).transpose() - ref).cwiseAbs().maxCoeff(), 1e-8 * std::max(1.0, ref.cwiseAbs().maxCoeff()));
+    const Eigen::VectorXd ref =
+        exid::inverseDynamics(ident, *da, d.q.row(100 * k).transpose(),
+                              d.qd.row(100 * k).transpose(), d.qdd.row(100 * k).transpose());
+    EXPECT_LE((tau.data.row(k).transpose() - ref).cwiseAbs().maxCoeff(),
+              1e-8 * std::max(1.0, ref.cwiseAbs().maxCoeff()));
   }
   // A study without consistent standard parameters is refused with a reason.
   fs::remove_all(dir);
@@ -435,7 +472,8 @@ TEST(Export, WriterRoundTripsADhRobotWithPostTransforms) {
     const Vec10 t = exid::est::logCholeskyFromInertial(b.inertia, 1e-4);
     b.inertia = exid::est::logCholeskyToInertial(t);
   }
-  const fs::path f = fs::temp_directory_path() / ("exid_puma_" + std::to_string(::getpid()) + ".urdf");
+  const fs::path f =
+      fs::temp_directory_path() / ("exid_puma_" + std::to_string(::getpid()) + ".urdf");
   exid::writeFileAtomic(f, exid::writeUrdf(r));
   const auto l = exid_test::robot("urdf", "{file: '" + f.string() + "', strict: true}");
   fs::remove(f);
@@ -450,7 +488,8 @@ TEST(Export, WriterRoundTripsADhRobotWithPostTransforms) {
       qd(j) = u(rng);
       qdd(j) = u(rng);
     }
-    const Eigen::VectorXd a = exid::inverseDynamics(r, *da, q, qd, qdd), b = exid::inverseDynamics(*l, *db, q, qd, qdd);
+    const Eigen::VectorXd a = exid::inverseDynamics(r, *da, q, qd, qdd),
+                          b = exid::inverseDynamics(*l, *db, q, qd, qdd);
     EXPECT_LE((a - b).cwiseAbs().maxCoeff(), 1e-9 * std::max(1.0, a.cwiseAbs().maxCoeff()));
   }
 }

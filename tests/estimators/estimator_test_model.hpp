@@ -43,7 +43,9 @@ class PendulumModel : public exid::ObservationModel {
  public:
   static constexpr double kG = 9.81;
   /// n joints; `extra` additional pseudo-random columns (hashUnit) with parameters X1..Xextra.
-  explicit PendulumModel(int n = 1, int extra = 0) : n_(n), extra_(extra) { setPluginName("test_pendulum"); }
+  explicit PendulumModel(int n = 1, int extra = 0) : n_(n), extra_(extra) {
+    setPluginName("test_pendulum");
+  }
 
   std::vector<std::string> fullNames() const override {
     std::vector<std::string> v = {"ZZ1", "MX1", "MY1", "Fv1", "Fc1", "Ia1"};
@@ -89,7 +91,8 @@ class PendulumModel : public exid::ObservationModel {
   }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
-    exid::check(d.hasVelocity() && d.hasAcceleration() && d.hasTorque(), "test model: needs q, qd, qdd, tau");
+    exid::check(d.hasVelocity() && d.hasAcceleration() && d.hasTorque(),
+                "test model: needs q, qd, qdd, tau");
     const int K = d.size();
     max_samples_per_call = std::max(max_samples_per_call, K);
     exid::Rows r;

@@ -1,9 +1,9 @@
 // Estimator plugins (batch_ls, rls, wls, filtered_ls) on a test model with known columns.
 #include <gtest/gtest.h>
 
+#include <Eigen/LU>
 #include <Eigen/QR>
 #include <Eigen/SVD>
-#include <Eigen/LU>
 #include <cmath>
 
 #include "estimator_test_model.hpp"
@@ -46,7 +46,8 @@ TEST(Estimators, BaseNamesRegroupRotorInertia) {
   auto m = makeModel(1);
   EXPECT_EQ(m->numBase(), 6);  // ZZ1 and Ia1 regrouped
   bool regrouped = false;
-  for (const auto& x : m->base().expressions) regrouped |= x.find("Ia1") != std::string::npos && x.find("ZZ1") != std::string::npos;
+  for (const auto& x : m->base().expressions)
+    regrouped |= x.find("Ia1") != std::string::npos && x.find("ZZ1") != std::string::npos;
   EXPECT_TRUE(regrouped);
 }
 
@@ -65,7 +66,8 @@ TEST(Estimators, NoiseFreeAllReturnTruth) {
   }
   // filtered_ls with the position filter off: the parallel decimation filters W and y alike, so
   // noise-free linear data stay exact.
-  exid::Estimate f = make("filtered_ls", "{cutoff_hz: 0, decimation: 5}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate f =
+      make("filtered_ls", "{cutoff_hz: 0, decimation: 5}")->estimate(*m, d, nullptr, ctx);
   expectFilled(f, *m);
   EXPECT_LE(maxRelErr(f.value, truth), 1e-8);
   EXPECT_EQ(f.details.find("decimation")->asInt(), 5);
@@ -96,7 +98,8 @@ TEST(Estimators, BatchLsChunkingAndAccumulationAgree) {
   Eigen::MatrixXd cov = a.sigma * a.sigma * (r.W.transpose() * r.W).inverse();
   EXPECT_LE((cov - a.covariance).cwiseAbs().maxCoeff(), 1e-8 * cov.cwiseAbs().maxCoeff());
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(r.W);
-  EXPECT_NEAR(a.cond_W, svd.singularValues()(0) / svd.singularValues()(m->numBase() - 1), 1e-8 * a.cond_W);
+  EXPECT_NEAR(a.cond_W, svd.singularValues()(0) / svd.singularValues()(m->numBase() - 1),
+              1e-8 * a.cond_W);
 }
 
 TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
@@ -165,7 +168,8 @@ TEST(Estimators, RlsConvergesToBatchLs) {
     // History: every sample, time stamps, final value, diag(P) shrinking.
     ASSERT_EQ(r.history_t.size(), d.size());
     EXPECT_DOUBLE_EQ(r.history_t(d.size() - 1), d.t(d.size() - 1));
-    EXPECT_LE((r.history_value.row(d.size() - 1).transpose() - r.value).norm(), 1e-12 * r.value.norm());
+    EXPECT_LE((r.history_value.row(d.size() - 1).transpose() - r.value).norm(),
+              1e-12 * r.value.norm());
     EXPECT_LT(r.history_pdiag(d.size() - 1, 0), 1e-3 * r.history_pdiag(0, 0));
     EXPECT_EQ(r.history_pdiag.cols(), m->numBase());
   }
@@ -213,7 +217,8 @@ TEST(Estimators, RlsForgettingTracksAChange) {
   d.tau = stack(d1.tau, d2.tau);
   exid::RunContext ctx;
   const Eigen::VectorXd truth2 = m->base().reduce(pi2);
-  exid::Estimate forget = make("rls", "{forgetting_factor: 0.995, history_stride: 1000}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate forget = make("rls", "{forgetting_factor: 0.995, history_stride: 1000}")
+                              ->estimate(*m, d, nullptr, ctx);
   exid::Estimate plain = make("rls")->estimate(*m, d, nullptr, ctx);
   EXPECT_LT(maxRelErr(forget.value, truth2), 0.01);
   EXPECT_GT(maxRelErr(plain.value, truth2), 0.1);
@@ -256,7 +261,8 @@ TEST(Estimators, WlsWeightsPerEquationAndReportsOls) {
   const exid::Json* eqs = w.details.find("equations");
   ASSERT_NE(eqs, nullptr);
   ASSERT_EQ(eqs->size(), 2u);
-  const double s0 = eqs->at(0).find("residual_std")->asDouble(), s1 = eqs->at(1).find("residual_std")->asDouble();
+  const double s0 = eqs->at(0).find("residual_std")->asDouble(),
+               s1 = eqs->at(1).find("residual_std")->asDouble();
   EXPECT_NEAR(s0, 0.02, 0.01);  // OLS residuals spread the noise a little
   EXPECT_NEAR(s1, 0.5, 0.05);
   EXPECT_NEAR(eqs->at(0).find("weight")->asDouble() * s0, 1.0, 1e-12);
@@ -269,7 +275,8 @@ TEST(Estimators, WlsWeightsPerEquationAndReportsOls) {
   EXPECT_NEAR(w3.sigma, 1.0, 0.05);
   EXPECT_NEAR(w3.details.find("equations")->at(0).find("residual_std")->asDouble(), 0.02, 0.002);
   // Reported precision of the shared parameters is better than OLS's.
-  for (int i = 0; i < 5; ++i) EXPECT_LT(w.std(i), 0.5 * b.std(i)) << w.names[static_cast<std::size_t>(i)];
+  for (int i = 0; i < 5; ++i)
+    EXPECT_LT(w.std(i), 0.5 * b.std(i)) << w.names[static_cast<std::size_t>(i)];
   EXPECT_TRUE(w.details.contains("ols"));
 }
 
@@ -290,11 +297,13 @@ TEST(Estimators, FilteredLsRecoversFromNoisyPositionsWithinItsSigma) {
   const Eigen::VectorXd truth = m->baseNominal();
   for (int i = 0; i < m->numBase(); ++i)
     EXPECT_LE(std::abs(e.value(i) - truth(i)), 3.0 * e.std(i))
-        << e.names[static_cast<std::size_t>(i)] << " " << e.value(i) << " vs " << truth(i) << " std " << e.std(i);
+        << e.names[static_cast<std::size_t>(i)] << " " << e.value(i) << " vs " << truth(i)
+        << " std " << e.std(i);
   EXPECT_EQ(e.details.find("decimation")->asInt(), 20);  // auto: floor(0.2 * 1000 / 10)
   EXPECT_LT(e.details.find("parameters")->at(1).find("rel_std_percent")->asDouble(), 5.0);
   // Without filtering, differentiating noisy positions destroys the accelerations.
-  exid::Estimate raw = make("filtered_ls", "{cutoff_hz: 0, decimation: 1}")->estimate(*m, d, nullptr, ctx);
+  exid::Estimate raw =
+      make("filtered_ls", "{cutoff_hz: 0, decimation: 1}")->estimate(*m, d, nullptr, ctx);
   EXPECT_GT(std::abs(raw.value(0) - truth(0)), 10 * std::abs(e.value(0) - truth(0)));
 }
 

@@ -2,9 +2,9 @@
 // differences, parallel decimation, streaming QR accumulation.
 #include <gtest/gtest.h>
 
+#include <Eigen/QR>
 #include <cmath>
 #include <cstdio>
-#include <Eigen/QR>
 #include <random>
 
 #include "exid/error.hpp"
@@ -132,7 +132,8 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   Eigen::MatrixXd A(m, p + 1);
   A << W, y;
   const Eigen::MatrixXd& F = acc.factor();
-  EXPECT_LE((F.transpose() * F - A.transpose() * A).cwiseAbs().maxCoeff(), 1e-10 * (A.transpose() * A).cwiseAbs().maxCoeff());
+  EXPECT_LE((F.transpose() * F - A.transpose() * A).cwiseAbs().maxCoeff(),
+            1e-10 * (A.transpose() * A).cwiseAbs().maxCoeff());
   est::SolveOptions opt;
   opt.rank_tolerance = 1e-12;
   est::LsSolution s = est::solveLeastSquares(acc, {}, opt, "test");
@@ -140,7 +141,8 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   // equations square it and lose about 7 more digits.
   using MatL = Eigen::Matrix<long double, Eigen::Dynamic, Eigen::Dynamic>;
   using VecL = Eigen::Matrix<long double, Eigen::Dynamic, 1>;
-  const VecL refl = MatL(W.cast<long double>()).colPivHouseholderQr().solve(VecL(y.cast<long double>()));
+  const VecL refl =
+      MatL(W.cast<long double>()).colPivHouseholderQr().solve(VecL(y.cast<long double>()));
   const Eigen::VectorXd ref = refl.cast<double>();
   const double err_qr = (s.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   EXPECT_LE(err_qr, 1e-7);
@@ -151,8 +153,10 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   est::LsSolution sn = est::solveLeastSquares(nacc, {}, opt, "test");
   const double err_normal = (sn.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   EXPECT_GT(err_normal, 100 * err_qr);
-  std::printf("relative error vs long double: QR accumulation %.2e, normal equations %.2e (cond_W %.2e, scaled %.2e)\n",
-              err_qr, err_normal, s.cond_W, s.cond_W_scaled);
+  std::printf(
+      "relative error vs long double: QR accumulation %.2e, normal equations %.2e (cond_W %.2e, "
+      "scaled %.2e)\n",
+      err_qr, err_normal, s.cond_W, s.cond_W_scaled);
   // merge and scale
   est::RowAccumulator a2(p), b2(p);
   a2.add(W.topRows(100), y.head(100));
@@ -160,7 +164,8 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   Eigen::MatrixXd A2(100, p + 1);
   A2 << 2 * W.topRows(100), 2 * y.head(100);
   const Eigen::MatrixXd& F2 = b2.factor();
-  EXPECT_LE((F2.transpose() * F2 - A2.transpose() * A2).cwiseAbs().maxCoeff(), 1e-9 * (A2.transpose() * A2).cwiseAbs().maxCoeff());
+  EXPECT_LE((F2.transpose() * F2 - A2.transpose() * A2).cwiseAbs().maxCoeff(),
+            1e-9 * (A2.transpose() * A2).cwiseAbs().maxCoeff());
   EXPECT_EQ(b2.rows(), 100);
 }
 

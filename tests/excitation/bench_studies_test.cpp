@@ -7,8 +7,8 @@
 #include <gtest/gtest.h>
 
 #include <chrono>
-#include <cstdlib>
 #include <cmath>
+#include <cstdlib>
 #include <iostream>
 
 #include "exid/config.hpp"
@@ -26,13 +26,15 @@ struct Outcome {
 
 // max_cpu_s > 0 overrides the study's optimiser CPU budget, starts > 0 its starts, with
 // start_evaluations per start (reproducible starts: a CPU-time cut on a loaded machine moves).
-Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int starts = 0, int start_evaluations = 0) {
+Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int starts = 0,
+                 int start_evaluations = 0) {
   const auto path = exid_test::sourceDir() / "examples" / "bench" / file;
   exid::StudyConfig cfg = exid::loadStudy(path, exid_test::registry());
   if (max_cpu_s > 0) {
     cfg.optimizer->params.set("max_cpu_s", max_cpu_s);
     if (starts > 0) cfg.optimizer->params.set("starts", static_cast<std::int64_t>(starts));
-    if (start_evaluations > 0) cfg.optimizer->params.set("start_evaluations", static_cast<std::int64_t>(start_evaluations));
+    if (start_evaluations > 0)
+      cfg.optimizer->params.set("start_evaluations", static_cast<std::int64_t>(start_evaluations));
     cfg.name += "_cpu" + std::to_string(static_cast<int>(max_cpu_s * 1000)) + "ms";
   }
   const auto out = std::filesystem::temp_directory_path() / ("exid_bench_" + cfg.name);
@@ -48,13 +50,16 @@ Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int
   const exid::Json* x = r.summary.find("excitation");
   if (x && x->find("wall_s")) o.wall_s = x->find("wall_s")->asDouble();
   if (x && x->find("criterion_final")) o.reported = x->find("criterion_final")->asDouble();
-  if (x && x->find("details") && x->find("details")->find("cpu_s")) o.cpu_s = x->find("details")->find("cpu_s")->asDouble();
+  if (x && x->find("details") && x->find("details")->find("cpu_s"))
+    o.cpu_s = x->find("details")->find("cpu_s")->asDouble();
   // recompute from the CSV with a freshly bound model
   exid::CsvTable T = exid::readCsv(out / "trajectory_optimal.csv");
   exid::RunContext ctx;
   ctx.seed = cfg.seed;
-  auto robot = exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
-  auto model = exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type, cfg.models[0].params);
+  auto robot =
+      exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
+  auto model = exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type,
+                                                                    cfg.models[0].params);
   model->bind(robot, ctx);
   const int n = robot->dof();
   exid::Samples s;
@@ -79,8 +84,9 @@ Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int
     if (vcap > 0) v = std::max(v, s.qd.col(j).cwiseAbs().maxCoeff() - vcap);
   }
   o.violation = v;
-  std::cout << "[bench] " << cfg.name << ": cond(W) from CSV " << o.cond << " (reported " << o.reported
-            << "), excitation CPU " << o.cpu_s << " s, wall " << o.wall_s << " s, max violation " << v << "\n";
+  std::cout << "[bench] " << cfg.name << ": cond(W) from CSV " << o.cond << " (reported "
+            << o.reported << "), excitation CPU " << o.cpu_s << " s, wall " << o.wall_s
+            << " s, max violation " << v << "\n";
   return o;
 }
 

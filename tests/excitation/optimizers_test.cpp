@@ -4,8 +4,8 @@
 
 #include <chrono>
 #include <cmath>
-#include <filesystem>
 #include <cstdlib>
+#include <filesystem>
 #include <random>
 
 #include "exid/error.hpp"
@@ -25,7 +25,7 @@ struct XSetup {
 };
 
 XSetup make(const std::string& robot, const std::string& traj, const std::string& tparams,
-           const std::string& crit = "cond", const std::string& mparams = "{coulomb: false}") {
+            const std::string& crit = "cond", const std::string& mparams = "{coulomb: false}") {
   XSetup s;
   exid::RunContext ctx;
   ctx.seed = 11;
@@ -45,8 +45,8 @@ XSetup make(const std::string& robot, const std::string& traj, const std::string
 }
 
 // Largest violation of the robot's limits (and the caps) recomputed from the samples.
-double violation(const exid::Samples& s, const exid::RobotModel& r, double margin, bool vel, bool acc,
-                 double vcap = 0) {
+double violation(const exid::Samples& s, const exid::RobotModel& r, double margin, bool vel,
+                 bool acc, double vcap = 0) {
   double v = 0;
   for (int j = 0; j < s.dof(); ++j) {
     const auto& L = r.limits[static_cast<std::size_t>(j)];
@@ -68,7 +68,8 @@ struct GradCase {
 };
 
 // A CSV (t, q, qd, qdd) of a random Fourier trajectory of the robot.
-std::string fourierStartCsv(const std::string& robot, const std::string& fparams, const std::string& tag) {
+std::string fourierStartCsv(const std::string& robot, const std::string& fparams,
+                            const std::string& tag) {
   exid::RunContext ctx;
   ctx.seed = 7;
   auto f = exid_test::create<exid::Trajectory>("fourier", fparams);
@@ -84,7 +85,8 @@ std::string fourierStartCsv(const std::string& robot, const std::string& fparams
   T.data.middleCols(1, n) = smp.q;
   T.data.middleCols(1 + n, n) = smp.qd;
   T.data.middleCols(1 + 2 * n, n) = smp.qdd;
-  const auto path = std::filesystem::temp_directory_path() / ("exid_gradtest_start_" + tag + ".csv");
+  const auto path =
+      std::filesystem::temp_directory_path() / ("exid_gradtest_start_" + tag + ".csv");
   exid::writeCsvAtomic(path, T);
   return path.string();
 }
@@ -116,7 +118,8 @@ TEST_P(GradientTest, MatchesCentralDifferences) {
   const double rtol = std::getenv("EXID_FD_RTOL") ? std::atof(std::getenv("EXID_FD_RTOL")) : 1e-6;
   auto derivative = [&](const Eigen::VectorXd& d, double h) {
     auto central = [&](double hh) {
-      return (s.problem->value(z + hh * d, nullptr) - s.problem->value(z - hh * d, nullptr)) / (2 * hh);
+      return (s.problem->value(z + hh * d, nullptr) - s.problem->value(z - hh * d, nullptr)) /
+             (2 * hh);
     };
     return (4.0 * central(0.5 * h) - central(h)) / 3.0;
   };
@@ -129,12 +132,14 @@ TEST_P(GradientTest, MatchesCentralDifferences) {
     for (Eigen::Index i = 0; i < d.size(); ++i) d(i) = N(rng);
     d /= d.norm();
     const double fd = derivative(d, hstep * zscale);
-    EXPECT_NEAR(g.dot(d), fd, rtol * std::max(std::abs(fd), 1e-3 * g.norm())) << c.crit << " direction " << trial;
+    EXPECT_NEAR(g.dot(d), fd, rtol * std::max(std::abs(fd), 1e-3 * g.norm()))
+        << c.crit << " direction " << trial;
   }
   for (Eigen::Index i : {Eigen::Index(0), z.size() / 2, z.size() - 1}) {
     const Eigen::VectorXd e = Eigen::VectorXd::Unit(z.size(), i);
     const double fd = derivative(e, hstep * std::max(1.0, std::abs(z(i))));
-    EXPECT_NEAR(g(i), fd, rtol * std::max(std::abs(fd), 1e-3 * g.cwiseAbs().maxCoeff())) << c.crit << " variable " << i;
+    EXPECT_NEAR(g(i), fd, rtol * std::max(std::abs(fd), 1e-3 * g.cwiseAbs().maxCoeff()))
+        << c.crit << " variable " << i;
   }
 }
 
@@ -149,14 +154,19 @@ INSTANTIATE_TEST_SUITE_P(
                  "{period_s: 4, harmonics: 5, sample_period_s: 0.05}"},
         GradCase{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 5}", "log_det"},
         GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "cond"},
-        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "min_sv"},
-        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "frobenius_cond"},
-        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}", "log_det"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}",
+                 "min_sv"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}",
+                 "frobenius_cond"},
+        GradCase{"puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}",
+                 "log_det"},
         GradCase{"puma560", "pointwise", "{duration_s: 4, sample_period_s: 0.05}", "cond",
                  "{period_s: 4, harmonics: 5, sample_period_s: 0.05}"},
         GradCase{"puma560", "pointwise", "{duration_s: 4, sample_period_s: 0.05}", "log_det",
                  "{period_s: 4, harmonics: 5, sample_period_s: 0.05}"}),
-    [](const auto& info) { return info.param.robot + "_" + info.param.traj + "_" + info.param.crit; });
+    [](const auto& info) {
+      return info.param.robot + "_" + info.param.traj + "_" + info.param.crit;
+    });
 
 TEST(Limits, TheTrajectorysCapsArePartOfTheProblem) {
   // velocity_limit_rad_s reaches the excitation problem's g through Trajectory::adjustLimits
@@ -164,7 +174,9 @@ TEST(Limits, TheTrajectorysCapsArePartOfTheProblem) {
   // alone is imposed. max g equals the violation recomputed from the samples.
   for (const char* vl : {"true", "false"}) {
     XSetup s = make("puma560", "fourier",
-                    std::string("{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, init_scale: 0.9, velocity_limits: ") + vl + "}",
+                    std::string("{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, "
+                                "init_scale: 0.9, velocity_limits: ") +
+                        vl + "}",
                     "cond", "{rotor_inertia: false, viscous: false, coulomb: false}");
     EXPECT_TRUE(s.traj->velocityLimits());
     const bool acc = s.traj->accelerationLimits();
@@ -189,9 +201,12 @@ TEST(Limits, TheTrajectorysCapsArePartOfTheProblem) {
 }
 
 TEST(Limits, OptimisersRespectTheCaps) {
-  XSetup s = make("puma560", "fourier", "{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, init_scale: 0.9}",
-                 "cond", "{rotor_inertia: false, viscous: false, coulomb: false}");
-  for (const char* p : {"{algorithm: LD_SLSQP, max_time_s: 20}", "{algorithm: LD_SLSQP, max_time_s: 20, constraint_mode: aggregated, starts: 2}"}) {
+  XSetup s = make("puma560", "fourier",
+                  "{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, init_scale: 0.9}", "cond",
+                  "{rotor_inertia: false, viscous: false, coulomb: false}");
+  for (const char* p :
+       {"{algorithm: LD_SLSQP, max_time_s: 20}",
+        "{algorithm: LD_SLSQP, max_time_s: 20, constraint_mode: aggregated, starts: 2}"}) {
     auto opt = exid_test::create<exid::Optimizer>("nlopt", p);
     exid::RunContext ctx;
     auto r = opt->minimize(*s.problem, ctx);
@@ -232,37 +247,53 @@ TEST_P(OptimizerTest, ReducesCondAndReturnsAFeasiblePoint) {
   EXPECT_NEAR(s.problem->value(r.z, nullptr), r.criterion_final, 1e-9 * r.criterion_final);
   // feasible: recomputed from the trajectory at every sample
   const exid::Samples best = s.traj->evaluate(r.z);
-  EXPECT_LE(violation(best, *s.robot, s.traj->positionMargin(), s.traj->velocityLimits(), s.traj->accelerationLimits()), 1e-9);
+  EXPECT_LE(violation(best, *s.robot, s.traj->positionMargin(), s.traj->velocityLimits(),
+                      s.traj->accelerationLimits()),
+            1e-9);
   EXPECT_LE(r.max_violation, 1e-9);
   EXPECT_GT(r.evaluations, 0);
   EXPECT_FALSE(r.stop_reason.empty());
   ASSERT_FALSE(r.history_value.empty());
   EXPECT_EQ(r.history_value.size(), r.history_t_s.size());
   EXPECT_NEAR(r.history_value.back(), r.criterion_final, 1e-9 * r.criterion_final);
-  for (std::size_t i = 1; i < r.history_value.size(); ++i) EXPECT_LE(r.history_value[i], r.history_value[i - 1]);
+  for (std::size_t i = 1; i < r.history_value.size(); ++i)
+    EXPECT_LE(r.history_value[i], r.history_value[i - 1]);
   EXPECT_FALSE(progress.empty());
 }
 
-const char* kFourier = "{period_s: 4, harmonics: 3, sample_period_s: 0.05, position_margin_rad: 0.1}";
+const char* kFourier =
+    "{period_s: 4, harmonics: 3, sample_period_s: 0.05, position_margin_rad: 0.1}";
 
 INSTANTIATE_TEST_SUITE_P(
     All, OptimizerTest,
     ::testing::Values(
         OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_MMA, max_time_s: 5, max_evaluations: 300}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_time_s: 5, max_evaluations: 400}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_MMA, max_time_s: 5, max_evaluations: 300}", "fourier",
+                kFourier},
+        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_time_s: 5, max_evaluations: 400}", "fourier",
+                kFourier},
+        OptCase{
+            "nlopt",
+            "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000, max_time_s: 10}",
+            "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400, max_time_s: 10}",
+                "fourier", kFourier},
         OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "spline",
+                "{duration_s: 4, knots: 6, degree: 5}"},
         OptCase{"adjoint_gradient", "{max_time_s: 10}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "fourier",
+                kFourier},
         OptCase{"adjoint_gradient", "{constraints: penalty, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{constraints: projection, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{max_time_s: 10}", "pointwise", "{duration_s: 4, sample_period_s: 0.05}"},
-        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "pointwise",
-                "{duration_s: 4, sample_period_s: 0.05}"}),
-    [](const auto& info) { return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index); });
+        OptCase{"adjoint_gradient", "{constraints: projection, max_time_s: 10}", "fourier",
+                kFourier},
+        OptCase{"adjoint_gradient", "{max_time_s: 10}", "pointwise",
+                "{duration_s: 4, sample_period_s: 0.05}"},
+        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}",
+                "pointwise", "{duration_s: 4, sample_period_s: 0.05}"}),
+    [](const auto& info) {
+      return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index);
+    });
 
 TEST(Nlopt, UnknownAlgorithmListsTheValidOnes) {
   try {

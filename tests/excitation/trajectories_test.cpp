@@ -28,7 +28,8 @@ std::shared_ptr<exid::Trajectory> bound(const Case& c) {
 Eigen::VectorXd stackSignals(const Samples& s) {
   const Eigen::Index Kn = s.q.size();
   Eigen::VectorXd v(3 * Kn);
-  v << Eigen::Map<const Eigen::VectorXd>(s.q.data(), Kn), Eigen::Map<const Eigen::VectorXd>(s.qd.data(), Kn),
+  v << Eigen::Map<const Eigen::VectorXd>(s.q.data(), Kn),
+      Eigen::Map<const Eigen::VectorXd>(s.qd.data(), Kn),
       Eigen::Map<const Eigen::VectorXd>(s.qdd.data(), Kn);
   return v;
 }
@@ -70,7 +71,10 @@ TEST_P(TrajectoryTest, JacobianAndVjpMatchFiniteDifferences) {
   Eigen::VectorXd dir(nz);
   for (int i = 0; i < nz; ++i) dir(i) = N(rng);
   const double h = 1e-4;
-  const double fd = (stackSignals(t->evaluate(z + h * dir)) - stackSignals(t->evaluate(z - h * dir))).dot(stackSignals(adj)) / (2 * h);
+  const double fd =
+      (stackSignals(t->evaluate(z + h * dir)) - stackSignals(t->evaluate(z - h * dir)))
+          .dot(stackSignals(adj)) /
+      (2 * h);
   EXPECT_NEAR(g.dot(dir), fd, 1e-7 * std::max(1.0, std::abs(fd)));
 }
 
@@ -87,8 +91,10 @@ TEST_P(TrajectoryTest, InitialPointRespectsTheLimits) {
     const auto& L = limits[static_cast<std::size_t>(j)];
     EXPECT_LE(s.q.col(j).maxCoeff(), L.q_max - margin + 1e-12) << "joint " << j + 1;
     EXPECT_GE(s.q.col(j).minCoeff(), L.q_min + margin - 1e-12) << "joint " << j + 1;
-    if (t->velocityLimits() && L.qd_max < 1e299) EXPECT_LE(s.qd.col(j).cwiseAbs().maxCoeff(), L.qd_max + 1e-12);
-    if (t->accelerationLimits() && L.qdd_max < 1e299) EXPECT_LE(s.qdd.col(j).cwiseAbs().maxCoeff(), L.qdd_max + 1e-12);
+    if (t->velocityLimits() && L.qd_max < 1e299)
+      EXPECT_LE(s.qd.col(j).cwiseAbs().maxCoeff(), L.qd_max + 1e-12);
+    if (t->accelerationLimits() && L.qdd_max < 1e299)
+      EXPECT_LE(s.qdd.col(j).cwiseAbs().maxCoeff(), L.qdd_max + 1e-12);
   }
 }
 
@@ -98,8 +104,10 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"planar2r", "pointwise", "{duration_s: 2, sample_period_s: 0.05}"},
         Case{"puma560", "pointwise", "{duration_s: 1, sample_period_s: 0.05, joints: [1, 3]}"},
         Case{"planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.1}"},
-        Case{"panda", "fourier", "{period_s: 10, harmonics: 5, position_margin_rad: 0.1, acceleration_limits: false}"},
-        Case{"puma560", "fourier", "{period_s: 5, harmonics: 2, joints: [2], velocity_limit_rad_s: 3}"},
+        Case{"panda", "fourier",
+             "{period_s: 10, harmonics: 5, position_margin_rad: 0.1, acceleration_limits: false}"},
+        Case{"puma560", "fourier",
+             "{period_s: 5, harmonics: 2, joints: [2], velocity_limit_rad_s: 3}"},
         Case{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 3}"},
         Case{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
         Case{"puma560", "spline", "{duration_s: 4, knots: 7, degree: 5, boundary: periodic}"},
@@ -109,7 +117,8 @@ INSTANTIATE_TEST_SUITE_P(
     });
 
 TEST(Pointwise, IntegratesExactlyByTheRecursion) {
-  auto t = bound({"planar2r", "pointwise", "{duration_s: 3, sample_period_s: 0.01, q0_rad: [0.2, -0.3]}"});
+  auto t = bound(
+      {"planar2r", "pointwise", "{duration_s: 3, sample_period_s: 0.01, q0_rad: [0.2, -0.3]}"});
   Eigen::VectorXd z = t->initial();
   std::mt19937_64 rng(1);
   std::uniform_real_distribution<double> U(-5, 5);
@@ -144,7 +153,8 @@ TEST(Pointwise, CostateRecursionIsTheAdjointOfTheRecursion) {
     for (Eigen::Index i = 0; i < m->size(); ++i) m->data()[i] = N(rng);
   auto inner = [&](const Eigen::VectorXd& z) {
     Samples s = t->evaluate(z);
-    return (s.q.cwiseProduct(adj.q).sum() + s.qd.cwiseProduct(adj.qd).sum() + s.qdd.cwiseProduct(adj.qdd).sum());
+    return (s.q.cwiseProduct(adj.q).sum() + s.qd.cwiseProduct(adj.qd).sum() +
+            s.qdd.cwiseProduct(adj.qdd).sum());
   };
   const Eigen::VectorXd z = Eigen::VectorXd::Zero(t->numVariables());
   const Eigen::VectorXd g = t->vjp(z, adj);
@@ -167,10 +177,13 @@ TEST(Pointwise, StartsFromCsvAccelerationsOrPositions) {
     f << "t,q1,q2\n";
     for (int k = 0; k < N; ++k) {
       const double tt = k * dt, w = 2 * M_PI / T;
-      f << tt << "," << 0.3 + 0.4 * std::cos(w * tt) << "," << -0.2 + 0.5 * std::sin(2 * w * tt) << "\n";
+      f << tt << "," << 0.3 + 0.4 * std::cos(w * tt) << "," << -0.2 + 0.5 * std::sin(2 * w * tt)
+        << "\n";
     }
   }
-  auto t = bound({"planar2r", "pointwise", "{duration_s: 2, sample_period_s: 0.02, init: csv, init_csv: " + (dir / "q.csv").string() + "}"});
+  auto t = bound({"planar2r", "pointwise",
+                  "{duration_s: 2, sample_period_s: 0.02, init: csv, init_csv: " +
+                      (dir / "q.csv").string() + "}"});
   const Samples s = t->evaluate(t->initial());
   const double w = 2 * M_PI / T;
   EXPECT_NEAR(s.q(0, 0), 0.7, 1e-9);
@@ -195,7 +208,10 @@ TEST(Fourier, IsPeriodicAndBandLimited) {
     // no harmonic above 4 in q
     for (int l = 5; l < 20; ++l) {
       double c = 0, si = 0;
-      for (int k = 0; k < s.size(); ++k) { c += s.q(k, j) * std::cos(w * l * s.t(k)); si += s.q(k, j) * std::sin(w * l * s.t(k)); }
+      for (int k = 0; k < s.size(); ++k) {
+        c += s.q(k, j) * std::cos(w * l * s.t(k));
+        si += s.q(k, j) * std::sin(w * l * s.t(k));
+      }
       EXPECT_NEAR(c, 0.0, 1e-9);
       EXPECT_NEAR(si, 0.0, 1e-9);
     }
@@ -205,13 +221,17 @@ TEST(Fourier, IsPeriodicAndBandLimited) {
   const int L = 4, m = 1 + 2 * L;
   for (int j = 0; j < s.dof(); ++j) {
     double qT = z(j * m), q0 = s.q(0, j);
-    for (int l = 1; l <= L; ++l) qT += z(j * m + l) / (w * l) * std::sin(w * l * 8.0) - z(j * m + L + l) / (w * l) * std::cos(w * l * 8.0);
+    for (int l = 1; l <= L; ++l)
+      qT += z(j * m + l) / (w * l) * std::sin(w * l * 8.0) -
+            z(j * m + L + l) / (w * l) * std::cos(w * l * 8.0);
     EXPECT_NEAR(qT, q0, 1e-12);
   }
 }
 
 TEST(Fourier, HeldJointsStayAtRest) {
-  auto t = bound({"puma560", "fourier", "{period_s: 4, harmonics: 2, joints: [2, 3], rest_position_rad: [0.1, 0.2, 0.3, 0.4, 0.5, 0.6]}"});
+  auto t = bound({"puma560", "fourier",
+                  "{period_s: 4, harmonics: 2, joints: [2, 3], rest_position_rad: [0.1, 0.2, 0.3, "
+                  "0.4, 0.5, 0.6]}"});
   EXPECT_EQ(t->numVariables(), 2 * 5);
   const Samples s = t->evaluate(t->initial());
   for (int j : {0, 3, 4, 5}) {
@@ -224,7 +244,9 @@ TEST(Fourier, HeldJointsStayAtRest) {
 
 TEST(Spline, StartsAndEndsAtRest) {
   for (int degree : {3, 5}) {
-    auto t = bound({"planar2r", "spline", "{duration_s: 5, knots: 8, sample_period_s: 0.01, degree: " + std::to_string(degree) + "}"});
+    auto t = bound({"planar2r", "spline",
+                    "{duration_s: 5, knots: 8, sample_period_s: 0.01, degree: " +
+                        std::to_string(degree) + "}"});
     Eigen::VectorXd z = t->initial();
     const Samples s = t->evaluate(z);
     ASSERT_NEAR(s.t(s.size() - 1), 5.0, 1e-12);
@@ -245,14 +267,17 @@ TEST(Spline, StartsAndEndsAtRest) {
 }
 
 TEST(Spline, PeriodicWrapsSmoothly) {
-  auto t = bound({"planar2r", "spline", "{duration_s: 4, knots: 5, degree: 5, boundary: periodic, sample_period_s: 0.001}"});
+  auto t =
+      bound({"planar2r", "spline",
+             "{duration_s: 4, knots: 5, degree: 5, boundary: periodic, sample_period_s: 0.001}"});
   const Samples s = t->evaluate(t->initial());
   ASSERT_EQ(s.size(), 4000);
   const int K = s.size();
   const double dt = 0.001;
   for (int j = 0; j < 2; ++j) {
     // the sample after the last is the first one: extrapolate with the Taylor step
-    EXPECT_NEAR(s.q(K - 1, j) + dt * s.qd(K - 1, j) + 0.5 * dt * dt * s.qdd(K - 1, j), s.q(0, j), 1e-7);
+    EXPECT_NEAR(s.q(K - 1, j) + dt * s.qd(K - 1, j) + 0.5 * dt * dt * s.qdd(K - 1, j), s.q(0, j),
+                1e-7);
     EXPECT_NEAR(s.qd(K - 1, j) + dt * s.qdd(K - 1, j), s.qd(0, j), 1e-5);
   }
 }

@@ -28,7 +28,8 @@ fs::path writeText(const std::string& name, const std::string& text) {
 exid::Dataset readCsv(const fs::path& file, const std::string& extra = "",
                       std::shared_ptr<const exid::RobotModel> r = nullptr) {
   if (!r) r = mtest::robot("puma560");
-  auto e = exid_test::create<exid::Experiment>("csv", "{file: " + file.string() + (extra.empty() ? "" : ", " + extra) + "}");
+  auto e = exid_test::create<exid::Experiment>(
+      "csv", "{file: " + file.string() + (extra.empty() ? "" : ", " + extra) + "}");
   return e->run(r, nullptr, mtest::context());
 }
 
@@ -56,7 +57,9 @@ std::string row(double t, int n, double v, bool with_t = true) {
 
 TEST(Csv, ReadsBackWhatTheRunnerWritesExactly) {
   auto r = mtest::robot("puma560");
-  const exid::Dataset d = mtest::simulate(r, "{duration_s: 1, wrench: true, payload_mass_kg: 1.5, noise_q_rad: 1e-3, noise_tau_Nm: 0.1}");
+  const exid::Dataset d = mtest::simulate(
+      r,
+      "{duration_s: 1, wrench: true, payload_mass_kg: 1.5, noise_q_rad: 1e-3, noise_tau_Nm: 0.1}");
   const fs::path f = tmpDir() / "experiment.csv";
   exid::writeCsvAtomic(f, exid::datasetTable(d));
   const exid::Dataset b = readCsv(f);
@@ -86,8 +89,9 @@ TEST(Csv, SegmentSignOffsetAndNoTimeColumn) {
   std::string text = header(6, false);
   for (int k = 0; k < 10; ++k) text += row(0, 6, k, false);
   const fs::path f = writeText("no_t.csv", text);
-  const exid::Dataset d = readCsv(f, "sample_period_s: 0.1, t_start_s: 0.2, t_end_s: 0.5, "
-                                     "sign: [1, -1, 1, 1, 1, 1], offset_rad: [0, 0.5, 0, 0, 0, 0]");
+  const exid::Dataset d = readCsv(f,
+                                  "sample_period_s: 0.1, t_start_s: 0.2, t_end_s: 0.5, "
+                                  "sign: [1, -1, 1, 1, 1, 1], offset_rad: [0, 0.5, 0, 0, 0, 0]");
   ASSERT_EQ(d.size(), 4);  // t = 0.2, 0.3, 0.4, 0.5
   EXPECT_NEAR(d.t[0], 0.2, 1e-12);
   EXPECT_NEAR(d.q(0, 0), 2.0, 1e-12);
@@ -99,10 +103,12 @@ TEST(Csv, TorqueFromCurrents) {
   std::string text = "t,q1,q2,q3,q4,q5,q6,i1,i2,i3,i4,i5,i6\n";
   text += "0,0,0,0,0,0,0,1,2,3,4,5,6\n0.01,0,0,0,0,0,0,1,1,1,1,1,1\n";
   const fs::path f = writeText("currents.csv", text);
-  const exid::Dataset d = readCsv(f, "torque_from: current, torque_constants_Nm_per_A: [10, 20, 30, 40, 50, 60]");
+  const exid::Dataset d =
+      readCsv(f, "torque_from: current, torque_constants_Nm_per_A: [10, 20, 30, 40, 50, 60]");
   EXPECT_NEAR(d.tau(0, 2), 90.0, 1e-12);
   EXPECT_NEAR(d.tau(1, 5), 60.0, 1e-12);
-  EXPECT_NE(errorOf(f, "torque_from: current").find("torque_constants_Nm_per_A: expected 6"), std::string::npos);
+  EXPECT_NE(errorOf(f, "torque_from: current").find("torque_constants_Nm_per_A: expected 6"),
+            std::string::npos);
 }
 
 TEST(Csv, UnsortedTimeNamesTheLine) {
@@ -146,7 +152,8 @@ TEST(Csv, MissingColumnAndWrongJointCount) {
   std::printf("%s\n", e.c_str());
   EXPECT_NE(e.find("missing column 'q1'"), std::string::npos) << e;
 
-  const fs::path partw = writeText("partial_wrench.csv", "t,q1,q2,q3,q4,q5,q6,fx,fy,fz\n0,1,2,3,4,5,6,1,2,3\n");
+  const fs::path partw =
+      writeText("partial_wrench.csv", "t,q1,q2,q3,q4,q5,q6,fx,fy,fz\n0,1,2,3,4,5,6,1,2,3\n");
   e = errorOf(partw);
   std::printf("%s\n", e.c_str());
   EXPECT_NE(e.find("mx, my, mz"), std::string::npos) << e;

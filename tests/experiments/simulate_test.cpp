@@ -15,7 +15,8 @@ TEST(Simulate, OwnFourierReferenceWithinLimitsAndMeta) {
   EXPECT_NEAR(d.t[d.size() - 1], 10.0, 1e-12);
   ASSERT_TRUE(d.meta.find("simulated"));
   EXPECT_TRUE(d.meta.find("simulated")->asBool());
-  for (const char* key : {"integrator", "rtol", "atol", "steps", "seed", "noise", "controller", "reference"})
+  for (const char* key :
+       {"integrator", "rtol", "atol", "steps", "seed", "noise", "controller", "reference"})
     EXPECT_TRUE(d.meta.contains(key)) << key;
   EXPECT_GT(d.meta.find("steps")->asInt(), 10);
   for (int j = 0; j < r->dof(); ++j) {
@@ -33,13 +34,15 @@ TEST(Simulate, OwnFourierReferenceWithinLimitsAndMeta) {
 TEST(Simulate, RecordedTorqueSatisfiesTheEquationsOfMotion) {
   auto r = mtest::robot("puma560");
   for (const char* ctl : {"computed_torque", "pd_feedforward"}) {
-    const exid::Dataset d = mtest::simulate(r, std::string("{duration_s: 2, controller: ") + ctl + "}");
+    const exid::Dataset d =
+        mtest::simulate(r, std::string("{duration_s: 2, controller: ") + ctl + "}");
     auto data = exid::makeDynamicsData(*r);
     exid::DriveColumns all{true, true, true, true};
     double worst = 0;
     for (int k = 0; k < d.size(); ++k) {
-      const Eigen::VectorXd tau = exid::actuatorTorque(*r, *data, all, d.q.row(k).transpose(),
-                                                       d.qd.row(k).transpose(), d.qdd.row(k).transpose());
+      const Eigen::VectorXd tau =
+          exid::actuatorTorque(*r, *data, all, d.q.row(k).transpose(), d.qd.row(k).transpose(),
+                               d.qdd.row(k).transpose());
       worst = std::max(worst, (tau - d.tau.row(k).transpose()).cwiseAbs().maxCoeff());
     }
     std::printf("[%s] max |tau - ID(q, qd, qdd)| = %.2e N m, tracking error %.2e rad\n", ctl, worst,
@@ -50,7 +53,9 @@ TEST(Simulate, RecordedTorqueSatisfiesTheEquationsOfMotion) {
 
 TEST(Simulate, CvodeAndArkodeAgree) {
   auto r = mtest::robot("puma560");
-  const std::string base = "{duration_s: 3, controller: pd_feedforward, kp: 25, kd: 10, coulomb: tanh, coulomb_velocity_scale: 0.01, rtol: 1e-10, atol: 1e-12, integrator: ";
+  const std::string base =
+      "{duration_s: 3, controller: pd_feedforward, kp: 25, kd: 10, coulomb: tanh, "
+      "coulomb_velocity_scale: 0.01, rtol: 1e-10, atol: 1e-12, integrator: ";
   const exid::Dataset a = mtest::simulate(r, base + "cvode}");
   const exid::Dataset b = mtest::simulate(r, base + "arkode}");
   const double dq = (a.q - b.q).cwiseAbs().maxCoeff();
@@ -70,16 +75,21 @@ TEST(Simulate, TracksAGivenReference) {
   EXPECT_EQ(d.size(), 801);
   // At the reference's knots the tracked positions equal the reference.
   double worst = 0;
-  for (int k = 0; k < ref.size(); ++k) worst = std::max(worst, (d.q.row(4 * k) - ref.q.row(k)).cwiseAbs().maxCoeff());
+  for (int k = 0; k < ref.size(); ++k)
+    worst = std::max(worst, (d.q.row(4 * k) - ref.q.row(k)).cwiseAbs().maxCoeff());
   EXPECT_LT(worst, 1e-6);
   EXPECT_EQ(d.meta.find("reference")->find("type")->asString().rfind("excitation", 0), 0u);
 }
 
 TEST(Simulate, NoiseQuantisationAndRecordedSignals) {
   auto r = mtest::robot("puma560");
-  const exid::Dataset clean = mtest::simulate(r, "{duration_s: 5, wrench: true, payload_mass_kg: 1.0}", 3);
-  const exid::Dataset noisy = mtest::simulate(
-      r, "{duration_s: 5, wrench: true, payload_mass_kg: 1.0, noise_q_rad: 0.001, noise_tau_Nm: 0.2, noise_wrench: [0.5, 0.05]}", 3);
+  const exid::Dataset clean =
+      mtest::simulate(r, "{duration_s: 5, wrench: true, payload_mass_kg: 1.0}", 3);
+  const exid::Dataset noisy =
+      mtest::simulate(r,
+                      "{duration_s: 5, wrench: true, payload_mass_kg: 1.0, noise_q_rad: 0.001, "
+                      "noise_tau_Nm: 0.2, noise_wrench: [0.5, 0.05]}",
+                      3);
   auto stdOf = [](const Eigen::MatrixXd& x) {
     const double mean = x.mean();
     return std::sqrt((x.array() - mean).square().sum() / (x.size() - 1));
@@ -92,7 +102,8 @@ TEST(Simulate, NoiseQuantisationAndRecordedSignals) {
   // A static payload of 1 kg: |f| = 9.81 N at rest-like moments; here check only it is finite.
   EXPECT_TRUE(noisy.wrench.allFinite());
 
-  const exid::Dataset q = mtest::simulate(r, "{duration_s: 1, encoder_resolution_rad: 0.001, output_qd_qdd: false}");
+  const exid::Dataset q =
+      mtest::simulate(r, "{duration_s: 1, encoder_resolution_rad: 0.001, output_qd_qdd: false}");
   EXPECT_FALSE(q.hasVelocity());
   EXPECT_FALSE(q.hasAcceleration());
   EXPECT_TRUE(q.hasTorque());
@@ -109,7 +120,8 @@ TEST(Simulate, StaticPayloadWrenchIsItsWeight) {
   s.q.col(1).setConstant(0.3);
   s.qd = Eigen::MatrixXd::Zero(3, 6);
   s.qdd = Eigen::MatrixXd::Zero(3, 6);
-  const exid::Dataset d = mtest::simulate(r, "{wrench: true, payload_mass_kg: 2.0, drive_terms: false}", 1, &s);
+  const exid::Dataset d =
+      mtest::simulate(r, "{wrench: true, payload_mass_kg: 2.0, drive_terms: false}", 1, &s);
   EXPECT_NEAR(d.wrench.row(0).head(3).norm(), 2.0 * 9.81, 1e-9);
 }
 
@@ -131,7 +143,8 @@ TEST(Simulate, ErrorsAreClear) {
 TEST(Simulate, IntegralRowsOnArkodeData) {
   // The energy balance holds on ARKODE data too (the integrator's accuracy shows in the rows).
   auto r = mtest::robot("puma560");
-  const exid::Dataset d = mtest::simulate(r, "{duration_s: 10, integrator: arkode, rtol: 1e-11, atol: 1e-12, sample_period_s: 0.005}");
+  const exid::Dataset d = mtest::simulate(
+      r, "{duration_s: 10, integrator: arkode, rtol: 1e-11, atol: 1e-12, sample_period_s: 0.005}");
   auto m = mtest::model("integral", "{offset: true, window_s: 0.1}", r);
   const mtest::Recovery rec = mtest::recover(*m, d);
   mtest::print("integral on ARKODE data", rec);

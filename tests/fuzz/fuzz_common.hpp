@@ -10,7 +10,6 @@
 #include <string>
 
 #include "exid/registry.hpp"
-
 #include "fuzz_common_min.hpp"
 
 namespace exid_fuzz {

@@ -68,7 +68,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   }
   write(dir() / "in.csv", rest);
   write(dir() / "tau.csv", tau);
-  static const auto robot = std::make_shared<const exid::RobotModel>(exid::loadDhYamlString(kRobot, "fuzz2.yaml"));
+  static const auto robot =
+      std::make_shared<const exid::RobotModel>(exid::loadDhYamlString(kRobot, "fuzz2.yaml"));
   try {
     exid::Registry& reg = exid_fuzz::registry();
     const exid::PluginInfo& info = reg.get(exid::PluginKind::Experiment, "csv");

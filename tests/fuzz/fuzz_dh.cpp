@@ -11,7 +11,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   exid::LoadOptions opt;
   opt.warnings = &warnings;
   try {
-    const exid::RobotModel m = exid::loadDhYamlString(exid_fuzz::text(data, size), "fuzz.yaml", opt);
+    const exid::RobotModel m =
+        exid::loadDhYamlString(exid_fuzz::text(data, size), "fuzz.yaml", opt);
     const Eigen::VectorXd z = Eigen::VectorXd::Zero(m.dof());
     exid::DynamicsDataPtr dd = exid::makeDynamicsData(m);
     (void)exid::inverseDynamics(m, *dd, z, z, z);

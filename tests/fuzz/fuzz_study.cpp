@@ -5,9 +5,9 @@
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   try {
-    const exid::StudyConfig c = exid::parseStudy(exid_fuzz::text(data, size), "fuzz.yaml",
-                                                 std::filesystem::temp_directory_path(),
-                                                 exid_fuzz::registry());
+    const exid::StudyConfig c =
+        exid::parseStudy(exid_fuzz::text(data, size), "fuzz.yaml",
+                         std::filesystem::temp_directory_path(), exid_fuzz::registry());
     (void)c.resolvedYaml();
     (void)c.hash();
   } catch (const exid::Error&) {

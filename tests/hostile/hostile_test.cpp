@@ -22,7 +22,8 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path tempDir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("exid_hostile_" + name + "_" + std::to_string(::getpid()));
+  fs::path d =
+      fs::temp_directory_path() / ("exid_hostile_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -60,7 +61,8 @@ Child start(const fs::path& study, const fs::path& out, const fs::path& dir, lon
       rlimit rl{static_cast<rlim_t>(limit_bytes), static_cast<rlim_t>(limit_bytes)};
       ::setrlimit(RLIMIT_FSIZE, &rl);
     }
-    ::execl(EXID_EXE, EXID_EXE, "-q", "run", study.c_str(), "--out", out.c_str(), static_cast<char*>(nullptr));
+    ::execl(EXID_EXE, EXID_EXE, "-q", "run", study.c_str(), "--out", out.c_str(),
+            static_cast<char*>(nullptr));
     ::_exit(127);
   }
   return c;
@@ -119,7 +121,8 @@ TEST(Hostile, SigtermMidRunStopsCleanlyAndSaysWhy) {
   const auto t0 = std::chrono::steady_clock::now();
   int sig = 0;
   const int code = wait(c, &sig);
-  const double waited = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  const double waited =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   const std::string log = slurp(c.log);
   EXPECT_EQ(sig, 0) << "killed by signal " << sig << "\n" << log;
   EXPECT_NE(code, 0) << log;
@@ -127,7 +130,8 @@ TEST(Hostile, SigtermMidRunStopsCleanlyAndSaysWhy) {
   ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
   const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
   EXPECT_EQ(s.find("status")->asString(), "failed");
-  EXPECT_NE(s.find("message")->asString().find("interrupted"), std::string::npos) << s.find("message")->asString();
+  EXPECT_NE(s.find("message")->asString().find("interrupted"), std::string::npos)
+      << s.find("message")->asString();
   EXPECT_TRUE(noTemporaries(dir));
   fs::remove_all(dir);
 }
@@ -145,7 +149,8 @@ TEST(Hostile, AJointThatNeverMovesIsNamed) {
         << std::sin(3 * t) << "," << std::cos(2 * t) << "\n";
     }
   }
-  std::ofstream(dir / "study.yaml") << kPlanar << "experiment: {type: csv, params: {file: data.csv}}\n";
+  std::ofstream(dir / "study.yaml")
+      << kPlanar << "experiment: {type: csv, params: {file: data.csv}}\n";
   const Child c = start(dir / "study.yaml", dir / "out", dir);
   const int code = wait(c);
   const std::string log = slurp(c.log);

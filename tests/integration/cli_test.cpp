@@ -54,12 +54,13 @@ bool noTemporaries(const fs::path& dir) {
 
 TEST(Cli, DefaultStudyRunsAndWritesItsResults) {
   fs::path out = tempDir("default");
-  CmdResult r = runExid("-q run " + std::string(EXID_SOURCE_DIR) + "/examples/default.yaml --out " + out.string());
+  CmdResult r = runExid("-q run " + std::string(EXID_SOURCE_DIR) + "/examples/default.yaml --out " +
+                        out.string());
   ASSERT_EQ(r.code, 0) << r.out;
   EXPECT_NE(r.out.find("| status | ok |"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("report.md"), std::string::npos) << r.out;
-  for (const char* f : {"summary.json", "report.md", "study.resolved.yaml", "experiment.csv", "parameters.csv",
-                        "validation.csv"})
+  for (const char* f : {"summary.json", "report.md", "study.resolved.yaml", "experiment.csv",
+                        "parameters.csv", "validation.csv"})
     EXPECT_TRUE(fs::exists(out / f)) << f;
   exid::Json s = exid::Json::parse(slurp(out / "summary.json"));
   EXPECT_EQ(s.find("status")->asString(), "ok");
@@ -78,9 +79,10 @@ TEST(Cli, DefaultStudyRunsAndWritesItsResults) {
 TEST(Cli, AFailingStudyExitsNonZeroAndSaysWhyInSummary) {
   fs::path dir = tempDir("failing");
   std::ofstream(dir / "bad.yaml") << "robot: {type: puma560}\nmodel: {type: differential}\n"
-                                      "experiment: {type: csv, params: {file: missing.csv}}\n"
-                                      "estimator: {type: batch_ls}\n";
-  CmdResult r = runExid("-q run " + (dir / "bad.yaml").string() + " --out " + (dir / "out").string());
+                                     "experiment: {type: csv, params: {file: missing.csv}}\n"
+                                     "estimator: {type: batch_ls}\n";
+  CmdResult r =
+      runExid("-q run " + (dir / "bad.yaml").string() + " --out " + (dir / "out").string());
   EXPECT_EQ(r.code, 1) << r.out;
   EXPECT_NE(r.out.find("missing.csv"), std::string::npos) << r.out;
   exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
@@ -96,8 +98,8 @@ TEST(Cli, AFailingStudyExitsNonZeroAndSaysWhyInSummary) {
 TEST(Cli, ConfigErrorsAreReportedBeforeAnyWork) {
   fs::path dir = tempDir("config");
   std::ofstream(dir / "typo.yaml") << "robot: {type: puma560}\nmodel: {type: differential}\n"
-                                       "experiment: {type: simulate}\n"
-                                       "estimator: {type: rls, params: {forgetting_factor: 1.2}}\n";
+                                      "experiment: {type: simulate}\n"
+                                      "estimator: {type: rls, params: {forgetting_factor: 1.2}}\n";
   CmdResult r = runExid("run " + (dir / "typo.yaml").string() + " --out " + (dir / "out").string());
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_NE(r.out.find("typo.yaml:4: estimator.params.forgetting_factor = 1.2: must be in (0, 1]"),
@@ -114,8 +116,8 @@ TEST(Cli, ConfigErrorsAreReportedBeforeAnyWork) {
 TEST(Cli, PluginsListsEveryKindWithParameters) {
   CmdResult r = runExid("plugins");
   ASSERT_EQ(r.code, 0) << r.out;
-  for (const char* k : {"robot (", "model (", "criterion (", "trajectory (", "optimizer (", "experiment (",
-                        "estimator ("})
+  for (const char* k : {"robot (", "model (", "criterion (", "trajectory (", "optimizer (",
+                        "experiment (", "estimator ("})
     EXPECT_NE(r.out.find(k), std::string::npos) << k;
   EXPECT_NE(r.out.find("forgetting_factor"), std::string::npos);
   EXPECT_EQ(r.out.find("refused"), std::string::npos) << r.out;
@@ -131,7 +133,9 @@ TEST(Cli, PluginsListsEveryKindWithParameters) {
 }
 
 TEST(Cli, RobotInfoPrintsBaseParametersAsJson) {
-  CmdResult r = runExid("-q robot info puma560 --json --model-params '{rotor_inertia: false, coulomb: false, viscous: false}'");
+  CmdResult r = runExid(
+      "-q robot info puma560 --json --model-params '{rotor_inertia: false, coulomb: false, "
+      "viscous: false}'");
   ASSERT_EQ(r.code, 0) << r.out;
   exid::Json j = exid::Json::parse(r.out.substr(r.out.find('{')));
   EXPECT_EQ(j.find("dof")->asInt(), 6);
@@ -141,14 +145,16 @@ TEST(Cli, RobotInfoPrintsBaseParametersAsJson) {
 
 TEST(Cli, SimulateThenIdentifyReadsTheCsvBack) {
   fs::path dir = tempDir("stages");
-  std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\nmodel: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}\n"
-                                     "experiment: {type: simulate, params: {duration_s: 5}}\n"
-                                     "estimator: {type: batch_ls}\n";
-  CmdResult r = runExid("-q simulate " + (dir / "s.yaml").string() + " --out " + (dir / "sim").string());
+  std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\nmodel: {type: differential, params: "
+                                   "{rotor_inertia: false, coulomb: false, viscous: false}}\n"
+                                   "experiment: {type: simulate, params: {duration_s: 5}}\n"
+                                   "estimator: {type: batch_ls}\n";
+  CmdResult r =
+      runExid("-q simulate " + (dir / "s.yaml").string() + " --out " + (dir / "sim").string());
   ASSERT_EQ(r.code, 0) << r.out;
   ASSERT_TRUE(fs::exists(dir / "sim" / "experiment.csv"));
-  r = runExid("-q identify " + (dir / "s.yaml").string() + " --data " + (dir / "sim" / "experiment.csv").string() +
-           " --out " + (dir / "id").string());
+  r = runExid("-q identify " + (dir / "s.yaml").string() + " --data " +
+              (dir / "sim" / "experiment.csv").string() + " --out " + (dir / "id").string());
   ASSERT_EQ(r.code, 0) << r.out;
   exid::Json s = exid::Json::parse(slurp(dir / "id" / "summary.json"));
   EXPECT_LT(s.find("identification")->find("residual_rms")->asDouble(), 1e-9);
@@ -157,15 +163,20 @@ TEST(Cli, SimulateThenIdentifyReadsTheCsvBack) {
 
 TEST(Cli, ReportHasPlotsOrSaysWhyNot) {
   fs::path dir = tempDir("report");
-  std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\n"
-                                     "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}\n"
-                                     "experiment: {type: simulate, params: {duration_s: 4, noise_tau_Nm: 0.01, drive_terms: false}}\n"
-                                     "estimator: {type: rls, params: {history_stride: 10}}\n"
-                                     "validation: {type: simulate, params: {duration_s: 2, drive_terms: false}}\n";
-  CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "with").string());
+  std::ofstream(dir / "s.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
+         "false}}\n"
+         "experiment: {type: simulate, params: {duration_s: 4, noise_tau_Nm: 0.01, drive_terms: "
+         "false}}\n"
+         "estimator: {type: rls, params: {history_stride: 10}}\n"
+         "validation: {type: simulate, params: {duration_s: 2, drive_terms: false}}\n";
+  CmdResult r =
+      runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "with").string());
   ASSERT_EQ(r.code, 0) << r.out;
-  for (const char* f : {"plots/estimate_1.svg", "plots/estimate_1.png", "plots/estimate_1.csv",
-                        "plots/validation_equation1.svg", "plots/residual_histogram.png", "estimate_history.csv"})
+  for (const char* f :
+       {"plots/estimate_1.svg", "plots/estimate_1.png", "plots/estimate_1.csv",
+        "plots/validation_equation1.svg", "plots/residual_histogram.png", "estimate_history.csv"})
     EXPECT_TRUE(fs::exists(dir / "with" / f)) << f;
   const std::string html = slurp(dir / "with" / "report.html");
   EXPECT_NE(html.find("<svg"), std::string::npos);  // self-contained: pictures inline
@@ -188,13 +199,17 @@ TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
     std::ofstream s(dir / "samples.csv");
     s << "q1,q2,qd1,qd2,qdd1,qdd2\n0.1,0.2,0.3,-0.4,1.0,2.0\n-0.5,1.1,0.0,0.7,-1.5,0.25\n";
   }
-  for (const char* what : {"torque", "regressor", "energy", "energy_regressor", "wrench_regressor"}) {
-    CmdResult r = runExid("-q eval planar2r --samples " + (dir / "samples.csv").string() + " --what " + what +
-                          " --out " + (dir / (std::string(what) + ".csv")).string());
+  for (const char* what :
+       {"torque", "regressor", "energy", "energy_regressor", "wrench_regressor"}) {
+    CmdResult r =
+        runExid("-q eval planar2r --samples " + (dir / "samples.csv").string() + " --what " + what +
+                " --out " + (dir / (std::string(what) + ".csv")).string());
     ASSERT_EQ(r.code, 0) << what << ": " << r.out;
   }
   // tau = Y pi: the regressor rows times the robot's parameters (from robot info) give the torques.
-  CmdResult info = runExid("-q robot info planar2r --json --model-params '{rotor_inertia: false, coulomb: false, viscous: false}'");
+  CmdResult info = runExid(
+      "-q robot info planar2r --json --model-params '{rotor_inertia: false, coulomb: false, "
+      "viscous: false}'");
   exid::Json j = exid::Json::parse(info.out.substr(info.out.find('{')));
   const exid::Json& values = *j.find("values");
   std::ifstream reg(dir / "regressor.csv"), tau(dir / "torque.csv"), en(dir / "energy.csv");
@@ -221,8 +236,8 @@ TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
   EXPECT_EQ(header, "kinetic,potential,total");
   // A missing column is an error naming the file and the column.
   std::ofstream(dir / "bad.csv") << "q1,q2\n0,0\n";
-  CmdResult r = runExid("-q eval planar2r --samples " + (dir / "bad.csv").string() + " --what torque --out " +
-                        (dir / "x.csv").string());
+  CmdResult r = runExid("-q eval planar2r --samples " + (dir / "bad.csv").string() +
+                        " --what torque --out " + (dir / "x.csv").string());
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.out.find("missing column 'qd1'"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(dir / "x.csv"));

@@ -1,6 +1,8 @@
 // Comparison matrices: cells are isolated (a failing or over-budget cell does not lose the
 // others), results are keyed by configuration hash (re-running skips finished cells), shards
 // merge to the single-process result, and a run killed part-way loses only cells in flight.
+#include "exid/matrix.hpp"
+
 #include <gtest/gtest.h>
 #include <signal.h>
 #include <sys/wait.h>
@@ -12,7 +14,6 @@
 #include <thread>
 
 #include "exid/error.hpp"
-#include "exid/matrix.hpp"
 #include "exid_test.hpp"
 
 namespace fs = std::filesystem;
@@ -20,7 +21,8 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path tempDir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("exid_matrix_" + name + "_" + std::to_string(::getpid()));
+  fs::path d =
+      fs::temp_directory_path() / ("exid_matrix_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -86,7 +88,8 @@ cells:
   EXPECT_EQ(s.failed, 1);
   EXPECT_EQ(s.timeout, 1);
   // The table shows the two good cells and marks the others.
-  exid::MatrixTable t = exid::matrixTable(opt.out_dir / "results.sqlite", {"seed"}, {}, "residual_rms");
+  exid::MatrixTable t =
+      exid::matrixTable(opt.out_dir / "results.sqlite", {"seed"}, {}, "residual_rms");
   EXPECT_NE(t.markdown.find("n/a"), std::string::npos) << t.markdown;
   // Re-running skips every finished cell (failed ones too, unless asked).
   s = exid::runMatrix(spec, exid_test::registry(), opt);
@@ -110,14 +113,19 @@ TEST(Matrix, ShardsMergeToTheSingleProcessResult) {
     exid::MatrixRunSummary s = exid::runMatrix(spec, exid_test::registry(), sh);
     EXPECT_EQ(s.total, 3);
   }
-  EXPECT_EQ(exid::mergeMatrixDatabases(d / "merged" / "results.sqlite",
-                                       {d / "shard0" / "results.sqlite", d / "shard1" / "results.sqlite"}),
+  EXPECT_EQ(exid::mergeMatrixDatabases(
+                d / "merged" / "results.sqlite",
+                {d / "shard0" / "results.sqlite", d / "shard1" / "results.sqlite"}),
             6);
-  auto a = exid::matrixTable(d / "single" / "results.sqlite", {"estimator", "seed"}, {}, "param_rel_err");
-  auto b = exid::matrixTable(d / "merged" / "results.sqlite", {"estimator", "seed"}, {}, "param_rel_err");
+  auto a = exid::matrixTable(d / "single" / "results.sqlite", {"estimator", "seed"}, {},
+                             "param_rel_err");
+  auto b = exid::matrixTable(d / "merged" / "results.sqlite", {"estimator", "seed"}, {},
+                             "param_rel_err");
   EXPECT_EQ(a.csv, b.csv);
   // Merging again copies nothing new.
-  EXPECT_EQ(exid::mergeMatrixDatabases(d / "merged" / "results.sqlite", {d / "shard0" / "results.sqlite"}), 0);
+  EXPECT_EQ(exid::mergeMatrixDatabases(d / "merged" / "results.sqlite",
+                                       {d / "shard0" / "results.sqlite"}),
+            0);
   fs::remove_all(d);
 }
 
@@ -136,7 +144,8 @@ axes:
   if (pid == 0) {
     std::string out = (d / "out").string();
     std::string file = (d / "m.yaml").string();
-    ::execl(EXID_EXE, EXID_EXE, "-q", "matrix", file.c_str(), "--out", out.c_str(), "-j", "1", (char*)nullptr);
+    ::execl(EXID_EXE, EXID_EXE, "-q", "matrix", file.c_str(), "--out", out.c_str(), "-j", "1",
+            (char*)nullptr);
     ::_exit(127);
   }
   // Wait until at least one cell is finished, then stop the matrix.

@@ -12,15 +12,22 @@ namespace fs = std::filesystem;
 
 TEST(StackedModels, DifferentialPlusLoadWrenchRecoverRobotAndPayloadTogether) {
   const std::string payload =
-      "payload_mass_kg: 1.5, payload_com_m: [0.02, -0.01, 0.06], payload_inertia_kg_m2: [0.003, 0, 0, 0.004, 0, 0.002]";
+      "payload_mass_kg: 1.5, payload_com_m: [0.02, -0.01, 0.06], payload_inertia_kg_m2: [0.003, 0, "
+      "0, 0.004, 0, 0.002]";
   const std::string study =
       "robot: {type: puma560}\n"
       "model:\n"
-      "  - {type: differential, weight: 1.0, params: {rotor_inertia: false, coulomb: false, viscous: false}}\n"
-      "  - {type: load_wrench, weight: 2.0, params: {" + payload + "}}\n"
-      "experiment: {type: simulate, params: {duration_s: 6, drive_terms: false, wrench: true, " + payload + "}}\n"
+      "  - {type: differential, weight: 1.0, params: {rotor_inertia: false, coulomb: false, "
+      "viscous: false}}\n"
+      "  - {type: load_wrench, weight: 2.0, params: {" +
+      payload +
+      "}}\n"
+      "experiment: {type: simulate, params: {duration_s: 6, drive_terms: false, wrench: true, " +
+      payload +
+      "}}\n"
       "estimator: {type: batch_ls}\n";
-  exid::StudyConfig cfg = exid::parseStudy(study, "stacked.yaml", exid_test::sourceDir(), exid_test::registry());
+  exid::StudyConfig cfg =
+      exid::parseStudy(study, "stacked.yaml", exid_test::sourceDir(), exid_test::registry());
   ASSERT_EQ(cfg.models.size(), 2u);
   exid::RunOptions opt;
   exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), opt);
@@ -39,7 +46,9 @@ TEST(StackedModels, DifferentialPlusLoadWrenchRecoverRobotAndPayloadTogether) {
   for (std::size_t i = 0; i < params.size(); ++i) {
     const std::string name = params.at(i).find("name")->asString();
     if (name.rfind("L_", 0) != 0) continue;
-    EXPECT_NEAR(params.at(i).find("value")->asDouble(), params.at(i).find("nominal")->asDouble(), 1e-8) << name;
+    EXPECT_NEAR(params.at(i).find("value")->asDouble(), params.at(i).find("nominal")->asDouble(),
+                1e-8)
+        << name;
     ++checked;
   }
   EXPECT_EQ(checked, 10);

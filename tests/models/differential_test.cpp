@@ -22,9 +22,7 @@ void checkRobot(const std::string& name, const std::string& params, int expect_b
   EXPECT_LT(rec.est_rel, 1e-6);
 }
 
-TEST(Differential, PumaAllDriveTermsRecovered) {
-  checkRobot("puma560", "{offset: true}");
-}
+TEST(Differential, PumaAllDriveTermsRecovered) { checkRobot("puma560", "{offset: true}"); }
 
 TEST(Differential, PumaFrictionSubtracted40BaseParameters) {
   // The paper's approach: friction precomputed from the drive data and subtracted; the rotor
@@ -72,7 +70,8 @@ TEST(Differential, ErrorsNameTheProblem) {
     m->bind(r, mtest::context());
     FAIL() << "expected an error";
   } catch (const exid::Error& e) {
-    EXPECT_NE(std::string(e.what()).find("joints: 7 is out of range"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("joints: 7 is out of range"), std::string::npos)
+        << e.what();
   }
   auto ok = mtest::model("differential", "{}", r);
   exid::Dataset d = mtest::simulate(r, "{duration_s: 0.5, output_qd_qdd: false}");

@@ -45,8 +45,9 @@ TEST(Integral, PandaAndIrp6Exact) {
     if (!r) continue;
     // 20 s without repetition (period 20 s, 10 harmonics), 1 kHz: the Panda's energy rows are
     // less well conditioned (cond(W) ~ 1e7), so the quadrature error must be smaller.
-    const exid::Dataset d = mtest::simulate(
-        r, "{rtol: 1e-12, atol: 1e-14, duration_s: 20, period_s: 20, harmonics: 10, sample_period_s: 0.001}");
+    const exid::Dataset d = mtest::simulate(r,
+                                            "{rtol: 1e-12, atol: 1e-14, duration_s: 20, period_s: "
+                                            "20, harmonics: 10, sample_period_s: 0.001}");
     auto m = mtest::model("integral", "{window: short, window_s: 0.05, offset: true}", r);
     const mtest::Recovery rec = mtest::recover(*m, d);
     mtest::print((std::string(name) + " integral short 0.05 s").c_str(), rec);
@@ -114,7 +115,8 @@ TEST(Integral, SimpsonIsExactForQuadraticsOnUnevenGrids) {
   // Work of a constant torque along q = t^3 / 3: power 2 t^2, integrated exactly by the
   // uneven-grid Simpson rule including the odd last interval.
   auto r = mtest::robot("puma560");
-  auto m = mtest::model("integral", "{window: long, window_s: 1.0, friction: false, rotor_inertia: false}", r);
+  auto m = mtest::model("integral",
+                        "{window: long, window_s: 1.0, friction: false, rotor_inertia: false}", r);
   exid::Dataset d;
   const int K = 8;  // 7 intervals: odd, uneven
   d.t.resize(K);
@@ -124,7 +126,7 @@ TEST(Integral, SimpsonIsExactForQuadraticsOnUnevenGrids) {
   d.tau = Eigen::MatrixXd::Zero(K, 6);
   for (int k = 0; k < K; ++k) {
     const double t = d.t[k];
-    d.qd(k, 0) = t * t;            // quadratic velocity
+    d.qd(k, 0) = t * t;  // quadratic velocity
     d.q(k, 0) = t * t * t / 3.0;
     d.tau(k, 0) = 2.0;  // power 2 t^2: quadratic
   }

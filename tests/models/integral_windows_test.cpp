@@ -23,7 +23,8 @@ Fit fit(const exid::ObservationModel& m, const exid::Dataset& d) {
   Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(r.W);
   const Eigen::VectorXd th = qr.solve(r.y);
   const double s2 = (r.W * th - r.y).squaredNorm() / std::max(1, f.rows - p);
-  const Eigen::MatrixXd cov = s2 * (r.W.transpose() * r.W).ldlt().solve(Eigen::MatrixXd::Identity(p, p));
+  const Eigen::MatrixXd cov =
+      s2 * (r.W.transpose() * r.W).ldlt().solve(Eigen::MatrixXd::Identity(p, p));
   const Eigen::VectorXd tr = m.baseNominal();
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(r.W);
   f.condW = svd.singularValues()[0] / svd.singularValues()[p - 1];
@@ -41,34 +42,43 @@ Fit fit(const exid::ObservationModel& m, const exid::Dataset& d) {
 
 TEST(IntegralWindows, NoisyTorqueWindowComparison) {
   auto r = mtest::robot("puma560");
-  const exid::Dataset d =
-      mtest::simulate(r, "{duration_s: 60, period_s: 60, harmonics: 30, noise_tau_Nm: 0.5, rtol: 1e-10, atol: 1e-12}", 21);
-  std::printf("\nPUMA 560, 60 s Fourier excitation (30 harmonics of 1/60 Hz), 100 Hz, torque noise std 0.5 N m,\n"
-              "Simpson, friction and offsets identified (58 base parameters)\n");
-  std::printf("| model / window                  | rows | cond(W)  | ||err||/||true|| | median rel. std %% | max |err|/std |\n");
-  std::printf("|---------------------------------|------|----------|------------------|-------------------|---------------|\n");
+  const exid::Dataset d = mtest::simulate(
+      r,
+      "{duration_s: 60, period_s: 60, harmonics: 30, noise_tau_Nm: 0.5, rtol: 1e-10, atol: 1e-12}",
+      21);
+  std::printf(
+      "\nPUMA 560, 60 s Fourier excitation (30 harmonics of 1/60 Hz), 100 Hz, torque noise std 0.5 "
+      "N m,\n"
+      "Simpson, friction and offsets identified (58 base parameters)\n");
+  std::printf(
+      "| model / window                  | rows | cond(W)  | ||err||/||true|| | median rel. std %% "
+      "| max |err|/std |\n");
+  std::printf(
+      "|---------------------------------|------|----------|------------------|-------------------|"
+      "---------------|\n");
   auto row = [&](const std::string& label, const Fit& f) {
-    std::printf("| %-31s | %4d | %8.3g | %16.3e | %17.3g | %13.2f |\n", label.c_str(), f.rows, f.condW,
-                f.err_rel, f.median_rel_std, f.max_z);
+    std::printf("| %-31s | %4d | %8.3g | %16.3e | %17.3g | %13.2f |\n", label.c_str(), f.rows,
+                f.condW, f.err_rel, f.median_rel_std, f.max_z);
   };
   for (double w : {0.05, 0.1, 0.2, 0.5}) {
-    auto m = mtest::model("integral", "{window: short, overlap: disjoint, offset: true, window_s: " +
-                                          std::to_string(w) + "}",
-                          r);
+    auto m = mtest::model(
+        "integral",
+        "{window: short, overlap: disjoint, offset: true, window_s: " + std::to_string(w) + "}", r);
     const Fit f = fit(*m, d);
     row("integral short " + std::to_string(w).substr(0, 4) + " s", f);
     EXPECT_LT(f.max_z, 4.0) << "short window " << w;
   }
   for (double w : {0.1, 0.5}) {
-    auto m = mtest::model("integral", "{window: long, overlap: disjoint, offset: true, window_s: " +
-                                          std::to_string(w) + "}",
-                          r);
+    auto m = mtest::model(
+        "integral",
+        "{window: long, overlap: disjoint, offset: true, window_s: " + std::to_string(w) + "}", r);
     // Long windows share their start: rows are strongly correlated, the OLS standard deviations
     // are not valid; printed for comparison only.
     row("integral long " + std::to_string(w).substr(0, 4) + " s (corr.)", fit(*m, d));
   }
   {
-    auto m = mtest::model("integral", "{window: short, overlap: sliding, offset: true, window_s: 0.5}", r);
+    auto m = mtest::model("integral",
+                          "{window: short, overlap: sliding, offset: true, window_s: 0.5}", r);
     row("integral sliding 0.50 s (corr.)", fit(*m, d));
   }
   {

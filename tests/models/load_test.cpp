@@ -10,8 +10,9 @@ const std::string kPayload =
     "payload_inertia_kg_m2: [0.012, 0.0007, -0.0004, 0.015, 0.0009, 0.009]";
 
 const exid::Dataset& pumaWithPayload() {
-  static exid::Dataset d = mtest::simulate(
-      mtest::robot("puma560"), "{rtol: 1e-10, atol: 1e-12, duration_s: 10, wrench: true, " + kPayload + "}");
+  static exid::Dataset d =
+      mtest::simulate(mtest::robot("puma560"),
+                      "{rtol: 1e-10, atol: 1e-12, duration_s: 10, wrench: true, " + kPayload + "}");
   return d;
 }
 
@@ -65,7 +66,10 @@ TEST(LoadModels, VjpMatchesFiniteDifferences) {
     if (!r) continue;
     const exid::Samples s = mtest::randomSamples(*r, 3, 0.01, 17);
     for (const char* model : {"load_wrench", "load_torque"}) {
-      auto m = mtest::model(model, "{" + kPayload + (std::string(model) == "load_wrench" ? ", sensor_offset: true}" : "}"), r);
+      auto m = mtest::model(
+          model,
+          "{" + kPayload + (std::string(model) == "load_wrench" ? ", sensor_offset: true}" : "}"),
+          r);
       const double err = mtest::vjpError(*m, s, true);
       std::printf("[%s %s] VJP vs FD relative error %.2e\n", name, model, err);
       EXPECT_LT(err, 1e-6) << name << " " << model;

@@ -25,7 +25,8 @@ inline std::shared_ptr<const exid::RobotModel> robot(const std::string& name) {
   } catch (const std::exception& e) {
     std::printf("[note] robot plugin '%s' unavailable (%s)\n", name.c_str(), e.what());
   }
-  if (name == "puma560") return std::make_shared<const exid::RobotModel>(exid::testing::puma560Standard());
+  if (name == "puma560")
+    return std::make_shared<const exid::RobotModel>(exid::testing::puma560Standard());
   if (name == "panda") return std::make_shared<const exid::RobotModel>(exid::testing::panda());
   return nullptr;
 }
@@ -36,14 +37,16 @@ inline exid::RunContext context(std::uint64_t seed = 7) {
   return ctx;
 }
 
-inline exid::Dataset simulate(const std::shared_ptr<const exid::RobotModel>& r, const std::string& yaml,
-                              std::uint64_t seed = 7, const exid::Samples* reference = nullptr) {
+inline exid::Dataset simulate(const std::shared_ptr<const exid::RobotModel>& r,
+                              const std::string& yaml, std::uint64_t seed = 7,
+                              const exid::Samples* reference = nullptr) {
   auto e = exid_test::create<exid::Experiment>("simulate", yaml);
   return e->run(r, reference, context(seed));
 }
 
-inline std::shared_ptr<exid::ObservationModel> model(const std::string& name, const std::string& yaml,
-                                                     const std::shared_ptr<const exid::RobotModel>& r) {
+inline std::shared_ptr<exid::ObservationModel> model(
+    const std::string& name, const std::string& yaml,
+    const std::shared_ptr<const exid::RobotModel>& r) {
   auto m = exid_test::create<exid::ObservationModel>(name, yaml);
   m->bind(r, context(11));
   return m;
@@ -72,7 +75,8 @@ inline Recovery recover(const exid::ObservationModel& m, const exid::Dataset& d)
   out.est_rel = (th - tr).norm() / tr.norm();
   const double floor = 1e-6 * tr.cwiseAbs().maxCoeff();
   for (Eigen::Index i = 0; i < th.size(); ++i)
-    out.worst_rel = std::max(out.worst_rel, std::abs(th[i] - tr[i]) / std::max(std::abs(tr[i]), floor));
+    out.worst_rel =
+        std::max(out.worst_rel, std::abs(th[i] - tr[i]) / std::max(std::abs(tr[i]), floor));
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(rows.W);
   const auto& s = svd.singularValues();
   out.condW = s[0] / s[s.size() - 1];
@@ -82,9 +86,10 @@ inline Recovery recover(const exid::ObservationModel& m, const exid::Dataset& d)
 }
 
 inline void print(const char* what, const Recovery& r) {
-  std::printf("[%s] rows %d, base %d, cond(W) %.3g, row residual %.2e, estimate error %.2e (norm), "
-              "%.2e (worst parameter)\n",
-              what, r.rows, r.base, r.condW, r.rows_rel, r.est_rel, r.worst_rel);
+  std::printf(
+      "[%s] rows %d, base %d, cond(W) %.3g, row residual %.2e, estimate error %.2e (norm), "
+      "%.2e (worst parameter)\n",
+      what, r.rows, r.base, r.condW, r.rows_rel, r.est_rel, r.worst_rel);
 }
 
 /// fullDesignVjp against central finite differences of <G, fullDesign(s)> for random G.
@@ -117,7 +122,8 @@ inline double vjpError(const exid::ObservationModel& m, const exid::Samples& s, 
 }
 
 /// A few random samples within the robot's limits (velocities away from zero).
-inline exid::Samples randomSamples(const exid::RobotModel& r, int K, double dt, std::uint64_t seed) {
+inline exid::Samples randomSamples(const exid::RobotModel& r, int K, double dt,
+                                   std::uint64_t seed) {
   std::mt19937_64 rng(seed);
   std::uniform_real_distribution<double> u(-1.0, 1.0);
   const int n = r.dof();

@@ -53,12 +53,16 @@ void record(const Row& r) {
   const fs::path f = outRoot() / "paper_results.csv";
   const bool fresh = !fs::exists(f);
   std::ofstream o(f, std::ios::app);
-  if (fresh) o << "study,n_base,cond_W_initial,cond_W_final,ratio_cond_W,ratio_cond_WtW,iterations,evaluations,wall_s,stop_reason\n";
-  o << r.study << "," << r.nbase << "," << r.c0 << "," << r.c1 << "," << r.ratio << "," << r.ratio * r.ratio << ","
-    << r.iterations << "," << r.evaluations << "," << r.wall << ",\"" << r.stop << "\"\n";
-  std::cout << "  " << r.study << ": base " << r.nbase << ", cond(W) " << r.c0 << " -> " << r.c1 << " (ratio "
-            << r.ratio << ", cond(W^T W) ratio " << r.ratio * r.ratio << "), " << r.iterations << " iterations, "
-            << r.evaluations << " evaluations, optimiser " << r.wall << " s, " << r.stop << "\n";
+  if (fresh)
+    o << "study,n_base,cond_W_initial,cond_W_final,ratio_cond_W,ratio_cond_WtW,iterations,"
+         "evaluations,wall_s,stop_reason\n";
+  o << r.study << "," << r.nbase << "," << r.c0 << "," << r.c1 << "," << r.ratio << ","
+    << r.ratio * r.ratio << "," << r.iterations << "," << r.evaluations << "," << r.wall << ",\""
+    << r.stop << "\"\n";
+  std::cout << "  " << r.study << ": base " << r.nbase << ", cond(W) " << r.c0 << " -> " << r.c1
+            << " (ratio " << r.ratio << ", cond(W^T W) ratio " << r.ratio * r.ratio << "), "
+            << r.iterations << " iterations, " << r.evaluations << " evaluations, optimiser "
+            << r.wall << " s, " << r.stop << "\n";
 }
 
 Row excitation(const std::string& file) {
@@ -108,7 +112,8 @@ TEST(Paper, Exp4LoadWrench) {
 
 TEST(Paper, Exp5RlsOptimalAgainstNonOptimal) {
   std::map<std::string, exid::Json> S;
-  for (const char* k : {"optimal", "nonoptimal"}) S[k] = run(std::string("exp5_rls_") + k + ".yaml");
+  for (const char* k : {"optimal", "nonoptimal"})
+    S[k] = run(std::string("exp5_rls_") + k + ".yaml");
   const exid::Json* po = S["optimal"].find("identification");
   const exid::Json* pn = S["nonoptimal"].find("identification");
   ASSERT_TRUE(po && pn);
@@ -118,24 +123,27 @@ TEST(Paper, Exp5RlsOptimalAgainstNonOptimal) {
   ASSERT_EQ(Po.size(), 3u) << "joint 1 alone, integral model: X1, Fc1, Fv1";
   fs::create_directories(outRoot());
   std::ofstream o(outRoot() / "exp5_comparison.csv");
-  o << "parameter,expression,true,optimal_value,optimal_std,nonoptimal_value,nonoptimal_std,std_ratio\n";
+  o << "parameter,expression,true,optimal_value,optimal_std,nonoptimal_value,nonoptimal_std,std_"
+       "ratio\n";
   for (std::size_t i = 0; i < Po.size(); ++i) {
     const exid::Json& a = Po.at(i);
     const exid::Json& b = Pn.at(i);
     const double truth = a.find("true")->asDouble();
     const double va = a.find("value")->asDouble(), sa = a.find("std")->asDouble();
     const double vb = b.find("value")->asDouble(), sb = b.find("std")->asDouble();
-    o << a.find("name")->asString() << ",\"" << a.find("expression")->asString() << "\"," << truth << "," << va
-      << "," << sa << "," << vb << "," << sb << "," << sb / sa << "\n";
-    std::cout << "  " << a.find("name")->asString() << " = " << a.find("expression")->asString() << ": true " << truth
-              << "; optimal " << va << " +- " << sa << "; non-optimal " << vb << " +- " << sb << " (std ratio "
-              << sb / sa << ")\n";
+    o << a.find("name")->asString() << ",\"" << a.find("expression")->asString() << "\"," << truth
+      << "," << va << "," << sa << "," << vb << "," << sb << "," << sb / sa << "\n";
+    std::cout << "  " << a.find("name")->asString() << " = " << a.find("expression")->asString()
+              << ": true " << truth << "; optimal " << va << " +- " << sa << "; non-optimal " << vb
+              << " +- " << sb << " (std ratio " << sb / sa << ")\n";
     EXPECT_LE(std::abs(va - truth), 3.0 * sa) << a.find("name")->asString() << " (optimal)";
     EXPECT_LE(std::abs(vb - truth), 3.0 * sb) << b.find("name")->asString() << " (non-optimal)";
-    EXPECT_LT(sa, sb) << a.find("name")->asString() << ": the optimal trajectory gives the smaller std";
+    EXPECT_LT(sa, sb) << a.find("name")->asString()
+                      << ": the optimal trajectory gives the smaller std";
   }
-  std::cout << "  cond(W) of the design: optimal " << num(S["optimal"], "excitation", "cond_W_final")
-            << ", non-optimal " << num(S["nonoptimal"], "excitation", "cond_W_final") << "\n";
+  std::cout << "  cond(W) of the design: optimal "
+            << num(S["optimal"], "excitation", "cond_W_final") << ", non-optimal "
+            << num(S["nonoptimal"], "excitation", "cond_W_final") << "\n";
   for (const char* k : {"optimal", "nonoptimal"})
     EXPECT_TRUE(fs::exists(outRoot() / (std::string("exp5_rls_") + k) / "estimate_history.csv"));
 }

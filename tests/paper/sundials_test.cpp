@@ -21,7 +21,8 @@ struct Problem {
 };
 
 Problem make(const std::string& robot, const std::string& model, const std::string& model_params,
-           const std::string& traj, const std::string& traj_params, const std::string& crit = "cond") {
+             const std::string& traj, const std::string& traj_params,
+             const std::string& crit = "cond") {
   Problem s;
   auto r = exid_test::robot(robot);
   exid::RunContext ctx;
@@ -32,7 +33,8 @@ Problem make(const std::string& robot, const std::string& model, const std::stri
   const exid::Json d = s.traj->describe();
   if (const exid::Json* js = d.find("joints"); js && static_cast<int>(js->size()) < r->dof()) {
     std::vector<int> moving;
-    for (std::size_t i = 0; i < js->size(); ++i) moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+    for (std::size_t i = 0; i < js->size(); ++i)
+      moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
     s.model->restrictMotion(moving, s.traj->evaluate(s.traj->initial()).q.row(0).transpose());
   }
   s.model->bind(r, ctx);
@@ -55,16 +57,18 @@ exid::OptimizerResult check(Problem& s, double tol) {
   if (!gc) return r;
   const double rel = gc->find("max_rel_error")->asDouble();
   std::cout << "  adjoint vs FD: max rel error " << rel << " (max |grad| "
-            << gc->find("max_abs_gradient")->asDouble() << "), cost J+grad / J = "
-            << gc->find("cost_ratio")->asDouble() << ", J continuous " << r.criterion_initial
-            << ", discrete " << r.details.find("discrete_criterion_initial")->asDouble() << "\n";
+            << gc->find("max_abs_gradient")->asDouble()
+            << "), cost J+grad / J = " << gc->find("cost_ratio")->asDouble() << ", J continuous "
+            << r.criterion_initial << ", discrete "
+            << r.details.find("discrete_criterion_initial")->asDouble() << "\n";
   EXPECT_LT(rel, tol);
   return r;
 }
 
 TEST(Sundials, AdjointGradientMatchesFiniteDifferencesFourierDifferential) {
-  Problem s = make("puma560", "differential", "{joints: [1, 2, 3], friction: subtract}", "fourier",
-                 "{period_s: 4, harmonics: 3, joints: [1, 2, 3], sample_period_s: 0.01, init_scale: 0.4}");
+  Problem s = make(
+      "puma560", "differential", "{joints: [1, 2, 3], friction: subtract}", "fourier",
+      "{period_s: 4, harmonics: 3, joints: [1, 2, 3], sample_period_s: 0.01, init_scale: 0.4}");
   auto r = check(s, 1e-4);
   // continuous (1/dt) int Phi Phi^T dt against the discrete sum on a 10 ms grid
   const double disc = r.details.find("discrete_criterion_initial")->asDouble();
@@ -74,9 +78,10 @@ TEST(Sundials, AdjointGradientMatchesFiniteDifferencesFourierDifferential) {
 TEST(Sundials, AdjointGradientMatchesFiniteDifferencesSplineLogDet) {
   // A well-conditioned case: with cond(W) ~ 1e5 the quadrature error (rtol) is amplified by
   // cond(M) = cond(W)^2 and finite differences become meaningless.
-  Problem s = make("puma560", "differential", "{joints: [1, 2, 3], friction: subtract}", "spline",
-                   "{duration_s: 3, knots: 6, joints: [1, 2, 3], sample_period_s: 0.01, init_scale: 0.6}",
-                   "log_det");
+  Problem s =
+      make("puma560", "differential", "{joints: [1, 2, 3], friction: subtract}", "spline",
+           "{duration_s: 3, knots: 6, joints: [1, 2, 3], sample_period_s: 0.01, init_scale: 0.6}",
+           "log_det");
   // OPEN ISSUE: for splines the adjoint agrees with central differences to ~5e-3 only (fourier:
   // ~2e-7). Suspected: the kinks of the cubic spline's qdd at the knots, which the forward and
   // backward integrations step over without stopping. Until that is fixed, 1e-2 here.
@@ -84,21 +89,24 @@ TEST(Sundials, AdjointGradientMatchesFiniteDifferencesSplineLogDet) {
 }
 
 TEST(Sundials, AdjointGradientMatchesFiniteDifferencesLoadWrench) {
-  Problem s = make("irp6", "load_wrench",
-                 "{payload_mass_kg: 2.0, payload_com_m: [0.01, -0.02, 0.08], "
-                 "payload_inertia_kg_m2: [0.004, 0.0, 0.0, 0.005, 0.0, 0.003]}",
-                 "fourier", "{period_s: 4, harmonics: 2, sample_period_s: 0.02, init_scale: 0.3}");
+  Problem s =
+      make("irp6", "load_wrench",
+           "{payload_mass_kg: 2.0, payload_com_m: [0.01, -0.02, 0.08], "
+           "payload_inertia_kg_m2: [0.004, 0.0, 0.0, 0.005, 0.0, 0.003]}",
+           "fourier", "{period_s: 4, harmonics: 2, sample_period_s: 0.02, init_scale: 0.3}");
   check(s, 1e-4);
 }
 
 TEST(Sundials, OptimisationLowersTheCriterionWithinLimits) {
   Problem s = make("puma560", "differential", "{joints: [1, 2, 3]}", "fourier",
-                 "{period_s: 2, harmonics: 2, joints: [1, 2, 3], sample_period_s: 0.02, init_scale: 0.3, velocity_limit_rad_s: 2.0}");
+                   "{period_s: 2, harmonics: 2, joints: [1, 2, 3], sample_period_s: 0.02, "
+                   "init_scale: 0.3, velocity_limit_rad_s: 2.0}");
   auto opt = exid_test::create<exid::Optimizer>("sundials", "{max_iterations: 15, max_time_s: 10}");
   exid::RunContext ctx;
   const auto r = opt->minimize(*s.problem, ctx);
-  std::cout << "  sundials: " << r.criterion_initial << " -> " << r.criterion_final << " in " << r.iterations
-            << " iterations, " << r.evaluations << " evaluations, " << r.wall_s << " s, " << r.stop_reason << "\n";
+  std::cout << "  sundials: " << r.criterion_initial << " -> " << r.criterion_final << " in "
+            << r.iterations << " iterations, " << r.evaluations << " evaluations, " << r.wall_s
+            << " s, " << r.stop_reason << "\n";
   EXPECT_LT(r.criterion_final, 0.8 * r.criterion_initial);
   EXPECT_LE(r.max_violation, 1e-9);
   EXPECT_FALSE(r.history_value.empty());
@@ -106,11 +114,13 @@ TEST(Sundials, OptimisationLowersTheCriterionWithinLimits) {
 }
 
 TEST(Sundials, RefusesPointwiseAndWindowModels) {
-  Problem s = make("planar2r", "differential", "{}", "pointwise", "{duration_s: 1, sample_period_s: 0.05}");
+  Problem s =
+      make("planar2r", "differential", "{}", "pointwise", "{duration_s: 1, sample_period_s: 0.05}");
   auto opt = exid_test::create<exid::Optimizer>("sundials", "{max_iterations: 1}");
   exid::RunContext ctx;
   EXPECT_THROW(opt->minimize(*s.problem, ctx), exid::Error);
-  Problem w = make("planar2r", "integral", "{window_s: 0.2}", "fourier", "{period_s: 2, harmonics: 2, sample_period_s: 0.02}");
+  Problem w = make("planar2r", "integral", "{window_s: 0.2}", "fourier",
+                   "{period_s: 2, harmonics: 2, sample_period_s: 0.02}");
   EXPECT_THROW(opt->minimize(*w.problem, ctx), exid::Error);
 }
 

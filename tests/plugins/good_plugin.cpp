@@ -30,8 +30,12 @@ class ThrowingRobot final : public exid::Robot {
   static constexpr const char* kVersion = "0.1";
   static constexpr const char* kDoc = "test: a factory that throws";
   static std::vector<exid::ParamDecl> params() { return {}; }
-  explicit ThrowingRobot(const exid::ParamSet&) { throw exid::Error("deliberate failure in the factory"); }
-  std::shared_ptr<const exid::RobotModel> build(const exid::RunContext&) override { return nullptr; }
+  explicit ThrowingRobot(const exid::ParamSet&) {
+    throw exid::Error("deliberate failure in the factory");
+  }
+  std::shared_ptr<const exid::RobotModel> build(const exid::RunContext&) override {
+    return nullptr;
+  }
 };
 
 // Fixtures for configuration tests: their declarations matter, running them is refused.
@@ -41,7 +45,8 @@ class ConfigEstimator final : public exid::Estimator {
   static constexpr const char* kVersion = "0.1";
   static constexpr const char* kDoc = "test: parameters of every type";
   static std::vector<exid::ParamDecl> params() {
-    return {exid::param_double("forgetting_factor", 1.0, "", "forgetting factor", 0.0, 1.0, true, false),
+    return {exid::param_double("forgetting_factor", 1.0, "", "forgetting factor", 0.0, 1.0, true,
+                               false),
             exid::param_int("iterations", 10, "iterations", 1, 1000),
             exid::param_bool("verbose", false, "talk"),
             exid::param_string("method", std::string("qr"), "solver", {"qr", "svd"}),
@@ -84,7 +89,8 @@ class ConfigModel final : public exid::ObservationModel {
   Eigen::MatrixXd fullDesign(const exid::Samples& s) const override {
     return Eigen::MatrixXd::Ones(s.size(), 1);
   }
-  void fullDesignVjp(const exid::Samples& s, const Eigen::MatrixXd&, exid::Samples* g) const override {
+  void fullDesignVjp(const exid::Samples& s, const Eigen::MatrixXd&,
+                     exid::Samples* g) const override {
     *g = s;
     g->q.setZero();
     g->qd.setZero();

@@ -37,7 +37,8 @@ TEST(CiExcitation, EveryCriterionAndOptimiserImprovesAndNothingRegresses) {
   const fs::path src = exid_test::sourceDir();
   const fs::path out = fs::path(EXID_BINARY_DIR) / "ci_excitation";
   fs::remove_all(out);
-  exid::MatrixSpec spec = exid::loadMatrix(src / "examples/matrix/ci_excitation.yaml", exid_test::registry());
+  exid::MatrixSpec spec =
+      exid::loadMatrix(src / "examples/matrix/ci_excitation.yaml", exid_test::registry());
   exid::MatrixOptions opt;
   opt.out_dir = out;
   opt.jobs = 2;
@@ -49,7 +50,9 @@ TEST(CiExcitation, EveryCriterionAndOptimiserImprovesAndNothingRegresses) {
   auto j0 = column(exid::matrixTable(db, keys, {}, "excitation.criterion_initial").csv);
   auto j1 = column(exid::matrixTable(db, keys, {}, "excitation.criterion_final").csv);
   auto final_ = column(exid::matrixTable(db, keys, {}, "excitation.cond_W_final").csv);
-  std::cout << exid::matrixTable(db, {"robot", "excitation.criterion"}, {"optimizer"}, "excitation.cond_W_final").markdown;
+  std::cout << exid::matrixTable(db, {"robot", "excitation.criterion"}, {"optimizer"},
+                                 "excitation.cond_W_final")
+                   .markdown;
   ASSERT_EQ(final_.size(), spec.cells.size());
   // Each optimiser improves its own criterion (log_det need not lower cond(W)).
   for (const auto& [k, v] : j1) EXPECT_LT(v, j0[k]) << k << ": no improvement of the criterion";

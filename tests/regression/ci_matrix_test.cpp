@@ -6,15 +6,14 @@
 // Regenerate the baseline (after an intended change) with EXID_UPDATE_BASELINE=1.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
-#include <algorithm>
 #include <fstream>
 #include <iostream>
 #include <map>
 #include <sstream>
-
 
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
@@ -36,8 +35,11 @@ TEST(CiMatrix, AllCellsFinishAndNoTrackedMetricRegresses) {
 
   // Current values per cell label.
   std::map<std::string, double> current;
-  exid::MatrixTable t = exid::matrixTable(out / "results.sqlite", {"robot", "model", "estimator", "seed"}, {}, "param_rel_err");
-  std::cout << exid::matrixTable(out / "results.sqlite", {"robot", "model"}, {"estimator"}, "param_rel_err").markdown;
+  exid::MatrixTable t = exid::matrixTable(
+      out / "results.sqlite", {"robot", "model", "estimator", "seed"}, {}, "param_rel_err");
+  std::cout << exid::matrixTable(out / "results.sqlite", {"robot", "model"}, {"estimator"},
+                                 "param_rel_err")
+                   .markdown;
   // The table's CSV has the row label (quoted) and one value column.
   std::istringstream in(t.csv);
   std::string line;
@@ -73,7 +75,8 @@ TEST(CiMatrix, AllCellsFinishAndNoTrackedMetricRegresses) {
     const double base = std::stod(line.substr(comma + 1));
     auto it = current.find(label);
     ASSERT_NE(it, current.end()) << "cell missing: " << label;
-    EXPECT_LE(it->second, 1.25 * base + 1e-6) << label << ": param_rel_err " << it->second << " vs baseline " << base;
+    EXPECT_LE(it->second, 1.25 * base + 1e-6)
+        << label << ": param_rel_err " << it->second << " vs baseline " << base;
     ++compared;
   }
   EXPECT_EQ(compared, static_cast<int>(spec.cells.size()));

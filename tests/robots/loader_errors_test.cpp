@@ -172,12 +172,13 @@ TEST(DhYamlErrors, StrictRefusesImpossibleInertia) {
 }
 
 TEST(DhYaml, KeysAndUnits) {
-  const std::string text = std::string(kGoodHead) +
-                           "  - name: a\n    alpha_deg: 90\n    theta_deg: 30\n    mass: 2\n"
-                           "    com: [0.1, 0, 0]\n    inertia_origin: {xx: 1, yy: 2, zz: 3, xy: 0.5}\n"
-                           "    limits: {q_min_deg: -90, q_max_deg: 90, qd_max_deg: 180, tau_max: 5}\n"
-                           "    drive: {gear_ratio: 10, motor_inertia: 0.001, viscous: 1}\n"
-                           "sensor: {link: 1, xyz: [0, 0, 0.1], rpy_deg: [0, 0, 90]}\n";
+  const std::string text =
+      std::string(kGoodHead) +
+      "  - name: a\n    alpha_deg: 90\n    theta_deg: 30\n    mass: 2\n"
+      "    com: [0.1, 0, 0]\n    inertia_origin: {xx: 1, yy: 2, zz: 3, xy: 0.5}\n"
+      "    limits: {q_min_deg: -90, q_max_deg: 90, qd_max_deg: 180, tau_max: 5}\n"
+      "    drive: {gear_ratio: 10, motor_inertia: 0.001, viscous: 1}\n"
+      "sensor: {link: 1, xyz: [0, 0, 0.1], rpy_deg: [0, 0, 90]}\n";
   const RobotModel m = exid::loadDhYamlString(text, "ok.yaml");
   EXPECT_NEAR(m.limits[0].q_max, M_PI / 2, 1e-15);
   EXPECT_NEAR(m.limits[0].qd_max, M_PI, 1e-15);
@@ -246,10 +247,9 @@ TEST(UrdfErrors, MissingLink) {
 
 TEST(UrdfErrors, KinematicLoop) {
   // b has two parents (a closed chain).
-  std::string m = urdfError(urdf(link("base") + link("a") + link("b") +
-                                 joint("j1", "revolute", "base", "a") +
-                                 joint("j2", "revolute", "base", "b") +
-                                 joint("j3", "revolute", "a", "b")));
+  std::string m =
+      urdfError(urdf(link("base") + link("a") + link("b") + joint("j1", "revolute", "base", "a") +
+                     joint("j2", "revolute", "base", "b") + joint("j3", "revolute", "a", "b")));
   EXPECT_HAS(m, "bad.urdf:8");
   EXPECT_HAS(m, "joint 'j3'");
   EXPECT_HAS(m, "kinematic loop");
@@ -261,8 +261,8 @@ TEST(UrdfErrors, KinematicLoop) {
 }
 
 TEST(UrdfErrors, SeveralRoots) {
-  const std::string m = urdfError(urdf(link("base") + link("other") + link("a") +
-                                       joint("j1", "revolute", "base", "a")));
+  const std::string m = urdfError(
+      urdf(link("base") + link("other") + link("a") + joint("j1", "revolute", "base", "a")));
   EXPECT_HAS(m, "several root links");
   EXPECT_HAS(m, "'other'");
 }
@@ -286,9 +286,9 @@ TEST(UrdfErrors, WrongTypeInUrdfdomValues) {
 }
 
 TEST(UrdfErrors, NonFiniteNumber) {
-  const std::string m = urdfError(urdf(link("base") + link("a") +
-                                       joint("j1", "revolute", "base", "a") +
-                                       "  <exid><drive joint=\"j1\" viscous=\"nan\"/></exid>\n"));
+  const std::string m =
+      urdfError(urdf(link("base") + link("a") + joint("j1", "revolute", "base", "a") +
+                     "  <exid><drive joint=\"j1\" viscous=\"nan\"/></exid>\n"));
   EXPECT_HAS(m, "bad.urdf:6");
   EXPECT_HAS(m, "<drive>");
   EXPECT_HAS(m, "non-finite");
@@ -335,11 +335,12 @@ TEST(UrdfErrors, StrictRefusesImpossibleInertia) {
 TEST(Urdf, FixedJointMergingPreservesMassAndCom) {
   // a (1 kg, COM 0.1 on x of a) carries b through a fixed joint (rotated, offset) and c through a
   // revolute joint. The merged body "a" must have 2 kg and the combined COM.
-  const std::string text = urdf(
-      link("base") + link("a") + link("b") + link("c") + joint("j1", "revolute", "base", "a") +
-      "  <joint name=\"fix\" type=\"fixed\"><parent link=\"a\"/><child link=\"b\"/>"
-      "<origin xyz=\"0 0.2 0\" rpy=\"0 0 1.5707963267948966\"/></joint>\n" +
-      joint("j2", "continuous", "b", "c") + "  <exid><sensor link=\"b\" xyz=\"0 0 0.05\"/></exid>\n");
+  const std::string text =
+      urdf(link("base") + link("a") + link("b") + link("c") + joint("j1", "revolute", "base", "a") +
+           "  <joint name=\"fix\" type=\"fixed\"><parent link=\"a\"/><child link=\"b\"/>"
+           "<origin xyz=\"0 0.2 0\" rpy=\"0 0 1.5707963267948966\"/></joint>\n" +
+           joint("j2", "continuous", "b", "c") +
+           "  <exid><sensor link=\"b\" xyz=\"0 0 0.05\"/></exid>\n");
   const RobotModel m = exid::loadUrdfString(text, "merge.urdf");
   ASSERT_EQ(m.dof(), 2);
   EXPECT_EQ(m.bodies[0].name, "a");

@@ -65,7 +65,7 @@ Eigen::VectorXd randomConfig(const RobotModel& m, std::mt19937* rng) {
 
 TEST(RobotFiles, EveryShippedFileLoads) {
   const std::vector<std::pair<std::string, int>> files = {
-      {"planar2r/planar2r.yaml", 2}, {"puma560/puma560.yaml", 6}, {"puma560/puma560.urdf", 6},
+      {"planar2r/planar2r.yaml", 2}, {"puma560/puma560.yaml", 6},   {"puma560/puma560.urdf", 6},
       {"irp6/irp6.yaml", 5},         {"stanford/stanford.yaml", 6}, {"panda/panda.yaml", 7}};
   for (const auto& [file, dof] : files) {
     SCOPED_TRACE(file);
@@ -197,11 +197,11 @@ TEST(RobotFiles, PumaGravityLoadMatchesTheToolbox) {
   // qn = [0, pi/4, pi, 0, pi/4, 0] gives [0, 31.6399, 6.0351, 0, 0.0283, 0] N m.
   const RobotModel m = load("puma560/puma560.yaml");
   auto d = exid::makeDynamicsData(m);
-  const Eigen::VectorXd qn =
-      (Eigen::VectorXd(6) << 0, M_PI / 4, M_PI, 0, M_PI / 4, 0).finished();
+  const Eigen::VectorXd qn = (Eigen::VectorXd(6) << 0, M_PI / 4, M_PI, 0, M_PI / 4, 0).finished();
   const Eigen::VectorXd z = Eigen::VectorXd::Zero(6);
   const Eigen::VectorXd tau = exid::inverseDynamics(m, *d, qn, z, z);
-  const Eigen::VectorXd expected = (Eigen::VectorXd(6) << 0, 31.6399, 6.0351, 0, 0.0283, 0).finished();
+  const Eigen::VectorXd expected =
+      (Eigen::VectorXd(6) << 0, 31.6399, 6.0351, 0, 0.0283, 0).finished();
   EXPECT_LT((tau - expected).cwiseAbs().maxCoeff(), 1e-3) << tau.transpose();
 }
 
@@ -224,8 +224,8 @@ TEST(RobotFiles, Irp6Transmission) {
   // MRROC++ forward kinematics of the flange position (reference file).
   const double c1 = std::cos(0.1), s1 = std::sin(0.1);
   const double r = 0.455 * std::cos(-1.2) + 0.67 * std::cos(0.3) + 0.095 * std::cos(0.5);
-  const Eigen::Vector3d p(c1 * r, s1 * r,
-                          0.7 - 0.455 * std::sin(-1.2) - 0.67 * std::sin(0.3) - 0.095 * std::sin(0.5));
+  const Eigen::Vector3d p(
+      c1 * r, s1 * r, 0.7 - 0.455 * std::sin(-1.2) - 0.67 * std::sin(0.3) - 0.095 * std::sin(0.5));
   EXPECT_LT((X[4].p - p).norm(), 1e-9) << X[4].p.transpose() << " vs " << p.transpose();
   // Approach vector a = [c4 c1, c4 s1, -s4].
   const Eigen::Vector3d a(std::cos(0.5) * c1, std::cos(0.5) * s1, -std::sin(0.5));

@@ -77,8 +77,10 @@ void expectSameModel(const exid::RobotModel& a, const exid::RobotModel& b) {
 
 TEST(RobotPlugins, NamedRobotsEqualTheirFiles) {
   const std::vector<std::pair<std::string, std::string>> robots = {
-      {"planar2r", "planar2r/planar2r.yaml"}, {"puma560", "puma560/puma560.yaml"},
-      {"irp6", "irp6/irp6.yaml"},             {"stanford", "stanford/stanford.yaml"},
+      {"planar2r", "planar2r/planar2r.yaml"},
+      {"puma560", "puma560/puma560.yaml"},
+      {"irp6", "irp6/irp6.yaml"},
+      {"stanford", "stanford/stanford.yaml"},
       {"panda", "panda/panda.yaml"}};
   int tested = 0;
   for (const auto& [name, file] : robots) {
@@ -90,8 +92,7 @@ TEST(RobotPlugins, NamedRobotsEqualTheirFiles) {
     std::vector<std::string> w;
     exid::LoadOptions o;
     o.warnings = &w;
-    const auto fromFile =
-        exid::loadDhYaml(std::string(EXID_SOURCE_DIR) + "/robots/" + file, o);
+    const auto fromFile = exid::loadDhYaml(std::string(EXID_SOURCE_DIR) + "/robots/" + file, o);
     const auto built = build(p.info, defaults(p.info));
     expectSameModel(*built, fromFile);
     ++tested;

@@ -20,8 +20,9 @@ Eigen::Matrix3d refRot(const Eigen::Vector3d& k, double t) {
   return Eigen::Matrix3d::Identity() + std::sin(t) * K + (1 - std::cos(t)) * K * K;
 }
 
-std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                        const Eigen::VectorXd& qdd, bool with_gravity) {
+std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::VectorXd& q,
+                                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                                        bool with_gravity) {
   const int n = m.dof();
   std::vector<RefBodyState> st(static_cast<size_t>(n));
   for (int j = 0; j < n; ++j) {
@@ -31,7 +32,12 @@ std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::Vector
     Eigen::Vector3d ap = with_gravity ? Eigen::Vector3d(-m.gravity) : Eigen::Vector3d::Zero();
     if (b.parent >= 0) {
       const RefBodyState& P = st[static_cast<size_t>(b.parent)];
-      Rp = P.R; op = P.o; wp = P.w; wdp = P.wd; ap = P.a; vp = P.v;
+      Rp = P.R;
+      op = P.o;
+      wp = P.w;
+      wdp = P.wd;
+      ap = P.a;
+      vp = P.v;
     }
     // joint frame (before motion) in base
     const Eigen::Matrix3d RJ = Rp * b.pre.R;
@@ -44,8 +50,8 @@ std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::Vector
     else
       pm = b.axis * q[j];
     RefBodyState& S = st[static_cast<size_t>(j)];
-    const Eigen::Matrix3d RJm = RJ * Rm;            // moved joint frame
-    const Eigen::Vector3d oJm = oJ + RJ * pm;        // its origin
+    const Eigen::Matrix3d RJm = RJ * Rm;       // moved joint frame
+    const Eigen::Vector3d oJm = oJ + RJ * pm;  // its origin
     S.R = RJm * b.post.R;
     S.o = oJm + RJm * b.post.p;
     if (b.type == JointType::Revolute) {
@@ -72,7 +78,8 @@ Eigen::VectorXd refTorques(const RobotModel& m, const Eigen::VectorXd& q, const 
                            const Eigen::VectorXd& qdd, const Eigen::VectorXd& pi) {
   const int n = m.dof();
   const auto st = refKinematics(m, q, qd, qdd, true);
-  std::vector<Eigen::Vector3d> F(static_cast<size_t>(n)), N(static_cast<size_t>(n));  // N about base origin
+  std::vector<Eigen::Vector3d> F(static_cast<size_t>(n)),
+      N(static_cast<size_t>(n));  // N about base origin
   for (int j = 0; j < n; ++j) {
     const RefBodyState& S = st[static_cast<size_t>(j)];
     const Eigen::Matrix<double, 10, 1> p = pi.segment<10>(10 * j);
@@ -80,7 +87,8 @@ Eigen::VectorXd refTorques(const RobotModel& m, const Eigen::VectorXd& q, const 
     Eigen::Vector3d f, nc, c;
     if (mass != 0.0) {
       const Eigen::Vector3d cb = p.segment<3>(6) / mass;
-      const Eigen::Matrix3d Ic = symI(p) - mass * (cb.squaredNorm() * Eigen::Matrix3d::Identity() - cb * cb.transpose());
+      const Eigen::Matrix3d Ic =
+          symI(p) - mass * (cb.squaredNorm() * Eigen::Matrix3d::Identity() - cb * cb.transpose());
       c = S.o + S.R * cb;
       const Eigen::Matrix3d Icw = S.R * Ic * S.R.transpose();
       const Eigen::Vector3d r = c - S.o;
@@ -124,8 +132,8 @@ Eigen::VectorXd refTorques(const RobotModel& m, const Eigen::VectorXd& q, const 
   return tau;
 }
 
-void refEnergy(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& pi,
-               double* T, double* U) {
+void refEnergy(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+               const Eigen::VectorXd& pi, double* T, double* U) {
   const int n = m.dof();
   const Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
   const auto st = refKinematics(m, q, qd, z, false);
@@ -143,8 +151,9 @@ void refEnergy(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::Vecto
   *U = u;
 }
 
-Eigen::Matrix<double, 6, 1> refPayloadWrench(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                             const Eigen::VectorXd& qdd, const Eigen::Matrix<double, 10, 1>& phi) {
+Eigen::Matrix<double, 6, 1> refPayloadWrench(const RobotModel& m, const Eigen::VectorXd& q,
+                                             const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                                             const Eigen::Matrix<double, 10, 1>& phi) {
   const auto st = refKinematics(m, q, qd, qdd, true);
   const RefBodyState& B = st[static_cast<size_t>(m.sensorBody())];
   const Eigen::Matrix3d Rs = B.R * m.sensor_pose.R;
@@ -155,13 +164,15 @@ Eigen::Matrix<double, 6, 1> refPayloadWrench(const RobotModel& m, const Eigen::V
   const Eigen::Vector3d cs = phi.segment<3>(1) / mass;  // in sensor frame
   Eigen::Matrix3d I;
   I << phi[4], phi[5], phi[6], phi[5], phi[7], phi[8], phi[6], phi[8], phi[9];
-  const Eigen::Matrix3d Ic = I - mass * (cs.squaredNorm() * Eigen::Matrix3d::Identity() - cs * cs.transpose());
+  const Eigen::Matrix3d Ic =
+      I - mass * (cs.squaredNorm() * Eigen::Matrix3d::Identity() - cs * cs.transpose());
   const Eigen::Vector3d c = os + Rs * cs;
   const Eigen::Vector3d rc = c - os;
   const Eigen::Vector3d ac = as + B.wd.cross(rc) + B.w.cross(B.w.cross(rc));
   const Eigen::Vector3d f = mass * ac;
   const Eigen::Matrix3d Icw = Rs * Ic * Rs.transpose();
-  const Eigen::Vector3d nO = Icw * B.wd + B.w.cross(Icw * B.w) + rc.cross(f);  // about sensor origin
+  const Eigen::Vector3d nO =
+      Icw * B.wd + B.w.cross(Icw * B.w) + rc.cross(f);  // about sensor origin
   Eigen::Matrix<double, 6, 1> w;
   w << Rs.transpose() * f, Rs.transpose() * nO;
   return w;
@@ -180,8 +191,14 @@ Eigen::Matrix<double, 10, 1> randomInertia(std::mt19937& rng, double size) {
   for (int k = 0; k < 6; ++k) {  // point masses: always physically consistent
     const double mk = M(rng);
     const Eigen::Vector3d x(U(rng), U(rng), U(rng));
-    const Eigen::Matrix3d I = mk * (x.squaredNorm() * Eigen::Matrix3d::Identity() - x * x.transpose());
-    p[0] += I(0, 0); p[1] += I(0, 1); p[2] += I(0, 2); p[3] += I(1, 1); p[4] += I(1, 2); p[5] += I(2, 2);
+    const Eigen::Matrix3d I =
+        mk * (x.squaredNorm() * Eigen::Matrix3d::Identity() - x * x.transpose());
+    p[0] += I(0, 0);
+    p[1] += I(0, 1);
+    p[2] += I(0, 2);
+    p[3] += I(1, 1);
+    p[4] += I(1, 2);
+    p[5] += I(2, 2);
     p.segment<3>(6) += mk * x;
     p[9] += mk;
   }
@@ -211,9 +228,12 @@ RobotModel randomTree(std::mt19937& rng, int n, bool identity_post) {
     b.pre = randomPose(rng);
     b.post = identity_post ? Pose{} : randomPose(rng);
     const double r = U(rng);
-    if (r < 0.25) b.axis = Eigen::Vector3d::UnitZ();
-    else if (r < 0.3) b.axis = -Eigen::Vector3d::UnitZ();
-    else b.axis = Eigen::Vector3d(N(rng), N(rng), N(rng)).normalized();
+    if (r < 0.25)
+      b.axis = Eigen::Vector3d::UnitZ();
+    else if (r < 0.3)
+      b.axis = -Eigen::Vector3d::UnitZ();
+    else
+      b.axis = Eigen::Vector3d(N(rng), N(rng), N(rng)).normalized();
     b.type = U(rng) < 0.25 ? JointType::Prismatic : JointType::Revolute;
     b.inertia = randomInertia(rng);
     m.bodies.push_back(b);

@@ -27,8 +27,9 @@ inline exid::Registry& registry() {
 template <class T>
 std::shared_ptr<T> create(const std::string& name, const std::string& yaml_params = "{}") {
   const exid::PluginInfo& info = registry().get(T::kKind, name);
-  exid::ParamSet ps = exid::resolveParams(info, yaml_params, std::string(exid::toString(T::kKind)) + " " + name,
-                                          std::filesystem::path(EXID_SOURCE_DIR));
+  exid::ParamSet ps =
+      exid::resolveParams(info, yaml_params, std::string(exid::toString(T::kKind)) + " " + name,
+                          std::filesystem::path(EXID_SOURCE_DIR));
   return registry().create<T>(name, ps);
 }
 
@@ -40,6 +41,8 @@ inline std::shared_ptr<const exid::RobotModel> robot(const std::string& name,
 }
 
 inline std::filesystem::path sourceDir() { return EXID_SOURCE_DIR; }
-inline std::filesystem::path sharedDir() { return std::filesystem::path(EXID_SOURCE_DIR) / ".." / "shared"; }
+inline std::filesystem::path sharedDir() {
+  return std::filesystem::path(EXID_SOURCE_DIR) / ".." / "shared";
+}
 
 }  // namespace exid_test

@@ -1,8 +1,9 @@
 // Study files: the whole file is validated before any work starts, and every problem names the
 // file, the line and the key path.
+#include "exid/config.hpp"
+
 #include <gtest/gtest.h>
 
-#include "exid/config.hpp"
 #include "exid/error.hpp"
 #include "exid/registry.hpp"
 
@@ -11,7 +12,8 @@ namespace {
 const exid::Registry& reg() {
   static exid::Registry* r = [] {
     auto* x = new exid::Registry();
-    x->loadLibrary(std::string(EXID_TEST_PLUGIN_DIR) + "/good_plugin/libexid_plugin_good_plugin.so");
+    x->loadLibrary(std::string(EXID_TEST_PLUGIN_DIR) +
+                   "/good_plugin/libexid_plugin_good_plugin.so");
     return x;
   }();
   return *r;
@@ -79,20 +81,24 @@ TEST(StudyConfig, WrongTypeIsReported) {
   std::string y = kGood;
   y.replace(y.find("0.99"), 4, "fast");
   std::string msg = problems(y);
-  EXPECT_NE(msg.find("study.yaml:9: estimator.params.forgetting_factor: expected a number, found 'fast'"),
-            std::string::npos)
+  EXPECT_NE(
+      msg.find("study.yaml:9: estimator.params.forgetting_factor: expected a number, found 'fast'"),
+      std::string::npos)
       << msg;
   y = kGood;
   y.replace(y.find("[1, 2]"), 6, "[1, two]");
   msg = problems(y);
-  EXPECT_NE(msg.find("estimator.params.joints: expected a list of integers"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("estimator.params.joints: expected a list of integers"), std::string::npos)
+      << msg;
 }
 
 TEST(StudyConfig, UnknownKeysAreErrorsWithTheClosestMatch) {
   std::string y = kGood;
   y.replace(y.find("forgetting_factor"), 17, "forgeting_factor");
   std::string msg = problems(y);
-  EXPECT_NE(msg.find("estimator.params.forgeting_factor: unknown key 'forgeting_factor'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("estimator.params.forgeting_factor: unknown key 'forgeting_factor'"),
+            std::string::npos)
+      << msg;
   EXPECT_NE(msg.find("did you mean 'forgetting_factor'?"), std::string::npos) << msg;
   msg = problems(std::string(kGood) + "estimater: {type: x}\n");
   EXPECT_NE(msg.find("unknown key 'estimater'"), std::string::npos) << msg;
@@ -103,27 +109,35 @@ TEST(StudyConfig, UnknownPluginListsAvailableAndClosest) {
   std::string y = kGood;
   y.replace(y.find("type: test_estimator"), 20, "type: test_estimater");
   std::string msg = problems(y);
-  EXPECT_NE(msg.find("estimator.type: unknown estimator 'test_estimater'; available: test_estimator; "
-                     "did you mean 'test_estimator'?"),
-            std::string::npos)
+  EXPECT_NE(
+      msg.find("estimator.type: unknown estimator 'test_estimater'; available: test_estimator; "
+               "did you mean 'test_estimator'?"),
+      std::string::npos)
       << msg;
 }
 
 TEST(StudyConfig, ChoicesIntegerRangesAndListElementsAreChecked) {
   std::string y = kGood;
-  y.replace(y.find("    joints: [1, 2]"), 18, "    joints: [1, 9]\n    method: lu\n    iterations: 0");
+  y.replace(y.find("    joints: [1, 2]"), 18,
+            "    joints: [1, 9]\n    method: lu\n    iterations: 0");
   std::string msg = problems(y);
-  EXPECT_NE(msg.find("estimator.params.joints = [1, 9]: element 1 must be in [1, 7]"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("estimator.params.method = lu: must be one of: qr, svd"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("estimator.params.iterations = 0: must be in [1, 1000]"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("estimator.params.joints = [1, 9]: element 1 must be in [1, 7]"),
+            std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("estimator.params.method = lu: must be one of: qr, svd"), std::string::npos)
+      << msg;
+  EXPECT_NE(msg.find("estimator.params.iterations = 0: must be in [1, 1000]"), std::string::npos)
+      << msg;
   // Every problem is reported at once.
   EXPECT_NE(msg.find("3 problems"), std::string::npos) << msg;
 }
 
 TEST(StudyConfig, MissingRequiredParameterAndSections) {
-  std::string msg = problems("robot: {type: test_throws}\nmodel: {type: test_model}\n"
-                             "experiment: {type: test_experiment}\nestimator: {type: test_estimator}\n");
-  EXPECT_NE(msg.find("experiment.params.file: required parameter is missing"), std::string::npos) << msg;
+  std::string msg = problems(
+      "robot: {type: test_throws}\nmodel: {type: test_model}\n"
+      "experiment: {type: test_experiment}\nestimator: {type: test_estimator}\n");
+  EXPECT_NE(msg.find("experiment.params.file: required parameter is missing"), std::string::npos)
+      << msg;
   msg = problems("model: {type: test_model}\nestimator: {type: test_estimator}\n");
   EXPECT_NE(msg.find("robot: missing section"), std::string::npos) << msg;
   EXPECT_NE(msg.find("experiment: missing section"), std::string::npos) << msg;
@@ -139,7 +153,9 @@ TEST(StudyConfig, MalformedYamlNamesTheLine) {
 
 TEST(StudyConfig, SectionShapeErrors) {
   std::string msg = problems("robot: test_throws\n");
-  EXPECT_NE(msg.find("study.yaml:1: robot: expected a mapping {type: NAME, params: {...}}"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("study.yaml:1: robot: expected a mapping {type: NAME, params: {...}}"),
+            std::string::npos)
+      << msg;
   msg = problems("robot: {type: test_throws, param: {}}\n");
   EXPECT_NE(msg.find("robot.param: unknown key 'param'"), std::string::npos) << msg;
   EXPECT_NE(msg.find("did you mean 'params'?"), std::string::npos) << msg;
@@ -149,14 +165,17 @@ TEST(StudyConfig, SectionShapeErrors) {
 
 TEST(StudyConfig, StackedModelsTakeWeights) {
   exid::StudyConfig c = exid::parseStudy(
-      "robot: {type: test_throws}\nmodel:\n  - {type: test_model, weight: 2}\n  - {type: test_model}\n",
+      "robot: {type: test_throws}\nmodel:\n  - {type: test_model, weight: 2}\n  - {type: "
+      "test_model}\n",
       "s.yaml", "/b", reg());
   ASSERT_EQ(c.models.size(), 2u);
   EXPECT_DOUBLE_EQ(c.models[0].weight, 2.0);
   EXPECT_DOUBLE_EQ(c.models[1].weight, 1.0);
   EXPECT_EQ(c.models[1].key_path, "model[1]");
-  std::string msg = problems("robot: {type: test_throws}\nmodel:\n  - {type: test_model, weight: -1}\n");
-  EXPECT_NE(msg.find("model[0].weight = -1: must be a number in (0, inf)"), std::string::npos) << msg;
+  std::string msg =
+      problems("robot: {type: test_throws}\nmodel:\n  - {type: test_model, weight: -1}\n");
+  EXPECT_NE(msg.find("model[0].weight = -1: must be a number in (0, inf)"), std::string::npos)
+      << msg;
 }
 
 TEST(StudyConfig, EmptyOptionalPathsSurviveTheResolvedStudy) {
@@ -169,8 +188,10 @@ TEST(StudyConfig, EmptyOptionalPathsSurviveTheResolvedStudy) {
   ps = exid::resolveParams(info, "{}", "x.params", "/base");
   EXPECT_EQ(ps.getString("extra"), "");
   // A required path may not be empty.
-  std::string msg = problems("robot: {type: test_throws}\nmodel: {type: test_model}\n"
-                             "experiment: {type: test_experiment, params: {file: ''}}\nestimator: {type: test_estimator}\n");
+  std::string msg = problems(
+      "robot: {type: test_throws}\nmodel: {type: test_model}\n"
+      "experiment: {type: test_experiment, params: {file: ''}}\nestimator: {type: "
+      "test_estimator}\n");
   EXPECT_NE(msg.find("experiment.params.file: expected a file path"), std::string::npos) << msg;
   // Every resolved study parses again to the same configuration.
   exid::StudyConfig c = exid::parseStudy(kGood, "s.yaml", "/base", reg());

@@ -1,4 +1,6 @@
 // Files and values: atomic writes, CSV with errors that name file/line/column, JSON.
+#include "exid/io.hpp"
+
 #include <gtest/gtest.h>
 #include <sys/stat.h>
 #include <unistd.h>
@@ -9,7 +11,6 @@
 #include <functional>
 
 #include "exid/error.hpp"
-#include "exid/io.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 
@@ -68,7 +69,8 @@ TEST(AtomicWrite, FailureLeavesTheOldFileAndNamesThePath) {
 
 TEST(AtomicWrite, UnwritableTargetIsReportedAndNothingIsLeft) {
   // A target that cannot be created: the error names it and nothing is left behind.
-  std::string msg = errorOf([&] { exid::writeFileAtomic("/proc/exid_cannot_write_here.txt", "data"); });
+  std::string msg =
+      errorOf([&] { exid::writeFileAtomic("/proc/exid_cannot_write_here.txt", "data"); });
   EXPECT_NE(msg.find("/proc/exid_cannot_write_here.txt"), std::string::npos) << msg;
   EXPECT_FALSE(fs::exists("/proc/exid_cannot_write_here.txt"));
 }
@@ -135,7 +137,8 @@ TEST(Params, RangeTextAndViolations) {
   EXPECT_EQ(d.violation(exid::ParamValue(1.0)), "");
   EXPECT_EQ(d.violation(exid::ParamValue(std::nan(""))), "must be in (0, 1]");
   auto l = exid::param_doubles("w", std::nullopt, "N m", "weights", 2, 3);
-  EXPECT_NE(l.violation(exid::ParamValue(std::vector<double>{1.0})).find("at least 2"), std::string::npos);
+  EXPECT_NE(l.violation(exid::ParamValue(std::vector<double>{1.0})).find("at least 2"),
+            std::string::npos);
   exid::ParamSet ps;
   ps.context = "estimator.params";
   ps.set("n", exid::ParamValue(std::int64_t{3}));

@@ -74,7 +74,9 @@ TEST(PluginLoader, RefusesAMismatchedBuildFingerprint) {
   exid::Registry reg;
   std::string msg = errorOf([&] { reg.loadLibrary(testLib("wrong_fingerprint_plugin")); });
   EXPECT_NE(msg.find("fingerprint mismatch"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("exid version: expected '" EXID_VERSION_STRING "', found '9.9.9'"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("exid version: expected '" EXID_VERSION_STRING "', found '9.9.9'"),
+            std::string::npos)
+      << msg;
   EXPECT_NE(msg.find("Eigen max alignment"), std::string::npos) << msg;
 }
 
@@ -106,7 +108,8 @@ TEST(PluginLoader, AFactoryThatThrowsIsReportedAndTheProcessSurvives) {
   exid::Registry reg;
   reg.loadLibrary(testLib("good_plugin"));
   const exid::PluginInfo& info = reg.get(exid::PluginKind::Robot, "test_throws");
-  std::string msg = errorOf([&] { reg.create<exid::Robot>("test_throws", exid::resolveParams(info, "{}", "t", "")); });
+  std::string msg = errorOf(
+      [&] { reg.create<exid::Robot>("test_throws", exid::resolveParams(info, "{}", "t", "")); });
   EXPECT_NE(msg.find("robot 'test_throws' could not be created"), std::string::npos) << msg;
   EXPECT_NE(msg.find("deliberate failure in the factory"), std::string::npos) << msg;
   // Still usable afterwards.

@@ -41,8 +41,8 @@ Eigen::Matrix4d pseudoInertia(const Vec10& pi) {
 
 Vec10 inertialFromPseudo(const Eigen::Matrix4d& J) {
   Vec10 pi;
-  pi << J(1, 1) + J(2, 2), -J(0, 1), -J(0, 2), J(0, 0) + J(2, 2), -J(1, 2), J(0, 0) + J(1, 1), J(0, 3),
-      J(1, 3), J(2, 3), J(3, 3);
+  pi << J(1, 1) + J(2, 2), -J(0, 1), -J(0, 2), J(0, 0) + J(2, 2), -J(1, 2), J(0, 0) + J(1, 1),
+      J(0, 3), J(1, 3), J(2, 3), J(3, 3);
   return pi;
 }
 
@@ -88,7 +88,8 @@ double pseudoInertiaMinEigenvalue(const Vec10& pi) {
 }
 
 Vec10 logCholeskyFromInertial(const Vec10& pi, double eig_floor, bool* projected) {
-  check(eig_floor > 0 && std::isfinite(eig_floor), "logCholeskyFromInertial: eig_floor must be positive");
+  check(eig_floor > 0 && std::isfinite(eig_floor),
+        "logCholeskyFromInertial: eig_floor must be positive");
   check(pi.allFinite(), "logCholeskyFromInertial: non-finite parameters");
   Eigen::Matrix4d J = pseudoInertia(pi);
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix4d> es(J);
@@ -103,7 +104,8 @@ Vec10 logCholeskyFromInertial(const Vec10& pi, double eig_floor, bool* projected
   Eigen::Matrix4d P = Eigen::Matrix4d::Zero();
   for (int k = 0; k < 4; ++k) P(k, 3 - k) = 1.0;
   Eigen::LLT<Eigen::Matrix4d> llt(P * J * P);
-  check(llt.info() == Eigen::Success, "logCholeskyFromInertial: pseudo-inertia not positive definite");
+  check(llt.info() == Eigen::Success,
+        "logCholeskyFromInertial: pseudo-inertia not positive definite");
   const Eigen::Matrix4d L = llt.matrixL();
   const Eigen::Matrix4d U = P * L * P;
   Vec10 t;
@@ -115,14 +117,18 @@ Vec10 logCholeskyFromInertial(const Vec10& pi, double eig_floor, bool* projected
 // ---------------------------------------------------------------- priors
 Eigen::MatrixXd priorSqrtInformation(const Prior& prior, int p, const std::string& who) {
   check(prior.value.size() == p && prior.covariance.rows() == p && prior.covariance.cols() == p,
-        fmt::format("{}: the prior has {} values and a {}x{} covariance; the model has {} base parameters",
-                    who, prior.value.size(), prior.covariance.rows(), prior.covariance.cols(), p));
-  check(prior.value.allFinite() && prior.covariance.allFinite(), fmt::format("{}: the prior is not finite", who));
+        fmt::format(
+            "{}: the prior has {} values and a {}x{} covariance; the model has {} base parameters",
+            who, prior.value.size(), prior.covariance.rows(), prior.covariance.cols(), p));
+  check(prior.value.allFinite() && prior.covariance.allFinite(),
+        fmt::format("{}: the prior is not finite", who));
   const Eigen::MatrixXd C = 0.5 * (prior.covariance + prior.covariance.transpose());
-  check((C - prior.covariance).cwiseAbs().maxCoeff() <= 1e-9 * std::max(1e-300, C.cwiseAbs().maxCoeff()),
+  check((C - prior.covariance).cwiseAbs().maxCoeff() <=
+            1e-9 * std::max(1e-300, C.cwiseAbs().maxCoeff()),
         fmt::format("{}: the prior covariance is not symmetric", who));
   Eigen::LLT<Eigen::MatrixXd> llt(C);
-  check(llt.info() == Eigen::Success, fmt::format("{}: the prior covariance is not positive definite", who));
+  check(llt.info() == Eigen::Success,
+        fmt::format("{}: the prior covariance is not positive definite", who));
   const Eigen::MatrixXd L = llt.matrixL();
   Eigen::MatrixXd S = Eigen::MatrixXd::Identity(p, p);
   L.triangularView<Eigen::Lower>().solveInPlace(S);  // S = L^-1, S^T S = C^-1
@@ -143,7 +149,8 @@ Eigen::VectorXd solveMinimumNorm(const RowAccumulator& acc, double rank_toleranc
   Eigen::VectorXd d = Fw.colwise().norm().transpose();
   for (Eigen::Index j = 0; j < p; ++j)
     if (!(d(j) > 0.0)) d(j) = 1.0;
-  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Fw * d.cwiseInverse().asDiagonal(), Eigen::ComputeThinU | Eigen::ComputeThinV);
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(Fw * d.cwiseInverse().asDiagonal(),
+                                        Eigen::ComputeThinU | Eigen::ComputeThinV);
   const Eigen::VectorXd s = svd.singularValues();
   int r = 0;
   Eigen::VectorXd c = svd.matrixU().transpose() * fy;
@@ -165,27 +172,32 @@ double noiseStdForPrior(const RowAccumulator& acc, double rank_tolerance) {
   const double rss = acc.residualSquared(theta);
   const long m = acc.rows();
   const double dof = static_cast<double>(std::max<long>(1, m - rank));
-  const double yrms = acc.factor().col(acc.cols()).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
+  const double yrms =
+      acc.factor().col(acc.cols()).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
   return std::max(std::sqrt(std::max(rss, 0.0) / dof), 1e-9 * std::max(yrms, 1e-300));
 }
 
-Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate, const Eigen::VectorXd& posterior_std) {
+Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
+                  const Eigen::VectorXd& posterior_std) {
   Json j = Json::object();
   const Eigen::VectorXd sd = prior.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
-  j["value"] = Json(std::vector<double>(prior.value.data(), prior.value.data() + prior.value.size()));
+  j["value"] =
+      Json(std::vector<double>(prior.value.data(), prior.value.data() + prior.value.size()));
   j["std"] = Json(std::vector<double>(sd.data(), sd.data() + sd.size()));
   // Share of each parameter's information that comes from the prior: posterior variance over
   // prior variance (1 = the data say nothing about it, 0 = the data decide).
   std::vector<double> share;
   double maha = 0.0;
   for (Eigen::Index i = 0; i < sd.size(); ++i) {
-    share.push_back(posterior_std.size() > i && sd(i) > 0 ? std::pow(posterior_std(i) / sd(i), 2) : NAN);
+    share.push_back(posterior_std.size() > i && sd(i) > 0 ? std::pow(posterior_std(i) / sd(i), 2)
+                                                          : NAN);
   }
   const Eigen::VectorXd dv = estimate - prior.value;
   Eigen::LLT<Eigen::MatrixXd> llt(0.5 * (prior.covariance + prior.covariance.transpose()));
   if (llt.info() == Eigen::Success) maha = std::sqrt(std::max(0.0, dv.dot(llt.solve(dv))));
   j["prior_share"] = Json(share);
-  j["prior_share_definition"] = "posterior variance / prior variance per base parameter (1: prior only)";
+  j["prior_share_definition"] =
+      "posterior variance / prior variance per base parameter (1: prior only)";
   j["mahalanobis_from_prior"] = maha;
   return j;
 }

@@ -52,8 +52,10 @@ void RowAccumulator::compress() const {
 
 void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
                          const Eigen::Ref<const Eigen::VectorXd>& y, double scale) {
-  check(W.cols() == p_, fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
-  check(W.rows() == y.size(), fmt::format("RowAccumulator: {} rows of W but {} of y", W.rows(), y.size()));
+  check(W.cols() == p_,
+        fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
+  check(W.rows() == y.size(),
+        fmt::format("RowAccumulator: {} rows of W but {} of y", W.rows(), y.size()));
   const Eigen::Index r = W.rows();
   const Eigen::Index cap = buf_.rows();
   Eigen::Index i = 0;
@@ -75,7 +77,8 @@ void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
 }
 
 void RowAccumulator::addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale) {
-  check(w.size() == p_, fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));
+  check(w.size() == p_,
+        fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));
   if (fill_ == buf_.rows()) compress();
   buf_.block(fill_, 0, 1, p_) = scale * w;
   buf_(fill_, p_) = scale * y;
@@ -134,7 +137,8 @@ std::string explainNullSpace(const Eigen::MatrixXd& null_vectors, const Eigen::V
     v /= v.norm();
     std::vector<int> idx(static_cast<std::size_t>(v.size()));
     std::iota(idx.begin(), idx.end(), 0);
-    std::stable_sort(idx.begin(), idx.end(), [&](int a, int b) { return std::abs(v(a)) > std::abs(v(b)); });
+    std::stable_sort(idx.begin(), idx.end(),
+                     [&](int a, int b) { return std::abs(v(a)) > std::abs(v(b)); });
     // sign convention: largest component positive
     if (v(idx[0]) < 0) v = -v;
     std::string expr;
@@ -142,7 +146,7 @@ std::string explainNullSpace(const Eigen::MatrixXd& null_vectors, const Eigen::V
     for (int i : idx) {
       if (shown >= terms || (shown > 0 && std::abs(v(i)) < 0.05)) break;
       const std::string nm = i < static_cast<int>(names.size()) ? names[static_cast<std::size_t>(i)]
-                                                                 : fmt::format("theta{}", i + 1);
+                                                                : fmt::format("theta{}", i + 1);
       const double c = v(i);
       if (shown == 0)
         expr += fmt::format("{:.3g} {}", c, nm);
@@ -177,7 +181,8 @@ LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::s
   const Eigen::MatrixXd Fs = Fw * d.cwiseInverse().asDiagonal();
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV);
   const Eigen::VectorXd s = svd.singularValues();
-  check(s(0) > 0.0, fmt::format("{}: the regressor is identically zero (no excitation at all)", who));
+  check(s(0) > 0.0,
+        fmt::format("{}: the regressor is identically zero (no excitation at all)", who));
   const double smax = s(0);
   std::vector<int> null_idx;
   for (int i = 0; i < p; ++i)
@@ -209,7 +214,8 @@ LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::s
   out.theta = theta_s.cwiseQuotient(d);
   out.rss = (Fw * out.theta - fy).squaredNorm();
   out.sigma2 = out.rss / static_cast<double>(m - p);
-  const Eigen::MatrixXd Vs = d.cwiseInverse().asDiagonal() * V * sinv.asDiagonal();  // (W^T W)^-1 = Vs Vs^T
+  const Eigen::MatrixXd Vs =
+      d.cwiseInverse().asDiagonal() * V * sinv.asDiagonal();  // (W^T W)^-1 = Vs Vs^T
   out.covariance = (opt.unit_variance ? 1.0 : out.sigma2) * (Vs * Vs.transpose());
   out.std = out.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
   out.rel_std_percent = relativeStdPercent(out.theta, out.std);
@@ -252,7 +258,8 @@ void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& 
   e->covariance = s.covariance;
   e->sigma = std::sqrt(s.sigma2);
   e->cond_W = s.cond_W;
-  e->residual_rms = m_unweighted > 0 ? std::sqrt(rss_unweighted / static_cast<double>(m_unweighted)) : 0.0;
+  e->residual_rms =
+      m_unweighted > 0 ? std::sqrt(rss_unweighted / static_cast<double>(m_unweighted)) : 0.0;
   e->rows = s.m;
   Json& d = e->details;
   if (!d.isObject()) d = Json::object();

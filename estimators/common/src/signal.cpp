@@ -12,10 +12,13 @@
 namespace exid::est {
 
 Sos butterworthLowpass(int order, double cutoff_hz, double fs_hz) {
-  check(order >= 1 && order <= 20, fmt::format("Butterworth order must be in [1, 20], got {}", order));
-  check(fs_hz > 0 && std::isfinite(fs_hz), fmt::format("sampling rate must be positive, got {} Hz", fs_hz));
+  check(order >= 1 && order <= 20,
+        fmt::format("Butterworth order must be in [1, 20], got {}", order));
+  check(fs_hz > 0 && std::isfinite(fs_hz),
+        fmt::format("sampling rate must be positive, got {} Hz", fs_hz));
   check(cutoff_hz > 0 && cutoff_hz < 0.5 * fs_hz,
-        fmt::format("Butterworth cutoff must be in (0, fs/2) = (0, {:g}) Hz, got {:g} Hz", 0.5 * fs_hz, cutoff_hz));
+        fmt::format("Butterworth cutoff must be in (0, fs/2) = (0, {:g}) Hz, got {:g} Hz",
+                    0.5 * fs_hz, cutoff_hz));
   // Analog prototype poles p_k = exp(i pi (2k + N + 1) / (2N)) (left half plane, |p| = 1),
   // pre-warped cutoff 2 fs tan(pi fc / fs); the bilinear transform s = 2 fs (z - 1) / (z + 1)
   // maps them to z = (1 + K p) / (1 - K p), K = tan(pi fc / fs); the N zeros go to z = -1.
@@ -122,10 +125,12 @@ double samplingRate(const Eigen::VectorXd& t, double* jitter) {
   for (Eigen::Index i = 0; i + 1 < n; ++i) {
     dt[static_cast<std::size_t>(i)] = t(i + 1) - t(i);
     check(dt[static_cast<std::size_t>(i)] > 0,
-          fmt::format("time must increase strictly: t[{}] = {} then t[{}] = {}", i, t(i), i + 1, t(i + 1)));
+          fmt::format("time must increase strictly: t[{}] = {} then t[{}] = {}", i, t(i), i + 1,
+                      t(i + 1)));
   }
   std::vector<double> sorted = dt;
-  std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2), sorted.end());
+  std::nth_element(sorted.begin(), sorted.begin() + static_cast<long>(sorted.size() / 2),
+                   sorted.end());
   const double med = sorted[sorted.size() / 2];
   double jit = 0.0;
   for (double d : dt) jit = std::max(jit, std::abs(d - med) / med);
@@ -135,7 +140,8 @@ double samplingRate(const Eigen::VectorXd& t, double* jitter) {
 
 Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X) {
   const Eigen::Index n = X.rows();
-  check(n >= 3 && t.size() == n, "central differences need at least 3 samples and one time per sample");
+  check(n >= 3 && t.size() == n,
+        "central differences need at least 3 samples and one time per sample");
   Eigen::MatrixXd D(n, X.cols());
   for (Eigen::Index k = 1; k + 1 < n; ++k) {
     const double h1 = t(k) - t(k - 1), h2 = t(k + 1) - t(k);
@@ -149,7 +155,8 @@ Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::Ma
   }
   {  // at the end: nodes n-3, n-2, n-1
     const double h1 = t(n - 2) - t(n - 3), h2 = t(n - 1) - t(n - 2);
-    D.row(n - 1) = (h2 / (h1 * (h1 + h2))) * X.row(n - 3) + (-(h1 + h2) / (h1 * h2)) * X.row(n - 2) +
+    D.row(n - 1) = (h2 / (h1 * (h1 + h2))) * X.row(n - 3) +
+                   (-(h1 + h2) / (h1 * h2)) * X.row(n - 2) +
                    ((h1 + 2 * h2) / (h2 * (h1 + h2))) * X.row(n - 1);
   }
   return D;
@@ -157,11 +164,13 @@ Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::Ma
 
 Eigen::MatrixXd centralSecondDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X) {
   const Eigen::Index n = X.rows();
-  check(n >= 4 && t.size() == n, "second differences need at least 4 samples and one time per sample");
+  check(n >= 4 && t.size() == n,
+        "second differences need at least 4 samples and one time per sample");
   Eigen::MatrixXd D(n, X.cols());
   for (Eigen::Index k = 1; k + 1 < n; ++k) {
     const double h1 = t(k) - t(k - 1), h2 = t(k + 1) - t(k);
-    D.row(k) = 2.0 * (X.row(k - 1) / (h1 * (h1 + h2)) - X.row(k) / (h1 * h2) + X.row(k + 1) / (h2 * (h1 + h2)));
+    D.row(k) = 2.0 * (X.row(k - 1) / (h1 * (h1 + h2)) - X.row(k) / (h1 * h2) +
+                      X.row(k + 1) / (h2 * (h1 + h2)));
   }
   // Linear extrapolation of the second derivative to the ends.
   const double a0 = (t(0) - t(1)) / (t(2) - t(1));
@@ -177,7 +186,10 @@ Rows decimateRows(const Rows& rows, int factor, const Sos& sos) {
   const auto R = static_cast<int>(rows.y.size());
   std::map<int, std::vector<int>> groups;
   for (int i = 0; i < R; ++i)
-    groups[rows.equation.size() == static_cast<std::size_t>(R) ? rows.equation[static_cast<std::size_t>(i)] : 0].push_back(i);
+    groups[rows.equation.size() == static_cast<std::size_t>(R)
+               ? rows.equation[static_cast<std::size_t>(i)]
+               : 0]
+        .push_back(i);
   const Eigen::Index p = rows.W.cols();
   std::vector<Eigen::MatrixXd> dec;  // per equation: kept rows of [W y]
   std::vector<int> labels;

@@ -41,18 +41,22 @@ bool modelIsPerSample(const ObservationModel& model) {
 }
 
 void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
-  check(rows.W.cols() == p, fmt::format("{}: the model returned {} columns, expected {} base parameters",
-                                        who, rows.W.cols(), p));
+  check(rows.W.cols() == p,
+        fmt::format("{}: the model returned {} columns, expected {} base parameters", who,
+                    rows.W.cols(), p));
   check(rows.W.rows() == rows.y.size(),
-        fmt::format("{}: the model returned {} rows of W but {} measurements", who, rows.W.rows(), rows.y.size()));
+        fmt::format("{}: the model returned {} rows of W but {} measurements", who, rows.W.rows(),
+                    rows.y.size()));
   check(rows.equation.empty() || rows.equation.size() == static_cast<std::size_t>(rows.y.size()),
-        fmt::format("{}: the model returned {} equation labels for {} rows", who, rows.equation.size(), rows.y.size()));
+        fmt::format("{}: the model returned {} equation labels for {} rows", who,
+                    rows.equation.size(), rows.y.size()));
   if (!rows.W.allFinite() || !rows.y.allFinite()) {
     for (Eigen::Index i = 0; i < rows.W.rows(); ++i)
       if (!rows.W.row(i).allFinite() || !std::isfinite(rows.y(i)))
-        throw Error(fmt::format("{}: observation row {} (computed from samples starting at {}) is not "
-                                "finite (NaN or inf in the data?)",
-                                who, i, begin));
+        throw Error(
+            fmt::format("{}: observation row {} (computed from samples starting at {}) is not "
+                        "finite (NaN or inf in the data?)",
+                        who, i, begin));
   }
 }
 
@@ -70,11 +74,13 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
     Rows r = (b == 0 && e == K) ? model.rows(data, ctx) : model.rows(sliceDataset(data, b, e), ctx);
     checkRows(r, model.numBase(), who, b);
     fn(r, b, e);
-    ctx.report(lo + (hi - lo) * static_cast<double>(e) / K, fmt::format("{}: {} / {} samples", who, e, K));
+    ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
+               fmt::format("{}: {} / {} samples", who, e, K));
   }
 }
 
-void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row, std::vector<int>* order) {
+void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row,
+                  std::vector<int>* order) {
   const auto R = static_cast<int>(rows.y.size());
   sample_of_row->assign(static_cast<std::size_t>(R), 0);
   order->resize(static_cast<std::size_t>(R));
@@ -86,8 +92,11 @@ void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row
     bool sample_major = true, equation_major = true;
     for (int i = 0; i < R && (sample_major || equation_major); ++i) {
       const int eq = rows.equation[static_cast<std::size_t>(i)];
-      if (sample_major && rows.equation[static_cast<std::size_t>(i)] != rows.equation[static_cast<std::size_t>(i % r)]) sample_major = false;
-      if (equation_major && eq != rows.equation[static_cast<std::size_t>((i / samples) * samples)]) equation_major = false;
+      if (sample_major && rows.equation[static_cast<std::size_t>(i)] !=
+                              rows.equation[static_cast<std::size_t>(i % r)])
+        sample_major = false;
+      if (equation_major && eq != rows.equation[static_cast<std::size_t>((i / samples) * samples)])
+        equation_major = false;
     }
     // A layout with one row per sample is both; distinct labels inside a sample decide.
     if (sample_major) {
@@ -97,7 +106,8 @@ void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row
     if (equation_major) {
       for (int i = 0; i < R; ++i) (*sample_of_row)[static_cast<std::size_t>(i)] = i % samples;
       std::stable_sort(order->begin(), order->end(), [&](int a, int b) {
-        return (*sample_of_row)[static_cast<std::size_t>(a)] < (*sample_of_row)[static_cast<std::size_t>(b)];
+        return (*sample_of_row)[static_cast<std::size_t>(a)] <
+               (*sample_of_row)[static_cast<std::size_t>(b)];
       });
       return;
     }

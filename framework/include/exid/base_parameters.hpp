@@ -17,12 +17,12 @@
 namespace exid {
 
 struct BaseParameters {
-  std::vector<std::string> full_names;  // columns of the full regressor
-  std::vector<int> independent;         // base columns, indices into full_names, ascending
-  std::vector<int> dependent;           // the others (regrouped or unidentifiable)
-  Eigen::MatrixXd beta;                 // |independent| x |dependent|: W_dep = W_ind * beta
-  Eigen::MatrixXd K;                    // base x full: pi_b = K * pi
-  std::vector<std::string> names;       // base names: "ZZ1R" when regrouped, else the full name
+  std::vector<std::string> full_names;   // columns of the full regressor
+  std::vector<int> independent;          // base columns, indices into full_names, ascending
+  std::vector<int> dependent;            // the others (regrouped or unidentifiable)
+  Eigen::MatrixXd beta;                  // |independent| x |dependent|: W_dep = W_ind * beta
+  Eigen::MatrixXd K;                     // base x full: pi_b = K * pi
+  std::vector<std::string> names;        // base names: "ZZ1R" when regrouped, else the full name
   std::vector<std::string> expressions;  // "ZZ1 + YY2 + 0.186 M3" with the numbers filled in
   double tolerance = 1e-8;
   int rank() const { return static_cast<int>(independent.size()); }
@@ -39,14 +39,15 @@ struct BaseParameterOptions {
 };
 
 /// From a stacked full regressor and its column names.
-BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector<std::string>& names,
+BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,
+                                     const std::vector<std::string>& names,
                                      const BaseParameterOptions& opt = {});
 
 /// Stack `samples` calls of `rows(k, W_k)` (each returning rows of the full regressor) and
 /// compute the base parameters.
-BaseParameters computeBaseParameters(int samples, int rows_per_sample,
-                                     const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
-                                     const std::vector<std::string>& names,
-                                     const BaseParameterOptions& opt = {});
+BaseParameters computeBaseParameters(
+    int samples, int rows_per_sample,
+    const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
+    const std::vector<std::string>& names, const BaseParameterOptions& opt = {});
 
 }  // namespace exid

@@ -20,12 +20,12 @@ struct Samples {
 
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).
 struct Dataset {
-  Eigen::VectorXd t;                   // [s], strictly increasing
-  Eigen::MatrixXd q, qd, qdd;          // K x n, measured coordinates [rad or m, /s, /s^2]
-  Eigen::MatrixXd tau;                 // K x n [N m or N]
-  Eigen::MatrixXd wrench;              // K x 6 fx fy fz mx my mz, sensor frame [N, N m]
-  std::string source;                  // file or generator, for messages
-  Json meta = Json::object();          // what produced it (noise, seed, dropped rows, ...)
+  Eigen::VectorXd t;           // [s], strictly increasing
+  Eigen::MatrixXd q, qd, qdd;  // K x n, measured coordinates [rad or m, /s, /s^2]
+  Eigen::MatrixXd tau;         // K x n [N m or N]
+  Eigen::MatrixXd wrench;      // K x 6 fx fy fz mx my mz, sensor frame [N, N m]
+  std::string source;          // file or generator, for messages
+  Json meta = Json::object();  // what produced it (noise, seed, dropped rows, ...)
 
   int size() const { return static_cast<int>(t.size()); }
   int dof() const { return static_cast<int>(q.cols()); }

@@ -8,7 +8,8 @@
 //   pre = Rz(theta) Tz(d),  joint motion about/along z,  post = Tx(a) Rx(alpha).
 // (Rz(q) commutes with Rz(theta) and Tz(d), Tz(q) with Tz(d), so the product is A_i.)
 //
-// Modified DH (Craig 1986 / Khalil-Kleinfinger 1986), row i holds alpha_{i-1}, a_{i-1}, d_i, theta_i:
+// Modified DH (Craig 1986 / Khalil-Kleinfinger 1986), row i holds alpha_{i-1}, a_{i-1}, d_i,
+// theta_i:
 //   A_i = Rx(alpha_{i-1}) Tx(a_{i-1}) Rz(theta_i + q_i) Tz(d_i)   (revolute; prismatic: d_i + q_i)
 // Split: pre = Rx(alpha) Tx(a) Rz(theta) Tz(d), joint motion about/along z, post = identity.
 //

@@ -29,9 +29,9 @@ Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& col
 int numParameters(const RobotModel& model, const DriveColumns& cols);
 
 /// Joint coordinates from measured ones (identity when the model has no transmission).
-void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm,
-                     const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm, Eigen::VectorXd* q,
-                     Eigen::VectorXd* qd, Eigen::VectorXd* qdd);
+void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                     const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                     Eigen::VectorXd* qdd);
 /// Measured coordinates from joint ones (the transmission must be invertible).
 void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                      const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm,

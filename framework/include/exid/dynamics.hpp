@@ -47,9 +47,9 @@ void wrenchRegressor(const RobotModel& model, DynamicsData& data, const Eigen::V
                      Eigen::Ref<Eigen::Matrix<double, 6, 10>> A);
 
 /// The payload's contribution to the joint torques: n x 10, tau_payload = Yp * phi.
-void payloadTorqueRegressor(const RobotModel& model, DynamicsData& data,
-                            const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                            const Eigen::VectorXd& qdd, Eigen::Ref<Eigen::MatrixXd> Yp);
+void payloadTorqueRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                            const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                            Eigen::Ref<Eigen::MatrixXd> Yp);
 
 /// Inverse dynamics by recursive Newton-Euler with the model's own parameters (or pi if given,
 /// 10n stacked standard parameters). Rigid body only, no drive terms.
@@ -79,8 +79,7 @@ void torqueRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen
 /// Gradient of <Gk, kinetic> + <Gu, potential> with respect to q and qd.
 void energyRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
                         const Eigen::VectorXd& qd, const Eigen::RowVectorXd& Gk,
-                        const Eigen::RowVectorXd& Gu, Eigen::VectorXd* d_q,
-                        Eigen::VectorXd* d_qd);
+                        const Eigen::RowVectorXd& Gu, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd);
 /// Gradient of <G, A> (G 6 x 10) with respect to q, qd, qdd.
 void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
                         const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
@@ -90,8 +89,7 @@ void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen
 void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& data,
                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
-                               Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
-                               Eigen::VectorXd* d_qdd);
+                               Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd);
 
 /// Information-matrix accumulation M = sum_k W_k^T W_k over many small row blocks W_k (e.g. one
 /// regressor per sample), much faster than a rank update per block: rows are grouped by their

@@ -14,10 +14,10 @@
 namespace exid {
 
 struct ExcitationOptions {
-  double position_margin = 0.0;    // [rad or m] kept inside the position limits
+  double position_margin = 0.0;  // [rad or m] kept inside the position limits
   bool velocity_limits = true;
   bool acceleration_limits = true;
-  bool scale_columns = false;      // scale base columns by |nominal base parameter|
+  bool scale_columns = false;  // scale base columns by |nominal base parameter|
 };
 
 std::unique_ptr<ExcitationProblem> makeExcitationProblem(std::shared_ptr<Trajectory> trajectory,

@@ -178,7 +178,7 @@ struct Prior {
 };
 
 struct EstimatorSpecs {
-  bool recursive = false;       // produces a history
+  bool recursive = false;          // produces a history
   bool needs_raw_dataset = false;  // filters or differentiates the signals itself
   bool accepts_prior = false;
 };
@@ -202,8 +202,8 @@ class Estimator : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Estimator;
   virtual EstimatorSpecs specs() const { return {}; }
-  virtual Estimate estimate(const ObservationModel& model, const Dataset& data,
-                            const Prior* prior, const RunContext& ctx) = 0;
+  virtual Estimate estimate(const ObservationModel& model, const Dataset& data, const Prior* prior,
+                            const RunContext& ctx) = 0;
 };
 
 }  // namespace exid

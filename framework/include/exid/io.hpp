@@ -16,14 +16,14 @@ void writeFileAtomic(const std::filesystem::path& path, const std::string& text)
 /// A numeric table with named columns.
 struct CsvTable {
   std::vector<std::string> columns;
-  Eigen::MatrixXd data;  // rows x columns
+  Eigen::MatrixXd data;                    // rows x columns
   int col(const std::string& name) const;  // -1 when absent
   bool has(const std::string& name) const { return col(name) >= 0; }
   Eigen::VectorXd column(const std::string& name) const;
 };
 
 struct CsvReadOptions {
-  bool allow_non_finite = false;  // NaN/Inf cells are an error naming row and column unless set
+  bool allow_non_finite = false;      // NaN/Inf cells are an error naming row and column unless set
   bool drop_non_finite_rows = false;  // drop (and count) rows with NaN/Inf/empty cells instead
   char delimiter = 0;                 // 0: detect ',' ';' or tab from the header
 };
@@ -31,8 +31,8 @@ struct CsvReadOptions {
 /// Reads a CSV with a header line. Errors name the file, the line and the column.
 CsvTable readCsv(const std::filesystem::path& path, const CsvReadOptions& opt = {},
                  int* dropped_rows = nullptr);
-CsvTable parseCsv(const std::string& text, const std::string& source, const CsvReadOptions& opt = {},
-                  int* dropped_rows = nullptr);
+CsvTable parseCsv(const std::string& text, const std::string& source,
+                  const CsvReadOptions& opt = {}, int* dropped_rows = nullptr);
 /// CSV text (full double precision).
 std::string toCsv(const CsvTable& table);
 void writeCsvAtomic(const std::filesystem::path& path, const CsvTable& table);

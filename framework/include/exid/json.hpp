@@ -29,8 +29,16 @@ class Json {
   Json(const std::vector<double>& v);
   Json(const std::vector<std::string>& v);
 
-  static Json array() { Json j; j.type_ = Type::Array; return j; }
-  static Json object() { Json j; j.type_ = Type::Object; return j; }
+  static Json array() {
+    Json j;
+    j.type_ = Type::Array;
+    return j;
+  }
+  static Json object() {
+    Json j;
+    j.type_ = Type::Object;
+    return j;
+  }
 
   Type type() const { return type_; }
   bool isNull() const { return type_ == Type::Null; }

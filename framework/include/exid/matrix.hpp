@@ -34,9 +34,9 @@ class Registry;
 struct MatrixCell {
   int index = 0;
   std::vector<std::pair<std::string, std::string>> coords;  // axis -> short value label
-  std::string label;                                         // "robot=puma560 estimator=rls"
-  std::string yaml;                                          // the cell's study text
-  std::string hash;                                          // of the resolved configuration
+  std::string label;                                        // "robot=puma560 estimator=rls"
+  std::string yaml;                                         // the cell's study text
+  std::string hash;                                         // of the resolved configuration
   StudyConfig config;
 };
 
@@ -67,7 +67,8 @@ struct MatrixRunSummary {
   double wall_s = 0.0;
 };
 
-MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& registry, const MatrixOptions& opt);
+MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& registry,
+                           const MatrixOptions& opt);
 
 /// Markdown table of a metric (mean over the cells that share the row/column keys); also
 /// returns the CSV text. Rows/cols are axis names; metric is a metric name (exact, or the
@@ -81,6 +82,7 @@ MatrixTable matrixTable(const std::filesystem::path& db, const std::vector<std::
 std::vector<std::string> matrixMetrics(const std::filesystem::path& db);
 /// Copies the runs of the source databases into dest (created if needed), skipping hashes
 /// already present. Returns the number of runs copied.
-int mergeMatrixDatabases(const std::filesystem::path& dest, const std::vector<std::filesystem::path>& sources);
+int mergeMatrixDatabases(const std::filesystem::path& dest,
+                         const std::vector<std::filesystem::path>& sources);
 
 }  // namespace exid

@@ -25,8 +25,8 @@ struct ParamDecl {
   std::string name;
   ParamType type = ParamType::Double;
   std::optional<ParamValue> default_value;  // none: the parameter is required
-  std::string unit;                          // SI unit, "" when dimensionless
-  std::string doc;                           // one line
+  std::string unit;                         // SI unit, "" when dimensionless
+  std::string doc;                          // one line
   // Numeric range (applies to every element of a list). Open ends exclude the bound.
   std::optional<double> min, max;
   bool min_open = false, max_open = false;
@@ -52,8 +52,8 @@ ParamDecl param_bool(std::string name, bool def, std::string doc);
 ParamDecl param_string(std::string name, std::optional<std::string> def, std::string doc,
                        std::vector<std::string> choices = {});
 ParamDecl param_path(std::string name, std::optional<std::string> def, std::string doc);
-ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def,
-                        std::string unit, std::string doc, int min_size = 0, int max_size = -1);
+ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def, std::string unit,
+                        std::string doc, int min_size = 0, int max_size = -1);
 ParamDecl param_ints(std::string name, std::optional<std::vector<std::int64_t>> def,
                      std::string doc, std::optional<double> min = std::nullopt,
                      std::optional<double> max = std::nullopt);
@@ -70,7 +70,7 @@ class ParamSet {
 
   bool getBool(const std::string& name) const;
   std::int64_t getInt(const std::string& name) const;
-  double getDouble(const std::string& name) const;  // accepts Int values too
+  double getDouble(const std::string& name) const;              // accepts Int values too
   const std::string& getString(const std::string& name) const;  // String and Path
   std::vector<std::int64_t> getInts(const std::string& name) const;
   std::vector<double> getDoubles(const std::string& name) const;

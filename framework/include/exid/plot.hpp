@@ -11,7 +11,7 @@ namespace exid {
 struct PlotSeries {
   std::string title;
   std::vector<double> x, y;
-  std::string style = "lines";  // lines | points | linespoints | boxes | band
+  std::string style = "lines";        // lines | points | linespoints | boxes | band
   std::vector<double> y_low, y_high;  // style "band": filled band between them (y unused)
 };
 

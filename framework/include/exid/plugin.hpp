@@ -92,8 +92,8 @@ struct exid_build_fingerprint {
 };
 
 struct exid_manifest {
-  int abi_version;            // EXID_PLUGIN_ABI_VERSION of the library
-  unsigned manifest_size;     // sizeof(exid_manifest) of the library
+  int abi_version;         // EXID_PLUGIN_ABI_VERSION of the library
+  unsigned manifest_size;  // sizeof(exid_manifest) of the library
   exid_build_fingerprint fingerprint;
   /// Fills *out (an exid::PluginList*) with the plugins inside. Called only after the checks.
   void (*list_plugins)(void* out);
@@ -108,8 +108,7 @@ typedef const exid_manifest* (*exid_plugin_manifest_fn)(void);
 #if defined(__clang__)
 #define EXID_COMPILER_ID "Clang " __clang_version__
 #elif defined(__GNUC__)
-#define EXID_COMPILER_ID \
-  "GNU " EXID_STRINGIFY(__GNUC__) "." EXID_STRINGIFY(__GNUC_MINOR__)
+#define EXID_COMPILER_ID "GNU " EXID_STRINGIFY(__GNUC__) "." EXID_STRINGIFY(__GNUC_MINOR__)
 #else
 #define EXID_COMPILER_ID "unknown"
 #endif
@@ -122,15 +121,15 @@ typedef const exid_manifest* (*exid_plugin_manifest_fn)(void);
 #define EXID_STDLIB_ABI "unknown"
 #endif
 
-#define EXID_EIGEN_VERSION_STRING                                              \
-  EXID_STRINGIFY(EIGEN_WORLD_VERSION)                                          \
+#define EXID_EIGEN_VERSION_STRING     \
+  EXID_STRINGIFY(EIGEN_WORLD_VERSION) \
   "." EXID_STRINGIFY(EIGEN_MAJOR_VERSION) "." EXID_STRINGIFY(EIGEN_MINOR_VERSION)
 
 /// The fingerprint of the code being compiled now (core or plugin).
-#define EXID_BUILD_FINGERPRINT                                                          \
-  exid_build_fingerprint {                                                              \
+#define EXID_BUILD_FINGERPRINT                                                           \
+  exid_build_fingerprint {                                                               \
     EXID_COMPILER_ID, EXID_STDLIB_ABI, EXID_EIGEN_VERSION_STRING, EIGEN_MAX_ALIGN_BYTES, \
-        EXID_VERSION_STRING                                                             \
+        EXID_VERSION_STRING                                                              \
   }
 
 #ifndef EXID_PLUGIN_ABI_OVERRIDE
@@ -138,19 +137,17 @@ typedef const exid_manifest* (*exid_plugin_manifest_fn)(void);
 #endif
 
 /// Registers the plugin classes of this library (one or more). Place once, at the end of a file.
-#define EXID_REGISTER_PLUGIN(...)                                                       \
-  namespace {                                                                           \
-  template <class... Ts>                                                                \
-  void exid_list_plugins_impl(void* out) {                                              \
-    auto* list = static_cast<exid::PluginList*>(out);                                   \
-    (list->push_back(exid::describePlugin<Ts>()), ...);                                 \
-  }                                                                                     \
-  void exid_list_plugins(void* out) { exid_list_plugins_impl<__VA_ARGS__>(out); }       \
-  }                                                                                     \
-  extern "C" __attribute__((visibility("default"))) const exid_manifest*         \
-  exid_plugin_manifest() {                                                              \
-    static const exid_manifest m{EXID_PLUGIN_ABI_OVERRIDE,                              \
-                                        sizeof(exid_manifest),                          \
-                                        EXID_BUILD_FINGERPRINT, &exid_list_plugins};    \
-    return &m;                                                                          \
+#define EXID_REGISTER_PLUGIN(...)                                                                 \
+  namespace {                                                                                     \
+  template <class... Ts>                                                                          \
+  void exid_list_plugins_impl(void* out) {                                                        \
+    auto* list = static_cast<exid::PluginList*>(out);                                             \
+    (list->push_back(exid::describePlugin<Ts>()), ...);                                           \
+  }                                                                                               \
+  void exid_list_plugins(void* out) { exid_list_plugins_impl<__VA_ARGS__>(out); }                 \
+  }                                                                                               \
+  extern "C" __attribute__((visibility("default"))) const exid_manifest* exid_plugin_manifest() { \
+    static const exid_manifest m{EXID_PLUGIN_ABI_OVERRIDE, sizeof(exid_manifest),                 \
+                                 EXID_BUILD_FINGERPRINT, &exid_list_plugins};                     \
+    return &m;                                                                                    \
   }

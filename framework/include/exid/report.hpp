@@ -28,7 +28,7 @@ class Report {
   const StudyConfig& cfg_;
   std::filesystem::path dir_;
   std::vector<std::string> sections_;  // markdown; "@@PLOTS:<section index>@@" placeholders
-  std::vector<std::pair<std::size_t, PlotSpec>> plots_;  // section index, plot
+  std::vector<std::pair<std::size_t, PlotSpec>> plots_;     // section index, plot
   std::vector<std::pair<std::string, std::string>> files_;  // name, content
 };
 

@@ -60,8 +60,8 @@ struct RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
   std::vector<Body> bodies;
-  std::vector<JointLimits> limits;  // one per body/joint, joint coordinates
-  std::vector<Drive> drives;        // one per measured coordinate
+  std::vector<JointLimits> limits;           // one per body/joint, joint coordinates
+  std::vector<Drive> drives;                 // one per measured coordinate
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};  // in the base frame [m/s^2]
   /// Measured (motor or absolute) coordinates qm relate to joint coordinates by
   /// q = transmission * qm + transmission_offset; torques by tau_m = transmission^T tau.

@@ -16,8 +16,8 @@
 namespace exid {
 
 struct UrdfWriteOptions {
-  std::string comment;           // written as an XML comment at the top (no "--")
-  std::string root_link = "";    // name of the massless root link ("" = "base_link" or a free name)
+  std::string comment;         // written as an XML comment at the top (no "--")
+  std::string root_link = "";  // name of the massless root link ("" = "base_link" or a free name)
 };
 
 /// Throws exid::Error when a body cannot be written (mass <= 0 with non-zero parameters, or

@@ -21,8 +21,9 @@
 namespace exid {
 
 Eigen::MatrixXd BaseParameters::columns(const Eigen::MatrixXd& W_full) const {
-  check(W_full.cols() == numFull(), "BaseParameters::columns: the regressor has " + std::to_string(W_full.cols()) +
-                                        " columns (expected " + std::to_string(numFull()) + ")");
+  check(W_full.cols() == numFull(), "BaseParameters::columns: the regressor has " +
+                                        std::to_string(W_full.cols()) + " columns (expected " +
+                                        std::to_string(numFull()) + ")");
   Eigen::MatrixXd W(W_full.rows(), rank());
   for (int k = 0; k < rank(); ++k) W.col(k) = W_full.col(independent[static_cast<size_t>(k)]);
   return W;
@@ -38,13 +39,16 @@ std::string formatCoef(double c) {
 
 }  // namespace
 
-BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector<std::string>& names,
+BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,
+                                     const std::vector<std::string>& names,
                                      const BaseParameterOptions& opt) {
   const Eigen::Index p = W.cols(), N = W.rows();
   check(static_cast<Eigen::Index>(names.size()) == p,
-        "computeBaseParameters: " + std::to_string(names.size()) + " names for " + std::to_string(p) + " columns");
+        "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
+            std::to_string(p) + " columns");
   check(W.allFinite(), "computeBaseParameters: the stacked regressor contains non-finite numbers");
-  check(opt.tolerance > 0.0 && opt.tolerance < 1.0, "computeBaseParameters: tolerance must be in (0, 1)");
+  check(opt.tolerance > 0.0 && opt.tolerance < 1.0,
+        "computeBaseParameters: tolerance must be in (0, 1)");
   BaseParameters bp;
   bp.full_names = names;
   bp.tolerance = opt.tolerance;
@@ -52,12 +56,15 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector
   Eigen::VectorXd norms = W.colwise().norm().transpose();
   const double max_norm = p > 0 ? norms.maxCoeff() : 0.0;
   std::vector<bool> zero(static_cast<size_t>(p), false);
-  for (Eigen::Index k = 0; k < p; ++k) zero[static_cast<size_t>(k)] = !(norms[k] > opt.tolerance * max_norm) || max_norm == 0.0;
+  for (Eigen::Index k = 0; k < p; ++k)
+    zero[static_cast<size_t>(k)] = !(norms[k] > opt.tolerance * max_norm) || max_norm == 0.0;
 
   Eigen::MatrixXd A(N, p);
   for (Eigen::Index k = 0; k < p; ++k) {
-    const double s = (opt.normalize_columns && !zero[static_cast<size_t>(k)]) ? 1.0 / norms[k] : 1.0;
-    A.col(k) = zero[static_cast<size_t>(k)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(k) * s);
+    const double s =
+        (opt.normalize_columns && !zero[static_cast<size_t>(k)]) ? 1.0 / norms[k] : 1.0;
+    A.col(k) =
+        zero[static_cast<size_t>(k)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(k) * s);
   }
 
   // Sequential Householder QR, keeping a column when |R_kk| > tol * |R_00|.
@@ -98,7 +105,8 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector
   }
   if (rank_cp != static_cast<int>(ind.size())) {
     ind.clear();
-    for (int k = 0; k < rank_cp; ++k) ind.push_back(static_cast<int>(cpqr.colsPermutation().indices()[k]));
+    for (int k = 0; k < rank_cp; ++k)
+      ind.push_back(static_cast<int>(cpqr.colsPermutation().indices()[k]));
     std::sort(ind.begin(), ind.end());
   }
   bp.independent = ind;
@@ -145,12 +153,16 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W, const std::vector
   return bp;
 }
 
-BaseParameters computeBaseParameters(int samples, int rows_per_sample,
-                                     const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
-                                     const std::vector<std::string>& names, const BaseParameterOptions& opt) {
-  check(samples > 0 && rows_per_sample > 0, "computeBaseParameters: samples and rows_per_sample must be positive");
-  Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * rows_per_sample, static_cast<Eigen::Index>(names.size()));
-  for (int k = 0; k < samples; ++k) rows(k, W.middleRows(static_cast<Eigen::Index>(k) * rows_per_sample, rows_per_sample));
+BaseParameters computeBaseParameters(
+    int samples, int rows_per_sample,
+    const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
+    const std::vector<std::string>& names, const BaseParameterOptions& opt) {
+  check(samples > 0 && rows_per_sample > 0,
+        "computeBaseParameters: samples and rows_per_sample must be positive");
+  Eigen::MatrixXd W(static_cast<Eigen::Index>(samples) * rows_per_sample,
+                    static_cast<Eigen::Index>(names.size()));
+  for (int k = 0; k < samples; ++k)
+    rows(k, W.middleRows(static_cast<Eigen::Index>(k) * rows_per_sample, rows_per_sample));
   return computeBaseParameters(W, names, opt);
 }
 

@@ -13,10 +13,11 @@ namespace {
 
 inline double sgn(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
 
-void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* what, const char* fn) {
+void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* what,
+                   const char* fn) {
   if (x.size() != m.dof())  // the message is built only on failure (hot path)
-    throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) + " entries (expected " +
-                std::to_string(m.dof()) + ")");
+    throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
+                " entries (expected " + std::to_string(m.dof()) + ")");
 }
 
 }  // namespace
@@ -43,7 +44,8 @@ Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& col
   v.head(10 * n) = model.inertialParameters();
   int c = 10 * n;
   for (int j = 0; j < n; ++j) {
-    const Drive dr = j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
+    const Drive dr =
+        j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
     if (cols.rotor_inertia) v[c++] = dr.rotor_inertia;
     if (cols.coulomb) v[c++] = dr.coulomb;
     if (cols.viscous) v[c++] = dr.viscous;
@@ -53,7 +55,8 @@ Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& col
 }
 
 void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
-                     const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd) {
+                     const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                     Eigen::VectorXd* qdd) {
   const bool T = model.hasTransmission();
   if (q) {
     checkMeasured(model, qm, "qm", "measuredToJoint");
@@ -80,9 +83,13 @@ void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const E
 }
 
 void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                     const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm) {
+                     const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm,
+                     Eigen::VectorXd* qddm) {
   if (!model.hasTransmission()) {
-    if (qm) *qm = model.transmission_offset.size() == q.size() ? Eigen::VectorXd(q - model.transmission_offset) : q;
+    if (qm)
+      *qm = model.transmission_offset.size() == q.size()
+                ? Eigen::VectorXd(q - model.transmission_offset)
+                : q;
     if (qdm) *qdm = qd;
     if (qddm) *qddm = qdd;
     return;
@@ -92,7 +99,9 @@ void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Ei
                                "' is singular (expected an invertible n x n matrix)");
   if (qm) {
     checkMeasured(model, q, "q", "jointToMeasured");
-    *qm = lu.solve(model.transmission_offset.size() == q.size() ? Eigen::VectorXd(q - model.transmission_offset) : q);
+    *qm = lu.solve(model.transmission_offset.size() == q.size()
+                       ? Eigen::VectorXd(q - model.transmission_offset)
+                       : q);
   }
   if (qdm) {
     checkMeasured(model, qd, "qd", "jointToMeasured");
@@ -105,8 +114,8 @@ void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Ei
 }
 
 void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                       const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
-                       Eigen::Ref<Eigen::MatrixXd> Y) {
+                       const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                       const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y) {
   const int n = model.dof();
   check(Y.rows() == n && Y.cols() == numParameters(model, cols),
         "actuatorRegressor: Y must be n x numParameters(model, cols)");
@@ -142,9 +151,9 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
 }
 
 void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                          const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
-                          const Eigen::MatrixXd& G, Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm,
-                          Eigen::VectorXd* d_qddm) {
+                          const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                          const Eigen::VectorXd& qddm, const Eigen::MatrixXd& G,
+                          Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm) {
   const int n = model.dof();
   check(G.rows() == n && G.cols() == numParameters(model, cols),
         "actuatorRegressorVjp: G must be n x numParameters(model, cols)");
@@ -179,15 +188,18 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
   }
 }
 
-Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                               const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm) {
+Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
+                               const DriveColumns& cols, const Eigen::VectorXd& qm,
+                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm) {
   const int n = model.dof();
   Eigen::VectorXd q, qd, qdd;
   measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
   const Eigen::VectorXd tau = inverseDynamics(model, data, q, qd, qdd);
-  Eigen::VectorXd tm = model.hasTransmission() ? Eigen::VectorXd(model.transmission.transpose() * tau) : tau;
+  Eigen::VectorXd tm =
+      model.hasTransmission() ? Eigen::VectorXd(model.transmission.transpose() * tau) : tau;
   for (int j = 0; j < n; ++j) {
-    const Drive dr = j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
+    const Drive dr =
+        j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
     if (cols.rotor_inertia) tm[j] += dr.rotor_inertia * qddm[j];
     if (cols.coulomb) tm[j] += dr.coulomb * sgn(qdm[j]);
     if (cols.viscous) tm[j] += dr.viscous * qdm[j];

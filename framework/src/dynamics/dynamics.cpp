@@ -32,14 +32,23 @@ struct SV {  // spatial vector {angular, linear}
   V3 w = V3::Zero(), v = V3::Zero();
   SV() = default;
   SV(const V3& a, const V3& b) : w(a), v(b) {}
-  void setZero() { w.setZero(); v.setZero(); }
+  void setZero() {
+    w.setZero();
+    v.setZero();
+  }
 };
 inline SV operator+(const SV& a, const SV& b) { return {a.w + b.w, a.v + b.v}; }
 inline SV operator*(const SV& a, double s) { return {a.w * s, a.v * s}; }
-inline SV& operator+=(SV& a, const SV& b) { a.w += b.w; a.v += b.v; return a; }
+inline SV& operator+=(SV& a, const SV& b) {
+  a.w += b.w;
+  a.v += b.v;
+  return a;
+}
 inline double dot(const SV& a, const SV& b) { return a.w.dot(b.w) + a.v.dot(b.v); }
 // motion cross product a x b
-inline SV crm(const SV& a, const SV& b) { return {a.w.cross(b.w), a.w.cross(b.v) + a.v.cross(b.w)}; }
+inline SV crm(const SV& a, const SV& b) {
+  return {a.w.cross(b.w), a.w.cross(b.v) + a.v.cross(b.w)};
+}
 // c . (a x b) for motion cross
 inline double dotCrm(const SV& a, const SV& b, const SV& c) {
   return c.w.dot(a.w.cross(b.w)) + c.v.dot(a.w.cross(b.v) + a.v.cross(b.w));
@@ -62,7 +71,8 @@ inline V3 symMul(const P& g, const V3& x) {
 }
 
 struct Kin {
-  V3 w, wd, ao;  // angular velocity, angular acceleration, classical acceleration of the origin (incl. -g)
+  V3 w, wd, ao;  // angular velocity, angular acceleration, classical acceleration of the origin
+                 // (incl. -g)
 };
 
 // Newton-Euler wrench {n, f} of a body with parameters g (pi order) and kinematics k.
@@ -105,7 +115,8 @@ inline void pairKinGrad(const SV& s, const P& g, const Kin& k, V3& wb, V3& wdb, 
   const V3& sv = s.v;
   wdb += symMul(g, sw) + h.cross(sv);
   aob += sw.cross(h) + m * sv;
-  wb += symMul(g, k.w).cross(sw) + symMul(g, sw.cross(k.w)) + h.cross(sv.cross(k.w)) + k.w.cross(h).cross(sv);
+  wb += symMul(g, k.w).cross(sw) + symMul(g, sw.cross(k.w)) + h.cross(sv.cross(k.w)) +
+        k.w.cross(h).cross(sv);
 }
 
 struct JointC {
@@ -166,9 +177,9 @@ void setup(const RobotModel& model, DynamicsData& d) {
   d.anc_idx.clear();
   for (int j = 0; j < n; ++j) {
     const Body& b = model.bodies[static_cast<size_t>(j)];
-    check(b.parent >= -1 && b.parent < j,
-          "dynamics: body " + std::to_string(j + 1) + " has parent " + std::to_string(b.parent) +
-              " (expected -1 <= parent < own index)");
+    check(b.parent >= -1 && b.parent < j, "dynamics: body " + std::to_string(j + 1) +
+                                              " has parent " + std::to_string(b.parent) +
+                                              " (expected -1 <= parent < own index)");
     JointC& c = d.J[static_cast<size_t>(j)];
     c.parent = b.parent;
     c.revolute = b.type == JointType::Revolute;
@@ -218,7 +229,8 @@ void setup(const RobotModel& model, DynamicsData& d) {
   d.ssb.assign(N, SV());
   d.zero_n = Eigen::VectorXd::Zero(n);
   d.tmp_n = Eigen::VectorXd::Zero(n);
-  for (int j = 0; j < n; ++j) d.s[static_cast<size_t>(d.anc_off[static_cast<size_t>(j)])] = d.J[static_cast<size_t>(j)].S;
+  for (int j = 0; j < n; ++j)
+    d.s[static_cast<size_t>(d.anc_off[static_cast<size_t>(j)])] = d.J[static_cast<size_t>(j)].S;
 }
 
 inline void prepare(const RobotModel& model, DynamicsData& d) {
@@ -227,8 +239,8 @@ inline void prepare(const RobotModel& model, DynamicsData& d) {
 
 void checkSize(const Eigen::VectorXd& x, int n, const char* what, const char* fn) {
   if (x.size() != n)
-    throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) + " entries (expected " +
-                std::to_string(n) + ")");
+    throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
+                " entries (expected " + std::to_string(n) + ")");
 }
 
 void checkState(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd* qd,
@@ -241,7 +253,8 @@ void checkState(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::Vect
 
 enum class Level { Position, Velocity, Acceleration };
 
-// Forward pass: poses (R, p), velocities, accelerations (with gravity if `gravity`), body kinematics.
+// Forward pass: poses (R, p), velocities, accelerations (with gravity if `gravity`), body
+// kinematics.
 void forwardPass(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
                  const double* qdd, Level level, bool gravity) {
   const int n = d.n;
@@ -299,7 +312,8 @@ void ancestorSubspaces(DynamicsData& d) {
     const int cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
     const M3& R = d.R[static_cast<size_t>(j)];
     const V3& p = d.p[static_cast<size_t>(j)];
-    for (int k = 1; k < cnt; ++k) d.s[static_cast<size_t>(oj + k)] = xMotion(R, p, d.s[static_cast<size_t>(op + k - 1)]);
+    for (int k = 1; k < cnt; ++k)
+      d.s[static_cast<size_t>(oj + k)] = xMotion(R, p, d.s[static_cast<size_t>(op + k - 1)]);
   }
 }
 
@@ -314,8 +328,10 @@ void sensorKinematics(const RobotModel& model, DynamicsData& d, bool subspaces) 
   d.ks.wd = d.as.w;
   d.ks.ao = d.as.v + d.vs.w.cross(d.vs.v);
   if (subspaces) {
-    const int ob = d.anc_off[static_cast<size_t>(b)], cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
-    for (int k = 0; k < cnt; ++k) d.ss[static_cast<size_t>(k)] = xMotion(d.Rs, d.ps, d.s[static_cast<size_t>(ob + k)]);
+    const int ob = d.anc_off[static_cast<size_t>(b)],
+              cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
+    for (int k = 0; k < cnt; ++k)
+      d.ss[static_cast<size_t>(k)] = xMotion(d.Rs, d.ps, d.s[static_cast<size_t>(ob + k)]);
   }
 }
 
@@ -333,8 +349,8 @@ void clearAdjoints(DynamicsData& d, bool subspaces) {
 
 // Reverse pass: from adjoints of the body kinematics (wb, wdb, aob), of v / a (vb, ab) and of the
 // ancestor subspaces (sb) to gradients in q, qd, qdd. Outputs are overwritten (may be null).
-void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces, double* gq, double* gqd,
-                 double* gqdd) {
+void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces, double* gq,
+                 double* gqd, double* gqdd) {
   for (int j = d.n - 1; j >= 0; --j) {
     const size_t J = static_cast<size_t>(j);
     const JointC& c = d.J[J];
@@ -365,7 +381,8 @@ void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces,
     const V3& p = d.p[J];
     const int oj = d.anc_off[J], cnt = d.anc_off[J + 1] - oj;
     if (subspaces)
-      for (int k = 1; k < cnt; ++k) dq -= dotCrm(S, d.s[static_cast<size_t>(oj + k)], d.sb[static_cast<size_t>(oj + k)]);
+      for (int k = 1; k < cnt; ++k)
+        dq -= dotCrm(S, d.s[static_cast<size_t>(oj + k)], d.sb[static_cast<size_t>(oj + k)]);
     if (par >= 0) {
       const size_t Pp = static_cast<size_t>(par);
       d.vb[Pp] += xForceT(R, p, vb);
@@ -383,7 +400,8 @@ void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces,
 }
 
 // Adjoint of the sensor kinematics (given d.ks adjoints) into the sensor body's v / a adjoints.
-void sensorReverse(const RobotModel& model, DynamicsData& d, const V3& wb, const V3& wdb, const V3& aob) {
+void sensorReverse(const RobotModel& model, DynamicsData& d, const V3& wb, const V3& wdb,
+                   const V3& aob) {
   const int b = model.sensorBody();
   const SV asb(wdb, aob);
   const SV vsb(wb + d.vs.v.cross(aob), aob.cross(d.vs.w));
@@ -420,7 +438,8 @@ DynamicsDataPtr makeDynamicsData(const RobotModel& model) {
 }
 
 void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd, Eigen::Ref<Eigen::MatrixXd> Y) {
+                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                     Eigen::Ref<Eigen::MatrixXd> Y) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "torqueRegressor");
@@ -429,11 +448,13 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   ancestorSubspaces(d);
   Y.setZero();
   for (int j = 0; j < n; ++j) {
-    const int oj = d.anc_off[static_cast<size_t>(j)], cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
+    const int oj = d.anc_off[static_cast<size_t>(j)],
+              cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
     const Kin& k = d.kin[static_cast<size_t>(j)];
     for (int t = 0; t < cnt; ++t) {
       const int i = d.anc_idx[static_cast<size_t>(oj + t)];
-      pairRow(d.s[static_cast<size_t>(oj + t)], k, [&](int col) -> double& { return Y(i, 10 * j + col); });
+      pairRow(d.s[static_cast<size_t>(oj + t)], k,
+              [&](int col) -> double& { return Y(i, 10 * j + col); });
     }
   }
 }
@@ -508,7 +529,8 @@ void wrenchRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
 }
 
 void payloadTorqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                            const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd, Eigen::Ref<Eigen::MatrixXd> Yp) {
+                            const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                            Eigen::Ref<Eigen::MatrixXd> Yp) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "payloadTorqueRegressor");
@@ -518,7 +540,8 @@ void payloadTorqueRegressor(const RobotModel& model, DynamicsData& d, const Eige
   sensorKinematics(model, d, true);
   Yp.setZero();
   const int b = model.sensorBody();
-  const int ob = d.anc_off[static_cast<size_t>(b)], cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
+  const int ob = d.anc_off[static_cast<size_t>(b)],
+            cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
   for (int t = 0; t < cnt; ++t) {
     const int i = d.anc_idx[static_cast<size_t>(ob + t)];
     Vec10 row;
@@ -528,7 +551,8 @@ void payloadTorqueRegressor(const RobotModel& model, DynamicsData& d, const Eige
 }
 
 Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi) {
+                                const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                                const Eigen::VectorXd* pi) {
   prepare(model, d);
   checkState(model, q, &qd, &qdd, "inverseDynamics");
   if (pi) checkSize(*pi, 10 * d.n, "pi", "inverseDynamics");
@@ -547,7 +571,8 @@ Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& d, const Eigen
   forwardPass(model, d, q.data(), nullptr, nullptr, Level::Position, false);
   using M6 = Eigen::Matrix<double, 6, 6>;
   for (int j = 0; j < n; ++j) {
-    const double* g = pi ? pi->data() + 10 * j : model.bodies[static_cast<size_t>(j)].inertia.data();
+    const double* g =
+        pi ? pi->data() + 10 * j : model.bodies[static_cast<size_t>(j)].inertia.data();
     M6& I = d.Ic[static_cast<size_t>(j)];
     M3 In;
     In << g[0], g[1], g[2], g[1], g[3], g[4], g[2], g[4], g[5];
@@ -583,7 +608,8 @@ Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& d, const Eigen
     return x;
   };
   for (int i = 0; i < n; ++i) {
-    Eigen::Matrix<double, 6, 1> F = d.Ic[static_cast<size_t>(i)] * toVec(d.J[static_cast<size_t>(i)].S);
+    Eigen::Matrix<double, 6, 1> F =
+        d.Ic[static_cast<size_t>(i)] * toVec(d.J[static_cast<size_t>(i)].S);
     M(i, i) = toVec(d.J[static_cast<size_t>(i)].S).dot(F);
     int j = i;
     while (d.J[static_cast<size_t>(j)].parent >= 0) {
@@ -596,7 +622,8 @@ Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& d, const Eigen
 }
 
 Eigen::VectorXd forwardDynamics(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                                const Eigen::VectorXd& qd, const Eigen::VectorXd& tau, const Eigen::VectorXd* pi) {
+                                const Eigen::VectorXd& qd, const Eigen::VectorXd& tau,
+                                const Eigen::VectorXd* pi) {
   prepare(model, d);
   checkState(model, q, &qd, nullptr, "forwardDynamics");
   checkSize(tau, d.n, "tau", "forwardDynamics");
@@ -621,8 +648,9 @@ Pose bodyPose(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q
 }
 
 void torqueRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
-                        Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd) {
+                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                        const Eigen::MatrixXd& G, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                        Eigen::VectorXd* d_qdd) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "torqueRegressorVjp");
@@ -653,12 +681,13 @@ void torqueRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::V
 }
 
 void energyRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                        const Eigen::VectorXd& qd, const Eigen::RowVectorXd& Gk, const Eigen::RowVectorXd& Gu,
-                        Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd) {
+                        const Eigen::VectorXd& qd, const Eigen::RowVectorXd& Gk,
+                        const Eigen::RowVectorXd& Gu, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, nullptr, "energyRegressorVjp");
-  check(Gk.size() == 10 * n && Gu.size() == 10 * n, "energyRegressorVjp: Gk and Gu must have 10n entries");
+  check(Gk.size() == 10 * n && Gu.size() == 10 * n,
+        "energyRegressorVjp: Gk and Gu must have 10n entries");
   // Kinetic part: reverse mode through the velocity recursion.
   forwardPass(model, d, q.data(), qd.data(), nullptr, Level::Velocity, false);
   clearAdjoints(d, false);
@@ -686,8 +715,8 @@ void energyRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::V
 
 void wrenchRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
                         const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                        const Eigen::Matrix<double, 6, 10>& G, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
-                        Eigen::VectorXd* d_qdd) {
+                        const Eigen::Matrix<double, 6, 10>& G, Eigen::VectorXd* d_q,
+                        Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "wrenchRegressorVjp");
@@ -710,8 +739,9 @@ void wrenchRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::V
 }
 
 void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
-                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
-                               Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd) {
+                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                               const Eigen::MatrixXd& G, Eigen::VectorXd* d_q,
+                               Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd) {
   prepare(model, d);
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "payloadTorqueRegressorVjp");
@@ -721,7 +751,8 @@ void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& d, const E
   sensorKinematics(model, d, true);
   clearAdjoints(d, true);
   const int b = model.sensorBody();
-  const int ob = d.anc_off[static_cast<size_t>(b)], cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
+  const int ob = d.anc_off[static_cast<size_t>(b)],
+            cnt = d.anc_off[static_cast<size_t>(b) + 1] - ob;
   V3 wb = V3::Zero(), wdb = V3::Zero(), aob = V3::Zero();
   for (int t = 0; t < cnt; ++t) {
     const int i = d.anc_idx[static_cast<size_t>(ob + t)];

@@ -51,7 +51,8 @@ void kernelGeneric(double* acc, int ld, const double* B, int ldb, int k, int m) 
 // AVX2 + FMA kernel. Rows of acc have room for roundUp4(m) entries past the diagonal block
 // start and B rows are zero-padded to roundUp4(m), so full vectors can be used (the extra
 // entries land in the unused upper triangle).
-__attribute__((target("avx2,fma"))) void kernelAvx2(double* acc, int ld, const double* B, int ldb, int k, int m) {
+__attribute__((target("avx2,fma"))) void kernelAvx2(double* acc, int ld, const double* B, int ldb,
+                                                    int k, int m) {
   for (int i = 0; i < m; ++i) {
     double* A = acc + static_cast<long>(i) * ld;
     const int len4 = roundUp4(i + 1);
@@ -76,7 +77,8 @@ __attribute__((target("avx2,fma"))) void kernelAvx2(double* acc, int ld, const d
       const double* B0 = B + static_cast<long>(r) * ldb;
       const __m256d b0 = _mm256_set1_pd(B0[i]);
       for (int j = 0; j < len4; j += 4)
-        _mm256_storeu_pd(A + j, _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), _mm256_loadu_pd(A + j)));
+        _mm256_storeu_pd(A + j,
+                         _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), _mm256_loadu_pd(A + j)));
     }
   }
 }
@@ -95,8 +97,8 @@ bool haveAvx2() {
 struct GramAccumulator::Impl {
   int c = 0, ld = 0;
   long rows = 0;
-  std::vector<double> acc;                  // c x ld, row-major, lower triangle used
-  std::vector<std::vector<double>> buf;     // per first non-zero column
+  std::vector<double> acc;               // c x ld, row-major, lower triangle used
+  std::vector<std::vector<double>> buf;  // per first non-zero column
   std::vector<int> count;
   Eigen::MatrixXd M;
   bool dirty = true;
@@ -173,7 +175,9 @@ const Eigen::MatrixXd& GramAccumulator::matrix() {
   if (I.dirty) {
     for (int s = 0; s < I.c; ++s) I.flush(s);
     for (int i = 0; i < I.c; ++i)
-      for (int j = 0; j <= i; ++j) I.M(i, j) = I.M(j, i) = I.acc[static_cast<size_t>(i) * static_cast<size_t>(I.ld) + static_cast<size_t>(j)];
+      for (int j = 0; j <= i; ++j)
+        I.M(i, j) = I.M(j, i) =
+            I.acc[static_cast<size_t>(i) * static_cast<size_t>(I.ld) + static_cast<size_t>(j)];
     I.dirty = false;
   }
   return I.M;

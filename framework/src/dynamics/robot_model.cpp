@@ -59,7 +59,8 @@ std::vector<std::string> RobotModel::inertialParameterNames() const {
   std::vector<std::string> names;
   names.reserve(static_cast<size_t>(numInertialParameters()));
   for (int j = 0; j < dof(); ++j)
-    for (int k = 0; k < 10; ++k) names.push_back(std::string(kInertialNames[k]) + std::to_string(j + 1));
+    for (int k = 0; k < 10; ++k)
+      names.push_back(std::string(kInertialNames[k]) + std::to_string(j + 1));
   return names;
 }
 
@@ -71,7 +72,8 @@ Eigen::VectorXd RobotModel::inertialParameters() const {
 
 void RobotModel::validateStructure() const {
   const int n = dof();
-  if (n == 0) throw Error(where(*this) + ": the model has no moving body (expected at least one joint)");
+  if (n == 0)
+    throw Error(where(*this) + ": the model has no moving body (expected at least one joint)");
   std::set<std::string> body_names, joint_names;
   for (int i = 0; i < n; ++i) {
     const Body& b = bodies[static_cast<size_t>(i)];
@@ -82,7 +84,8 @@ void RobotModel::validateStructure() const {
       throw Error(os.str());
     }
     if (!b.name.empty() && !body_names.insert(b.name).second)
-      throw Error(where(*this) + ": " + bodyLabel(*this, i) + ": duplicate body name '" + b.name + "'");
+      throw Error(where(*this) + ": " + bodyLabel(*this, i) + ": duplicate body name '" + b.name +
+                  "'");
     if (!b.joint_name.empty() && !joint_names.insert(b.joint_name).second)
       throw Error(where(*this) + ": " + bodyLabel(*this, i) + ": duplicate joint name '" +
                   b.joint_name + "'");
@@ -101,37 +104,42 @@ void RobotModel::validateStructure() const {
   }
   if (static_cast<int>(limits.size()) != n) {
     std::ostringstream os;
-    os << where(*this) << ": " << limits.size() << " joint limit entries (expected one per joint, " << n << ")";
+    os << where(*this) << ": " << limits.size() << " joint limit entries (expected one per joint, "
+       << n << ")";
     throw Error(os.str());
   }
   for (int i = 0; i < n; ++i) {
     const JointLimits& L = limits[static_cast<size_t>(i)];
-    if (std::isnan(L.q_min) || std::isnan(L.q_max) || std::isnan(L.qd_max) || std::isnan(L.qdd_max) ||
-        std::isnan(L.tau_max) || L.q_min > L.q_max || L.qd_max < 0 || L.qdd_max < 0 || L.tau_max < 0)
+    if (std::isnan(L.q_min) || std::isnan(L.q_max) || std::isnan(L.qd_max) ||
+        std::isnan(L.qdd_max) || std::isnan(L.tau_max) || L.q_min > L.q_max || L.qd_max < 0 ||
+        L.qdd_max < 0 || L.tau_max < 0)
       throw Error(where(*this) + ": " + bodyLabel(*this, i) +
                   ": invalid limits (expected q_min <= q_max and non-negative qd/qdd/tau limits)");
   }
   if (static_cast<int>(drives.size()) != n) {
     std::ostringstream os;
-    os << where(*this) << ": " << drives.size() << " drive entries (expected one per measured coordinate, " << n << ")";
+    os << where(*this) << ": " << drives.size()
+       << " drive entries (expected one per measured coordinate, " << n << ")";
     throw Error(os.str());
   }
   if (hasTransmission()) {
     if (transmission.rows() != n || transmission.cols() != n || !transmission.allFinite()) {
       std::ostringstream os;
-      os << where(*this) << ": transmission is " << transmission.rows() << "x" << transmission.cols()
-         << " (expected a finite " << n << "x" << n << " matrix)";
+      os << where(*this) << ": transmission is " << transmission.rows() << "x"
+         << transmission.cols() << " (expected a finite " << n << "x" << n << " matrix)";
       throw Error(os.str());
     }
   }
   if (transmission_offset.size() != 0 && transmission_offset.size() != n) {
     std::ostringstream os;
-    os << where(*this) << ": transmission_offset has " << transmission_offset.size() << " entries (expected 0 or " << n << ")";
+    os << where(*this) << ": transmission_offset has " << transmission_offset.size()
+       << " entries (expected 0 or " << n << ")";
     throw Error(os.str());
   }
   if (sensor_body < -1 || sensor_body >= n) {
     std::ostringstream os;
-    os << where(*this) << ": sensor_body " << sensor_body << " out of range (expected -1 or 0.." << n - 1 << ")";
+    os << where(*this) << ": sensor_body " << sensor_body << " out of range (expected -1 or 0.."
+       << n - 1 << ")";
     throw Error(os.str());
   }
   if (!finite(sensor_pose)) throw Error(where(*this) + ": non-finite sensor_pose");
@@ -141,7 +149,8 @@ void RobotModel::validateStructure() const {
 
 Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,
                                              const Eigen::Matrix3d& I_com) {
-  const Eigen::Matrix3d I = I_com + mass * (com.squaredNorm() * Eigen::Matrix3d::Identity() - com * com.transpose());
+  const Eigen::Matrix3d I =
+      I_com + mass * (com.squaredNorm() * Eigen::Matrix3d::Identity() - com * com.transpose());
   Eigen::Matrix<double, 10, 1> pi;
   pi << I(0, 0), 0.5 * (I(0, 1) + I(1, 0)), 0.5 * (I(0, 2) + I(2, 0)), I(1, 1),
       0.5 * (I(1, 2) + I(2, 1)), I(2, 2), mass * com.x(), mass * com.y(), mass * com.z(), mass;
@@ -156,10 +165,13 @@ void comFromInertial(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen
   const Eigen::Vector3d c = pi.segment<3>(6) / m;
   if (mass) *mass = m;
   if (com) *com = c;
-  if (I_com) *I_com = inertiaMatrix(pi) - m * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
+  if (I_com)
+    *I_com =
+        inertiaMatrix(pi) - m * (c.squaredNorm() * Eigen::Matrix3d::Identity() - c * c.transpose());
 }
 
-Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1>& pi_B, const Pose& X_AB) {
+Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1>& pi_B,
+                                               const Pose& X_AB) {
   // Linear in pi (valid for any parameters, including zero mass):
   // I_A = R I_B R^T - [Rh]x [p]x - [p]x [Rh]x - m [p]x [p]x,  h_A = R h_B + m p.
   const Eigen::Matrix3d& R = X_AB.R;
@@ -170,8 +182,8 @@ Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1
   const Eigen::Matrix3d I = R * inertiaMatrix(pi_B) * R.transpose() - H * P - P * H - m * P * P;
   const Eigen::Vector3d h = Rh + m * p;
   Eigen::Matrix<double, 10, 1> out;
-  out << I(0, 0), 0.5 * (I(0, 1) + I(1, 0)), 0.5 * (I(0, 2) + I(2, 0)), I(1, 1), 0.5 * (I(1, 2) + I(2, 1)),
-      I(2, 2), h.x(), h.y(), h.z(), m;
+  out << I(0, 0), 0.5 * (I(0, 1) + I(1, 0)), 0.5 * (I(0, 2) + I(2, 0)), I(1, 1),
+      0.5 * (I(1, 2) + I(2, 1)), I(2, 2), h.x(), h.y(), h.z(), m;
   return out;
 }
 
@@ -192,7 +204,8 @@ InertiaCheck checkPhysical(const Eigen::Matrix<double, 10, 1>& pi, double tol) {
   }
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Ic, Eigen::EigenvaluesOnly);
   const Eigen::Vector3d l = es.eigenvalues();  // ascending
-  if (l[0] < -tol * scale) return {false, "inertia about the centre of mass not positive semi-definite"};
+  if (l[0] < -tol * scale)
+    return {false, "inertia about the centre of mass not positive semi-definite"};
   if (l[0] + l[1] < l[2] - tol * scale)
     return {false, "triangle inequality violated (principal moments: I1 + I2 >= I3)"};
   return r;

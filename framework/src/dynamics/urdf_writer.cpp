@@ -17,7 +17,9 @@ std::string num(double v) {
   return buf;
 }
 
-std::string vec3(const Eigen::Vector3d& v) { return num(v.x()) + " " + num(v.y()) + " " + num(v.z()); }
+std::string vec3(const Eigen::Vector3d& v) {
+  return num(v.x()) + " " + num(v.y()) + " " + num(v.z());
+}
 
 /// URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
 Eigen::Vector3d rpy(const Eigen::Matrix3d& R) {
@@ -33,11 +35,20 @@ std::string xmlEscape(const std::string& s) {
   std::string o;
   for (char c : s) {
     switch (c) {
-      case '&': o += "&amp;"; break;
-      case '<': o += "&lt;"; break;
-      case '>': o += "&gt;"; break;
-      case '"': o += "&quot;"; break;
-      default: o += c;
+      case '&':
+        o += "&amp;";
+        break;
+      case '<':
+        o += "&lt;";
+        break;
+      case '>':
+        o += "&gt;";
+        break;
+      case '"':
+        o += "&quot;";
+        break;
+      default:
+        o += c;
     }
   }
   return o;
@@ -79,21 +90,25 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
       comFromInertial(pi, &mass, &c, &Ic);
       x << "    <inertial>\n      " << origin(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
         << "      <mass value=\"" << num(mass) << "\"/>\n"
-        << "      <inertia ixx=\"" << num(Ic(0, 0)) << "\" ixy=\"" << num(0.5 * (Ic(0, 1) + Ic(1, 0)))
-        << "\" ixz=\"" << num(0.5 * (Ic(0, 2) + Ic(2, 0))) << "\" iyy=\"" << num(Ic(1, 1)) << "\" iyz=\""
-        << num(0.5 * (Ic(1, 2) + Ic(2, 1))) << "\" izz=\"" << num(Ic(2, 2)) << "\"/>\n    </inertial>\n";
+        << "      <inertia ixx=\"" << num(Ic(0, 0)) << "\" ixy=\""
+        << num(0.5 * (Ic(0, 1) + Ic(1, 0))) << "\" ixz=\"" << num(0.5 * (Ic(0, 2) + Ic(2, 0)))
+        << "\" iyy=\"" << num(Ic(1, 1)) << "\" iyz=\"" << num(0.5 * (Ic(1, 2) + Ic(2, 1)))
+        << "\" izz=\"" << num(Ic(2, 2)) << "\"/>\n    </inertial>\n";
     } else {
-      check(pi.cwiseAbs().maxCoeff() == 0.0,
-            "writeUrdf: body '" + b.name + "' has mass " + num(pi(9)) +
-                " and non-zero inertial parameters: URDF cannot describe it (identify with consistent_ls)");
+      check(pi.cwiseAbs().maxCoeff() == 0.0, "writeUrdf: body '" + b.name + "' has mass " +
+                                                 num(pi(9)) +
+                                                 " and non-zero inertial parameters: URDF cannot "
+                                                 "describe it (identify with consistent_ls)");
     }
     x << "  </link>\n";
     const JointLimits& L = m.limits[static_cast<std::size_t>(j)];
     const bool bounded = finiteLimit(L.q_min) && finiteLimit(L.q_max);
-    std::string type = b.type == JointType::Prismatic ? "prismatic" : (bounded ? "revolute" : "continuous");
+    std::string type =
+        b.type == JointType::Prismatic ? "prismatic" : (bounded ? "revolute" : "continuous");
     const Pose X = b.parent < 0 ? b.pre : m.bodies[static_cast<std::size_t>(b.parent)].post * b.pre;
     x << "  <joint name=\"" << xmlEscape(b.joint_name) << "\" type=\"" << type << "\">\n"
-      << "    <parent link=\"" << xmlEscape(b.parent < 0 ? root : m.bodies[static_cast<std::size_t>(b.parent)].name)
+      << "    <parent link=\""
+      << xmlEscape(b.parent < 0 ? root : m.bodies[static_cast<std::size_t>(b.parent)].name)
       << "\"/>\n    <child link=\"" << xmlEscape(b.name) << "\"/>\n    " << origin(X) << "\n"
       << "    <axis xyz=\"" << vec3(b.axis) << "\"/>\n";
     const double eff = finiteLimit(L.tau_max) ? L.tau_max : 0.0;
@@ -101,8 +116,9 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
     if (type == "continuous") {
       x << "    <limit effort=\"" << num(eff) << "\" velocity=\"" << num(vel) << "\"/>\n";
     } else {
-      x << "    <limit lower=\"" << num(bounded ? L.q_min : -1e300) << "\" upper=\"" << num(bounded ? L.q_max : 1e300)
-        << "\" effort=\"" << num(eff) << "\" velocity=\"" << num(vel) << "\"/>\n";
+      x << "    <limit lower=\"" << num(bounded ? L.q_min : -1e300) << "\" upper=\""
+        << num(bounded ? L.q_max : 1e300) << "\" effort=\"" << num(eff) << "\" velocity=\""
+        << num(vel) << "\"/>\n";
     }
     x << "  </joint>\n";
   }
@@ -111,29 +127,34 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     if (j < static_cast<int>(m.drives.size())) {
       const Drive& d = m.drives[static_cast<std::size_t>(j)];
-      x << "    <drive joint=\"" << xmlEscape(b.joint_name) << "\" gear_ratio=\"" << num(d.gear_ratio)
-        << "\" rotor_inertia=\"" << num(d.rotor_inertia) << "\" coulomb=\"" << num(d.coulomb) << "\" viscous=\""
-        << num(d.viscous) << "\" offset=\"" << num(d.offset) << "\"/>\n";
+      x << "    <drive joint=\"" << xmlEscape(b.joint_name) << "\" gear_ratio=\""
+        << num(d.gear_ratio) << "\" rotor_inertia=\"" << num(d.rotor_inertia) << "\" coulomb=\""
+        << num(d.coulomb) << "\" viscous=\"" << num(d.viscous) << "\" offset=\"" << num(d.offset)
+        << "\"/>\n";
     }
     const JointLimits& L = m.limits[static_cast<std::size_t>(j)];
-    if (finiteLimit(L.qdd_max)) x << "    <limit joint=\"" << xmlEscape(b.joint_name) << "\" qdd_max=\"" << num(L.qdd_max) << "\"/>\n";
+    if (finiteLimit(L.qdd_max))
+      x << "    <limit joint=\"" << xmlEscape(b.joint_name) << "\" qdd_max=\"" << num(L.qdd_max)
+        << "\"/>\n";
   }
   if (m.hasTransmission()) {
     x << "    <transmission matrix=\"";
     for (Eigen::Index r = 0; r < m.transmission.rows(); ++r)
-      for (Eigen::Index c = 0; c < m.transmission.cols(); ++c) x << (r || c ? " " : "") << num(m.transmission(r, c));
+      for (Eigen::Index c = 0; c < m.transmission.cols(); ++c)
+        x << (r || c ? " " : "") << num(m.transmission(r, c));
     x << "\"";
     if (m.transmission_offset.size() > 0) {
       x << " offset=\"";
-      for (Eigen::Index r = 0; r < m.transmission_offset.size(); ++r) x << (r ? " " : "") << num(m.transmission_offset(r));
+      for (Eigen::Index r = 0; r < m.transmission_offset.size(); ++r)
+        x << (r ? " " : "") << num(m.transmission_offset(r));
       x << "\"";
     }
     x << "/>\n";
   }
   const int sb = m.sensorBody();
   const Pose S = m.bodies[static_cast<std::size_t>(sb)].post * m.sensor_pose;
-  x << "    <sensor link=\"" << xmlEscape(m.bodies[static_cast<std::size_t>(sb)].name) << "\" xyz=\"" << vec3(S.p)
-    << "\" rpy=\"" << vec3(rpy(S.R)) << "\"/>\n";
+  x << "    <sensor link=\"" << xmlEscape(m.bodies[static_cast<std::size_t>(sb)].name)
+    << "\" xyz=\"" << vec3(S.p) << "\" rpy=\"" << vec3(rpy(S.R)) << "\"/>\n";
   x << "  </exid>\n</robot>\n";
   return x.str();
 }

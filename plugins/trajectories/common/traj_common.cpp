@@ -16,19 +16,25 @@ bool finite(double x) { return std::isfinite(x) && std::abs(x) < 1e299; }
 
 std::vector<ParamDecl> commonParams() {
   return {
-      param_double("sample_period_s", 0.1, "s", "sample period of the design grid", 0.0, std::nullopt, true),
-      param_int("samples", 0, "number of samples (0: from the period/duration and sample_period_s)", 0.0),
-      param_double("position_margin_rad", 0.0, "rad", "margin kept inside the joint position limits", 0.0),
+      param_double("sample_period_s", 0.1, "s", "sample period of the design grid", 0.0,
+                   std::nullopt, true),
+      param_int("samples", 0, "number of samples (0: from the period/duration and sample_period_s)",
+                0.0),
+      param_double("position_margin_rad", 0.0, "rad",
+                   "margin kept inside the joint position limits", 0.0),
       param_bool("velocity_limits", true, "impose the joint velocity limits at every sample"),
-      param_bool("acceleration_limits", true, "impose the joint acceleration limits at every sample"),
+      param_bool("acceleration_limits", true,
+                 "impose the joint acceleration limits at every sample"),
       param_double("velocity_limit_rad_s", 0.0, "rad/s",
                    "own velocity cap |qd| <= value at every sample (0: none); part of the "
                    "excitation problem's limits (Trajectory::adjustLimits), also on robots without "
-                   "velocity limits and with velocity_limits: false", 0.0),
+                   "velocity limits and with velocity_limits: false",
+                   0.0),
       param_double("acceleration_limit_rad_s2", 0.0, "rad/s^2",
                    "own acceleration cap |qdd| <= value (0: none), as velocity_limit_rad_s", 0.0),
       param_ints("joints", std::vector<std::int64_t>{},
-                 "1-based joints that move (empty: all); the others stay at rest_position_rad", 1.0),
+                 "1-based joints that move (empty: all); the others stay at rest_position_rad",
+                 1.0),
       param_doubles("rest_position_rad", std::vector<double>{}, "rad",
                     "positions of the joints that do not move (one value per joint or one for all; "
                     "empty: the centre of their range)"),
@@ -51,17 +57,23 @@ CommonOptions readCommon(const ParamSet& p) {
 
 bool JointSpace::hasCaps() const { return hasVelocityCap() || hasAccelerationCap(); }
 bool JointSpace::hasVelocityCap() const { return qd_cap.size() && qd_cap.array().isFinite().any(); }
-bool JointSpace::hasAccelerationCap() const { return qdd_cap.size() && qdd_cap.array().isFinite().any(); }
+bool JointSpace::hasAccelerationCap() const {
+  return qdd_cap.size() && qdd_cap.array().isFinite().any();
+}
 
-void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o, std::vector<JointLimits>* limits) {
+void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o,
+                        std::vector<JointLimits>* limits) {
   if (!limits) return;
   const int n = std::min(js.n, static_cast<int>(limits->size()));
   for (int j = 0; j < n; ++j) {
     JointLimits& L = (*limits)[static_cast<std::size_t>(j)];
     if (!o.velocity_limits) L.qd_max = kInf;
     if (!o.acceleration_limits) L.qdd_max = kInf;
-    if (std::isfinite(js.qd_cap_joint(j))) L.qd_max = finite(L.qd_max) ? std::min(L.qd_max, js.qd_cap_joint(j)) : js.qd_cap_joint(j);
-    if (std::isfinite(js.qdd_cap_joint(j))) L.qdd_max = finite(L.qdd_max) ? std::min(L.qdd_max, js.qdd_cap_joint(j)) : js.qdd_cap_joint(j);
+    if (std::isfinite(js.qd_cap_joint(j)))
+      L.qd_max = finite(L.qd_max) ? std::min(L.qd_max, js.qd_cap_joint(j)) : js.qd_cap_joint(j);
+    if (std::isfinite(js.qdd_cap_joint(j)))
+      L.qdd_max =
+          finite(L.qdd_max) ? std::min(L.qdd_max, js.qdd_cap_joint(j)) : js.qdd_cap_joint(j);
   }
 }
 
@@ -74,8 +86,10 @@ JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std:
   } else {
     std::vector<bool> seen(static_cast<std::size_t>(n), false);
     for (auto j1 : o.joints) {
-      check(j1 >= 1 && j1 <= n, fmt::format("{}: joints: {} is not a joint of the {}-dof robot", who, j1, n));
-      check(!seen[static_cast<std::size_t>(j1 - 1)], fmt::format("{}: joints: {} given twice", who, j1));
+      check(j1 >= 1 && j1 <= n,
+            fmt::format("{}: joints: {} is not a joint of the {}-dof robot", who, j1, n));
+      check(!seen[static_cast<std::size_t>(j1 - 1)],
+            fmt::format("{}: joints: {} given twice", who, j1));
       seen[static_cast<std::size_t>(j1 - 1)] = true;
       js.moving.push_back(static_cast<int>(j1 - 1));
     }
@@ -95,22 +109,31 @@ JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std:
                     (r.transmission.rows() == n && r.transmission.cols() == n &&
                      r.transmission.isDiagonal() && (r.transmission.diagonal().array() != 0).all());
   for (int j = 0; j < n; ++j) {
-    const JointLimits L = j < static_cast<int>(r.limits.size()) ? r.limits[static_cast<std::size_t>(j)] : JointLimits{};
+    const JointLimits L = j < static_cast<int>(r.limits.size())
+                              ? r.limits[static_cast<std::size_t>(j)]
+                              : JointLimits{};
     double lo = finite(L.q_min) ? L.q_min + o.margin : -kInf;
     double hi = finite(L.q_max) ? L.q_max - o.margin : kInf;
     double vd = (o.velocity_limits && finite(L.qd_max)) ? L.qd_max : kInf;
     double ad = (o.acceleration_limits && finite(L.qdd_max)) ? L.qdd_max : kInf;
     if (r.hasTransmission()) {
-      if (!diag) { lo = -kInf; hi = kInf; vd = kInf; ad = kInf; }
-      else {
+      if (!diag) {
+        lo = -kInf;
+        hi = kInf;
+        vd = kInf;
+        ad = kInf;
+      } else {
         const double d = r.transmission(j, j);
         const double off = r.transmission_offset.size() ? r.transmission_offset(j) : 0.0;
         double a = (lo - off) / d, b = (hi - off) / d;
-        lo = std::min(a, b); hi = std::max(a, b);
-        vd /= std::abs(d); ad /= std::abs(d);
+        lo = std::min(a, b);
+        hi = std::max(a, b);
+        vd /= std::abs(d);
+        ad /= std::abs(d);
       }
     }
-    check(!(lo > hi), fmt::format("{}: joint {}: position margin {} leaves no range", who, j + 1, o.margin));
+    check(!(lo > hi),
+          fmt::format("{}: joint {}: position margin {} leaves no range", who, j + 1, o.margin));
     js.q_lo(j) = lo;
     js.q_hi(j) = hi;
     if (o.velocity_cap > 0) js.qd_cap(j) = o.velocity_cap;
@@ -120,15 +143,20 @@ JointSpace resolveJoints(const RobotModel& r, const CommonOptions& o, const std:
     js.qdd_cap_joint(j) = js.qdd_cap(j) * tj;
     js.qd_max(j) = std::min(vd, js.qd_cap(j));
     js.qdd_max(j) = std::min(ad, js.qdd_cap(j));
-    if (std::isfinite(lo) && std::isfinite(hi)) js.centre(j) = 0.5 * (lo + hi);
-    else if (std::isfinite(lo)) js.centre(j) = lo + 1.0;
-    else if (std::isfinite(hi)) js.centre(j) = hi - 1.0;
+    if (std::isfinite(lo) && std::isfinite(hi))
+      js.centre(j) = 0.5 * (lo + hi);
+    else if (std::isfinite(lo))
+      js.centre(j) = lo + 1.0;
+    else if (std::isfinite(hi))
+      js.centre(j) = hi - 1.0;
   }
   js.rest = js.centre;
   if (!o.rest.empty()) {
     check(o.rest.size() == 1 || static_cast<int>(o.rest.size()) == n,
-          fmt::format("{}: rest_position_rad has {} values (expected 1 or {})", who, o.rest.size(), n));
-    for (int j = 0; j < n; ++j) js.rest(j) = o.rest.size() == 1 ? o.rest[0] : o.rest[static_cast<std::size_t>(j)];
+          fmt::format("{}: rest_position_rad has {} values (expected 1 or {})", who, o.rest.size(),
+                      n));
+    for (int j = 0; j < n; ++j)
+      js.rest(j) = o.rest.size() == 1 ? o.rest[0] : o.rest[static_cast<std::size_t>(j)];
   }
   return js;
 }
@@ -142,9 +170,12 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear) {
   d["position_margin_rad"] = o.margin;
   if (js.hasCaps()) {
     Json caps = Json::object();
-    std::vector<double> v(js.qd_cap.data(), js.qd_cap.data() + js.n), a(js.qdd_cap.data(), js.qdd_cap.data() + js.n);
-    for (auto& x : v) if (!std::isfinite(x)) x = 0.0;  // 0: none
-    for (auto& x : a) if (!std::isfinite(x)) x = 0.0;
+    std::vector<double> v(js.qd_cap.data(), js.qd_cap.data() + js.n),
+        a(js.qdd_cap.data(), js.qdd_cap.data() + js.n);
+    for (auto& x : v)
+      if (!std::isfinite(x)) x = 0.0;  // 0: none
+    for (auto& x : a)
+      if (!std::isfinite(x)) x = 0.0;
     caps["qd_max"] = Json(v);
     caps["qdd_max"] = Json(a);
     caps["imposed_by"] = "Trajectory::adjustLimits (the excitation problem's g)";
@@ -157,7 +188,8 @@ int sampleCount(const CommonOptions& o, double T, bool include_end, const std::s
   if (o.samples > 0) return o.samples;
   const double r = T / o.sample_period;
   int K = static_cast<int>(std::lround(r));
-  check(K >= 2, fmt::format("{}: {} s at {} s per sample gives fewer than 2 samples", who, T, o.sample_period));
+  check(K >= 2, fmt::format("{}: {} s at {} s per sample gives fewer than 2 samples", who, T,
+                            o.sample_period));
   return include_end ? K + 1 : K;
 }
 
@@ -225,7 +257,8 @@ Json BasisTrajectory::describe() const {
   return d;
 }
 
-void BasisTrajectory::scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd& zref, double fraction) const {
+void BasisTrajectory::scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd& zref,
+                                      double fraction) const {
   for (std::size_t i = 0; i < js_.moving.size(); ++i) {
     const int j = js_.moving[i];
     const Eigen::Index c = static_cast<Eigen::Index>(i) * m_;

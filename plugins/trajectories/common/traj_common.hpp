@@ -34,12 +34,12 @@ CommonOptions readCommon(const ParamSet& p);
 /// (margin included) and the caps.
 struct JointSpace {
   int n = 0;
-  std::vector<int> moving;           // 0-based indices of the joints that move
-  Eigen::VectorXd rest;              // n: positions of every joint when it does not move
-  Eigen::VectorXd centre;            // n: centre of the (margined) range, or 0 if unlimited
-  Eigen::VectorXd q_lo, q_hi;        // n: position range less the margin (+-inf if none)
-  Eigen::VectorXd qd_max, qdd_max;   // n: effective limits (+inf if none or not imposed)
-  Eigen::VectorXd qd_cap, qdd_cap;   // n: the trajectory's own caps (+inf if none)
+  std::vector<int> moving;          // 0-based indices of the joints that move
+  Eigen::VectorXd rest;             // n: positions of every joint when it does not move
+  Eigen::VectorXd centre;           // n: centre of the (margined) range, or 0 if unlimited
+  Eigen::VectorXd q_lo, q_hi;       // n: position range less the margin (+-inf if none)
+  Eigen::VectorXd qd_max, qdd_max;  // n: effective limits (+inf if none or not imposed)
+  Eigen::VectorXd qd_cap, qdd_cap;  // n: the trajectory's own caps (+inf if none)
   // n: the caps in joint coordinates (the excitation problem's limits): cap x |T_jj| with a
   // diagonal transmission, else the cap itself (then a joint-coordinate cap).
   Eigen::VectorXd qd_cap_joint, qdd_cap_joint;
@@ -51,7 +51,8 @@ JointSpace resolveJoints(const RobotModel& robot, const CommonOptions& o, const 
 
 /// Trajectory::adjustLimits for every trajectory plugin: velocity/acceleration limits the
 /// trajectory does not impose are dropped (+inf), and its caps tighten the rest (or stand alone).
-void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o, std::vector<JointLimits>* limits);
+void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o,
+                        std::vector<JointLimits>* limits);
 
 /// What describe() says: "linear", the moving joints, the margin and (informative) the caps.
 Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
@@ -72,8 +73,12 @@ class BasisTrajectory : public Trajectory {
   double positionMargin() const override { return opt_.margin; }
   // A cap is imposed even when the robot's own limits are not (adjustLimits drops those).
   bool velocityLimits() const override { return opt_.velocity_limits || js_.hasVelocityCap(); }
-  bool accelerationLimits() const override { return opt_.acceleration_limits || js_.hasAccelerationCap(); }
-  void adjustLimits(std::vector<JointLimits>* limits) const override { adjustLimitsCommon(js_, opt_, limits); }
+  bool accelerationLimits() const override {
+    return opt_.acceleration_limits || js_.hasAccelerationCap();
+  }
+  void adjustLimits(std::vector<JointLimits>* limits) const override {
+    adjustLimitsCommon(js_, opt_, limits);
+  }
   Json describe() const override;
   const JointSpace& joints() const { return js_; }
 

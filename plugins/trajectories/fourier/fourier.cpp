@@ -26,7 +26,8 @@ class Fourier final : public exid::traj::BasisTrajectory {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::traj::commonParams();
-    p.push_back(exid::param_double("period_s", 10.0, "s", "fundamental period T", 0.0, std::nullopt, true));
+    p.push_back(
+        exid::param_double("period_s", 10.0, "s", "fundamental period T", 0.0, std::nullopt, true));
     p.push_back(exid::param_int("harmonics", 5, "number of harmonics L", 1.0, 1000.0));
     p.push_back(exid::param_string("init", std::string("random"),
                                    "start: random coefficients (seed) scaled to init_scale of the "
@@ -35,7 +36,8 @@ class Fourier final : public exid::traj::BasisTrajectory {
                                    {"random", "zero", "coefficients"}));
     p.push_back(exid::param_double("init_scale", 0.5, "",
                                    "fraction of the tightest of position range, velocity and "
-                                   "acceleration limits the random start uses", 0.0, 1.0, true));
+                                   "acceleration limits the random start uses",
+                                   0.0, 1.0, true));
     p.push_back(exid::param_int("seed", 0, "seed of the random start (0: the study seed)", 0.0));
     p.push_back(exid::param_doubles("init_coefficients", std::vector<double>{}, "",
                                     "with init: coefficients, z itself (moving joint after joint: "
@@ -44,9 +46,12 @@ class Fourier final : public exid::traj::BasisTrajectory {
   }
 
   explicit Fourier(const exid::ParamSet& p)
-      : period_(p.getDouble("period_s")), L_(static_cast<int>(p.getInt("harmonics"))),
-        init_(p.getString("init")), init_scale_(p.getDouble("init_scale")),
-        seed_(static_cast<std::uint64_t>(p.getInt("seed"))), coeffs_(p.getDoubles("init_coefficients")) {
+      : period_(p.getDouble("period_s")),
+        L_(static_cast<int>(p.getInt("harmonics"))),
+        init_(p.getString("init")),
+        init_scale_(p.getDouble("init_scale")),
+        seed_(static_cast<std::uint64_t>(p.getInt("seed"))),
+        coeffs_(p.getDoubles("init_coefficients")) {
     opt_ = exid::traj::readCommon(p);
   }
 
@@ -76,7 +81,8 @@ class Fourier final : public exid::traj::BasisTrajectory {
     // start
     const int nv = numVariables();
     zref_ = Eigen::VectorXd::Zero(nv);
-    for (std::size_t i = 0; i < js_.moving.size(); ++i) zref_(static_cast<Eigen::Index>(i) * m) = js_.centre(js_.moving[i]);
+    for (std::size_t i = 0; i < js_.moving.size(); ++i)
+      zref_(static_cast<Eigen::Index>(i) * m) = js_.centre(js_.moving[i]);
     z0_ = zref_;
     if (init_ == "random") {
       std::mt19937_64 rng(seed_ ? seed_ : ctx.seed);
@@ -85,9 +91,11 @@ class Fourier final : public exid::traj::BasisTrajectory {
         for (int c = 1; c < m; ++c) z0_(static_cast<Eigen::Index>(i) * m + c) = U(rng);
       scaleIntoLimits(&z0_, zref_, init_scale_);
     } else if (init_ == "coefficients") {
-      exid::check(static_cast<int>(coeffs_.size()) == nv,
-                  fmt::format("{}: init_coefficients has {} values (expected {} = {} joints x (1 + 2 x {}))",
-                              who, coeffs_.size(), nv, js_.moving.size(), L_));
+      exid::check(
+          static_cast<int>(coeffs_.size()) == nv,
+          fmt::format(
+              "{}: init_coefficients has {} values (expected {} = {} joints x (1 + 2 x {}))", who,
+              coeffs_.size(), nv, js_.moving.size(), L_));
       z0_ = Eigen::Map<const Eigen::VectorXd>(coeffs_.data(), nv);
     }
     // Bounds (necessary conditions, valid for every feasible z): q0 within the range; the l-th
@@ -103,9 +111,13 @@ class Fourier final : public exid::traj::BasisTrajectory {
         double b = HUGE_VAL;
         const double wl = w * l;
         if (std::isfinite(js_.qd_max(j))) b = std::min(b, 2.0 * js_.qd_max(j));
-        if (std::isfinite(js_.q_hi(j) - js_.q_lo(j))) b = std::min(b, 2.0 * (js_.q_hi(j) - js_.q_lo(j)) * wl);
+        if (std::isfinite(js_.q_hi(j) - js_.q_lo(j)))
+          b = std::min(b, 2.0 * (js_.q_hi(j) - js_.q_lo(j)) * wl);
         if (std::isfinite(js_.qdd_max(j))) b = std::min(b, 2.0 * js_.qdd_max(j) / wl);
-        for (Eigen::Index c : {c0 + l, c0 + L_ + l}) { lo_(c) = -b; hi_(c) = b; }
+        for (Eigen::Index c : {c0 + l, c0 + L_ + l}) {
+          lo_(c) = -b;
+          hi_(c) = b;
+        }
       }
     }
   }

@@ -28,17 +28,22 @@ class Pointwise final : public exid::Trajectory {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::traj::commonParams();
-    p.push_back(exid::param_double("duration_s", 10.0, "s", "duration: K = duration_s / sample_period_s samples", 0.0, std::nullopt, true));
-    p.push_back(exid::param_doubles("q0_rad", std::vector<double>{}, "rad",
-                                    "initial positions X_0 (one per joint; empty: the centre of "
-                                    "the range, or rest_position_rad for joints that do not move)"));
+    p.push_back(exid::param_double("duration_s", 10.0, "s",
+                                   "duration: K = duration_s / sample_period_s samples", 0.0,
+                                   std::nullopt, true));
+    p.push_back(
+        exid::param_doubles("q0_rad", std::vector<double>{}, "rad",
+                            "initial positions X_0 (one per joint; empty: the centre of "
+                            "the range, or rest_position_rad for joints that do not move)"));
     p.push_back(exid::param_string("init", std::string("cosine"),
                                    "start: cosine (q = q0 + A (cos(2 pi f_i t) - 1), f_i = "
                                    "(i+1) init_frequency_hz for the i-th moving joint, A capped to "
                                    "the limits); csv: init_csv; zero: no motion",
                                    {"cosine", "csv", "zero"}));
-    p.push_back(exid::param_double("init_amplitude_rad", 0.5, "rad", "amplitude A of the cosine start", 0.0));
-    p.push_back(exid::param_double("init_frequency_hz", 0.1, "Hz", "base frequency of the cosine start", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("init_amplitude_rad", 0.5, "rad",
+                                   "amplitude A of the cosine start", 0.0));
+    p.push_back(exid::param_double("init_frequency_hz", 0.1, "Hz",
+                                   "base frequency of the cosine start", 0.0, std::nullopt, true));
     p.push_back(exid::param_path("init_csv", std::string(""),
                                  "start from a trajectory: CSV with t and qdd1..qddn (taken as the "
                                  "accelerations), or t and q1..qn (one period of a periodic "
@@ -48,8 +53,11 @@ class Pointwise final : public exid::Trajectory {
   }
 
   explicit Pointwise(const exid::ParamSet& p)
-      : D_(p.getDouble("duration_s")), q0_param_(p.getDoubles("q0_rad")), init_(p.getString("init")),
-        amp_(p.getDouble("init_amplitude_rad")), freq_(p.getDouble("init_frequency_hz")),
+      : D_(p.getDouble("duration_s")),
+        q0_param_(p.getDoubles("q0_rad")),
+        init_(p.getString("init")),
+        amp_(p.getDouble("init_amplitude_rad")),
+        freq_(p.getDouble("init_frequency_hz")),
         csv_(p.getString("init_csv")) {
     opt_ = exid::traj::readCommon(p);
   }
@@ -82,7 +90,8 @@ class Pointwise final : public exid::Trajectory {
         A = std::max(A, 0.0);
         // u_k = (qd(t_{k+1}) - qd(t_k)) / dt reproduces qd exactly at the samples (no drift)
         for (int k = 0; k < K_; ++k) {
-          const double qd1 = -A * w * std::sin(w * (k + 1) * dt_), qd0 = -A * w * std::sin(w * k * dt_);
+          const double qd1 = -A * w * std::sin(w * (k + 1) * dt_),
+                       qd0 = -A * w * std::sin(w * k * dt_);
           z0_(i * K_ + k) = (qd1 - qd0) / dt_;
         }
       }
@@ -109,7 +118,9 @@ class Pointwise final : public exid::Trajectory {
   }
 
   exid::Samples evaluate(const Eigen::VectorXd& z) const override {
-    exid::check(z.size() == numVariables(), fmt::format("trajectory 'pointwise': {} variables given, {} expected", z.size(), numVariables()));
+    exid::check(z.size() == numVariables(),
+                fmt::format("trajectory 'pointwise': {} variables given, {} expected", z.size(),
+                            numVariables()));
     exid::Samples s;
     s.t = Eigen::VectorXd::LinSpaced(K_, 0.0, (K_ - 1) * dt_);
     s.q.resize(K_, js_.n);
@@ -154,7 +165,8 @@ class Pointwise final : public exid::Trajectory {
       const Eigen::Index K = K_, n = js_.n, Kn = K * n;
       J_ = Eigen::MatrixXd::Zero(3 * Kn, numVariables());
       for (int i = 0; i < nm_; ++i) {
-        const Eigen::Index j = js_.moving[static_cast<std::size_t>(i)], c = static_cast<Eigen::Index>(i) * K;
+        const Eigen::Index j = js_.moving[static_cast<std::size_t>(i)],
+                           c = static_cast<Eigen::Index>(i) * K;
         for (Eigen::Index k = 0; k < K; ++k) {
           for (Eigen::Index l = 0; l < k; ++l) {
             J_(j * K + k, c + l) = dt_ * dt_ * (static_cast<double>(k - l) - 0.5);
@@ -169,7 +181,9 @@ class Pointwise final : public exid::Trajectory {
 
   double positionMargin() const override { return opt_.margin; }
   bool velocityLimits() const override { return opt_.velocity_limits || js_.hasVelocityCap(); }
-  bool accelerationLimits() const override { return opt_.acceleration_limits || js_.hasAccelerationCap(); }
+  bool accelerationLimits() const override {
+    return opt_.acceleration_limits || js_.hasAccelerationCap();
+  }
   void adjustLimits(std::vector<exid::JointLimits>* limits) const override {
     exid::traj::adjustLimitsCommon(js_, opt_, limits);
   }
@@ -192,9 +206,12 @@ class Pointwise final : public exid::Trajectory {
       has_qdd = has_qdd && T.has(fmt::format("qdd{}", j + 1));
       has_q = has_q && T.has(fmt::format("q{}", j + 1));
     }
-    exid::check(has_qdd || has_q, fmt::format("{}: init_csv {}: needs columns qdd<j> or q<j> for every moving joint", who, path.string()));
+    exid::check(has_qdd || has_q,
+                fmt::format("{}: init_csv {}: needs columns qdd<j> or q<j> for every moving joint",
+                            who, path.string()));
     if (has_qdd) {
-      exid::check(N >= K_, fmt::format("{}: init_csv {}: {} rows, {} samples needed", who, path.string(), N, K_));
+      exid::check(N >= K_, fmt::format("{}: init_csv {}: {} rows, {} samples needed", who,
+                                       path.string(), N, K_));
       for (int i = 0; i < nm_; ++i) {
         const int j = js_.moving[static_cast<std::size_t>(i)];
         z0_.segment(i * K_, K_) = T.column(fmt::format("qdd{}", j + 1)).head(K_);
@@ -224,7 +241,8 @@ class Pointwise final : public exid::Trajectory {
       }
       auto qd_at = [&](double tt) {
         double v = 0;
-        for (int m = 1; m <= M; ++m) v += w * m * (-a(m) * std::sin(w * m * tt) + b(m) * std::cos(w * m * tt));
+        for (int m = 1; m <= M; ++m)
+          v += w * m * (-a(m) * std::sin(w * m * tt) + b(m) * std::cos(w * m * tt));
         return v;
       };
       double q0 = 0;

@@ -26,7 +26,8 @@ class Spline final : public exid::traj::BasisTrajectory {
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::traj::commonParams();
-    p.push_back(exid::param_double("duration_s", 10.0, "s", "duration (the period when periodic)", 0.0, std::nullopt, true));
+    p.push_back(exid::param_double("duration_s", 10.0, "s", "duration (the period when periodic)",
+                                   0.0, std::nullopt, true));
     p.push_back(exid::param_int("knots", 10, "number of knots, both ends included", 3.0, 10000.0));
     p.push_back(exid::param_int("degree", 3, "3: cubic (C2); 5: quintic (C4)", 3.0, 5.0));
     p.push_back(exid::param_string("boundary", std::string("rest"),
@@ -34,8 +35,11 @@ class Spline final : public exid::traj::BasisTrajectory {
                                    {"rest", "periodic"}));
     p.push_back(exid::param_string("init", std::string("random"),
                                    "start: random knots (seed) scaled to init_scale of the limits "
-                                   "about the centre; knots: init_knots", {"random", "knots"}));
-    p.push_back(exid::param_double("init_scale", 0.5, "", "fraction of the tightest limit the random start uses", 0.0, 1.0, true));
+                                   "about the centre; knots: init_knots",
+                                   {"random", "knots"}));
+    p.push_back(exid::param_double("init_scale", 0.5, "",
+                                   "fraction of the tightest limit the random start uses", 0.0, 1.0,
+                                   true));
     p.push_back(exid::param_int("seed", 0, "seed of the random start (0: the study seed)", 0.0));
     p.push_back(exid::param_doubles("init_knots", std::vector<double>{}, "rad",
                                     "with init: knots, z itself (moving joint after joint)"));
@@ -43,12 +47,17 @@ class Spline final : public exid::traj::BasisTrajectory {
   }
 
   explicit Spline(const exid::ParamSet& p)
-      : D_(p.getDouble("duration_s")), knots_(static_cast<int>(p.getInt("knots"))),
-        degree_(static_cast<int>(p.getInt("degree"))), periodic_(p.getString("boundary") == "periodic"),
-        init_(p.getString("init")), init_scale_(p.getDouble("init_scale")),
-        seed_(static_cast<std::uint64_t>(p.getInt("seed"))), init_knots_(p.getDoubles("init_knots")) {
+      : D_(p.getDouble("duration_s")),
+        knots_(static_cast<int>(p.getInt("knots"))),
+        degree_(static_cast<int>(p.getInt("degree"))),
+        periodic_(p.getString("boundary") == "periodic"),
+        init_(p.getString("init")),
+        init_scale_(p.getDouble("init_scale")),
+        seed_(static_cast<std::uint64_t>(p.getInt("seed"))),
+        init_knots_(p.getDoubles("init_knots")) {
     opt_ = exid::traj::readCommon(p);
-    exid::check(degree_ == 3 || degree_ == 5, fmt::format("trajectory 'spline': degree {} (use 3 or 5)", degree_));
+    exid::check(degree_ == 3 || degree_ == 5,
+                fmt::format("trajectory 'spline': degree {} (use 3 or 5)", degree_));
   }
 
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
@@ -119,7 +128,8 @@ class Spline final : public exid::traj::BasisTrajectory {
       zref.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.centre(js_.moving[i]));
     if (init_ == "knots") {
       exid::check(static_cast<int>(init_knots_.size()) == n_all,
-                  fmt::format("{}: init_knots has {} values (expected {})", who, init_knots_.size(), n_all));
+                  fmt::format("{}: init_knots has {} values (expected {})", who, init_knots_.size(),
+                              n_all));
       z0_ = Eigen::Map<const Eigen::VectorXd>(init_knots_.data(), n_all);
     } else {
       std::mt19937_64 rng(seed_ ? seed_ : ctx.seed);

@@ -80,9 +80,9 @@ struct LsSolution {
   Eigen::MatrixXd covariance;
   Eigen::VectorXd singular_values;         // of W (unscaled), descending
   Eigen::VectorXd singular_values_scaled;  // of W with unit-norm columns, descending
-  double rss = 0.0;      // ||y - W theta||^2
-  double sigma2 = 0.0;   // rss / (m - p)
-  double cond_W = 0.0;   // sigma_max / sigma_min of W
+  double rss = 0.0;                        // ||y - W theta||^2
+  double sigma2 = 0.0;                     // rss / (m - p)
+  double cond_W = 0.0;                     // sigma_max / sigma_min of W
   double cond_W_scaled = 0.0;
   long m = 0;
   int p = 0;

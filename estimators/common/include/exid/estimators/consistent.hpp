@@ -55,6 +55,7 @@ Eigen::VectorXd solveMinimumNorm(const RowAccumulator& acc, double rank_toleranc
 double noiseStdForPrior(const RowAccumulator& acc, double rank_tolerance);
 
 /// Summary of a prior for Estimate::details.
-Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate, const Eigen::VectorXd& posterior_std);
+Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
+                  const Eigen::VectorXd& posterior_std);
 
 }  // namespace exid::est
