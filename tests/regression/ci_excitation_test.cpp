@@ -11,27 +11,14 @@
 #include <map>
 #include <sstream>
 
+#include "baseline.hpp"
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
 #include "exid_test.hpp"
 
 namespace fs = std::filesystem;
 
-namespace {
-std::map<std::string, double> column(const std::string& csv) {
-  std::map<std::string, double> out;
-  std::istringstream in(csv);
-  std::string line;
-  std::getline(in, line);
-  while (std::getline(in, line)) {
-    auto comma = line.rfind(',');
-    std::string label = line.substr(0, comma);
-    label.erase(std::remove(label.begin(), label.end(), '"'), label.end());
-    out[label] = line.substr(comma + 1).empty() ? NAN : std::stod(line.substr(comma + 1));
-  }
-  return out;
-}
-}  // namespace
+using exid_test::labelledColumn;
 
 TEST(CiExcitation, EveryCriterionAndOptimiserImprovesAndNothingRegresses) {
   const fs::path src = exid_test::sourceDir();
@@ -47,9 +34,9 @@ TEST(CiExcitation, EveryCriterionAndOptimiserImprovesAndNothingRegresses) {
   EXPECT_EQ(s.ok, s.total) << s.failed << " failed, " << s.timeout << " timeout";
   const fs::path db = out / "results.sqlite";
   const std::vector<std::string> keys = {"robot", "excitation.criterion", "optimizer"};
-  auto j0 = column(exid::matrixTable(db, keys, {}, "excitation.criterion_initial").csv);
-  auto j1 = column(exid::matrixTable(db, keys, {}, "excitation.criterion_final").csv);
-  auto final_ = column(exid::matrixTable(db, keys, {}, "excitation.cond_W_final").csv);
+  auto j0 = labelledColumn(exid::matrixTable(db, keys, {}, "excitation.criterion_initial").csv);
+  auto j1 = labelledColumn(exid::matrixTable(db, keys, {}, "excitation.criterion_final").csv);
+  auto final_ = labelledColumn(exid::matrixTable(db, keys, {}, "excitation.cond_W_final").csv);
   std::cout << exid::matrixTable(db, {"robot", "excitation.criterion"}, {"optimizer"},
                                  "excitation.cond_W_final")
                    .markdown;
@@ -58,21 +45,12 @@ TEST(CiExcitation, EveryCriterionAndOptimiserImprovesAndNothingRegresses) {
   for (const auto& [k, v] : j1) EXPECT_LT(v, j0[k]) << k << ": no improvement of the criterion";
   const fs::path baseline = src / "tests/regression/ci_excitation_baseline.csv";
   if (std::getenv("EXID_UPDATE_BASELINE")) {
-    std::string text = "cell,cond_W_final\n";
-    for (const auto& [k, v] : final_) {
-      std::ostringstream os;
-      os.precision(17);
-      os << v;
-      text += "\"" + k + "\"," + os.str() + "\n";
-    }
-    exid::writeFileAtomic(baseline, text);
+    exid_test::writeBaseline(baseline, "cond_W_final", final_);
     std::cout << "baseline written to " << baseline << "\n";
     return;
   }
-  std::ifstream b(baseline);
-  ASSERT_TRUE(b.good()) << baseline;
-  std::string text((std::istreambuf_iterator<char>(b)), std::istreambuf_iterator<char>());
-  auto base = column(text);
+  ASSERT_TRUE(fs::exists(baseline)) << baseline;
+  auto base = labelledColumn(exid_test::readText(baseline));
   ASSERT_EQ(base.size(), final_.size());
   for (const auto& [k, v] : base) {
     ASSERT_TRUE(final_.count(k)) << "cell missing: " << k;

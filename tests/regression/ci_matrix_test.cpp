@@ -15,6 +15,7 @@
 #include <map>
 #include <sstream>
 
+#include "baseline.hpp"
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
 #include "exid_test.hpp"
@@ -33,46 +34,22 @@ TEST(CiMatrix, AllCellsFinishAndNoTrackedMetricRegresses) {
   exid::MatrixRunSummary s = exid::runMatrix(spec, exid_test::registry(), opt);
   EXPECT_EQ(s.ok, s.total) << s.failed << " failed, " << s.timeout << " timeout";
 
-  // Current values per cell label.
-  std::map<std::string, double> current;
   exid::MatrixTable t = exid::matrixTable(
       out / "results.sqlite", {"robot", "model", "estimator", "seed"}, {}, "param_rel_err");
   std::cout << exid::matrixTable(out / "results.sqlite", {"robot", "model"}, {"estimator"},
                                  "param_rel_err")
                    .markdown;
-  // The table's CSV has the row label (quoted) and one value column.
-  std::istringstream in(t.csv);
-  std::string line;
-  std::getline(in, line);  // header
-  while (std::getline(in, line)) {
-    auto comma = line.rfind(',');
-    std::string label = line.substr(0, comma);
-    label.erase(std::remove(label.begin(), label.end(), '"'), label.end());
-    current[label] = line.substr(comma + 1).empty() ? NAN : std::stod(line.substr(comma + 1));
-  }
+  const std::map<std::string, double> current = exid_test::labelledColumn(t.csv);
   ASSERT_EQ(current.size(), spec.cells.size());
   const fs::path baseline = src / "tests/regression/ci_matrix_baseline.csv";
   if (std::getenv("EXID_UPDATE_BASELINE")) {
-    std::string text = "cell,param_rel_err\n";
-    for (const auto& [k, v] : current) {
-      std::ostringstream os;
-      os.precision(17);
-      os << v;
-      text += "\"" + k + "\"," + os.str() + "\n";
-    }
-    exid::writeFileAtomic(baseline, text);
+    exid_test::writeBaseline(baseline, "param_rel_err", current);
     std::cout << "baseline written to " << baseline << "\n";
     return;
   }
-  std::ifstream b(baseline);
-  ASSERT_TRUE(b.good()) << baseline;
-  std::getline(b, line);
+  ASSERT_TRUE(std::filesystem::exists(baseline)) << baseline;
   int compared = 0;
-  while (std::getline(b, line)) {
-    auto comma = line.rfind(',');
-    std::string label = line.substr(0, comma);
-    label.erase(std::remove(label.begin(), label.end(), '"'), label.end());
-    const double base = std::stod(line.substr(comma + 1));
+  for (const auto& [label, base] : exid_test::labelledColumn(exid_test::readText(baseline))) {
     auto it = current.find(label);
     ASSERT_NE(it, current.end()) << "cell missing: " << label;
     EXPECT_LE(it->second, 1.25 * base + 1e-6)
