@@ -295,7 +295,8 @@ Json specJson(const PluginSpec& s) {
   Json j = Json::object();
   j["type"] = s.type;
   Json p = Json::object();
-  for (const auto& [k, v] : s.params.values()) {
+  for (const auto& [name, v] : s.params.values()) {
+    const std::string& k = name;  // a structured binding cannot be captured before C++20 (clang)
     std::visit(
         [&](const auto& x) {
           using T = std::decay_t<decltype(x)>;
