@@ -161,6 +161,16 @@ void unknownKey(Problems& pr, const YAML::Node& at, const std::string& path, con
   pr.add(at, msg);
 }
 
+// The text of a mapping key; a key that is not a plain scalar (`{a: 1}: x`, `[a]: x`, `? ...`) is
+// a problem at its line (found by tests/fuzz/fuzz_study: converting it to a string threw
+// YAML::TypedBadConversion out of parseStudy).
+std::optional<std::string> keyName(Problems& pr, const YAML::Node& key, const std::string& path) {
+  if (key.IsScalar()) return key.Scalar();
+  pr.add(key, fmt::format("{}a key must be a plain name, found '{}'",
+                          path.empty() ? "" : path + ": ", scalarText(key)));
+  return std::nullopt;
+}
+
 // Fills `out` from a params mapping node (may be null) and the declarations.
 void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::string& path,
                  const fs::path& base_dir, Problems& pr, ParamSet& out) {
@@ -172,7 +182,9 @@ void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::st
   }
   if (params && params.IsMap()) {
     for (const auto& kv : params) {
-      const std::string key = kv.first.as<std::string>();
+      const std::optional<std::string> name = keyName(pr, kv.first, path);
+      if (!name) continue;
+      const std::string& key = *name;
       bool known = false;
       for (const auto& d : info.params) known = known || d.name == key;
       if (!known) unknownKey(pr, kv.first, path, key, keysOf(info.params));
@@ -221,9 +233,9 @@ std::optional<PluginSpec> parseSpec(const YAML::Node& node, PluginKind kind,
   std::vector<std::string> allowed = {"type", "params"};
   if (allow_weight) allowed.push_back("weight");
   for (const auto& kv : node) {
-    const std::string key = kv.first.as<std::string>();
-    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
-      unknownKey(pr, kv.first, path, key, allowed);
+    const std::optional<std::string> key = keyName(pr, kv.first, path);
+    if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
+      unknownKey(pr, kv.first, path, *key, allowed);
   }
   YAML::Node type = node["type"];
   if (!type || !type.IsScalar()) {
@@ -343,9 +355,9 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
                            : std::vector<std::string>{"from", "study", "scale"};
   bool bad = false;
   for (const auto& kv : n) {
-    const std::string key = kv.first.as<std::string>();
-    if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
-      unknownKey(pr, kv.first, "prior", key, allowed);
+    const std::optional<std::string> key = keyName(pr, kv.first, "prior");
+    if (!key || std::find(allowed.begin(), allowed.end(), *key) == allowed.end()) {
+      if (key) unknownKey(pr, kv.first, "prior", *key, allowed);
       bad = true;
     }
   }
@@ -383,8 +395,8 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
 
 }  // namespace
 
-StudyConfig parseStudy(const std::string& text, const std::string& source_name,
-                       const fs::path& base_dir, const Registry& reg) {
+static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
+                                       const fs::path& base_dir, const Registry& reg) {
   Problems pr;
   pr.source = source_name;
   YAML::Node root;
@@ -400,9 +412,9 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
                             fmt::join(kTopKeys, ", "), scalarText(root)));
   }
   for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
-    if (std::find(kTopKeys.begin(), kTopKeys.end(), key) == kTopKeys.end())
-      unknownKey(pr, kv.first, "", key, kTopKeys);
+    const std::optional<std::string> key = keyName(pr, kv.first, "");
+    if (key && std::find(kTopKeys.begin(), kTopKeys.end(), *key) == kTopKeys.end())
+      unknownKey(pr, kv.first, "", *key, kTopKeys);
   }
   if (root["name"]) {
     if (root["name"].IsScalar())
@@ -450,9 +462,9 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
     } else {
       const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer"};
       for (const auto& kv : x) {
-        const std::string key = kv.first.as<std::string>();
-        if (std::find(allowed.begin(), allowed.end(), key) == allowed.end())
-          unknownKey(pr, kv.first, "excitation", key, allowed);
+        const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
+        if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
+          unknownKey(pr, kv.first, "excitation", *key, allowed);
       }
       if (x["trajectory"])
         cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory",
@@ -485,9 +497,9 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
       pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
     } else {
       for (const auto& kv : r) {
-        const std::string key = kv.first.as<std::string>();
-        if (key != "type" && key != "params")
-          unknownKey(pr, kv.first, "report", key, {"type", "params"});
+        const std::optional<std::string> key = keyName(pr, kv.first, "report");
+        if (key && *key != "type" && *key != "params")
+          unknownKey(pr, kv.first, "report", *key, {"type", "params"});
       }
       if (r["type"] && (!r["type"].IsScalar() || r["type"].Scalar() != "standard"))
         pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard",
@@ -526,6 +538,16 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
     throw Error(msg);
   }
   return cfg;
+}
+
+StudyConfig parseStudy(const std::string& text, const std::string& source_name,
+                       const fs::path& base_dir, const Registry& reg) {
+  try {
+    return parseStudyUnchecked(text, source_name, base_dir, reg);
+  } catch (const YAML::Exception& e) {  // a conversion not checked above: still the input's fault
+    throw Error(e.mark.line >= 0 ? fmt::format("{}:{}: {}", source_name, e.mark.line + 1, e.msg)
+                                 : fmt::format("{}: {}", source_name, e.msg));
+  }
 }
 
 StudyConfig loadStudy(const fs::path& file, const Registry& reg) {

@@ -151,6 +151,34 @@ TEST(StudyConfig, MalformedYamlNamesTheLine) {
   EXPECT_NE(msg.find("expected a mapping"), std::string::npos) << msg;
 }
 
+// Found by tests/fuzz/fuzz_study (corpus/fuzz_study/crash-map-as-key.yaml, the minimised input
+// first below): a mapping key that is itself a map or a list threw yaml-cpp's bad conversion out
+// of parseStudy; it is a problem with its line, wherever it is.
+TEST(StudyConfig, KeysThatAreNotNamesAreProblemsWithTheirLine) {
+  std::string msg = problems("s: nop}\nmodel: [{l,&\xd0\xd0 {ng}}]\nfo 1\n");
+  EXPECT_NE(msg.find("study.yaml:2: model[0]: a key must be a plain name, found '{...}'"),
+            std::string::npos)
+      << msg;
+  msg = problems(
+      "robot: {type: test_throws, {a: 1}: x}\n"
+      "model: {type: test_model, params: {[1, 2]: 3}}\n"
+      "? [top, level]\n"
+      ": 1\n"
+      "excitation: {{x: 1}: 2}\n"
+      "report: {[r]: 1}\n"
+      "experiment: {type: test_experiment, params: {file: a.csv}}\n"
+      "estimator: {type: test_estimator}\n"
+      "prior: {from: robot, {p: 1}: 2}\n");
+  for (const char* want : {"study.yaml:1: robot: a key must be a plain name, found '{...}'",
+                           "study.yaml:2: model.params: a key must be a plain name, found '[...]'",
+                           "study.yaml:3: a key must be a plain name, found '[...]'",
+                           "study.yaml:5: excitation: a key must be a plain name, found '{...}'",
+                           "study.yaml:6: report: a key must be a plain name, found '[...]'",
+                           "study.yaml:9: prior: a key must be a plain name, found '{...}'"}) {
+    EXPECT_NE(msg.find(want), std::string::npos) << want << "\n" << msg;
+  }
+}
+
 TEST(StudyConfig, SectionShapeErrors) {
   std::string msg = problems("robot: test_throws\n");
   EXPECT_NE(msg.find("study.yaml:1: robot: expected a mapping {type: NAME, params: {...}}"),
