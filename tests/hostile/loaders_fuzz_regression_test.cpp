@@ -23,3 +23,20 @@ TEST(FuzzRegression, DhBadNumberInInertiaIsAnErrorNotAnAbort) {
     EXPECT_NE(m.find("inertia_com.zz"), std::string::npos) << m;
   }
 }
+
+// The same, as libFuzzer minimised it (corpus/fuzz_dh/crash-inertia-comma-initializer-min.yaml):
+// keys without values inside inertia_com.
+TEST(FuzzRegression, DhKeyWithoutValueInInertiaIsAnErrorNotAnAbort) {
+  const std::string yaml =
+      "convention: standard\n"
+      "links:\n"
+      "- inertia_com: {xx: 0,yy,zz}\n";
+  try {
+    exid::loadDhYamlString(yaml, "min.yaml");
+    FAIL() << "accepted";
+  } catch (const exid::Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("min.yaml:3"), std::string::npos) << m;
+    EXPECT_NE(m.find("inertia_com.yy: expected a number, found nothing"), std::string::npos) << m;
+  }
+}
