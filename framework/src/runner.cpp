@@ -346,7 +346,40 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       RunContext xctx = ctx;
       xctx.progress = progressFor("excitation");
       Samples initial = traj->evaluate(traj->initial());
-      OptimizerResult r = optim->minimize(*problem, xctx);
+      // A criterion that is NaN (or fails) at the optimiser's answer makes it no answer: the
+      // optimisers skip such points, but one that found nothing better may return one (nlopt
+      // scores a failed evaluation 1e30). Checked before anything of the stage is written.
+      const std::string crit_place = fmt::format(
+          "{}{}: excitation.criterion '{}'", cfg.file.empty() ? "study" : cfg.file.string(),
+          cfg.criterion->line > 0 ? ":" + std::to_string(cfg.criterion->line) : "",
+          cfg.criterion->type);
+      auto criterionAt = [&](const Eigen::VectorXd& z, std::string* why) {
+        try {
+          const double J = problem->value(z, nullptr);
+          if (!std::isfinite(J)) *why = fmt::format("it evaluates to {}", J);
+          return J;
+        } catch (const Error& e) {
+          *why = e.what();
+          return static_cast<double>(NAN);
+        }
+      };
+      OptimizerResult r;
+      try {
+        r = optim->minimize(*problem, xctx);
+      } catch (const Error& e) {
+        std::string why;
+        if (ctx.shouldStop() || std::isfinite(criterionAt(traj->initial(), &why))) throw;
+        throw Error(fmt::format(
+            "{}: no finite value at the initial trajectory ({}) nor at any point optimizer '{}' "
+            "tried ({})",
+            crit_place, why, cfg.optimizer->type, e.what()));
+      }
+      if (std::string why; !std::isfinite(criterionAt(r.z, &why))) {
+        throw Error(fmt::format(
+            "{}: not finite at the trajectory optimizer '{}' returned ({}; {} evaluations, "
+            "stop: {}): no usable excitation trajectory",
+            crit_place, cfg.optimizer->type, why, r.evaluations, r.stop_reason));
+      }
       Samples best = traj->evaluate(r.z);
       Json& X = S["excitation"];
       X["trajectory"] = cfg.trajectory->type;

@@ -10,6 +10,7 @@
 #include <fmt/ranges.h>
 
 #include <Eigen/Core>
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -157,10 +158,19 @@ class CsvExperiment : public exid::Experiment {
     if (!P_.getString("torque_file").empty()) {
       srcs.push_back(readSource(P_.getString("torque_file")));
       ftau = 1;
-      exid::check(srcs[1].T.data.rows() == rows,
-                  fmt::format("experiment 'csv': torque_file {} has {} data rows, file {} has {}: "
-                              "the two files must be row-aligned",
-                              srcs[1].file, srcs[1].T.data.rows(), file, rows));
+      const int tau_rows = static_cast<int>(srcs[1].T.data.rows());
+      if (tau_rows != rows) {
+        // The place: the first data row of the longer file that has no counterpart.
+        const Source& longer = srcs[tau_rows > rows ? 1 : 0];
+        const int k = std::min(rows, tau_rows);
+        const int line = k < static_cast<int>(longer.line_of.size())
+                             ? longer.line_of[static_cast<std::size_t>(k)]
+                             : 0;
+        throw exid::Error(fmt::format(
+            "experiment 'csv': torque_file {} has {} data rows, file {} has {}: the two files "
+            "must be row-aligned ({}: data row {} at line {} has no counterpart)",
+            srcs[1].file, tau_rows, file, rows, longer.file, k + 1, line));
+      }
     }
     // Columns as (source, column) references, flattened: ref = source * kStride + column.
     constexpr int kStride = 1 << 20;

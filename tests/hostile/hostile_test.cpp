@@ -47,12 +47,14 @@ struct Child {
 
 /// Starts `exid -q run study --out out` with stdout+stderr to dir/log.txt; `limit_bytes` > 0 caps
 /// the size of any file it writes (RLIMIT_FSIZE, SIGXFSZ ignored: writes fail with EFBIG, as on
-/// a full disk).
-Child start(const fs::path& study, const fs::path& out, const fs::path& dir, long limit_bytes = 0) {
+/// a full disk); `plugin_path`, when given, is the child's EXID_PLUGIN_PATH.
+Child start(const fs::path& study, const fs::path& out, const fs::path& dir, long limit_bytes = 0,
+            const std::string& plugin_path = "") {
   Child c;
   c.log = dir / "log.txt";
   c.pid = ::fork();
   if (c.pid == 0) {
+    if (!plugin_path.empty()) ::setenv("EXID_PLUGIN_PATH", plugin_path.c_str(), 1);
     FILE* f = std::freopen(c.log.c_str(), "w", stdout);
     (void)f;
     ::dup2(STDOUT_FILENO, STDERR_FILENO);
@@ -162,4 +164,85 @@ TEST(Hostile, AJointThatNeverMovesIsNamed) {
   EXPECT_TRUE(fs::exists(dir / "out" / "experiment.csv"));  // the finished stage is kept
   EXPECT_TRUE(noTemporaries(dir));
   fs::remove_all(dir);
+}
+
+// Two row-aligned files of different length (experiment csv, torque_file): both files and their
+// row counts are named, with the line of the first row that has no counterpart; exit 1, the
+// resolved study is kept, no experiment.csv and no temporary file.
+TEST(Hostile, TorqueFileRowMismatchNamesBothFiles) {
+  const fs::path dir = tempDir("rows");
+  {
+    std::ofstream q(dir / "q.csv"), tau(dir / "tau.csv");
+    q << "t,q1,q2\n";
+    tau << "tau1,tau2\n";
+    for (int k = 0; k < 500; ++k) {
+      const double t = 0.01 * k;
+      q << t << "," << std::sin(t) << "," << std::cos(2 * t) << "\n";
+      if (k < 499) tau << std::sin(3 * t) << "," << std::cos(t) << "\n";  // one row short
+    }
+  }
+  std::ofstream(dir / "study.yaml")
+      << kPlanar
+      << "experiment: {type: csv, params: {file: q.csv, q_columns: [q1, q2], torque_file: "
+         "tau.csv, tau_columns: [tau1, tau2]}}\n";
+  const Child c = start(dir / "study.yaml", dir / "out", dir);
+  const int code = wait(c);
+  const std::string log = slurp(c.log);
+  EXPECT_EQ(code, 1) << log;
+  EXPECT_NE(log.find((dir / "tau.csv").string() + " has 499 data rows"), std::string::npos) << log;
+  EXPECT_NE(log.find((dir / "q.csv").string() + " has 500"), std::string::npos) << log;
+  EXPECT_NE(log.find("row-aligned"), std::string::npos) << log;
+  // Header at line 1, data row 500 at line 501 of q.csv: the first row without a counterpart.
+  EXPECT_NE(log.find("line 501"), std::string::npos) << log;
+  ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
+  const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
+  EXPECT_EQ(s.find("status")->asString(), "failed");
+  EXPECT_EQ(s.find("failed_stage")->asString(), "experiment");
+  EXPECT_NE(s.find("message")->asString().find("row-aligned"), std::string::npos);
+  EXPECT_TRUE(fs::exists(dir / "out" / "study.resolved.yaml"));
+  EXPECT_FALSE(fs::exists(dir / "out" / "experiment.csv"));
+  EXPECT_TRUE(noTemporaries(dir));
+  fs::remove_all(dir);
+}
+
+// A criterion that evaluates to NaN at every point of the excitation optimisation (test plugin
+// test_nan, tests/plugins/nan_criterion_plugin.cpp), with each optimiser: the study file, the
+// line of the criterion and the criterion are named, exit 1, summary.json says why, and none of
+// the stage's files (trajectories, criterion history) nor any later stage's is written.
+TEST(Hostile, NanCriterionDuringExcitationIsNamedAndWritesNothing) {
+  const std::string plugins = std::string(EXID_TEST_PLUGIN_DIR) + "/nan_criterion_plugin";
+  for (const char* optimizer : {"nlopt", "adjoint_gradient", "sundials"}) {
+    SCOPED_TRACE(optimizer);
+    const fs::path dir = tempDir(std::string("nan_") + optimizer);
+    std::ofstream(dir / "study.yaml") << "robot: {type: planar2r}\n"
+                                         "model: {type: differential}\n"
+                                         "excitation:\n"
+                                         "  trajectory: {type: fourier, params: {harmonics: 2}}\n"
+                                         "  criterion: {type: test_nan}\n"
+                                         "  optimizer: {type: "
+                                      << optimizer
+                                      << ", params: {max_evaluations: 30, max_time_s: 20}}\n"
+                                         "experiment: {type: simulate, params: {duration_s: 2}}\n"
+                                         "estimator: {type: batch_ls}\n";
+    const Child c = start(dir / "study.yaml", dir / "out", dir, 0, plugins);
+    const int code = wait(c);
+    const std::string log = slurp(c.log);
+    EXPECT_EQ(code, 1) << log;
+    EXPECT_NE(log.find((dir / "study.yaml").string() + ":5: excitation.criterion 'test_nan'"),
+              std::string::npos)
+        << log;
+    EXPECT_NE(log.find("nan"), std::string::npos) << log;
+    ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
+    const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
+    EXPECT_EQ(s.find("status")->asString(), "failed");
+    EXPECT_EQ(s.find("failed_stage")->asString(), "excitation");
+    EXPECT_NE(s.find("message")->asString().find("test_nan"), std::string::npos);
+    EXPECT_TRUE(fs::exists(dir / "out" / "study.resolved.yaml"));
+    for (const char* f : {"trajectory_initial.csv", "trajectory_optimal.csv",
+                          "criterion_history.csv", "experiment.csv", "report.md"}) {
+      EXPECT_FALSE(fs::exists(dir / "out" / f)) << f;
+    }
+    EXPECT_TRUE(noTemporaries(dir));
+    fs::remove_all(dir);
+  }
 }
