@@ -1,15 +1,22 @@
 // exid — estimator `batch_ls`: ordinary least squares on the base regressor, streamed.
 //
-// The dataset is processed in chunks of samples (model.rows on slices), and every chunk of
-// augmented rows [W y] is folded into an upper-triangular factor R by Householder QR of
-// [R; chunk] (exid::est::RowAccumulator). Memory is O(p^2 + chunk), independent of the number of
-// samples, and cond(R) = cond([W y]) — the normal matrix W^T W is never formed, so no digits are
-// lost to squaring the condition number. The solve is an SVD of the column-scaled R: rank
-// revealing, and a rank-deficient problem is refused with the unidentifiable directions named.
-// See docs/estimators.md.
+// The dataset is processed in chunks of samples (model.rows on slices) and folded into a
+// (p+1) x (p+1) factor of [W y] (exid::est::RowAccumulator): memory is O(p^2 + chunk),
+// independent of the number of samples. Two ways to fold:
+//   qr:     incremental Householder QR of [R; chunk]; cond(R) = cond([W y]), nothing squared;
+//   normal: the Gram matrix [W y]^T [W y] (a symmetric rank-k update, BLAS-3 speed); squares
+//           cond(W), so the solution's relative error grows like eps cond(W)^2.
+//   auto (default): normal, then the column-scaled cond(W) is checked; above normal_max_cond
+//           (1e3: at most ~2e-10 relative error from squaring) the data are folded again by
+//           QR. Well-conditioned problems (the usual case: an excited robot has cond ~ 10-100)
+//           get the speed, ill-conditioned ones the accuracy; the report says which was used.
+// The solve is an SVD of the column-scaled factor: rank revealing, and a rank-deficient problem
+// is refused with the unidentifiable directions named. See docs/estimators.md.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
+#include <cmath>
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
@@ -21,7 +28,8 @@ namespace {
 class BatchLs : public exid::Estimator {
  public:
   static constexpr const char* kName = "batch_ls";
-  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kVersion = "1.1";
+  static constexpr double kMinRelativeRss = 1e-8;
   static constexpr const char* kDoc =
       "ordinary least squares, streamed in chunks (incremental Householder QR of [W y]), "
       "rank-revealing SVD solve, covariance sigma^2 (W^T W)^-1 and %std";
@@ -29,13 +37,19 @@ class BatchLs : public exid::Estimator {
   static std::vector<exid::ParamDecl> params() {
     return {
         exid::param_int(
-            "chunk_samples", 4096,
+            "chunk_samples", 64,
             "samples per chunk passed to the model (memory ~ chunk x rows per sample x p)", 1.0,
             1e9),
-        exid::param_string("accumulate", std::string("qr"),
-                           "qr: incremental Householder QR of [W y] (cond not squared); normal: "
-                           "accumulate W^T W (faster, squares cond(W); for comparison)",
-                           {"qr", "normal"}),
+        exid::param_string(
+            "accumulate", std::string("auto"),
+            "qr: incremental Householder QR of [W y] (cond not squared); normal: accumulate "
+            "[W y]^T [W y] (about twice as fast, squares cond(W)); auto: normal, and a second "
+            "pass by qr when the column-scaled cond(W) exceeds normal_max_cond",
+            {"auto", "qr", "normal"}),
+        exid::param_double("normal_max_cond", 1e3, "",
+                           "accumulate: auto keeps the normal equations while the column-scaled "
+                           "cond(W) is at most this (relative error ~ 2.2e-16 cond^2)",
+                           1.0, 1e8),
         exid::param_double("rank_tolerance", 1e-8, "",
                            "a direction is unidentifiable when its singular value of the "
                            "column-scaled W is below this times the largest",
@@ -45,8 +59,8 @@ class BatchLs : public exid::Estimator {
 
   explicit BatchLs(const exid::ParamSet& p)
       : chunk_(static_cast<int>(p.getInt("chunk_samples"))),
-        method_(p.getString("accumulate") == "normal" ? exid::est::RowAccumulator::Method::Normal
-                                                      : exid::est::RowAccumulator::Method::Qr) {
+        accumulate_(p.getString("accumulate")),
+        normal_max_cond_(p.getDouble("normal_max_cond")) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
@@ -60,9 +74,53 @@ class BatchLs : public exid::Estimator {
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int p = model.numBase();
-    exid::est::RowAccumulator acc(p, method_);
-    exid::est::forEachChunk(model, data, chunk_, ctx, kName, 0.0, 0.95,
-                            [&](const exid::Rows& r, int, int) { acc.add(r.W, r.y); });
+    using Method = exid::est::RowAccumulator::Method;
+    auto fold = [&](Method m, double lo, double hi) {
+      exid::est::RowAccumulator a(p, m);
+      exid::est::forEachChunk(model, data, chunk_, ctx, kName, lo, hi,
+                              [&](const exid::Rows& r, int, int) { a.add(r.W, r.y); });
+      return a;
+    };
+    const bool automatic = accumulate_ == "auto";
+    exid::est::RowAccumulator acc =
+        fold(accumulate_ == "qr" ? Method::Qr : Method::Normal, 0.0, automatic ? 0.5 : 0.95);
+    exid::Json choice = exid::Json::object();
+    choice["requested"] = accumulate_;
+    if (automatic) {
+      const double kappa = acc.scaledCondition();
+      choice["cond_W_scaled_from_gram"] = kappa;
+      choice["normal_max_cond"] = normal_max_cond_;
+      // The residual from the Gram matrix is yTy - 2 thetaT WTy + thetaT WTW theta: its
+      // absolute error is ~eps yTy, so a fit closer than 1e-8 yTy (noise-free data) needs QR
+      // for a meaningful residual and sigma^2.
+      double rel_rss = HUGE_VAL;
+      if (kappa <= normal_max_cond_) {
+        const double yy = acc.ySquaredNorm();
+        if (yy > 0.0) rel_rss = acc.minimumResidualSquared() / yy;
+        choice["rss_over_yTy"] = rel_rss;
+      }
+      if (!(kappa <= normal_max_cond_) || !(rel_rss >= kMinRelativeRss)) {
+        const bool cond_bad = !(kappa <= normal_max_cond_);
+        ctx.report(0.5, "batch_ls: folding again by QR");
+        acc = fold(Method::Qr, 0.5, 0.95);
+        choice["reason"] =
+            cond_bad
+                ? fmt::format("column-scaled cond(W) = {:.4g} > normal_max_cond = {:g}: the normal "
+                              "equations would lose ~{:.0f} digits, so the data were folded "
+                              "again by Householder QR",
+                              kappa, normal_max_cond_, std::log10(kappa * kappa))
+                : fmt::format("residual ||y - W theta||^2 = {:.3g} yTy < {:g} yTy: too small to "
+                              "resolve from the Gram matrix (noise-free data?), so the data were "
+                              "folded again by Householder QR",
+                              rel_rss, kMinRelativeRss);
+      } else {
+        choice["reason"] = fmt::format(
+            "column-scaled cond(W) = {:.4g} <= normal_max_cond = {:g}: normal equations "
+            "(relative error <~ {:.1e})",
+            kappa, normal_max_cond_, 2.2e-16 * kappa * kappa);
+      }
+    }
+    choice["used"] = acc.method() == Method::Qr ? "qr" : "normal";
     ctx.report(0.97, "batch_ls: solving");
     exid::Estimate e;
     if (!prior) {
@@ -94,9 +152,10 @@ class BatchLs : public exid::Estimator {
     }
     exid::Json& d = e.details;
     d["estimator"] = kName;
-    d["method"] = method_ == exid::est::RowAccumulator::Method::Qr
+    d["method"] = acc.method() == Method::Qr
                       ? "incremental Householder QR of [W y], SVD of the column-scaled R"
-                      : "accumulated W^T W (cond squared), eigendecomposition, SVD";
+                      : "accumulated [W y]^T [W y] (cond squared), eigendecomposition, SVD";
+    d["accumulate"] = choice;
     d["samples"] = data.size();
     d["chunk_samples"] = exid::est::modelIsPerSample(model) ? chunk_ : data.size();
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -106,7 +165,8 @@ class BatchLs : public exid::Estimator {
 
  private:
   int chunk_;
-  exid::est::RowAccumulator::Method method_;
+  std::string accumulate_;
+  double normal_max_cond_;
   exid::est::SolveOptions opt_;
 };
 

@@ -107,10 +107,12 @@ class DifferentialModel : public exid::ObservationModel {
       q = s.q.row(k).transpose();
       qd = s.qd.row(k).transpose();
       qdd = s.qdd.row(k).transpose();
-      exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
       if (all) {
-        W.middleRows(static_cast<Eigen::Index>(k) * m, m) = Y;
+        // Written in place (a strided block of W): no per-sample copy.
+        exid::actuatorRegressor(R, *data, cols_, q, qd, qdd,
+                                W.middleRows(static_cast<Eigen::Index>(k) * m, m));
       } else {
+        exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
         for (int i = 0; i < m; ++i) W.row(k * m + i) = Y.row(sel_[static_cast<std::size_t>(i)]);
       }
     }

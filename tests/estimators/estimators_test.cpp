@@ -1,4 +1,5 @@
 // Estimator plugins (batch_ls, rls, wls, filtered_ls) on a test model with known columns.
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <Eigen/LU>
@@ -100,6 +101,40 @@ TEST(Estimators, BatchLsChunkingAndAccumulationAgree) {
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(r.W);
   EXPECT_NEAR(a.cond_W, svd.singularValues()(0) / svd.singularValues()(m->numBase() - 1),
               1e-8 * a.cond_W);
+}
+
+TEST(Estimators, BatchLsAutoAccumulationPicksNormalOnlyWhenWellConditioned) {
+  const int n = 2;
+  auto m = makeModel(n);
+  DataOptions o;
+  o.tau_noise = {0.05, 0.05};
+  exid::Dataset d = makeData(*m, n, o);
+  exid::RunContext ctx;
+  const exid::Estimate q = make("batch_ls", "{accumulate: qr}")->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate a = make("batch_ls")->estimate(*m, d, nullptr, ctx);
+  const exid::Json& ca = *a.details.find("accumulate");
+  EXPECT_EQ(ca.find("requested")->asString(), "auto");
+  const double kappa = ca.find("cond_W_scaled_from_gram")->asDouble();
+  // The Gram matrix's estimate of the scaled condition number is the QR's one.
+  EXPECT_NEAR(kappa, q.details.find("cond_W_scaled")->asDouble(), 1e-6 * kappa);
+  ASSERT_LT(kappa, 1e3);
+  EXPECT_EQ(ca.find("used")->asString(), "normal");
+  EXPECT_LE(maxRelErr(a.value, q.value), 1e-10);
+  EXPECT_LE(maxRelErr(a.std, q.std), 1e-8);
+  // Above the threshold the data are folded again by QR: the result is the QR's, bit for bit.
+  const exid::Estimate b = make("batch_ls", fmt::format("{{normal_max_cond: {}}}", 0.5 * kappa))
+                               ->estimate(*m, d, nullptr, ctx);
+  const exid::Json& cb = *b.details.find("accumulate");
+  EXPECT_EQ(cb.find("used")->asString(), "qr");
+  EXPECT_NE(cb.find("reason")->asString().find("folded again by Householder QR"),
+            std::string::npos);
+  EXPECT_EQ(maxRelErr(b.value, q.value), 0.0);
+  EXPECT_EQ(make("batch_ls", "{accumulate: normal}")
+                ->estimate(*m, d, nullptr, ctx)
+                .details.find("accumulate")
+                ->find("used")
+                ->asString(),
+            "normal");
 }
 
 TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {

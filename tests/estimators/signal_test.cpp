@@ -150,6 +150,10 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   EXPECT_GT(s.cond_W_scaled, 1e6);
   est::RowAccumulator nacc(p, est::RowAccumulator::Method::Normal);
   nacc.add(W, y);
+  // The scaled condition number: exact from the QR factor; from the Gram matrix it is only
+  // known to be far beyond what the normal equations tolerate (cond^2 ~ 1/eps).
+  EXPECT_NEAR(acc.scaledCondition(), s.cond_W_scaled, 1e-6 * s.cond_W_scaled);
+  EXPECT_GT(nacc.scaledCondition(), 1e5);
   est::LsSolution sn = est::solveLeastSquares(nacc, {}, opt, "test");
   const double err_normal = (sn.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   EXPECT_GT(err_normal, 100 * err_qr);

@@ -1,6 +1,7 @@
 // Streaming QR / normal-equation accumulation and the rank-revealing least-squares solve.
 #include <fmt/format.h>
 
+#include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -57,6 +58,18 @@ void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
   check(W.rows() == y.size(),
         fmt::format("RowAccumulator: {} rows of W but {} of y", W.rows(), y.size()));
   const Eigen::Index r = W.rows();
+  if (method_ == Method::Normal && fill_ == 0 && r >= 64) {
+    // A large block goes straight into the Gram matrix (no copy into the buffer):
+    // [W y]^T [W y] = [W^T W, W^T y; y^T W, y^T y] (lower triangle kept).
+    const int pp = p_;
+    const double s2 = scale * scale;
+    gram_.topLeftCorner(pp, pp).selfadjointView<Eigen::Lower>().rankUpdate(W.transpose(), s2);
+    gram_.row(pp).head(pp).noalias() += s2 * (y.transpose() * W);
+    gram_(pp, pp) += s2 * y.squaredNorm();
+    m_ += r;
+    dirty_ = true;
+    return;
+  }
   const Eigen::Index cap = buf_.rows();
   Eigen::Index i = 0;
   while (i < r) {
@@ -118,6 +131,55 @@ double RowAccumulator::residualSquared(const Eigen::VectorXd& theta) const {
 
 Eigen::VectorXd RowAccumulator::columnNorms() const {
   return factor().leftCols(p_).colwise().norm().transpose();
+}
+
+double RowAccumulator::ySquaredNorm() const {
+  if (method_ == Method::Normal) {
+    compress();
+    return gram_(p_, p_);
+  }
+  return factor().col(p_).squaredNorm();
+}
+
+double RowAccumulator::minimumResidualSquared() const {
+  if (method_ == Method::Qr) {
+    const double r = factor()(p_, p_);
+    return r * r;
+  }
+  compress();
+  const Eigen::MatrixXd G = gram_.topLeftCorner(p_, p_).selfadjointView<Eigen::Lower>();
+  const Eigen::VectorXd b = gram_.row(p_).head(p_).transpose();
+  Eigen::VectorXd d = G.diagonal().cwiseMax(0.0).cwiseSqrt();
+  for (Eigen::Index j = 0; j < p_; ++j)
+    if (!(d(j) > 0.0)) return HUGE_VAL;
+  const Eigen::VectorXd di = d.cwiseInverse();
+  Eigen::LDLT<Eigen::MatrixXd> ldlt(di.asDiagonal() * G * di.asDiagonal());
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().minCoeff() > 0.0)) return HUGE_VAL;
+  const Eigen::VectorXd bs = di.asDiagonal() * b;
+  return std::max(0.0, gram_(p_, p_) - bs.dot(ldlt.solve(bs)));
+}
+
+double RowAccumulator::scaledCondition() const {
+  if (method_ == Method::Normal) {
+    compress();
+    const Eigen::MatrixXd G = gram_.topLeftCorner(p_, p_).selfadjointView<Eigen::Lower>();
+    Eigen::VectorXd d = G.diagonal().cwiseMax(0.0).cwiseSqrt();
+    for (Eigen::Index j = 0; j < p_; ++j)
+      if (!(d(j) > 0.0)) return std::numeric_limits<double>::infinity();
+    const Eigen::VectorXd di = d.cwiseInverse();
+    const Eigen::MatrixXd Gs = di.asDiagonal() * G * di.asDiagonal();
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(Gs, Eigen::EigenvaluesOnly);
+    const double lmin = es.eigenvalues()(0), lmax = es.eigenvalues()(p_ - 1);
+    if (!(lmin > 0.0) || !std::isfinite(lmax)) return std::numeric_limits<double>::infinity();
+    return std::sqrt(lmax / lmin);
+  }
+  const Eigen::MatrixXd Fw = factor().leftCols(p_);
+  Eigen::VectorXd d = Fw.colwise().norm().transpose();
+  for (Eigen::Index j = 0; j < p_; ++j)
+    if (!(d(j) > 0.0)) return std::numeric_limits<double>::infinity();
+  const Eigen::VectorXd s =
+      Eigen::JacobiSVD<Eigen::MatrixXd>(Fw * d.cwiseInverse().asDiagonal()).singularValues();
+  return s(p_ - 1) > 0.0 ? s(0) / s(p_ - 1) : std::numeric_limits<double>::infinity();
 }
 
 // ---------------------------------------------------------------- solve

@@ -50,7 +50,10 @@ void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
   check(rows.equation.empty() || rows.equation.size() == static_cast<std::size_t>(rows.y.size()),
         fmt::format("{}: the model returned {} equation labels for {} rows", who,
                     rows.equation.size(), rows.y.size()));
-  if (!rows.W.allFinite() || !rows.y.allFinite()) {
+  // One vectorised sum is finite whenever every entry is (a NaN or inf propagates); only a
+  // non-finite sum (or an overflow of finite entries) pays for the entry-by-entry search.
+  if (!std::isfinite(rows.W.sum() + rows.y.sum()) &&
+      (!rows.W.allFinite() || !rows.y.allFinite())) {
     for (Eigen::Index i = 0; i < rows.W.rows(); ++i)
       if (!rows.W.row(i).allFinite() || !std::isfinite(rows.y(i)))
         throw Error(

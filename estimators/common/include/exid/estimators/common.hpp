@@ -26,7 +26,9 @@ namespace exid::est {
 ///   (rows are buffered and compressed in blocks). cond(F) = cond([W y]): nothing is squared.
 /// Method::Normal: accumulates the Gram matrix [W y]^T [W y] (a symmetric rank-k update,
 ///   about half the flops of the QR), and F comes from its eigendecomposition. Squares
-///   cond(W): digits are lost when cond(W) > ~1e5. Offered for speed comparison only.
+///   cond(W): the solution's relative error grows like eps cond(W)^2 (eps = 2.2e-16), so it is
+///   safe when the column-scaled cond(W) is moderate (scaledCondition(); batch_ls's
+///   `accumulate: auto` uses it below 1e3 and falls back to a QR pass above).
 class RowAccumulator {
  public:
   enum class Method { Qr, Normal };
@@ -50,6 +52,16 @@ class RowAccumulator {
   double residualSquared(const Eigen::VectorXd& theta) const;
   /// Euclidean norm of each column of W (p).
   Eigen::VectorXd columnNorms() const;
+  /// sigma_max / sigma_min of W with every column scaled to unit norm (inf when W is rank
+  /// deficient to working precision). Normal: from the eigenvalues of the scaled Gram matrix
+  /// (accurate while cond^2 << 1/eps); Qr: from the singular values of the scaled R.
+  double scaledCondition() const;
+  /// ||y||^2 of everything added (scaled).
+  double ySquaredNorm() const;
+  /// min_theta ||y - W theta||^2, cheaply: Qr: the last diagonal entry of R squared; Normal:
+  /// yTy - bT G^-1 b by a Cholesky (LDLT) solve of the column-scaled Gram matrix (absolute
+  /// error ~ eps yTy). HUGE_VAL when W is singular to working precision.
+  double minimumResidualSquared() const;
 
  private:
   void compress() const;
