@@ -9,7 +9,8 @@
 // where [F_w f_y] is the QR-compressed factor of the (noise-normalised) rows [W y] stacked with
 // the prior's pseudo-observations, so one evaluation costs O(p * n_full), not O(rows). NLopt
 // (LD_LBFGS by default) with exact gradients, then a Levenberg-Marquardt polish with the exact
-// Jacobian. See docs/consistent.md.
+// Jacobian. The prior's scale is fixed or chosen on the identification data (blocked
+// cross-validation or evidence, exid/estimators/prior_scale.hpp). See docs/consistent.md.
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
@@ -20,10 +21,12 @@
 #include <limits>
 #include <map>
 #include <nlopt.hpp>
+#include <optional>
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/estimators/consistent.hpp"
+#include "exid/estimators/prior_scale.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 
@@ -256,7 +259,8 @@ class ConsistentLs : public exid::Estimator {
   static constexpr const char* kDoc =
       "least squares of the base parameters with physically consistent standard parameters behind "
       "them (log-Cholesky pseudo-inertia per body, Ia/Fc/Fv >= 0), per-equation weights, optional "
-      "prior; NLopt with exact gradients + Levenberg-Marquardt polish";
+      "prior (scale fixed, or by blocked cross-validation or evidence); NLopt with exact "
+      "gradients + Levenberg-Marquardt polish";
 
   static std::vector<exid::ParamDecl> params() {
     return {
@@ -265,6 +269,23 @@ class ConsistentLs : public exid::Estimator {
             "equation: each equation's rows divided by its residual std (wls, Gautier); "
             "none: one std for all rows (OLS)",
             {"equation", "none"}),
+        exid::param_double("prior_scale", 1.0, "",
+                           "with prior_scale_selection: none, every prior standard deviation "
+                           "is multiplied by this",
+                           0.0, std::nullopt, true),
+        exid::param_string(
+            "prior_scale_selection", std::string("none"),
+            "none: prior_scale as given; cv: blocked cross-validation on the identification "
+            "samples (cv_blocks contiguous blocks) over a log grid in prior_scale_range; "
+            "evidence: type-II maximum likelihood (MacKay) of the scale and a common noise "
+            "variance. Both on the weighted linear (prior-regularised) problem",
+            {"none", "cv", "evidence"}),
+        exid::param_int("cv_blocks", 5,
+                        "contiguous blocks of samples for prior_scale_selection: cv", 2.0, 1000.0),
+        exid::param_doubles("prior_scale_range", std::vector<double>{0.01, 100.0}, "",
+                            "[lo, hi] of the scales searched by prior_scale_selection (cv: 8 "
+                            "log-spaced candidates per decade)",
+                            2, 2),
         exid::param_string(
             "algorithm", std::string("LD_LBFGS"),
             "NLopt algorithm (exact gradients); none: Levenberg-Marquardt only",
@@ -293,11 +314,19 @@ class ConsistentLs : public exid::Estimator {
       : weighting_(p.getString("weighting")),
         algorithm_(p.getString("algorithm")),
         start_(p.getString("start")),
+        scale_selection_(p.getString("prior_scale_selection")),
+        scale_range_(p.getDoubles("prior_scale_range")),
+        prior_scale_(p.getDouble("prior_scale")),
+        cv_blocks_(static_cast<int>(p.getInt("cv_blocks"))),
         max_eval_(static_cast<int>(p.getInt("max_evaluations"))),
         polish_(static_cast<int>(p.getInt("polish_iterations"))),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         max_eq_(static_cast<int>(p.getInt("max_equations"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
+    exid::check(
+        scale_range_.size() == 2 && scale_range_[0] > 0 && scale_range_[1] >= scale_range_[0] &&
+            std::isfinite(scale_range_[1]),
+        fmt::format("{}: prior_scale_range must be [lo, hi] with 0 < lo <= hi < inf", kName));
   }
 
   exid::EstimatorSpecs specs() const override {
@@ -313,13 +342,19 @@ class ConsistentLs : public exid::Estimator {
     const exid::BaseParameters& base = model.base();
     const std::vector<std::string>& names = base.names;
 
-    // ---- rows compressed per equation
+    // ---- rows compressed per equation (and per block of samples for cross-validation)
+    const bool select_cv = prior && scale_selection_ == "cv";
+    const int blocks = select_cv ? cv_blocks_ : 0;
+    const int n_samples = data.size();
     std::map<int, RowAccumulator> acc;
+    std::vector<std::map<int, RowAccumulator>> block_acc(static_cast<std::size_t>(blocks));
     std::map<int, std::vector<int>> idx;
+    std::vector<int> sample_of_row, order;
     exid::est::forEachChunk(
-        model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int, int) {
+        model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int begin, int end) {
           for (auto& [eq, v] : idx) v.clear();
           const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
+          if (blocks > 0) exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
           for (Eigen::Index i = 0; i < r.y.size(); ++i)
             idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
                 static_cast<int>(i));
@@ -340,6 +375,18 @@ class ConsistentLs : public exid::Estimator {
             if (it == acc.end())
               it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
             it->second.add(W, y);
+            for (Eigen::Index k = 0; k < n && blocks > 0; ++k) {
+              // contiguous blocks in time: sample s of n_samples -> block s * blocks / n_samples
+              const long s = begin + sample_of_row[static_cast<std::size_t>(v[k])];
+              const auto blk = static_cast<std::size_t>(
+                  std::min<long>(blocks - 1, s * blocks / std::max(1, n_samples)));
+              auto bt = block_acc[blk].find(eq);
+              if (bt == block_acc[blk].end())
+                bt = block_acc[blk]
+                         .emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 64))
+                         .first;
+              bt->second.addRow(W.row(k), y(k));
+            }
           }
         });
     RowAccumulator all(p);
@@ -354,10 +401,10 @@ class ConsistentLs : public exid::Estimator {
     // ---- noise-normalised rows (+ prior): one factor
     int rank = 0;
     const Eigen::VectorXd theta_mn = exid::est::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
-    RowAccumulator total(p);
+    RowAccumulator weighted(p);
     Json eq_table = Json::array();
+    std::map<int, double> sigma;
     {
-      std::map<int, double> sigma;
       double smax = 0.0;
       const double global = std::sqrt(std::max(0.0, all.residualSquared(theta_mn)) /
                                       static_cast<double>(std::max<long>(1, m - rank)));
@@ -382,18 +429,46 @@ class ConsistentLs : public exid::Estimator {
           all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
       const double floor =
           std::max(smax > 0 ? 1e-6 * smax : 0.0, (prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
-      for (const auto& [eq, a] : acc) {
-        const double s = std::max(sigma[eq], floor);
-        total.merge(a, 1.0 / s);
+      for (auto& [eq, s] : sigma) {
         Json row = Json::object();
         row["equation"] = eq;
-        row["rows"] = Json(static_cast<long long>(a.rows()));
-        row["residual_std"] = sigma[eq];
+        row["rows"] = Json(static_cast<long long>(acc.at(eq).rows()));
+        row["residual_std"] = s;
+        s = std::max(s, floor);
         row["weight"] = 1.0 / s;
         eq_table.push_back(row);
+        weighted.merge(acc.at(eq), 1.0 / s);
       }
     }
-    if (prior) exid::est::addPriorRows(&total, *prior, kName);
+    // ---- the prior, its scale chosen on the weighted rows when asked (docs/consistent.md)
+    std::optional<exid::Prior> used_prior;
+    Json scale_details = Json::object();
+    if (prior) {
+      double scale = prior_scale_;
+      scale_details["method"] = "fixed";
+      if (scale_selection_ != "none") {
+        exid::est::PriorScaleChoice c;
+        if (select_cv) {
+          std::vector<RowAccumulator> folds;
+          for (const auto& blk : block_acc) {
+            RowAccumulator f(p);
+            for (const auto& [eq, a] : blk) f.merge(a, 1.0 / sigma.at(eq));
+            folds.push_back(std::move(f));
+          }
+          c = exid::est::selectPriorScaleCv(
+              folds, *prior, exid::est::logGrid(scale_range_[0], scale_range_[1], 8), kName);
+        } else {
+          c = exid::est::selectPriorScaleEvidence(weighted, *prior, scale_range_[0],
+                                                  scale_range_[1], kName);
+        }
+        scale = c.scale;
+        scale_details = c.toJson();
+      }
+      scale_details["scale"] = scale;
+      used_prior = exid::est::scaledPrior(*prior, scale);
+    }
+    RowAccumulator total = weighted;
+    if (used_prior) exid::est::addPriorRows(&total, *used_prior, kName);
     exid::est::SolveOptions uo = opt_;
     uo.unit_variance = true;
     if (prior) uo.rank_tolerance = 0.0;  // positive definite with the prior
@@ -535,7 +610,10 @@ class ConsistentLs : public exid::Estimator {
     o["variables"] = map.nz();
     o["linearised_rank"] = lin_rank;
     d["optimization"] = o;
-    if (prior) d["prior"] = exid::est::priorDetails(*prior, theta, sol.std);
+    if (used_prior) {
+      d["prior"] = exid::est::priorDetails(*used_prior, theta, sol.std);
+      d["prior"]["scale"] = scale_details;
+    }
 
     // Consistent standard parameters (exid export writes them into a URDF).
     Json sp = Json::object();
@@ -631,7 +709,10 @@ class ConsistentLs : public exid::Estimator {
     return it;
   }
 
-  std::string weighting_, algorithm_, start_;
+  std::string weighting_, algorithm_, start_, scale_selection_;
+  std::vector<double> scale_range_;
+  double prior_scale_;
+  int cv_blocks_;
   int max_eval_, polish_, chunk_, max_eq_;
   exid::est::SolveOptions opt_;
 };

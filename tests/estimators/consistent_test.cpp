@@ -20,6 +20,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/estimators/prior_scale.hpp"
 #include "exid/io.hpp"
 #include "exid/urdf_writer.hpp"
 #include "exid_test.hpp"
@@ -349,6 +350,112 @@ TEST(ConsistentLs, PandaConsistentAtEveryNoiseLevel) {
     int pinned = 0;
     for (Eigen::Index i = 0; i < c.std.size(); ++i) pinned += c.std(i) < 1e-6 * ols.std(i) ? 1 : 0;
     std::printf("  %d base parameters pinned by active bounds (linearised std 0)\n", pinned);
+  }
+}
+
+// ---------------------------------------------------------------- prior scale
+// A linear problem y = W theta + e (unit noise) whose truth is a draw from the prior with its
+// standard deviations multiplied by a_true: the evidence must recover a_true and the unit noise
+// variance, cross-validation a scale of the same order.
+TEST(PriorScale, EvidenceAndCrossValidationRecoverTheScaleOfThePriorDraw) {
+  const int p = 50, m = 4000, blocks = 5;
+  std::mt19937 rng(17);
+  std::normal_distribution<double> nz(0.0, 1.0);
+  std::uniform_real_distribution<double> uni(0.5, 2.0);
+  exid::Prior prior;
+  prior.value.resize(p);
+  Eigen::VectorXd sd(p);
+  for (int i = 0; i < p; ++i) {
+    prior.value(i) = 3.0 * nz(rng);
+    sd(i) = uni(rng);
+  }
+  prior.covariance = sd.cwiseAbs2().asDiagonal();
+  // Data std of each parameter ~ 1 / (0.1 sqrt(m)) ~ 0.16: the draw's deviation from the prior
+  // (a_true * sd, sd in [0.5, 2]) is visible in the data for every a_true below, and the prior
+  // still matters.
+  Eigen::MatrixXd W(m, p);
+  for (int r = 0; r < m; ++r)
+    for (int c = 0; c < p; ++c) W(r, c) = 0.1 * nz(rng);
+  for (double a_true : {0.3, 1.0, 10.0}) {
+    SCOPED_TRACE(a_true);
+    Eigen::VectorXd theta(p);
+    for (int i = 0; i < p; ++i) theta(i) = prior.value(i) + a_true * sd(i) * nz(rng);
+    Eigen::VectorXd y = W * theta;
+    for (int r = 0; r < m; ++r) y(r) += nz(rng);
+    exid::est::RowAccumulator all(p);
+    all.add(W, y);
+    const exid::est::PriorScaleChoice ev =
+        exid::est::selectPriorScaleEvidence(all, prior, 1e-3, 1e3, "test");
+    std::vector<exid::est::RowAccumulator> folds;
+    for (int b = 0; b < blocks; ++b) {
+      folds.emplace_back(p);
+      folds.back().add(W.middleRows(b * m / blocks, m / blocks),
+                       y.segment(b * m / blocks, m / blocks));
+    }
+    const exid::est::PriorScaleChoice cv =
+        exid::est::selectPriorScaleCv(folds, prior, exid::est::logGrid(1e-3, 1e3, 8), "test");
+    std::printf("a_true %g: evidence a = %.3g (s^2 = %.3g, gamma = %.1g), cv a = %.3g\n", a_true,
+                ev.scale, ev.noise_variance, ev.effective_parameters, cv.scale);
+    EXPECT_GT(ev.scale, 0.7 * a_true);
+    EXPECT_LT(ev.scale, 1.4 * a_true);
+    EXPECT_NEAR(ev.noise_variance, 1.0, 0.1);
+    EXPECT_GT(cv.scale, a_true / 4);
+    EXPECT_LT(cv.scale, 4 * a_true);
+    ASSERT_EQ(cv.criterion.size(), cv.grid.size());
+  }
+}
+
+// consistent_ls on noisy, short Panda data with a prior whose stated standard deviations are
+// wrong by a factor 10 either way: the selected scale moves the right way and the estimate
+// predicts fresh (noise-free) torques better than with the prior as stated.
+TEST(PriorScale, SelectionCorrectsAMisstatedPriorInConsistentLs) {
+  Panda pa = panda();
+  exid::RunContext ctx;
+  const exid::Dataset d = pandaData(*pa.truth, 2.0, 11, 500);
+  const exid::Dataset fresh = pandaData(*pa.truth, 0.0, 12, 1500);
+  const Eigen::MatrixXd Wt = pa.model->rows(fresh, ctx).W;
+  const Eigen::VectorXd truth =
+      pa.model->base().K *
+      exid::parameterValues(*pa.truth, exid::DriveColumns{true, true, true, false});
+  const int p = pa.model->numBase();
+  std::mt19937 rng(5);
+  std::normal_distribution<double> nz(0.0, 1.0);
+  Eigen::VectorXd sd(p), xi(p);
+  for (int i = 0; i < p; ++i) {
+    sd(i) = 0.3 * std::abs(truth(i)) + 0.02;
+    xi(i) = nz(rng);
+  }
+  auto predictionError = [&](const exid::Estimate& e) {
+    return (Wt * (e.value - truth)).norm() / (Wt * truth).norm();
+  };
+  for (double actual : {0.1, 10.0}) {  // prior error / stated std
+    SCOPED_TRACE(actual);
+    exid::Prior prior;
+    prior.value = truth + actual * sd.cwiseProduct(xi);
+    prior.covariance = sd.cwiseAbs2().asDiagonal();
+    const exid::Estimate fixed = make("consistent_ls")->estimate(*pa.model, d, &prior, ctx);
+    const double e_fixed = predictionError(fixed);
+    EXPECT_EQ(fixed.details.find("prior")->find("scale")->find("method")->asString(), "fixed");
+    for (const std::string method : {"cv", "evidence"}) {
+      SCOPED_TRACE(method);
+      const exid::Estimate sel = make("consistent_ls", "{prior_scale_selection: " + method + "}")
+                                     ->estimate(*pa.model, d, &prior, ctx);
+      expectConsistent(sel);
+      const exid::Json& sc = *sel.details.find("prior")->find("scale");
+      EXPECT_EQ(sc.find("method")->asString(), method);
+      const double a = sc.find("scale")->asDouble();
+      const double e_sel = predictionError(sel);
+      std::printf(
+          "prior off by %g x its std, %s: scale %.3g, fresh torque error %.4f (stated "
+          "prior %.4f)\n",
+          actual, method.c_str(), a, e_sel, e_fixed);
+      if (actual < 1) {
+        EXPECT_LT(a, 0.5);
+      } else {
+        EXPECT_GT(a, 2.0);
+      }
+      EXPECT_LT(e_sel, e_fixed);
+    }
   }
 }
 
