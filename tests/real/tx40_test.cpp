@@ -1,5 +1,6 @@
 // Real data: the Staubli TX40 recording (../shared/data/staubli_tx40, FIGAROH) identified by
-// examples/real/tx40_{filtered_ls,wls}.yaml and validated on the held-out segment 6 - 7.6 s.
+// examples/real/tx40_{filtered_ls,wls,consistent_ls,consistent_ls_cv}.yaml and validated on the
+// held-out segment 6 - 7.6 s.
 // A regression guard: the bounds are the errors measured when the studies were written
 // (docs/real_data.md) plus about 15 %. Skipped when the data folder is absent.
 #include <gtest/gtest.h>
@@ -136,4 +137,50 @@ TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
     EXPECT_LT(rc.at(j).asDouble(), rw.at(j).asDouble()) << "joint " << j + 1;
   const std::array<double, 6> bound = {0.10, 0.09, 0.17, 0.18, 0.25, 0.25};
   for (std::size_t j = 0; j < 6; ++j) EXPECT_LT(rc.at(j).asDouble(), bound[j]) << "joint " << j + 1;
+}
+
+// The same with the prior's scale chosen by blocked cross-validation on the identification part
+// (examples/real/tx40_consistent_ls_cv.yaml, docs/consistent.md "Prior scale"). Measured: scale
+// 0.316; consistent_ls 0.0841 0.0778 0.1441 0.1456 0.2128 0.2084, all 0.0897 (wls 0.0877 0.0774
+// 0.1456 0.1544 0.2211 0.2127, all 0.0916). Asserted: the identification data ask for a tighter
+// prior than stated (scale < 1; every block count from 3 to 10 selects 0.02 - 0.42), overall and
+// joints 4-6 better than wls. Joint 3 is printed, not asserted: it beats wls with 5 blocks
+// (0.1441 < 0.1456) but not with 3, 4, 6, 8 or 10 (selected scales 0.056 - 0.1, joint 3 0.1466 -
+// 0.1473), nor with the cross-validation error pooled over those block counts (scale 0.075) --
+// the margin is smaller than the spread of equally justified selections (docs/real_data.md).
+TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
+  ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
+      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+  const ::Run w = runStudy("tx40_wls");
+  const ::Run c = runStudy("tx40_consistent_ls_cv");
+  ASSERT_EQ(w.code, 0) << w.out;
+  ASSERT_EQ(c.code, 0) << c.out;
+  const exid::Json& d = *c.summary.find("identification")->find("details");
+  EXPECT_TRUE(d.find("consistent")->asBool());
+  const exid::Json& sc = *d.find("prior")->find("scale");
+  EXPECT_EQ(sc.find("method")->asString(), "cv");
+  const double scale = sc.find("scale")->asDouble();
+  EXPECT_LT(scale, 1.0);
+  EXPECT_GE(scale, 0.01);
+  // the criterion is reported over the whole grid and its minimum is the selected scale
+  const exid::Json& grid = *sc.find("grid");
+  const exid::Json& cv = *sc.find("cv_error");
+  ASSERT_EQ(grid.size(), cv.size());
+  std::size_t at = cv.size();
+  for (std::size_t i = 0; i < cv.size(); ++i)
+    if (grid.at(i).asDouble() == scale) at = i;
+  ASSERT_LT(at, cv.size()) << "the selected scale is not on the grid";
+  for (std::size_t k = 0; k < cv.size(); ++k)
+    EXPECT_LE(cv.at(at).asDouble(), cv.at(k).asDouble()) << "grid " << k;
+  const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");
+  const exid::Json& rc = *c.summary.find("validation")->find("relative_error_per_joint");
+  const double aw = w.summary.find("validation")->find("relative_error")->asDouble();
+  const double ac = c.summary.find("validation")->find("relative_error")->asDouble();
+  for (std::size_t j = 0; j < 6; ++j)
+    std::printf("joint %zu: wls %.4f  consistent_ls + CAD prior x %.3g (cv) %.4f\n", j + 1,
+                rw.at(j).asDouble(), scale, rc.at(j).asDouble());
+  std::printf("all: wls %.4f  consistent_ls + CAD prior x %.3g (cv) %.4f\n", aw, scale, ac);
+  EXPECT_LE(ac, aw);
+  for (std::size_t j = 3; j < 6; ++j)
+    EXPECT_LT(rc.at(j).asDouble(), rw.at(j).asDouble()) << "joint " << j + 1;
 }
