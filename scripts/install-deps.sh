@@ -1,10 +1,17 @@
 #!/usr/bin/env bash
 # Installs the Debian 12 packages exid needs, only those missing. Run as root (or with sudo).
+# --fuzz: also clang 14 and its libFuzzer/sanitizer runtimes, for the fuzz build (tests/fuzz).
 set -euo pipefail
 pkgs=(build-essential cmake pkg-config
       libeigen3-dev libboost-dev libboost-filesystem-dev libnlopt-cxx-dev libsundials-dev
       libfmt-dev libyaml-cpp-dev liburdfdom-dev libcli11-dev libgtest-dev libgmock-dev
       libbenchmark-dev libsqlite3-dev gnuplot-nox libopenmpi-dev openmpi-bin)
+for arg in "$@"; do
+  case "$arg" in
+    --fuzz) pkgs+=(clang-14 libclang-rt-14-dev) ;;
+    *) echo "install-deps: unknown argument '$arg' (--fuzz)" >&2; exit 2 ;;
+  esac
+done
 missing=()
 for p in "${pkgs[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

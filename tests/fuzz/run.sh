@@ -5,7 +5,9 @@
 # The seed corpus tests/fuzz/corpus/TARGET is read, never written: new inputs go to
 # FUZZ_BUILD_DIR/corpus/TARGET, findings to FUZZ_BUILD_DIR/artifacts/ (the exit status is
 # non-zero when libFuzzer finds a crash, a sanitizer error, a leak, a timeout or an OOM).
-# Environment: EXID_FUZZ_JOBS (build jobs, default 1), CXX_FUZZ (default clang++-14 or clang++).
+# The build dir's `ctest -L fuzz` runs every target for EXID_FUZZ_SECONDS (set at configure time).
+# Environment: EXID_FUZZ_JOBS (build jobs, default 1), CXX_FUZZ (default clang++-14 or clang++),
+# EXID_FUZZ_SECONDS (default 60, read when the build is configured).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
 root=$(cd "$here/../.." && pwd)
@@ -18,7 +20,8 @@ case "$cmd" in
     if [ ! -f "$build/CMakeCache.txt" ]; then
       cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER="$cxx" \
         -DCMAKE_C_COMPILER="$cc" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DEXID_FUZZ=ON \
-        -DEXID_BUILD_TESTS=OFF -DEXID_BUILD_BENCHMARKS=OFF >/dev/null
+        -DEXID_BUILD_TESTS=OFF -DEXID_BUILD_BENCHMARKS=OFF \
+        -DEXID_FUZZ_SECONDS="${EXID_FUZZ_SECONDS:-60}" >/dev/null
     fi
     shift 2
     cmake --build "$build" -j "${EXID_FUZZ_JOBS:-1}" --target "${@:-exid_fuzz_all}"
