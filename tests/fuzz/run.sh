@@ -19,7 +19,7 @@ case "$cmd" in
     cc=${cxx/clang++/clang}
     if [ ! -f "$build/CMakeCache.txt" ]; then
       cmake -S "$root" -B "$build" -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER="$cxx" \
-        -DCMAKE_C_COMPILER="$cc" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -g" -DEXID_FUZZ=ON \
+        -DCMAKE_C_COMPILER="$cc" -DCMAKE_CXX_FLAGS_RELWITHDEBINFO="-O1 -gline-tables-only" -DEXID_FUZZ=ON \
         -DEXID_BUILD_TESTS=OFF -DEXID_BUILD_BENCHMARKS=OFF \
         -DEXID_FUZZ_SECONDS="${EXID_FUZZ_SECONDS:-60}" >/dev/null
     fi
