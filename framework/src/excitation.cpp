@@ -74,6 +74,29 @@ class Problem final : public ExcitationProblem {
     return J;
   }
 
+  Eigen::MatrixXd information(const Eigen::VectorXd& z) override {
+    ++evaluations_;
+    const Eigen::MatrixXd W = model_->design(traj_->evaluate(z)) * scale_.asDiagonal();
+    return W.transpose() * W;
+  }
+
+  Eigen::MatrixXd informationGradients(const Eigen::VectorXd& z,
+                                       const std::vector<Eigen::MatrixXd>& dM) override {
+    const Samples s = traj_->evaluate(z);
+    const Eigen::MatrixXd W = model_->design(s) * scale_.asDiagonal();
+    Eigen::MatrixXd out(numVariables(), static_cast<Eigen::Index>(dM.size()));
+    Samples adj;
+    for (std::size_t i = 0; i < dM.size(); ++i) {
+      check(dM[i].rows() == W.cols() && dM[i].cols() == W.cols(),
+            "informationGradients: each dM must be p x p (p = number of base parameters)");
+      const Eigen::MatrixXd dW = 2.0 * W * (0.5 * (dM[i] + dM[i].transpose())) *
+                                 scale_.asDiagonal();  // back through the scaling
+      model_->designVjp(s, dW, &adj);
+      out.col(static_cast<Eigen::Index>(i)) = traj_->vjp(z, adj);
+    }
+    return out;
+  }
+
   int numConstraints() const override { return static_cast<int>(active_.size()) * K_; }
 
   void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) override {

@@ -9,6 +9,7 @@
 #include <fmt/format.h>
 #include <nlopt.h>
 
+#include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
 #include <nlopt.hpp>
@@ -54,9 +55,15 @@ struct Ctx {
   const std::vector<int>* rows = nullptr;  // working set: only these rows of g
   double ks_rho = 0;                       // > 0: one Kreisselmeier-Steinhauser aggregate per group
   bool log_objective = false;
+  int epigraph_k = 0;  // > 0: epigraph form of log cond with this many eigenvalues at each end
   double wall_end = HUGE_VAL, cpu_end = HUGE_VAL;  // this run's share of the budget
   long evals = 0;
 };
+
+bool runOver(const Ctx* c) {
+  return c->tr->shouldStop() || c->tr->elapsed() >= c->wall_end ||
+         c->tr->cpuElapsed() >= c->cpu_end;
+}
 
 // Number of constraints NLopt sees.
 int nloptConstraints(const Limits& lim, int slots, double ks_rho) {
@@ -68,8 +75,7 @@ int nloptConstraints(const Limits& lim, int slots, double ks_rho) {
 
 double objective(unsigned n, const double* x, double* grad, void* data) {
   auto* c = static_cast<Ctx*>(data);
-  if (c->tr->shouldStop() || c->tr->elapsed() >= c->wall_end || c->tr->cpuElapsed() >= c->cpu_end)
-    throw nlopt::forced_stop();
+  if (runOver(c)) throw nlopt::forced_stop();
   Eigen::Map<const Eigen::VectorXd> z(x, n);
   Eigen::VectorXd zz = z, g;
   double J;
@@ -152,6 +158,85 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
   }
 }
 
+// ---------------------------------------------------------------- epigraph form of log cond
+// Variables x = [z; a; b]. cond(W) = sqrt(lambda_max / lambda_min) of M = W^T W, so
+//   min log cond  <=>  min (a - b) / 2  s.t.  log lambda_i(M(z)) <= a  (the k largest),
+//                                             log lambda_i(M(z)) >= b  (the k smallest).
+// Each constraint is one eigenvalue, smooth while it is simple; where the extreme eigenvalues
+// coalesce (as they do at the optimum of cond) the max is not differentiable but every
+// eigenvalue involved is its own constraint, so the SQP model sees the whole cluster instead of
+// one arbitrary eigenvector of it (Overton's approach to eigenvalue optimisation).
+double epiObjective(unsigned n2, const double* x, double* grad, void* data) {
+  auto* c = static_cast<Ctx*>(data);
+  if (runOver(c)) throw nlopt::forced_stop();
+  const unsigned n = n2 - 2;
+  if (grad) {
+    std::fill(grad, grad + n, 0.0);
+    grad[n] = 0.5;
+    grad[n + 1] = -0.5;
+  }
+  return 0.5 * (x[n] - x[n + 1]);
+}
+
+void epiEigen(unsigned m, double* result, unsigned n2, const double* x, double* grad,
+              void* data) {
+  auto* c = static_cast<Ctx*>(data);
+  if (runOver(c)) throw nlopt::forced_stop();
+  const unsigned n = n2 - 2;
+  const int k = static_cast<int>(m) / 2;
+  const Eigen::VectorXd z = Eigen::Map<const Eigen::VectorXd>(x, n);
+  const Eigen::MatrixXd M = c->p->information(z);
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(M);
+  const Eigen::VectorXd& lam = es.eigenvalues();  // ascending
+  const auto p = static_cast<int>(lam.size());
+  const double floor = 1e-300;
+  const double J = lam(0) > 0.0 ? std::sqrt(lam(p - 1) / lam(0)) : 1e30;
+  c->tr->offer(z, J, c->lim->maxViolation(z));
+  ++c->evals;
+  // rows 0..k-1: log lambda_(p-1-i) - a <= 0; rows k..2k-1: b - log lambda_i <= 0
+  std::vector<Eigen::MatrixXd> dM;
+  for (int i = 0; i < k; ++i) {
+    const int top = p - 1 - i;
+    result[i] = std::log(std::max(lam(top), floor)) - x[n] + c->tighten;
+    result[k + i] = x[n + 1] - std::log(std::max(lam(i), floor)) + c->tighten;
+    if (grad) {
+      dM.push_back(es.eigenvectors().col(top) * es.eigenvectors().col(top).transpose());
+    }
+  }
+  if (!grad) return;
+  for (int i = 0; i < k; ++i)
+    dM.push_back(es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose());
+  const Eigen::MatrixXd G = c->p->informationGradients(z, dM);
+  for (int r = 0; r < 2 * k; ++r) {
+    double* row = grad + static_cast<std::ptrdiff_t>(r) * n2;
+    const bool upper = r < k;
+    const int idx = upper ? p - 1 - r : r - k;
+    const double inv = 1.0 / std::max(lam(idx), floor);
+    Eigen::Map<Eigen::RowVectorXd>(row, n) = (upper ? inv : -inv) * G.col(r).transpose();
+    row[n] = upper ? -1.0 : 0.0;
+    row[n + 1] = upper ? 0.0 : 1.0;
+  }
+}
+
+void mconstraint(unsigned m, double* result, unsigned n, const double* x, double* grad,
+                 void* data);
+
+// The limits of z in the epigraph variables: the same constraints, zero columns for a and b.
+void epiLimits(unsigned m, double* result, unsigned n2, const double* x, double* grad,
+               void* data) {
+  const unsigned n = n2 - 2;
+  if (!grad) return mconstraint(m, result, n, x, nullptr, data);
+  std::vector<double> g(static_cast<std::size_t>(m) * n);
+  mconstraint(m, result, n, x, g.data(), data);
+  for (unsigned i = 0; i < m; ++i) {
+    std::copy(g.begin() + static_cast<std::ptrdiff_t>(i) * n,
+              g.begin() + static_cast<std::ptrdiff_t>(i + 1) * n,
+              grad + static_cast<std::ptrdiff_t>(i) * n2);
+    grad[static_cast<std::ptrdiff_t>(i) * n2 + n] = 0.0;
+    grad[static_cast<std::ptrdiff_t>(i) * n2 + n + 1] = 0.0;
+  }
+}
+
 class NloptOptimizer final : public exid::Optimizer {
  public:
   static constexpr const char* kName = "nlopt";
@@ -215,10 +300,22 @@ class NloptOptimizer final : public exid::Optimizer {
                                    "aggregated: share of the budget kept for polishing the best "
                                    "point with every sample's constraint (0: none)",
                                    0.0, 0.9));
-    p.push_back(exid::param_string("objective", std::string("value"),
-                                   "what NLopt minimises: value — J; log — log J (same minimisers, "
-                                   "better scaled for cond); the reported criterion is J",
-                                   {"value", "log"}));
+    p.push_back(exid::param_string(
+        "objective", std::string("value"),
+        "what NLopt minimises: value — J; log — log J (same minimisers, better scaled for "
+        "cond); epigraph — criterion cond only: (a - b)/2 over [z; a; b] with log lambda_i(M) "
+        "<= a for the epigraph_eigenvalues largest and >= b for as many smallest eigenvalues "
+        "of M = W^T W (smooth where cond is not: coalescing extreme eigenvalues); the "
+        "reported criterion is J",
+        {"value", "log", "epigraph"}));
+    p.push_back(exid::param_string(
+        "polish_objective", std::string("same"),
+        "objective of the polish runs after the starts (aggregated mode) and after a global "
+        "algorithm: same — as objective; or value, log, epigraph",
+        {"same", "value", "log", "epigraph"}));
+    p.push_back(exid::param_int("epigraph_eigenvalues", 4,
+                                "epigraph: eigenvalues constrained at each end of the spectrum",
+                                1.0));
     p.push_back(exid::param_double("working_set_margin", 0.3, "rad",
                                    "working_set: rows with g > -this join", 0.0));
     p.push_back(exid::param_int("constraint_slots", 10,
@@ -252,7 +349,11 @@ class NloptOptimizer final : public exid::Optimizer {
         start_evals_(p.getInt("start_evaluations")),
         ks_rho_(p.getDouble("ks_rho")),
         final_polish_(p.getDouble("final_polish")),
-        log_objective_(p.getString("objective") == "log") {
+        objective_(p.getString("objective")),
+        polish_objective_(p.getString("polish_objective") == "same"
+                              ? p.getString("objective")
+                              : p.getString("polish_objective")),
+        epigraph_k_(static_cast<int>(p.getInt("epigraph_eigenvalues"))) {
     alg_ = algorithmFromName(alg_name_, "algorithm");
     local_ = algorithmFromName(local_name_, "local_algorithm");
   }
@@ -294,14 +395,14 @@ class NloptOptimizer final : public exid::Optimizer {
       RunEnd end{std::isfinite(W0) ? std::min(f_starts * W0, tr.elapsed() + cap * W0) : HUGE_VAL,
                  std::isfinite(C0) ? std::min(f_starts * C0, tr.cpuElapsed() + cap * C0) : HUGE_VAL,
                  1.0 / (starts_ - s)};
-      std::string r =
-          run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations, aggregated ? ks_rho_ : 0.0);
+      std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations,
+                          aggregated ? ks_rho_ : 0.0, objective_);
       exid::Json run_info = exid::Json::object();
       run_info["start"] = s;
       run_info["result"] = r;
       if (isGlobal(alg_name_) && polish_ && !tr.shouldStop() && tr.hasFeasible()) {
         r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations,
-                aggregated ? ks_rho_ : 0.0);
+                aggregated ? ks_rho_ : 0.0, polish_objective_);
         run_info["polish"] = r;
       }
       run_info["best_so_far"] = tr.bestValue();
@@ -321,11 +422,12 @@ class NloptOptimizer final : public exid::Optimizer {
                        std::isfinite(C0) ? f_mid * C0 : HUGE_VAL, 0.5};
       const RunEnd last{HUGE_VAL, HUGE_VAL, 1.0};
       exid::Json run_info = exid::Json::object();
-      run_info["polish_sharper_ks"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid,
-                                              &iterations, nullptr, nullptr, 10.0 * ks_rho_);
+      run_info["polish_sharper_ks"] =
+          runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid, &iterations, nullptr,
+                  nullptr, 10.0 * ks_rho_, polish_objective_);
       if (!tr.shouldStop())
         run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last,
-                                           &iterations, nullptr, nullptr, 0.0);
+                                           &iterations, nullptr, nullptr, 0.0, polish_objective_);
       run_info["best_so_far"] = tr.bestValue();
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
@@ -334,6 +436,8 @@ class NloptOptimizer final : public exid::Optimizer {
     auto res = tr.finish(J0, iterations, reason);
     res.details["algorithm"] = alg_name_;
     res.details["constraint_mode"] = cmode_;
+    res.details["objective"] = objective_;
+    res.details["polish_objective"] = polish_objective_;
     res.details["runs"] = runs;
     return res;
   }
@@ -348,9 +452,10 @@ class NloptOptimizer final : public exid::Optimizer {
   // One NLopt run from x0 until `end`. Returns a short result text.
   std::string run(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr, nlopt::algorithm alg,
                   const std::string& name, const Eigen::VectorXd& x0, const RunEnd& end,
-                  int* iterations, double ks_rho) {
+                  int* iterations, double ks_rho, const std::string& obj) {
     if (cmode_ != "working_set" || lim.size() == 0)
-      return runOnce(problem, lim, tr, alg, name, x0, end, iterations, nullptr, nullptr, ks_rho);
+      return runOnce(problem, lim, tr, alg, name, x0, end, iterations, nullptr, nullptr, ks_rho,
+                     obj);
     // Working set: NLopt sees the rows with g > -working_set_margin at the start of a round
     // (and every row seen so far); a round that ends infeasible adds the rows then near or
     // above their limit and runs again from there.
@@ -377,7 +482,7 @@ class NloptOptimizer final : public exid::Optimizer {
       }
       if (round > 0 && rows.size() == before) break;  // feasible, or nothing new to add
       if (tr.elapsed() >= end.wall || tr.cpuElapsed() >= end.cpu || tr.shouldStop()) break;
-      r = runOnce(problem, lim, tr, alg, name, x, end, iterations, &rows, &x, 0.0);
+      r = runOnce(problem, lim, tr, alg, name, x, end, iterations, &rows, &x, 0.0, obj);
       if (lim.maxViolation(x) <= budget_.feasibility_tol && r != "roundoff_limited") {
         lim.eval(x, &g);
         bool near_new = false;
@@ -392,12 +497,21 @@ class NloptOptimizer final : public exid::Optimizer {
   std::string runOnce(exid::ExcitationProblem& problem, Limits& lim, Tracker& tr,
                       nlopt::algorithm alg, const std::string& name, const Eigen::VectorXd& x0,
                       const RunEnd& end, int* iterations, const std::vector<int>* rows,
-                      Eigen::VectorXd* xout, double ks_rho) {
+                      Eigen::VectorXd* xout, double ks_rho, const std::string& obj) {
     const unsigned n = static_cast<unsigned>(x0.size());
     Ctx c{&problem, &lim, &tr, tighten_, rows || ks_rho > 0 ? 0 : slots_};
     c.rows = rows;
     c.ks_rho = rows ? 0.0 : ks_rho;
-    c.log_objective = log_objective_;
+    c.log_objective = obj == "log";
+    const bool epi = obj == "epigraph";
+    if (epi) {
+      exid::check(problem.criterion().pluginName() == "cond",
+                  fmt::format("optimizer 'nlopt': objective: epigraph is the epigraph form of "
+                              "log cond and needs criterion 'cond' (the study has '{}')",
+                              problem.criterion().pluginName()));
+      c.epigraph_k = std::max(1, std::min(epigraph_k_, problem.model().numBase() / 2));
+    }
+    const unsigned nv = epi ? n + 2 : n;
     c.wall_end = end.wall;
     c.cpu_end = end.cpu;
     Eigen::VectorXd lo, hi;
@@ -406,17 +520,21 @@ class NloptOptimizer final : public exid::Optimizer {
     else
       problem.bounds(&lo, &hi);
     std::vector<double> vlo(lo.data(), lo.data() + n), vhi(hi.data(), hi.data() + n);
+    if (epi) {
+      vlo.insert(vlo.end(), 2, -HUGE_VAL);
+      vhi.insert(vhi.end(), 2, HUGE_VAL);
+    }
     auto configure = [&](nlopt::opt& o) {
       o.set_lower_bounds(vlo);
       o.set_upper_bounds(vhi);
       if (xtol_ > 0) o.set_xtol_rel(xtol_);
       if (ftol_ > 0) o.set_ftol_rel(ftol_);
     };
-    nlopt::opt main(alg, n);
+    nlopt::opt main(alg, nv);
     configure(main);
-    main.set_min_objective(objective, &c);
+    main.set_min_objective(epi ? epiObjective : objective, &c);
     if (name.rfind("G_MLSL", 0) == 0 || name == "AUGLAG" || name == "AUGLAG_EQ") {
-      nlopt::opt loc(local_, n);
+      nlopt::opt loc(local_, nv);
       configure(loc);
       main.set_local_optimizer(loc);
     }
@@ -424,16 +542,21 @@ class NloptOptimizer final : public exid::Optimizer {
     nlopt::opt wrapper;
     const int m = rows ? static_cast<int>(rows->size()) : nloptConstraints(lim, c.slots, c.ks_rho);
     std::vector<double> tol(static_cast<std::size_t>(m), 0.0);
-    if (m > 0) {
+    const std::vector<double> etol(static_cast<std::size_t>(2 * c.epigraph_k), 0.0);
+    auto limits_fn = epi ? epiLimits : mconstraint;
+    if (m > 0 || epi) {
       try {
-        main.add_inequality_mconstraint(mconstraint, &c, tol);
+        if (epi) main.add_inequality_mconstraint(epiEigen, &c, etol);
+        if (m > 0) main.add_inequality_mconstraint(limits_fn, &c, tol);
       } catch (const std::invalid_argument&) {
         // no nonlinear constraints in this algorithm: NLopt's augmented Lagrangian around it
-        wrapper = nlopt::opt(nlopt::AUGLAG, n);
+        main.remove_inequality_constraints();
+        wrapper = nlopt::opt(nlopt::AUGLAG, nv);
         configure(wrapper);
-        wrapper.set_min_objective(objective, &c);
-        wrapper.add_inequality_mconstraint(mconstraint, &c, tol);
-        nlopt::opt sub(alg, n);
+        wrapper.set_min_objective(epi ? epiObjective : objective, &c);
+        if (epi) wrapper.add_inequality_mconstraint(epiEigen, &c, etol);
+        if (m > 0) wrapper.add_inequality_mconstraint(limits_fn, &c, tol);
+        nlopt::opt sub(alg, nv);
         configure(sub);
         wrapper.set_local_optimizer(sub);
         top = &wrapper;
@@ -458,6 +581,15 @@ class NloptOptimizer final : public exid::Optimizer {
           "optimizer 'nlopt': global algorithm {} needs max_time_s or max_evaluations", name));
     std::vector<double> x(x0.data(), x0.data() + n);
     for (unsigned i = 0; i < n; ++i) x[i] = std::clamp(x[i], vlo[i], vhi[i]);
+    if (epi) {
+      // a, b start on the extreme eigenvalues' logarithms: the start is feasible.
+      Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(
+          problem.information(Eigen::Map<const Eigen::VectorXd>(x.data(), n)),
+          Eigen::EigenvaluesOnly);
+      const Eigen::VectorXd& lam = es.eigenvalues();
+      x.push_back(std::log(std::max(lam(lam.size() - 1), 1e-300)));
+      x.push_back(std::log(std::max(lam(0), 1e-300)));
+    }
     double f = 0;
     std::string r;
     try {
@@ -471,7 +603,7 @@ class NloptOptimizer final : public exid::Optimizer {
       r = std::string("failure: ") + e.what();
     }
     *iterations += static_cast<int>(c.evals);
-    if (xout) *xout = Eigen::Map<const Eigen::VectorXd>(x.data(), n);
+    if (xout) *xout = Eigen::Map<const Eigen::VectorXd>(x.data(), n);  // z without a, b
     return r;
   }
 
@@ -489,7 +621,8 @@ class NloptOptimizer final : public exid::Optimizer {
   int slots_;
   long start_evals_;
   double ks_rho_, final_polish_;
-  bool log_objective_;
+  std::string objective_, polish_objective_;
+  int epigraph_k_;
 };
 
 }  // namespace

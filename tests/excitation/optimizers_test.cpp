@@ -2,6 +2,8 @@
 // finite differences; the optimisers reduce cond and return feasible points.
 #include <gtest/gtest.h>
 
+#include <Eigen/Eigenvalues>
+
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -224,6 +226,64 @@ struct OptCase {
 
 class OptimizerTest : public ::testing::TestWithParam<OptCase> {};
 
+// The epigraph objective's constraints are eigenvalues of M(z): their gradients come from
+// informationGradients with G = v v^T. Checked against central differences of the eigenvalue
+// (simple eigenvalues at a random Fourier start), and <G, M> for a random symmetric G.
+TEST(Excitation, EigenvalueGradientsMatchCentralDifferences) {
+  XSetup s = make("puma560", "fourier", "{period_s: 6, harmonics: 3, sample_period_s: 0.1}");
+  const Eigen::VectorXd z = s.problem->initial();
+  const Eigen::MatrixXd M = s.problem->information(z);
+  const int p = static_cast<int>(M.rows());
+  ASSERT_EQ(p, s.model->numBase());
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(M);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  Eigen::MatrixXd R(p, p);
+  for (int i = 0; i < p; ++i)
+    for (int j = 0; j < p; ++j) R(i, j) = N(rng);
+  const std::vector<int> which = {0, 1, p - 2, p - 1};
+  std::vector<Eigen::MatrixXd> dM;
+  for (int i : which) dM.push_back(es.eigenvectors().col(i) * es.eigenvectors().col(i).transpose());
+  dM.push_back(R + R.transpose());
+  const Eigen::MatrixXd G = s.problem->informationGradients(z, dM);
+  ASSERT_EQ(G.rows(), z.size());
+  ASSERT_EQ(G.cols(), 5);
+  auto eig = [&](const Eigen::VectorXd& x, int i) {
+    return Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>(s.problem->information(x),
+                                                          Eigen::EigenvaluesOnly)
+        .eigenvalues()(i);
+  };
+  auto inner = [&](const Eigen::VectorXd& x) {
+    return (dM.back().array() * s.problem->information(x).array()).sum();
+  };
+  Eigen::VectorXd d(z.size());
+  for (Eigen::Index i = 0; i < d.size(); ++i) d(i) = N(rng);
+  d /= d.norm();
+  const double h = 1e-4 * std::max(1.0, z.cwiseAbs().maxCoeff());
+  for (std::size_t k = 0; k < which.size(); ++k) {
+    const double fd = (eig(z + h * d, which[k]) - eig(z - h * d, which[k])) / (2 * h);
+    EXPECT_NEAR(G.col(static_cast<Eigen::Index>(k)).dot(d), fd, 1e-5 * std::abs(fd) + 1e-9)
+        << "eigenvalue " << which[k];
+  }
+  const double fd = (inner(z + h * d) - inner(z - h * d)) / (2 * h);
+  EXPECT_NEAR(G.col(4).dot(d), fd, 1e-6 * std::abs(fd));
+}
+
+TEST(Nlopt, EpigraphObjectiveNeedsTheCondCriterion) {
+  XSetup s = make("planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.05}",
+                  "log_det");
+  auto opt = exid_test::create<exid::Optimizer>(
+      "nlopt", "{algorithm: LD_SLSQP, objective: epigraph, max_time_s: 5}");
+  exid::RunContext ctx;
+  try {
+    opt->minimize(*s.problem, ctx);
+    FAIL() << "expected an error";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("needs criterion 'cond'"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("log_det"), std::string::npos) << e.what();
+  }
+}
+
 TEST_P(OptimizerTest, ReducesCondAndReturnsAFeasiblePoint) {
   const auto& c = GetParam();
   XSetup s = make("planar2r", c.traj, c.tparams, "cond", "{}");
@@ -279,6 +339,12 @@ INSTANTIATE_TEST_SUITE_P(
         OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400, max_time_s: 10}",
                 "fourier", kFourier},
         OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3, max_time_s: 10}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, objective: epigraph, max_time_s: 10}", "fourier",
+                kFourier},
+        OptCase{"nlopt",
+                "{algorithm: LD_SLSQP, objective: log, constraint_mode: aggregated, "
+                "polish_objective: epigraph, starts: 2, max_time_s: 10}",
+                "fourier", kFourier},
         OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "spline",
                 "{duration_s: 4, knots: 6, degree: 5}"},
         OptCase{"adjoint_gradient", "{max_time_s: 10}", "fourier", kFourier},

@@ -134,6 +134,14 @@ class ExcitationProblem {
   virtual void bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const = 0;
   /// Criterion value and (if grad) its exact gradient with respect to z.
   virtual double value(const Eigen::VectorXd& z, Eigen::VectorXd* grad) = 0;
+  /// The information matrix M(z) the criterion sees (base columns, scaled when the criterion
+  /// scales columns), and counts as one evaluation.
+  virtual Eigen::MatrixXd information(const Eigen::VectorXd& z) = 0;
+  /// For each symmetric G_i in dM, the exact gradient of <G_i, M(z)> with respect to z (column
+  /// i of the result; one reverse pass each through model and trajectory). With G = v v^T for
+  /// an eigenvector v of M this is the gradient of that (simple) eigenvalue.
+  virtual Eigen::MatrixXd informationGradients(const Eigen::VectorXd& z,
+                                               const std::vector<Eigen::MatrixXd>& dM) = 0;
   /// Inequality constraints g(z) <= 0 (joint, velocity, acceleration, torque limits; rest).
   virtual int numConstraints() const = 0;
   virtual void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) = 0;
