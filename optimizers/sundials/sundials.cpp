@@ -624,6 +624,11 @@ class SundialsOptimizer final : public exid::Optimizer {
         break;
       }
     }
+    // Like the other optimisers: a criterion that is never finite leaves no point to return.
+    exid::check(have_feasible_ || best_inf_z_.size() == problem.numVariables(),
+                fmt::format("sundials: no point could be evaluated (the criterion was not finite "
+                            "at any of the {} points tried)",
+                            evals_));
     exid::OptimizerResult r;
     r.z = have_feasible_ ? best_z_ : best_inf_z_;
     r.criterion_initial = J0;
