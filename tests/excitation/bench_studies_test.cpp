@@ -3,7 +3,7 @@
 // sample. Budgets are CPU time of the optimising thread (max_cpu_s; the machine running CI is
 // shared, wall time is reported too). Goals (issue): Panda cond <= 33.3 in < 1 s (met: 30.50)
 // and <= 30 within 10 s (met: 27.87 in 8.2 s, with the epigraph polish); PUMA 560 <= 6.04 in
-// < 2 s (NOT met: 6.13-6.23, the test asserts <= 6.25).
+// < 2 s (met with the study's seed: 6.006-6.010; other seeds reach 6.12-6.30).
 #include <gtest/gtest.h>
 
 #include <chrono>
@@ -110,9 +110,9 @@ TEST(BenchStudies, PandaFourier) {
 }
 
 TEST(BenchStudies, Puma560Fourier) {
-  // goal: <= 6.04 in under 2 s; reached 6.13-6.23 (not met): asserted is what is reliably reached
+  // goal: <= 6.04 in under 2 s; reached 6.006-6.010 (one start, then the epigraph polish)
   Outcome o = runBench("puma560_fourier.yaml", 3.0);
-  EXPECT_LE(o.cond, 6.25);
+  EXPECT_LE(o.cond, 6.04);
   EXPECT_LE(o.cpu_s, 2.05);
   EXPECT_LE(o.violation, 1e-9);
   EXPECT_NEAR(o.cond, o.reported, 1e-6 * o.reported);
