@@ -106,15 +106,15 @@ void rowsOnly(benchmark::State& state, const Setup& s) {
   // The baseline for batch_ls: the model's rows alone, streamed in batch_ls's default chunks.
   exid::RunContext ctx;
   for (auto _ : state)
-    exid::est::forEachChunk(*s.model, s.data, 64, ctx, "rows", 0.0, 1.0,
-                            [](const exid::Rows& r, int, int) { benchmark::DoNotOptimize(r.W.data()); });
+    exid::est::forEachChunk(
+        *s.model, s.data, 64, ctx, "rows", 0.0, 1.0,
+        [](const exid::Rows& r, int, int) { benchmark::DoNotOptimize(r.W.data()); });
   state.SetItemsProcessed(state.iterations() * s.data.size());
 }
 
 }  // namespace
 
-BENCHMARK_CAPTURE(run, puma_batch_ls, puma(), "batch_ls", "{}")
-    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(run, puma_batch_ls, puma(), "batch_ls", "{}")->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(run, puma_batch_ls_qr, puma(), "batch_ls", "{accumulate: qr}")
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(run, puma_batch_ls_normal, puma(), "batch_ls", "{accumulate: normal}")
@@ -124,8 +124,7 @@ BENCHMARK_CAPTURE(run, puma_rls, puma(), "rls", "{history_stride: 1000}")
 BENCHMARK_CAPTURE(run, puma_rls_standard, puma(), "rls", "{history_stride: 1000, update: standard}")
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(run, puma_wls, puma(), "wls", "{}")->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(rowsOnly, puma_model_rows_only, puma())
-    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(rowsOnly, puma_model_rows_only, puma())->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(run, testmodel_batch_ls, testModel(), "batch_ls", "{}")
     ->Unit(benchmark::kMillisecond);
 BENCHMARK_CAPTURE(run, testmodel_batch_ls_qr, testModel(), "batch_ls", "{accumulate: qr}")
@@ -137,9 +136,7 @@ BENCHMARK_CAPTURE(run, testmodel_rls, testModel(), "rls", "{history_stride: 1000
 BENCHMARK_CAPTURE(run, testmodel_rls_standard, testModel(), "rls",
                   "{history_stride: 1000, update: standard}")
     ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(run, testmodel_wls, testModel(), "wls", "{}")
-    ->Unit(benchmark::kMillisecond);
-BENCHMARK_CAPTURE(rowsOnly, testmodel_rows_only, testModel())
-    ->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(run, testmodel_wls, testModel(), "wls", "{}")->Unit(benchmark::kMillisecond);
+BENCHMARK_CAPTURE(rowsOnly, testmodel_rows_only, testModel())->Unit(benchmark::kMillisecond);
 
 BENCHMARK_MAIN();

@@ -104,15 +104,16 @@ class BatchLs : public exid::Estimator {
         ctx.report(0.5, "batch_ls: folding again by QR");
         acc = fold(Method::Qr, 0.5, 0.95);
         choice["reason"] =
-            cond_bad
-                ? fmt::format("column-scaled cond(W) = {:.4g} > normal_max_cond = {:g}: the normal "
-                              "equations would lose ~{:.0f} digits, so the data were folded "
-                              "again by Householder QR",
-                              kappa, normal_max_cond_, std::log10(kappa * kappa))
-                : fmt::format("residual ||y - W theta||^2 = {:.3g} yTy < {:g} yTy: too small to "
-                              "resolve from the Gram matrix (noise-free data?), so the data were "
-                              "folded again by Householder QR",
-                              rel_rss, kMinRelativeRss);
+            cond_bad ? fmt::format(
+                           "column-scaled cond(W) = {:.4g} > normal_max_cond = {:g}: the normal "
+                           "equations would lose ~{:.0f} digits, so the data were folded "
+                           "again by Householder QR",
+                           kappa, normal_max_cond_, std::log10(kappa * kappa))
+                     : fmt::format(
+                           "residual ||y - W theta||^2 = {:.3g} yTy < {:g} yTy: too small to "
+                           "resolve from the Gram matrix (noise-free data?), so the data were "
+                           "folded again by Householder QR",
+                           rel_rss, kMinRelativeRss);
       } else {
         choice["reason"] = fmt::format(
             "column-scaled cond(W) = {:.4g} <= normal_max_cond = {:g}: normal equations "

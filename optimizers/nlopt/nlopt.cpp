@@ -178,8 +178,7 @@ double epiObjective(unsigned n2, const double* x, double* grad, void* data) {
   return 0.5 * (x[n] - x[n + 1]);
 }
 
-void epiEigen(unsigned m, double* result, unsigned n2, const double* x, double* grad,
-              void* data) {
+void epiEigen(unsigned m, double* result, unsigned n2, const double* x, double* grad, void* data) {
   auto* c = static_cast<Ctx*>(data);
   if (runOver(c)) throw nlopt::forced_stop();
   const unsigned n = n2 - 2;
@@ -218,12 +217,10 @@ void epiEigen(unsigned m, double* result, unsigned n2, const double* x, double* 
   }
 }
 
-void mconstraint(unsigned m, double* result, unsigned n, const double* x, double* grad,
-                 void* data);
+void mconstraint(unsigned m, double* result, unsigned n, const double* x, double* grad, void* data);
 
 // The limits of z in the epigraph variables: the same constraints, zero columns for a and b.
-void epiLimits(unsigned m, double* result, unsigned n2, const double* x, double* grad,
-               void* data) {
+void epiLimits(unsigned m, double* result, unsigned n2, const double* x, double* grad, void* data) {
   const unsigned n = n2 - 2;
   if (!grad) return mconstraint(m, result, n, x, nullptr, data);
   std::vector<double> g(static_cast<std::size_t>(m) * n);

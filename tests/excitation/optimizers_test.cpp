@@ -3,7 +3,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Eigenvalues>
-
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -270,8 +269,8 @@ TEST(Excitation, EigenvalueGradientsMatchCentralDifferences) {
 }
 
 TEST(Nlopt, EpigraphObjectiveNeedsTheCondCriterion) {
-  XSetup s = make("planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.05}",
-                  "log_det");
+  XSetup s =
+      make("planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.05}", "log_det");
   auto opt = exid_test::create<exid::Optimizer>(
       "nlopt", "{algorithm: LD_SLSQP, objective: epigraph, max_time_s: 5}");
   exid::RunContext ctx;

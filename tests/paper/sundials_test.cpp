@@ -7,7 +7,6 @@
 #include <gtest/gtest.h>
 
 #include <cstdlib>
-
 #include <iostream>
 
 #include "exid/excitation.hpp"
@@ -51,8 +50,9 @@ Problem make(const std::string& robot, const std::string& model, const std::stri
 
 exid::OptimizerResult check(Problem& s, double tol, const char* fd_step = "1.0e-5") {
   auto opt = exid_test::create<exid::Optimizer>(
-      "sundials", std::string("{max_iterations: 0, check_gradient: true, rtol: 1.0e-10, fd_step: ") +
-                      (std::getenv("EXID_FD_STEP") ? std::getenv("EXID_FD_STEP") : fd_step) + "}");
+      "sundials",
+      std::string("{max_iterations: 0, check_gradient: true, rtol: 1.0e-10, fd_step: ") +
+          (std::getenv("EXID_FD_STEP") ? std::getenv("EXID_FD_STEP") : fd_step) + "}");
   exid::RunContext ctx;
   exid::OptimizerResult r = opt->minimize(*s.problem, ctx);
   const exid::Json* gc = r.details.find("gradient_check");

@@ -52,8 +52,7 @@ void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
                     rows.equation.size(), rows.y.size()));
   // One vectorised sum is finite whenever every entry is (a NaN or inf propagates); only a
   // non-finite sum (or an overflow of finite entries) pays for the entry-by-entry search.
-  if (!std::isfinite(rows.W.sum() + rows.y.sum()) &&
-      (!rows.W.allFinite() || !rows.y.allFinite())) {
+  if (!std::isfinite(rows.W.sum() + rows.y.sum()) && (!rows.W.allFinite() || !rows.y.allFinite())) {
     for (Eigen::Index i = 0; i < rows.W.rows(); ++i)
       if (!rows.W.row(i).allFinite() || !std::isfinite(rows.y(i)))
         throw Error(
