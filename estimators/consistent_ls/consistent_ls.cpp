@@ -365,19 +365,11 @@ class ConsistentLs : public exid::Estimator {
           for (const auto& [eq, v] : idx) {
             if (v.empty()) continue;
             const auto n = static_cast<Eigen::Index>(v.size());
-            Eigen::MatrixXd W(n, p);
-            Eigen::VectorXd y(n);
-            for (Eigen::Index k = 0; k < n; ++k) {
-              W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
-              y(k) = r.y(v[static_cast<std::size_t>(k)]);
-            }
-            auto it = acc.find(eq);
-            if (it == acc.end())
-              it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
-            it->second.add(W, y);
+            exid::est::addEquationRows(r, v, eq, &acc);
             for (Eigen::Index k = 0; k < n && blocks > 0; ++k) {
               // contiguous blocks in time: sample s of n_samples -> block s * blocks / n_samples
-              const long s = begin + sample_of_row[static_cast<std::size_t>(v[k])];
+              const long s =
+                  begin + sample_of_row[static_cast<std::size_t>(v[static_cast<std::size_t>(k)])];
               const auto blk = static_cast<std::size_t>(
                   std::min<long>(blocks - 1, s * blocks / std::max(1, n_samples)));
               auto bt = block_acc[blk].find(eq);
@@ -385,7 +377,8 @@ class ConsistentLs : public exid::Estimator {
                 bt = block_acc[blk]
                          .emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 64))
                          .first;
-              bt->second.addRow(W.row(k), y(k));
+              bt->second.addRow(r.W.row(v[static_cast<std::size_t>(k)]),
+                                r.y(v[static_cast<std::size_t>(k)]));
             }
           }
         });

@@ -81,18 +81,7 @@ class Wls : public exid::Estimator {
                           "per-equation weighting needs many rows per equation",
                           max_eq_));
           for (const auto& [eq, v] : idx) {
-            if (v.empty()) continue;
-            const auto n = static_cast<Eigen::Index>(v.size());
-            Eigen::MatrixXd W(n, p);
-            Eigen::VectorXd y(n);
-            for (Eigen::Index k = 0; k < n; ++k) {
-              W.row(k) = r.W.row(v[static_cast<std::size_t>(k)]);
-              y(k) = r.y(v[static_cast<std::size_t>(k)]);
-            }
-            auto it = acc.find(eq);
-            if (it == acc.end())
-              it = acc.emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
-            it->second.add(W, y);
+            exid::est::addEquationRows(r, v, eq, &acc);
           }
         });
 

@@ -81,6 +81,23 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
   }
 }
 
+void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,
+                     std::map<int, RowAccumulator>* acc) {
+  if (index.empty()) return;
+  const auto n = static_cast<Eigen::Index>(index.size());
+  const auto p = static_cast<int>(rows.W.cols());
+  Eigen::MatrixXd W(n, p);
+  Eigen::VectorXd y(n);
+  for (Eigen::Index k = 0; k < n; ++k) {
+    W.row(k) = rows.W.row(index[static_cast<std::size_t>(k)]);
+    y(k) = rows.y(index[static_cast<std::size_t>(k)]);
+  }
+  auto it = acc->find(eq);
+  if (it == acc->end())
+    it = acc->emplace(eq, RowAccumulator(p, RowAccumulator::Method::Qr, 512)).first;
+  it->second.add(W, y);
+}
+
 void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row,
                   std::vector<int>* order) {
   const auto R = static_cast<int>(rows.y.size());

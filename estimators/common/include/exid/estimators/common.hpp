@@ -7,6 +7,7 @@
 #include <array>
 #include <complex>
 #include <functional>
+#include <map>
 #include <string>
 #include <vector>
 
@@ -150,6 +151,12 @@ void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row
 
 /// Throws exid::Error when the rows are not finite or shapes disagree with the model.
 void checkRows(const Rows& rows, int p, const std::string& who, int begin);
+
+/// Folds the rows `index` of `rows` (one equation's rows of a chunk) into the accumulator
+/// `(*acc)[eq]`, created (QR, blocks of 512 rows) on first use. wls and consistent_ls weight
+/// each equation separately from these per-equation factors.
+void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,
+                     std::map<int, RowAccumulator>* acc);
 
 // ============================================================== signals
 
