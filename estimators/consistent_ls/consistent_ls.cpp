@@ -214,7 +214,7 @@ class StandardMap {
 /// f(z) = ||A pi(z) - b||^2.
 struct Problem {
   const StandardMap* map = nullptr;
-  Eigen::MatrixXd A;  // (p+1) x n_full: F_w K
+  Eigen::MatrixXd A;  // (p+1) x n_full: F_w K (standard prior: + n_full rows D^-1)
   Eigen::VectorXd b;
   long evaluations = 0;
   double best_f = HUGE_VAL;
@@ -274,6 +274,13 @@ class ConsistentLs : public exid::Estimator {
                            "is multiplied by this",
                            0.0, std::nullopt, true),
         exid::param_string(
+            "prior_on", std::string("standard"),
+            "standard: the prior acts on the standard parameters inside the consistent fit "
+            "(||D^-1 (pi - pi0)||^2, D = the prior's standard deviations; needs a prior from the "
+            "robot, otherwise base is used); base: on the base parameters only (K pi), the "
+            "standard parameters are then any consistent completion",
+            {"standard", "base"}),
+        exid::param_string(
             "prior_scale_selection", std::string("none"),
             "none: prior_scale as given; cv: blocked cross-validation on the identification "
             "samples (cv_blocks contiguous blocks) over a log grid in prior_scale_range; "
@@ -312,6 +319,7 @@ class ConsistentLs : public exid::Estimator {
 
   explicit ConsistentLs(const exid::ParamSet& p)
       : weighting_(p.getString("weighting")),
+        prior_on_(p.getString("prior_on")),
         algorithm_(p.getString("algorithm")),
         start_(p.getString("start")),
         scale_selection_(p.getString("prior_scale_selection")),
@@ -470,24 +478,59 @@ class ConsistentLs : public exid::Estimator {
     const Eigen::MatrixXd Fw = F.leftCols(p);
     const Eigen::VectorXd fy = F.col(p);
 
-    // ---- the consistent problem
+    // ---- the consistent problem: f(z) = ||A pi(z) - b||^2 with
+    //   prior on the base parameters:     A = F K,                  b = f      (F: data + prior)
+    //   prior on the standard parameters: A = [F_d K; D^-1],        b = [f_d; D^-1 pi0]
+    // (F_d: data only, D = diag of the scaled standard prior std). In the linear problem both
+    // give the same base parameters (K pi ~ N(K pi0, K D^2 K^T)); with the consistency
+    // constraints, the standard form keeps each body near its prior instead of letting the
+    // unidentifiable combinations wander off to satisfy them.
     const StandardMap map(base.full_names, model.fullNominal());
+    const int nfull = static_cast<int>(base.full_names.size());
+    const bool std_prior = used_prior && prior_on_ == "standard" &&
+                           used_prior->standard_value.size() == nfull &&
+                           used_prior->standard_std.size() == nfull;
     Problem P;
     P.map = &map;
-    P.A = Fw * base.K;
-    P.b = fy;
     P.ctx = &ctx;
-    const Eigen::VectorXd pi0 = model.fullNominal();
+    Eigen::VectorXd dinv;  // D^-1 (standard prior)
+    if (std_prior) {
+      dinv = used_prior->standard_std.cwiseInverse();
+      exid::check(dinv.allFinite(),
+                  fmt::format("{}: prior_on: standard needs every standard prior std > 0 (give "
+                              "prior.absolute_std > 0)",
+                              kName));
+      const Eigen::MatrixXd& Fd = weighted.factor();  // (p+1) x (p+1), last row: the residual
+      P.A.resize(p + 1 + nfull, nfull);
+      P.A.topRows(p + 1) = Fd.leftCols(p) * base.K;
+      P.A.bottomRows(nfull) = dinv.asDiagonal();
+      P.b.resize(p + 1 + nfull);
+      P.b.head(p + 1) = Fd.col(p);
+      P.b.tail(nfull) = dinv.cwiseProduct(used_prior->standard_value);
+    } else {
+      P.A = Fw * base.K;
+      P.b = fy;
+    }
+    const Eigen::VectorXd pi0 = std_prior ? used_prior->standard_value : model.fullNominal();
     const double floor = map.eigFloor(pi0);
     int projected_nominal = 0, projected_unc = 0;
     const Eigen::VectorXd z_nom = map.fromStandard(pi0, floor, &projected_nominal);
     Eigen::VectorXd z0 = z_nom;
     std::string started = "nominal";
+    // The unconstrained solution completed with the nominal values: pi_u = pi0 + dpi, K dpi =
+    // theta_u - K pi0, dpi of least norm (standard prior: least D^-1-weighted norm, which makes
+    // pi_u the linear problem's own minimiser, so f_unc below is the same objective's value).
+    Eigen::VectorXd dpi;
+    if (std_prior) {
+      const Eigen::MatrixXd KD = base.K * dinv.cwiseInverse().asDiagonal();
+      dpi = dinv.cwiseInverse().asDiagonal() *
+            KD.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
+    } else {
+      dpi = base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
+    }
+    const Eigen::VectorXd pi_unc = pi0 + dpi;
     if (start_ != "nominal") {
-      // pi0 + K^+ (theta_u - K pi0): the unconstrained solution completed with the nominal values.
-      const Eigen::VectorXd dpi =
-          base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
-      const Eigen::VectorXd z_unc = map.fromStandard(pi0 + dpi, floor, &projected_unc);
+      const Eigen::VectorXd z_unc = map.fromStandard(pi_unc, floor, &projected_unc);
       if (start_ == "unconstrained" || P.value(z_unc, nullptr) < P.value(z_nom, nullptr)) {
         z0 = z_unc;
         started = "unconstrained";
@@ -495,7 +538,7 @@ class ConsistentLs : public exid::Estimator {
     }
     P.best_f = HUGE_VAL;
     const double f_start = P.value(z0, nullptr);
-    const double f_unc = (Fw * unc.theta - fy).squaredNorm();
+    const double f_unc = (P.A * pi_unc - P.b).squaredNorm();
     ctx.report(0.85, fmt::format("{}: optimising {} variables", kName, map.nz()));
 
     std::vector<double> lb;
@@ -528,18 +571,19 @@ class ConsistentLs : public exid::Estimator {
     // ---- results
     const Eigen::VectorXd pi = map.pi(z);
     const Eigen::VectorXd theta = base.K * pi;
-    const Eigen::VectorXd r = Fw * theta - fy;
-    const double f_final = r.squaredNorm();
-    // Linearised covariance: theta = K pi(z), the variables at an active bound held fixed.
-    Eigen::MatrixXd Jb = base.K * map.jacobian(z);
+    const double f_final = (P.A * pi - P.b).squaredNorm();
+    // Linearised covariance: theta = K pi(z), the variables at an active bound held fixed:
+    // Cov = J_b (J_z^T A^T A J_z)^+ J_b^T, J_z = dpi/dz, J_b = K J_z.
+    Eigen::MatrixXd Jz = map.jacobian(z);
     {
       Eigen::VectorXd g = map.vjp(z, 2.0 * (P.A.transpose() * (P.A * pi - P.b)));
       for (int k = 0; k < map.nz(); ++k)
         if (std::isfinite(lb[static_cast<std::size_t>(k)]) &&
             z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
-          Jb.col(k).setZero();
+          Jz.col(k).setZero();
     }
-    const Eigen::MatrixXd JA = Fw * Jb;
+    const Eigen::MatrixXd Jb = base.K * Jz;
+    const Eigen::MatrixXd JA = P.A * Jz;
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(JA, Eigen::ComputeThinV);
     const Eigen::VectorXd sv = svd.singularValues();
     Eigen::VectorXd sinv2 = Eigen::VectorXd::Zero(sv.size());
@@ -567,6 +611,7 @@ class ConsistentLs : public exid::Estimator {
     sol.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
     sol.rss = f_final;
     sol.sigma2 = f_final / static_cast<double>(std::max<long>(1, total.rows() - p));
+    // (with the standard prior, f_final also holds the standard prior's terms)
     exid::Estimate e;
     exid::est::fillEstimate(&e, model, sol, rss_c, m);
     e.rows = m;
@@ -606,6 +651,17 @@ class ConsistentLs : public exid::Estimator {
     if (used_prior) {
       d["prior"] = exid::est::priorDetails(*used_prior, theta, sol.std);
       d["prior"]["scale"] = scale_details;
+      d["prior"]["on"] = std_prior ? "standard" : "base";
+      if (std_prior) {
+        // ||D^-1 (pi - pi0)||: the standard parameters' distance from the prior, in its std.
+        d["prior"]["standard_mahalanobis"] =
+            dinv.cwiseProduct(pi - used_prior->standard_value).norm();
+        d["prior"]["standard_parameters"] = nfull;
+      } else if (prior_on_ == "standard") {
+        d["prior"]["on_note"] =
+            "prior_on: standard asked, but the prior has no standard parameters (from: study): "
+            "it acts on the base parameters";
+      }
     }
 
     // Consistent standard parameters (exid export writes them into a URDF).
@@ -702,7 +758,7 @@ class ConsistentLs : public exid::Estimator {
     return it;
   }
 
-  std::string weighting_, algorithm_, start_, scale_selection_;
+  std::string weighting_, prior_on_, algorithm_, start_, scale_selection_;
   std::vector<double> scale_range_;
   double prior_scale_;
   int cv_blocks_;

@@ -351,7 +351,8 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
   }
   spec.from = from.Scalar();
   const std::vector<std::string> allowed =
-      spec.from == "robot" ? std::vector<std::string>{"from", "relative_std", "absolute_std"}
+      spec.from == "robot" ? std::vector<std::string>{"from", "relative_std", "absolute_std",
+                                                      "drive_relative_std", "drive_absolute_std"}
                            : std::vector<std::string>{"from", "study", "scale"};
   bool bad = false;
   for (const auto& kv : n) {
@@ -376,6 +377,16 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
   if (spec.from == "robot") {
     number("relative_std", 0.0, false, &spec.relative_std);
     number("absolute_std", 0.0, false, &spec.absolute_std);
+    const std::pair<const char*, std::optional<double>*> drive[] = {
+        {"drive_relative_std", &spec.drive_relative_std},
+        {"drive_absolute_std", &spec.drive_absolute_std}};
+    for (const auto& [key, out] : drive) {
+      if (!n[key]) continue;
+      double v = 0.0;
+      const bool was_bad = bad;
+      number(key, 0.0, false, &v);
+      if (!bad || was_bad) *out = v;
+    }
   } else {
     number("scale", 0.0, true, &spec.scale);
     YAML::Node st = n["study"];
@@ -633,6 +644,12 @@ std::string StudyConfig::resolvedYaml() const {
         << formatValue(ParamValue(prior->relative_std));
       e << YAML::Key << "absolute_std" << YAML::Value
         << formatValue(ParamValue(prior->absolute_std));
+      if (prior->drive_relative_std)
+        e << YAML::Key << "drive_relative_std" << YAML::Value
+          << formatValue(ParamValue(*prior->drive_relative_std));
+      if (prior->drive_absolute_std)
+        e << YAML::Key << "drive_absolute_std" << YAML::Value
+          << formatValue(ParamValue(*prior->drive_absolute_std));
     } else {
       e << YAML::Key << "study" << YAML::Value << prior->study.string();
       e << YAML::Key << "scale" << YAML::Value << formatValue(ParamValue(prior->scale));
@@ -675,6 +692,8 @@ Json StudyConfig::resolvedJson() const {
     if (prior->from == "robot") {
       p["relative_std"] = prior->relative_std;
       p["absolute_std"] = prior->absolute_std;
+      if (prior->drive_relative_std) p["drive_relative_std"] = *prior->drive_relative_std;
+      if (prior->drive_absolute_std) p["drive_absolute_std"] = *prior->drive_absolute_std;
     } else {
       p["study"] = prior->study.string();
       p["scale"] = prior->scale;

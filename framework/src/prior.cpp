@@ -7,6 +7,7 @@
 #include <map>
 #include <sstream>
 
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/runner.hpp"
@@ -35,13 +36,20 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   Prior prior;
   if (spec.from == "robot") {
     const Eigen::VectorXd pi0 = model.fullNominal();
-    Eigen::VectorXd var(pi0.size());
+    const std::vector<std::string> names = model.fullNames();
+    Eigen::VectorXd sd(pi0.size());
     for (Eigen::Index i = 0; i < pi0.size(); ++i) {
-      const double s = std::hypot(spec.relative_std * pi0(i), spec.absolute_std);
-      var(i) = s * s;
+      const bool drive = isDriveParameterName(names[static_cast<std::size_t>(i)]);
+      const double rel = drive ? spec.drive_relative_std.value_or(spec.relative_std)
+                               : spec.relative_std;
+      const double abs = drive ? spec.drive_absolute_std.value_or(spec.absolute_std)
+                               : spec.absolute_std;
+      sd(i) = std::hypot(rel * pi0(i), abs);
     }
     prior.value = b.K * pi0;
-    prior.covariance = b.K * var.asDiagonal() * b.K.transpose();
+    prior.covariance = b.K * sd.cwiseAbs2().asDiagonal() * b.K.transpose();
+    prior.standard_value = pi0;
+    prior.standard_std = sd;
     Eigen::LLT<Eigen::MatrixXd> llt(prior.covariance);
     if (llt.info() != Eigen::Success || !(prior.covariance.diagonal().minCoeff() > 0)) {
       std::string zero;

@@ -18,6 +18,7 @@ namespace exid::est {
 Prior scaledPrior(const Prior& prior, double scale) {
   Prior out = prior;
   out.covariance *= scale * scale;
+  out.standard_std *= scale;
   return out;
 }
 

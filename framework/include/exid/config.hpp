@@ -53,6 +53,9 @@ struct PriorSpec {
   std::string from;  // "robot" | "study"
   double relative_std = 0.3;
   double absolute_std = 0.0;
+  // from: robot, the drive columns (Ia, Fc, Fv, OFF): a robot file's friction values are rarely
+  // known as well as its masses; unset = relative_std / absolute_std.
+  std::optional<double> drive_relative_std, drive_absolute_std;
   std::filesystem::path study;  // from: study (absolute)
   double scale = 1.0;
   int line = 0;

@@ -27,6 +27,8 @@ struct DriveColumns {
 std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
 Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
 int numParameters(const RobotModel& model, const DriveColumns& cols);
+/// True for a drive column's name as parameterNames writes it (Ia3, Fc3, Fv3, OFF3).
+bool isDriveParameterName(const std::string& name);
 
 /// Joint coordinates from measured ones (identity when the model has no transmission).
 void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,

@@ -183,6 +183,10 @@ class Experiment : public PluginObject {
 struct Prior {
   Eigen::VectorXd value;       // base parameters
   Eigen::MatrixXd covariance;  // base x base
+  // A prior from the robot description also keeps the independent prior on the STANDARD
+  // parameters behind it (model.fullNames() order): value = K standard_value, covariance =
+  // K diag(standard_std^2) K^T. Empty for a prior from an earlier study (base parameters only).
+  Eigen::VectorXd standard_value, standard_std;
 };
 
 struct EstimatorSpecs {

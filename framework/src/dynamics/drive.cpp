@@ -34,6 +34,16 @@ std::vector<std::string> parameterNames(const RobotModel& model, const DriveColu
   return names;
 }
 
+bool isDriveParameterName(const std::string& name) {
+  for (const char* pre : {"Ia", "Fc", "Fv", "OFF"}) {
+    const std::size_t n = std::char_traits<char>::length(pre);
+    if (name.size() > n && name.compare(0, n, pre) == 0 && name[n] != '0' &&
+        name.find_first_not_of("0123456789", n) == std::string::npos)
+      return true;
+  }
+  return false;
+}
+
 int numParameters(const RobotModel& model, const DriveColumns& cols) {
   return model.numInertialParameters() + cols.count() * model.dof();
 }
