@@ -22,6 +22,7 @@
 #include "exid/error.hpp"
 #include "exid/estimators/prior_scale.hpp"
 #include "exid/io.hpp"
+#include "exid/runner.hpp"
 #include "exid/urdf_writer.hpp"
 #include "exid_test.hpp"
 
@@ -164,6 +165,41 @@ TEST(Priors, StudyConfigValidatesThePriorSection) {
   EXPECT_DOUBLE_EQ(cfg.prior->relative_std, 0.2);
   EXPECT_DOUBLE_EQ(cfg.prior->absolute_std, 1e-3);
   EXPECT_NE(cfg.resolvedYaml().find("prior"), std::string::npos);
+  EXPECT_FALSE(cfg.prior->drive_relative_std.has_value());
+  EXPECT_FALSE(cfg.prior->drive_absolute_std.has_value());
+  // drive columns with their own std; the resolved study keeps them and hashes the same
+  const exid::StudyConfig cfgd = exid::parseStudy(
+      head +
+          "prior: {from: robot, relative_std: 0.2, absolute_std: 1e-3, drive_relative_std: 0, "
+          "drive_absolute_std: 10}\n",
+      "s.yaml", exid_test::sourceDir(), exid_test::registry());
+  ASSERT_TRUE(cfgd.prior->drive_relative_std && cfgd.prior->drive_absolute_std);
+  EXPECT_DOUBLE_EQ(*cfgd.prior->drive_relative_std, 0.0);
+  EXPECT_DOUBLE_EQ(*cfgd.prior->drive_absolute_std, 10.0);
+  EXPECT_NE(cfgd.hash(), cfg.hash());
+  const exid::StudyConfig back = exid::parseStudy(cfgd.resolvedYaml(), "resolved.yaml",
+                                                  exid_test::sourceDir(), exid_test::registry());
+  ASSERT_TRUE(back.prior->drive_absolute_std.has_value());
+  EXPECT_DOUBLE_EQ(*back.prior->drive_absolute_std, 10.0);
+  EXPECT_EQ(back.hash(), cfgd.hash());
+  try {
+    exid::parseStudy(head + "prior: {from: robot, drive_absolute_std: -2}\n", "s.yaml",
+                     exid_test::sourceDir(), exid_test::registry());
+    FAIL() << "accepted";
+  } catch (const exid::Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("s.yaml:5: prior.drive_absolute_std = -2: must be a number in [0, inf)"),
+              std::string::npos)
+        << m;
+  }
+  try {
+    exid::parseStudy(head + "prior: {from: study, study: out/a, drive_relative_std: 1}\n",
+                     "s.yaml", exid_test::sourceDir(), exid_test::registry());
+    FAIL() << "accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("unknown key 'drive_relative_std'"), std::string::npos)
+        << e.what();
+  }
   const exid::StudyConfig cfg2 =
       exid::parseStudy(head + "prior: {from: study, study: out/a, scale: 2}\n", "s.yaml",
                        exid_test::sourceDir(), exid_test::registry());
@@ -210,9 +246,27 @@ struct Panda {
   std::shared_ptr<exid::ObservationModel> model;
 };
 
-Panda panda() {
+/// A solid sphere (mass ms, radius r) added at each body's centre of mass: a margin inside the
+/// consistent set (Gaz et al.'s bodies are at its edge: their pseudo-inertias are near singular).
+void fatten(Vec10* pi, double ms, double r) {
+  const Eigen::Vector3d c = Eigen::Vector3d((*pi)(6), (*pi)(7), (*pi)(8)) / (*pi)(9);
+  const Eigen::Matrix3d I =
+      ms * ((0.4 * r * r + c.squaredNorm()) * Eigen::Matrix3d::Identity() - c * c.transpose());
+  (*pi)(0) += I(0, 0);
+  (*pi)(1) += I(0, 1);
+  (*pi)(2) += I(0, 2);
+  (*pi)(3) += I(1, 1);
+  (*pi)(4) += I(1, 2);
+  (*pi)(5) += I(2, 2);
+  (*pi).segment<3>(6) += ms * c;
+  (*pi)(9) += ms;
+}
+
+Panda panda(bool fat = false) {
   Panda p;
   p.truth = std::make_shared<exid::RobotModel>(*exid_test::robot("panda"));
+  if (fat)
+    for (auto& b : p.truth->bodies) fatten(&b.inertia, 0.5 * b.inertia(9), 0.1);
   // Gaz et al.'s viscous friction of joint 6 is negative: a consistent truth needs Fv >= 0.
   for (std::size_t j = 0; j < p.truth->drives.size(); ++j) {
     exid::Drive& d = p.truth->drives[j];
@@ -353,6 +407,84 @@ TEST(ConsistentLs, PandaConsistentAtEveryNoiseLevel) {
   }
 }
 
+// The prior from the robot description acts on the STANDARD parameters inside the consistent fit
+// (prior_on: standard): min ||F K pi - f||^2 + ||D^-1 (pi - pi0)||^2 over consistent pi. Where no
+// constraint is active this is the linear problem, whose minimiser has (i) the same base
+// parameters as the base-level prior N(K pi0, K D^2 K^T) and (ii) as standard parameters the
+// D-weighted completion pi0 + D^2 K^T (K D^2 K^T)^-1 (theta - K pi0). With prior_on: base the
+// standard parameters are any consistent completion, farther from the prior in its own metric.
+TEST(ConsistentLs, StandardPriorCompletesTheBodiesByThePrior) {
+  // The prior's centre (the truth) strictly inside the consistent set, and a prior narrow enough
+  // (5 %) that the estimate stays inside it: independent 30 % std on XX, YY, ZZ of a body would
+  // already reach across the triangle inequalities, and the constraints would be active.
+  Panda pa = panda(true);
+  exid::RunContext ctx;
+  const exid::Dataset d = pandaData(*pa.truth, 0.05, 21, 600);
+  exid::PriorSpec spec;
+  spec.from = "robot";
+  spec.relative_std = 0.05;
+  spec.absolute_std = 1e-3;
+  spec.drive_relative_std = 0.0;
+  spec.drive_absolute_std = 0.5;
+  const exid::Prior prior = exid::buildPrior(spec, *pa.model);
+  const std::vector<std::string> names = pa.model->fullNames();
+  const Eigen::VectorXd pi0 = pa.model->fullNominal();
+  const int nf = static_cast<int>(names.size());
+  ASSERT_EQ(prior.standard_value.size(), nf);
+  ASSERT_EQ(prior.standard_std.size(), nf);
+  int drives = 0;
+  for (int i = 0; i < nf; ++i) {
+    const bool drive = exid::isDriveParameterName(names[static_cast<std::size_t>(i)]);
+    drives += drive ? 1 : 0;
+    EXPECT_DOUBLE_EQ(prior.standard_value(i), pi0(i));
+    EXPECT_DOUBLE_EQ(prior.standard_std(i),
+                     drive ? 0.5 : std::hypot(0.05 * pi0(i), 1e-3))
+        << names[static_cast<std::size_t>(i)];
+  }
+  EXPECT_EQ(drives, 21);  // Ia, Fc, Fv of 7 joints
+  const Eigen::MatrixXd& K = pa.model->base().K;
+  const Eigen::VectorXd D2 = prior.standard_std.cwiseAbs2();
+  EXPECT_LE((prior.covariance - K * D2.asDiagonal() * K.transpose()).norm(),
+            1e-12 * prior.covariance.norm());
+  // scaling the prior scales both forms
+  const exid::Prior half = exid::est::scaledPrior(prior, 0.5);
+  EXPECT_LE((half.standard_std - 0.5 * prior.standard_std).norm(), 1e-15);
+
+  const exid::Estimate s = make("consistent_ls")->estimate(*pa.model, d, &prior, ctx);
+  const exid::Estimate b =
+      make("consistent_ls", "{prior_on: base}")->estimate(*pa.model, d, &prior, ctx);
+  expectConsistent(s);
+  expectConsistent(b);
+  EXPECT_EQ(s.details.find("prior")->find("on")->asString(), "standard");
+  EXPECT_EQ(b.details.find("prior")->find("on")->asString(), "base");
+  auto standard = [&](const exid::Estimate& e) {
+    const exid::Json& v = *e.details.find("standard_parameters")->find("values");
+    Eigen::VectorXd out(nf);
+    for (int i = 0; i < nf; ++i) out(i) = v.at(static_cast<std::size_t>(i)).asDouble();
+    return out;
+  };
+  const Eigen::VectorXd pis = standard(s), pib = standard(b);
+  // (i) the same base parameters (no constraint active: the consistent fit is the linear one)
+  EXPECT_LE(s.details.find("mahalanobis_from_unconstrained")->asDouble(), 1e-4);
+  EXPECT_LE((s.value - b.value).cwiseQuotient(s.std).cwiseAbs().maxCoeff(), 1e-3);
+  // (ii) the standard parameters are the prior's own completion of them
+  const Eigen::MatrixXd KD2Kt = K * D2.asDiagonal() * K.transpose();
+  const Eigen::VectorXd completion =
+      pi0 + D2.asDiagonal() * K.transpose() * KD2Kt.ldlt().solve(s.value - K * pi0);
+  const Eigen::VectorXd dinv = prior.standard_std.cwiseInverse();
+  const double dev = dinv.cwiseProduct(pis - completion).norm();
+  const double dist_s = dinv.cwiseProduct(pis - pi0).norm();
+  const double dist_b = dinv.cwiseProduct(pib - pi0).norm();
+  std::printf(
+      "standard prior: ||D^-1 (pi - completion)|| = %.3g; distance from the prior in its std: "
+      "prior_on standard %.3f, base %.3f\n",
+      dev, dist_s, dist_b);
+  EXPECT_LE(dev, 1e-4 * dist_s);
+  EXPECT_NEAR(s.details.find("prior")->find("standard_mahalanobis")->asDouble(), dist_s,
+              1e-9 * dist_s);
+  EXPECT_LT(dist_s, 0.9 * dist_b);
+}
+
 // ---------------------------------------------------------------- prior scale
 // A linear problem y = W theta + e (unit noise) whose truth is a draw from the prior with its
 // standard deviations multiplied by a_true: the evidence must recover a_true and the unit noise
@@ -435,6 +567,9 @@ TEST(PriorScale, SelectionCorrectsAMisstatedPriorInConsistentLs) {
     prior.covariance = sd.cwiseAbs2().asDiagonal();
     const exid::Estimate fixed = make("consistent_ls")->estimate(*pa.model, d, &prior, ctx);
     const double e_fixed = predictionError(fixed);
+    // a prior on base parameters only: prior_on: standard (the default) falls back, and says so
+    EXPECT_EQ(fixed.details.find("prior")->find("on")->asString(), "base");
+    EXPECT_TRUE(fixed.details.find("prior")->find("on_note"));
     EXPECT_EQ(fixed.details.find("prior")->find("scale")->find("method")->asString(), "fixed");
     for (const std::string method : {"cv", "evidence"}) {
       SCOPED_TRACE(method);

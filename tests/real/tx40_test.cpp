@@ -29,13 +29,12 @@ struct Run {
   exid::Json summary;
 };
 
-Run runStudy(const std::string& study) {
+Run runStudyFile(const fs::path& file, const std::string& tag) {
   const fs::path out =
-      fs::temp_directory_path() / ("exid_real_" + study + "_" + std::to_string(::getpid()));
+      fs::temp_directory_path() / ("exid_real_" + tag + "_" + std::to_string(::getpid()));
   fs::remove_all(out);
-  const std::string cmd = std::string(EXID_EXE) + " -q run " +
-                          (exid_test::sourceDir() / "examples/real" / (study + ".yaml")).string() +
-                          " --out " + out.string() + " 2>&1";
+  const std::string cmd =
+      std::string(EXID_EXE) + " -q run " + file.string() + " --out " + out.string() + " 2>&1";
   Run r;
   FILE* p = ::popen(cmd.c_str(), "r");
   std::array<char, 4096> buf{};
@@ -47,6 +46,50 @@ Run runStudy(const std::string& study) {
   if (!text.empty()) r.summary = exid::Json::parse(text);
   fs::remove_all(out);
   return r;
+}
+
+Run runStudy(const std::string& study) {
+  return runStudyFile(exid_test::sourceDir() / "examples/real" / (study + ".yaml"), study);
+}
+
+/// A variant of examples/real/STUDY.yaml: `from` replaced by `to` (which must occur), relative
+/// paths made absolute, written to a temporary folder and run.
+Run runVariant(const std::string& study, const std::string& from, const std::string& to) {
+  const fs::path src = exid_test::sourceDir() / "examples/real" / (study + ".yaml");
+  std::ifstream in(src);
+  std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::size_t at = text.find(from);
+  if (at == std::string::npos) return Run{-1, "'" + from + "' not in " + src.string(), {}};
+  text.replace(at, from.size(), to);
+  const std::string rel = " ../../", abs = " " + (src.parent_path() / "../../").string();
+  for (std::size_t p = text.find(rel); p != std::string::npos; p = text.find(rel, p + abs.size()))
+    text.replace(p, rel.size(), abs);
+  const std::string tag = study + "_variant";
+  const fs::path file =
+      fs::temp_directory_path() / ("exid_real_" + tag + "_" + std::to_string(::getpid()) + ".yaml");
+  std::ofstream(file) << text;
+  Run r = runStudyFile(file, tag);
+  fs::remove(file);
+  return r;
+}
+
+/// The bodies of a consistent_ls estimate near the URDF's CAD masses (tx40_mdh_modified.urdf,
+/// links 1-6: 10.5, 3.6, 4.07, 3.62, 1.02, 0.2 kg): within a factor 2, centres of mass within
+/// 0.3 m of their link frame.
+void expectPlausibleBodies(const exid::Json& details) {
+  const std::array<double, 6> cad = {10.5, 3.6, 4.07, 3.62, 1.02, 0.2};
+  const exid::Json& bodies = *details.find("bodies");
+  ASSERT_EQ(bodies.size(), 6u);
+  for (std::size_t b = 0; b < 6; ++b) {
+    const double m = bodies.at(b).find("mass")->asDouble();
+    const exid::Json& c = *bodies.at(b).find("com");
+    const double r = std::sqrt(std::pow(c.at(0).asDouble(), 2) + std::pow(c.at(1).asDouble(), 2) +
+                               std::pow(c.at(2).asDouble(), 2));
+    std::printf("body %zu: mass %.3f kg (CAD %.3g), |com| %.3f m\n", b + 1, m, cad[b], r);
+    EXPECT_GT(m, 0.5 * cad[b]) << "body " << b + 1;
+    EXPECT_LT(m, 2.0 * cad[b]) << "body " << b + 1;
+    EXPECT_LT(r, 0.3) << "body " << b + 1;
+  }
 }
 
 std::map<std::string, std::pair<double, double>> params(const exid::Json& s) {
@@ -102,10 +145,11 @@ TEST(RealTx40, WlsValidatesOnTheHeldOutSegment) {
 }
 
 // Physically consistent identification with the CAD prior (examples/real/tx40_consistent_ls.yaml,
-// docs/consistent.md) against wls on the held-out segment. Measured: consistent_ls + prior
-// 0.0857 0.0786 0.1463 0.1486 0.2139 0.2088, all 0.0909; wls 0.0877 0.0774 0.1456 0.1544 0.2211
-// 0.2127, all 0.0916: better overall and on joints 1, 4, 5, 6; joints 2 and 3 slightly worse
-// (+0.0012, +0.0007), so only overall and joints 4-6 are asserted.
+// docs/consistent.md) against wls on the held-out segment. The prior (as stated, scale 1) acts on
+// the standard parameters inside the consistent fit; the drive values are left to the data.
+// Measured: consistent_ls 0.0845 0.0788 0.1447 0.1493 0.2139 0.2084, all 0.0904; wls 0.0877
+// 0.0774 0.1456 0.1544 0.2211 0.2127, all 0.0916: better overall and on joints 1, 3, 4, 5, 6.
+// Asserted: overall, joints 3-6, consistent and plausible bodies (CAD masses within a factor 2).
 TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
       << "no data in " << dataDir() << " (../shared/data beside the repository)";
@@ -117,10 +161,12 @@ TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
   EXPECT_EQ(c.summary.find("robot")->find("n_base_parameters")->asInt(), 58);
   const exid::Json& d = *I.find("details");
   EXPECT_TRUE(d.find("consistent")->asBool());
+  EXPECT_EQ(d.find("prior")->find("on")->asString(), "standard");
   const exid::Json& bodies = *d.find("bodies");
   ASSERT_EQ(bodies.size(), 6u);
   for (std::size_t b = 0; b < 6; ++b)
     EXPECT_EQ(bodies.at(b).find("check")->asString(), "ok") << "body " << b + 1;
+  expectPlausibleBodies(d);
   const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");
   const exid::Json& rc = *c.summary.find("validation")->find("relative_error_per_joint");
   const double aw = w.summary.find("validation")->find("relative_error")->asDouble();
@@ -133,7 +179,7 @@ TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
       aw, ac, d.find("residual_rms_ratio")->asDouble(),
       d.find("mahalanobis_from_unconstrained")->asDouble());
   EXPECT_LE(ac, aw);
-  for (std::size_t j = 3; j < 6; ++j)
+  for (std::size_t j = 2; j < 6; ++j)
     EXPECT_LT(rc.at(j).asDouble(), rw.at(j).asDouble()) << "joint " << j + 1;
   const std::array<double, 6> bound = {0.10, 0.09, 0.17, 0.18, 0.25, 0.25};
   for (std::size_t j = 0; j < 6; ++j) EXPECT_LT(rc.at(j).asDouble(), bound[j]) << "joint " << j + 1;
@@ -141,13 +187,9 @@ TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
 
 // The same with the prior's scale chosen by blocked cross-validation on the identification part
 // (examples/real/tx40_consistent_ls_cv.yaml, docs/consistent.md "Prior scale"). Measured: scale
-// 0.316; consistent_ls 0.0841 0.0778 0.1441 0.1456 0.2128 0.2084, all 0.0897 (wls 0.0877 0.0774
-// 0.1456 0.1544 0.2211 0.2127, all 0.0916). Asserted: the identification data ask for a tighter
-// prior than stated (scale < 1; every block count from 3 to 10 selects 0.02 - 0.42), overall and
-// joints 4-6 better than wls. Joint 3 is printed, not asserted: it beats wls with 5 blocks
-// (0.1441 < 0.1456) but not with 3, 4, 6, 8 or 10 (selected scales 0.056 - 0.1, joint 3 0.1466 -
-// 0.1473), nor with the cross-validation error pooled over those block counts (scale 0.075) --
-// the margin is smaller than the spread of equally justified selections (docs/real_data.md).
+// 0.42; consistent_ls 0.0843 0.0778 0.1431 0.1482 0.2149 0.2080, all 0.0898 (wls 0.0877 0.0774
+// 0.1456 0.1544 0.2211 0.2127, all 0.0916). Asserted: scale < 1 at the minimum of the reported
+// curve, overall and joints 3-6 better than wls, plausible bodies.
 TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
       << "no data in " << dataDir() << " (../shared/data beside the repository)";
@@ -157,6 +199,7 @@ TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
   ASSERT_EQ(c.code, 0) << c.out;
   const exid::Json& d = *c.summary.find("identification")->find("details");
   EXPECT_TRUE(d.find("consistent")->asBool());
+  expectPlausibleBodies(d);
   const exid::Json& sc = *d.find("prior")->find("scale");
   EXPECT_EQ(sc.find("method")->asString(), "cv");
   const double scale = sc.find("scale")->asDouble();
@@ -181,6 +224,35 @@ TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
                 rw.at(j).asDouble(), scale, rc.at(j).asDouble());
   std::printf("all: wls %.4f  consistent_ls + CAD prior x %.3g (cv) %.4f\n", aw, scale, ac);
   EXPECT_LE(ac, aw);
-  for (std::size_t j = 3; j < 6; ++j)
+  for (std::size_t j = 2; j < 6; ++j)
     EXPECT_LT(rc.at(j).asDouble(), rw.at(j).asDouble()) << "joint " << j + 1;
+}
+
+// The win over wls must not hang on an arbitrary choice: with 3, 4, 6, 8 or 10 cross-validation
+// blocks (the study uses 5) the selected scale is 0.18 - 0.42 and joints 3-6 and the whole
+// held-out segment are still predicted better than by wls. Measured joint 3: 0.1424 - 0.1431
+// (wls 0.1456).
+TEST(RealTx40, ConsistentLsWinOverWlsHoldsForEveryCrossValidationBlockCount) {
+  ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
+      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+  const ::Run w = runStudy("tx40_wls");
+  ASSERT_EQ(w.code, 0) << w.out;
+  const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");
+  const double aw = w.summary.find("validation")->find("relative_error")->asDouble();
+  for (int blocks : {3, 4, 6, 8, 10}) {
+    SCOPED_TRACE(blocks);
+    const ::Run c = runVariant("tx40_consistent_ls_cv", "cv_blocks: 5",
+                               "cv_blocks: " + std::to_string(blocks));
+    ASSERT_EQ(c.code, 0) << c.out;
+    const exid::Json& d = *c.summary.find("identification")->find("details");
+    EXPECT_TRUE(d.find("consistent")->asBool());
+    const exid::Json& rc = *c.summary.find("validation")->find("relative_error_per_joint");
+    const double ac = c.summary.find("validation")->find("relative_error")->asDouble();
+    std::printf("%2d blocks: scale %.3g, joints 3-6 %.4f %.4f %.4f %.4f, all %.4f\n", blocks,
+                d.find("prior")->find("scale")->find("scale")->asDouble(), rc.at(2).asDouble(),
+                rc.at(3).asDouble(), rc.at(4).asDouble(), rc.at(5).asDouble(), ac);
+    EXPECT_LE(ac, aw);
+    for (std::size_t j = 2; j < 6; ++j)
+      EXPECT_LT(rc.at(j).asDouble(), rw.at(j).asDouble()) << "joint " << j + 1;
+  }
 }
