@@ -79,13 +79,17 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   Eigen::Map<const Eigen::VectorXd> z(x, n);
   Eigen::VectorXd zz = z, g;
   double J;
+  bool failed = false;
   try {
     J = c->p->value(zz, grad ? &g : nullptr);
   } catch (const exid::Error&) {
-    J = 1e30;  // singular information matrix: a very bad point
+    J = 1e30;  // singular information matrix: a very bad point for NLopt...
     g = Eigen::VectorXd::Zero(n);
+    failed = true;
   }
-  c->tr->offer(zz, J, c->lim->maxViolation(zz));
+  // ...but never a result: the tracker ignores non-finite values (a least-violation point that
+  // could not be evaluated must not be returned with the stand-in 1e30)
+  c->tr->offer(zz, failed ? HUGE_VAL : J, c->lim->maxViolation(zz));
   ++c->evals;
   if (c->log_objective && J > 0 && J < 1e30) {
     // log J: the same minimisers, better scaled (cond spans decades between starts and optima)

@@ -205,6 +205,44 @@ TEST(Hostile, TorqueFileRowMismatchNamesBothFiles) {
   fs::remove_all(dir);
 }
 
+// A criterion that throws at every point (test plugin test_singular, as on a singular information
+// matrix): no optimiser may return one of those points as its result (nlopt used to offer them
+// with the stand-in value 1e30 it gives NLopt, and the study went on with a trajectory nothing
+// had evaluated). Exit 1, the excitation stage failed, no trajectory written.
+TEST(Hostile, CriterionThatFailsEverywhereFailsTheExcitation) {
+  const std::string plugins = std::string(EXID_TEST_PLUGIN_DIR) + "/nan_criterion_plugin";
+  for (const char* optimizer : {"nlopt", "adjoint_gradient", "sundials"}) {
+    SCOPED_TRACE(optimizer);
+    const fs::path dir = tempDir(std::string("singular_") + optimizer);
+    std::ofstream(dir / "study.yaml") << "robot: {type: planar2r}\n"
+                                         "model: {type: differential}\n"
+                                         "excitation:\n"
+                                         "  trajectory: {type: fourier, params: {harmonics: 2}}\n"
+                                         "  criterion: {type: test_singular}\n"
+                                         "  optimizer: {type: "
+                                      << optimizer
+                                      << ", params: {max_evaluations: 30, max_time_s: 20}}\n"
+                                         "experiment: {type: simulate, params: {duration_s: 2}}\n"
+                                         "estimator: {type: batch_ls}\n";
+    const Child c = start(dir / "study.yaml", dir / "out", dir, 0, plugins);
+    const int code = wait(c);
+    const std::string log = slurp(c.log);
+    EXPECT_EQ(code, 1) << log;
+    ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
+    const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
+    EXPECT_EQ(s.find("status")->asString(), "failed");
+    EXPECT_EQ(s.find("failed_stage")->asString(), "excitation");
+    const std::string msg = s.find("message")->asString();
+    EXPECT_TRUE(msg.find("singular") != std::string::npos ||
+                msg.find("no point could be evaluated") != std::string::npos)
+        << msg;
+    for (const char* f : {"trajectory_optimal.csv", "experiment.csv", "report.md"})
+      EXPECT_FALSE(fs::exists(dir / "out" / f)) << f;
+    EXPECT_TRUE(noTemporaries(dir));
+    fs::remove_all(dir);
+  }
+}
+
 // A criterion that evaluates to NaN at every point of the excitation optimisation (test plugin
 // test_nan, tests/plugins/nan_criterion_plugin.cpp), with each optimiser: the study file, the
 // line of the criterion and the criterion are named, exit 1, summary.json says why, and none of

@@ -1,8 +1,10 @@
-// Test plugin library (tests/hostile): a criterion that evaluates to NaN at every point, as a
-// criterion whose arithmetic breaks down does.
+// Test plugin library (tests/hostile): criteria that fail at every point: one evaluates to NaN, as
+// a criterion whose arithmetic breaks down does; one throws exid::Error, as a criterion does on a
+// singular information matrix.
 #include <Eigen/Core>
 #include <cmath>
 
+#include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 
 namespace {
@@ -20,6 +22,18 @@ class NanCriterion final : public exid::Criterion {
   }
 };
 
+class SingularCriterion final : public exid::Criterion {
+ public:
+  static constexpr const char* kName = "test_singular";
+  static constexpr const char* kVersion = "0.1";
+  static constexpr const char* kDoc = "test: throws 'singular' whatever the information matrix";
+  static std::vector<exid::ParamDecl> params() { return {}; }
+  explicit SingularCriterion(const exid::ParamSet&) {}
+  double evaluate(const Eigen::MatrixXd&, Eigen::MatrixXd*) const override {
+    throw exid::Error("test_singular: the information matrix is singular");
+  }
+};
+
 }  // namespace
 
-EXID_REGISTER_PLUGIN(NanCriterion)
+EXID_REGISTER_PLUGIN(NanCriterion, SingularCriterion)
