@@ -132,17 +132,9 @@ class BatchLs : public exid::Estimator {
       // Regularised least squares: the data rows divided by their noise std (from the
       // rank-tolerant fit), stacked with the prior's pseudo-observations S (theta - theta0) = 0,
       // S^T S = Sigma^-1. Directions the data do not excite fall back to the prior.
-      const double noise = exid::est::noiseStdForPrior(acc, opt_.rank_tolerance);
-      exid::est::RowAccumulator tot(p);
-      tot.merge(acc, 1.0 / noise);
-      exid::est::addPriorRows(&tot, *prior, kName);
-      exid::est::SolveOptions o = opt_;
-      o.unit_variance = true;
-      // The prior makes the problem positive definite: no rank decision (noise-free data with
-      // a prior are legitimately ill-conditioned: tiny noise std, large weights).
-      o.rank_tolerance = 0.0;
-      const exid::est::LsSolution s =
-          exid::est::solveLeastSquares(tot, model.base().names, o, kName);
+      double noise = 0.0;
+      const exid::est::LsSolution s = exid::est::solveWithPrior(acc, *prior, model.base().names,
+                                                                opt_, kName, 1.0, &noise);
       exid::est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
       e.rows = acc.rows();
       e.details["noise_std"] = noise;

@@ -19,6 +19,7 @@
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
+#include "exid/estimators/consistent.hpp"
 #include "exid/interfaces.hpp"
 
 namespace {
@@ -83,11 +84,12 @@ class FilteredLs : public exid::Estimator {
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
     s.needs_raw_dataset = true;
+    s.accepts_prior = true;
     return s;
   }
 
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
-                          const exid::Prior* /*prior*/, const exid::RunContext& ctx) override {
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int K = data.size();
     exid::check(K >= 8,
@@ -173,13 +175,29 @@ class FilteredLs : public exid::Estimator {
     ctx.report(0.9, "filtered_ls: solving");
     est::RowAccumulator acc(model.numBase());
     acc.add(rows.W, rows.y);
-    const est::LsSolution s = est::solveLeastSquares(acc, model.base().names, opt_, kName);
     exid::Estimate e;
-    est::fillEstimate(&e, model, s, s.rss, s.m);
-    if (kappa != 1.0) {  // decimated residuals are correlated: scale the covariance
-      e.covariance *= kappa;
-      e.std *= std::sqrt(kappa);
-      e.details["parameters"] = est::parameterTable(e);
+    if (!prior) {
+      const est::LsSolution s = est::solveLeastSquares(acc, model.base().names, opt_, kName);
+      est::fillEstimate(&e, model, s, s.rss, s.m);
+      if (kappa != 1.0) {  // decimated residuals are correlated: scale the covariance
+        e.covariance *= kappa;
+        e.std *= std::sqrt(kappa);
+        e.details["parameters"] = est::parameterTable(e);
+      }
+    } else {
+      // Regularised least squares (docs/consistent.md "Priors"): the rows divided by their noise
+      // std, inflated by the decimation's variance factor (the data carry kappa times less
+      // information than independent rows would), stacked with the prior's pseudo-observations.
+      double noise = 0.0;
+      const est::LsSolution s =
+          est::solveWithPrior(acc, *prior, model.base().names, opt_, kName, kappa, &noise);
+      est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
+      e.rows = acc.rows();
+      e.details["noise_std"] = noise;
+      e.details["prior"] = est::priorDetails(*prior, s.theta, s.std);
+      e.details["covariance_definition"] =
+          "posterior (W^T W / s^2 + Sigma_prior^-1)^-1, s^2 = kappa rss / (m - rank) of the "
+          "rank-tolerant fit of the rows alone (kappa: the decimation's variance factor)";
     }
     exid::Json& d = e.details;
     d["estimator"] = kName;
@@ -203,9 +221,11 @@ class FilteredLs : public exid::Estimator {
     d["samples"] = K;
     d["noise_correlation_factor"] = kappa;
     d["std_definition"] =
-        "covariance = kappa sigma^2 (W^T W)^-1 on the decimated rows; kappa = sum of the "
-        "autocorrelation of white noise after the decimation filter, at multiples of the "
-        "decimation factor (the decimated residuals are correlated; kappa = 1 without correction)";
+        std::string(prior ? "posterior (W^T W / (kappa sigma^2) + Sigma_prior^-1)^-1"
+                          : "covariance = kappa sigma^2 (W^T W)^-1") +
+        " on the decimated rows; kappa = sum of the autocorrelation of white noise after the "
+        "decimation filter, at multiples of the decimation factor (the decimated residuals are "
+        "correlated; kappa = 1 without correction)";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ctx.report(1.0, "filtered_ls: done");
     return e;

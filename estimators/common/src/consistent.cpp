@@ -177,6 +177,22 @@ double noiseStdForPrior(const RowAccumulator& acc, double rank_tolerance) {
   return std::max(std::sqrt(std::max(rss, 0.0) / dof), 1e-9 * std::max(yrms, 1e-300));
 }
 
+LsSolution solveWithPrior(const RowAccumulator& acc, const Prior& prior,
+                          const std::vector<std::string>& names, SolveOptions opt,
+                          const std::string& who, double variance_factor, double* noise_std) {
+  const double noise =
+      noiseStdForPrior(acc, opt.rank_tolerance) * std::sqrt(std::max(variance_factor, 0.0));
+  RowAccumulator tot(acc.cols());
+  tot.merge(acc, 1.0 / noise);
+  addPriorRows(&tot, prior, who);
+  opt.unit_variance = true;
+  // Noise-free data with a prior are legitimately ill-conditioned (tiny noise std, large
+  // weights): no rank decision.
+  opt.rank_tolerance = 0.0;
+  if (noise_std) *noise_std = noise;
+  return solveLeastSquares(tot, names, opt, who);
+}
+
 Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
                   const Eigen::VectorXd& posterior_std) {
   Json j = Json::object();

@@ -54,6 +54,15 @@ Eigen::VectorXd solveMinimumNorm(const RowAccumulator& acc, double rank_toleranc
 /// rank-tolerant fit (floored at 1e-9 of the rms of y so noise-free data stay finite).
 double noiseStdForPrior(const RowAccumulator& acc, double rank_tolerance);
 
+/// Regularised least squares of the rows in `acc` with a prior: the rows divided by their noise
+/// std (noiseStdForPrior, times sqrt(variance_factor) when the residuals are correlated, e.g.
+/// decimated rows), stacked with the prior's pseudo-observations, solved with unit variance and
+/// no rank decision (the prior makes the problem positive definite). *noise_std receives the
+/// std used. Covariance: the posterior (W^T W / s^2 + Sigma^-1)^-1, s^2 = noise_std^2.
+LsSolution solveWithPrior(const RowAccumulator& acc, const Prior& prior,
+                          const std::vector<std::string>& names, SolveOptions opt,
+                          const std::string& who, double variance_factor, double* noise_std);
+
 /// Summary of a prior for Estimate::details.
 Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
                   const Eigen::VectorXd& posterior_std);
