@@ -31,7 +31,6 @@
 #include <Eigen/QR>
 #include <algorithm>
 #include <cmath>
-#include <deque>
 
 #include "exid/error.hpp"
 #include "optim_common.hpp"
@@ -249,8 +248,7 @@ class AdjointGradient final : public exid::Optimizer {
     double phi = merit(p, lim, tr, z, &g);
     cur_J_ = cur_J_trial_;
     if (!std::isfinite(phi)) return true;
-    std::deque<Eigen::VectorXd> S, Y;
-    std::deque<double> R;
+    exid::optim::LbfgsMemory mem(mem_);
     Eigen::MatrixXd A(0, z.size());  // held velocity rows: steps keep A dz = 0
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (tr.shouldStop()) return false;
@@ -259,28 +257,13 @@ class AdjointGradient final : public exid::Optimizer {
       if (gmax <= gtol_ * std::max(1.0, std::abs(phi))) return true;
       Eigen::VectorXd d;
       double alpha;
-      if (paper_ || S.empty()) {
+      if (paper_ || mem.empty()) {
         d = -pg;
         alpha = (paper_ ? paper_gain_ : gain_) / gmax;
       } else {
-        // two-loop recursion
-        Eigen::VectorXd q = pg;
-        std::vector<double> a(S.size());
-        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
-          a[static_cast<std::size_t>(i)] =
-              R[static_cast<std::size_t>(i)] * S[static_cast<std::size_t>(i)].dot(q);
-          q -= a[static_cast<std::size_t>(i)] * Y[static_cast<std::size_t>(i)];
-        }
-        q *= S.back().dot(Y.back()) / Y.back().squaredNorm();
-        for (std::size_t i = 0; i < S.size(); ++i) {
-          const double b = R[i] * Y[i].dot(q);
-          q += (a[i] - b) * S[i];
-        }
-        d = -tangent(A, q);
-        if (d.dot(pg) >= 0) {  // not a descent direction: restart
-          S.clear();
-          Y.clear();
-          R.clear();
+        d = -tangent(A, mem.apply(pg));  // two-loop recursion
+        if (d.dot(pg) >= 0) {            // not a descent direction: restart
+          mem.clear();
           d = -pg;
           alpha = gain_ / gmax;
         } else {
@@ -309,27 +292,14 @@ class AdjointGradient final : public exid::Optimizer {
         // velocity crossing zero), backtracking walks up to the jump and stalls there with a
         // large gradient. Hold the velocities that sit on the jump (tangent space) and go on.
         if (holdVelocitySigns(p, z, z + alpha0 * d, &A)) {
-          S.clear();
-          Y.clear();
-          R.clear();
+          mem.clear();
           continue;
         }
         return true;  // no decrease possible along the direction
       }
       ++*iters;
       if (paper_) paper_gain_ = std::min(paper_gain_ * 1.5, 1e6 * gain_);
-      const Eigen::VectorXd s = zn - z, y = gn - g;
-      const double sy = s.dot(y);
-      if (sy > 1e-12 * s.norm() * y.norm()) {
-        S.push_back(s);
-        Y.push_back(y);
-        R.push_back(1.0 / sy);
-        if (static_cast<int>(S.size()) > mem_) {
-          S.pop_front();
-          Y.pop_front();
-          R.pop_front();
-        }
-      }
+      mem.update(zn - z, gn - g);
       const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
       z = zn;
       g = gn;

@@ -185,6 +185,38 @@ OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reas
   return r;
 }
 
+// ---------------------------------------------------------------- L-BFGS memory
+void LbfgsMemory::clear() {
+  S_.clear();
+  Y_.clear();
+  R_.clear();
+}
+
+void LbfgsMemory::update(const Eigen::VectorXd& s, const Eigen::VectorXd& y) {
+  const double sy = s.dot(y);
+  if (!(sy > 1e-12 * s.norm() * y.norm())) return;
+  S_.push_back(s);
+  Y_.push_back(y);
+  R_.push_back(1.0 / sy);
+  if (static_cast<int>(S_.size()) > capacity_) {
+    S_.pop_front();
+    Y_.pop_front();
+    R_.pop_front();
+  }
+}
+
+Eigen::VectorXd LbfgsMemory::apply(const Eigen::VectorXd& g) const {
+  Eigen::VectorXd q = g;
+  std::vector<double> a(S_.size());
+  for (std::size_t k = S_.size(); k-- > 0;) {
+    a[k] = R_[k] * S_[k].dot(q);
+    q -= a[k] * Y_[k];
+  }
+  q *= S_.back().dot(Y_.back()) / Y_.back().squaredNorm();
+  for (std::size_t k = 0; k < S_.size(); ++k) q += (a[k] - R_[k] * Y_[k].dot(q)) * S_[k];
+  return q;
+}
+
 // ---------------------------------------------------------------- starts and bounds
 Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
                                double perturbation, std::mt19937_64& rng) {

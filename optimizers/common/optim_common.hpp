@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <chrono>
+#include <deque>
 #include <random>
 #include <string>
 #include <vector>
@@ -98,6 +99,24 @@ double threadCpuSeconds();
 /// A start point: z0 + perturbation * width * U(-1, 1) (width = half the bound range when
 /// finite, else max(1, |z0|_inf)), clipped to the bounds, then pulled back towards z0
 /// (z0 + alpha (z - z0), alpha halved) until it satisfies g <= 0 when z0 does.
+/// L-BFGS memory: the last `capacity` curvature pairs (s, y) and the two-loop recursion.
+class LbfgsMemory {
+ public:
+  explicit LbfgsMemory(int capacity) : capacity_(capacity) {}
+  bool empty() const { return S_.empty(); }
+  void clear();
+  /// Stores (s, y) when s^T y > 1e-12 |s| |y| (curvature condition), dropping the oldest pair
+  /// beyond the capacity.
+  void update(const Eigen::VectorXd& s, const Eigen::VectorXd& y);
+  /// H g by the two-loop recursion (initial H = s^T y / y^T y of the newest pair); not empty.
+  Eigen::VectorXd apply(const Eigen::VectorXd& g) const;
+
+ private:
+  int capacity_;
+  std::deque<Eigen::VectorXd> S_, Y_;
+  std::deque<double> R_;
+};
+
 Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
                                double perturbation, std::mt19937_64& rng);
 

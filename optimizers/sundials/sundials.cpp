@@ -37,7 +37,6 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <deque>
 #include <memory>
 #include <string>
 #include <vector>
@@ -752,8 +751,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     double phi = merit(cc, lim, z, &g);
     cur_J_ = trial_J_;
     if (!std::isfinite(phi)) return true;
-    std::deque<Eigen::VectorXd> S, Y;
-    std::deque<double> R;
+    exid::optim::LbfgsMemory mem(mem_);
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (stop()) return false;
       Eigen::VectorXd pg = g;
@@ -763,24 +761,13 @@ class SundialsOptimizer final : public exid::Optimizer {
       if (gmax <= 1e-12 * std::max(1.0, std::abs(phi))) return true;
       Eigen::VectorXd d;
       double alpha = 1.0;
-      if (S.empty()) {
+      if (mem.empty()) {
         d = -pg;
         alpha = gain_ / gmax;
       } else {
-        Eigen::VectorXd q = pg;
-        std::vector<double> a(S.size());
-        for (int i = static_cast<int>(S.size()) - 1; i >= 0; --i) {
-          const auto u = static_cast<std::size_t>(i);
-          a[u] = R[u] * S[u].dot(q);
-          q -= a[u] * Y[u];
-        }
-        q *= S.back().dot(Y.back()) / Y.back().squaredNorm();
-        for (std::size_t i = 0; i < S.size(); ++i) q += (a[i] - R[i] * Y[i].dot(q)) * S[i];
-        d = -q;
+        d = -mem.apply(pg);  // two-loop recursion
         if (d.dot(pg) >= 0) {
-          S.clear();
-          Y.clear();
-          R.clear();
+          mem.clear();
           d = -pg;
           alpha = gain_ / gmax;
         }
@@ -801,18 +788,7 @@ class SundialsOptimizer final : public exid::Optimizer {
       }
       if (!accepted) return true;
       ++*iters;
-      const Eigen::VectorXd s = zn - z, y = gn - g;
-      const double sy = s.dot(y);
-      if (sy > 1e-12 * s.norm() * y.norm()) {
-        S.push_back(s);
-        Y.push_back(y);
-        R.push_back(1.0 / sy);
-        if (static_cast<int>(S.size()) > mem_) {
-          S.pop_front();
-          Y.pop_front();
-          R.pop_front();
-        }
-      }
+      mem.update(zn - z, gn - g);
       const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
       z = zn;
       g = gn;

@@ -205,84 +205,89 @@ TEST(Hostile, TorqueFileRowMismatchNamesBothFiles) {
   fs::remove_all(dir);
 }
 
-// A criterion that throws at every point (test plugin test_singular, as on a singular information
-// matrix): no optimiser may return one of those points as its result (nlopt used to offer them
-// with the stand-in value 1e30 it gives NLopt, and the study went on with a trajectory nothing
-// had evaluated). Exit 1, the excitation stage failed, no trajectory written.
-TEST(Hostile, CriterionThatFailsEverywhereFailsTheExcitation) {
-  const std::string plugins = std::string(EXID_TEST_PLUGIN_DIR) + "/nan_criterion_plugin";
-  for (const char* optimizer : {"nlopt", "adjoint_gradient", "sundials"}) {
-    SCOPED_TRACE(optimizer);
-    const fs::path dir = tempDir(std::string("singular_") + optimizer);
-    std::ofstream(dir / "study.yaml") << "robot: {type: planar2r}\n"
+namespace {
+
+// An excitation study whose criterion (a test plugin, tests/plugins/nan_criterion_plugin.cpp)
+// fails at every point, run with `optimizer`: its exit code, log and summary.json.
+struct FailingExcitation {
+  fs::path dir;
+  int code = -1;
+  std::string log;
+  exid::Json summary;
+};
+
+FailingExcitation runFailingCriterion(const std::string& criterion, const std::string& optimizer) {
+  FailingExcitation r;
+  r.dir = tempDir(criterion + "_" + optimizer);
+  std::ofstream(r.dir / "study.yaml") << "robot: {type: planar2r}\n"
                                          "model: {type: differential}\n"
                                          "excitation:\n"
                                          "  trajectory: {type: fourier, params: {harmonics: 2}}\n"
-                                         "  criterion: {type: test_singular}\n"
-                                         "  optimizer: {type: "
-                                      << optimizer
+                                         "  criterion: {type: "
+                                      << criterion << "}\n  optimizer: {type: " << optimizer
                                       << ", params: {max_evaluations: 30, max_time_s: 20}}\n"
                                          "experiment: {type: simulate, params: {duration_s: 2}}\n"
                                          "estimator: {type: batch_ls}\n";
-    const Child c = start(dir / "study.yaml", dir / "out", dir, 0, plugins);
-    const int code = wait(c);
-    const std::string log = slurp(c.log);
-    EXPECT_EQ(code, 1) << log;
-    ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
-    const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
-    EXPECT_EQ(s.find("status")->asString(), "failed");
-    EXPECT_EQ(s.find("failed_stage")->asString(), "excitation");
-    const std::string msg = s.find("message")->asString();
-    EXPECT_TRUE(msg.find("singular") != std::string::npos ||
-                msg.find("no point could be evaluated") != std::string::npos)
-        << msg;
-    for (const char* f : {"trajectory_optimal.csv", "experiment.csv", "report.md"})
-      EXPECT_FALSE(fs::exists(dir / "out" / f)) << f;
-    EXPECT_TRUE(noTemporaries(dir));
-    fs::remove_all(dir);
+  const Child c = start(r.dir / "study.yaml", r.dir / "out", r.dir, 0,
+                        std::string(EXID_TEST_PLUGIN_DIR) + "/nan_criterion_plugin");
+  r.code = wait(c);
+  r.log = slurp(c.log);
+  if (fs::exists(r.dir / "out" / "summary.json"))
+    r.summary = exid::Json::parse(slurp(r.dir / "out" / "summary.json"));
+  return r;
+}
+
+// What every such study must do: exit 1, summary.json says the excitation stage failed, the
+// resolved study is kept, and none of the stage's files (trajectories, criterion history) nor
+// any later stage's is written; no temporary file is left.
+void expectExcitationFailedCleanly(const FailingExcitation& r) {
+  EXPECT_EQ(r.code, 1) << r.log;
+  ASSERT_TRUE(r.summary.find("status")) << r.log;
+  EXPECT_EQ(r.summary.find("status")->asString(), "failed");
+  EXPECT_EQ(r.summary.find("failed_stage")->asString(), "excitation");
+  EXPECT_TRUE(fs::exists(r.dir / "out" / "study.resolved.yaml"));
+  for (const char* f : {"trajectory_initial.csv", "trajectory_optimal.csv",
+                        "criterion_history.csv", "experiment.csv", "report.md"}) {
+    EXPECT_FALSE(fs::exists(r.dir / "out" / f)) << f;
+  }
+  EXPECT_TRUE(noTemporaries(r.dir));
+}
+
+}  // namespace
+
+// A criterion that evaluates to NaN at every point (test_nan), with each optimiser: the study
+// file, the line of the criterion and the criterion are named, and the optimiser itself says it
+// found no finite point (not a follow-on error elsewhere).
+TEST(Hostile, NanCriterionDuringExcitationIsNamedAndWritesNothing) {
+  for (const char* optimizer : {"nlopt", "adjoint_gradient", "sundials"}) {
+    SCOPED_TRACE(optimizer);
+    const FailingExcitation r = runFailingCriterion("test_nan", optimizer);
+    expectExcitationFailedCleanly(r);
+    EXPECT_NE(r.log.find((r.dir / "study.yaml").string() + ":5: excitation.criterion 'test_nan'"),
+              std::string::npos)
+        << r.log;
+    EXPECT_NE(r.log.find("nan"), std::string::npos) << r.log;
+    EXPECT_EQ(r.log.find("variables given"), std::string::npos) << r.log;
+    const std::string msg =
+        r.summary.find("message") ? r.summary.find("message")->asString() : std::string();
+    EXPECT_NE(msg.find("test_nan"), std::string::npos) << msg;
+    fs::remove_all(r.dir);
   }
 }
 
-// A criterion that evaluates to NaN at every point of the excitation optimisation (test plugin
-// test_nan, tests/plugins/nan_criterion_plugin.cpp), with each optimiser: the study file, the
-// line of the criterion and the criterion are named, exit 1, summary.json says why, and none of
-// the stage's files (trajectories, criterion history) nor any later stage's is written.
-TEST(Hostile, NanCriterionDuringExcitationIsNamedAndWritesNothing) {
-  const std::string plugins = std::string(EXID_TEST_PLUGIN_DIR) + "/nan_criterion_plugin";
+// A criterion that throws at every point (test_singular, as on a singular information matrix):
+// no optimiser may return one of those points as its result (nlopt used to offer them with the
+// stand-in value 1e30 it gives NLopt); the message says why.
+TEST(Hostile, CriterionThatFailsEverywhereFailsTheExcitation) {
   for (const char* optimizer : {"nlopt", "adjoint_gradient", "sundials"}) {
     SCOPED_TRACE(optimizer);
-    const fs::path dir = tempDir(std::string("nan_") + optimizer);
-    std::ofstream(dir / "study.yaml") << "robot: {type: planar2r}\n"
-                                         "model: {type: differential}\n"
-                                         "excitation:\n"
-                                         "  trajectory: {type: fourier, params: {harmonics: 2}}\n"
-                                         "  criterion: {type: test_nan}\n"
-                                         "  optimizer: {type: "
-                                      << optimizer
-                                      << ", params: {max_evaluations: 30, max_time_s: 20}}\n"
-                                         "experiment: {type: simulate, params: {duration_s: 2}}\n"
-                                         "estimator: {type: batch_ls}\n";
-    const Child c = start(dir / "study.yaml", dir / "out", dir, 0, plugins);
-    const int code = wait(c);
-    const std::string log = slurp(c.log);
-    EXPECT_EQ(code, 1) << log;
-    EXPECT_NE(log.find((dir / "study.yaml").string() + ":5: excitation.criterion 'test_nan'"),
-              std::string::npos)
-        << log;
-    EXPECT_NE(log.find("nan"), std::string::npos) << log;
-    // the optimiser itself says it found no finite point (not a follow-on error elsewhere)
-    EXPECT_EQ(log.find("variables given"), std::string::npos) << log;
-    ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
-    const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
-    EXPECT_EQ(s.find("status")->asString(), "failed");
-    EXPECT_EQ(s.find("failed_stage")->asString(), "excitation");
-    EXPECT_NE(s.find("message")->asString().find("test_nan"), std::string::npos);
-    EXPECT_TRUE(fs::exists(dir / "out" / "study.resolved.yaml"));
-    for (const char* f : {"trajectory_initial.csv", "trajectory_optimal.csv",
-                          "criterion_history.csv", "experiment.csv", "report.md"}) {
-      EXPECT_FALSE(fs::exists(dir / "out" / f)) << f;
-    }
-    EXPECT_TRUE(noTemporaries(dir));
-    fs::remove_all(dir);
+    const FailingExcitation r = runFailingCriterion("test_singular", optimizer);
+    expectExcitationFailedCleanly(r);
+    const std::string msg =
+        r.summary.find("message") ? r.summary.find("message")->asString() : std::string();
+    EXPECT_TRUE(msg.find("singular") != std::string::npos ||
+                msg.find("no point could be evaluated") != std::string::npos)
+        << msg;
+    fs::remove_all(r.dir);
   }
 }
