@@ -406,6 +406,16 @@ TEST(ConsistentLs, PandaConsistentAtEveryNoiseLevel) {
     int pinned = 0;
     for (Eigen::Index i = 0; i < c.std.size(); ++i) pinned += c.std(i) < 1e-6 * ols.std(i) ? 1 : 0;
     std::printf("  %d base parameters pinned by active bounds (linearised std 0)\n", pinned);
+    // with the robot's prior on the standard parameters (the default prior_on), too
+    exid::PriorSpec spec;
+    spec.from = "robot";
+    spec.relative_std = 0.3;
+    spec.absolute_std = 1e-3;
+    const exid::Prior prior = exid::buildPrior(spec, *p.model);
+    const exid::Estimate cp = make("consistent_ls")->estimate(*p.model, d, &prior, ctx);
+    expectConsistent(cp);
+    EXPECT_EQ(cp.details.find("prior")->find("on")->asString(), "standard");
+    EXPECT_TRUE(cp.std.allFinite());
   }
 }
 
