@@ -479,6 +479,9 @@ TEST(ConsistentLs, StandardPriorCompletesTheBodiesByThePrior) {
   // (i) the same base parameters (no constraint active: the consistent fit is the linear one)
   EXPECT_LE(s.details.find("mahalanobis_from_unconstrained")->asDouble(), 1e-4);
   EXPECT_LE((s.value - b.value).cwiseQuotient(s.std).cwiseAbs().maxCoeff(), 1e-3);
+  // ... and the same linearised covariance: K (K^T F^T F K + D^-2)^-1 K^T = (F^T F + (K D^2
+  // K^T)^-1)^-1 (Woodbury), the base prior's posterior
+  EXPECT_LE((s.covariance - b.covariance).norm(), 1e-6 * b.covariance.norm());
   // (ii) the standard parameters are the prior's own completion of them
   const Eigen::MatrixXd KD2Kt = K * D2.asDiagonal() * K.transpose();
   const Eigen::VectorXd completion =
