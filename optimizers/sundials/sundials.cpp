@@ -254,8 +254,6 @@ class ContinuousCriterion {
       for (int i = 0; i < nb_; ++i) scale_(i) = std::max(nom(i), floor);
     }
     nq_ = nb_ * (nb_ + 1) / 2;
-    exid::check(SUNContext_Create(nullptr, &sctx_) == 0,
-                "optimizer 'sundials': SUNContext_Create failed");
     sample_.t = Eigen::VectorXd::Zero(1);
     sample_.q = par_.rest().transpose();
     sample_.qd = Eigen::MatrixXd::Zero(1, par_.n());
@@ -268,6 +266,10 @@ class ContinuousCriterion {
             "optimizer 'sundials': the model '{}' gives no design rows for a single "
             "instant (the integral model's rows are windows): use adjoint_gradient or nlopt",
             model_.pluginName()));
+    // Last: nothing after it may throw (the destructor, which frees it, does not run when the
+    // constructor throws).
+    exid::check(SUNContext_Create(nullptr, &sctx_) == 0,
+                "optimizer 'sundials': SUNContext_Create failed");
   }
   ~ContinuousCriterion() { SUNContext_Free(&sctx_); }
   ContinuousCriterion(const ContinuousCriterion&) = delete;
