@@ -133,8 +133,8 @@ class BatchLs : public exid::Estimator {
       // rank-tolerant fit), stacked with the prior's pseudo-observations S (theta - theta0) = 0,
       // S^T S = Sigma^-1. Directions the data do not excite fall back to the prior.
       double noise = 0.0;
-      const exid::est::LsSolution s = exid::est::solveWithPrior(acc, *prior, model.base().names,
-                                                                opt_, kName, 1.0, &noise);
+      const exid::est::LsSolution s =
+          exid::est::solveWithPrior(acc, *prior, model.base().names, opt_, kName, 1.0, &noise);
       exid::est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
       e.rows = acc.rows();
       e.details["noise_std"] = noise;

@@ -40,10 +40,10 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
     Eigen::VectorXd sd(pi0.size());
     for (Eigen::Index i = 0; i < pi0.size(); ++i) {
       const bool drive = isDriveParameterName(names[static_cast<std::size_t>(i)]);
-      const double rel = drive ? spec.drive_relative_std.value_or(spec.relative_std)
-                               : spec.relative_std;
-      const double abs = drive ? spec.drive_absolute_std.value_or(spec.absolute_std)
-                               : spec.absolute_std;
+      const double rel =
+          drive ? spec.drive_relative_std.value_or(spec.relative_std) : spec.relative_std;
+      const double abs =
+          drive ? spec.drive_absolute_std.value_or(spec.absolute_std) : spec.absolute_std;
       sd(i) = std::hypot(rel * pi0(i), abs);
     }
     prior.value = b.K * pi0;

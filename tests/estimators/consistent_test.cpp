@@ -195,8 +195,8 @@ TEST(Priors, StudyConfigValidatesThePriorSection) {
         << m;
   }
   try {
-    exid::parseStudy(head + "prior: {from: study, study: out/a, drive_relative_std: 1}\n",
-                     "s.yaml", exid_test::sourceDir(), exid_test::registry());
+    exid::parseStudy(head + "prior: {from: study, study: out/a, drive_relative_std: 1}\n", "s.yaml",
+                     exid_test::sourceDir(), exid_test::registry());
     FAIL() << "accepted";
   } catch (const exid::Error& e) {
     EXPECT_NE(std::string(e.what()).find("unknown key 'drive_relative_std'"), std::string::npos)
@@ -449,8 +449,7 @@ TEST(ConsistentLs, StandardPriorCompletesTheBodiesByThePrior) {
     const bool drive = exid::isDriveParameterName(names[static_cast<std::size_t>(i)]);
     drives += drive ? 1 : 0;
     EXPECT_DOUBLE_EQ(prior.standard_value(i), pi0(i));
-    EXPECT_DOUBLE_EQ(prior.standard_std(i),
-                     drive ? 0.5 : std::hypot(0.05 * pi0(i), 1e-3))
+    EXPECT_DOUBLE_EQ(prior.standard_std(i), drive ? 0.5 : std::hypot(0.05 * pi0(i), 1e-3))
         << names[static_cast<std::size_t>(i)];
   }
   EXPECT_EQ(drives, 21);  // Ia, Fc, Fv of 7 joints

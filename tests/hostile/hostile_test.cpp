@@ -246,8 +246,8 @@ void expectExcitationFailedCleanly(const FailingExcitation& r) {
   EXPECT_EQ(r.summary.find("status")->asString(), "failed");
   EXPECT_EQ(r.summary.find("failed_stage")->asString(), "excitation");
   EXPECT_TRUE(fs::exists(r.dir / "out" / "study.resolved.yaml"));
-  for (const char* f : {"trajectory_initial.csv", "trajectory_optimal.csv",
-                        "criterion_history.csv", "experiment.csv", "report.md"}) {
+  for (const char* f : {"trajectory_initial.csv", "trajectory_optimal.csv", "criterion_history.csv",
+                        "experiment.csv", "report.md"}) {
     EXPECT_FALSE(fs::exists(r.dir / "out" / f)) << f;
   }
   EXPECT_TRUE(noTemporaries(r.dir));

@@ -241,8 +241,8 @@ TEST(RealTx40, ConsistentLsWinOverWlsHoldsForEveryCrossValidationBlockCount) {
   const double aw = w.summary.find("validation")->find("relative_error")->asDouble();
   for (int blocks : {3, 4, 6, 8, 10}) {
     SCOPED_TRACE(blocks);
-    const ::Run c = runVariant("tx40_consistent_ls_cv", "cv_blocks: 5",
-                               "cv_blocks: " + std::to_string(blocks));
+    const ::Run c =
+        runVariant("tx40_consistent_ls_cv", "cv_blocks: 5", "cv_blocks: " + std::to_string(blocks));
     ASSERT_EQ(c.code, 0) << c.out;
     const exid::Json& d = *c.summary.find("identification")->find("details");
     EXPECT_TRUE(d.find("consistent")->asBool());

@@ -63,7 +63,8 @@ TEST(PluginLoader, RefusesAWrongAbiVersionWithExpectedAndFound) {
   exid::Registry reg;
   std::string msg = errorOf([&] { reg.loadLibrary(testLib("wrong_abi_plugin")); });
   EXPECT_NE(msg.find("ABI version mismatch"), std::string::npos) << msg;
-  EXPECT_NE(msg.find("expected " + std::to_string(EXID_PLUGIN_ABI_VERSION)), std::string::npos) << msg;
+  EXPECT_NE(msg.find("expected " + std::to_string(EXID_PLUGIN_ABI_VERSION)), std::string::npos)
+      << msg;
   EXPECT_NE(msg.find("found 999"), std::string::npos) << msg;
   EXPECT_NE(msg.find("wrong_abi_plugin"), std::string::npos) << msg;
   EXPECT_EQ(reg.find(exid::PluginKind::Criterion, "test_stale"), nullptr);
