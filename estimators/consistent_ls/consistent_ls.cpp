@@ -23,6 +23,7 @@
 #include <nlopt.hpp>
 #include <optional>
 
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/estimators/consistent.hpp"
@@ -84,14 +85,9 @@ class StandardMap {
     }
     for (std::size_t i = 0; i < names.size(); ++i) {
       if (used[i]) continue;
-      const std::string& n = names[i];
-      auto starts = [&](const char* pre) {
-        const std::string p(pre);
-        return n.size() > p.size() && n.compare(0, p.size(), p) == 0 &&
-               n.substr(p.size()).find_first_not_of("0123456789") == std::string::npos;
-      };
       scalars_.push_back(static_cast<int>(i));
-      nonneg_.push_back(starts("Ia") || starts("Fc") || starts("Fv"));
+      // rotor inertia and friction coefficients are >= 0; offsets are free
+      nonneg_.push_back(exid::isDriveParameterName(names[i]) && names[i].rfind("OFF", 0) != 0);
       const double v = std::abs(nominal(static_cast<Eigen::Index>(i)));
       scale_.push_back(v > 0 && std::isfinite(v) ? v : 1.0);
     }

@@ -362,17 +362,19 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
       bad = true;
     }
   }
+  // Reads n[key] into *out; false (and *out unchanged) when the key is absent or bad.
   auto number = [&](const char* key, double lo, bool lo_open, double* out) {
     YAML::Node v = n[key];
-    if (!v) return;
+    if (!v) return false;
     auto d = v.IsScalar() ? toDouble(v.Scalar()) : std::nullopt;
     if (!d || !std::isfinite(*d) || (lo_open ? !(*d > lo) : !(*d >= lo))) {
       pr.add(v, fmt::format("prior.{} = {}: must be a number in {}{}, inf)", key, scalarText(v),
                             lo_open ? "(" : "[", lo));
       bad = true;
-      return;
+      return false;
     }
     *out = *d;
+    return true;
   };
   if (spec.from == "robot") {
     number("relative_std", 0.0, false, &spec.relative_std);
@@ -381,11 +383,8 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
         {"drive_relative_std", &spec.drive_relative_std},
         {"drive_absolute_std", &spec.drive_absolute_std}};
     for (const auto& [key, out] : drive) {
-      if (!n[key]) continue;
       double v = 0.0;
-      const bool was_bad = bad;
-      number(key, 0.0, false, &v);
-      if (!bad || was_bad) *out = v;
+      if (number(key, 0.0, false, &v)) *out = v;
     }
   } else {
     number("scale", 0.0, true, &spec.scale);
