@@ -8,7 +8,9 @@
 #include <sstream>
 
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/registry.hpp"
+#include "exid/yaml_strict.hpp"
 
 namespace exid {
 
@@ -73,9 +75,16 @@ std::optional<bool> toBool(const std::string& s) {
 std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const fs::path& base_dir,
                                   std::string* why) {
   auto expect = [&](const char* what) {
-    *why = fmt::format("expected {}, found '{}'", what, scalarText(n));
+    std::string found = scalarText(n);
+    if (found.size() > 80) found = found.substr(0, 60) + fmt::format("... ({} bytes)", found.size());
+    *why = fmt::format("expected {}, found '{}'", what, found);
     return std::nullopt;
   };
+  if (n.IsSequence() && n.size() > kMaxListElements) {
+    *why = fmt::format("a list of {} elements; at most {} are accepted", n.size(),
+                       kMaxListElements);
+    return std::nullopt;
+  }
   switch (d.type) {
     case ParamType::Bool: {
       if (!n.IsScalar()) return expect("true or false");
@@ -144,6 +153,9 @@ std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const
   }
   return std::nullopt;
 }
+
+// Elements of one list parameter at most (a longer list is refused before it is converted).
+constexpr std::size_t kMaxListElements = 100000;
 
 std::vector<std::string> keysOf(const std::vector<ParamDecl>& decls) {
   std::vector<std::string> k;
@@ -328,6 +340,23 @@ Json specJson(const PluginSpec& s) {
   return j;
 }
 
+}  // namespace
+
+std::string studyNameProblem(const std::string& name) {
+  if (name.empty()) return "must not be empty";
+  if (name.size() > 200) return fmt::format("has {} characters; at most 200", name.size());
+  if (name == "." || name == "..") return "must not be '.' or '..'";
+  if (name[0] == '.') return "must not start with '.' (hidden or relative folder)";
+  for (unsigned char c : name) {
+    if (c == '/' || c == '\\')
+      return "must be a plain name without '/' or '\\' (it names the output folder out/<name>)";
+    if (c < 0x20 || c == 0x7f) return fmt::format("contains the control byte 0x{:02X}", c);
+  }
+  return "";
+}
+
+namespace {
+
 const std::vector<std::string> kTopKeys = {"name",      "description", "seed",       "budget_s",
                                            "robot",     "model",       "excitation", "experiment",
                                            "estimator", "validation",  "report",     "prior"};
@@ -417,6 +446,7 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
   }
   StudyConfig cfg;
   cfg.dir = base_dir;
+  duplicateKeys(root, source_name, "", &pr.items);
   if (!root.IsMap()) {
     throw Error(fmt::format("{}: expected a mapping with sections ({}), found '{}'", source_name,
                             fmt::join(kTopKeys, ", "), scalarText(root)));
@@ -427,10 +457,13 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       unknownKey(pr, kv.first, "", *key, kTopKeys);
   }
   if (root["name"]) {
-    if (root["name"].IsScalar())
+    if (root["name"].IsScalar()) {
       cfg.name = root["name"].Scalar();
-    else
+      if (const std::string why = studyNameProblem(cfg.name); !why.empty())
+        pr.add(root["name"], fmt::format("name = '{}': {}", scalarText(root["name"]), why));
+    } else {
       pr.add(root["name"], "name: expected a string");
+    }
   }
   if (root["seed"]) {
     auto s = root["seed"].IsScalar() ? toInt(root["seed"].Scalar()) : std::nullopt;
@@ -561,15 +594,43 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
 }
 
 StudyConfig loadStudy(const fs::path& file, const Registry& reg) {
-  std::ifstream in(file);
-  if (!in) throw Error(fmt::format("{}: cannot open the study file", file.string()));
-  std::stringstream ss;
-  ss << in.rdbuf();
+  const std::string text = readInputFile(file, "study", kMaxStudyFileBytes);
   fs::path abs = fs::absolute(file);
-  StudyConfig cfg = parseStudy(ss.str(), file.string(), abs.parent_path(), reg);
+  StudyConfig cfg = parseStudy(text, file.string(), abs.parent_path(), reg);
   cfg.file = abs;
-  if (cfg.name.empty()) cfg.name = file.stem().string();
+  if (cfg.name.empty()) {
+    cfg.name = file.stem().string();
+    if (!studyNameProblem(cfg.name).empty()) cfg.name = "study";
+  }
   return cfg;
+}
+
+std::vector<fs::path> studyInputFiles(const StudyConfig& cfg, const Registry& reg) {
+  std::vector<fs::path> out;
+  auto add = [&](const std::optional<PluginSpec>& spec) {
+    if (!spec) return;
+    const PluginInfo* info = reg.find(spec->kind, spec->type);
+    if (!info) return;
+    for (const auto& d : info->params) {
+      if (d.type != ParamType::Path || !spec->params.has(d.name)) continue;
+      const auto* v = std::get_if<std::string>(&spec->params.at(d.name));
+      if (v && !v->empty()) {
+        fs::path p(*v);
+        if (p.is_relative() && !cfg.dir.empty()) p = cfg.dir / p;
+        out.push_back(p.lexically_normal());
+      }
+    }
+  };
+  add(cfg.robot);
+  for (const auto& m : cfg.models) add(m);
+  add(cfg.trajectory);
+  add(cfg.criterion);
+  add(cfg.optimizer);
+  add(cfg.experiment);
+  add(cfg.estimator);
+  add(cfg.validation);
+  if (cfg.prior && cfg.prior->from == "study") out.push_back(cfg.prior->study / "parameters.csv");
+  return out;
 }
 
 ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,

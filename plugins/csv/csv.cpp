@@ -96,11 +96,11 @@ class CsvExperiment : public exid::Experiment {
                   "keep one sample in this many after filtering (> 1 needs "
                   "differentiate_cutoff_hz and filter_torque, and the cut-off below the new "
                   "Nyquist frequency)",
-                  1),
+                  1, 1e6),
         param_int("trim_edges", -1,
                   "samples dropped at each end of the segment after filtering; -1: "
                   "ceil(2 fs / cutoff) when filtering, else 0",
-                  -1),
+                  -1, 1e9),
     };
   }
 
@@ -121,12 +121,7 @@ class CsvExperiment : public exid::Experiment {
       if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
       Source src;
       src.file = p.string();
-      std::ifstream in(p, std::ios::binary);
-      exid::check(static_cast<bool>(in),
-                  fmt::format("experiment 'csv': {}: cannot open the file", src.file));
-      std::stringstream ss;
-      ss << in.rdbuf();
-      const std::string text = ss.str();
+      const std::string text = exid::readInputFile(p, "CSV data", exid::kMaxDataFileBytes);
       std::istringstream ls(text);
       std::string line;
       int lineno = 0;
@@ -193,6 +188,12 @@ class CsvExperiment : public exid::Experiment {
                   fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
                               "'{}'), found {}",
                               key, n, robot->name, names.size()));
+      for (std::size_t a = 0; a < names.size(); ++a)
+        for (std::size_t b = 0; b < a; ++b)
+          exid::check(names[a] != names[b],
+                      fmt::format("experiment 'csv': {}: column '{}' is named twice (elements {} "
+                                  "and {}); each joint needs its own column",
+                                  key, names[a], b + 1, a + 1));
       for (const auto& c : names) {
         const int i = sr.T.col(c);
         exid::check(i >= 0,
@@ -467,14 +468,26 @@ class CsvExperiment : public exid::Experiment {
       if (d->hasTorque()) d->tau = est::filtfiltColumns(sos, d->tau);
       if (d->hasWrench()) d->wrench = est::filtfiltColumns(sos, d->wrench);
     }
+    // In double: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges, does not fit an
+    // int (it was narrowed, wrapped and indexed before the data).
     const std::int64_t trim_p = P_.getInt("trim_edges");
-    pp.trim = trim_p >= 0 ? static_cast<int>(trim_p)
-                          : static_cast<int>(std::ceil(2.0 * pp.fs / pp.cutoff_hz));
+    const double trim =
+        trim_p >= 0 ? static_cast<double>(trim_p) : std::ceil(2.0 * pp.fs / pp.cutoff_hz);
     exid::check(
-        K - 2 * pp.trim >= 2,
+        std::isfinite(trim) && static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
-                    "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
-                    file, pp.trim, K));
+                    "segment leaves too few ({}); lower trim_edges or raise "
+                    "differentiate_cutoff_hz = {} Hz",
+                    file, trim, K,
+                    trim_p >= 0 ? "trim_edges" : "trim_edges: -1 trims ceil(2 fs / cutoff)",
+                    pp.cutoff_hz));
+    pp.trim = static_cast<int>(trim);
+    for (const Eigen::MatrixXd* M : {&d->q, &d->qd, &d->qdd})
+      exid::check(M->allFinite(),
+                  fmt::format("experiment 'csv': {}: the low-pass filter (differentiate_cutoff_hz "
+                              "= {} Hz, filter_order {}, sample rate {} Hz) gave non-finite "
+                              "values; raise the cut-off",
+                              file, pp.cutoff_hz, pp.order, pp.fs));
     std::vector<Eigen::Index> keep;
     for (Eigen::Index k = pp.trim; k < K - pp.trim; k += pp.decimation) keep.push_back(k);
     auto pick = [&](const Eigen::MatrixXd& M) {
