@@ -244,10 +244,9 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
 int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
                   const std::string& out) {
   const fs::path dir(study_dir);
-  std::ifstream in(dir / "summary.json");
-  if (!in)
+  if (!fs::exists(dir / "summary.json"))
     throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = readInputFile(dir / "summary.json", "summary", kMaxStudyFileBytes);
   const Json S = Json::parse(text);
   const Json* I = S.find("identification");
   const Json* d = I ? I->find("details") : nullptr;

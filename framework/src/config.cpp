@@ -3,7 +3,9 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
@@ -54,15 +56,13 @@ std::optional<double> toDouble(const std::string& s) {
   if (s == ".inf" || s == "inf" || s == "+.inf") return HUGE_VAL;
   if (s == "-.inf" || s == "-inf") return -HUGE_VAL;
   if (s == ".nan" || s == "nan" || s == "NaN") return std::nan("");
-  if (s.empty()) return std::nullopt;
-  std::size_t pos = 0;
-  try {
-    double v = std::stod(s, &pos);
-    if (pos != s.size()) return std::nullopt;
-    return v;
-  } catch (...) {
-    return std::nullopt;
-  }
+  if (s.empty() || std::isspace(static_cast<unsigned char>(s[0]))) return std::nullopt;
+  // strtod, not stod: a subnormal (5e-324) is a number (stod threw on the underflow); an
+  // overflow is inf, which the range check refuses.
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (end != s.c_str() + s.size()) return std::nullopt;
+  return v;
 }
 
 std::optional<bool> toBool(const std::string& s) {
@@ -70,6 +70,9 @@ std::optional<bool> toBool(const std::string& s) {
   if (s == "false" || s == "False" || s == "FALSE" || s == "no" || s == "off") return false;
   return std::nullopt;
 }
+
+// Elements of one list parameter at most (a longer list is refused before it is converted).
+constexpr std::size_t kMaxListElements = 100000;
 
 // Converts a YAML node into the declared type; returns nullopt and sets why on failure.
 std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const fs::path& base_dir,
@@ -153,9 +156,6 @@ std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const
   }
   return std::nullopt;
 }
-
-// Elements of one list parameter at most (a longer list is refused before it is converted).
-constexpr std::size_t kMaxListElements = 100000;
 
 std::vector<std::string> keysOf(const std::vector<ParamDecl>& decls) {
   std::vector<std::string> k;

@@ -112,8 +112,8 @@ TEST(Hostile, DiskFullOnOutputIsReportedAndLeavesNoPartialFile) {
 TEST(Hostile, SigtermMidRunStopsCleanlyAndSaysWhy) {
   const fs::path dir = tempDir("sigterm");
   std::ofstream(dir / "study.yaml") << kPlanar
-                                    << "experiment: {type: simulate, params: {duration_s: 100000, "
-                                       "period_s: 100000, sample_period_s: 0.01}}\n";
+                                    << "experiment: {type: simulate, params: {duration_s: 2000, "
+                                       "period_s: 2000, sample_period_s: 0.001}}\n";
   const Child c = start(dir / "study.yaml", dir / "out", dir);
   // Wait until the run has started (the resolved study is written first, into the staging
   // folder .out.staging.PID), then a little more.

@@ -75,7 +75,7 @@ study:
 cells:
   - {seed: 1}
   - {experiment: {type: csv, params: {file: does_not_exist.csv}}}
-  - {experiment: {type: simulate, params: {duration_s: 100000, sample_period_s: 0.001, drive_terms: false}}}
+  - {experiment: {type: simulate, params: {duration_s: 2000, sample_period_s: 0.001, drive_terms: false}}}
   - {seed: 2}
 )";
   exid::MatrixSpec spec = exid::loadMatrix(d / "m.yaml", exid_test::registry());

@@ -171,14 +171,14 @@ TEST(Csv, NulOrStrayByteInsideANumberIsAnErrorWithItsColumn) {
 // 2^63 - 1 was accepted and narrowed to 40, issue 16).
 TEST(Params, IntegersAlwaysHaveARangeThatFitsAnInt) {
   const auto d = exid::param_int("n", 1, "count", 0.0);
-  EXPECT_EQ(d.rangeText(), "[0, 1e+09]");
+  EXPECT_EQ(d.rangeText(), "[0, 1000000000]");
   EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{1000000000})), "");
-  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})), "must be in [0, 1e+09]");
+  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})), "must be in [0, 1000000000]");
   const auto u = exid::param_int("m", 1, "count");
-  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})), "must be in [-1e+09, 1e+09]");
+  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})), "must be in [-1000000000, 1000000000]");
   const auto l = exid::param_ints("j", std::nullopt, "joints", 1.0);
   EXPECT_EQ(l.violation(exid::ParamValue(std::vector<std::int64_t>{1, 4294967297})),
-            "element 1 must be in [1, 1e+09]");
+            "element 1 must be in [1, 1000000000]");
 }
 
 // Input files: only regular files, only up to a cap; a FIFO is refused without blocking.
