@@ -715,7 +715,16 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
         ::prctl(PR_SET_PDEATHSIG, SIGKILL);
         if (::getppid() != parent) ::_exit(1);
         if (spec.cell_memory_mb > 0) {
-          const rlim_t bytes = static_cast<rlim_t>(spec.cell_memory_mb * 1048576.0);
+          // The cap is on what the cell adds to the address space it inherits (the program,
+          // its libraries and plugins are already mapped when it is forked).
+          double inherited = 0;
+          if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+            unsigned long pages = 0;
+            if (std::fscanf(f, "%lu", &pages) == 1)
+              inherited = static_cast<double>(pages) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+            std::fclose(f);
+          }
+          const rlim_t bytes = static_cast<rlim_t>(inherited + spec.cell_memory_mb * 1048576.0);
           struct rlimit rl {
             bytes, bytes
           };

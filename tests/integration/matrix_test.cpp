@@ -164,7 +164,7 @@ axes:
   int status = 0;
   ::waitpid(pid, &status, 0);
   ASSERT_TRUE(WIFEXITED(status));
-  EXPECT_EQ(WEXITSTATUS(status), 130);  // interrupted
+  EXPECT_EQ(WEXITSTATUS(status), 128 + SIGTERM);  // interrupted by SIGTERM: 143
   exid::MatrixSpec spec = exid::loadMatrix(d / "m.yaml", exid_test::registry());
   exid::MatrixOptions opt;
   opt.out_dir = d / "out";

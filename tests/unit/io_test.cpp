@@ -87,7 +87,7 @@ TEST(Csv, RoundTripKeepsFullPrecision) {
 
 TEST(Csv, ErrorsNameFileLineAndColumn) {
   std::string msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,abc\n", "run.csv"); });
-  EXPECT_NE(msg.find("run.csv:3: column 'q1': 'abc' is not a number"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("run.csv:3:5: column 'q1': 'abc' is not a number"), std::string::npos) << msg;
   msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,nan\n", "run.csv"); });
   EXPECT_NE(msg.find("run.csv:3: column 'q1': non-finite (nan) value"), std::string::npos) << msg;
   msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,\n", "run.csv"); });

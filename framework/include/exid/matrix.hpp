@@ -48,7 +48,9 @@ struct MatrixSpec {
   std::string name;
   std::filesystem::path file;
   double cell_budget_s = 0.0;
-  double cell_memory_mb = 0.0;  // address-space cap of a cell's process (RLIMIT_AS); 0 = none
+  // Address space a cell may add to what it inherits from the matrix process (RLIMIT_AS on the
+  // cell's process); 0 = no cap. A cell over it fails ("out of memory").
+  double cell_memory_mb = 0.0;
   std::vector<std::string> axes;  // axis names in order
   std::vector<MatrixCell> cells;
 };
