@@ -226,12 +226,10 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   StudyResult r = runStudy(cfg, reg, opt);
   std::cout << briefTable(r.summary);
   if (!r.ok) {
-    std::cerr << fmt::format("exid {}: {}: {}{}\n", stage, r.cancelled ? "cancelled" : "failed",
-                             r.message,
-                             r.written_to.empty()
-                                 ? std::string()
-                                 : fmt::format(" (details in {}/summary.json)",
-                                               r.written_to.string()));
+    std::cerr << fmt::format(
+        "exid {}: {}: {}{}\n", stage, r.cancelled ? "cancelled" : "failed", r.message,
+        r.written_to.empty() ? std::string()
+                             : fmt::format(" (details in {}/summary.json)", r.written_to.string()));
     return r.cancelled ? signalExitCode() : 1;
   }
   std::cout << fmt::format("\nResults in {}/ (summary.json, report.md)\n", out);
@@ -352,9 +350,10 @@ void parseShard(const std::string& shard, int* index, int* count) {
   const auto slash = shard.find('/');
   auto number = [&](const std::string& t, const char* what) {
     if (t.empty() || t.size() > 6 || t.find_first_not_of("0123456789") != std::string::npos)
-      throw Error(fmt::format("--shard {}: {} '{}' is not a non-negative integer; expected i/N "
-                              "with 0 <= i < N (e.g. --shard 0/4)",
-                              shard, what, t));
+      throw Error(
+          fmt::format("--shard {}: {} '{}' is not a non-negative integer; expected i/N "
+                      "with 0 <= i < N (e.g. --shard 0/4)",
+                      shard, what, t));
     return std::stoi(t);
   };
   if (slash == std::string::npos)
@@ -367,8 +366,8 @@ void parseShard(const std::string& shard, int* index, int* count) {
 
 int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
                   const std::string& out_arg, int jobs, const std::string& shard, bool retry,
-                  bool force, const std::string& rows, const std::string& cols, const std::string& metric,
-                  const std::function<bool()>& cancelled) {
+                  bool force, const std::string& rows, const std::string& cols,
+                  const std::string& metric, const std::function<bool()>& cancelled) {
   if (args.empty())
     throw Error(
         "usage: exid matrix MATRIX.yaml --out DIR [-j N] | exid matrix table DIR ... | exid matrix "

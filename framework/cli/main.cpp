@@ -144,11 +144,11 @@ int main(int argc, char** argv) {
             r.message,
             r.written_to.empty()
                 ? std::string("(nothing was written)")
-                : fmt::format("(details in {}/summary.json{})", r.written_to.string(),
-                              r.written_to != fs::path(out_dir).lexically_normal()
-                                  ? fmt::format("; the earlier results in {} are untouched",
-                                                out_dir)
-                                  : ""));
+                : fmt::format(
+                      "(details in {}/summary.json{})", r.written_to.string(),
+                      r.written_to != fs::path(out_dir).lexically_normal()
+                          ? fmt::format("; the earlier results in {} are untouched", out_dir)
+                          : ""));
         return r.cancelled ? exid::cli::signalExitCode() : 1;
       }
       std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir,

@@ -79,13 +79,14 @@ std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const
                                   std::string* why) {
   auto expect = [&](const char* what) {
     std::string found = scalarText(n);
-    if (found.size() > 80) found = found.substr(0, 60) + fmt::format("... ({} bytes)", found.size());
+    if (found.size() > 80)
+      found = found.substr(0, 60) + fmt::format("... ({} bytes)", found.size());
     *why = fmt::format("expected {}, found '{}'", what, found);
     return std::nullopt;
   };
   if (n.IsSequence() && n.size() > kMaxListElements) {
-    *why = fmt::format("a list of {} elements; at most {} are accepted", n.size(),
-                       kMaxListElements);
+    *why =
+        fmt::format("a list of {} elements; at most {} are accepted", n.size(), kMaxListElements);
     return std::nullopt;
   }
   switch (d.type) {

@@ -68,8 +68,8 @@ int cleanStaleTemporaries(const fs::path& dir) {
       continue;
     const std::string stem = name.substr(0, dot);
     const bool tmp = stem.size() > 4 && stem.compare(stem.size() - 4, 4, ".tmp") == 0;
-    const bool staging = name[0] == '.' && stem.size() > 8 &&
-                         stem.compare(stem.size() - 8, 8, ".staging") == 0;
+    const bool staging =
+        name[0] == '.' && stem.size() > 8 && stem.compare(stem.size() - 8, 8, ".staging") == 0;
     if (!tmp && !staging) continue;
     const pid_t pid = static_cast<pid_t>(std::stol(pid_text));
     if (pid <= 0 || pid == ::getpid()) continue;
@@ -195,12 +195,12 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
       const std::size_t used = s.empty() ? 0 : static_cast<std::size_t>(end - s.c_str());
       if (!s.empty() && (used == 0 || used != s.size())) {
         const unsigned char b = static_cast<unsigned char>(s[used == 0 ? 0 : used]);
-        throw Error(fmt::format(
-            "{}:{}:{}: column '{}': '{}' is not a number ({} at column {})", source, lineno,
-            starts[c] + used + 1, t.columns[c], printable(s),
-            b >= 0x20 && b < 0x7f ? fmt::format("unexpected '{}'", static_cast<char>(b))
-                                  : fmt::format("unexpected byte 0x{:02X}", b),
-            starts[c] + used + 1));
+        throw Error(fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})",
+                                source, lineno, starts[c] + used + 1, t.columns[c], printable(s),
+                                b >= 0x20 && b < 0x7f
+                                    ? fmt::format("unexpected '{}'", static_cast<char>(b))
+                                    : fmt::format("unexpected byte 0x{:02X}", b),
+                                starts[c] + used + 1));
       }
       if (!std::isfinite(v) && !opt.allow_non_finite) {
         bad = true;
@@ -229,8 +229,7 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
 }
 
 CsvTable readCsv(const fs::path& path, const CsvReadOptions& opt, int* dropped_rows) {
-  return parseCsv(readInputFile(path, "CSV", kMaxDataFileBytes), path.string(), opt,
-                  dropped_rows);
+  return parseCsv(readInputFile(path, "CSV", kMaxDataFileBytes), path.string(), opt, dropped_rows);
 }
 
 std::string toCsv(const CsvTable& t) {

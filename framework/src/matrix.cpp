@@ -23,12 +23,12 @@
 #include <sstream>
 
 #include "exid/context.hpp"
+#include "exid/error.hpp"
 #include "exid/input_file.hpp"
 #include "exid/io.hpp"
-#include "exid/yaml_strict.hpp"
-#include "exid/error.hpp"
 #include "exid/registry.hpp"
 #include "exid/runner.hpp"
+#include "exid/yaml_strict.hpp"
 
 namespace exid {
 
@@ -105,8 +105,8 @@ YAML::Node loadStrictYaml(const fs::path& file, const std::string& what) {
 
 std::string keyText(const YAML::Node& key, const fs::path& file) {
   if (!key.IsScalar())
-    throw Error(fmt::format("{}:{}: a key must be a plain name", file.string(),
-                            key.Mark().line + 1));
+    throw Error(
+        fmt::format("{}:{}: a key must be a plain name", file.string(), key.Mark().line + 1));
   return key.Scalar();
 }
 
@@ -152,9 +152,8 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
   if (!root.IsMap())
     throw Error(
         fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
-  const std::vector<std::string> allowed = {"name",          "base",          "study",
-                                            "axes",          "cells",         "cell_budget_s",
-                                            "cell_memory_mb", "description"};
+  const std::vector<std::string> allowed = {
+      "name", "base", "study", "axes", "cells", "cell_budget_s", "cell_memory_mb", "description"};
   for (const auto& kv : root) {
     const std::string key = keyText(kv.first, file);
     if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
@@ -231,10 +230,11 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
     for (const auto& kv : axes) {
       product *= kv.second.IsSequence() ? static_cast<double>(kv.second.size()) : 1.0;
       if (product > kMaxMatrixCells)
-        throw Error(fmt::format("{}:{}: axes: the product of the axes has more than {:g} cells "
-                                "(at axis '{}'); split the matrix",
-                                file.string(), kv.first.Mark().line + 1, kMaxMatrixCells,
-                                kv.first.IsScalar() ? kv.first.Scalar() : "?"));
+        throw Error(
+            fmt::format("{}:{}: axes: the product of the axes has more than {:g} cells "
+                        "(at axis '{}'); split the matrix",
+                        file.string(), kv.first.Mark().line + 1, kMaxMatrixCells,
+                        kv.first.IsScalar() ? kv.first.Scalar() : "?"));
     }
     overrides.push_back(YAML::Node(YAML::NodeType::Map));
     for (const auto& kv : axes) {
@@ -557,8 +557,8 @@ class FolderLock {
     const fs::path file = dir / ".lock";
     fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd_ < 0)
-      throw Error(fmt::format("{}: cannot create the lock file: {}", file.string(),
-                              std::strerror(errno)));
+      throw Error(
+          fmt::format("{}: cannot create the lock file: {}", file.string(), std::strerror(errno)));
     if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
       char buf[256] = {0};
       const ssize_t n = ::pread(fd_, buf, sizeof buf - 1, 0);
@@ -971,76 +971,76 @@ int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sour
   int copied = 0;
   db.exec("BEGIN IMMEDIATE");
   try {
-  for (auto& inp : ins) {
-    Db& in = *inp;
-    Db::Stmt runs(&in,
-                  "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, "
-                  "finished, summary FROM runs");
-    while (runs.step()) {
-      const std::string hash = runs.text(3);
-      {
-        Db::Stmt exists(&db, "SELECT 1 FROM runs WHERE hash = ?");
-        exists.bind(1, hash);
-        if (exists.step()) continue;
-      }
-      {
-        Db::Stmt(&db,
-                 "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
-                 "finished, summary) "
-                 "VALUES(?,?,?,?,?,?,?,?,?,?)")
-            .bind(1, runs.text(1))
-            .bind(2, runs.integer(2))
-            .bind(3, hash)
-            .bind(4, runs.text(4))
-            .bind(5, runs.text(5))
-            .bind(6, runs.text(6))
-            .bind(7, runs.real(7))
-            .bind(8, runs.text(8))
-            .bind(9, runs.text(9))
-            .bind(10, runs.text(10))
-            .step();
-        const long long id = db.lastId();
-        const long long old = runs.integer(0);
-        Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
-        ax.bind(1, old);
-        while (ax.step())
-          Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)")
-              .bind(1, id)
-              .bind(2, ax.text(0))
-              .bind(3, ax.text(1))
-              .step();
-        Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
-        mt.bind(1, old);
-        while (mt.step()) {
-          Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
-          ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
-          if (std::isfinite(mt.real(2)))
-            ins.bind(4, mt.real(2));
-          else
-            ins.bindNull(4);
-          ins.bind(5, mt.text(3)).step();
+    for (auto& inp : ins) {
+      Db& in = *inp;
+      Db::Stmt runs(&in,
+                    "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, "
+                    "finished, summary FROM runs");
+      while (runs.step()) {
+        const std::string hash = runs.text(3);
+        {
+          Db::Stmt exists(&db, "SELECT 1 FROM runs WHERE hash = ?");
+          exists.bind(1, hash);
+          if (exists.step()) continue;
         }
-        Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
-        pr.bind(1, old);
-        while (pr.step())
-          Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)")
-              .bind(1, id)
-              .bind(2, pr.text(0))
-              .bind(3, pr.real(1))
-              .bind(4, pr.real(2))
+        {
+          Db::Stmt(&db,
+                   "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
+                   "finished, summary) "
+                   "VALUES(?,?,?,?,?,?,?,?,?,?)")
+              .bind(1, runs.text(1))
+              .bind(2, runs.integer(2))
+              .bind(3, hash)
+              .bind(4, runs.text(4))
+              .bind(5, runs.text(5))
+              .bind(6, runs.text(6))
+              .bind(7, runs.real(7))
+              .bind(8, runs.text(8))
+              .bind(9, runs.text(9))
+              .bind(10, runs.text(10))
               .step();
-        Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
-        cf.bind(1, hash);
-        if (cf.step())
-          Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)")
-              .bind(1, hash)
-              .bind(2, cf.text(0))
-              .bind(3, cf.text(1))
-              .step();
-        ++copied;
+          const long long id = db.lastId();
+          const long long old = runs.integer(0);
+          Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
+          ax.bind(1, old);
+          while (ax.step())
+            Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)")
+                .bind(1, id)
+                .bind(2, ax.text(0))
+                .bind(3, ax.text(1))
+                .step();
+          Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
+          mt.bind(1, old);
+          while (mt.step()) {
+            Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
+            ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
+            if (std::isfinite(mt.real(2)))
+              ins.bind(4, mt.real(2));
+            else
+              ins.bindNull(4);
+            ins.bind(5, mt.text(3)).step();
+          }
+          Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
+          pr.bind(1, old);
+          while (pr.step())
+            Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)")
+                .bind(1, id)
+                .bind(2, pr.text(0))
+                .bind(3, pr.real(1))
+                .bind(4, pr.real(2))
+                .step();
+          Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
+          cf.bind(1, hash);
+          if (cf.step())
+            Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)")
+                .bind(1, hash)
+                .bind(2, cf.text(0))
+                .bind(3, cf.text(1))
+                .step();
+          ++copied;
+        }
       }
     }
-  }
     db.exec("COMMIT");
   } catch (const std::exception& e) {
     sqlite3_exec(db.raw(), "ROLLBACK", nullptr, nullptr, nullptr);

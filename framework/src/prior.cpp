@@ -71,9 +71,10 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   try {
     text = readInputFile(file, "prior parameters", kMaxDataFileBytes);
   } catch (const Error& e) {
-    throw Error(fmt::format("prior (from: study): {} (the output folder of a study with an "
-                            "estimator)",
-                            e.what()));
+    throw Error(
+        fmt::format("prior (from: study): {} (the output folder of a study with an "
+                    "estimator)",
+                    e.what()));
   }
   std::istringstream in(text);
   std::string line;

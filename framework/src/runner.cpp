@@ -1,20 +1,19 @@
 #include "exid/runner.hpp"
 
-#include <fmt/format.h>
-
 #include <fcntl.h>
+#include <fmt/format.h>
 #include <stdio.h>
 #include <unistd.h>
 
 #include <atomic>
 #include <chrono>
+#include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <map>
 #include <mutex>
 #include <optional>
 #include <thread>
-#include <cmath>
-#include <map>
 
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
@@ -202,12 +201,11 @@ void checkFinite(const Eigen::MatrixXd& M, const std::string& what,
   for (Eigen::Index j = 0; j < M.cols(); ++j)
     for (Eigen::Index i = 0; i < M.rows(); ++i)
       if (!std::isfinite(M(i, j))) {
-        std::string where =
-            M.cols() == 1
-                ? (static_cast<std::size_t>(i) < names.size()
-                       ? fmt::format("'{}'", names[static_cast<std::size_t>(i)])
-                       : fmt::format("element {}", i + 1))
-                : fmt::format("row {}, column {}", i + 1, j + 1);
+        std::string where = M.cols() == 1
+                                ? (static_cast<std::size_t>(i) < names.size()
+                                       ? fmt::format("'{}'", names[static_cast<std::size_t>(i)])
+                                       : fmt::format("element {}", i + 1))
+                                : fmt::format("row {}, column {}", i + 1, j + 1);
         throw Error(fmt::format("{}: {} is {} (a non-finite result is an error, never a result)",
                                 what, where, M(i, j)));
       }
@@ -347,9 +345,9 @@ class Watchdog {
       // Move the staging folder away first: a file the stage is writing can no longer be
       // renamed into place, and its temporary is removed below.
       std::error_code ec;
-      const fs::path moved = folder_.parent / fmt::format(".{}.cancel.{}",
-                                                          folder_.final_dir.filename().string(),
-                                                          ::getpid());
+      const fs::path moved =
+          folder_.parent /
+          fmt::format(".{}.cancel.{}", folder_.final_dir.filename().string(), ::getpid());
       fs::remove_all(moved, ec);
       fs::rename(folder_.staging, moved, ec);
       if (!ec) {
@@ -376,8 +374,10 @@ class Watchdog {
           fs::remove_all(moved, ec);
         }
       }
-      std::fprintf(stderr, "exid: stage '%s' cancelled: stopped by the watchdog %.1f s after the "
-                   "stop request\n", stage.c_str(), opt_.hard_stop_s);
+      std::fprintf(stderr,
+                   "exid: stage '%s' cancelled: stopped by the watchdog %.1f s after the "
+                   "stop request\n",
+                   stage.c_str(), opt_.hard_stop_s);
     }
     std::fflush(nullptr);
     ::_exit(code);

@@ -28,7 +28,8 @@ namespace fs = std::filesystem;
 namespace {
 
 fs::path tempDir(const std::string& name) {
-  fs::path d = fs::temp_directory_path() / ("exid_robust_" + name + "_" + std::to_string(::getpid()));
+  fs::path d =
+      fs::temp_directory_path() / ("exid_robust_" + name + "_" + std::to_string(::getpid()));
   fs::remove_all(d);
   fs::create_directories(d);
   return d;
@@ -48,7 +49,7 @@ struct CmdResult {
 /// Runs exid with args (no shell) in dir, stdout+stderr captured; killed after timeout_s
 /// (reported as signal 9) so that a hang is a failure, not a stuck test.
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir, double timeout_s = 120,
-               long fsize_limit = 0) {
+                  long fsize_limit = 0) {
   const fs::path log = dir / "exid_log.txt";
   const pid_t pid = ::fork();
   if (pid == 0) {
@@ -177,8 +178,9 @@ TEST(Robustness, CsvTinyCutoffIsAFailedStageNotACrash) {
   for (const char* v : {"1e-10", "1e-300", "5e-324"}) {
     SCOPED_TRACE(v);
     std::ofstream(dir / "study.yaml")
-        << kPlanar << "experiment: {type: csv, params: {file: rec.csv, differentiate_cutoff_hz: "
-        << v << "}}\n";
+        << kPlanar
+        << "experiment: {type: csv, params: {file: rec.csv, differentiate_cutoff_hz: " << v
+        << "}}\n";
     const CmdResult r = runExid({"-q", "run", "study.yaml", "--out", "out"}, dir);
     EXPECT_EQ(r.signal, 0) << r.out;
     EXPECT_EQ(r.code, 1) << r.out;
@@ -308,8 +310,8 @@ TEST(Robustness, NulByteInsideACsvNumberIsAnError) {
   const std::size_t comma = text.find(',', at);
   text.insert(comma, std::string("\0", 1) + "7");
   std::ofstream(dir / "rec.csv", std::ios::binary) << text;
-  std::ofstream(dir / "study.yaml") << kPlanar
-                                    << "experiment: {type: csv, params: {file: rec.csv}}\n";
+  std::ofstream(dir / "study.yaml")
+      << kPlanar << "experiment: {type: csv, params: {file: rec.csv}}\n";
   const CmdResult r = runExid({"-q", "run", "study.yaml", "--out", "out"}, dir);
   EXPECT_EQ(r.code, 1) << r.out;
   EXPECT_TRUE(contains(r.out, "rec.csv:3:" + std::to_string(comma - at + 1) + ": column 't'"))
@@ -325,7 +327,8 @@ TEST(Robustness, DuplicateYamlKeysAreRefusedNamingBothLines) {
                                     << "estimator: {type: wls}\n";
   CmdResult r = runExid({"validate", "study.yaml"}, dir);
   EXPECT_EQ(r.code, 2) << r.out;
-  EXPECT_TRUE(contains(r.out, "study.yaml:5: estimator: duplicate key 'estimator' (first at line 3)"))
+  EXPECT_TRUE(
+      contains(r.out, "study.yaml:5: estimator: duplicate key 'estimator' (first at line 3)"))
       << r.out;
   std::ofstream(dir / "m.yaml") << "name: m\nstudy:\n  robot: {type: planar2r}\n"
                                    "axes:\n  seed: [1, 2]\n  seed: [3]\n";
@@ -345,12 +348,13 @@ TEST(Robustness, ARunFolderIsAUnit) {
   const fs::path dir = tempDir("unit");
   std::ofstream(dir / "good.yaml")
       << kPlanar << "experiment: {type: simulate, params: {duration_s: 2}}\n"
-      << "validation: {type: simulate, params: {duration_s: 1}}\nreport: {params: {plots: false}}\n";
+      << "validation: {type: simulate, params: {duration_s: 1}}\nreport: {params: {plots: "
+         "false}}\n";
   std::ofstream(dir / "bad.yaml") << kPlanar
                                   << "experiment: {type: csv, params: {file: missing.csv}}\n";
-  std::ofstream(dir / "other.yaml") << kPlanar
-                                    << "experiment: {type: simulate, params: {duration_s: 2}}\n"
-                                    << "report: {params: {plots: false}}\n";
+  std::ofstream(dir / "other.yaml")
+      << kPlanar << "experiment: {type: simulate, params: {duration_s: 2}}\n"
+      << "report: {params: {plots: false}}\n";
   CmdResult r = runExid({"-q", "run", "good.yaml", "--out", "out"}, dir);
   ASSERT_EQ(r.code, 0) << r.out;
   const std::string params = slurp(dir / "out" / "parameters.csv");
@@ -369,7 +373,7 @@ TEST(Robustness, ARunFolderIsAUnit) {
   EXPECT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(statusOf(dir / "out"), "ok");
   EXPECT_FALSE(fs::exists(dir / "out" / "validation.csv"));  // the earlier study's
-  EXPECT_FALSE(fs::exists(dir / "out.failed"));               // superseded
+  EXPECT_FALSE(fs::exists(dir / "out.failed"));              // superseded
   EXPECT_EQ(summaryOf(dir / "out").find("study")->asString(), "other");
   EXPECT_TRUE(noTemporaries(dir));
 
@@ -406,7 +410,8 @@ TEST(Robustness, StaleTemporariesOfDeadProcessesAreCleaned) {
   const pid_t dead = ::fork();
   if (dead == 0) ::_exit(0);
   ::waitpid(dead, nullptr, 0);
-  std::ofstream(dir / "study.yaml") << "robot: {type: planar2r}\nreport: {params: {plots: false}}\n";
+  std::ofstream(dir / "study.yaml")
+      << "robot: {type: planar2r}\nreport: {params: {plots: false}}\n";
   ASSERT_EQ(runExid({"-q", "run", "study.yaml", "--out", "out"}, dir).code, 0);
   const std::string tmp = "summary.json.tmp." + std::to_string(dead);
   std::ofstream(dir / "out" / tmp) << "half";
@@ -612,7 +617,8 @@ TEST(Robustness, InputsThatAreNotRegularFilesAreRefusedBeforeOpening) {
   EXPECT_EQ(r.code, 1) << r.out;
   EXPECT_TRUE(contains(r.out, "/dev/zero: the URDF file is a character device")) << r.out;
   mkfifo((dir / "data.csv").c_str(), 0644);
-  std::ofstream(dir / "s2.yaml") << kPlanar << "experiment: {type: csv, params: {file: data.csv}}\n";
+  std::ofstream(dir / "s2.yaml") << kPlanar
+                                 << "experiment: {type: csv, params: {file: data.csv}}\n";
   r = runExid({"-q", "run", "s2.yaml", "--out", "out2"}, dir, 30);
   EXPECT_EQ(r.signal, 0) << r.out;
   EXPECT_EQ(r.code, 1) << r.out;

@@ -233,8 +233,9 @@ TEST(StudyConfig, DuplicateKeysAreRefusedNamingBothLines) {
   EXPECT_NE(m.find("study.yaml:11: estimator: duplicate key 'estimator' (first at line 6)"),
             std::string::npos)
       << m;
-  m = problems("robot: {type: test_throws}\nmodel:\n  type: test_model\n  params:\n"
-               "    a: 1\n    a: 2\n");
+  m = problems(
+      "robot: {type: test_throws}\nmodel:\n  type: test_model\n  params:\n"
+      "    a: 1\n    a: 2\n");
   EXPECT_NE(m.find("study.yaml:6: model.params.a: duplicate key 'a' (first at line 5)"),
             std::string::npos)
       << m;
@@ -265,4 +266,3 @@ TEST(StudyConfig, HugeListsAreRefusedWithAShortMessage) {
   EXPECT_NE(m.find("a list of 100001 elements; at most 100000"), std::string::npos) << m;
   EXPECT_LT(m.size(), 2000u);
 }
-

@@ -173,9 +173,11 @@ TEST(Params, IntegersAlwaysHaveARangeThatFitsAnInt) {
   const auto d = exid::param_int("n", 1, "count", 0.0);
   EXPECT_EQ(d.rangeText(), "[0, 1000000000]");
   EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{1000000000})), "");
-  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})), "must be in [0, 1000000000]");
+  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})),
+            "must be in [0, 1000000000]");
   const auto u = exid::param_int("m", 1, "count");
-  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})), "must be in [-1000000000, 1000000000]");
+  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})),
+            "must be in [-1000000000, 1000000000]");
   const auto l = exid::param_ints("j", std::nullopt, "joints", 1.0);
   EXPECT_EQ(l.violation(exid::ParamValue(std::vector<std::int64_t>{1, 4294967297})),
             "element 1 must be in [1, 1000000000]");
@@ -204,4 +206,3 @@ TEST(InputFile, NonRegularAndOversizedFilesAreRefused) {
   fs::remove(fifo);
   fs::remove(d / "big.yaml");
 }
-

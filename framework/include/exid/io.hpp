@@ -3,11 +3,12 @@
 
 #include <Eigen/Core>
 #include <cstdint>
-#include "exid/error.hpp"
-#include "exid/input_file.hpp"
 #include <filesystem>
 #include <string>
 #include <vector>
+
+#include "exid/error.hpp"
+#include "exid/input_file.hpp"
 
 namespace exid {
 

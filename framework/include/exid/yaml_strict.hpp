@@ -43,8 +43,8 @@ inline void duplicateKeys(const YAML::Node& node, const std::string& source,
           }
         seen.emplace_back(key, line);
       }
-      duplicateKeys(kv.second, source, path.empty() ? key : path + "." + key, out,
-                    max_depth - 1, budget);
+      duplicateKeys(kv.second, source, path.empty() ? key : path + "." + key, out, max_depth - 1,
+                    budget);
     }
   } else if (node.IsSequence()) {
     std::size_t i = 0;

@@ -192,8 +192,8 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
     bp.beta = T.triangularView<Eigen::Upper>().solve(R12);
     for (int c = 0; c < nd; ++c)
       for (int k = 0; k < r; ++k)
-        bp.beta(k, c) *= scale[ind[static_cast<size_t>(k)]] /
-                         scale[bp.dependent[static_cast<size_t>(c)]];
+        bp.beta(k, c) *=
+            scale[ind[static_cast<size_t>(k)]] / scale[bp.dependent[static_cast<size_t>(c)]];
   } else {
     bp.beta = (r > 0 && nd > 0) ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2))
                                 : Eigen::MatrixXd(Eigen::MatrixXd::Zero(r, nd));

@@ -33,8 +33,8 @@ std::vector<ParamDecl> commonParams() {
       param_double("acceleration_limit_rad_s2", 0.0, "rad/s^2",
                    "own acceleration cap |qdd| <= value (0: none), as velocity_limit_rad_s", 0.0),
       param_ints("joints", std::vector<std::int64_t>{},
-                 "1-based joints that move (empty: all); the others stay at rest_position_rad",
-                 1.0, 10000.0),
+                 "1-based joints that move (empty: all); the others stay at rest_position_rad", 1.0,
+                 10000.0),
       param_doubles("rest_position_rad", std::vector<double>{}, "rad",
                     "positions of the joints that do not move (one value per joint or one for all; "
                     "empty: the centre of their range)"),
