@@ -344,7 +344,7 @@ Json specJson(const PluginSpec& s) {
 }  // namespace
 
 std::string studyNameProblem(const std::string& name) {
-  if (name.empty()) return "must not be empty";
+  if (name.empty()) return "";  // unnamed: loadStudy names it after the file
   if (name.size() > 200) return fmt::format("has {} characters; at most 200", name.size());
   if (name == "." || name == "..") return "must not be '.' or '..'";
   if (name[0] == '.') return "must not start with '.' (hidden or relative folder)";

@@ -166,6 +166,7 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
   MatrixSpec spec;
   spec.file = fs::absolute(file);
   spec.name = root["name"] ? root["name"].as<std::string>() : file.stem().string();
+  if (spec.name.empty()) spec.name = file.stem().string();
   if (const std::string why = studyNameProblem(spec.name); !why.empty())
     throw Error(fmt::format("{}{}: name = '{}': {}", file.string(),
                             root["name"] ? ":" + std::to_string(root["name"].Mark().line + 1) : "",
@@ -553,8 +554,8 @@ void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std
 /// kernel when the process ends), holding "pid host" for the message of a second writer.
 class FolderLock {
  public:
-  explicit FolderLock(const fs::path& dir) {
-    const fs::path file = dir / ".lock";
+  FolderLock(const fs::path& dir, const std::string& name) {
+    const fs::path file = dir / name;
     fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
     if (fd_ < 0)
       throw Error(
@@ -607,7 +608,10 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
   check(opt.jobs >= 1 && opt.jobs <= 1024,
         fmt::format("-j {}: expected 1 to 1024 cells at a time", opt.jobs));
   fs::create_directories(opt.out_dir);
-  FolderLock lock(opt.out_dir);  // before anything in the folder is touched
+  // Before anything in the folder is touched. MPI ranks share the folder, one database each:
+  // each locks its own.
+  FolderLock lock(opt.out_dir,
+                  opt.database == "results.sqlite" ? ".lock" : "." + opt.database + ".lock");
   cleanStaleTemporaries(opt.out_dir);
   cleanStaleTemporaries(opt.out_dir / "cells");
   Db db(opt.out_dir / opt.database);
