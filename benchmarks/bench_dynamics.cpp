@@ -1,8 +1,8 @@
 // exid — benchmarks of the rigid-body algorithms on the PUMA 560 (one core).
 // Baseline measured in the same run: the plain RNEA inverseDynamics (BM_Baseline_InverseDynamics).
 //
-// PUMA 560: standard DH and inertial data as in Corke's Robotics Toolbox (mdl_puma560.m; copied in
-// ../shared/reference/robots/puma560.yaml): I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
+// PUMA 560: standard DH and inertial data as in Corke's Robotics Toolbox (mdl_puma560.m):
+// I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Core>

@@ -1,8 +1,8 @@
-// Real data: the Staubli TX40 recording (../shared/data/staubli_tx40, FIGAROH) identified by
+// Real data: the Staubli TX40 recording (data/staubli_tx40, FIGAROH) identified by
 // examples/real/tx40_{filtered_ls,wls,consistent_ls,consistent_ls_cv}.yaml and validated on the
 // held-out segment 6 - 7.6 s.
 // A regression guard: the bounds are the errors measured when the studies were written
-// (docs/real_data.md) plus about 15 %. Skipped when the data folder is absent.
+// (docs/real_data.md) plus about 15 %.
 #include <gtest/gtest.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -21,7 +21,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path dataDir() { return exid_test::sharedDir() / "data/staubli_tx40"; }
+fs::path dataDir() { return exid_test::dataDir() / "staubli_tx40"; }
 
 struct Run {
   int code = -1;
@@ -103,7 +103,7 @@ std::map<std::string, std::pair<double, double>> params(const exid::Json& s) {
 
 void check(const std::string& study, const std::array<double, 6>& bound, double bound_all) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
-      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+      << "no data in " << dataDir() << " (data/staubli_tx40, shipped in the repository)";
   const Run r = runStudy(study);
   ASSERT_EQ(r.code, 0) << r.out;
   const exid::Json& s = r.summary;
@@ -152,7 +152,7 @@ TEST(RealTx40, WlsValidatesOnTheHeldOutSegment) {
 // Asserted: overall, joints 3-6, consistent and plausible bodies (CAD masses within a factor 2).
 TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
-      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+      << "no data in " << dataDir() << " (data/staubli_tx40, shipped in the repository)";
   const ::Run w = runStudy("tx40_wls");
   const ::Run c = runStudy("tx40_consistent_ls");
   ASSERT_EQ(w.code, 0) << w.out;
@@ -192,7 +192,7 @@ TEST(RealTx40, ConsistentLsWithCadPriorPredictsAtLeastAsWellAsWls) {
 // curve, overall and joints 3-6 better than wls, plausible bodies.
 TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
-      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+      << "no data in " << dataDir() << " (data/staubli_tx40, shipped in the repository)";
   const ::Run w = runStudy("tx40_wls");
   const ::Run c = runStudy("tx40_consistent_ls_cv");
   ASSERT_EQ(w.code, 0) << w.out;
@@ -234,7 +234,7 @@ TEST(RealTx40, ConsistentLsWithCrossValidatedPriorScale) {
 // (wls 0.1456).
 TEST(RealTx40, ConsistentLsWinOverWlsHoldsForEveryCrossValidationBlockCount) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"))
-      << "no data in " << dataDir() << " (../shared/data beside the repository)";
+      << "no data in " << dataDir() << " (data/staubli_tx40, shipped in the repository)";
   const ::Run w = runStudy("tx40_wls");
   ASSERT_EQ(w.code, 0) << w.out;
   const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");

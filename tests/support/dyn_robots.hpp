@@ -5,7 +5,7 @@
 
 namespace exid::testing {
 
-/// PUMA 560, standard DH + Corke/Armstrong parameters (../shared/reference/robots/puma560.yaml,
+/// PUMA 560, standard DH + Corke/Armstrong parameters (the published PUMA 560 reference parameters,
 /// from RTB mdl_puma560.m). Drives: Ia = Jm G^2, Fv = B G^2, Fc = Tc+ |G| (link side).
 RobotModel puma560Standard();
 /// PUMA 560, modified DH, Armstrong-Khatib-Burdick 1986 parameters (RTB mdl_puma560akb.m).

@@ -41,8 +41,7 @@ inline std::shared_ptr<const exid::RobotModel> robot(const std::string& name,
 }
 
 inline std::filesystem::path sourceDir() { return EXID_SOURCE_DIR; }
-inline std::filesystem::path sharedDir() {
-  return std::filesystem::path(EXID_SOURCE_DIR) / ".." / "shared";
-}
+/// Recordings shipped in the repository (data/).
+inline std::filesystem::path dataDir() { return std::filesystem::path(EXID_SOURCE_DIR) / "data"; }
 
 }  // namespace exid_test
