@@ -476,9 +476,9 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
   }
   if (root["budget_s"]) {
     auto b = root["budget_s"].IsScalar() ? toDouble(root["budget_s"].Scalar()) : std::nullopt;
-    if (!b || !(*b >= 0) || !std::isfinite(*b))
-      pr.add(root["budget_s"],
-             fmt::format("budget_s = {}: must be in [0, inf)", scalarText(root["budget_s"])));
+    if (!b || !(*b >= 0) || !(*b <= 1e9))
+      pr.add(root["budget_s"], fmt::format("budget_s = {}: must be in [0, 1e9] s (0: none)",
+                                           scalarText(root["budget_s"])));
     else
       cfg.budget_s = *b;
   }

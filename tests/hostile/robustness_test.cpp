@@ -20,6 +20,7 @@
 #include <thread>
 #include <vector>
 
+#include "exid/context.hpp"
 #include "exid/json.hpp"
 #include "exid_test.hpp"
 
@@ -208,6 +209,20 @@ TEST(Robustness, IntegerOptionsHaveDeclaredRanges) {
   r = runExid({"validate", "study.yaml"}, dir);
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_TRUE(contains(r.out, "experiment.params.max_steps = 4294967297")) << r.out;
+  fs::remove_all(dir);
+}
+
+// budget_s: 1e308 overflowed the clock (an end in the past: an instant timeout); refused by
+// validate, and a Deadline beyond 1e9 s is none.
+TEST(Robustness, HugeBudgetIsRefusedNotAnInstantTimeout) {
+  const fs::path dir = tempDir("budget");
+  std::ofstream(dir / "study.yaml") << "budget_s: 1e308\nrobot: {type: planar2r}\n";
+  const CmdResult r = runExid({"validate", "study.yaml"}, dir);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_TRUE(contains(r.out, "study.yaml:1: budget_s = 1e308: must be in [0, 1e9] s")) << r.out;
+  EXPECT_FALSE(exid::Deadline(1e308).expired());
+  EXPECT_FALSE(exid::Deadline(1e308).active());
+  EXPECT_TRUE(exid::Deadline(1e6).active());
   fs::remove_all(dir);
 }
 
