@@ -119,17 +119,25 @@ void fnv(std::uint64_t* h, const std::string& text) {
 }
 
 // The cell's key: configuration hash, exid version, and the contents of every file it reads.
-std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, const Registry& reg) {
+// `contents` caches the hash of each file's contents (cells of a matrix share their files).
+std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, const Registry& reg,
+                    std::map<std::string, std::string>* contents) {
   std::uint64_t h = 1469598103934665603ull;
   fnv(&h, config_hash);
   fnv(&h, std::string("\nexid ") + EXID_VERSION_STRING);
   for (const auto& f : studyInputFiles(cfg, reg)) {
     fnv(&h, "\n" + f.string() + "\n");
-    try {
-      fnv(&h, readInputFile(f, "input", kMaxDataFileBytes));
-    } catch (const Error&) {
-      fnv(&h, "(unreadable)");  // the cell will fail and say why
+    auto it = contents->find(f.string());
+    if (it == contents->end()) {
+      std::uint64_t c = 1469598103934665603ull;
+      try {
+        fnv(&c, readInputFile(f, "input", kMaxDataFileBytes));
+      } catch (const Error&) {
+        fnv(&c, "(unreadable)");  // the cell will fail and say why
+      }
+      it = contents->emplace(f.string(), fmt::format("{:016x}", c)).first;
     }
+    fnv(&h, it->second);
   }
   return fmt::format("{:016x}", h);
 }
@@ -276,6 +284,7 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
 
   std::vector<std::string> problems;
   std::set<std::string> hashes;
+  std::map<std::string, std::string> file_hashes;
   for (std::size_t i = 0; i < overrides.size(); ++i) {
     MatrixCell cell;
     cell.index = static_cast<int>(i);
@@ -316,7 +325,7 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
       cell.config = parseStudy(
           cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
       cell.config_hash = cell.config.hash();
-      cell.hash = cellKey(cell.config, cell.config_hash, reg);
+      cell.hash = cellKey(cell.config, cell.config_hash, reg, &file_hashes);
       if (!hashes.insert(cell.config_hash).second)
         problems.push_back(
             fmt::format("cell {} ({}): same configuration as an earlier cell", i, cell.label));
