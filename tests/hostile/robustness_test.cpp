@@ -22,8 +22,8 @@
 
 #include "exid/context.hpp"
 #include "exid/interfaces.hpp"
-#include "exid/robot_loaders.hpp"
 #include "exid/json.hpp"
+#include "exid/robot_loaders.hpp"
 #include "exid_test.hpp"
 
 namespace fs = std::filesystem;
