@@ -753,6 +753,7 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
           cfg.report.plots = false;  // a cell's plots would dominate the matrix's overhead
           RunOptions ro;
           if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
+          ro.clean_stale = false;  // done once for all cells (a scan of cells/ per cell is O(n^2))
           StudyResult r = runStudy(cfg, reg, ro);
           text = r.summary.dump(-1);
         } catch (const std::exception& e) {

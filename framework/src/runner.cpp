@@ -243,7 +243,7 @@ bool holdsOkRun(const fs::path& dir) {
   }
 }
 
-RunFolder prepareRunFolder(const fs::path& out) {
+RunFolder prepareRunFolder(const fs::path& out, bool clean_stale) {
   RunFolder f;
   fs::path d = out.lexically_normal();
   if (d.has_filename() == false && d.has_parent_path()) d = d.parent_path();  // "x/" -> "x"
@@ -263,8 +263,10 @@ RunFolder prepareRunFolder(const fs::path& out) {
                       d.string()));
   }
   fs::create_directories(f.parent);
-  cleanStaleTemporaries(f.parent);
-  cleanStaleTemporaries(d);
+  if (clean_stale) {
+    cleanStaleTemporaries(f.parent);
+    cleanStaleTemporaries(d);
+  }
   f.staging = f.parent / fmt::format(".{}.staging.{}", name, ::getpid());
   fs::remove_all(f.staging, ec);
   fs::create_directory(f.staging);
@@ -455,7 +457,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   RunFolder folder;
   if (write) {
     try {
-      folder = prepareRunFolder(opt.out_dir);
+      folder = prepareRunFolder(opt.out_dir, opt.clean_stale);
     } catch (const std::exception& e) {  // nothing written, nothing replaced
       res.ok = false;
       res.message = fmt::format("stage 'setup': {}", e.what());

@@ -30,6 +30,9 @@ struct RunOptions {
   /// ends the PROCESS with _exit(hard_stop_exit_code()).
   double hard_stop_s = 0.0;
   std::function<int()> hard_stop_exit_code;
+  /// Remove the `*.tmp.PID` files and staging folders of dead processes beside out_dir first
+  /// (a matrix does it once for all its cells instead).
+  bool clean_stale = true;
 };
 
 struct StudyResult {
