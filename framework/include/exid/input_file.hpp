@@ -17,9 +17,13 @@
 namespace exid {
 
 /// Size caps on input files (docs/hostile_input.md): a bigger file is refused before it is read.
-inline constexpr std::uintmax_t kMaxStudyFileBytes = std::uintmax_t{16} << 20;  // study, matrix
-inline constexpr std::uintmax_t kMaxRobotFileBytes = std::uintmax_t{64} << 20;  // URDF, DH YAML
-inline constexpr std::uintmax_t kMaxDataFileBytes = std::uintmax_t{1} << 30;    // CSV data
+// A YAML file costs about 250 bytes of memory per byte in the worst case (a list of one-digit
+// numbers: 1 MiB parsed into 250 MB), hence the small caps on YAML and robot files (the shipped
+// studies and robots are below 100 KB; a 100-link URDF is about 60 KB).
+inline constexpr std::uintmax_t kMaxStudyFileBytes = std::uintmax_t{1} << 20;  // study, matrix
+inline constexpr std::uintmax_t kMaxRobotFileBytes = std::uintmax_t{2} << 20;  // URDF, DH YAML
+// CSV data: a file is held as text and as numbers while it is parsed (about 3 times its size).
+inline constexpr std::uintmax_t kMaxDataFileBytes = std::uintmax_t{256} << 20;
 
 namespace detail {
 inline std::string fileKind(mode_t m) {
