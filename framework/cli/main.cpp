@@ -112,8 +112,14 @@ int main(int argc, char** argv) {
     return code == 0 ? 0 : 2;
   }
 
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
+  // Commands that poll the stop flag (runs and matrices) turn SIGINT/SIGTERM into a clean stop;
+  // the others (robot info, eval, export, validate, ...) keep the default action and end at once
+  // (they write only atomically, so nothing is half written).
+  if (*run || app.got_subcommand("matrix") || app.got_subcommand("excite") ||
+      app.got_subcommand("simulate") || app.got_subcommand("identify")) {
+    std::signal(SIGINT, onSignal);
+    std::signal(SIGTERM, onSignal);
+  }
 
   try {
     setup();

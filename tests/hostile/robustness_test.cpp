@@ -785,3 +785,36 @@ TEST(Robustness, BaseParametersOfALargeChainAreExact) {
   const Eigen::VectorXd base = b.columns(W) * b.reduce(pi);
   EXPECT_LT((full - base).norm(), 1e-8 * full.norm());
 }
+
+// A command that does not poll the stop flag (here `robot info` on a 150-link chain, seconds of
+// work) ended only when it was done: SIGINT/SIGTERM were caught and ignored. Now it ends at once.
+TEST(Robustness, SignalsEndCommandsThatDoNotPoll) {
+  const fs::path dir = tempDir("infostop");
+  {
+    std::ofstream f(dir / "chain.yaml");
+    f << "name: chain\nconvention: standard\nlinks:\n";
+    for (int i = 0; i < 150; ++i)
+      f << "  - {a: 0.1, alpha: " << (i % 2 ? "-1.5707963" : "1.5707963")
+        << ", d: 0.05, mass: 1, com: [-0.05, 0.01, 0.02], inertia_com: {xx: 0.01, yy: 0.02, zz: "
+           "0.03, xy: 0.001}}\n";
+  }
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    if (::chdir(dir.c_str()) != 0) ::_exit(126);
+    const int fd = ::open("log.txt", O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(fd, STDOUT_FILENO);
+    ::dup2(fd, STDERR_FILENO);
+    ::execl(EXID_EXE, EXID_EXE, "robot", "info", "chain.yaml", static_cast<char*>(nullptr));
+    ::_exit(127);
+  }
+  std::this_thread::sleep_for(std::chrono::milliseconds(300));
+  ASSERT_EQ(::kill(pid, SIGTERM), 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  const double waited =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  EXPECT_TRUE(WIFSIGNALED(status) && WTERMSIG(status) == SIGTERM) << slurp(dir / "log.txt");
+  EXPECT_LT(waited, 10.0);
+  fs::remove_all(dir);
+}
