@@ -3,6 +3,7 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -98,10 +99,19 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
 }
 
 int evalCommand(const Registry& reg, const std::string& robot, const std::string& samples,
-                const std::string& what, const std::string& out) {
+                const std::string& what, const std::string& out, bool rigid_body_only) {
   auto r = loadRobot(reg, robot);
   const int n = r->dof();
   CsvTable in = readCsv(samples);
+  // A joint column beyond the robot's joints means the file is not for this robot.
+  for (const char* pre : {"q", "qd", "qdd"})
+    if (in.has(fmt::format("{}{}", pre, n + 1)))
+      throw Error(fmt::format(
+          "{}: column '{}{}' but robot '{}' has {} joints (expected q1..q{}, qd1..qd{}, "
+          "qdd1..qdd{}); is this file for another robot?",
+          samples, pre, n + 1, r->name, n, n, n, n));
+  if (rigid_body_only && what != "torque")
+    throw Error(fmt::format("--rigid-body-only applies to --what torque only (given: {})", what));
   auto column = [&](const std::string& name, bool required) -> Eigen::VectorXd {
     int c = in.col(name);
     if (c < 0) {
@@ -122,6 +132,8 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     QDD.col(j) = column(fmt::format("qdd{}", j + 1), needs_qdd);
   }
   auto data = makeDynamicsData(*r);
+  DriveColumns drives;  // the robot's full torque: every drive term it describes
+  drives.rotor_inertia = drives.coulomb = drives.viscous = drives.offset = !rigid_body_only;
   CsvTable t;
   std::vector<std::string> names = r->inertialParameterNames();
   if (what == "torque") {
@@ -157,8 +169,13 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     Eigen::VectorXd q, qd, qdd;
     measuredToJoint(*r, qm, qdm, qddm, &q, &qd, &qdd);
     if (what == "torque") {
-      Eigen::VectorXd tau = inverseDynamics(*r, *data, q, qd, qdd);
-      if (r->hasTransmission()) tau = r->transmission.transpose() * tau;
+      Eigen::VectorXd tau;
+      if (rigid_body_only) {
+        tau = inverseDynamics(*r, *data, q, qd, qdd);
+        if (r->hasTransmission()) tau = r->transmission.transpose() * tau;
+      } else {
+        tau = actuatorTorque(*r, *data, drives, qm, qdm, qddm);
+      }
       t.data.row(k) = tau.transpose();
     } else if (what == "regressor") {
       torqueRegressor(*r, *data, q, qd, qdd, Y);
@@ -179,9 +196,22 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
       t.data.middleRows(k * 6, 6) = A;
     }
   }
-  writeCsvAtomic(out, t);
+  std::string what_text = what;
+  if (what == "torque") {
+    const bool has_drives = std::any_of(r->drives.begin(), r->drives.end(), [](const Drive& d) {
+      return d.rotor_inertia != 0 || d.coulomb != 0 || d.viscous != 0 || d.offset != 0;
+    });
+    what_text = rigid_body_only ? "torque of the rigid bodies alone (--rigid-body-only: no rotor "
+                                  "inertia, friction or offset)"
+                                : fmt::format("full torque: rigid bodies + drives (rotor inertia, "
+                                              "Coulomb, viscous, offset: the robot's nominal "
+                                              "values{})",
+                                              has_drives ? "" : "; this robot describes none");
+    what_text += r->hasTransmission() ? ", measured (motor) coordinates, N m" : ", N m";
+  }
+  writeFileAtomic(out, fmt::format("# exid eval {} {}: {}\n{}", what, r->name, what_text, toCsv(t)));
   std::cout << fmt::format("{}: {} rows x {} columns ({} of {} on {} samples)\n", out,
-                           t.data.rows(), t.data.cols(), what, r->name, K);
+                           t.data.rows(), t.data.cols(), what_text, r->name, K);
   return 0;
 }
 
@@ -463,7 +493,7 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
 Commands addCommands(CLI::App& app, Registry& registry) {
   struct State {
     std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
-    bool json = false;
+    bool json = false, rigid_body_only = false;
     std::vector<std::string> matrix_args;
     int jobs = 1;
     std::string shard, rows, cols, metric;
@@ -488,6 +518,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   eval->add_option("--what", st->what, "torque|regressor|energy|energy_regressor|wrench_regressor")
       ->required();
   eval->add_option("--out", st->out, "output CSV")->required();
+  eval->add_flag("--rigid-body-only", st->rigid_body_only,
+                 "torque: the rigid bodies alone (default: the full torque, drives included)");
 
   std::vector<CLI::App*> stages;
   for (const char* name : {"excite", "simulate", "identify"}) {
@@ -530,7 +562,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
                            st->force, st->rows, st->cols, st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
-    if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out);
+    if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out,
+                                       st->rigid_body_only);
     if (*exp) return exportCommand(registry, st->robot, st->study, st->out);
     for (auto* s : stages)
       if (*s) return stageCommand(registry, s->get_name(), st->study, st->data, st->out);

@@ -15,6 +15,7 @@
 #include "exid/error.hpp"
 #include "exid/registry.hpp"
 #include "exid/runner.hpp"
+#include "exid/version.hpp"
 
 namespace {
 
@@ -69,6 +70,12 @@ int main(int argc, char** argv) {
       "exid — experimental identification of robot and payload dynamics, and the "
       "design of exciting trajectories"};
   app.require_subcommand(1);
+  // Global options are accepted before or after the subcommand (`exid run X -q`): every
+  // subcommand, nested ones included, passes the options it does not know to its parent.
+  app.fallthrough();
+  app.set_version_flag("-V,--version",
+                       fmt::format("exid {} (commit {})", EXID_VERSION_STRING, exid::gitCommit()),
+                       "print exid's version and the git commit it was built from");
   std::vector<std::string> plugin_paths;
   bool verbose = false, quiet = false;
   app.add_option("--plugin-path", plugin_paths,

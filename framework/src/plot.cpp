@@ -1,6 +1,7 @@
 #include "exid/plot.hpp"
 
 #include <fmt/format.h>
+#include <fcntl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -45,12 +46,18 @@ std::string quote(const std::string& s) {
 }
 
 int runGnuplot(const std::string& program, const fs::path& script) {
+  // The child must not touch the parent's stdio buffers: freopen() on stdout would flush what
+  // the parent had buffered (a pipe or file is fully buffered) a second time, once per plot.
+  std::fflush(nullptr);
   pid_t pid = ::fork();
   if (pid < 0) return -1;
   if (pid == 0) {
     // gnuplot writes nothing we need on stdout/stderr; keep the terminal clean.
-    std::freopen("/dev/null", "w", stdout);
-    std::freopen("/dev/null", "w", stderr);
+    const int null = ::open("/dev/null", O_WRONLY);
+    if (null >= 0) {
+      ::dup2(null, STDOUT_FILENO);
+      ::dup2(null, STDERR_FILENO);
+    }
     ::execl(program.c_str(), program.c_str(), script.c_str(), static_cast<char*>(nullptr));
     ::_exit(127);
   }

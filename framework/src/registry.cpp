@@ -1,5 +1,7 @@
 #include "exid/registry.hpp"
 
+#include <dlfcn.h>
+
 #include <fmt/format.h>
 #include <unistd.h>
 
@@ -91,6 +93,17 @@ fs::path executableDir() {
   return ec ? fs::path() : exe.parent_path();
 }
 
+/// The folder of the library this code is in (libexid_core.so): an installed exid keeps its
+/// plugins in <that folder>/exid/plugins, whatever the prefix it was installed under.
+fs::path coreLibraryDir() {
+  Dl_info info{};
+  if (dladdr(reinterpret_cast<const void*>(&executableDir), &info) == 0 || !info.dli_fname)
+    return {};
+  std::error_code ec;
+  const fs::path lib = fs::weakly_canonical(fs::path(info.dli_fname), ec);
+  return ec ? fs::path() : lib.parent_path();
+}
+
 bool isPluginFile(const fs::path& p) {
   const std::string name = p.filename().string();
   return name.rfind("libexid_plugin_", 0) == 0 && p.extension() == ".so";
@@ -119,6 +132,8 @@ struct Registry::Impl {
       out.push_back(exe.parent_path() / "plugins");                   // build tree: build/bin/exid
       out.push_back(exe.parent_path() / "lib" / "exid" / "plugins");  // install: prefix/bin/exid
     }
+    if (const fs::path lib = coreLibraryDir(); !lib.empty())
+      out.push_back(lib / "exid" / "plugins");  // install: prefix/<libdir>/libexid_core.so
     out.emplace_back(EXID_PLUGIN_BUILD_DIR);
     out.emplace_back(EXID_PLUGIN_INSTALL_DIR);
     // Drop duplicates (same canonical directory), keep the first.

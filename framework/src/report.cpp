@@ -345,6 +345,17 @@ std::string Report::write(const Json& summary) {
       "results in `summary.json`.\n\n",
       cfg_.hash());
   md += briefTable(summary) + "\n";
+  if (const Json* w = summary.find("warnings"); w && w->isArray() && w->size() > 0) {
+    md += "## Warnings\n\n";
+    for (std::size_t i = 0; i < w->size(); ++i) md += "- " + w->at(i).asString() + "\n";
+    md += "\n";
+  }
+  if (const Json* r = summary.find("robot"); r && r->find("notes")) {
+    md += "## Notes on the robot\n\n";
+    for (std::size_t i = 0; i < r->find("notes")->size(); ++i)
+      md += "- " + r->find("notes")->at(i).asString() + "\n";
+    md += "\n";
+  }
   for (std::size_t i = 0; i < sections_.size(); ++i) md += sections_[i] + plot_md[i] + "\n";
   std::string missing_text;
   if (!missing.empty()) {

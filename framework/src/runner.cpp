@@ -22,6 +22,7 @@
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
 #include "exid/report.hpp"
+#include "exid/version.hpp"
 
 namespace exid {
 
@@ -450,9 +451,16 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   S["message"] = "";
   S["study"] = cfg.name;
   S["exid_version"] = EXID_VERSION_STRING;
+  S["exid_commit"] = gitCommit();
   S["build"] = Registry::fingerprintText();
   S["config_hash"] = cfg.hash();
   S["seed"] = Json(static_cast<long long>(cfg.seed));
+  // What a user should know about this run's results (also logged): the report lists them.
+  S["warnings"] = Json::array();
+  auto warn = [&S](const std::string& text) {
+    logWarn(text);
+    S["warnings"].push_back(Json(text));
+  };
   const bool write = !opt.out_dir.empty();
   RunFolder folder;
   if (write) {
@@ -504,6 +512,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     R["name"] = robot->name;
     R["dof"] = robot->dof();
     R["n_parameters"] = robot->numInertialParameters();
+    if (!robot->notes.empty()) R["notes"] = Json(robot->notes);
+    for (const auto& w : robot->warnings) S["warnings"].push_back(Json(w));  // logged on load
     R["wall_s"] = seconds(t0);
 
     // ---------------------------------------------------------------- model
@@ -630,6 +640,15 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       X["evaluations"] = Json(static_cast<long long>(r.evaluations));
       X["wall_s"] = r.wall_s;
       X["stop_reason"] = r.stop_reason;
+      // A run cut by time gives another answer on another (or a busier) machine.
+      X["reproducible"] = r.stop_reason != "max_time_s" && r.stop_reason != "max_cpu_s" &&
+                          r.stop_reason != "deadline";
+      if (!X["reproducible"].asBool())
+        warn(fmt::format(
+            "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "
+            "the trajectory depends on the speed of this machine; for a reproducible result give "
+            "an evaluation or iteration budget (max_evaluations, max_iterations)",
+            cfg.optimizer->type, r.stop_reason, r.evaluations));
       X["details"] = r.details;
       X["history"]["t_s"] = Json(r.history_t_s);
       X["history"]["value"] = Json(r.history_value);

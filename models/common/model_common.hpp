@@ -1,6 +1,6 @@
 // exid — helpers shared by the observation-model plugins (models/*) and the `simulate`
 // experiment: payload parameters, joint selections, coordinate maps, dataset checks.
-// Header-only, not installed; plugins include it with target_include_directories.
+// Header-only; installed (exid::models_common), so that out-of-tree models use it too.
 #pragma once
 
 #include <fmt/format.h>

@@ -51,7 +51,7 @@ class AdjointGradient final : public exid::Optimizer {
       "sample limits penalised)";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(60.0, 0);
+    auto p = exid::optim::budgetParams(0.0, 0);
     p.push_back(exid::param_string("step", std::string("lbfgs"), "step rule", {"lbfgs", "paper"}));
     p.push_back(exid::param_string("constraints", std::string("augmented_lagrangian"),
                                    "how the limits are handled",

@@ -49,12 +49,16 @@ double Limits::maxViolation(const Eigen::VectorXd& z) {
 std::vector<ParamDecl> budgetParams(double default_time_s, long default_evals) {
   return {
       param_double("max_time_s", default_time_s, "s",
-                   "wall-time budget (0: none; the study deadline still applies)", 0.0),
+                   "wall-time budget (0: none; the study deadline still applies). A run stopped "
+                   "by a time budget depends on the machine's speed and load, and says so "
+                   "(summary warning); evaluation and iteration budgets are reproducible",
+                   0.0),
       param_double("max_cpu_s", 0.0, "s",
                    "CPU-time budget of the optimising thread (0: none); with a loaded machine this "
-                   "is the budget that means 'on one core'",
+                   "is the budget that means 'on one core' (not reproducible either)",
                    0.0),
-      param_int("max_evaluations", default_evals, "criterion evaluations budget (0: none)", 0.0),
+      param_int("max_evaluations", default_evals,
+                "criterion evaluations budget (0: none): the same answer on any machine", 0.0),
       param_double("feasibility_tol", 1e-9, "rad",
                    "a point is feasible when every g(z) <= this (limits in rad, rad/s, rad/s^2)",
                    0.0),

@@ -13,6 +13,7 @@
 #include <algorithm>
 #include <cmath>
 #include <nlopt.hpp>
+#include <limits>
 #include <random>
 
 #include "exid/error.hpp"
@@ -248,7 +249,7 @@ class NloptOptimizer final : public exid::Optimizer {
       "local polish after global algorithms, best feasible point returned";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(60.0, 0);
+    auto p = exid::optim::budgetParams(0.0, 20000);
     p.push_back(exid::param_string(
         "algorithm", std::string("LD_SLSQP"),
         "NLopt algorithm name (NLOPT_ prefix dropped); an unknown name lists the valid ones"));
@@ -372,18 +373,24 @@ class NloptOptimizer final : public exid::Optimizer {
     int iterations = 0;
     exid::Json runs = exid::Json::array();
     const bool aggregated = cmode_ == "aggregated" && lim.size() > 0;
-    // Time: the starts run one after the other in (1 - final_polish) of the budget (aggregated
+    // Budget: the starts run one after the other in (1 - final_polish) of the budget (aggregated
     // mode keeps final_polish of it for the polish of the best point); later starts are skipped
-    // when that time is used up.
+    // when that share is used up. The shares apply alike to an evaluation budget (reproducible
+    // on any machine) and to wall or CPU time.
     const double W0 = tr.wallRemaining(), C0 = tr.cpuRemaining();
     const double f_starts = aggregated && final_polish_ > 0 ? 1.0 - final_polish_ : 1.0;
+    const long E0 = budget_.max_evaluations;
+    const long starts_evals =
+        E0 > 0 ? std::max<long>(1, static_cast<long>(f_starts * static_cast<double>(E0)))
+               : std::numeric_limits<long>::max();
     for (int s = 0; s < starts_; ++s) {
       if (tr.shouldStop()) {
         reason = tr.stopCause();
         break;
       }
       if ((std::isfinite(W0) && tr.elapsed() >= f_starts * W0) ||
-          (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0))
+          (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0) ||
+          problem.evaluations() - tr.evaluations0() >= starts_evals)
         break;
       Eigen::VectorXd x0 =
           s == 0 ? z0
@@ -392,10 +399,19 @@ class NloptOptimizer final : public exid::Optimizer {
       // A start may use up to max(1/starts, 0.3) of the starts' time (a local run usually
       // converges well before), never beyond the starts' time.
       // With start_evaluations the starts are bounded by evaluations (reproducible) instead.
+      // An evaluation budget is shared by the same rule: a start may use up to
+      // max(1/starts, 0.3) of the starts' evaluations (or start_evaluations).
       const double cap = start_evals_ > 0 ? f_starts : f_starts * std::max(1.0 / starts_, 0.3);
+      long eval_end = starts_evals;
+      if (E0 > 0 && start_evals_ <= 0) {
+        const long used = problem.evaluations() - tr.evaluations0();
+        const long share = static_cast<long>(
+            std::ceil(std::max(1.0 / starts_, 0.3) * static_cast<double>(starts_evals)));
+        eval_end = std::min(starts_evals, used + share);
+      }
       RunEnd end{std::isfinite(W0) ? std::min(f_starts * W0, tr.elapsed() + cap * W0) : HUGE_VAL,
                  std::isfinite(C0) ? std::min(f_starts * C0, tr.cpuElapsed() + cap * C0) : HUGE_VAL,
-                 1.0 / (starts_ - s)};
+                 1.0, eval_end};
       std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations,
                           aggregated ? ks_rho_ : 0.0, objective_);
       exid::Json run_info = exid::Json::object();
@@ -448,6 +464,7 @@ class NloptOptimizer final : public exid::Optimizer {
   // share of the remaining evaluation budget it may use.
   struct RunEnd {
     double wall = HUGE_VAL, cpu = HUGE_VAL, eval_share = 1.0;
+    long eval_end = std::numeric_limits<long>::max();  // evaluations since the start, at most
   };
 
   // One NLopt run from x0 until `end`. Returns a short result text.
@@ -569,11 +586,13 @@ class NloptOptimizer final : public exid::Optimizer {
     const bool time_limited =
         std::isfinite(left) || std::isfinite(std::min(tr.cpuRemaining(), end.cpu));
     long evals_left = 0;
-    if (budget_.max_evaluations > 0)
-      evals_left =
-          std::max<long>(1, static_cast<long>((budget_.max_evaluations -
-                                               (problem.evaluations() - tr.evaluations0())) *
-                                              end.eval_share));
+    if (budget_.max_evaluations > 0) {
+      const long used = problem.evaluations() - tr.evaluations0();
+      const long share = std::min(
+          static_cast<long>(static_cast<double>(budget_.max_evaluations - used) * end.eval_share),
+          end.eval_end - used);
+      evals_left = std::max<long>(1, share);
+    }
     if (start_evals_ > 0)
       evals_left = evals_left > 0 ? std::min<long>(evals_left, start_evals_) : start_evals_;
     if (evals_left > 0) top->set_maxeval(static_cast<int>(evals_left));

@@ -522,7 +522,7 @@ class SundialsOptimizer final : public exid::Optimizer {
       "(re-implemented in continuous time), models with rows per instant";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(60.0, 0);
+    auto p = exid::optim::budgetParams(0.0, 0);
     p.push_back(exid::param_int("max_iterations", 500,
                                 "accepted steps in total (0: evaluate the start only)", 0.0));
     p.push_back(exid::param_int("inner_iterations", 60, "iterations per penalty pass", 1.0));

@@ -37,15 +37,26 @@ struct CommonOptions {
     }
   }
 
-  /// Loads with these options, logs the warnings, applies the gravity override.
+  /// Loads with these options, applies the gravity override. The loader's warnings are logged
+  /// and kept in the model's `warnings`; with `known_defects` (a shipped description of
+  /// published data whose defects are documented and kept on purpose) they are stated once as
+  /// a note instead: `known_defects` followed by what the checks found.
   template <class Load>
-  std::shared_ptr<const RobotModel> build(Load&& load) const {
+  std::shared_ptr<const RobotModel> build(Load&& load, const std::string& known_defects = {}) const {
     std::vector<std::string> warnings;
     LoadOptions opt;
     opt.strict = strict;
     opt.warnings = &warnings;
     RobotModel m = load(opt);
-    for (const auto& w : warnings) logWarn(w);
+    if (!known_defects.empty() && !warnings.empty()) {
+      std::string found;
+      for (const auto& w : warnings) found += (found.empty() ? "" : "; ") + w;
+      m.notes.push_back(known_defects + " Found: " + found + ".");
+      for (const auto& w : warnings) logDebug(w);
+    } else {
+      for (const auto& w : warnings) logWarn(w);
+      m.warnings.insert(m.warnings.end(), warnings.begin(), warnings.end());
+    }
     if (!gravity.empty()) m.gravity = Eigen::Vector3d(gravity[0], gravity[1], gravity[2]);
     return std::make_shared<const RobotModel>(std::move(m));
   }

@@ -696,7 +696,7 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
     EXPECT_NEAR(b2(static_cast<Eigen::Index>(i)), v, 1e-8 * std::max(1.0, std::abs(v)))
         << ps.at(i).find("name")->asString();
   }
-  // `exid eval` on the exported file gives the identified rigid-body torques.
+  // `exid eval --rigid-body-only` on the exported file gives the identified rigid-body torques.
   exid::CsvTable s;
   s.columns.clear();
   for (const char* c : {"q", "qd", "qdd"})
@@ -707,7 +707,8 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
   exid::writeCsvAtomic(dir / "samples.csv", s);
   const Cmd ev =
       run("eval " + (dir / "identified.urdf").string() + " --samples " +
-          (dir / "samples.csv").string() + " --what torque --out " + (dir / "tau.csv").string());
+          (dir / "samples.csv").string() + " --what torque --rigid-body-only --out " +
+          (dir / "tau.csv").string());
   ASSERT_EQ(ev.code, 0) << ev.out;
   const exid::CsvTable tau = exid::readCsv(dir / "tau.csv");
   for (int k = 0; k < 5; ++k) {

@@ -1,14 +1,16 @@
 // The benchmark studies (examples/bench): run through exid::runStudy, then cond(W) is recomputed
 // from trajectory_optimal.csv (the file is what counts) and the limits are checked at every
-// sample. Budgets are CPU time of the optimising thread (max_cpu_s; the machine running CI is
-// shared, wall time is reported too). Goals (issue): Panda cond <= 33.3 in < 1 s (met: 30.50)
-// and <= 30 within 10 s (met: 27.87 in 8.2 s, with the epigraph polish); PUMA 560 <= 6.04 in
-// < 2 s (met with the study's seed: 6.006-6.010; other seeds reach 6.12-6.30).
+// sample. Budgets are evaluations, never time: a study gives the same trajectory, bit for bit,
+// on any machine, loaded or not (checked: two runs write identical files). What the optimisers
+// reach within a CPU-time budget (Panda <= 33.3 in < 1 s, <= 30 in 10 s; PUMA 560 <= 6.04 in
+// < 2 s) is measured by benchmarks/bench_studies.cpp (bash scripts/bench.sh studies), not here.
 #include <gtest/gtest.h>
 
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
+#include <fstream>
+#include <iterator>
 #include <iostream>
 
 #include "exid/config.hpp"
@@ -22,21 +24,23 @@ namespace {
 
 struct Outcome {
   double cond = HUGE_VAL, wall_s = 0, cpu_s = HUGE_VAL, reported = 0, violation = HUGE_VAL;
+  long evaluations = 0;
+  std::string stop, csv;
 };
 
-// max_cpu_s > 0 overrides the study's optimiser CPU budget, starts > 0 its starts, with
-// start_evaluations per start (reproducible starts: a CPU-time cut on a loaded machine moves).
-Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int starts = 0,
-                 int start_evaluations = 0) {
+// starts > 0 replaces the study's starts, with start_evaluations per start and max_evaluations
+// in all (the study's own evaluation budget otherwise).
+Outcome runBench(const std::string& file, double vcap, int starts = 0, int start_evaluations = 0,
+                 int max_evaluations = 0, const std::string& suffix = "") {
   const auto path = exid_test::sourceDir() / "examples" / "bench" / file;
   exid::StudyConfig cfg = exid::loadStudy(path, exid_test::registry());
-  if (max_cpu_s > 0) {
-    cfg.optimizer->params.set("max_cpu_s", max_cpu_s);
-    if (starts > 0) cfg.optimizer->params.set("starts", static_cast<std::int64_t>(starts));
-    if (start_evaluations > 0)
-      cfg.optimizer->params.set("start_evaluations", static_cast<std::int64_t>(start_evaluations));
-    cfg.name += "_cpu" + std::to_string(static_cast<int>(max_cpu_s * 1000)) + "ms";
+  if (starts > 0) {
+    cfg.optimizer->params.set("starts", static_cast<std::int64_t>(starts));
+    cfg.optimizer->params.set("start_evaluations", static_cast<std::int64_t>(start_evaluations));
+    cfg.optimizer->params.set("max_evaluations", static_cast<std::int64_t>(max_evaluations));
+    cfg.name += "_starts" + std::to_string(starts);
   }
+  cfg.name += suffix;
   const auto out = std::filesystem::temp_directory_path() / ("exid_bench_" + cfg.name);
   std::filesystem::remove_all(out);
   exid::RunOptions opt;
@@ -84,42 +88,54 @@ Outcome runBench(const std::string& file, double vcap, double max_cpu_s = 0, int
     if (vcap > 0) v = std::max(v, s.qd.col(j).cwiseAbs().maxCoeff() - vcap);
   }
   o.violation = v;
+  o.evaluations = static_cast<long>(x->find("evaluations")->asDouble());
+  o.stop = x->find("stop_reason")->asString();
+  {
+    std::ifstream in(out / "trajectory_optimal.csv", std::ios::binary);
+    o.csv.assign(std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>());
+  }
+  EXPECT_TRUE(x->find("reproducible")->asBool()) << o.stop;
+  EXPECT_EQ(r.summary.find("warnings")->size(), 0u) << r.summary.find("warnings")->dump(0);
   std::cout << "[bench] " << cfg.name << ": cond(W) from CSV " << o.cond << " (reported "
-            << o.reported << "), excitation CPU " << o.cpu_s << " s, wall " << o.wall_s
-            << " s, max violation " << v << "\n";
+            << o.reported << "), " << o.evaluations << " evaluations (" << o.stop
+            << "), excitation CPU " << o.cpu_s << " s, wall " << o.wall_s << " s, max violation "
+            << v << "\n";
   return o;
 }
 
-TEST(BenchStudies, PandaFourierOneSecond) {
-  // goal: cond <= 33.3 in under 1 s on one core: the study with 1 s of CPU time, 2 starts of
-  // at most 300 evaluations each (~0.35 s), the rest of the second for the polish
-  Outcome o = runBench("panda_fourier.yaml", 0.0, 1.0, 2, 300);
+TEST(BenchStudies, PandaFourierTwoStarts) {
+  // the small budget (the "1 s" question of the benchmark): two starts of at most 300
+  // evaluations each, 1000 in all; reached 27.87 in 673 evaluations (the polish converges)
+  Outcome o = runBench("panda_fourier.yaml", 0.0, 2, 300, 1000);
   EXPECT_LE(o.cond, 33.3);
-  EXPECT_LE(o.cpu_s, 1.05);
+  EXPECT_LE(o.evaluations, 1000);
   EXPECT_LE(o.violation, 1e-9);
   EXPECT_NEAR(o.cond, o.reported, 1e-6 * o.reported);
 }
 
 TEST(BenchStudies, PandaFourier) {
-  // goal: <= 30 within 10 s; reached 27.87 (the polish in the epigraph form of log cond)
+  // the study as shipped (40 starts, 8000 evaluations): <= 30; reached 27.87
   Outcome o = runBench("panda_fourier.yaml", 0.0);
   EXPECT_LE(o.cond, 30.0);
-  EXPECT_LE(o.cpu_s, 10.05);
+  EXPECT_LE(o.evaluations, 8000);
   EXPECT_LE(o.violation, 1e-9);
   EXPECT_NEAR(o.cond, o.reported, 1e-6 * o.reported);
 }
 
-TEST(BenchStudies, Puma560Fourier) {
-  // goal: <= 6.04 in under 2 s; reached 6.006-6.010 (one start, then the epigraph polish)
-  Outcome o = runBench("puma560_fourier.yaml", 3.0);
-  EXPECT_LE(o.cond, 6.04);
-  EXPECT_LE(o.cpu_s, 2.05);
-  EXPECT_LE(o.violation, 1e-9);
-  EXPECT_NEAR(o.cond, o.reported, 1e-6 * o.reported);
+TEST(BenchStudies, Puma560FourierIsReproducibleBitForBit) {
+  // the study as shipped (one start, then the epigraph polish; 2000 evaluations): <= 6.04;
+  // reached 6.00005. Run twice: the same file, byte for byte.
+  Outcome a = runBench("puma560_fourier.yaml", 3.0, 0, 0, 0, "_a");
+  EXPECT_LE(a.cond, 6.04);
+  EXPECT_EQ(a.evaluations, 2000);
+  EXPECT_EQ(a.stop, "max_evaluations");
+  EXPECT_LE(a.violation, 1e-9);
+  EXPECT_NEAR(a.cond, a.reported, 1e-6 * a.reported);
+  Outcome b = runBench("puma560_fourier.yaml", 3.0, 0, 0, 0, "_b");
+  EXPECT_FALSE(a.csv.empty());
+  EXPECT_EQ(a.csv, b.csv) << "two runs of the same study gave different trajectories";
+  EXPECT_EQ(a.cond, b.cond);
 }
 
 }  // namespace
 
-namespace {
-// Tuning aid: EXID_BENCH_STUDY=<yaml> EXID_BENCH_VCAP=<rad/s> runs another study the same way.
-}  // namespace

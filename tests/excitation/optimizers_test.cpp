@@ -206,8 +206,7 @@ TEST(Limits, OptimisersRespectTheCaps) {
                   "{period_s: 4, harmonics: 3, velocity_limit_rad_s: 0.5, init_scale: 0.9}", "cond",
                   "{rotor_inertia: false, viscous: false, coulomb: false}");
   for (const char* p :
-       {"{algorithm: LD_SLSQP, max_time_s: 20}",
-        "{algorithm: LD_SLSQP, max_time_s: 20, constraint_mode: aggregated, starts: 2}"}) {
+       {"{algorithm: LD_SLSQP}", "{algorithm: LD_SLSQP, constraint_mode: aggregated, starts: 2}"}) {
     auto opt = exid_test::create<exid::Optimizer>("nlopt", p);
     exid::RunContext ctx;
     auto r = opt->minimize(*s.problem, ctx);
@@ -272,7 +271,7 @@ TEST(Nlopt, EpigraphObjectiveNeedsTheCondCriterion) {
   XSetup s =
       make("planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.05}", "log_det");
   auto opt = exid_test::create<exid::Optimizer>(
-      "nlopt", "{algorithm: LD_SLSQP, objective: epigraph, max_time_s: 5}");
+      "nlopt", "{algorithm: LD_SLSQP, objective: epigraph}");
   exid::RunContext ctx;
   try {
     opt->minimize(*s.problem, ctx);
@@ -326,35 +325,35 @@ const char* kFourier =
 INSTANTIATE_TEST_SUITE_P(
     All, OptimizerTest,
     ::testing::Values(
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_MMA, max_time_s: 5, max_evaluations: 300}", "fourier",
+        OptCase{"nlopt", "{algorithm: LD_SLSQP}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_MMA, max_evaluations: 300}", "fourier",
                 kFourier},
-        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_time_s: 5, max_evaluations: 400}", "fourier",
+        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_evaluations: 400}", "fourier",
                 kFourier},
         OptCase{
             "nlopt",
-            "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000, max_time_s: 10}",
+            "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000}",
             "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400, max_time_s: 10}",
+        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400}",
                 "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, objective: epigraph, max_time_s: 10}", "fourier",
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, objective: epigraph}", "fourier",
                 kFourier},
         OptCase{"nlopt",
                 "{algorithm: LD_SLSQP, objective: log, constraint_mode: aggregated, "
-                "polish_objective: epigraph, starts: 2, max_time_s: 10}",
+                "polish_objective: epigraph, starts: 2}",
                 "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, max_time_s: 10}", "spline",
+        OptCase{"nlopt", "{algorithm: LD_SLSQP}", "spline",
                 "{duration_s: 4, knots: 6, degree: 5}"},
-        OptCase{"adjoint_gradient", "{max_time_s: 10}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}", "fourier",
+        OptCase{"adjoint_gradient", "{max_iterations: 400}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}", "fourier",
                 kFourier},
-        OptCase{"adjoint_gradient", "{constraints: penalty, max_time_s: 10}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{constraints: projection, max_time_s: 10}", "fourier",
+        OptCase{"adjoint_gradient", "{constraints: penalty, max_iterations: 400}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{constraints: projection, max_iterations: 400}", "fourier",
                 kFourier},
-        OptCase{"adjoint_gradient", "{max_time_s: 10}", "pointwise",
+        OptCase{"adjoint_gradient", "{max_iterations: 400}", "pointwise",
                 "{duration_s: 4, sample_period_s: 0.05}"},
-        OptCase{"adjoint_gradient", "{step: paper, max_time_s: 10, max_iterations: 300}",
+        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}",
                 "pointwise", "{duration_s: 4, sample_period_s: 0.05}"}),
     [](const auto& info) {
       return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index);
@@ -378,16 +377,18 @@ TEST(Optimizers, RespectTheTimeBudgetAndCancellation) {
     auto opt = exid_test::create<exid::Optimizer>(name, "{max_time_s: 0.3}");
     (void)opt;
   }
-  auto opt = exid_test::create<exid::Optimizer>("nlopt", "{algorithm: GN_ISRES, max_time_s: 0.3}");
+  auto opt = exid_test::create<exid::Optimizer>(
+      "nlopt", "{algorithm: GN_ISRES, max_time_s: 0.3, max_evaluations: 0}");
   exid::RunContext ctx;
   auto t0 = std::chrono::steady_clock::now();
   auto r = opt->minimize(*s.problem, ctx);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  EXPECT_LT(wall, 1.5);
+  EXPECT_LT(wall, 10.0);  // it stops (0.3 s and the last evaluation; generous for a loaded machine)
+  EXPECT_EQ(r.stop_reason, "max_time_s");  // and says why: a time budget is not reproducible
   EXPECT_LE(r.max_violation, 1e-9);
   int calls = 0;
   ctx.cancelled = [&] { return ++calls > 5; };
-  auto opt2 = exid_test::create<exid::Optimizer>("adjoint_gradient", "{max_time_s: 30}");
+  auto opt2 = exid_test::create<exid::Optimizer>("adjoint_gradient", "{}");
   auto r2 = opt2->minimize(*s.problem, ctx);
   EXPECT_NE(r2.stop_reason.find("cancelled"), std::string::npos) << r2.stop_reason;
 }

@@ -228,7 +228,7 @@ FailingExcitation runFailingCriterion(const std::string& criterion, const std::s
                                          "  trajectory: {type: fourier, params: {harmonics: 2}}\n"
                                          "  criterion: {type: "
                                       << criterion << "}\n  optimizer: {type: " << optimizer
-                                      << ", params: {max_evaluations: 30, max_time_s: 20}}\n"
+                                      << ", params: {max_evaluations: 30}}\n"
                                          "experiment: {type: simulate, params: {duration_s: 2}}\n"
                                          "estimator: {type: batch_ls}\n";
   const Child c = start(r.dir / "study.yaml", r.dir / "out", r.dir, 0,

@@ -10,7 +10,9 @@
 #include <fstream>
 #include <sstream>
 
+#include "exid/io.hpp"
 #include "exid/json.hpp"
+#include "exid/version.hpp"
 
 namespace fs = std::filesystem;
 
@@ -54,9 +56,11 @@ bool noTemporaries(const fs::path& dir) {
 
 TEST(Cli, DefaultStudyRunsAndWritesItsResults) {
   fs::path out = tempDir("default");
-  CmdResult r = runExid("-q run " + std::string(EXID_SOURCE_DIR) + "/examples/default.yaml --out " +
+  // not quiet: the default study prints no warning a newcomer cannot act on
+  CmdResult r = runExid("run " + std::string(EXID_SOURCE_DIR) + "/examples/default.yaml --out " +
                         out.string());
   ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.out.find("warning"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("| status | ok |"), std::string::npos) << r.out;
   EXPECT_NE(r.out.find("report.md"), std::string::npos) << r.out;
   for (const char* f : {"summary.json", "report.md", "study.resolved.yaml", "experiment.csv",
@@ -72,6 +76,14 @@ TEST(Cli, DefaultStudyRunsAndWritesItsResults) {
   EXPECT_LT(id->find("param_rel_err")->asDouble(), 0.01);
   EXPECT_LT(s.find("validation")->find("relative_error")->asDouble(), 0.01);
   EXPECT_EQ(s.find("robot")->find("dof")->asInt(), 6);
+  EXPECT_EQ(s.find("warnings")->size(), 0u) << s.find("warnings")->dump(2);
+  // the published PUMA 560 data's known defects: said once, as a note in the report
+  ASSERT_NE(s.find("robot")->find("notes"), nullptr);
+  EXPECT_NE(s.find("robot")->find("notes")->at(0).asString().find("triangle inequality"),
+            std::string::npos);
+  const std::string md = slurp(out / "report.md");
+  EXPECT_NE(md.find("## Notes on the robot"), std::string::npos);
+  EXPECT_EQ(md.find("## Warnings"), std::string::npos);
   EXPECT_TRUE(noTemporaries(out));
   fs::remove_all(out);
 }
@@ -196,44 +208,72 @@ TEST(Cli, ReportHasPlotsOrSaysWhyNot) {
 TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
   fs::path dir = tempDir("eval");
   {
+    // the PUMA 560 describes its drives (rotor inertia, Coulomb and viscous friction)
     std::ofstream s(dir / "samples.csv");
-    s << "q1,q2,qd1,qd2,qdd1,qdd2\n0.1,0.2,0.3,-0.4,1.0,2.0\n-0.5,1.1,0.0,0.7,-1.5,0.25\n";
+    s << "q1,q2,q3,q4,q5,q6,qd1,qd2,qd3,qd4,qd5,qd6,qdd1,qdd2,qdd3,qdd4,qdd5,qdd6\n"
+         "0.1,0.2,-0.3,0.4,0.5,-0.6,0.3,-0.4,0.5,0.1,-0.2,0.7,1.0,2.0,-1.0,0.5,0.25,-0.5\n"
+         "-0.5,1.1,0.2,-0.1,0.3,0.2,0.0,0.7,-0.3,0.2,0.4,-0.1,-1.5,0.25,0.5,1.0,-2.0,0.75\n";
   }
   for (const char* what :
        {"torque", "regressor", "energy", "energy_regressor", "wrench_regressor"}) {
     CmdResult r =
-        runExid("-q eval planar2r --samples " + (dir / "samples.csv").string() + " --what " + what +
+        runExid("-q eval puma560 --samples " + (dir / "samples.csv").string() + " --what " + what +
                 " --out " + (dir / (std::string(what) + ".csv")).string());
     ASSERT_EQ(r.code, 0) << what << ": " << r.out;
   }
-  // tau = Y pi: the regressor rows times the robot's parameters (from robot info) give the torques.
+  // the rigid bodies alone, asked for explicitly; global options also after the subcommand
+  CmdResult rb = runExid("eval puma560 --samples " + (dir / "samples.csv").string() +
+                         " --what torque --rigid-body-only --out " +
+                         (dir / "rigid.csv").string() + " -q");
+  ASSERT_EQ(rb.code, 0) << rb.out;
+  EXPECT_NE(slurp(dir / "torque.csv").find("# exid eval torque puma560: full torque: rigid "
+                                           "bodies + drives"),
+            std::string::npos)
+      << slurp(dir / "torque.csv");
+  EXPECT_NE(slurp(dir / "rigid.csv").find("rigid bodies alone"), std::string::npos)
+      << slurp(dir / "rigid.csv");
+  // Rigid bodies: tau = Y pi with the regressor rows and the robot's inertial parameters.
+  // Full torque: the same plus every drive term the robot describes (Ia qdd + Fc sign(qd) +
+  // Fv qd + OFF), i.e. the differential model's full regressor times its nominal values.
   CmdResult info = runExid(
-      "-q robot info planar2r --json --model-params '{rotor_inertia: false, coulomb: false, "
+      "-q robot info puma560 --json --model-params '{rotor_inertia: false, coulomb: false, "
       "viscous: false}'");
   exid::Json j = exid::Json::parse(info.out.substr(info.out.find('{')));
   const exid::Json& values = *j.find("values");
-  std::ifstream reg(dir / "regressor.csv"), tau(dir / "torque.csv"), en(dir / "energy.csv");
-  std::string header, line;
-  std::getline(reg, header);
-  std::getline(tau, line);
-  std::vector<double> torques;
-  while (std::getline(tau, line)) {
-    std::stringstream ss(line);
-    std::string cell;
-    while (std::getline(ss, cell, ',')) torques.push_back(std::stod(cell));
-  }
-  ASSERT_EQ(torques.size(), 4u);
-  for (std::size_t row = 0; row < 4; ++row) {
-    ASSERT_TRUE(std::getline(reg, line));
-    std::stringstream ss(line);
-    std::string cell;
-    double sum = 0;
-    std::size_t c = 0;
-    while (std::getline(ss, cell, ',')) sum += std::stod(cell) * values.at(c++).asDouble();
-    EXPECT_NEAR(sum, torques[row], 1e-9 * (1 + std::abs(sum)));
-  }
-  std::getline(en, header);
-  EXPECT_EQ(header, "kinetic,potential,total");
+  CmdResult full_info = runExid(
+      "-q robot info puma560 --json --model-params '{rotor_inertia: true, coulomb: true, "
+      "viscous: true, offset: true}'");
+  exid::Json jf = exid::Json::parse(full_info.out.substr(full_info.out.find('{')));
+  const exid::Json& fvalues = *jf.find("values");
+  const exid::CsvTable Y = exid::readCsv(dir / "regressor.csv");
+  const exid::CsvTable T = exid::readCsv(dir / "torque.csv");
+  const exid::CsvTable R = exid::readCsv(dir / "rigid.csv");
+  const exid::CsvTable S = exid::readCsv(dir / "samples.csv");
+  constexpr int n = 6;
+  ASSERT_EQ(T.data.rows(), 2);
+  ASSERT_EQ(R.data.rows(), 2);
+  ASSERT_EQ(Y.data.rows(), 2 * n);
+  ASSERT_EQ(fvalues.size(), static_cast<std::size_t>(14 * n));
+  double drive_part = 0;
+  for (int k = 0; k < 2; ++k)
+    for (int jn = 0; jn < n; ++jn) {
+      double rigid = 0;
+      for (Eigen::Index c = 0; c < Y.data.cols(); ++c)
+        rigid += Y.data(n * k + jn, c) * values.at(static_cast<std::size_t>(c)).asDouble();
+      EXPECT_NEAR(R.data(k, jn), rigid, 1e-9 * (1 + std::abs(rigid)));
+      // drive columns of joint jn: Ia, Fc, Fv, OFF after the 10 n inertial parameters
+      const std::size_t o = 10 * n + 4 * static_cast<std::size_t>(jn);
+      const double qd = S.column("qd" + std::to_string(jn + 1))(k);
+      const double qdd = S.column("qdd" + std::to_string(jn + 1))(k);
+      const double drive = fvalues.at(o).asDouble() * qdd +
+                           fvalues.at(o + 1).asDouble() * (qd > 0 ? 1.0 : (qd < 0 ? -1.0 : 0.0)) +
+                           fvalues.at(o + 2).asDouble() * qd + fvalues.at(o + 3).asDouble();
+      EXPECT_NEAR(T.data(k, jn), rigid + drive, 1e-9 * (1 + std::abs(rigid + drive)));
+      drive_part += std::abs(drive);
+    }
+  EXPECT_GT(drive_part, 1e-3) << "the PUMA 560 describes drives: the full torque must include them";
+  const exid::CsvTable E = exid::readCsv(dir / "energy.csv");
+  EXPECT_EQ(E.columns, (std::vector<std::string>{"kinetic", "potential", "total"}));
   // A missing column is an error naming the file and the column.
   std::ofstream(dir / "bad.csv") << "q1,q2\n0,0\n";
   CmdResult r = runExid("-q eval planar2r --samples " + (dir / "bad.csv").string() +
@@ -241,5 +281,43 @@ TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
   EXPECT_EQ(r.code, 2);
   EXPECT_NE(r.out.find("missing column 'qd1'"), std::string::npos) << r.out;
   EXPECT_FALSE(fs::exists(dir / "x.csv"));
+  // A joint column beyond the robot's joints: the file is for another robot.
+  std::ofstream(dir / "three.csv") << "q1,q2,q3,qd1,qd2,qd3,qdd1,qdd2,qdd3\n0,0,0,0,0,0,0,0,0\n";
+  r = runExid("-q eval planar2r --samples " + (dir / "three.csv").string() +
+              " --what torque --out " + (dir / "x.csv").string());
+  EXPECT_EQ(r.code, 2);
+  EXPECT_NE(r.out.find("column 'q3' but robot"), std::string::npos) << r.out;
+  EXPECT_FALSE(fs::exists(dir / "x.csv"));
   fs::remove_all(dir);
+}
+
+TEST(Cli, VersionAndGlobalOptionsAfterTheSubcommand) {
+  CmdResult v = runExid("--version");
+  EXPECT_EQ(v.code, 0) << v.out;
+  EXPECT_EQ(v.out.rfind("exid " EXID_VERSION_STRING " (commit ", 0), 0u) << v.out;
+  // the commit is 12 hex digits (optionally -dirty) or 'unknown' outside a checkout
+  const std::string commit = v.out.substr(v.out.find("(commit ") + 8);
+  EXPECT_TRUE(commit.rfind("unknown", 0) == 0 ||
+              commit.find_first_not_of("0123456789abcdef") >= 12)
+      << commit;
+  // -q, -v and --plugin-path before or after the subcommand, nested subcommands included
+  for (const std::string args :
+       {"plugins robot -q", "-q plugins robot", "plugins robot -v",
+        "robot info planar2r -q", "plugins robot --plugin-path /nonexistent -q"}) {
+    CmdResult r = runExid(args);
+    EXPECT_EQ(r.code, 0) << args << ": " << r.out;
+  }
+  const fs::path out = tempDir("quiet_after");
+  std::ofstream(out / "s.yaml") << "robot: {type: planar2r}\nmodel: {type: differential, params: "
+                                   "{rotor_inertia: false, coulomb: false, viscous: false}}\n"
+                                   "experiment: {type: simulate, params: {duration_s: 3}}\n"
+                                   "estimator: {type: batch_ls}\n";
+  CmdResult r = runExid("run " + (out / "s.yaml").string() + " --out " + (out / "o").string() +
+                        " -q");
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_EQ(r.out.find("[exid]"), std::string::npos) << "-q after the subcommand: " << r.out;
+  const exid::Json S = exid::Json::parse(slurp(out / "o" / "summary.json"));
+  EXPECT_EQ(S.find("exid_version")->asString(), EXID_VERSION_STRING);
+  EXPECT_EQ(S.find("exid_commit")->asString(), commit.substr(0, commit.find(')')));
+  fs::remove_all(out);
 }

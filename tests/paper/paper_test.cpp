@@ -1,7 +1,9 @@
 // The paper reproduced: every study in examples/paper runs through exid::runStudy, and its
-// figures are checked against the paper's (reduction ratios of the condition number, optimiser
-// wall time) and, for experiment 5, the RLS estimates with the optimal and a non-optimal
-// trajectory. The measured figures are printed and written to
+// figures are checked against the paper's (reduction ratios of the condition number) and, for
+// experiment 5, the RLS estimates with the optimal and a non-optimal trajectory. The optimiser
+// runs on an iteration budget (about what one second of CPU time gives on one core), so the
+// result is the same on any machine; how long it takes is measured by bash scripts/bench.sh
+// studies (the paper: 20-60 h on a PC/486; the benchmark: under a second each). The measured figures are printed and written to
 // <build>/paper_out/paper_results.csv (examples/paper/README.md quotes them).
 //
 // Condition number: cond(W) = sigma_max / sigma_min of the stacked base regressor (exid's
@@ -79,35 +81,30 @@ Row excitation(const std::string& file) {
   const exid::Json* x = S.find("excitation");
   r.stop = x && x->find("stop_reason") ? x->find("stop_reason")->asString() : "";
   EXPECT_LE(num(S, "excitation", "max_constraint_violation"), 1e-9) << file;
+  EXPECT_EQ(r.stop, "max_iterations") << file << ": the study's budget is iterations";
   record(r);
   return r;
 }
 
-// Optimiser wall time on one core: the paper's 20-60 h on a PC/486 against < 1 s here.
-constexpr double kWallLimit = 1.0 + 0.05;  // max_time_s 1 plus the final bookkeeping
 
 TEST(Paper, Exp1DifferentialThreeJoints) {
   const Row r = excitation("exp1_differential_3joints.yaml");
   EXPECT_GE(r.ratio, 10.0);  // paper: 1e14 -> 1e13
-  EXPECT_LT(r.wall, kWallLimit);
 }
 
 TEST(Paper, Exp2DifferentialJointOne) {
   const Row r = excitation("exp2_differential_joint1.yaml");
   EXPECT_GE(r.ratio, 1.9e5 / 88.0);  // paper: 1.9e5 -> 88
-  EXPECT_LT(r.wall, kWallLimit);
 }
 
 TEST(Paper, Exp3IntegralJointTwo) {
   const Row r = excitation("exp3_integral_joint2.yaml");
   EXPECT_GE(r.ratio, 6.0);  // paper: 3000 -> 500
-  EXPECT_LT(r.wall, kWallLimit);
 }
 
 TEST(Paper, Exp4LoadWrench) {
   const Row r = excitation("exp4_load_wrench.yaml");
   EXPECT_GE(r.ratio, 90830.0 / 3000.0);  // paper: 90830 -> 3000
-  EXPECT_LT(r.wall, kWallLimit);
 }
 
 TEST(Paper, Exp5RlsOptimalAgainstNonOptimal) {

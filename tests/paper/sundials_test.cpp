@@ -106,7 +106,7 @@ TEST(Sundials, OptimisationLowersTheCriterionWithinLimits) {
   Problem s = make("puma560", "differential", "{joints: [1, 2, 3]}", "fourier",
                    "{period_s: 2, harmonics: 2, joints: [1, 2, 3], sample_period_s: 0.02, "
                    "init_scale: 0.3, velocity_limit_rad_s: 2.0}");
-  auto opt = exid_test::create<exid::Optimizer>("sundials", "{max_iterations: 15, max_time_s: 10}");
+  auto opt = exid_test::create<exid::Optimizer>("sundials", "{max_iterations: 15}");
   exid::RunContext ctx;
   const auto r = opt->minimize(*s.problem, ctx);
   std::cout << "  sundials: " << r.criterion_initial << " -> " << r.criterion_final << " in "

@@ -116,6 +116,25 @@ TEST(RobotPlugins, Puma560VariantsStrictAndGravity) {
   EXPECT_THROW(p.info.factory(params), exid::Error);
 }
 
+TEST(RobotPlugins, PublishedDefectsAreANoteAndAUsersFileGetsWarnings) {
+  // The shipped PUMA 560: its published data's defects are stated once, as a note.
+  LoadedPlugin p;
+  ASSERT_TRUE(loadPlugin("puma560", &p)) << "puma560 plugin not built";
+  const auto puma = build(p.info, defaults(p.info));
+  EXPECT_TRUE(puma->warnings.empty());
+  ASSERT_EQ(puma->notes.size(), 1u);
+  for (const char* what : {"published", "triangle inequality", "link1", "link3", "zero mass"})
+    EXPECT_NE(puma->notes[0].find(what), std::string::npos) << what << ": " << puma->notes[0];
+  // The same data as a user's own file (the dh plugin): warnings the user can act on.
+  LoadedPlugin dh;
+  ASSERT_TRUE(loadPlugin("dh", &dh)) << "dh plugin not built";
+  exid::ParamSet params = defaults(dh.info);
+  params.set("file", std::string(EXID_SOURCE_DIR) + "/robots/puma560/puma560.yaml");
+  const auto own = build(dh.info, params);
+  EXPECT_TRUE(own->notes.empty());
+  EXPECT_EQ(own->warnings.size(), 3u);
+}
+
 TEST(RobotPlugins, FilePluginsResolveRelativePaths) {
   for (const auto& [name, file] : std::vector<std::pair<std::string, std::string>>{
            {"dh", "stanford/stanford.yaml"}, {"urdf", "puma560/puma560.urdf"}}) {

@@ -71,6 +71,12 @@ struct RobotModel {
   /// Frame of a wrist force/torque sensor (and payload), attached to body `sensor_body`.
   int sensor_body = -1;  // -1: the last body
   Pose sensor_pose;      // sensor frame in that body's frame
+  /// What loading found and the user may act on (physically impossible inertia in their own
+  /// file, ...): also logged; the runner puts them in summary.json's `warnings`.
+  std::vector<std::string> warnings;
+  /// Facts about a shipped description worth stating once in a report (known defects of
+  /// published data, kept as published): summary.json `robot.notes` and the report, not logged.
+  std::vector<std::string> notes;
 
   int dof() const { return static_cast<int>(bodies.size()); }
   int numInertialParameters() const { return 10 * dof(); }
