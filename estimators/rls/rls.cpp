@@ -40,7 +40,7 @@ class Rls : public exid::Estimator {
                            1.0, true, false),
         exid::param_int("history_stride", 1,
                         "record the estimate and diag(P) every N samples (the last one always)",
-                        1.0, 1e12),
+                        1.0, 1e9),
         exid::param_string(
             "update", std::string("joseph"),
             "joseph: symmetric Joseph form (robust to rounding); standard: eqn 7 as written "

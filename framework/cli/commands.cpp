@@ -33,6 +33,7 @@ std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::stri
   const std::string ext = p.extension().string();
   if (ext == ".urdf" || ext == ".yaml" || ext == ".yml") {
     if (!fs::exists(p)) throw Error(fmt::format("{}: no such robot file", robot));
+    checkInputFile(p, "robot", kMaxRobotFileBytes);  // a FIFO or a device: refused, not opened
     type = ext == ".urdf" ? "urdf" : "dh";
     params = fmt::format("{{file: '{}'}}", fs::absolute(p).string());
   }
@@ -252,11 +253,17 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   if (out.empty()) out = "out/" + cfg.name + "_" + stage;
   RunOptions opt;
   opt.out_dir = out;
+  opt.cancelled = cancelled();
+  opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
+  opt.hard_stop_exit_code = signalExitCode;
   StudyResult r = runStudy(cfg, reg, opt);
   std::cout << briefTable(r.summary);
   if (!r.ok) {
-    std::cerr << fmt::format("exid {}: failed: {}\n", stage, r.message);
-    return 1;
+    std::cerr << fmt::format(
+        "exid {}: {}: {}{}\n", stage, r.cancelled ? "cancelled" : "failed", r.message,
+        r.written_to.empty() ? std::string()
+                             : fmt::format(" (details in {}/summary.json)", r.written_to.string()));
+    return r.cancelled ? signalExitCode() : 1;
   }
   std::cout << fmt::format("\nResults in {}/ (summary.json, report.md)\n", out);
   return 0;
@@ -268,10 +275,9 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
 int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
                   const std::string& out) {
   const fs::path dir(study_dir);
-  std::ifstream in(dir / "summary.json");
-  if (!in)
+  if (!fs::exists(dir / "summary.json"))
     throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
-  const std::string text((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  const std::string text = readInputFile(dir / "summary.json", "summary", kMaxStudyFileBytes);
   const Json S = Json::parse(text);
   const Json* I = S.find("identification");
   const Json* d = I ? I->find("details") : nullptr;
@@ -372,10 +378,29 @@ std::vector<std::string> splitComma(const std::string& s) {
   return out;
 }
 
+/// --shard i/N: two decimal integers, 0 <= i < N <= 100000 (nothing else on the line).
+void parseShard(const std::string& shard, int* index, int* count) {
+  const auto slash = shard.find('/');
+  auto number = [&](const std::string& t, const char* what) {
+    if (t.empty() || t.size() > 6 || t.find_first_not_of("0123456789") != std::string::npos)
+      throw Error(
+          fmt::format("--shard {}: {} '{}' is not a non-negative integer; expected i/N "
+                      "with 0 <= i < N (e.g. --shard 0/4)",
+                      shard, what, t));
+    return std::stoi(t);
+  };
+  if (slash == std::string::npos)
+    throw Error(fmt::format("--shard {}: expected i/N with 0 <= i < N (e.g. --shard 0/4)", shard));
+  *index = number(shard.substr(0, slash), "i");
+  *count = number(shard.substr(slash + 1), "N");
+  if (*count < 1 || *count > 100000 || *index >= *count)
+    throw Error(fmt::format("--shard {}: expected 0 <= i < N and 1 <= N <= 100000", shard));
+}
+
 int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
                   const std::string& out_arg, int jobs, const std::string& shard, bool retry,
-                  const std::string& rows, const std::string& cols, const std::string& metric,
-                  const std::function<bool()>& cancelled) {
+                  bool force, const std::string& rows, const std::string& cols,
+                  const std::string& metric, const std::function<bool()>& cancelled) {
   if (args.empty())
     throw Error(
         "usage: exid matrix MATRIX.yaml --out DIR [-j N] | exid matrix table DIR ... | exid matrix "
@@ -423,6 +448,7 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
     MpiSession mpi;
     opt.jobs = std::max(1, jobs);
     opt.retry_failed = retry;
+    opt.force = force;
     opt.cancelled = cancelled;
     opt.shard_index = mpi.rank;
     opt.shard_count = mpi.size;
@@ -444,17 +470,13 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
           spec.name, mpi.size, total, ok, failed, timeout, skipped, not_run, merged,
           opt.out_dir.string());
     }
-    return not_run > 0 ? 130 : 0;
+    return not_run > 0 ? signalExitCode() : 0;
   }
-  opt.jobs = std::max(1, jobs);
+  opt.jobs = jobs;
   opt.retry_failed = retry;
+  opt.force = force;
   opt.cancelled = cancelled;
-  if (!shard.empty()) {
-    auto slash = shard.find('/');
-    if (slash == std::string::npos) throw Error(fmt::format("--shard {}: expected i/N", shard));
-    opt.shard_index = std::stoi(shard.substr(0, slash));
-    opt.shard_count = std::stoi(shard.substr(slash + 1));
-  }
+  if (!shard.empty()) parseShard(shard, &opt.shard_index, &opt.shard_count);
   MatrixRunSummary s = runMatrix(spec, reg, opt);
   std::cout << fmt::format(
       "matrix {}: {} cells: {} ok, {} failed, {} timeout, {} skipped (finished before), {} not "
@@ -462,7 +484,11 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
       "{:.2f} s\nresults: {}/results.sqlite\n",
       spec.name, s.total, s.ok, s.failed, s.timeout, s.skipped, s.not_run, s.wall_s,
       opt.out_dir.string());
-  return s.not_run > 0 ? 130 : 0;
+  if (s.incomplete > 0)
+    std::cout << fmt::format(
+        "{} incomplete (no space left on device): they run again when the matrix is resumed\n",
+        s.incomplete);
+  return s.not_run > 0 ? signalExitCode() : 0;
 }
 
 }  // namespace
@@ -474,7 +500,7 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     std::vector<std::string> matrix_args;
     int jobs = 1;
     std::string shard, rows, cols, metric;
-    bool retry = false;
+    bool retry = false, force = false;
   };
   auto st = std::make_shared<State>();
 
@@ -524,9 +550,11 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   matrix->add_option("args", st->matrix_args,
                      "MATRIX.yaml, or 'table DIR', or 'merge DEST SRC...'");
   matrix->add_option("--out", st->out, "output folder (results.sqlite, cells/)");
-  matrix->add_option("-j,--jobs", st->jobs, "cells run in parallel");
+  matrix->add_option("-j,--jobs", st->jobs, "cells run in parallel (1 to 1024)")
+      ->check(CLI::Range(1, 1024));
   matrix->add_option("--shard", st->shard, "run every N-th cell: i/N with 0 <= i < N");
   matrix->add_flag("--retry-failed", st->retry, "re-run cells that failed or timed out");
+  matrix->add_flag("--force", st->force, "re-run every cell, finished ones included");
   matrix->add_option("--rows", st->rows, "table: axes of the rows, comma-separated");
   matrix->add_option("--cols", st->cols, "table: axes of the columns, comma-separated");
   matrix->add_option("--metric", st->metric, "table: the metric (without: list the metrics)");
@@ -535,7 +563,7 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   c.run = [st, info, eval, exp, stages, matrix, &registry]() -> int {
     if (*matrix)
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
-                           st->rows, st->cols, st->metric, cancelled());
+                           st->force, st->rows, st->cols, st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
     if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out,
                                        st->rigid_body_only);

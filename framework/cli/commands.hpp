@@ -31,5 +31,8 @@ struct MpiSession {
 
 /// True once SIGINT or SIGTERM was received (set up by main).
 std::function<bool()> cancelled();
+/// The exit code of a run stopped by a signal: 128 + the signal (130 SIGINT, 143 SIGTERM); 130
+/// when no signal was received.
+int signalExitCode();
 
 }  // namespace exid::cli

@@ -19,8 +19,14 @@
 
 namespace {
 
+namespace fs = std::filesystem;
+
 std::atomic<bool> g_stop{false};
-extern "C" void onSignal(int) { g_stop = true; }
+std::atomic<int> g_signal{0};
+extern "C" void onSignal(int sig) {
+  g_signal = sig;
+  g_stop = true;
+}
 
 /// A progress bar on a terminal; a line every few seconds otherwise.
 class ProgressPrinter {
@@ -56,6 +62,8 @@ class ProgressPrinter {
 std::function<bool()> exid::cli::cancelled() {
   return [] { return g_stop.load(); };
 }
+
+int exid::cli::signalExitCode() { return 128 + (g_signal.load() > 0 ? g_signal.load() : SIGINT); }
 
 int main(int argc, char** argv) {
   CLI::App app{
@@ -106,11 +114,19 @@ int main(int argc, char** argv) {
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
-    return app.exit(e);
+    // --help and --version exit 0; every usage error exits 2 (CLI11's own codes are 100+).
+    const int code = app.exit(e);
+    return code == 0 ? 0 : 2;
   }
 
-  std::signal(SIGINT, onSignal);
-  std::signal(SIGTERM, onSignal);
+  // Commands that poll the stop flag (runs and matrices) turn SIGINT/SIGTERM into a clean stop;
+  // the others (robot info, eval, export, validate, ...) keep the default action and end at once
+  // (they write only atomically, so nothing is half written).
+  if (*run || app.got_subcommand("matrix") || app.got_subcommand("excite") ||
+      app.got_subcommand("simulate") || app.got_subcommand("identify")) {
+    std::signal(SIGINT, onSignal);
+    std::signal(SIGTERM, onSignal);
+  }
 
   try {
     setup();
@@ -122,7 +138,7 @@ int main(int argc, char** argv) {
         std::cout << cfg.resolvedYaml();
         return 0;
       }
-      if (out_dir.empty()) out_dir = "out/" + cfg.name;
+      if (out_dir.empty()) out_dir = "out/" + cfg.name;  // a plain name (validated)
       exid::RunOptions opt;
       opt.out_dir = out_dir;
       ProgressPrinter printer;
@@ -130,13 +146,23 @@ int main(int argc, char** argv) {
         printer(s, f, t);
       };
       opt.cancelled = [] { return g_stop.load(); };
+      opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
+      opt.hard_stop_exit_code = exid::cli::signalExitCode;
       exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
       exid::StudyResult r = exid::runStudy(cfg, registry, opt);
       std::cout << exid::briefTable(r.summary);
       if (!r.ok) {
-        std::cerr << fmt::format("exid: study '{}' failed: {}\n(details in {}/summary.json)\n",
-                                 cfg.name, r.message, out_dir);
-        return 1;
+        std::cerr << fmt::format(
+            "exid: study '{}' {}: {}\n{}\n", cfg.name, r.cancelled ? "cancelled" : "failed",
+            r.message,
+            r.written_to.empty()
+                ? std::string("(nothing was written)")
+                : fmt::format(
+                      "(details in {}/summary.json{})", r.written_to.string(),
+                      r.written_to != fs::path(out_dir).lexically_normal()
+                          ? fmt::format("; the earlier results in {} are untouched", out_dir)
+                          : ""));
+        return r.cancelled ? exid::cli::signalExitCode() : 1;
       }
       std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir,
                                out_dir);

@@ -3,12 +3,16 @@
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/registry.hpp"
+#include "exid/yaml_strict.hpp"
 
 namespace exid {
 
@@ -52,15 +56,13 @@ std::optional<double> toDouble(const std::string& s) {
   if (s == ".inf" || s == "inf" || s == "+.inf") return HUGE_VAL;
   if (s == "-.inf" || s == "-inf") return -HUGE_VAL;
   if (s == ".nan" || s == "nan" || s == "NaN") return std::nan("");
-  if (s.empty()) return std::nullopt;
-  std::size_t pos = 0;
-  try {
-    double v = std::stod(s, &pos);
-    if (pos != s.size()) return std::nullopt;
-    return v;
-  } catch (...) {
-    return std::nullopt;
-  }
+  if (s.empty() || std::isspace(static_cast<unsigned char>(s[0]))) return std::nullopt;
+  // strtod, not stod: a subnormal (5e-324) is a number (stod threw on the underflow); an
+  // overflow is inf, which the range check refuses.
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  if (end != s.c_str() + s.size()) return std::nullopt;
+  return v;
 }
 
 std::optional<bool> toBool(const std::string& s) {
@@ -69,13 +71,24 @@ std::optional<bool> toBool(const std::string& s) {
   return std::nullopt;
 }
 
+// Elements of one list parameter at most (a longer list is refused before it is converted).
+constexpr std::size_t kMaxListElements = 100000;
+
 // Converts a YAML node into the declared type; returns nullopt and sets why on failure.
 std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const fs::path& base_dir,
                                   std::string* why) {
   auto expect = [&](const char* what) {
-    *why = fmt::format("expected {}, found '{}'", what, scalarText(n));
+    std::string found = scalarText(n);
+    if (found.size() > 80)
+      found = found.substr(0, 60) + fmt::format("... ({} bytes)", found.size());
+    *why = fmt::format("expected {}, found '{}'", what, found);
     return std::nullopt;
   };
+  if (n.IsSequence() && n.size() > kMaxListElements) {
+    *why =
+        fmt::format("a list of {} elements; at most {} are accepted", n.size(), kMaxListElements);
+    return std::nullopt;
+  }
   switch (d.type) {
     case ParamType::Bool: {
       if (!n.IsScalar()) return expect("true or false");
@@ -328,6 +341,23 @@ Json specJson(const PluginSpec& s) {
   return j;
 }
 
+}  // namespace
+
+std::string studyNameProblem(const std::string& name) {
+  if (name.empty()) return "";  // unnamed: loadStudy names it after the file
+  if (name.size() > 200) return fmt::format("has {} characters; at most 200", name.size());
+  if (name == "." || name == "..") return "must not be '.' or '..'";
+  if (name[0] == '.') return "must not start with '.' (hidden or relative folder)";
+  for (unsigned char c : name) {
+    if (c == '/' || c == '\\')
+      return "must be a plain name without '/' or '\\' (it names the output folder out/<name>)";
+    if (c < 0x20 || c == 0x7f) return fmt::format("contains the control byte 0x{:02X}", c);
+  }
+  return "";
+}
+
+namespace {
+
 const std::vector<std::string> kTopKeys = {"name",      "description", "seed",       "budget_s",
                                            "robot",     "model",       "excitation", "experiment",
                                            "estimator", "validation",  "report",     "prior"};
@@ -417,6 +447,7 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
   }
   StudyConfig cfg;
   cfg.dir = base_dir;
+  duplicateKeys(root, source_name, "", &pr.items);
   if (!root.IsMap()) {
     throw Error(fmt::format("{}: expected a mapping with sections ({}), found '{}'", source_name,
                             fmt::join(kTopKeys, ", "), scalarText(root)));
@@ -427,10 +458,13 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       unknownKey(pr, kv.first, "", *key, kTopKeys);
   }
   if (root["name"]) {
-    if (root["name"].IsScalar())
+    if (root["name"].IsScalar()) {
       cfg.name = root["name"].Scalar();
-    else
+      if (const std::string why = studyNameProblem(cfg.name); !why.empty())
+        pr.add(root["name"], fmt::format("name = '{}': {}", scalarText(root["name"]), why));
+    } else {
       pr.add(root["name"], "name: expected a string");
+    }
   }
   if (root["seed"]) {
     auto s = root["seed"].IsScalar() ? toInt(root["seed"].Scalar()) : std::nullopt;
@@ -442,9 +476,9 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
   }
   if (root["budget_s"]) {
     auto b = root["budget_s"].IsScalar() ? toDouble(root["budget_s"].Scalar()) : std::nullopt;
-    if (!b || !(*b >= 0) || !std::isfinite(*b))
-      pr.add(root["budget_s"],
-             fmt::format("budget_s = {}: must be in [0, inf)", scalarText(root["budget_s"])));
+    if (!b || !(*b >= 0) || !(*b <= 1e9))
+      pr.add(root["budget_s"], fmt::format("budget_s = {}: must be in [0, 1e9] s (0: none)",
+                                           scalarText(root["budget_s"])));
     else
       cfg.budget_s = *b;
   }
@@ -561,15 +595,43 @@ StudyConfig parseStudy(const std::string& text, const std::string& source_name,
 }
 
 StudyConfig loadStudy(const fs::path& file, const Registry& reg) {
-  std::ifstream in(file);
-  if (!in) throw Error(fmt::format("{}: cannot open the study file", file.string()));
-  std::stringstream ss;
-  ss << in.rdbuf();
+  const std::string text = readInputFile(file, "study", kMaxStudyFileBytes);
   fs::path abs = fs::absolute(file);
-  StudyConfig cfg = parseStudy(ss.str(), file.string(), abs.parent_path(), reg);
+  StudyConfig cfg = parseStudy(text, file.string(), abs.parent_path(), reg);
   cfg.file = abs;
-  if (cfg.name.empty()) cfg.name = file.stem().string();
+  if (cfg.name.empty()) {
+    cfg.name = file.stem().string();
+    if (!studyNameProblem(cfg.name).empty()) cfg.name = "study";
+  }
   return cfg;
+}
+
+std::vector<fs::path> studyInputFiles(const StudyConfig& cfg, const Registry& reg) {
+  std::vector<fs::path> out;
+  auto add = [&](const std::optional<PluginSpec>& spec) {
+    if (!spec) return;
+    const PluginInfo* info = reg.find(spec->kind, spec->type);
+    if (!info) return;
+    for (const auto& d : info->params) {
+      if (d.type != ParamType::Path || !spec->params.has(d.name)) continue;
+      const auto* v = std::get_if<std::string>(&spec->params.at(d.name));
+      if (v && !v->empty()) {
+        fs::path p(*v);
+        if (p.is_relative() && !cfg.dir.empty()) p = cfg.dir / p;
+        out.push_back(p.lexically_normal());
+      }
+    }
+  };
+  add(cfg.robot);
+  for (const auto& m : cfg.models) add(m);
+  add(cfg.trajectory);
+  add(cfg.criterion);
+  add(cfg.optimizer);
+  add(cfg.experiment);
+  add(cfg.estimator);
+  add(cfg.validation);
+  if (cfg.prior && cfg.prior->from == "study") out.push_back(cfg.prior->study / "parameters.csv");
+  return out;
 }
 
 ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,

@@ -29,7 +29,9 @@ void logDebug(const std::string& msg) {
 }
 
 Deadline::Deadline(double seconds) {
-  if (seconds > 0) {
+  // Over 1e9 s (32 years) is no budget: converting more to clock ticks overflowed (a budget_s of
+  // 1e308 wrapped to an end in the past and the study timed out at once).
+  if (seconds > 0 && seconds < 1e9) {
     active_ = true;
     end_ = std::chrono::steady_clock::now() +
            std::chrono::duration_cast<std::chrono::steady_clock::duration>(

@@ -15,7 +15,18 @@ void ObservationModel::bind(std::shared_ptr<const RobotModel> robot, const RunCo
   check(robot != nullptr, "ObservationModel::bind: no robot");
   robot_ = std::move(robot);
   onBind(ctx);
-  const int samples = baseSamples();
+  int samples = baseSamples();
+  // Large robots: no more rows than computeBaseParameters uses (max(4 p, 2000)); a 50-link
+  // chain needs 52 of the 200 samples. Sized from the rows of one probe sample.
+  try {
+    const Samples probe = randomSamples(1, ctx.seed);
+    const Eigen::Index per = fullDesign(probe).rows();
+    const double needed =
+        std::max(4.0 * static_cast<double>(fullNames().size()), 2000.0) / std::max<double>(per, 1);
+    if (per > 0 && static_cast<double>(samples) > std::ceil(needed))
+      samples = std::max(1, static_cast<int>(std::ceil(needed)));
+  } catch (const Error&) {  // a model that needs more than one sample: all of them
+  }
   Samples s = randomSamples(samples, ctx.seed ^ 0x9e3779b97f4a7c15ull);
   if (!moving_.empty()) {
     check(held_.size() == s.dof(),

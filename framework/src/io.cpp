@@ -2,6 +2,7 @@
 
 #include <fcntl.h>
 #include <fmt/format.h>
+#include <signal.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -16,12 +17,19 @@ namespace exid {
 
 namespace fs = std::filesystem;
 
+bool IoError::outOfSpace() const {
+  return errno_value == ENOSPC || errno_value == EDQUOT || errno_value == EFBIG;
+}
+
 void writeFileAtomic(const fs::path& path, const std::string& text) {
   std::error_code ec;
   if (path.has_parent_path()) fs::create_directories(path.parent_path(), ec);
   const fs::path tmp = path.string() + fmt::format(".tmp.{}", ::getpid());
   int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) throw Error(fmt::format("{}: cannot write: {}", path.string(), std::strerror(errno)));
+  if (fd < 0) {
+    const int err = errno;
+    throw IoError(fmt::format("{}: cannot write: {}", path.string(), std::strerror(err)), err);
+  }
   std::size_t done = 0;
   while (done < text.size()) {
     ssize_t n = ::write(fd, text.data() + done, text.size() - done);
@@ -30,20 +38,46 @@ void writeFileAtomic(const fs::path& path, const std::string& text) {
       int err = errno;
       ::close(fd);
       ::unlink(tmp.c_str());
-      throw Error(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)));
+      throw IoError(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)), err);
     }
     done += static_cast<std::size_t>(n);
   }
   if (::fsync(fd) != 0 || ::close(fd) != 0) {
     int err = errno;
     ::unlink(tmp.c_str());
-    throw Error(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)));
+    throw IoError(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)), err);
   }
   if (std::rename(tmp.c_str(), path.c_str()) != 0) {
     int err = errno;
     ::unlink(tmp.c_str());
     throw Error(fmt::format("{}: cannot rename into place: {}", path.string(), std::strerror(err)));
   }
+}
+
+int cleanStaleTemporaries(const fs::path& dir) {
+  int removed = 0;
+  std::error_code ec;
+  fs::directory_iterator it(dir, ec), end;
+  for (; !ec && it != end; it.increment(ec)) {
+    const std::string name = it->path().filename().string();
+    // NAME.tmp.PID (writeFileAtomic) and .NAME.staging.PID (runStudy's staging folder)
+    std::size_t dot = name.rfind('.');
+    if (dot == std::string::npos || dot + 1 >= name.size()) continue;
+    const std::string pid_text = name.substr(dot + 1);
+    if (pid_text.find_first_not_of("0123456789") != std::string::npos || pid_text.size() > 9)
+      continue;
+    const std::string stem = name.substr(0, dot);
+    const bool tmp = stem.size() > 4 && stem.compare(stem.size() - 4, 4, ".tmp") == 0;
+    const bool staging =
+        name[0] == '.' && stem.size() > 8 && stem.compare(stem.size() - 8, 8, ".staging") == 0;
+    if (!tmp && !staging) continue;
+    const pid_t pid = static_cast<pid_t>(std::stol(pid_text));
+    if (pid <= 0 || pid == ::getpid()) continue;
+    if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // its writer may still be running
+    std::error_code rm;
+    if (fs::remove_all(it->path(), rm) > 0 && !rm) ++removed;
+  }
+  return removed;
 }
 
 int CsvTable::col(const std::string& name) const {
@@ -65,18 +99,39 @@ std::string trim(const std::string& s) {
   std::size_t b = s.find_last_not_of(" \t\r\"");
   return s.substr(a, b - a + 1);
 }
-std::vector<std::string> split(const std::string& line, char d) {
+std::vector<std::string> split(const std::string& line, char d,
+                               std::vector<std::size_t>* starts = nullptr) {
   std::vector<std::string> out;
   std::string cur;
-  for (char c : line) {
-    if (c == d) {
-      out.push_back(trim(cur));
-      cur.clear();
-    } else {
-      cur += c;
+  std::size_t start = 0;
+  auto push = [&](std::size_t end) {
+    out.push_back(trim(cur));
+    if (starts) {  // 0-based offset in the line of the cell's first byte after trimming
+      const std::size_t a = cur.find_first_not_of(" \t\r\"");
+      starts->push_back(start + (a == std::string::npos ? 0 : a));
     }
+    cur.clear();
+    start = end + 1;
+  };
+  for (std::size_t i = 0; i < line.size(); ++i) {
+    if (line[i] == d)
+      push(i);
+    else
+      cur += line[i];
   }
-  out.push_back(trim(cur));
+  push(line.size());
+  return out;
+}
+
+std::string printable(const std::string& s) {
+  std::string out;
+  for (unsigned char c : s) {
+    if (c >= 0x20 && c < 0x7f)
+      out += static_cast<char>(c);
+    else
+      out += fmt::format("\\x{:02X}", c);
+    if (out.size() > 60) return out + "...";
+  }
   return out;
 }
 }  // namespace
@@ -124,7 +179,8 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
     ++lineno;
     if (!line.empty() && line.back() == '\r') line.pop_back();
     if (trim(line).empty() || line[0] == '#') continue;
-    auto cells = split(line, d);
+    std::vector<std::size_t> starts;
+    auto cells = split(line, d, &starts);
     if (cells.size() != nc)
       throw Error(fmt::format("{}:{}: expected {} values (as in the header), found {}", source,
                               lineno, nc, cells.size()));
@@ -134,9 +190,18 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
       const std::string& s = cells[c];
       char* end = nullptr;
       double v = s.empty() ? std::nan("") : std::strtod(s.c_str(), &end);
-      if (!s.empty() && (end == s.c_str() || *end != '\0'))
-        throw Error(fmt::format("{}:{}: column '{}': '{}' is not a number", source, lineno,
-                                t.columns[c], s));
+      // The whole cell must be the number: a NUL or any other byte after it (strtod stops
+      // there; the NUL looked like the end of the text) is an error at its column.
+      const std::size_t used = s.empty() ? 0 : static_cast<std::size_t>(end - s.c_str());
+      if (!s.empty() && (used == 0 || used != s.size())) {
+        const unsigned char b = static_cast<unsigned char>(s[used == 0 ? 0 : used]);
+        throw Error(fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})",
+                                source, lineno, starts[c] + used + 1, t.columns[c], printable(s),
+                                b >= 0x20 && b < 0x7f
+                                    ? fmt::format("unexpected '{}'", static_cast<char>(b))
+                                    : fmt::format("unexpected byte 0x{:02X}", b),
+                                starts[c] + used + 1));
+      }
       if (!std::isfinite(v) && !opt.allow_non_finite) {
         bad = true;
         if (bad_msg.empty())
@@ -164,11 +229,7 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
 }
 
 CsvTable readCsv(const fs::path& path, const CsvReadOptions& opt, int* dropped_rows) {
-  std::ifstream in(path, std::ios::binary);
-  if (!in) throw Error(fmt::format("{}: cannot open ({})", path.string(), std::strerror(errno)));
-  std::stringstream ss;
-  ss << in.rdbuf();
-  return parseCsv(ss.str(), path.string(), opt, dropped_rows);
+  return parseCsv(readInputFile(path, "CSV", kMaxDataFileBytes), path.string(), opt, dropped_rows);
 }
 
 std::string toCsv(const CsvTable& t) {

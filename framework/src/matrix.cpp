@@ -5,22 +5,30 @@
 #include <poll.h>
 #include <signal.h>
 #include <sqlite3.h>
+#include <sys/file.h>
+#include <sys/prctl.h>
+#include <sys/resource.h>
 #include <sys/wait.h>
 #include <unistd.h>
 #include <yaml-cpp/yaml.h>
 
 #include <chrono>
 #include <cmath>
+#include <cstring>
 #include <ctime>
 #include <fstream>
 #include <map>
+#include <memory>
 #include <set>
 #include <sstream>
 
 #include "exid/context.hpp"
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
+#include "exid/io.hpp"
 #include "exid/registry.hpp"
 #include "exid/runner.hpp"
+#include "exid/yaml_strict.hpp"
 
 namespace exid {
 
@@ -70,24 +78,92 @@ std::string isoNow() {
   return buf;
 }
 
-}  // namespace
+MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg);
 
-MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
+// Cells of one matrix at most: the product of the axes is checked before any cell is built.
+constexpr double kMaxMatrixCells = 100000;
+
+// Parses a YAML file read with the input-file checks; duplicate keys are errors.
+YAML::Node loadStrictYaml(const fs::path& file, const std::string& what) {
+  const std::string text = readInputFile(file, what, kMaxStudyFileBytes);
   YAML::Node root;
   try {
-    root = YAML::LoadFile(file.string());
-  } catch (const YAML::BadFile&) {
-    throw Error(fmt::format("{}: cannot open the matrix file", file.string()));
+    root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     throw Error(fmt::format("{}:{}: malformed YAML: {}", file.string(), e.mark.line + 1, e.msg));
   }
+  std::vector<std::string> dups;
+  duplicateKeys(root, file.string(), "", &dups);
+  if (!dups.empty()) {
+    std::string msg = fmt::format("{}: {} problem{} in the {} file:", file.string(), dups.size(),
+                                  dups.size() == 1 ? "" : "s", what);
+    for (std::size_t i = 0; i < dups.size() && i < 20; ++i) msg += "\n  " + dups[i];
+    throw Error(msg);
+  }
+  return root;
+}
+
+std::string keyText(const YAML::Node& key, const fs::path& file) {
+  if (!key.IsScalar())
+    throw Error(
+        fmt::format("{}:{}: a key must be a plain name", file.string(), key.Mark().line + 1));
+  return key.Scalar();
+}
+
+// FNV-1a, 64 bits, as StudyConfig::hash.
+void fnv(std::uint64_t* h, const std::string& text) {
+  for (unsigned char c : text) {
+    *h ^= c;
+    *h *= 1099511628211ull;
+  }
+}
+
+// The cell's key: configuration hash, exid version, and the contents of every file it reads.
+// `contents` caches the hash of each file's contents (cells of a matrix share their files).
+std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, const Registry& reg,
+                    std::map<std::string, std::string>* contents) {
+  std::uint64_t h = 1469598103934665603ull;
+  fnv(&h, config_hash);
+  fnv(&h, std::string("\nexid ") + EXID_VERSION_STRING);
+  for (const auto& f : studyInputFiles(cfg, reg)) {
+    fnv(&h, "\n" + f.string() + "\n");
+    auto it = contents->find(f.string());
+    if (it == contents->end()) {
+      std::uint64_t c = 1469598103934665603ull;
+      try {
+        fnv(&c, readInputFile(f, "input", kMaxDataFileBytes));
+      } catch (const Error&) {
+        fnv(&c, "(unreadable)");  // the cell will fail and say why
+      }
+      it = contents->emplace(f.string(), fmt::format("{:016x}", c)).first;
+    }
+    fnv(&h, it->second);
+  }
+  return fmt::format("{:016x}", h);
+}
+
+}  // namespace
+
+MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
+  try {
+    return loadMatrixUnchecked(file, reg);
+  } catch (const YAML::Exception& e) {  // a conversion not checked: still the input's fault
+    throw Error(e.mark.line >= 0 ? fmt::format("{}:{}: {}", file.string(), e.mark.line + 1, e.msg)
+                                 : fmt::format("{}: {}", file.string(), e.msg));
+  }
+}
+
+namespace {
+
+MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
+  YAML::Node root = loadStrictYaml(file, "matrix");
   if (!root.IsMap())
     throw Error(
         fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
-  const std::vector<std::string> allowed = {"name",  "base",          "study",      "axes",
-                                            "cells", "cell_budget_s", "description"};
+  const std::vector<std::string> allowed = {
+      "name", "base", "study", "axes", "cells", "cell_budget_s", "cell_memory_mb", "description"};
   for (const auto& kv : root) {
-    const std::string key = kv.first.as<std::string>();
+    const std::string key = keyText(kv.first, file);
     if (std::find(allowed.begin(), allowed.end(), key) == allowed.end()) {
       std::string close = closestMatch(key, allowed);
       throw Error(fmt::format("{}:{}: unknown key '{}'; allowed: {}{}", file.string(),
@@ -98,13 +174,34 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
   MatrixSpec spec;
   spec.file = fs::absolute(file);
   spec.name = root["name"] ? root["name"].as<std::string>() : file.stem().string();
-  if (root["cell_budget_s"]) {
-    try {
-      spec.cell_budget_s = root["cell_budget_s"].as<double>();
-    } catch (...) {
-      throw Error(fmt::format("{}: cell_budget_s: expected a number", file.string()));
+  if (spec.name.empty()) spec.name = file.stem().string();
+  if (const std::string why = studyNameProblem(spec.name); !why.empty())
+    throw Error(fmt::format("{}{}: name = '{}': {}", file.string(),
+                            root["name"] ? ":" + std::to_string(root["name"].Mark().line + 1) : "",
+                            spec.name, why));
+  // A number in [0, max]; 0 means none.
+  auto limit = [&](const char* key, double max, const char* unit) {
+    YAML::Node v = root[key];
+    if (!v) return 0.0;
+    double x = NAN;
+    if (v.IsScalar()) {
+      try {
+        std::size_t pos = 0;
+        x = std::stod(v.Scalar(), &pos);
+        if (pos != v.Scalar().size()) x = NAN;
+      } catch (...) {
+        x = NAN;
+      }
     }
-  }
+    if (!(x >= 0 && x <= max))
+      throw Error(fmt::format("{}:{}: {} = {}: must be a number in [0, {:g}] {} (0: none)",
+                              file.string(), v.Mark().line + 1, key,
+                              v.IsScalar() ? v.Scalar() : std::string("(not a number)"), max,
+                              unit));
+    return x;
+  };
+  spec.cell_budget_s = limit("cell_budget_s", 1e7, "s");
+  spec.cell_memory_mb = limit("cell_memory_mb", 1e8, "MB");
   YAML::Node base;
   fs::path base_dir = spec.file.parent_path();
   std::string base_name;
@@ -115,9 +212,9 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
     fs::path bp = root["base"].as<std::string>();
     if (bp.is_relative()) bp = base_dir / bp;
     try {
-      base = YAML::LoadFile(bp.string());
-    } catch (const YAML::Exception& e) {
-      throw Error(fmt::format("{}: base study {}: {}", file.string(), bp.string(), e.what()));
+      base = loadStrictYaml(bp, "base study");
+    } catch (const Error& e) {
+      throw Error(fmt::format("{}: base study: {}", file.string(), e.what()));
     }
     base_dir = fs::absolute(bp).parent_path();
     base_name = bp.string();
@@ -138,9 +235,19 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
     if (!axes.IsMap() || axes.size() == 0)
       throw Error(
           fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
+    double product = 1;
+    for (const auto& kv : axes) {
+      product *= kv.second.IsSequence() ? static_cast<double>(kv.second.size()) : 1.0;
+      if (product > kMaxMatrixCells)
+        throw Error(
+            fmt::format("{}:{}: axes: the product of the axes has more than {:g} cells "
+                        "(at axis '{}'); split the matrix",
+                        file.string(), kv.first.Mark().line + 1, kMaxMatrixCells,
+                        kv.first.IsScalar() ? kv.first.Scalar() : "?"));
+    }
     overrides.push_back(YAML::Node(YAML::NodeType::Map));
     for (const auto& kv : axes) {
-      const std::string axis = kv.first.as<std::string>();
+      const std::string axis = keyText(kv.first, file);
       if (!kv.second.IsSequence() || kv.second.size() == 0)
         throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values",
                                 file.string(), kv.second.Mark().line + 1, axis));
@@ -157,12 +264,15 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
   } else if (root["cells"]) {
     if (!root["cells"].IsSequence())
       throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
+    if (static_cast<double>(root["cells"].size()) > kMaxMatrixCells)
+      throw Error(fmt::format("{}: cells: {} cells, more than {:g}; split the matrix",
+                              file.string(), root["cells"].size(), kMaxMatrixCells));
     for (const auto& c : root["cells"]) {
       if (!c.IsMap())
         throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(),
                                 c.Mark().line + 1));
       for (const auto& kv : c) {
-        const std::string axis = kv.first.as<std::string>();
+        const std::string axis = keyText(kv.first, file);
         if (std::find(spec.axes.begin(), spec.axes.end(), axis) == spec.axes.end())
           spec.axes.push_back(axis);
       }
@@ -174,6 +284,7 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
 
   std::vector<std::string> problems;
   std::set<std::string> hashes;
+  std::map<std::string, std::string> file_hashes;
   for (std::size_t i = 0; i < overrides.size(); ++i) {
     MatrixCell cell;
     cell.index = static_cast<int>(i);
@@ -213,8 +324,9 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
     try {
       cell.config = parseStudy(
           cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
-      cell.hash = cell.config.hash();
-      if (!hashes.insert(cell.hash).second)
+      cell.config_hash = cell.config.hash();
+      cell.hash = cellKey(cell.config, cell.config_hash, reg, &file_hashes);
+      if (!hashes.insert(cell.config_hash).second)
         problems.push_back(
             fmt::format("cell {} ({}): same configuration as an earlier cell", i, cell.label));
     } catch (const Error& err) {
@@ -230,6 +342,8 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
   }
   return spec;
 }
+
+}  // namespace
 
 // ------------------------------------------------------------------ database
 
@@ -436,11 +550,53 @@ void recordRun(Db& db, const MatrixSpec& spec, const MatrixCell& cell, const std
       }
     }
     db.exec("COMMIT");
-  } catch (...) {
-    db.exec("ROLLBACK");
-    throw;
+  } catch (const std::exception& e) {
+    // The cause (e.g. "database or disk is full") is what matters; a failed ROLLBACK (SQLite
+    // may have rolled back itself) must not replace it. The cell is not recorded: it runs again
+    // on resume.
+    sqlite3_exec(db.raw(), "ROLLBACK", nullptr, nullptr, nullptr);
+    throw Error(fmt::format("recording cell {} ({}): {}", cell.index, cell.label, e.what()));
   }
 }
+
+/// The output folder belongs to one writer: an exclusive flock on DIR/.lock (released by the
+/// kernel when the process ends), holding "pid host" for the message of a second writer.
+class FolderLock {
+ public:
+  FolderLock(const fs::path& dir, const std::string& name) {
+    const fs::path file = dir / name;
+    fd_ = ::open(file.c_str(), O_RDWR | O_CREAT | O_CLOEXEC, 0644);
+    if (fd_ < 0)
+      throw Error(
+          fmt::format("{}: cannot create the lock file: {}", file.string(), std::strerror(errno)));
+    if (::flock(fd_, LOCK_EX | LOCK_NB) != 0) {
+      char buf[256] = {0};
+      const ssize_t n = ::pread(fd_, buf, sizeof buf - 1, 0);
+      std::string who = n > 0 ? std::string(buf, static_cast<std::size_t>(n)) : "unknown";
+      while (!who.empty() && (who.back() == '\n' || who.back() == ' ')) who.pop_back();
+      ::close(fd_);
+      throw Error(fmt::format(
+          "{}: the matrix folder is in use by another exid (pid {}); wait for it to finish or "
+          "use another --out",
+          dir.string(), who));
+    }
+    char host[256] = {0};
+    ::gethostname(host, sizeof host - 1);
+    const std::string me = fmt::format("{} on host {}\n", ::getpid(), host);
+    if (::ftruncate(fd_, 0) == 0) {
+      const ssize_t w = ::pwrite(fd_, me.data(), me.size(), 0);
+      (void)w;
+    }
+  }
+  ~FolderLock() {
+    if (fd_ >= 0) ::close(fd_);
+  }
+  FolderLock(const FolderLock&) = delete;
+  FolderLock& operator=(const FolderLock&) = delete;
+
+ private:
+  int fd_ = -1;
+};
 
 struct Child {
   pid_t pid = -1;
@@ -458,7 +614,15 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
   const auto t0 = std::chrono::steady_clock::now();
   check(opt.shard_count >= 1 && opt.shard_index >= 0 && opt.shard_index < opt.shard_count,
         fmt::format("--shard {}/{}: expected 0 <= i < N", opt.shard_index, opt.shard_count));
+  check(opt.jobs >= 1 && opt.jobs <= 1024,
+        fmt::format("-j {}: expected 1 to 1024 cells at a time", opt.jobs));
   fs::create_directories(opt.out_dir);
+  // Before anything in the folder is touched. MPI ranks share the folder, one database each:
+  // each locks its own.
+  FolderLock lock(opt.out_dir,
+                  opt.database == "results.sqlite" ? ".lock" : "." + opt.database + ".lock");
+  cleanStaleTemporaries(opt.out_dir);
+  cleanStaleTemporaries(opt.out_dir / "cells");
   Db db(opt.out_dir / opt.database);
   {
     Db::Stmt(&db, "INSERT INTO matrices(name, file, started, exid_version, axes) VALUES(?,?,?,?,?)")
@@ -480,7 +644,9 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
     if (c.index % opt.shard_count != opt.shard_index) continue;
     ++sum.total;
     auto it = done.find(c.hash);
-    if (it != done.end() && (it->second == "ok" || !opt.retry_failed)) {
+    // "incomplete": stopped by the machine (disk full), never a result: always run again.
+    if (!opt.force && it != done.end() && it->second != "incomplete" &&
+        (it->second == "ok" || !opt.retry_failed)) {
       ++sum.skipped;
       continue;
     }
@@ -513,6 +679,15 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
         msg = summary.find("message") ? summary.find("message")->asString() : "";
         const Json* to = summary.find("timed_out");
         if (st != "ok" && to && to->asBool()) st = "timeout";
+        const Json* full = summary.find("out_of_space");
+        if (st != "ok" && full && full->asBool()) {
+          st = "incomplete";  // run again on resume
+          msg = "no space left on device (or over the file size limit): " + msg;
+        }
+        const Json* oom = summary.find("out_of_memory");
+        if (st != "ok" && oom && oom->asBool() && spec.cell_memory_mb > 0)
+          msg += fmt::format(" (over the cell memory cap cell_memory_mb = {} MB)",
+                             spec.cell_memory_mb);
       } catch (const std::exception& e) {
         st = "failed";
         msg = fmt::format("the cell's process gave no summary (exit {}): {}",
@@ -520,6 +695,7 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
       }
     }
     recordRun(db, spec, *ch.cell, st, msg, wall, ch.started, summary);
+    if (st == "incomplete") ++sum.incomplete;
     if (st == "ok")
       ++sum.ok;
     else if (st == "timeout")
@@ -542,10 +718,31 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
       ch.start = std::chrono::steady_clock::now();
       ch.started = isoNow();
       std::fflush(nullptr);
+      const pid_t parent = ::getpid();
       pid_t pid = ::fork();
       if (pid < 0) throw Error("matrix: fork failed");
       if (pid == 0) {
         ::close(fds[0]);
+        // The cell dies with its parent (no orphans when the parent is killed, even by SIGKILL);
+        // the parent may have died before the request took effect.
+        ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+        if (::getppid() != parent) ::_exit(1);
+        if (spec.cell_memory_mb > 0) {
+          // The cap is on what the cell adds to the address space it inherits (the program,
+          // its libraries and plugins are already mapped when it is forked).
+          double inherited = 0;
+          if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+            unsigned long pages = 0;
+            if (std::fscanf(f, "%lu", &pages) == 1)
+              inherited = static_cast<double>(pages) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+            std::fclose(f);
+          }
+          const rlim_t bytes = static_cast<rlim_t>(inherited + spec.cell_memory_mb * 1048576.0);
+          struct rlimit rl {
+            bytes, bytes
+          };
+          ::setrlimit(RLIMIT_AS, &rl);
+        }
         ::signal(SIGINT, SIG_IGN);  // the parent decides
         ::signal(SIGTERM, SIG_DFL);
         setLogLevel(LogLevel::Quiet);
@@ -556,12 +753,14 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
           cfg.report.plots = false;  // a cell's plots would dominate the matrix's overhead
           RunOptions ro;
           if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
+          ro.clean_stale = false;  // done once for all cells (a scan of cells/ per cell is O(n^2))
           StudyResult r = runStudy(cfg, reg, ro);
           text = r.summary.dump(-1);
         } catch (const std::exception& e) {
           Json j = Json::object();
           j["status"] = "failed";
           j["message"] = e.what();
+          if (dynamic_cast<const std::bad_alloc*>(&e)) j["out_of_memory"] = true;
           text = j.dump(-1);
         }
         std::size_t off = 0;
@@ -620,7 +819,17 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
             break;
         }
         ::close(ch.fd);
-        finish(ch, status);
+        try {
+          finish(ch, status);
+        } catch (...) {  // e.g. the database cannot be written: stop, leave no cell running
+          for (auto& other : running)
+            if (other.pid != ch.pid) {
+              ::kill(other.pid, SIGKILL);
+              ::waitpid(other.pid, nullptr, 0);
+              ::close(other.fd);
+            }
+          throw;
+        }
         running.erase(running.begin() + static_cast<std::ptrdiff_t>(i));
         continue;
       }
@@ -761,84 +970,95 @@ MatrixTable matrixTable(const fs::path& path, const std::vector<std::string>& ro
 }
 
 int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sources) {
+  // Atomic: every source is opened and read before anything is written, and the whole merge
+  // is one transaction (a failure part-way leaves dest exactly as it was).
+  std::vector<std::unique_ptr<Db>> ins;
+  for (const auto& src : sources) {
+    checkInputFile(src, "matrix database", std::uintmax_t{1} << 40);
+    auto in = std::make_unique<Db>(src);
+    Db::Stmt probe(in.get(), "SELECT count(*) FROM runs");
+    probe.step();
+    ins.push_back(std::move(in));
+  }
   if (dest.has_parent_path()) fs::create_directories(dest.parent_path());
   Db db(dest);
   int copied = 0;
-  for (const auto& src : sources) {
-    check(fs::exists(src), fmt::format("{}: no such database", src.string()));
-    Db in(src);
-    Db::Stmt runs(&in,
-                  "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, "
-                  "finished, summary FROM runs");
-    while (runs.step()) {
-      const std::string hash = runs.text(3);
-      {
-        Db::Stmt exists(&db, "SELECT 1 FROM runs WHERE hash = ?");
-        exists.bind(1, hash);
-        if (exists.step()) continue;
-      }
-      db.exec("BEGIN IMMEDIATE");
-      try {
-        Db::Stmt(&db,
-                 "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
-                 "finished, summary) "
-                 "VALUES(?,?,?,?,?,?,?,?,?,?)")
-            .bind(1, runs.text(1))
-            .bind(2, runs.integer(2))
-            .bind(3, hash)
-            .bind(4, runs.text(4))
-            .bind(5, runs.text(5))
-            .bind(6, runs.text(6))
-            .bind(7, runs.real(7))
-            .bind(8, runs.text(8))
-            .bind(9, runs.text(9))
-            .bind(10, runs.text(10))
-            .step();
-        const long long id = db.lastId();
-        const long long old = runs.integer(0);
-        Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
-        ax.bind(1, old);
-        while (ax.step())
-          Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)")
-              .bind(1, id)
-              .bind(2, ax.text(0))
-              .bind(3, ax.text(1))
-              .step();
-        Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
-        mt.bind(1, old);
-        while (mt.step()) {
-          Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
-          ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
-          if (std::isfinite(mt.real(2)))
-            ins.bind(4, mt.real(2));
-          else
-            ins.bindNull(4);
-          ins.bind(5, mt.text(3)).step();
+  db.exec("BEGIN IMMEDIATE");
+  try {
+    for (auto& inp : ins) {
+      Db& in = *inp;
+      Db::Stmt runs(&in,
+                    "SELECT id, matrix, cell, hash, label, status, message, wall_s, started, "
+                    "finished, summary FROM runs");
+      while (runs.step()) {
+        const std::string hash = runs.text(3);
+        {
+          Db::Stmt exists(&db, "SELECT 1 FROM runs WHERE hash = ?");
+          exists.bind(1, hash);
+          if (exists.step()) continue;
         }
-        Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
-        pr.bind(1, old);
-        while (pr.step())
-          Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)")
-              .bind(1, id)
-              .bind(2, pr.text(0))
-              .bind(3, pr.real(1))
-              .bind(4, pr.real(2))
+        {
+          Db::Stmt(&db,
+                   "INSERT INTO runs(matrix, cell, hash, label, status, message, wall_s, started, "
+                   "finished, summary) "
+                   "VALUES(?,?,?,?,?,?,?,?,?,?)")
+              .bind(1, runs.text(1))
+              .bind(2, runs.integer(2))
+              .bind(3, hash)
+              .bind(4, runs.text(4))
+              .bind(5, runs.text(5))
+              .bind(6, runs.text(6))
+              .bind(7, runs.real(7))
+              .bind(8, runs.text(8))
+              .bind(9, runs.text(9))
+              .bind(10, runs.text(10))
               .step();
-        Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
-        cf.bind(1, hash);
-        if (cf.step())
-          Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)")
-              .bind(1, hash)
-              .bind(2, cf.text(0))
-              .bind(3, cf.text(1))
-              .step();
-        db.exec("COMMIT");
-        ++copied;
-      } catch (...) {
-        db.exec("ROLLBACK");
-        throw;
+          const long long id = db.lastId();
+          const long long old = runs.integer(0);
+          Db::Stmt ax(&in, "SELECT axis, value FROM axes WHERE run_id = ?");
+          ax.bind(1, old);
+          while (ax.step())
+            Db::Stmt(&db, "INSERT INTO axes VALUES(?,?,?)")
+                .bind(1, id)
+                .bind(2, ax.text(0))
+                .bind(3, ax.text(1))
+                .step();
+          Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
+          mt.bind(1, old);
+          while (mt.step()) {
+            Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
+            ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
+            if (std::isfinite(mt.real(2)))
+              ins.bind(4, mt.real(2));
+            else
+              ins.bindNull(4);
+            ins.bind(5, mt.text(3)).step();
+          }
+          Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
+          pr.bind(1, old);
+          while (pr.step())
+            Db::Stmt(&db, "INSERT INTO progress VALUES(?,?,?,?)")
+                .bind(1, id)
+                .bind(2, pr.text(0))
+                .bind(3, pr.real(1))
+                .bind(4, pr.real(2))
+                .step();
+          Db::Stmt cf(&in, "SELECT yaml, json FROM configs WHERE hash = ?");
+          cf.bind(1, hash);
+          if (cf.step())
+            Db::Stmt(&db, "INSERT OR IGNORE INTO configs VALUES(?,?,?)")
+                .bind(1, hash)
+                .bind(2, cf.text(0))
+                .bind(3, cf.text(1))
+                .step();
+          ++copied;
+        }
       }
     }
+    db.exec("COMMIT");
+  } catch (const std::exception& e) {
+    sqlite3_exec(db.raw(), "ROLLBACK", nullptr, nullptr, nullptr);
+    throw Error(fmt::format("{}: merge failed, nothing was merged: {}", dest.string(), e.what()));
   }
   return copied;
 }

@@ -96,9 +96,9 @@ std::string ParamDecl::violation(const ParamValue& v) const {
     return r.empty() ? std::string("must be finite") : "must be in " + r;
   };
   auto sizeMsg = [&](std::size_t n) -> std::string {
-    if (static_cast<int>(n) < min_size)
+    if (min_size > 0 && n < static_cast<std::size_t>(min_size))
       return fmt::format("must have at least {} elements (has {})", min_size, n);
-    if (max_size >= 0 && static_cast<int>(n) > max_size)
+    if (max_size >= 0 && n > static_cast<std::size_t>(max_size))
       return fmt::format("must have at most {} elements (has {})", max_size, n);
     return "";
   };
@@ -156,8 +156,8 @@ ParamDecl param_int(std::string name, std::optional<std::int64_t> def, std::stri
   d.type = ParamType::Int;
   if (def) d.default_value = *def;
   d.doc = std::move(doc);
-  d.min = min;
-  d.max = max;
+  d.min = min ? min : -kMaxIntParam;
+  d.max = max ? max : kMaxIntParam;
   return d;
 }
 ParamDecl param_bool(std::string name, bool def, std::string doc) {
@@ -205,8 +205,8 @@ ParamDecl param_ints(std::string name, std::optional<std::vector<std::int64_t>> 
   d.type = ParamType::IntList;
   if (def) d.default_value = *def;
   d.doc = std::move(doc);
-  d.min = min;
-  d.max = max;
+  d.min = min ? min : -kMaxIntParam;
+  d.max = max ? max : kMaxIntParam;
   return d;
 }
 ParamDecl param_strings(std::string name, std::optional<std::vector<std::string>> def,

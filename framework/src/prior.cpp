@@ -9,6 +9,7 @@
 
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/runner.hpp"
 
@@ -66,11 +67,16 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   }
   // from: study -- parameters.csv of an earlier study (name, value, std by base parameter)
   const auto file = spec.study / "parameters.csv";
-  std::ifstream in(file);
-  check(static_cast<bool>(in),
-        fmt::format("prior (from: study): cannot read {} (the output folder of a study "
-                    "with an estimator)",
-                    file.string()));
+  std::string text;
+  try {
+    text = readInputFile(file, "prior parameters", kMaxDataFileBytes);
+  } catch (const Error& e) {
+    throw Error(
+        fmt::format("prior (from: study): {} (the output folder of a study with an "
+                    "estimator)",
+                    e.what()));
+  }
+  std::istringstream in(text);
   std::string line;
   check(static_cast<bool>(std::getline(in, line)), fmt::format("{}: empty file", file.string()));
   const auto head = splitCsvLine(line);

@@ -1,14 +1,24 @@
 #include "exid/runner.hpp"
 
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <stdio.h>
+#include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
+#include <condition_variable>
+#include <cstdio>
 #include <map>
+#include <mutex>
+#include <optional>
+#include <thread>
 
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
+#include "exid/input_file.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
 #include "exid/report.hpp"
@@ -186,6 +196,207 @@ void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationMo
   }
 }
 
+// Every value finite, else an error naming the stage's quantity, the element and the value.
+void checkFinite(const Eigen::MatrixXd& M, const std::string& what,
+                 const std::vector<std::string>& names = {}) {
+  for (Eigen::Index j = 0; j < M.cols(); ++j)
+    for (Eigen::Index i = 0; i < M.rows(); ++i)
+      if (!std::isfinite(M(i, j))) {
+        std::string where = M.cols() == 1
+                                ? (static_cast<std::size_t>(i) < names.size()
+                                       ? fmt::format("'{}'", names[static_cast<std::size_t>(i)])
+                                       : fmt::format("element {}", i + 1))
+                                : fmt::format("row {}, column {}", i + 1, j + 1);
+        throw Error(fmt::format("{}: {} is {} (a non-finite result is an error, never a result)",
+                                what, where, M(i, j)));
+      }
+}
+
+void checkDatasetFinite(const Dataset& d, const std::string& what) {
+  const std::pair<const char*, const Eigen::MatrixXd*> sig[] = {
+      {"q", &d.q}, {"qd", &d.qd}, {"qdd", &d.qdd}, {"tau", &d.tau}, {"wrench", &d.wrench}};
+  checkFinite(d.t, fmt::format("{} ({}): t", what, d.source));
+  for (const auto& [name, M] : sig)
+    if (M->size() > 0) checkFinite(*M, fmt::format("{} ({}): {}", what, d.source, name));
+}
+
+// ---------------------------------------------------------------- the run folder as a unit
+// A run writes into a fresh staging folder beside the output folder (.NAME.staging.PID, same
+// file system) and publishes it at the end in one rename (renameat2 RENAME_EXCHANGE when the
+// output folder exists). A failed or cancelled run beside an earlier successful one leaves that
+// one untouched and is published as NAME.failed; a successful run removes NAME.failed.
+struct RunFolder {
+  fs::path final_dir, parent, staging, failed_dir;
+};
+
+bool isRunFolder(const fs::path& dir) {
+  std::error_code ec;
+  return fs::exists(dir / "summary.json", ec) || fs::exists(dir / "study.resolved.yaml", ec);
+}
+
+bool holdsOkRun(const fs::path& dir) {
+  try {
+    const std::string text = readInputFile(dir / "summary.json", "summary", 64u << 20);
+    const Json S = Json::parse(text);
+    return S.find("status") && S.find("status")->asString() == "ok";
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+RunFolder prepareRunFolder(const fs::path& out, bool clean_stale) {
+  RunFolder f;
+  fs::path d = out.lexically_normal();
+  if (d.has_filename() == false && d.has_parent_path()) d = d.parent_path();  // "x/" -> "x"
+  const std::string name = d.filename().string();
+  check(!name.empty() && name != "." && name != "..",
+        fmt::format("--out {}: name an output folder (not '.', '..' or a root)", out.string()));
+  f.final_dir = d;
+  f.parent = d.has_parent_path() ? d.parent_path() : fs::path(".");
+  f.failed_dir = f.parent / (name + ".failed");
+  std::error_code ec;
+  if (fs::exists(d, ec)) {
+    check(fs::is_directory(d, ec),
+          fmt::format("{}: exists and is not a folder; choose another output folder", d.string()));
+    check(fs::is_empty(d, ec) || isRunFolder(d),
+          fmt::format("{}: exists and does not hold an exid run (no summary.json or "
+                      "study.resolved.yaml); refusing to replace it: choose another output folder",
+                      d.string()));
+  }
+  fs::create_directories(f.parent);
+  if (clean_stale) {
+    cleanStaleTemporaries(f.parent);
+    cleanStaleTemporaries(d);
+  }
+  f.staging = f.parent / fmt::format(".{}.staging.{}", name, ::getpid());
+  fs::remove_all(f.staging, ec);
+  fs::create_directory(f.staging);
+  return f;
+}
+
+// Moves the staging folder to `to` (which may exist: exchanged atomically, then the old one
+// removed).
+void publish(const fs::path& staging, const fs::path& to) {
+  std::error_code ec;
+  if (!fs::exists(to, ec)) {
+    fs::rename(staging, to);
+    return;
+  }
+  if (::renameat2(AT_FDCWD, staging.c_str(), AT_FDCWD, to.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(staging, ec);  // now the old folder
+    return;
+  }
+  // No RENAME_EXCHANGE on this file system: the old folder moves aside first.
+  const fs::path aside = to.string() + fmt::format(".old.{}", ::getpid());
+  fs::remove_all(aside, ec);
+  fs::rename(to, aside);
+  fs::rename(staging, to);
+  fs::remove_all(aside, ec);
+}
+
+// Ends the process when a cancelled run does not stop by itself in time (RunOptions::
+// hard_stop_s). The main thread holds finishing() while it writes the final summary and
+// publishes; the watchdog takes it before it acts, so only one of them publishes.
+class Watchdog {
+ public:
+  Watchdog(const RunOptions& opt, RunFolder folder, const StudyConfig& cfg,
+           const std::atomic<const char*>& stage, std::chrono::steady_clock::time_point t0)
+      : opt_(opt), folder_(std::move(folder)), stage_(stage), t0_(t0) {
+    if (!(opt.hard_stop_s > 0) || !opt.cancelled) return;
+    study_ = cfg.name;
+    hash_ = cfg.hash();
+    thread_ = std::thread([this] { watch(); });
+  }
+  ~Watchdog() {
+    {
+      std::lock_guard<std::mutex> l(m_);
+      done_ = true;
+    }
+    cv_.notify_all();
+    if (thread_.joinable()) thread_.join();
+  }
+  Watchdog(const Watchdog&) = delete;
+  Watchdog& operator=(const Watchdog&) = delete;
+  std::mutex& finishing() { return finishing_; }
+  void finished() {
+    std::lock_guard<std::mutex> l(m_);
+    done_ = true;
+    cv_.notify_all();
+  }
+
+ private:
+  void watch() {
+    std::unique_lock<std::mutex> l(m_);
+    std::optional<std::chrono::steady_clock::time_point> since;
+    while (!done_) {
+      cv_.wait_for(l, std::chrono::milliseconds(20));
+      if (done_) return;
+      if (!since && opt_.cancelled()) since = std::chrono::steady_clock::now();
+      if (since && seconds(*since) > opt_.hard_stop_s) break;
+    }
+    if (done_) return;
+    l.unlock();
+    std::unique_lock<std::mutex> fin(finishing_, std::try_to_lock);
+    if (!fin.owns_lock()) return;  // the main thread is already writing the final summary
+    hardStop();
+  }
+
+  void hardStop() {
+    const int code = opt_.hard_stop_exit_code ? opt_.hard_stop_exit_code() : 130;
+    const std::string stage = stage_.load();
+    if (!folder_.staging.empty()) {
+      // Move the staging folder away first: a file the stage is writing can no longer be
+      // renamed into place, and its temporary is removed below.
+      std::error_code ec;
+      const fs::path moved =
+          folder_.parent /
+          fmt::format(".{}.cancel.{}", folder_.final_dir.filename().string(), ::getpid());
+      fs::remove_all(moved, ec);
+      fs::rename(folder_.staging, moved, ec);
+      if (!ec) {
+        for (auto it = fs::directory_iterator(moved, ec); !ec && it != fs::directory_iterator();
+             it.increment(ec))
+          if (it->path().filename().string().find(".tmp.") != std::string::npos)
+            fs::remove(it->path(), ec);
+        Json S = Json::object();
+        S["status"] = "cancelled";
+        S["study"] = study_;
+        S["exid_version"] = EXID_VERSION_STRING;
+        S["config_hash"] = hash_;
+        S["failed_stage"] = stage;
+        S["message"] = fmt::format(
+            "stage '{}': stopped: interrupted (the stage had not reached a stop check {} s after "
+            "the request; ended by the watchdog, results of the stage discarded)",
+            stage, opt_.hard_stop_s);
+        S["wall_s"] = seconds(t0_);
+        try {
+          writeFileAtomic(moved / "summary.json", S.dump(2) + "\n");
+          const bool beside = holdsOkRun(folder_.final_dir);
+          publish(moved, beside ? folder_.failed_dir : folder_.final_dir);
+        } catch (const std::exception&) {
+          fs::remove_all(moved, ec);
+        }
+      }
+      std::fprintf(stderr,
+                   "exid: stage '%s' cancelled: stopped by the watchdog %.1f s after the "
+                   "stop request\n",
+                   stage.c_str(), opt_.hard_stop_s);
+    }
+    std::fflush(nullptr);
+    ::_exit(code);
+  }
+
+  const RunOptions& opt_;
+  RunFolder folder_;
+  const std::atomic<const char*>& stage_;
+  std::chrono::steady_clock::time_point t0_;
+  std::string study_, hash_;
+  std::thread thread_;
+  std::mutex m_, finishing_;
+  std::condition_variable cv_;
+  bool done_ = false;
+};
+
 }  // namespace
 
 CsvTable samplesTable(const Samples& s) {
@@ -251,12 +462,32 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     S["warnings"].push_back(Json(text));
   };
   const bool write = !opt.out_dir.empty();
-  Report report(cfg, opt.out_dir);
+  RunFolder folder;
+  if (write) {
+    try {
+      folder = prepareRunFolder(opt.out_dir, opt.clean_stale);
+    } catch (const std::exception& e) {  // nothing written, nothing replaced
+      res.ok = false;
+      res.message = fmt::format("stage 'setup': {}", e.what());
+      S["status"] = "failed";
+      S["failed_stage"] = "setup";
+      S["message"] = res.message;
+      return res;
+    }
+  }
+  const fs::path dir = folder.staging;  // where this run writes ("" = nowhere)
+  Report report(cfg, dir);
   std::string stage = "setup";
+  std::atomic<const char*> stage_now{"setup"};  // for the watchdog's thread
+  auto setStage = [&](const char* name) {
+    stage = name;
+    stage_now = name;
+  };
+  Watchdog watchdog(opt, write ? folder : RunFolder{}, cfg, stage_now, t_start);
 
   RunContext ctx;
   ctx.study_dir = cfg.dir;
-  ctx.out_dir = opt.out_dir;
+  ctx.out_dir = dir;
   ctx.seed = cfg.seed;
   ctx.deadline = Deadline(cfg.budget_s);
   ctx.cancelled = opt.cancelled;
@@ -268,11 +499,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
 
   try {
     if (write) {
-      fs::create_directories(opt.out_dir);
-      writeFileAtomic(opt.out_dir / "study.resolved.yaml", cfg.resolvedYaml());
+      writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
     }
     // ---------------------------------------------------------------- robot
-    stage = "robot";
+    setStage("robot");
     auto t0 = std::chrono::steady_clock::now();
     auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
     std::shared_ptr<const RobotModel> robot = robotPlugin->build(ctx);
@@ -290,7 +520,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     std::shared_ptr<ObservationModel> model;
     std::shared_ptr<Trajectory> traj;
     if (!cfg.models.empty()) {
-      stage = "model";
+      setStage("model");
       t0 = std::chrono::steady_clock::now();
       if (cfg.models.size() == 1) {
         model = reg.create<ObservationModel>(cfg.models[0].type, cfg.models[0].params);
@@ -319,6 +549,12 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         }
       }
       model->bind(robot, ctx);
+      checkFinite(model->fullNominal(),
+                  fmt::format("model '{}': the robot's nominal parameter", model->pluginName()),
+                  model->fullNames());
+      checkFinite(model->baseNominal(),
+                  fmt::format("model '{}': the nominal base parameter", model->pluginName()),
+                  model->base().names);
       R["n_parameters"] = model->base().numFull();
       R["n_base_parameters"] = model->numBase();
       Json& Mj = S["model"];
@@ -339,7 +575,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     // ---------------------------------------------------------------- excitation
     std::optional<Samples> reference;
     if (cfg.hasExcitation()) {
-      stage = "excitation";
+      setStage("excitation");
       t0 = std::chrono::steady_clock::now();
       if (!traj) {
         traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
@@ -417,8 +653,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       X["history"]["t_s"] = Json(r.history_t_s);
       X["history"]["value"] = Json(r.history_value);
       if (write) {
-        writeCsvAtomic(opt.out_dir / "trajectory_initial.csv", samplesTable(initial));
-        writeCsvAtomic(opt.out_dir / "trajectory_optimal.csv", samplesTable(best));
+        writeCsvAtomic(dir / "trajectory_initial.csv", samplesTable(initial));
+        writeCsvAtomic(dir / "trajectory_optimal.csv", samplesTable(best));
         CsvTable h;
         h.columns = {"wall_s", "criterion"};
         h.data.resize(static_cast<Eigen::Index>(r.history_value.size()), 2);
@@ -427,7 +663,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
               i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
           h.data(static_cast<Eigen::Index>(i), 1) = r.history_value[i];
         }
-        writeCsvAtomic(opt.out_dir / "criterion_history.csv", h);
+        writeCsvAtomic(dir / "criterion_history.csv", h);
         X["trajectory_csv"] = "trajectory_optimal.csv";
       }
       report.excitation(initial, best, r, *model);
@@ -437,7 +673,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     // ---------------------------------------------------------------- experiment
     std::optional<Dataset> data;
     if (cfg.experiment) {
-      stage = "experiment";
+      setStage("experiment");
       t0 = std::chrono::steady_clock::now();
       auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
       RunContext ectx = ctx;
@@ -448,6 +684,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
                                ->specs()
                                .needs_raw_dataset;
       checkDataset(*data, *robot, model.get(), "experiment", raw);
+      checkDatasetFinite(*data, "experiment");
       Json& E = S["experiment"];
       E["type"] = cfg.experiment->type;
       E["samples"] = data->size();
@@ -457,7 +694,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       if (const Json* w = data->meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
       if (write) {
-        writeCsvAtomic(opt.out_dir / "experiment.csv", datasetTable(*data));
+        writeCsvAtomic(dir / "experiment.csv", datasetTable(*data));
         E["csv"] = "experiment.csv";
       }
     }
@@ -465,7 +702,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     // ---------------------------------------------------------------- estimator
     std::optional<Estimate> est;
     if (cfg.estimator) {
-      stage = "identification";
+      setStage("identification");
       t0 = std::chrono::steady_clock::now();
       auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
       RunContext ictx = ctx;
@@ -480,6 +717,16 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         prior = buildPrior(*cfg.prior, *model);
       }
       est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
+      checkFinite(est->value, fmt::format("estimator '{}': the estimate of", cfg.estimator->type),
+                  est->names);
+      if (est->std.size() > 0)
+        checkFinite(est->std,
+                    fmt::format("estimator '{}': the standard deviation of", cfg.estimator->type),
+                    est->names);
+      check(std::isfinite(est->residual_rms),
+            fmt::format("estimator '{}': the residual RMS is {} (a non-finite result is an "
+                        "error, never a result)",
+                        cfg.estimator->type, est->residual_rms));
       Json& I = S["identification"];
       I["estimator"] = cfg.estimator->type;
       if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
@@ -515,7 +762,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
 
     // ---------------------------------------------------------------- validation
     if (cfg.validation) {
-      stage = "validation";
+      setStage("validation");
       t0 = std::chrono::steady_clock::now();
       auto exp = reg.create<Experiment>(cfg.validation->type, cfg.validation->params);
       RunContext vctx = ctx;
@@ -525,8 +772,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       // measure how the model generalises.
       Dataset vd = exp->run(robot, nullptr, vctx);
       checkDataset(vd, *robot, model.get(), "validation");
+      checkDatasetFinite(vd, "validation");
       Rows rows = model->rows(vd, vctx);
       Eigen::VectorXd pred = rows.W * est->value;
+      checkFinite(pred, "validation: the predicted measurement, row");
       Eigen::VectorXd err = rows.y - pred;
       Json& V = S["validation"];
       V["type"] = cfg.validation->type;
@@ -562,7 +811,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
           t.data(r, 2) = rows.y(r);
           t.data(r, 3) = pred(r);
         }
-        writeCsvAtomic(opt.out_dir / "validation.csv", t);
+        writeCsvAtomic(dir / "validation.csv", t);
       }
       report.validation(rows, pred, V);
     }
@@ -573,27 +822,63 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     res.ok = true;
   } catch (const std::exception& e) {
     res.ok = false;
-    res.message = fmt::format("stage '{}': {}", stage, e.what());
-    S["status"] = "failed";
+    const auto* io = dynamic_cast<const IoError*>(&e);
+    const bool nomem = dynamic_cast<const std::bad_alloc*>(&e) != nullptr;
+    res.message = fmt::format("stage '{}': {}", stage,
+                              nomem ? std::string("out of memory (std::bad_alloc)") : e.what());
+    res.cancelled = opt.cancelled && opt.cancelled();
+    S["status"] = res.cancelled ? "cancelled" : "failed";
     S["failed_stage"] = stage;
     S["message"] = res.message;
+    if (io && io->outOfSpace()) S["out_of_space"] = true;  // the machine's, not the study's
+    if (nomem) S["out_of_memory"] = true;
     if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
   }
   S["wall_s"] = seconds(t_start);
+  const std::lock_guard<std::mutex> finishing(watchdog.finishing());
+  watchdog.finished();
   if (write) {
+    // Published where: a failure beside an earlier successful run goes to NAME.failed.
+    const bool beside = !res.ok && holdsOkRun(folder.final_dir);
+    const fs::path target = beside ? folder.failed_dir : folder.final_dir;
     try {
       if (res.ok) {
         const std::string missing = report.write(S);
-        S["report"] = (opt.out_dir / "report.md").string();
+        S["report"] = (folder.final_dir / "report.md").string();
         if (!missing.empty()) S["report_missing_plots"] = missing;
       }
-      writeFileAtomic(opt.out_dir / "summary.json", S.dump(2) + "\n");
+      if (beside)
+        S["note"] = fmt::format(
+            "this run failed; the results of the earlier successful run in {} are untouched",
+            folder.final_dir.string());
+      writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
+      std::error_code ec;
+      if (res.ok || !beside) fs::remove_all(folder.failed_dir, ec);  // superseded
+      publish(dir, target);
+      res.written_to = target;
     } catch (const std::exception& e) {
       res.ok = false;
+      const auto* io = dynamic_cast<const IoError*>(&e);
+      if (io && io->outOfSpace()) S["out_of_space"] = true;
       res.message +=
           (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
       S["status"] = "failed";
       S["message"] = res.message;
+      // Whatever was written stays in the staging folder's place only if publishing it
+      // worked; the earlier results are never touched. Try to leave the failure visible.
+      std::error_code ec;
+      try {
+        writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
+        const bool besides2 = holdsOkRun(folder.final_dir);
+        const fs::path t2 = besides2 ? folder.failed_dir : folder.final_dir;
+        if (fs::exists(dir, ec)) {
+          if (besides2) fs::remove_all(folder.failed_dir, ec);
+          publish(dir, t2);
+          res.written_to = t2;
+        }
+      } catch (const std::exception&) {
+        fs::remove_all(dir, ec);  // nothing half written is left behind
+      }
     }
   }
   return res;

@@ -115,11 +115,11 @@ class CsvExperiment : public exid::Experiment {
                   "keep one sample in this many after filtering (> 1 needs "
                   "differentiate_cutoff_hz and filter_torque, and the cut-off below the new "
                   "Nyquist frequency)",
-                  1),
+                  1, 1e6),
         param_int("trim_edges", -1,
                   "samples dropped at each end of the segment after filtering; -1: "
                   "ceil(2 fs / cutoff) when filtering, else 0",
-                  -1),
+                  -1, 1e9),
     };
   }
 
@@ -140,12 +140,7 @@ class CsvExperiment : public exid::Experiment {
       if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
       Source src;
       src.file = p.string();
-      std::ifstream in(p, std::ios::binary);
-      exid::check(static_cast<bool>(in),
-                  fmt::format("experiment 'csv': {}: cannot open the file", src.file));
-      std::stringstream ss;
-      ss << in.rdbuf();
-      const std::string text = ss.str();
+      const std::string text = exid::readInputFile(p, "CSV data", exid::kMaxDataFileBytes);
       std::istringstream ls(text);
       std::string line;
       int lineno = 0;
@@ -212,6 +207,12 @@ class CsvExperiment : public exid::Experiment {
                   fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
                               "'{}'), found {}",
                               key, n, robot->name, names.size()));
+      for (std::size_t a = 0; a < names.size(); ++a)
+        for (std::size_t b = 0; b < a; ++b)
+          exid::check(names[a] != names[b],
+                      fmt::format("experiment 'csv': {}: column '{}' is named twice (elements {} "
+                                  "and {}); each joint needs its own column",
+                                  key, names[a], b + 1, a + 1));
       for (const auto& c : names) {
         const int i = sr.T.col(c);
         exid::check(i >= 0,
@@ -589,18 +590,32 @@ class CsvExperiment : public exid::Experiment {
     // more than 10 % of a short recording (the zero-phase filter pads its ends by reflection:
     // what is left of the transient there is small). fs is the median step's rate, rounded to
     // the file's resolution (a 100 Hz log is 100 Hz, not 100.0000001: 2 fs / fc = 100, not 101).
+    // In double: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges, does not fit an
+    // int (it was narrowed, wrapped and indexed before the data).
     const std::int64_t trim_p = P_.getInt("trim_edges");
     const double transient = 2.0 * pp.fs / pp.cutoff_hz;
-    pp.trim_transient = static_cast<int>(std::ceil(transient - 1e-6 * std::max(1.0, transient)));
+    const double transient_c = std::ceil(transient - 1e-6 * std::max(1.0, transient));
     pp.trim_cap = static_cast<int>(std::floor(0.05 * static_cast<double>(K)));
     pp.trim_default = trim_p < 0;
-    pp.trim = trim_p >= 0 ? static_cast<int>(trim_p) : std::min(pp.trim_transient, pp.trim_cap);
+    const double trim = trim_p >= 0 ? static_cast<double>(trim_p)
+                                    : std::min(transient_c, static_cast<double>(pp.trim_cap));
+    pp.trim_transient = transient_c < 1e9 ? static_cast<int>(transient_c) : 1000000000;
     exid::check(
-        K - 2 * pp.trim >= 2,
+        std::isfinite(trim) && static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
-                    "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
-                    file, pp.trim, K));
+                    "segment leaves too few ({}); lower trim_edges or raise "
+                    "differentiate_cutoff_hz = {} Hz",
+                    file, trim, K,
+                    trim_p >= 0 ? "trim_edges" : "trim_edges: -1 trims ceil(2 fs / cutoff)",
+                    pp.cutoff_hz));
+    pp.trim = static_cast<int>(trim);
     pp.samples_before_trim = static_cast<int>(K);
+    for (const Eigen::MatrixXd* M : {&d->q, &d->qd, &d->qdd})
+      exid::check(M->allFinite(),
+                  fmt::format("experiment 'csv': {}: the low-pass filter (differentiate_cutoff_hz "
+                              "= {} Hz, filter_order {}, sample rate {} Hz) gave non-finite "
+                              "values; raise the cut-off",
+                              file, pp.cutoff_hz, pp.order, pp.fs));
     std::vector<Eigen::Index> keep;
     for (Eigen::Index k = pp.trim; k < K - pp.trim; k += pp.decimation) keep.push_back(k);
     auto pick = [&](const Eigen::MatrixXd& M) {

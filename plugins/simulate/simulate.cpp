@@ -149,7 +149,7 @@ class SimulateExperiment : public exid::Experiment {
         param_double("rtol", 1e-8, "", "relative tolerance of the integrator", 0.0, 1.0, true),
         param_double("atol", 1e-10, "", "absolute tolerance of the integrator (rad, rad/s)", 0.0,
                      std::nullopt, true),
-        param_int("max_steps", 100000, "maximum internal steps between two samples", 1),
+        param_int("max_steps", 100000, "maximum internal steps between two samples", 1, 1e9),
         param_string("controller", std::string("computed_torque"),
                      "computed_torque (true model, perfect tracking from a state on the "
                      "reference) or pd_feedforward (feedforward from the description without "
@@ -288,7 +288,16 @@ class SimulateExperiment : public exid::Experiment {
 
     // Sample times.
     const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
-    const int N = static_cast<int>(std::floor(duration / dt + 1e-9)) + 1;
+    // The count is checked in double before it sizes anything (the int overflowed, or a huge
+    // count ended in bad_alloc): at most kMaxValues values per recorded signal.
+    constexpr double kMaxValues = 2e7;
+    const double count = std::floor(duration / dt + 1e-9) + 1.0;
+    exid::check(std::isfinite(count) && count * n <= kMaxValues,
+                fmt::format("experiment 'simulate': duration_s = {} s / sample_period_s = {} s "
+                            "gives {:g} samples x {} joints, more than {:g} values per signal; "
+                            "shorten duration_s or lengthen sample_period_s",
+                            duration, dt, count, n, kMaxValues));
+    const int N = static_cast<int>(count);
     exid::check(N >= 2, fmt::format("experiment 'simulate': duration {} s holds fewer than two "
                                     "samples of {} s",
                                     duration, dt));

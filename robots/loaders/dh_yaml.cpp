@@ -9,6 +9,7 @@
 #include "exid/dh.hpp"
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
+#include "exid/yaml_strict.hpp"
 #include "read_text.hpp"
 
 namespace exid {
@@ -428,6 +429,13 @@ RobotModel loadDhYamlString(const std::string& text, const std::string& source,
     std::string msg = source;
     if (e.mark.line >= 0) msg += ":" + std::to_string(e.mark.line + 1);
     throw Error(msg + ": invalid YAML: " + e.msg);
+  }
+  std::vector<std::string> dups;
+  duplicateKeys(root, source, "", &dups);
+  if (!dups.empty()) {
+    std::string msg = dups[0];
+    for (std::size_t i = 1; i < dups.size() && i < 20; ++i) msg += "\n" + dups[i];
+    throw Error(msg);
   }
   try {
     return parseDh(root, r, options);

@@ -8,19 +8,15 @@
 #include <string>
 
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid::detail {
 
+/// Only a regular file of at most kMaxRobotFileBytes (a FIFO, /dev/zero or a directory is
+/// refused before it is opened for reading).
 inline std::string readTextFile(const std::filesystem::path& file, const char* what) {
-  std::ifstream in(file, std::ios::binary);
-  if (!in) {
-    throw Error(file.string() + ": cannot open the " + what + " file (" +
-                (std::filesystem::exists(file) ? "not readable" : "no such file") + ")");
-  }
-  std::ostringstream ss;
-  ss << in.rdbuf();
-  return ss.str();
+  return readInputFile(file, what, kMaxRobotFileBytes);
 }
 
 /// URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).

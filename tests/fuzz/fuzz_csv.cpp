@@ -1,6 +1,7 @@
 // Fuzz target: the CSV reader (exid::parseCsv, every option) and the `csv` experiment plugin.
 // Input: "<params YAML>\n%%\n<file in.csv>[\n%%\n<torque file tau.csv>]". The files are written
-// to a per-process temporary folder, which is the study folder (`file: in.csv`). Robot: two
+// to a per-process temporary folder, which is the study folder (`file: in.csv`, added to a flow
+// map of parameters that does not name a file). Robot: two
 // revolute joints with a transmission (DH YAML below).
 #include <unistd.h>
 
@@ -59,7 +60,14 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   // 2. the csv experiment.
   const std::size_t a = in.find("\n%%\n");
   if (a == std::string::npos) return 0;
-  const std::string params = in.substr(0, a);
+  std::string params = in.substr(0, a);
+  // `file` is required: without it every seed stopped at parameter resolution and the plugin
+  // (trim_edges, the cut-off, ...) was never reached. A flow map without it gets `file: in.csv`.
+  bool names_file = false;
+  for (std::size_t at = params.find("file:"); at != std::string::npos && !names_file;
+       at = params.find("file:", at + 1))
+    names_file = at == 0 || params[at - 1] == '{' || params[at - 1] == ' ' || params[at - 1] == ',';
+  if (!params.empty() && params[0] == '{' && !names_file) params.insert(1, "file: in.csv, ");
   std::string rest = in.substr(a + 4), tau;
   const std::size_t b = rest.find("\n%%\n");
   if (b != std::string::npos) {

@@ -112,11 +112,13 @@ TEST(Hostile, DiskFullOnOutputIsReportedAndLeavesNoPartialFile) {
 TEST(Hostile, SigtermMidRunStopsCleanlyAndSaysWhy) {
   const fs::path dir = tempDir("sigterm");
   std::ofstream(dir / "study.yaml") << kPlanar
-                                    << "experiment: {type: simulate, params: {duration_s: 100000, "
-                                       "period_s: 100000, sample_period_s: 0.01}}\n";
+                                    << "experiment: {type: simulate, params: {duration_s: 2000, "
+                                       "period_s: 2000, sample_period_s: 0.001}}\n";
   const Child c = start(dir / "study.yaml", dir / "out", dir);
-  // Wait until the run has started (the resolved study is written first), then a little more.
-  for (int i = 0; i < 200 && !fs::exists(dir / "out" / "study.resolved.yaml"); ++i)
+  // Wait until the run has started (the resolved study is written first, into the staging
+  // folder .out.staging.PID), then a little more.
+  const fs::path staged = dir / (".out.staging." + std::to_string(c.pid)) / "study.resolved.yaml";
+  for (int i = 0; i < 200 && !fs::exists(staged); ++i)
     std::this_thread::sleep_for(std::chrono::milliseconds(50));
   std::this_thread::sleep_for(std::chrono::milliseconds(1500));
   ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
@@ -131,7 +133,8 @@ TEST(Hostile, SigtermMidRunStopsCleanlyAndSaysWhy) {
   EXPECT_LT(waited, 30.0) << "the stop request took too long";
   ASSERT_TRUE(fs::exists(dir / "out" / "summary.json")) << log;
   const exid::Json s = exid::Json::parse(slurp(dir / "out" / "summary.json"));
-  EXPECT_EQ(s.find("status")->asString(), "failed");
+  EXPECT_EQ(s.find("status")->asString(), "cancelled");
+  EXPECT_EQ(code, 128 + SIGTERM) << log;
   EXPECT_NE(s.find("message")->asString().find("interrupted"), std::string::npos)
       << s.find("message")->asString();
   EXPECT_TRUE(noTemporaries(dir));

@@ -118,6 +118,22 @@ TEST(DhYamlErrors, DuplicateKey) {
   const std::string m = yamlError(std::string(kGoodHead) + "  - a: 1\n    a: 2\n");
   EXPECT_HAS(m, "bad.yaml:5");
   EXPECT_HAS(m, "duplicate key 'a'");
+  EXPECT_HAS(m, "first at line 4");
+  // At the top level the first used to win silently (issue 16): both lines are named.
+  const std::string t =
+      yamlError(std::string(kGoodHead) + "  - a: 1\ngravity: [0, 0, -9.81]\ngravity: [0, 0, 0]\n");
+  EXPECT_HAS(t, "bad.yaml:6: gravity: duplicate key 'gravity' (first at line 5)");
+}
+
+// A robot file that is not a regular file (FIFO, /dev/zero) is refused before it is opened:
+// the FIFO hung forever, /dev/zero ended in bad_alloc (issue 16).
+TEST(DhYamlErrors, NotARegularFileIsRefusedBeforeOpening) {
+  const std::string z = errorOf([] { exid::loadDhYaml("/dev/zero"); });
+  EXPECT_HAS(z, "/dev/zero: the DH YAML file is a character device, not a regular file");
+  const std::string u = errorOf([] { exid::loadUrdf("/dev/zero"); });
+  EXPECT_HAS(u, "/dev/zero: the URDF file is a character device");
+  const std::string d = errorOf([] { exid::loadUrdf("/"); });
+  EXPECT_HAS(d, "is a directory");
 }
 
 TEST(DhYamlErrors, ConflictingKeys) {

@@ -225,3 +225,44 @@ TEST(StudyConfig, EmptyOptionalPathsSurviveTheResolvedStudy) {
   exid::StudyConfig c = exid::parseStudy(kGood, "s.yaml", "/base", reg());
   EXPECT_EQ(exid::parseStudy(c.resolvedYaml(), "r.yaml", "/base", reg()).hash(), c.hash());
 }
+
+// Duplicate keys: yaml-cpp keeps both and a lookup answers the first, so a second `estimator:`
+// at the end of a study was silently ignored (issue 16). Both lines are named, at any depth.
+TEST(StudyConfig, DuplicateKeysAreRefusedNamingBothLines) {
+  std::string m = problems(std::string(kGood) + "estimator: {type: test_estimator}\n");
+  EXPECT_NE(m.find("study.yaml:11: estimator: duplicate key 'estimator' (first at line 6)"),
+            std::string::npos)
+      << m;
+  m = problems(
+      "robot: {type: test_throws}\nmodel:\n  type: test_model\n  params:\n"
+      "    a: 1\n    a: 2\n");
+  EXPECT_NE(m.find("study.yaml:6: model.params.a: duplicate key 'a' (first at line 5)"),
+            std::string::npos)
+      << m;
+}
+
+// The name becomes out/<name>: `name: "../../x"` wrote outside out/ (issue 16).
+TEST(StudyConfig, TheNameIsAPlainFolderName) {
+  for (const char* name : {"../../x", "a/b", "..", ".", ".x", "a\\\\b"}) {
+    SCOPED_TRACE(name);
+    const std::string m =
+        problems(std::string("name: \"") + name + "\"\nrobot: {type: test_throws}\n");
+    EXPECT_NE(m.find("study.yaml:1: name = "), std::string::npos) << m;
+  }
+  EXPECT_EQ(problems("name: run_1-b.c\nrobot: {type: test_throws}\n"), "");
+}
+
+// A huge list is refused by its length, and the message stays short (a 25-million-element list
+// gave a 75 MB message, issue 16).
+TEST(StudyConfig, HugeListsAreRefusedWithAShortMessage) {
+  std::string list = "[";
+  for (int i = 0; i < 100001; ++i) list += (i ? ",1" : "1");
+  list += "]";
+  const std::string m = problems(
+      "robot: {type: test_throws}\nmodel: {type: test_model}\nexperiment: {type: "
+      "test_experiment, params: {file: a.csv}}\nestimator: {type: test_estimator, params: "
+      "{joints: " +
+      list + "}}\n");
+  EXPECT_NE(m.find("a list of 100001 elements; at most 100000"), std::string::npos) << m;
+  EXPECT_LT(m.size(), 2000u);
+}

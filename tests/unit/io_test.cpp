@@ -90,7 +90,7 @@ TEST(Csv, RoundTripKeepsFullPrecision) {
 
 TEST(Csv, ErrorsNameFileLineAndColumn) {
   std::string msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,abc\n", "run.csv"); });
-  EXPECT_NE(msg.find("run.csv:3: column 'q1': 'abc' is not a number"), std::string::npos) << msg;
+  EXPECT_NE(msg.find("run.csv:3:5: column 'q1': 'abc' is not a number"), std::string::npos) << msg;
   msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,nan\n", "run.csv"); });
   EXPECT_NE(msg.find("run.csv:3: column 'q1': non-finite (nan) value"), std::string::npos) << msg;
   msg = errorOf([] { exid::parseCsv("t,q1\n0,1\n0.1,\n", "run.csv"); });
@@ -152,6 +152,64 @@ TEST(Params, RangeTextAndViolations) {
   EXPECT_NE(msg.find("'absent' is not set"), std::string::npos) << msg;
 }
 
+// A NUL (or any other byte) inside a number: strtod stopped at the NUL, which looked like the
+// end of the text, and the number was silently truncated (issue 16). Now file:line:column.
+TEST(Csv, NulOrStrayByteInsideANumberIsAnErrorWithItsColumn) {
+  std::string text = "t,q1\n0,1.5\n0.1,2";
+  text += std::string("\0", 1) + "5\n";
+  std::string m = errorOf([&] { exid::parseCsv(text, "d.csv"); });
+  EXPECT_NE(m.find("d.csv:3:6: column 'q1': '2\\x005' is not a number (unexpected byte 0x00 at "
+                   "column 6)"),
+            std::string::npos)
+      << m;
+  m = errorOf([&] { exid::parseCsv("t,q1\n0,  1.5x\n", "d.csv"); });
+  EXPECT_NE(m.find("d.csv:2:8: column 'q1'"), std::string::npos) << m;
+  EXPECT_NE(m.find("unexpected 'x'"), std::string::npos) << m;
+  m = errorOf([&] { exid::parseCsv("t,q1\n0,\x01\n", "d.csv"); });
+  EXPECT_NE(m.find("d.csv:2:3: column 'q1'"), std::string::npos) << m;
+  EXPECT_NE(m.find("unexpected byte 0x01"), std::string::npos) << m;
+}
+
+// Integer parameters declared without bounds still have a range that fits an int (samples:
+// 2^63 - 1 was accepted and narrowed to 40, issue 16).
+TEST(Params, IntegersAlwaysHaveARangeThatFitsAnInt) {
+  const auto d = exid::param_int("n", 1, "count", 0.0);
+  EXPECT_EQ(d.rangeText(), "[0, 1000000000]");
+  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{1000000000})), "");
+  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})),
+            "must be in [0, 1000000000]");
+  const auto u = exid::param_int("m", 1, "count");
+  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})),
+            "must be in [-1000000000, 1000000000]");
+  const auto l = exid::param_ints("j", std::nullopt, "joints", 1.0);
+  EXPECT_EQ(l.violation(exid::ParamValue(std::vector<std::int64_t>{1, 4294967297})),
+            "element 1 must be in [1, 1000000000]");
+}
+
+// Input files: only regular files, only up to a cap; a FIFO is refused without blocking.
+TEST(InputFile, NonRegularAndOversizedFilesAreRefused) {
+  const fs::path d = tempDir();
+  const fs::path fifo = d / "pipe.csv";
+  fs::remove(fifo);
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0644), 0);
+  std::string m = errorOf([&] { exid::readCsv(fifo); });
+  EXPECT_NE(m.find("pipe.csv: the CSV file is a FIFO (named pipe), not a regular file"),
+            std::string::npos)
+      << m;
+  m = errorOf([&] { exid::readInputFile("/dev/zero", "robot", 100); });
+  EXPECT_NE(m.find("/dev/zero: the robot file is a character device"), std::string::npos) << m;
+  m = errorOf([&] { exid::readInputFile(d, "study", 100); });
+  EXPECT_NE(m.find("is a directory"), std::string::npos) << m;
+  std::ofstream(d / "big.yaml") << std::string(101, 'x');
+  m = errorOf([&] { exid::readInputFile(d / "big.yaml", "study", 100); });
+  EXPECT_NE(m.find("big.yaml: the study file has 101 bytes, more than the limit of 100 bytes"),
+            std::string::npos)
+      << m;
+  EXPECT_EQ(exid::readInputFile(d / "big.yaml", "study", 101).size(), 101u);
+  fs::remove(fifo);
+  fs::remove(d / "big.yaml");
+}
+
 // Drawing a plot runs gnuplot in a child process; the child must not flush the parent's
 // buffered standard output a second time (it did, once per plot, when stdout was a pipe or a
 // file: every report repeated what the program had printed before it).
@@ -173,7 +231,8 @@ TEST(Plot, GnuplotChildDoesNotRepeatTheParentsBufferedOutput) {
       s.name = "p" + std::to_string(i);
       exid::drawPlot(s, dir);
     }
-    std::exit(0);  // flushes stdout once
+    std::fflush(stdout);  // the buffered line, written once by this process
+    ::_exit(0);           // (no exit handlers of the test program in the child)
   }
   int status = 0;
   ::waitpid(pid, &status, 0);

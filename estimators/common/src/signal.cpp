@@ -93,10 +93,11 @@ Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>
     rmax = std::max(rmax, r);
   }
   const double tau = rmax > 0 && rmax < 1 ? -1.0 / std::log(rmax) : 0.0;
-  const Eigen::Index padlen = std::min<Eigen::Index>(
-      std::max<Eigen::Index>(3 * (2 * static_cast<Eigen::Index>(sos.sections.size()) + 1),
-                             static_cast<Eigen::Index>(std::ceil(10.0 * tau))),
-      n - 1);
+  // In double: a tiny cut-off gives a time constant beyond any integer (the cast wrapped).
+  const Eigen::Index padlen = static_cast<Eigen::Index>(std::min<double>(
+      std::max<double>(3.0 * (2.0 * static_cast<double>(sos.sections.size()) + 1.0),
+                       std::ceil(10.0 * tau)),
+      static_cast<double>(n - 1)));
   Eigen::VectorXd ext(n + 2 * padlen);
   for (Eigen::Index i = 0; i < padlen; ++i) ext(i) = 2.0 * x(0) - x(padlen - i);
   ext.segment(padlen, n) = x;

@@ -87,6 +87,15 @@ struct StudyConfig {
   std::string hash() const;
 };
 
+/// Why a study (or matrix) name cannot be used, "" when it can. The name becomes a folder
+/// (out/<name>, a matrix's cells): a plain file name, so that no output can leave the output
+/// root (no '/', '\\', control bytes, leading '.').
+std::string studyNameProblem(const std::string& name);
+
+/// The files a study reads (path parameters of every section, a prior's parameters.csv), in a
+/// fixed order; the matrix keys its cells by their contents.
+std::vector<std::filesystem::path> studyInputFiles(const StudyConfig& cfg, const Registry& reg);
+
 /// Parses and validates. Throws exid::Error with every problem found, one per line.
 StudyConfig loadStudy(const std::filesystem::path& file, const Registry& registry);
 StudyConfig parseStudy(const std::string& yaml_text, const std::string& source_name,

@@ -2,16 +2,33 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <filesystem>
 #include <string>
 #include <vector>
 
+#include "exid/error.hpp"
+#include "exid/input_file.hpp"
+
 namespace exid {
+
+/// A failed write, with its errno: ENOSPC, EDQUOT and EFBIG (disk or quota full, file size
+/// limit) are conditions of the machine, not of the study (a matrix retries such a cell).
+class IoError : public Error {
+ public:
+  IoError(const std::string& what, int err) : Error(what), errno_value(err) {}
+  int errno_value;
+  bool outOfSpace() const;
+};
 
 /// Writes text to path atomically: path.tmp.<pid> is written and flushed, then renamed over
 /// path. On any failure nothing is left at path (an older file stays as it was) and
 /// exid::Error names the file and the reason (e.g. disk full).
 void writeFileAtomic(const std::filesystem::path& path, const std::string& text);
+
+/// Removes `*.tmp.PID` files and `.*.staging.PID` folders in dir whose process PID is gone (left
+/// by a process killed with SIGKILL). Returns how many were removed; never throws.
+int cleanStaleTemporaries(const std::filesystem::path& dir);
 
 /// A numeric table with named columns.
 struct CsvTable {

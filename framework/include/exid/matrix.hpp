@@ -36,7 +36,11 @@ struct MatrixCell {
   std::vector<std::pair<std::string, std::string>> coords;  // axis -> short value label
   std::string label;                                        // "robot=puma560 estimator=rls"
   std::string yaml;                                         // the cell's study text
-  std::string hash;                                         // of the resolved configuration
+  // Key of the cell's result: the resolved configuration, the contents of every file the study
+  // reads (path parameters, a prior's parameters.csv) and the exid version. A cell whose key
+  // is in the database is finished (skipped on resume).
+  std::string hash;
+  std::string config_hash;  // of the resolved configuration alone (StudyConfig::hash)
   StudyConfig config;
 };
 
@@ -44,6 +48,9 @@ struct MatrixSpec {
   std::string name;
   std::filesystem::path file;
   double cell_budget_s = 0.0;
+  // Address space a cell may add to what it inherits from the matrix process (RLIMIT_AS on the
+  // cell's process); 0 = no cap. A cell over it fails ("out of memory").
+  double cell_memory_mb = 0.0;
   std::vector<std::string> axes;  // axis names in order
   std::vector<MatrixCell> cells;
 };
@@ -57,6 +64,7 @@ struct MatrixOptions {
   int jobs = 1;
   int shard_index = 0, shard_count = 1;  // run cells with index % count == index
   bool retry_failed = false;             // re-run cells whose status is failed/timeout
+  bool force = false;                    // re-run every cell, finished ones included
   bool write_cell_files = true;          // each cell's study outputs under out/cells/<hash>
   std::function<bool()> cancelled;
   std::string database = "results.sqlite";
@@ -64,6 +72,7 @@ struct MatrixOptions {
 
 struct MatrixRunSummary {
   int total = 0, skipped = 0, ok = 0, failed = 0, timeout = 0, not_run = 0;
+  int incomplete = 0;  // of the failed: stopped by the machine (disk full); run again on resume
   double wall_s = 0.0;
 };
 

@@ -45,6 +45,9 @@ ParamDecl param_double(std::string name, std::optional<double> def, std::string 
                        std::string doc, std::optional<double> min = std::nullopt,
                        std::optional<double> max = std::nullopt, bool min_open = false,
                        bool max_open = false);
+/// Integer parameters declared without a bound get [-kMaxIntParam, kMaxIntParam]: every integer
+/// has a range, and every accepted value fits an int (no narrowing conversion can wrap).
+inline constexpr double kMaxIntParam = 1e9;
 ParamDecl param_int(std::string name, std::optional<std::int64_t> def, std::string doc,
                     std::optional<double> min = std::nullopt,
                     std::optional<double> max = std::nullopt);

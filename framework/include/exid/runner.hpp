@@ -23,12 +23,27 @@ struct RunOptions {
   std::filesystem::path out_dir;  // "" = write nothing
   std::function<void(const std::string& stage, double fraction, const std::string& text)> progress;
   std::function<bool()> cancelled;
+  /// > 0 (command-line programs only): once cancelled() turns true, a run that has not ended
+  /// within this many seconds (a long computation without a stop check, e.g. one call into an
+  /// optimiser library) is ended by a watchdog: it records status "cancelled" in summary.json,
+  /// publishes the run folder as for any failed run (partial files of the stage removed) and
+  /// ends the PROCESS with _exit(hard_stop_exit_code()).
+  double hard_stop_s = 0.0;
+  std::function<int()> hard_stop_exit_code;
+  /// Remove the `*.tmp.PID` files and staging folders of dead processes beside out_dir first
+  /// (a matrix does it once for all its cells instead).
+  bool clean_stale = true;
 };
 
 struct StudyResult {
   bool ok = false;
   std::string message;
   Json summary;
+  /// Where the run's files are: out_dir, or (a failed run beside an earlier run's results,
+  /// which it leaves untouched) out_dir + ".failed". Empty when nothing was written.
+  std::filesystem::path written_to;
+  /// The stop was a request (SIGINT/SIGTERM through RunOptions::cancelled): status "cancelled".
+  bool cancelled = false;
 };
 
 /// Never throws for failures inside the study: they come back as ok = false.

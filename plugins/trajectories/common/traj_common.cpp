@@ -19,7 +19,7 @@ std::vector<ParamDecl> commonParams() {
       param_double("sample_period_s", 0.1, "s", "sample period of the design grid", 0.0,
                    std::nullopt, true),
       param_int("samples", 0, "number of samples (0: from the period/duration and sample_period_s)",
-                0.0),
+                0.0, kMaxDesignSamples),
       param_double("position_margin_rad", 0.0, "rad",
                    "margin kept inside the joint position limits", 0.0),
       param_bool("velocity_limits", true, "impose the joint velocity limits at every sample"),
@@ -33,8 +33,8 @@ std::vector<ParamDecl> commonParams() {
       param_double("acceleration_limit_rad_s2", 0.0, "rad/s^2",
                    "own acceleration cap |qdd| <= value (0: none), as velocity_limit_rad_s", 0.0),
       param_ints("joints", std::vector<std::int64_t>{},
-                 "1-based joints that move (empty: all); the others stay at rest_position_rad",
-                 1.0),
+                 "1-based joints that move (empty: all); the others stay at rest_position_rad", 1.0,
+                 10000.0),
       param_doubles("rest_position_rad", std::vector<double>{}, "rad",
                     "positions of the joints that do not move (one value per joint or one for all; "
                     "empty: the centre of their range)"),
@@ -184,9 +184,15 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear) {
   return d;
 }
 
-int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who) {
+int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who,
+                const std::string& t_key) {
   if (o.samples > 0) return o.samples;
+  // The quotient is checked in double before it becomes a count (it overflowed an int).
   const double r = T / o.sample_period;
+  check(std::isfinite(r) && r <= kMaxDesignSamples,
+        fmt::format("{}: {} = {} s / sample_period_s = {} s gives {:g} samples, more than the "
+                    "{:g} allowed; lengthen sample_period_s or shorten {}",
+                    who, t_key, T, o.sample_period, r, kMaxDesignSamples, t_key));
   int K = static_cast<int>(std::lround(r));
   check(K >= 2, fmt::format("{}: {} s at {} s per sample gives fewer than 2 samples", who, T,
                             o.sample_period));

@@ -59,7 +59,10 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
 
 /// Sample count for a window of length T [s]: `samples` if set, else round(T / dt) (+1 when the
 /// end point is included).
-int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who);
+/// Design samples at most (samples, or T / sample_period_s); checked before any allocation.
+inline constexpr double kMaxDesignSamples = 1e6;
+int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who,
+                const std::string& t_key = "duration_s");
 
 /// Trajectory whose signals are a constant plus a basis shared by every moving joint:
 /// q(:, j) = rest_j + Bq z_j, qd(:, j) = Bqd z_j, qdd(:, j) = Bqdd z_j (z_j: m variables per

@@ -58,7 +58,7 @@ class Fourier final : public exid::traj::BasisTrajectory {
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
     const std::string who = "trajectory 'fourier'";
     js_ = exid::traj::resolveJoints(*robot, opt_, who);
-    const int K = exid::traj::sampleCount(opt_, period_, false, who);
+    const int K = exid::traj::sampleCount(opt_, period_, false, who, "period_s");
     const double dt = opt_.samples > 0 ? period_ / K : opt_.sample_period;
     const double w = 2.0 * M_PI / period_;
     Eigen::VectorXd t(K);
