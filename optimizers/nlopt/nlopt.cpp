@@ -378,6 +378,7 @@ class NloptOptimizer final : public exid::Optimizer {
     // when that share is used up. The shares apply alike to an evaluation budget (reproducible
     // on any machine) and to wall or CPU time.
     const double W0 = tr.wallRemaining(), C0 = tr.cpuRemaining();
+    time_cut_ = false;
     const double f_starts = aggregated && final_polish_ > 0 ? 1.0 - final_polish_ : 1.0;
     const long E0 = budget_.max_evaluations;
     const long starts_evals =
@@ -389,9 +390,11 @@ class NloptOptimizer final : public exid::Optimizer {
         break;
       }
       if ((std::isfinite(W0) && tr.elapsed() >= f_starts * W0) ||
-          (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0) ||
-          problem.evaluations() - tr.evaluations0() >= starts_evals)
+          (std::isfinite(C0) && tr.cpuElapsed() >= f_starts * C0)) {
+        time_cut_ = true;  // the remaining starts were skipped for time
         break;
+      }
+      if (problem.evaluations() - tr.evaluations0() >= starts_evals) break;
       Eigen::VectorXd x0 =
           s == 0 ? z0
                  : (random_starts_ ? exid::optim::randomStart(problem, lim, z0, perturb_, rng)
@@ -414,12 +417,14 @@ class NloptOptimizer final : public exid::Optimizer {
                  1.0, eval_end};
       std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations,
                           aggregated ? ks_rho_ : 0.0, objective_);
+      noteTimeCut(r);
       exid::Json run_info = exid::Json::object();
       run_info["start"] = s;
       run_info["result"] = r;
       if (isGlobal(alg_name_) && polish_ && !tr.shouldStop() && tr.hasFeasible()) {
         r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations,
                 aggregated ? ks_rho_ : 0.0, polish_objective_);
+        noteTimeCut(r);
         run_info["polish"] = r;
       }
       run_info["best_so_far"] = tr.bestValue();
@@ -442,14 +447,23 @@ class NloptOptimizer final : public exid::Optimizer {
       run_info["polish_sharper_ks"] =
           runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid, &iterations, nullptr,
                   nullptr, 10.0 * ks_rho_, polish_objective_);
-      if (!tr.shouldStop())
+      noteTimeCut(run_info["polish_sharper_ks"].asString());
+      if (!tr.shouldStop()) {
         run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last,
                                            &iterations, nullptr, nullptr, 0.0, polish_objective_);
+        noteTimeCut(run_info["final_polish"].asString());
+      }
       run_info["best_so_far"] = tr.bestValue();
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
     }
     if (tr.shouldStop()) reason = tr.stopCause();
+    // A run cut by time (NLopt's own time limit, or a start's share of the time) makes the
+    // result depend on the machine even when a later run converged: say so.
+    if (time_cut_ && reason != "cancelled" && reason != "max_time_s" && reason != "max_cpu_s" &&
+        reason != "deadline")
+      reason = budget_.max_cpu_s > 0 ? "max_cpu_s" : budget_.max_time_s > 0 ? "max_time_s"
+                                                                              : "deadline";
     auto res = tr.finish(J0, iterations, reason);
     res.details["algorithm"] = alg_name_;
     res.details["constraint_mode"] = cmode_;
@@ -627,6 +641,13 @@ class NloptOptimizer final : public exid::Optimizer {
     return r;
   }
 
+  void noteTimeCut(const std::string& r) {
+    for (const char* t : {"MAXTIME_REACHED", "run time share used", "max_time_s", "max_cpu_s",
+                          "deadline"})
+      if (r.rfind(t, 0) == 0) time_cut_ = true;
+  }
+
+  bool time_cut_ = false;
   exid::optim::Budget budget_;
   std::string alg_name_, local_name_;
   nlopt::algorithm alg_, local_;

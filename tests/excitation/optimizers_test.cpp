@@ -384,7 +384,9 @@ TEST(Optimizers, RespectTheTimeBudgetAndCancellation) {
   auto r = opt->minimize(*s.problem, ctx);
   const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   EXPECT_LT(wall, 10.0);  // it stops (0.3 s and the last evaluation; generous for a loaded machine)
-  EXPECT_EQ(r.stop_reason, "max_time_s");  // and says why: a time budget is not reproducible
+  // and says why, also when the polish after the time-cut global run converged: a time budget
+  // is not reproducible
+  EXPECT_EQ(r.stop_reason, "max_time_s") << r.details.dump(0);
   EXPECT_LE(r.max_violation, 1e-9);
   int calls = 0;
   ctx.cancelled = [&] { return ++calls > 5; };
