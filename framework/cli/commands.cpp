@@ -72,10 +72,13 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
     }
     j["base_parameters"] = bp;
     j["tolerance"] = b.tolerance;
+    j["notes"] = Json(r->notes);
+    j["warnings"] = Json(r->warnings);
     std::cout << j.dump(2) << '\n';
     return 0;
   }
   std::cout << fmt::format("robot {} ({} joints) from {}\n", r->name, r->dof(), r->source);
+  for (const auto& note : r->notes) std::cout << "  note: " << note << "\n";
   for (int i = 0; i < r->dof(); ++i) {
     const Body& body = r->bodies[static_cast<std::size_t>(i)];
     const JointLimits& L = r->limits[static_cast<std::size_t>(i)];

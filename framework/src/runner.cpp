@@ -691,6 +691,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       E["duration_s"] = data->t(data->size() - 1) - data->t(0);
       E["wall_s"] = seconds(t0);
       E["meta"] = data->meta;
+      if (const Json* w = data->meta.find("warnings"); w && w->isArray())
+        for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
       if (write) {
         writeCsvAtomic(dir / "experiment.csv", datasetTable(*data));
         E["csv"] = "experiment.csv";
@@ -765,7 +767,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       auto exp = reg.create<Experiment>(cfg.validation->type, cfg.validation->params);
       RunContext vctx = ctx;
       vctx.seed = ctx.seed + 1000003;  // independent noise
-      Dataset vd = exp->run(robot, reference ? &*reference : nullptr, vctx);
+      // The validation experiment runs its own trajectory (its own period, harmonics, seed):
+      // validating on the identification trajectory (the excitation's optimum) would not
+      // measure how the model generalises.
+      Dataset vd = exp->run(robot, nullptr, vctx);
       checkDataset(vd, *robot, model.get(), "validation");
       checkDatasetFinite(vd, "validation");
       Rows rows = model->rows(vd, vctx);
@@ -775,6 +780,9 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       Json& V = S["validation"];
       V["type"] = cfg.validation->type;
       V["samples"] = vd.size();
+      V["meta"] = vd.meta;
+      if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
+        for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
       V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
       std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0),
           cnt(rms.size(), 0.0), ref(rms.size(), 0.0);

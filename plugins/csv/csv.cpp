@@ -52,9 +52,28 @@ class CsvExperiment : public exid::Experiment {
         param_bool("drop_bad_rows", false,
                    "drop rows with missing or non-finite values in the columns used (counted in "
                    "meta); false: such a row is an error naming its line and column"),
-        param_double("sample_period_s", 0.01, "s",
-                     "sampling period, used only when the file has no t column (t = row * period)",
-                     0.0, std::nullopt, true),
+        param_double("sample_period_s", 0.0, "s",
+                     "sampling period of a file without a time column (t = row * period); 0: "
+                     "not given (a file without a time column is then an error: exid does not "
+                     "guess a rate)",
+                     0.0),
+        param_string("time_column", std::string("t"),
+                     "name of the time column; absent from the file: sample_period_s is needed"),
+        param_string("time_unit", std::string("s"), "unit of the time column",
+                     {"s", "ms", "us", "ns"}),
+        param_doubles("q_scale", std::vector<double>{}, "",
+                      "per joint, multiplies the q column (after which sign and offset_rad "
+                      "apply), e.g. 0.0174533 for degrees; empty: 1"),
+        param_doubles("qd_scale", std::vector<double>{}, "",
+                      "per joint, multiplies the qd and qdd columns; empty: as q_scale"),
+        param_doubles("tau_scale", std::vector<double>{}, "",
+                      "per joint, multiplies the torque column alone (after torque constants), "
+                      "e.g. -1 for a torque recorded with the opposite sign to the joint; "
+                      "empty: 1"),
+        param_double("max_gap_ratio", 1.5, "",
+                     "a time step longer than this times the median step (a gap), or shorter "
+                     "than its inverse (uneven stamps), is an error naming the rows",
+                     1.0, std::nullopt, true),
         param_double("t_start_s", 0.0, "s",
                      "segment start, in seconds after the first sample's time", 0.0),
         param_double("t_end_s", 0.0, "s",
@@ -265,7 +284,34 @@ class CsvExperiment : public exid::Experiment {
         for (const char* c : wn) cw.push_back(T.col(c));  // source 0
       }
     }
-    const int ct = T.col("t");
+    const std::string tname = P_.getString("time_column");
+    const int ct = T.col(tname);
+    const double dt = P_.getDouble("sample_period_s");
+    exid::check(ct >= 0 || dt > 0,
+                fmt::format("experiment 'csv': {}: no time column '{}' and no sample_period_s: "
+                            "exid does not guess the sample rate; give time_column (the name of "
+                            "the time column, with time_unit) or sample_period_s (found columns: "
+                            "{})",
+                            file, tname, fmt::join(T.columns, ", ")));
+    const std::string tunit = P_.getString("time_unit");
+    const double tfactor = tunit == "ms" ? 1e-3 : tunit == "us" ? 1e-6 : tunit == "ns" ? 1e-9 : 1.0;
+    // Per-signal scales (a unit, a sign of one signal alone).
+    auto perJoint = [&](const char* key, std::vector<double> v, double dflt) {
+      if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
+      exid::check(static_cast<int>(v.size()) == n,
+                  fmt::format("experiment 'csv': {}: expected {} values (one per joint of robot "
+                              "'{}'), found {}",
+                              key, n, robot->name, v.size()));
+      for (double x : v)
+        exid::check(std::isfinite(x) && x != 0.0,
+                    fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
+      return v;
+    };
+    const std::vector<double> qscale = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
+    const std::vector<double> qdscale =
+        P_.getDoubles("qd_scale").empty() ? qscale
+                                          : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
+    const std::vector<double> tauscale = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
 
     // Per-joint sign and offset.
     std::vector<double> sign = P_.getDoubles("sign"), off = P_.getDoubles("offset_rad");
@@ -291,7 +337,6 @@ class CsvExperiment : public exid::Experiment {
       used.insert(used.end(), g->begin(), g->end());
     if (ct >= 0) used.push_back(ct);
     const bool drop = P_.getBool("drop_bad_rows");
-    const double dt = P_.getDouble("sample_period_s");
     std::vector<int> keep;
     std::vector<double> tk;
     int dropped = 0;
@@ -319,12 +364,13 @@ class CsvExperiment : public exid::Experiment {
             "drop_bad_rows: true to drop such rows)",
             srcs[static_cast<std::size_t>(bf)].file, lineText(r, bf), r + 1, colName(bad)));
       }
-      const double t = ct >= 0 ? T.data(r, ct) : r * dt;
+      const double t = ct >= 0 ? tfactor * T.data(r, ct) : r * dt;
       if (!keep.empty())
         exid::check(t > tk.back(),
-                    fmt::format("experiment 'csv': {}: {} (data row {}): column 't': time must "
-                                "strictly increase; t = {} after t = {} at {}",
-                                file, lineText(r), r + 1, t, tk.back(), lineText(keep.back())));
+                    fmt::format("experiment 'csv': {}: {} (data row {}): column '{}': time must "
+                                "strictly increase; t = {} s after t = {} s at {}",
+                                file, lineText(r), r + 1, tname, t, tk.back(),
+                                lineText(keep.back())));
       keep.push_back(r);
       tk.push_back(t);
     }
@@ -333,13 +379,45 @@ class CsvExperiment : public exid::Experiment {
                             "values)",
                             file, dropped));
 
-    // Segment.
+    // Gaps and uneven stamps: one behaviour, refused with the place (a filter, a derivative and
+    // an energy integral all assume a uniform rate).
+    if (ct >= 0 && tk.size() >= 3) {
+      // per row of the file: a step across rows dropped for bad values spans that many rows
+      std::vector<double> steps(tk.size() - 1);
+      for (std::size_t i = 1; i < tk.size(); ++i)
+        steps[i - 1] = (tk[i] - tk[i - 1]) / static_cast<double>(keep[i] - keep[i - 1]);
+      std::vector<double> sorted = steps;
+      std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                       sorted.end());
+      const double med = sorted[sorted.size() / 2];
+      const double ratio = P_.getDouble("max_gap_ratio");
+      for (std::size_t i = 0; i < steps.size(); ++i)
+        exid::check(steps[i] <= ratio * med && steps[i] >= med / ratio,
+                    fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s against "
+                                "a median step of {} s: {} (a filter, derivatives and energy "
+                                "integrals need a uniform rate); cut the recording there with "
+                                "t_start_s/t_end_s, or resample it (max_gap_ratio = {})",
+                                file, lineText(keep[i + 1]), keep[i + 1] + 1, steps[i], med,
+                                steps[i] > med ? "a gap" : "uneven time stamps", ratio));
+    }
+    // Segment: inside the recording, never clamped.
     const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
     exid::check(te == 0.0 || te > ts,
                 fmt::format("experiment 'csv': t_end_s = {} must be after t_start_s = {} (or 0 for "
                             "the end)",
                             te, ts));
     const double tfirst = tk.front();
+    const double span = tk.back() - tfirst;
+    const double step_tol = tk.size() > 1 ? 0.5 * span / static_cast<double>(tk.size() - 1) : 0.0;
+    exid::check(ts <= span,
+                fmt::format("experiment 'csv': {}: t_start_s = {} s is after the end of the "
+                            "recording ({} s after its first sample)",
+                            file, ts, span));
+    exid::check(te <= span + step_tol,
+                fmt::format("experiment 'csv': {}: t_end_s = {} s is past the end of the "
+                            "recording ({} s after its first sample); the segment is never "
+                            "clamped (0: to the end)",
+                            file, te, span));
     std::vector<int> sel;
     for (std::size_t i = 0; i < keep.size(); ++i) {
       const double rel = tk[i] - tfirst;
@@ -368,10 +446,12 @@ class CsvExperiment : public exid::Experiment {
       d.t[k] = tk[i];
       for (int j = 0; j < n; ++j) {
         const double s = sign[static_cast<std::size_t>(j)];
-        d.q(k, j) =
-            s * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
-        if (!cqd.empty()) d.qd(k, j) = s * value(r, cqd[static_cast<std::size_t>(j)]);
-        if (!cqdd.empty()) d.qdd(k, j) = s * value(r, cqdd[static_cast<std::size_t>(j)]);
+        const double qs = qscale[static_cast<std::size_t>(j)];
+        const double vs = qdscale[static_cast<std::size_t>(j)];
+        d.q(k, j) = s * qs * value(r, cq[static_cast<std::size_t>(j)]) +
+                    off[static_cast<std::size_t>(j)];
+        if (!cqd.empty()) d.qd(k, j) = s * vs * value(r, cqd[static_cast<std::size_t>(j)]);
+        if (!cqdd.empty()) d.qdd(k, j) = s * vs * value(r, cqdd[static_cast<std::size_t>(j)]);
       }
       if (!ctau.empty()) {
         VectorXd tau(n);
@@ -382,7 +462,9 @@ class CsvExperiment : public exid::Experiment {
         }
         if (!Kt.empty() && joint_frame && robot->hasTransmission())
           tau = robot->transmission.transpose() * tau;
-        for (int j = 0; j < n; ++j) d.tau(k, j) = sign[static_cast<std::size_t>(j)] * tau[j];
+        for (int j = 0; j < n; ++j)
+          d.tau(k, j) =
+              sign[static_cast<std::size_t>(j)] * tauscale[static_cast<std::size_t>(j)] * tau[j];
       }
       for (std::size_t e = 0; e < cw.size(); ++e)
         d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
@@ -396,9 +478,42 @@ class CsvExperiment : public exid::Experiment {
     m["rows_in_file"] = rows;
     m["dropped_rows"] = dropped;
     m["samples"] = K;
-    m["time_column"] = ct >= 0;
+    m["time_column"] = ct >= 0 ? exid::Json(tname) : exid::Json(false);
+    if (ct >= 0) m["time_unit"] = tunit;
     if (ct < 0) m["sample_period_s"] = dt;
     m["segment_s"] = exid::Json(std::vector<double>{ts, te});
+    m["recording_span_s"] = span;
+    // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
+    {
+      exid::Json& a = m["accounting"];
+      a["rows_in_file"] = rows;
+      a["dropped_bad_rows"] = dropped;
+      a["outside_segment"] = static_cast<int>(keep.size()) - K;
+      a["segment_samples"] = K;
+      const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
+      a["trimmed_edges"] = trimmed;
+      a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K);
+      a["decimated_away"] = K - trimmed - static_cast<int>(d.size());
+      a["samples_used"] = static_cast<int>(d.size());
+      exid::Json w = exid::Json::array();
+      if (dropped > 0)
+        w.push_back(exid::Json(fmt::format(
+            "experiment 'csv': {}: {} of {} rows ({:.1f} %) dropped for missing or non-finite "
+            "values (drop_bad_rows)",
+            file, dropped, rows, 100.0 * dropped / std::max(1, rows))));
+      if (trimmed > 0.1 * K)
+        w.push_back(exid::Json(fmt::format(
+            "experiment 'csv': {}: trim_edges = {} discards {} of the segment's {} samples "
+            "({:.1f} %, more than 10 %)",
+            file, pp.trim, trimmed, K, 100.0 * trimmed / K)));
+      if (pp.trim_default && pp.trim < pp.trim_transient)
+        a["trim_rule"] = fmt::format(
+            "ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
+            pp.trim_transient, pp.trim);
+      else if (pp.trim_default)
+        a["trim_rule"] = fmt::format("ceil(2 fs / fc) = {} samples at each end", pp.trim);
+      if (w.size() > 0) m["warnings"] = w;
+    }
     m["torque_from"] = tfrom;
     std::vector<std::string> sig = {"q"};
     if (!cqd.empty()) sig.push_back("qd");
@@ -425,6 +540,8 @@ class CsvExperiment : public exid::Experiment {
   struct Preprocessed {
     double cutoff_hz = 0, fs = 0;
     int order = 0, trim = 0, decimation = 1;
+    int trim_transient = 0, trim_cap = 0, samples_before_trim = 0;
+    bool trim_default = false;
     bool filter_torque = false;
   };
 
@@ -468,20 +585,33 @@ class CsvExperiment : public exid::Experiment {
       if (d->hasTorque()) d->tau = est::filtfiltColumns(sos, d->tau);
       if (d->hasWrench()) d->wrench = est::filtfiltColumns(sos, d->wrench);
     }
-    // In double: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges, does not fit an
-    // int (it was narrowed, wrapped and indexed before the data).
+    // Default trim: the filter's edge transient, 2 fs / fc samples (two periods of the cut-off)
+    // at each end, but at most 5 % of the segment at each end, so that a default never discards
+    // more than 10 % of a short recording (the zero-phase filter pads its ends by reflection:
+    // what is left of the transient there is small). fs is the median step's rate, rounded to
+    // the file's resolution (a 100 Hz log is 100 Hz, not 100.0000001: 2 fs / fc = 100, not 101).
+    // Every count in double first: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges,
+    // does not fit an int (it was narrowed, wrapped and indexed before the data); a transient
+    // longer than the whole segment leaves nothing the filter has not smeared.
     const std::int64_t trim_p = P_.getInt("trim_edges");
-    const double trim =
-        trim_p >= 0 ? static_cast<double>(trim_p) : std::ceil(2.0 * pp.fs / pp.cutoff_hz);
+    const double transient = 2.0 * pp.fs / pp.cutoff_hz;
+    exid::check(std::isfinite(transient) && transient <= static_cast<double>(K),
+                fmt::format("experiment 'csv': {}: differentiate_cutoff_hz = {} Hz is too low for "
+                            "the {} samples of the segment at {} Hz: its edge transient 2 fs / fc "
+                            "= {:g} samples is longer than the segment; raise the cut-off",
+                            file, pp.cutoff_hz, K, pp.fs, transient));
+    pp.trim_transient = static_cast<int>(std::ceil(transient - 1e-6 * std::max(1.0, transient)));
+    pp.trim_cap = static_cast<int>(std::floor(0.05 * static_cast<double>(K)));
+    pp.trim_default = trim_p < 0;
+    const double trim = trim_p >= 0 ? static_cast<double>(trim_p)
+                                     : static_cast<double>(std::min(pp.trim_transient, pp.trim_cap));
     exid::check(
-        std::isfinite(trim) && static_cast<double>(K) - 2.0 * trim >= 2.0,
+        static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
-                    "segment leaves too few ({}); lower trim_edges or raise "
-                    "differentiate_cutoff_hz = {} Hz",
-                    file, trim, K,
-                    trim_p >= 0 ? "trim_edges" : "trim_edges: -1 trims ceil(2 fs / cutoff)",
-                    pp.cutoff_hz));
+                    "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
+                    file, trim, K));
     pp.trim = static_cast<int>(trim);
+    pp.samples_before_trim = static_cast<int>(K);
     for (const Eigen::MatrixXd* M : {&d->q, &d->qd, &d->qdd})
       exid::check(M->allFinite(),
                   fmt::format("experiment 'csv': {}: the low-pass filter (differentiate_cutoff_hz "

@@ -1,6 +1,8 @@
 // exid — URDF robot descriptions (urdfdom for the values, TinyXML for structure checks with line
 // numbers and for the <exid> extension element). Format: docs/robots.md.
 #include <console_bridge/console.h>
+#include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <tinyxml.h>
 #include <urdf_parser/urdf_parser.h>
 
@@ -231,7 +233,18 @@ XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
       x.exid = e;
     }
   }
-  if (x.links.empty()) throw Error(src + ": no <link> in the robot");
+  if (x.links.empty()) {
+    const TiXmlElement* root = doc.RootElement();
+    const bool xacro = src.size() >= 6 && src.compare(src.size() - 6, 6, ".xacro") == 0;
+    bool macros = false;
+    for (const TiXmlElement* e = root ? root->FirstChildElement() : nullptr; e && !macros;
+         e = e->NextSiblingElement())
+      macros = std::string(e->Value()).rfind("xacro:", 0) == 0;
+    if (xacro || macros)
+      throw Error(src + ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
+                        "expand it first: xacro " + src + " > robot.urdf");
+    throw Error(src + ": no <link> in the robot");
+  }
 
   // Every joint names existing links; every link has at most one parent joint.
   std::map<std::string, int> parent_joint;
@@ -508,6 +521,7 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
   m.source = src;
   std::map<std::string, int> joint_body;
   std::map<std::string, LinkPlace> link_place;
+  std::vector<std::string> ignored_dynamics;  // joints whose <dynamics> were not used
 
   // Depth first from the root, children in document order: parents get lower indices.
   struct Item {
@@ -572,8 +586,12 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
         if (!std::isfinite(j->dynamics->damping) || !std::isfinite(j->dynamics->friction)) {
           throw Error(jw + ": <dynamics>: non-finite number");
         }
-        drv.viscous = j->dynamics->damping;
-        drv.coulomb = j->dynamics->friction;
+        if (options.urdf_dynamics_as_friction) {
+          drv.viscous = j->dynamics->damping;
+          drv.coulomb = j->dynamics->friction;
+        } else if (j->dynamics->damping != 0.0 || j->dynamics->friction != 0.0) {
+          ignored_dynamics.push_back(xj.name);
+        }
       }
       const int index = m.dof();
       m.bodies.push_back(b);
@@ -622,6 +640,12 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
     throw Error(src + ": " + e.what());
   }
   checkModelPhysical(m, options);
+  if (!ignored_dynamics.empty())
+    m.notes.push_back(fmt::format(
+        "{}: <dynamics damping friction> of joint(s) {} not used as nominal friction (they are "
+        "usually a simulator's values, not identified ones); the urdf robot's "
+        "dynamics_as_friction: true uses them",
+        src, fmt::join(ignored_dynamics, ", ")));
   return m;
 }
 

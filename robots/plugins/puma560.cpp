@@ -34,8 +34,10 @@ class Puma560Robot : public exid::Robot {
     if (variant_ == "urdf") {
       return opt_.build(
           [](const exid::LoadOptions& o) {
+            exid::LoadOptions u = o;  // its <dynamics> hold the published friction
+            u.urdf_dynamics_as_friction = true;
             return exid::loadUrdfString(exid_embedded_puma560_urdf,
-                                        "puma560.urdf (embedded in plugin puma560)", o);
+                                        "puma560.urdf (embedded in plugin puma560)", u);
           },
           kKnownDefects);
     }

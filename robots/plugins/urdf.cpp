@@ -19,10 +19,17 @@ class UrdfRobot : public exid::Robot {
                               "optional companion XML file whose root is an <exid> element "
                               "(drives, transmission, sensor, ...) for a URDF kept as published "
                               "(relative paths: to the study file); empty: none"));
+    p.push_back(exid::param_bool(
+        "dynamics_as_friction", false,
+        "use the URDF's <dynamics damping friction> as nominal viscous and Coulomb friction "
+        "(usually a simulator's values; off: ignored, and the robot's notes say so)"));
     return p;
   }
   explicit UrdfRobot(const exid::ParamSet& p)
-      : file_(p.getString("file")), extension_(p.getString("extension")), opt_(p) {}
+      : file_(p.getString("file")),
+        extension_(p.getString("extension")),
+        dynamics_(p.getBool("dynamics_as_friction")),
+        opt_(p) {}
 
   std::shared_ptr<const exid::RobotModel> build(const exid::RunContext& ctx) override {
     std::filesystem::path f(file_);
@@ -32,12 +39,14 @@ class UrdfRobot : public exid::Robot {
     return opt_.build([&](const exid::LoadOptions& o) {
       exid::LoadOptions oe = o;
       oe.urdf_extension = e;
+      oe.urdf_dynamics_as_friction = dynamics_;
       return exid::loadUrdf(f, oe);
     });
   }
 
  private:
   std::string file_, extension_;
+  bool dynamics_;
   exid::robots::CommonOptions opt_;
 };
 

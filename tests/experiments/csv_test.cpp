@@ -1,9 +1,12 @@
 // Experiment `csv`: reads back exactly what the runner writes (exid::datasetTable), and bad
 // files give clear errors naming the file, the line and the column.
+#include <fmt/format.h>
 #include <unistd.h>
 
 #include <filesystem>
+#include <cmath>
 #include <fstream>
+#include <iterator>
 
 #include "../models/model_test_util.hpp"
 #include "exid/io.hpp"
@@ -170,3 +173,110 @@ TEST(Csv, MissingFile) {
 }
 
 }  // namespace
+
+namespace {
+
+// A 6-joint file: t (in the given unit, or none), q and tau columns, `rows` rows at `period_s`.
+fs::path uniformFile(const std::string& name, int rows, double period_s, bool with_t = true,
+                     double t_factor = 1.0) {
+  std::string s = header(6, with_t);
+  for (int k = 0; k < rows; ++k) {
+    const double t = k * period_s;
+    std::string line = with_t ? fmt::format("{}", t * t_factor) : "";
+    for (int j = 0; j < 6; ++j)
+      line += (line.empty() ? "" : ",") + fmt::format("{}", 0.3 * std::sin(1.3 * t + j));
+    for (int j = 0; j < 6; ++j) line += "," + fmt::format("{}", 2.0 * std::cos(0.7 * t + j) + j);
+    s += line + "\n";
+  }
+  return writeText(name, s);
+}
+
+}  // namespace
+
+TEST(CsvSignals, NoTimeColumnAndNoSamplePeriodIsAnErrorNamingBothWaysOut) {
+  const fs::path f = uniformFile("no_t.csv", 50, 0.005, false);
+  const std::string m = errorOf(f);
+  for (const char* what : {"no time column 't'", "sample_period_s", "time_column", "does not guess"})
+    EXPECT_NE(m.find(what), std::string::npos) << what << ": " << m;
+  // with the period: t = row * period, exactly the file's rate (200 Hz here, not an assumed 100)
+  const exid::Dataset d = readCsv(f, "sample_period_s: 0.005");
+  EXPECT_DOUBLE_EQ(d.t[49], 49 * 0.005);
+  EXPECT_EQ(d.meta.find("sample_period_s")->asDouble(), 0.005);
+}
+
+TEST(CsvSignals, TimeColumnByNameWithItsUnit) {
+  // time in milliseconds in a column named 'stamp'
+  std::string text = uniformFile("ms.csv", 40, 0.01, true, 1e3).string();
+  std::ifstream in(text);
+  std::string body((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  body.replace(0, 1, "stamp");
+  const fs::path f = writeText("ms_named.csv", body);
+  const exid::Dataset d = readCsv(f, "time_column: stamp, time_unit: ms");
+  EXPECT_NEAR(d.t[10] - d.t[0], 0.1, 1e-12);
+  EXPECT_EQ(d.meta.find("time_column")->asString(), "stamp");
+  EXPECT_NE(errorOf(f).find("no time column 't'"), std::string::npos);
+}
+
+TEST(CsvSignals, TorqueScaleFlipsTheTorqueAloneAndQScaleConvertsUnits) {
+  const fs::path f = uniformFile("scale.csv", 30, 0.01);
+  const exid::Dataset a = readCsv(f);
+  const exid::Dataset b = readCsv(
+      f, "tau_scale: [-1, 1, 1, -1, 1, 2], q_scale: [0.0174532925, 1, 1, 1, 1, 1]");
+  EXPECT_EQ(b.q.col(1), a.q.col(1));
+  EXPECT_NEAR((b.q.col(0) - 0.0174532925 * a.q.col(0)).cwiseAbs().maxCoeff(), 0.0, 1e-15);
+  EXPECT_EQ(b.tau.col(0), -a.tau.col(0));
+  EXPECT_EQ(b.tau.col(3), -a.tau.col(3));
+  EXPECT_EQ(b.tau.col(5), 2.0 * a.tau.col(5));
+  EXPECT_EQ(b.tau.col(1), a.tau.col(1));
+  EXPECT_NE(errorOf(f, "tau_scale: [1, 1]").find("tau_scale: expected 6 values"),
+            std::string::npos);
+  EXPECT_NE(errorOf(f, "tau_scale: [1, 1, 0, 1, 1, 1]").find("not a usable scale"),
+            std::string::npos);
+}
+
+TEST(CsvSignals, ASegmentOutsideTheRecordingIsAnErrorNeverClamped) {
+  const fs::path f = uniformFile("seg.csv", 101, 0.01);  // 0 .. 1 s
+  EXPECT_EQ(readCsv(f, "t_end_s: 1.0").size(), 101);
+  const std::string m = errorOf(f, "t_start_s: 0.5, t_end_s: 1.2");
+  EXPECT_NE(m.find("t_end_s = 1.2 s is past the end of the recording"), std::string::npos) << m;
+  EXPECT_NE(errorOf(f, "t_start_s: 1.5").find("after the end of the recording"),
+            std::string::npos);
+}
+
+TEST(CsvSignals, GapsAndUnevenStampsAreRefusedNamingTheLine) {
+  std::string s = header(6);
+  for (int k = 0; k < 40; ++k) s += row(k < 20 ? 0.01 * k : 0.01 * k + 3.6, 6, 0.1);
+  const std::string m = errorOf(writeText("gap.csv", s));
+  EXPECT_NE(m.find("line 22 (data row 21)"), std::string::npos) << m;
+  EXPECT_NE(m.find("a gap"), std::string::npos) << m;
+  std::string u = header(6);
+  for (int k = 0; k < 40; ++k) u += row(0.01 * k + (k == 10 ? 0.004 : 0.0), 6, 0.1);
+  EXPECT_NE(errorOf(writeText("uneven.csv", u)).find("uneven time stamps"), std::string::npos);
+}
+
+TEST(CsvSignals, TrimmedSamplesAreCountedAndTheDefaultKeepsAShortSegment) {
+  // 100 Hz, cut-off 2 Hz: the transient rule gives exactly 2 fs / fc = 100 samples at each end
+  // (not 101 from a rate estimated a hair above 100 Hz); a 1000-sample segment caps the default
+  // at 5 % of it at each end, so at most 10 % is discarded, and says so.
+  const fs::path f = uniformFile("trim.csv", 1000, 0.01);
+  const exid::Dataset d = readCsv(f, "differentiate_cutoff_hz: 2");
+  const exid::Json& a = *d.meta.find("accounting");
+  EXPECT_EQ(a.find("segment_samples")->asInt(), 1000);
+  EXPECT_EQ(a.find("trimmed_edges")->asInt(), 100);
+  EXPECT_EQ(a.find("samples_used")->asInt(), 900);
+  EXPECT_NE(a.find("trim_rule")->asString().find("ceil(2 fs / fc) = 100 samples capped at 5 %"),
+            std::string::npos)
+      << a.find("trim_rule")->asString();
+  EXPECT_EQ(d.meta.find("warnings"), nullptr);
+  // a long segment: the transient rule itself, 100 at each end
+  const exid::Dataset l = readCsv(uniformFile("trim_long.csv", 4000, 0.01),
+                                  "differentiate_cutoff_hz: 2");
+  EXPECT_EQ(l.meta.find("accounting")->find("trimmed_edges")->asInt(), 200);
+  // an explicit trim discarding more than 10 % is a warning with the figures
+  const exid::Dataset w = readCsv(f, "differentiate_cutoff_hz: 2, trim_edges: 80");
+  ASSERT_NE(w.meta.find("warnings"), nullptr);
+  EXPECT_NE(w.meta.find("warnings")->at(0).asString().find("discards 160 of the segment's 1000 "
+                                                            "samples (16.0 %"),
+            std::string::npos)
+      << w.meta.find("warnings")->at(0).asString();
+}

@@ -321,3 +321,55 @@ TEST(Cli, VersionAndGlobalOptionsAfterTheSubcommand) {
   EXPECT_EQ(S.find("exid_commit")->asString(), commit.substr(0, commit.find(')')));
   fs::remove_all(out);
 }
+
+TEST(Cli, ValidationRunsItsOwnTrajectoryAndDataWarningsReachTheSummary) {
+  fs::path dir = tempDir("own_validation");
+  // An excitation stage, then a validation experiment with its own period and harmonics.
+  std::ofstream(dir / "s.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
+         "false}}\n"
+         "excitation:\n"
+         "  trajectory: {type: fourier, params: {period_s: 4, harmonics: 3, sample_period_s: "
+         "0.1}}\n"
+         "  criterion: {type: cond}\n"
+         "  optimizer: {type: nlopt, params: {max_evaluations: 50}}\n"
+         "experiment: {type: simulate, params: {duration_s: 3.9, drive_terms: false}}\n"
+         "estimator: {type: batch_ls}\n"
+         "validation: {type: simulate, params: {period_s: 3, harmonics: 2, duration_s: 3, "
+         "drive_terms: false}}\n";
+  CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  exid::Json S = exid::Json::parse(slurp(dir / "o" / "summary.json"));
+  const exid::Json& ref = *S.find("validation")->find("meta")->find("reference");
+  EXPECT_EQ(ref.find("type")->asString(), "fourier") << ref.dump(0);
+  EXPECT_EQ(ref.find("period_s")->asDouble(), 3.0);
+  EXPECT_EQ(ref.find("harmonics")->asInt(), 2);
+  EXPECT_NE(S.find("experiment")->find("meta")->find("reference")->find("type")->asString(),
+            "fourier");  // the identification experiment follows the excitation's trajectory
+  // Data warnings of the csv experiment land in summary.json's warnings and the report.
+  {
+    std::ofstream f(dir / "rec.csv");
+    f << "t,q1,q2,tau1,tau2\n";
+    for (int k = 0; k < 400; ++k) {
+      const double t = 0.01 * k;
+      f << t << "," << std::sin(t) << "," << std::cos(1.3 * t) << "," << 0.1 * k << ","
+        << -0.05 * k << "\n";
+    }
+  }
+  std::ofstream(dir / "c.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
+         "false}}\n"
+         "experiment: {type: csv, params: {file: rec.csv, differentiate_cutoff_hz: 5, "
+         "trim_edges: 30}}\n"
+         "estimator: {type: batch_ls}\n";
+  r = runExid("-q run " + (dir / "c.yaml").string() + " --out " + (dir / "c").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  S = exid::Json::parse(slurp(dir / "c" / "summary.json"));
+  ASSERT_EQ(S.find("warnings")->size(), 1u) << S.find("warnings")->dump(0);
+  EXPECT_NE(S.find("warnings")->at(0).asString().find("discards 60 of the segment's 400"),
+            std::string::npos);
+  EXPECT_NE(slurp(dir / "c" / "report.md").find("## Warnings"), std::string::npos);
+  fs::remove_all(dir);
+}

@@ -411,3 +411,35 @@ TEST(Urdf, TreeWithSeveralChildrenOfTheRoot) {
 }
 
 }  // namespace
+
+TEST(UrdfErrors, XacroGetsAHintToExpandItFirst) {
+  const std::string text =
+      "<?xml version=\"1.0\"?>\n<robot name=\"r\" xmlns:xacro=\"http://www.ros.org/wiki/xacro\">\n"
+      "  <xacro:macro name=\"arm\" params=\"prefix\">\n"
+      "    <link name=\"${prefix}base\"/>\n  </xacro:macro>\n  <xacro:arm prefix=\"\"/>\n"
+      "</robot>\n";
+  std::vector<std::string> w;
+  LoadOptions o;
+  o.warnings = &w;
+  const std::string m = errorOf([&] { exid::loadUrdfString(text, "arm.urdf.xacro", o); });
+  EXPECT_HAS(m, "this is a xacro file");
+  EXPECT_HAS(m, "expand it first: xacro arm.urdf.xacro > robot.urdf");
+  EXPECT_HAS(urdfError(urdf("")), "no <link> in the robot");
+}
+
+TEST(UrdfFiles, GazeboDynamicsAreNotNominalFrictionUnlessAsked) {
+  const std::string text =
+      urdf(link("base") + link("a") +
+           joint("j1", "revolute", "base", "a", "<dynamics damping=\"0.7\" friction=\"0.2\"/>"));
+  const RobotModel m = exid::loadUrdfString(text, "gz.urdf");
+  EXPECT_EQ(m.drives[0].viscous, 0.0);
+  EXPECT_EQ(m.drives[0].coulomb, 0.0);
+  ASSERT_EQ(m.notes.size(), 1u);
+  EXPECT_HAS(m.notes[0], "<dynamics damping friction> of joint(s) j1 not used");
+  LoadOptions o;
+  o.urdf_dynamics_as_friction = true;
+  const RobotModel u = exid::loadUrdfString(text, "gz.urdf", o);
+  EXPECT_EQ(u.drives[0].viscous, 0.7);
+  EXPECT_EQ(u.drives[0].coulomb, 0.2);
+  EXPECT_TRUE(u.notes.empty());
+}

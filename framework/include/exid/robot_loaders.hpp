@@ -32,6 +32,10 @@ struct LoadOptions {
   /// extension element, docs/robots.md), for a URDF that must stay as published. Empty: none.
   /// A URDF that has its own <exid> element and a companion is an error.
   std::filesystem::path urdf_extension;
+  /// URDF only: use <dynamics damping friction> as the nominal viscous and Coulomb friction.
+  /// Off by default: those are usually a simulator's (Gazebo's) values, not identified ones;
+  /// the model's notes then say that they were ignored.
+  bool urdf_dynamics_as_friction = false;
 };
 
 /// A DH (standard or modified) YAML table. See docs/robots.md for the keys.
