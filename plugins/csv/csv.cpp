@@ -608,8 +608,11 @@ class CsvExperiment : public exid::Experiment {
     exid::check(
         static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
-                    "segment leaves too few; lower trim_edges or raise differentiate_cutoff_hz",
-                    file, trim, K));
+                    "segment leaves too few ({}); lower trim_edges or raise "
+                    "differentiate_cutoff_hz = {} Hz",
+                    file, trim, K,
+                    trim_p >= 0 ? "trim_edges" : "trim_edges: -1 trims ceil(2 fs / cutoff)",
+                    pp.cutoff_hz));
     pp.trim = static_cast<int>(trim);
     pp.samples_before_trim = static_cast<int>(K);
     for (const Eigen::MatrixXd* M : {&d->q, &d->qd, &d->qdd})
