@@ -590,18 +590,23 @@ class CsvExperiment : public exid::Experiment {
     // more than 10 % of a short recording (the zero-phase filter pads its ends by reflection:
     // what is left of the transient there is small). fs is the median step's rate, rounded to
     // the file's resolution (a 100 Hz log is 100 Hz, not 100.0000001: 2 fs / fc = 100, not 101).
-    // In double: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges, does not fit an
-    // int (it was narrowed, wrapped and indexed before the data).
+    // Every count in double first: ceil(2 fs / cutoff) of a tiny cut-off, or a huge trim_edges,
+    // does not fit an int (it was narrowed, wrapped and indexed before the data); a transient
+    // longer than the whole segment leaves nothing the filter has not smeared.
     const std::int64_t trim_p = P_.getInt("trim_edges");
     const double transient = 2.0 * pp.fs / pp.cutoff_hz;
-    const double transient_c = std::ceil(transient - 1e-6 * std::max(1.0, transient));
+    exid::check(std::isfinite(transient) && transient <= static_cast<double>(K),
+                fmt::format("experiment 'csv': {}: differentiate_cutoff_hz = {} Hz is too low for "
+                            "the {} samples of the segment at {} Hz: its edge transient 2 fs / fc "
+                            "= {:g} samples is longer than the segment; raise the cut-off",
+                            file, pp.cutoff_hz, K, pp.fs, transient));
+    pp.trim_transient = static_cast<int>(std::ceil(transient - 1e-6 * std::max(1.0, transient)));
     pp.trim_cap = static_cast<int>(std::floor(0.05 * static_cast<double>(K)));
     pp.trim_default = trim_p < 0;
     const double trim = trim_p >= 0 ? static_cast<double>(trim_p)
-                                    : std::min(transient_c, static_cast<double>(pp.trim_cap));
-    pp.trim_transient = transient_c < 1e9 ? static_cast<int>(transient_c) : 1000000000;
+                                     : static_cast<double>(std::min(pp.trim_transient, pp.trim_cap));
     exid::check(
-        std::isfinite(trim) && static_cast<double>(K) - 2.0 * trim >= 2.0,
+        static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "
                     "segment leaves too few ({}); lower trim_edges or raise "
                     "differentiate_cutoff_hz = {} Hz",
