@@ -5,6 +5,7 @@
 
 #include <gtest/gtest.h>
 #include <signal.h>
+#include <sqlite3.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -14,6 +15,7 @@
 #include <thread>
 
 #include "exid/error.hpp"
+#include "exid/version.hpp"
 #include "exid_test.hpp"
 
 namespace fs = std::filesystem;
@@ -122,6 +124,30 @@ TEST(Matrix, ShardsMergeToTheSingleProcessResult) {
   auto b = exid::matrixTable(d / "merged" / "results.sqlite", {"estimator", "seed"}, {},
                              "param_rel_err");
   EXPECT_EQ(a.csv, b.csv);
+  // Every row carries the exid version and the git commit it was computed with.
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((d / "merged" / "results.sqlite").string().c_str(), &db), SQLITE_OK);
+    sqlite3_stmt* st = nullptr;
+    ASSERT_EQ(sqlite3_prepare_v2(db,
+                                 "SELECT (SELECT text FROM metrics m WHERE m.run_id = r.id AND "
+                                 "m.name = 'exid_version'), (SELECT text FROM metrics m WHERE "
+                                 "m.run_id = r.id AND m.name = 'exid_commit') FROM runs r",
+                                 -1, &st, nullptr),
+              SQLITE_OK);
+    int rows = 0;
+    while (sqlite3_step(st) == SQLITE_ROW) {
+      ++rows;
+      const unsigned char* v = sqlite3_column_text(st, 0);
+      const unsigned char* c = sqlite3_column_text(st, 1);
+      ASSERT_TRUE(v && c);
+      EXPECT_EQ(std::string(reinterpret_cast<const char*>(v)), EXID_VERSION_STRING);
+      EXPECT_EQ(std::string(reinterpret_cast<const char*>(c)), exid::gitCommit());
+    }
+    EXPECT_EQ(rows, 6);
+    sqlite3_finalize(st);
+    sqlite3_close(db);
+  }
   // Merging again copies nothing new.
   EXPECT_EQ(exid::mergeMatrixDatabases(d / "merged" / "results.sqlite",
                                        {d / "shard0" / "results.sqlite"}),
