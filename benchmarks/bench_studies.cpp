@@ -107,7 +107,8 @@ std::vector<Row>& rows() {
 /// CPU-time budget (the time-to-quality question), 0 runs the study as shipped (reproducible).
 void runStudy(benchmark::State& state, const std::string& file, double cpu_s, double goal_cond,
               double goal_ratio, const std::string& goal) {
-  exid::StudyConfig cfg = exid::loadStudy(fs::path(EXID_SOURCE_DIR) / "examples" / file, registry());
+  exid::StudyConfig cfg =
+      exid::loadStudy(fs::path(EXID_SOURCE_DIR) / "examples" / file, registry());
   cfg.experiment.reset();
   cfg.estimator.reset();
   cfg.validation.reset();
@@ -182,10 +183,9 @@ void registerAll() {
     const std::string name =
         fmt::format("{}/{}", fs::path(b.file).stem().string(),
                     b.cpu_s > 0 ? fmt::format("cpu_{:g}s", b.cpu_s) : std::string("shipped"));
-    benchmark::RegisterBenchmark(name.c_str(),
-                                 [b](benchmark::State& st) {
-                                   runStudy(st, b.file, b.cpu_s, b.cond, b.ratio, b.goal);
-                                 })
+    benchmark::RegisterBenchmark(
+        name.c_str(),
+        [b](benchmark::State& st) { runStudy(st, b.file, b.cpu_s, b.cond, b.ratio, b.goal); })
         ->Iterations(1)
         ->UseManualTime()
         ->Unit(benchmark::kSecond);

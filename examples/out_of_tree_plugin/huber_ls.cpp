@@ -24,12 +24,11 @@ class HuberLs final : public exid::Estimator {
       "least squares with Huber weights by IRLS (example out-of-tree estimator on the installed "
       "estimator helpers)";
   static std::vector<exid::ParamDecl> params() {
-    return {exid::param_double("k", 1.345, "", "Huber threshold in robust standard deviations",
-                               0.0, std::nullopt, true),
+    return {exid::param_double("k", 1.345, "", "Huber threshold in robust standard deviations", 0.0,
+                               std::nullopt, true),
             exid::param_int("iterations", 20, "reweighting passes at most", 1.0, 1000.0),
             exid::param_double("tolerance", 1e-10, "",
-                               "stop when no estimate moves by more than this times its std",
-                               0.0)};
+                               "stop when no estimate moves by more than this times its std", 0.0)};
   }
   explicit HuberLs(const exid::ParamSet& p)
       : k_(p.getDouble("k")),
@@ -44,12 +43,11 @@ class HuberLs final : public exid::Estimator {
     auto fit = [&](double lo, double hi) {
       exid::est::RowAccumulator acc(p);
       std::size_t row = 0;
-      exid::est::forEachChunk(model, data, 256, ctx, kName, lo, hi,
-                              [&](const exid::Rows& r, int, int) {
-                                for (Eigen::Index i = 0; i < r.W.rows(); ++i, ++row)
-                                  acc.addRow(r.W.row(i), r.y(i),
-                                             weight.empty() ? 1.0 : std::sqrt(weight[row]));
-                              });
+      exid::est::forEachChunk(
+          model, data, 256, ctx, kName, lo, hi, [&](const exid::Rows& r, int, int) {
+            for (Eigen::Index i = 0; i < r.W.rows(); ++i, ++row)
+              acc.addRow(r.W.row(i), r.y(i), weight.empty() ? 1.0 : std::sqrt(weight[row]));
+          });
       return acc;
     };
     exid::est::RowAccumulator acc = fit(0.0, 0.1);

@@ -206,13 +206,15 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     });
     what_text = rigid_body_only ? "torque of the rigid bodies alone (--rigid-body-only: no rotor "
                                   "inertia, friction or offset)"
-                                : fmt::format("full torque: rigid bodies + drives (rotor inertia, "
-                                              "Coulomb, viscous, offset: the robot's nominal "
-                                              "values{})",
-                                              has_drives ? "" : "; this robot describes none");
+                                : fmt::format(
+                                      "full torque: rigid bodies + drives (rotor inertia, "
+                                      "Coulomb, viscous, offset: the robot's nominal "
+                                      "values{})",
+                                      has_drives ? "" : "; this robot describes none");
     what_text += r->hasTransmission() ? ", measured (motor) coordinates, N m" : ", N m";
   }
-  writeFileAtomic(out, fmt::format("# exid eval {} {}: {}\n{}", what, r->name, what_text, toCsv(t)));
+  writeFileAtomic(out,
+                  fmt::format("# exid eval {} {}: {}\n{}", what, r->name, what_text, toCsv(t)));
   std::cout << fmt::format("{}: {} rows x {} columns ({} of {} on {} samples)\n", out,
                            t.data.rows(), t.data.cols(), what_text, r->name, K);
   return 0;
@@ -565,8 +567,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
                            st->force, st->rows, st->cols, st->metric, cancelled());
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
-    if (*eval) return evalCommand(registry, st->robot, st->samples, st->what, st->out,
-                                       st->rigid_body_only);
+    if (*eval)
+      return evalCommand(registry, st->robot, st->samples, st->what, st->out, st->rigid_body_only);
     if (*exp) return exportCommand(registry, st->robot, st->study, st->out);
     for (auto* s : stages)
       if (*s) return stageCommand(registry, s->get_name(), st->study, st->data, st->out);

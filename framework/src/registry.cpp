@@ -1,7 +1,6 @@
 #include "exid/registry.hpp"
 
 #include <dlfcn.h>
-
 #include <fmt/format.h>
 #include <unistd.h>
 

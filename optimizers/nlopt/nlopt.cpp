@@ -12,8 +12,8 @@
 #include <Eigen/Eigenvalues>
 #include <algorithm>
 #include <cmath>
-#include <nlopt.hpp>
 #include <limits>
+#include <nlopt.hpp>
 #include <random>
 
 #include "exid/error.hpp"
@@ -462,8 +462,9 @@ class NloptOptimizer final : public exid::Optimizer {
     // result depend on the machine even when a later run converged: say so.
     if (time_cut_ && reason != "cancelled" && reason != "max_time_s" && reason != "max_cpu_s" &&
         reason != "deadline")
-      reason = budget_.max_cpu_s > 0 ? "max_cpu_s" : budget_.max_time_s > 0 ? "max_time_s"
-                                                                              : "deadline";
+      reason = budget_.max_cpu_s > 0    ? "max_cpu_s"
+               : budget_.max_time_s > 0 ? "max_time_s"
+                                        : "deadline";
     auto res = tr.finish(J0, iterations, reason);
     res.details["algorithm"] = alg_name_;
     res.details["constraint_mode"] = cmode_;
@@ -642,8 +643,8 @@ class NloptOptimizer final : public exid::Optimizer {
   }
 
   void noteTimeCut(const std::string& r) {
-    for (const char* t : {"MAXTIME_REACHED", "run time share used", "max_time_s", "max_cpu_s",
-                          "deadline"})
+    for (const char* t :
+         {"MAXTIME_REACHED", "run time share used", "max_time_s", "max_cpu_s", "deadline"})
       if (r.rfind(t, 0) == 0) time_cut_ = true;
   }
 

@@ -308,9 +308,9 @@ class CsvExperiment : public exid::Experiment {
       return v;
     };
     const std::vector<double> qscale = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
-    const std::vector<double> qdscale =
-        P_.getDoubles("qd_scale").empty() ? qscale
-                                          : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
+    const std::vector<double> qdscale = P_.getDoubles("qd_scale").empty()
+                                            ? qscale
+                                            : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
     const std::vector<double> tauscale = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
 
     // Per-joint sign and offset.
@@ -366,11 +366,11 @@ class CsvExperiment : public exid::Experiment {
       }
       const double t = ct >= 0 ? tfactor * T.data(r, ct) : r * dt;
       if (!keep.empty())
-        exid::check(t > tk.back(),
-                    fmt::format("experiment 'csv': {}: {} (data row {}): column '{}': time must "
-                                "strictly increase; t = {} s after t = {} s at {}",
-                                file, lineText(r), r + 1, tname, t, tk.back(),
-                                lineText(keep.back())));
+        exid::check(
+            t > tk.back(),
+            fmt::format("experiment 'csv': {}: {} (data row {}): column '{}': time must "
+                        "strictly increase; t = {} s after t = {} s at {}",
+                        file, lineText(r), r + 1, tname, t, tk.back(), lineText(keep.back())));
       keep.push_back(r);
       tk.push_back(t);
     }
@@ -387,7 +387,8 @@ class CsvExperiment : public exid::Experiment {
       for (std::size_t i = 1; i < tk.size(); ++i)
         steps[i - 1] = (tk[i] - tk[i - 1]) / static_cast<double>(keep[i] - keep[i - 1]);
       std::vector<double> sorted = steps;
-      std::nth_element(sorted.begin(), sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+      std::nth_element(sorted.begin(),
+                       sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
                        sorted.end());
       const double med = sorted[sorted.size() / 2];
       const double ratio = P_.getDouble("max_gap_ratio");
@@ -448,8 +449,8 @@ class CsvExperiment : public exid::Experiment {
         const double s = sign[static_cast<std::size_t>(j)];
         const double qs = qscale[static_cast<std::size_t>(j)];
         const double vs = qdscale[static_cast<std::size_t>(j)];
-        d.q(k, j) = s * qs * value(r, cq[static_cast<std::size_t>(j)]) +
-                    off[static_cast<std::size_t>(j)];
+        d.q(k, j) =
+            s * qs * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
         if (!cqd.empty()) d.qd(k, j) = s * vs * value(r, cqd[static_cast<std::size_t>(j)]);
         if (!cqdd.empty()) d.qdd(k, j) = s * vs * value(r, cqdd[static_cast<std::size_t>(j)]);
       }
@@ -507,9 +508,9 @@ class CsvExperiment : public exid::Experiment {
             "({:.1f} %, more than 10 %)",
             file, pp.trim, trimmed, K, 100.0 * trimmed / K)));
       if (pp.trim_default && pp.trim < pp.trim_transient)
-        a["trim_rule"] = fmt::format(
-            "ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
-            pp.trim_transient, pp.trim);
+        a["trim_rule"] =
+            fmt::format("ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
+                        pp.trim_transient, pp.trim);
       else if (pp.trim_default)
         a["trim_rule"] = fmt::format("ceil(2 fs / fc) = {} samples at each end", pp.trim);
       if (w.size() > 0) m["warnings"] = w;
@@ -604,7 +605,7 @@ class CsvExperiment : public exid::Experiment {
     pp.trim_cap = static_cast<int>(std::floor(0.05 * static_cast<double>(K)));
     pp.trim_default = trim_p < 0;
     const double trim = trim_p >= 0 ? static_cast<double>(trim_p)
-                                     : static_cast<double>(std::min(pp.trim_transient, pp.trim_cap));
+                                    : static_cast<double>(std::min(pp.trim_transient, pp.trim_cap));
     exid::check(
         static_cast<double>(K) - 2.0 * trim >= 2.0,
         fmt::format("experiment 'csv': {}: trimming {} samples at each end of the {} of the "

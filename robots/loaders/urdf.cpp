@@ -241,8 +241,10 @@ XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
          e = e->NextSiblingElement())
       macros = std::string(e->Value()).rfind("xacro:", 0) == 0;
     if (xacro || macros)
-      throw Error(src + ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
-                        "expand it first: xacro " + src + " > robot.urdf");
+      throw Error(src +
+                  ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
+                  "expand it first: xacro " +
+                  src + " > robot.urdf");
     throw Error(src + ": no <link> in the robot");
   }
 

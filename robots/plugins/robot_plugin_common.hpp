@@ -42,7 +42,8 @@ struct CommonOptions {
   /// published data whose defects are documented and kept on purpose) they are stated once as
   /// a note instead: `known_defects` followed by what the checks found.
   template <class Load>
-  std::shared_ptr<const RobotModel> build(Load&& load, const std::string& known_defects = {}) const {
+  std::shared_ptr<const RobotModel> build(Load&& load,
+                                          const std::string& known_defects = {}) const {
     std::vector<std::string> warnings;
     LoadOptions opt;
     opt.strict = strict;

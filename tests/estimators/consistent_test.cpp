@@ -705,10 +705,9 @@ TEST(Export, IdentifiedUrdfReproducesTheIdentifiedModel) {
   for (int k = 0; k < 5; ++k)
     s.data.row(k) << d.q.row(100 * k), d.qd.row(100 * k), d.qdd.row(100 * k);
   exid::writeCsvAtomic(dir / "samples.csv", s);
-  const Cmd ev =
-      run("eval " + (dir / "identified.urdf").string() + " --samples " +
-          (dir / "samples.csv").string() + " --what torque --rigid-body-only --out " +
-          (dir / "tau.csv").string());
+  const Cmd ev = run("eval " + (dir / "identified.urdf").string() + " --samples " +
+                     (dir / "samples.csv").string() + " --what torque --rigid-body-only --out " +
+                     (dir / "tau.csv").string());
   ASSERT_EQ(ev.code, 0) << ev.out;
   const exid::CsvTable tau = exid::readCsv(dir / "tau.csv");
   for (int k = 0; k < 5; ++k) {

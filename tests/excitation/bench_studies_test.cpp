@@ -10,8 +10,8 @@
 #include <cmath>
 #include <cstdlib>
 #include <fstream>
-#include <iterator>
 #include <iostream>
+#include <iterator>
 
 #include "exid/config.hpp"
 #include "exid/excitation.hpp"
@@ -138,4 +138,3 @@ TEST(BenchStudies, Puma560FourierIsReproducibleBitForBit) {
 }
 
 }  // namespace
-

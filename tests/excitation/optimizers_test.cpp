@@ -270,8 +270,8 @@ TEST(Excitation, EigenvalueGradientsMatchCentralDifferences) {
 TEST(Nlopt, EpigraphObjectiveNeedsTheCondCriterion) {
   XSetup s =
       make("planar2r", "fourier", "{period_s: 4, harmonics: 3, sample_period_s: 0.05}", "log_det");
-  auto opt = exid_test::create<exid::Optimizer>(
-      "nlopt", "{algorithm: LD_SLSQP, objective: epigraph}");
+  auto opt =
+      exid_test::create<exid::Optimizer>("nlopt", "{algorithm: LD_SLSQP, objective: epigraph}");
   exid::RunContext ctx;
   try {
     opt->minimize(*s.problem, ctx);
@@ -326,35 +326,28 @@ INSTANTIATE_TEST_SUITE_P(
     All, OptimizerTest,
     ::testing::Values(
         OptCase{"nlopt", "{algorithm: LD_SLSQP}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_MMA, max_evaluations: 300}", "fourier",
-                kFourier},
-        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_evaluations: 400}", "fourier",
-                kFourier},
-        OptCase{
-            "nlopt",
-            "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000}",
-            "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400}",
+        OptCase{"nlopt", "{algorithm: LD_MMA, max_evaluations: 300}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: LN_COBYLA, max_evaluations: 400}", "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: GN_ISRES, start_evaluations: 600, max_evaluations: 2000}",
                 "fourier", kFourier},
+        OptCase{"nlopt", "{algorithm: GN_DIRECT_L, max_evaluations: 400}", "fourier", kFourier},
         OptCase{"nlopt", "{algorithm: LD_SLSQP, starts: 3}", "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP, objective: epigraph}", "fourier",
-                kFourier},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP, objective: epigraph}", "fourier", kFourier},
         OptCase{"nlopt",
                 "{algorithm: LD_SLSQP, objective: log, constraint_mode: aggregated, "
                 "polish_objective: epigraph, starts: 2}",
                 "fourier", kFourier},
-        OptCase{"nlopt", "{algorithm: LD_SLSQP}", "spline",
-                "{duration_s: 4, knots: 6, degree: 5}"},
+        OptCase{"nlopt", "{algorithm: LD_SLSQP}", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
         OptCase{"adjoint_gradient", "{max_iterations: 400}", "fourier", kFourier},
-        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}", "fourier",
+        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}", "fourier", kFourier},
+        OptCase{"adjoint_gradient", "{constraints: penalty, max_iterations: 400}", "fourier",
                 kFourier},
-        OptCase{"adjoint_gradient", "{constraints: penalty, max_iterations: 400}", "fourier", kFourier},
         OptCase{"adjoint_gradient", "{constraints: projection, max_iterations: 400}", "fourier",
                 kFourier},
         OptCase{"adjoint_gradient", "{max_iterations: 400}", "pointwise",
                 "{duration_s: 4, sample_period_s: 0.05}"},
-        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}",
-                "pointwise", "{duration_s: 4, sample_period_s: 0.05}"}),
+        OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}", "pointwise",
+                "{duration_s: 4, sample_period_s: 0.05}"}),
     [](const auto& info) {
       return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index);
     });

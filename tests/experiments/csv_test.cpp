@@ -3,8 +3,8 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
-#include <filesystem>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <iterator>
 
@@ -196,7 +196,8 @@ fs::path uniformFile(const std::string& name, int rows, double period_s, bool wi
 TEST(CsvSignals, NoTimeColumnAndNoSamplePeriodIsAnErrorNamingBothWaysOut) {
   const fs::path f = uniformFile("no_t.csv", 50, 0.005, false);
   const std::string m = errorOf(f);
-  for (const char* what : {"no time column 't'", "sample_period_s", "time_column", "does not guess"})
+  for (const char* what :
+       {"no time column 't'", "sample_period_s", "time_column", "does not guess"})
     EXPECT_NE(m.find(what), std::string::npos) << what << ": " << m;
   // with the period: t = row * period, exactly the file's rate (200 Hz here, not an assumed 100)
   const exid::Dataset d = readCsv(f, "sample_period_s: 0.005");
@@ -220,8 +221,8 @@ TEST(CsvSignals, TimeColumnByNameWithItsUnit) {
 TEST(CsvSignals, TorqueScaleFlipsTheTorqueAloneAndQScaleConvertsUnits) {
   const fs::path f = uniformFile("scale.csv", 30, 0.01);
   const exid::Dataset a = readCsv(f);
-  const exid::Dataset b = readCsv(
-      f, "tau_scale: [-1, 1, 1, -1, 1, 2], q_scale: [0.0174532925, 1, 1, 1, 1, 1]");
+  const exid::Dataset b =
+      readCsv(f, "tau_scale: [-1, 1, 1, -1, 1, 2], q_scale: [0.0174532925, 1, 1, 1, 1, 1]");
   EXPECT_EQ(b.q.col(1), a.q.col(1));
   EXPECT_NEAR((b.q.col(0) - 0.0174532925 * a.q.col(0)).cwiseAbs().maxCoeff(), 0.0, 1e-15);
   EXPECT_EQ(b.tau.col(0), -a.tau.col(0));
@@ -239,8 +240,7 @@ TEST(CsvSignals, ASegmentOutsideTheRecordingIsAnErrorNeverClamped) {
   EXPECT_EQ(readCsv(f, "t_end_s: 1.0").size(), 101);
   const std::string m = errorOf(f, "t_start_s: 0.5, t_end_s: 1.2");
   EXPECT_NE(m.find("t_end_s = 1.2 s is past the end of the recording"), std::string::npos) << m;
-  EXPECT_NE(errorOf(f, "t_start_s: 1.5").find("after the end of the recording"),
-            std::string::npos);
+  EXPECT_NE(errorOf(f, "t_start_s: 1.5").find("after the end of the recording"), std::string::npos);
 }
 
 TEST(CsvSignals, GapsAndUnevenStampsAreRefusedNamingTheLine) {
@@ -269,14 +269,17 @@ TEST(CsvSignals, TrimmedSamplesAreCountedAndTheDefaultKeepsAShortSegment) {
       << a.find("trim_rule")->asString();
   EXPECT_EQ(d.meta.find("warnings"), nullptr);
   // a long segment: the transient rule itself, 100 at each end
-  const exid::Dataset l = readCsv(uniformFile("trim_long.csv", 4000, 0.01),
-                                  "differentiate_cutoff_hz: 2");
+  const exid::Dataset l =
+      readCsv(uniformFile("trim_long.csv", 4000, 0.01), "differentiate_cutoff_hz: 2");
   EXPECT_EQ(l.meta.find("accounting")->find("trimmed_edges")->asInt(), 200);
   // an explicit trim discarding more than 10 % is a warning with the figures
   const exid::Dataset w = readCsv(f, "differentiate_cutoff_hz: 2, trim_edges: 80");
   ASSERT_NE(w.meta.find("warnings"), nullptr);
-  EXPECT_NE(w.meta.find("warnings")->at(0).asString().find("discards 160 of the segment's 1000 "
-                                                            "samples (16.0 %"),
+  EXPECT_NE(w.meta.find("warnings")
+                ->at(0)
+                .asString()
+                .find("discards 160 of the segment's 1000 "
+                      "samples (16.0 %"),
             std::string::npos)
       << w.meta.find("warnings")->at(0).asString();
 }

@@ -222,12 +222,13 @@ TEST(Cli, EvalWritesTorqueRegressorAndEnergyConsistently) {
     ASSERT_EQ(r.code, 0) << what << ": " << r.out;
   }
   // the rigid bodies alone, asked for explicitly; global options also after the subcommand
-  CmdResult rb = runExid("eval puma560 --samples " + (dir / "samples.csv").string() +
-                         " --what torque --rigid-body-only --out " +
-                         (dir / "rigid.csv").string() + " -q");
+  CmdResult rb =
+      runExid("eval puma560 --samples " + (dir / "samples.csv").string() +
+              " --what torque --rigid-body-only --out " + (dir / "rigid.csv").string() + " -q");
   ASSERT_EQ(rb.code, 0) << rb.out;
-  EXPECT_NE(slurp(dir / "torque.csv").find("# exid eval torque puma560: full torque: rigid "
-                                           "bodies + drives"),
+  EXPECT_NE(slurp(dir / "torque.csv")
+                .find("# exid eval torque puma560: full torque: rigid "
+                      "bodies + drives"),
             std::string::npos)
       << slurp(dir / "torque.csv");
   EXPECT_NE(slurp(dir / "rigid.csv").find("rigid bodies alone"), std::string::npos)
@@ -297,13 +298,12 @@ TEST(Cli, VersionAndGlobalOptionsAfterTheSubcommand) {
   EXPECT_EQ(v.out.rfind("exid " EXID_VERSION_STRING " (commit ", 0), 0u) << v.out;
   // the commit is 12 hex digits (optionally -dirty) or 'unknown' outside a checkout
   const std::string commit = v.out.substr(v.out.find("(commit ") + 8);
-  EXPECT_TRUE(commit.rfind("unknown", 0) == 0 ||
-              commit.find_first_not_of("0123456789abcdef") >= 12)
+  EXPECT_TRUE(commit.rfind("unknown", 0) == 0 || commit.find_first_not_of("0123456789abcdef") >= 12)
       << commit;
   // -q, -v and --plugin-path before or after the subcommand, nested subcommands included
   for (const std::string args :
-       {"plugins robot -q", "-q plugins robot", "plugins robot -v",
-        "robot info planar2r -q", "plugins robot --plugin-path /nonexistent -q"}) {
+       {"plugins robot -q", "-q plugins robot", "plugins robot -v", "robot info planar2r -q",
+        "plugins robot --plugin-path /nonexistent -q"}) {
     CmdResult r = runExid(args);
     EXPECT_EQ(r.code, 0) << args << ": " << r.out;
   }
@@ -312,8 +312,8 @@ TEST(Cli, VersionAndGlobalOptionsAfterTheSubcommand) {
                                    "{rotor_inertia: false, coulomb: false, viscous: false}}\n"
                                    "experiment: {type: simulate, params: {duration_s: 3}}\n"
                                    "estimator: {type: batch_ls}\n";
-  CmdResult r = runExid("run " + (out / "s.yaml").string() + " --out " + (out / "o").string() +
-                        " -q");
+  CmdResult r =
+      runExid("run " + (out / "s.yaml").string() + " --out " + (out / "o").string() + " -q");
   EXPECT_EQ(r.code, 0) << r.out;
   EXPECT_EQ(r.out.find("[exid]"), std::string::npos) << "-q after the subcommand: " << r.out;
   const exid::Json S = exid::Json::parse(slurp(out / "o" / "summary.json"));
@@ -353,8 +353,8 @@ TEST(Cli, ValidationRunsItsOwnTrajectoryAndDataWarningsReachTheSummary) {
     f << "t,q1,q2,tau1,tau2\n";
     for (int k = 0; k < 400; ++k) {
       const double t = 0.01 * k;
-      f << t << "," << std::sin(t) << "," << std::cos(1.3 * t) << "," << 0.1 * k << ","
-        << -0.05 * k << "\n";
+      f << t << "," << std::sin(t) << "," << std::cos(1.3 * t) << "," << 0.1 * k << "," << -0.05 * k
+        << "\n";
     }
   }
   std::ofstream(dir / "c.yaml")

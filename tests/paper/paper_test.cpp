@@ -3,8 +3,9 @@
 // experiment 5, the RLS estimates with the optimal and a non-optimal trajectory. The optimiser
 // runs on an iteration budget (about what one second of CPU time gives on one core), so the
 // result is the same on any machine; how long it takes is measured by bash scripts/bench.sh
-// studies (the paper: 20-60 h on a PC/486; the benchmark: under a second each). The measured figures are printed and written to
-// <build>/paper_out/paper_results.csv (examples/paper/README.md quotes them).
+// studies (the paper: 20-60 h on a PC/486; the benchmark: under a second each). The measured
+// figures are printed and written to <build>/paper_out/paper_results.csv (examples/paper/README.md
+// quotes them).
 //
 // Condition number: cond(W) = sigma_max / sigma_min of the stacked base regressor (exid's
 // `cond`); the paper's may be that of W^T W = cond(W)^2, so the ratio is also given squared.
@@ -85,7 +86,6 @@ Row excitation(const std::string& file) {
   record(r);
   return r;
 }
-
 
 TEST(Paper, Exp1DifferentialThreeJoints) {
   const Row r = excitation("exp1_differential_3joints.yaml");
