@@ -40,6 +40,12 @@ using exid::est::Vec10;
 std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
 /// The map z -> full standard parameter vector (model.fullNames() order).
+// Implausible results are warnings: the consistent fit's residual above this many times the
+// unconstrained one (noise alone moves it by a few percent), a body's mass this many times off
+// the robot description's (heavier only: a body the motion barely excites often comes out light).
+constexpr double kResidualRatioWarn = 1.2;
+constexpr double kMassRatioWarn = 10.0;
+
 class StandardMap {
  public:
   StandardMap(const std::vector<std::string>& names, const Eigen::VectorXd& nominal)
@@ -685,6 +691,33 @@ class ConsistentLs : public exid::Estimator {
       if (map.nonneg(s)) all_ok = all_ok && pi(map.scalarIndex(s)) >= 0.0;
     d["bodies"] = bodies;
     d["consistent"] = all_ok;
+    // A consistent fit the data disagree with is no result to trust silently: say so, with the
+    // likely causes (these reach summary.json's warnings).
+    {
+      Json w = Json::array();
+      const double ratio = rms_u > 0 ? rms_c / rms_u : 1.0;
+      if (ratio > kResidualRatioWarn)
+        w.push_back(Json(fmt::format(
+            "{}: the physically consistent fit leaves a residual {:.2f} times the unconstrained "
+            "fit's ({:.4g} against {:.4g}): the data ask for a physically impossible model. "
+            "Likely causes: a torque of the opposite sign to the joint (tau_scale: -1 for it; "
+            "`exid inspect` checks each joint), a wrong transmission or torque scale, "
+            "unmodelled friction, or a delay between position and torque",
+            kName, ratio, rms_c, rms_u)));
+      const Eigen::VectorXd nom = model.fullNominal();
+      for (int b = 0; b < map.numBodies(); ++b) {
+        const double m_est = pi(map.bodyIndices(b)[9]), m_nom = nom(map.bodyIndices(b)[9]);
+        if (m_nom > 0 && std::isfinite(m_nom) && m_est > kMassRatioWarn * m_nom)
+          w.push_back(Json(fmt::format(
+              "{}: body {} has a mass of {:.4g} kg against {:.4g} kg in the robot description "
+              "(more than {:g} times heavier): the masses of a chain are identified only through "
+              "the torques they cause, so a mass this far off usually means a torque of the "
+              "opposite sign (tau_scale: -1 for it), a wrong torque scale or transmission, or a "
+              "body the motion does not excite",
+              kName, map.bodyNumber(b), m_est, m_nom, kMassRatioWarn)));
+      }
+      if (w.size() > 0) d["warnings"] = w;
+    }
     d["samples"] = data.size();
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
 

@@ -9,6 +9,7 @@
 //   4. rows W, y from the model, then parallel decimation: every column of W and y, per
 //      equation, low-pass filtered (its own zero-phase Butterworth, cutoff
 //      decimation_cutoff_ratio x the new Nyquist frequency) and one sample in `decimation` kept;
+//   4b. optionally (min_speed) the samples where a joint is nearly at rest are removed;
 //   5. least squares with batch_ls's solver (QR of [W y], rank-revealing SVD, covariance).
 // Holds the filtered signals and the rows of the whole dataset in memory (filtfilt is
 // non-causal): memory O(samples x rows per sample x p), unlike batch_ls.
@@ -62,6 +63,14 @@ class FilteredLs : public exid::Estimator {
                         "samples dropped at each end after filtering; -1: automatic "
                         "(ceil(2 fs / cutoff_hz), or 1 after differentiating without a filter)",
                         -1.0, 1e9),
+        exid::param_doubles("min_speed", std::vector<double>{}, "rad/s or m/s",
+                            "per joint: samples (after decimation) where any joint moves slower "
+                            "than its value are removed whole (where Coulomb friction changes "
+                            "sign; FIGAROH's dq_lim_def rule); empty: none removed"),
+        exid::param_string("min_speed_frame", std::string("measured"),
+                           "coordinates of min_speed: measured (the data's, e.g. motors) or "
+                           "joint (through the robot's transmission)",
+                           {"measured", "joint"}),
         exid::param_double("rank_tolerance", 1e-8, "",
                            "a direction is unidentifiable when its singular value of the "
                            "column-scaled W is below this times the largest",
@@ -77,7 +86,9 @@ class FilteredLs : public exid::Estimator {
         dec_order_(static_cast<int>(p.getInt("decimation_order"))),
         dec_ratio_(p.getDouble("decimation_cutoff_ratio")),
         trim_(p.getInt("trim_edges")),
-        correct_(p.getBool("correct_correlation")) {
+        correct_(p.getBool("correct_correlation")),
+        min_speed_(p.getDoubles("min_speed")),
+        min_speed_joint_(p.getString("min_speed_frame") == "joint") {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
@@ -88,28 +99,46 @@ class FilteredLs : public exid::Estimator {
     return s;
   }
 
-  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
-                          const exid::Prior* prior, const exid::RunContext& ctx) override {
-    const auto t0 = std::chrono::steady_clock::now();
+  /// Steps 1-4 (also used for the validation rows of raw validation data, so that the held-out
+  /// error is measured on rows processed exactly like the identification rows).
+  struct Processed {
+    exid::Rows rows;
+    double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
+    bool filter_q = false, diff_qd = false, diff_qdd = false;
+    long trim = 0, trim_transient = 0;
+    bool trim_default = false;
+    int R = 1;
+    long rows_before = 0, slow_removed = 0, samples_after_decimation = 0;
+    std::string dec_note;
+  };
+
+  Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
+                    const exid::RunContext& ctx) const {
+    Processed P;
     const int K = data.size();
     exid::check(K >= 8,
                 fmt::format("filtered_ls: dataset '{}' has {} samples; filtering needs at least 8",
                             data.source, K));
     exid::check(data.q.rows() == K && data.q.cols() > 0,
                 fmt::format("filtered_ls: dataset '{}' has no positions q", data.source));
-    double jitter = 0.0;
-    const double fs = est::samplingRate(data.t, &jitter);
-    if (jitter > 0.05)
+    P.fs = est::samplingRate(data.t, &P.jitter);
+    const double fs = P.fs;
+    if (P.jitter > 0.05)
       exid::logWarn(
           fmt::format("filtered_ls: sampling of '{}' is not uniform (max |dt - median| = {:.0f} % "
                       "of the median); filters assume fs = {:g} Hz",
-                      data.source, 100 * jitter, fs));
-    const bool filter_q = cutoff_ > 0.0;
+                      data.source, 100 * P.jitter, fs));
+    P.filter_q = cutoff_ > 0.0;
+    const bool filter_q = P.filter_q;
     if (filter_q)
       exid::check(cutoff_ < 0.5 * fs,
                   fmt::format("filtered_ls: cutoff_hz = {:g} Hz must be below the Nyquist "
                               "frequency fs/2 = {:g} Hz of '{}'",
                               cutoff_, 0.5 * fs, data.source));
+    const int n = data.dof();
+    exid::check(min_speed_.empty() || static_cast<int>(min_speed_.size()) == n,
+                fmt::format("filtered_ls: min_speed: expected {} values (one per joint), found {}",
+                            n, min_speed_.size()));
 
     // ---- 1-2. filtering and differentiation
     ctx.report(0.0, "filtered_ls: filtering");
@@ -119,57 +148,126 @@ class FilteredLs : public exid::Estimator {
       sos = est::butterworthLowpass(order_, cutoff_, fs);
       f.q = est::filtfiltColumns(sos, data.q);
     }
-    const bool diff_qd = differentiate_ || !data.hasVelocity();
-    const bool diff_qdd = differentiate_ || !data.hasAcceleration();
-    if (diff_qd) {
+    P.diff_qd = differentiate_ || !data.hasVelocity();
+    P.diff_qdd = differentiate_ || !data.hasAcceleration();
+    if (P.diff_qd) {
       f.qd = est::centralFirstDerivative(data.t, f.q);
     } else if (filter_q) {
       f.qd = est::filtfiltColumns(sos, data.qd);
     }
-    if (diff_qdd) {
-      f.qdd = diff_qd ? est::centralSecondDerivative(data.t, f.q)
-                      : est::centralFirstDerivative(data.t, f.qd);
+    if (P.diff_qdd) {
+      f.qdd = P.diff_qd ? est::centralSecondDerivative(data.t, f.q)
+                        : est::centralFirstDerivative(data.t, f.qd);
     } else if (filter_q) {
       f.qdd = est::filtfiltColumns(sos, data.qdd);
     }
     if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped after filtering");
 
-    // ---- 3. trim
+    // ---- 3. trim: by default the filter's edge transient, ceil(2 fs / fc - eps) samples, but
+    // at most 5 % of the data at each end (the csv experiment's rule: a default never discards
+    // more than 10 %; the edges of a zero-phase filter with steady-state initial conditions
+    // are already close, and a short recording cannot spare its edges).
     long trim = trim_;
-    if (trim < 0)
-      trim = filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_))
-                      : ((diff_qd || diff_qdd) ? 1 : 0);
+    if (trim < 0) {
+      P.trim_default = true;
+      P.trim_transient = filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_ - 1e-9))
+                                  : ((P.diff_qd || P.diff_qdd) ? 1 : 0);
+      trim = std::min(P.trim_transient, std::max<long>(P.diff_qd || P.diff_qdd ? 1 : 0, K / 20));
+    }
     exid::check(K - 2 * trim >= 8,
                 fmt::format("filtered_ls: trimming {} samples at each end of {} leaves too few; "
                             "lower trim_edges or raise cutoff_hz",
                             trim, K));
     if (trim > 0) f = est::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
+    P.trim = trim;
 
     // ---- 4. rows and parallel decimation
     ctx.report(0.3, "filtered_ls: observation rows");
     exid::Rows rows = model.rows(f, ctx);
     est::checkRows(rows, model.numBase(), kName, static_cast<int>(trim));
-    const long rows_before = rows.y.size();
+    P.rows_before = rows.y.size();
     int R = decimation_;
-    std::string dec_note;
     if (R == 0)
       R = filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
-    if (R > 1 && !est::modelIsPerSample(model)) {
-      dec_note = fmt::format(
+    const bool per_sample = est::modelIsPerSample(model);
+    if (R > 1 && !per_sample) {
+      P.dec_note = fmt::format(
           "decimation {} skipped: the model '{}' does not give one row per sample and equation", R,
           model.pluginName());
-      exid::logWarn("filtered_ls: " + dec_note);
+      exid::logWarn("filtered_ls: " + P.dec_note);
       R = 1;
     }
-    double dec_cut = 0.0, kappa = 1.0;
     if (R > 1) {
       if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped before decimation");
       ctx.report(0.6, "filtered_ls: parallel decimation");
-      dec_cut = dec_ratio_ * 0.5 * fs / R;
-      const est::Sos dsos = est::butterworthLowpass(dec_order_, dec_cut, fs);
+      P.dec_cut = dec_ratio_ * 0.5 * fs / R;
+      const est::Sos dsos = est::butterworthLowpass(dec_order_, P.dec_cut, fs);
       rows = est::decimateRows(rows, R, dsos);
-      if (correct_) kappa = est::decimationVarianceFactor(dsos, R);
+      if (correct_) P.kappa = est::decimationVarianceFactor(dsos, R);
     }
+    P.R = R;
+    // ---- 4b. samples where a joint is slower than min_speed (its Coulomb friction changes
+    // sign there) are removed whole, after the decimation (FIGAROH's rule).
+    const int neq = std::max(1, rows.numEquations);
+    P.samples_after_decimation = rows.y.size() / neq;
+    if (!min_speed_.empty()) {
+      exid::check(per_sample,
+                  fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
+                              "equation (model '{}' is not)",
+                              model.pluginName()));
+      const Eigen::Index S = rows.y.size() / neq;
+      const exid::RobotModel& robot = model.robot();
+      const bool via_T = min_speed_joint_ && robot.hasTransmission();
+      std::vector<Eigen::Index> keep;
+      for (Eigen::Index k = 0; k < S; ++k) {
+        const Eigen::Index sample = std::min<Eigen::Index>(k * R, f.qd.rows() - 1);
+        const Eigen::VectorXd v =
+            via_T ? Eigen::VectorXd(robot.transmission * f.qd.row(sample).transpose())
+                  : Eigen::VectorXd(f.qd.row(sample).transpose());
+        bool slow = false;
+        for (int j = 0; j < n; ++j)
+          slow = slow || std::abs(v(j)) < min_speed_[static_cast<std::size_t>(j)];
+        if (slow) continue;
+        for (int e = 0; e < neq; ++e) keep.push_back(k * neq + e);
+      }
+      P.slow_removed = static_cast<long>(S) - static_cast<long>(keep.size()) / neq;
+      exid::check(!keep.empty(),
+                  fmt::format("filtered_ls: min_speed removes every sample of '{}'", data.source));
+      exid::Rows kept;
+      kept.W.resize(static_cast<Eigen::Index>(keep.size()), rows.W.cols());
+      kept.y.resize(static_cast<Eigen::Index>(keep.size()));
+      kept.numEquations = rows.numEquations;
+      kept.equation_names = rows.equation_names;
+      for (std::size_t i = 0; i < keep.size(); ++i) {
+        kept.W.row(static_cast<Eigen::Index>(i)) = rows.W.row(keep[i]);
+        kept.y(static_cast<Eigen::Index>(i)) = rows.y(keep[i]);
+        if (!rows.equation.empty())
+          kept.equation.push_back(rows.equation[static_cast<std::size_t>(keep[i])]);
+        if (rows.t.size() == static_cast<std::size_t>(rows.y.size()))
+          kept.t.push_back(rows.t[static_cast<std::size_t>(keep[i])]);
+      }
+      rows = std::move(kept);
+    }
+    P.rows = std::move(rows);
+    return P;
+  }
+
+  exid::Rows validationRows(const exid::ObservationModel& model, const exid::Dataset& data,
+                            const exid::RunContext& ctx) const override {
+    return process(model, data, ctx).rows;
+  }
+
+  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    const int K = data.size();
+    Processed P = process(model, data, ctx);
+    const exid::Rows& rows = P.rows;
+    const double fs = P.fs, jitter = P.jitter, kappa = P.kappa, dec_cut = P.dec_cut;
+    const bool filter_q = P.filter_q, diff_qd = P.diff_qd, diff_qdd = P.diff_qdd;
+    const long trim = P.trim, rows_before = P.rows_before;
+    const int R = P.R;
+    const std::string& dec_note = P.dec_note;
 
     // ---- 5. least squares
     ctx.report(0.9, "filtered_ls: solving");
@@ -213,6 +311,27 @@ class FilteredLs : public exid::Estimator {
                                           : "central differences of filtered qd")
                                : (filter_q ? "measured, filtered" : "measured");
     d["trimmed_samples_each_end"] = Json(static_cast<long long>(trim));
+    d["trimmed_percent"] = 100.0 * 2.0 * static_cast<double>(trim) / std::max(1, K);
+    if (P.trim_default)
+      d["trim_rule"] =
+          trim < P.trim_transient
+              ? fmt::format(
+                    "ceil(2 fs / fc) = {} samples capped at 5 % of the data: {} at each end",
+                    P.trim_transient, trim)
+              : fmt::format("ceil(2 fs / fc) = {} samples at each end", trim);
+    if (2 * trim > K / 10) {
+      d["warnings"] = Json::array();
+      d["warnings"].push_back(Json(fmt::format(
+          "filtered_ls: trim_edges = {} discards {} of the {} samples ({:.1f} %, more than 10 %)",
+          trim, 2 * trim, K, 200.0 * static_cast<double>(trim) / K)));
+    }
+    if (!min_speed_.empty()) {
+      d["min_speed"] = Json(min_speed_);
+      d["slow_samples_removed"] = Json(static_cast<long long>(P.slow_removed));
+      d["slow_samples_removed_percent"] =
+          100.0 * static_cast<double>(P.slow_removed) /
+          static_cast<double>(std::max<long>(1, P.samples_after_decimation));
+    }
     d["decimation"] = R;
     d["decimation_cutoff_hz"] = R > 1 ? exid::Json(dec_cut) : exid::Json(nullptr);
     d["decimation_order"] = dec_order_;
@@ -240,6 +359,8 @@ class FilteredLs : public exid::Estimator {
   double dec_ratio_;
   long trim_;
   bool correct_;
+  std::vector<double> min_speed_;
+  bool min_speed_joint_ = false;
   est::SolveOptions opt_;
 };
 

@@ -358,9 +358,9 @@ std::string studyNameProblem(const std::string& name) {
 
 namespace {
 
-const std::vector<std::string> kTopKeys = {"name",      "description", "seed",       "budget_s",
-                                           "robot",     "model",       "excitation", "experiment",
-                                           "estimator", "validation",  "report",     "prior"};
+const std::vector<std::string> kTopKeys = {
+    "name",       "description", "seed",       "budget_s", "robot", "model", "excitation",
+    "experiment", "estimator",   "validation", "report",   "prior", "split"};
 
 std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_dir, Problems& pr) {
   if (!n.IsMap()) {
@@ -431,6 +431,99 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
   }
   if (bad) return std::nullopt;
   return spec;
+}
+
+/// `split:` expands into the experiment (identification part) and a copy of it as validation
+/// (the rest, with split.validation's parameters laid over). False when it cannot.
+bool expandSplit(const YAML::Node& root, const fs::path& base_dir, const Registry& reg,
+                 Problems& pr, StudyConfig& cfg) {
+  const YAML::Node n = root["split"];
+  if (!n.IsMap()) {
+    pr.add(n, fmt::format("split: expected a mapping {{identification_fraction: 0.65}} or {{at_s: "
+                          "5.0}} (optionally validation: {{...experiment parameters}}), found '{}'",
+                          scalarText(n)));
+    return false;
+  }
+  const std::vector<std::string> allowed = {"identification_fraction", "at_s", "validation"};
+  bool bad = false;
+  for (const auto& kv : n) {
+    const std::optional<std::string> key = keyName(pr, kv.first, "split");
+    if (!key || std::find(allowed.begin(), allowed.end(), *key) == allowed.end()) {
+      if (key) unknownKey(pr, kv.first, "split", *key, allowed);
+      bad = true;
+    }
+  }
+  SplitSpec sp;
+  sp.line = n.Mark().line + 1;
+  const YAML::Node f = n["identification_fraction"], a = n["at_s"];
+  if (static_cast<bool>(f) == static_cast<bool>(a)) {
+    pr.add(n,
+           "split: give exactly one of identification_fraction (of the experiment's segment, "
+           "in (0, 1)) and at_s (seconds after the segment's start)");
+    return false;
+  }
+  const YAML::Node v = f ? f : a;
+  const auto d = v.IsScalar() ? toDouble(v.Scalar()) : std::nullopt;
+  if (!d || !std::isfinite(*d) || !(*d > 0.0) || (f && !(*d < 1.0))) {
+    pr.add(v, fmt::format("split.{} = {}: must be a number in {}",
+                          f ? "identification_fraction" : "at_s", scalarText(v),
+                          f ? "(0, 1)" : "(0, inf)"));
+    return false;
+  }
+  (f ? sp.identification_fraction : sp.at_s) = *d;
+  if (root["validation"]) {
+    pr.add(root["validation"],
+           "validation: a study with split validates on the rest of its experiment's recording; "
+           "give split or a validation section, not both");
+    bad = true;
+  }
+  const YAML::Node e = root["experiment"];
+  if (!e || !e.IsMap() || !e["type"] || !e["type"].IsScalar()) {
+    pr.add(n, "split: needs an experiment section (the recording that is split)");
+    return false;
+  }
+  const PluginInfo* info = reg.find(PluginKind::Experiment, e["type"].Scalar());
+  if (!info) return false;  // reported by the experiment section
+  const bool can = std::any_of(info->params.begin(), info->params.end(),
+                               [](const ParamDecl& p) { return p.name == "split_part"; });
+  if (!can) {
+    pr.add(n, fmt::format("split: experiment '{}' cannot split its data (no split_part "
+                          "parameter; the csv experiment can); give a validation section",
+                          info->name));
+    return false;
+  }
+  const YAML::Node vo = n["validation"];
+  if (vo && !vo.IsMap()) {
+    pr.add(vo, fmt::format("split.validation: expected a mapping of the experiment's parameters "
+                           "for the validation part, found '{}'",
+                           scalarText(vo)));
+    return false;
+  }
+  if (bad) return false;
+  YAML::Node ident = YAML::Clone(e), valid = YAML::Clone(e);
+  for (const char* k : {"split_part", "split_fraction", "split_at_s"}) {
+    if ((e["params"] && e["params"].IsMap() && e["params"][k]) || (vo && vo[k])) {
+      pr.add(n,
+             fmt::format("split: sets {} itself; remove it from the experiment's parameters", k));
+      return false;
+    }
+  }
+  if (vo)
+    for (const auto& kv : vo) {
+      valid["params"][kv.first.Scalar()] = YAML::Clone(kv.second);
+      sp.validation_overrides.push_back(kv.first.Scalar());
+    }
+  const std::string point = fmt::format("{:.17g}", *d);
+  for (const auto& [node, part] : {std::pair<YAML::Node*, const char*>{&ident, "identification"},
+                                   std::pair<YAML::Node*, const char*>{&valid, "validation"}}) {
+    (*node)["params"]["split_part"] = part;
+    (*node)["params"][f ? "split_fraction" : "split_at_s"] = point;
+  }
+  cfg.experiment = parseSpec(ident, PluginKind::Experiment, "experiment", base_dir, reg, pr, false);
+  cfg.validation = parseSpec(valid, PluginKind::Experiment, "validation", base_dir, reg, pr, false);
+  if (cfg.validation) cfg.validation->line = sp.line;
+  cfg.split = sp;
+  return true;
 }
 
 }  // namespace
@@ -527,13 +620,18 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
         pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
     }
   }
-  if (root["experiment"])
+  bool split_done = false;
+  if (root["split"] && root["experiment"])
+    split_done = expandSplit(root, base_dir, reg, pr, cfg);
+  else if (root["split"])
+    pr.add(root["split"], "split: needs an experiment section (the recording that is split)");
+  if (root["experiment"] && !split_done)
     cfg.experiment = parseSpec(root["experiment"], PluginKind::Experiment, "experiment", base_dir,
                                reg, pr, false);
   if (root["estimator"])
     cfg.estimator =
         parseSpec(root["estimator"], PluginKind::Estimator, "estimator", base_dir, reg, pr, false);
-  if (root["validation"])
+  if (root["validation"] && !split_done)
     cfg.validation = parseSpec(root["validation"], PluginKind::Experiment, "validation", base_dir,
                                reg, pr, false);
   if (YAML::Node r = root["report"]) {
@@ -571,7 +669,9 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
            "csv, params: {file: ...}})");
   if (root["prior"] && !cfg.estimator && !root["estimator"])
     pr.add(root["prior"], "prior: needs an estimator section (the prior is the estimator's)");
-  if (cfg.validation && !cfg.estimator && !root["estimator"])
+  if (cfg.split && !cfg.estimator && !root["estimator"])
+    pr.add(root["split"], "split: needs an estimator section (the identified model is validated)");
+  else if (cfg.validation && !cfg.estimator && !root["estimator"])
     pr.add(0, "validation: needs an estimator section (the identified model is what is validated)");
 
   if (!pr.items.empty()) {

@@ -91,6 +91,8 @@ Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
   out.y = std::move(full.y);
   out.equation = std::move(full.equation);
   out.numEquations = full.numEquations;
+  out.t = std::move(full.t);
+  out.equation_names = std::move(full.equation_names);
   return out;
 }
 

@@ -86,6 +86,13 @@ int CsvTable::col(const std::string& name) const {
   return -1;
 }
 
+const std::string& CsvTable::notNumeric(int c) const {
+  static const std::string none;
+  return c >= 0 && static_cast<std::size_t>(c) < not_numeric.size()
+             ? not_numeric[static_cast<std::size_t>(c)]
+             : none;
+}
+
 Eigen::VectorXd CsvTable::column(const std::string& name) const {
   int c = col(name);
   if (c < 0) throw Error(fmt::format("CSV: no column '{}'", name));
@@ -171,6 +178,7 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
         throw Error(fmt::format("{}:{}: duplicate column '{}'", source, lineno, t.columns[i]));
   }
   const std::size_t nc = t.columns.size();
+  t.not_numeric.assign(nc, std::string());
   std::vector<double> values;
   std::size_t rows = 0;
   int dropped = 0;
@@ -195,12 +203,16 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
       const std::size_t used = s.empty() ? 0 : static_cast<std::size_t>(end - s.c_str());
       if (!s.empty() && (used == 0 || used != s.size())) {
         const unsigned char b = static_cast<unsigned char>(s[used == 0 ? 0 : used]);
-        throw Error(fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})",
-                                source, lineno, starts[c] + used + 1, t.columns[c], printable(s),
-                                b >= 0x20 && b < 0x7f
-                                    ? fmt::format("unexpected '{}'", static_cast<char>(b))
-                                    : fmt::format("unexpected byte 0x{:02X}", b),
-                                starts[c] + used + 1));
+        std::string msg =
+            fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})", source,
+                        lineno, starts[c] + used + 1, t.columns[c], printable(s),
+                        b >= 0x20 && b < 0x7f ? fmt::format("unexpected '{}'", static_cast<char>(b))
+                                              : fmt::format("unexpected byte 0x{:02X}", b),
+                        starts[c] + used + 1);
+        if (!opt.text_columns) throw Error(msg);
+        if (t.not_numeric[c].empty()) t.not_numeric[c] = std::move(msg);
+        row[c] = std::nan("");
+        continue;
       }
       if (!std::isfinite(v) && !opt.allow_non_finite) {
         bad = true;

@@ -53,6 +53,15 @@ class StackedModel final : public ObservationModel {
     }
     return v;
   }
+  Eigen::VectorXd fullTruth(const Json& meta) const override {
+    Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
+    for (std::size_t m = 0; m < parts_.size(); ++m) {
+      Eigen::VectorXd tm = parts_[m]->fullTruth(meta);
+      for (std::size_t c = 0; c < map_[m].size(); ++c)
+        v(map_[m][c]) = tm(static_cast<Eigen::Index>(c));
+    }
+    return v;
+  }
   Rows fullRows(const Dataset& data, const RunContext& ctx) const override {
     std::vector<Rows> blocks;
     Eigen::Index rows = 0;
@@ -72,6 +81,15 @@ class StackedModel final : public ObservationModel {
             weights_[m] * b.W.col(static_cast<Eigen::Index>(c));
       out.y.segment(r0, b.y.size()) = weights_[m] * b.y;
       for (int e : b.equation) out.equation.push_back(eq0 + e);
+      if (b.t.size() == static_cast<std::size_t>(b.y.size()))
+        out.t.insert(out.t.end(), b.t.begin(), b.t.end());
+      else
+        out.t.insert(out.t.end(), static_cast<std::size_t>(b.y.size()), NAN);
+      for (int e = 0; e < b.numEquations; ++e)
+        out.equation_names.push_back(parts_[m]->pluginName() + ": " +
+                                     (e < static_cast<int>(b.equation_names.size())
+                                          ? b.equation_names[static_cast<std::size_t>(e)]
+                                          : fmt::format("equation {}", e)));
       eq0 += b.numEquations;
       r0 += b.W.rows();
     }
@@ -736,7 +754,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       I["residual_rms"] = est->residual_rms;
       I["sigma"] = est->sigma;
       const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
-      Eigen::VectorXd truth = model->baseNominal();
+      const Eigen::VectorXd nominal = model->baseNominal();
+      // A simulated study is judged against what the simulation used (its payload), never
+      // against a nominal value it did not use.
+      const Eigen::VectorXd truth =
+          simulated ? Eigen::VectorXd(model->base().reduce(model->fullTruth(data->meta))) : nominal;
       Json params = Json::array();
       double err2 = 0, tru2 = 0;
       for (Eigen::Index i = 0; i < est->value.size(); ++i) {
@@ -748,15 +770,26 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         p["rel_std_percent"] = est->std.size() > i && est->value(i) != 0
                                    ? 100.0 * est->std(i) / std::abs(est->value(i))
                                    : NAN;
-        p["nominal"] = truth(i);
+        p["nominal"] = nominal(i);
         if (simulated) p["true"] = truth(i);
         err2 += (est->value(i) - truth(i)) * (est->value(i) - truth(i));
         tru2 += truth(i) * truth(i);
         params.push_back(p);
       }
-      if (simulated && tru2 > 0) I["param_rel_err"] = std::sqrt(err2 / tru2);
+      if (simulated) {
+        I["param_abs_err"] = std::sqrt(err2);
+        if (tru2 > 0)
+          I["param_rel_err"] = std::sqrt(err2 / tru2);
+        else
+          warn(
+              "identification: every true parameter is zero (the simulation used none of the "
+              "model's parameters, e.g. no payload): param_rel_err is undefined; "
+              "param_abs_err is given");
+      }
       I["parameters"] = params;
       I["details"] = est->details;
+      if (const Json* w = est->details.find("warnings"); w && w->isArray())
+        for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());
       report.identification(*est, truth, simulated);
     }
 
@@ -771,9 +804,16 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       // validating on the identification trajectory (the excitation's optimum) would not
       // measure how the model generalises.
       Dataset vd = exp->run(robot, nullptr, vctx);
-      checkDataset(vd, *robot, model.get(), "validation");
+      // Raw validation data (no q̇/q̈ yet) for an estimator that processes its own data: its
+      // processing makes the validation rows too (the held-out error is then measured on rows
+      // processed like the identification rows). Otherwise the model's rows of the data as
+      // the validation experiment gives them.
+      auto vest = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+      const bool by_estimator =
+          vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
+      checkDataset(vd, *robot, model.get(), "validation", by_estimator);
       checkDatasetFinite(vd, "validation");
-      Rows rows = model->rows(vd, vctx);
+      Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx) : model->rows(vd, vctx);
       Eigen::VectorXd pred = rows.W * est->value;
       checkFinite(pred, "validation: the predicted measurement, row");
       Eigen::VectorXd err = rows.y - pred;
@@ -781,6 +821,32 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       V["type"] = cfg.validation->type;
       V["samples"] = vd.size();
       V["meta"] = vd.meta;
+      V["rows"] = Json(static_cast<long long>(rows.y.size()));
+      V["rows_processing"] = by_estimator
+                                 ? fmt::format(
+                                       "the estimator's: '{}' filtered, differentiated and "
+                                       "decimated the raw validation data as it did its own",
+                                       cfg.estimator->type)
+                                 : std::string("the model's rows of the validation data as given");
+      if (cfg.split) {
+        // One recording, two parts: where it was cut, and what each part holds.
+        Json sp = Json::object();
+        if (cfg.split->identification_fraction > 0)
+          sp["identification_fraction"] = cfg.split->identification_fraction;
+        else
+          sp["at_s"] = cfg.split->at_s;
+        if (const Json* m = vd.meta.find("split")) {
+          for (const char* k : {"split_at_s", "identification_s", "validation_s"})
+            if (const Json* x = m->find(k)) sp[k] = *x;
+        }
+        sp["identification_samples"] = data->size();
+        sp["validation_samples"] = vd.size();
+        sp["validation_overrides"] = Json(cfg.split->validation_overrides);
+        sp["rule"] =
+            "each part is read, filtered, differentiated and trimmed on its own: no sample of "
+            "one part enters the other";
+        S["split"] = sp;
+      }
       if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
       V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
@@ -801,17 +867,27 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       V["rms_per_joint"] = Json(rms);
       V["relative_error_per_joint"] = Json(relj);
       V["wall_s"] = seconds(t0);
+      if (!rows.equation_names.empty()) V["equations"] = Json(rows.equation_names);
       if (write) {
+        // t of each row's sample so rows can be matched with other tools; the equations named
+        // in a comment line.
         CsvTable t;
-        t.columns = {"row", "equation", "measured", "predicted"};
-        t.data.resize(rows.y.size(), 4);
+        t.columns = {"t", "row", "equation", "measured", "predicted"};
+        t.data.resize(rows.y.size(), 5);
+        const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
         for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
-          t.data(r, 0) = static_cast<double>(r);
-          t.data(r, 1) = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
-          t.data(r, 2) = rows.y(r);
-          t.data(r, 3) = pred(r);
+          t.data(r, 0) = has_t ? rows.t[static_cast<std::size_t>(r)] : NAN;
+          t.data(r, 1) = static_cast<double>(r);
+          t.data(r, 2) = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
+          t.data(r, 3) = rows.y(r);
+          t.data(r, 4) = pred(r);
         }
-        writeCsvAtomic(dir / "validation.csv", t);
+        std::string names;
+        for (std::size_t e = 0; e < rows.equation_names.size(); ++e)
+          names += fmt::format("{}{} = {}", e ? ", " : "", e, rows.equation_names[e]);
+        writeFileAtomic(dir / "validation.csv",
+                        fmt::format("# exid validation of study '{}': equation {}\n{}", cfg.name,
+                                    names.empty() ? std::string("indices") : names, toCsv(t)));
       }
       report.validation(rows, pred, V);
     }

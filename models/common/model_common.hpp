@@ -71,6 +71,20 @@ struct Payload {
     L.I_com << I[0], I[1], I[2], I[1], I[3], I[4], I[2], I[4], I[5];
     return L;
   }
+  /// From the JSON json() writes (a simulated dataset's meta.payload).
+  static Payload fromJson(const Json& j) {
+    const Json* m = j.find("mass_kg");
+    const Json* c = j.find("com_m");
+    const Json* I = j.find("inertia_com_kg_m2");
+    check(m && c && I && c->size() == 3 && I->size() == 6,
+          "payload: expected {mass_kg, com_m[3], inertia_com_kg_m2[6]}");
+    Payload L;
+    L.mass = m->asDouble();
+    L.com = Eigen::Vector3d(c->at(0).asDouble(), c->at(1).asDouble(), c->at(2).asDouble());
+    auto e = [&](std::size_t i) { return I->at(i).asDouble(); };
+    L.I_com << e(0), e(1), e(2), e(1), e(3), e(4), e(2), e(4), e(5);
+    return L;
+  }
   bool empty() const { return mass == 0.0 && I_com.isZero(0.0); }
   /// Standard parameters about the sensor origin, sensor axes, pi order.
   Vec10 pi() const { return inertialFromCom(mass, com, I_com); }
@@ -85,6 +99,20 @@ struct Payload {
     return j;
   }
 };
+
+/// Names of the torque equations of the selected (0-based) measured coordinates.
+inline std::vector<std::string> torqueEquationNames(const RobotModel& R,
+                                                    const std::vector<int>& sel) {
+  std::vector<std::string> out;
+  for (int j : sel) {
+    const std::string& jn = !R.hasTransmission() && j < static_cast<int>(R.bodies.size())
+                                ? R.bodies[static_cast<std::size_t>(j)].joint_name
+                                : std::string();
+    out.push_back(jn.empty() ? fmt::format("tau{} [N m or N]", j + 1)
+                             : fmt::format("tau{} {} [N m or N]", j + 1, jn));
+  }
+  return out;
+}
 
 /// 1-based joint numbers from a parameter -> 0-based indices; empty selects all joints.
 inline std::vector<int> selectJoints(const std::vector<std::int64_t>& joints, int dof,

@@ -79,6 +79,7 @@ class DifferentialModel : public exid::ObservationModel {
     r.y.resize(static_cast<Eigen::Index>(K) * m);
     r.equation.resize(static_cast<std::size_t>(K) * m);
     r.numEquations = m;
+    r.t.resize(static_cast<std::size_t>(K) * m);
     for (int k = 0; k < K; ++k)
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];
@@ -86,7 +87,9 @@ class DifferentialModel : public exid::ObservationModel {
         if (friction_ == "subtract") y -= frictionTorque(j, d.qd(k, j));
         r.y[k * m + i] = y;
         r.equation[static_cast<std::size_t>(k * m + i)] = i;
+        r.t[static_cast<std::size_t>(k * m + i)] = d.t[k];
       }
+    r.equation_names = exid::models::torqueEquationNames(robot(), sel_);
     return r;
   }
 

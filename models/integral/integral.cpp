@@ -125,6 +125,10 @@ class IntegralModel : public exid::ObservationModel {
     }
     r.equation.assign(static_cast<std::size_t>(R), 0);
     r.numEquations = 1;
+    r.t.resize(static_cast<std::size_t>(R));
+    for (int i = 0; i < R; ++i)
+      r.t[static_cast<std::size_t>(i)] = d.t[win[static_cast<std::size_t>(i)].b];
+    r.equation_names = {"energy of a window [J] (t: its end)"};
     return r;
   }
 

@@ -42,6 +42,11 @@ class LoadTorqueModel : public exid::ObservationModel {
 
   std::vector<std::string> fullNames() const override { return exid::models::payloadNames(); }
   Eigen::VectorXd fullNominal() const override { return payload_.phi(); }
+  Eigen::VectorXd fullTruth(const exid::Json& meta) const override {
+    if (const exid::Json* p = meta.find("payload"))
+      return exid::models::Payload::fromJson(*p).phi();
+    return fullNominal();
+  }
   std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "tau"}; }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
@@ -69,6 +74,10 @@ class LoadTorqueModel : public exid::ObservationModel {
         r.equation[static_cast<std::size_t>(k * m + i)] = i;
       }
     }
+    r.t.resize(static_cast<std::size_t>(K) * m);
+    for (int k = 0; k < K; ++k)
+      for (int i = 0; i < m; ++i) r.t[static_cast<std::size_t>(k * m + i)] = d.t[k];
+    r.equation_names = exid::models::torqueEquationNames(R, sel_);
     return r;
   }
 

@@ -52,6 +52,12 @@ class LoadWrenchModel : public exid::ObservationModel {
     v.head(10) = payload_.phi();
     return v;
   }
+  Eigen::VectorXd fullTruth(const exid::Json& meta) const override {
+    Eigen::VectorXd v = fullNominal();  // the simulation adds no sensor offset
+    if (const exid::Json* p = meta.find("payload"))
+      v.head(10) = exid::models::Payload::fromJson(*p).phi();
+    return v;
+  }
   std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "wrench"}; }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
@@ -74,6 +80,10 @@ class LoadWrenchModel : public exid::ObservationModel {
         r.equation[static_cast<std::size_t>(6 * k + e)] = e;
       }
     r.numEquations = 6;
+    r.t.resize(static_cast<std::size_t>(6 * K));
+    for (int k = 0; k < K; ++k)
+      for (int e = 0; e < 6; ++e) r.t[static_cast<std::size_t>(6 * k + e)] = d.t[k];
+    r.equation_names = {"fx [N]", "fy [N]", "fz [N]", "mx [N m]", "my [N m]", "mz [N m]"};
     return r;
   }
 

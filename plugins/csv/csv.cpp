@@ -78,6 +78,20 @@ class CsvExperiment : public exid::Experiment {
                      "segment start, in seconds after the first sample's time", 0.0),
         param_double("t_end_s", 0.0, "s",
                      "segment end, in seconds after the first sample's time; 0: to the end", 0.0),
+        param_string("split_part", std::string("none"),
+                     "none: the whole segment; identification / validation: the part of the "
+                     "segment before / after the split point (split_fraction or split_at_s; the "
+                     "study key `split` sets these); each part is filtered on its own, so no "
+                     "sample of one touches the other",
+                     {"none", "identification", "validation"}),
+        param_double("split_fraction", 0.0, "",
+                     "with split_part: the split point as a fraction of the segment's duration "
+                     "(e.g. 0.65: identification = first 65 %); 0: use split_at_s",
+                     0.0, 1.0, false, true),
+        param_double("split_at_s", 0.0, "s",
+                     "with split_part: the split point in seconds after the segment's start; "
+                     "0: use split_fraction",
+                     0.0),
         param_string("torque_from", std::string("tau"),
                      "tau: columns tau1..taun; current: columns <current_prefix>1..n times "
                      "torque_constants_Nm_per_A",
@@ -157,6 +171,7 @@ class CsvExperiment : public exid::Experiment {
       }
       exid::CsvReadOptions opt;
       opt.allow_non_finite = true;  // checked below, only in the columns used
+      opt.text_columns = true;      // a column of labels nobody uses is not an error
       src.T = exid::parseCsv(text, src.file, opt);
       exid::check(src.T.data.rows() > 0,
                   fmt::format("experiment 'csv': {}: no data rows after the header", src.file));
@@ -336,6 +351,12 @@ class CsvExperiment : public exid::Experiment {
                                       static_cast<const std::vector<int>*>(&cw)})
       used.insert(used.end(), g->begin(), g->end());
     if (ct >= 0) used.push_back(ct);
+    // Text in a column that is used is an error at its first such cell (never a dropped row).
+    for (int c : used) {
+      const std::string& why =
+          srcs[static_cast<std::size_t>(c / kStride)].T.notNumeric(c % kStride);
+      if (!why.empty()) throw exid::Error("experiment 'csv': " + why);
+    }
     const bool drop = P_.getBool("drop_bad_rows");
     std::vector<int> keep;
     std::vector<double> tk;
@@ -419,17 +440,44 @@ class CsvExperiment : public exid::Experiment {
                             "recording ({} s after its first sample); the segment is never "
                             "clamped (0: to the end)",
                             file, te, span));
+    // Split of the segment into an identification and a validation part (half-open at the
+    // split point: no sample belongs to both).
+    const std::string part = P_.getString("split_part");
+    const double sf = P_.getDouble("split_fraction"), sat = P_.getDouble("split_at_s");
+    const double seg_end = te > 0.0 ? std::min(te, span) : span;
+    double tsplit = 0.0;
+    if (part != "none") {
+      exid::check((sf > 0.0) != (sat > 0.0),
+                  fmt::format("experiment 'csv': split_part = {} needs exactly one of "
+                              "split_fraction (found {}) and split_at_s (found {})",
+                              part, sf, sat));
+      tsplit = sf > 0.0 ? ts + sf * (seg_end - ts) : ts + sat;
+      exid::check(tsplit > ts && tsplit < seg_end,
+                  fmt::format("experiment 'csv': {}: the split point {} s (split_at_s = {}) is "
+                              "not inside the segment [{}, {}] s",
+                              file, tsplit, sat, ts, seg_end));
+    } else {
+      exid::check(sf == 0.0 && sat == 0.0,
+                  fmt::format("experiment 'csv': split_fraction / split_at_s need split_part "
+                              "(identification or validation; the study key `split` sets all "
+                              "three)"));
+    }
+    const double lo = part == "validation" ? tsplit : ts;
+    const double hi = part == "identification" ? tsplit : seg_end;
     std::vector<int> sel;
+    int in_segment = 0;
     for (std::size_t i = 0; i < keep.size(); ++i) {
       const double rel = tk[i] - tfirst;
       if (rel < ts) continue;
       if (te > 0.0 && rel > te) break;
+      ++in_segment;
+      if (rel < lo || (part == "identification" && rel >= hi)) continue;
       sel.push_back(static_cast<int>(i));
     }
     exid::check(!sel.empty(),
                 fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
                             "after the first sample (t = {} s; the file spans {} s)",
-                            file, ts, te, tfirst, tk.back() - tfirst));
+                            file, lo, part == "none" ? te : hi, tfirst, tk.back() - tfirst));
 
     // Fill the dataset.
     const int K = static_cast<int>(sel.size());
@@ -483,13 +531,24 @@ class CsvExperiment : public exid::Experiment {
     if (ct >= 0) m["time_unit"] = tunit;
     if (ct < 0) m["sample_period_s"] = dt;
     m["segment_s"] = exid::Json(std::vector<double>{ts, te});
+    if (part != "none") {
+      exid::Json& sp = m["split"];
+      sp["part"] = part;
+      sp["split_at_s"] = tsplit;
+      if (sf > 0.0) sp["fraction"] = sf;
+      sp["identification_s"] = exid::Json(std::vector<double>{ts, tsplit});
+      sp["validation_s"] = exid::Json(std::vector<double>{tsplit, seg_end});
+      sp["segment_samples"] = in_segment;
+      sp["part_samples"] = static_cast<int>(sel.size());
+    }
     m["recording_span_s"] = span;
     // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
     {
       exid::Json& a = m["accounting"];
       a["rows_in_file"] = rows;
       a["dropped_bad_rows"] = dropped;
-      a["outside_segment"] = static_cast<int>(keep.size()) - K;
+      a["outside_segment"] = static_cast<int>(keep.size()) - in_segment;
+      if (part != "none") a["other_part_of_split"] = in_segment - K;
       a["segment_samples"] = K;
       const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
       a["trimmed_edges"] = trimmed;

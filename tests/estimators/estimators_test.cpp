@@ -378,3 +378,51 @@ TEST(Estimators, ProgressIsReported) {
 }
 
 }  // namespace
+
+TEST(Estimators, FilteredLsDefaultTrimIsCappedAndMinSpeedRemovesSlowSamples) {
+  auto m = makeModel(1);
+  DataOptions o;
+  o.samples = 2000;
+  o.dt = 0.001;  // 2 s at 1 kHz
+  o.derivatives = false;
+  const exid::Dataset d = makeData(*m, 1, o);
+  exid::RunContext ctx;
+  // A 2 Hz cut-off has an edge transient of 2 fs / fc = 1000 samples: half the recording at
+  // each end. The default trims 5 % of it at each end instead, and says why.
+  exid::Estimate e =
+      make("filtered_ls", "{cutoff_hz: 2, decimation: 1}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(e.details.find("trimmed_samples_each_end")->asInt(), 100);
+  EXPECT_NE(e.details.find("trim_rule")->asString().find("= 1000 samples capped at 5 %"),
+            std::string::npos);
+  EXPECT_EQ(e.details.find("warnings"), nullptr);
+  // An explicit trim above 10 % is a warning.
+  e = make("filtered_ls", "{cutoff_hz: 2, decimation: 1, trim_edges: 300}")
+          ->estimate(*m, d, nullptr, ctx);
+  ASSERT_NE(e.details.find("warnings"), nullptr);
+  EXPECT_NE(e.details.find("warnings")->at(0).asString().find("600 of the 2000 samples"),
+            std::string::npos);
+  // min_speed: the decimated samples whose speed is below it are removed (counted), and
+  // noise-free data still give the parameters.
+  const exid::Dataset l = makeData(*m, 1, [] {
+    DataOptions x;
+    x.samples = 10000;
+    x.dt = 0.001;
+    x.derivatives = false;
+    return x;
+  }());
+  e = make("filtered_ls", "{cutoff_hz: 20, decimation: 10, min_speed: [0.3]}")
+          ->estimate(*m, l, nullptr, ctx);
+  long slow = 0, total = 0;
+  const exid::Dataset truth = makeData(*m, 1, [] {
+    DataOptions x;
+    x.samples = 10000;
+    x.dt = 0.001;
+    return x;
+  }());
+  for (int k = 100; k < 9900; k += 10, ++total) slow += std::abs(truth.qd(k, 0)) < 0.3;
+  ASSERT_GT(slow, 20);
+  EXPECT_NEAR(static_cast<double>(e.details.find("slow_samples_removed")->asInt()),
+              static_cast<double>(slow), 3.0);
+  EXPECT_EQ(e.rows, total - e.details.find("slow_samples_removed")->asInt());
+  EXPECT_LE(maxRelErr(e.value, m->baseNominal()), 1e-3);
+}

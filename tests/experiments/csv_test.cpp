@@ -283,3 +283,59 @@ TEST(CsvSignals, TrimmedSamplesAreCountedAndTheDefaultKeepsAShortSegment) {
             std::string::npos)
       << w.meta.find("warnings")->at(0).asString();
 }
+
+TEST(CsvSignals, SplitPartsNeverShareASampleNorAFilterEdge) {
+  const fs::path f = uniformFile("split.csv", 1000, 0.01);  // t = 0 .. 9.99 s
+  const std::string filt = "differentiate_cutoff_hz: 4, filter_torque: true";
+  const exid::Dataset a = readCsv(f, filt + ", split_part: identification, split_fraction: 0.65");
+  const exid::Dataset b = readCsv(f, filt + ", split_part: validation, split_fraction: 0.65");
+  const double cut = 0.65 * 9.99;
+  EXPECT_LT(a.t[a.size() - 1], cut);
+  EXPECT_GE(b.t[0], cut);
+  const exid::Json& sa = *a.meta.find("split");
+  EXPECT_EQ(sa.find("part")->asString(), "identification");
+  EXPECT_DOUBLE_EQ(sa.find("split_at_s")->asDouble(), cut);
+  EXPECT_EQ(sa.find("part_samples")->asInt(), 650);  // before the trim of its own edges
+  EXPECT_EQ(b.meta.find("split")->find("part_samples")->asInt(), 350);
+  EXPECT_EQ(a.meta.find("accounting")->find("other_part_of_split")->asInt(), 350);
+  // The validation part's samples never reach the identification part through the filter:
+  // change every sample after the split point and the identification data stay bit for bit.
+  std::ifstream in(f);
+  std::string line, text;
+  int k = 0;
+  while (std::getline(in, line)) {
+    if (k > 0 && (k - 1) * 0.01 >= cut) {
+      auto c = line.find(',');
+      line = line.substr(0, c + 1) + "5" + line.substr(c + 2);  // q1's first digit replaced
+    }
+    text += line + "\n";
+    ++k;
+  }
+  const fs::path g = writeText("split_changed.csv", text);
+  const exid::Dataset a2 = readCsv(g, filt + ", split_part: identification, split_fraction: 0.65");
+  EXPECT_EQ(a2.q, a.q);
+  EXPECT_EQ(a2.qd, a.qd);
+  EXPECT_EQ(a2.tau, a.tau);
+  EXPECT_NE(readCsv(g, filt + ", split_part: validation, split_fraction: 0.65").q, b.q);
+  // by time, and the errors
+  EXPECT_EQ(readCsv(f, "split_part: validation, split_at_s: 4").size(), 600);
+  EXPECT_NE(errorOf(f, "split_part: validation").find("exactly one of split_fraction"),
+            std::string::npos);
+  EXPECT_NE(errorOf(f, "split_part: validation, split_at_s: 12").find("not inside the segment"),
+            std::string::npos);
+  EXPECT_NE(errorOf(f, "split_fraction: 0.5").find("need split_part"), std::string::npos);
+}
+
+TEST(CsvSignals, ATextColumnNobodyUsesIsIgnoredAUsedOneIsAnError) {
+  std::string s = "t,label," + header(6, false);
+  for (int k = 0; k < 30; ++k)
+    s += fmt::format("{},{},", 0.01 * k, k % 2 ? "run" : "hold") + row(0, 6, 0.1 * k, false);
+  const fs::path f = writeText("labels.csv", s);
+  EXPECT_EQ(readCsv(f).size(), 30);
+  std::string bad = header(6);
+  for (int k = 0; k < 30; ++k) bad += row(0.01 * k, 6, 0.1);
+  bad.replace(bad.find("\n", bad.find("\n") + 1) + 1 + 9, 1, "x");  // a letter in row 2
+  const std::string m = errorOf(writeText("text_in_q.csv", bad));
+  EXPECT_NE(m.find("is not a number"), std::string::npos) << m;
+  EXPECT_NE(m.find(":3:"), std::string::npos) << m;  // its line
+}

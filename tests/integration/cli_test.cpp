@@ -373,3 +373,116 @@ TEST(Cli, ValidationRunsItsOwnTrajectoryAndDataWarningsReachTheSummary) {
   EXPECT_NE(slurp(dir / "c" / "report.md").find("## Warnings"), std::string::npos);
   fs::remove_all(dir);
 }
+
+TEST(Cli, SplitIdentifiesOnOnePartAndValidatesOnTheRestOfOneRecording) {
+  fs::path dir = tempDir("split");
+  // A recording simulated by exid itself, written as the csv experiment reads it.
+  std::ofstream(dir / "sim.yaml")
+      << "robot: {type: planar2r}\n"
+         "experiment: {type: simulate, params: {duration_s: 8, drive_terms: false, "
+         "noise_tau_Nm: 0.01}}\n";
+  CmdResult r =
+      runExid("-q run " + (dir / "sim.yaml").string() + " --out " + (dir / "sim").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string study =
+      "robot: {type: planar2r}\n"
+      "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
+      "false}}\n"
+      "experiment: {type: csv, params: {file: sim/experiment.csv}}\n"
+      "estimator: {type: batch_ls}\n";
+  std::ofstream(dir / "s.yaml") << study << "split: {identification_fraction: 0.65}\n";
+  r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  exid::Json S = exid::Json::parse(slurp(dir / "o" / "summary.json"));
+  const exid::Json& sp = *S.find("split");
+  EXPECT_EQ(sp.find("identification_fraction")->asDouble(), 0.65);
+  const int ni = sp.find("identification_samples")->asInt();
+  const int nv = sp.find("validation_samples")->asInt();
+  EXPECT_EQ(ni + nv,
+            S.find("validation")->find("meta")->find("split")->find("segment_samples")->asInt());
+  EXPECT_NEAR(static_cast<double>(ni) / (ni + nv), 0.65, 0.01);
+  EXPECT_EQ(S.find("experiment")->find("samples")->asInt(), ni);
+  const double cut = sp.find("split_at_s")->asDouble();
+  EXPECT_EQ(sp.find("identification_s")->at(1).asDouble(), cut);
+  EXPECT_EQ(sp.find("validation_s")->at(0).asDouble(), cut);
+  EXPECT_LT(S.find("validation")->find("relative_error")->asDouble(), 0.05);
+  // The resolved study spells the two parts out (and runs again as it is).
+  const std::string resolved = slurp(dir / "o" / "study.resolved.yaml");
+  EXPECT_NE(resolved.find("split_part: identification"), std::string::npos) << resolved;
+  EXPECT_NE(resolved.find("split_part: validation"), std::string::npos) << resolved;
+  r = runExid("-q run " + (dir / "o" / "study.resolved.yaml").string() + " --out " +
+              (dir / "o2").string());
+  EXPECT_EQ(r.code, 0) << r.out;
+  // split and a validation section exclude each other; a simulated experiment cannot split
+  std::ofstream(dir / "both.yaml") << study << "split: {at_s: 3}\nvalidation: {type: simulate}\n";
+  r = runExid("-q validate " + (dir / "both.yaml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("give split or a validation section, not both"), std::string::npos) << r.out;
+  std::ofstream(dir / "sim_split.yaml")
+      << "robot: {type: planar2r}\nmodel: {type: differential}\n"
+         "experiment: {type: simulate}\nestimator: {type: batch_ls}\n"
+         "split: {identification_fraction: 0.5}\n";
+  r = runExid("-q validate " + (dir / "sim_split.yaml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("cannot split its data"), std::string::npos) << r.out;
+  fs::remove_all(dir);
+}
+
+TEST(Cli, APayloadStudyIsJudgedAgainstTheSimulatedPayloadNotTheNominal) {
+  fs::path dir = tempDir("payload_truth");
+  // The model's nominal payload is zero (unknown); the simulation carries 1.5 kg.
+  std::ofstream(dir / "s.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: load_wrench}\n"
+         "experiment: {type: simulate, params: {duration_s: 4, wrench: true, drive_terms: false, "
+         "payload_mass_kg: 1.5, payload_com_m: [0.01, 0.02, 0.05], payload_inertia_kg_m2: "
+         "[0.004, 0, 0, 0.005, 0, 0.003]}}\n"
+         "estimator: {type: batch_ls}\n";
+  CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  const exid::Json S = exid::Json::parse(slurp(dir / "o" / "summary.json"));
+  const exid::Json& I = *S.find("identification");
+  ASSERT_NE(I.find("param_rel_err"), nullptr) << I.dump(0);
+  EXPECT_LT(I.find("param_rel_err")->asDouble(), 1e-6);
+  const exid::Json& p0 = I.find("parameters")->at(0);  // L_M
+  EXPECT_EQ(p0.find("name")->asString(), "L_M");
+  EXPECT_DOUBLE_EQ(p0.find("true")->asDouble(), 1.5);
+  EXPECT_DOUBLE_EQ(p0.find("nominal")->asDouble(), 0.0);
+  fs::remove_all(dir);
+}
+
+TEST(Cli, AnImplausibleConsistentFitIsAWarningNamingTheLikelyCause) {
+  fs::path dir = tempDir("implausible");
+  std::ofstream(dir / "sim.yaml")
+      << "robot: {type: puma560}\n"
+         "experiment: {type: simulate, params: {duration_s: 6, drive_terms: true, "
+         "noise_tau_Nm: 0.01}}\n";
+  CmdResult r =
+      runExid("-q run " + (dir / "sim.yaml").string() + " --out " + (dir / "sim").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  auto warnings =
+      [&](const std::string& tau_scale) {
+        std::ofstream(dir / "s.yaml")
+            << "robot: {type: puma560}\nmodel: {type: differential}\n"
+               "experiment: {type: csv, params: {file: sim/experiment.csv, tau_scale: "
+            << tau_scale << "}}\nestimator: {type: consistent_ls}\n";
+        CmdResult c =
+            runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+        EXPECT_EQ(c.code, 0) << c.out;
+        const exid::Json S = exid::Json::parse(slurp(dir / "o" / "summary.json"));
+        std::string all;
+        for (std::size_t i = 0; S.find("warnings") && i < S.find("warnings")->size(); ++i)
+          all += S.find("warnings")->at(i).asString() + "\n";
+        return all;
+      };
+  // the torque of joint 2 recorded with the opposite sign: the consistent fit cannot follow
+  // (friction and rotor inertia are >= 0), and body 2 comes out far too heavy
+  const std::string flipped = warnings("[1, -1, 1, 1, 1, 1]");
+  EXPECT_NE(flipped.find("physically impossible model"), std::string::npos) << flipped;
+  EXPECT_NE(flipped.find("opposite sign"), std::string::npos) << flipped;
+  EXPECT_NE(flipped.find("body 2 has a mass of"), std::string::npos) << flipped;
+  // the same data with the right sign: no such warning
+  const std::string right = warnings("[1, 1, 1, 1, 1, 1]");
+  EXPECT_EQ(right.find("consistent_ls"), std::string::npos) << right;
+  fs::remove_all(dir);
+}

@@ -223,8 +223,12 @@ Rows decimateRows(const Rows& rows, int factor, const Sos& sos) {
         out.W.row(r) = dec[g].row(static_cast<Eigen::Index>(j)).head(p);
         out.y(r) = dec[g](static_cast<Eigen::Index>(j), p);
         out.equation.push_back(labels[g]);
+        if (rows.t.size() == static_cast<std::size_t>(R))
+          out.t.push_back(rows.t[static_cast<std::size_t>(
+              groups.at(labels[g])[j * static_cast<std::size_t>(factor)])]);
         ++r;
       }
+  out.equation_names = rows.equation_names;
   return out;
 }
 

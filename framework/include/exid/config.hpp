@@ -61,6 +61,15 @@ struct PriorSpec {
   int line = 0;
 };
 
+/// `split:` one recording, two parts: the experiment identifies on the part before the split
+/// point and a copy of it (with `validation` parameters laid over) validates on the rest.
+struct SplitSpec {
+  double identification_fraction = 0.0;           // of the experiment's segment; 0: at_s
+  double at_s = 0.0;                              // seconds after the segment's start; 0: fraction
+  std::vector<std::string> validation_overrides;  // parameter names laid over the copy
+  int line = 0;
+};
+
 struct ReportOptions {
   bool plots = true;
   std::string title;
@@ -78,6 +87,7 @@ struct StudyConfig {
   std::optional<PluginSpec> experiment, estimator, validation;
   ReportOptions report;
   std::optional<PriorSpec> prior;
+  std::optional<SplitSpec> split;  // (already expanded into experiment + validation)
 
   bool hasExcitation() const { return optimizer.has_value(); }
   /// The resolved study as YAML text (every default filled in), and as JSON.

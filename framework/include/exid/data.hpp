@@ -44,6 +44,8 @@ struct Rows {
   std::vector<int> equation;  // per row: which equation it is (joint index, wrench component,
                               // window), so estimators can weight per equation
   int numEquations = 1;       // distinct values in `equation`
+  std::vector<double> t;      // per row: time of its sample [s] (a window: its end); may be empty
+  std::vector<std::string> equation_names;  // per equation, e.g. "tau joint 2 (shoulder)"
 };
 
 }  // namespace exid

@@ -51,6 +51,13 @@ class ObservationModel : public PluginObject {
   /// Names and nominal values (from the robot description) of the full parameter vector.
   virtual std::vector<std::string> fullNames() const = 0;
   virtual Eigen::VectorXd fullNominal() const = 0;
+  /// The full parameters of the system that produced a dataset, when its meta says so (a
+  /// simulated payload: `meta.payload`); by default the nominal ones. The runner compares a
+  /// simulated study's estimate with this, never with a nominal value the simulation did not use.
+  virtual Eigen::VectorXd fullTruth(const Json& data_meta) const {
+    (void)data_meta;
+    return fullNominal();
+  }
   /// Full-column rows from a dataset (W_full * pi_full ~= y).
   virtual Rows fullRows(const Dataset& data, const RunContext& ctx) const = 0;
   /// Full-column design rows from trajectory samples (no measurements), for excitation design
@@ -216,6 +223,14 @@ class Estimator : public PluginObject {
   virtual EstimatorSpecs specs() const { return {}; }
   virtual Estimate estimate(const ObservationModel& model, const Dataset& data, const Prior* prior,
                             const RunContext& ctx) = 0;
+  /// The rows the identified model is validated on, for a validation dataset as raw as the
+  /// estimator's own (specs().needs_raw_dataset: no q̇/q̈ yet). An estimator that filters,
+  /// differentiates or decimates does the same to them, so that the held-out error is measured
+  /// on rows processed exactly like the identification rows. Default: the model's rows.
+  virtual Rows validationRows(const ObservationModel& model, const Dataset& data,
+                              const RunContext& ctx) const {
+    return model.rows(data, ctx);
+  }
 };
 
 }  // namespace exid

@@ -37,12 +37,20 @@ struct CsvTable {
   int col(const std::string& name) const;  // -1 when absent
   bool has(const std::string& name) const { return col(name) >= 0; }
   Eigen::VectorXd column(const std::string& name) const;
+  /// With CsvReadOptions::text_columns: per column, the error of its first cell that is not a
+  /// number ("" when every cell is one). Such cells read as NaN; a reader that uses the column
+  /// throws this message (a column of labels nobody asked for is not an error).
+  std::vector<std::string> not_numeric;
+  /// The message for column c, "" when it is numeric (or not checked).
+  const std::string& notNumeric(int c) const;
 };
 
 struct CsvReadOptions {
   bool allow_non_finite = false;      // NaN/Inf cells are an error naming row and column unless set
   bool drop_non_finite_rows = false;  // drop (and count) rows with NaN/Inf/empty cells instead
   char delimiter = 0;                 // 0: detect ',' ';' or tab from the header
+  bool text_columns = false;          // a cell that is not a number reads as NaN and is recorded in
+                                      // CsvTable::not_numeric instead of being an error
 };
 
 /// Reads a CSV with a header line. Errors name the file, the line and the column.
