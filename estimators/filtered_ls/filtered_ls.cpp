@@ -123,11 +123,6 @@ class FilteredLs : public exid::Estimator {
                 fmt::format("filtered_ls: dataset '{}' has no positions q", data.source));
     P.fs = est::samplingRate(data.t, &P.jitter);
     const double fs = P.fs;
-    if (P.jitter > 0.05)
-      exid::logWarn(
-          fmt::format("filtered_ls: sampling of '{}' is not uniform (max |dt - median| = {:.0f} % "
-                      "of the median); filters assume fs = {:g} Hz",
-                      data.source, 100 * P.jitter, fs));
     P.filter_q = cutoff_ > 0.0;
     const bool filter_q = P.filter_q;
     if (filter_q)
@@ -319,8 +314,16 @@ class FilteredLs : public exid::Estimator {
                     "ceil(2 fs / fc) = {} samples capped at 5 % of the data: {} at each end",
                     P.trim_transient, trim)
               : fmt::format("ceil(2 fs / fc) = {} samples at each end", trim);
+    if (jitter > 0.05) {
+      if (!d.find("warnings")) d["warnings"] = Json::array();
+      d["warnings"].push_back(Json(fmt::format(
+          "filtered_ls: the sampling of '{}' is not uniform (max |dt - median| = {:.0f} % of the "
+          "median step); the filters assume fs = {:g} Hz (the csv experiment's resample_hz puts "
+          "the data on a uniform grid)",
+          data.source, 100 * jitter, fs)));
+    }
     if (2 * trim > K / 10) {
-      d["warnings"] = Json::array();
+      if (!d.find("warnings")) d["warnings"] = Json::array();
       d["warnings"].push_back(Json(fmt::format(
           "filtered_ls: trim_edges = {} discards {} of the {} samples ({:.1f} %, more than 10 %)",
           trim, 2 * trim, K, 200.0 * static_cast<double>(trim) / K)));

@@ -70,6 +70,14 @@ class CsvExperiment : public exid::Experiment {
                       "per joint, multiplies the torque column alone (after torque constants), "
                       "e.g. -1 for a torque recorded with the opposite sign to the joint; "
                       "empty: 1"),
+        param_double("resample_hz", 0.0, "Hz",
+                     "> 0: the segment is linearly interpolated onto a uniform grid at this rate "
+                     "(uneven time stamps, e.g. a logger's jitter, are then accepted; a gap "
+                     "longer than max_gap_ratio times the median step is still an error: nothing "
+                     "is invented across it); 0: the stamps must be uniform",
+                     0.0),
+        param_doubles("wrench_scale", std::vector<double>{}, "",
+                      "6 values multiplying fx fy fz mx my mz (a unit, a sign); empty: 1"),
         param_double("max_gap_ratio", 1.5, "",
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the rows",
@@ -327,6 +335,15 @@ class CsvExperiment : public exid::Experiment {
                                             ? qscale
                                             : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
     const std::vector<double> tauscale = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
+    std::vector<double> wscale = P_.getDoubles("wrench_scale");
+    if (wscale.empty()) wscale.assign(6, 1.0);
+    exid::check(wscale.size() == 6,
+                fmt::format("experiment 'csv': wrench_scale: expected 6 values (fx fy fz mx my "
+                            "mz), found {}",
+                            wscale.size()));
+    for (double x : wscale)
+      exid::check(std::isfinite(x) && x != 0.0,
+                  fmt::format("experiment 'csv': wrench_scale: {} is not a usable scale", x));
 
     // Per-joint sign and offset.
     std::vector<double> sign = P_.getDoubles("sign"), off = P_.getDoubles("offset_rad");
@@ -413,14 +430,16 @@ class CsvExperiment : public exid::Experiment {
                        sorted.end());
       const double med = sorted[sorted.size() / 2];
       const double ratio = P_.getDouble("max_gap_ratio");
+      const bool resample = P_.getDouble("resample_hz") > 0.0;
       for (std::size_t i = 0; i < steps.size(); ++i)
-        exid::check(steps[i] <= ratio * med && steps[i] >= med / ratio,
+        exid::check(steps[i] <= ratio * med && (resample || steps[i] >= med / ratio),
                     fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s against "
                                 "a median step of {} s: {} (a filter, derivatives and energy "
                                 "integrals need a uniform rate); cut the recording there with "
-                                "t_start_s/t_end_s, or resample it (max_gap_ratio = {})",
+                                "t_start_s/t_end_s{} (max_gap_ratio = {})",
                                 file, lineText(keep[i + 1]), keep[i + 1] + 1, steps[i], med,
-                                steps[i] > med ? "a gap" : "uneven time stamps", ratio));
+                                steps[i] > med ? "a gap" : "uneven time stamps",
+                                steps[i] > med ? "" : ", or resample it (resample_hz)", ratio));
     }
     // Segment: inside the recording, never clamped.
     const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
@@ -516,8 +535,42 @@ class CsvExperiment : public exid::Experiment {
               sign[static_cast<std::size_t>(j)] * tauscale[static_cast<std::size_t>(j)] * tau[j];
       }
       for (std::size_t e = 0; e < cw.size(); ++e)
-        d.wrench(k, static_cast<Eigen::Index>(e)) = T.data(r, cw[e]);
+        d.wrench(k, static_cast<Eigen::Index>(e)) = wscale[e] * T.data(r, cw[e]);
     }
+    // Resampling on request: linear interpolation of every signal onto a uniform grid.
+    const double rs_hz = P_.getDouble("resample_hz");
+    int resampled_from = 0;
+    if (rs_hz > 0.0) {
+      exid::check(K >= 2, fmt::format("experiment 'csv': {}: resample_hz needs two samples", file));
+      resampled_from = K;
+      const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
+      const auto M = static_cast<Eigen::Index>(std::floor(span_s * rs_hz + 1e-9)) + 1;
+      exid::check(M >= 2 && M <= 100000000,
+                  fmt::format("experiment 'csv': {}: resample_hz = {} gives {} samples over "
+                              "{} s",
+                              file, rs_hz, M, span_s));
+      exid::Dataset u;
+      u.t.resize(M);
+      for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rs_hz;
+      auto interp = [&](const Eigen::MatrixXd& A) {
+        if (A.size() == 0) return Eigen::MatrixXd();
+        Eigen::MatrixXd B(M, A.cols());
+        Eigen::Index k = 0;
+        for (Eigen::Index m = 0; m < M; ++m) {
+          while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
+          const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
+          B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
+        }
+        return B;
+      };
+      u.q = interp(d.q);
+      u.qd = interp(d.qd);
+      u.qdd = interp(d.qdd);
+      u.tau = interp(d.tau);
+      u.wrench = interp(d.wrench);
+      d = std::move(u);
+    }
+    const int K_grid = d.size();  // samples entering the filter (after any resampling)
     const Preprocessed pp = preprocess(&d, file);
 
     d.source = file;
@@ -550,10 +603,15 @@ class CsvExperiment : public exid::Experiment {
       a["outside_segment"] = static_cast<int>(keep.size()) - in_segment;
       if (part != "none") a["other_part_of_split"] = in_segment - K;
       a["segment_samples"] = K;
+      if (resampled_from > 0) {
+        a["resampled_from"] = resampled_from;
+        a["resampled_to"] = K_grid;
+        a["resample_hz"] = rs_hz;
+      }
       const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
       a["trimmed_edges"] = trimmed;
-      a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K);
-      a["decimated_away"] = K - trimmed - static_cast<int>(d.size());
+      a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K_grid);
+      a["decimated_away"] = K_grid - trimmed - static_cast<int>(d.size());
       a["samples_used"] = static_cast<int>(d.size());
       exid::Json w = exid::Json::array();
       if (dropped > 0)
@@ -561,11 +619,11 @@ class CsvExperiment : public exid::Experiment {
             "experiment 'csv': {}: {} of {} rows ({:.1f} %) dropped for missing or non-finite "
             "values (drop_bad_rows)",
             file, dropped, rows, 100.0 * dropped / std::max(1, rows))));
-      if (trimmed > 0.1 * K)
+      if (trimmed > 0.1 * K_grid)
         w.push_back(exid::Json(fmt::format(
             "experiment 'csv': {}: trim_edges = {} discards {} of the segment's {} samples "
             "({:.1f} %, more than 10 %)",
-            file, pp.trim, trimmed, K, 100.0 * trimmed / K)));
+            file, pp.trim, trimmed, K_grid, 100.0 * trimmed / K_grid)));
       if (pp.trim_default && pp.trim < pp.trim_transient)
         a["trim_rule"] =
             fmt::format("ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",

@@ -339,3 +339,41 @@ TEST(CsvSignals, ATextColumnNobodyUsesIsIgnoredAUsedOneIsAnError) {
   EXPECT_NE(m.find("is not a number"), std::string::npos) << m;
   EXPECT_NE(m.find(":3:"), std::string::npos) << m;  // its line
 }
+
+TEST(CsvSignals, UnevenStampsAreResampledWhenAskedAndAGapStaysAnError) {
+  // 200 rows at a nominal 100 Hz with a logger's jitter of +-30 % (refused by default).
+  std::string s = header(6);
+  for (int k = 0; k < 200; ++k) {
+    const double t = 0.01 * k + (k % 2 ? 0.003 : 0.0);
+    std::string line = fmt::format("{}", t);
+    for (int j = 0; j < 6; ++j) line += fmt::format(",{}", 2.0 * t + j);  // q linear in t
+    for (int j = 0; j < 6; ++j) line += fmt::format(",{}", -t);
+    s += line + "\n";
+  }
+  const fs::path f = writeText("jitter.csv", s);
+  EXPECT_NE(errorOf(f).find("resample_hz"), std::string::npos) << errorOf(f);
+  const exid::Dataset d = readCsv(f, "resample_hz: 100");
+  ASSERT_EQ(d.size(), 200);  // 0 .. 1.99 s at 100 Hz
+  EXPECT_NEAR(d.t[57] - d.t[0], 0.57, 1e-12);
+  // a signal linear in t is interpolated exactly
+  for (int k = 0; k < d.size(); ++k) EXPECT_NEAR(d.q(k, 3), 2.0 * d.t[k] + 3, 1e-12);
+  EXPECT_EQ(d.meta.find("accounting")->find("resampled_from")->asInt(), 200);
+  EXPECT_EQ(d.meta.find("accounting")->find("resampled_to")->asInt(), 200);
+  // a gap is never bridged
+  std::string g = header(6);
+  for (int k = 0; k < 40; ++k) g += row(k < 20 ? 0.01 * k : 0.01 * k + 3.6, 6, 0.1);
+  EXPECT_NE(errorOf(writeText("gap2.csv", g), "resample_hz: 100").find("a gap"), std::string::npos);
+}
+
+TEST(CsvSignals, WrenchScaleActsOnTheWrenchAlone) {
+  auto r = mtest::robot("puma560");
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 0.5, wrench: true, payload_mass_kg: 1}");
+  const fs::path f = tmpDir() / "wrench.csv";
+  exid::writeCsvAtomic(f, exid::datasetTable(d));
+  const exid::Dataset b = readCsv(f, "wrench_scale: [-1, 1, 1, 1, 1, 1000]");
+  EXPECT_EQ(b.wrench.col(0), -d.wrench.col(0));
+  EXPECT_EQ(b.wrench.col(5), 1000.0 * d.wrench.col(5));
+  EXPECT_EQ(b.wrench.col(2), d.wrench.col(2));
+  EXPECT_EQ(b.tau, d.tau);
+  EXPECT_NE(errorOf(f, "wrench_scale: [1, 1]").find("expected 6 values"), std::string::npos);
+}
