@@ -544,17 +544,19 @@ class CsvExperiment : public exid::Experiment {
   /// before any filtering): sample rate exact to the stamps' resolution, jitter and gaps of the
   /// time stamps; duplicate rows (identical to the previous row in every used column, the time
   /// stamp included: with a time column such a row is refused before, time must increase);
-  /// frozen rows (every q repeats the previous row while the robot moves: the step after the run
-  /// is more than kFrozenJump times the step before it, which sets sample-and-hold apart from a
-  /// standstill or a slow encoder); saturation of each torque column (samples at the column's
-  /// minimum or maximum in runs of >= 3). meta.recording; exid::inspectDataset warns from it.
+  /// frozen rows (every q repeats the previous row while the robot moves: some joint stepped by
+  /// at least kFrozenQuanta times its column's resolution before the run and by more than
+  /// kFrozenJump times that step after it, which sets sample-and-hold apart from a standstill, a
+  /// slow encoder or a file printed with few digits); saturation of each torque column (samples at
+  /// the column's minimum or maximum in runs of >= 3). meta.recording; exid::inspectDataset warns
+  /// from it.
   template <class Value, class Sources>
   exid::Json recordingStats(const std::string& file, const std::vector<int>& keep,
                             const std::vector<int>& sel, const Value& value, const Sources& srcs,
                             const std::vector<int>& used, const std::vector<int>& cq,
                             const std::vector<int>& ctau, int ct, double tfactor,
                             double period) const {
-    constexpr double kFrozenJump = 1.5;
+    constexpr double kFrozenJump = 1.5, kFrozenQuanta = 3.0;
     constexpr int kSaturationRun = 3;
     constexpr int kStride = 1 << 20;  // as in run(): ref = source * kStride + column
     std::vector<int> rows;
@@ -594,13 +596,16 @@ class CsvExperiment : public exid::Experiment {
     }
     R["duplicate_rows"]["count"] = ndup;
     R["duplicate_rows"]["data_rows"] = dup_at;
-    auto step = [&](std::size_t i) {  // |q(i) - q(i-1)|
-      double s2 = 0;
-      for (int c : cq) {
-        const double d = value(rows[i], c) - value(rows[i - 1], c);
-        s2 += d * d;
+    // The resolution of each q column: its smallest non-zero step (a file printed with few
+    // digits repeats q while the robot creeps; that is no sample-and-hold).
+    std::vector<double> quantum(cq.size(), HUGE_VAL);
+    for (std::size_t i = 1; i < N; ++i)
+      for (std::size_t j = 0; j < cq.size(); ++j) {
+        const double d = std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
+        if (d > 0) quantum[j] = std::min(quantum[j], d);
       }
-      return std::sqrt(s2);
+    auto dq = [&](std::size_t i, std::size_t j) {  // |q_j(i) - q_j(i-1)|
+      return std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
     };
     long long runs = 0, frozen = 0;
     exid::Json frozen_at = exid::Json::array();
@@ -612,13 +617,14 @@ class CsvExperiment : public exid::Experiment {
       std::size_t b = a;
       while (b + 1 < N && held[b + 1]) ++b;
       // rows a..b repeat row a-1; the steps before (a-2 -> a-1) and after (b -> b+1)
-      if (a >= 2 && b + 1 < N) {
-        const double before = step(a - 1), after = step(b + 1);
-        if (before > 0 && after > kFrozenJump * before) {
-          ++runs;
-          frozen += static_cast<long long>(b - a + 1);
-          if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(rows[a] + 1));
-        }
+      bool jumps = false;  // a joint that moved by kFrozenQuanta or more jumps after the run
+      for (std::size_t j = 0; a >= 2 && b + 1 < N && j < cq.size(); ++j)
+        jumps = jumps || (dq(a - 1, j) >= kFrozenQuanta * quantum[j] &&
+                          dq(b + 1, j) > kFrozenJump * dq(a - 1, j));
+      if (jumps) {
+        ++runs;
+        frozen += static_cast<long long>(b - a + 1);
+        if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(rows[a] + 1));
       }
       a = b + 1;
     }
