@@ -638,6 +638,13 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
         per.push_back(e);
       }
       D["per_joint"] = per;
+      {  // how well the joints agree: their delays' standard deviation
+        std::vector<double> dj;
+        for (std::size_t i = 0; i < per.size(); ++i)
+          if (per.at(i).find("delay_s")->isNumber())
+            dj.push_back(per.at(i).find("delay_s")->asDouble());
+        D["per_joint_spread_s"] = dj.size() > 1 ? Json(stdOf(dj)) : Json();
+      }
       if (edge)
         W.push_back(fmt::format(
             "the torque's delay against the model lies at the edge of the searched window (+-{} "
@@ -792,8 +799,10 @@ std::string inspectionText(const Json& J) {
   if (const Json* d = J.find("delay")) {
     if (d->find("delay_samples") && d->find("delay_samples")->isNumber())
       out += fmt::format(
-          "delay: {:.2f} samples = {:.4g} s (positive: measured torque lags the model){}\n",
+          "delay: {:.2f} samples = {:.4g} s (positive: measured torque lags the model; joints "
+          "spread {} s){}\n",
           d->find("delay_samples")->asDouble(), d->find("delay_s")->asDouble(),
+          num(d->find("per_joint_spread_s"), "{:.2g}"),
           d->find("at_window_edge") && d->find("at_window_edge")->asBool()
               ? " [at the edge of the window]"
               : "");
