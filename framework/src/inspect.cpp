@@ -733,7 +733,12 @@ std::string inspectionText(const Json& J) {
                      J.find("source") ? J.find("source")->asString() : "?",
                      num(J.find("samples"), "{:.0f}"), num(J.find("duration_s")));
   if (const Json* rec = J.find("recording")) {
-    if (const Json* t = rec->find("timing")) {
+    const Json* t = rec->find("timing");
+    if (t && t->find("source") && t->find("source")->asString() == "sample_period_s") {
+      out += fmt::format(
+          "recording: {} Hz (sample_period_s: no time stamps, so no jitter or gaps to measure)\n",
+          num(t->find("rate_hz"), "{:.10g}"));
+    } else if (t) {
       const Json* jit = t->find("jitter");
       const Json* g = t->find("gaps");
       out += fmt::format("recording: {} Hz ({}), jitter {} std / {} max (relative), gaps {}\n",
