@@ -434,7 +434,10 @@ int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
         model_name, resolveParams(mi, model_params, "model " + model_name, fs::current_path()),
         robot, ctx);
     const Dataset d = reg.create<Experiment>("csv", ps)->run(robot, nullptr, ctx);
-    out = inspectDataset(*robot, model.get(), d, ctx);
+    out = Json::object();
+    out["robot"] = robot->name;
+    const Json result = inspectDataset(*robot, model.get(), d, ctx);
+    for (const auto& [k, v] : result.items()) out[k] = v;
     text = fmt::format("exid inspect: robot {} ({} joints), model {}\n", robot->name, robot->dof(),
                        model_name) +
            inspectionText(out);

@@ -210,6 +210,54 @@ TEST(Inspect, AStandstillStretchIsFoundAsASegment) {
   EXPECT_EQ(s.find("verdict")->asString(), "ok");
 }
 
+TEST(Inspect, AtRestTheSignIsJudgedFromSeveralPoses) {
+  // Rest 1 s at each of six poses, 1 s of smooth motion between them; tau2 negated.
+  auto r = puma();
+  const int n = r->dof();
+  const double dt = 0.01;
+  std::vector<Eigen::VectorXd> poses;
+  for (int i = 0; i < 6; ++i) {
+    Eigen::VectorXd p(n);
+    for (int j = 0; j < n; ++j) p[j] = 0.6 * std::sin(1.3 * i + 0.7 * j);
+    poses.push_back(p);
+  }
+  exid::Dataset d;
+  const int K = static_cast<int>(std::lround(11.0 / dt));
+  d.t.resize(K);
+  d.q.resize(K, n);
+  d.qd.resize(K, n);
+  d.qdd.resize(K, n);
+  d.tau.resize(K, n);
+  auto dd = exid::makeDynamicsData(*r);
+  exid::DriveColumns cols;
+  cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
+  for (int k = 0; k < K; ++k) {
+    const double t = k * dt;
+    const int i = std::min(5, static_cast<int>(t / 2.0));
+    const double u = t - 2.0 * i;  // [0, 1): rest at pose i; [1, 2): move to pose i + 1
+    const Eigen::VectorXd& a = poses[static_cast<std::size_t>(i)];
+    const Eigen::VectorXd& b = poses[static_cast<std::size_t>(std::min(5, i + 1))];
+    const double v = u < 1 ? 0 : u - 1;
+    d.t[k] = t;
+    d.q.row(k) = (a + (b - a) * 0.5 * (1 - std::cos(M_PI * v))).transpose();
+    d.qd.row(k) = ((b - a) * (u < 1 ? 0 : 0.5 * M_PI * std::sin(M_PI * v))).transpose();
+    d.qdd.row(k) = ((b - a) * (u < 1 ? 0 : 0.5 * M_PI * M_PI * std::cos(M_PI * v))).transpose();
+    d.tau.row(k) = exid::actuatorTorque(*r, *dd, cols, d.q.row(k).transpose(),
+                                        d.qd.row(k).transpose(), d.qdd.row(k).transpose())
+                       .transpose();
+    d.tau(k, 1) *= -1.0;
+  }
+  const exid::Json J = inspect(r, d);
+  EXPECT_GE(J.find("motion")->find("standstill_s")->size(), 5u) << J.find("motion")->dump(2);
+  const exid::Json& s2 = *J.find("joints")->at(1).find("sign_check");
+  EXPECT_LT(s2.find("correlation_rest")->asDouble(), -0.9) << s2.dump(2);
+  EXPECT_LT(s2.find("correlation_moving")->asDouble(), -0.9) << s2.dump(2);
+  EXPECT_EQ(s2.find("verdict")->asString(), "flipped");
+  EXPECT_GT(J.find("joints")->at(2).find("sign_check")->find("correlation_rest")->asDouble(), 0.9);
+  // joint 1 turns about the vertical: gravity does not load it, the rest poses cannot judge it
+  EXPECT_TRUE(J.find("joints")->at(0).find("sign_check")->find("correlation_rest")->isNull());
+}
+
 TEST(Inspect, DuplicateAndFrozenRowsAndASaturatedTorqueColumnAreCounted) {
   auto r = puma();
   const exid::Dataset d = mtest::simulate(r, "{duration_s: 6, noise_tau_Nm: 0.05}");
