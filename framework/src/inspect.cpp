@@ -419,7 +419,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
         W.push_back(fmt::format(
             "joint {} ({}): {:.1f} % of the samples lie outside its position limits [{:.4g}, "
             "{:.4g}] (the data spans [{:.4g}, {:.4g}]): a wrong offset (offset_rad), sign or unit "
-            "(q_scale) of q?",
+            "(q_scale) of q, or motor angles read without the robot's transmission?",
             j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, 100.0 * frac, L.q_min,
             L.q_max, lo, hi));
     } else {
@@ -438,7 +438,8 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     if (vknown && vmax > 1.5 * L.qd_max)
       W.push_back(fmt::format(
           "joint {} ({}): moves at up to {:.2f} times its velocity limit {:.4g}: a wrong unit of "
-          "q (q_scale) or a wrong sample period?",
+          "q (q_scale), motor angles read without the robot's transmission, or a wrong sample "
+          "period?",
           j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, vmax / L.qd_max, L.qd_max));
     jrows.push_back(e);
   }
@@ -485,7 +486,11 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
                                 spread_rest > kRestMinSpread * spread_move && spread_rest > 0
                             ? pearson(ar, pr)
                             : NAN;
-      const double gain = std::isfinite(rm) && spread_move > 0 ? rm * stdOf(am) / spread_move : NAN;
+      // the gain means something only where the torque follows the model
+      const double gain =
+          std::isfinite(rm) && std::abs(rm) >= kNoFollowCorrelation && spread_move > 0
+              ? rm * stdOf(am) / spread_move
+              : NAN;
       s["correlation_moving"] = numberOrNull(rm);
       s["correlation_rest"] = numberOrNull(rr);
       s["gain_moving"] = numberOrNull(gain);
