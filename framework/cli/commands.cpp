@@ -14,6 +14,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
@@ -371,6 +372,114 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   return 0;
 }
 
+/// The params YAML of a plugin with `file: PATH` added (a flow mapping, a block mapping or "").
+std::string withFile(const std::string& yaml, const std::string& file) {
+  std::string esc;
+  for (char ch : file) esc += ch == '\'' ? std::string("''") : std::string(1, ch);
+  const std::string f = "file: '" + esc + "'";
+  const auto a = yaml.find_first_not_of(" \t\r\n"), b = yaml.find_last_not_of(" \t\r\n");
+  const std::string t = a == std::string::npos ? std::string() : yaml.substr(a, b - a + 1);
+  if (t.empty()) return "{" + f + "}";
+  if (t.front() == '{' && t.back() == '}') {
+    const std::string inner = t.substr(1, t.size() - 2);
+    return inner.find_first_not_of(" \t\r\n") == std::string::npos ? "{" + f + "}"
+                                                                   : "{" + f + ", " + inner + "}";
+  }
+  return f + "\n" + yaml + "\n";
+}
+
+/// exid inspect ROBOT DATA.csv [--set key=value ...] [--params YAML] [--json FILE], or
+/// exid inspect STUDY.yaml [--json FILE]: the checks of exid/inspect.hpp, printed and as JSON.
+int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
+                   const std::vector<std::string>& sets, const std::string& params,
+                   const std::string& model_name, const std::string& model_params,
+                   const std::string& json_out) {
+  const char* usage =
+      "usage: exid inspect ROBOT DATA.csv [--set key=value ...] [--params '{yaml}'] [--json "
+      "FILE], or exid inspect STUDY.yaml [--json FILE]";
+  if (args.empty() || args.size() > 2) throw Error(usage);
+  RunContext ctx;
+  ctx.study_dir = fs::current_path();
+  auto bindModel = [&](const std::string& type, const ParamSet& ps,
+                       std::shared_ptr<const RobotModel> r, const RunContext& c) {
+    auto m = reg.create<ObservationModel>(type, ps);
+    m->bind(std::move(r), c);
+    return m;
+  };
+  std::string text;
+  Json out;
+  if (args.size() == 2) {
+    auto robot = loadRobot(reg, args[0]);
+    const fs::path data(args[1]);
+    if (!fs::exists(data)) throw Error(fmt::format("{}: no such data file", args[1]));
+    const PluginInfo& csv = reg.get(PluginKind::Experiment, "csv");
+    const std::string file = fs::absolute(data).string();
+    ParamSet ps =
+        resolveParams(csv, withFile(params, file), "experiment csv (--params)", fs::current_path());
+    for (const auto& kv : sets) {
+      const auto eq = kv.find('=');
+      if (eq == std::string::npos || eq == 0)
+        throw Error(
+            fmt::format("--set {}: expected key=value (a parameter of the csv experiment, "
+                        "see exid plugins info csv)",
+                        kv));
+      const std::string key = kv.substr(0, eq);
+      const ParamSet one =
+          resolveParams(csv, withFile(key + ": " + kv.substr(eq + 1), file),
+                        fmt::format("experiment csv (--set {})", kv), fs::current_path());
+      ps.set(key, one.at(key));
+    }
+    const PluginInfo& mi = reg.get(PluginKind::Model, model_name);
+    auto model = bindModel(
+        model_name, resolveParams(mi, model_params, "model " + model_name, fs::current_path()),
+        robot, ctx);
+    const Dataset d = reg.create<Experiment>("csv", ps)->run(robot, nullptr, ctx);
+    out = Json::object();
+    out["robot"] = robot->name;
+    const Json result = inspectDataset(*robot, model.get(), d, ctx);
+    for (const auto& [k, v] : result.items()) out[k] = v;
+    text = fmt::format("exid inspect: robot {} ({} joints), model {}\n", robot->name, robot->dof(),
+                       model_name) +
+           inspectionText(out);
+  } else {
+    if (!sets.empty() || !params.empty())
+      throw Error(
+          "exid inspect STUDY.yaml: --set and --params apply to a CSV file (exid inspect ROBOT "
+          "DATA.csv); the study gives its experiment's parameters");
+    const StudyConfig cfg = loadStudy(args[0], reg);
+    if (!cfg.experiment && !cfg.validation)
+      throw Error(
+          fmt::format("{}: no experiment or validation section: no data to inspect", args[0]));
+    ctx.study_dir = cfg.dir;
+    ctx.seed = cfg.seed;
+    auto robot = reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
+    std::shared_ptr<ObservationModel> model;
+    if (!cfg.models.empty())
+      model = bindModel(cfg.models[0].type, cfg.models[0].params, robot, ctx);
+    out = Json::object();
+    text = fmt::format("exid inspect: study {} ({}), robot {} ({} joints), model {}{}\n", cfg.name,
+                       args[0], robot->name, robot->dof(),
+                       model ? model->pluginName() : std::string("none"),
+                       cfg.models.size() > 1 ? " (the first of the study's models)" : "");
+    for (const auto& [what, spec] : {std::make_pair("experiment", &cfg.experiment),
+                                     std::make_pair("validation", &cfg.validation)}) {
+      if (!*spec) continue;
+      RunContext c = ctx;
+      if (std::string(what) == "validation") c.seed = ctx.seed + 1000003;  // as exid run
+      const Dataset d =
+          reg.create<Experiment>((*spec)->type, (*spec)->params)->run(robot, nullptr, c);
+      out[what] = inspectDataset(*robot, model.get(), d, c);
+      text += fmt::format("\n== {} ({}) ==\n", what, (*spec)->type) + inspectionText(out[what]);
+    }
+  }
+  std::cout << text;
+  if (!json_out.empty()) {
+    writeFileAtomic(json_out, out.dump(2) + "\n");
+    std::cout << fmt::format("JSON: {}\n", json_out);
+  }
+  return 0;
+}
+
 std::vector<std::string> splitComma(const std::string& s) {
   std::vector<std::string> out;
   std::stringstream ss(s);
@@ -499,7 +608,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   struct State {
     std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
     bool json = false, rigid_body_only = false;
-    std::vector<std::string> matrix_args;
+    std::vector<std::string> matrix_args, inspect_args, sets;
+    std::string params, json_out;
     int jobs = 1;
     std::string shard, rows, cols, metric;
     bool retry = false, force = false;
@@ -561,8 +671,30 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   matrix->add_option("--cols", st->cols, "table: axes of the columns, comma-separated");
   matrix->add_option("--metric", st->metric, "table: the metric (without: list the metrics)");
 
+  auto* inspect = app.add_subcommand(
+      "inspect",
+      "look at a recording before trusting it: exid inspect ROBOT DATA.csv [--set key=value ...] "
+      "[--json FILE] | exid inspect STUDY.yaml [--json FILE]");
+  inspect->add_option("args", st->inspect_args,
+                      "ROBOT (plugin name, .urdf or DH .yaml) and DATA.csv, or STUDY.yaml");
+  inspect
+      ->add_option("--set", st->sets,
+                   "a parameter of the csv experiment, key=value (repeatable), e.g. "
+                   "sample_period_s=0.002 or q_columns=[a,b,c]")
+      ->allow_extra_args(false);
+  inspect->add_option("--params", st->params,
+                      "the csv experiment's parameters as YAML, e.g. '{sample_period_s: 0.002}'");
+  inspect->add_option("--model", st->model,
+                      "observation model for the condition number (default differential)");
+  inspect->add_option("--model-params", st->model_params,
+                      "its parameters as YAML, e.g. '{offset: true}'");
+  inspect->add_option("--json", st->json_out, "write the result as JSON to this file");
+
   Commands c;
-  c.run = [st, info, eval, exp, stages, matrix, &registry]() -> int {
+  c.run = [st, info, eval, exp, stages, matrix, inspect, &registry]() -> int {
+    if (*inspect)
+      return inspectCommand(registry, st->inspect_args, st->sets, st->params, st->model,
+                            st->model_params, st->json_out);
     if (*matrix)
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
                            st->force, st->rows, st->cols, st->metric, cancelled());

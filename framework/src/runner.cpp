@@ -10,6 +10,7 @@
 #include <cmath>
 #include <condition_variable>
 #include <cstdio>
+#include <functional>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -19,6 +20,7 @@
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
 #include "exid/input_file.hpp"
+#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
 #include "exid/report.hpp"
@@ -415,6 +417,23 @@ class Watchdog {
   bool done_ = false;
 };
 
+// exid inspect's checks on a dataset of the study (inspect.hpp): the whole result under
+// summary.json `inspection.<what>`, its warnings among the study's. An inspection that cannot be
+// done is noted there; it never fails the study.
+void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
+                 const RobotModel& robot, const ObservationModel* model, const Dataset& d,
+                 const RunContext& ctx) {
+  try {
+    Json I = inspectDataset(robot, model, d, ctx);
+    if (const Json* w = I.find("warnings"))
+      for (std::size_t i = 0; i < w->size(); ++i)
+        warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));
+    S["inspection"][what] = I;
+  } catch (const std::exception& e) {
+    S["inspection"][what]["note"] = fmt::format("not inspected: {}", e.what());
+  }
+}
+
 }  // namespace
 
 CsvTable samplesTable(const Samples& s) {
@@ -711,6 +730,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       E["meta"] = data->meta;
       if (const Json* w = data->meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
+      inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
       if (write) {
         writeCsvAtomic(dir / "experiment.csv", datasetTable(*data));
         E["csv"] = "experiment.csv";
@@ -849,6 +869,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       }
       if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
+      inspectInto(S, warn, "validation", *robot, model.get(), vd, vctx);
       V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
       std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0),
           cnt(rms.size(), 0.0), ref(rms.size(), 0.0);

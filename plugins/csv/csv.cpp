@@ -21,6 +21,7 @@
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
+#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 
@@ -595,6 +596,7 @@ class CsvExperiment : public exid::Experiment {
       sp["part_samples"] = static_cast<int>(sel.size());
     }
     m["recording_span_s"] = span;
+    m["recording"] = recordingStats(file, keep, sel, value, srcs, used, cq, ctau, ct, tfactor, dt);
     // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
     {
       exid::Json& a = m["accounting"];
@@ -655,6 +657,127 @@ class CsvExperiment : public exid::Experiment {
   }
 
  private:
+  /// Recording-level statistics of the rows the experiment uses (the segment's rows of the file,
+  /// before any filtering): sample rate exact to the stamps' resolution, jitter and gaps of the
+  /// time stamps; duplicate rows (identical to the previous row in every used column, the time
+  /// stamp included: with a time column such a row is refused before, time must increase);
+  /// frozen rows (every q repeats the previous row while the robot moves: some joint stepped by
+  /// at least kFrozenQuanta times its column's resolution before the run and by more than
+  /// kFrozenJump times that step after it, which sets sample-and-hold apart from a standstill, a
+  /// slow encoder or a file printed with few digits); saturation of each torque column (samples at
+  /// the column's minimum or maximum in runs of >= 3). meta.recording; exid::inspectDataset warns
+  /// from it.
+  template <class Value, class Sources>
+  exid::Json recordingStats(const std::string& file, const std::vector<int>& keep,
+                            const std::vector<int>& sel, const Value& value, const Sources& srcs,
+                            const std::vector<int>& used, const std::vector<int>& cq,
+                            const std::vector<int>& ctau, int ct, double tfactor,
+                            double period) const {
+    constexpr double kFrozenJump = 1.5, kFrozenQuanta = 3.0;
+    constexpr int kSaturationRun = 3;
+    constexpr int kStride = 1 << 20;  // as in run(): ref = source * kStride + column
+    std::vector<int> rows;
+    for (int i : sel) rows.push_back(keep[static_cast<std::size_t>(i)]);
+    const std::size_t N = rows.size();
+    exid::Json R = exid::Json::object();
+    R["file"] = file;
+    R["rows"] = static_cast<long long>(N);
+    if (ct >= 0) {
+      std::vector<double> raw(N);
+      for (std::size_t i = 0; i < N; ++i) raw[i] = value(rows[i], ct);
+      exid::Json t = exid::samplingStats(raw, tfactor, rows, P_.getDouble("max_gap_ratio"));
+      t["source"] = fmt::format("time column '{}'", P_.getString("time_column"));
+      R["timing"] = t;
+    } else {
+      exid::Json t = exid::Json::object();
+      t["source"] = "sample_period_s";
+      t["rate_hz"] = exid::rateFromPeriod(period);
+      t["period_s"] = period;
+      t["jitter"]["std_rel"] = 0.0;
+      t["jitter"]["max_rel"] = 0.0;
+      t["gaps"]["count"] = 0;
+      R["timing"] = t;
+    }
+    auto same = [&](std::size_t i, const std::vector<int>& cols) {
+      for (int c : cols)
+        if (value(rows[i], c) != value(rows[i - 1], c)) return false;
+      return true;
+    };
+    std::vector<char> dup(N, 0), held(N, 0);
+    long long ndup = 0;
+    exid::Json dup_at = exid::Json::array();
+    for (std::size_t i = 1; i < N; ++i) {
+      dup[i] = same(i, used);
+      held[i] = !dup[i] && same(i, cq);
+      if (dup[i] && ++ndup <= 20) dup_at.push_back(exid::Json(rows[i] + 1));
+    }
+    R["duplicate_rows"]["count"] = ndup;
+    R["duplicate_rows"]["data_rows"] = dup_at;
+    // The resolution of each q column: its smallest non-zero step (a file printed with few
+    // digits repeats q while the robot creeps; that is no sample-and-hold).
+    std::vector<double> quantum(cq.size(), HUGE_VAL);
+    for (std::size_t i = 1; i < N; ++i)
+      for (std::size_t j = 0; j < cq.size(); ++j) {
+        const double d = std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
+        if (d > 0) quantum[j] = std::min(quantum[j], d);
+      }
+    auto dq = [&](std::size_t i, std::size_t j) {  // |q_j(i) - q_j(i-1)|
+      return std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
+    };
+    long long runs = 0, frozen = 0;
+    exid::Json frozen_at = exid::Json::array();
+    for (std::size_t a = 1; a < N;) {
+      if (!held[a]) {
+        ++a;
+        continue;
+      }
+      std::size_t b = a;
+      while (b + 1 < N && held[b + 1]) ++b;
+      // rows a..b repeat row a-1; the steps before (a-2 -> a-1) and after (b -> b+1)
+      bool jumps = false;  // a joint that moved by kFrozenQuanta or more jumps after the run
+      for (std::size_t j = 0; a >= 2 && b + 1 < N && j < cq.size(); ++j)
+        jumps = jumps || (dq(a - 1, j) >= kFrozenQuanta * quantum[j] &&
+                          dq(b + 1, j) > kFrozenJump * dq(a - 1, j));
+      if (jumps) {
+        ++runs;
+        frozen += static_cast<long long>(b - a + 1);
+        if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(rows[a] + 1));
+      }
+      a = b + 1;
+    }
+    R["frozen_rows"]["rows"] = frozen;
+    R["frozen_rows"]["runs"] = runs;
+    R["frozen_rows"]["first_data_rows"] = frozen_at;
+    exid::Json sat = exid::Json::array();
+    for (int c : ctau) {
+      const auto& T = srcs[static_cast<std::size_t>(c / kStride)].T;
+      double lo = HUGE_VAL, hi = -HUGE_VAL;
+      for (std::size_t i = 0; i < N; ++i) {
+        lo = std::min(lo, value(rows[i], c));
+        hi = std::max(hi, value(rows[i], c));
+      }
+      long long at_limit = 0;
+      for (std::size_t i = 0; i < N;) {
+        const double v = value(rows[i], c);
+        std::size_t e = i + 1;
+        while (e < N && value(rows[e], c) == v) ++e;
+        if ((v == lo || v == hi) && e - i >= static_cast<std::size_t>(kSaturationRun))
+          at_limit += static_cast<long long>(e - i);
+        i = e;
+      }
+      exid::Json s = exid::Json::object();
+      s["column"] = T.columns[static_cast<std::size_t>(c % kStride)];
+      s["min"] = N > 0 ? exid::Json(lo) : exid::Json();
+      s["max"] = N > 0 ? exid::Json(hi) : exid::Json();
+      s["saturated_samples"] = at_limit;
+      s["fraction"] = N > 0 ? static_cast<double>(at_limit) / static_cast<double>(N) : 0.0;
+      if (N > 1 && lo == hi) s["constant"] = true;
+      sat.push_back(s);
+    }
+    R["saturation"] = sat;
+    return R;
+  }
+
   struct Preprocessed {
     double cutoff_hz = 0, fs = 0;
     int order = 0, trim = 0, decimation = 1;

@@ -1,0 +1,92 @@
+// exid — looking at a recording before trusting it (exid inspect, and the `inspection` of
+// summary.json written by exid run; docs/real_data.md "Inspecting a recording").
+//
+// inspectDataset() checks a Dataset against the robot's nominal model: standstill and moving
+// segments, the fraction of each joint's range and velocity limit the data covers, a per-joint
+// sign check of the measured torque against the nominal model's full torque (rigid bodies and
+// drives) at rest and in motion, the delay between measured and predicted torque, and the
+// condition number of the regressor the recording gives. The recording-level statistics of a
+// file (rate, jitter, gaps, duplicate and frozen rows, saturation) come from the experiment that
+// read it (the csv experiment writes them into meta.recording); inspectDataset() turns them into
+// warnings as well. Every threshold is one of the named constants below.
+#pragma once
+
+#include <Eigen/Core>
+#include <string>
+#include <vector>
+
+#include "exid/context.hpp"
+#include "exid/data.hpp"
+#include "exid/json.hpp"
+#include "exid/robot_model.hpp"
+
+namespace exid {
+
+class ObservationModel;
+
+namespace inspect {
+/// A sample moves when the velocity of some joint exceeds this fraction of that joint's
+/// velocity range (the 99th percentile of |qd_j| over the recording), and at least
+/// kStandstillVelocityFloor [rad/s or m/s].
+inline constexpr double kStandstillVelocityFraction = 0.05;
+inline constexpr double kStandstillVelocityFloor = 1e-3;
+/// Moving or standstill stretches shorter than this are merged into their neighbours [s].
+inline constexpr double kMinSegmentS = 0.1;
+/// Sign check, on the correlation r of measured with predicted torque (in motion, else at rest):
+/// r <= kFlippedCorrelation: "torque sign looks flipped"; |r| < kNoFollowCorrelation: "does not
+/// follow the model"; otherwise below kGoodCorrelation: a weak agreement.
+inline constexpr double kFlippedCorrelation = -0.5;
+inline constexpr double kNoFollowCorrelation = 0.3;
+inline constexpr double kGoodCorrelation = 0.5;
+/// The correlation at rest is computed only when the predicted torque at rest varies by at
+/// least this fraction of its variation in motion (several rest poses), else it is null.
+inline constexpr double kRestMinSpread = 0.05;
+/// Fewest samples a correlation is computed from.
+inline constexpr int kMinCorrelationSamples = 20;
+/// The gain (least-squares slope of measured on predicted torque, in motion) outside
+/// [1 / kGainFactor, kGainFactor] with a good correlation: "scale or units?".
+inline constexpr double kGainFactor = 5.0;
+/// Delay: cross-correlation over lags |l| <= max(kDelayMaxLagS * rate, kDelayMinLagSamples),
+/// at most a quarter of the samples; warned about when |delay| >= kDelayWarnSamples samples and
+/// >= kDelayWarnS seconds.
+inline constexpr double kDelayMaxLagS = 0.05;
+inline constexpr int kDelayMinLagSamples = 10;
+inline constexpr double kDelayWarnSamples = 1.5;
+inline constexpr double kDelayWarnS = 0.002;
+/// Derivatives absent from the data: a quadratic Savitzky-Golay fit whose -3 dB frequency is
+/// about this [Hz] (window half-width M = round((1.5 fs / fc + 4.6) / 3.2), at least 2 samples);
+/// the torque is smoothed by the same fit (zero phase: no delay).
+inline constexpr double kDifferentiateCutoffHz = 20.0;
+/// Condition number of the base regressor with columns scaled to unit norm above which the
+/// recording is said to excite the base parameters poorly.
+inline constexpr double kCondWarn = 1e5;
+/// Recording: relative jitter std above which the time stamps are called uneven, fraction of
+/// saturated samples of a torque column above which it is warned about, and the fraction of
+/// samples outside a joint's position limits above which the offset or units are suspected.
+inline constexpr double kJitterStdWarn = 0.05;
+inline constexpr double kSaturationWarnFraction = 1e-3;
+inline constexpr double kOutsideLimitsWarnFraction = 0.01;
+/// At most this many samples per block when the regressor is assembled (memory bound).
+inline constexpr int kRegressorBlockSamples = 2000;
+}  // namespace inspect
+
+/// The checks on one dataset (measured coordinates, torques in N m or N). `model` may be null
+/// (no condition number). Missing qd/qdd are derived from q (see kDifferentiateCutoffHz).
+/// Never throws on data it cannot judge: such a check is null with a `note`.
+Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
+                    const RunContext& ctx);
+
+/// A readable text summary of inspectDataset()'s result (several lines).
+std::string inspectionText(const Json& inspection);
+
+/// Sampling statistics from time stamps as written in a file (raw values in the file's unit,
+/// unit_s seconds each; row[i] is the file's data row of stamp i, steps across skipped rows are
+/// divided among them). rate_hz is exact to the stamps' resolution (the finest power of ten
+/// that every stamp is a multiple of): a 100 Hz log is 100 Hz, not 100.0001. Gaps: steps longer
+/// than gap_factor times the median step.
+Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vector<int>& row,
+                   double gap_factor);
+/// The rate of a given sample period, exact to the period's decimal resolution.
+double rateFromPeriod(double period_s);
+
+}  // namespace exid

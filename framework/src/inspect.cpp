@@ -1,0 +1,840 @@
+// exid — checks on a recording before it is trusted (inspect.hpp).
+#include "exid/inspect.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/Eigenvalues>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <stdexcept>
+
+#include "exid/drive.hpp"
+#include "exid/dynamics.hpp"
+#include "exid/interfaces.hpp"
+
+namespace exid {
+
+namespace {
+
+using namespace inspect;
+using Eigen::Index;
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+constexpr double kUnknownLimit = 1e299;  // JointLimits are +-1e300 where unknown
+
+double medianOf(std::vector<double> v) {
+  if (v.empty()) return NAN;
+  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
+  std::nth_element(v.begin(), mid, v.end());
+  return *mid;
+}
+
+double percentileOf(std::vector<double> v, double p) {
+  if (v.empty()) return NAN;
+  const auto k = static_cast<std::size_t>(std::floor(p * static_cast<double>(v.size() - 1)));
+  std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(k), v.end());
+  return v[k];
+}
+
+/// The smallest d in [0, 9] such that every value is a multiple of 10^-d (to within a millionth
+/// of that unit and the values' own rounding); -1 when there is none.
+int decimalResolution(const std::vector<double>& v) {
+  constexpr double eps = std::numeric_limits<double>::epsilon();
+  for (int d = 0; d <= 9; ++d) {
+    const double s = std::pow(10.0, d);
+    bool ok = true;
+    for (double x : v) {
+      const double y = x * s;
+      if (std::abs(y - std::round(y)) > 1e-6 + 16 * eps * std::abs(y)) {
+        ok = false;
+        break;
+      }
+    }
+    if (ok) return d;
+  }
+  return -1;
+}
+
+double pearson(const std::vector<double>& a, const std::vector<double>& b) {
+  const auto n = static_cast<double>(a.size());
+  if (a.size() < 2) return NAN;
+  double ma = 0, mb = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    ma += a[i];
+    mb += b[i];
+  }
+  ma /= n;
+  mb /= n;
+  double sab = 0, saa = 0, sbb = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    sab += (a[i] - ma) * (b[i] - mb);
+    saa += (a[i] - ma) * (a[i] - ma);
+    sbb += (b[i] - mb) * (b[i] - mb);
+  }
+  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : NAN;
+}
+
+double stdOf(const std::vector<double>& a) {
+  if (a.size() < 2) return 0.0;
+  double m = 0;
+  for (double x : a) m += x;
+  m /= static_cast<double>(a.size());
+  double s = 0;
+  for (double x : a) s += (x - m) * (x - m);
+  return std::sqrt(s / static_cast<double>(a.size()));
+}
+
+Json pair(double a, double b) { return Json(std::vector<double>{a, b}); }
+
+Json numberOrNull(double x) { return std::isfinite(x) ? Json(x) : Json(); }
+
+/// Quadratic Savitzky-Golay fit over +-m samples at every sample (the window shrinks at the
+/// ends): smoothed value, first and second derivative of each column, uniform step dt.
+void savitzkyGolay(const MatrixXd& X, double dt, int m, MatrixXd* value, MatrixXd* d1,
+                   MatrixXd* d2) {
+  const Index K = X.rows();
+  if (value) value->resize(K, X.cols());
+  if (d1) d1->resize(K, X.cols());
+  if (d2) d2->resize(K, X.cols());
+  for (Index k = 0; k < K; ++k) {
+    const Index h = std::min<Index>({static_cast<Index>(m), k, K - 1 - k});
+    if (h == 0) continue;  // the two end samples: copied from their neighbour below
+    double S2 = 0, S4 = 0;
+    for (Index i = -h; i <= h; ++i) {
+      S2 += static_cast<double>(i * i);
+      S4 += static_cast<double>(i * i * i * i);
+    }
+    const double N = static_cast<double>(2 * h + 1);
+    const double den0 = N * S4 - S2 * S2;
+    double cc = 0;  // sum of (i^2 - S2/N)^2
+    for (Index i = -h; i <= h; ++i) {
+      const double c = static_cast<double>(i * i) - S2 / N;
+      cc += c * c;
+    }
+    for (Index j = 0; j < X.cols(); ++j) {
+      double s0 = 0, s1 = 0, s2 = 0, sc = 0;
+      for (Index i = -h; i <= h; ++i) {
+        const double x = X(k + i, j);
+        const double ii = static_cast<double>(i * i);
+        s0 += x;
+        s1 += static_cast<double>(i) * x;
+        s2 += ii * x;
+        sc += (ii - S2 / N) * x;
+      }
+      if (value) (*value)(k, j) = (S4 * s0 - S2 * s2) / den0;
+      if (d1) (*d1)(k, j) = s1 / S2 / dt;
+      if (d2) (*d2)(k, j) = 2.0 * sc / cc / (dt * dt);
+    }
+  }
+  if (K >= 3) {
+    for (MatrixXd* M : {value, d1, d2}) {
+      if (!M) continue;
+      M->row(0) = M->row(1);
+      M->row(K - 1) = M->row(K - 2);
+    }
+    if (value) {
+      value->row(0) = X.row(0);
+      value->row(K - 1) = X.row(K - 1);
+    }
+  }
+}
+
+std::string jointList(const std::vector<int>& joints, const char* prefix) {
+  std::string s;
+  for (std::size_t i = 0; i < joints.size(); ++i)
+    s += fmt::format("{}{}{}", i ? ", " : "", prefix, joints[i] + 1);
+  return s;
+}
+
+std::string valueList(const std::vector<double>& v, const char* format) {
+  std::string s;
+  for (std::size_t i = 0; i < v.size(); ++i)
+    s += (i ? ", " : "") + fmt::format(fmt::runtime(format), v[i]);
+  return s;
+}
+
+/// Warnings from the file-level statistics of an experiment (meta.recording of the csv one).
+void recordingWarnings(const Json& rec, std::vector<std::string>* W) {
+  const std::string file =
+      rec.find("file") ? rec.find("file")->asString() + ": " : std::string("the recording: ");
+  if (const Json* t = rec.find("timing")) {
+    const Json* j = t->find("jitter");
+    const Json* sd = j ? j->find("std_rel") : nullptr;
+    if (sd && sd->isNumber() && sd->asDouble() > kJitterStdWarn)
+      W->push_back(fmt::format(
+          "{}the time steps vary by {:.1f} % (std, relative to the median step {} s; max {:.1f} "
+          "%): uneven stamps from a non-real-time logger? Derivatives and filters assume a "
+          "uniform rate",
+          file, 100.0 * sd->asDouble(), t->find("period_s") ? t->find("period_s")->asDouble() : NAN,
+          j->find("max_rel") ? 100.0 * j->find("max_rel")->asDouble() : NAN));
+    const Json* g = t->find("gaps");
+    if (g && g->find("count") && g->find("count")->asInt() > 0) {
+      const Json* at = g->find("at_s");
+      W->push_back(fmt::format(
+          "{}{} gap(s) in the time stamps (largest {:.6g} s; the first after t = {:.6g} s): "
+          "samples were lost; cut the segment around them",
+          file, g->find("count")->asInt(), g->find("largest_s")->asDouble(),
+          at && at->size() > 0 ? at->at(0).at(0).asDouble() : NAN));
+    }
+  }
+  if (const Json* dup = rec.find("duplicate_rows"); dup && dup->find("count")) {
+    const auto c = dup->find("count")->asInt();
+    if (c > 0)
+      W->push_back(fmt::format(
+          "{}{} row(s) repeat the previous row in every used column: duplicated rows (a logger "
+          "writing the same sample twice); the sample rate and derivatives are wrong there",
+          file, c));
+  }
+  if (const Json* fr = rec.find("frozen_rows"); fr && fr->find("rows")) {
+    const auto c = fr->find("rows")->asInt();
+    if (c > 0)
+      W->push_back(fmt::format(
+          "{}{} row(s) in {} run(s) hold every joint position while the robot moves (the next "
+          "step jumps): sample-and-hold positions; velocities and accelerations are wrong there",
+          file, c, fr->find("runs") ? fr->find("runs")->asInt() : 0));
+  }
+  if (const Json* sat = rec.find("saturation"); sat && sat->isArray()) {
+    for (std::size_t i = 0; i < sat->size(); ++i) {
+      const Json& s = sat->at(i);
+      const Json* f = s.find("fraction");
+      if (!f || !f->isNumber() || f->asDouble() < kSaturationWarnFraction) continue;
+      W->push_back(fmt::format(
+          "{}torque column '{}' sits at its minimum or maximum ({:.6g} / {:.6g}) for {:.2f} % of "
+          "the samples in runs of 3 or more: saturated (current limit, sensor range)? Those "
+          "samples do not measure the dynamics",
+          file, s.find("column") ? s.find("column")->asString() : "?",
+          s.find("min") ? s.find("min")->asDouble() : NAN,
+          s.find("max") ? s.find("max")->asDouble() : NAN, 100.0 * f->asDouble()));
+    }
+  }
+}
+
+}  // namespace
+
+double rateFromPeriod(double period_s) {
+  if (!(period_s > 0)) return NAN;
+  const int d = decimalResolution({period_s});
+  if (d < 0) return 1.0 / period_s;
+  const double units = std::round(period_s * std::pow(10.0, d));
+  return std::pow(10.0, d) / units;
+}
+
+Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vector<int>& row,
+                   double gap_factor) {
+  Json J = Json::object();
+  J["samples"] = static_cast<long long>(raw.size());
+  if (raw.size() < 2 || row.size() != raw.size()) {
+    J["rate_hz"] = Json();
+    J["note"] = "fewer than two time stamps";
+    return J;
+  }
+  std::vector<double> steps(raw.size() - 1);
+  for (std::size_t i = 0; i + 1 < raw.size(); ++i)
+    steps[i] = (raw[i + 1] - raw[i]) / static_cast<double>(std::max(1, row[i + 1] - row[i]));
+  const double med = medianOf(steps);
+  const int d = decimalResolution(raw);
+  double period = med, rate = 1.0 / (med * unit_s);
+  if (d >= 0) {
+    const double s = std::pow(10.0, d);
+    const double units = std::round(med * s);
+    if (units >= 1) {
+      period = units / s;
+      // a decimal unit (s, ms, us, ns) keeps the rate exact: 10^(d + u) / units
+      const int u = static_cast<int>(std::lround(-std::log10(unit_s)));
+      rate = std::abs(std::pow(10.0, -u) - unit_s) <= 1e-12 * unit_s ? std::pow(10.0, d + u) / units
+                                                                     : s / units / unit_s;
+    }
+  }
+  J["rate_hz"] = rate;
+  J["period_s"] = period * unit_s;
+  J["resolution_s"] = d >= 0 ? Json(std::pow(10.0, -d) * unit_s) : Json();
+  double mean = 0, maxrel = 0;
+  for (double st : steps) {
+    const double rel = (st - period) / period;
+    mean += rel;
+    maxrel = std::max(maxrel, std::abs(rel));
+  }
+  mean /= static_cast<double>(steps.size());
+  double var = 0;
+  for (double st : steps) {
+    const double rel = (st - period) / period;
+    var += (rel - mean) * (rel - mean);
+  }
+  Json& jit = J["jitter"];
+  jit["std_rel"] = std::sqrt(var / static_cast<double>(steps.size()));
+  jit["max_rel"] = maxrel;
+  Json& g = J["gaps"];
+  g["factor"] = gap_factor;
+  long long count = 0;
+  double largest = 0;
+  Json at = Json::array();
+  for (std::size_t i = 0; i < steps.size(); ++i) {
+    if (!(steps[i] > gap_factor * period)) continue;
+    ++count;
+    largest = std::max(largest, (raw[i + 1] - raw[i]) * unit_s);
+    if (at.size() < 20) at.push_back(pair(raw[i] * unit_s, raw[i + 1] * unit_s));
+  }
+  g["count"] = count;
+  g["largest_s"] = largest;
+  g["at_s"] = at;
+  return J;
+}
+
+Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
+                    const RunContext& ctx) {
+  Json J = Json::object();
+  std::vector<std::string> W;
+  const int n = robot.dof();
+  const Index K = data.size();
+  J["source"] = data.source;
+  J["samples"] = static_cast<long long>(K);
+  J["duration_s"] = K > 0 ? data.t(K - 1) - data.t(0) : 0.0;
+  if (const Json* s = data.meta.find("simulated")) J["simulated"] = *s;
+  if (const Json* rec = data.meta.find("recording")) {
+    J["recording"] = *rec;
+    recordingWarnings(*rec, &W);
+  }
+  auto finish = [&]() {
+    J["warnings"] = Json(W);
+    return J;
+  };
+  if (K < 5 || data.q.cols() != n || data.q.rows() != K) {
+    J["note"] = fmt::format("{} samples of {} joints: too few to inspect", K, data.q.cols());
+    return finish();
+  }
+  {
+    std::vector<double> t(data.t.data(), data.t.data() + K);
+    std::vector<int> rows(static_cast<std::size_t>(K));
+    for (Index k = 0; k < K; ++k) rows[static_cast<std::size_t>(k)] = static_cast<int>(k);
+    J["timing"] = samplingStats(t, 1.0, rows, 1.5);
+  }
+  const double rate = J["timing"].find("rate_hz")->asDouble();
+  const double dt = 1.0 / rate;
+  J["rate_hz"] = rate;
+
+  // ------------------------------------------------------------ signals
+  MatrixXd qd = data.qd, qdd = data.qdd, tau = data.tau;
+  const bool has_tau = data.hasTorque() && data.tau.cols() == n;
+  if (!data.hasVelocity() || !data.hasAcceleration()) {
+    const int m = std::max(
+        2, static_cast<int>(std::lround((1.5 * rate / kDifferentiateCutoffHz + 4.6) / 3.2)));
+    MatrixXd v, a;
+    savitzkyGolay(data.q, dt, m, nullptr, &v, &a);
+    if (!data.hasVelocity()) qd = v;
+    if (!data.hasAcceleration()) qdd = a;
+    if (has_tau) savitzkyGolay(data.tau, dt, m, &tau, nullptr, nullptr);
+    J["derivatives"] = fmt::format(
+        "the data has no {}: derived from q by a quadratic Savitzky-Golay fit over +-{} samples "
+        "(about {:g} Hz); the torque is smoothed by the same fit (zero phase)",
+        data.hasVelocity() ? "qdd" : "qd and qdd", m, kDifferentiateCutoffHz);
+  } else {
+    J["derivatives"] = "qd and qdd from the data";
+  }
+
+  // ------------------------------------------------------------ motion: standstill / moving
+  std::vector<double> thr(static_cast<std::size_t>(n));
+  for (int j = 0; j < n; ++j) {
+    std::vector<double> a(static_cast<std::size_t>(K));
+    for (Index k = 0; k < K; ++k) a[static_cast<std::size_t>(k)] = std::abs(qd(k, j));
+    thr[static_cast<std::size_t>(j)] =
+        std::max(kStandstillVelocityFraction * percentileOf(a, 0.99), kStandstillVelocityFloor);
+  }
+  std::vector<char> moving(static_cast<std::size_t>(K), 0);
+  for (Index k = 0; k < K; ++k)
+    for (int j = 0; j < n; ++j)
+      if (std::abs(qd(k, j)) > thr[static_cast<std::size_t>(j)])
+        moving[static_cast<std::size_t>(k)] = 1;
+  struct Run {
+    bool moving;
+    Index begin, end;  // [begin, end)
+  };
+  std::vector<Run> runs;
+  for (Index k = 0; k < K; ++k) {
+    const bool mv = moving[static_cast<std::size_t>(k)] != 0;
+    if (runs.empty() || runs.back().moving != mv)
+      runs.push_back({mv, k, k + 1});
+    else
+      runs.back().end = k + 1;
+  }
+  auto lengthS = [&](const Run& r) { return static_cast<double>(r.end - r.begin) * dt; };
+  std::vector<Run> merged;
+  for (const Run& r : runs) {
+    if (!merged.empty() && (lengthS(r) < kMinSegmentS || r.moving == merged.back().moving))
+      merged.back().end = r.end;
+    else
+      merged.push_back(r);
+  }
+  if (merged.size() > 1 && lengthS(merged[0]) < kMinSegmentS) {
+    merged[1].begin = 0;
+    merged.erase(merged.begin());
+  }
+  Json standstill = Json::array(), movingS = Json::array();
+  Index moving_samples = 0;
+  for (const Run& r : merged) {
+    (r.moving ? movingS : standstill).push_back(pair(data.t(r.begin), data.t(r.end - 1)));
+    for (Index k = r.begin; k < r.end; ++k) moving[static_cast<std::size_t>(k)] = r.moving;
+    if (r.moving) moving_samples += r.end - r.begin;
+  }
+  {
+    Json& M = J["motion"];
+    M["velocity_threshold"] = Json(thr);
+    M["velocity_threshold_rule"] = fmt::format(
+        "a sample moves when some joint's |qd| exceeds {:g} of its 99th percentile (and {:g} rad/s "
+        "or m/s); stretches shorter than {:g} s are merged into their neighbours",
+        kStandstillVelocityFraction, kStandstillVelocityFloor, kMinSegmentS);
+    M["moving_fraction"] = static_cast<double>(moving_samples) / static_cast<double>(K);
+    M["moving_s"] = movingS;
+    M["standstill_s"] = standstill;
+  }
+
+  // ------------------------------------------------------------ coverage (joint coordinates)
+  MatrixXd qj(K, n), qdj(K, n);
+  for (Index k = 0; k < K; ++k) {
+    VectorXd a, b, c;
+    measuredToJoint(robot, data.q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(),
+                    &a, &b, &c);
+    qj.row(k) = a.transpose();
+    qdj.row(k) = b.transpose();
+  }
+  std::vector<Json> jrows;
+  for (int j = 0; j < n; ++j) {
+    const JointLimits& L = robot.limits[static_cast<std::size_t>(j)];
+    Json e = Json::object();
+    e["joint"] = j + 1;
+    e["name"] = robot.bodies[static_cast<std::size_t>(j)].joint_name;
+    const double lo = qj.col(j).minCoeff(), hi = qj.col(j).maxCoeff();
+    e["position_range"] = pair(lo, hi);
+    const bool qknown = L.q_max < kUnknownLimit && L.q_min > -kUnknownLimit && L.q_max > L.q_min;
+    if (qknown) {
+      e["position_limits"] = pair(L.q_min, L.q_max);
+      e["position_coverage"] = (hi - lo) / (L.q_max - L.q_min);
+      const double tol = 1e-9 * (L.q_max - L.q_min);
+      Index outside = 0;
+      for (Index k = 0; k < K; ++k) outside += qj(k, j) < L.q_min - tol || qj(k, j) > L.q_max + tol;
+      const double frac = static_cast<double>(outside) / static_cast<double>(K);
+      e["outside_limits_fraction"] = frac;
+      if (frac > kOutsideLimitsWarnFraction)
+        W.push_back(fmt::format(
+            "joint {} ({}): {:.1f} % of the samples lie outside its position limits [{:.4g}, "
+            "{:.4g}] (the data spans [{:.4g}, {:.4g}]): a wrong offset (offset_rad), sign or unit "
+            "(q_scale) of q, or motor angles read without the robot's transmission?",
+            j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, 100.0 * frac, L.q_min,
+            L.q_max, lo, hi));
+    } else {
+      e["position_limits"] = Json();
+      e["position_coverage"] = Json();
+    }
+    const double vmax = qdj.col(j).cwiseAbs().maxCoeff();
+    e["velocity_max"] = vmax;
+    const bool vknown = L.qd_max < kUnknownLimit && L.qd_max > 0;
+    e["velocity_limit"] = vknown ? Json(L.qd_max) : Json();
+    e["velocity_coverage"] = vknown ? Json(vmax / L.qd_max) : Json();
+    e["limits"] = qknown && vknown ? "known"
+                  : qknown         ? "velocity limit unknown"
+                  : vknown         ? "position limits unknown"
+                                   : "unknown";
+    if (vknown && vmax > 1.5 * L.qd_max)
+      W.push_back(fmt::format(
+          "joint {} ({}): moves at up to {:.2f} times its velocity limit {:.4g}: a wrong unit of "
+          "q (q_scale), motor angles read without the robot's transmission, or a wrong sample "
+          "period?",
+          j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, vmax / L.qd_max, L.qd_max));
+    jrows.push_back(e);
+  }
+
+  // ------------------------------------------------------------ sign check
+  std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
+  MatrixXd pred;
+  if (!has_tau) {
+    J["sign_check"] = Json();
+    J["sign_check_note"] = "the data has no torque";
+  } else {
+    auto dd = makeDynamicsData(robot);
+    DriveColumns cols;
+    cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
+    pred.resize(K, n);
+    MatrixXd pred_rest = MatrixXd::Zero(K, n);
+    const VectorXd zero = VectorXd::Zero(n);
+    for (Index k = 0; k < K; ++k) {
+      const VectorXd qk = data.q.row(k).transpose();
+      pred.row(k) =
+          actuatorTorque(robot, *dd, cols, qk, qd.row(k).transpose(), qdd.row(k).transpose())
+              .transpose();
+      if (!moving[static_cast<std::size_t>(k)])
+        pred_rest.row(k) = actuatorTorque(robot, *dd, cols, qk, zero, zero).transpose();
+    }
+    std::vector<int> flipped, nofollow, weak, scale;
+    std::vector<double> r_flipped, r_nofollow, r_weak, g_scale;
+    for (int j = 0; j < n; ++j) {
+      std::vector<double> am, pm, ar, pr;
+      for (Index k = 0; k < K; ++k) {
+        if (moving[static_cast<std::size_t>(k)]) {
+          am.push_back(tau(k, j));
+          pm.push_back(pred(k, j));
+        } else {
+          ar.push_back(tau(k, j));
+          pr.push_back(pred_rest(k, j));
+        }
+      }
+      Json s = Json::object();
+      const double rm =
+          static_cast<int>(am.size()) >= kMinCorrelationSamples ? pearson(am, pm) : NAN;
+      const double spread_move = stdOf(pm), spread_rest = stdOf(pr);
+      const double rr = static_cast<int>(ar.size()) >= kMinCorrelationSamples &&
+                                spread_rest > kRestMinSpread * spread_move && spread_rest > 0
+                            ? pearson(ar, pr)
+                            : NAN;
+      // the gain means something only where the torque follows the model
+      const double gain =
+          std::isfinite(rm) && std::abs(rm) >= kNoFollowCorrelation && spread_move > 0
+              ? rm * stdOf(am) / spread_move
+              : NAN;
+      s["correlation_moving"] = numberOrNull(rm);
+      s["correlation_rest"] = numberOrNull(rr);
+      s["gain_moving"] = numberOrNull(gain);
+      s["samples_moving"] = static_cast<long long>(am.size());
+      s["samples_rest"] = static_cast<long long>(ar.size());
+      const double r = std::isfinite(rm) ? rm : rr;
+      s["judged_on"] = std::isfinite(rm) ? "motion" : std::isfinite(rr) ? "rest" : "nothing";
+      std::string verdict;
+      if (!std::isfinite(r)) {
+        verdict = "unknown";
+      } else if (r <= kFlippedCorrelation) {
+        verdict = "flipped";
+        flipped.push_back(j);
+        r_flipped.push_back(r);
+      } else if (std::abs(r) < kNoFollowCorrelation) {
+        verdict = "does not follow";
+        nofollow.push_back(j);
+        r_nofollow.push_back(r);
+      } else if (r < kGoodCorrelation) {
+        verdict = "weak";
+        weak.push_back(j);
+        r_weak.push_back(r);
+      } else if (std::isfinite(gain) && (gain > kGainFactor || gain < 1.0 / kGainFactor)) {
+        verdict = "scale";
+        scale.push_back(j);
+        g_scale.push_back(gain);
+      } else {
+        verdict = "ok";
+      }
+      if (std::isfinite(r) && std::abs(r) >= kGoodCorrelation)
+        weight[static_cast<std::size_t>(j)] = r > 0 ? 1.0 : -1.0;
+      s["verdict"] = verdict;
+      jrows[static_cast<std::size_t>(j)]["sign_check"] = s;
+    }
+    const char* where = moving_samples > 0 ? "in motion" : "at rest";
+    auto plural = [](const std::vector<int>& v) { return v.size() > 1; };
+    if (!flipped.empty())
+      W.push_back(fmt::format(
+          "{} correlate{} {} with the nominal model's torque {}: torque sign looks flipped (set "
+          "tau_scale -1 for {}, or check the column's sign)",
+          jointList(flipped, "tau"), plural(flipped) ? "" : "s", valueList(r_flipped, "{:.2f}"),
+          where, plural(flipped) ? "those joints" : "that joint"));
+    if (!nofollow.empty())
+      W.push_back(fmt::format(
+          "{} correlate{} only {} with the nominal model's torque {}: torque does not follow the "
+          "model: scale, column or units?",
+          jointList(nofollow, "tau"), plural(nofollow) ? "" : "s", valueList(r_nofollow, "{:.2f}"),
+          where));
+    if (!weak.empty())
+      W.push_back(fmt::format(
+          "{} correlate{} weakly ({}) with the nominal model's torque {}: noise, friction the "
+          "model lacks, or a wrong column?",
+          jointList(weak, "tau"), plural(weak) ? "" : "s", valueList(r_weak, "{:.2f}"), where));
+    if (!scale.empty())
+      W.push_back(fmt::format(
+          "{} follow{} the nominal model's torque but with a gain of {}: scale, torque constant or "
+          "units (tau_scale, torque_constants_Nm_per_A)?",
+          jointList(scale, "tau"), plural(scale) ? "" : "s", valueList(g_scale, "{:.3g}")));
+  }
+  {
+    Json joints = Json::array();
+    for (const Json& e : jrows) joints.push_back(e);
+    J["joints"] = joints;
+  }
+
+  // ------------------------------------------------------------ delay
+  {
+    Json& D = J["delay"];
+    D["convention"] =
+        "positive: the measured torque lags the prediction, tau_measured(t) ~ "
+        "tau_predicted(t - delay_s)";
+    double wsum = 0;
+    for (double w : weight) wsum += std::abs(w);
+    const int L =
+        std::min(std::max(static_cast<int>(std::lround(kDelayMaxLagS * rate)), kDelayMinLagSamples),
+                 static_cast<int>(K / 4));
+    D["max_lag_samples"] = L;
+    if (!has_tau || wsum == 0 || L < 1) {
+      D["delay_samples"] = Json();
+      D["delay_s"] = Json();
+      D["note"] = !has_tau ? "the data has no torque"
+                           : "no joint's torque follows the model (|r| >= 0.5): nothing to align";
+    } else {
+      // c_j(l) = corr(tau_j(k), pred_j(k - l)) over the same samples k in [L, K - L) for every
+      // lag (a window that changed with the lag would tilt the peak). The sub-sample part comes
+      // from the smooth part of the torques: the jumps of Coulomb friction at velocity reversals
+      // happen at a sample in the data and the prediction alike, and correlate in a cusp at a
+      // whole lag (averaged over many reversals, at the delay).
+      std::vector<std::vector<double>> c(static_cast<std::size_t>(n),
+                                         std::vector<double>(static_cast<std::size_t>(2 * L + 1)));
+      std::vector<double> sum(static_cast<std::size_t>(2 * L + 1), 0.0);
+      for (int j = 0; j < n; ++j) {
+        if (weight[static_cast<std::size_t>(j)] == 0) continue;
+        for (int l = -L; l <= L; ++l) {
+          const Index k0 = L, k1 = K - L;
+          double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
+          for (Index k = k0; k < k1; ++k) {
+            const double a = tau(k, j), b = pred(k - l, j);
+            sa += a;
+            sb += b;
+            saa += a * a;
+            sbb += b * b;
+            sab += a * b;
+          }
+          const double m = static_cast<double>(k1 - k0);
+          const double cov = sab - sa * sb / m, va = saa - sa * sa / m, vb = sbb - sb * sb / m;
+          const double r = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;
+          c[static_cast<std::size_t>(j)][static_cast<std::size_t>(l + L)] =
+              weight[static_cast<std::size_t>(j)] * r;
+          sum[static_cast<std::size_t>(l + L)] += weight[static_cast<std::size_t>(j)] * r / wsum;
+        }
+      }
+      // Peak and parabolic sub-sample refinement; at the window's edge: not refined.
+      auto peak = [&](const std::vector<double>& y, bool* edge, double* height) {
+        const auto it = std::max_element(y.begin(), y.end());
+        const int i = static_cast<int>(it - y.begin());
+        *height = *it;
+        *edge = i == 0 || i == 2 * L;
+        double off = 0;
+        if (!*edge) {
+          const double ym = y[static_cast<std::size_t>(i - 1)], y0 = *it,
+                       yp = y[static_cast<std::size_t>(i + 1)];
+          const double den = ym - 2 * y0 + yp;
+          if (den < 0) off = 0.5 * (ym - yp) / den;
+        }
+        return static_cast<double>(i - L) + off;
+      };
+      bool edge = false;
+      double height = 0;
+      const double d = peak(sum, &edge, &height);
+      D["delay_samples"] = d;
+      D["delay_s"] = d * dt;
+      D["peak_correlation"] = height;
+      D["at_window_edge"] = edge;
+      Json per = Json::array();
+      for (int j = 0; j < n; ++j) {
+        Json e = Json::object();
+        e["joint"] = j + 1;
+        if (weight[static_cast<std::size_t>(j)] == 0) {
+          e["delay_samples"] = Json();
+          e["delay_s"] = Json();
+        } else {
+          bool ej = false;
+          double hj = 0;
+          const double dj = peak(c[static_cast<std::size_t>(j)], &ej, &hj);
+          e["delay_samples"] = dj;
+          e["delay_s"] = dj * dt;
+          e["peak_correlation"] = hj;
+        }
+        per.push_back(e);
+      }
+      D["per_joint"] = per;
+      {  // how well the joints agree: their delays' standard deviation
+        std::vector<double> dj;
+        for (std::size_t i = 0; i < per.size(); ++i)
+          if (per.at(i).find("delay_s")->isNumber())
+            dj.push_back(per.at(i).find("delay_s")->asDouble());
+        D["per_joint_spread_s"] = dj.size() > 1 ? Json(stdOf(dj)) : Json();
+      }
+      if (edge)
+        W.push_back(fmt::format(
+            "the torque's delay against the model lies at the edge of the searched window (+-{} "
+            "samples, {:.3g} s): a large delay, or a torque that does not follow the model",
+            L, L * dt));
+      else if (std::abs(d) >= kDelayWarnSamples && std::abs(d * dt) >= kDelayWarnS)
+        W.push_back(fmt::format(
+            "the measured torque {} the nominal model's prediction by {:.2f} samples ({:.4g} s): "
+            "a delay in the torque (or position) signal; shift one of them before identifying",
+            d > 0 ? "lags" : "leads", std::abs(d), std::abs(d * dt)));
+    }
+  }
+
+  // ------------------------------------------------------------ regressor condition number
+  if (model) {
+    Json& R = J["regressor"];
+    R["model"] = model->pluginName();
+    R["base_columns"] = model->numBase();
+    try {
+      const int p = model->numBase();
+      MatrixXd G = MatrixXd::Zero(p, p);
+      long long rows = 0;
+      for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
+        if (ctx.shouldStop()) throw std::runtime_error("stopped");
+        const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
+        Samples s;
+        s.t = data.t.segment(k0, m);
+        s.q = data.q.middleRows(k0, m);
+        s.qd = qd.middleRows(k0, m);
+        s.qdd = qdd.middleRows(k0, m);
+        const MatrixXd Wb = model->design(s);
+        G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
+        rows += Wb.rows();
+      }
+      G = G.selfadjointView<Eigen::Lower>();
+      auto cond = [](const MatrixXd& A) {
+        Eigen::SelfAdjointEigenSolver<MatrixXd> es(A, Eigen::EigenvaluesOnly);
+        const VectorXd& ev = es.eigenvalues();
+        if (ev.size() == 0) return static_cast<double>(NAN);
+        const double lmax = ev(ev.size() - 1), lmin = ev(0);
+        return lmin > 0 && lmax > 0 ? std::sqrt(lmax / lmin) : HUGE_VAL;
+      };
+      const double c_raw = cond(G);
+      VectorXd sc(p);
+      bool zero_col = false;
+      for (int i = 0; i < p; ++i) {
+        zero_col = zero_col || !(G(i, i) > 0);
+        sc(i) = G(i, i) > 0 ? 1.0 / std::sqrt(G(i, i)) : 0.0;
+      }
+      const double c_scaled = zero_col ? HUGE_VAL : cond(sc.asDiagonal() * G * sc.asDiagonal());
+      R["rows"] = rows;
+      R["cond"] = numberOrNull(c_raw);
+      R["cond_scaled"] = numberOrNull(c_scaled);
+      R["rank_deficient"] = !std::isfinite(c_scaled);
+      R["method"] =
+          "sqrt of the extreme eigenvalues of W^T W (base columns; scaled: each column to unit "
+          "norm); reliable up to about 1e7";
+      if (!std::isfinite(c_scaled))
+        W.push_back(fmt::format(
+            "the recording does not excite every base parameter of model '{}' (the regressor's "
+            "{} base columns are rank deficient): more or other motion is needed",
+            model->pluginName(), p));
+      else if (c_scaled > kCondWarn)
+        W.push_back(fmt::format(
+            "the regressor of model '{}' on this recording has condition number {:.3g} (columns "
+            "scaled to unit norm; above {:g}): some base parameters are poorly excited",
+            model->pluginName(), c_scaled, kCondWarn));
+    } catch (const std::exception& e) {
+      R["cond"] = Json();
+      R["cond_scaled"] = Json();
+      R["note"] = fmt::format("not computed: {}", e.what());
+    }
+  }
+  return finish();
+}
+
+std::string inspectionText(const Json& J) {
+  std::string out;
+  auto num = [](const Json* j, const char* f = "{:.4g}") {
+    return j && j->isNumber() ? fmt::format(fmt::runtime(f), j->asDouble()) : std::string("-");
+  };
+  auto pct = [](const Json* j) {
+    return j && j->isNumber() ? fmt::format("{:.0f} %", 100.0 * j->asDouble()) : std::string("-");
+  };
+  out += fmt::format("data: {} ({} samples, {} s)\n",
+                     J.find("source") ? J.find("source")->asString() : "?",
+                     num(J.find("samples"), "{:.0f}"), num(J.find("duration_s")));
+  if (const Json* rec = J.find("recording")) {
+    const Json* t = rec->find("timing");
+    if (t && t->find("source") && t->find("source")->asString() == "sample_period_s") {
+      out += fmt::format(
+          "recording: {} Hz (sample_period_s: no time stamps, so no jitter or gaps to measure)\n",
+          num(t->find("rate_hz"), "{:.10g}"));
+    } else if (t) {
+      const Json* jit = t->find("jitter");
+      const Json* g = t->find("gaps");
+      out += fmt::format("recording: {} Hz ({}), jitter {} std / {} max (relative), gaps {}\n",
+                         num(t->find("rate_hz"), "{:.10g}"),
+                         t->find("source") ? t->find("source")->asString() : "time stamps",
+                         jit ? num(jit->find("std_rel"), "{:.2e}") : "-",
+                         jit ? num(jit->find("max_rel"), "{:.2e}") : "-",
+                         g ? num(g->find("count"), "{:.0f}") : "-");
+    }
+    const Json* dup = rec->find("duplicate_rows");
+    const Json* fr = rec->find("frozen_rows");
+    out += fmt::format("rows: {} duplicate, {} frozen (sample-and-hold)\n",
+                       dup ? num(dup->find("count"), "{:.0f}") : "-",
+                       fr ? num(fr->find("rows"), "{:.0f}") : "-");
+    if (const Json* sat = rec->find("saturation"); sat && sat->isArray()) {
+      std::string s;
+      for (std::size_t i = 0; i < sat->size(); ++i) {
+        const Json& c = sat->at(i);
+        const Json* f = c.find("fraction");
+        if (!f || !f->isNumber() || f->asDouble() <= 0) continue;
+        s += fmt::format("{}{} {:.2f} %", s.empty() ? "" : ", ",
+                         c.find("column") ? c.find("column")->asString() : "?",
+                         100.0 * f->asDouble());
+      }
+      out += "saturated torque samples: " + (s.empty() ? std::string("none") : s) + "\n";
+    }
+  }
+  if (const Json* t = J.find("timing"))
+    out += fmt::format("data as used: {} Hz\n", num(t->find("rate_hz"), "{:.10g}"));
+  if (const Json* d = J.find("derivatives")) out += "derivatives: " + d->asString() + "\n";
+  if (const Json* m = J.find("motion")) {
+    auto segs = [&](const Json* s) {
+      std::string r;
+      if (!s) return r;
+      for (std::size_t i = 0; i < s->size(); ++i) {
+        if (i == 6) {
+          r += fmt::format(" ... ({} in all)", s->size());
+          break;
+        }
+        r += fmt::format("{}[{:.3f}, {:.3f}]", i ? " " : "", s->at(i).at(0).asDouble(),
+                         s->at(i).at(1).asDouble());
+      }
+      return r.empty() ? std::string("none") : r;
+    };
+    out += fmt::format("motion: moving {} of the time\n  moving s: {}\n  standstill s: {}\n",
+                       pct(m->find("moving_fraction")), segs(m->find("moving_s")),
+                       segs(m->find("standstill_s")));
+  }
+  if (const Json* js = J.find("joints")) {
+    out += "joint  range covered  |qd| covered  r moving  r rest  gain   verdict\n";
+    for (std::size_t i = 0; i < js->size(); ++i) {
+      const Json& e = js->at(i);
+      const Json* s = e.find("sign_check");
+      out +=
+          fmt::format("{:>5}  {:>13}  {:>12}  {:>8}  {:>6}  {:>5}  {}\n", e.find("joint")->asInt(),
+                      pct(e.find("position_coverage")), pct(e.find("velocity_coverage")),
+                      s ? num(s->find("correlation_moving"), "{:.2f}") : "-",
+                      s ? num(s->find("correlation_rest"), "{:.2f}") : "-",
+                      s ? num(s->find("gain_moving"), "{:.2f}") : "-",
+                      s && s->find("verdict") ? s->find("verdict")->asString() : "-");
+    }
+  }
+  if (const Json* d = J.find("delay")) {
+    if (d->find("delay_samples") && d->find("delay_samples")->isNumber())
+      out += fmt::format(
+          "delay: {:.2f} samples = {:.4g} s (positive: measured torque lags the model; joints "
+          "spread {} s){}\n",
+          d->find("delay_samples")->asDouble(), d->find("delay_s")->asDouble(),
+          num(d->find("per_joint_spread_s"), "{:.2g}"),
+          d->find("at_window_edge") && d->find("at_window_edge")->asBool()
+              ? " [at the edge of the window]"
+              : "");
+    else
+      out += fmt::format("delay: - ({})\n",
+                         d->find("note") ? d->find("note")->asString() : "not estimated");
+  }
+  if (const Json* r = J.find("regressor")) {
+    out += fmt::format("regressor ({}, {} base columns): cond {}, with unit-norm columns {}{}\n",
+                       r->find("model") ? r->find("model")->asString() : "?",
+                       num(r->find("base_columns"), "{:.0f}"), num(r->find("cond"), "{:.4g}"),
+                       num(r->find("cond_scaled"), "{:.4g}"),
+                       r->find("note") ? " (" + r->find("note")->asString() + ")" : "");
+  }
+  const Json* w = J.find("warnings");
+  if (w && w->size() > 0) {
+    out += "warnings:\n";
+    for (std::size_t i = 0; i < w->size(); ++i) out += "  - " + w->at(i).asString() + "\n";
+  } else {
+    out += "warnings: none\n";
+  }
+  return out;
+}
+
+}  // namespace exid
