@@ -732,7 +732,19 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
       inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
       if (write) {
-        writeCsvAtomic(dir / "experiment.csv", datasetTable(*data));
+        // The joints named in a first comment line (readers skip it; exid's csv experiment too).
+        std::string joints;
+        for (int j = 0; j < robot->dof(); ++j) {
+          const std::string& jn = robot->hasTransmission()
+                                      ? std::string()
+                                      : robot->bodies[static_cast<std::size_t>(j)].joint_name;
+          joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
+                                jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
+        }
+        writeFileAtomic(dir / "experiment.csv",
+                        fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
+                                    "units, t in s\n{}",
+                                    cfg.name, robot->name, joints, toCsv(datasetTable(*data))));
         E["csv"] = "experiment.csv";
       }
     }

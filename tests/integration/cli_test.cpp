@@ -490,3 +490,32 @@ TEST(Cli, AnImplausibleConsistentFitIsAWarningNamingTheLikelyCause) {
   EXPECT_EQ(right.find("consistent_ls"), std::string::npos) << right;
   fs::remove_all(dir);
 }
+
+TEST(Cli, ExperimentAndValidationCsvCarryTimeAndJointNames) {
+  fs::path dir = tempDir("csv_names");
+  std::ofstream(dir / "s.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
+         "false}}\n"
+         "experiment: {type: simulate, params: {duration_s: 2, drive_terms: false}}\n"
+         "estimator: {type: batch_ls}\n"
+         "validation: {type: simulate, params: {duration_s: 1, drive_terms: false}}\n";
+  CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  const std::string e = slurp(dir / "o" / "experiment.csv");
+  EXPECT_EQ(e.rfind("# exid experiment of study", 0), 0u) << e.substr(0, 200);
+  EXPECT_NE(e.find("joints 1 = "), std::string::npos);
+  const std::string v = slurp(dir / "o" / "validation.csv");
+  EXPECT_NE(v.find("\nt,row,equation,measured,predicted\n"), std::string::npos) << v.substr(0, 300);
+  EXPECT_NE(v.find("0 = tau1 "), std::string::npos) << v.substr(0, 300);
+  // the t column is the time of each row's sample: rows of one sample share it
+  const exid::CsvTable T = exid::readCsv(dir / "o" / "validation.csv");
+  ASSERT_GT(T.data.rows(), 4);
+  EXPECT_EQ(T.data(0, 0), T.data(1, 0));
+  EXPECT_LT(T.data(1, 0), T.data(2, 0));
+  // experiment.csv reads back as data (exid identify --data)
+  r = runExid("-q identify " + (dir / "s.yaml").string() + " --data " +
+              (dir / "o" / "experiment.csv").string() + " --out " + (dir / "i").string());
+  EXPECT_EQ(r.code, 0) << r.out;
+  fs::remove_all(dir);
+}
