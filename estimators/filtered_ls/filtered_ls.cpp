@@ -17,6 +17,9 @@
 
 #include <chrono>
 #include <cmath>
+#include <exception>
+#include <map>
+#include <thread>
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
@@ -71,6 +74,15 @@ class FilteredLs : public exid::Estimator {
                            "coordinates of min_speed: measured (the data's, e.g. motors) or "
                            "joint (through the robot's transmission)",
                            {"measured", "joint"}),
+        exid::param_int("chunk_samples", 8192,
+                        "samples per chunk of the row pipeline (rows, decimation filter, "
+                        "accumulation): memory is bounded by the chunk (plus the decimation "
+                        "filter's settling margin at each side), not by the recording",
+                        64, 1e8),
+        exid::param_int("threads", 0,
+                        "threads building the chunks (0: the machine's cores, at most 8); the "
+                        "chunks are merged in order, so the result is the same for any count",
+                        0, 256),
         exid::param_double("rank_tolerance", 1e-8, "",
                            "a direction is unidentifiable when its singular value of the "
                            "column-scaled W is below this times the largest",
@@ -88,7 +100,9 @@ class FilteredLs : public exid::Estimator {
         trim_(p.getInt("trim_edges")),
         correct_(p.getBool("correct_correlation")),
         min_speed_(p.getDoubles("min_speed")),
-        min_speed_joint_(p.getString("min_speed_frame") == "joint") {
+        min_speed_joint_(p.getString("min_speed_frame") == "joint"),
+        chunk_samples_(p.getInt("chunk_samples")),
+        threads_(static_cast<int>(p.getInt("threads"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
@@ -102,7 +116,11 @@ class FilteredLs : public exid::Estimator {
   /// Steps 1-4 (also used for the validation rows of raw validation data, so that the held-out
   /// error is measured on rows processed exactly like the identification rows).
   struct Processed {
-    exid::Rows rows;
+    exid::Rows rows;          // with keep_rows
+    est::RowAccumulator acc;  // every kept row
+    bool streamed = false;
+    long chunk_samples = 0, margin_samples = 0;
+    int threads = 1;
     double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
     bool filter_q = false, diff_qd = false, diff_qdd = false;
     long trim = 0, trim_transient = 0;
@@ -113,7 +131,7 @@ class FilteredLs : public exid::Estimator {
   };
 
   Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
-                    const exid::RunContext& ctx) const {
+                    const exid::RunContext& ctx, bool keep_rows) const {
     Processed P;
     const int K = data.size();
     exid::check(K >= 8,
@@ -176,11 +194,10 @@ class FilteredLs : public exid::Estimator {
     if (trim > 0) f = est::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
     P.trim = trim;
 
-    // ---- 4. rows and parallel decimation
+    // ---- 4. rows and parallel decimation, in chunks of samples (memory bounded by the chunk,
+    // not the recording), on several threads, merged in chunk order (the same result for any
+    // thread count).
     ctx.report(0.3, "filtered_ls: observation rows");
-    exid::Rows rows = model.rows(f, ctx);
-    est::checkRows(rows, model.numBase(), kName, static_cast<int>(trim));
-    P.rows_before = rows.y.size();
     int R = decimation_;
     if (R == 0)
       R = filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
@@ -189,75 +206,186 @@ class FilteredLs : public exid::Estimator {
       P.dec_note = fmt::format(
           "decimation {} skipped: the model '{}' does not give one row per sample and equation", R,
           model.pluginName());
-      exid::logWarn("filtered_ls: " + P.dec_note);
       R = 1;
     }
+    exid::check(min_speed_.empty() || per_sample,
+                fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
+                            "equation (model '{}' is not)",
+                            model.pluginName()));
+    est::Sos dsos;
     if (R > 1) {
-      if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped before decimation");
-      ctx.report(0.6, "filtered_ls: parallel decimation");
       P.dec_cut = dec_ratio_ * 0.5 * fs / R;
-      const est::Sos dsos = est::butterworthLowpass(dec_order_, P.dec_cut, fs);
-      rows = est::decimateRows(rows, R, dsos);
+      dsos = est::butterworthLowpass(dec_order_, P.dec_cut, fs);
       if (correct_) P.kappa = est::decimationVarianceFactor(dsos, R);
     }
     P.R = R;
-    // ---- 4b. samples where a joint is slower than min_speed (its Coulomb friction changes
-    // sign there) are removed whole, after the decimation (FIGAROH's rule).
-    const int neq = std::max(1, rows.numEquations);
-    P.samples_after_decimation = rows.y.size() / neq;
-    if (!min_speed_.empty()) {
-      exid::check(per_sample,
-                  fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
-                              "equation (model '{}' is not)",
-                              model.pluginName()));
-      const Eigen::Index S = rows.y.size() / neq;
-      const exid::RobotModel& robot = model.robot();
-      const bool via_T = min_speed_joint_ && robot.hasTransmission();
-      std::vector<Eigen::Index> keep;
-      for (Eigen::Index k = 0; k < S; ++k) {
-        const Eigen::Index sample = std::min<Eigen::Index>(k * R, f.qd.rows() - 1);
-        const Eigen::VectorXd v =
-            via_T ? Eigen::VectorXd(robot.transmission * f.qd.row(sample).transpose())
-                  : Eigen::VectorXd(f.qd.row(sample).transpose());
-        bool slow = false;
-        for (int j = 0; j < n; ++j)
-          slow = slow || std::abs(v(j)) < min_speed_[static_cast<std::size_t>(j)];
-        if (slow) continue;
-        for (int e = 0; e < neq; ++e) keep.push_back(k * neq + e);
+    const long Kt = f.size();
+    // Chunks [a, b) (multiples of R, so the kept samples are those of the whole recording),
+    // each computed with `margin` samples of context on both sides: the decimation filter's
+    // transient from the chunk's artificial ends decays below 1e-13 before the chunk starts.
+    const long margin = R > 1 ? est::settlingSamples(dsos, 1e-13) : 0;
+    // (at least 8 margins: the context computed twice costs at most a quarter more)
+    long C = std::max<long>(chunk_samples_, 8 * margin);
+    C = ((C + R - 1) / R) * R;
+    if (!per_sample) C = Kt;  // such a model's rows need the whole dataset at once
+    const long nchunks = (Kt + C - 1) / C;
+    P.streamed = per_sample;
+    P.chunk_samples = C;
+    P.margin_samples = margin;
+    const exid::RobotModel& robot = model.robot();
+    const bool via_T = min_speed_joint_ && robot.hasTransmission();
+    const int p = model.numBase();
+    struct ChunkOut {
+      exid::Rows rows;
+      est::RowAccumulator acc;
+      long slow = 0, kept = 0, rows_before = 0;
+      std::exception_ptr error;
+    };
+    std::vector<ChunkOut> outs(static_cast<std::size_t>(nchunks));
+    auto work = [&](long c) {
+      ChunkOut& o = outs[static_cast<std::size_t>(c)];
+      try {
+        if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
+        const long ca = c * C, cb = std::min(Kt, ca + C);
+        const long lo = std::max<long>(0, ca - margin), hi = std::min(Kt, cb + margin);
+        const exid::Dataset slice =
+            per_sample ? est::sliceDataset(f, static_cast<int>(lo), static_cast<int>(hi)) : f;
+        exid::Rows rows = model.rows(slice, ctx);
+        est::checkRows(rows, p, kName, static_cast<int>(trim + lo));
+        o.rows_before =
+            static_cast<long>(std::min<long>(cb - ca, hi - lo) * std::max(1, rows.numEquations));
+        if (!per_sample) {
+          o.rows_before = rows.y.size();
+          o.kept = rows.y.size();
+          if (keep_rows) o.rows = rows;
+          o.acc = est::RowAccumulator(p);
+          o.acc.add(rows.W, rows.y);
+          return;
+        }
+        // per equation: rows in sample order
+        std::map<int, std::vector<Eigen::Index>> groups;
+        for (Eigen::Index i = 0; i < rows.y.size(); ++i)
+          groups[rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(i)]].push_back(
+              i);
+        const long L = hi - lo;
+        std::vector<est::RowMajorMatrix> A;
+        std::vector<int> labels;
+        for (const auto& [label, idx] : groups) {
+          exid::check(static_cast<long>(idx.size()) == L,
+                      fmt::format("filtered_ls: model '{}' gave {} rows of equation {} for {} "
+                                  "samples",
+                                  model.pluginName(), idx.size(), label, L));
+          est::RowMajorMatrix M(L, p + 1);
+          for (long i = 0; i < L; ++i) {
+            M.row(i).head(p) = rows.W.row(idx[static_cast<std::size_t>(i)]);
+            M(i, p) = rows.y(idx[static_cast<std::size_t>(i)]);
+          }
+          if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, &M);
+          A.push_back(std::move(M));
+          labels.push_back(label);
+        }
+        const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
+        std::vector<long> kept_samples;
+        for (long sidx = ((ca + R - 1) / R) * R; sidx < cb; sidx += R) {
+          if (!min_speed_.empty()) {
+            const Eigen::VectorXd v =
+                via_T ? Eigen::VectorXd(robot.transmission * f.qd.row(sidx).transpose())
+                      : Eigen::VectorXd(f.qd.row(sidx).transpose());
+            bool slow = false;
+            for (Eigen::Index j = 0; j < v.size(); ++j)
+              slow = slow || std::abs(v(j)) < min_speed_[static_cast<std::size_t>(j)];
+            if (slow) {
+              ++o.slow;
+              continue;
+            }
+          }
+          kept_samples.push_back(sidx);
+        }
+        const auto G = static_cast<Eigen::Index>(A.size());
+        Eigen::MatrixXd W(static_cast<Eigen::Index>(kept_samples.size()) * G, p);
+        Eigen::VectorXd y(W.rows());
+        exid::Rows out;
+        out.numEquations = rows.numEquations;
+        out.equation_names = rows.equation_names;
+        for (std::size_t k = 0; k < kept_samples.size(); ++k)
+          for (Eigen::Index g = 0; g < G; ++g) {
+            const long local = kept_samples[k] - lo;
+            const Eigen::Index r = static_cast<Eigen::Index>(k) * G + g;
+            W.row(r) = A[static_cast<std::size_t>(g)].row(local).head(p);
+            y(r) = A[static_cast<std::size_t>(g)](local, p);
+            if (keep_rows) {
+              out.equation.push_back(labels[static_cast<std::size_t>(g)]);
+              if (has_t)
+                out.t.push_back(rows.t[static_cast<std::size_t>(groups.at(
+                    labels[static_cast<std::size_t>(g)])[static_cast<std::size_t>(local)])]);
+            }
+          }
+        o.kept = static_cast<long>(kept_samples.size());
+        o.acc = est::RowAccumulator(p);
+        o.acc.add(W, y);
+        if (keep_rows) {
+          out.W = std::move(W);
+          out.y = std::move(y);
+          o.rows = std::move(out);
+        }
+      } catch (...) {
+        o.error = std::current_exception();
       }
-      P.slow_removed = static_cast<long>(S) - static_cast<long>(keep.size()) / neq;
-      exid::check(!keep.empty(),
-                  fmt::format("filtered_ls: min_speed removes every sample of '{}'", data.source));
-      exid::Rows kept;
-      kept.W.resize(static_cast<Eigen::Index>(keep.size()), rows.W.cols());
-      kept.y.resize(static_cast<Eigen::Index>(keep.size()));
-      kept.numEquations = rows.numEquations;
-      kept.equation_names = rows.equation_names;
-      for (std::size_t i = 0; i < keep.size(); ++i) {
-        kept.W.row(static_cast<Eigen::Index>(i)) = rows.W.row(keep[i]);
-        kept.y(static_cast<Eigen::Index>(i)) = rows.y(keep[i]);
-        if (!rows.equation.empty())
-          kept.equation.push_back(rows.equation[static_cast<std::size_t>(keep[i])]);
-        if (rows.t.size() == static_cast<std::size_t>(rows.y.size()))
-          kept.t.push_back(rows.t[static_cast<std::size_t>(keep[i])]);
-      }
-      rows = std::move(kept);
+    };
+    int T = threads_ > 0
+                ? threads_
+                : std::max(1, std::min(8, static_cast<int>(std::thread::hardware_concurrency())));
+    T = static_cast<int>(std::min<long>(T, nchunks));
+    P.threads = T;
+    if (T <= 1) {
+      for (long c = 0; c < nchunks; ++c) work(c);
+    } else {
+      std::vector<std::thread> pool;
+      for (int t = 0; t < T; ++t)
+        pool.emplace_back([&, t] {
+          for (long c = t; c < nchunks; c += T) work(c);
+        });
+      for (auto& th : pool) th.join();
     }
-    P.rows = std::move(rows);
+    for (auto& o : outs)
+      if (o.error) std::rethrow_exception(o.error);
+    P.acc = est::RowAccumulator(p);
+    exid::Rows all;
+    for (auto& o : outs) {  // in chunk order: deterministic
+      P.acc.merge(o.acc);
+      P.rows_before += o.rows_before;
+      P.slow_removed += o.slow;
+      P.samples_after_decimation += o.kept + o.slow;
+      if (keep_rows) {
+        const Eigen::Index r0 = all.W.rows();
+        all.W.conservativeResize(r0 + o.rows.W.rows(), p);
+        all.y.conservativeResize(r0 + o.rows.y.size());
+        all.W.bottomRows(o.rows.W.rows()) = o.rows.W;
+        all.y.tail(o.rows.y.size()) = o.rows.y;
+        all.equation.insert(all.equation.end(), o.rows.equation.begin(), o.rows.equation.end());
+        all.t.insert(all.t.end(), o.rows.t.begin(), o.rows.t.end());
+        all.numEquations = o.rows.numEquations;
+        all.equation_names = o.rows.equation_names;
+      }
+      o = ChunkOut();
+    }
+    exid::check(P.acc.rows() > 0,
+                fmt::format("filtered_ls: no rows left of '{}'{}", data.source,
+                            min_speed_.empty() ? "" : " (min_speed removed every sample)"));
+    if (keep_rows) P.rows = std::move(all);
     return P;
   }
 
   exid::Rows validationRows(const exid::ObservationModel& model, const exid::Dataset& data,
                             const exid::RunContext& ctx) const override {
-    return process(model, data, ctx).rows;
+    return process(model, data, ctx, true).rows;
   }
 
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int K = data.size();
-    Processed P = process(model, data, ctx);
-    const exid::Rows& rows = P.rows;
+    Processed P = process(model, data, ctx, false);
     const double fs = P.fs, jitter = P.jitter, kappa = P.kappa, dec_cut = P.dec_cut;
     const bool filter_q = P.filter_q, diff_qd = P.diff_qd, diff_qdd = P.diff_qdd;
     const long trim = P.trim, rows_before = P.rows_before;
@@ -266,8 +394,7 @@ class FilteredLs : public exid::Estimator {
 
     // ---- 5. least squares
     ctx.report(0.9, "filtered_ls: solving");
-    est::RowAccumulator acc(model.numBase());
-    acc.add(rows.W, rows.y);
+    const est::RowAccumulator& acc = P.acc;
     exid::Estimate e;
     if (!prior) {
       const est::LsSolution s = est::solveLeastSquares(acc, model.base().names, opt_, kName);
@@ -340,6 +467,18 @@ class FilteredLs : public exid::Estimator {
     d["decimation_order"] = dec_order_;
     if (!dec_note.empty()) d["decimation_note"] = dec_note;
     d["rows_before_decimation"] = Json(static_cast<long long>(rows_before));
+    d["streamed"] = P.streamed;
+    d["chunk_samples"] = Json(static_cast<long long>(P.chunk_samples));
+    d["chunk_margin_samples"] = Json(static_cast<long long>(P.margin_samples));
+    d["threads"] = P.threads;
+    d["memory"] =
+        P.streamed
+            ? "rows built, filtered and accumulated per chunk of chunk_samples (+ the margin at "
+              "each side); the filtered signals q, qd, qdd, tau of the whole recording are held"
+            : fmt::format(
+                  "the model '{}' does not give one row per sample: its rows of the whole "
+                  "recording are held at once",
+                  model.pluginName());
     d["samples"] = K;
     d["noise_correlation_factor"] = kappa;
     d["std_definition"] =
@@ -364,6 +503,8 @@ class FilteredLs : public exid::Estimator {
   bool correct_;
   std::vector<double> min_speed_;
   bool min_speed_joint_ = false;
+  long chunk_samples_ = 8192;
+  int threads_ = 0;
   est::SolveOptions opt_;
 };
 

@@ -426,3 +426,36 @@ TEST(Estimators, FilteredLsDefaultTrimIsCappedAndMinSpeedRemovesSlowSamples) {
   EXPECT_EQ(e.rows, total - e.details.find("slow_samples_removed")->asInt());
   EXPECT_LE(maxRelErr(e.value, m->baseNominal()), 1e-3);
 }
+
+TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGivesTheSameBits) {
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 30000;
+  o.dt = 0.001;
+  o.q_noise = 1e-5;
+  o.tau_noise = {0.02, 0.02};
+  o.derivatives = false;
+  const exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  // one chunk holding the whole recording: the reference
+  const exid::Estimate whole =
+      make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 100000000, threads: 1}")
+          ->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(whole.details.find("chunk_samples")->asInt(), 100000000);
+  // small chunks (the settling margin sets the floor: 8 margins), 1 and 3 threads
+  const exid::Estimate c1 = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 1}")
+                                ->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate c3 = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 3}")
+                                ->estimate(*m, d, nullptr, ctx);
+  const long C = c1.details.find("chunk_samples")->asInt();
+  EXPECT_LT(C, 10000);  // several chunks
+  EXPECT_EQ(c1.details.find("threads")->asInt(), 1);
+  EXPECT_EQ(c3.details.find("threads")->asInt(), 3);
+  EXPECT_EQ(c1.rows, whole.rows);
+  for (Eigen::Index i = 0; i < whole.value.size(); ++i) {
+    EXPECT_NEAR(c1.value(i), whole.value(i), 1e-9 * (1.0 + std::abs(whole.value(i))));
+    EXPECT_NEAR(c1.std(i), whole.std(i), 1e-6 * whole.std(i));
+  }
+  EXPECT_EQ(c1.value, c3.value);  // bit for bit
+  EXPECT_EQ(c1.std, c3.std);
+}

@@ -182,3 +182,21 @@ TEST(RowAccumulator, ExplainsNullSpace) {
   EXPECT_NE(s.find("0.707 Fc1 - 0.707 OFF1"), std::string::npos) << s;
   EXPECT_EQ(s.find("MX1"), std::string::npos) << s;
 }
+
+TEST(Filtfilt, RowMajorBlockEqualsPerColumnBitForBit) {
+  const exid::est::Sos sos = exid::est::butterworthLowpass(8, 12.0, 1000.0);
+  Eigen::MatrixXd X(700, 5);
+  for (Eigen::Index i = 0; i < X.rows(); ++i)
+    for (Eigen::Index j = 0; j < X.cols(); ++j)
+      X(i, j) = std::sin(0.01 * static_cast<double>(i * (j + 1))) + 0.1 * std::cos(0.9 * i + j);
+  exid::est::RowMajorMatrix R = X;
+  exid::est::filtfiltRowsInPlace(sos, &R);
+  for (Eigen::Index j = 0; j < X.cols(); ++j) {
+    const Eigen::VectorXd ref = exid::est::filtfilt(sos, X.col(j));
+    for (Eigen::Index i = 0; i < X.rows(); ++i) ASSERT_EQ(R(i, j), ref(i)) << i << "," << j;
+  }
+  // the settling margin: the slowest pole decays below the tolerance within it
+  const long M = exid::est::settlingSamples(sos, 1e-13);
+  EXPECT_GT(M, 100);
+  EXPECT_LT(M, 5000);
+}

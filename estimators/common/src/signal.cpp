@@ -113,10 +113,84 @@ Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>
   return ext.segment(padlen, n);
 }
 
+namespace {
+
+double slowestPoleRadius(const Sos& sos) {
+  double rmax = 0.0;
+  for (const auto& s : sos.sections) {
+    const double a1 = s[4], a2 = s[5], disc = a1 * a1 - 4.0 * a2;
+    const double r = disc < 0 ? std::sqrt(a2) : 0.5 * (std::abs(a1) + std::sqrt(disc));
+    rmax = std::max(rmax, r);
+  }
+  return rmax;
+}
+
+// One pass of the sections over rows [0, n) of E (row-major, c columns), in place, from the
+// steady state scaled by row 0. Per column exactly sosFilter's arithmetic.
+void sosFilterRows(const Sos& sos, double* E, Eigen::Index n, Eigen::Index c,
+                   const std::vector<double>& zstep) {
+  const std::size_t S = sos.sections.size();
+  std::vector<double> z(2 * S * static_cast<std::size_t>(c));
+  for (std::size_t k = 0; k < S; ++k)
+    for (Eigen::Index j = 0; j < c; ++j) {
+      z[(2 * k) * static_cast<std::size_t>(c) + static_cast<std::size_t>(j)] = zstep[2 * k] * E[j];
+      z[(2 * k + 1) * static_cast<std::size_t>(c) + static_cast<std::size_t>(j)] =
+          zstep[2 * k + 1] * E[j];
+    }
+  // Section by section over the whole block (as sosFilter does), columns innermost.
+  for (std::size_t k = 0; k < S; ++k) {
+    const auto& s = sos.sections[k];
+    const double b0 = s[0], b1 = s[1], b2 = s[2], a1 = s[4], a2 = s[5];
+    double* z0 = z.data() + (2 * k) * static_cast<std::size_t>(c);
+    double* z1 = z.data() + (2 * k + 1) * static_cast<std::size_t>(c);
+    for (Eigen::Index i = 0; i < n; ++i) {
+      double* x = E + i * c;
+      for (Eigen::Index j = 0; j < c; ++j) {
+        const double xi = x[j];
+        const double yi = b0 * xi + z0[j];
+        z0[j] = b1 * xi - a1 * yi + z1[j];
+        z1[j] = b2 * xi - a2 * yi;
+        x[j] = yi;
+      }
+    }
+  }
+}
+
+}  // namespace
+
+long settlingSamples(const Sos& sos, double tol) {
+  const double r = slowestPoleRadius(sos);
+  if (!(r > 0 && r < 1)) return 0;
+  return static_cast<long>(std::ceil(std::log(tol) / std::log(r)));
+}
+
+void filtfiltRowsInPlace(const Sos& sos, RowMajorMatrix* X) {
+  const Eigen::Index n = X->rows(), c = X->cols();
+  check(n >= 2, fmt::format("filtfilt: needs at least 2 samples, got {}", n));
+  const double rmax = slowestPoleRadius(sos);
+  const double tau = rmax > 0 && rmax < 1 ? -1.0 / std::log(rmax) : 0.0;
+  const Eigen::Index padlen = static_cast<Eigen::Index>(std::min<double>(
+      std::max<double>(3.0 * (2.0 * static_cast<double>(sos.sections.size()) + 1.0),
+                       std::ceil(10.0 * tau)),
+      static_cast<double>(n - 1)));
+  RowMajorMatrix ext(n + 2 * padlen, c);
+  for (Eigen::Index i = 0; i < padlen; ++i) ext.row(i) = 2.0 * X->row(0) - X->row(padlen - i);
+  ext.middleRows(padlen, n) = *X;
+  for (Eigen::Index i = 0; i < padlen; ++i)
+    ext.row(padlen + n + i) = 2.0 * X->row(n - 1) - X->row(n - 2 - i);
+  const std::vector<double> z = sosStepState(sos);
+  const Eigen::Index N = ext.rows();
+  sosFilterRows(sos, ext.data(), N, c, z);
+  ext.colwise().reverseInPlace();
+  sosFilterRows(sos, ext.data(), N, c, z);
+  ext.colwise().reverseInPlace();
+  *X = ext.middleRows(padlen, n);
+}
+
 Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X) {
-  Eigen::MatrixXd Y(X.rows(), X.cols());
-  for (Eigen::Index j = 0; j < X.cols(); ++j) Y.col(j) = filtfilt(sos, X.col(j));
-  return Y;
+  RowMajorMatrix R = X;
+  filtfiltRowsInPlace(sos, &R);
+  return R;
 }
 
 double samplingRate(const Eigen::VectorXd& t, double* jitter) {
@@ -197,12 +271,12 @@ Rows decimateRows(const Rows& rows, int factor, const Sos& sos) {
   std::size_t total = 0, longest = 0;
   for (const auto& [label, idx] : groups) {
     const auto L = static_cast<Eigen::Index>(idx.size());
-    Eigen::MatrixXd A(L, p + 1);
+    RowMajorMatrix A(L, p + 1);
     for (Eigen::Index i = 0; i < L; ++i) {
       A.row(i).head(p) = rows.W.row(idx[static_cast<std::size_t>(i)]);
       A(i, p) = rows.y(idx[static_cast<std::size_t>(i)]);
     }
-    if (L >= 2) A = filtfiltColumns(sos, A);
+    if (L >= 2) filtfiltRowsInPlace(sos, &A);
     const Eigen::Index kept = (L + factor - 1) / factor;
     Eigen::MatrixXd K(kept, p + 1);
     for (Eigen::Index i = 0; i < kept; ++i) K.row(i) = A.row(i * factor);

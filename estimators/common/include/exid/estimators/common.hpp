@@ -181,6 +181,16 @@ std::vector<double> sosStepState(const Sos& sos);
 Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>& x);
 /// filtfilt of every column.
 Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X);
+/// Row-major samples x signals.
+using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+/// filtfilt of every column of a row-major block, in place: the same padding, initial
+/// conditions and arithmetic per column as filtfilt (bit for bit), with the recursion run over
+/// all columns of a sample at once (vectorised across signals instead of latency-bound per
+/// signal).
+void filtfiltRowsInPlace(const Sos& sos, RowMajorMatrix* X);
+/// Samples after which the slowest pole's transient has decayed below `tol` (relative):
+/// ceil(log(tol) / log(r_max)); 0 for a filter without poles.
+long settlingSamples(const Sos& sos, double tol);
 
 /// Sampling rate 1 / median(dt); *jitter = max |dt - median| / median. Throws on < 3 samples
 /// or non-increasing t.
