@@ -649,10 +649,15 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       PluginInfo rep;
       rep.name = "standard";
       rep.params = {param_bool("plots", true, "draw plots with gnuplot when it is installed"),
+                    param_string("experiment_csv", std::string("auto"),
+                                 "write experiment.csv: auto (simulated data always; recorded "
+                                 "data, a copy of the input, up to 100000 samples), always, never",
+                                 {"auto", "always", "never"}),
                     param_string("title", std::string(), "title of the report")};
       ParamSet ps;
       resolveInto(rep, r["params"], "report.params", base_dir, pr, ps);
       if (ps.has("plots")) cfg.report.plots = ps.getBool("plots");
+      if (ps.has("experiment_csv")) cfg.report.experiment_csv = ps.getString("experiment_csv");
       if (ps.has("title")) cfg.report.title = ps.getString("title");
     }
   }
@@ -820,7 +825,8 @@ std::string StudyConfig::resolvedYaml() const {
   e << YAML::Key << "report" << YAML::Value << YAML::BeginMap << YAML::Key << "type" << YAML::Value
     << "standard" << YAML::Key << "params" << YAML::Value << YAML::BeginMap << YAML::Key << "plots"
     << YAML::Value << report.plots << YAML::Key << "title" << YAML::Value << report.title
-    << YAML::EndMap << YAML::EndMap;
+    << YAML::Key << "experiment_csv" << YAML::Value << report.experiment_csv << YAML::EndMap
+    << YAML::EndMap;
   e << YAML::EndMap;
   return std::string(e.c_str()) + "\n";
 }

@@ -731,7 +731,23 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       if (const Json* w = data->meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
       inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
-      if (write) {
+      // experiment.csv: simulated data always; recorded data are a copy of the input, written
+      // (by default) only while small. What was written, or why not, is in the summary.
+      const bool simulated_data =
+          data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+      const std::string& policy = cfg.report.experiment_csv;
+      const bool write_csv =
+          policy == "always" ||
+          (policy == "auto" && (simulated_data || data->size() <= kExperimentCsvAutoSamples));
+      if (write && !write_csv)
+        E["csv_not_written"] =
+            policy == "never"
+                ? std::string("report.params.experiment_csv: never")
+                : fmt::format(
+                      "recorded data of {} samples (more than {}): a copy of the input; "
+                      "report.params.experiment_csv: always writes it",
+                      data->size(), kExperimentCsvAutoSamples);
+      if (write && write_csv) {
         // The joints named in a first comment line (readers skip it; exid's csv experiment too).
         std::string joints;
         for (int j = 0; j < robot->dof(); ++j) {

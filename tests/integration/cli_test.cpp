@@ -10,6 +10,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "exid/config.hpp"
 #include "exid/io.hpp"
 #include "exid/json.hpp"
 #include "exid/version.hpp"
@@ -517,5 +518,36 @@ TEST(Cli, ExperimentAndValidationCsvCarryTimeAndJointNames) {
   r = runExid("-q identify " + (dir / "s.yaml").string() + " --data " +
               (dir / "o" / "experiment.csv").string() + " --out " + (dir / "i").string());
   EXPECT_EQ(r.code, 0) << r.out;
+  fs::remove_all(dir);
+}
+
+TEST(Cli, ALongRecordingIsNotCopiedIntoExperimentCsvUnlessAsked) {
+  fs::path dir = tempDir("no_copy");
+  {
+    std::ofstream f(dir / "rec.csv");
+    f << "t,q1,q2,qd1,qd2,qdd1,qdd2,tau1,tau2\n";
+    for (long k = 0; k <= exid::kExperimentCsvAutoSamples; ++k) {
+      const double t = 0.001 * static_cast<double>(k);
+      f << t << "," << std::sin(t) << ",0.5," << std::cos(t) << ",0," << -std::sin(t) << ",0,1,2\n";
+    }
+  }
+  auto run = [&](const std::string& policy) {
+    std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\n"
+                                     "experiment: {type: csv, params: {file: rec.csv}}\n"
+                                     "report: {params: {plots: false" +
+                                         (policy.empty() ? "" : ", experiment_csv: " + policy) +
+                                         "}}\n";
+    fs::remove_all(dir / "o");
+    CmdResult r = runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+    EXPECT_EQ(r.code, 0) << r.out;
+    return exid::Json::parse(slurp(dir / "o" / "summary.json"));
+  };
+  exid::Json S = run("");
+  EXPECT_FALSE(fs::exists(dir / "o" / "experiment.csv"));
+  EXPECT_NE(S.find("experiment")->find("csv_not_written")->asString().find("100001 samples"),
+            std::string::npos);
+  S = run("always");
+  EXPECT_TRUE(fs::exists(dir / "o" / "experiment.csv"));
+  EXPECT_EQ(S.find("experiment")->find("csv")->asString(), "experiment.csv");
   fs::remove_all(dir);
 }

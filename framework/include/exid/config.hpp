@@ -73,7 +73,11 @@ struct SplitSpec {
 struct ReportOptions {
   bool plots = true;
   std::string title;
+  /// experiment.csv: "auto" (simulated data always; recorded data, a copy of the input, only up
+  /// to kExperimentCsvAutoSamples samples), "always", "never".
+  std::string experiment_csv = "auto";
 };
+inline constexpr long kExperimentCsvAutoSamples = 100000;
 
 struct StudyConfig {
   std::filesystem::path file;  // the study file ("" when parsed from text)

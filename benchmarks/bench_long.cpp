@@ -1,0 +1,200 @@
+// Long recordings, whole process: `exid run` of a study reading a recorded CSV, timed from the
+// outside (wall time and the child's maximum resident set size, from wait4), as a user sees it.
+//
+//   - recorded PUMA 560 CSV (t, q, qd, qdd, tau: 25 columns, 1 kHz) of 100 k and 1 M samples
+//     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M) -> batch_ls;
+//   - the same 1 M samples without qd, qdd -> filtered_ls {cutoff_hz: 20} on 1 and 2 threads;
+//   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz).
+//
+// Baseline in the same run: reading the same file once (std::fread into a 4 MB buffer), so that
+// the figures are quoted as "times the plain read" as well as in seconds.
+//
+//   build/bin/bench_long            (the files are generated once into $TMPDIR/exid_bench_long)
+#include <benchmark/benchmark.h>
+#include <fmt/format.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <map>
+#include <string>
+#include <vector>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+fs::path workDir() {
+  const fs::path d = fs::temp_directory_path() / "exid_bench_long";
+  fs::create_directories(d);
+  return d;
+}
+
+/// A recorded-looking CSV: smooth motion of the 6 joints, torques with a little noise.
+fs::path recording(long samples, bool derivatives) {
+  const fs::path f =
+      workDir() / fmt::format("puma_{}_{}.csv", samples, derivatives ? "qdqdd" : "raw");
+  if (fs::exists(f)) return f;
+  std::FILE* out = std::fopen((f.string() + ".part").c_str(), "w");
+  std::string line = "t";
+  for (const char* g : {"q", "qd", "qdd", "tau"}) {
+    if (!derivatives && (std::string(g) == "qd" || std::string(g) == "qdd")) continue;
+    for (int j = 1; j <= 6; ++j) line += fmt::format(",{}{}", g, j);
+  }
+  std::fputs((line + "\n").c_str(), out);
+  unsigned long long s = 88172645463325252ULL;  // xorshift noise
+  auto noise = [&] {
+    s ^= s << 13;
+    s ^= s >> 7;
+    s ^= s << 17;
+    return (static_cast<double>(s % 2000001) / 1e6 - 1.0) * 0.05;
+  };
+  for (long k = 0; k < samples; ++k) {
+    const double t = 1e-3 * static_cast<double>(k);
+    line = fmt::format("{:.3f}", t);
+    for (int j = 0; j < 6; ++j)
+      line += fmt::format(",{:.9g}", 0.8 * std::sin(0.5 * (j + 1) * t + j));
+    if (derivatives) {
+      for (int j = 0; j < 6; ++j)
+        line += fmt::format(",{:.9g}", 0.4 * (j + 1) * std::cos(0.5 * (j + 1) * t + j));
+      for (int j = 0; j < 6; ++j)
+        line += fmt::format(",{:.9g}", -0.2 * (j + 1) * (j + 1) * std::sin(0.5 * (j + 1) * t + j));
+    }
+    for (int j = 0; j < 6; ++j)
+      line += fmt::format(",{:.7g}", 20.0 * std::cos(0.3 * (j + 1) * t) + noise());
+    std::fputs((line + "\n").c_str(), out);
+  }
+  std::fclose(out);
+  fs::rename(f.string() + ".part", f);
+  return f;
+}
+
+struct Child {
+  double wall_s = 0;
+  long max_rss_kb = 0;
+  int status = -1;
+};
+
+Child runExid(const std::vector<std::string>& args) {
+  const auto t0 = std::chrono::steady_clock::now();
+  const pid_t pid = fork();
+  if (pid == 0) {
+    std::vector<char*> argv;
+    const std::string exe = std::string(EXID_BINARY_DIR) + "/bin/exid";
+    argv.push_back(const_cast<char*>(exe.c_str()));
+    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    std::freopen("/dev/null", "w", stdout);
+    execv(exe.c_str(), argv.data());
+    _exit(127);
+  }
+  Child c;
+  rusage ru{};
+  wait4(pid, &c.status, 0, &ru);
+  c.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  c.max_rss_kb = ru.ru_maxrss;
+  return c;
+}
+
+double plainRead(const fs::path& f) {
+  const auto t0 = std::chrono::steady_clock::now();
+  std::FILE* in = std::fopen(f.c_str(), "rb");
+  std::vector<char> buf(4 << 20);
+  std::size_t total = 0;
+  while (std::size_t n = std::fread(buf.data(), 1, buf.size(), in)) total += n;
+  std::fclose(in);
+  benchmark::DoNotOptimize(total);
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+}
+
+std::map<std::string, std::string>& table() {
+  static std::map<std::string, std::string> t;
+  return t;
+}
+
+void runStudyBench(benchmark::State& state, const std::string& label, const fs::path& data,
+                   const std::string& estimator) {
+  const fs::path study = workDir() / (label + ".yaml");
+  std::ofstream(study) << "name: " << label << "\nrobot: {type: puma560}\n"
+                       << "model: {type: differential}\n"
+                       << "experiment: {type: csv, params: {file: " << data.string() << "}}\n"
+                       << "estimator: " << estimator << "\n"
+                       << "report: {type: standard, params: {plots: false}}\n";
+  Child c;
+  double read_s = 0;
+  for (auto _ : state) {
+    read_s = plainRead(data);
+    c = runExid({"-q", "run", study.string(), "--out", (workDir() / ("out_" + label)).string()});
+    state.SetIterationTime(c.wall_s);
+  }
+  if (c.status != 0) state.SkipWithError("exid run failed");
+  state.counters["wall_s"] = c.wall_s;
+  state.counters["max_rss_MB"] = static_cast<double>(c.max_rss_kb) / 1024.0;
+  state.counters["x_plain_read"] = c.wall_s / read_s;
+  table()[label] = fmt::format("{:8.2f} s {:8.0f} MB  ({:.0f} x the plain read of {:.0f} MB)",
+                               c.wall_s, c.max_rss_kb / 1024.0, c.wall_s / read_s,
+                               static_cast<double>(fs::file_size(data)) / 1e6);
+}
+
+void BM_BatchLs(benchmark::State& state) {
+  const long n = state.range(0);
+  runStudyBench(state, fmt::format("batch_ls_{}", n), recording(n, true), "{type: batch_ls}");
+}
+
+void BM_FilteredLs(benchmark::State& state) {
+  const long n = state.range(0);
+  const int threads = static_cast<int>(state.range(1));
+  runStudyBench(
+      state, fmt::format("filtered_ls_{}_threads{}", n, threads), recording(n, false),
+      fmt::format("{{type: filtered_ls, params: {{cutoff_hz: 20, threads: {}}}}}", threads));
+}
+
+void BM_Tx40FilteredLs(benchmark::State& state) {
+  Child c;
+  for (auto _ : state) {
+    c = runExid({"-q", "run", std::string(EXID_SOURCE_DIR) + "/examples/real/tx40_filtered_ls.yaml",
+                 "--out", (workDir() / "out_tx40").string()});
+    state.SetIterationTime(c.wall_s);
+  }
+  if (c.status != 0) state.SkipWithError("exid run failed");
+  state.counters["wall_s"] = c.wall_s;
+  state.counters["max_rss_MB"] = static_cast<double>(c.max_rss_kb) / 1024.0;
+  table()["tx40_filtered_ls"] =
+      fmt::format("{:8.2f} s {:8.0f} MB", c.wall_s, c.max_rss_kb / 1024.0);
+}
+
+}  // namespace
+
+BENCHMARK(BM_BatchLs)
+    ->Arg(100000)
+    ->Arg(1000000)
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kSecond);
+BENCHMARK(BM_FilteredLs)
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
+    ->UseManualTime()
+    ->Iterations(1)
+    ->Unit(benchmark::kSecond);
+BENCHMARK(BM_Tx40FilteredLs)->UseManualTime()->Iterations(1)->Unit(benchmark::kSecond);
+
+int main(int argc, char** argv) {
+  if (const char* ten = std::getenv("EXID_BENCH_LONG_SAMPLES"))
+    benchmark::RegisterBenchmark("BM_BatchLs_env", BM_BatchLs)
+        ->Arg(std::atol(ten))
+        ->UseManualTime()
+        ->Iterations(1)
+        ->Unit(benchmark::kSecond);
+  benchmark::Initialize(&argc, argv);
+  benchmark::RunSpecifiedBenchmarks();
+  std::printf("\nwhole process, exid run (wall, max RSS):\n");
+  for (const auto& [k, v] : table()) std::printf("  %-28s %s\n", k.c_str(), v.c_str());
+  return 0;
+}
