@@ -50,6 +50,11 @@ class BatchLs : public exid::Estimator {
                            "accumulate: auto keeps the normal equations while the column-scaled "
                            "cond(W) is at most this (relative error ~ 2.2e-16 cond^2)",
                            1.0, 1e8),
+        exid::param_int("threads", 0,
+                        "threads building the rows (0: the machine's cores, at most 8); each "
+                        "thread's block of samples is merged in order, so the result is the "
+                        "same for any count",
+                        0, 256),
         exid::param_double("rank_tolerance", 1e-8, "",
                            "a direction is unidentifiable when its singular value of the "
                            "column-scaled W is below this times the largest",
@@ -60,7 +65,8 @@ class BatchLs : public exid::Estimator {
   explicit BatchLs(const exid::ParamSet& p)
       : chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         accumulate_(p.getString("accumulate")),
-        normal_max_cond_(p.getDouble("normal_max_cond")) {
+        normal_max_cond_(p.getDouble("normal_max_cond")),
+        threads_(exid::est::resolveThreads(p.getInt("threads"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
@@ -73,13 +79,9 @@ class BatchLs : public exid::Estimator {
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
-    const int p = model.numBase();
     using Method = exid::est::RowAccumulator::Method;
     auto fold = [&](Method m, double lo, double hi) {
-      exid::est::RowAccumulator a(p, m);
-      exid::est::forEachChunk(model, data, chunk_, ctx, kName, lo, hi,
-                              [&](const exid::Rows& r, int, int) { a.add(r.W, r.y); });
-      return a;
+      return exid::est::accumulateRows(model, data, chunk_, ctx, kName, lo, hi, m, threads_);
     };
     const bool automatic = accumulate_ == "auto";
     exid::est::RowAccumulator acc =
@@ -151,6 +153,7 @@ class BatchLs : public exid::Estimator {
     d["accumulate"] = choice;
     d["samples"] = data.size();
     d["chunk_samples"] = exid::est::modelIsPerSample(model) ? chunk_ : data.size();
+    d["threads"] = threads_;
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ctx.report(1.0, "batch_ls: done");
     return e;
@@ -160,6 +163,7 @@ class BatchLs : public exid::Estimator {
   int chunk_;
   std::string accumulate_;
   double normal_max_cond_;
+  int threads_ = 1;
   exid::est::SolveOptions opt_;
 };
 

@@ -239,12 +239,14 @@ class FilteredLs : public exid::Estimator {
       exid::Rows rows;
       est::RowAccumulator acc;
       long slow = 0, kept = 0, rows_before = 0;
-      std::exception_ptr error;
     };
-    std::vector<ChunkOut> outs(static_cast<std::size_t>(nchunks));
+    const int T = static_cast<int>(std::min<long>(est::resolveThreads(threads_), nchunks));
+    P.threads = T;
+    std::vector<ChunkOut> outs(static_cast<std::size_t>(T));  // one wave of chunks
     auto work = [&](long c) {
-      ChunkOut& o = outs[static_cast<std::size_t>(c)];
-      try {
+      ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
+      o = ChunkOut();
+      {
         if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
         const long ca = c * C, cb = std::min(Kt, ca + C);
         const long lo = std::max<long>(0, ca - margin), hi = std::min(Kt, cb + margin);
@@ -328,30 +330,12 @@ class FilteredLs : public exid::Estimator {
           out.y = std::move(y);
           o.rows = std::move(out);
         }
-      } catch (...) {
-        o.error = std::current_exception();
       }
     };
-    int T = threads_ > 0
-                ? threads_
-                : std::max(1, std::min(8, static_cast<int>(std::thread::hardware_concurrency())));
-    T = static_cast<int>(std::min<long>(T, nchunks));
-    P.threads = T;
-    if (T <= 1) {
-      for (long c = 0; c < nchunks; ++c) work(c);
-    } else {
-      std::vector<std::thread> pool;
-      for (int t = 0; t < T; ++t)
-        pool.emplace_back([&, t] {
-          for (long c = t; c < nchunks; c += T) work(c);
-        });
-      for (auto& th : pool) th.join();
-    }
-    for (auto& o : outs)
-      if (o.error) std::rethrow_exception(o.error);
     P.acc = est::RowAccumulator(p);
     exid::Rows all;
-    for (auto& o : outs) {  // in chunk order: deterministic
+    est::parallelChunks(nchunks, T, work, [&](long c) {  // in chunk order: deterministic
+      ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
       P.acc.merge(o.acc);
       P.rows_before += o.rows_before;
       P.slow_removed += o.slow;
@@ -368,7 +352,7 @@ class FilteredLs : public exid::Estimator {
         all.equation_names = o.rows.equation_names;
       }
       o = ChunkOut();
-    }
+    });
     exid::check(P.acc.rows() > 0,
                 fmt::format("filtered_ls: no rows left of '{}'{}", data.source,
                             min_speed_.empty() ? "" : " (min_speed removed every sample)"));

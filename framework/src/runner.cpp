@@ -424,7 +424,38 @@ void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, c
                  const RobotModel& robot, const ObservationModel* model, const Dataset& d,
                  const RunContext& ctx) {
   try {
-    Json I = inspectDataset(robot, model, d, ctx);
+    // A long recording is inspected on every s-th sample (at most kRunInspectSamples): the checks
+    // cost a fraction of the identification, never several times it. `exid inspect` looks at
+    // every sample.
+    constexpr long kRunInspectSamples = 100000;
+    const long K = d.size();
+    Json I;
+    if (K > kRunInspectSamples) {
+      const long stride = (K + kRunInspectSamples - 1) / kRunInspectSamples;
+      Dataset sub;
+      const long M = (K + stride - 1) / stride;
+      auto take = [&](const Eigen::MatrixXd& A) {
+        if (A.size() == 0) return Eigen::MatrixXd();
+        Eigen::MatrixXd B(M, A.cols());
+        for (long i = 0; i < M; ++i) B.row(i) = A.row(i * stride);
+        return B;
+      };
+      sub.t.resize(M);
+      for (long i = 0; i < M; ++i) sub.t(i) = d.t(i * stride);
+      sub.q = take(d.q);
+      sub.qd = take(d.qd);
+      sub.qdd = take(d.qdd);
+      sub.tau = take(d.tau);
+      sub.wrench = take(d.wrench);
+      sub.source = d.source;
+      sub.meta = d.meta;
+      I = inspectDataset(robot, model, sub, ctx);
+      I["subsampled"] = fmt::format(
+          "every {}th of the {} samples ({} inspected; `exid inspect` looks at every sample)",
+          stride, K, M);
+    } else {
+      I = inspectDataset(robot, model, d, ctx);
+    }
     if (const Json* w = I.find("warnings"))
       for (std::size_t i = 0; i < w->size(); ++i)
         warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));

@@ -459,3 +459,22 @@ TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGives
   EXPECT_EQ(c1.value, c3.value);  // bit for bit
   EXPECT_EQ(c1.std, c3.std);
 }
+
+TEST(Estimators, BatchLsGivesTheSameBitsForAnyThreadCount) {
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 50000;
+  o.tau_noise = {0.05, 0.05};
+  const exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  const exid::Estimate a = make("batch_ls", "{threads: 1}")->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate b = make("batch_ls", "{threads: 3}")->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(b.details.find("threads")->asInt(), 3);
+  EXPECT_EQ(a.value, b.value);
+  EXPECT_EQ(a.std, b.std);
+  EXPECT_EQ(a.residual_rms, b.residual_rms);
+  // and the truth within the estimate's own standard deviations
+  const Eigen::VectorXd truth = m->baseNominal();
+  for (Eigen::Index i = 0; i < truth.size(); ++i)
+    EXPECT_LE(std::abs(a.value(i) - truth(i)), 4.0 * a.std(i));
+}

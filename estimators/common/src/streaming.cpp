@@ -3,7 +3,9 @@
 
 #include <algorithm>
 #include <cmath>
+#include <exception>
 #include <numeric>
+#include <thread>
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
@@ -79,6 +81,89 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
     ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
                fmt::format("{}: {} / {} samples", who, e, K));
   }
+}
+
+int resolveThreads(long requested) {
+  if (requested > 0) return static_cast<int>(std::min<long>(requested, 256));
+  const unsigned hw = std::thread::hardware_concurrency();
+  return std::max(1, std::min(8, static_cast<int>(hw == 0 ? 1 : hw)));
+}
+
+void parallelChunks(long n, int threads, const std::function<void(long)>& work,
+                    const std::function<void(long)>& consume) {
+  const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));
+  std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
+  for (long w0 = 0; w0 < n; w0 += T) {
+    const long w1 = std::min(n, w0 + T);
+    auto one = [&](long c) {
+      try {
+        work(c);
+      } catch (...) {
+        err[static_cast<std::size_t>(c - w0)] = std::current_exception();
+      }
+    };
+    if (T == 1) {
+      one(w0);
+    } else {
+      std::vector<std::thread> pool;
+      for (long c = w0 + 1; c < w1; ++c) pool.emplace_back(one, c);
+      one(w0);
+      for (auto& th : pool) th.join();
+    }
+    for (long c = w0; c < w1; ++c)
+      if (auto& e = err[static_cast<std::size_t>(c - w0)]) {
+        std::exception_ptr first = e;
+        std::fill(err.begin(), err.end(), nullptr);
+        std::rethrow_exception(first);
+      }
+    for (long c = w0; c < w1; ++c) consume(c);
+  }
+}
+
+RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data, int chunk_samples,
+                              const RunContext& ctx, const std::string& who, double lo, double hi,
+                              RowAccumulator::Method method, int threads) {
+  const int K = data.size();
+  check(K > 0, fmt::format("{}: the dataset '{}' is empty", who, data.source));
+  const int p = model.numBase();
+  const bool per_sample = modelIsPerSample(model);
+  const int chunk = per_sample ? std::max(1, chunk_samples) : K;
+  // A task (one thread's unit, one accumulator merged in order) spans whole chunks, at least
+  // kTaskSamples samples: merging costs one small QR per task.
+  constexpr int kTaskSamples = 8192;
+  // (and at most a sixteenth of the data, so that progress is reported along the way)
+  const int span = std::min(kTaskSamples, (K + 15) / 16);
+  const int task = per_sample ? std::max(chunk, (span / chunk) * chunk) : K;
+  const long n = (K + task - 1) / task;
+  const int T = std::max(1, threads);
+  std::vector<RowAccumulator> slot(static_cast<std::size_t>(T));
+  RowAccumulator total(p, method);
+  parallelChunks(
+      n, T,
+      [&](long c) {
+        const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+        RowAccumulator a(p, method);
+        for (int b = tb; b < te; b += chunk) {
+          if (ctx.shouldStop())
+            throw Error(
+                fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
+                            ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
+          const int e = std::min(te, b + chunk);
+          Rows r = (b == 0 && e == K) ? model.rows(data, ctx)
+                                      : model.rows(sliceDataset(data, b, e), ctx);
+          checkRows(r, p, who, b);
+          a.add(r.W, r.y);
+        }
+        slot[static_cast<std::size_t>(c % T)] = std::move(a);
+      },
+      [&](long c) {
+        total.merge(slot[static_cast<std::size_t>(c % T)]);
+        slot[static_cast<std::size_t>(c % T)] = RowAccumulator();
+        const long e = std::min<long>(K, (c + 1) * task);
+        ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
+                   fmt::format("{}: {} / {} samples", who, e, K));
+      });
+  return total;
 }
 
 void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,

@@ -138,6 +138,20 @@ bool modelIsPerSample(const ObservationModel& model);
 /// Streams a dataset through the model: calls fn(rows, begin, end) on consecutive slices of at
 /// most chunk_samples samples (the whole dataset at once when the model is not per sample).
 /// Reports progress in [lo, hi] of the stage and throws exid::Error when ctx.shouldStop().
+/// Threads for a `threads` parameter: n > 0 as given, 0 the machine's cores (at most 8).
+int resolveThreads(long requested);
+/// Runs work(c) for the chunks c in [0, n) on `threads` threads, in waves of `threads`
+/// consecutive chunks; after each wave consume(c) runs on the calling thread in chunk order. So
+/// a reduction done in consume is the same for any thread count, and at most `threads` chunks'
+/// results exist at once. An exception from a chunk is rethrown (the first by chunk order).
+void parallelChunks(long n, int threads, const std::function<void(long)>& work,
+                    const std::function<void(long)>& consume);
+/// The model's rows of the dataset in chunks of chunk_samples, accumulated per chunk on
+/// `threads` threads and merged in chunk order (the same bits for any thread count).
+RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data, int chunk_samples,
+                              const RunContext& ctx, const std::string& who, double lo, double hi,
+                              RowAccumulator::Method method, int threads);
+
 void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_samples,
                   const RunContext& ctx, const std::string& who, double lo, double hi,
                   const std::function<void(const Rows&, int begin, int end)>& fn);
