@@ -456,9 +456,10 @@ CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool a
   std::size_t r0 = 0;
   for (auto& ch : chunks) {
     const std::size_t n = nc ? ch.size() / nc : 0;
-    for (std::size_t r = 0; r < n; ++r)
-      for (std::size_t c = 0; c < nc; ++c)
-        t.data(static_cast<Eigen::Index>(r0 + r), static_cast<Eigen::Index>(c)) = ch[r * nc + c];
+    for (std::size_t c = 0; c < nc; ++c) {  // down each column of the matrix (column-major)
+      double* out = t.data.col(static_cast<Eigen::Index>(c)).data() + r0;
+      for (std::size_t r = 0; r < n; ++r) out[r] = ch[r * nc + c];
+    }
     r0 += n;
     std::vector<double>().swap(ch);
   }
