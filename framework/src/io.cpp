@@ -3,6 +3,7 @@
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <signal.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +14,7 @@
 #include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <new>
 #include <sstream>
 
 #include "exid/error.hpp"
@@ -437,31 +439,44 @@ CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool a
       t.slot[static_cast<std::size_t>(columns[k])] = static_cast<int>(k);
   }
   const std::size_t nc = reader.selected().size();
-  // Rows in chunks (row-major), copied into the matrix at the end chunk by chunk, each freed
-  // once copied: the numbers are held about once, never as one vector that doubles.
-  constexpr std::size_t kChunkRows = 8192;
-  std::vector<std::vector<double>> chunks;
-  std::size_t rows = 0;
-  std::vector<double> row(std::max<std::size_t>(nc, 1));
-  while (reader.next(row.data())) {
-    if (rows % kChunkRows == 0) {
-      chunks.emplace_back();
-      chunks.back().reserve(kChunkRows * nc);
+  // Rows in chunks (row-major), copied into the matrix at the end chunk by chunk, each unmapped
+  // once copied: the numbers are held about once, never as one vector that doubles. Each chunk
+  // has pages of its own (mmap): malloc would keep freed chunks in its heap once its mmap
+  // threshold has risen, and the process would hold the numbers twice.
+  constexpr std::size_t kChunkRows = 16384;
+  const std::size_t chunk_bytes = std::max<std::size_t>(1, kChunkRows * nc * sizeof(double));
+  struct Chunks {
+    std::vector<double*> list;
+    std::size_t bytes = 0;
+    ~Chunks() {
+      for (double* p : list)
+        if (p) ::munmap(p, bytes);
     }
-    chunks.back().insert(chunks.back().end(), row.begin(), row.begin() + static_cast<long>(nc));
+  } chunks;
+  chunks.bytes = chunk_bytes;
+  std::size_t rows = 0;
+  while (true) {
+    if (rows % kChunkRows == 0) {
+      void* p =
+          ::mmap(nullptr, chunk_bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+      if (p == MAP_FAILED) throw std::bad_alloc();
+      chunks.list.push_back(static_cast<double*>(p));
+    }
+    if (!reader.next(chunks.list.back() + (rows % kChunkRows) * nc)) break;
     t.line_of.push_back(reader.line());
     ++rows;
   }
   t.data.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(nc));
-  std::size_t r0 = 0;
-  for (auto& ch : chunks) {
-    const std::size_t n = nc ? ch.size() / nc : 0;
+  for (std::size_t k = 0; k < chunks.list.size(); ++k) {
+    const std::size_t r0 = k * kChunkRows;
+    const std::size_t n = std::min(kChunkRows, rows - std::min(rows, r0));
+    const double* ch = chunks.list[k];
     for (std::size_t c = 0; c < nc; ++c) {  // down each column of the matrix (column-major)
       double* out = t.data.col(static_cast<Eigen::Index>(c)).data() + r0;
       for (std::size_t r = 0; r < n; ++r) out[r] = ch[r * nc + c];
     }
-    r0 += n;
-    std::vector<double>().swap(ch);
+    ::munmap(chunks.list[k], chunk_bytes);
+    chunks.list[k] = nullptr;
   }
   t.not_numeric = reader.notNumeric();
   return t;
