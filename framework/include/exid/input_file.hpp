@@ -22,7 +22,7 @@ namespace exid {
 // studies and robots are below 100 KB; a 100-link URDF is about 60 KB).
 inline constexpr std::uintmax_t kMaxStudyFileBytes = std::uintmax_t{1} << 20;  // study, matrix
 inline constexpr std::uintmax_t kMaxRobotFileBytes = std::uintmax_t{2} << 20;  // URDF, DH YAML
-// Data files read whole (prior parameters; a matrix hashes its inputs). CSV data is read as a
+// Data files read whole (a prior's parameters.csv). CSV data is read as a
 // stream (exid::CsvReader) with no size limit.
 inline constexpr std::uintmax_t kMaxDataFileBytes = std::uintmax_t{256} << 20;
 
