@@ -442,7 +442,8 @@ CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool a
   // Rows in chunks (row-major), copied into the matrix at the end chunk by chunk, each unmapped
   // once copied: the numbers are held about once, never as one vector that doubles. Each chunk
   // has pages of its own (mmap): malloc would keep freed chunks in its heap once its mmap
-  // threshold has risen, and the process would hold the numbers twice.
+  // threshold has risen, and the process would hold the numbers twice. MAP_POPULATE: the pages
+  // of a chunk are mapped at once, not one fault at a time (a third of readCsv's time).
   constexpr std::size_t kChunkRows = 16384;
   const std::size_t chunk_bytes = std::max<std::size_t>(1, kChunkRows * nc * sizeof(double));
   struct Chunks {
@@ -457,8 +458,8 @@ CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool a
   std::size_t rows = 0;
   while (true) {
     if (rows % kChunkRows == 0) {
-      void* p =
-          ::mmap(nullptr, chunk_bytes, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+      void* p = ::mmap(nullptr, chunk_bytes, PROT_READ | PROT_WRITE,
+                       MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE, -1, 0);
       if (p == MAP_FAILED) throw std::bad_alloc();
       chunks.list.push_back(static_cast<double*>(p));
     }
