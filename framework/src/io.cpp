@@ -3,12 +3,18 @@
 #include <fcntl.h>
 #include <fmt/format.h>
 #include <signal.h>
+#include <sys/mman.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cerrno>
+#include <charconv>
+#include <climits>
 #include <cmath>
+#include <cstdint>
 #include <cstring>
 #include <fstream>
+#include <new>
 #include <sstream>
 
 #include "exid/error.hpp"
@@ -143,22 +149,175 @@ std::string printable(const std::string& s) {
 }
 }  // namespace
 
-CsvTable parseCsv(const std::string& text, const std::string& source, const CsvReadOptions& opt,
-                  int* dropped_rows) {
-  std::istringstream in(text);
-  std::string line;
-  int lineno = 0;
-  // Header: first non-empty line that is not a comment.
-  std::string header;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (trim(line).empty() || line[0] == '#') continue;
-    header = line;
+namespace {
+inline bool isTrim(char c) { return c == ' ' || c == '\t' || c == '\r' || c == '"'; }
+
+// The error of a cell [a, b) (trimmed, not empty) that strtod does not read whole: `used` bytes
+// were read, col0 is the 0-based offset of a in its line.
+std::string notANumber(const std::string& source, int lineno, std::size_t col0,
+                       const std::string& column, const std::string& s, std::size_t used) {
+  const unsigned char b = static_cast<unsigned char>(s[used == 0 ? 0 : used]);
+  return fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})", source,
+                     lineno, col0 + used + 1, column, printable(s),
+                     b >= 0x20 && b < 0x7f ? fmt::format("unexpected '{}'", static_cast<char>(b))
+                                           : fmt::format("unexpected byte 0x{:02X}", b),
+                     col0 + used + 1);
+}
+
+// A cell as strtod reads it, the reference: how many bytes it used (0: none).
+double strtodCell(const std::string& s, std::size_t* used) {
+  char* end = nullptr;
+  const double v = std::strtod(s.c_str(), &end);
+  *used = static_cast<std::size_t>(end - s.c_str());
+  return v;
+}
+}  // namespace
+
+bool parseCsvNumber(const char* a, const char* b, double* v, std::size_t* used) {
+  // Fast path: std::from_chars on the whole cell, a leading '+' skipped (strtod takes it).
+  const char* p = a;
+  if (b - a >= 2 && *p == '+' && p[1] != '+' && p[1] != '-') ++p;
+  double x = 0;
+  const auto r = std::from_chars(p, b, x);
+  if (r.ec == std::errc() && r.ptr == b && std::isfinite(x)) {
+    *v = x;
+    *used = static_cast<std::size_t>(b - a);
+    return true;
+  }
+  // Anything else as strtod says it (hex, NaN payloads, out of range, a stray byte).
+  const std::string s(a, b);
+  *v = strtodCell(s, used);
+  return *used != 0 && *used == s.size();
+}
+
+CsvReader::CsvReader(const fs::path& path, const CsvReadOptions& opt, const std::string& what,
+                     std::size_t block_bytes)
+    : opt_(opt),
+      source_(path.string()),
+      what_(what),
+      block_(std::max<std::size_t>(1, block_bytes)) {
+  fd_ = openInputFile(path, what, UINTMAX_MAX);
+  try {
+    readHeader();
+  } catch (...) {
+    ::close(fd_);
+    fd_ = -1;
+    throw;
+  }
+}
+
+CsvReader::CsvReader(std::string_view text, const std::string& source, const CsvReadOptions& opt,
+                     std::size_t block_bytes)
+    : opt_(opt), source_(source), text_(text), block_(block_bytes) {
+  if (block_ == 0) {  // the whole text is the one block
+    beg_ = text.data();
+    end_ = text.data() + text.size();
+    text_pos_ = text.size();
+    eof_ = true;
+  }
+  readHeader();
+}
+
+CsvReader::~CsvReader() {
+  if (fd_ >= 0) ::close(fd_);
+}
+
+void CsvReader::readFailed(int err) {
+  throw Error(fmt::format("{}: cannot read the {} file ({})", source_, what_, std::strerror(err)));
+}
+
+// More bytes after [beg_, end_): false at the end of the input.
+bool CsvReader::refill() {
+  if (eof_) return false;
+  const std::size_t have = static_cast<std::size_t>(end_ - beg_);
+  if (buf_.size() < have + block_) {
+    std::vector<char> bigger(std::max(have + block_, 2 * buf_.size()));
+    if (have) std::memcpy(bigger.data(), beg_, have);
+    buf_.swap(bigger);
+  } else if (have && beg_ != buf_.data()) {
+    std::memmove(buf_.data(), beg_, have);
+  }
+  beg_ = buf_.data();
+  end_ = beg_ + have;
+  std::size_t n = 0;
+  if (fd_ >= 0) {
+    while (true) {
+      const ssize_t r = ::read(fd_, buf_.data() + have, block_);
+      if (r < 0) {
+        if (errno == EINTR) continue;
+        readFailed(errno);
+      }
+      n = static_cast<std::size_t>(r);
+      break;
+    }
+  } else {
+    n = std::min(block_, text_.size() - text_pos_);
+    if (n) std::memcpy(buf_.data() + have, text_.data() + text_pos_, n);
+    text_pos_ += n;
+  }
+  if (n == 0) {
+    eof_ = true;
+    return false;
+  }
+  end_ += n;
+  return true;
+}
+
+// The next line [b, e) without its '\n' (nor one '\r' before it): false at the end. As
+// std::getline: a last line without '\n' counts when it is not empty.
+bool CsvReader::nextLine(const char** b, const char** e) {
+  while (true) {
+    const char* nl = static_cast<const char*>(
+        beg_ + scanned_ < end_
+            ? std::memchr(beg_ + scanned_, '\n', static_cast<std::size_t>(end_ - beg_) - scanned_)
+            : nullptr);
+    if (nl) {
+      *b = beg_;
+      *e = nl;
+      bytes_ += static_cast<std::uint64_t>(nl + 1 - beg_);
+      beg_ = nl + 1;
+      scanned_ = 0;
+      break;
+    }
+    scanned_ = static_cast<std::size_t>(end_ - beg_);
+    if (!refill()) {
+      if (beg_ == end_) return false;
+      *b = beg_;
+      *e = end_;
+      bytes_ += static_cast<std::uint64_t>(end_ - beg_);
+      beg_ = end_;
+      scanned_ = 0;
+      break;
+    }
+  }
+  ++lineno_;
+  if (*e > *b && (*e)[-1] == '\r') --*e;
+  return true;
+}
+
+namespace {
+// Blank (only spaces, tabs, CRs and quotes) or a comment ('#' first).
+inline bool skipLine(const char* b, const char* e) {
+  if (b == e) return true;
+  if (*b == '#') return true;
+  for (const char* p = b; p < e; ++p)
+    if (!isTrim(*p)) return false;
+  return true;
+}
+}  // namespace
+
+void CsvReader::readHeader() {
+  const char *b = nullptr, *e = nullptr;
+  bool found = false;
+  while (nextLine(&b, &e)) {
+    if (skipLine(b, e)) continue;
+    found = true;
     break;
   }
-  if (header.empty()) throw Error(fmt::format("{}: empty CSV (no header line)", source));
-  char d = opt.delimiter;
+  if (!found) throw Error(fmt::format("{}: empty CSV (no header line)", source_));
+  header_line_ = lineno_;
+  const std::string header(b, e);
+  char d = opt_.delimiter;
   if (d == 0) {
     d = ',';
     if (header.find(',') == std::string::npos) {
@@ -168,80 +327,175 @@ CsvTable parseCsv(const std::string& text, const std::string& source, const CsvR
         d = '\t';
     }
   }
-  CsvTable t;
-  t.columns = split(header, d);
-  for (std::size_t i = 0; i < t.columns.size(); ++i) {
-    if (t.columns[i].empty())
-      throw Error(fmt::format("{}:{}: column {} has an empty name", source, lineno, i + 1));
+  delim_ = d;
+  columns_ = split(header, d);
+  for (std::size_t i = 0; i < columns_.size(); ++i) {
+    if (columns_[i].empty())
+      throw Error(fmt::format("{}:{}: column {} has an empty name", source_, lineno_, i + 1));
     for (std::size_t j = 0; j < i; ++j)
-      if (t.columns[j] == t.columns[i])
-        throw Error(fmt::format("{}:{}: duplicate column '{}'", source, lineno, t.columns[i]));
+      if (columns_[j] == columns_[i])
+        throw Error(fmt::format("{}:{}: duplicate column '{}'", source_, lineno_, columns_[i]));
   }
-  const std::size_t nc = t.columns.size();
-  t.not_numeric.assign(nc, std::string());
-  std::vector<double> values;
-  std::size_t rows = 0;
-  int dropped = 0;
-  std::vector<double> row(nc);
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (!line.empty() && line.back() == '\r') line.pop_back();
-    if (trim(line).empty() || line[0] == '#') continue;
-    std::vector<std::size_t> starts;
-    auto cells = split(line, d, &starts);
-    if (cells.size() != nc)
-      throw Error(fmt::format("{}:{}: expected {} values (as in the header), found {}", source,
-                              lineno, nc, cells.size()));
+  not_numeric_.assign(columns_.size(), std::string());
+  std::vector<int> all(columns_.size());
+  for (std::size_t c = 0; c < all.size(); ++c) all[c] = static_cast<int>(c);
+  select(all);
+}
+
+void CsvReader::select(const std::vector<int>& columns) {
+  slot_.assign(columns_.size(), -1);
+  for (std::size_t k = 0; k < columns.size(); ++k) {
+    const int c = columns[k];
+    check(c >= 0 && static_cast<std::size_t>(c) < columns_.size() &&
+              slot_[static_cast<std::size_t>(c)] < 0,
+          fmt::format("{}: CSV reader: column index {} is out of range or repeated", source_, c));
+    slot_[static_cast<std::size_t>(c)] = static_cast<int>(k);
+  }
+  sel_ = columns;
+}
+
+// Throws when the line (cell c ends at ce, the line at e) does not hold one value per column.
+void CsvReader::countValues(std::size_t c, const char* ce, const char* e) const {
+  std::size_t found = c + 1;
+  for (const char* p = ce; p < e; ++p) found += *p == delim_;
+  if (found != columns_.size())
+    throw Error(fmt::format("{}:{}: expected {} values (as in the header), found {}", source_,
+                            lineno_, columns_.size(), found));
+}
+
+bool CsvReader::next(double* values) {
+  const std::size_t nc = columns_.size();
+  const char *b = nullptr, *e = nullptr;
+  while (nextLine(&b, &e)) {
+    if (skipLine(b, e)) continue;
+    // Cells: nc - 1 delimiters, each cell's bytes found once.
+    const char* cell = b;
+    std::size_t c = 0;
     bool bad = false;
     std::string bad_msg;
-    for (std::size_t c = 0; c < nc; ++c) {
-      const std::string& s = cells[c];
-      char* end = nullptr;
-      double v = s.empty() ? std::nan("") : std::strtod(s.c_str(), &end);
-      // The whole cell must be the number: a NUL or any other byte after it (strtod stops
-      // there; the NUL looked like the end of the text) is an error at its column.
-      const std::size_t used = s.empty() ? 0 : static_cast<std::size_t>(end - s.c_str());
-      if (!s.empty() && (used == 0 || used != s.size())) {
-        const unsigned char b = static_cast<unsigned char>(s[used == 0 ? 0 : used]);
-        std::string msg =
-            fmt::format("{}:{}:{}: column '{}': '{}' is not a number ({} at column {})", source,
-                        lineno, starts[c] + used + 1, t.columns[c], printable(s),
-                        b >= 0x20 && b < 0x7f ? fmt::format("unexpected '{}'", static_cast<char>(b))
-                                              : fmt::format("unexpected byte 0x{:02X}", b),
-                        starts[c] + used + 1);
-        if (!opt.text_columns) throw Error(msg);
-        if (t.not_numeric[c].empty()) t.not_numeric[c] = std::move(msg);
-        row[c] = std::nan("");
-        continue;
+    while (true) {
+      const char* stop =
+          static_cast<const char*>(std::memchr(cell, delim_, static_cast<std::size_t>(e - cell)));
+      const char* ce = stop ? stop : e;
+      if (c < nc) {
+        const int k = slot_[c];
+        if (k >= 0) {
+          const char* a = cell;
+          const char* z = ce;
+          while (a < z && isTrim(*a)) ++a;
+          while (z > a && isTrim(z[-1])) --z;
+          double v = std::nan("");
+          bool number = true;
+          std::size_t used = 0;
+          if (a != z && !parseCsvNumber(a, z, &v, &used)) {
+            // the count of values first, as before: the whole line was split before any cell
+            countValues(c, ce, e);
+            std::string msg = notANumber(source_, lineno_, static_cast<std::size_t>(a - b),
+                                         columns_[c], std::string(a, z), used);
+            if (!opt_.text_columns) throw Error(msg);
+            if (not_numeric_[c].empty()) not_numeric_[c] = std::move(msg);
+            v = std::nan("");
+            number = false;
+          }
+          if (number && !std::isfinite(v) && !opt_.allow_non_finite) {
+            if (!bad) {
+              countValues(c, ce, e);
+              bad_msg = fmt::format(
+                  "{}:{}: column '{}': {} value", source_, lineno_, columns_[c],
+                  a == z ? std::string("missing") : "non-finite (" + std::string(a, z) + ")");
+            }
+            bad = true;
+          }
+          values[k] = v;
+        }
       }
-      if (!std::isfinite(v) && !opt.allow_non_finite) {
-        bad = true;
-        if (bad_msg.empty())
-          bad_msg = fmt::format("{}:{}: column '{}': {} value", source, lineno, t.columns[c],
-                                s.empty() ? "missing" : "non-finite (" + s + ")");
-      }
-      row[c] = v;
+      ++c;
+      if (!stop) break;
+      cell = stop + 1;
     }
+    if (c != nc)
+      throw Error(fmt::format("{}:{}: expected {} values (as in the header), found {}", source_,
+                              lineno_, nc, c));
     if (bad) {
-      if (opt.drop_non_finite_rows) {
-        ++dropped;
+      if (opt_.drop_non_finite_rows) {
+        ++dropped_;
         continue;
       }
       throw Error(bad_msg + " (set drop_bad_rows to drop such rows)");
     }
-    values.insert(values.end(), row.begin(), row.end());
+    line_ = lineno_;
+    return true;
+  }
+  return false;
+}
+
+CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool all) {
+  CsvTable t;
+  t.columns = reader.columns();
+  if (!all) {
+    reader.select(columns);
+    t.slot.assign(t.columns.size(), -1);
+    for (std::size_t k = 0; k < columns.size(); ++k)
+      t.slot[static_cast<std::size_t>(columns[k])] = static_cast<int>(k);
+  }
+  const std::size_t nc = reader.selected().size();
+  // Rows in chunks (row-major), copied into the matrix at the end chunk by chunk, each unmapped
+  // once copied: the numbers are held about once, never as one vector that doubles. Each chunk
+  // has pages of its own (mmap): malloc would keep freed chunks in its heap once its mmap
+  // threshold has risen, and the process would hold the numbers twice. MAP_POPULATE: the pages
+  // of a chunk are mapped at once, not one fault at a time (a third of readCsv's time).
+  constexpr std::size_t kChunkRows = 16384;
+  const std::size_t chunk_bytes = std::max<std::size_t>(1, kChunkRows * nc * sizeof(double));
+  struct Chunks {
+    std::vector<double*> list;
+    std::size_t bytes = 0;
+    ~Chunks() {
+      for (double* p : list)
+        if (p) ::munmap(p, bytes);
+    }
+  } chunks;
+  chunks.bytes = chunk_bytes;
+  std::size_t rows = 0;
+  while (true) {
+    if (rows % kChunkRows == 0) {
+      void* p = ::mmap(nullptr, chunk_bytes, PROT_READ | PROT_WRITE,
+                       MAP_PRIVATE | MAP_ANONYMOUS | MAP_POPULATE, -1, 0);
+      if (p == MAP_FAILED) throw std::bad_alloc();
+      chunks.list.push_back(static_cast<double*>(p));
+    }
+    if (!reader.next(chunks.list.back() + (rows % kChunkRows) * nc)) break;
+    t.line_of.push_back(reader.line());
     ++rows;
   }
   t.data.resize(static_cast<Eigen::Index>(rows), static_cast<Eigen::Index>(nc));
-  for (std::size_t r = 0; r < rows; ++r)
-    for (std::size_t c = 0; c < nc; ++c)
-      t.data(static_cast<Eigen::Index>(r), static_cast<Eigen::Index>(c)) = values[r * nc + c];
-  if (dropped_rows) *dropped_rows = dropped;
+  for (std::size_t k = 0; k < chunks.list.size(); ++k) {
+    const std::size_t r0 = k * kChunkRows;
+    const std::size_t n = std::min(kChunkRows, rows - std::min(rows, r0));
+    const double* ch = chunks.list[k];
+    for (std::size_t c = 0; c < nc; ++c) {  // down each column of the matrix (column-major)
+      double* out = t.data.col(static_cast<Eigen::Index>(c)).data() + r0;
+      for (std::size_t r = 0; r < n; ++r) out[r] = ch[r * nc + c];
+    }
+    ::munmap(chunks.list[k], chunk_bytes);
+    chunks.list[k] = nullptr;
+  }
+  t.not_numeric = reader.notNumeric();
+  return t;
+}
+
+CsvTable parseCsv(const std::string& text, const std::string& source, const CsvReadOptions& opt,
+                  int* dropped_rows) {
+  CsvReader reader(std::string_view(text), source, opt);
+  CsvTable t = readCsvTable(reader, {}, true);
+  if (dropped_rows) *dropped_rows = reader.dropped();
   return t;
 }
 
 CsvTable readCsv(const fs::path& path, const CsvReadOptions& opt, int* dropped_rows) {
-  return parseCsv(readInputFile(path, "CSV", kMaxDataFileBytes), path.string(), opt, dropped_rows);
+  CsvReader reader(path, opt);
+  CsvTable t = readCsvTable(reader, {}, true);
+  if (dropped_rows) *dropped_rows = reader.dropped();
+  return t;
 }
 
 std::string toCsv(const CsvTable& t) {

@@ -111,11 +111,31 @@ std::string keyText(const YAML::Node& key, const fs::path& file) {
 }
 
 // FNV-1a, 64 bits, as StudyConfig::hash.
-void fnv(std::uint64_t* h, const std::string& text) {
-  for (unsigned char c : text) {
-    *h ^= c;
+void fnv(std::uint64_t* h, const char* p, std::size_t n) {
+  for (std::size_t i = 0; i < n; ++i) {
+    *h ^= static_cast<unsigned char>(p[i]);
     *h *= 1099511628211ull;
   }
+}
+void fnv(std::uint64_t* h, const std::string& text) { fnv(h, text.data(), text.size()); }
+
+// The hash of a file's contents, read in blocks (a recording may be larger than memory should
+// hold: CSV data has no size limit).
+void fnvFile(std::uint64_t* h, const fs::path& f) {
+  const int fd = openInputFile(f, "input", UINTMAX_MAX);
+  std::vector<char> buf(std::size_t{1} << 20);
+  while (true) {
+    const ssize_t n = ::read(fd, buf.data(), buf.size());
+    if (n < 0 && errno == EINTR) continue;
+    if (n < 0) {
+      const int err = errno;
+      ::close(fd);
+      throw Error(f.string() + ": cannot read the input file (" + std::strerror(err) + ")");
+    }
+    if (n == 0) break;
+    fnv(h, buf.data(), static_cast<std::size_t>(n));
+  }
+  ::close(fd);
 }
 
 // The cell's key: configuration hash, exid version, and the contents of every file it reads.
@@ -131,7 +151,7 @@ std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, cons
     if (it == contents->end()) {
       std::uint64_t c = 1469598103934665603ull;
       try {
-        fnv(&c, readInputFile(f, "input", kMaxDataFileBytes));
+        fnvFile(&c, f);
       } catch (const Error&) {
         fnv(&c, "(unreadable)");  // the cell will fail and say why
       }

@@ -31,13 +31,6 @@ namespace fs = std::filesystem;
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
-std::string trimmed(const std::string& s) {
-  const std::size_t a = s.find_first_not_of(" \t\r\"");
-  if (a == std::string::npos) return "";
-  const std::size_t b = s.find_last_not_of(" \t\r\"");
-  return s.substr(a, b - a + 1);
-}
-
 class CsvExperiment : public exid::Experiment {
  public:
   static constexpr const char* kName = "csv";
@@ -153,35 +146,43 @@ class CsvExperiment : public exid::Experiment {
     exid::check(robot != nullptr, "experiment 'csv': no robot");
     const int n = robot->dof();
 
-    // Raw text and the line number of every data row (as parseCsv counts them), per file.
+    // Per file: its table (only the columns the experiment can use are read: see usable) and
+    // the file line of every data row.
     struct Source {
       std::string file;
       std::vector<int> line_of;
       exid::CsvTable T;
     };
+    // A column the experiment may use: the time column, q_columns / tau_columns, a wrench
+    // component, or a group's prefix followed by digits (q1.., qd.., qdd.., tau.., currents).
+    // The others are never converted (a column of labels nobody uses is not an error).
+    const std::string time_name = P_.getString("time_column");
+    const std::vector<std::string> named_q = P_.getStrings("q_columns");
+    const std::vector<std::string> named_tau = P_.getStrings("tau_columns");
+    const std::vector<std::string> prefixes = {"q", "qd", "qdd", "tau",
+                                               P_.getString("current_prefix")};
+    auto usable = [&](const std::string& c) {
+      if (c == time_name) return true;
+      for (const auto* v : {&named_q, &named_tau})
+        if (std::find(v->begin(), v->end(), c) != v->end()) return true;
+      for (const char* w : {"fx", "fy", "fz", "mx", "my", "mz"})
+        if (c == w) return true;
+      for (const std::string& pre : prefixes)
+        if (c.size() > pre.size() && c.compare(0, pre.size(), pre) == 0 &&
+            c.find_first_not_of("0123456789", pre.size()) == std::string::npos)
+          return true;
+      return false;
+    };
     auto readSource = [&](fs::path p) {
       if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
       Source src;
       src.file = p.string();
-      const std::string text = exid::readInputFile(p, "CSV data", exid::kMaxDataFileBytes);
-      std::istringstream ls(text);
-      std::string line;
-      int lineno = 0;
-      bool header = false;
-      while (std::getline(ls, line)) {
-        ++lineno;
-        if (!line.empty() && line.back() == '\r') line.pop_back();
-        if (trimmed(line).empty() || line[0] == '#') continue;
-        if (!header) {
-          header = true;
-          continue;
-        }
-        src.line_of.push_back(lineno);
-      }
       exid::CsvReadOptions opt;
       opt.allow_non_finite = true;  // checked below, only in the columns used
       opt.text_columns = true;      // a column of labels nobody uses is not an error
-      src.T = exid::parseCsv(text, src.file, opt);
+      exid::CsvReader reader(p, opt, "CSV data");
+      src.T = exid::readCsvColumns(reader, usable);
+      src.line_of = std::move(src.T.line_of);
       exid::check(src.T.data.rows() > 0,
                   fmt::format("experiment 'csv': {}: no data rows after the header", src.file));
       return src;
@@ -213,7 +214,8 @@ class CsvExperiment : public exid::Experiment {
     // Columns as (source, column) references, flattened: ref = source * kStride + column.
     constexpr int kStride = 1 << 20;
     auto value = [&](int r, int ref) {
-      return srcs[static_cast<std::size_t>(ref / kStride)].T.data(r, ref % kStride);
+      const exid::CsvTable& Ts = srcs[static_cast<std::size_t>(ref / kStride)].T;
+      return Ts.data(r, Ts.dataCol(ref % kStride));
     };
     auto colName = [&](int ref) {
       const Source& sr = srcs[static_cast<std::size_t>(ref / kStride)];
@@ -374,6 +376,8 @@ class CsvExperiment : public exid::Experiment {
       const std::string& why =
           srcs[static_cast<std::size_t>(c / kStride)].T.notNumeric(c % kStride);
       if (!why.empty()) throw exid::Error("experiment 'csv': " + why);
+      exid::check(srcs[static_cast<std::size_t>(c / kStride)].T.dataCol(c % kStride) >= 0,
+                  "experiment 'csv': internal error: a column used was not read");
     }
     const bool drop = P_.getBool("drop_bad_rows");
     std::vector<int> keep;
@@ -403,7 +407,7 @@ class CsvExperiment : public exid::Experiment {
             "drop_bad_rows: true to drop such rows)",
             srcs[static_cast<std::size_t>(bf)].file, lineText(r, bf), r + 1, colName(bad)));
       }
-      const double t = ct >= 0 ? tfactor * T.data(r, ct) : r * dt;
+      const double t = ct >= 0 ? tfactor * value(r, ct) : r * dt;
       if (!keep.empty())
         exid::check(
             t > tk.back(),
@@ -536,7 +540,7 @@ class CsvExperiment : public exid::Experiment {
               sign[static_cast<std::size_t>(j)] * tauscale[static_cast<std::size_t>(j)] * tau[j];
       }
       for (std::size_t e = 0; e < cw.size(); ++e)
-        d.wrench(k, static_cast<Eigen::Index>(e)) = wscale[e] * T.data(r, cw[e]);
+        d.wrench(k, static_cast<Eigen::Index>(e)) = wscale[e] * value(r, cw[e]);
     }
     // Resampling on request: linear interpolation of every signal onto a uniform grid.
     const double rs_hz = P_.getDouble("resample_hz");

@@ -22,7 +22,8 @@ namespace exid {
 // studies and robots are below 100 KB; a 100-link URDF is about 60 KB).
 inline constexpr std::uintmax_t kMaxStudyFileBytes = std::uintmax_t{1} << 20;  // study, matrix
 inline constexpr std::uintmax_t kMaxRobotFileBytes = std::uintmax_t{2} << 20;  // URDF, DH YAML
-// CSV data: a file is held as text and as numbers while it is parsed (about 3 times its size).
+// Data files read whole (a prior's parameters.csv). CSV data is read as a
+// stream (exid::CsvReader) with no size limit.
 inline constexpr std::uintmax_t kMaxDataFileBytes = std::uintmax_t{256} << 20;
 
 namespace detail {
@@ -56,12 +57,11 @@ inline void checkInputFile(const std::filesystem::path& path, const std::string&
   detail::checkStat(st, path.string(), what, max_bytes);
 }
 
-/// Reads a whole input file. Anything that is not a regular file (a FIFO, a device such as
-/// /dev/zero, a directory) is refused BEFORE it is opened for reading; the file is then opened
-/// non-blocking and checked again on the open descriptor (it may have been replaced), and a
-/// file larger than max_bytes is refused (also one that grows while it is read).
-inline std::string readInputFile(const std::filesystem::path& path, const std::string& what,
-                                 std::uintmax_t max_bytes) {
+/// Opens an input file for reading after the checks of readInputFile (the path must name a
+/// regular file of at most max_bytes, checked again on the open descriptor: it may have been
+/// replaced). Returns the descriptor; the caller closes it.
+inline int openInputFile(const std::filesystem::path& path, const std::string& what,
+                         std::uintmax_t max_bytes, struct stat* out = nullptr) {
   checkInputFile(path, what, max_bytes);
   const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
   if (fd < 0)
@@ -79,6 +79,18 @@ inline std::string readInputFile(const std::filesystem::path& path, const std::s
     ::close(fd);
     throw;
   }
+  if (out) *out = st;
+  return fd;
+}
+
+/// Reads a whole input file. Anything that is not a regular file (a FIFO, a device such as
+/// /dev/zero, a directory) is refused BEFORE it is opened for reading; the file is then opened
+/// non-blocking and checked again on the open descriptor (it may have been replaced), and a
+/// file larger than max_bytes is refused (also one that grows while it is read).
+inline std::string readInputFile(const std::filesystem::path& path, const std::string& what,
+                                 std::uintmax_t max_bytes) {
+  struct stat st {};
+  const int fd = openInputFile(path, what, max_bytes, &st);
   std::string text;
   text.reserve(static_cast<std::size_t>(st.st_size));
   char buf[1 << 16];
