@@ -549,11 +549,13 @@ class CsvExperiment : public exid::Experiment {
       exid::check(K >= 2, fmt::format("experiment 'csv': {}: resample_hz needs two samples", file));
       resampled_from = K;
       const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
-      const auto M = static_cast<Eigen::Index>(std::floor(span_s * rs_hz + 1e-9)) + 1;
-      exid::check(M >= 2 && M <= 100000000,
-                  fmt::format("experiment 'csv': {}: resample_hz = {} gives {} samples over "
-                              "{} s",
-                              file, rs_hz, M, span_s));
+      // (counted in double first: a huge rate must not overflow the integer count)
+      const double Md = std::floor(span_s * rs_hz + 1e-9) + 1.0;
+      exid::check(Md >= 2.0 && Md <= 1e8,
+                  fmt::format("experiment 'csv': {}: resample_hz = {} gives {:g} samples over "
+                              "{} s (2 to 1e8)",
+                              file, rs_hz, Md, span_s));
+      const auto M = static_cast<Eigen::Index>(Md);
       exid::Dataset u;
       u.t.resize(M);
       for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rs_hz;

@@ -377,3 +377,9 @@ TEST(CsvSignals, WrenchScaleActsOnTheWrenchAlone) {
   EXPECT_EQ(b.tau, d.tau);
   EXPECT_NE(errorOf(f, "wrench_scale: [1, 1]").find("expected 6 values"), std::string::npos);
 }
+
+TEST(CsvSignals, AResampleRateGivingAbsurdlyManySamplesIsRefused) {
+  const fs::path f = uniformFile("resample_huge.csv", 50, 0.01);
+  EXPECT_NE(errorOf(f, "resample_hz: 1e300").find("resample_hz = 1e+300 gives"), std::string::npos)
+      << errorOf(f, "resample_hz: 1e300");
+}
