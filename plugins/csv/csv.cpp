@@ -513,6 +513,7 @@ class CsvExperiment : public exid::Experiment {
     if (!ctau.empty()) d.tau.resize(K, n);
     if (!cw.empty()) d.wrench.resize(K, 6);
     const bool joint_frame = P_.getString("current_frame") == "joint";
+    VectorXd tau(n);  // one buffer for every row (no allocation per sample)
     for (int k = 0; k < K; ++k) {
       const std::size_t i = static_cast<std::size_t>(sel[static_cast<std::size_t>(k)]);
       const int r = keep[i];
@@ -527,7 +528,6 @@ class CsvExperiment : public exid::Experiment {
         if (!cqdd.empty()) d.qdd(k, j) = s * vs * value(r, cqdd[static_cast<std::size_t>(j)]);
       }
       if (!ctau.empty()) {
-        VectorXd tau(n);
         for (int j = 0; j < n; ++j) {
           double v = value(r, ctau[static_cast<std::size_t>(j)]);
           if (!Kt.empty()) v *= Kt[static_cast<std::size_t>(j)];
