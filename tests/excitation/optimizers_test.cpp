@@ -373,12 +373,11 @@ TEST(Optimizers, RespectTheTimeBudgetAndCancellation) {
   auto opt = exid_test::create<exid::Optimizer>(
       "nlopt", "{algorithm: GN_ISRES, max_time_s: 0.3, max_evaluations: 0}");
   exid::RunContext ctx;
-  auto t0 = std::chrono::steady_clock::now();
+  // No evaluation budget: only the time budget can end this run, so its returning is the check
+  // (a run that ignored it would hit ctest's timeout), whatever the machine's speed. It says
+  // why, also when the polish after the time-cut global run converged: a time budget is not
+  // reproducible.
   auto r = opt->minimize(*s.problem, ctx);
-  const double wall = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-  EXPECT_LT(wall, 10.0);  // it stops (0.3 s and the last evaluation; generous for a loaded machine)
-  // and says why, also when the polish after the time-cut global run converged: a time budget
-  // is not reproducible
   EXPECT_EQ(r.stop_reason, "max_time_s") << r.details.dump(0);
   EXPECT_LE(r.max_violation, 1e-9);
   int calls = 0;

@@ -115,7 +115,8 @@ TEST(Sundials, OptimisationLowersTheCriterionWithinLimits) {
   EXPECT_LT(r.criterion_final, 0.8 * r.criterion_initial);
   EXPECT_LE(r.max_violation, 1e-9);
   EXPECT_FALSE(r.history_value.empty());
-  EXPECT_LE(r.wall_s, 12.0);
+  EXPECT_LE(r.iterations,
+            15);  // the budget is iterations, never seconds (bench_excitation times it)
 }
 
 TEST(Sundials, RefusesPointwiseAndWindowModels) {
