@@ -14,39 +14,17 @@
 #include "exid/io.hpp"
 #include "exid/json.hpp"
 #include "exid/runner.hpp"
+#include "exid_cli.hpp"
 
 namespace fs = std::filesystem;
 
 namespace {
 
-struct CmdResult {
-  int code = -1;
-  std::string out;  // stdout and stderr
-};
+using exid_cli::CmdResult;
+using exid_cli::runExid;
+using exid_cli::slurp;
 
-CmdResult runExid(const std::string& args) {
-  std::string cmd = std::string(EXID_EXE) + " " + args + " 2>&1";
-  CmdResult r;
-  FILE* p = ::popen(cmd.c_str(), "r");
-  std::array<char, 4096> buf{};
-  while (p && std::fgets(buf.data(), buf.size(), p)) r.out += buf.data();
-  int status = p ? ::pclose(p) : -1;
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  return r;
-}
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
-
-fs::path tempDir(const std::string& name) {
-  fs::path d =
-      fs::temp_directory_path() / ("exid_inspect_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path tempDir(const std::string& name) { return exid_cli::freshTempDir("exid_inspect_", name); }
 
 /// Simulated PUMA 560 data (10 s at 100 Hz, 0.05 N m torque noise), optionally with the torques
 /// of joints 2 and 4 negated, written with (or without) its time column.
