@@ -341,6 +341,7 @@ class ConsistentLs : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
+    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
     s.accepts_prior = true;
     return s;
   }

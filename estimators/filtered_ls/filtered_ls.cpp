@@ -191,7 +191,7 @@ class FilteredLs : public exid::Estimator {
                 fmt::format("filtered_ls: trimming {} samples at each end of {} leaves too few; "
                             "lower trim_edges or raise cutoff_hz",
                             trim, K));
-    if (trim > 0) f = est::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
+    if (trim > 0) f = exid::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
     P.trim = trim;
 
     // ---- 4. rows and parallel decimation, in chunks of samples (memory bounded by the chunk,
@@ -251,7 +251,7 @@ class FilteredLs : public exid::Estimator {
         const long ca = c * C, cb = std::min(Kt, ca + C);
         const long lo = std::max<long>(0, ca - margin), hi = std::min(Kt, cb + margin);
         const exid::Dataset slice =
-            per_sample ? est::sliceDataset(f, static_cast<int>(lo), static_cast<int>(hi)) : f;
+            per_sample ? exid::sliceDataset(f, static_cast<int>(lo), static_cast<int>(hi)) : f;
         exid::Rows rows = model.rows(slice, ctx);
         est::checkRows(rows, p, kName, static_cast<int>(trim + lo));
         o.rows_before =

@@ -70,6 +70,7 @@ class Rls : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
+    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
     s.recursive = true;
     s.accepts_prior = true;
     return s;
@@ -153,7 +154,16 @@ class Rls : public exid::Estimator {
                     smp;
             const long global = begin + smp;
             if (last_of_sample && (global % stride_ == 0 || global == K - 1) && h < n_hist) {
-              e.history_t(h) = data.t(global);
+              // (the row's own time: a streamed dataset holds no samples itself)
+              if (r.t.size() == static_cast<std::size_t>(r.y.size()))
+                e.history_t(h) = r.t[static_cast<std::size_t>(i)];
+              else if (!data.streamed())
+                e.history_t(h) = data.t(global);
+              else
+                throw exid::Error(fmt::format(
+                    "rls: the model '{}' gives no time per row, needed for the history of a "
+                    "streamed dataset",
+                    model.pluginName()));
               e.history_value.row(h) = theta.transpose();
               e.history_pdiag.row(h) = P.diagonal().transpose();
               ++h;

@@ -58,6 +58,7 @@ class Wls : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
+    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
     s.accepts_prior = true;
     return s;
   }

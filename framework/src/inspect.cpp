@@ -225,14 +225,15 @@ Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vec
                    double gap_factor) {
   Json J = Json::object();
   J["samples"] = static_cast<long long>(raw.size());
-  if (raw.size() < 2 || row.size() != raw.size()) {
+  if (raw.size() < 2 || (!row.empty() && row.size() != raw.size())) {
     J["rate_hz"] = Json();
     J["note"] = "fewer than two time stamps";
     return J;
   }
   std::vector<double> steps(raw.size() - 1);
   for (std::size_t i = 0; i + 1 < raw.size(); ++i)
-    steps[i] = (raw[i + 1] - raw[i]) / static_cast<double>(std::max(1, row[i + 1] - row[i]));
+    steps[i] = (raw[i + 1] - raw[i]) /
+               static_cast<double>(row.empty() ? 1 : std::max(1, row[i + 1] - row[i]));
   const double med = medianOf(steps);
   const int d = decimalResolution(raw);
   double period = med, rate = 1.0 / (med * unit_s);

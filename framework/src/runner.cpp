@@ -196,10 +196,11 @@ std::vector<std::string> signalNames(const std::string& prefix, int n) {
 void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationModel* model,
                   const std::string& what, bool raw = false) {
   check(d.size() > 0, fmt::format("{} ({}): no samples", what, d.source));
-  check(d.q.rows() == d.size() && d.q.cols() == robot.dof(),
+  check((d.streamed() || d.q.rows() == d.size()) && d.dof() == robot.dof(),
         fmt::format("{} ({}): q has {} columns, the robot '{}' has {} joints", what, d.source,
-                    d.q.cols(), robot.name, robot.dof()));
-  for (int k = 1; k < d.size(); ++k)
+                    d.dof(), robot.name, robot.dof()));
+  // (a stream checks its time stamps when it opens)
+  for (int k = 1; k < (d.streamed() ? 0 : d.size()); ++k)
     check(d.t(k) > d.t(k - 1),
           fmt::format("{} ({}): time must increase; row {} has t = {} after {}", what, d.source,
                       k + 1, d.t(k), d.t(k - 1)));
@@ -232,7 +233,9 @@ void checkFinite(const Eigen::MatrixXd& M, const std::string& what,
       }
 }
 
+// (a streamed dataset: every value is checked by the stream as it is read)
 void checkDatasetFinite(const Dataset& d, const std::string& what) {
+  if (d.streamed()) return;
   const std::pair<const char*, const Eigen::MatrixXd*> sig[] = {
       {"q", &d.q}, {"qd", &d.qd}, {"qdd", &d.qdd}, {"tau", &d.tau}, {"wrench", &d.wrench}};
   checkFinite(d.t, fmt::format("{} ({}): t", what, d.source));
@@ -417,6 +420,12 @@ class Watchdog {
   bool done_ = false;
 };
 
+// A long recording is inspected on every s-th sample (at most kRunInspectSamples): the checks
+// cost a fraction of the identification, never several times it. `exid inspect` looks at every
+// sample.
+constexpr long kRunInspectSamples = 100000;
+long streamInspectStride(long K) { return (K + kRunInspectSamples - 1) / kRunInspectSamples; }
+
 // exid inspect's checks on a dataset of the study (inspect.hpp): the whole result under
 // summary.json `inspection.<what>`, its warnings among the study's. An inspection that cannot be
 // done is noted there; it never fails the study.
@@ -424,13 +433,19 @@ void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, c
                  const RobotModel& robot, const ObservationModel* model, const Dataset& d,
                  const RunContext& ctx) {
   try {
-    // A long recording is inspected on every s-th sample (at most kRunInspectSamples): the checks
-    // cost a fraction of the identification, never several times it. `exid inspect` looks at
-    // every sample.
-    constexpr long kRunInspectSamples = 100000;
     const long K = d.size();
     Json I;
-    if (K > kRunInspectSamples) {
+    if (d.streamed()) {  // the samples the stream kept on its first pass (streamInspectStride)
+      const long stride = streamInspectStride(K);
+      check(d.stream->passed(), "inspection: the stream has not been read");
+      Dataset sub = d.stream->collected();
+      sub.meta = d.meta;
+      I = inspectDataset(robot, model, sub, ctx);
+      if (stride > 1)
+        I["subsampled"] = fmt::format(
+            "every {}th of the {} samples ({} inspected; `exid inspect` looks at every sample)",
+            stride, K, sub.size());
+    } else if (K > kRunInspectSamples) {
       const long stride = (K + kRunInspectSamples - 1) / kRunInspectSamples;
       Dataset sub;
       const long M = (K + stride - 1) / stride;
@@ -746,22 +761,33 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
       RunContext ectx = ctx;
       ectx.progress = progressFor("experiment");
-      data = exp->run(robot, reference ? &*reference : nullptr, ectx);
-      const bool raw =
-          cfg.estimator && reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)
-                               ->specs()
-                               .needs_raw_dataset;
-      checkDataset(*data, *robot, model.get(), "experiment", raw);
+      const EstimatorSpecs especs =
+          cfg.estimator ? reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs()
+                        : EstimatorSpecs();
+      // Streamed (read in chunks, never held whole) when the estimator streams and nothing else
+      // needs the whole dataset (experiment.csv: always).
+      const bool may_stream =
+          cfg.estimator && especs.streams && cfg.report.experiment_csv != "always";
+      data = may_stream ? exp->stream(robot, reference ? &*reference : nullptr, ectx)
+                        : exp->run(robot, reference ? &*reference : nullptr, ectx);
+      checkDataset(*data, *robot, model.get(), "experiment", especs.needs_raw_dataset);
       checkDatasetFinite(*data, "experiment");
       Json& E = S["experiment"];
       E["type"] = cfg.experiment->type;
       E["samples"] = data->size();
-      E["duration_s"] = data->t(data->size() - 1) - data->t(0);
+      E["duration_s"] = data->tLast() - data->tFirst();
       E["wall_s"] = seconds(t0);
       E["meta"] = data->meta;
+      if (data->streamed()) {
+        E["streamed"] = fmt::format(
+            "read from the file in chunks by the estimator '{}' (never held whole); the "
+            "recording's statistics and the inspection are from its first pass",
+            cfg.estimator->type);
+        data->stream->collectEvery(static_cast<int>(streamInspectStride(data->size())));
+      }
       if (const Json* w = data->meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
-      inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
+      if (!data->streamed()) inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
       // experiment.csv: simulated data always; recorded data are a copy of the input, written
       // (by default) only while small. What was written, or why not, is in the summary.
       const bool simulated_data =
@@ -788,10 +814,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
           joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
                                 jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
         }
-        writeFileAtomic(dir / "experiment.csv",
-                        fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
-                                    "units, t in s\n{}",
-                                    cfg.name, robot->name, joints, toCsv(datasetTable(*data))));
+        writeFileAtomic(
+            dir / "experiment.csv",
+            fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
+                        "units, t in s\n{}",
+                        cfg.name, robot->name, joints, toCsv(datasetTable(materialize(*data)))));
         E["csv"] = "experiment.csv";
       }
     }
@@ -814,6 +841,19 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         prior = buildPrior(*cfg.prior, *model);
       }
       est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
+      if (data->streamed()) {
+        // The recording's statistics (and the samples kept for the inspection) are complete
+        // after a whole pass: the estimator's, or one more here.
+        if (!data->stream->passed()) {
+          Dataset chunk;
+          data->stream->rewind();
+          while (data->stream->read(8192, &chunk) > 0) {
+          }
+        }
+        data->meta = data->stream->meta();
+        S["experiment"]["meta"] = data->meta;
+        inspectInto(S, warn, "experiment", *robot, model.get(), *data, ictx);
+      }
       checkFinite(est->value, fmt::format("estimator '{}': the estimate of", cfg.estimator->type),
                   est->names);
       if (est->std.size() > 0)

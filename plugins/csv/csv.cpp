@@ -143,647 +143,47 @@ class CsvExperiment : public exid::Experiment {
 
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples*,
                     const exid::RunContext& ctx) override {
-    exid::check(robot != nullptr, "experiment 'csv': no robot");
-    const int n = robot->dof();
-
-    // Per file: its table (only the columns the experiment can use are read: see usable) and
-    // the file line of every data row.
-    struct Source {
-      std::string file;
-      std::vector<int> line_of;
-      exid::CsvTable T;
-    };
-    // A column the experiment may use: the time column, q_columns / tau_columns, a wrench
-    // component, or a group's prefix followed by digits (q1.., qd.., qdd.., tau.., currents).
-    // The others are never converted (a column of labels nobody uses is not an error).
-    const std::string time_name = P_.getString("time_column");
-    const std::vector<std::string> named_q = P_.getStrings("q_columns");
-    const std::vector<std::string> named_tau = P_.getStrings("tau_columns");
-    const std::vector<std::string> prefixes = {"q", "qd", "qdd", "tau",
-                                               P_.getString("current_prefix")};
-    auto usable = [&](const std::string& c) {
-      if (c == time_name) return true;
-      for (const auto* v : {&named_q, &named_tau})
-        if (std::find(v->begin(), v->end(), c) != v->end()) return true;
-      for (const char* w : {"fx", "fy", "fz", "mx", "my", "mz"})
-        if (c == w) return true;
-      for (const std::string& pre : prefixes)
-        if (c.size() > pre.size() && c.compare(0, pre.size(), pre) == 0 &&
-            c.find_first_not_of("0123456789", pre.size()) == std::string::npos)
-          return true;
-      return false;
-    };
-    auto readSource = [&](fs::path p) {
-      if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
-      Source src;
-      src.file = p.string();
-      exid::CsvReadOptions opt;
-      opt.allow_non_finite = true;  // checked below, only in the columns used
-      opt.text_columns = true;      // a column of labels nobody uses is not an error
-      exid::CsvReader reader(p, opt, "CSV data");
-      src.T = exid::readCsvColumns(reader, usable);
-      src.line_of = std::move(src.T.line_of);
-      exid::check(src.T.data.rows() > 0,
-                  fmt::format("experiment 'csv': {}: no data rows after the header", src.file));
-      return src;
-    };
-    std::vector<Source> srcs;
-    srcs.reserve(2);  // references into srcs[0] are taken below
-    srcs.push_back(readSource(P_.getString("file")));
-    const std::string file = srcs[0].file;
-    const exid::CsvTable& T = srcs[0].T;
-    const int rows = static_cast<int>(T.data.rows());
-    int fq = 0, ftau = 0;  // which source holds q / the torques
-    if (!P_.getString("torque_file").empty()) {
-      srcs.push_back(readSource(P_.getString("torque_file")));
-      ftau = 1;
-      const int tau_rows = static_cast<int>(srcs[1].T.data.rows());
-      if (tau_rows != rows) {
-        // The place: the first data row of the longer file that has no counterpart.
-        const Source& longer = srcs[tau_rows > rows ? 1 : 0];
-        const int k = std::min(rows, tau_rows);
-        const int line = k < static_cast<int>(longer.line_of.size())
-                             ? longer.line_of[static_cast<std::size_t>(k)]
-                             : 0;
-        throw exid::Error(fmt::format(
-            "experiment 'csv': torque_file {} has {} data rows, file {} has {}: the two files "
-            "must be row-aligned ({}: data row {} at line {} has no counterpart)",
-            srcs[1].file, tau_rows, file, rows, longer.file, k + 1, line));
-      }
-    }
-    // Columns as (source, column) references, flattened: ref = source * kStride + column.
-    constexpr int kStride = 1 << 20;
-    auto value = [&](int r, int ref) {
-      const exid::CsvTable& Ts = srcs[static_cast<std::size_t>(ref / kStride)].T;
-      return Ts.data(r, Ts.dataCol(ref % kStride));
-    };
-    auto colName = [&](int ref) {
-      const Source& sr = srcs[static_cast<std::size_t>(ref / kStride)];
-      return srcs.size() > 1
-                 ? fmt::format("{}' of {}", sr.T.columns[static_cast<std::size_t>(ref % kStride)],
-                               sr.file)
-                 : sr.T.columns[static_cast<std::size_t>(ref % kStride)] + "'";
-    };
-    auto named = [&](int f, const char* key) -> std::vector<int> {
-      std::vector<int> idx;
-      const std::vector<std::string> names = P_.getStrings(key);
-      if (names.empty()) return idx;
-      const Source& sr = srcs[static_cast<std::size_t>(f)];
-      exid::check(static_cast<int>(names.size()) == n,
-                  fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
-                              "'{}'), found {}",
-                              key, n, robot->name, names.size()));
-      for (std::size_t a = 0; a < names.size(); ++a)
-        for (std::size_t b = 0; b < a; ++b)
-          exid::check(names[a] != names[b],
-                      fmt::format("experiment 'csv': {}: column '{}' is named twice (elements {} "
-                                  "and {}); each joint needs its own column",
-                                  key, names[a], b + 1, a + 1));
-      for (const auto& c : names) {
-        const int i = sr.T.col(c);
-        exid::check(i >= 0,
-                    fmt::format("experiment 'csv': {}: {}: no column '{}' (found columns: {})",
-                                sr.file, key, c, fmt::join(sr.T.columns, ", ")));
-        idx.push_back(f * kStride + i);
-      }
-      return idx;
-    };
-
-    // Column groups.
-    auto group = [&](const std::string& prefix, bool required, const char* what,
-                     int f = 0) -> std::vector<int> {
-      const exid::CsvTable& Tg = srcs[static_cast<std::size_t>(f)].T;
-      const std::string& fileg = srcs[static_cast<std::size_t>(f)].file;
-      std::vector<int> idx;
-      int found = 0;
-      while (Tg.has(prefix + std::to_string(found + 1))) ++found;
-      if (found == 0) {
-        exid::check(!required, fmt::format("experiment 'csv': {}: missing column '{}1' ({}; "
-                                           "expected columns {}1..{}{} for the {} joints of robot "
-                                           "'{}'; found columns: {})",
-                                           fileg, prefix, what, prefix, prefix, n, n, robot->name,
-                                           fmt::join(Tg.columns, ", ")));
-        return idx;
-      }
-      exid::check(
-          found == n,
-          fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
-                      "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
-                      fileg, prefix, prefix, found, found, prefix, prefix, n, robot->name, n));
-      for (int j = 1; j <= n; ++j) idx.push_back(f * kStride + Tg.col(prefix + std::to_string(j)));
-      return idx;
-    };
-    std::vector<int> cq = named(fq, "q_columns");
-    if (cq.empty()) cq = group("q", true, "joint positions are required", fq);
-    const std::vector<int> cqd = group("qd", false, "");
-    const std::vector<int> cqdd = group("qdd", false, "");
-    const std::string tfrom = P_.getString("torque_from");
-    std::vector<int> ctau;
-    std::vector<double> Kt;
-    ctau = named(ftau, "tau_columns");
-    if (tfrom == "tau") {
-      if (ctau.empty()) ctau = group("tau", ftau > 0, "torque_file is given", ftau);
-    } else {
-      const std::string pre = P_.getString("current_prefix");
-      if (ctau.empty())
-        ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
-      Kt = P_.getDoubles("torque_constants_Nm_per_A");
-      exid::check(
-          static_cast<int>(Kt.size()) == n,
-          fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values (one "
-                      "per joint of robot '{}'), found {}",
-                      n, robot->name, Kt.size()));
-    }
-    std::vector<int> cw;
-    {
-      const char* wn[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
-      int present = 0;
-      for (const char* c : wn) present += T.has(c);
-      if (present > 0) {
-        std::vector<std::string> missing;
-        for (const char* c : wn)
-          if (!T.has(c)) missing.push_back(c);
-        exid::check(missing.empty(),
-                    fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
-                                "(expected all of fx fy fz mx my mz, or none)",
-                                file, fmt::join(missing, ", ")));
-        for (const char* c : wn) cw.push_back(T.col(c));  // source 0
-      }
-    }
-    const std::string tname = P_.getString("time_column");
-    const int ct = T.col(tname);
-    const double dt = P_.getDouble("sample_period_s");
-    exid::check(ct >= 0 || dt > 0,
-                fmt::format("experiment 'csv': {}: no time column '{}' and no sample_period_s: "
-                            "exid does not guess the sample rate; give time_column (the name of "
-                            "the time column, with time_unit) or sample_period_s (found columns: "
-                            "{})",
-                            file, tname, fmt::join(T.columns, ", ")));
-    const std::string tunit = P_.getString("time_unit");
-    const double tfactor = tunit == "ms" ? 1e-3 : tunit == "us" ? 1e-6 : tunit == "ns" ? 1e-9 : 1.0;
-    // Per-signal scales (a unit, a sign of one signal alone).
-    auto perJoint = [&](const char* key, std::vector<double> v, double dflt) {
-      if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
-      exid::check(static_cast<int>(v.size()) == n,
-                  fmt::format("experiment 'csv': {}: expected {} values (one per joint of robot "
-                              "'{}'), found {}",
-                              key, n, robot->name, v.size()));
-      for (double x : v)
-        exid::check(std::isfinite(x) && x != 0.0,
-                    fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
-      return v;
-    };
-    const std::vector<double> qscale = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
-    const std::vector<double> qdscale = P_.getDoubles("qd_scale").empty()
-                                            ? qscale
-                                            : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
-    const std::vector<double> tauscale = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
-    std::vector<double> wscale = P_.getDoubles("wrench_scale");
-    if (wscale.empty()) wscale.assign(6, 1.0);
-    exid::check(wscale.size() == 6,
-                fmt::format("experiment 'csv': wrench_scale: expected 6 values (fx fy fz mx my "
-                            "mz), found {}",
-                            wscale.size()));
-    for (double x : wscale)
-      exid::check(std::isfinite(x) && x != 0.0,
-                  fmt::format("experiment 'csv': wrench_scale: {} is not a usable scale", x));
-
-    // Per-joint sign and offset.
-    std::vector<double> sign = P_.getDoubles("sign"), off = P_.getDoubles("offset_rad");
-    if (sign.empty()) sign.assign(static_cast<std::size_t>(n), 1.0);
-    if (off.empty()) off.assign(static_cast<std::size_t>(n), 0.0);
-    exid::check(static_cast<int>(sign.size()) == n,
-                fmt::format("experiment 'csv': sign: expected {} values (one per joint), found {}",
-                            n, sign.size()));
-    exid::check(
-        static_cast<int>(off.size()) == n,
-        fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), found {}", n,
-                    off.size()));
-    for (int j = 0; j < n; ++j)
-      exid::check(
-          sign[static_cast<std::size_t>(j)] == 1.0 || sign[static_cast<std::size_t>(j)] == -1.0,
-          fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
-                      sign[static_cast<std::size_t>(j)]));
-
-    // Rows: bad values in the used columns, time.
-    std::vector<int> used = cq;
-    for (const std::vector<int>* g : {&cqd, &cqdd, static_cast<const std::vector<int>*>(&ctau),
-                                      static_cast<const std::vector<int>*>(&cw)})
-      used.insert(used.end(), g->begin(), g->end());
-    if (ct >= 0) used.push_back(ct);
-    // Text in a column that is used is an error at its first such cell (never a dropped row).
-    for (int c : used) {
-      const std::string& why =
-          srcs[static_cast<std::size_t>(c / kStride)].T.notNumeric(c % kStride);
-      if (!why.empty()) throw exid::Error("experiment 'csv': " + why);
-      exid::check(srcs[static_cast<std::size_t>(c / kStride)].T.dataCol(c % kStride) >= 0,
-                  "experiment 'csv': internal error: a column used was not read");
-    }
-    const bool drop = P_.getBool("drop_bad_rows");
-    std::vector<int> keep;
-    std::vector<double> tk;
-    int dropped = 0;
-    auto lineText = [&](int r, int f = 0) {
-      const std::vector<int>& line_of = srcs[static_cast<std::size_t>(f)].line_of;
-      return r < static_cast<int>(line_of.size())
-                 ? fmt::format("line {}", line_of[static_cast<std::size_t>(r)])
-                 : fmt::format("data row {}", r + 1);
-    };
-    for (int r = 0; r < rows; ++r) {
-      int bad = -1;
-      for (int c : used)
-        if (!std::isfinite(value(r, c))) {
-          bad = c;
-          break;
-        }
-      if (bad >= 0) {
-        if (drop) {
-          ++dropped;
-          continue;
-        }
-        const int bf = bad / kStride;
-        throw exid::Error(fmt::format(
-            "experiment 'csv': {}: {} (data row {}): column '{}: missing or non-finite value (set "
-            "drop_bad_rows: true to drop such rows)",
-            srcs[static_cast<std::size_t>(bf)].file, lineText(r, bf), r + 1, colName(bad)));
-      }
-      const double t = ct >= 0 ? tfactor * value(r, ct) : r * dt;
-      if (!keep.empty())
-        exid::check(
-            t > tk.back(),
-            fmt::format("experiment 'csv': {}: {} (data row {}): column '{}': time must "
-                        "strictly increase; t = {} s after t = {} s at {}",
-                        file, lineText(r), r + 1, tname, t, tk.back(), lineText(keep.back())));
-      keep.push_back(r);
-      tk.push_back(t);
-    }
-    exid::check(!keep.empty(),
-                fmt::format("experiment 'csv': {}: every row was dropped ({} with bad "
-                            "values)",
-                            file, dropped));
-
-    // Gaps and uneven stamps: one behaviour, refused with the place (a filter, a derivative and
-    // an energy integral all assume a uniform rate).
-    if (ct >= 0 && tk.size() >= 3) {
-      // per row of the file: a step across rows dropped for bad values spans that many rows
-      std::vector<double> steps(tk.size() - 1);
-      for (std::size_t i = 1; i < tk.size(); ++i)
-        steps[i - 1] = (tk[i] - tk[i - 1]) / static_cast<double>(keep[i] - keep[i - 1]);
-      std::vector<double> sorted = steps;
-      std::nth_element(sorted.begin(),
-                       sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                       sorted.end());
-      const double med = sorted[sorted.size() / 2];
-      const double ratio = P_.getDouble("max_gap_ratio");
-      const bool resample = P_.getDouble("resample_hz") > 0.0;
-      for (std::size_t i = 0; i < steps.size(); ++i)
-        exid::check(steps[i] <= ratio * med && (resample || steps[i] >= med / ratio),
-                    fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s against "
-                                "a median step of {} s: {} (a filter, derivatives and energy "
-                                "integrals need a uniform rate); cut the recording there with "
-                                "t_start_s/t_end_s{} (max_gap_ratio = {})",
-                                file, lineText(keep[i + 1]), keep[i + 1] + 1, steps[i], med,
-                                steps[i] > med ? "a gap" : "uneven time stamps",
-                                steps[i] > med ? "" : ", or resample it (resample_hz)", ratio));
-    }
-    // Segment: inside the recording, never clamped.
-    const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
-    exid::check(te == 0.0 || te > ts,
-                fmt::format("experiment 'csv': t_end_s = {} must be after t_start_s = {} (or 0 for "
-                            "the end)",
-                            te, ts));
-    const double tfirst = tk.front();
-    const double span = tk.back() - tfirst;
-    const double step_tol = tk.size() > 1 ? 0.5 * span / static_cast<double>(tk.size() - 1) : 0.0;
-    exid::check(ts <= span,
-                fmt::format("experiment 'csv': {}: t_start_s = {} s is after the end of the "
-                            "recording ({} s after its first sample)",
-                            file, ts, span));
-    exid::check(te <= span + step_tol,
-                fmt::format("experiment 'csv': {}: t_end_s = {} s is past the end of the "
-                            "recording ({} s after its first sample); the segment is never "
-                            "clamped (0: to the end)",
-                            file, te, span));
-    // Split of the segment into an identification and a validation part (half-open at the
-    // split point: no sample belongs to both).
-    const std::string part = P_.getString("split_part");
-    const double sf = P_.getDouble("split_fraction"), sat = P_.getDouble("split_at_s");
-    const double seg_end = te > 0.0 ? std::min(te, span) : span;
-    double tsplit = 0.0;
-    if (part != "none") {
-      exid::check((sf > 0.0) != (sat > 0.0),
-                  fmt::format("experiment 'csv': split_part = {} needs exactly one of "
-                              "split_fraction (found {}) and split_at_s (found {})",
-                              part, sf, sat));
-      tsplit = sf > 0.0 ? ts + sf * (seg_end - ts) : ts + sat;
-      exid::check(tsplit > ts && tsplit < seg_end,
-                  fmt::format("experiment 'csv': {}: the split point {} s (split_at_s = {}) is "
-                              "not inside the segment [{}, {}] s",
-                              file, tsplit, sat, ts, seg_end));
-    } else {
-      exid::check(sf == 0.0 && sat == 0.0,
-                  fmt::format("experiment 'csv': split_fraction / split_at_s need split_part "
-                              "(identification or validation; the study key `split` sets all "
-                              "three)"));
-    }
-    const double lo = part == "validation" ? tsplit : ts;
-    const double hi = part == "identification" ? tsplit : seg_end;
-    std::vector<int> sel;
-    int in_segment = 0;
-    for (std::size_t i = 0; i < keep.size(); ++i) {
-      const double rel = tk[i] - tfirst;
-      if (rel < ts) continue;
-      if (te > 0.0 && rel > te) break;
-      ++in_segment;
-      if (rel < lo || (part == "identification" && rel >= hi)) continue;
-      sel.push_back(static_cast<int>(i));
-    }
-    exid::check(!sel.empty(),
-                fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
-                            "after the first sample (t = {} s; the file spans {} s)",
-                            file, lo, part == "none" ? te : hi, tfirst, tk.back() - tfirst));
-
-    // Fill the dataset.
-    const int K = static_cast<int>(sel.size());
+    auto src = CsvStream::open(P_, robot, ctx);
     exid::Dataset d;
-    d.t.resize(K);
-    d.q.resize(K, n);
-    if (!cqd.empty()) d.qd.resize(K, n);
-    if (!cqdd.empty()) d.qdd.resize(K, n);
-    if (!ctau.empty()) d.tau.resize(K, n);
-    if (!cw.empty()) d.wrench.resize(K, 6);
-    const bool joint_frame = P_.getString("current_frame") == "joint";
-    VectorXd tau(n);  // one buffer for every row (no allocation per sample)
-    for (int k = 0; k < K; ++k) {
-      const std::size_t i = static_cast<std::size_t>(sel[static_cast<std::size_t>(k)]);
-      const int r = keep[i];
-      d.t[k] = tk[i];
-      for (int j = 0; j < n; ++j) {
-        const double s = sign[static_cast<std::size_t>(j)];
-        const double qs = qscale[static_cast<std::size_t>(j)];
-        const double vs = qdscale[static_cast<std::size_t>(j)];
-        d.q(k, j) =
-            s * qs * value(r, cq[static_cast<std::size_t>(j)]) + off[static_cast<std::size_t>(j)];
-        if (!cqd.empty()) d.qd(k, j) = s * vs * value(r, cqd[static_cast<std::size_t>(j)]);
-        if (!cqdd.empty()) d.qdd(k, j) = s * vs * value(r, cqdd[static_cast<std::size_t>(j)]);
-      }
-      if (!ctau.empty()) {
-        for (int j = 0; j < n; ++j) {
-          double v = value(r, ctau[static_cast<std::size_t>(j)]);
-          if (!Kt.empty()) v *= Kt[static_cast<std::size_t>(j)];
-          tau[j] = v;
-        }
-        if (!Kt.empty() && joint_frame && robot->hasTransmission())
-          tau = robot->transmission.transpose() * tau;
-        for (int j = 0; j < n; ++j)
-          d.tau(k, j) =
-              sign[static_cast<std::size_t>(j)] * tauscale[static_cast<std::size_t>(j)] * tau[j];
-      }
-      for (std::size_t e = 0; e < cw.size(); ++e)
-        d.wrench(k, static_cast<Eigen::Index>(e)) = wscale[e] * value(r, cw[e]);
-    }
+    d.stream = src;
+    d.source = src->file();
+    d = exid::materialize(d);  // one pass: the recording's statistics are complete
     // Resampling on request: linear interpolation of every signal onto a uniform grid.
+    const int K = d.size();
     const double rs_hz = P_.getDouble("resample_hz");
     int resampled_from = 0;
     if (rs_hz > 0.0) {
-      exid::check(K >= 2, fmt::format("experiment 'csv': {}: resample_hz needs two samples", file));
+      exid::check(K >= 2,
+                  fmt::format("experiment 'csv': {}: resample_hz needs two samples", src->file()));
       resampled_from = K;
-      const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
-      // (counted in double first: a huge rate must not overflow the integer count)
-      const double Md = std::floor(span_s * rs_hz + 1e-9) + 1.0;
-      exid::check(Md >= 2.0 && Md <= 1e8,
-                  fmt::format("experiment 'csv': {}: resample_hz = {} gives {:g} samples over "
-                              "{} s (2 to 1e8)",
-                              file, rs_hz, Md, span_s));
-      const auto M = static_cast<Eigen::Index>(Md);
-      exid::Dataset u;
-      u.t.resize(M);
-      for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rs_hz;
-      auto interp = [&](const Eigen::MatrixXd& A) {
-        if (A.size() == 0) return Eigen::MatrixXd();
-        Eigen::MatrixXd B(M, A.cols());
-        Eigen::Index k = 0;
-        for (Eigen::Index m = 0; m < M; ++m) {
-          while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
-          const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
-          B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
-        }
-        return B;
-      };
-      u.q = interp(d.q);
-      u.qd = interp(d.qd);
-      u.qdd = interp(d.qdd);
-      u.tau = interp(d.tau);
-      u.wrench = interp(d.wrench);
-      d = std::move(u);
+      d = resample(d, rs_hz, src->file());
     }
     const int K_grid = d.size();  // samples entering the filter (after any resampling)
-    const Preprocessed pp = preprocess(&d, file);
+    const Preprocessed pp = preprocess(&d, src->file());
+    d.meta = src->metaAfter(K_grid, resampled_from, rs_hz, pp, d.size());
+    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), src->file()));
+    return d;
+  }
 
-    d.source = file;
-    exid::Json& m = d.meta;
-    m["simulated"] = false;
-    m["file"] = file;
-    m["rows_in_file"] = rows;
-    m["dropped_rows"] = dropped;
-    m["samples"] = K;
-    m["time_column"] = ct >= 0 ? exid::Json(tname) : exid::Json(false);
-    if (ct >= 0) m["time_unit"] = tunit;
-    if (ct < 0) m["sample_period_s"] = dt;
-    m["segment_s"] = exid::Json(std::vector<double>{ts, te});
-    if (part != "none") {
-      exid::Json& sp = m["split"];
-      sp["part"] = part;
-      sp["split_at_s"] = tsplit;
-      if (sf > 0.0) sp["fraction"] = sf;
-      sp["identification_s"] = exid::Json(std::vector<double>{ts, tsplit});
-      sp["validation_s"] = exid::Json(std::vector<double>{tsplit, seg_end});
-      sp["segment_samples"] = in_segment;
-      sp["part_samples"] = static_cast<int>(sel.size());
-    }
-    m["recording_span_s"] = span;
-    m["recording"] = recordingStats(file, keep, sel, value, srcs, used, cq, ctau, ct, tfactor, dt);
-    // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
-    {
-      exid::Json& a = m["accounting"];
-      a["rows_in_file"] = rows;
-      a["dropped_bad_rows"] = dropped;
-      a["outside_segment"] = static_cast<int>(keep.size()) - in_segment;
-      if (part != "none") a["other_part_of_split"] = in_segment - K;
-      a["segment_samples"] = K;
-      if (resampled_from > 0) {
-        a["resampled_from"] = resampled_from;
-        a["resampled_to"] = K_grid;
-        a["resample_hz"] = rs_hz;
-      }
-      const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
-      a["trimmed_edges"] = trimmed;
-      a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K_grid);
-      a["decimated_away"] = K_grid - trimmed - static_cast<int>(d.size());
-      a["samples_used"] = static_cast<int>(d.size());
-      exid::Json w = exid::Json::array();
-      if (dropped > 0)
-        w.push_back(exid::Json(fmt::format(
-            "experiment 'csv': {}: {} of {} rows ({:.1f} %) dropped for missing or non-finite "
-            "values (drop_bad_rows)",
-            file, dropped, rows, 100.0 * dropped / std::max(1, rows))));
-      if (trimmed > 0.1 * K_grid)
-        w.push_back(exid::Json(fmt::format(
-            "experiment 'csv': {}: trim_edges = {} discards {} of the segment's {} samples "
-            "({:.1f} %, more than 10 %)",
-            file, pp.trim, trimmed, K_grid, 100.0 * trimmed / K_grid)));
-      if (pp.trim_default && pp.trim < pp.trim_transient)
-        a["trim_rule"] =
-            fmt::format("ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
-                        pp.trim_transient, pp.trim);
-      else if (pp.trim_default)
-        a["trim_rule"] = fmt::format("ceil(2 fs / fc) = {} samples at each end", pp.trim);
-      if (w.size() > 0) m["warnings"] = w;
-    }
-    m["torque_from"] = tfrom;
-    std::vector<std::string> sig = {"q"};
-    if (!cqd.empty()) sig.push_back("qd");
-    if (!cqdd.empty()) sig.push_back("qdd");
-    if (!ctau.empty()) sig.push_back("tau");
-    if (!cw.empty()) sig.push_back("wrench");
-    m["signals"] = exid::Json(sig);
-    if (srcs.size() > 1) m["torque_file"] = srcs[1].file;
-    if (pp.cutoff_hz > 0) {
-      m["differentiated"] = exid::Json::object();
-      m["differentiated"]["cutoff_hz"] = pp.cutoff_hz;
-      m["differentiated"]["filter_order"] = pp.order;
-      m["differentiated"]["filter_torque"] = pp.filter_torque;
-      m["differentiated"]["trimmed_samples_each_end"] = pp.trim;
-      m["differentiated"]["decimation"] = pp.decimation;
-      m["differentiated"]["sample_rate_hz"] = pp.fs;
-    }
-    m["samples"] = d.size();
-    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), file));
+  /// The recording streamed from its file (one scan of its time stamps now; the samples are
+  /// read in chunks by whoever consumes them, in one or more passes). Resampling and the
+  /// differentiating filter need the whole segment at once: then the dataset is in memory.
+  exid::Dataset stream(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* ref,
+                       const exid::RunContext& ctx) override {
+    if (P_.getDouble("resample_hz") > 0.0 || P_.getDouble("differentiate_cutoff_hz") > 0.0)
+      return run(robot, ref, ctx);
+    exid::check(P_.getInt("decimation") == 1 && !P_.getBool("filter_torque"),
+                "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");
+    auto src = CsvStream::open(P_, robot, ctx);
+    exid::Dataset d;
+    d.stream = src;
+    d.source = src->file();
+    d.meta = src->meta();
+    ctx.report(1.0, fmt::format("{} samples in {} (streamed)", d.size(), src->file()));
     return d;
   }
 
  private:
-  /// Recording-level statistics of the rows the experiment uses (the segment's rows of the file,
-  /// before any filtering): sample rate exact to the stamps' resolution, jitter and gaps of the
-  /// time stamps; duplicate rows (identical to the previous row in every used column, the time
-  /// stamp included: with a time column such a row is refused before, time must increase);
-  /// frozen rows (every q repeats the previous row while the robot moves: some joint stepped by
-  /// at least kFrozenQuanta times its column's resolution before the run and by more than
-  /// kFrozenJump times that step after it, which sets sample-and-hold apart from a standstill, a
-  /// slow encoder or a file printed with few digits); saturation of each torque column (samples at
-  /// the column's minimum or maximum in runs of >= 3). meta.recording; exid::inspectDataset warns
-  /// from it.
-  template <class Value, class Sources>
-  exid::Json recordingStats(const std::string& file, const std::vector<int>& keep,
-                            const std::vector<int>& sel, const Value& value, const Sources& srcs,
-                            const std::vector<int>& used, const std::vector<int>& cq,
-                            const std::vector<int>& ctau, int ct, double tfactor,
-                            double period) const {
-    constexpr double kFrozenJump = 1.5, kFrozenQuanta = 3.0;
-    constexpr int kSaturationRun = 3;
-    constexpr int kStride = 1 << 20;  // as in run(): ref = source * kStride + column
-    std::vector<int> rows;
-    for (int i : sel) rows.push_back(keep[static_cast<std::size_t>(i)]);
-    const std::size_t N = rows.size();
-    exid::Json R = exid::Json::object();
-    R["file"] = file;
-    R["rows"] = static_cast<long long>(N);
-    if (ct >= 0) {
-      std::vector<double> raw(N);
-      for (std::size_t i = 0; i < N; ++i) raw[i] = value(rows[i], ct);
-      exid::Json t = exid::samplingStats(raw, tfactor, rows, P_.getDouble("max_gap_ratio"));
-      t["source"] = fmt::format("time column '{}'", P_.getString("time_column"));
-      R["timing"] = t;
-    } else {
-      exid::Json t = exid::Json::object();
-      t["source"] = "sample_period_s";
-      t["rate_hz"] = exid::rateFromPeriod(period);
-      t["period_s"] = period;
-      t["jitter"]["std_rel"] = 0.0;
-      t["jitter"]["max_rel"] = 0.0;
-      t["gaps"]["count"] = 0;
-      R["timing"] = t;
-    }
-    auto same = [&](std::size_t i, const std::vector<int>& cols) {
-      for (int c : cols)
-        if (value(rows[i], c) != value(rows[i - 1], c)) return false;
-      return true;
-    };
-    std::vector<char> dup(N, 0), held(N, 0);
-    long long ndup = 0;
-    exid::Json dup_at = exid::Json::array();
-    for (std::size_t i = 1; i < N; ++i) {
-      dup[i] = same(i, used);
-      held[i] = !dup[i] && same(i, cq);
-      if (dup[i] && ++ndup <= 20) dup_at.push_back(exid::Json(rows[i] + 1));
-    }
-    R["duplicate_rows"]["count"] = ndup;
-    R["duplicate_rows"]["data_rows"] = dup_at;
-    // The resolution of each q column: its smallest non-zero step (a file printed with few
-    // digits repeats q while the robot creeps; that is no sample-and-hold).
-    std::vector<double> quantum(cq.size(), HUGE_VAL);
-    for (std::size_t i = 1; i < N; ++i)
-      for (std::size_t j = 0; j < cq.size(); ++j) {
-        const double d = std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
-        if (d > 0) quantum[j] = std::min(quantum[j], d);
-      }
-    auto dq = [&](std::size_t i, std::size_t j) {  // |q_j(i) - q_j(i-1)|
-      return std::abs(value(rows[i], cq[j]) - value(rows[i - 1], cq[j]));
-    };
-    long long runs = 0, frozen = 0;
-    exid::Json frozen_at = exid::Json::array();
-    for (std::size_t a = 1; a < N;) {
-      if (!held[a]) {
-        ++a;
-        continue;
-      }
-      std::size_t b = a;
-      while (b + 1 < N && held[b + 1]) ++b;
-      // rows a..b repeat row a-1; the steps before (a-2 -> a-1) and after (b -> b+1)
-      bool jumps = false;  // a joint that moved by kFrozenQuanta or more jumps after the run
-      for (std::size_t j = 0; a >= 2 && b + 1 < N && j < cq.size(); ++j)
-        jumps = jumps || (dq(a - 1, j) >= kFrozenQuanta * quantum[j] &&
-                          dq(b + 1, j) > kFrozenJump * dq(a - 1, j));
-      if (jumps) {
-        ++runs;
-        frozen += static_cast<long long>(b - a + 1);
-        if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(rows[a] + 1));
-      }
-      a = b + 1;
-    }
-    R["frozen_rows"]["rows"] = frozen;
-    R["frozen_rows"]["runs"] = runs;
-    R["frozen_rows"]["first_data_rows"] = frozen_at;
-    exid::Json sat = exid::Json::array();
-    for (int c : ctau) {
-      const auto& T = srcs[static_cast<std::size_t>(c / kStride)].T;
-      double lo = HUGE_VAL, hi = -HUGE_VAL;
-      for (std::size_t i = 0; i < N; ++i) {
-        lo = std::min(lo, value(rows[i], c));
-        hi = std::max(hi, value(rows[i], c));
-      }
-      long long at_limit = 0;
-      for (std::size_t i = 0; i < N;) {
-        const double v = value(rows[i], c);
-        std::size_t e = i + 1;
-        while (e < N && value(rows[e], c) == v) ++e;
-        if ((v == lo || v == hi) && e - i >= static_cast<std::size_t>(kSaturationRun))
-          at_limit += static_cast<long long>(e - i);
-        i = e;
-      }
-      exid::Json s = exid::Json::object();
-      s["column"] = T.columns[static_cast<std::size_t>(c % kStride)];
-      s["min"] = N > 0 ? exid::Json(lo) : exid::Json();
-      s["max"] = N > 0 ? exid::Json(hi) : exid::Json();
-      s["saturated_samples"] = at_limit;
-      s["fraction"] = N > 0 ? static_cast<double>(at_limit) / static_cast<double>(N) : 0.0;
-      if (N > 1 && lo == hi) s["constant"] = true;
-      sat.push_back(s);
-    }
-    R["saturation"] = sat;
-    return R;
-  }
-
   struct Preprocessed {
     double cutoff_hz = 0, fs = 0;
     int order = 0, trim = 0, decimation = 1;
@@ -791,6 +191,966 @@ class CsvExperiment : public exid::Experiment {
     bool trim_default = false;
     bool filter_torque = false;
   };
+
+  /// Recording-level statistics of the rows the experiment uses (the segment's rows of the file,
+  /// before any filtering), accumulated row by row in one pass: duplicate rows (identical to the
+  /// previous row in every used column, the time stamp included: with a time column such a row
+  /// is refused before, time must increase); frozen rows (every q repeats the previous row while
+  /// the robot moves: some joint stepped by at least kFrozenQuanta times its column's resolution
+  /// before the run and by more than kFrozenJump times that step after it, which sets
+  /// sample-and-hold apart from a standstill, a slow encoder or a file printed with few digits);
+  /// saturation of each torque column (samples at the column's minimum or maximum in runs of >=
+  /// 3). Timing statistics come from the scan of the time stamps. meta.recording;
+  /// exid::inspectDataset warns from it. Memory: the previous row, and per run of held rows
+  /// after which some joint jumps, one step per joint (the column's resolution, which decides
+  /// whether it counts, is known only at the end).
+  class RecordingStats {
+   public:
+    static constexpr double kFrozenJump = 1.5, kFrozenQuanta = 3.0;
+    static constexpr int kSaturationRun = 3;
+
+    RecordingStats(std::vector<int> q_pos, std::vector<int> tau_pos, std::size_t used)
+        : pq_(std::move(q_pos)),
+          ptau_(std::move(tau_pos)),
+          prev_(used),
+          prev2_q_(pq_.size()),
+          quantum_(pq_.size(), HUGE_VAL),
+          sat_(ptau_.size()) {}
+
+    /// The next row (values of the used columns) and its data row in the file (0-based).
+    void add(const double* v, int row) {
+      if (N_ > 0) {
+        bool dup = true;
+        for (std::size_t c = 0; c < prev_.size() && dup; ++c) dup = v[c] == prev_[c];
+        bool same_q = true;
+        for (int c : pq_) same_q = same_q && v[c] == prev_[static_cast<std::size_t>(c)];
+        const bool held = !dup && same_q;
+        if (dup && ++ndup_ <= 20) dup_at_.push_back(exid::Json(row + 1));
+        for (std::size_t j = 0; j < pq_.size(); ++j) {
+          const double d = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
+          if (d > 0) quantum_[j] = std::min(quantum_[j], d);
+        }
+        if (held) {
+          if (run_len_ == 0) {  // a run starts: the step into the held value (a-2 -> a-1)
+            run_first_row_ = row;
+            run_has_before_ = N_ >= 2;
+            before_.assign(pq_.size(), 0.0);
+            for (std::size_t j = 0; j < pq_.size() && run_has_before_; ++j)
+              before_[j] = std::abs(prev_[static_cast<std::size_t>(pq_[j])] - prev2_q_[j]);
+          }
+          ++run_len_;
+        } else if (run_len_ > 0) {  // the run ends here (b + 1 = this row)
+          endRun(v);
+        }
+      }
+      for (std::size_t k = 0; k < ptau_.size(); ++k) saturationAdd(k, v[ptau_[k]]);
+      for (std::size_t j = 0; j < pq_.size(); ++j)
+        prev2_q_[j] = N_ > 0 ? prev_[static_cast<std::size_t>(pq_[j])] : 0.0;
+      std::copy(v, v + prev_.size(), prev_.begin());
+      ++N_;
+    }
+
+    /// The statistics (after every row): duplicate_rows, frozen_rows, saturation.
+    void finish(exid::Json* R, const std::vector<std::string>& tau_names) const {
+      (*R)["rows"] = N_;
+      (*R)["duplicate_rows"]["count"] = ndup_;
+      (*R)["duplicate_rows"]["data_rows"] = dup_at_;
+      long long runs = 0, frozen = 0;
+      exid::Json frozen_at = exid::Json::array();
+      for (const Run& r : runs_) {
+        bool jumps = false;
+        for (std::size_t j = 0; j < pq_.size() && !jumps; ++j)
+          jumps = r.before[j] > 0 && r.before[j] >= kFrozenQuanta * quantum_[j];
+        if (!jumps) continue;
+        ++runs;
+        frozen += r.length;
+        if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(r.first_row + 1));
+      }
+      (*R)["frozen_rows"]["rows"] = frozen;
+      (*R)["frozen_rows"]["runs"] = runs;
+      (*R)["frozen_rows"]["first_data_rows"] = frozen_at;
+      exid::Json sat = exid::Json::array();
+      for (std::size_t k = 0; k < ptau_.size(); ++k) {
+        Saturation s = sat_[k];
+        if (s.run > 0) closeRun(&s);
+        const long long at_limit = s.lo == s.hi ? s.at_lo : s.at_lo + s.at_hi;
+        exid::Json o = exid::Json::object();
+        o["column"] = tau_names[k];
+        o["min"] = N_ > 0 ? exid::Json(s.lo) : exid::Json();
+        o["max"] = N_ > 0 ? exid::Json(s.hi) : exid::Json();
+        o["saturated_samples"] = at_limit;
+        o["fraction"] = N_ > 0 ? static_cast<double>(at_limit) / static_cast<double>(N_) : 0.0;
+        if (N_ > 1 && s.lo == s.hi) o["constant"] = true;
+        sat.push_back(o);
+      }
+      (*R)["saturation"] = sat;
+    }
+
+   private:
+    struct Run {
+      int first_row = 0;
+      long long length = 0;
+      std::vector<double> before;  // per joint: the step before the run, where it jumps after
+    };
+    struct Saturation {
+      double lo = HUGE_VAL, hi = -HUGE_VAL;
+      double value = 0;  // the run in progress
+      long long run = 0;
+      long long at_lo = 0, at_hi = 0;  // samples in runs >= kSaturationRun at lo / hi
+    };
+    static void closeRun(Saturation* s) {
+      if (s->run >= kSaturationRun) {
+        if (s->value == s->lo) s->at_lo += s->run;
+        if (s->value == s->hi) s->at_hi += s->run;
+      }
+      s->run = 0;
+    }
+    void saturationAdd(std::size_t k, double v) {
+      Saturation& s = sat_[k];
+      if (s.run > 0 && v != s.value) closeRun(&s);
+      // a new extreme: no earlier run had its value
+      if (v < s.lo) {
+        s.lo = v;
+        s.at_lo = 0;
+      }
+      if (v > s.hi) {
+        s.hi = v;
+        s.at_hi = 0;
+      }
+      s.value = v;
+      ++s.run;
+    }
+    void endRun(const double* v) {
+      // a joint that stepped by kFrozenQuanta resolutions or more into the run and jumps by
+      // more than kFrozenJump times that after it; the resolution is applied in finish()
+      if (run_has_before_) {
+        Run r;
+        r.first_row = run_first_row_;
+        r.length = run_len_;
+        r.before.assign(pq_.size(), 0.0);
+        bool any = false;
+        for (std::size_t j = 0; j < pq_.size(); ++j) {
+          const double after = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
+          if (before_[j] > 0 && after > kFrozenJump * before_[j]) {
+            r.before[j] = before_[j];
+            any = true;
+          }
+        }
+        if (any) runs_.push_back(std::move(r));
+      }
+      run_len_ = 0;
+    }
+
+    std::vector<int> pq_, ptau_;
+    std::vector<double> prev_, prev2_q_, quantum_, before_;
+    long long N_ = 0, ndup_ = 0;
+    exid::Json dup_at_ = exid::Json::array();
+    long long run_len_ = 0;
+    int run_first_row_ = 0;
+    bool run_has_before_ = false;
+    std::vector<Run> runs_;
+    std::vector<Saturation> sat_;
+  };
+
+  /// The csv experiment's reading of a recording: its columns found from the headers, one scan
+  /// of the rows (time stamps; every used column with drop_bad_rows) that checks time, gaps,
+  /// the segment and the split, and then passes over the samples in chunks, each reading the
+  /// file(s) again. Memory: 8 bytes per row for the time stamps during the scan (released
+  /// after it), the dropped rows' numbers, and one chunk.
+  class CsvStream : public exid::DatasetStream {
+    struct Ref {
+      int source = 0, column = 0;
+    };
+
+   public:
+    static std::shared_ptr<CsvStream> open(const exid::ParamSet& P,
+                                           std::shared_ptr<const exid::RobotModel> robot,
+                                           const exid::RunContext& ctx) {
+      exid::check(robot != nullptr, "experiment 'csv': no robot");
+      auto s = std::shared_ptr<CsvStream>(new CsvStream(P, std::move(robot)));
+      s->resolveColumns(ctx);
+      s->scan();
+      return s;
+    }
+
+    const std::string& file() const { return files_[0]; }
+    int size() const override { return static_cast<int>(i1_ - i0_); }
+    int dof() const override { return n_; }
+    bool hasVelocity() const override { return !pqd_.empty(); }
+    bool hasAcceleration() const override { return !pqdd_.empty(); }
+    bool hasTorque() const override { return !ptau_.empty(); }
+    bool hasWrench() const override { return !pw_.empty(); }
+    double tFirst() const override { return t_first_; }
+    double tLast() const override { return t_last_; }
+    bool passed() const override { return stats_done_; }
+    void collectEvery(int stride) override { stride_ = std::max(1, stride); }
+    const exid::Dataset& collected() const override { return collected_; }
+    exid::Json meta() const override { return metaAfter(size(), 0, 0.0, Preprocessed(), size()); }
+
+    void rewind() override {
+      readers_.clear();
+      for (std::size_t f = 0; f < files_.size(); ++f) {
+        exid::CsvReadOptions opt;
+        opt.allow_non_finite = true;  // checked below, only in the columns used
+        opt.text_columns = true;
+        readers_.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
+        readers_.back()->select(select_[f]);
+      }
+      row_ = -1;
+      kept_ = -1;
+      stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size());
+      collecting_ = !stats_done_;
+      if (collecting_) collected_ = exid::Dataset();
+      taken_ = 0;
+    }
+
+    int read(int count, exid::Dataset* chunk) override {
+      exid::check(!readers_.empty(), "experiment 'csv': a pass read before rewind()");
+      const int want = static_cast<int>(std::min<long>(count, i1_ - std::max(i0_, kept_ + 1)));
+      if (want <= 0) {
+        finishPass();
+        return 0;
+      }
+      chunk->t.resize(want);
+      chunk->q.resize(want, n_);
+      chunk->qd.resize(pqd_.empty() ? 0 : want, pqd_.empty() ? 0 : n_);
+      chunk->qdd.resize(pqdd_.empty() ? 0 : want, pqdd_.empty() ? 0 : n_);
+      chunk->tau.resize(ptau_.empty() ? 0 : want, ptau_.empty() ? 0 : n_);
+      chunk->wrench.resize(pw_.empty() ? 0 : want, pw_.empty() ? 0 : 6);
+      chunk->source = files_[0];
+      int k = 0;
+      while (k < want) {
+        if (!nextKeptRow()) break;
+        if (kept_ < i0_) continue;
+        convert(k, chunk);
+        if (collecting_) {
+          stats_->add(uv_.data(), row_);
+          if (stride_ > 0 && taken_ % stride_ == 0) collect(*chunk, k);
+          ++taken_;
+        }
+        ++k;
+      }
+      exid::check(k == want, fmt::format("experiment 'csv': {}: the file changed while it was "
+                                         "read (a pass found {} of the {} samples of the scan)",
+                                         files_[0], kept_ - i0_ + 1, size()));
+      if (kept_ + 1 >= i1_) finishPass();
+      return k;
+    }
+
+    /// The meta of the dataset after resampling (resampled_from > 0), filtering (pp) and
+    /// decimation: `samples_used` samples from the `K_grid` that entered the filter.
+    exid::Json metaAfter(int K_grid, int resampled_from, double rs_hz, const Preprocessed& pp,
+                         int samples_used) const {
+      const int K = size();
+      exid::Json m = exid::Json::object();
+      m["simulated"] = false;
+      m["file"] = files_[0];
+      m["rows_in_file"] = rows_;
+      m["dropped_rows"] = dropped_;
+      m["samples"] = K;
+      m["time_column"] = ct_ ? exid::Json(tname_) : exid::Json(false);
+      if (ct_) m["time_unit"] = tunit_;
+      if (!ct_) m["sample_period_s"] = dt_;
+      m["segment_s"] = exid::Json(std::vector<double>{ts_, te_});
+      if (part_ != "none") {
+        exid::Json& sp = m["split"];
+        sp["part"] = part_;
+        sp["split_at_s"] = tsplit_;
+        if (sf_ > 0.0) sp["fraction"] = sf_;
+        sp["identification_s"] = exid::Json(std::vector<double>{ts_, tsplit_});
+        sp["validation_s"] = exid::Json(std::vector<double>{tsplit_, seg_end_});
+        sp["segment_samples"] = in_segment_;
+        sp["part_samples"] = K;
+      }
+      m["recording_span_s"] = span_;
+      m["recording"] = recording_;
+      {  // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
+        exid::Json& a = m["accounting"];
+        a["rows_in_file"] = rows_;
+        a["dropped_bad_rows"] = dropped_;
+        a["outside_segment"] = kept_rows_ - in_segment_;
+        if (part_ != "none") a["other_part_of_split"] = in_segment_ - K;
+        a["segment_samples"] = K;
+        if (resampled_from > 0) {
+          a["resampled_from"] = resampled_from;
+          a["resampled_to"] = K_grid;
+          a["resample_hz"] = rs_hz;
+        }
+        const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
+        a["trimmed_edges"] = trimmed;
+        a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K_grid);
+        a["decimated_away"] = K_grid - trimmed - samples_used;
+        a["samples_used"] = samples_used;
+        exid::Json w = exid::Json::array();
+        if (dropped_ > 0)
+          w.push_back(exid::Json(fmt::format(
+              "experiment 'csv': {}: {} of {} rows ({:.1f} %) dropped for missing or non-finite "
+              "values (drop_bad_rows)",
+              files_[0], dropped_, rows_, 100.0 * dropped_ / std::max(1, rows_))));
+        if (trimmed > 0.1 * K_grid)
+          w.push_back(exid::Json(fmt::format(
+              "experiment 'csv': {}: trim_edges = {} discards {} of the segment's {} samples "
+              "({:.1f} %, more than 10 %)",
+              files_[0], pp.trim, trimmed, K_grid, 100.0 * trimmed / K_grid)));
+        if (pp.trim_default && pp.trim < pp.trim_transient)
+          a["trim_rule"] = fmt::format(
+              "ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
+              pp.trim_transient, pp.trim);
+        else if (pp.trim_default)
+          a["trim_rule"] = fmt::format("ceil(2 fs / fc) = {} samples at each end", pp.trim);
+        if (w.size() > 0) m["warnings"] = w;
+      }
+      m["torque_from"] = tfrom_;
+      std::vector<std::string> sig = {"q"};
+      if (!pqd_.empty()) sig.push_back("qd");
+      if (!pqdd_.empty()) sig.push_back("qdd");
+      if (!ptau_.empty()) sig.push_back("tau");
+      if (!pw_.empty()) sig.push_back("wrench");
+      m["signals"] = exid::Json(sig);
+      if (files_.size() > 1) m["torque_file"] = files_[1];
+      if (pp.cutoff_hz > 0) {
+        m["differentiated"] = exid::Json::object();
+        m["differentiated"]["cutoff_hz"] = pp.cutoff_hz;
+        m["differentiated"]["filter_order"] = pp.order;
+        m["differentiated"]["filter_torque"] = pp.filter_torque;
+        m["differentiated"]["trimmed_samples_each_end"] = pp.trim;
+        m["differentiated"]["decimation"] = pp.decimation;
+        m["differentiated"]["sample_rate_hz"] = pp.fs;
+      }
+      m["samples"] = samples_used;
+      return m;
+    }
+
+   private:
+    CsvStream(const exid::ParamSet& P, std::shared_ptr<const exid::RobotModel> robot)
+        : P_(P), robot_(std::move(robot)), n_(robot_->dof()) {}
+
+    // ---- columns, from the headers
+    void resolveColumns(const exid::RunContext& ctx) {
+      const int n = n_;
+      const exid::RobotModel& robot = *robot_;
+      auto path = [&](fs::path p) {
+        if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
+        return p.string();
+      };
+      files_.push_back(path(P_.getString("file")));
+      if (!P_.getString("torque_file").empty()) files_.push_back(path(P_.getString("torque_file")));
+      for (const std::string& f : files_) {
+        exid::CsvReadOptions opt;
+        opt.text_columns = true;
+        exid::CsvReader r(f, opt, "CSV data");
+        columns_.push_back(r.columns());
+      }
+      const int fq = 0, ftau = static_cast<int>(files_.size()) - 1;
+      auto col = [&](int f, const std::string& c) {
+        const auto& C = columns_[static_cast<std::size_t>(f)];
+        const auto it = std::find(C.begin(), C.end(), c);
+        return it == C.end() ? -1 : static_cast<int>(it - C.begin());
+      };
+      auto named = [&](int f, const char* key) -> std::vector<Ref> {
+        std::vector<Ref> idx;
+        const std::vector<std::string> names = P_.getStrings(key);
+        if (names.empty()) return idx;
+        exid::check(static_cast<int>(names.size()) == n,
+                    fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
+                                "'{}'), found {}",
+                                key, n, robot.name, names.size()));
+        for (std::size_t a = 0; a < names.size(); ++a)
+          for (std::size_t b = 0; b < a; ++b)
+            exid::check(names[a] != names[b],
+                        fmt::format("experiment 'csv': {}: column '{}' is named twice (elements "
+                                    "{} and {}); each joint needs its own column",
+                                    key, names[a], b + 1, a + 1));
+        for (const auto& c : names) {
+          const int i = col(f, c);
+          exid::check(i >= 0, fmt::format("experiment 'csv': {}: {}: no column '{}' (found "
+                                          "columns: {})",
+                                          files_[static_cast<std::size_t>(f)], key, c,
+                                          fmt::join(columns_[static_cast<std::size_t>(f)], ", ")));
+          idx.push_back({f, i});
+        }
+        return idx;
+      };
+      auto group = [&](const std::string& prefix, bool required, const char* what,
+                       int f = 0) -> std::vector<Ref> {
+        const std::string& fileg = files_[static_cast<std::size_t>(f)];
+        const auto& C = columns_[static_cast<std::size_t>(f)];
+        std::vector<Ref> idx;
+        int found = 0;
+        while (col(f, prefix + std::to_string(found + 1)) >= 0) ++found;
+        if (found == 0) {
+          exid::check(!required,
+                      fmt::format("experiment 'csv': {}: missing column '{}1' ({}; expected "
+                                  "columns {}1..{}{} for the {} joints of robot '{}'; found "
+                                  "columns: {})",
+                                  fileg, prefix, what, prefix, prefix, n, n, robot.name,
+                                  fmt::join(C, ", ")));
+          return idx;
+        }
+        exid::check(
+            found == n,
+            fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
+                        "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
+                        fileg, prefix, prefix, found, found, prefix, prefix, n, robot.name, n));
+        for (int j = 1; j <= n; ++j) idx.push_back({f, col(f, prefix + std::to_string(j))});
+        return idx;
+      };
+      std::vector<Ref> cq = named(fq, "q_columns");
+      if (cq.empty()) cq = group("q", true, "joint positions are required", fq);
+      const std::vector<Ref> cqd = group("qd", false, "");
+      const std::vector<Ref> cqdd = group("qdd", false, "");
+      tfrom_ = P_.getString("torque_from");
+      std::vector<Ref> ctau = named(ftau, "tau_columns");
+      if (tfrom_ == "tau") {
+        if (ctau.empty()) ctau = group("tau", ftau > 0, "torque_file is given", ftau);
+      } else {
+        const std::string pre = P_.getString("current_prefix");
+        if (ctau.empty())
+          ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
+        Kt_ = P_.getDoubles("torque_constants_Nm_per_A");
+        exid::check(static_cast<int>(Kt_.size()) == n,
+                    fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values "
+                                "(one per joint of robot '{}'), found {}",
+                                n, robot.name, Kt_.size()));
+      }
+      std::vector<Ref> cw;
+      {
+        const char* wn[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
+        int present = 0;
+        for (const char* c : wn) present += col(0, c) >= 0;
+        if (present > 0) {
+          std::vector<std::string> missing;
+          for (const char* c : wn)
+            if (col(0, c) < 0) missing.push_back(c);
+          exid::check(missing.empty(),
+                      fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
+                                  "(expected all of fx fy fz mx my mz, or none)",
+                                  files_[0], fmt::join(missing, ", ")));
+          for (const char* c : wn) cw.push_back({0, col(0, c)});
+        }
+      }
+      tname_ = P_.getString("time_column");
+      const int ct = col(0, tname_);
+      dt_ = P_.getDouble("sample_period_s");
+      exid::check(ct >= 0 || dt_ > 0,
+                  fmt::format("experiment 'csv': {}: no time column '{}' and no sample_period_s: "
+                              "exid does not guess the sample rate; give time_column (the name "
+                              "of the time column, with time_unit) or sample_period_s (found "
+                              "columns: {})",
+                              files_[0], tname_, fmt::join(columns_[0], ", ")));
+      tunit_ = P_.getString("time_unit");
+      tfactor_ = tunit_ == "ms" ? 1e-3 : tunit_ == "us" ? 1e-6 : tunit_ == "ns" ? 1e-9 : 1.0;
+      auto perJoint = [&](const char* key, std::vector<double> v, double dflt) {
+        if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
+        exid::check(static_cast<int>(v.size()) == n,
+                    fmt::format("experiment 'csv': {}: expected {} values (one per joint of "
+                                "robot '{}'), found {}",
+                                key, n, robot.name, v.size()));
+        for (double x : v)
+          exid::check(std::isfinite(x) && x != 0.0,
+                      fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
+        return v;
+      };
+      qscale_ = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
+      qdscale_ = P_.getDoubles("qd_scale").empty()
+                     ? qscale_
+                     : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
+      tauscale_ = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
+      wscale_ = P_.getDoubles("wrench_scale");
+      if (wscale_.empty()) wscale_.assign(6, 1.0);
+      exid::check(wscale_.size() == 6,
+                  fmt::format("experiment 'csv': wrench_scale: expected 6 values (fx fy fz mx my "
+                              "mz), found {}",
+                              wscale_.size()));
+      for (double x : wscale_)
+        exid::check(std::isfinite(x) && x != 0.0,
+                    fmt::format("experiment 'csv': wrench_scale: {} is not a usable scale", x));
+      sign_ = P_.getDoubles("sign");
+      off_ = P_.getDoubles("offset_rad");
+      if (sign_.empty()) sign_.assign(static_cast<std::size_t>(n), 1.0);
+      if (off_.empty()) off_.assign(static_cast<std::size_t>(n), 0.0);
+      exid::check(static_cast<int>(sign_.size()) == n,
+                  fmt::format("experiment 'csv': sign: expected {} values (one per joint), found "
+                              "{}",
+                              n, sign_.size()));
+      exid::check(static_cast<int>(off_.size()) == n,
+                  fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), "
+                              "found {}",
+                              n, off_.size()));
+      for (int j = 0; j < n; ++j)
+        exid::check(
+            sign_[static_cast<std::size_t>(j)] == 1.0 || sign_[static_cast<std::size_t>(j)] == -1.0,
+            fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
+                        sign_[static_cast<std::size_t>(j)]));
+      joint_frame_ = P_.getString("current_frame") == "joint";
+      drop_ = P_.getBool("drop_bad_rows");
+
+      // The used columns, in the order q, qd, qdd, tau, wrench, t; per source the columns it
+      // reads and where each value goes.
+      auto add = [&](const std::vector<Ref>& g, std::vector<int>* pos) {
+        for (const Ref& r : g) {
+          pos->push_back(static_cast<int>(used_.size()));
+          used_.push_back(r);
+        }
+      };
+      add(cq, &pq_);
+      add(cqd, &pqd_);
+      add(cqdd, &pqdd_);
+      add(ctau, &ptau_);
+      add(cw, &pw_);
+      ct_ = ct >= 0;
+      if (ct_) {
+        pt_ = static_cast<int>(used_.size());
+        used_.push_back({0, ct});
+      }
+      select_.assign(files_.size(), {});
+      for (const Ref& r : used_) {
+        auto& sel = select_[static_cast<std::size_t>(r.source)];
+        if (std::find(sel.begin(), sel.end(), r.column) == sel.end()) sel.push_back(r.column);
+      }
+      slot_.clear();
+      for (const Ref& r : used_) {
+        const auto& sel = select_[static_cast<std::size_t>(r.source)];
+        slot_.push_back({r.source, static_cast<int>(std::find(sel.begin(), sel.end(), r.column) -
+                                                    sel.begin())});
+      }
+      for (std::size_t f = 0; f < files_.size(); ++f) vals_.emplace_back(select_[f].size());
+      uv_.resize(used_.size());
+      for (int p : ptau_) tau_names_.push_back(colName(used_[static_cast<std::size_t>(p)], false));
+    }
+
+    std::string colName(const Ref& r, bool with_file = true) const {
+      const std::string& c =
+          columns_[static_cast<std::size_t>(r.source)][static_cast<std::size_t>(r.column)];
+      if (!with_file) return c;
+      return files_.size() > 1
+                 ? fmt::format("{}' of {}", c, files_[static_cast<std::size_t>(r.source)])
+                 : c + "'";
+    }
+
+    // One row of every source into uv_ (false at the end of the first file); the sources must
+    // have the same number of rows (the scan checks).
+    bool readRow(std::vector<std::unique_ptr<exid::CsvReader>>& rd) {
+      bool more = true;
+      for (std::size_t f = 0; f < rd.size(); ++f) {
+        const bool got = rd[f]->next(vals_[f].data());
+        if (f == 0) more = got;
+        if (!more) return false;
+        exid::check(got, "experiment 'csv': internal error: the torque file ended early");
+      }
+      for (std::size_t u = 0; u < used_.size(); ++u)
+        uv_[u] = vals_[static_cast<std::size_t>(slot_[u].source)]
+                      [static_cast<std::size_t>(slot_[u].column)];
+      return true;
+    }
+
+    // The first used column whose value in uv_ is not finite, or -1.
+    int badColumn() const {
+      for (std::size_t u = 0; u < used_.size(); ++u)
+        if (!std::isfinite(uv_[u])) return static_cast<int>(u);
+      return -1;
+    }
+
+    // A bad value at used column u in the current row of reader set rd: text in that column is
+    // named first (it is never a dropped row), then the missing or non-finite value.
+    [[noreturn]] void badValue(const std::vector<std::unique_ptr<exid::CsvReader>>& rd, int u,
+                               int row) const {
+      const Ref& r = used_[static_cast<std::size_t>(u)];
+      const std::string& why =
+          rd[static_cast<std::size_t>(r.source)]->notNumeric()[static_cast<std::size_t>(r.column)];
+      if (!why.empty()) throw exid::Error("experiment 'csv': " + why);
+      throw exid::Error(fmt::format(
+          "experiment 'csv': {}: line {} (data row {}): column '{}: missing or non-finite value "
+          "(set drop_bad_rows: true to drop such rows)",
+          files_[static_cast<std::size_t>(r.source)],
+          rd[static_cast<std::size_t>(r.source)]->line(), row + 1, colName(r)));
+    }
+
+    // The file line of data row `row` of source f (read again: only an error needs it).
+    int lineOfRow(int f, int row) const {
+      exid::CsvReadOptions opt;
+      opt.allow_non_finite = true;
+      opt.text_columns = true;
+      exid::CsvReader r(files_[static_cast<std::size_t>(f)], opt, "CSV data");
+      r.select({});
+      for (int k = 0; k <= row; ++k)
+        if (!r.next(nullptr)) return 0;
+      return r.line();
+    }
+    std::string lineText(int row) const {
+      const int l = lineOfRow(0, row);
+      return l > 0 ? fmt::format("line {}", l) : fmt::format("data row {}", row + 1);
+    }
+    // ---- the scan: rows, bad values (drop_bad_rows), time, gaps, segment, split
+    void scan() {
+      const std::string& file = files_[0];
+      // torque_file: row-aligned with file
+      if (files_.size() > 1) {
+        int tau_rows = 0, file_rows = 0;
+        for (int f = 0; f < 2; ++f) {
+          int& count = f == 0 ? file_rows : tau_rows;
+          exid::CsvReadOptions opt;
+          opt.allow_non_finite = true;
+          opt.text_columns = true;
+          exid::CsvReader r(files_[static_cast<std::size_t>(f)], opt, "CSV data");
+          r.select({});
+          while (r.next(nullptr)) ++count;
+        }
+        if (tau_rows != file_rows) {
+          const int f = tau_rows > file_rows ? 1 : 0;
+          const int k = std::min(file_rows, tau_rows);
+          const int line = lineOfRow(f, k);
+          throw exid::Error(fmt::format(
+              "experiment 'csv': torque_file {} has {} data rows, file {} has {}: the two files "
+              "must be row-aligned ({}: data row {} at line {} has no counterpart)",
+              files_[1], tau_rows, file, file_rows, files_[static_cast<std::size_t>(f)], k + 1,
+              line));
+        }
+      }
+      // Readers for the scan: the time column alone, unless rows may be dropped (then every
+      // used column decides).
+      std::vector<std::unique_ptr<exid::CsvReader>> rd;
+      for (std::size_t f = 0; f < files_.size(); ++f) {
+        exid::CsvReadOptions opt;
+        opt.allow_non_finite = true;
+        opt.text_columns = true;
+        rd.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
+        rd.back()->select(
+            drop_ ? select_[f]
+                  : (f == 0 && ct_ ? std::vector<int>{used_.back().column} : std::vector<int>{}));
+      }
+      std::vector<double> raw;  // per kept row: the time stamp as written
+      int rows = 0, prev_line = 0;
+      double prev_t = 0;
+      std::vector<double> v0(std::max<std::size_t>(1, vals_[0].size()));
+      while (true) {
+        bool got;
+        if (drop_) {
+          got = readRow(rd);
+        } else {
+          got = rd[0]->next(v0.data());
+        }
+        if (!got) break;
+        const int r = rows++;
+        if (drop_) {
+          const int bad = badColumn();
+          if (bad >= 0) {
+            const Ref& br = used_[static_cast<std::size_t>(bad)];
+            if (!rd[static_cast<std::size_t>(br.source)]
+                     ->notNumeric()[static_cast<std::size_t>(br.column)]
+                     .empty())
+              badValue(rd, bad, r);  // text is never dropped
+            ++dropped_;
+            dropped_rows_.push_back(r);
+            continue;
+          }
+        }
+        const double rv = ct_ ? (drop_ ? uv_[static_cast<std::size_t>(pt_)] : v0[0]) : 0.0;
+        if (ct_ && !std::isfinite(rv)) {
+          if (!drop_) {
+            uv_[static_cast<std::size_t>(pt_)] = rv;
+            badValue(rd, pt_, r);
+          }
+        }
+        const double t = ct_ ? tfactor_ * rv : r * dt_;
+        if (kept_rows_ > 0 && !(t > prev_t))
+          throw exid::Error(
+              fmt::format("experiment 'csv': {}: line {} (data row {}): column '{}': time "
+                          "must strictly increase; t = {} s after t = {} s at line {}",
+                          file, rd[0]->line(), r + 1, tname_, t, prev_t, prev_line));
+        if (kept_rows_ == 0) t_first_abs_ = t;
+        prev_t = t;
+        prev_line = rd[0]->line();
+        if (ct_) raw.push_back(rv);
+        ++kept_rows_;
+      }
+      rows_ = rows;
+      exid::check(rows > 0,
+                  fmt::format("experiment 'csv': {}: no data rows after the header", file));
+      exid::check(kept_rows_ > 0,
+                  fmt::format("experiment 'csv': {}: every row was dropped ({} with bad values)",
+                              file, dropped_));
+      // Gaps and uneven stamps: one behaviour, refused with the place (a filter, a derivative
+      // and an energy integral all assume a uniform rate). Steps across dropped rows count per
+      // row.
+      std::vector<int> keep;  // file row of each kept row, only when rows were dropped
+      if (!dropped_rows_.empty()) {
+        keep.reserve(static_cast<std::size_t>(kept_rows_));
+        for (long i = 0, r = 0, d = 0; i < kept_rows_; ++r) {
+          if (d < static_cast<long>(dropped_rows_.size()) &&
+              dropped_rows_[static_cast<std::size_t>(d)] == r) {
+            ++d;
+            continue;
+          }
+          keep.push_back(static_cast<int>(r));
+          ++i;
+        }
+      }
+      auto rowOf = [&](std::size_t i) { return keep.empty() ? static_cast<int>(i) : keep[i]; };
+      auto timeOf = [&](long i) {
+        return ct_ ? tfactor_ * raw[static_cast<std::size_t>(i)]
+                   : rowOf(static_cast<std::size_t>(i)) * dt_;
+      };
+      if (ct_ && raw.size() >= 3) {
+        std::vector<double> steps(raw.size() - 1);
+        for (std::size_t i = 1; i < raw.size(); ++i)
+          steps[i - 1] = (timeOf(static_cast<long>(i)) - timeOf(static_cast<long>(i - 1))) /
+                         static_cast<double>(rowOf(i) - rowOf(i - 1));
+        std::vector<double> sorted = steps;
+        std::nth_element(sorted.begin(),
+                         sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
+                         sorted.end());
+        const double med = sorted[sorted.size() / 2];
+        const double ratio = P_.getDouble("max_gap_ratio");
+        const bool resample = P_.getDouble("resample_hz") > 0.0;
+        for (std::size_t i = 0; i < steps.size(); ++i)
+          if (!(steps[i] <= ratio * med && (resample || steps[i] >= med / ratio)))
+            throw exid::Error(
+                fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s "
+                            "against a median step of {} s: {} (a filter, derivatives and "
+                            "energy integrals need a uniform rate); cut the recording there "
+                            "with t_start_s/t_end_s{} (max_gap_ratio = {})",
+                            file, lineText(rowOf(i + 1)), rowOf(i + 1) + 1, steps[i], med,
+                            steps[i] > med ? "a gap" : "uneven time stamps",
+                            steps[i] > med ? "" : ", or resample it (resample_hz)", ratio));
+      }
+      // Segment: inside the recording, never clamped.
+      ts_ = P_.getDouble("t_start_s");
+      te_ = P_.getDouble("t_end_s");
+      exid::check(te_ == 0.0 || te_ > ts_,
+                  fmt::format("experiment 'csv': t_end_s = {} must be after t_start_s = {} (or 0 "
+                              "for the end)",
+                              te_, ts_));
+      const double tfirst = t_first_abs_;
+      span_ = timeOf(kept_rows_ - 1) - tfirst;
+      const double step_tol =
+          kept_rows_ > 1 ? 0.5 * span_ / static_cast<double>(kept_rows_ - 1) : 0.0;
+      exid::check(ts_ <= span_,
+                  fmt::format("experiment 'csv': {}: t_start_s = {} s is after the end of the "
+                              "recording ({} s after its first sample)",
+                              file, ts_, span_));
+      exid::check(te_ <= span_ + step_tol,
+                  fmt::format("experiment 'csv': {}: t_end_s = {} s is past the end of the "
+                              "recording ({} s after its first sample); the segment is never "
+                              "clamped (0: to the end)",
+                              file, te_, span_));
+      // Split of the segment into an identification and a validation part (half-open at the
+      // split point: no sample belongs to both).
+      part_ = P_.getString("split_part");
+      sf_ = P_.getDouble("split_fraction");
+      const double sat = P_.getDouble("split_at_s");
+      seg_end_ = te_ > 0.0 ? std::min(te_, span_) : span_;
+      if (part_ != "none") {
+        exid::check((sf_ > 0.0) != (sat > 0.0),
+                    fmt::format("experiment 'csv': split_part = {} needs exactly one of "
+                                "split_fraction (found {}) and split_at_s (found {})",
+                                part_, sf_, sat));
+        tsplit_ = sf_ > 0.0 ? ts_ + sf_ * (seg_end_ - ts_) : ts_ + sat;
+        exid::check(tsplit_ > ts_ && tsplit_ < seg_end_,
+                    fmt::format("experiment 'csv': {}: the split point {} s (split_at_s = {}) is "
+                                "not inside the segment [{}, {}] s",
+                                file, tsplit_, sat, ts_, seg_end_));
+      } else {
+        exid::check(sf_ == 0.0 && sat == 0.0,
+                    fmt::format("experiment 'csv': split_fraction / split_at_s need split_part "
+                                "(identification or validation; the study key `split` sets all "
+                                "three)"));
+      }
+      const double lo = part_ == "validation" ? tsplit_ : ts_;
+      const double hi = part_ == "identification" ? tsplit_ : seg_end_;
+      // the samples: kept rows [i0_, i1_) (time increases, so the selection is one range)
+      i0_ = -1;
+      i1_ = -1;
+      in_segment_ = 0;
+      for (long i = 0; i < kept_rows_; ++i) {
+        const double rel = timeOf(i) - tfirst;
+        if (rel < ts_) continue;
+        if (te_ > 0.0 && rel > te_) break;
+        ++in_segment_;
+        if (rel < lo || (part_ == "identification" && rel >= hi)) continue;
+        if (i0_ < 0) i0_ = i;
+        i1_ = i + 1;
+      }
+      exid::check(i0_ >= 0, fmt::format("experiment 'csv': {}: no sample in the segment [{}, {}] s "
+                                        "after the first sample (t = {} s; the file spans {} s)",
+                                        file, lo, part_ == "none" ? te_ : hi, tfirst, span_));
+      if (i0_ < 0) i0_ = i1_ = 0;
+      t_first_ = timeOf(i0_);
+      t_last_ = timeOf(i1_ - 1);
+      // Recording statistics: the timing now; the rest after the first whole pass.
+      recording_ = exid::Json::object();
+      recording_["file"] = file;
+      recording_["rows"] = static_cast<long long>(i1_ - i0_);
+      if (ct_) {
+        raw.erase(raw.begin() + i1_, raw.end());  // the samples' stamps, in place
+        raw.erase(raw.begin(), raw.begin() + i0_);
+        std::vector<int> sel_rows;
+        if (!keep.empty()) sel_rows.assign(keep.begin() + i0_, keep.begin() + i1_);
+        exid::Json t = exid::samplingStats(raw, tfactor_, sel_rows, P_.getDouble("max_gap_ratio"));
+        t["source"] = fmt::format("time column '{}'", tname_);
+        recording_["timing"] = t;
+      } else {
+        exid::Json t = exid::Json::object();
+        t["source"] = "sample_period_s";
+        t["rate_hz"] = exid::rateFromPeriod(dt_);
+        t["period_s"] = dt_;
+        t["jitter"]["std_rel"] = 0.0;
+        t["jitter"]["max_rel"] = 0.0;
+        t["gaps"]["count"] = 0;
+        recording_["timing"] = t;
+      }
+    }
+
+    // ---- a pass
+    // The next kept row into uv_ (its file row in row_, its kept index in kept_); false at the
+    // end of the file. A bad value is an error, or the row is skipped as the scan dropped it.
+    bool nextKeptRow() {
+      while (true) {
+        if (!readRow(readers_)) return false;
+        ++row_;
+        const int bad = badColumn();
+        if (bad >= 0) {
+          if (!drop_) badValue(readers_, bad, row_);
+          continue;  // the scan dropped it (the same rule on the same values)
+        }
+        ++kept_;
+        return true;
+      }
+    }
+
+    void convert(int k, exid::Dataset* d) {
+      const int n = n_;
+      d->t[k] = ct_ ? tfactor_ * uv_[static_cast<std::size_t>(pt_)] : row_ * dt_;
+      for (int j = 0; j < n; ++j) {
+        const auto u = static_cast<std::size_t>(j);
+        const double s = sign_[u];
+        d->q(k, j) = s * qscale_[u] * uv_[static_cast<std::size_t>(pq_[u])] + off_[u];
+        if (!pqd_.empty()) d->qd(k, j) = s * qdscale_[u] * uv_[static_cast<std::size_t>(pqd_[u])];
+        if (!pqdd_.empty())
+          d->qdd(k, j) = s * qdscale_[u] * uv_[static_cast<std::size_t>(pqdd_[u])];
+      }
+      if (!ptau_.empty()) {
+        tau_.resize(n);
+        for (int j = 0; j < n; ++j) {
+          const auto u = static_cast<std::size_t>(j);
+          double v = uv_[static_cast<std::size_t>(ptau_[u])];
+          if (!Kt_.empty()) v *= Kt_[u];
+          tau_[j] = v;
+        }
+        if (!Kt_.empty() && joint_frame_ && robot_->hasTransmission())
+          tau_ = robot_->transmission.transpose() * tau_;
+        for (int j = 0; j < n; ++j)
+          d->tau(k, j) =
+              sign_[static_cast<std::size_t>(j)] * tauscale_[static_cast<std::size_t>(j)] * tau_[j];
+      }
+      for (std::size_t e = 0; e < pw_.size(); ++e)
+        d->wrench(k, static_cast<Eigen::Index>(e)) =
+            wscale_[e] * uv_[static_cast<std::size_t>(pw_[e])];
+    }
+
+    void collect(const exid::Dataset& chunk, int k) {
+      const Eigen::Index i = taken_ / stride_;
+      if (i == 0) {  // sized once: samples 0, stride, 2 stride, ... of the pass
+        const Eigen::Index M = (size() + stride_ - 1) / stride_;
+        collected_.t.resize(M);
+        collected_.q.resize(M, n_);
+        collected_.qd.resize(pqd_.empty() ? 0 : M, pqd_.empty() ? 0 : n_);
+        collected_.qdd.resize(pqdd_.empty() ? 0 : M, pqdd_.empty() ? 0 : n_);
+        collected_.tau.resize(ptau_.empty() ? 0 : M, ptau_.empty() ? 0 : n_);
+        collected_.wrench.resize(pw_.empty() ? 0 : M, pw_.empty() ? 0 : 6);
+      }
+      auto row = [&](Eigen::MatrixXd* dst, const Eigen::MatrixXd& src) {
+        if (src.cols() > 0) dst->row(i) = src.row(k);
+      };
+      collected_.t[i] = chunk.t[k];
+      row(&collected_.q, chunk.q);
+      row(&collected_.qd, chunk.qd);
+      row(&collected_.qdd, chunk.qdd);
+      row(&collected_.tau, chunk.tau);
+      row(&collected_.wrench, chunk.wrench);
+    }
+
+    void finishPass() {
+      if (!collecting_ || stats_done_) return;
+      stats_->finish(&recording_, tau_names_);
+      stats_done_ = true;
+      collecting_ = false;
+      collected_.source = files_[0];
+      collected_.meta = meta();
+    }
+
+    exid::ParamSet P_;
+    std::shared_ptr<const exid::RobotModel> robot_;
+    int n_ = 0;
+    std::vector<std::string> files_;
+    std::vector<std::vector<std::string>> columns_;
+    std::vector<Ref> used_;                         // q, qd, qdd, tau, wrench, t
+    std::vector<int> pq_, pqd_, pqdd_, ptau_, pw_;  // positions in used_
+    int pt_ = -1;
+    bool ct_ = false;                        // a time column
+    std::vector<std::vector<int>> select_;   // per source: the columns it reads
+    std::vector<Ref> slot_;                  // per used column: (source, place in its values)
+    std::vector<std::vector<double>> vals_;  // per source: one row's values
+    std::vector<double> uv_;                 // one row's used values
+    std::vector<std::string> tau_names_;
+    std::vector<double> qscale_, qdscale_, tauscale_, wscale_, sign_, off_, Kt_;
+    Eigen::VectorXd tau_;
+    bool joint_frame_ = false, drop_ = false;
+    double tfactor_ = 1.0, dt_ = 0.0;
+    std::string tname_, tunit_, tfrom_, part_;
+    // the scan
+    int rows_ = 0, dropped_ = 0;
+    long kept_rows_ = 0;
+    std::vector<int> dropped_rows_;
+    long i0_ = 0, i1_ = 0;
+    int in_segment_ = 0;
+    double ts_ = 0, te_ = 0, sf_ = 0, tsplit_ = 0, seg_end_ = 0, span_ = 0;
+    double t_first_abs_ = 0, t_first_ = 0, t_last_ = 0;
+    exid::Json recording_;
+    // a pass
+    std::vector<std::unique_ptr<exid::CsvReader>> readers_;
+    int row_ = -1;
+    long kept_ = -1;
+    std::unique_ptr<RecordingStats> stats_;
+    bool stats_done_ = false, collecting_ = false;
+    int stride_ = 0;  // collectEvery(); 0: nothing kept
+    long taken_ = 0;
+    exid::Dataset collected_;
+  };
+
+  /// Linear interpolation of every signal onto a uniform grid at rs_hz.
+  static exid::Dataset resample(const exid::Dataset& d, double rs_hz, const std::string& file) {
+    const int K = d.size();
+    const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
+    // (counted in double first: a huge rate must not overflow the integer count)
+    const double Md = std::floor(span_s * rs_hz + 1e-9) + 1.0;
+    exid::check(Md >= 2.0 && Md <= 1e8,
+                fmt::format("experiment 'csv': {}: resample_hz = {} gives {:g} samples over {} s "
+                            "(2 to 1e8)",
+                            file, rs_hz, Md, span_s));
+    const auto M = static_cast<Eigen::Index>(Md);
+    exid::Dataset u;
+    u.t.resize(M);
+    for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rs_hz;
+    auto interp = [&](const Eigen::MatrixXd& A) {
+      if (A.size() == 0) return Eigen::MatrixXd();
+      Eigen::MatrixXd B(M, A.cols());
+      Eigen::Index k = 0;
+      for (Eigen::Index m = 0; m < M; ++m) {
+        while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
+        const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
+        B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
+      }
+      return B;
+    };
+    u.q = interp(d.q);
+    u.qd = interp(d.qd);
+    u.qdd = interp(d.qdd);
+    u.tau = interp(d.tau);
+    u.wrench = interp(d.wrench);
+    u.source = d.source;
+    return u;
+  }
 
   /// Optional: zero-phase low-pass of q (and tau, wrench), central differences, trim, decimate.
   Preprocessed preprocess(exid::Dataset* d, const std::string& file) const {

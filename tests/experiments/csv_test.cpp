@@ -7,6 +7,8 @@
 #include <filesystem>
 #include <fstream>
 #include <iterator>
+#include <sstream>
+#include <vector>
 
 #include "../models/model_test_util.hpp"
 #include "exid/io.hpp"
@@ -382,4 +384,88 @@ TEST(CsvSignals, AResampleRateGivingAbsurdlyManySamplesIsRefused) {
   const fs::path f = uniformFile("resample_huge.csv", 50, 0.01);
   EXPECT_NE(errorOf(f, "resample_hz: 1e300").find("resample_hz = 1e+300 gives"), std::string::npos)
       << errorOf(f, "resample_hz: 1e300");
+}
+
+// ---- a recording streamed from its file (Experiment::stream)
+
+TEST(CsvStream, WindowsOverAStreamGiveTheSamplesAndStatisticsOfTheWholeRead) {
+  const fs::path f = uniformFile("stream.csv", 1000, 0.01);
+  const std::string extra = "t_start_s: 0.5, t_end_s: 8";
+  const exid::Dataset whole = readCsv(f, extra);
+  auto e = exid_test::create<exid::Experiment>("csv", "{file: " + f.string() + ", " + extra + "}");
+  const exid::Dataset s = e->stream(mtest::robot("puma560"), nullptr, mtest::context());
+  ASSERT_TRUE(s.streamed());
+  ASSERT_EQ(s.size(), whole.size());
+  EXPECT_EQ(s.tFirst(), whole.t(0));
+  EXPECT_EQ(s.tLast(), whole.t(whole.size() - 1));
+  EXPECT_TRUE(s.hasTorque());
+  EXPECT_FALSE(s.hasVelocity());
+  EXPECT_FALSE(s.stream->passed());
+  // overlapping windows, in order, as chunks with context ask for them
+  exid::SampleWindow w(s);
+  for (int b = 0; b < s.size(); b += 97) {
+    const int lo = std::max(0, b - 13), hi = std::min(s.size(), b + 97 + 13);
+    const exid::Dataset x = w.span(lo, hi);
+    ASSERT_EQ(x.size(), hi - lo);
+    EXPECT_EQ(x.t, whole.t.segment(lo, hi - lo));
+    EXPECT_EQ(x.q, whole.q.middleRows(lo, hi - lo));
+    EXPECT_EQ(x.tau, whole.tau.middleRows(lo, hi - lo));
+  }
+  EXPECT_TRUE(s.stream->passed());
+  EXPECT_EQ(s.stream->meta().dump(), whole.meta.dump());
+  EXPECT_NE(whole.meta.find("recording")->find("saturation"), nullptr);
+  // behind the window is an error, never a wrong span
+  EXPECT_THROW(w.span(0, 5), exid::Error);
+  // another pass reads the same samples
+  const exid::Dataset m = exid::materialize(s);
+  EXPECT_EQ(m.t, whole.t);
+  EXPECT_EQ(m.q, whole.q);
+  EXPECT_EQ(m.tau, whole.tau);
+}
+
+TEST(CsvStream, ABadValueFoundWhileStreamingNamesItsLineAndDroppedRowsAreSkippedAlike) {
+  std::string s = header(6);
+  for (int k = 0; k < 300; ++k) s += row(0.01 * k, 6, 0.1 * std::sin(0.05 * k));
+  const std::string good = s;
+  // data row 200 (file line 201) loses its q3
+  std::string bad;
+  {
+    std::istringstream in(good);
+    std::string line;
+    int l = 0;
+    while (std::getline(in, line)) {
+      if (++l == 202) {
+        std::vector<std::string> cells;
+        std::stringstream ls(line);
+        std::string c;
+        while (std::getline(ls, c, ',')) cells.push_back(c);
+        cells[3] = "";
+        line.clear();
+        for (std::size_t i = 0; i < cells.size(); ++i) line += (i ? "," : "") + cells[i];
+      }
+      bad += line + "\n";
+    }
+  }
+  const fs::path f = writeText("stream_bad.csv", bad);
+  auto e = exid_test::create<exid::Experiment>("csv", "{file: " + f.string() + "}");
+  const exid::Dataset d = e->stream(mtest::robot("puma560"), nullptr, mtest::context());
+  ASSERT_TRUE(d.streamed());  // the scan reads the time stamps alone
+  try {
+    exid::materialize(d);
+    ADD_FAILURE() << "no error";
+  } catch (const exid::Error& err) {
+    const std::string m = err.what();
+    EXPECT_NE(m.find("line 202 (data row 201)"), std::string::npos) << m;
+    EXPECT_NE(m.find("q3"), std::string::npos) << m;
+  }
+  // dropped: the scan decides on every used column, the passes skip the same row
+  const std::string extra = "drop_bad_rows: true";
+  const exid::Dataset whole = readCsv(f, extra);
+  auto e2 = exid_test::create<exid::Experiment>("csv", "{file: " + f.string() + ", " + extra + "}");
+  const exid::Dataset st =
+      exid::materialize(e2->stream(mtest::robot("puma560"), nullptr, mtest::context()));
+  EXPECT_EQ(whole.size(), 299);
+  EXPECT_EQ(st.t, whole.t);
+  EXPECT_EQ(st.q, whole.q);
+  EXPECT_EQ(st.meta.dump(), whole.meta.dump());
 }

@@ -530,3 +530,79 @@ TEST(Cli, ALongRecordingIsNotCopiedIntoExperimentCsvUnlessAsked) {
   EXPECT_EQ(S.find("experiment")->find("csv")->asString(), "experiment.csv");
   fs::remove_all(dir);
 }
+
+// A summary's JSON without the lines that hold times measured (wall, CPU, rates).
+std::string withoutTimes(const exid::Json& j) {
+  std::istringstream in(j.dump());
+  std::string line, out;
+  while (std::getline(in, line))
+    if (line.find("wall_s") == std::string::npos && line.find("cpu_s") == std::string::npos &&
+        line.find("per_s") == std::string::npos)
+      out += line + "\n";
+  return out;
+}
+
+// A recording streamed from its file (estimators that stream, experiment.csv not asked for)
+// gives the same bits as the same recording read whole: estimates, statistics of the recording,
+// inspection, held-out error; bad rows dropped and a segment cut the same way.
+TEST(Cli, AStreamedRecordingGivesTheSameResultsAsTheWholeRead) {
+  fs::path dir = tempDir("streamed");
+  std::ofstream(dir / "sim.yaml")
+      << "robot: {type: planar2r}\n"
+         "model: {type: differential}\n"
+         "experiment: {type: simulate, params: {duration_s: 6, noise_q_rad: 1e-4, noise_tau_Nm: "
+         "0.05}}\n"
+         "report: {params: {plots: false}}\n";
+  CmdResult r =
+      runExid("-q run " + (dir / "sim.yaml").string() + " --out " + (dir / "sim").string());
+  ASSERT_EQ(r.code, 0) << r.out;
+  // the recording, with one row made bad (dropped by drop_bad_rows)
+  {
+    std::ifstream in(dir / "sim" / "experiment.csv");
+    std::ofstream out(dir / "rec.csv");
+    std::string line;
+    int k = 0;
+    while (std::getline(in, line)) {
+      if (k++ == 40)
+        line = line.substr(0, line.find(',')) + ",nan" +
+               line.substr(line.find(',', line.find(',') + 1));
+      out << line << "\n";
+    }
+  }
+  for (const std::string est : {"batch_ls", "wls", "rls", "consistent_ls"}) {
+    auto run = [&](const std::string& policy) {
+      std::ofstream(dir / "s.yaml")
+          << "robot: {type: planar2r}\n"
+             "model: {type: differential}\n"
+             "experiment: {type: csv, params: {file: rec.csv, drop_bad_rows: true, t_start_s: "
+             "0.2}}\n"
+             "split: {identification_fraction: 0.7}\n"
+             "estimator: {type: "
+          << est << (est == "consistent_ls" ? ", params: {}}\n" : "}\n")
+          << (est == "consistent_ls" || est == "rls"
+                  ? "prior: {from: robot, relative_std: 0.5, absolute_std: 1}\n"
+                  : "")
+          << "report: {params: {plots: false, experiment_csv: " << policy << "}}\n";
+      fs::remove_all(dir / "o");
+      CmdResult c =
+          runExid("-q run " + (dir / "s.yaml").string() + " --out " + (dir / "o").string());
+      EXPECT_EQ(c.code, 0) << est << " " << policy << ": " << c.out;
+      return exid::Json::parse(slurp(dir / "o" / "summary.json"));
+    };
+    const exid::Json whole = run("always"), streamed = run("never");
+    ASSERT_NE(streamed.find("experiment"), nullptr);
+    EXPECT_NE(streamed.find("experiment")->find("streamed"), nullptr) << est;
+    EXPECT_EQ(whole.find("experiment")->find("streamed"), nullptr) << est;
+    for (const char* key : {"identification", "validation", "inspection"}) {
+      ASSERT_NE(whole.find(key), nullptr) << est << " " << key;
+      EXPECT_EQ(withoutTimes(*whole.find(key)), withoutTimes(*streamed.find(key)))
+          << est << " " << key;
+    }
+    const exid::Json& mw = *whole.find("experiment")->find("meta");
+    const exid::Json& ms = *streamed.find("experiment")->find("meta");
+    EXPECT_EQ(mw.dump(), ms.dump()) << est;
+    EXPECT_EQ(ms.find("accounting")->find("dropped_bad_rows")->asInt(), 1);
+    EXPECT_NE(ms.find("recording")->find("duplicate_rows"), nullptr);
+  }
+  fs::remove_all(dir);
+}

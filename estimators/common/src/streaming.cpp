@@ -12,28 +12,6 @@
 
 namespace exid::est {
 
-namespace {
-Eigen::MatrixXd rowsOf(const Eigen::MatrixXd& M, int begin, int end) {
-  if (M.cols() == 0 || M.rows() == 0) return Eigen::MatrixXd(0, 0);
-  return M.middleRows(begin, end - begin);
-}
-}  // namespace
-
-Dataset sliceDataset(const Dataset& d, int begin, int end) {
-  check(0 <= begin && begin <= end && end <= d.size(),
-        fmt::format("sliceDataset: rows [{}, {}) outside a dataset of {}", begin, end, d.size()));
-  Dataset s;
-  s.t = d.t.segment(begin, end - begin);
-  s.q = rowsOf(d.q, begin, end);
-  s.qd = rowsOf(d.qd, begin, end);
-  s.qdd = rowsOf(d.qdd, begin, end);
-  s.tau = rowsOf(d.tau, begin, end);
-  s.wrench = rowsOf(d.wrench, begin, end);
-  s.source = d.source;
-  s.meta = d.meta;
-  return s;
-}
-
 bool modelIsPerSample(const ObservationModel& model) {
   const Json desc = model.describe();
   if (const Json* ps = desc.isObject() ? desc.find("per_sample") : nullptr)
@@ -70,12 +48,14 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
   const int K = data.size();
   check(K > 0, fmt::format("{}: the dataset '{}' is empty", who, data.source));
   const int chunk = modelIsPerSample(model) ? std::max(1, chunk_samples) : K;
+  SampleWindow window(data);
   for (int b = 0; b < K; b += chunk) {
     if (ctx.shouldStop())
       throw Error(fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
                               ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
     const int e = std::min(K, b + chunk);
-    Rows r = (b == 0 && e == K) ? model.rows(data, ctx) : model.rows(sliceDataset(data, b, e), ctx);
+    Rows r = (b == 0 && e == K && !data.streamed()) ? model.rows(data, ctx)
+                                                    : model.rows(window.span(b, e), ctx);
     checkRows(r, model.numBase(), who, b);
     fn(r, b, e);
     ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
@@ -138,10 +118,23 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
   const int T = std::max(1, threads);
   std::vector<RowAccumulator> slot(static_cast<std::size_t>(T));
   RowAccumulator total(p, method);
+  // A streamed dataset is read in order on this thread, one wave of tasks at a time (the
+  // samples of at most T tasks are held); the tasks' rows are then built on the T threads.
+  SampleWindow window(data);
+  std::vector<Dataset> task_data(static_cast<std::size_t>(T));
+  auto readWave = [&](long c0) {
+    for (long c = c0; c < std::min(n, c0 + T); ++c) {
+      const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+      task_data[static_cast<std::size_t>(c % T)] = window.span(tb, te);
+    }
+  };
+  if (data.streamed()) readWave(0);
   parallelChunks(
       n, T,
       [&](long c) {
         const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+        const Dataset* src = data.streamed() ? &task_data[static_cast<std::size_t>(c % T)] : &data;
+        const int off = data.streamed() ? tb : 0;  // sample index of src's first sample
         RowAccumulator a(p, method);
         for (int b = tb; b < te; b += chunk) {
           if (ctx.shouldStop())
@@ -149,8 +142,9 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
                 fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
                             ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
           const int e = std::min(te, b + chunk);
-          Rows r = (b == 0 && e == K) ? model.rows(data, ctx)
-                                      : model.rows(sliceDataset(data, b, e), ctx);
+          Rows r = (b - off == 0 && e - off == src->size())
+                       ? model.rows(*src, ctx)
+                       : model.rows(sliceDataset(*src, b - off, e - off), ctx);
           checkRows(r, p, who, b);
           a.add(r.W, r.y);
         }
@@ -159,6 +153,8 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
       [&](long c) {
         total.merge(slot[static_cast<std::size_t>(c % T)]);
         slot[static_cast<std::size_t>(c % T)] = RowAccumulator();
+        // the wave's last task merged: read the next wave's samples
+        if (data.streamed() && (c % T == T - 1 || c == n - 1) && c + 1 < n) readWave(c + 1);
         const long e = std::min<long>(K, (c + 1) * task);
         ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
                    fmt::format("{}: {} / {} samples", who, e, K));

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -18,7 +19,42 @@ struct Samples {
   int dof() const { return static_cast<int>(q.cols()); }
 };
 
+struct Dataset;
+
+/// The samples of a dataset too long to hold, read in consecutive chunks (a recording streamed
+/// from its file). A pass reads every sample once, in order; rewind() starts another. Reading may
+/// throw exid::Error (a bad value found in the file), naming the file and the line.
+class DatasetStream {
+ public:
+  virtual ~DatasetStream() = default;
+  virtual int size() const = 0;  // samples in a pass
+  virtual int dof() const = 0;
+  virtual bool hasVelocity() const = 0;
+  virtual bool hasAcceleration() const = 0;
+  virtual bool hasTorque() const = 0;
+  virtual bool hasWrench() const = 0;
+  virtual double tFirst() const = 0;  // [s] time of the first and the last sample
+  virtual double tLast() const = 0;
+  /// Starts a pass at sample 0.
+  virtual void rewind() = 0;
+  /// The next min(count, left) samples of the pass into *chunk (t, q, ... resized; source set,
+  /// meta left as it is). Returns how many: 0 at the end of the pass.
+  virtual int read(int count, Dataset* chunk) = 0;
+  /// What produced the data (as Dataset::meta); statistics over every sample (e.g. a
+  /// recording's duplicate rows) are in it once a whole pass has been read.
+  virtual Json meta() const = 0;
+  /// Whether a whole pass has been read (meta() is then complete).
+  virtual bool passed() const = 0;
+  /// Keep every stride-th sample (0, stride, 2 stride, ...) of the first whole pass, for
+  /// checks that look at a subset (exid inspect). Call before the first read.
+  virtual void collectEvery(int stride) = 0;
+  /// Those samples, once a whole pass has been read (empty before).
+  virtual const Dataset& collected() const = 0;
+};
+
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).
+/// A streamed dataset (`stream` set) holds no samples itself: its matrices are empty and its
+/// samples are read through the stream (materialize() reads them all into memory).
 struct Dataset {
   Eigen::VectorXd t;           // [s], strictly increasing
   Eigen::MatrixXd q, qd, qdd;  // K x n, measured coordinates [rad or m, /s, /s^2]
@@ -27,14 +63,41 @@ struct Dataset {
   std::string source;          // file or generator, for messages
   Json meta = Json::object();  // what produced it (noise, seed, dropped rows, ...)
 
-  int size() const { return static_cast<int>(t.size()); }
-  int dof() const { return static_cast<int>(q.cols()); }
-  bool hasVelocity() const { return qd.cols() > 0; }
-  bool hasAcceleration() const { return qdd.cols() > 0; }
-  bool hasTorque() const { return tau.cols() > 0; }
-  bool hasWrench() const { return wrench.cols() > 0; }
-  /// Samples view (copies q, qd, qdd).
+  std::shared_ptr<DatasetStream> stream;  // set: the samples are read through it
+
+  bool streamed() const { return stream != nullptr; }
+  int size() const { return stream ? stream->size() : static_cast<int>(t.size()); }
+  int dof() const { return stream ? stream->dof() : static_cast<int>(q.cols()); }
+  bool hasVelocity() const { return stream ? stream->hasVelocity() : qd.cols() > 0; }
+  bool hasAcceleration() const { return stream ? stream->hasAcceleration() : qdd.cols() > 0; }
+  bool hasTorque() const { return stream ? stream->hasTorque() : tau.cols() > 0; }
+  bool hasWrench() const { return stream ? stream->hasWrench() : wrench.cols() > 0; }
+  double tFirst() const { return stream ? stream->tFirst() : t(0); }
+  double tLast() const { return stream ? stream->tLast() : t(t.size() - 1); }
+  /// Samples view (copies q, qd, qdd; a dataset in memory).
   Samples samples() const { return {t, q, qd, qdd}; }
+};
+
+/// Samples [begin, end) of a dataset in memory (meta and source kept).
+Dataset sliceDataset(const Dataset& d, int begin, int end);
+/// A dataset in memory: d itself, or every sample of its stream read in one pass (meta then
+/// the stream's, complete).
+Dataset materialize(const Dataset& d);
+
+/// Consecutive spans of a dataset, in memory or streamed, asked for in order: span(b, e) with b
+/// and e never below the previous call's. A stream is read once, keeping only the samples
+/// between the lowest begin still to come and the highest end asked for.
+class SampleWindow {
+ public:
+  explicit SampleWindow(const Dataset& d);
+  /// Samples [begin, end) (meta and source of the dataset).
+  Dataset span(int begin, int end);
+
+ private:
+  const Dataset& d_;
+  Dataset buf_;  // samples [buf_begin_, buf_begin_ + buf_.size()) of a stream
+  int buf_begin_ = 0;
+  bool started_ = false;
 };
 
 /// Observation rows of a model: W * theta ~= y. Columns are BASE parameters of the model.

@@ -184,6 +184,13 @@ class Experiment : public PluginObject {
   /// reference: the excitation stage's trajectory, or null when the study has none.
   virtual Dataset run(std::shared_ptr<const RobotModel> robot, const Samples* reference,
                       const RunContext& ctx) = 0;
+  /// The same data, possibly streamed (Dataset::stream: read in chunks, never held whole) when
+  /// the experiment can read it so (a long recording); by default run(). The runner asks for it
+  /// when every consumer of the data streams (EstimatorSpecs::streams).
+  virtual Dataset stream(std::shared_ptr<const RobotModel> robot, const Samples* reference,
+                         const RunContext& ctx) {
+    return run(std::move(robot), reference, ctx);
+  }
 };
 
 // ---------------------------------------------------------------- estimator
@@ -200,6 +207,7 @@ struct EstimatorSpecs {
   bool recursive = false;          // produces a history
   bool needs_raw_dataset = false;  // filters or differentiates the signals itself
   bool accepts_prior = false;
+  bool streams = false;  // reads a streamed dataset in chunks (never holds it whole)
 };
 
 struct Estimate {

@@ -126,8 +126,8 @@ Json parameterTable(const Estimate& e);
 
 // ============================================================== streaming rows
 
-/// Rows [begin, end) of a dataset (every signal that is present).
-Dataset sliceDataset(const Dataset& d, int begin, int end);
+// Datasets in memory or streamed (Dataset::stream): the functions below read a streamed
+// dataset in one pass, in order, holding only the chunks at work (exid::SampleWindow).
 
 /// Whether model.rows() may be computed on consecutive slices of a dataset and stacked, i.e.
 /// the rows of sample k depend on sample k only. True for the models known to be per sample
@@ -136,7 +136,8 @@ Dataset sliceDataset(const Dataset& d, int begin, int end);
 bool modelIsPerSample(const ObservationModel& model);
 
 /// Streams a dataset through the model: calls fn(rows, begin, end) on consecutive slices of at
-/// most chunk_samples samples (the whole dataset at once when the model is not per sample).
+/// most chunk_samples samples (the whole dataset at once when the model is not per sample: a
+/// streamed dataset is then read whole into memory).
 /// Reports progress in [lo, hi] of the stage and throws exid::Error when ctx.shouldStop().
 /// Threads for a `threads` parameter: n > 0 as given, 0 the machine's cores (at most 8).
 int resolveThreads(long requested);

@@ -1,0 +1,160 @@
+// exid — datasets in memory or streamed: slices, materialising a stream, ordered windows.
+#include "exid/data.hpp"
+
+#include <fmt/format.h>
+
+#include <algorithm>
+
+#include "exid/error.hpp"
+
+namespace exid {
+
+namespace {
+Eigen::MatrixXd rowsOf(const Eigen::MatrixXd& M, int begin, int end) {
+  if (M.cols() == 0 || M.rows() == 0) return Eigen::MatrixXd(0, 0);
+  return M.middleRows(begin, end - begin);
+}
+
+// Appends the rows of b to a (same signals).
+void append(Eigen::MatrixXd* a, const Eigen::MatrixXd& b) {
+  if (b.rows() == 0 || b.cols() == 0) return;
+  if (a->rows() == 0) {
+    *a = b;
+    return;
+  }
+  const Eigen::Index r = a->rows();
+  a->conservativeResize(r + b.rows(), Eigen::NoChange);
+  a->bottomRows(b.rows()) = b;
+}
+
+// Drops the first m rows of a.
+void dropFront(Eigen::MatrixXd* a, Eigen::Index m) {
+  if (a->rows() == 0 || m == 0) return;
+  const Eigen::Index left = a->rows() - m;
+  Eigen::MatrixXd rest = a->bottomRows(left);
+  a->swap(rest);
+}
+}  // namespace
+
+Dataset sliceDataset(const Dataset& d, int begin, int end) {
+  check(!d.streamed(), "sliceDataset: a streamed dataset has no samples in memory");
+  check(0 <= begin && begin <= end && end <= d.size(),
+        fmt::format("sliceDataset: rows [{}, {}) outside a dataset of {}", begin, end, d.size()));
+  Dataset s;
+  s.t = d.t.segment(begin, end - begin);
+  s.q = rowsOf(d.q, begin, end);
+  s.qd = rowsOf(d.qd, begin, end);
+  s.qdd = rowsOf(d.qdd, begin, end);
+  s.tau = rowsOf(d.tau, begin, end);
+  s.wrench = rowsOf(d.wrench, begin, end);
+  s.source = d.source;
+  s.meta = d.meta;
+  return s;
+}
+
+Dataset materialize(const Dataset& d) {
+  if (!d.streamed()) return d;
+  DatasetStream& s = *d.stream;
+  const int K = s.size(), n = s.dof();
+  Dataset out;
+  out.t.resize(K);
+  out.q.resize(K, n);
+  if (s.hasVelocity()) out.qd.resize(K, n);
+  if (s.hasAcceleration()) out.qdd.resize(K, n);
+  if (s.hasTorque()) out.tau.resize(K, n);
+  if (s.hasWrench()) out.wrench.resize(K, 6);
+  s.rewind();
+  Dataset chunk;
+  int at = 0;
+  constexpr int kChunk = 8192;
+  for (int got; (got = s.read(kChunk, &chunk)) > 0; at += got) {
+    check(at + got <= K, fmt::format("{}: the stream gave more than its {} samples", d.source, K));
+    out.t.segment(at, got) = chunk.t;
+    out.q.middleRows(at, got) = chunk.q;
+    if (s.hasVelocity()) out.qd.middleRows(at, got) = chunk.qd;
+    if (s.hasAcceleration()) out.qdd.middleRows(at, got) = chunk.qdd;
+    if (s.hasTorque()) out.tau.middleRows(at, got) = chunk.tau;
+    if (s.hasWrench()) out.wrench.middleRows(at, got) = chunk.wrench;
+  }
+  check(at == K, fmt::format("{}: the stream gave {} of its {} samples", d.source, at, K));
+  out.source = d.source;
+  out.meta = s.meta();
+  return out;
+}
+
+SampleWindow::SampleWindow(const Dataset& d) : d_(d) {}
+
+Dataset SampleWindow::span(int begin, int end) {
+  check(
+      0 <= begin && begin <= end && end <= d_.size(),
+      fmt::format("SampleWindow: samples [{}, {}) outside a dataset of {}", begin, end, d_.size()));
+  if (!d_.streamed()) return sliceDataset(d_, begin, end);
+  DatasetStream& s = *d_.stream;
+  if (!started_) {
+    s.rewind();
+    buf_ = Dataset();
+    buf_begin_ = 0;
+    started_ = true;
+  }
+  check(begin >= buf_begin_,
+        fmt::format("SampleWindow: samples from {} asked for after samples from {} (a stream is "
+                    "read in order)",
+                    begin, buf_begin_));
+  // Forget what no later span can ask for.
+  const int have = static_cast<int>(buf_.t.size());
+  const int drop = std::min(have, begin - buf_begin_);
+  if (drop > 0) {
+    const Eigen::Index left = have - drop;
+    Eigen::VectorXd t = buf_.t.tail(left);
+    buf_.t.swap(t);
+    for (Eigen::MatrixXd* M : {&buf_.q, &buf_.qd, &buf_.qdd, &buf_.tau, &buf_.wrench})
+      dropFront(M, drop);
+  }
+  buf_begin_ += drop;
+  if (buf_begin_ < begin) {  // skip samples never asked for
+    Dataset skip;
+    while (buf_begin_ < begin) {
+      const int got = s.read(std::min(8192, begin - buf_begin_), &skip);
+      check(got > 0, fmt::format("{}: the stream ended at sample {} of {}", d_.source, buf_begin_,
+                                 d_.size()));
+      buf_begin_ += got;
+    }
+  }
+  Dataset chunk;
+  while (buf_begin_ + buf_.t.size() < end) {
+    const int need = end - buf_begin_ - static_cast<int>(buf_.t.size());
+    const int got = s.read(need, &chunk);
+    check(got > 0, fmt::format("{}: the stream ended at sample {} of {}", d_.source,
+                               buf_begin_ + static_cast<int>(buf_.t.size()), d_.size()));
+    if (buf_.t.size() == 0) {
+      buf_.t = chunk.t;
+      buf_.q = chunk.q;
+      buf_.qd = chunk.qd;
+      buf_.qdd = chunk.qdd;
+      buf_.tau = chunk.tau;
+      buf_.wrench = chunk.wrench;
+    } else {
+      const Eigen::Index r = buf_.t.size();
+      buf_.t.conservativeResize(r + got);
+      buf_.t.tail(got) = chunk.t;
+      append(&buf_.q, chunk.q);
+      append(&buf_.qd, chunk.qd);
+      append(&buf_.qdd, chunk.qdd);
+      append(&buf_.tau, chunk.tau);
+      append(&buf_.wrench, chunk.wrench);
+    }
+  }
+  Dataset out;
+  const int b = begin - buf_begin_, e = end - buf_begin_;
+  out.t = buf_.t.segment(b, e - b);
+  out.q = rowsOf(buf_.q, b, e);
+  out.qd = rowsOf(buf_.qd, b, e);
+  out.qdd = rowsOf(buf_.qdd, b, e);
+  out.tau = rowsOf(buf_.tau, b, e);
+  out.wrench = rowsOf(buf_.wrench, b, e);
+  out.source = d_.source;
+  out.meta = d_.meta;
+  return out;
+}
+
+}  // namespace exid
