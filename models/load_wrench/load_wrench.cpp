@@ -1,5 +1,5 @@
 // exid — observation model `load_wrench`: payload parameters from a wrist force/torque sensor,
-// six rows per sample (DESIGN.md §4):
+// six rows per sample (docs/conventions.md §2):
 //   w = A(omega, alpha, a - g) phi (+ w0)
 // w = [fx fy fz mx my mz] is the wrench the sensor (i.e. the robot) exerts on the payload,
 // expressed in the sensor frame, moment about the sensor origin; A = exid::wrenchRegressor at
