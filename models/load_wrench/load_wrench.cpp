@@ -58,7 +58,12 @@ class LoadWrenchModel : public exid::ObservationModel {
       v.head(10) = exid::models::Payload::fromJson(*p).phi();
     return v;
   }
-  std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "wrench"}; }
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = true;  // six rows per sample
+    sp.required_signals = {"q", "qd", "qdd", "wrench"};
+    return sp;
+  }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const int n = robot().dof();

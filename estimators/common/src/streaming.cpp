@@ -34,13 +34,7 @@ Dataset sliceDataset(const Dataset& d, int begin, int end) {
   return s;
 }
 
-bool modelIsPerSample(const ObservationModel& model) {
-  const Json desc = model.describe();
-  if (const Json* ps = desc.isObject() ? desc.find("per_sample") : nullptr)
-    if (ps->type() == Json::Type::Bool) return ps->asBool();
-  const std::string& n = model.pluginName();
-  return n == "differential" || n == "load_wrench" || n == "load_torque";
-}
+bool modelIsPerSample(const ObservationModel& model) { return model.specs().per_sample; }
 
 void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
   check(rows.W.cols() == p,
