@@ -32,7 +32,6 @@
 #include <sundials/sundials_context.h>
 #include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
 
-#include <Eigen/LU>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -64,15 +63,15 @@ class TimeTrajectory {
                     who, name));
     exid::check(sp.duration_s > 0,
                 fmt::format("{}: trajectory '{}' declares no duration", who, name));
-    s0_ = traj.evaluate(traj.initial());
-    n_ = s0_.dof();
-    exid::check(s0_.size() >= 2, fmt::format("{}: the trajectory has fewer than 2 samples", who));
+    const exid::Samples s0 = traj.evaluate(traj.initial());
+    n_ = s0.dof();
+    exid::check(s0.size() >= 2, fmt::format("{}: the trajectory has fewer than 2 samples", who));
     moving_ = sp.moving_joints;
     if (moving_.empty())
       for (int j = 0; j < n_; ++j) moving_.push_back(j);
     T_ = sp.duration_s;
-    dt_ = s0_.t(1) - s0_.t(0);
-    rest_ = s0_.q.row(0).transpose();
+    dt_ = s0.t(1) - s0.t(0);
+    rest_ = s0.q.row(0).transpose();
     t1_ = Eigen::VectorXd::Zero(1);
   }
 
@@ -101,7 +100,6 @@ class TimeTrajectory {
   double T_ = 0, dt_ = 0.1;
   Eigen::VectorXd rest_;
   mutable Eigen::VectorXd t1_;
-  exid::Samples s0_;
 };
 
 // ---------------------------------------------------------------- CVODES forward + adjoint
