@@ -62,20 +62,16 @@ double baselineSeconds(const exid::StudyConfig& cfg) {
   auto model = registry().create<exid::ObservationModel>(cfg.models[0].type, cfg.models[0].params);
   auto traj = registry().create<exid::Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
   traj->bind(robot, ctx);
-  const exid::Json d = traj->describe();
-  if (const exid::Json* js = d.find("joints");
-      js && js->isArray() && static_cast<int>(js->size()) < robot->dof()) {
-    std::vector<int> moving;
-    for (std::size_t i = 0; i < js->size(); ++i)
-      moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+  std::vector<int> moving = traj->specs().moving_joints;
+  if (!moving.empty() && static_cast<int>(moving.size()) < robot->dof()) {
     const exid::Samples s0 = traj->evaluate(traj->initial());
-    model->restrictMotion(moving, s0.q.row(0).transpose());
+    model->restrictMotion(std::move(moving), s0.q.row(0).transpose());
   }
   model->bind(robot, ctx);
   auto crit = registry().create<exid::Criterion>(cfg.criterion->type, cfg.criterion->params);
   exid::ExcitationOptions xo;
   xo.position_margin = traj->positionMargin();
-  xo.scale_columns = crit->scaleColumns();
+  xo.scale_columns = crit->specs().scale_columns;
   auto problem = exid::makeExcitationProblem(traj, model, crit, xo);
   const Eigen::VectorXd z = problem->initial();
   Eigen::VectorXd g;

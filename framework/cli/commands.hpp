@@ -1,4 +1,5 @@
-// exid — the stage commands of the command line (DESIGN.md §5) beyond run/validate/plugins.
+// exid — the stage commands of the command line (docs/conventions.md §3) beyond
+// run/validate/plugins.
 #pragma once
 
 #include <CLI/CLI.hpp>

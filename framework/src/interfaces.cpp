@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <ostream>
 #include <random>
 
 #include "exid/drive.hpp"
@@ -131,6 +132,61 @@ Eigen::MatrixXd Trajectory::jacobian(const Eigen::VectorXd& z) const {
     m(idx % K, idx / K) = 0.0;
   }
   return J;
+}
+
+Samples Trajectory::evaluateAt(const Eigen::VectorXd&, const Eigen::VectorXd&) const {
+  throw Error(fmt::format(
+      "trajectory '{}' is defined on its sample grid only (no evaluation at arbitrary times)",
+      pluginName()));
+}
+
+Eigen::VectorXd Trajectory::vjpAt(const Eigen::VectorXd&, const Eigen::VectorXd&,
+                                  const Samples&) const {
+  throw Error(fmt::format(
+      "trajectory '{}' is defined on its sample grid only (no evaluation at arbitrary times)",
+      pluginName()));
+}
+
+std::string toString(StopReason r) {
+  switch (r) {
+    case StopReason::None:
+      return "";
+    case StopReason::Converged:
+      return "converged";
+    case StopReason::ConvergedFtol:
+      return "converged (ftol_rel)";
+    case StopReason::ConvergedGtol:
+      return "converged (gtol)";
+    case StopReason::MaxIterations:
+      return "max_iterations";
+    case StopReason::StartOnly:
+      return "max_iterations (0: start evaluated only)";
+    case StopReason::OuterPasses:
+      return "outer passes";
+    case StopReason::MaxEvaluations:
+      return "max_evaluations";
+    case StopReason::MaxTime:
+      return "max_time_s";
+    case StopReason::MaxCpu:
+      return "max_cpu_s";
+    case StopReason::Deadline:
+      return "deadline";
+    case StopReason::Cancelled:
+      return "cancelled";
+  }
+  return "";
+}
+
+std::ostream& operator<<(std::ostream& os, StopReason r) { return os << toString(r); }
+
+bool stoppedByTime(StopReason r) {
+  return r == StopReason::MaxTime || r == StopReason::MaxCpu || r == StopReason::Deadline;
+}
+
+std::string stopReasonText(const OptimizerResult& r) {
+  std::string s = toString(r.stop_reason);
+  if (!r.feasible) s += " (no feasible point found; least violation returned)";
+  return s;
 }
 
 }  // namespace exid

@@ -80,7 +80,7 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
       "({}).\nLargest constraint violation at the optimum: {:.3g}.\n\nSingular values of the base "
       "design matrix W at the optimum (cond(W) = sigma_max / sigma_min = {:.6g}):\n\n",
       cfg_.criterion ? cfg_.criterion->type : "?", r.criterion_initial, r.criterion_final,
-      r.iterations, r.evaluations, r.wall_s, r.stop_reason, r.max_violation,
+      r.iterations, r.evaluations, r.wall_s, stopReasonText(r), r.max_violation,
       svd.singularValues()(0) / svd.singularValues()(svd.singularValues().size() - 1));
   s += "```\n";
   for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i)

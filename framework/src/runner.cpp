@@ -134,12 +134,17 @@ class StackedModel final : public ObservationModel {
       r0 += rows;
     }
   }
-  std::vector<std::string> requiredSignals() const override {
-    std::vector<std::string> out;
+  // Every part's signals. Not declared per sample: the stack's rows are computed on the whole
+  // dataset at once, as they always were.
+  ModelSpecs specs() const override {
+    ModelSpecs sp;
+    sp.required_signals.clear();
     for (const auto& p : parts_)
-      for (const auto& s : p->requiredSignals())
-        if (std::find(out.begin(), out.end(), s) == out.end()) out.push_back(s);
-    return out;
+      for (const auto& s : p->specs().required_signals)
+        if (std::find(sp.required_signals.begin(), sp.required_signals.end(), s) ==
+            sp.required_signals.end())
+          sp.required_signals.push_back(s);
+    return sp;
   }
   Json describe() const override {
     Json j = Json::array();
@@ -205,7 +210,7 @@ void checkDataset(const Dataset& d, const RobotModel& robot, const ObservationMo
           fmt::format("{} ({}): time must increase; row {} has t = {} after {}", what, d.source,
                       k + 1, d.t(k), d.t(k - 1)));
   if (!model) return;
-  for (const auto& sig : model->requiredSignals()) {
+  for (const auto& sig : model->specs().required_signals) {
     if (raw && (sig == "qd" || sig == "qdd")) continue;
     bool present = sig == "q" || (sig == "qd" && d.hasVelocity()) ||
                    (sig == "qdd" && d.hasAcceleration()) || (sig == "tau" && d.hasTorque()) ||
@@ -621,14 +626,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       if (cfg.hasExcitation()) {
         traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
         traj->bind(robot, ctx);
-        const Json d = traj->describe();
-        if (const Json* js = d.find("joints");
-            js && js->isArray() && static_cast<int>(js->size()) < robot->dof()) {
-          std::vector<int> moving;
-          for (std::size_t i = 0; i < js->size(); ++i)
-            moving.push_back(static_cast<int>(js->at(i).asInt()) - 1);
+        std::vector<int> moving = traj->specs().moving_joints;
+        if (!moving.empty() && static_cast<int>(moving.size()) < robot->dof()) {
           const Samples s0 = traj->evaluate(traj->initial());
-          model->restrictMotion(moving, s0.q.row(0).transpose());
+          model->restrictMotion(std::move(moving), s0.q.row(0).transpose());
         }
       }
       model->bind(robot, ctx);
@@ -670,7 +671,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       xo.position_margin = traj->positionMargin();
       xo.velocity_limits = traj->velocityLimits();
       xo.acceleration_limits = traj->accelerationLimits();
-      xo.scale_columns = crit->scaleColumns();
+      xo.scale_columns = crit->specs().scale_columns;
       auto problem = makeExcitationProblem(traj, model, crit, xo);
       RunContext xctx = ctx;
       xctx.progress = progressFor("excitation");
@@ -707,7 +708,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         throw Error(fmt::format(
             "{}: not finite at the trajectory optimizer '{}' returned ({}; {} evaluations, "
             "stop: {}): no usable excitation trajectory",
-            crit_place, cfg.optimizer->type, why, r.evaluations, r.stop_reason));
+            crit_place, cfg.optimizer->type, why, r.evaluations, stopReasonText(r)));
       }
       Samples best = traj->evaluate(r.z);
       Json& X = S["excitation"];
@@ -722,16 +723,15 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       X["iterations"] = r.iterations;
       X["evaluations"] = Json(static_cast<long long>(r.evaluations));
       X["wall_s"] = r.wall_s;
-      X["stop_reason"] = r.stop_reason;
+      X["stop_reason"] = stopReasonText(r);
       // A run cut by time gives another answer on another (or a busier) machine.
-      X["reproducible"] = r.stop_reason != "max_time_s" && r.stop_reason != "max_cpu_s" &&
-                          r.stop_reason != "deadline";
+      X["reproducible"] = !stoppedByTime(r.stop_reason);
       if (!X["reproducible"].asBool())
         warn(fmt::format(
             "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "
             "the trajectory depends on the speed of this machine; for a reproducible result give "
             "an evaluation or iteration budget (max_evaluations, max_iterations)",
-            cfg.optimizer->type, r.stop_reason, r.evaluations));
+            cfg.optimizer->type, stopReasonText(r), r.evaluations));
       X["details"] = r.details;
       X["history"]["t_s"] = Json(r.history_t_s);
       X["history"]["value"] = Json(r.history_value);

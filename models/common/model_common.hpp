@@ -21,7 +21,7 @@ namespace exid::models {
 
 using Vec10 = Eigen::Matrix<double, 10, 1>;
 
-/// Names of the 10 payload parameters, in the order of wrenchRegressor (DESIGN.md §4).
+/// Names of the 10 payload parameters, in the order of wrenchRegressor (docs/conventions.md §1).
 inline std::vector<std::string> payloadNames() {
   return {"L_M", "L_MX", "L_MY", "L_MZ", "L_XX", "L_XY", "L_XZ", "L_YY", "L_YZ", "L_ZZ"};
 }

@@ -64,7 +64,12 @@ class DifferentialModel : public exid::ObservationModel {
   }
   Eigen::VectorXd fullNominal() const override { return exid::parameterValues(robot(), cols_); }
 
-  std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "tau"}; }
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = true;  // the rows of sample k are the equations of motion at sample k
+    sp.required_signals = {"q", "qd", "qdd", "tau"};
+    return sp;
+  }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const int n = robot().dof();

@@ -91,7 +91,12 @@ class IntegralModel : public exid::ObservationModel {
     return exid::parameterNames(robot(), cols_);
   }
   Eigen::VectorXd fullNominal() const override { return exid::parameterValues(robot(), cols_); }
-  std::vector<std::string> requiredSignals() const override { return {"q", "qd", "tau"}; }
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = false;  // a row integrates over a window of samples
+    sp.required_signals = {"q", "qd", "tau"};
+    return sp;
+  }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const int n = robot().dof();

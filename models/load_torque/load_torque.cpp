@@ -47,7 +47,12 @@ class LoadTorqueModel : public exid::ObservationModel {
       return exid::models::Payload::fromJson(*p).phi();
     return fullNominal();
   }
-  std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "tau"}; }
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = true;  // one row per sample and selected joint
+    sp.required_signals = {"q", "qd", "qdd", "tau"};
+    return sp;
+  }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const exid::RobotModel& R = robot();

@@ -1,5 +1,5 @@
 // exid — observation model `load_wrench`: payload parameters from a wrist force/torque sensor,
-// six rows per sample (DESIGN.md §4):
+// six rows per sample (docs/conventions.md §2):
 //   w = A(omega, alpha, a - g) phi (+ w0)
 // w = [fx fy fz mx my mz] is the wrench the sensor (i.e. the robot) exerts on the payload,
 // expressed in the sensor frame, moment about the sensor origin; A = exid::wrenchRegressor at
@@ -58,7 +58,12 @@ class LoadWrenchModel : public exid::ObservationModel {
       v.head(10) = exid::models::Payload::fromJson(*p).phi();
     return v;
   }
-  std::vector<std::string> requiredSignals() const override { return {"q", "qd", "qdd", "wrench"}; }
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = true;  // six rows per sample
+    sp.required_signals = {"q", "qd", "qdd", "wrench"};
+    return sp;
+  }
 
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const int n = robot().dof();

@@ -102,7 +102,7 @@ class AdjointGradient final : public exid::Optimizer {
     mu_ = Eigen::VectorXd::Zero(m);
     rho_ = rho_rel_ * std::max(1e-12, std::abs(J0));
     int iters = 0;
-    std::string reason = "max_iterations";
+    exid::StopReason reason = exid::StopReason::MaxIterations;
     double prev_J = HUGE_VAL, prev_v = HUGE_VAL;
     for (int outer = 0; iters < max_iter_; ++outer) {
       if (tr.shouldStop()) {
@@ -129,13 +129,13 @@ class AdjointGradient final : public exid::Optimizer {
       }
       if (feasible && std::abs(prev_J - J) <= ftol_ * std::max(1.0, std::abs(J)) &&
           inner_converged) {
-        reason = "converged (ftol_rel)";
+        reason = exid::StopReason::ConvergedFtol;
         break;
       }
       prev_J = feasible ? J : prev_J;
       prev_v = v;
       if (m == 0 && inner_converged) {
-        reason = "converged (gtol)";
+        reason = exid::StopReason::ConvergedGtol;
         break;
       }
     }

@@ -13,8 +13,7 @@ namespace exid::optim {
 // ---------------------------------------------------------------- Limits
 Limits::Limits(ExcitationProblem& p) : p_(p) {
   m_ = p.numConstraints();
-  const Json d = p.trajectory().describe();
-  if (const Json* l = d.find("linear")) linear_ = l->asBool();
+  linear_ = p.trajectory().specs().linear;
   K_ = p.trajectory().evaluate(p.initial()).size();
 }
 
@@ -145,17 +144,17 @@ double Tracker::evaluateAndOffer(const Eigen::VectorXd& z) {
   return J;
 }
 
-std::string Tracker::stopCause() const {
-  if (ctx_.cancelled && ctx_.cancelled()) return "cancelled";
-  if (ctx_.deadline.expired()) return "deadline";
-  if (b_.max_time_s > 0 && elapsed() >= b_.max_time_s) return "max_time_s";
-  if (b_.max_cpu_s > 0 && cpuElapsed() >= b_.max_cpu_s) return "max_cpu_s";
+StopReason Tracker::stopCause() const {
+  if (ctx_.cancelled && ctx_.cancelled()) return StopReason::Cancelled;
+  if (ctx_.deadline.expired()) return StopReason::Deadline;
+  if (b_.max_time_s > 0 && elapsed() >= b_.max_time_s) return StopReason::MaxTime;
+  if (b_.max_cpu_s > 0 && cpuElapsed() >= b_.max_cpu_s) return StopReason::MaxCpu;
   if (b_.max_evaluations > 0 && p_.evaluations() - evals0_ >= b_.max_evaluations)
-    return "max_evaluations";
-  return "";
+    return StopReason::MaxEvaluations;
+  return StopReason::None;
 }
 
-bool Tracker::shouldStop() const { return !stopCause().empty(); }
+bool Tracker::shouldStop() const { return stopCause() != StopReason::None; }
 
 void Tracker::progress(const std::string& text) const {
   double f = 0.0;
@@ -168,7 +167,7 @@ void Tracker::progress(const std::string& text) const {
                              have_feasible_ ? "" : " (infeasible)", text));
 }
 
-OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reason) {
+OptimizerResult Tracker::finish(double J0, int iterations, StopReason stop_reason) {
   OptimizerResult r;
   check(have_any_, fmt::format("{}: no point could be evaluated", who_));
   r.z = best();
@@ -178,8 +177,8 @@ OptimizerResult Tracker::finish(double J0, int iterations, std::string stop_reas
   r.iterations = iterations;
   r.evaluations = p_.evaluations() - evals0_;
   r.wall_s = elapsed();
-  if (!have_feasible_) stop_reason += " (no feasible point found; least violation returned)";
-  r.stop_reason = std::move(stop_reason);
+  r.stop_reason = stop_reason;
+  r.feasible = have_feasible_;
   r.history_t_s = ht_;
   r.history_value = hv_;
   r.details["feasible"] = have_feasible_;

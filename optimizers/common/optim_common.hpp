@@ -16,7 +16,7 @@ namespace exid::optim {
 /// g(z) <= 0: the problem's constraints (joint limits less the margin, velocity and
 /// acceleration limits at every sample; a trajectory's own caps are part of them through
 /// Trajectory::adjustLimits). The dense Jacobian is computed once and cached when the trajectory
-/// says it is linear (describe(): "linear": true).
+/// says it is linear (specs().linear).
 class Limits {
  public:
   explicit Limits(ExcitationProblem& p);
@@ -60,19 +60,20 @@ class Tracker {
   bool offer(const Eigen::VectorXd& z, double J, double violation);
   /// Evaluates J (no gradient) and the violation at z, then offers it.
   double evaluateAndOffer(const Eigen::VectorXd& z);
-  bool shouldStop() const;        // time budget, evaluations, ctx.shouldStop()
-  std::string stopCause() const;  // "max_time_s", "max_evaluations", "cancelled" or ""
-  double elapsed() const;         // wall time since construction [s]
-  double cpuElapsed() const;      // CPU time of the calling thread since construction [s]
-  double remaining() const;       // seconds left: min(wallRemaining, cpuRemaining)
-  double wallRemaining() const;   // max_time_s and the study deadline (inf without)
-  double cpuRemaining() const;    // max_cpu_s (inf without)
+  bool shouldStop() const;       // time budget, evaluations, ctx.shouldStop()
+  StopReason stopCause() const;  // Cancelled, Deadline, MaxTime, MaxCpu, MaxEvaluations or None
+  double elapsed() const;        // wall time since construction [s]
+  double cpuElapsed() const;     // CPU time of the calling thread since construction [s]
+  double remaining() const;      // seconds left: min(wallRemaining, cpuRemaining)
+  double wallRemaining() const;  // max_time_s and the study deadline (inf without)
+  double cpuRemaining() const;   // max_cpu_s (inf without)
   bool hasFeasible() const { return have_feasible_; }
   double bestValue() const { return have_feasible_ ? best_J_ : best_inf_J_; }
   const Eigen::VectorXd& best() const { return have_feasible_ ? best_z_ : best_inf_z_; }
   void progress(const std::string& text) const;
-  /// Fills the result: z, criterion_final (re-evaluated), max_violation, wall, history.
-  OptimizerResult finish(double J0, int iterations, std::string stop_reason);
+  /// Fills the result: z, criterion_final (re-evaluated), max_violation, wall, history,
+  /// feasible.
+  OptimizerResult finish(double J0, int iterations, StopReason stop_reason);
   const Budget& budget() const { return b_; }
   ExcitationProblem& problem() { return p_; }
   Limits& limits() { return lim_; }

@@ -369,7 +369,7 @@ class NloptOptimizer final : public exid::Optimizer {
     const std::uint64_t seed = seed_ ? seed_ : ctx.seed;
     nlopt::srand(static_cast<unsigned long>(seed));
     std::mt19937_64 rng(seed);
-    std::string reason = "converged";
+    exid::StopReason reason = exid::StopReason::Converged;
     int iterations = 0;
     exid::Json runs = exid::Json::array();
     const bool aggregated = cmode_ == "aggregated" && lim.size() > 0;
@@ -431,9 +431,7 @@ class NloptOptimizer final : public exid::Optimizer {
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
       tr.progress(fmt::format("start {}/{} {}", s + 1, starts_, r));
-      if (r == "cancelled" || r == "max_time_s" || r == "max_cpu_s" || r == "deadline" ||
-          r == "max_evaluations")
-        reason = r;
+      if (const exid::StopReason b = budgetNamed(r); b != exid::StopReason::None) reason = b;
     }
     if (aggregated && final_polish_ > 0 && !tr.shouldStop() && tr.hasFeasible()) {
       // The KS aggregate keeps the iterates a little inside the limits (up to log(K)/rho):
@@ -460,11 +458,10 @@ class NloptOptimizer final : public exid::Optimizer {
     if (tr.shouldStop()) reason = tr.stopCause();
     // A run cut by time (NLopt's own time limit, or a start's share of the time) makes the
     // result depend on the machine even when a later run converged: say so.
-    if (time_cut_ && reason != "cancelled" && reason != "max_time_s" && reason != "max_cpu_s" &&
-        reason != "deadline")
-      reason = budget_.max_cpu_s > 0    ? "max_cpu_s"
-               : budget_.max_time_s > 0 ? "max_time_s"
-                                        : "deadline";
+    if (time_cut_ && reason != exid::StopReason::Cancelled && !exid::stoppedByTime(reason))
+      reason = budget_.max_cpu_s > 0    ? exid::StopReason::MaxCpu
+               : budget_.max_time_s > 0 ? exid::StopReason::MaxTime
+                                        : exid::StopReason::Deadline;
     auto res = tr.finish(J0, iterations, reason);
     res.details["algorithm"] = alg_name_;
     res.details["constraint_mode"] = cmode_;
@@ -538,7 +535,7 @@ class NloptOptimizer final : public exid::Optimizer {
     c.log_objective = obj == "log";
     const bool epi = obj == "epigraph";
     if (epi) {
-      exid::check(problem.criterion().pluginName() == "cond",
+      exid::check(problem.criterion().specs().condition_number,
                   fmt::format("optimizer 'nlopt': objective: epigraph is the epigraph form of "
                               "log cond and needs criterion 'cond' (the study has '{}')",
                               problem.criterion().pluginName()));
@@ -631,7 +628,8 @@ class NloptOptimizer final : public exid::Optimizer {
       nlopt::result res = top->optimize(x, f);
       r = nlopt_result_to_string(static_cast<nlopt_result>(res));
     } catch (const nlopt::forced_stop&) {
-      r = tr.stopCause().empty() ? "run time share used" : tr.stopCause();
+      const exid::StopReason cause = tr.stopCause();
+      r = cause == exid::StopReason::None ? "run time share used" : exid::toString(cause);
     } catch (const nlopt::roundoff_limited&) {
       r = "roundoff_limited";
     } catch (const std::runtime_error& e) {
@@ -642,9 +640,21 @@ class NloptOptimizer final : public exid::Optimizer {
     return r;
   }
 
+  // The budget a run's result text names: runOnce reports a run ended by a budget by the
+  // budget's own text (the other texts are NLopt's results, kept in details).
+  static exid::StopReason budgetNamed(const std::string& r) {
+    for (exid::StopReason s :
+         {exid::StopReason::Cancelled, exid::StopReason::MaxTime, exid::StopReason::MaxCpu,
+          exid::StopReason::Deadline, exid::StopReason::MaxEvaluations})
+      if (r == exid::toString(s)) return s;
+    return exid::StopReason::None;
+  }
+
   void noteTimeCut(const std::string& r) {
-    for (const char* t :
-         {"MAXTIME_REACHED", "run time share used", "max_time_s", "max_cpu_s", "deadline"})
+    for (const std::string& t :
+         {std::string("MAXTIME_REACHED"), std::string("run time share used"),
+          exid::toString(exid::StopReason::MaxTime), exid::toString(exid::StopReason::MaxCpu),
+          exid::toString(exid::StopReason::Deadline)})
       if (r.rfind(t, 0) == 0) time_cut_ = true;
   }
 

@@ -1,10 +1,9 @@
 // Optimizer `sundials`: excitation design in CONTINUOUS time with CVODES.
 //
-// The trajectory is read as a function of time, q(t; z), rest + b(t) z_j per moving joint. The
-// parameterisations of the `fourier` and `spline` trajectory plugins are RE-IMPLEMENTED here
-// (the Trajectory interface only evaluates on its own sample grid); at the start the
-// re-implementation is checked against the plugin's samples and the optimiser refuses to run
-// when they differ (other trajectories, e.g. `pointwise`, are refused with a message).
+// The trajectory is read as a function of time, q(t; z), through the Trajectory interface: a
+// trajectory whose specs() declare it `continuous` (fourier, spline) gives its signals at any
+// time (evaluateAt) and their VJP (vjpAt); one defined on its sample grid only (pointwise) is
+// refused with a message.
 //
 // Forward problem (CVODES, Adams, fixed-point iteration), state y = [q; qd] of the moving
 // joints driven by the parameterised acceleration:
@@ -33,7 +32,6 @@
 #include <sundials/sundials_context.h>
 #include <sunnonlinsol/sunnonlinsol_fixedpoint.h>
 
-#include <Eigen/LU>
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -46,76 +44,37 @@
 
 namespace {
 
-// ---------------------------------------------------------------- continuous parameterisation
-/// q_j(t) = rest_j + bq(t) z_j (moving joints), the same for qd, qdd; held joints at rest.
-class Parameterisation {
+// ---------------------------------------------------------------- the trajectory in time
+/// The trajectory as a function of time, through the Trajectory interface (a trajectory whose
+/// specs() say `continuous`: evaluateAt, vjpAt). The moving joints are the ODE's state; the held
+/// joints stay at their rest positions.
+class TimeTrajectory {
  public:
   void build(const exid::Trajectory& traj, const std::string& who) {
-    const std::string name = traj.pluginName();
-    const exid::Json d = traj.describe();
-    auto num = [&](const char* key) {
-      const exid::Json* v = d.find(key);
-      exid::check(v && v->isNumber(),
-                  fmt::format("{}: trajectory '{}' does not describe '{}'", who, name, key));
-      return v->asDouble();
-    };
-    const exid::Json* js = d.find("joints");
-    exid::check(js && js->isArray(),
-                fmt::format("{}: trajectory '{}' does not list its moving joints", who, name));
-    moving_.clear();
-    for (std::size_t i = 0; i < js->size(); ++i)
-      moving_.push_back(static_cast<int>(js->at(i).asInt()) - 1);
-    const Eigen::VectorXd z0 = traj.initial();
-    s0_ = traj.evaluate(z0);
-    n_ = s0_.dof();
-    exid::check(s0_.size() >= 2, fmt::format("{}: the trajectory has fewer than 2 samples", who));
-    dt_ = s0_.t(1) - s0_.t(0);
-    rest_ = s0_.q.row(0).transpose();
-    if (name == "fourier") {
-      kind_ = Kind::Fourier;
-      T_ = num("period_s");
-      L_ = static_cast<int>(num("harmonics"));
-      w_ = 2.0 * M_PI / T_;
-      m_ = 1 + 2 * L_;
-    } else if (name == "spline") {
-      kind_ = Kind::Spline;
-      T_ = num("duration_s");
-      const int knots = static_cast<int>(num("knots"));
-      d_ = static_cast<int>(num("degree"));
-      const exid::Json* b = d.find("boundary");
-      periodic_ = b && b->isString() && b->asString() == "periodic";
-      buildSpline(knots);
-    } else {
-      throw exid::Error(fmt::format(
-          "{}: trajectory '{}' is not supported: the continuous-time optimiser re-implements the "
-          "'fourier' and 'spline' parameterisations only (for 'pointwise' use adjoint_gradient or "
-          "nlopt)",
-          who, name));
-    }
-    exid::check(static_cast<int>(moving_.size()) * m_ == traj.numVariables(),
-                fmt::format("{}: trajectory '{}' has {} variables, the re-implementation {}", who,
-                            name, traj.numVariables(), static_cast<int>(moving_.size()) * m_));
-    // The re-implementation must reproduce the plugin's samples (at z0 and at a perturbed z).
-    Eigen::VectorXd z1 = z0;
-    for (Eigen::Index i = 0; i < z1.size(); ++i)
-      z1(i) += 0.01 * std::sin(1.0 + 3.7 * static_cast<double>(i));
-    for (const Eigen::VectorXd* z : {&z0, static_cast<const Eigen::VectorXd*>(&z1)}) {
-      const exid::Samples s = traj.evaluate(*z);
-      const exid::Samples r = samplesAt(s.t, *z);
-      const double scale = 1.0 + s.q.cwiseAbs().maxCoeff() + s.qd.cwiseAbs().maxCoeff() +
-                           s.qdd.cwiseAbs().maxCoeff();
-      const double err =
-          std::max({(s.q - r.q).cwiseAbs().maxCoeff(), (s.qd - r.qd).cwiseAbs().maxCoeff(),
-                    (s.qdd - r.qdd).cwiseAbs().maxCoeff()});
-      exid::check(
-          err <= 1e-8 * scale,
-          fmt::format("{}: the continuous re-implementation of trajectory '{}' differs from the "
-                      "plugin's samples by {:.3g} (parameters not understood)",
-                      who, name, err));
-    }
+    traj_ = &traj;
+    const std::string& name = traj.pluginName();
+    const exid::TrajectorySpecs sp = traj.specs();
+    exid::check(
+        sp.continuous,
+        fmt::format("{}: trajectory '{}' is not supported: it is defined on its sample grid "
+                    "only, and the continuous-time optimiser needs a trajectory evaluated "
+                    "at any time (fourier, spline; for 'pointwise' use adjoint_gradient or "
+                    "nlopt)",
+                    who, name));
+    exid::check(sp.duration_s > 0,
+                fmt::format("{}: trajectory '{}' declares no duration", who, name));
+    const exid::Samples s0 = traj.evaluate(traj.initial());
+    n_ = s0.dof();
+    exid::check(s0.size() >= 2, fmt::format("{}: the trajectory has fewer than 2 samples", who));
+    moving_ = sp.moving_joints;
+    if (moving_.empty())
+      for (int j = 0; j < n_; ++j) moving_.push_back(j);
+    T_ = sp.duration_s;
+    dt_ = s0.t(1) - s0.t(0);
+    rest_ = s0.q.row(0).transpose();
+    t1_ = Eigen::VectorXd::Zero(1);
   }
 
-  int m() const { return m_; }
   int n() const { return n_; }
   int nm() const { return static_cast<int>(moving_.size()); }
   const std::vector<int>& moving() const { return moving_; }
@@ -123,115 +82,24 @@ class Parameterisation {
   double dt() const { return dt_; }
   const Eigen::VectorXd& rest() const { return rest_; }
 
-  /// Basis rows at time t (m values each).
-  void basis(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd,
-             Eigen::RowVectorXd* bqdd) const {
-    bq->setZero(m_);
-    bqd->setZero(m_);
-    bqdd->setZero(m_);
-    if (kind_ == Kind::Fourier) {
-      (*bq)(0) = 1.0;
-      for (int l = 1; l <= L_; ++l) {
-        const double wl = w_ * l, s = std::sin(wl * t), c = std::cos(wl * t);
-        (*bq)(l) = s / wl;
-        (*bq)(L_ + l) = -c / wl;
-        (*bqd)(l) = c;
-        (*bqd)(L_ + l) = s;
-        (*bqdd)(l) = -wl * s;
-        (*bqdd)(L_ + l) = wl * c;
-      }
-      return;
-    }
-    const int nc = d_ + 1;
-    int i = std::min(S_ - 1, static_cast<int>(std::floor(t / h_ + 1e-12)));
-    i = std::max(i, 0);
-    const double tau = t - i * h_;
-    Eigen::RowVectorXd e(nc);
-    for (int r = 0; r < 3; ++r) {
-      for (int p = 0; p <= d_; ++p) e(p) = dpow(p, r, tau);
-      (r == 0 ? *bq : (r == 1 ? *bqd : *bqdd)) = e * C_.middleRows(i * nc, nc);
-    }
+  /// q, qd, qdd at time t (one sample).
+  exid::Samples at(const Eigen::VectorXd& z, double t) const {
+    t1_(0) = t;
+    return traj_->evaluateAt(z, t1_);
   }
-
-  /// Samples at arbitrary times (for the check and for tests).
-  exid::Samples samplesAt(const Eigen::VectorXd& t, const Eigen::VectorXd& z) const {
-    exid::Samples s;
-    s.t = t;
-    const Eigen::Index K = t.size();
-    s.q = rest_.transpose().replicate(K, 1);
-    s.qd = Eigen::MatrixXd::Zero(K, n_);
-    s.qdd = Eigen::MatrixXd::Zero(K, n_);
-    Eigen::RowVectorXd bq, bqd, bqdd;
-    for (Eigen::Index k = 0; k < K; ++k) {
-      basis(t(k), &bq, &bqd, &bqdd);
-      for (int i = 0; i < nm(); ++i) {
-        const int j = moving_[static_cast<std::size_t>(i)];
-        const auto zi = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
-        s.q(k, j) = bq.dot(zi);
-        s.qd(k, j) = bqd.dot(zi);
-        s.qdd(k, j) = bqdd.dot(zi);
-      }
-    }
-    return s;
+  /// Gradient with respect to z of <adj, signals at time t> (adj: one sample).
+  Eigen::VectorXd vjpAt(const Eigen::VectorXd& z, double t, const exid::Samples& adj) const {
+    t1_(0) = t;
+    return traj_->vjpAt(z, t1_, adj);
   }
 
  private:
-  enum class Kind { Fourier, Spline };
-  static double dpow(int p, int r, double tau) {
-    if (r > p) return 0.0;
-    double f = 1.0;
-    for (int i = 0; i < r; ++i) f *= p - i;
-    return f * std::pow(tau, p - r);
-  }
-  // Same linear system as the `spline` plugin: knot interpolation, C^(d-1) continuity inside,
-  // rest (clamped) or periodic ends; C = coefficients per unit knot vector.
-  void buildSpline(int knots) {
-    S_ = knots - 1;
-    const int d = d_, nc = d + 1;
-    m_ = periodic_ ? knots - 1 : knots;
-    h_ = T_ / S_;
-    const int N = nc * S_;
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, m_);
-    int row = 0;
-    auto knotVar = [&](int i) { return periodic_ ? i % m_ : i; };
-    for (int i = 0; i < S_; ++i) {
-      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, 0.0);
-      R(row++, knotVar(i)) = 1.0;
-      for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, h_);
-      R(row++, knotVar(i + 1)) = 1.0;
-    }
-    for (int i = 1; i < S_; ++i)
-      for (int r = 1; r < d; ++r, ++row)
-        for (int p = 0; p <= d; ++p) {
-          A(row, (i - 1) * nc + p) += dpow(p, r, h_);
-          A(row, i * nc + p) -= dpow(p, r, 0.0);
-        }
-    if (periodic_) {
-      for (int r = 1; r < d; ++r, ++row)
-        for (int p = 0; p <= d; ++p) {
-          A(row, (S_ - 1) * nc + p) += dpow(p, r, h_);
-          A(row, p) -= dpow(p, r, 0.0);
-        }
-    } else {
-      for (int r = 1; r <= (d - 1) / 2; ++r) {
-        for (int p = 0; p <= d; ++p) A(row, p) = dpow(p, r, 0.0);
-        ++row;
-        for (int p = 0; p <= d; ++p) A(row, (S_ - 1) * nc + p) = dpow(p, r, h_);
-        ++row;
-      }
-    }
-    exid::check(row == N, "optimizer 'sundials': internal: spline system size");
-    C_ = A.fullPivLu().solve(R);
-  }
-
-  Kind kind_ = Kind::Fourier;
+  const exid::Trajectory* traj_ = nullptr;
   std::vector<int> moving_;
-  int n_ = 0, m_ = 0, L_ = 0, S_ = 0, d_ = 3;
-  double T_ = 0, w_ = 0, h_ = 0, dt_ = 0.1;
-  bool periodic_ = false;
+  int n_ = 0;
+  double T_ = 0, dt_ = 0.1;
   Eigen::VectorXd rest_;
-  Eigen::MatrixXd C_;
-  exid::Samples s0_;
+  mutable Eigen::VectorXd t1_;
 };
 
 // ---------------------------------------------------------------- CVODES forward + adjoint
@@ -243,12 +111,12 @@ struct CvodesSettings {
 
 class ContinuousCriterion {
  public:
-  ContinuousCriterion(const exid::ExcitationProblem& p, const Parameterisation& par,
+  ContinuousCriterion(const exid::ExcitationProblem& p, const TimeTrajectory& par,
                       CvodesSettings cs)
       : model_(p.model()), crit_(p.criterion()), par_(par), cs_(cs) {
     nb_ = model_.numBase();
     scale_ = Eigen::VectorXd::Ones(nb_);
-    if (crit_.scaleColumns()) {  // as framework/src/excitation.cpp
+    if (crit_.specs().scale_columns) {  // as framework/src/excitation.cpp
       Eigen::VectorXd nom = model_.baseNominal().cwiseAbs();
       const double floor = std::max(1e-6, 1e-3 * nom.maxCoeff());
       for (int i = 0; i < nb_; ++i) scale_(i) = std::max(nom(i), floor);
@@ -289,13 +157,12 @@ class ContinuousCriterion {
     Holder h;
     h.y = N_VNew_Serial(std::max(ny, 1), sctx_);
     h.q = N_VNew_Serial(nq_, sctx_);
-    Eigen::RowVectorXd bq, bqd, bqdd;
-    par_.basis(0.0, &bq, &bqd, &bqdd);
+    const exid::Samples s0 = par_.at(z, 0.0);
     double* y = N_VGetArrayPointer(h.y);
     for (int i = 0; i < nm; ++i) {
-      const auto zi = z.segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m());
-      y[i] = bq.dot(zi);
-      y[nm + i] = bqd.dot(zi);
+      const int j = par_.moving()[static_cast<std::size_t>(i)];
+      y[i] = s0.q(0, j);
+      y[nm + i] = s0.qd(0, j);
     }
     if (ny == 0) y[0] = 0.0;
     N_VConst(0.0, h.q);
@@ -363,9 +230,14 @@ class ContinuousCriterion {
     const double* qb = N_VGetArrayPointer(h.qB);
     grad->resize(nz);
     for (int i = 0; i < nz; ++i) (*grad)(i) = qb[i];
-    for (int i = 0; i < nm; ++i)
-      grad->segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()) +=
-          lam[i] * bq.transpose() + lam[nm + i] * bqd.transpose();
+    // lambda(0)^T dy0/dz: the trajectory's VJP at t = 0 with adjoints lq on q, lqd on qd.
+    exid::Samples adj0 = zeroSample();
+    for (int i = 0; i < nm; ++i) {
+      const int j = par_.moving()[static_cast<std::size_t>(i)];
+      adj0.q(0, j) = lam[i];
+      adj0.qd(0, j) = lam[nm + i];
+    }
+    *grad += par_.vjpAt(z, 0.0, adj0);
     return J;
   }
 
@@ -391,16 +263,26 @@ class ContinuousCriterion {
     if (!ok) throw exid::Error(fmt::format("optimizer 'sundials': {} failed", what));
   }
 
-  // Fills sample_ (moving joints from y and the basis) and the basis rows at t.
+  // One sample of zeros (n joints).
+  exid::Samples zeroSample() const {
+    exid::Samples s;
+    s.t = Eigen::VectorXd::Zero(1);
+    s.q = Eigen::MatrixXd::Zero(1, par_.n());
+    s.qd = s.q;
+    s.qdd = s.q;
+    return s;
+  }
+
+  // Fills sample_: q, qd of the moving joints from y, qdd from the trajectory at t.
   void fillSample(double t, const double* y) {
-    par_.basis(t, &bq_, &bqd_, &bqdd_);
+    const exid::Samples st = par_.at(z_, t);
     const int nm = par_.nm();
     sample_.t(0) = t;
     for (int i = 0; i < nm; ++i) {
       const int j = par_.moving()[static_cast<std::size_t>(i)];
       sample_.q(0, j) = y[i];
       sample_.qd(0, j) = y[nm + i];
-      sample_.qdd(0, j) = bqdd_.dot(z_.segment(static_cast<Eigen::Index>(i) * par_.m(), par_.m()));
+      sample_.qdd(0, j) = st.qdd(0, j);
     }
   }
 
@@ -413,11 +295,14 @@ class ContinuousCriterion {
       yd[0] = 0.0;
       return 0;
     }
-    self->par_.basis(t, &self->bq_, &self->bqd_, &self->bqdd_);
-    for (int i = 0; i < nm; ++i) {
-      yd[i] = y[nm + i];
-      yd[nm + i] = self->bqdd_.dot(
-          self->z_.segment(static_cast<Eigen::Index>(i) * self->par_.m(), self->par_.m()));
+    try {
+      const exid::Samples st = self->par_.at(self->z_, t);
+      for (int i = 0; i < nm; ++i) {
+        yd[i] = y[nm + i];
+        yd[nm + i] = st.qdd(0, self->par_.moving()[static_cast<std::size_t>(i)]);
+      }
+    } catch (...) {
+      return -1;
     }
     return 0;
   }
@@ -476,34 +361,36 @@ class ContinuousCriterion {
 
   static int rhsQuadB(double t, N_Vector yv, N_Vector yBv, N_Vector qBdv, void* ud) {
     auto* self = static_cast<ContinuousCriterion*>(ud);
-    const int nm = self->par_.nm(), m = self->par_.m();
+    const int nm = self->par_.nm();
     const double* lam = N_VGetArrayPointer(yBv);
     double* out = N_VGetArrayPointer(qBdv);
     try {
       self->adjointAt(t, N_VGetArrayPointer(yv));
+      // -(dw/dqdd + lqd)^T dqdd/dz: the trajectory's VJP with that adjoint on qdd alone.
+      exid::Samples& a = self->adjB_;
+      if (a.q.cols() != self->par_.n()) a = self->zeroSample();
+      for (int i = 0; i < nm; ++i) {
+        const int j = self->par_.moving()[static_cast<std::size_t>(i)];
+        a.qdd(0, j) = -(self->adj_.qdd(0, j) + lam[nm + i]);
+      }
+      const Eigen::VectorXd g = self->par_.vjpAt(self->z_, t, a);
+      for (Eigen::Index c = 0; c < g.size(); ++c) out[c] = g(c);
     } catch (...) {
       return -1;
-    }
-    self->par_.basis(t, &self->bq_, &self->bqd_, &self->bqdd_);
-    for (int i = 0; i < nm; ++i) {
-      const int j = self->par_.moving()[static_cast<std::size_t>(i)];
-      const double a = self->adj_.qdd(0, j) + lam[nm + i];
-      for (int c = 0; c < m; ++c) out[i * m + c] = -a * self->bqdd_(c);
     }
     return 0;
   }
 
   const exid::ObservationModel& model_;
   const exid::Criterion& crit_;
-  const Parameterisation& par_;
+  const TimeTrajectory& par_;
   CvodesSettings cs_;
   SUNContext sctx_ = nullptr;
   int nb_ = 0, nq_ = 0;
   double quad_scale_ = 1.0;
   Eigen::VectorXd scale_, z_;
   Eigen::MatrixXd G_;
-  exid::Samples sample_, adj_;
-  Eigen::RowVectorXd bq_, bqd_, bqdd_;
+  exid::Samples sample_, adj_, adjB_;
   bool have_adj_ = false;
   double adj_t_ = 0.0;
   std::vector<double> adj_y_;
@@ -518,8 +405,8 @@ class SundialsOptimizer final : public exid::Optimizer {
   static constexpr const char* kDoc =
       "continuous-time design: trajectory ODE and information matrix int Phi Phi^T dt by CVODES "
       "(quadratures with error control), gradient by CVODES adjoint sensitivity, projected "
-      "L-BFGS + Armijo; limits by a quadratic penalty; trajectories fourier and spline "
-      "(re-implemented in continuous time), models with rows per instant";
+      "L-BFGS + Armijo; limits by a quadratic penalty; trajectories defined at any time (fourier, "
+      "spline), models with rows per instant";
 
   static std::vector<exid::ParamDecl> params() {
     auto p = exid::optim::budgetParams(0.0, 0);
@@ -572,7 +459,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     ctx_ = &ctx;
     evals_ = 0;
     grads_ = 0;
-    Parameterisation par;
+    TimeTrajectory par;
     par.build(problem.trajectory(), "optimizer 'sundials'");
     ContinuousCriterion cc(problem, par, cs_);
     exid::optim::Limits lim(problem);
@@ -592,8 +479,8 @@ class SundialsOptimizer final : public exid::Optimizer {
     offer(zs, J0, lim.size() ? std::max(0.0, maxOf(lim, zs)) : 0.0);
     rho_ = rho_rel_ * std::max(1e-12, std::abs(J0));
     int iters = 0;
-    std::string reason =
-        max_iter_ == 0 ? "max_iterations (0: start evaluated only)" : "max_iterations";
+    exid::StopReason reason =
+        max_iter_ == 0 ? exid::StopReason::StartOnly : exid::StopReason::MaxIterations;
     double prev_J = HUGE_VAL;
     for (int outer = 0; iters < max_iter_; ++outer) {
       if (stop()) {
@@ -612,16 +499,16 @@ class SundialsOptimizer final : public exid::Optimizer {
       if (!feasible) rho_ *= 10.0;
       if (feasible && converged &&
           std::abs(prev_J - cur_J_) <= ftol_ * std::max(1.0, std::abs(cur_J_))) {
-        reason = "converged (ftol_rel)";
+        reason = exid::StopReason::ConvergedFtol;
         break;
       }
       if (feasible && converged && lim.size() == 0) {
-        reason = "converged";
+        reason = exid::StopReason::Converged;
         break;
       }
       if (feasible) prev_J = cur_J_;
       if (outer > 50) {
-        reason = "outer passes";
+        reason = exid::StopReason::OuterPasses;
         break;
       }
     }
@@ -638,7 +525,8 @@ class SundialsOptimizer final : public exid::Optimizer {
     r.iterations = iters;
     r.evaluations = evals_;
     r.wall_s = elapsed();
-    r.stop_reason = have_feasible_ ? reason : reason + " (no feasible point found)";
+    r.stop_reason = reason;
+    r.feasible = have_feasible_;
     r.history_t_s = ht_;
     r.history_value = hv_;
     r.details["continuous"] = true;
@@ -659,12 +547,13 @@ class SundialsOptimizer final : public exid::Optimizer {
   double elapsed() const {
     return std::chrono::duration<double>(std::chrono::steady_clock::now() - t0_).count();
   }
-  bool stop() const { return !stopCause().empty(); }
-  std::string stopCause() const {
-    if (budget_.max_time_s > 0 && elapsed() >= budget_.max_time_s) return "max_time_s";
-    if (budget_.max_evaluations > 0 && evals_ >= budget_.max_evaluations) return "max_evaluations";
-    if (ctx_ && ctx_->shouldStop()) return "cancelled";
-    return "";
+  bool stop() const { return stopCause() != exid::StopReason::None; }
+  exid::StopReason stopCause() const {
+    if (budget_.max_time_s > 0 && elapsed() >= budget_.max_time_s) return exid::StopReason::MaxTime;
+    if (budget_.max_evaluations > 0 && evals_ >= budget_.max_evaluations)
+      return exid::StopReason::MaxEvaluations;
+    if (ctx_ && ctx_->shouldStop()) return exid::StopReason::Cancelled;
+    return exid::StopReason::None;
   }
   // Adjoint gradient vs central differences; cost of J + gradient relative to J alone.
   Json gradientCheck(ContinuousCriterion& cc, const Eigen::VectorXd& z) {

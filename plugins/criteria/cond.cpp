@@ -16,7 +16,12 @@ class Cond final : public exid::Criterion {
       "condition number of W: sigma_max/sigma_min (cond(M) is its square)";
   static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
   explicit Cond(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  bool scaleColumns() const override { return scale_; }
+  exid::CriterionSpecs specs() const override {
+    exid::CriterionSpecs sp;
+    sp.scale_columns = scale_;
+    sp.condition_number = true;
+    return sp;
+  }
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const Eigen::Index n = s.lambda.size();

@@ -14,7 +14,11 @@ class FrobeniusCond final : public exid::Criterion {
   static constexpr const char* kDoc = "Frobenius condition number ||W||_F ||W^+||_F";
   static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
   explicit FrobeniusCond(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  bool scaleColumns() const override { return scale_; }
+  exid::CriterionSpecs specs() const override {
+    exid::CriterionSpecs sp;
+    sp.scale_columns = scale_;
+    return sp;
+  }
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const double tr = s.lambda.sum();

@@ -13,7 +13,11 @@ class LogDet final : public exid::Criterion {
   static constexpr const char* kDoc = "D-optimality: -log det(W^T W)";
   static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
   explicit LogDet(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  bool scaleColumns() const override { return scale_; }
+  exid::CriterionSpecs specs() const override {
+    exid::CriterionSpecs sp;
+    sp.scale_columns = scale_;
+    return sp;
+  }
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     if (dM) *dM = -(s.V * s.lambda.cwiseInverse().asDiagonal() * s.V.transpose());

@@ -13,7 +13,11 @@ class MinSv final : public exid::Criterion {
   static constexpr const char* kDoc = "reciprocal of the smallest singular value of W";
   static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
   explicit MinSv(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  bool scaleColumns() const override { return scale_; }
+  exid::CriterionSpecs specs() const override {
+    exid::CriterionSpecs sp;
+    sp.scale_columns = scale_;
+    return sp;
+  }
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const double J = 1.0 / std::sqrt(s.lambda(0));

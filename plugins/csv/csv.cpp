@@ -1,5 +1,5 @@
 // exid — experiment `csv`: a recorded (or previously written) dataset read from a CSV file with
-// the columns of DESIGN.md §3: t, q1..qn, qd1..qdn, qdd1..qddn, tau1..taun, fx fy fz mx my mz.
+// the columns of docs/conventions.md §1: t, q1..qn, qd1..qdn, qdd1..qddn, tau1..taun, fx..mz.
 // q is required; every other group is optional but complete when present (all n joints, or all
 // six wrench components). Absent qd/qdd stay absent: estimators decide how to differentiate.
 // The file written by the runner (experiment.csv, exid::datasetTable) reads back exactly.

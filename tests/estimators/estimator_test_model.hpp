@@ -128,10 +128,10 @@ class PendulumModel : public exid::ObservationModel {
   /// The largest number of samples one fullRows() call has seen (streaming check).
   mutable int max_samples_per_call = 0;
 
-  exid::Json describe() const override {
-    exid::Json j = exid::Json::object();
-    j["per_sample"] = true;
-    return j;
+  exid::ModelSpecs specs() const override {
+    exid::ModelSpecs sp;
+    sp.per_sample = true;
+    return sp;
   }
 
  private:

@@ -153,11 +153,7 @@ TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
   // A model that does not declare per-sample rows gets the whole dataset at once.
   struct Windowed : est_test::PendulumModel {
     using PendulumModel::PendulumModel;
-    exid::Json describe() const override {
-      exid::Json j = exid::Json::object();
-      j["per_sample"] = false;
-      return j;
-    }
+    exid::ModelSpecs specs() const override { return {}; }
   };
   auto w = std::make_shared<Windowed>(2);
   w->bind(est_test::makeRobot(2), ctx);

@@ -40,7 +40,7 @@ XSetup make(const std::string& robot, const std::string& traj, const std::string
   xo.position_margin = s.traj->positionMargin();
   xo.velocity_limits = s.traj->velocityLimits();
   xo.acceleration_limits = s.traj->accelerationLimits();
-  xo.scale_columns = s.crit->scaleColumns();
+  xo.scale_columns = s.crit->specs().scale_columns;
   s.problem = exid::makeExcitationProblem(s.traj, s.model, s.crit, xo);
   return s;
 }
@@ -310,7 +310,7 @@ TEST_P(OptimizerTest, ReducesCondAndReturnsAFeasiblePoint) {
             1e-9);
   EXPECT_LE(r.max_violation, 1e-9);
   EXPECT_GT(r.evaluations, 0);
-  EXPECT_FALSE(r.stop_reason.empty());
+  EXPECT_NE(r.stop_reason, exid::StopReason::None);
   ASSERT_FALSE(r.history_value.empty());
   EXPECT_EQ(r.history_value.size(), r.history_t_s.size());
   EXPECT_NEAR(r.history_value.back(), r.criterion_final, 1e-9 * r.criterion_final);
@@ -378,13 +378,44 @@ TEST(Optimizers, RespectTheTimeBudgetAndCancellation) {
   // why, also when the polish after the time-cut global run converged: a time budget is not
   // reproducible.
   auto r = opt->minimize(*s.problem, ctx);
-  EXPECT_EQ(r.stop_reason, "max_time_s") << r.details.dump(0);
+  EXPECT_EQ(r.stop_reason, exid::StopReason::MaxTime) << r.details.dump(0);
   EXPECT_LE(r.max_violation, 1e-9);
   int calls = 0;
   ctx.cancelled = [&] { return ++calls > 5; };
   auto opt2 = exid_test::create<exid::Optimizer>("adjoint_gradient", "{}");
   auto r2 = opt2->minimize(*s.problem, ctx);
-  EXPECT_NE(r2.stop_reason.find("cancelled"), std::string::npos) << r2.stop_reason;
+  EXPECT_EQ(r2.stop_reason, exid::StopReason::Cancelled) << exid::stopReasonText(r2);
+}
+
+// The stop reasons read in summaries and reports: the texts of the enum, the feasibility note,
+// and which of them depend on the machine's speed.
+TEST(Optimizers, StopReasonTexts) {
+  using exid::StopReason;
+  const std::vector<std::pair<StopReason, std::string>> texts = {
+      {StopReason::None, ""},
+      {StopReason::Converged, "converged"},
+      {StopReason::ConvergedFtol, "converged (ftol_rel)"},
+      {StopReason::ConvergedGtol, "converged (gtol)"},
+      {StopReason::MaxIterations, "max_iterations"},
+      {StopReason::StartOnly, "max_iterations (0: start evaluated only)"},
+      {StopReason::OuterPasses, "outer passes"},
+      {StopReason::MaxEvaluations, "max_evaluations"},
+      {StopReason::MaxTime, "max_time_s"},
+      {StopReason::MaxCpu, "max_cpu_s"},
+      {StopReason::Deadline, "deadline"},
+      {StopReason::Cancelled, "cancelled"}};
+  for (const auto& [r, text] : texts) {
+    EXPECT_EQ(exid::toString(r), text);
+    EXPECT_EQ(exid::stoppedByTime(r),
+              r == StopReason::MaxTime || r == StopReason::MaxCpu || r == StopReason::Deadline)
+        << text;
+  }
+  exid::OptimizerResult res;
+  res.stop_reason = StopReason::MaxEvaluations;
+  EXPECT_EQ(exid::stopReasonText(res), "max_evaluations");
+  res.feasible = false;
+  EXPECT_EQ(exid::stopReasonText(res),
+            "max_evaluations (no feasible point found; least violation returned)");
 }
 
 }  // namespace

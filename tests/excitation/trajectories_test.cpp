@@ -2,10 +2,12 @@
 // recursion, Fourier periodicity, splines at rest at both ends, limits of the starts.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <random>
 
+#include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid_test.hpp"
 
@@ -76,6 +78,60 @@ TEST_P(TrajectoryTest, JacobianAndVjpMatchFiniteDifferences) {
           .dot(stackSignals(adj)) /
       (2 * h);
   EXPECT_NEAR(g.dot(dir), fd, 1e-7 * std::max(1.0, std::abs(fd)));
+}
+
+// A trajectory that declares itself continuous gives at its sample times what evaluate() gives,
+// and vjpAt() is the VJP of evaluateAt(); one that does not refuses evaluateAt().
+TEST_P(TrajectoryTest, SpecsAndEvaluationAtArbitraryTimes) {
+  const Case& c = GetParam();
+  auto t = bound(c);
+  const exid::TrajectorySpecs sp = t->specs();
+  const Samples s = t->evaluate(t->initial());
+  EXPECT_TRUE(sp.linear);
+  ASSERT_FALSE(sp.moving_joints.empty());
+  for (int j = 0; j < s.dof(); ++j) {  // the held joints do not move
+    if (std::find(sp.moving_joints.begin(), sp.moving_joints.end(), j) != sp.moving_joints.end())
+      continue;
+    EXPECT_EQ(s.q.col(j).maxCoeff(), s.q.col(j).minCoeff()) << "joint " << j + 1;
+    EXPECT_EQ(s.qd.col(j).cwiseAbs().maxCoeff(), 0.0) << "joint " << j + 1;
+  }
+  EXPECT_GT(sp.duration_s, 0.0);
+  if (!sp.continuous) {
+    EXPECT_EQ(c.traj, "pointwise");
+    EXPECT_THROW(t->evaluateAt(t->initial(), s.t), exid::Error);
+    return;
+  }
+  EXPECT_EQ(sp.periodic, c.traj == "fourier" || c.params.find("periodic") != std::string::npos);
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  Eigen::VectorXd z = t->initial();
+  for (Eigen::Index i = 0; i < z.size(); ++i) z(i) += 0.05 * N(rng);
+  const Samples g = t->evaluate(z), a = t->evaluateAt(z, g.t);
+  const double scale = 1.0 + g.qdd.cwiseAbs().maxCoeff();
+  EXPECT_LT((g.q - a.q).cwiseAbs().maxCoeff(), 1e-12 * scale);
+  EXPECT_LT((g.qd - a.qd).cwiseAbs().maxCoeff(), 1e-12 * scale);
+  EXPECT_LT((g.qdd - a.qdd).cwiseAbs().maxCoeff(), 1e-12 * scale);
+  // between the samples, up to the end; the VJP against central differences
+  Eigen::VectorXd tt(4);
+  tt << 0.37 * sp.duration_s, 0.5 * sp.duration_s + 1e-3, 0.91 * sp.duration_s, sp.duration_s;
+  const Samples at = t->evaluateAt(z, tt);
+  ASSERT_EQ(at.size(), 4);
+  Samples adj = at;
+  for (auto* m : {&adj.q, &adj.qd, &adj.qdd})
+    for (Eigen::Index i = 0; i < m->size(); ++i) m->data()[i] = N(rng);
+  const Eigen::VectorXd gz = t->vjpAt(z, tt, adj);
+  Eigen::VectorXd dir(z.size());
+  for (Eigen::Index i = 0; i < z.size(); ++i) dir(i) = N(rng);
+  const double h = 1e-4;
+  const Samples p = t->evaluateAt(z + h * dir, tt), m = t->evaluateAt(z - h * dir, tt);
+  const double fd = ((stackSignals(p) - stackSignals(m)).dot(stackSignals(adj))) / (2 * h);
+  EXPECT_NEAR(gz.dot(dir), fd, 1e-7 * std::max(1.0, std::abs(fd)));
+  // on the sample grid vjpAt is vjp
+  Samples adjg = g;
+  for (auto* mm : {&adjg.q, &adjg.qd, &adjg.qdd})
+    for (Eigen::Index i = 0; i < mm->size(); ++i) mm->data()[i] = N(rng);
+  const Eigen::VectorXd v1 = t->vjp(z, adjg), v2 = t->vjpAt(z, g.t, adjg);
+  EXPECT_LT((v1 - v2).cwiseAbs().maxCoeff(), 1e-10 * std::max(1.0, v1.cwiseAbs().maxCoeff()));
 }
 
 TEST_P(TrajectoryTest, InitialPointRespectsTheLimits) {

@@ -22,6 +22,21 @@ void checkRobot(const std::string& name, const std::string& params, int expect_b
   EXPECT_LT(rec.est_rel, 1e-6);
 }
 
+// The models declare their capabilities: rows per sample (streamed in chunks by the estimators)
+// or over windows, and the signals a dataset must carry.
+TEST(Models, DeclareTheirRowsAndSignals) {
+  const std::vector<std::pair<std::string, std::vector<std::string>>> per_sample = {
+      {"differential", {"q", "qd", "qdd", "tau"}},
+      {"load_torque", {"q", "qd", "qdd", "tau"}},
+      {"load_wrench", {"q", "qd", "qdd", "wrench"}}};
+  for (const auto& [name, signals] : per_sample) {
+    const exid::ModelSpecs sp = exid_test::create<exid::ObservationModel>(name)->specs();
+    EXPECT_TRUE(sp.per_sample) << name;
+    EXPECT_EQ(sp.required_signals, signals) << name;
+  }
+  EXPECT_FALSE(exid_test::create<exid::ObservationModel>("integral")->specs().per_sample);
+}
+
 TEST(Differential, PumaAllDriveTermsRecovered) { checkRobot("puma560", "{offset: true}"); }
 
 TEST(Differential, PumaFrictionSubtracted40BaseParameters) {

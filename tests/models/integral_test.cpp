@@ -93,7 +93,8 @@ TEST(Integral, NeedsNoAcceleration) {
   exid::Dataset d = pumaData();
   d.qdd.resize(0, 0);
   EXPECT_NO_THROW(m->fullRows(d, mtest::context()));
-  EXPECT_EQ(m->requiredSignals(), (std::vector<std::string>{"q", "qd", "tau"}));
+  EXPECT_EQ(m->specs().required_signals, (std::vector<std::string>{"q", "qd", "tau"}));
+  EXPECT_FALSE(m->specs().per_sample);
 }
 
 TEST(Integral, VjpMatchesFiniteDifferences) {

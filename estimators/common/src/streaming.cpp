@@ -12,13 +12,7 @@
 
 namespace exid::est {
 
-bool modelIsPerSample(const ObservationModel& model) {
-  const Json desc = model.describe();
-  if (const Json* ps = desc.isObject() ? desc.find("per_sample") : nullptr)
-    if (ps->type() == Json::Type::Bool) return ps->asBool();
-  const std::string& n = model.pluginName();
-  return n == "differential" || n == "load_wrench" || n == "load_torque";
-}
+bool modelIsPerSample(const ObservationModel& model) { return model.specs().per_sample; }
 
 void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
   check(rows.W.cols() == p,

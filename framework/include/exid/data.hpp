@@ -1,5 +1,5 @@
 // exid — data that flows between stages: trajectory samples, recorded or simulated datasets,
-// observation rows. Columns follow DESIGN.md §3; all SI.
+// observation rows. Columns follow docs/conventions.md §1; all SI.
 #pragma once
 
 #include <Eigen/Core>

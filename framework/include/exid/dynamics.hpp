@@ -6,11 +6,11 @@
 // Coordinates are JOINT coordinates of the tree (not the measured coordinates of a transmission;
 // see drive.hpp for those). Gravity is model.gravity, in the base frame.
 //
-// Parameter order per body (DESIGN.md §3): XX XY XZ YY YZ ZZ MX MY MZ M about the body frame
-// origin, in the body frame. The identity  tau = Y(q, qd, qdd) * pi  holds with
-// pi = model.inertialParameters().
-// Payload parameters phi (DESIGN.md §4): M MX MY MZ XX XY XZ YY YZ ZZ about the sensor frame
-// origin, in the sensor frame. Wrench order: fx fy fz mx my mz, in the sensor frame.
+// Parameter order per body (docs/conventions.md §1): XX XY XZ YY YZ ZZ MX MY MZ M about the body
+// frame origin, in the body frame. The identity  tau = Y(q, qd, qdd) * pi  holds with pi =
+// model.inertialParameters(). Payload parameters phi (docs/conventions.md §1): M MX MY MZ XX XY XZ
+// YY YZ ZZ about the sensor frame origin, in the sensor frame. Wrench order: fx fy fz mx my mz, in
+// the sensor frame.
 #pragma once
 
 #include <Eigen/Core>

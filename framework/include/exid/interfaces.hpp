@@ -4,6 +4,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <iosfwd>
 #include <memory>
 #include <string>
 #include <vector>
@@ -26,6 +27,16 @@ class Robot : public PluginObject {
 };
 
 // ---------------------------------------------------------------- observation model
+/// What an observation model can do, declared by the model itself (ObservationModel::specs()).
+struct ModelSpecs {
+  /// The rows of sample k depend on sample k alone, so rows() may be computed on consecutive
+  /// slices of a dataset and stacked (streamed in chunks). False: the rows need the whole
+  /// dataset at once (e.g. windows of samples).
+  bool per_sample = false;
+  /// Signals a dataset must carry: any of "q", "qd", "qdd", "tau", "wrench".
+  std::vector<std::string> required_signals{"q", "qd", "qdd", "tau"};
+};
+
 /// Turns a Dataset (or, for excitation design, bare trajectory samples) into observation rows.
 /// A model works on FULL columns (fullNames); bind() finds its base parameters (QR with column
 /// pivoting over random samples) and the base-column methods below follow from that.
@@ -68,8 +79,9 @@ class ObservationModel : public PluginObject {
   virtual void fullDesignVjp(const Samples& s, const Eigen::MatrixXd& dW, Samples* grad) const = 0;
   /// Random samples within the robot's limits used by bind() to find the base parameters.
   virtual Samples randomSamples(int count, std::uint64_t seed) const;
-  /// Which signals a dataset must carry ("q", "qd", "qdd", "tau", "wrench").
-  virtual std::vector<std::string> requiredSignals() const { return {"q", "qd", "qdd", "tau"}; }
+  /// The model's capabilities (per-sample rows, required signals).
+  virtual ModelSpecs specs() const { return {}; }
+  /// Free-form description for the summary and the report; never read as a capability.
   virtual Json describe() const { return Json::object(); }
 
   // Base-column forms (defined once here from the full forms).
@@ -95,15 +107,39 @@ class ObservationModel : public PluginObject {
 // ---------------------------------------------------------------- criterion
 /// A scalar of the information matrix M = W^T W (base columns) and its exact gradient dJ/dM
 /// (symmetric). Smaller is better.
+/// What a criterion is, declared by the criterion itself (Criterion::specs()).
+struct CriterionSpecs {
+  /// The base columns are scaled by the nominal parameter magnitudes before M is formed.
+  bool scale_columns = false;
+  /// The value is the condition number sqrt(lambda_max(M) / lambda_min(M)), so an optimiser may
+  /// minimise an equivalent form of log(lambda_max / lambda_min) instead (nlopt's epigraph).
+  bool condition_number = false;
+};
+
 class Criterion : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Criterion;
   virtual double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dJ_dM) const = 0;
-  /// Whether the base columns are scaled by the nominal parameter magnitudes before M is formed.
-  virtual bool scaleColumns() const { return false; }
+  virtual CriterionSpecs specs() const { return {}; }
 };
 
 // ---------------------------------------------------------------- trajectory
+/// What a trajectory can do, declared by the trajectory itself (Trajectory::specs(), valid after
+/// bind()).
+struct TrajectorySpecs {
+  /// 0-based measured coordinates that move; the others stay at their rest position. Empty:
+  /// not declared (every coordinate may move).
+  std::vector<int> moving_joints;
+  /// The samples are affine in z: the Jacobian is constant.
+  bool linear = false;
+  /// evaluateAt() and vjpAt() give the signals at any time in [0, duration_s].
+  bool continuous = false;
+  /// The motion repeats with period duration_s (the sample grid covers one period).
+  bool periodic = false;
+  /// Length of the motion [s] (the period when periodic); 0 when not declared.
+  double duration_s = 0.0;
+};
+
 /// Decision variables z -> q, qd, qdd at the sample times (measured coordinates).
 class Trajectory : public PluginObject {
  public:
@@ -119,6 +155,17 @@ class Trajectory : public PluginObject {
   virtual void bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const;
   /// Dense Jacobian d[vec(q); vec(qd); vec(qdd)]/dz (column-major vec), by default from vjp.
   virtual Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const;
+  /// The trajectory's capabilities (moving joints, linearity, continuous time, period).
+  virtual TrajectorySpecs specs() const { return {}; }
+  /// q, qd, qdd at the times t (any times in [0, specs().duration_s]) for a trajectory with
+  /// specs().continuous; at the sample times it agrees with evaluate(). Default: throws
+  /// exid::Error (a trajectory defined on its sample grid only).
+  virtual Samples evaluateAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t) const;
+  /// Gradient with respect to z of <adj.q, q> + <adj.qd, qd> + <adj.qdd, qdd>, the signals being
+  /// evaluateAt(z, t) (adj has their shape). Default: throws exid::Error.
+  virtual Eigen::VectorXd vjpAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t,
+                                const Samples& adj) const;
+  /// Free-form description for the summary and the report; never read as a capability.
   virtual Json describe() const { return Json::object(); }
   /// Margin kept inside the position limits, and whether velocity/acceleration limits are
   /// imposed as constraints by the excitation problem.
@@ -158,6 +205,28 @@ class ExcitationProblem {
   virtual long evaluations() const = 0;
 };
 
+/// Why an optimiser stopped (OptimizerResult::stop_reason); toString() gives the text the
+/// summary and the report show.
+enum class StopReason {
+  None,            // "": not stopped (a budget check that finds nothing to stop for)
+  Converged,       // "converged"
+  ConvergedFtol,   // "converged (ftol_rel)": a pass improved J by less than ftol_rel
+  ConvergedGtol,   // "converged (gtol)": projected gradient below tolerance, no constraints
+  MaxIterations,   // "max_iterations"
+  StartOnly,       // "max_iterations (0: start evaluated only)"
+  OuterPasses,     // "outer passes": the penalty passes ran out
+  MaxEvaluations,  // "max_evaluations"
+  MaxTime,         // "max_time_s"
+  MaxCpu,          // "max_cpu_s"
+  Deadline,        // "deadline": the study's time budget
+  Cancelled,       // "cancelled"
+};
+std::string toString(StopReason r);
+std::ostream& operator<<(std::ostream& os, StopReason r);
+/// Stopped by wall or CPU time (max_time_s, max_cpu_s, deadline): the result depends on the
+/// speed and load of the machine.
+bool stoppedByTime(StopReason r);
+
 struct OptimizerResult {
   Eigen::VectorXd z;
   double criterion_initial = 0.0, criterion_final = 0.0;
@@ -165,10 +234,16 @@ struct OptimizerResult {
   int iterations = 0;
   long evaluations = 0;
   double wall_s = 0.0;
-  std::string stop_reason;
+  StopReason stop_reason = StopReason::None;
+  /// False when no feasible point was found (z is then the point of least violation).
+  bool feasible = true;
   std::vector<double> history_t_s, history_value;  // criterion over wall time
   Json details = Json::object();
 };
+
+/// The stop reason as the summary and the report show it: toString(stop_reason), followed by
+/// " (no feasible point found; least violation returned)" when r.feasible is false.
+std::string stopReasonText(const OptimizerResult& r);
 
 class Optimizer : public PluginObject {
  public:

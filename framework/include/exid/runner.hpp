@@ -53,7 +53,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& registry, const Run
 /// Throws exid::Error when it cannot be built (missing file or names, zero variances).
 Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 
-/// Dataset <-> CSV table (DESIGN.md §3 column names).
+/// Dataset <-> CSV table (docs/conventions.md §1 column names).
 CsvTable datasetTable(const Dataset& d);
 CsvTable samplesTable(const Samples& s);
 

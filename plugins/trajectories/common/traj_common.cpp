@@ -184,6 +184,13 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear) {
   return d;
 }
 
+TrajectorySpecs specsCommon(const JointSpace& js, bool linear) {
+  TrajectorySpecs sp;
+  sp.moving_joints = js.moving;
+  sp.linear = linear;
+  return sp;
+}
+
 int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who,
                 const std::string& t_key) {
   if (o.samples > 0) return o.samples;
@@ -200,14 +207,69 @@ int sampleCount(const CommonOptions& o, double T, bool include_end, const std::s
 }
 
 // ---------------------------------------------------------------- BasisTrajectory
-void BasisTrajectory::setBasis(Eigen::VectorXd t, Eigen::MatrixXd Bq, Eigen::MatrixXd Bqd,
-                               Eigen::MatrixXd Bqdd) {
+void BasisTrajectory::setGrid(Eigen::VectorXd t, int m) {
   t_ = std::move(t);
-  Bq_ = std::move(Bq);
-  Bqd_ = std::move(Bqd);
-  Bqdd_ = std::move(Bqdd);
-  m_ = static_cast<int>(Bq_.cols());
+  m_ = m;
+  const Eigen::Index K = t_.size();
+  Bq_.resize(K, m);
+  Bqd_.resize(K, m);
+  Bqdd_.resize(K, m);
+  Eigen::RowVectorXd bq, bqd, bqdd;
+  for (Eigen::Index k = 0; k < K; ++k) {
+    basisAt(t_(k), &bq, &bqd, &bqdd);
+    Bq_.row(k) = bq;
+    Bqd_.row(k) = bqd;
+    Bqdd_.row(k) = bqdd;
+  }
   J_.resize(0, 0);
+}
+
+TrajectorySpecs BasisTrajectory::basisSpecs() const {
+  TrajectorySpecs sp = specsCommon(js_, true);
+  sp.continuous = true;
+  return sp;
+}
+
+Samples BasisTrajectory::evaluateAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t) const {
+  check(z.size() == numVariables(), fmt::format("trajectory '{}': {} variables given, {} expected",
+                                                pluginName(), z.size(), numVariables()));
+  const Eigen::Index K = t.size();
+  Samples s;
+  s.t = t;
+  s.q = Eigen::MatrixXd::Zero(K, js_.n);
+  s.qd = s.q;
+  s.qdd = s.q;
+  for (int j = 0; j < js_.n; ++j) s.q.col(j).setConstant(js_.rest(j));
+  Eigen::RowVectorXd bq, bqd, bqdd;
+  for (Eigen::Index k = 0; k < K; ++k) {
+    basisAt(t(k), &bq, &bqd, &bqdd);
+    for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+      const int j = js_.moving[i];
+      const auto zj = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
+      s.q(k, j) = bq.dot(zj);
+      s.qd(k, j) = bqd.dot(zj);
+      s.qdd(k, j) = bqdd.dot(zj);
+    }
+  }
+  return s;
+}
+
+Eigen::VectorXd BasisTrajectory::vjpAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t,
+                                       const Samples& adj) const {
+  check(z.size() == numVariables(), fmt::format("trajectory '{}': {} variables given, {} expected",
+                                                pluginName(), z.size(), numVariables()));
+  Eigen::VectorXd g = Eigen::VectorXd::Zero(numVariables());
+  Eigen::RowVectorXd bq, bqd, bqdd;
+  for (Eigen::Index k = 0; k < t.size(); ++k) {
+    basisAt(t(k), &bq, &bqd, &bqdd);
+    for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+      const int j = js_.moving[i];
+      g.segment(static_cast<Eigen::Index>(i) * m_, m_) += adj.q(k, j) * bq.transpose() +
+                                                          adj.qd(k, j) * bqd.transpose() +
+                                                          adj.qdd(k, j) * bqdd.transpose();
+    }
+  }
+  return g;
 }
 
 Samples BasisTrajectory::evaluate(const Eigen::VectorXd& z) const {

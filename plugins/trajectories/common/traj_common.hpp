@@ -54,8 +54,11 @@ JointSpace resolveJoints(const RobotModel& robot, const CommonOptions& o, const 
 void adjustLimitsCommon(const JointSpace& js, const CommonOptions& o,
                         std::vector<JointLimits>* limits);
 
-/// What describe() says: "linear", the moving joints, the margin and (informative) the caps.
+/// What describe() says (for the report): "linear", the moving joints, the margin and the caps.
 Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
+
+/// The capabilities every trajectory plugin declares: its moving joints and linearity.
+TrajectorySpecs specsCommon(const JointSpace& js, bool linear);
 
 /// Sample count for a window of length T [s]: `samples` if set, else round(T / dt) (+1 when the
 /// end point is included).
@@ -67,12 +70,19 @@ int sampleCount(const CommonOptions& o, double T, bool include_end, const std::s
 /// Trajectory whose signals are a constant plus a basis shared by every moving joint:
 /// q(:, j) = rest_j + Bq z_j, qd(:, j) = Bqd z_j, qdd(:, j) = Bqdd z_j (z_j: m variables per
 /// moving joint, stored joint after joint). Held joints stay at rest. Exact, cached Jacobian.
+/// The basis is a function of time (basisAt), so the trajectory is also evaluated at arbitrary
+/// times (evaluateAt, vjpAt); the sample grid's basis is the same function at the sample times.
 class BasisTrajectory : public Trajectory {
  public:
   int numVariables() const override { return m_ * static_cast<int>(js_.moving.size()); }
   Samples evaluate(const Eigen::VectorXd& z) const override;
   Eigen::VectorXd vjp(const Eigen::VectorXd& z, const Samples& adj) const override;
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const override;
+  /// Moving joints, linear, continuous; subclasses add the duration and whether it is periodic.
+  TrajectorySpecs specs() const override { return basisSpecs(); }
+  Samples evaluateAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t) const override;
+  Eigen::VectorXd vjpAt(const Eigen::VectorXd& z, const Eigen::VectorXd& t,
+                        const Samples& adj) const override;
   double positionMargin() const override { return opt_.margin; }
   // A cap is imposed even when the robot's own limits are not (adjustLimits drops those).
   bool velocityLimits() const override { return opt_.velocity_limits || js_.hasVelocityCap(); }
@@ -86,8 +96,13 @@ class BasisTrajectory : public Trajectory {
   const JointSpace& joints() const { return js_; }
 
  protected:
-  /// Called by subclasses' bind().
-  void setBasis(Eigen::VectorXd t, Eigen::MatrixXd Bq, Eigen::MatrixXd Bqd, Eigen::MatrixXd Bqdd);
+  /// The basis rows (m values each) of q, qd and qdd at time t. Valid after bind().
+  virtual void basisAt(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd,
+                       Eigen::RowVectorXd* bqdd) const = 0;
+  /// The sample grid t with its basis from basisAt; called by subclasses' bind() once the basis
+  /// function is set up (m: variables per moving joint).
+  void setGrid(Eigen::VectorXd t, int m);
+  TrajectorySpecs basisSpecs() const;
   /// z <- zref + s_j (z - zref) per moving joint j, s_j chosen so that the deviation from the
   /// reference (whose signals are the constant centre_j) uses `fraction` of the tightest of the
   /// joint's half position range (about the centre), velocity and acceleration limits.

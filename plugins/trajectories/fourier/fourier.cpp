@@ -3,8 +3,8 @@
 //   qd_j(t) = sum a_jl cos(w l t) + b_jl sin(w l t),
 //   qdd_j(t) = sum -a_jl w l sin(w l t) + b_jl w l cos(w l t).
 // Decision variables per moving joint: [q0_j, a_j1..a_jL, b_j1..b_jL]. Periodic and
-// band-limited; sampled over one period (t = 0, dt, ..., T - dt). Linear in z: the Jacobian is
-// constant and cached.
+// band-limited; sampled over one period (t = 0, dt, ..., T - dt), and defined at any time
+// (evaluateAt). Linear in z: the Jacobian is constant and cached.
 #include <fmt/format.h>
 
 #include <cmath>
@@ -60,24 +60,12 @@ class Fourier final : public exid::traj::BasisTrajectory {
     js_ = exid::traj::resolveJoints(*robot, opt_, who);
     const int K = exid::traj::sampleCount(opt_, period_, false, who, "period_s");
     const double dt = opt_.samples > 0 ? period_ / K : opt_.sample_period;
-    const double w = 2.0 * M_PI / period_;
+    w_ = 2.0 * M_PI / period_;
+    const double w = w_;
     Eigen::VectorXd t(K);
     const int m = 1 + 2 * L_;
-    Eigen::MatrixXd Bq = Eigen::MatrixXd::Zero(K, m), Bqd = Bq, Bqdd = Bq;
-    for (int k = 0; k < K; ++k) {
-      t(k) = k * dt;
-      Bq(k, 0) = 1.0;
-      for (int l = 1; l <= L_; ++l) {
-        const double wl = w * l, s = std::sin(wl * t(k)), c = std::cos(wl * t(k));
-        Bq(k, l) = s / wl;
-        Bq(k, L_ + l) = -c / wl;
-        Bqd(k, l) = c;
-        Bqd(k, L_ + l) = s;
-        Bqdd(k, l) = -wl * s;
-        Bqdd(k, L_ + l) = wl * c;
-      }
-    }
-    setBasis(t, Bq, Bqd, Bqdd);
+    for (int k = 0; k < K; ++k) t(k) = k * dt;
+    setGrid(t, m);
     // start
     const int nv = numVariables();
     zref_ = Eigen::VectorXd::Zero(nv);
@@ -127,6 +115,12 @@ class Fourier final : public exid::traj::BasisTrajectory {
     if (lo) *lo = lo_;
     if (hi) *hi = hi_;
   }
+  exid::TrajectorySpecs specs() const override {
+    exid::TrajectorySpecs sp = basisSpecs();
+    sp.periodic = true;
+    sp.duration_s = period_;
+    return sp;
+  }
   exid::Json describe() const override {
     exid::Json d = BasisTrajectory::describe();
     d["period_s"] = period_;
@@ -135,8 +129,28 @@ class Fourier final : public exid::traj::BasisTrajectory {
     return d;
   }
 
+ protected:
+  void basisAt(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd,
+               Eigen::RowVectorXd* bqdd) const override {
+    const int m = 1 + 2 * L_;
+    bq->setZero(m);
+    bqd->setZero(m);
+    bqdd->setZero(m);
+    (*bq)(0) = 1.0;
+    for (int l = 1; l <= L_; ++l) {
+      const double wl = w_ * l, s = std::sin(wl * t), c = std::cos(wl * t);
+      (*bq)(l) = s / wl;
+      (*bq)(L_ + l) = -c / wl;
+      (*bqd)(l) = c;
+      (*bqd)(L_ + l) = s;
+      (*bqdd)(l) = -wl * s;
+      (*bqdd)(L_ + l) = wl * c;
+    }
+  }
+
  private:
   double period_;
+  double w_ = 0.0;  // 2 pi / period_
   int L_;
   std::string init_;
   double init_scale_;

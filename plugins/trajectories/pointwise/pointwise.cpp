@@ -187,6 +187,12 @@ class Pointwise final : public exid::Trajectory {
   void adjustLimits(std::vector<exid::JointLimits>* limits) const override {
     exid::traj::adjustLimitsCommon(js_, opt_, limits);
   }
+  // Defined at the samples only (the accelerations are the variables): not continuous.
+  exid::TrajectorySpecs specs() const override {
+    exid::TrajectorySpecs sp = exid::traj::specsCommon(js_, true);
+    sp.duration_s = D_;
+    return sp;
+  }
   exid::Json describe() const override {
     exid::Json d = exid::traj::describeCommon(js_, opt_, true);
     d["samples"] = K_;

@@ -4,7 +4,8 @@
 // ends; the cubic is the clamped spline); periodic — q, and derivatives 1..degree-1 continuous
 // across the period end (the last knot equals the first, knots - 1 variables per joint).
 // The map knot values -> spline coefficients is linear (one banded system, solved once for
-// every unit vector at bind()), so the signals at the samples are a constant basis times z.
+// every unit vector at bind()), so the signals at the samples, or at any time (evaluateAt), are
+// a basis times z.
 #include <fmt/format.h>
 
 #include <Eigen/LU>
@@ -63,16 +64,11 @@ class Spline final : public exid::traj::BasisTrajectory {
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
     const std::string who = "trajectory 'spline'";
     js_ = exid::traj::resolveJoints(*robot, opt_, who);
-    const int S = knots_ - 1, d = degree_, nc = d + 1;
+    S_ = knots_ - 1;
+    const int S = S_, d = degree_, nc = d + 1;
     const int nv = periodic_ ? knots_ - 1 : knots_;  // variables per joint
-    const double h = D_ / S;
-    // derivative factor: d^r/dtau^r tau^p = p!/(p-r)! tau^(p-r)
-    auto dpow = [](int p, int r, double tau) {
-      if (r > p) return 0.0;
-      double f = 1.0;
-      for (int i = 0; i < r; ++i) f *= p - i;
-      return f * std::pow(tau, p - r);
-    };
+    h_ = D_ / S;
+    const double h = h_;
     const int N = nc * S;
     Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, nv);
     int row = 0;
@@ -104,24 +100,12 @@ class Spline final : public exid::traj::BasisTrajectory {
       }
     }
     exid::check(row == N, "trajectory 'spline': internal: system size");
-    Eigen::MatrixXd C = A.fullPivLu().solve(R);  // coefficients per unit knot vector
+    C_ = A.fullPivLu().solve(R);  // coefficients per unit knot vector
     const int K = exid::traj::sampleCount(opt_, D_, !periodic_, who);
     const double dt = opt_.samples > 0 ? D_ / (periodic_ ? K : K - 1) : opt_.sample_period;
     Eigen::VectorXd t(K);
-    Eigen::MatrixXd Bq(K, nv), Bqd(K, nv), Bqdd(K, nv);
-    for (int k = 0; k < K; ++k) {
-      t(k) = k * dt;
-      int i = std::min(S - 1, static_cast<int>(std::floor(t(k) / h + 1e-12)));
-      i = std::max(i, 0);
-      const double tau = t(k) - i * h;
-      for (int r = 0; r < 3; ++r) {
-        Eigen::RowVectorXd e(nc);
-        for (int p = 0; p <= d; ++p) e(p) = dpow(p, r, tau);
-        Eigen::RowVectorXd row_r = e * C.middleRows(i * nc, nc);
-        (r == 0 ? Bq : (r == 1 ? Bqd : Bqdd)).row(k) = row_r;
-      }
-    }
-    setBasis(t, Bq, Bqd, Bqdd);
+    for (int k = 0; k < K; ++k) t(k) = k * dt;
+    setGrid(t, nv);
     const int n_all = numVariables();
     Eigen::VectorXd zref(n_all);
     for (std::size_t i = 0; i < js_.moving.size(); ++i)
@@ -151,6 +135,12 @@ class Spline final : public exid::traj::BasisTrajectory {
     if (lo) *lo = lo_;
     if (hi) *hi = hi_;
   }
+  exid::TrajectorySpecs specs() const override {
+    exid::TrajectorySpecs sp = basisSpecs();
+    sp.periodic = periodic_;
+    sp.duration_s = D_;
+    return sp;
+  }
   exid::Json describe() const override {
     exid::Json d = BasisTrajectory::describe();
     d["duration_s"] = D_;
@@ -160,9 +150,36 @@ class Spline final : public exid::traj::BasisTrajectory {
     return d;
   }
 
+ protected:
+  // Segment i = floor(t / h) (the last one up to the end), tau = t - i h; each row is the
+  // derivative of the segment's polynomial times its coefficients per unit knot vector.
+  void basisAt(double t, Eigen::RowVectorXd* bq, Eigen::RowVectorXd* bqd,
+               Eigen::RowVectorXd* bqdd) const override {
+    const int d = degree_, nc = d + 1;
+    int i = std::min(S_ - 1, static_cast<int>(std::floor(t / h_ + 1e-12)));
+    i = std::max(i, 0);
+    const double tau = t - i * h_;
+    Eigen::RowVectorXd e(nc);
+    for (int r = 0; r < 3; ++r) {
+      for (int p = 0; p <= d; ++p) e(p) = dpow(p, r, tau);
+      (r == 0 ? *bq : (r == 1 ? *bqd : *bqdd)) = e * C_.middleRows(i * nc, nc);
+    }
+  }
+
  private:
+  // derivative factor: d^r/dtau^r tau^p = p!/(p-r)! tau^(p-r)
+  static double dpow(int p, int r, double tau) {
+    if (r > p) return 0.0;
+    double f = 1.0;
+    for (int i = 0; i < r; ++i) f *= p - i;
+    return f * std::pow(tau, p - r);
+  }
+
   double D_;
   int knots_, degree_;
+  int S_ = 0;          // segments (knots - 1)
+  double h_ = 0.0;     // segment length [s]
+  Eigen::MatrixXd C_;  // polynomial coefficients (segment after segment) per unit knot vector
   bool periodic_;
   std::string init_;
   double init_scale_;

@@ -130,9 +130,7 @@ Json parameterTable(const Estimate& e);
 // dataset in one pass, in order, holding only the chunks at work (exid::SampleWindow).
 
 /// Whether model.rows() may be computed on consecutive slices of a dataset and stacked, i.e.
-/// the rows of sample k depend on sample k only. True for the models known to be per sample
-/// (differential, load_wrench, load_torque) and for any model whose describe() has
-/// "per_sample": true; false when describe() has "per_sample": false or the model is unknown.
+/// the rows of sample k depend on sample k only: the model's specs().per_sample.
 bool modelIsPerSample(const ObservationModel& model);
 
 /// Streams a dataset through the model: calls fn(rows, begin, end) on consecutive slices of at
