@@ -335,12 +335,13 @@ class Rosbag2Experiment : public exid::Experiment {
       wr = std::move(u);
     }
 
-    // Time in seconds after the first joint-state sample (integer nanoseconds first: an epoch
-    // stamp in double seconds would keep only a quarter microsecond).
+    // Time in seconds after the first joint-state sample: the difference in integer nanoseconds
+    // first (an epoch stamp in double seconds would keep only a quarter microsecond), then one
+    // correctly rounded division (5 s is 5.0, not 5 * 1e-9 * 1e9).
     const std::int64_t t0 = js[keep.front()].ns;
     std::vector<double> tk(keep.size());
     for (std::size_t i = 0; i < keep.size(); ++i)
-      tk[i] = static_cast<double>(js[keep[i]].ns - t0) * 1e-9;
+      tk[i] = static_cast<double>(js[keep[i]].ns - t0) / 1e9;
 
     // Gaps and uneven stamps (steps per message of the publisher: a dropped message is no gap).
     const double ratio = P_.getDouble("max_gap_ratio");
@@ -430,7 +431,7 @@ class Rosbag2Experiment : public exid::Experiment {
       exid::check(!wr.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
                                            "dropped",
                                            pre, bagname, w_topic, wr_msgs));
-      for (const Wr& w : wr) tw.push_back(static_cast<double>(w.ns - t0) * 1e-9);
+      for (const Wr& w : wr) tw.push_back(static_cast<double>(w.ns - t0) / 1e9);
       if (tw.size() >= 2) {
         std::vector<double> st(tw.size() - 1);
         for (std::size_t i = 1; i < tw.size(); ++i) st[i - 1] = tw[i] - tw[i - 1];

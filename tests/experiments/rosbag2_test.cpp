@@ -316,7 +316,7 @@ const Recording& recording() {
     r.d = s;
     for (int k = 0; k < s.size(); ++k) {
       r.ns.push_back(kEpoch + std::llround(s.t[k] * 1e9));
-      r.d.t[k] = static_cast<double>(r.ns.back() - r.ns.front()) * 1e-9;
+      r.d.t[k] = static_cast<double>(r.ns.back() - r.ns.front()) / 1e9;
     }
     return r;
   }();
@@ -690,7 +690,7 @@ TEST(Rosbag2, WrenchIsInterpolatedAtTheJointStateTimesAndSamplesOutsideItAreCut)
   for (int i = 0; i < 350; ++i) {
     const std::int64_t ns = kEpoch + 101300000LL + 2000000LL * i;
     double w[6];
-    wv(static_cast<double>(ns - kEpoch) * 1e-9, w);
+    wv(static_cast<double>(ns - kEpoch) / 1e9, w);
     msgs.push_back({"/ft", ns, wrenchStamped(ns, w)});
   }
   BagSpec s;
