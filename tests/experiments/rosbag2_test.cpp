@@ -21,6 +21,7 @@
 #include "exid/config.hpp"
 #include "exid/io.hpp"
 #include "exid/runner.hpp"
+#include "exid_cli.hpp"
 
 namespace {
 
@@ -811,4 +812,30 @@ TEST(Rosbag2, SplitAndSegmentAsTheCsvExperiment) {
   }
   EXPECT_NE(errorOf(dir, "t_end_s: 12").find("past the end of the recording"), std::string::npos);
   EXPECT_NE(errorOf(dir, "split_fraction: 0.5").find("need split_part"), std::string::npos);
+}
+
+TEST(Rosbag2, InspectAndIdentifyTakeABagFolderOnTheCommandLine) {
+  const fs::path dir = bagOf(kVariants[2]);
+  const exid_cli::CmdResult r =
+      exid_cli::runExid("inspect puma560 " + dir.string() + " --set t_end_s=5");
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("recording: 200 Hz (header stamps of topic '/joint_states')"),
+            std::string::npos)
+      << r.out;
+  EXPECT_NE(r.out.find("(1001 samples"), std::string::npos) << r.out;  // 0 .. 5 s at 200 Hz
+  // exid identify --data BAG_FOLDER replaces the study's experiment by the bag
+  const fs::path work = exid_cli::freshTempDir("exid_rosbag2_cli_", "identify");
+  std::ofstream(work / "study.yaml")
+      << "robot: {type: puma560}\n"
+         "model: {type: differential}\n"
+         "experiment: {type: csv, params: {file: does_not_exist.csv}}\n"
+         "estimator: {type: filtered_ls, params: {cutoff_hz: 8}}\n";
+  const exid_cli::CmdResult id =
+      exid_cli::runExid("-q identify " + (work / "study.yaml").string() + " --data " +
+                        dir.string() + " --out " + (work / "out").string());
+  ASSERT_EQ(id.code, 0) << id.out;
+  const exid::Json S = exid::Json::parse(exid_cli::slurp(work / "out" / "summary.json"));
+  EXPECT_EQ(S.find("status")->asString(), "ok");
+  EXPECT_EQ(S.find("experiment")->find("type")->asString(), "rosbag2");
+  fs::remove_all(work);
 }
