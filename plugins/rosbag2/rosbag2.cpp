@@ -182,7 +182,6 @@ class Rosbag2Experiment : public exid::Experiment {
     struct Js {
       std::int64_t ns;
       long long msg;  // 1-based index among the topic's messages (bag order)
-      long long seq;  // 1-based index among the messages carrying the robot's joints
     };
     std::vector<Js> js;
     std::vector<double> qv, qdv, tauv;  // n per sample
@@ -193,6 +192,7 @@ class Rosbag2Experiment : public exid::Experiment {
     };
     std::vector<Wr> wr;
     long long js_msgs = 0, js_other = 0, js_seq = 0, js_bad = 0, wr_msgs = 0, wr_bad = 0;
+    std::vector<std::int64_t> dropped_ns;     // stamps of joint-state messages dropped as bad
     std::vector<std::string> js_found_names;  // names of the first message without our joints
     exid::Json bad_examples = exid::Json::array();
     std::vector<std::string> cache_names;
@@ -231,7 +231,7 @@ class Rosbag2Experiment : public exid::Experiment {
             if (js_found_names.empty()) js_found_names = s.name;
             return;
           }
-          const long long sq = ++js_seq;
+          ++js_seq;
           if (present < n) {
             std::vector<std::string> missing;
             for (int j = 0; j < n; ++j)
@@ -260,8 +260,13 @@ class Rosbag2Experiment : public exid::Experiment {
                   (use_vel && !std::isfinite(s.velocity[i])))
                 why = fmt::format("non-finite value for joint '{}'", s.name[i]);
             }
-          if (!why.empty()) return bad(js_topic, k, m.where, why, &js_bad);
-          js.push_back({header_time ? s.stamp.ns() : m.receive_ns, k, sq});
+          const std::int64_t ns = header_time ? s.stamp.ns() : m.receive_ns;
+          if (!why.empty()) {
+            bad(js_topic, k, m.where, why, &js_bad);
+            dropped_ns.push_back(ns);  // its place in time: the step across it is no gap
+            return;
+          }
+          js.push_back({ns, k});
           for (int j = 0; j < n; ++j) {
             const std::size_t i = static_cast<std::size_t>(cache_idx[static_cast<std::size_t>(j)]);
             qv.push_back(s.position[i]);
@@ -343,7 +348,16 @@ class Rosbag2Experiment : public exid::Experiment {
     for (std::size_t i = 0; i < keep.size(); ++i)
       tk[i] = static_cast<double>(js[keep[i]].ns - t0) / 1e9;
 
-    // Gaps and uneven stamps (steps per message of the publisher: a dropped message is no gap).
+    // Position of each sample among the publisher's messages in time, dropped ones included:
+    // a step across a dropped message spans two periods and is no gap.
+    std::sort(dropped_ns.begin(), dropped_ns.end());
+    std::vector<long long> pos(keep.size());
+    for (std::size_t i = 0; i < keep.size(); ++i)
+      pos[i] = static_cast<long long>(i) +
+               (std::lower_bound(dropped_ns.begin(), dropped_ns.end(), js[keep[i]].ns) -
+                dropped_ns.begin());
+
+    // Gaps and uneven stamps.
     const double ratio = P_.getDouble("max_gap_ratio");
     const bool resample = P_.getDouble("resample_hz") > 0.0;
     auto median = [](std::vector<double> v) {
@@ -353,8 +367,7 @@ class Rosbag2Experiment : public exid::Experiment {
     if (tk.size() >= 3) {
       std::vector<double> steps(tk.size() - 1);
       for (std::size_t i = 1; i < tk.size(); ++i)
-        steps[i - 1] = (tk[i] - tk[i - 1]) /
-                       static_cast<double>(std::max(1LL, js[keep[i]].seq - js[keep[i - 1]].seq));
+        steps[i - 1] = (tk[i] - tk[i - 1]) / static_cast<double>(pos[i] - pos[i - 1]);
       const double med = median(steps);
       for (std::size_t i = 0; i < steps.size(); ++i)
         exid::check(
@@ -562,7 +575,7 @@ class Rosbag2Experiment : public exid::Experiment {
       std::vector<int> row;
       for (std::size_t i : sel) {
         raw.push_back(static_cast<double>(js[keep[i]].ns - t0));
-        row.push_back(static_cast<int>(std::min<long long>(js[keep[i]].seq, 2000000000LL)));
+        row.push_back(static_cast<int>(std::min<long long>(pos[i], 2000000000LL)));
       }
       exid::Json R = exid::Json::object();
       R["file"] = bagname;

@@ -36,19 +36,24 @@ fs::path tmpDir() {
 
 // ------------------------------------------------------------------------------ CDR writer
 struct CdrWriter {
-  Bytes b{0x00, 0x01, 0x00, 0x00};  // CDR little endian
+  bool big = false;
+  Bytes b{0x00, 0x01, 0x00, 0x00};  // CDR little endian (big endian: 00 00)
+  void put(std::uint64_t v, int n) {
+    for (int i = 0; i < n; ++i)
+      b.push_back(static_cast<std::uint8_t>(v >> (8 * (big ? n - 1 - i : i))));
+  }
   void align(std::size_t a) {
     while ((b.size() - 4) % a != 0) b.push_back(0);
   }
   void u32(std::uint32_t v) {
     align(4);
-    for (int i = 0; i < 4; ++i) b.push_back(static_cast<std::uint8_t>(v >> (8 * i)));
+    put(v, 4);
   }
   void f64(double d) {
     align(8);
     std::uint64_t u;
     std::memcpy(&u, &d, 8);
-    for (int i = 0; i < 8; ++i) b.push_back(static_cast<std::uint8_t>(u >> (8 * i)));
+    put(u, 8);
   }
   void str(const std::string& s) {
     u32(static_cast<std::uint32_t>(s.size() + 1));
@@ -67,8 +72,11 @@ struct CdrWriter {
 
 Bytes jointState(std::int64_t ns, const std::vector<std::string>& names,
                  const std::vector<double>& pos, const std::vector<double>& vel,
-                 const std::vector<double>& eff, const std::string& frame = "base") {
+                 const std::vector<double>& eff, const std::string& frame = "base",
+                 bool big_endian = false) {
   CdrWriter w;
+  w.big = big_endian;
+  if (big_endian) w.b[1] = 0x00;
   w.stamp(ns);
   w.str(frame);
   w.u32(static_cast<std::uint32_t>(names.size()));
@@ -838,4 +846,79 @@ TEST(Rosbag2, InspectAndIdentifyTakeABagFolderOnTheCommandLine) {
   EXPECT_EQ(S.find("status")->asString(), "ok");
   EXPECT_EQ(S.find("experiment")->find("type")->asString(), "rosbag2");
   fs::remove_all(work);
+}
+
+TEST(Rosbag2, BigEndianCdrAndAlignmentOfEmptySequences) {
+  // The same message in both byte orders, with a frame_id and names whose lengths leave the
+  // float64 sequences misaligned by 4 unless padded, and an empty velocity (no padding).
+  const std::vector<std::string> names = {"j", "joint_two", "x3"};
+  for (const char* frame : {"", "b", "base_link"})
+    for (bool big : {false, true}) {
+      SCOPED_TRACE(std::string(frame) + (big ? " big endian" : " little endian"));
+      const Bytes m = jointState(kEpoch, names, {1.5, -2.25, 3e-7}, {}, {4, 5, 6}, frame, big);
+      const exid::rosbag2::JointStateMsg d =
+          exid::rosbag2::decodeJointState(m.data(), m.size(), "here");
+      EXPECT_EQ(d.stamp.ns(), kEpoch);
+      EXPECT_EQ(d.frame_id, frame);
+      EXPECT_EQ(d.name, names);
+      EXPECT_EQ(d.position, (std::vector<double>{1.5, -2.25, 3e-7}));
+      EXPECT_TRUE(d.velocity.empty());
+      EXPECT_EQ(d.effort, (std::vector<double>{4, 5, 6}));
+      // one byte short anywhere: an error naming the place, never a read past the end
+      for (std::size_t cut = 0; cut < m.size(); ++cut) {
+        try {
+          exid::rosbag2::decodeJointState(m.data(), cut, "here");
+          ADD_FAILURE() << "a message cut to " << cut << " bytes was accepted";
+        } catch (const exid::Error& e) {
+          EXPECT_EQ(std::string(e.what()).rfind("here: ", 0), 0u) << e.what();
+        }
+      }
+    }
+  const Bytes other = {0x00, 0x03, 0x00, 0x00, 1, 2, 3, 4};  // PL_CDR_LE: not a plain CDR message
+  try {
+    exid::rosbag2::decodeJointState(other.data(), other.size(), "here");
+    ADD_FAILURE() << "PL_CDR accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("expected 00 01 (CDR little endian)"), std::string::npos)
+        << e.what();
+  }
+}
+
+TEST(Rosbag2, MessagesOutOfOrderAreSortedAndARepeatedStampIsAnErrorOrDropped) {
+  // Header stamps of messages 10 and 11 swapped (received in that order): sorted by time and
+  // counted; then a message 21 received after message 20 repeats its stamp.
+  const Recording& r = recording();
+  auto build = [&](bool repeat) {
+    std::vector<Msg> msgs;
+    for (int k = 0; k < 100; ++k) {
+      const int src = k == 10 ? 11 : k == 11 ? 10 : k;
+      std::vector<double> q(6), tau(6);
+      for (int j = 0; j < 6; ++j) {
+        q[static_cast<std::size_t>(j)] = r.d.q(src, j);
+        tau[static_cast<std::size_t>(j)] = r.d.tau(src, j);
+      }
+      const std::int64_t recv = r.ns[static_cast<std::size_t>(k)] + 1000000;
+      msgs.push_back({"/joint_states", recv,
+                      jointState(r.ns[static_cast<std::size_t>(src)], r.names, q, {}, tau)});
+      if (repeat && k == 19)
+        msgs.push_back({"/joint_states", recv + 500,
+                        jointState(r.ns[static_cast<std::size_t>(src)], r.names, q, {}, tau)});
+    }
+    BagSpec s;
+    s.storage = "mcap";
+    s.msgs = msgs;
+    return writeBag(tmpDir() / (repeat ? "repeat" : "swapped"), s);
+  };
+  const exid::Dataset d = readBag(build(false));
+  ASSERT_EQ(d.size(), 100);
+  for (int k = 0; k < 100; ++k) EXPECT_EQ(d.q.row(k), r.d.q.row(k)) << k;
+  EXPECT_EQ(acc(d, "reordered_messages"), 1);
+  const fs::path rep = build(true);
+  const std::string e = errorOf(rep);
+  EXPECT_NE(e.find("topic '/joint_states', message 21: its time stamp"), std::string::npos) << e;
+  EXPECT_NE(e.find("repeats that of message 20"), std::string::npos) << e;
+  const exid::Dataset k = readBag(rep, "drop_bad_messages: true");
+  EXPECT_EQ(k.size(), 100);
+  EXPECT_EQ(k.q, d.q);
+  EXPECT_EQ(acc(k, "dropped_repeated_stamps"), 1);
 }
