@@ -298,6 +298,13 @@ void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::st
     const std::int64_t row = sqlite3_column_int64(st.s, 0);
     m.topic = ids.at(sqlite3_column_int64(st.s, 1));
     m.receive_ns = sqlite3_column_int64(st.s, 2);
+    // Nanoseconds since the epoch; a negative one is corrupt (and differences of two arbitrary
+    // int64 stamps could overflow).
+    if (m.receive_ns < 0)
+      throw Error(
+          fmt::format("{}: messages row id {}: timestamp {}: expected nanoseconds since "
+                      "the epoch (>= 0)",
+                      name, row, m.receive_ns));
     m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st.s, 3));
     const int bytes = sqlite3_column_bytes(st.s, 3);
     m.size = bytes > 0 && m.data ? static_cast<std::size_t>(bytes) : 0;

@@ -922,3 +922,14 @@ TEST(Rosbag2, MessagesOutOfOrderAreSortedAndARepeatedStampIsAnErrorOrDropped) {
   EXPECT_EQ(k.q, d.q);
   EXPECT_EQ(acc(k, "dropped_repeated_stamps"), 1);
 }
+
+TEST(Rosbag2, ANegativeStorageTimestampIsAnError) {
+  std::vector<Msg> msgs = messages({0, 1, 2, 3, 4, 5}, false);
+  msgs.resize(60);
+  msgs[7].receive_ns = -5;
+  BagSpec s;
+  s.msgs = msgs;
+  const std::string e = errorOf(writeBag(tmpDir() / "negative_stamp", s));
+  EXPECT_NE(e.find("timestamp -5: expected nanoseconds since the epoch"), std::string::npos) << e;
+  EXPECT_NE(e.find("negative_stamp_0.db3: messages row id"), std::string::npos) << e;
+}
