@@ -12,8 +12,8 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
-#include <map>
 #include <numeric>
+#include <set>
 #include <string>
 #include <vector>
 
