@@ -221,6 +221,34 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
   return 0;
 }
 
+/// The params YAML of a plugin with `KEY: PATH` added (a flow mapping, a block mapping or "").
+std::string withFile(const std::string& yaml, const std::string& file,
+                     const std::string& key = "file") {
+  std::string esc;
+  for (char ch : file) esc += ch == '\'' ? std::string("''") : std::string(1, ch);
+  const std::string f = key + ": '" + esc + "'";
+  const auto a = yaml.find_first_not_of(" \t\r\n"), b = yaml.find_last_not_of(" \t\r\n");
+  const std::string t = a == std::string::npos ? std::string() : yaml.substr(a, b - a + 1);
+  if (t.empty()) return "{" + f + "}";
+  if (t.front() == '{' && t.back() == '}') {
+    const std::string inner = t.substr(1, t.size() - 2);
+    return inner.find_first_not_of(" \t\r\n") == std::string::npos ? "{" + f + "}"
+                                                                   : "{" + f + ", " + inner + "}";
+  }
+  return f + "\n" + yaml + "\n";
+}
+
+/// The experiment that reads a recording named on the command line: a ROS 2 bag folder (a folder
+/// holding metadata.yaml) by `rosbag2` (its parameter `path`), anything else by `csv` (`file`).
+struct DataReader {
+  const char* type;
+  const char* key;
+};
+DataReader dataReader(const fs::path& p) {
+  if (fs::is_directory(p) && fs::exists(p / "metadata.yaml")) return {"rosbag2", "path"};
+  return {"csv", "file"};
+}
+
 /// Single stages run through the study runner on a trimmed copy of the study.
 int stageCommand(const Registry& reg, const std::string& stage, const std::string& study,
                  const std::string& data_file, std::string out) {
@@ -243,10 +271,11 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
     if (!data_file.empty()) {
       PluginSpec spec;
       spec.kind = PluginKind::Experiment;
-      spec.type = "csv";
+      const DataReader dr = dataReader(data_file);
+      spec.type = dr.type;
       spec.key_path = "experiment";
-      spec.params = resolveParams(reg.get(PluginKind::Experiment, "csv"),
-                                  fmt::format("{{file: '{}'}}", fs::absolute(data_file).string()),
+      spec.params = resolveParams(reg.get(PluginKind::Experiment, dr.type),
+                                  withFile("", fs::absolute(data_file).string(), dr.key),
                                   "experiment.params", fs::current_path());
       cfg.experiment = spec;
     }
@@ -372,31 +401,15 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   return 0;
 }
 
-/// The params YAML of a plugin with `file: PATH` added (a flow mapping, a block mapping or "").
-std::string withFile(const std::string& yaml, const std::string& file) {
-  std::string esc;
-  for (char ch : file) esc += ch == '\'' ? std::string("''") : std::string(1, ch);
-  const std::string f = "file: '" + esc + "'";
-  const auto a = yaml.find_first_not_of(" \t\r\n"), b = yaml.find_last_not_of(" \t\r\n");
-  const std::string t = a == std::string::npos ? std::string() : yaml.substr(a, b - a + 1);
-  if (t.empty()) return "{" + f + "}";
-  if (t.front() == '{' && t.back() == '}') {
-    const std::string inner = t.substr(1, t.size() - 2);
-    return inner.find_first_not_of(" \t\r\n") == std::string::npos ? "{" + f + "}"
-                                                                   : "{" + f + ", " + inner + "}";
-  }
-  return f + "\n" + yaml + "\n";
-}
-
-/// exid inspect ROBOT DATA.csv [--set key=value ...] [--params YAML] [--json FILE], or
+/// exid inspect ROBOT DATA.csv|BAG [--set key=value ...] [--params YAML] [--json FILE], or
 /// exid inspect STUDY.yaml [--json FILE]: the checks of exid/inspect.hpp, printed and as JSON.
 int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
                    const std::vector<std::string>& sets, const std::string& params,
                    const std::string& model_name, const std::string& model_params,
                    const std::string& json_out) {
   const char* usage =
-      "usage: exid inspect ROBOT DATA.csv [--set key=value ...] [--params '{yaml}'] [--json "
-      "FILE], or exid inspect STUDY.yaml [--json FILE]";
+      "usage: exid inspect ROBOT DATA.csv|BAG_FOLDER [--set key=value ...] [--params '{yaml}'] "
+      "[--json FILE], or exid inspect STUDY.yaml [--json FILE]";
   if (args.empty() || args.size() > 2) throw Error(usage);
   RunContext ctx;
   ctx.study_dir = fs::current_path();
@@ -412,28 +425,30 @@ int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
     auto robot = loadRobot(reg, args[0]);
     const fs::path data(args[1]);
     if (!fs::exists(data)) throw Error(fmt::format("{}: no such data file", args[1]));
-    const PluginInfo& csv = reg.get(PluginKind::Experiment, "csv");
+    const DataReader dr = dataReader(data);
+    const PluginInfo& reader = reg.get(PluginKind::Experiment, dr.type);
     const std::string file = fs::absolute(data).string();
     ParamSet ps =
-        resolveParams(csv, withFile(params, file), "experiment csv (--params)", fs::current_path());
+        resolveParams(reader, withFile(params, file, dr.key),
+                      fmt::format("experiment {} (--params)", dr.type), fs::current_path());
     for (const auto& kv : sets) {
       const auto eq = kv.find('=');
       if (eq == std::string::npos || eq == 0)
         throw Error(
-            fmt::format("--set {}: expected key=value (a parameter of the csv experiment, "
-                        "see exid plugins info csv)",
-                        kv));
+            fmt::format("--set {}: expected key=value (a parameter of the {} experiment, "
+                        "see exid plugins info {})",
+                        kv, dr.type, dr.type));
       const std::string key = kv.substr(0, eq);
       const ParamSet one =
-          resolveParams(csv, withFile(key + ": " + kv.substr(eq + 1), file),
-                        fmt::format("experiment csv (--set {})", kv), fs::current_path());
+          resolveParams(reader, withFile(key + ": " + kv.substr(eq + 1), file, dr.key),
+                        fmt::format("experiment {} (--set {})", dr.type, kv), fs::current_path());
       ps.set(key, one.at(key));
     }
     const PluginInfo& mi = reg.get(PluginKind::Model, model_name);
     auto model = bindModel(
         model_name, resolveParams(mi, model_params, "model " + model_name, fs::current_path()),
         robot, ctx);
-    const Dataset d = reg.create<Experiment>("csv", ps)->run(robot, nullptr, ctx);
+    const Dataset d = reg.create<Experiment>(dr.type, ps)->run(robot, nullptr, ctx);
     out = Json::object();
     out["robot"] = robot->name;
     const Json result = inspectDataset(*robot, model.get(), d, ctx);
@@ -642,7 +657,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     s->add_option("study", st->study, "study YAML file")->required();
     s->add_option("--out", st->out, "output folder");
     if (std::string(name) == "identify")
-      s->add_option("--data", st->data, "recorded CSV (replaces the experiment)");
+      s->add_option("--data", st->data,
+                    "recorded CSV or ROS 2 bag folder (replaces the experiment)");
     stages.push_back(s);
   }
 
@@ -673,13 +689,14 @@ Commands addCommands(CLI::App& app, Registry& registry) {
 
   auto* inspect = app.add_subcommand(
       "inspect",
-      "look at a recording before trusting it: exid inspect ROBOT DATA.csv [--set key=value ...] "
-      "[--json FILE] | exid inspect STUDY.yaml [--json FILE]");
+      "look at a recording before trusting it: exid inspect ROBOT DATA.csv|BAG_FOLDER [--set "
+      "key=value ...] [--json FILE] | exid inspect STUDY.yaml [--json FILE]");
   inspect->add_option("args", st->inspect_args,
-                      "ROBOT (plugin name, .urdf or DH .yaml) and DATA.csv, or STUDY.yaml");
+                      "ROBOT (plugin name, .urdf or DH .yaml) and DATA.csv or a ROS 2 bag folder, "
+                      "or STUDY.yaml");
   inspect
       ->add_option("--set", st->sets,
-                   "a parameter of the csv experiment, key=value (repeatable), e.g. "
+                   "a parameter of the csv (or rosbag2) experiment, key=value (repeatable), e.g. "
                    "sample_period_s=0.002 or q_columns=[a,b,c]")
       ->allow_extra_args(false);
   inspect->add_option("--params", st->params,

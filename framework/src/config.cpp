@@ -488,7 +488,8 @@ bool expandSplit(const YAML::Node& root, const fs::path& base_dir, const Registr
                                [](const ParamDecl& p) { return p.name == "split_part"; });
   if (!can) {
     pr.add(n, fmt::format("split: experiment '{}' cannot split its data (no split_part "
-                          "parameter; the csv experiment can); give a validation section",
+                          "parameter; the csv and rosbag2 experiments can); give a validation "
+                          "section",
                           info->name));
     return false;
   }

@@ -55,7 +55,7 @@ TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
       {exid::PluginKind::Model, {"differential", "integral", "load_wrench", "load_torque"}},
       {exid::PluginKind::Trajectory, {"pointwise", "fourier", "spline"}},
       {exid::PluginKind::Optimizer, {"adjoint_gradient", "nlopt"}},
-      {exid::PluginKind::Experiment, {"simulate", "csv"}},
+      {exid::PluginKind::Experiment, {"simulate", "csv", "rosbag2"}},
       {exid::PluginKind::Estimator, {"rls", "batch_ls", "filtered_ls", "wls"}},
   };
   for (const auto& [kind, names] : expected)

@@ -1,0 +1,743 @@
+// exid — rosbag2 storage (metadata.yaml, SQLite, MCAP) and CDR decoding. See bag.hpp.
+//
+// Formats, as read here:
+// - metadata.yaml: rosbag2_bagfile_information {version, storage_identifier, relative_file_paths,
+//   topics_with_message_count: [{topic_metadata: {name, type, serialization_format},
+//   message_count}], compression_format, compression_mode}.
+// - SQLite (.db3): tables topics(id, name, type, serialization_format, ...) and
+//   messages(id, topic_id, timestamp, data).
+// - MCAP: magic \x89MCAP0\r\n, then records <opcode u8><length u64><content>, little endian;
+//   strings are u32 length + bytes; Schema(0x03) {id u16, name, encoding, data u32+bytes},
+//   Channel(0x04) {id u16, schema_id u16, topic, message_encoding, metadata}, Message(0x05)
+//   {channel_id u16, sequence u32, log_time u64, publish_time u64, data}, Chunk(0x06)
+//   {start u64, end u64, uncompressed_size u64, uncompressed_crc u32, compression, records
+//   u64+bytes}, DataEnd(0x0F) ends the data section, Footer(0x02) the file; other records are
+//   skipped. The data section is read sequentially: no summary section is needed.
+// - CDR: 4-byte encapsulation header (0x00 0x01: little endian, 0x00 0x00: big endian), then
+//   the fields, each aligned to its size relative to the end of that header.
+#include "bag.hpp"
+
+#include <fmt/format.h>
+#include <fmt/ranges.h>
+#include <lz4frame.h>
+#include <sqlite3.h>
+#include <yaml-cpp/yaml.h>
+#include <zstd.h>
+
+#include <algorithm>
+#include <array>
+#include <cstring>
+#include <fstream>
+#include <map>
+#include <memory>
+
+#include "exid/error.hpp"
+
+namespace exid::rosbag2 {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+// A chunk larger than this (uncompressed) is refused rather than allocated: rosbag2 writes
+// chunks of about 1 MB; a corrupt size field must not allocate gigabytes.
+constexpr std::uint64_t kMaxChunkBytes = 1ULL << 30;
+
+/// A read-only byte range (C++17 has no std::span).
+struct Span {
+  const std::uint8_t* p;
+  std::size_t n;
+  std::size_t size() const { return n; }
+  const std::uint8_t* data() const { return p; }
+  const std::uint8_t* begin() const { return p; }
+  std::uint8_t operator[](std::size_t i) const { return p[i]; }
+};
+
+constexpr std::array<std::uint8_t, 8> kMcapMagic = {0x89, 'M', 'C', 'A', 'P', '0', '\r', '\n'};
+
+/// Bounds-checked little-endian reader of a byte range (MCAP records).
+class Bytes {
+ public:
+  Bytes(const std::uint8_t* p, std::size_t n, std::string where)
+      : p_(p), n_(n), where_(std::move(where)) {}
+  std::size_t pos() const { return pos_; }
+  std::size_t left() const { return n_ - pos_; }
+  void need(std::size_t k, const char* what) const {
+    if (k > left())
+      throw Error(fmt::format("{}: truncated: {} needs {} bytes at byte {}, {} left", where_, what,
+                              k, pos_, left()));
+  }
+  std::uint64_t uint(int bytes, const char* what) {
+    need(static_cast<std::size_t>(bytes), what);
+    std::uint64_t v = 0;
+    for (int i = bytes - 1; i >= 0; --i) v = (v << 8) | p_[pos_ + static_cast<std::size_t>(i)];
+    pos_ += static_cast<std::size_t>(bytes);
+    return v;
+  }
+  std::uint16_t u16(const char* what) { return static_cast<std::uint16_t>(uint(2, what)); }
+  std::uint32_t u32(const char* what) { return static_cast<std::uint32_t>(uint(4, what)); }
+  std::uint64_t u64(const char* what) { return uint(8, what); }
+  std::string str(const char* what) {
+    const std::uint32_t len = u32(what);
+    need(len, what);
+    std::string s(reinterpret_cast<const char*>(p_ + pos_), len);
+    pos_ += len;
+    return s;
+  }
+  /// A u32- or u64-length-prefixed byte range: its start and size.
+  std::pair<const std::uint8_t*, std::size_t> block(int len_bytes, const char* what) {
+    const std::uint64_t len = uint(len_bytes, what);
+    if (len > left())
+      throw Error(fmt::format("{}: truncated: {} has length {} at byte {}, {} bytes left", where_,
+                              what, len, pos_, left()));
+    const std::uint8_t* at = p_ + pos_;
+    pos_ += static_cast<std::size_t>(len);
+    return {at, static_cast<std::size_t>(len)};
+  }
+  std::pair<const std::uint8_t*, std::size_t> rest() {
+    const std::uint8_t* at = p_ + pos_;
+    const std::size_t k = left();
+    pos_ = n_;
+    return {at, k};
+  }
+
+ private:
+  const std::uint8_t* p_;
+  std::size_t n_, pos_ = 0;
+  std::string where_;
+};
+
+// ------------------------------------------------------------------------------ CDR
+class Cdr {
+ public:
+  Cdr(const std::uint8_t* p, std::size_t n, const std::string& where) : where_(where) {
+    if (n < 4)
+      throw Error(
+          fmt::format("{}: truncated message: {} bytes, expected at least the 4-byte CDR "
+                      "encapsulation header",
+                      where, n));
+    if (p[0] != 0x00 || (p[1] != 0x00 && p[1] != 0x01))
+      throw Error(
+          fmt::format("{}: CDR encapsulation {:02x} {:02x}: expected 00 01 (CDR little "
+                      "endian) or 00 00 (CDR big endian)",
+                      where, p[0], p[1]));
+    big_ = p[1] == 0x00;
+    p_ = p + 4;
+    n_ = n - 4;
+  }
+  void align(std::size_t a, const char* what) {
+    const std::size_t to = (pos_ + a - 1) / a * a;
+    if (to > n_) fail(to - pos_, what);
+    pos_ = to;
+  }
+  void need(std::size_t k, const char* what) const {
+    if (k > n_ - pos_) fail(k, what);
+  }
+  std::uint64_t raw(std::size_t size, const char* what) {
+    align(size, what);
+    need(size, what);
+    std::uint64_t v = 0;
+    for (std::size_t i = 0; i < size; ++i) {
+      const std::size_t b = big_ ? i : size - 1 - i;
+      v = (v << 8) | p_[pos_ + b];
+    }
+    pos_ += size;
+    return v;
+  }
+  std::uint32_t u32(const char* what) { return static_cast<std::uint32_t>(raw(4, what)); }
+  std::int32_t i32(const char* what) {
+    const std::uint32_t u = u32(what);
+    std::int32_t v;
+    std::memcpy(&v, &u, 4);
+    return v;
+  }
+  double f64(const char* what) {
+    const std::uint64_t u = raw(8, what);
+    double v;
+    std::memcpy(&v, &u, 8);
+    return v;
+  }
+  std::string str(const char* what) {
+    const std::uint32_t len = u32(what);
+    need(len, what);
+    // The length counts the terminating NUL; an empty string may be written with length 0.
+    std::size_t k = len;
+    if (k > 0 && p_[pos_ + k - 1] == 0) --k;
+    std::string s(reinterpret_cast<const char*>(p_ + pos_), k);
+    pos_ += len;
+    return s;
+  }
+  /// Length of a sequence whose elements take at least min_elem bytes each (never more elements
+  /// than the bytes left can hold: a corrupt length allocates nothing).
+  std::size_t count(std::size_t min_elem, const char* what) {
+    const std::uint32_t c = u32(what);
+    if (static_cast<std::uint64_t>(c) * min_elem > n_ - pos_)
+      throw Error(fmt::format(
+          "{}: corrupt or truncated message: {} has {} elements, which need "
+          "at least {} bytes at byte {}; {} left",
+          where_, what, c, static_cast<std::uint64_t>(c) * min_elem, pos_ + 4, n_ - pos_));
+    return c;
+  }
+  std::vector<double> doubles(const char* what) {
+    const std::size_t c = count(8, what);
+    std::vector<double> v(c);
+    if (c > 0) align(8, what);  // an empty sequence writes no padding (Fast-CDR)
+    for (std::size_t i = 0; i < c; ++i) v[i] = f64(what);
+    return v;
+  }
+  Stamp stamp() {
+    Stamp s;
+    s.sec = i32("header.stamp.sec");
+    s.nanosec = u32("header.stamp.nanosec");
+    if (s.nanosec >= 1000000000u)
+      throw Error(
+          fmt::format("{}: header.stamp.nanosec = {}: expected below 1e9", where_, s.nanosec));
+    return s;
+  }
+
+ private:
+  [[noreturn]] void fail(std::size_t k, const char* what) const {
+    throw Error(
+        fmt::format("{}: truncated message: {} needs {} bytes at byte {} of the CDR data, "
+                    "{} left",
+                    where_, what, k, pos_ + 4, n_ - pos_));
+  }
+  const std::uint8_t* p_ = nullptr;
+  std::size_t n_ = 0, pos_ = 0;
+  bool big_ = false;
+  const std::string& where_;
+};
+
+// ------------------------------------------------------------------------------ files
+std::vector<std::uint8_t> readWhole(const fs::path& p) {
+  std::ifstream in(p, std::ios::binary);
+  if (!in) throw Error(fmt::format("{}: cannot open", p.string()));
+  in.seekg(0, std::ios::end);
+  const std::streamoff size = in.tellg();
+  if (size < 0) throw Error(fmt::format("{}: cannot read its size", p.string()));
+  in.seekg(0, std::ios::beg);
+  std::vector<std::uint8_t> buf(static_cast<std::size_t>(size));
+  if (size > 0 && !in.read(reinterpret_cast<char*>(buf.data()), size))
+    throw Error(fmt::format("{}: read error", p.string()));
+  return buf;
+}
+
+std::string scalarText(const YAML::Node& n) {
+  if (!n) return "(missing)";
+  if (n.IsScalar()) return n.Scalar();
+  if (n.IsSequence()) return "(a list)";
+  if (n.IsMap()) return "(a mapping)";
+  return "(null)";
+}
+
+// ------------------------------------------------------------------------------ SQLite
+struct Db {
+  sqlite3* db = nullptr;
+  ~Db() {
+    if (db) sqlite3_close(db);
+  }
+};
+struct Stmt {
+  sqlite3_stmt* s = nullptr;
+  ~Stmt() {
+    if (s) sqlite3_finalize(s);
+  }
+};
+
+void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::string>& wanted,
+                const std::function<void(const RawMessage&)>& fn) {
+  const std::string name = file.string();
+  Db db;
+  if (sqlite3_open_v2(name.c_str(), &db.db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK)
+    throw Error(fmt::format("{}: cannot open as SQLite: {}", name,
+                            db.db ? sqlite3_errmsg(db.db) : "out of memory"));
+  auto prepare = [&](const std::string& sql, Stmt* st, const char* what) {
+    if (sqlite3_prepare_v2(db.db, sql.c_str(), -1, &st->s, nullptr) != SQLITE_OK)
+      throw Error(
+          fmt::format("{}: not a rosbag2 SQLite file ({}: {}; expected tables "
+                      "topics(id, name, type, serialization_format) and messages(id, "
+                      "topic_id, timestamp, data), storage_identifier sqlite3 in {})",
+                      name, what, sqlite3_errmsg(db.db), bag.metadata_file.string()));
+  };
+  // Topics of this file: id -> name, with their types checked against metadata.yaml.
+  std::map<std::int64_t, const std::string*> ids;
+  {
+    Stmt st;
+    prepare("SELECT id, name, type, serialization_format FROM topics", &st, "table topics");
+    int rc;
+    while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+      auto text = [&](int c) {
+        const unsigned char* t = sqlite3_column_text(st.s, c);
+        return t ? std::string(reinterpret_cast<const char*>(t)) : std::string();
+      };
+      const std::string topic = text(1), type = text(2), ser = text(3);
+      const auto it = wanted.find(topic);
+      if (it == wanted.end()) continue;
+      const TopicInfo* info = bag.topic(topic);
+      if (info && info->type != type)
+        throw Error(fmt::format("{}: topic '{}' has type '{}' in table topics, '{}' in {}", name,
+                                topic, type, info->type, bag.metadata_file.string()));
+      if (ser != "cdr")
+        throw Error(fmt::format("{}: topic '{}': serialization_format '{}', expected cdr", name,
+                                topic, ser));
+      ids[sqlite3_column_int64(st.s, 0)] = &*it;
+    }
+    if (rc != SQLITE_DONE)
+      throw Error(fmt::format("{}: reading table topics: {}", name, sqlite3_errmsg(db.db)));
+  }
+  if (ids.empty()) return;
+  std::string in;
+  for (const auto& [id, t] : ids) in += (in.empty() ? "" : ", ") + std::to_string(id);
+  Stmt st;
+  prepare("SELECT id, topic_id, timestamp, data FROM messages WHERE topic_id IN (" + in +
+              ") ORDER BY timestamp, id",
+          &st, "table messages");
+  int rc;
+  while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+    RawMessage m;
+    const std::int64_t row = sqlite3_column_int64(st.s, 0);
+    m.topic = ids.at(sqlite3_column_int64(st.s, 1));
+    m.receive_ns = sqlite3_column_int64(st.s, 2);
+    // Nanoseconds since the epoch; a negative one is corrupt (and differences of two arbitrary
+    // int64 stamps could overflow).
+    if (m.receive_ns < 0)
+      throw Error(
+          fmt::format("{}: messages row id {}: timestamp {}: expected nanoseconds since "
+                      "the epoch (>= 0)",
+                      name, row, m.receive_ns));
+    m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st.s, 3));
+    const int bytes = sqlite3_column_bytes(st.s, 3);
+    m.size = bytes > 0 && m.data ? static_cast<std::size_t>(bytes) : 0;
+    m.where = fmt::format("{}: messages row id {}", name, row);
+    fn(m);
+  }
+  if (rc != SQLITE_DONE)
+    throw Error(fmt::format("{}: reading table messages: {}", name, sqlite3_errmsg(db.db)));
+}
+
+// ------------------------------------------------------------------------------ MCAP
+struct McapState {
+  struct Schema {
+    std::string name, encoding;
+  };
+  struct Channel {
+    std::string topic, encoding;
+    std::uint16_t schema = 0;
+    const std::string* wanted = nullptr;  // the wanted topic, or null
+  };
+  std::map<std::uint16_t, Schema> schemas;
+  std::map<std::uint16_t, Channel> channels;
+};
+
+/// Handles one Schema, Channel or Message record (top level or inside a chunk). Returns false
+/// for other opcodes (the caller decides).
+bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, Bytes& r,
+                const std::string& where, McapState& st, const std::set<std::string>& wanted,
+                const std::function<void(const RawMessage&)>& fn) {
+  if (op == 0x03) {
+    const std::uint16_t id = r.u16("Schema.id");
+    McapState::Schema s;
+    s.name = r.str("Schema.name");
+    s.encoding = r.str("Schema.encoding");
+    r.block(4, "Schema.data");
+    st.schemas[id] = s;
+    return true;
+  }
+  if (op == 0x04) {
+    const std::uint16_t id = r.u16("Channel.id");
+    McapState::Channel c;
+    c.schema = r.u16("Channel.schema_id");
+    c.topic = r.str("Channel.topic");
+    c.encoding = r.str("Channel.message_encoding");
+    r.block(4, "Channel.metadata");
+    const auto it = wanted.find(c.topic);
+    if (it != wanted.end()) {
+      c.wanted = &*it;
+      if (c.encoding != "cdr")
+        throw Error(fmt::format("{}: channel {} of topic '{}': message_encoding '{}', expected cdr",
+                                where, id, c.topic, c.encoding));
+      const TopicInfo* info = bag.topic(c.topic);
+      if (c.schema != 0) {
+        const auto s = st.schemas.find(c.schema);
+        if (s == st.schemas.end())
+          throw Error(
+              fmt::format("{}: channel {} of topic '{}' refers to schema {}, not defined "
+                          "before it",
+                          where, id, c.topic, c.schema));
+        if (info && s->second.name != info->type)
+          throw Error(fmt::format("{}: topic '{}' has schema '{}' in {}, type '{}' in {}", where,
+                                  c.topic, s->second.name, file, info->type,
+                                  bag.metadata_file.string()));
+      }
+    }
+    st.channels[id] = c;
+    return true;
+  }
+  if (op == 0x05) {
+    const std::uint16_t ch = r.u16("Message.channel_id");
+    r.u32("Message.sequence");
+    const std::uint64_t log_time = r.u64("Message.log_time");
+    r.u64("Message.publish_time");
+    const auto c = st.channels.find(ch);
+    if (c == st.channels.end())
+      throw Error(fmt::format(
+          "{}: message on channel {}, which no Channel record defined before it", where, ch));
+    if (!c->second.wanted) return true;
+    RawMessage m;
+    m.topic = c->second.wanted;
+    if (log_time > static_cast<std::uint64_t>(INT64_MAX))
+      throw Error(fmt::format("{}: Message.log_time {} ns is out of range", where, log_time));
+    m.receive_ns = static_cast<std::int64_t>(log_time);
+    const auto d = r.rest();
+    m.data = d.first;
+    m.size = d.second;
+    m.where = where;
+    fn(m);
+    return true;
+  }
+  return false;
+}
+
+}  // namespace
+
+void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8_t* data,
+                   std::size_t size, const std::set<std::string>& wanted,
+                   const std::function<void(const RawMessage&)>& fn) {
+  const Span buf{data, size};
+  if (buf.size() < kMcapMagic.size() ||
+      !std::equal(kMcapMagic.begin(), kMcapMagic.end(), buf.begin()))
+    throw Error(
+        fmt::format("{}: not an MCAP file: expected the magic bytes 89 4d 43 41 50 30 0d "
+                    "0a at its start (storage_identifier mcap in {})",
+                    file, bag.metadata_file.string()));
+  McapState st;
+  std::size_t pos = kMcapMagic.size();
+  long long index = 0;
+  bool ended = false;
+  while (!ended) {
+    ++index;
+    if (buf.size() - pos < 9)
+      throw Error(
+          fmt::format("{}: truncated: record {} at byte {} needs a 9-byte opcode and "
+                      "length, {} bytes left (the file ends before its DataEnd and Footer "
+                      "records)",
+                      file, index, pos, buf.size() - pos));
+    const std::uint8_t op = buf[pos];
+    std::uint64_t len = 0;
+    for (int i = 8; i >= 1; --i) len = (len << 8) | buf[pos + static_cast<std::size_t>(i)];
+    const std::size_t start = pos + 9;
+    if (len > buf.size() - start)
+      throw Error(
+          fmt::format("{}: truncated: record {} (opcode 0x{:02x}) at byte {} has length "
+                      "{}, {} bytes left in the file",
+                      file, index, op, pos, len, buf.size() - start));
+    const std::string where =
+        fmt::format("{}: record {} (opcode 0x{:02x}) at byte {}", file, index, op, pos);
+    Bytes r(buf.data() + start, static_cast<std::size_t>(len), where);
+    pos = start + static_cast<std::size_t>(len);
+    if (mcapRecord(bag, file, op, r, where, st, wanted, fn)) continue;
+    if (op == 0x06) {  // Chunk
+      r.u64("Chunk.message_start_time");
+      r.u64("Chunk.message_end_time");
+      const std::uint64_t usize = r.u64("Chunk.uncompressed_size");
+      const std::uint32_t crc = r.u32("Chunk.uncompressed_crc");
+      const std::string comp = r.str("Chunk.compression");
+      const auto stored = r.block(8, "Chunk.records");
+      const std::vector<std::uint8_t> recs =
+          decompressChunk(comp, stored.first, stored.second, usize, where);
+      if (crc != 0 && crc32(recs.data(), recs.size()) != crc)
+        throw Error(
+            fmt::format("{}: corrupt chunk: CRC-32 of its {} uncompressed bytes is "
+                        "{:08x}, the chunk says {:08x}",
+                        where, recs.size(), crc32(recs.data(), recs.size()), crc));
+      std::size_t q = 0;
+      long long inner = 0;
+      while (q < recs.size()) {
+        ++inner;
+        if (recs.size() - q < 9)
+          throw Error(
+              fmt::format("{}: corrupt chunk: its record {} at byte {} needs a 9-byte "
+                          "opcode and length, {} bytes left",
+                          where, inner, q, recs.size() - q));
+        const std::uint8_t iop = recs[q];
+        std::uint64_t ilen = 0;
+        for (int i = 8; i >= 1; --i) ilen = (ilen << 8) | recs[q + static_cast<std::size_t>(i)];
+        if (ilen > recs.size() - q - 9)
+          throw Error(
+              fmt::format("{}: corrupt chunk: its record {} (opcode 0x{:02x}) at byte {} "
+                          "has length {}, {} bytes left in the chunk",
+                          where, inner, iop, q, ilen, recs.size() - q - 9));
+        const std::string iwhere =
+            fmt::format("{}, chunk record {} (opcode 0x{:02x})", where, inner, iop);
+        Bytes ir(recs.data() + q + 9, static_cast<std::size_t>(ilen), iwhere);
+        q += 9 + static_cast<std::size_t>(ilen);
+        mcapRecord(bag, file, iop, ir, iwhere, st, wanted, fn);  // others: skipped
+      }
+      continue;
+    }
+    if (op == 0x0F || op == 0x02) ended = true;  // DataEnd (the summary follows) or Footer
+    // Header, MessageIndex, ChunkIndex, Attachment, Metadata, Statistics, ...: skipped.
+  }
+}
+
+namespace {
+
+void readMcap(const BagInfo& bag, const fs::path& path, const std::set<std::string>& wanted,
+              const std::function<void(const RawMessage&)>& fn) {
+  const std::vector<std::uint8_t> buf = readWhole(path);
+  readMcapBytes(bag, path.string(), buf.data(), buf.size(), wanted, fn);
+}
+
+}  // namespace
+
+// ------------------------------------------------------------------------------ public
+const TopicInfo* BagInfo::topic(const std::string& name) const {
+  for (const TopicInfo& t : topics)
+    if (t.name == name) return &t;
+  return nullptr;
+}
+
+std::uint32_t crc32(const std::uint8_t* data, std::size_t size, std::uint32_t crc) {
+  static const std::array<std::uint32_t, 256> table = [] {
+    std::array<std::uint32_t, 256> t{};
+    for (std::uint32_t i = 0; i < 256; ++i) {
+      std::uint32_t c = i;
+      for (int k = 0; k < 8; ++k) c = (c & 1) ? 0xEDB88320u ^ (c >> 1) : c >> 1;
+      t[i] = c;
+    }
+    return t;
+  }();
+  crc = ~crc;
+  for (std::size_t i = 0; i < size; ++i) crc = table[(crc ^ data[i]) & 0xFFu] ^ (crc >> 8);
+  return ~crc;
+}
+
+std::vector<std::uint8_t> decompressChunk(const std::string& compression, const std::uint8_t* src,
+                                          std::size_t size, std::uint64_t uncompressed_size,
+                                          const std::string& where) {
+  if (uncompressed_size > kMaxChunkBytes)
+    throw Error(
+        fmt::format("{}: chunk uncompressed_size {} bytes is above the limit of {} bytes "
+                    "(a corrupt size, or chunks far larger than rosbag2 writes)",
+                    where, uncompressed_size, kMaxChunkBytes));
+  std::vector<std::uint8_t> out;
+  if (compression.empty()) {
+    if (size != uncompressed_size)
+      throw Error(
+          fmt::format("{}: corrupt chunk: uncompressed, {} bytes of records, but "
+                      "uncompressed_size says {}",
+                      where, size, uncompressed_size));
+    out.assign(src, src + size);
+    return out;
+  }
+  if (compression != "zstd" && compression != "lz4")
+    throw Error(fmt::format("{}: chunk compression '{}': expected \"\" (none), zstd or lz4", where,
+                            compression));
+  // Streaming decompression into a buffer that grows with the output (never beyond
+  // uncompressed_size): a corrupt size field allocates nothing the data do not fill. When the
+  // buffer is full, one scratch byte of room shows whether the stream would give more.
+  const std::size_t usize = static_cast<std::size_t>(uncompressed_size);
+  out.resize(std::min<std::size_t>(usize, std::size_t{1} << 20));
+  std::size_t in_pos = 0, out_pos = 0;
+  std::uint8_t scratch = 0;
+  auto room = [&]() -> std::pair<std::uint8_t*, std::size_t> {
+    if (out_pos == out.size() && out.size() < usize)
+      out.resize(std::min(usize, std::max<std::size_t>(2 * out.size(), 4096)));
+    if (out_pos == out.size()) return {&scratch, 1};
+    return {out.data() + out_pos, out.size() - out_pos};
+  };
+  auto tooMuch = [&] {
+    return Error(fmt::format("{}: corrupt chunk: {} gives more than uncompressed_size = {} bytes",
+                             where, compression, uncompressed_size));
+  };
+  auto early = [&] {
+    return Error(
+        fmt::format("{}: corrupt chunk: the {} stream ends early ({} of {} bytes "
+                    "decompressed, all {} compressed bytes read)",
+                    where, compression, out_pos, uncompressed_size, size));
+  };
+  if (compression == "zstd") {
+    std::unique_ptr<ZSTD_DCtx, decltype(&ZSTD_freeDCtx)> ctx(ZSTD_createDCtx(), &ZSTD_freeDCtx);
+    if (!ctx) throw Error(fmt::format("{}: zstd: cannot create a decompression context", where));
+    ZSTD_inBuffer in{src, size, 0};
+    for (;;) {
+      const auto [dst, cap] = room();
+      ZSTD_outBuffer o{dst, cap, 0};
+      const std::size_t r = ZSTD_decompressStream(ctx.get(), &o, &in);
+      if (ZSTD_isError(r))
+        throw Error(fmt::format("{}: corrupt chunk: zstd: {} ({} compressed bytes)", where,
+                                ZSTD_getErrorName(r), size));
+      if (dst == &scratch && o.pos > 0) throw tooMuch();
+      if (dst != &scratch) out_pos += o.pos;
+      if (in.pos == in.size) {
+        if (r == 0) break;                  // the last frame is complete
+        if (o.pos < o.size) throw early();  // room left, input used up, frame unfinished
+      }
+    }
+  } else {
+    LZ4F_dctx* raw = nullptr;
+    if (LZ4F_isError(LZ4F_createDecompressionContext(&raw, LZ4F_VERSION)))
+      throw Error(fmt::format("{}: lz4: cannot create a decompression context", where));
+    std::unique_ptr<LZ4F_dctx, decltype(&LZ4F_freeDecompressionContext)> ctx(
+        raw, &LZ4F_freeDecompressionContext);
+    for (;;) {
+      const auto [dst, cap] = room();
+      std::size_t in_n = size - in_pos, out_n = cap;
+      const std::size_t r = LZ4F_decompress(ctx.get(), dst, &out_n, src + in_pos, &in_n, nullptr);
+      if (LZ4F_isError(r))
+        throw Error(fmt::format("{}: corrupt chunk: lz4: {} ({} compressed bytes)", where,
+                                LZ4F_getErrorName(r), size));
+      if (dst == &scratch && out_n > 0) throw tooMuch();
+      if (dst != &scratch) out_pos += out_n;
+      in_pos += in_n;
+      if (r == 0) {  // a frame is complete
+        if (in_pos == size) break;
+        continue;  // another frame follows
+      }
+      if (in_pos == size && out_n < cap) throw early();
+    }
+  }
+  if (out_pos != usize)
+    throw Error(fmt::format("{}: corrupt chunk: {} gave {} bytes, uncompressed_size says {}", where,
+                            compression, out_pos, uncompressed_size));
+  out.resize(out_pos);
+  return out;
+}
+
+BagInfo readMetadata(const fs::path& dir) {
+  BagInfo bag;
+  bag.dir = dir;
+  bag.metadata_file = dir / "metadata.yaml";
+  const std::string mf = bag.metadata_file.string();
+  if (!fs::is_directory(dir))
+    throw Error(
+        fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
+                    "its storage files)",
+                    dir.string()));
+  if (!fs::exists(bag.metadata_file))
+    throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
+  YAML::Node root;
+  try {
+    root = YAML::LoadFile(mf);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
+  }
+  const YAML::Node info = root["rosbag2_bagfile_information"];
+  if (!info || !info.IsMap())
+    throw Error(fmt::format("{}: expected a mapping rosbag2_bagfile_information at the top", mf));
+  auto line = [](const YAML::Node& n) { return n.Mark().line + 1; };
+  if (const YAML::Node v = info["version"]) {
+    try {
+      bag.version = v.as<int>();
+    } catch (const YAML::Exception&) {
+      throw Error(fmt::format("{}:{}: version: expected an integer, found '{}'", mf, line(v),
+                              scalarText(v)));
+    }
+  }
+  const YAML::Node sid = info["storage_identifier"];
+  if (!sid || !sid.IsScalar())
+    throw Error(fmt::format("{}: storage_identifier: missing (expected sqlite3 or mcap)", mf));
+  bag.storage = sid.Scalar();
+  if (bag.storage != "sqlite3" && bag.storage != "mcap")
+    throw Error(fmt::format("{}:{}: storage_identifier '{}': expected sqlite3 or mcap", mf,
+                            line(sid), bag.storage));
+  const YAML::Node cf = info["compression_format"];
+  if (cf && cf.IsScalar() && !cf.Scalar().empty())
+    throw Error(
+        fmt::format("{}:{}: compression_format '{}' (compression_mode '{}'): bags "
+                    "compressed by rosbag2 as a whole are not read; decompress it (ros2 "
+                    "bag convert) or record with the storage's own chunk compression "
+                    "(MCAP zstd or lz4)",
+                    mf, line(cf), cf.Scalar(), scalarText(info["compression_mode"])));
+  const YAML::Node files = info["relative_file_paths"];
+  if (!files || !files.IsSequence() || files.size() == 0)
+    throw Error(
+        fmt::format("{}: relative_file_paths: expected a list of the bag's storage files", mf));
+  for (const YAML::Node& f : files) {
+    if (!f.IsScalar())
+      throw Error(fmt::format("{}:{}: relative_file_paths: expected file names, found '{}'", mf,
+                              line(f), scalarText(f)));
+    // Paths are relative to the bag folder; early versions wrote them relative to its parent.
+    const fs::path rel = f.Scalar();
+    std::vector<fs::path> tries = {dir / rel, dir.parent_path() / rel, dir / rel.filename()};
+    fs::path found;
+    for (const fs::path& p : tries)
+      if (fs::is_regular_file(p)) {
+        found = p;
+        break;
+      }
+    if (found.empty()) {
+      std::vector<std::string> looked;
+      for (const fs::path& p : tries) looked.push_back(p.string());
+      throw Error(fmt::format("{}:{}: relative_file_paths: file '{}' not found (looked for {})", mf,
+                              line(f), f.Scalar(), fmt::join(looked, ", ")));
+    }
+    bag.files.push_back(found);
+  }
+  const YAML::Node topics = info["topics_with_message_count"];
+  if (topics && !topics.IsSequence())
+    throw Error(fmt::format("{}:{}: topics_with_message_count: expected a list", mf, line(topics)));
+  if (topics)
+    for (const YAML::Node& t : topics) {
+      const YAML::Node md = t["topic_metadata"];
+      if (!md || !md.IsMap() || !md["name"] || !md["type"])
+        throw Error(
+            fmt::format("{}:{}: topics_with_message_count: expected entries "
+                        "{{topic_metadata: {{name, type, serialization_format}}, "
+                        "message_count}}",
+                        mf, line(t)));
+      TopicInfo ti;
+      ti.name = scalarText(md["name"]);
+      ti.type = scalarText(md["type"]);
+      ti.serialization_format =
+          md["serialization_format"] ? scalarText(md["serialization_format"]) : "cdr";
+      if (const YAML::Node c = t["message_count"]) {
+        try {
+          ti.message_count = c.as<long long>();
+        } catch (const YAML::Exception&) {
+          throw Error(fmt::format("{}:{}: message_count: expected an integer, found '{}'", mf,
+                                  line(c), scalarText(c)));
+        }
+      }
+      bag.topics.push_back(ti);
+    }
+  return bag;
+}
+
+void readMessages(const BagInfo& bag, const std::set<std::string>& wanted,
+                  const std::function<void(const RawMessage&)>& fn) {
+  for (const fs::path& f : bag.files) {
+    if (bag.storage == "sqlite3")
+      readSqlite(bag, f, wanted, fn);
+    else
+      readMcap(bag, f, wanted, fn);
+  }
+}
+
+JointStateMsg decodeJointState(const std::uint8_t* data, std::size_t size,
+                               const std::string& where) {
+  Cdr c(data, size, where);
+  JointStateMsg m;
+  m.stamp = c.stamp();
+  m.frame_id = c.str("header.frame_id");
+  const std::size_t nn = c.count(4, "name");
+  m.name.reserve(nn);
+  for (std::size_t i = 0; i < nn; ++i) m.name.push_back(c.str("name"));
+  m.position = c.doubles("position");
+  m.velocity = c.doubles("velocity");
+  m.effort = c.doubles("effort");
+  return m;
+}
+
+WrenchStampedMsg decodeWrenchStamped(const std::uint8_t* data, std::size_t size,
+                                     const std::string& where) {
+  Cdr c(data, size, where);
+  WrenchStampedMsg m;
+  m.stamp = c.stamp();
+  m.frame_id = c.str("header.frame_id");
+  for (double& v : m.force) v = c.f64("wrench.force");
+  for (double& v : m.torque) v = c.f64("wrench.torque");
+  return m;
+}
+
+}  // namespace exid::rosbag2
