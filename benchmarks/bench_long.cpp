@@ -2,7 +2,8 @@
 // outside (wall time and the child's maximum resident set size, from wait4), as a user sees it.
 //
 //   - recorded PUMA 560 CSV (t, q, qd, qdd, tau: 25 columns, 1 kHz) of 100 k and 1 M samples
-//     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M) -> batch_ls;
+//     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M) -> batch_ls on 1 thread, and 1 M on 2 (the
+//     recording is streamed from the file: summary experiment.streamed);
 //   - the same 1 M samples without qd, qdd -> filtered_ls {cutoff_hz: 20} on 1 and 2 threads;
 //   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz).
 //
@@ -142,9 +143,12 @@ void runStudyBench(benchmark::State& state, const std::string& label, const fs::
                                static_cast<double>(fs::file_size(data)) / 1e6);
 }
 
+// range(1): batch_ls threads (0: the machine's cores)
 void BM_BatchLs(benchmark::State& state) {
   const long n = state.range(0);
-  runStudyBench(state, fmt::format("batch_ls_{}", n), recording(n, true), "{type: batch_ls}");
+  const long threads = state.range(1);
+  runStudyBench(state, fmt::format("batch_ls_{}_threads{}", n, threads), recording(n, true),
+                fmt::format("{{type: batch_ls, params: {{threads: {}}}}}", threads));
 }
 
 void BM_FilteredLs(benchmark::State& state) {
@@ -172,8 +176,9 @@ void BM_Tx40FilteredLs(benchmark::State& state) {
 }  // namespace
 
 BENCHMARK(BM_BatchLs)
-    ->Arg(100000)
-    ->Arg(1000000)
+    ->Args({100000, 1})
+    ->Args({1000000, 1})
+    ->Args({1000000, 2})
     ->UseManualTime()
     ->Iterations(1)
     ->Unit(benchmark::kSecond);
@@ -188,7 +193,7 @@ BENCHMARK(BM_Tx40FilteredLs)->UseManualTime()->Iterations(1)->Unit(benchmark::kS
 int main(int argc, char** argv) {
   if (const char* ten = std::getenv("EXID_BENCH_LONG_SAMPLES"))
     benchmark::RegisterBenchmark("BM_BatchLs_env", BM_BatchLs)
-        ->Arg(std::atol(ten))
+        ->Args({std::atol(ten), 1})
         ->UseManualTime()
         ->Iterations(1)
         ->Unit(benchmark::kSecond);

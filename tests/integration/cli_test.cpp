@@ -590,6 +590,24 @@ TEST(Cli, AStreamedRecordingGivesTheSameResultsAsTheWholeRead) {
       return exid::Json::parse(slurp(dir / "o" / "summary.json"));
     };
     const exid::Json whole = run("always"), streamed = run("never");
+    if (est == "batch_ls") {  // the same bits on 1 and 3 threads (the file read beside them)
+      for (const char* th : {"1", "3"}) {
+        std::ofstream(dir / "t.yaml")
+            << "robot: {type: planar2r}\nmodel: {type: differential}\n"
+               "experiment: {type: csv, params: {file: rec.csv, drop_bad_rows: true, t_start_s: "
+               "0.2}}\nsplit: {identification_fraction: 0.7}\n"
+               "estimator: {type: batch_ls, params: {threads: "
+            << th << "}}\nreport: {params: {plots: false, experiment_csv: never}}\n";
+        fs::remove_all(dir / "t");
+        CmdResult c =
+            runExid("-q run " + (dir / "t.yaml").string() + " --out " + (dir / "t").string());
+        ASSERT_EQ(c.code, 0) << c.out;
+        const exid::Json S = exid::Json::parse(slurp(dir / "t" / "summary.json"));
+        EXPECT_EQ(withoutTimes(*S.find("identification")->find("parameters")),
+                  withoutTimes(*streamed.find("identification")->find("parameters")))
+            << th << " threads";
+      }
+    }
     ASSERT_NE(streamed.find("experiment"), nullptr);
     EXPECT_NE(streamed.find("experiment")->find("streamed"), nullptr) << est;
     EXPECT_EQ(whole.find("experiment")->find("streamed"), nullptr) << est;

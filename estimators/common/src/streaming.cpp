@@ -112,47 +112,82 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
   const int T = std::max(1, threads);
   std::vector<RowAccumulator> slot(static_cast<std::size_t>(T));
   RowAccumulator total(p, method);
-  // A streamed dataset is read in order on this thread, one wave of tasks at a time (the
-  // samples of at most T tasks are held); the tasks' rows are then built on the T threads.
+  // One task's rows, from src (holding samples [off, off + src->size()) of the dataset).
+  auto accumulateTask = [&](long c, const Dataset& src, int off) {
+    const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+    RowAccumulator a(p, method);
+    for (int b = tb; b < te; b += chunk) {
+      if (ctx.shouldStop())
+        throw Error(fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
+                                ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
+      const int e = std::min(te, b + chunk);
+      Rows r = (b - off == 0 && e - off == src.size())
+                   ? model.rows(src, ctx)
+                   : model.rows(sliceDataset(src, b - off, e - off), ctx);
+      checkRows(r, p, who, b);
+      a.add(r.W, r.y);
+    }
+    slot[static_cast<std::size_t>(c % T)] = std::move(a);
+  };
+  auto merge = [&](long c) {
+    total.merge(slot[static_cast<std::size_t>(c % T)]);
+    slot[static_cast<std::size_t>(c % T)] = RowAccumulator();
+    const long e = std::min<long>(K, (c + 1) * task);
+    ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
+               fmt::format("{}: {} / {} samples", who, e, K));
+  };
+  if (!data.streamed()) {
+    parallelChunks(
+        n, T, [&](long c) { accumulateTask(c, data, 0); }, merge);
+    return total;
+  }
+  // A streamed dataset is read in order, one wave of T tasks at a time; with several threads the
+  // next wave is read (on one more thread) while the T threads build this wave's rows, so that
+  // reading the file overlaps the model. At most two waves' samples are held. The merge is in
+  // task order, so the result is the same for any thread count.
   SampleWindow window(data);
-  std::vector<Dataset> task_data(static_cast<std::size_t>(T));
-  auto readWave = [&](long c0) {
+  std::vector<Dataset> cur(static_cast<std::size_t>(T)), next(static_cast<std::size_t>(T));
+  auto readWave = [&](long c0, std::vector<Dataset>* buf) {
     for (long c = c0; c < std::min(n, c0 + T); ++c) {
       const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
-      task_data[static_cast<std::size_t>(c % T)] = window.span(tb, te);
+      (*buf)[static_cast<std::size_t>(c - c0)] = window.span(tb, te);
     }
   };
-  if (data.streamed()) readWave(0);
-  parallelChunks(
-      n, T,
-      [&](long c) {
-        const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
-        const Dataset* src = data.streamed() ? &task_data[static_cast<std::size_t>(c % T)] : &data;
-        const int off = data.streamed() ? tb : 0;  // sample index of src's first sample
-        RowAccumulator a(p, method);
-        for (int b = tb; b < te; b += chunk) {
-          if (ctx.shouldStop())
-            throw Error(
-                fmt::format("{}: stopped after {} of {} samples ({})", who, b, K,
-                            ctx.deadline.expired() ? "time budget exhausted" : "interrupted"));
-          const int e = std::min(te, b + chunk);
-          Rows r = (b - off == 0 && e - off == src->size())
-                       ? model.rows(*src, ctx)
-                       : model.rows(sliceDataset(*src, b - off, e - off), ctx);
-          checkRows(r, p, who, b);
-          a.add(r.W, r.y);
+  readWave(0, &cur);
+  std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
+  for (long w0 = 0; w0 < n; w0 += T) {
+    const long w1 = std::min(n, w0 + T);
+    auto one = [&](long c) {
+      try {
+        accumulateTask(c, cur[static_cast<std::size_t>(c - w0)], static_cast<int>(c * task));
+      } catch (...) {
+        err[static_cast<std::size_t>(c - w0)] = std::current_exception();
+      }
+    };
+    std::exception_ptr read_err;
+    if (T == 1) {
+      one(w0);
+      if (!err[0] && w1 < n) readWave(w1, &next);
+    } else {
+      std::thread reader([&] {
+        try {
+          if (w1 < n) readWave(w1, &next);
+        } catch (...) {
+          read_err = std::current_exception();
         }
-        slot[static_cast<std::size_t>(c % T)] = std::move(a);
-      },
-      [&](long c) {
-        total.merge(slot[static_cast<std::size_t>(c % T)]);
-        slot[static_cast<std::size_t>(c % T)] = RowAccumulator();
-        // the wave's last task merged: read the next wave's samples
-        if (data.streamed() && (c % T == T - 1 || c == n - 1) && c + 1 < n) readWave(c + 1);
-        const long e = std::min<long>(K, (c + 1) * task);
-        ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
-                   fmt::format("{}: {} / {} samples", who, e, K));
       });
+      std::vector<std::thread> pool;
+      for (long c = w0 + 1; c < w1; ++c) pool.emplace_back(one, c);
+      one(w0);
+      for (auto& th : pool) th.join();
+      reader.join();
+    }
+    for (long c = w0; c < w1; ++c)  // errors in the order of the data
+      if (auto& e = err[static_cast<std::size_t>(c - w0)]) std::rethrow_exception(e);
+    if (read_err) std::rethrow_exception(read_err);
+    for (long c = w0; c < w1; ++c) merge(c);
+    std::swap(cur, next);
+  }
   return total;
 }
 
