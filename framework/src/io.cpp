@@ -352,6 +352,11 @@ void CsvReader::select(const std::vector<int>& columns) {
     slot_[static_cast<std::size_t>(c)] = static_cast<int>(k);
   }
   sel_ = columns;
+  // the cells after the last selected column are only counted (one pass over the rest of the
+  // line), never split one by one
+  cells_read_ = 0;
+  for (int c : columns)
+    cells_read_ = std::max<std::size_t>(cells_read_, static_cast<std::size_t>(c) + 1);
 }
 
 // Throws when the line (cell c ends at ce, the line at e) does not hold one value per column.
@@ -374,6 +379,10 @@ bool CsvReader::next(double* values) {
     bool bad = false;
     std::string bad_msg;
     while (true) {
+      if (c >= cells_read_) {  // the rest: counted, not read
+        c += 1 + static_cast<std::size_t>(std::count(cell, e, delim_));
+        break;
+      }
       const char* stop =
           static_cast<const char*>(std::memchr(cell, delim_, static_cast<std::size_t>(e - cell)));
       const char* ce = stop ? stop : e;

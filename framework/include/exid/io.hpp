@@ -132,6 +132,7 @@ class CsvReader {
   char delim_ = ',';
   std::vector<std::string> columns_, not_numeric_;
   std::vector<int> sel_, slot_;  // slot_: per column, its place in the values of a row (-1)
+  std::size_t cells_read_ = 0;   // cells split per line: up to the last selected column
 };
 
 /// Reads a CSV with a header line. Errors name the file, the line and the column.
