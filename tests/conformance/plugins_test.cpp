@@ -77,8 +77,9 @@ TEST(Conformance, ParameterDeclarationsAreWellFormed) {
         EXPECT_TRUE(std::islower(static_cast<unsigned char>(c)) ||
                     std::isdigit(static_cast<unsigned char>(c)) || c == '_' ||
                     std::isupper(static_cast<unsigned char>(c)));
-      if (d.default_value)
+      if (d.default_value) {
         EXPECT_EQ(d.violation(*d.default_value), "") << "default breaks its own range";
+      }
     }
   }
 }

@@ -165,8 +165,8 @@ INSTANTIATE_TEST_SUITE_P(
                  "{period_s: 4, harmonics: 5, sample_period_s: 0.05}"},
         GradCase{"puma560", "pointwise", "{duration_s: 4, sample_period_s: 0.05}", "log_det",
                  "{period_s: 4, harmonics: 5, sample_period_s: 0.05}"}),
-    [](const auto& info) {
-      return info.param.robot + "_" + info.param.traj + "_" + info.param.crit;
+    [](const auto& param_info) {
+      return param_info.param.robot + "_" + param_info.param.traj + "_" + param_info.param.crit;
     });
 
 TEST(Limits, TheTrajectorysCapsArePartOfTheProblem) {
@@ -348,8 +348,9 @@ INSTANTIATE_TEST_SUITE_P(
                 "{duration_s: 4, sample_period_s: 0.05}"},
         OptCase{"adjoint_gradient", "{step: paper, max_iterations: 300}", "pointwise",
                 "{duration_s: 4, sample_period_s: 0.05}"}),
-    [](const auto& info) {
-      return info.param.optimizer + "_" + info.param.traj + "_" + std::to_string(info.index);
+    [](const auto& param_info) {
+      return param_info.param.optimizer + "_" + param_info.param.traj + "_" +
+             std::to_string(param_info.index);
     });
 
 TEST(Nlopt, UnknownAlgorithmListsTheValidOnes) {

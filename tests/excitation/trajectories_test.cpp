@@ -147,10 +147,12 @@ TEST_P(TrajectoryTest, InitialPointRespectsTheLimits) {
     const auto& L = limits[static_cast<std::size_t>(j)];
     EXPECT_LE(s.q.col(j).maxCoeff(), L.q_max - margin + 1e-12) << "joint " << j + 1;
     EXPECT_GE(s.q.col(j).minCoeff(), L.q_min + margin - 1e-12) << "joint " << j + 1;
-    if (t->velocityLimits() && L.qd_max < 1e299)
+    if (t->velocityLimits() && L.qd_max < 1e299) {
       EXPECT_LE(s.qd.col(j).cwiseAbs().maxCoeff(), L.qd_max + 1e-12);
-    if (t->accelerationLimits() && L.qdd_max < 1e299)
+    }
+    if (t->accelerationLimits() && L.qdd_max < 1e299) {
       EXPECT_LE(s.qdd.col(j).cwiseAbs().maxCoeff(), L.qdd_max + 1e-12);
+    }
   }
 }
 
@@ -168,8 +170,9 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
         Case{"puma560", "spline", "{duration_s: 4, knots: 7, degree: 5, boundary: periodic}"},
         Case{"planar2r", "spline", "{duration_s: 4, knots: 5, degree: 3, boundary: periodic}"}),
-    [](const auto& info) {
-      return info.param.robot + "_" + info.param.traj + "_" + std::to_string(info.index);
+    [](const auto& param_info) {
+      return param_info.param.robot + "_" + param_info.param.traj + "_" +
+             std::to_string(param_info.index);
     });
 
 TEST(Pointwise, IntegratesExactlyByTheRecursion) {
