@@ -230,11 +230,18 @@ Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vec
     J["note"] = "fewer than two time stamps";
     return J;
   }
-  std::vector<double> steps(raw.size() - 1);
-  for (std::size_t i = 0; i + 1 < raw.size(); ++i)
-    steps[i] = (raw[i + 1] - raw[i]) /
-               static_cast<double>(row.empty() ? 1 : std::max(1, row[i + 1] - row[i]));
-  const double med = medianOf(steps);
+  // step i, computed again where needed (one array of steps, for the median, is the peak)
+  auto stepAt = [&](std::size_t i) {
+    return (raw[i + 1] - raw[i]) /
+           static_cast<double>(row.empty() ? 1 : std::max(1, row[i + 1] - row[i]));
+  };
+  const std::size_t nsteps = raw.size() - 1;
+  double med;
+  {
+    std::vector<double> steps(nsteps);
+    for (std::size_t i = 0; i < nsteps; ++i) steps[i] = stepAt(i);
+    med = medianOf(std::move(steps));
+  }
   const int d = decimalResolution(raw);
   double period = med, rate = 1.0 / (med * unit_s);
   if (d >= 0) {
@@ -252,27 +259,27 @@ Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vec
   J["period_s"] = period * unit_s;
   J["resolution_s"] = d >= 0 ? Json(std::pow(10.0, -d) * unit_s) : Json();
   double mean = 0, maxrel = 0;
-  for (double st : steps) {
-    const double rel = (st - period) / period;
+  for (std::size_t i = 0; i < nsteps; ++i) {
+    const double rel = (stepAt(i) - period) / period;
     mean += rel;
     maxrel = std::max(maxrel, std::abs(rel));
   }
-  mean /= static_cast<double>(steps.size());
+  mean /= static_cast<double>(nsteps);
   double var = 0;
-  for (double st : steps) {
-    const double rel = (st - period) / period;
+  for (std::size_t i = 0; i < nsteps; ++i) {
+    const double rel = (stepAt(i) - period) / period;
     var += (rel - mean) * (rel - mean);
   }
   Json& jit = J["jitter"];
-  jit["std_rel"] = std::sqrt(var / static_cast<double>(steps.size()));
+  jit["std_rel"] = std::sqrt(var / static_cast<double>(nsteps));
   jit["max_rel"] = maxrel;
   Json& g = J["gaps"];
   g["factor"] = gap_factor;
   long long count = 0;
   double largest = 0;
   Json at = Json::array();
-  for (std::size_t i = 0; i < steps.size(); ++i) {
-    if (!(steps[i] > gap_factor * period)) continue;
+  for (std::size_t i = 0; i < nsteps; ++i) {
+    if (!(stepAt(i) > gap_factor * period)) continue;
     ++count;
     largest = std::max(largest, (raw[i + 1] - raw[i]) * unit_s);
     if (at.size() < 20) at.push_back(pair(raw[i] * unit_s, raw[i + 1] * unit_s));

@@ -892,27 +892,34 @@ class CsvExperiment : public exid::Experiment {
                    : rowOf(static_cast<std::size_t>(i)) * dt_;
       };
       if (ct_ && raw.size() >= 3) {
-        std::vector<double> steps(raw.size() - 1);
-        for (std::size_t i = 1; i < raw.size(); ++i)
-          steps[i - 1] = (timeOf(static_cast<long>(i)) - timeOf(static_cast<long>(i - 1))) /
-                         static_cast<double>(rowOf(i) - rowOf(i - 1));
-        std::vector<double> sorted = steps;
+        // step i: from kept row i to i + 1, per file row (computed again where needed: one
+        // array of steps, reordered by the median's selection, is the scan's peak)
+        auto stepAt = [&](std::size_t i) {
+          return (timeOf(static_cast<long>(i + 1)) - timeOf(static_cast<long>(i))) /
+                 static_cast<double>(rowOf(i + 1) - rowOf(i));
+        };
+        std::vector<double> sorted(raw.size() - 1);
+        for (std::size_t i = 0; i < sorted.size(); ++i) sorted[i] = stepAt(i);
         std::nth_element(sorted.begin(),
                          sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
                          sorted.end());
         const double med = sorted[sorted.size() / 2];
+        const std::size_t nsteps = sorted.size();
+        sorted = std::vector<double>();
         const double ratio = P_.getDouble("max_gap_ratio");
         const bool resample = P_.getDouble("resample_hz") > 0.0;
-        for (std::size_t i = 0; i < steps.size(); ++i)
-          if (!(steps[i] <= ratio * med && (resample || steps[i] >= med / ratio)))
+        for (std::size_t i = 0; i < nsteps; ++i) {
+          const double step = stepAt(i);
+          if (!(step <= ratio * med && (resample || step >= med / ratio)))
             throw exid::Error(
                 fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s "
                             "against a median step of {} s: {} (a filter, derivatives and "
                             "energy integrals need a uniform rate); cut the recording there "
                             "with t_start_s/t_end_s{} (max_gap_ratio = {})",
-                            file, lineText(rowOf(i + 1)), rowOf(i + 1) + 1, steps[i], med,
-                            steps[i] > med ? "a gap" : "uneven time stamps",
-                            steps[i] > med ? "" : ", or resample it (resample_hz)", ratio));
+                            file, lineText(rowOf(i + 1)), rowOf(i + 1) + 1, step, med,
+                            step > med ? "a gap" : "uneven time stamps",
+                            step > med ? "" : ", or resample it (resample_hz)", ratio));
+        }
       }
       // Segment: inside the recording, never clamped.
       ts_ = P_.getDouble("t_start_s");
