@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 
 #include "exid/error.hpp"
 
@@ -13,6 +14,21 @@ namespace {
 Eigen::MatrixXd rowsOf(const Eigen::MatrixXd& M, int begin, int end) {
   if (M.cols() == 0 || M.rows() == 0) return Eigen::MatrixXd(0, 0);
   return M.middleRows(begin, end - begin);
+}
+
+// Samples [begin, end) of d's matrices, named source with meta.
+Dataset samplesOf(const Dataset& d, int begin, int end, const std::string& source,
+                  const Json& meta) {
+  Dataset s;
+  s.t = d.t.segment(begin, end - begin);
+  s.q = rowsOf(d.q, begin, end);
+  s.qd = rowsOf(d.qd, begin, end);
+  s.qdd = rowsOf(d.qdd, begin, end);
+  s.tau = rowsOf(d.tau, begin, end);
+  s.wrench = rowsOf(d.wrench, begin, end);
+  s.source = source;
+  s.meta = meta;
+  return s;
 }
 
 // Appends the rows of b to a (same signals).
@@ -40,16 +56,7 @@ Dataset sliceDataset(const Dataset& d, int begin, int end) {
   check(!d.streamed(), "sliceDataset: a streamed dataset has no samples in memory");
   check(0 <= begin && begin <= end && end <= d.size(),
         fmt::format("sliceDataset: rows [{}, {}) outside a dataset of {}", begin, end, d.size()));
-  Dataset s;
-  s.t = d.t.segment(begin, end - begin);
-  s.q = rowsOf(d.q, begin, end);
-  s.qd = rowsOf(d.qd, begin, end);
-  s.qdd = rowsOf(d.qdd, begin, end);
-  s.tau = rowsOf(d.tau, begin, end);
-  s.wrench = rowsOf(d.wrench, begin, end);
-  s.source = d.source;
-  s.meta = d.meta;
-  return s;
+  return samplesOf(d, begin, end, d.source, d.meta);
 }
 
 Dataset materialize(const Dataset& d) {
@@ -80,6 +87,41 @@ Dataset materialize(const Dataset& d) {
   out.source = d.source;
   out.meta = s.meta();
   return out;
+}
+
+Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who) {
+  check(!d.streamed(), "resampleUniform: a streamed dataset has no samples in memory");
+  const Eigen::Index K = d.t.size();
+  check(K >= 2, fmt::format("{}: resample_hz needs two samples", who));
+  const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
+  // (counted in double first: a huge rate must not overflow the integer count)
+  const double Md = std::floor(span_s * rate_hz + 1e-9) + 1.0;
+  check(Md >= 2.0 && Md <= 1e8,
+        fmt::format("{}: resample_hz = {} gives {:g} samples over {} s (2 to 1e8)", who, rate_hz,
+                    Md, span_s));
+  const auto M = static_cast<Eigen::Index>(Md);
+  Dataset u;
+  u.t.resize(M);
+  for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rate_hz;
+  auto interp = [&](const Eigen::MatrixXd& A) {
+    if (A.size() == 0) return Eigen::MatrixXd();
+    Eigen::MatrixXd B(M, A.cols());
+    Eigen::Index k = 0;
+    for (Eigen::Index m = 0; m < M; ++m) {
+      while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
+      const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
+      B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
+    }
+    return B;
+  };
+  u.q = interp(d.q);
+  u.qd = interp(d.qd);
+  u.qdd = interp(d.qdd);
+  u.tau = interp(d.tau);
+  u.wrench = interp(d.wrench);
+  u.source = d.source;
+  u.meta = d.meta;
+  return u;
 }
 
 SampleWindow::SampleWindow(const Dataset& d) : d_(d) {}
@@ -144,17 +186,7 @@ Dataset SampleWindow::span(int begin, int end) {
       append(&buf_.wrench, chunk.wrench);
     }
   }
-  Dataset out;
-  const int b = begin - buf_begin_, e = end - buf_begin_;
-  out.t = buf_.t.segment(b, e - b);
-  out.q = rowsOf(buf_.q, b, e);
-  out.qd = rowsOf(buf_.qd, b, e);
-  out.qdd = rowsOf(buf_.qdd, b, e);
-  out.tau = rowsOf(buf_.tau, b, e);
-  out.wrench = rowsOf(buf_.wrench, b, e);
-  out.source = d_.source;
-  out.meta = d_.meta;
-  return out;
+  return samplesOf(buf_, begin - buf_begin_, end - buf_begin_, d_.source, d_.meta);
 }
 
 }  // namespace exid

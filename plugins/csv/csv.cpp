@@ -153,10 +153,8 @@ class CsvExperiment : public exid::Experiment {
     const double rs_hz = P_.getDouble("resample_hz");
     int resampled_from = 0;
     if (rs_hz > 0.0) {
-      exid::check(K >= 2,
-                  fmt::format("experiment 'csv': {}: resample_hz needs two samples", src->file()));
       resampled_from = K;
-      d = resample(d, rs_hz, src->file());
+      d = exid::resampleUniform(d, rs_hz, "experiment 'csv': " + src->file());
     }
     const int K_grid = d.size();  // samples entering the filter (after any resampling)
     const Preprocessed pp = preprocess(&d, src->file());
@@ -1124,40 +1122,6 @@ class CsvExperiment : public exid::Experiment {
     long taken_ = 0;
     exid::Dataset collected_;
   };
-
-  /// Linear interpolation of every signal onto a uniform grid at rs_hz.
-  static exid::Dataset resample(const exid::Dataset& d, double rs_hz, const std::string& file) {
-    const int K = d.size();
-    const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
-    // (counted in double first: a huge rate must not overflow the integer count)
-    const double Md = std::floor(span_s * rs_hz + 1e-9) + 1.0;
-    exid::check(Md >= 2.0 && Md <= 1e8,
-                fmt::format("experiment 'csv': {}: resample_hz = {} gives {:g} samples over {} s "
-                            "(2 to 1e8)",
-                            file, rs_hz, Md, span_s));
-    const auto M = static_cast<Eigen::Index>(Md);
-    exid::Dataset u;
-    u.t.resize(M);
-    for (Eigen::Index m = 0; m < M; ++m) u.t[m] = t0 + static_cast<double>(m) / rs_hz;
-    auto interp = [&](const Eigen::MatrixXd& A) {
-      if (A.size() == 0) return Eigen::MatrixXd();
-      Eigen::MatrixXd B(M, A.cols());
-      Eigen::Index k = 0;
-      for (Eigen::Index m = 0; m < M; ++m) {
-        while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
-        const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
-        B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
-      }
-      return B;
-    };
-    u.q = interp(d.q);
-    u.qd = interp(d.qd);
-    u.qdd = interp(d.qdd);
-    u.tau = interp(d.tau);
-    u.wrench = interp(d.wrench);
-    u.source = d.source;
-    return u;
-  }
 
   /// Optional: zero-phase low-pass of q (and tau, wrench), central differences, trim, decimate.
   Preprocessed preprocess(exid::Dataset* d, const std::string& file) const {

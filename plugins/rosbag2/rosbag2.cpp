@@ -485,32 +485,8 @@ class Rosbag2Experiment : public exid::Experiment {
     const double rs_hz = P_.getDouble("resample_hz");
     int resampled_from = 0;
     if (rs_hz > 0.0) {
-      exid::check(K >= 2, fmt::format("{}{}: resample_hz needs two samples", pre, bagname));
       resampled_from = K;
-      const double tb = d.t[0], span_s = d.t[K - 1] - tb;
-      const double Md = std::floor(span_s * rs_hz + 1e-9) + 1.0;
-      exid::check(Md >= 2.0 && Md <= 1e8,
-                  fmt::format("{}{}: resample_hz = {} gives {:g} samples over {} s (2 to 1e8)", pre,
-                              bagname, rs_hz, Md, span_s));
-      const auto M = static_cast<Eigen::Index>(Md);
-      exid::Dataset u;
-      u.t.resize(M);
-      for (Eigen::Index m = 0; m < M; ++m) u.t[m] = tb + static_cast<double>(m) / rs_hz;
-      auto interp = [&](const Eigen::MatrixXd& A) {
-        if (A.size() == 0) return Eigen::MatrixXd();
-        Eigen::MatrixXd B(M, A.cols());
-        Eigen::Index k = 0;
-        for (Eigen::Index m = 0; m < M; ++m) {
-          while (k + 2 < K && d.t[k + 1] <= u.t[m]) ++k;
-          const double a = (u.t[m] - d.t[k]) / (d.t[k + 1] - d.t[k]);
-          B.row(m) = (1.0 - a) * A.row(k) + a * A.row(k + 1);
-        }
-        return B;
-      };
-      u.q = interp(d.q);
-      u.qd = interp(d.qd);
-      u.tau = interp(d.tau);
-      d = std::move(u);
+      d = exid::resampleUniform(d, rs_hz, fmt::format("{}{}", pre, bagname));
     }
     if (with_wrench) {
       d.wrench.resize(d.size(), 6);

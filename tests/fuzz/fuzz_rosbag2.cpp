@@ -38,10 +38,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
     } else if (mode == 2) {
       rb::decodeWrenchStamped(p, n, "fuzz");
     } else if (n >= 4) {
-      const std::uint32_t usize = static_cast<std::uint32_t>(p[0]) |
-                                  static_cast<std::uint32_t>(p[1]) << 8 |
-                                  static_cast<std::uint32_t>(p[2]) << 16 |
-                                  static_cast<std::uint32_t>(p[3]) << 24;
+      const std::uint32_t usize =
+          static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+          static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
       rb::decompressChunk(mode == 3 ? "zstd" : "lz4", p + 4, n - 4, usize, "fuzz");
     }
   } catch (const exid::Error&) {

@@ -80,6 +80,11 @@ struct Dataset {
 
 /// Samples [begin, end) of a dataset in memory (meta and source kept).
 Dataset sliceDataset(const Dataset& d, int begin, int end);
+/// Every signal of d (in memory, at least two samples) linearly interpolated onto the uniform
+/// grid t0 + m / rate_hz, m = 0 .. floor(span * rate_hz); source and meta kept. `who` starts the
+/// messages (e.g. "experiment 'csv': file.csv"): fewer than two samples, or a grid of fewer than
+/// 2 or more than 1e8 samples, is an exid::Error.
+Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who);
 /// A dataset in memory: d itself, or every sample of its stream read in one pass (meta then
 /// the stream's, complete).
 Dataset materialize(const Dataset& d);
