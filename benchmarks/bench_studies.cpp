@@ -18,6 +18,7 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -53,8 +54,10 @@ double processCpuSeconds() {
   return static_cast<double>(ts.tv_sec) + 1e-9 * static_cast<double>(ts.tv_nsec);
 }
 
-/// CPU seconds of one value + gradient of the study's criterion at its initial trajectory.
-double baselineSeconds(const exid::StudyConfig& cfg) {
+/// CPU seconds of one value + gradient of the study's criterion at its initial trajectory, and
+/// (torque_s, when the study sets torque limits) of the torque rows with their exact Jacobian at
+/// the same point.
+double baselineSeconds(const exid::StudyConfig& cfg, double* torque_s = nullptr) {
   exid::RunContext ctx;
   ctx.study_dir = cfg.dir;
   ctx.seed = cfg.seed;
@@ -72,24 +75,36 @@ double baselineSeconds(const exid::StudyConfig& cfg) {
   exid::ExcitationOptions xo;
   xo.position_margin = traj->positionMargin();
   xo.scale_columns = crit->specs().scale_columns;
+  xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
+  xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
   auto problem = exid::makeExcitationProblem(traj, model, crit, xo);
   const Eigen::VectorXd z = problem->initial();
   Eigen::VectorXd g;
-  problem->value(z, &g);  // warm up
-  int reps = 0;
-  const double t0 = processCpuSeconds();
-  double t = 0;
-  do {
-    problem->value(z, &g);
-    ++reps;
-    t = processCpuSeconds() - t0;
-  } while (t < 0.2);
-  return t / reps;
+  Eigen::MatrixXd J;
+  auto timeIt = [](const std::function<void()>& f) {
+    f();  // warm up
+    int reps = 0;
+    const double t0 = processCpuSeconds();
+    double t = 0;
+    do {
+      f();
+      ++reps;
+      t = processCpuSeconds() - t0;
+    } while (t < 0.2);
+    return t / reps;
+  };
+  const double base = timeIt([&] { problem->value(z, &g); });
+  if (torque_s)
+    *torque_s = problem->numNonlinearConstraints() > 0
+                    ? timeIt([&] { problem->nonlinearConstraints(z, &g, &J); })
+                    : NAN;
+  return base;
 }
 
 struct Row {
   std::string study, budget, goal;
   double cond = NAN, ratio = NAN, cpu_s = NAN, baseline_ms = NAN;
+  double torque_ms = NAN, torque_ratio_max = NAN;  // torque rows + Jacobian; worst |tau|/tau_max
   long evaluations = 0;
   std::string stop;
   bool met = false;
@@ -108,7 +123,8 @@ void runStudy(benchmark::State& state, const std::string& file, double cpu_s, do
   cfg.experiment.reset();
   cfg.estimator.reset();
   cfg.validation.reset();
-  const double base = baselineSeconds(cfg);
+  double torque_s = NAN;
+  const double base = baselineSeconds(cfg, &torque_s);
   if (cpu_s > 0) {
     auto& p = cfg.optimizer->params;
     p.set("max_cpu_s", cpu_s);
@@ -137,13 +153,22 @@ void runStudy(benchmark::State& state, const std::string& file, double cpu_s, do
     row.stop = X.find("stop_reason")->asString();
     const exid::Json* d = X.find("details");
     row.cpu_s = d && d->find("cpu_s") ? d->find("cpu_s")->asDouble() : cpu;
+    const exid::Json* feasible = d ? d->find("feasible") : nullptr;
+    if (feasible && !feasible->asBool()) row.stop += " (infeasible)";
+    if (const exid::Json* tr = X.find("torque_ratio_max")) row.torque_ratio_max = tr->asDouble();
   }
+  row.torque_ms = 1e3 * torque_s;
   row.study = fs::path(file).stem().string();
   row.budget = cpu_s > 0 ? fmt::format("{:g} s CPU", cpu_s) : "as shipped (evaluations)";
   row.goal = goal;
   row.baseline_ms = 1e3 * base;
   row.met = (std::isnan(goal_cond) || row.cond <= goal_cond) &&
-            (std::isnan(goal_ratio) || row.ratio >= goal_ratio);
+            (std::isnan(goal_ratio) || row.ratio >= goal_ratio) &&
+            row.stop.find("infeasible") == std::string::npos;
+  if (!std::isnan(torque_s)) {
+    state.counters["torque_ms"] = row.torque_ms;
+    state.counters["torque_over_baseline"] = torque_s / base;
+  }
   state.counters["cond_W"] = row.cond;
   state.counters["ratio"] = row.ratio;
   state.counters["evaluations"] = static_cast<double>(row.evaluations);
@@ -164,6 +189,8 @@ void registerAll() {
       {"bench/panda_fourier.yaml", 1.0, 33.3, no, "cond <= 33.3 in < 1 s"},
       {"bench/panda_fourier.yaml", 10.0, 30.0, no, "cond <= 30 in 10 s"},
       {"bench/panda_fourier.yaml", 0.0, 30.0, no, "cond <= 30"},
+      {"bench/panda_fourier_torque.yaml", 2.0, 33.3, no, "cond <= 33.3 in < 2 s, torque limits on"},
+      {"bench/panda_fourier_torque.yaml", 0.0, 33.3, no, "cond <= 33.3, torque limits on"},
       {"bench/puma560_fourier.yaml", 2.0, 6.04, no, "cond <= 6.04 in < 2 s"},
       {"bench/puma560_fourier.yaml", 0.0, 6.04, no, "cond <= 6.04"},
       {"paper/exp1_differential_3joints.yaml", 1.0, no, 10.0, "ratio >= 10 in < 1 s"},
@@ -204,5 +231,12 @@ int main(int argc, char** argv) {
         "| {} | {} | {:.4f} | {:.4g} | {} | {:.2f} | {:.0f} | {:.3f} ms | {} | {} |\n", r.study,
         r.budget, r.cond, r.ratio, r.evaluations, r.cpu_s, r.cpu_s / (1e-3 * r.baseline_ms),
         r.baseline_ms, r.goal, r.met ? "yes" : "**no**");
+  std::cout << "\n| study | budget | torque rows + exact Jacobian | value + gradient | ratio | "
+               "max |tau| / tau_max |\n|---|---|---|---|---|---|\n";
+  for (const Row& r : rows())
+    if (!std::isnan(r.torque_ms))
+      std::cout << fmt::format("| {} | {} | {:.3f} ms | {:.3f} ms | {:.2f} | {:.3f} |\n", r.study,
+                               r.budget, r.torque_ms, r.baseline_ms, r.torque_ms / r.baseline_ms,
+                               r.torque_ratio_max);
   return 0;
 }

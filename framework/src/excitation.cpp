@@ -1,13 +1,18 @@
 #include "exid/excitation.hpp"
 
+#include <fmt/format.h>
+
 #include <Eigen/SVD>
 #include <cmath>
 
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 
 namespace exid {
 
 namespace {
+
+constexpr DriveColumns kAllDriveTerms{true, true, true, true};
 
 class Problem final : public ExcitationProblem {
  public:
@@ -42,6 +47,13 @@ class Problem final : public ExcitationProblem {
         active_.push_back({2, j, +1, L.qdd_max});
         active_.push_back({2, j, -1, L.qdd_max});
       }
+    }
+    if (opt_.torque_margin > 0) {
+      check(std::isfinite(opt_.torque_margin),
+            "excitation: torque_margin must be a finite fraction of the torque limits");
+      tau_max_ = torqueLimits(r, opt_.torque_max, "excitation: torque limits").tau_max;
+      dyn_ = makeDynamicsData(r);
+      nl_ = 2 * n_ * K_;
     }
     if (r.hasTransmission()) {
       T_ = r.transmission;
@@ -97,7 +109,17 @@ class Problem final : public ExcitationProblem {
     return out;
   }
 
-  int numConstraints() const override { return static_cast<int>(active_.size()) * K_; }
+  int numConstraints() const override { return static_cast<int>(active_.size()) * K_ + nl_; }
+  int numNonlinearConstraints() const override { return nl_; }
+
+  void nonlinearConstraints(const Eigen::VectorXd& z, Eigen::VectorXd* g,
+                            Eigen::MatrixXd* jac) override {
+    if (g) g->resize(nl_);
+    if (jac) jac->resize(nl_, numVariables());
+    if (nl_ == 0) return;
+    const Samples s = traj_->evaluate(z);
+    torqueRows(z, s, g ? g->data() : nullptr, jac, 0);
+  }
 
   void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) override {
     Samples s = traj_->evaluate(z);
@@ -107,11 +129,13 @@ class Problem final : public ExcitationProblem {
     Eigen::MatrixXd qj = (s.q * T_.transpose()).rowwise() + q0_.transpose();
     Eigen::MatrixXd qdj = s.qd * T_.transpose();
     Eigen::MatrixXd qddj = s.qdd * T_.transpose();
-    Eigen::MatrixXd Jt;  // d[vec q; vec qd; vec qdd]/dz, column-major vec (index j*K + k)
+    Eigen::MatrixXd Jt_own;  // d[vec q; vec qd; vec qdd]/dz, column-major vec (index j*K + k)
+    const Eigen::MatrixXd* Jtp = nullptr;
     if (jac) {
       jac->resize(m, numVariables());
-      Jt = traj_->jacobian(z);
+      Jtp = &trajectoryJacobian(z, &Jt_own);
     }
+    const Eigen::MatrixXd& Jt = jac ? *Jtp : Jt_own;
     const Eigen::Index Kn = static_cast<Eigen::Index>(K_) * n_;
     int row = 0;
     for (const auto& c : active_) {
@@ -130,6 +154,7 @@ class Problem final : public ExcitationProblem {
         }
       }
     }
+    if (nl_ > 0) torqueRows(z, s, g ? g->data() + row : nullptr, jac, row);
   }
 
   const Trajectory& trajectory() const override { return *traj_; }
@@ -144,6 +169,96 @@ class Problem final : public ExcitationProblem {
     double sign;
     double bound;
   };
+  // d[vec q; vec qd; vec qdd]/dz: the trajectory's, kept once when it is constant (linear).
+  const Eigen::MatrixXd& trajectoryJacobian(const Eigen::VectorXd& z, Eigen::MatrixXd* own) {
+    if (traj_->specs().linear) {
+      if (jt_.size() == 0) jt_ = traj_->jacobian(z);
+      return jt_;
+    }
+    *own = traj_->jacobian(z);
+    return *own;
+  }
+
+  // Torque rows: group (j, +) then (j, -) for each measured coordinate j, K samples each:
+  // +-tau_j(t_k) / tau_max,j - margin <= 0. Their Jacobian is exact: per sample, the partial
+  // derivatives of the full model's torque (actuatorTorqueDerivatives) times the trajectory's
+  // Jacobian rows of that sample (sampleRows).
+  void torqueRows(const Eigen::VectorXd& z, const Samples& s, double* g, Eigen::MatrixXd* jac,
+                  int row0) {
+    const RobotModel& r = model_->robot();
+    const int n = n_, K = K_;
+    SampleRows rows_own;
+    const SampleRows* R = jac ? &sampleRows(z, &rows_own) : nullptr;
+    const Eigen::Index nv = numVariables();
+    Eigen::VectorXd qm(n), qdm(n), qddm(n), tau(n);
+    Eigen::MatrixXd Dk(n, 3 * n), Dq, Dqd, Dqdd;
+    RowMatrix Tk(n, nv);
+    for (int k = 0; k < K; ++k) {
+      qm = s.q.row(k).transpose();
+      qdm = s.qd.row(k).transpose();
+      qddm = s.qdd.row(k).transpose();
+      if (jac)
+        actuatorTorqueDerivatives(r, *dyn_, kAllDriveTerms, qm, qdm, qddm, &tau, &Dq, &Dqd, &Dqdd);
+      else
+        tau = actuatorTorque(r, *dyn_, kAllDriveTerms, qm, qdm, qddm);
+      if (g)
+        for (int j = 0; j < n; ++j) {
+          const double x = tau(j) / tau_max_(j);
+          g[(2 * j) * K + k] = x - opt_.torque_margin;
+          g[(2 * j + 1) * K + k] = -x - opt_.torque_margin;
+        }
+      if (!jac) continue;
+      Dk.leftCols(n) = Dq;
+      Dk.middleCols(n, n) = Dqd;
+      Dk.rightCols(n) = Dqdd;
+      // Tk = Dk * (the trajectory's Jacobian rows of sample k), over each row's non-zero span
+      Tk.setZero();
+      for (int c = 0; c < 3 * n; ++c) {
+        const Eigen::Index src = static_cast<Eigen::Index>(3 * n) * k + c;
+        const auto [c0, c1] = R->span[static_cast<std::size_t>(src)];
+        if (c1 <= c0) continue;
+        const auto Jrow = R->J.row(src).segment(c0, c1 - c0);
+        for (int j = 0; j < n; ++j)
+          if (Dk(j, c) != 0.0) Tk.row(j).segment(c0, c1 - c0) += Dk(j, c) * Jrow;
+      }
+      for (int j = 0; j < n; ++j) {
+        const double sc = 1.0 / tau_max_(j);
+        jac->row(row0 + (2 * j) * K + k) = sc * Tk.row(j);
+        jac->row(row0 + (2 * j + 1) * K + k) = -sc * Tk.row(j);
+      }
+    }
+  }
+
+  using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
+  // The trajectory's Jacobian rows sample by sample (row 3n k + sig n + i: signal sig of joint i
+  // at sample k), row-major, with the span of each row's non-zero columns (a basis trajectory's
+  // row of one joint touches that joint's variables only). Kept once for a linear trajectory.
+  struct SampleRows {
+    RowMatrix J;
+    std::vector<std::pair<Eigen::Index, Eigen::Index>> span;
+  };
+  const SampleRows& sampleRows(const Eigen::VectorXd& z, SampleRows* own) {
+    const bool linear = traj_->specs().linear;
+    if (linear && rows_.J.size() > 0) return rows_;
+    SampleRows& R = linear ? rows_ : *own;
+    Eigen::MatrixXd Jt_own;
+    const Eigen::MatrixXd& Jt = trajectoryJacobian(z, &Jt_own);
+    const Eigen::Index n = n_, K = K_, Kn = K * n, nv = numVariables();
+    R.J.resize(3 * Kn, nv);
+    R.span.assign(static_cast<std::size_t>(3 * Kn), {0, 0});
+    for (Eigen::Index k = 0; k < K; ++k)
+      for (Eigen::Index sig = 0; sig < 3; ++sig)
+        for (Eigen::Index i = 0; i < n; ++i) {
+          const Eigen::Index dst = 3 * n * k + sig * n + i;
+          R.J.row(dst) = Jt.row(sig * Kn + i * K + k);
+          Eigen::Index c0 = 0, c1 = nv;
+          while (c0 < nv && R.J(dst, c0) == 0.0) ++c0;
+          while (c1 > c0 && R.J(dst, c1 - 1) == 0.0) --c1;
+          R.span[static_cast<std::size_t>(dst)] = {c0, c1};
+        }
+    return R;
+  }
+
   std::shared_ptr<Trajectory> traj_;
   std::shared_ptr<ObservationModel> model_;
   std::shared_ptr<Criterion> crit_;
@@ -154,6 +269,11 @@ class Problem final : public ExcitationProblem {
   Eigen::VectorXd q0_;
   int K_ = 0, n_ = 0;
   long evaluations_ = 0;
+  int nl_ = 0;  // torque rows (2 n K when the torque limits are on)
+  Eigen::VectorXd tau_max_;
+  DynamicsDataPtr dyn_;
+  Eigen::MatrixXd jt_;
+  SampleRows rows_;
 };
 
 }  // namespace
@@ -165,6 +285,62 @@ std::unique_ptr<ExcitationProblem> makeExcitationProblem(std::shared_ptr<Traject
   check(trajectory && model && criterion, "makeExcitationProblem: missing part");
   return std::make_unique<Problem>(std::move(trajectory), std::move(model), std::move(criterion),
                                    options);
+}
+
+TorqueLimits torqueLimits(const RobotModel& robot, const std::vector<double>& torque_max,
+                          const std::string& who) {
+  const int n = robot.dof();
+  check(robot.inertialParameters().cwiseAbs().maxCoeff() > 0,
+        fmt::format("{}: robot '{}' carries no inertial parameters (every mass, first and second "
+                    "moment is zero), so its torques cannot be predicted; give a robot description "
+                    "with its dynamic parameters, or drop the torque limits",
+                    who, robot.name));
+  TorqueLimits tl;
+  tl.tau_max.resize(n);
+  if (!torque_max.empty()) {
+    check(static_cast<int>(torque_max.size()) == n,
+          fmt::format("{}: torque_max_Nm has {} values; robot '{}' has {} joints", who,
+                      torque_max.size(), robot.name, n));
+    for (int j = 0; j < n; ++j) {
+      const double t = torque_max[static_cast<std::size_t>(j)];
+      check(std::isfinite(t) && t > 0,
+            fmt::format("{}: torque_max_Nm[{}] = {}: must be a positive finite torque", who, j, t));
+      tl.tau_max(j) = t;
+    }
+    return tl;
+  }
+  check(!robot.hasTransmission(),
+        fmt::format("{}: robot '{}' has a transmission, so its actuator (measured-coordinate) "
+                    "torques are not limited by the joints' effort limits; give torque_max_Nm, "
+                    "one limit per measured coordinate",
+                    who, robot.name));
+  std::vector<std::string> missing;
+  for (int j = 0; j < n; ++j) {
+    const double t = j < static_cast<int>(robot.limits.size())
+                         ? robot.limits[static_cast<std::size_t>(j)].tau_max
+                         : HUGE_VAL;
+    if (!(t > 0) || !(t < 1e299))
+      missing.push_back(
+          fmt::format("{} ({})", j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name));
+    else
+      tl.tau_max(j) = t;
+  }
+  check(missing.empty(),
+        fmt::format("{}: robot '{}' has no torque limit (URDF effort) for joint(s) {}; give "
+                    "torque_max_Nm, one limit per joint",
+                    who, robot.name, fmt::join(missing, ", ")));
+  return tl;
+}
+
+Eigen::MatrixXd predictedTorques(const RobotModel& robot, const Samples& s) {
+  auto dyn = makeDynamicsData(robot);
+  const int n = robot.dof();
+  Eigen::MatrixXd tau(s.size(), n);
+  for (int k = 0; k < s.size(); ++k)
+    tau.row(k) = actuatorTorque(robot, *dyn, kAllDriveTerms, s.q.row(k).transpose(),
+                                s.qd.row(k).transpose(), s.qdd.row(k).transpose())
+                     .transpose();
+  return tau;
 }
 
 double conditionNumber(const Eigen::MatrixXd& W) {

@@ -13,6 +13,7 @@ namespace exid::optim {
 // ---------------------------------------------------------------- Limits
 Limits::Limits(ExcitationProblem& p) : p_(p) {
   m_ = p.numConstraints();
+  nl_ = p.numNonlinearConstraints();
   linear_ = p.trajectory().specs().linear;
   K_ = p.trajectory().evaluate(p.initial()).size();
 }
@@ -28,11 +29,17 @@ void Limits::eval(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd*
 }
 
 const Eigen::MatrixXd& Limits::jacobian(const Eigen::VectorXd& z) {
-  if (jac_valid_ && linear_) return jac_;
-  if (m_ > 0)
-    p_.constraints(z, nullptr, &jac_);
-  else
+  if (jac_valid_ && linear_ && nl_ == 0) return jac_;
+  if (m_ == 0) {
     jac_.resize(0, z.size());
+  } else if (jac_valid_ && linear_) {
+    // the rows of the sample limits are constant; only the torque rows change with z
+    Eigen::MatrixXd tail;
+    p_.nonlinearConstraints(z, nullptr, &tail);
+    jac_.bottomRows(nl_) = tail;
+  } else {
+    p_.constraints(z, nullptr, &jac_);
+  }
   jac_valid_ = true;
   return jac_;
 }

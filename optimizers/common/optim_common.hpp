@@ -15,8 +15,10 @@ namespace exid::optim {
 
 /// g(z) <= 0: the problem's constraints (joint limits less the margin, velocity and
 /// acceleration limits at every sample; a trajectory's own caps are part of them through
-/// Trajectory::adjustLimits). The dense Jacobian is computed once and cached when the trajectory
-/// says it is linear (specs().linear).
+/// Trajectory::adjustLimits; the torque limits when the study sets them). The dense Jacobian of
+/// the sample limits is computed once and cached when the trajectory says it is linear
+/// (specs().linear); the torque rows (ExcitationProblem::numNonlinearConstraints) are computed
+/// again at every z.
 class Limits {
  public:
   explicit Limits(ExcitationProblem& p);
@@ -34,7 +36,7 @@ class Limits {
 
  private:
   ExcitationProblem& p_;
-  int m_ = 0, K_ = 0;
+  int m_ = 0, nl_ = 0, K_ = 0;
   bool linear_ = false;
   Eigen::MatrixXd jac_;
   bool jac_valid_ = false;

@@ -169,7 +169,15 @@ INSTANTIATE_TEST_SUITE_P(
         Case{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 3}"},
         Case{"planar2r", "spline", "{duration_s: 4, knots: 6, degree: 5}"},
         Case{"puma560", "spline", "{duration_s: 4, knots: 7, degree: 5, boundary: periodic}"},
-        Case{"planar2r", "spline", "{duration_s: 4, knots: 5, degree: 3, boundary: periodic}"}),
+        Case{"planar2r", "spline", "{duration_s: 4, knots: 5, degree: 3, boundary: periodic}"},
+        Case{"panda", "fourier",
+             "{period_s: 10, harmonics: 5, position_margin_rad: 0.1, rest_to_rest: true}"},
+        Case{"puma560", "fourier",
+             "{period_s: 5, harmonics: 3, joints: [2, 3], rest_to_rest: true, "
+             "start_position_rad: [0, 0.5, -0.5, 0, 0, 0]}"},
+        Case{"planar2r", "spline",
+             "{duration_s: 4, knots: 6, degree: 5, rest_to_rest: true, "
+             "start_position_rad: [0.3, -0.2]}"}),
     [](const auto& param_info) {
       return param_info.param.robot + "_" + param_info.param.traj + "_" +
              std::to_string(param_info.index);

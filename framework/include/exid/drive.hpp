@@ -52,5 +52,13 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
 Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
                                const DriveColumns& cols, const Eigen::VectorXd& qm,
                                const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
+/// actuatorTorque and its partial derivatives with respect to qm, qdm, qddm (n x n each, row i
+/// the gradient of tau_m,i; sign(qd) has zero derivative). Exact (inverseDynamicsDerivatives
+/// mapped through the transmission). The derivative outputs may be null.
+void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
+                               const DriveColumns& cols, const Eigen::VectorXd& qm,
+                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                               Eigen::VectorXd* tau_m, Eigen::MatrixXd* dtau_dqm,
+                               Eigen::MatrixXd* dtau_dqdm, Eigen::MatrixXd* dtau_dqddm);
 
 }  // namespace exid

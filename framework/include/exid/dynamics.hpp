@@ -57,6 +57,16 @@ Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& data,
                                 const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                 const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi = nullptr);
 
+/// Partial derivatives of the inverse dynamics tau(q, qd, qdd) (as inverseDynamics: the model's
+/// own parameters, or pi): row i of each n x n matrix is the gradient of tau_i. Exact (forward
+/// tangents of the recursive Newton-Euler algorithm, all 3n directions at once), O(n^2); also
+/// returns tau. Outputs may be null except tau.
+void inverseDynamicsDerivatives(const RobotModel& model, DynamicsData& data,
+                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi,
+                                Eigen::VectorXd* tau, Eigen::MatrixXd* dtau_dq,
+                                Eigen::MatrixXd* dtau_dqd, Eigen::MatrixXd* dtau_dqdd);
+
 /// Joint-space mass matrix (composite rigid body algorithm), n x n.
 Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
                            const Eigen::VectorXd* pi = nullptr);

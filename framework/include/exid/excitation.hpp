@@ -4,10 +4,14 @@
 // gradient by reverse accumulation: dJ/dW = 2 W S dF/dM S, then the model's and the
 // trajectory's vector-Jacobian products (the paper's adjoint, eqns 10-15, generalised).
 // Constraints g(z) <= 0: joint positions within limits less a margin, velocities and
-// accelerations within limits, at every sample (only limits that are finite).
+// accelerations within limits, at every sample (only limits that are finite); optionally the
+// predicted actuator torques within a fraction of their limits, |tau_j| <= margin tau_max,j, with
+// tau the robot's full model (rigid body + drives, its own nominal parameters).
 #pragma once
 
 #include <memory>
+#include <string>
+#include <vector>
 
 #include "exid/interfaces.hpp"
 
@@ -18,7 +22,26 @@ struct ExcitationOptions {
   bool velocity_limits = true;
   bool acceleration_limits = true;
   bool scale_columns = false;  // scale base columns by |nominal base parameter|
+  /// Torque limits: |tau_j(t_k)| <= torque_margin * tau_max,j at every sample, tau the predicted
+  /// actuator torque (measured coordinates) of the robot's full model with its nominal parameters.
+  /// 0: no torque constraint.
+  double torque_margin = 0.0;
+  /// tau_max per measured coordinate [N m or N]; empty: the robot's limits (tau_max, the URDF
+  /// `effort`), which must then be finite for every joint.
+  std::vector<double> torque_max;
 };
+
+/// The torque model the torque constraint and the exported trajectory use: the robot's full
+/// model with its nominal parameters (rigid body + every drive term), in measured coordinates,
+/// and the limits it is held to. Throws exid::Error, saying what is missing, when the robot has
+/// no inertial parameters or a limit is unknown.
+struct TorqueLimits {
+  Eigen::VectorXd tau_max;  // per measured coordinate [N m or N]
+};
+TorqueLimits torqueLimits(const RobotModel& robot, const std::vector<double>& torque_max,
+                          const std::string& who);
+/// Predicted actuator torques (K x n) along samples (measured coordinates).
+Eigen::MatrixXd predictedTorques(const RobotModel& robot, const Samples& s);
 
 std::unique_ptr<ExcitationProblem> makeExcitationProblem(std::shared_ptr<Trajectory> trajectory,
                                                          std::shared_ptr<ObservationModel> model,

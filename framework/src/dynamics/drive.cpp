@@ -218,4 +218,41 @@ Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
   return tm;
 }
 
+void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
+                               const DriveColumns& cols, const Eigen::VectorXd& qm,
+                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                               Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq, Eigen::MatrixXd* dqd,
+                               Eigen::MatrixXd* dqdd) {
+  const int n = model.dof();
+  check(tau_m != nullptr, "actuatorTorqueDerivatives: tau_m must be given");
+  Eigen::VectorXd& q = detail::scratchVector(data, 0);
+  Eigen::VectorXd& qd = detail::scratchVector(data, 1);
+  Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
+  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+  Eigen::VectorXd& tau = detail::scratchVector(data, 3);
+  inverseDynamicsDerivatives(model, data, q, qd, qdd, nullptr, &tau, dq, dqd, dqdd);
+  if (model.hasTransmission()) {
+    const Eigen::MatrixXd& T = model.transmission;
+    *tau_m = T.transpose() * tau;
+    for (Eigen::MatrixXd* x : {dq, dqd, dqdd})
+      if (x) *x = T.transpose() * *x * T;  // q = T qm + q0, tau_m = T^T tau
+  } else {
+    *tau_m = tau;
+  }
+  for (int j = 0; j < n; ++j) {
+    const Drive dr =
+        j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
+    if (cols.rotor_inertia) {
+      (*tau_m)[j] += dr.rotor_inertia * qddm[j];
+      if (dqdd) (*dqdd)(j, j) += dr.rotor_inertia;
+    }
+    if (cols.coulomb) (*tau_m)[j] += dr.coulomb * sgn(qdm[j]);
+    if (cols.viscous) {
+      (*tau_m)[j] += dr.viscous * qdm[j];
+      if (dqd) (*dqd)(j, j) += dr.viscous;
+    }
+    if (cols.offset) (*tau_m)[j] += dr.offset;
+  }
+}
+
 }  // namespace exid

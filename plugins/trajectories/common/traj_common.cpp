@@ -191,6 +191,33 @@ TrajectorySpecs specsCommon(const JointSpace& js, bool linear) {
   return sp;
 }
 
+std::vector<ParamDecl> restToRestParams() {
+  return {
+      param_bool("rest_to_rest", false,
+                 "start and stop at rest: qd = qdd = 0 at both ends, exactly (by construction)"),
+      param_doubles("start_position_rad", std::vector<double>{}, "rad",
+                    "with rest_to_rest: the position the motion starts (and ends) at, one value "
+                    "per joint or one for all (empty: free)"),
+  };
+}
+
+Eigen::VectorXd resolveStart(const JointSpace& js, const std::vector<double>& start,
+                             const std::string& who) {
+  if (start.empty()) return {};
+  check(start.size() == 1 || static_cast<int>(start.size()) == js.n,
+        fmt::format("{}: start_position_rad has {} values (expected 1 or {})", who, start.size(),
+                    js.n));
+  Eigen::VectorXd q = js.rest;
+  for (int j : js.moving) {
+    q(j) = start.size() == 1 ? start[0] : start[static_cast<std::size_t>(j)];
+    check(std::isfinite(q(j)) && q(j) >= js.q_lo(j) && q(j) <= js.q_hi(j),
+          fmt::format("{}: start_position_rad of joint {} = {} is outside its range [{}, {}] "
+                      "(limits less the position margin)",
+                      who, j + 1, q(j), js.q_lo(j), js.q_hi(j)));
+  }
+  return q;
+}
+
 int sampleCount(const CommonOptions& o, double T, bool include_end, const std::string& who,
                 const std::string& t_key) {
   if (o.samples > 0) return o.samples;
@@ -246,7 +273,7 @@ Samples BasisTrajectory::evaluateAt(const Eigen::VectorXd& z, const Eigen::Vecto
     for (std::size_t i = 0; i < js_.moving.size(); ++i) {
       const int j = js_.moving[i];
       const auto zj = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
-      s.q(k, j) = bq.dot(zj);
+      s.q(k, j) = bq.dot(zj) + offset(j);
       s.qd(k, j) = bqd.dot(zj);
       s.qdd(k, j) = bqdd.dot(zj);
     }
@@ -286,6 +313,7 @@ Samples BasisTrajectory::evaluate(const Eigen::VectorXd& z) const {
     const int j = js_.moving[i];
     auto zj = z.segment(static_cast<Eigen::Index>(i) * m_, m_);
     s.q.col(j).noalias() = Bq_ * zj;
+    if (q_offset_.size()) s.q.col(j).array() += q_offset_(j);
     s.qd.col(j).noalias() = Bqd_ * zj;
     s.qdd.col(j).noalias() = Bqdd_ * zj;
   }
@@ -333,7 +361,9 @@ void BasisTrajectory::scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd&
     Eigen::VectorXd dz = z->segment(c, m_) - zref.segment(c, m_);
     const double dq = (Bq_ * dz).cwiseAbs().maxCoeff(), dv = (Bqd_ * dz).cwiseAbs().maxCoeff(),
                  da = (Bqdd_ * dz).cwiseAbs().maxCoeff();
-    const double half = std::min(js_.q_hi(j) - js_.centre(j), js_.centre(j) - js_.q_lo(j));
+    // the reference's (constant) position: the centre, or the start position it is tied to
+    const double c0 = q_offset_.size() ? q_offset_(j) : js_.centre(j);
+    const double half = std::min(js_.q_hi(j) - c0, c0 - js_.q_lo(j));
     double s = kInf;
     if (dq > 0 && std::isfinite(half)) s = std::min(s, half / dq);
     if (dv > 0 && std::isfinite(js_.qd_max(j))) s = std::min(s, js_.qd_max(j) / dv);

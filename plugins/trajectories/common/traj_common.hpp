@@ -60,6 +60,14 @@ Json describeCommon(const JointSpace& js, const CommonOptions& o, bool linear);
 /// The capabilities every trajectory plugin declares: its moving joints and linearity.
 TrajectorySpecs specsCommon(const JointSpace& js, bool linear);
 
+/// Parameters of the trajectories that can start and stop at rest: rest_to_rest,
+/// start_position_rad.
+std::vector<ParamDecl> restToRestParams();
+/// start_position_rad resolved (n entries, every joint's; held joints: their rest position), or
+/// empty when not given. Checked against the (margined) position range of the moving joints.
+Eigen::VectorXd resolveStart(const JointSpace& js, const std::vector<double>& start,
+                             const std::string& who);
+
 /// Sample count for a window of length T [s]: `samples` if set, else round(T / dt) (+1 when the
 /// end point is included).
 /// Design samples at most (samples, or T / sample_period_s); checked before any allocation.
@@ -68,10 +76,11 @@ int sampleCount(const CommonOptions& o, double T, bool include_end, const std::s
                 const std::string& t_key = "duration_s");
 
 /// Trajectory whose signals are a constant plus a basis shared by every moving joint:
-/// q(:, j) = rest_j + Bq z_j, qd(:, j) = Bqd z_j, qdd(:, j) = Bqdd z_j (z_j: m variables per
-/// moving joint, stored joint after joint). Held joints stay at rest. Exact, cached Jacobian.
-/// The basis is a function of time (basisAt), so the trajectory is also evaluated at arbitrary
-/// times (evaluateAt, vjpAt); the sample grid's basis is the same function at the sample times.
+/// q(:, j) = Bq z_j (+ a constant offset_j), qd(:, j) = Bqd z_j, qdd(:, j) = Bqdd z_j (z_j: m
+/// variables per moving joint, stored joint after joint). Held joints stay at rest. Exact, cached
+/// Jacobian. The basis is a function of time (basisAt), so the trajectory is also evaluated at
+/// arbitrary times (evaluateAt, vjpAt); the sample grid's basis is the same function at the sample
+/// times.
 class BasisTrajectory : public Trajectory {
  public:
   int numVariables() const override { return m_ * static_cast<int>(js_.moving.size()); }
@@ -107,6 +116,11 @@ class BasisTrajectory : public Trajectory {
   /// reference (whose signals are the constant centre_j) uses `fraction` of the tightest of the
   /// joint's half position range (about the centre), velocity and acceleration limits.
   void scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd& zref, double fraction) const;
+
+  /// Constant added to q of each moving joint (n entries; empty: none): the start position of a
+  /// trajectory whose variables describe the motion relative to it.
+  double offset(int j) const { return q_offset_.size() ? q_offset_(j) : 0.0; }
+  Eigen::VectorXd q_offset_;
 
   CommonOptions opt_;
   JointSpace js_;

@@ -3,6 +3,10 @@
 // rest — the motion starts and ends at rest (qd = 0, and for the quintic also qdd = 0, at both
 // ends; the cubic is the clamped spline); periodic — q, and derivatives 1..degree-1 continuous
 // across the period end (the last knot equals the first, knots - 1 variables per joint).
+// rest_to_rest (quintic, boundary rest): qd = qdd = 0 at both ends; with start_position_rad the
+// first and last knots are that position, and the variables are the interior knots relative to
+// it (q = start + sum of the interior knots' basis times their offsets: the interpolating spline
+// of constant knots is that constant).
 // The map knot values -> spline coefficients is linear (one banded system, solved once for
 // every unit vector at bind()), so the signals at the samples, or at any time (evaluateAt), are
 // a basis times z.
@@ -43,7 +47,9 @@ class Spline final : public exid::traj::BasisTrajectory {
                                    true));
     p.push_back(exid::param_int("seed", 0, "seed of the random start (0: the study seed)", 0.0));
     p.push_back(exid::param_doubles("init_knots", std::vector<double>{}, "rad",
-                                    "with init: knots, z itself (moving joint after joint)"));
+                                    "with init: knots, z itself (moving joint after joint; "
+                                    "with start_position_rad: the interior knots less it)"));
+    for (auto& d : exid::traj::restToRestParams()) p.push_back(d);
     return p;
   }
 
@@ -55,10 +61,17 @@ class Spline final : public exid::traj::BasisTrajectory {
         init_(p.getString("init")),
         init_scale_(p.getDouble("init_scale")),
         seed_(static_cast<std::uint64_t>(p.getInt("seed"))),
-        init_knots_(p.getDoubles("init_knots")) {
+        init_knots_(p.getDoubles("init_knots")),
+        rest_(p.getBool("rest_to_rest")),
+        start_(p.getDoubles("start_position_rad")) {
     opt_ = exid::traj::readCommon(p);
     exid::check(degree_ == 3 || degree_ == 5,
                 fmt::format("trajectory 'spline': degree {} (use 3 or 5)", degree_));
+    exid::check(rest_ || start_.empty(),
+                "trajectory 'spline': start_position_rad is given without rest_to_rest: true");
+    exid::check(!rest_ || (degree_ == 5 && !periodic_),
+                "trajectory 'spline': rest_to_rest needs degree: 5 and boundary: rest (the cubic "
+                "spline ends with zero velocity but not zero acceleration)");
   }
 
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
@@ -66,13 +79,16 @@ class Spline final : public exid::traj::BasisTrajectory {
     js_ = exid::traj::resolveJoints(*robot, opt_, who);
     S_ = knots_ - 1;
     const int S = S_, d = degree_, nc = d + 1;
-    const int nv = periodic_ ? knots_ - 1 : knots_;  // variables per joint
+    const int nk = periodic_ ? knots_ - 1 : knots_;  // independent knots per joint
+    q_offset_ = exid::traj::resolveStart(js_, start_, who);
+    const bool fixed_start = q_offset_.size() > 0;
+    const int nv = fixed_start ? knots_ - 2 : nk;  // variables per joint
     h_ = D_ / S;
     const double h = h_;
     const int N = nc * S;
-    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, nv);
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(N, N), R = Eigen::MatrixXd::Zero(N, nk);
     int row = 0;
-    auto knotVar = [&](int i) { return periodic_ ? i % nv : i; };
+    auto knotVar = [&](int i) { return periodic_ ? i % nk : i; };
     for (int i = 0; i < S; ++i) {
       for (int p = 0; p <= d; ++p) A(row, i * nc + p) = dpow(p, 0, 0.0);
       R(row++, knotVar(i)) = 1.0;
@@ -101,15 +117,20 @@ class Spline final : public exid::traj::BasisTrajectory {
     }
     exid::check(row == N, "trajectory 'spline': internal: system size");
     C_ = A.fullPivLu().solve(R);  // coefficients per unit knot vector
+    if (fixed_start) {
+      const Eigen::MatrixXd interior = C_.middleCols(1, nv);
+      C_ = interior;  // the end knots are the start position (the constant offset)
+    }
     const int K = exid::traj::sampleCount(opt_, D_, !periodic_, who);
     const double dt = opt_.samples > 0 ? D_ / (periodic_ ? K : K - 1) : opt_.sample_period;
     Eigen::VectorXd t(K);
     for (int k = 0; k < K; ++k) t(k) = k * dt;
     setGrid(t, nv);
     const int n_all = numVariables();
-    Eigen::VectorXd zref(n_all);
-    for (std::size_t i = 0; i < js_.moving.size(); ++i)
-      zref.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.centre(js_.moving[i]));
+    Eigen::VectorXd zref = Eigen::VectorXd::Zero(n_all);
+    if (!fixed_start)
+      for (std::size_t i = 0; i < js_.moving.size(); ++i)
+        zref.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.centre(js_.moving[i]));
     if (init_ == "knots") {
       exid::check(static_cast<int>(init_knots_.size()) == n_all,
                   fmt::format("{}: init_knots has {} values (expected {})", who, init_knots_.size(),
@@ -125,8 +146,9 @@ class Spline final : public exid::traj::BasisTrajectory {
     lo_.resize(n_all);
     hi_.resize(n_all);
     for (std::size_t i = 0; i < js_.moving.size(); ++i) {
-      lo_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_lo(js_.moving[i]));
-      hi_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_hi(js_.moving[i]));
+      const int j = js_.moving[i];
+      lo_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_lo(j) - offset(j));
+      hi_.segment(static_cast<Eigen::Index>(i) * nv, nv).setConstant(js_.q_hi(j) - offset(j));
     }
   }
 
@@ -138,8 +160,43 @@ class Spline final : public exid::traj::BasisTrajectory {
   exid::TrajectorySpecs specs() const override {
     exid::TrajectorySpecs sp = basisSpecs();
     sp.periodic = periodic_;
+    sp.rest_to_rest = rest_;
+    sp.repeatable = periodic_ || (rest_ && q_offset_.size() > 0);
     sp.duration_s = D_;
     return sp;
+  }
+  exid::Json parametersAt(const Eigen::VectorXd& z) const override {
+    exid::Json d = exid::Json::object();
+    d["form"] = fmt::format("{} interpolating spline through uniformly spaced knots",
+                            degree_ == 3 ? "cubic (C2)" : "quintic (C4)");
+    d["duration_s"] = D_;
+    d["degree"] = degree_;
+    d["boundary"] = periodic_ ? "periodic" : "rest";
+    d["rest_to_rest"] = rest_;
+    std::vector<double> tk;
+    for (int i = 0; i < knots_; ++i) tk.push_back(i * h_);
+    d["knot_times_s"] = exid::Json(tk);
+    exid::Json joints = exid::Json::array();
+    const int nv = m_;
+    for (std::size_t i = 0; i < js_.moving.size(); ++i) {
+      const int j = js_.moving[i];
+      const Eigen::VectorXd zj = z.segment(static_cast<Eigen::Index>(i) * nv, nv);
+      std::vector<double> kv;
+      if (q_offset_.size()) {
+        kv.push_back(offset(j));
+        for (int c = 0; c < nv; ++c) kv.push_back(zj(c) + offset(j));
+        kv.push_back(offset(j));
+      } else {
+        for (int c = 0; c < nv; ++c) kv.push_back(zj(c));
+        if (periodic_) kv.push_back(zj(0));
+      }
+      exid::Json x = exid::Json::object();
+      x["joint"] = j + 1;
+      x["knots_rad"] = exid::Json(kv);
+      joints.push_back(x);
+    }
+    d["joints"] = joints;
+    return d;
   }
   exid::Json describe() const override {
     exid::Json d = BasisTrajectory::describe();
@@ -185,6 +242,8 @@ class Spline final : public exid::traj::BasisTrajectory {
   double init_scale_;
   std::uint64_t seed_;
   std::vector<double> init_knots_;
+  bool rest_;
+  std::vector<double> start_;
   Eigen::VectorXd z0_, lo_, hi_;
 };
 

@@ -1,0 +1,83 @@
+// exid — an excitation trajectory written for execution on a robot: sampled at a controller's
+// rate (trajectory.csv: t, q, qd, qdd and the torque the robot's full model predicts), the
+// trajectory's own parameters (trajectory.params.yaml) and a ROS 2 trajectory_msgs/JointTrajectory
+// (joint_trajectory.yaml); and the check of such a file against the robot's limits at its own
+// rate (the worst margin of each limit).
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <string>
+#include <vector>
+
+#include "exid/data.hpp"
+#include "exid/json.hpp"
+#include "exid/params.hpp"
+#include "exid/robot_model.hpp"
+
+namespace exid {
+
+class Trajectory;
+
+struct TrajectoryExportOptions {
+  double rate_Hz = 1000.0;  // controller rate
+  int periods = 1;          // repetitions (periodic, or rest to rest back to the start)
+  /// tau_max per measured coordinate [N m or N]; empty: the robot's limits (URDF effort). The
+  /// check reports the torque margin only when they are known.
+  std::vector<double> torque_max;
+  /// The fraction of tau_max the design was held to (0: none); reported beside the check.
+  double torque_margin = 0.0;
+  bool plots = true;
+};
+
+/// The trajectory at z sampled at rate_Hz over `periods` repetitions, both ends included:
+/// t_i = i / rate_Hz. Throws exid::Error for a trajectory defined on its sample grid only, for
+/// periods > 1 of one that does not end in its start state, and for a rate that does not divide
+/// the duration.
+Samples resampleTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& z, double rate_Hz,
+                           int periods);
+
+/// The worst case of one limit over a trajectory.
+struct LimitWorst {
+  std::string what;      // "position", "velocity", "acceleration", "torque"
+  bool checked = false;  // false: the robot has no such limit
+  int joint = 0;         // 1-based
+  double t_s = 0.0;      // when
+  double value = 0.0;    // the signal there (position: q; others: |x|)
+  double limit = 0.0;    // the limit it is held to (position: the nearer of q_min, q_max)
+  double margin = 0.0;   // limit - value (position: distance to the nearer limit); < 0: violated
+  double ratio = 0.0;    // |x| / x_max (position: 0 at the centre, 1 at a limit)
+};
+
+struct TrajectoryCheck {
+  int samples = 0;
+  double rate_Hz = 0.0;             // measured: (samples - 1) / duration
+  double max_rate_deviation = 0.0;  // max |t_i+1 - t_i - 1/rate| / (1/rate)
+  std::vector<LimitWorst> worst;    // position, velocity, acceleration, torque
+  /// max |tau in the file - tau the robot's model predicts| (NaN when the file has no tau).
+  double tau_file_deviation = 0.0;
+  bool ok = true;  // every checked limit holds
+  Json toJson() const;
+  std::string text() const;  // a small table for the terminal
+};
+
+/// Checks samples (measured coordinates) against the robot's limits: q within [q_min, q_max],
+/// |qd| <= qd_max, |qdd| <= qdd_max, |tau| <= tau_max with tau the torque of the robot's full
+/// model (rigid body + drives, nominal parameters), at every sample.
+TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
+                                const std::vector<double>& torque_max,
+                                const Eigen::MatrixXd* tau_file = nullptr);
+/// Reads a trajectory CSV (t, q1..qn, qd1..qdn, qdd1..qddn, optional tau1..taun) and checks it.
+TrajectoryCheck checkTrajectoryCsv(const std::filesystem::path& csv, const RobotModel& robot,
+                                   const std::vector<double>& torque_max);
+
+/// Writes dir/trajectory.csv, dir/trajectory.params.yaml, dir/joint_trajectory.yaml,
+/// dir/trajectory_check.json and the plots (dir/plots/trajectory_*): everything is written into
+/// a staging folder first and moved into dir at the end, so a failure leaves no partial set.
+/// The check re-reads the written CSV. Returns the check (and what was written) as JSON.
+Json exportTrajectory(const Trajectory& trajectory, const std::string& trajectory_type,
+                      const ParamSet& trajectory_params, const Eigen::VectorXd& z,
+                      const RobotModel& robot, const TrajectoryExportOptions& options,
+                      const std::filesystem::path& dir, TrajectoryCheck* check = nullptr);
+
+}  // namespace exid

@@ -1,0 +1,511 @@
+#include "exid/trajectory_export.hpp"
+
+#include <fmt/format.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <sstream>
+#include <variant>
+
+#include "exid/drive.hpp"
+#include "exid/error.hpp"
+#include "exid/excitation.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/io.hpp"
+#include "exid/plot.hpp"
+
+namespace exid {
+
+namespace fs = std::filesystem;
+
+namespace {
+
+bool finiteLimit(double x) { return std::isfinite(x) && std::abs(x) < 1e299; }
+
+// A YAML double-quoted scalar.
+std::string quoted(const std::string& s) {
+  std::string o = "\"";
+  for (char c : s) {
+    if (c == '"' || c == '\\')
+      o += '\\', o += c;
+    else if (static_cast<unsigned char>(c) < 0x20)
+      o += fmt::format("\\x{:02x}", static_cast<unsigned char>(c));
+    else
+      o += c;
+  }
+  return o + "\"";
+}
+
+std::string number(double x) {
+  if (std::isnan(x)) return ".nan";
+  if (std::isinf(x)) return x > 0 ? ".inf" : "-.inf";
+  return fmt::format("{}", x);
+}
+
+std::string flowList(const double* v, Eigen::Index n) {
+  std::string s = "[";
+  for (Eigen::Index i = 0; i < n; ++i) s += (i ? ", " : "") + number(v[i]);
+  return s + "]";
+}
+
+std::string paramYaml(const ParamValue& v) {
+  return std::visit(
+      [](const auto& x) -> std::string {
+        using T = std::decay_t<decltype(x)>;
+        if constexpr (std::is_same_v<T, bool>)
+          return x ? "true" : "false";
+        else if constexpr (std::is_same_v<T, std::int64_t>)
+          return std::to_string(x);
+        else if constexpr (std::is_same_v<T, double>)
+          return number(x);
+        else if constexpr (std::is_same_v<T, std::string>)
+          return quoted(x);
+        else if constexpr (std::is_same_v<T, std::vector<double>>)
+          return flowList(x.data(), static_cast<Eigen::Index>(x.size()));
+        else if constexpr (std::is_same_v<T, std::vector<std::int64_t>>) {
+          std::string s = "[";
+          for (std::size_t i = 0; i < x.size(); ++i) s += (i ? ", " : "") + std::to_string(x[i]);
+          return s + "]";
+        } else {
+          std::string s = "[";
+          for (std::size_t i = 0; i < x.size(); ++i) s += (i ? ", " : "") + quoted(x[i]);
+          return s + "]";
+        }
+      },
+      v);
+}
+
+bool scalarArray(const Json& j) {
+  if (!j.isArray()) return false;
+  for (const auto& kv : j.items())
+    if (kv.second.isArray() || kv.second.isObject()) return false;
+  return true;
+}
+
+std::string scalarYaml(const Json& j) {
+  switch (j.type()) {
+    case Json::Type::Null:
+      return "null";
+    case Json::Type::Bool:
+      return j.asBool() ? "true" : "false";
+    case Json::Type::Int:
+      return std::to_string(j.asInt());
+    case Json::Type::Double:
+      return number(j.asDouble());
+    case Json::Type::String:
+      return quoted(j.asString());
+    default:
+      return "";
+  }
+}
+
+// Json as block YAML (objects as mappings, arrays of scalars in flow style).
+void jsonYaml(const Json& j, int indent, std::string& out) {
+  const std::string pad(static_cast<std::size_t>(indent), ' ');
+  if (j.isObject()) {
+    for (const auto& [k, v] : j.items()) {
+      out += pad + k + ":";
+      if (v.isObject() && v.size() > 0) {
+        out += "\n";
+        jsonYaml(v, indent + 2, out);
+      } else if (v.isArray() && !scalarArray(v)) {
+        out += "\n";
+        jsonYaml(v, indent + 2, out);
+      } else if (v.isArray()) {
+        out += " [";
+        for (std::size_t i = 0; i < v.size(); ++i) out += (i ? ", " : "") + scalarYaml(v.at(i));
+        out += "]\n";
+      } else if (v.isObject()) {
+        out += " {}\n";
+      } else {
+        out += " " + scalarYaml(v) + "\n";
+      }
+    }
+  } else if (j.isArray()) {
+    for (const auto& kv : j.items()) {
+      const Json& v = kv.second;
+      if (v.isObject()) {
+        std::string inner;
+        jsonYaml(v, indent + 2, inner);
+        // "- " takes the place of the first line's indentation
+        out += pad + "- " + inner.substr(static_cast<std::size_t>(indent) + 2);
+      } else {
+        out += pad + "- " + scalarYaml(v) + "\n";
+      }
+    }
+  }
+}
+
+std::vector<std::string> names(const char* prefix, int n) {
+  std::vector<std::string> v;
+  for (int j = 1; j <= n; ++j) v.push_back(fmt::format("{}{}", prefix, j));
+  return v;
+}
+
+// tau_max per measured coordinate when known (empty otherwise).
+Eigen::VectorXd knownTorqueLimits(const RobotModel& robot, const std::vector<double>& torque_max) {
+  const int n = robot.dof();
+  if (!torque_max.empty()) {
+    check(static_cast<int>(torque_max.size()) == n,
+          fmt::format("torque_max_Nm has {} values; robot '{}' has {} joints", torque_max.size(),
+                      robot.name, n));
+    return Eigen::Map<const Eigen::VectorXd>(torque_max.data(), n);
+  }
+  if (robot.hasTransmission()) return {};
+  Eigen::VectorXd t(n);
+  for (int j = 0; j < n; ++j) {
+    const double x = j < static_cast<int>(robot.limits.size())
+                         ? robot.limits[static_cast<std::size_t>(j)].tau_max
+                         : HUGE_VAL;
+    if (!(x > 0) || !finiteLimit(x)) return {};
+    t(j) = x;
+  }
+  return t;
+}
+
+}  // namespace
+
+Samples resampleTrajectory(const Trajectory& traj, const Eigen::VectorXd& z, double rate_Hz,
+                           int periods) {
+  const TrajectorySpecs sp = traj.specs();
+  const std::string who = fmt::format("export of trajectory '{}'", traj.pluginName());
+  check(sp.continuous,
+        fmt::format("{}: it is defined on its sample grid only; a trajectory for a controller must "
+                    "be defined at any time (fourier, spline)",
+                    who));
+  check(sp.duration_s > 0, fmt::format("{}: the trajectory declares no duration", who));
+  check(std::isfinite(rate_Hz) && rate_Hz > 0,
+        fmt::format("{}: rate_Hz = {}: must be a positive rate", who, rate_Hz));
+  check(periods >= 1, fmt::format("{}: periods = {}: must be at least 1", who, periods));
+  check(periods == 1 || sp.repeatable,
+        fmt::format("{}: periods = {}, but the motion does not end in the state it starts in "
+                    "(give a periodic trajectory, or rest_to_rest with start_position_rad)",
+                    who, periods));
+  const double T = sp.duration_s;
+  const double steps = T * rate_Hz;
+  const long per = std::lround(steps);
+  check(per >= 1 && std::abs(steps - static_cast<double>(per)) <= 1e-9 * steps,
+        fmt::format("{}: the duration {} s is not a whole number of controller periods at {} Hz "
+                    "({} steps)",
+                    who, T, rate_Hz, steps));
+  const long N = per * periods;
+  check(N < 100000000, fmt::format("{}: {} samples are too many", who, N + 1));
+  Eigen::VectorXd local(N + 1), t(N + 1);
+  for (long i = 0; i <= N; ++i) {
+    t(i) = static_cast<double>(i) / rate_Hz;
+    local(i) = i == N ? T : static_cast<double>(i % per) / rate_Hz;
+  }
+  Samples s = traj.evaluateAt(z, local);
+  s.t = t;
+  return s;
+}
+
+TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
+                                const std::vector<double>& torque_max,
+                                const Eigen::MatrixXd* tau_file) {
+  const int n = robot.dof(), K = s.size();
+  check(s.dof() == n && K >= 2,
+        fmt::format("trajectory check: {} joints and {} samples (robot '{}' has {} joints; at "
+                    "least 2 samples are needed)",
+                    s.dof(), K, robot.name, n));
+  TrajectoryCheck c;
+  c.samples = K;
+  const double dur = s.t(K - 1) - s.t(0);
+  c.rate_Hz = dur > 0 ? (K - 1) / dur : 0.0;
+  if (c.rate_Hz > 0)
+    for (int k = 0; k + 1 < K; ++k)
+      c.max_rate_deviation =
+          std::max(c.max_rate_deviation, std::abs((s.t(k + 1) - s.t(k)) * c.rate_Hz - 1.0));
+  // joint coordinates for the joint limits
+  Eigen::MatrixXd q(K, n), qd(K, n), qdd(K, n);
+  for (int k = 0; k < K; ++k) {
+    Eigen::VectorXd a, b, e;
+    measuredToJoint(robot, s.q.row(k).transpose(), s.qd.row(k).transpose(),
+                    s.qdd.row(k).transpose(), &a, &b, &e);
+    q.row(k) = a.transpose();
+    qd.row(k) = b.transpose();
+    qdd.row(k) = e.transpose();
+  }
+  auto limitOf = [&](int j) {
+    return j < static_cast<int>(robot.limits.size()) ? robot.limits[static_cast<std::size_t>(j)]
+                                                     : JointLimits{};
+  };
+  LimitWorst pos{"position"}, vel{"velocity"}, acc{"acceleration"}, trq{"torque"};
+  pos.margin = HUGE_VAL;
+  for (LimitWorst* w : {&vel, &acc, &trq}) w->ratio = -1.0;
+  for (int j = 0; j < n; ++j) {
+    const JointLimits L = limitOf(j);
+    if (finiteLimit(L.q_min) && finiteLimit(L.q_max)) {
+      const double centre = 0.5 * (L.q_min + L.q_max), half = 0.5 * (L.q_max - L.q_min);
+      for (int k = 0; k < K; ++k) {
+        const double x = q(k, j);
+        const double m = std::min(x - L.q_min, L.q_max - x);
+        if (m < pos.margin) {
+          pos = {"position", true,
+                 j + 1,      s.t(k),
+                 x,          x - L.q_min < L.q_max - x ? L.q_min : L.q_max,
+                 m,          half > 0 ? std::abs(x - centre) / half : 0.0};
+        }
+      }
+    }
+    auto rateCheck = [&](LimitWorst& w, const Eigen::MatrixXd& x, double lim) {
+      if (!finiteLimit(lim) || !(lim > 0)) return;
+      for (int k = 0; k < K; ++k) {
+        const double r = std::abs(x(k, j)) / lim;
+        if (r > w.ratio)
+          w = {w.what, true, j + 1, s.t(k), std::abs(x(k, j)), lim, lim - std::abs(x(k, j)), r};
+      }
+    };
+    rateCheck(vel, qd, L.qd_max);
+    rateCheck(acc, qdd, L.qdd_max);
+  }
+  const Eigen::VectorXd tmax = knownTorqueLimits(robot, torque_max);
+  const Eigen::MatrixXd tau = predictedTorques(robot, s);
+  if (tmax.size() == n) {
+    for (int j = 0; j < n; ++j)
+      for (int k = 0; k < K; ++k) {
+        const double r = std::abs(tau(k, j)) / tmax(j);
+        if (r > trq.ratio)
+          trq = {"torque",
+                 true,
+                 j + 1,
+                 s.t(k),
+                 std::abs(tau(k, j)),
+                 tmax(j),
+                 tmax(j) - std::abs(tau(k, j)),
+                 r};
+      }
+  }
+  c.tau_file_deviation = tau_file && tau_file->rows() == K && tau_file->cols() == n
+                             ? (*tau_file - tau).cwiseAbs().maxCoeff()
+                             : std::nan("");
+  for (LimitWorst* w : {&pos, &vel, &acc, &trq}) {
+    if (!w->checked) {
+      w->margin = 0.0;
+      w->ratio = 0.0;
+    }
+    c.worst.push_back(*w);
+    if (w->checked && w->margin < 0) c.ok = false;
+  }
+  return c;
+}
+
+TrajectoryCheck checkTrajectoryCsv(const fs::path& csv, const RobotModel& robot,
+                                   const std::vector<double>& torque_max) {
+  const CsvTable T = readCsv(csv);
+  const int n = robot.dof();
+  Samples s;
+  s.t = T.column("t");
+  const Eigen::Index K = s.t.size();
+  s.q.resize(K, n);
+  s.qd.resize(K, n);
+  s.qdd.resize(K, n);
+  Eigen::MatrixXd tau(K, n);
+  bool has_tau = true;
+  for (int j = 0; j < n; ++j) {
+    for (const auto& [prefix, m] :
+         {std::pair<const char*, Eigen::MatrixXd*>{"q", &s.q}, {"qd", &s.qd}, {"qdd", &s.qdd}}) {
+      const std::string name = fmt::format("{}{}", prefix, j + 1);
+      check(T.has(name), fmt::format("{}: no column '{}' (robot '{}' has {} joints; expected t, "
+                                     "q1..q{}, qd1..qd{}, qdd1..qdd{})",
+                                     csv.string(), name, robot.name, n, n, n, n));
+      m->col(j) = T.column(name);
+    }
+    const std::string tn = fmt::format("tau{}", j + 1);
+    if (T.has(tn))
+      tau.col(j) = T.column(tn);
+    else
+      has_tau = false;
+  }
+  return checkTrajectory(s, robot, torque_max, has_tau ? &tau : nullptr);
+}
+
+Json TrajectoryCheck::toJson() const {
+  Json j = Json::object();
+  j["ok"] = ok;
+  j["samples"] = samples;
+  j["rate_Hz"] = rate_Hz;
+  j["max_rate_deviation"] = max_rate_deviation;
+  Json w = Json::object();
+  for (const LimitWorst& x : worst) {
+    Json e = Json::object();
+    e["checked"] = x.checked;
+    if (x.checked) {
+      e["joint"] = x.joint;
+      e["t_s"] = x.t_s;
+      e["value"] = x.value;
+      e["limit"] = x.limit;
+      e["margin"] = x.margin;
+      e["ratio"] = x.ratio;
+    }
+    w[x.what] = e;
+  }
+  j["worst"] = w;
+  if (std::isfinite(tau_file_deviation)) j["tau_file_deviation"] = tau_file_deviation;
+  return j;
+}
+
+std::string TrajectoryCheck::text() const {
+  std::string s = fmt::format("{} samples at {:.6g} Hz\n", samples, rate_Hz);
+  s +=
+      "| limit | joint | t [s] | value | limit | margin | ratio |\n|---|---|---|---|---|---|---|\n";
+  for (const LimitWorst& x : worst) {
+    if (!x.checked) {
+      s += fmt::format("| {} | - | - | - | none | - | - |\n", x.what);
+      continue;
+    }
+    s +=
+        fmt::format("| {} | {} | {:.4f} | {:.6g} | {:.6g} | {:.6g}{} | {:.4f} |\n", x.what, x.joint,
+                    x.t_s, x.value, x.limit, x.margin, x.margin < 0 ? " VIOLATED" : "", x.ratio);
+  }
+  if (std::isfinite(tau_file_deviation))
+    s += fmt::format("torque in the file vs the robot's model: max difference {:.3g}\n",
+                     tau_file_deviation);
+  return s;
+}
+
+Json exportTrajectory(const Trajectory& traj, const std::string& type, const ParamSet& params,
+                      const Eigen::VectorXd& z, const RobotModel& robot,
+                      const TrajectoryExportOptions& o, const fs::path& dir,
+                      TrajectoryCheck* check_out) {
+  const Samples s = resampleTrajectory(traj, z, o.rate_Hz, o.periods);
+  const Eigen::MatrixXd tau = predictedTorques(robot, s);
+  const int n = robot.dof();
+  const Eigen::Index K = s.size();
+  const TrajectorySpecs sp = traj.specs();
+
+  fs::create_directories(dir);
+  const fs::path stage = dir / fmt::format(".export.staging.{}", static_cast<long>(::getpid()));
+  fs::remove_all(stage);
+  fs::create_directories(stage);
+  try {
+    // trajectory.csv: the dataset columns (docs/conventions.md §1), tau predicted
+    CsvTable table;
+    table.columns = {"t"};
+    for (const char* p : {"q", "qd", "qdd", "tau"})
+      for (auto& c : names(p, n)) table.columns.push_back(c);
+    table.data.resize(K, 1 + 4 * n);
+    table.data.col(0) = s.t;
+    table.data.middleCols(1, n) = s.q;
+    table.data.middleCols(1 + n, n) = s.qd;
+    table.data.middleCols(1 + 2 * n, n) = s.qdd;
+    table.data.middleCols(1 + 3 * n, n) = tau;
+    writeCsvAtomic(stage / "trajectory.csv", table);
+
+    // trajectory.params.yaml
+    std::string y;
+    y += "# exid excitation trajectory: its own parameters. `variables` is z in the trajectory's\n"
+         "# order: with init: coefficients (fourier) or init: knots (spline) and\n"
+         "# init_coefficients / init_knots set to it, the same parameters give this trajectory.\n";
+    y += "trajectory:\n  type: " + quoted(type) + "\n  params:\n";
+    for (const auto& [k, v] : params.values()) y += "    " + k + ": " + paramYaml(v) + "\n";
+    y += "variables: " + flowList(z.data(), z.size()) + "\n";
+    y += fmt::format("duration_s: {}\nperiods: {}\nrate_Hz: {}\nrest_to_rest: {}\n",
+                     number(sp.duration_s), o.periods, number(o.rate_Hz),
+                     sp.rest_to_rest ? "true" : "false");
+    std::vector<std::string> jn;
+    for (const Body& b : robot.bodies) jn.push_back(quoted(b.joint_name));
+    y += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\n";
+    const Json pj = traj.parametersAt(z);
+    if (pj.isObject() && pj.size() > 0) {
+      y += "parameters:\n";
+      jsonYaml(pj, 2, y);
+    }
+    writeFileAtomic(stage / "trajectory.params.yaml", y);
+
+    // joint_trajectory.yaml: trajectory_msgs/msg/JointTrajectory
+    std::string r;
+    r.reserve(static_cast<std::size_t>(K) * static_cast<std::size_t>(n) * 100 + 256);
+    r += "# trajectory_msgs/msg/JointTrajectory (ROS 2), measured coordinates, SI units;\n"
+         "# effort: the torque the robot's model predicts (rigid body + drives)\n";
+    r += "header:\n  stamp: {sec: 0, nanosec: 0}\n  frame_id: \"\"\n";
+    r += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\npoints:\n";
+    const double ns_per_sample = 1e9 / o.rate_Hz;
+    for (Eigen::Index k = 0; k < K; ++k) {
+      const long long ns = std::llround(static_cast<double>(k) * ns_per_sample);
+      const Eigen::RowVectorXd qr = s.q.row(k), vr = s.qd.row(k), ar = s.qdd.row(k),
+                               er = tau.row(k);
+      r += "  - positions: " + flowList(qr.data(), n) + "\n";
+      r += "    velocities: " + flowList(vr.data(), n) + "\n";
+      r += "    accelerations: " + flowList(ar.data(), n) + "\n";
+      r += "    effort: " + flowList(er.data(), n) + "\n";
+      r += fmt::format("    time_from_start: {{sec: {}, nanosec: {}}}\n", ns / 1000000000LL,
+                       ns % 1000000000LL);
+    }
+    writeFileAtomic(stage / "joint_trajectory.yaml", r);
+
+    // the check, on the file as written
+    const TrajectoryCheck c = checkTrajectoryCsv(stage / "trajectory.csv", robot, o.torque_max);
+    Json out = Json::object();
+    out["files"] = Json(std::vector<std::string>{"trajectory.csv", "trajectory.params.yaml",
+                                                 "joint_trajectory.yaml", "trajectory_check.json"});
+    out["rate_Hz"] = o.rate_Hz;
+    out["periods"] = o.periods;
+    out["duration_s"] = s.t(K - 1) - s.t(0);
+    out["rest_to_rest"] = sp.rest_to_rest;
+    if (o.torque_margin > 0) out["torque_margin"] = o.torque_margin;
+    out["check"] = c.toJson();
+    writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
+
+    if (o.plots) {
+      auto series = [&](const Eigen::MatrixXd& m, const char* prefix,
+                        const Eigen::VectorXd* scale) {
+        std::vector<PlotSeries> v;
+        for (int j = 0; j < n; ++j) {
+          PlotSeries ps;
+          ps.title = fmt::format("{}{}", prefix, j + 1);
+          ps.x.assign(s.t.data(), s.t.data() + K);
+          ps.y.resize(static_cast<std::size_t>(K));
+          for (Eigen::Index k = 0; k < K; ++k)
+            ps.y[static_cast<std::size_t>(k)] = m(k, j) / (scale ? (*scale)(j) : 1.0);
+          v.push_back(std::move(ps));
+        }
+        return v;
+      };
+      drawPlot({"trajectory_q", "positions at the controller rate", "t [s]", "q [rad or m]",
+                series(s.q, "q", nullptr)},
+               stage);
+      drawPlot({"trajectory_qd", "velocities at the controller rate", "t [s]", "qd [rad/s or m/s]",
+                series(s.qd, "qd", nullptr)},
+               stage);
+      const Eigen::VectorXd tmax = knownTorqueLimits(robot, o.torque_max);
+      if (tmax.size() == n) {
+        PlotSpec ts{"trajectory_tau_ratio", "predicted torque / torque limit", "t [s]",
+                    "tau / tau_max", series(tau, "tau", &tmax)};
+        for (double lvl : {-1.0, 1.0}) {
+          PlotSeries b;
+          b.title = lvl > 0 ? "limit" : "";
+          b.x = {s.t(0), s.t(K - 1)};
+          b.y = {lvl, lvl};
+          ts.series.push_back(b);
+        }
+        drawPlot(ts, stage);
+      } else {
+        drawPlot({"trajectory_tau", "predicted torque (no torque limits known)", "t [s]",
+                  "tau [N m or N]", series(tau, "tau", nullptr)},
+                 stage);
+      }
+    }
+
+    // publish: move every entry of the staging folder into dir
+    for (const auto& e : fs::directory_iterator(stage)) {
+      const fs::path target = dir / e.path().filename();
+      if (e.is_directory()) {
+        fs::create_directories(target);
+        for (const auto& f : fs::directory_iterator(e.path()))
+          fs::rename(f.path(), target / f.path().filename());
+      } else {
+        fs::rename(e.path(), target);
+      }
+    }
+    fs::remove_all(stage);
+    if (check_out) *check_out = c;
+    return out;
+  } catch (...) {
+    std::error_code ec;
+    fs::remove_all(stage, ec);
+    throw;
+  }
+}
+
+}  // namespace exid
