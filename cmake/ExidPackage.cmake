@@ -67,6 +67,15 @@ set(CPACK_DEBIAN_PACKAGE_MAINTAINER "The exid developers")
 set(CPACK_DEBIAN_PACKAGE_SECTION science)
 set(CPACK_DEBIAN_PACKAGE_SHLIBDEPS ON)
 set(CPACK_DEBIAN_PACKAGE_DEPENDS "libeigen3-dev (>= 3.4), libfmt-dev, cmake (>= ${EXID_CMAKE_MINIMUM})")
+if(EXID_WITH_PYTHON)
+  # The Python package (/usr/lib/python3/dist-packages/exid): its module is built for this
+  # Python minor version; pandas is needed by exid.read_matrix alone.
+  math(EXPR exid_python_next_minor "${Python3_VERSION_MINOR} + 1")
+  string(APPEND CPACK_DEBIAN_PACKAGE_DEPENDS
+         ", python3 (>= ${Python3_VERSION_MAJOR}.${Python3_VERSION_MINOR})"
+         ", python3 (<< ${Python3_VERSION_MAJOR}.${exid_python_next_minor}), python3-numpy")
+  set(CPACK_DEBIAN_PACKAGE_RECOMMENDS "python3-pandas")
+endif()
 set(CPACK_DEBIAN_PACKAGE_DESCRIPTION
     "Experimental identification of robot and payload dynamics, and excitation design.\n exid identifies robot and payload dynamic parameters from recordings or simulations and\n designs the exciting trajectories that make the identification well conditioned. Studies\n are YAML files; robots, models, criteria, optimisers, experiments and estimators are\n plugins.")
 install(FILES ${PROJECT_SOURCE_DIR}/LICENSE ${PROJECT_SOURCE_DIR}/README.md

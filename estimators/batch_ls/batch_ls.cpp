@@ -37,7 +37,7 @@ class BatchLs : public exid::Estimator {
   static std::vector<exid::ParamDecl> params() {
     return {
         exid::param_int(
-            "chunk_samples", 64,
+            "chunk_samples", 128,
             "samples per chunk passed to the model (memory ~ chunk x rows per sample x p)", 1.0,
             1e9),
         exid::param_string(

@@ -15,6 +15,7 @@
 // non-causal): memory O(samples x rows per sample x p), unlike batch_ls.
 #include <fmt/format.h>
 
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <exception>
@@ -250,43 +251,75 @@ class FilteredLs : public exid::Estimator {
         if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
         const long ca = c * C, cb = std::min(Kt, ca + C);
         const long lo = std::max<long>(0, ca - margin), hi = std::min(Kt, cb + margin);
-        const exid::Dataset slice =
-            per_sample ? exid::sliceDataset(f, static_cast<int>(lo), static_cast<int>(hi)) : f;
-        exid::Rows rows = model.rows(slice, ctx);
-        est::checkRows(rows, p, kName, static_cast<int>(trim + lo));
-        o.rows_before =
-            static_cast<long>(std::min<long>(cb - ca, hi - lo) * std::max(1, rows.numEquations));
         if (!per_sample) {
+          exid::Rows rows = model.rows(f, ctx);
+          est::checkRows(rows, p, kName, static_cast<int>(trim));
           o.rows_before = rows.y.size();
           o.kept = rows.y.size();
-          if (keep_rows) o.rows = rows;
           o.acc = est::RowAccumulator(p);
           o.acc.add(rows.W, rows.y);
+          if (keep_rows) o.rows = std::move(rows);
           return;
         }
-        // per equation: rows in sample order
-        std::map<int, std::vector<Eigen::Index>> groups;
-        for (Eigen::Index i = 0; i < rows.y.size(); ++i)
-          groups[rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(i)]].push_back(
-              i);
+        // The chunk's rows, one row of M per sample: equation g's p base columns and its y at
+        // columns [g (p + 1), (g + 1)(p + 1)), built a block of samples at a time (the model's
+        // rows of the whole chunk are never held), then every column filtered at once.
         const long L = hi - lo;
-        std::vector<est::RowMajorMatrix> A;
-        std::vector<int> labels;
-        for (const auto& [label, idx] : groups) {
-          exid::check(static_cast<long>(idx.size()) == L,
-                      fmt::format("filtered_ls: model '{}' gave {} rows of equation {} for {} "
-                                  "samples",
-                                  model.pluginName(), idx.size(), label, L));
-          est::RowMajorMatrix M(L, p + 1);
-          for (long i = 0; i < L; ++i) {
-            M.row(i).head(p) = rows.W.row(idx[static_cast<std::size_t>(i)]);
-            M(i, p) = rows.y(idx[static_cast<std::size_t>(i)]);
+        constexpr long kBlock = 1024;
+        est::LargeRows Mbuf;        // huge pages: written once, tens of MB
+        std::vector<int> labels;    // equation label of each group, ascending
+        std::vector<double> times;  // (keep_rows) per sample and group: the row's time
+        bool has_t = false;
+        exid::Rows head;  // numEquations, equation_names
+        for (long a = lo; a < hi; a += kBlock) {
+          const long b = std::min(hi, a + kBlock);
+          exid::Rows rows =
+              model.rows(exid::sliceDataset(f, static_cast<int>(a), static_cast<int>(b)), ctx);
+          est::checkRows(rows, p, kName, static_cast<int>(trim + a));
+          if (a == lo) {
+            if (rows.equation.empty()) {
+              labels = {0};
+            } else {
+              labels = rows.equation;
+              std::sort(labels.begin(), labels.end());
+              labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
+            }
+            Mbuf = est::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
+            has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
+            if (keep_rows && has_t) times.resize(static_cast<std::size_t>(L) * labels.size());
+            head.numEquations = rows.numEquations;
+            head.equation_names = rows.equation_names;
+            o.rows_before =
+                static_cast<long>(std::min<long>(cb - ca, L) * std::max(1, rows.numEquations));
           }
-          if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, &M);
-          A.push_back(std::move(M));
-          labels.push_back(label);
+          const auto G = labels.size();
+          auto M = Mbuf.map();
+          std::vector<long> next(G, a - lo);  // per group: the next sample's row of M
+          for (Eigen::Index i = 0; i < rows.y.size(); ++i) {
+            const int label =
+                rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(i)];
+            const auto g = static_cast<std::size_t>(
+                std::lower_bound(labels.begin(), labels.end(), label) - labels.begin());
+            if (g == G || labels[g] != label || next[g] >= b - lo)
+              throw exid::Error(fmt::format(
+                  "filtered_ls: model '{}' gave rows of equation {} beyond one per sample and "
+                  "equation of its first samples (samples {}-{})",
+                  model.pluginName(), label, trim + a, trim + b - 1));
+            const long sm = next[g]++;
+            const Eigen::Index c0 = static_cast<Eigen::Index>(g) * (p + 1);
+            M.row(sm).segment(c0, p) = rows.W.row(i);
+            M(sm, c0 + p) = rows.y(i);
+            if (!times.empty())
+              times[static_cast<std::size_t>(sm) * G + g] = rows.t[static_cast<std::size_t>(i)];
+          }
+          for (std::size_t g = 0; g < G; ++g)
+            exid::check(next[g] == b - lo,
+                        fmt::format("filtered_ls: model '{}' gave {} rows of equation {} for {} "
+                                    "samples",
+                                    model.pluginName(), next[g] - (a - lo), labels[g], b - a));
         }
-        const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
+        auto M = Mbuf.map();
+        if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, M);
         std::vector<long> kept_samples;
         for (long sidx = ((ca + R - 1) / R) * R; sidx < cb; sidx += R) {
           if (!min_speed_.empty()) {
@@ -303,25 +336,24 @@ class FilteredLs : public exid::Estimator {
           }
           kept_samples.push_back(sidx);
         }
-        const auto G = static_cast<Eigen::Index>(A.size());
+        const auto G = static_cast<Eigen::Index>(labels.size());
         Eigen::MatrixXd W(static_cast<Eigen::Index>(kept_samples.size()) * G, p);
         Eigen::VectorXd y(W.rows());
         exid::Rows out;
-        out.numEquations = rows.numEquations;
-        out.equation_names = rows.equation_names;
-        for (std::size_t k = 0; k < kept_samples.size(); ++k)
+        out.numEquations = head.numEquations;
+        out.equation_names = head.equation_names;
+        for (std::size_t k = 0; k < kept_samples.size(); ++k) {
+          const long local = kept_samples[k] - lo;
           for (Eigen::Index g = 0; g < G; ++g) {
-            const long local = kept_samples[k] - lo;
             const Eigen::Index r = static_cast<Eigen::Index>(k) * G + g;
-            W.row(r) = A[static_cast<std::size_t>(g)].row(local).head(p);
-            y(r) = A[static_cast<std::size_t>(g)](local, p);
+            W.row(r) = M.row(local).segment(g * (p + 1), p);
+            y(r) = M(local, g * (p + 1) + p);
             if (keep_rows) {
               out.equation.push_back(labels[static_cast<std::size_t>(g)]);
-              if (has_t)
-                out.t.push_back(rows.t[static_cast<std::size_t>(groups.at(
-                    labels[static_cast<std::size_t>(g)])[static_cast<std::size_t>(local)])]);
+              if (!times.empty()) out.t.push_back(times[static_cast<std::size_t>(local * G + g)]);
             }
           }
+        }
         o.kept = static_cast<long>(kept_samples.size());
         o.acc = est::RowAccumulator(p);
         o.acc.add(W, y);

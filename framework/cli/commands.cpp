@@ -19,6 +19,7 @@
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
 #include "exid/runner.hpp"
+#include "exid/trajectory_export.hpp"
 #include "exid/urdf_writer.hpp"
 
 namespace exid::cli {
@@ -250,44 +251,24 @@ DataReader dataReader(const fs::path& p) {
 }
 
 /// Single stages run through the study runner on a trimmed copy of the study.
+struct ExportArgs {
+  std::string dir;
+  double rate_Hz = 1000.0;
+  int periods = 1;
+};
+
 int stageCommand(const Registry& reg, const std::string& stage, const std::string& study,
-                 const std::string& data_file, std::string out) {
-  StudyConfig cfg = loadStudy(study, reg);
-  if (stage == "excite") {
-    if (!cfg.hasExcitation()) throw Error(fmt::format("{}: no excitation section", study));
-    cfg.experiment.reset();
-    cfg.estimator.reset();
-    cfg.validation.reset();
-  } else if (stage == "simulate") {
-    if (!cfg.experiment) throw Error(fmt::format("{}: no experiment section", study));
-    cfg.estimator.reset();
-    cfg.validation.reset();
-  } else if (stage == "identify") {
-    if (!cfg.estimator) throw Error(fmt::format("{}: no estimator section", study));
-    cfg.trajectory.reset();
-    cfg.criterion.reset();
-    cfg.optimizer.reset();
-    cfg.validation.reset();
-    if (!data_file.empty()) {
-      PluginSpec spec;
-      spec.kind = PluginKind::Experiment;
-      const DataReader dr = dataReader(data_file);
-      spec.type = dr.type;
-      spec.key_path = "experiment";
-      spec.params = resolveParams(reg.get(PluginKind::Experiment, dr.type),
-                                  withFile("", fs::absolute(data_file).string(), dr.key),
-                                  "experiment.params", fs::current_path());
-      cfg.experiment = spec;
-    }
-    if (!cfg.experiment)
-      throw Error(fmt::format("{}: no experiment section and no --data file", study));
-  }
+                 const std::string& data_file, std::string out, const ExportArgs& ex = {}) {
+  StudyConfig cfg = stageStudy(loadStudy(study, reg), stage, reg, data_file);
   if (out.empty()) out = "out/" + cfg.name + "_" + stage;
   RunOptions opt;
   opt.out_dir = out;
   opt.cancelled = cancelled();
   opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
   opt.hard_stop_exit_code = signalExitCode;
+  opt.export_dir = ex.dir;
+  opt.export_rate_Hz = ex.rate_Hz;
+  opt.export_periods = ex.periods;
   StudyResult r = runStudy(cfg, reg, opt);
   std::cout << briefTable(r.summary);
   if (!r.ok) {
@@ -298,6 +279,40 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
     return r.cancelled ? signalExitCode() : 1;
   }
   std::cout << fmt::format("\nResults in {}/ (summary.json, report.md)\n", out);
+  if (!ex.dir.empty()) {
+    const Json* X = r.summary.find("excitation");
+    const Json* E = X ? X->find("export") : nullptr;
+    const Json* C = E ? E->find("check") : nullptr;
+    const Json* ok = C ? C->find("ok") : nullptr;
+    std::cout << fmt::format(
+        "Trajectory for execution in {}/ (trajectory.csv, trajectory.params.yaml, "
+        "joint_trajectory.yaml, trajectory_check.json)\n",
+        ex.dir);
+    if (!ok || !ok->asBool()) {
+      std::cerr << fmt::format(
+          "exid excite: the exported trajectory exceeds a limit of the robot at {} Hz (see {}/"
+          "trajectory_check.json)\n",
+          ex.rate_Hz, ex.dir);
+      return 1;
+    }
+  }
+  return 0;
+}
+
+/// exid check-trajectory: a trajectory CSV (t, q, qd, qdd[, tau]) against the robot's limits at
+/// the file's own rate; exit 1 when a limit is exceeded.
+int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const std::string& file,
+                           const std::vector<double>& torque_max, const std::string& json_out) {
+  const auto model = loadRobot(reg, robot);
+  const TrajectoryCheck c = checkTrajectoryCsv(file, *model, torque_max);
+  std::cout << c.text();
+  if (!json_out.empty()) writeFileAtomic(json_out, c.toJson().dump(2) + "\n");
+  if (!c.ok) {
+    std::cerr << fmt::format("exid check-trajectory: {} exceeds a limit of robot '{}'\n", file,
+                             model->name);
+    return 1;
+  }
+  std::cout << "every limit holds\n";
   return 0;
 }
 
@@ -628,6 +643,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     int jobs = 1;
     std::string shard, rows, cols, metric;
     bool retry = false, force = false;
+    std::string export_dir;
+    double rate_hz = 1000.0;
+    int periods = 1;
+    std::vector<double> torque_max;
   };
   auto st = std::make_shared<State>();
 
@@ -659,6 +678,16 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     if (std::string(name) == "identify")
       s->add_option("--data", st->data,
                     "recorded CSV or ROS 2 bag folder (replaces the experiment)");
+    if (std::string(name) == "excite") {
+      s->add_option("--export", st->export_dir,
+                    "also write the optimal trajectory for execution into this folder: "
+                    "trajectory.csv, trajectory.params.yaml, joint_trajectory.yaml (ROS 2), "
+                    "trajectory_check.json");
+      s->add_option("--rate-hz", st->rate_hz, "--export: the controller rate [Hz] (default 1000)")
+          ->check(CLI::PositiveNumber);
+      s->add_option("--periods", st->periods, "--export: repetitions of the motion (default 1)")
+          ->check(CLI::Range(1, 100000));
+    }
     stages.push_back(s);
   }
 
@@ -670,6 +699,18 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")
       ->required();
   exp->add_option("--out", st->out, "URDF file to write")->required();
+
+  auto* chk = app.add_subcommand(
+      "check-trajectory",
+      "check a trajectory CSV against a robot's limits at the file's rate: exid check-trajectory "
+      "ROBOT FILE.csv [--torque-max-nm T1,...,Tn] [--json FILE]");
+  chk->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
+  chk->add_option("file", st->samples, "CSV with t, q1..qn, qd1..qdn, qdd1..qddn [, tau1..taun]")
+      ->required();
+  chk->add_option("--torque-max-nm", st->torque_max,
+                  "torque limits [N m or N] per joint when the robot description has none")
+      ->delimiter(',');
+  chk->add_option("--json", st->json_out, "write the result as JSON to this file");
 
   auto* matrix = app.add_subcommand(
       "matrix",
@@ -708,7 +749,9 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   inspect->add_option("--json", st->json_out, "write the result as JSON to this file");
 
   Commands c;
-  c.run = [st, info, eval, exp, stages, matrix, inspect, &registry]() -> int {
+  c.run = [st, info, eval, exp, chk, stages, matrix, inspect, &registry]() -> int {
+    if (*chk)
+      return checkTrajectoryCommand(registry, st->robot, st->samples, st->torque_max, st->json_out);
     if (*inspect)
       return inspectCommand(registry, st->inspect_args, st->sets, st->params, st->model,
                             st->model_params, st->json_out);
@@ -720,7 +763,9 @@ Commands addCommands(CLI::App& app, Registry& registry) {
       return evalCommand(registry, st->robot, st->samples, st->what, st->out, st->rigid_body_only);
     if (*exp) return exportCommand(registry, st->robot, st->study, st->out);
     for (auto* s : stages)
-      if (*s) return stageCommand(registry, s->get_name(), st->study, st->data, st->out);
+      if (*s)
+        return stageCommand(registry, s->get_name(), st->study, st->data, st->out,
+                            ExportArgs{st->export_dir, st->rate_hz, st->periods});
     std::cerr << "exid: no command chosen (see exid --help)\n";
     return 2;
   };

@@ -343,6 +343,19 @@ Json specJson(const PluginSpec& s) {
 
 }  // namespace
 
+std::vector<ParamDecl> excitationConstraintParams() {
+  return {
+      param_double("torque_margin", 0.0, "",
+                   "torque limits: |tau_j(t)| <= torque_margin * tau_max,j at every sample, tau "
+                   "the torque the robot's full model (rigid body + drives, nominal parameters) "
+                   "predicts; 0: no torque limits",
+                   0.0, 1.0),
+      param_doubles("torque_max_Nm", std::vector<double>{}, "N m or N",
+                    "tau_max per joint (measured coordinates); empty: the robot's own limits (URDF "
+                    "effort), required when it has none"),
+  };
+}
+
 std::string studyNameProblem(const std::string& name) {
   if (name.empty()) return "";  // unnamed: loadStudy names it after the file
   if (name.size() > 200) return fmt::format("has {} characters; at most 200", name.size());
@@ -598,7 +611,8 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
     if (!x.IsMap()) {
       pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
     } else {
-      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer"};
+      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer",
+                                                "constraints"};
       for (const auto& kv : x) {
         const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
         if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
@@ -619,6 +633,10 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
                                   base_dir, reg, pr, false);
       else
         pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
+      PluginInfo cinfo;
+      cinfo.params = excitationConstraintParams();
+      resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
+                  cfg.excitation_constraints);
     }
   }
   bool split_done = false;
@@ -760,6 +778,14 @@ ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
   return ps;
 }
 
+namespace {
+bool hasTorqueLimits(const StudyConfig& c) {
+  return c.excitation_constraints.has("torque_margin") &&
+         (c.excitation_constraints.getDouble("torque_margin") > 0 ||
+          !c.excitation_constraints.getDoubles("torque_max_Nm").empty());
+}
+}  // namespace
+
 std::string StudyConfig::resolvedYaml() const {
   YAML::Emitter e;
   e << YAML::BeginMap;
@@ -789,6 +815,15 @@ std::string StudyConfig::resolvedYaml() const {
     emitSpec(e, *criterion, false);
     e << YAML::Key << "optimizer" << YAML::Value;
     emitSpec(e, *optimizer, false);
+    // Only when set, so that studies without them keep their resolved text and hash.
+    if (hasTorqueLimits(*this)) {
+      e << YAML::Key << "constraints" << YAML::Value << YAML::BeginMap;
+      for (const auto& d : excitationConstraintParams()) {
+        e << YAML::Key << d.name << YAML::Value;
+        emitValue(e, excitation_constraints.at(d.name));
+      }
+      e << YAML::EndMap;
+    }
     e << YAML::EndMap;
   }
   if (experiment) {
@@ -850,6 +885,12 @@ Json StudyConfig::resolvedJson() const {
     j["excitation"]["trajectory"] = specJson(*trajectory);
     j["excitation"]["criterion"] = specJson(*criterion);
     j["excitation"]["optimizer"] = specJson(*optimizer);
+    if (hasTorqueLimits(*this)) {
+      j["excitation"]["constraints"]["torque_margin"] =
+          excitation_constraints.getDouble("torque_margin");
+      j["excitation"]["constraints"]["torque_max_Nm"] =
+          Json(excitation_constraints.getDoubles("torque_max_Nm"));
+    }
   }
   if (experiment) j["experiment"] = specJson(*experiment);
   if (estimator) j["estimator"] = specJson(*estimator);

@@ -24,13 +24,6 @@ using Eigen::VectorXd;
 
 constexpr double kUnknownLimit = 1e299;  // JointLimits are +-1e300 where unknown
 
-double medianOf(std::vector<double> v) {
-  if (v.empty()) return NAN;
-  const auto mid = v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2);
-  std::nth_element(v.begin(), mid, v.end());
-  return *mid;
-}
-
 double percentileOf(std::vector<double> v, double p) {
   if (v.empty()) return NAN;
   const auto k = static_cast<std::size_t>(std::floor(p * static_cast<double>(v.size() - 1)));
@@ -98,9 +91,15 @@ void savitzkyGolay(const MatrixXd& X, double dt, int m, MatrixXd* value, MatrixX
   if (value) value->resize(K, X.cols());
   if (d1) d1->resize(K, X.cols());
   if (d2) d2->resize(K, X.cols());
-  for (Index k = 0; k < K; ++k) {
-    const Index h = std::min<Index>({static_cast<Index>(m), k, K - 1 - k});
-    if (h == 0) continue;  // the two end samples: copied from their neighbour below
+  // The fit over +-h samples is three fixed weightings of the window (value, slope, curvature):
+  // the weights are computed once per half-width h (h = m inside, smaller near the ends).
+  struct Weights {
+    std::vector<double> w0, w1, w2;
+  };
+  std::vector<Weights> by_h(static_cast<std::size_t>(std::max(0, m)) + 1);
+  auto weights = [&](Index h) -> const Weights& {
+    Weights& w = by_h[static_cast<std::size_t>(h)];
+    if (!w.w0.empty()) return w;
     double S2 = 0, S4 = 0;
     for (Index i = -h; i <= h; ++i) {
       S2 += static_cast<double>(i * i);
@@ -113,19 +112,30 @@ void savitzkyGolay(const MatrixXd& X, double dt, int m, MatrixXd* value, MatrixX
       const double c = static_cast<double>(i * i) - S2 / N;
       cc += c * c;
     }
-    for (Index j = 0; j < X.cols(); ++j) {
-      double s0 = 0, s1 = 0, s2 = 0, sc = 0;
-      for (Index i = -h; i <= h; ++i) {
-        const double x = X(k + i, j);
-        const double ii = static_cast<double>(i * i);
-        s0 += x;
-        s1 += static_cast<double>(i) * x;
-        s2 += ii * x;
-        sc += (ii - S2 / N) * x;
+    for (Index i = -h; i <= h; ++i) {
+      const double ii = static_cast<double>(i * i);
+      w.w0.push_back((S4 - S2 * ii) / den0);
+      w.w1.push_back(static_cast<double>(i) / S2 / dt);
+      w.w2.push_back(2.0 * (ii - S2 / N) / cc / (dt * dt));
+    }
+    return w;
+  };
+  for (Index j = 0; j < X.cols(); ++j) {
+    const double* x = X.col(j).data();
+    for (Index k = 0; k < K; ++k) {
+      const Index h = std::min<Index>({static_cast<Index>(m), k, K - 1 - k});
+      if (h == 0) continue;  // the two end samples: copied from their neighbour below
+      const Weights& w = weights(h);
+      const double* xk = x + (k - h);
+      double s0 = 0, s1 = 0, s2 = 0;
+      for (Index i = 0; i <= 2 * h; ++i) {
+        s0 += w.w0[static_cast<std::size_t>(i)] * xk[i];
+        s1 += w.w1[static_cast<std::size_t>(i)] * xk[i];
+        s2 += w.w2[static_cast<std::size_t>(i)] * xk[i];
       }
-      if (value) (*value)(k, j) = (S4 * s0 - S2 * s2) / den0;
-      if (d1) (*d1)(k, j) = s1 / S2 / dt;
-      if (d2) (*d2)(k, j) = 2.0 * sc / cc / (dt * dt);
+      if (value) (*value)(k, j) = s0;
+      if (d1) (*d1)(k, j) = s1;
+      if (d2) (*d2)(k, j) = s2;
     }
   }
   if (K >= 3) {
@@ -230,18 +240,13 @@ Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vec
     J["note"] = "fewer than two time stamps";
     return J;
   }
-  // step i, computed again where needed (one array of steps, for the median, is the peak)
+  // step i, computed where needed (never held: the stamps are the only array)
   auto stepAt = [&](std::size_t i) {
     return (raw[i + 1] - raw[i]) /
            static_cast<double>(row.empty() ? 1 : std::max(1, row[i + 1] - row[i]));
   };
   const std::size_t nsteps = raw.size() - 1;
-  double med;
-  {
-    std::vector<double> steps(nsteps);
-    for (std::size_t i = 0; i < nsteps; ++i) steps[i] = stepAt(i);
-    med = medianOf(std::move(steps));
-  }
+  const double med = medianOfValues(nsteps, stepAt);
   const int d = decimalResolution(raw);
   double period = med, rate = 1.0 / (med * unit_s);
   if (d >= 0) {
@@ -592,17 +597,12 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
       std::vector<double> sum(static_cast<std::size_t>(2 * L + 1), 0.0);
       for (int j = 0; j < n; ++j) {
         if (weight[static_cast<std::size_t>(j)] == 0) continue;
+        const Index k0 = L, k1 = K - L;
+        const auto a = tau.col(j).segment(k0, k1 - k0);  // the same samples for every lag
+        const double sa = a.sum(), saa = a.squaredNorm();
         for (int l = -L; l <= L; ++l) {
-          const Index k0 = L, k1 = K - L;
-          double sa = 0, sb = 0, saa = 0, sbb = 0, sab = 0;
-          for (Index k = k0; k < k1; ++k) {
-            const double a = tau(k, j), b = pred(k - l, j);
-            sa += a;
-            sb += b;
-            saa += a * a;
-            sbb += b * b;
-            sab += a * b;
-          }
+          const auto b = pred.col(j).segment(k0 - l, k1 - k0);
+          const double sb = b.sum(), sbb = b.squaredNorm(), sab = a.dot(b);
           const double m = static_cast<double>(k1 - k0);
           const double cov = sab - sa * sb / m, va = saa - sa * sa / m, vb = sbb - sb * sb / m;
           const double r = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;

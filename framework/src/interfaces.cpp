@@ -85,7 +85,54 @@ Samples ObservationModel::randomSamples(int count, std::uint64_t seed) const {
   return s;
 }
 
+namespace {
+
+// Samples per block when a per-sample model's full rows are built a block at a time (rows(),
+// design()): a block's full W about 1 MB (cache resident, its memory reused) for max(dof, 6)
+// rows per sample.
+int fullBlockSamples(int full_columns, int dof) {
+  constexpr double kBlockBytes = 1 << 20;
+  const double sample_bytes =
+      8.0 * static_cast<double>(std::max(1, full_columns)) * static_cast<double>(std::max(6, dof));
+  return static_cast<int>(std::clamp(kBlockBytes / sample_bytes, 16.0, 65536.0));
+}
+
+}  // namespace
+
 Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
+  // A per-sample model's full rows are built a block of samples at a time (a block's full W
+  // about 1 MB, cache resident and reused) and only the base columns are kept: the full W of a
+  // long chunk (84 columns for a 6-joint arm with drives, twice the base ones) is never held.
+  const int K = data.size();
+  const int block = fullBlockSamples(base_.numFull(), data.dof());
+  if (!data.streamed() && K > block && specs().per_sample) {
+    const int p = base_.rank();
+    Rows out;
+    Eigen::Index m = 0;  // rows per sample
+    for (int b = 0; b < K; b += block) {
+      const int e = std::min(K, b + block);
+      Rows full = fullRows(sliceDataset(data, b, e), ctx);
+      if (b == 0) {
+        m = full.W.rows() / std::max(1, e - b);
+        out.W.resize(static_cast<Eigen::Index>(K) * m, p);
+        out.y.resize(out.W.rows());
+        out.numEquations = full.numEquations;
+        out.equation_names = full.equation_names;
+      }
+      const Eigen::Index r0 = static_cast<Eigen::Index>(b) * m, nr = full.W.rows();
+      check(nr == static_cast<Eigen::Index>(e - b) * m && full.y.size() == nr &&
+                full.W.cols() == base_.numFull(),
+            fmt::format("model '{}': {} rows of {} columns for samples [{}, {}) (expected {} "
+                        "per sample, as for the first samples, of {} columns)",
+                        pluginName(), nr, full.W.cols(), b, e, m, base_.numFull()));
+      for (int k = 0; k < p; ++k)
+        out.W.col(k).segment(r0, nr) = full.W.col(base_.independent[static_cast<size_t>(k)]);
+      out.y.segment(r0, nr) = full.y;
+      out.equation.insert(out.equation.end(), full.equation.begin(), full.equation.end());
+      out.t.insert(out.t.end(), full.t.begin(), full.t.end());
+    }
+    return out;
+  }
   Rows full = fullRows(data, ctx);
   Rows out;
   out.W = base_.columns(full.W);
@@ -98,7 +145,34 @@ Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
 }
 
 Eigen::MatrixXd ObservationModel::design(const Samples& s) const {
-  return base_.columns(fullDesign(s));
+  const int K = s.size();
+  const int block = fullBlockSamples(base_.numFull(), s.dof());
+  if (K <= block || !specs().per_sample) return base_.columns(fullDesign(s));
+  // As rows(): the full design a block of samples at a time, only the base columns kept.
+  const int p = base_.rank();
+  Eigen::MatrixXd W;
+  Eigen::Index m = 0;
+  Samples sub;
+  for (int b = 0; b < K; b += block) {
+    const int e = std::min(K, b + block);
+    sub.t = s.t.segment(b, e - b);
+    sub.q = s.q.middleRows(b, e - b);
+    sub.qd = s.qd.middleRows(b, e - b);
+    sub.qdd = s.qdd.middleRows(b, e - b);
+    const Eigen::MatrixXd full = fullDesign(sub);
+    if (b == 0) {
+      m = full.rows() / (e - b);
+      W.resize(static_cast<Eigen::Index>(K) * m, p);
+    }
+    check(full.rows() == static_cast<Eigen::Index>(e - b) * m && full.cols() == base_.numFull(),
+          fmt::format("model '{}': design of {} rows, {} columns for samples [{}, {}) (expected {} "
+                      "per sample, as for the first samples, of {} columns)",
+                      pluginName(), full.rows(), full.cols(), b, e, m, base_.numFull()));
+    for (int k = 0; k < p; ++k)
+      W.col(k).segment(static_cast<Eigen::Index>(b) * m, full.rows()) =
+          full.col(base_.independent[static_cast<size_t>(k)]);
+  }
+  return W;
 }
 
 void ObservationModel::designVjp(const Samples& s, const Eigen::MatrixXd& dW_base,
@@ -106,6 +180,21 @@ void ObservationModel::designVjp(const Samples& s, const Eigen::MatrixXd& dW_bas
   Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base_.numFull());
   for (int i = 0; i < base_.rank(); ++i) dW.col(base_.independent[i]) = dW_base.col(i);
   fullDesignVjp(s, dW, grad);
+}
+
+void ExcitationProblem::nonlinearConstraints(const Eigen::VectorXd& z, Eigen::VectorXd* g,
+                                             Eigen::MatrixXd* jac) {
+  const int nl = numNonlinearConstraints();
+  if (nl == 0) {
+    if (g) g->resize(0);
+    if (jac) jac->resize(0, z.size());
+    return;
+  }
+  Eigen::VectorXd ga;
+  Eigen::MatrixXd ja;
+  constraints(z, g ? &ga : nullptr, jac ? &ja : nullptr);
+  if (g) *g = ga.tail(nl);
+  if (jac) *jac = ja.bottomRows(nl);
 }
 
 void Trajectory::bounds(Eigen::VectorXd* lower, Eigen::VectorXd* upper) const {

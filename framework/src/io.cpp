@@ -230,8 +230,9 @@ void CsvReader::readFailed(int err) {
 bool CsvReader::refill() {
   if (eof_) return false;
   const std::size_t have = static_cast<std::size_t>(end_ - beg_);
-  if (buf_.size() < have + block_) {
-    std::vector<char> bigger(std::max(have + block_, 2 * buf_.size()));
+  if (buf_.size() < have + block_) {  // (a file's first: room for a block and a line left over)
+    decltype(buf_) bigger(
+        std::max(have + block_, buf_.empty() && fd_ >= 0 ? 2 * block_ : 2 * buf_.size()));
     if (have) std::memcpy(bigger.data(), beg_, have);
     buf_.swap(bigger);
   } else if (have && beg_ != buf_.data()) {

@@ -1057,13 +1057,13 @@ int mergeMatrixDatabases(const fs::path& dest, const std::vector<fs::path>& sour
           Db::Stmt mt(&in, "SELECT name, type, real, text FROM metrics WHERE run_id = ?");
           mt.bind(1, old);
           while (mt.step()) {
-            Db::Stmt ins(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
-            ins.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
+            Db::Stmt insert(&db, "INSERT INTO metrics VALUES(?,?,?,?,?)");
+            insert.bind(1, id).bind(2, mt.text(0)).bind(3, mt.text(1));
             if (std::isfinite(mt.real(2)))
-              ins.bind(4, mt.real(2));
+              insert.bind(4, mt.real(2));
             else
-              ins.bindNull(4);
-            ins.bind(5, mt.text(3)).step();
+              insert.bindNull(4);
+            insert.bind(5, mt.text(3)).step();
           }
           Db::Stmt pr(&in, "SELECT series, t, value FROM progress WHERE run_id = ?");
           pr.bind(1, old);

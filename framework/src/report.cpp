@@ -90,6 +90,65 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
   sections_.push_back(s);
 }
 
+void Report::excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau,
+                              const Eigen::VectorXd& tau_max, double margin, const Json* exported) {
+  if (sections_.empty()) return;
+  const std::size_t sec = sections_.size() - 1;
+  std::string& s = sections_.back();
+  if (tau_max.size() == tau.cols() && tau.rows() == optimal.size()) {
+    PlotSpec p;
+    p.name = "torque_ratio";
+    p.title = "Predicted torque over its limit, optimal trajectory (design samples)";
+    p.xlabel = "t [s]";
+    p.ylabel = "tau / tau_max";
+    double worst = 0.0;
+    for (Eigen::Index j = 0; j < tau.cols(); ++j) {
+      const Eigen::VectorXd r = tau.col(j) / tau_max(j);
+      worst = std::max(worst, r.cwiseAbs().maxCoeff());
+      p.series.push_back({fmt::format("tau{}", j + 1), vec(optimal.t), vec(r), "lines", {}, {}});
+    }
+    for (double lvl : {-margin, margin})
+      p.series.push_back({lvl > 0 ? "margin" : "",
+                          {optimal.t(0), optimal.t(optimal.size() - 1)},
+                          {lvl, lvl},
+                          "lines",
+                          {},
+                          {}});
+    plots_.emplace_back(sec, p);
+    s += fmt::format(
+        "\nTorque limits: |tau_j| <= {:.3g} tau_max,j at every design sample (the robot's full "
+        "model, nominal parameters); largest |tau_j| / tau_max,j at the optimum: {:.4f}.\n",
+        margin, worst);
+  }
+  if (exported && exported->isObject()) {
+    const Json* dir = exported->find("dir");
+    const Json* rate = exported->find("rate_Hz");
+    const Json* periods = exported->find("periods");
+    s += fmt::format(
+        "\nExported for execution into `{}` at {:g} Hz, {} period(s) "
+        "(trajectory.csv, trajectory.params.yaml, joint_trajectory.yaml; plots of q, "
+        "qd and tau / tau_max there). Check of the written file against the robot's "
+        "limits at that rate:\n\n| limit | joint | t [s] | value | limit | margin | "
+        "ratio |\n|---|---|---|---|---|---|---|\n",
+        dir ? dir->asString() : "?", rate ? rate->asDouble() : 0.0, periods ? periods->asInt() : 0);
+    const Json* check = exported->find("check");
+    const Json* worst = check ? check->find("worst") : nullptr;
+    if (worst)
+      for (const auto& [what, w] : worst->items()) {
+        const Json* checked = w.find("checked");
+        if (!checked || !checked->asBool()) {
+          s += fmt::format("| {} | - | - | - | none | - | - |\n", what);
+          continue;
+        }
+        const double m = w.find("margin")->asDouble();
+        s += fmt::format("| {} | {} | {:.4f} | {:.6g} | {:.6g} | {:.6g}{} | {:.4f} |\n", what,
+                         w.find("joint")->asInt(), w.find("t_s")->asDouble(),
+                         w.find("value")->asDouble(), w.find("limit")->asDouble(), m,
+                         m < 0 ? " **violated**" : "", w.find("ratio")->asDouble());
+      }
+  }
+}
+
 void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated) {
   std::string s = fmt::format(
       "## Identification\n\n{} rows, cond(W) = {:.6g}, residual RMS = {:.6g}, sigma = {:.6g}.\n\n"

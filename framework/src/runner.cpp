@@ -11,6 +11,7 @@
 #include <condition_variable>
 #include <cstdio>
 #include <functional>
+#include <future>
 #include <map>
 #include <mutex>
 #include <optional>
@@ -24,6 +25,7 @@
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
 #include "exid/report.hpp"
+#include "exid/trajectory_export.hpp"
 #include "exid/version.hpp"
 
 namespace exid {
@@ -434,9 +436,9 @@ long streamInspectStride(long K) { return (K + kRunInspectSamples - 1) / kRunIns
 // exid inspect's checks on a dataset of the study (inspect.hpp): the whole result under
 // summary.json `inspection.<what>`, its warnings among the study's. An inspection that cannot be
 // done is noted there; it never fails the study.
-void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
-                 const RobotModel& robot, const ObservationModel* model, const Dataset& d,
-                 const RunContext& ctx) {
+// The inspection's result for a dataset: the checks, or a note when it could not be done.
+Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const Dataset& d,
+                  const RunContext& ctx) {
   try {
     const long K = d.size();
     Json I;
@@ -476,13 +478,27 @@ void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, c
     } else {
       I = inspectDataset(robot, model, d, ctx);
     }
-    if (const Json* w = I.find("warnings"))
-      for (std::size_t i = 0; i < w->size(); ++i)
-        warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));
-    S["inspection"][what] = I;
+    return I;
   } catch (const std::exception& e) {
-    S["inspection"][what]["note"] = fmt::format("not inspected: {}", e.what());
+    Json I = Json::object();
+    I["note"] = fmt::format("not inspected: {}", e.what());
+    return I;
   }
+}
+
+// An inspection's result under summary.json `inspection.<what>`, its warnings among the study's.
+void applyInspection(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
+                     const Json& I) {
+  if (const Json* w = I.find("warnings"))
+    for (std::size_t i = 0; i < w->size(); ++i)
+      warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));
+  S["inspection"][what] = I;
+}
+
+void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
+                 const RobotModel& robot, const ObservationModel* model, const Dataset& d,
+                 const RunContext& ctx) {
+  applyInspection(S, warn, what, inspectionOf(robot, model, d, ctx));
 }
 
 }  // namespace
@@ -585,6 +601,12 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     };
   };
 
+  // The experiment's inspection when it runs beside the estimator (a recording in memory).
+  std::future<Json> experiment_inspection;
+  auto collectExperimentInspection = [&] {
+    if (experiment_inspection.valid())
+      applyInspection(S, warn, "experiment", experiment_inspection.get());
+  };
   try {
     if (write) {
       writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
@@ -672,6 +694,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       xo.velocity_limits = traj->velocityLimits();
       xo.acceleration_limits = traj->accelerationLimits();
       xo.scale_columns = crit->specs().scale_columns;
+      xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
+      xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
       auto problem = makeExcitationProblem(traj, model, crit, xo);
       RunContext xctx = ctx;
       xctx.progress = progressFor("excitation");
@@ -720,6 +744,14 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       X["cond_W_initial"] = conditionNumber(model->design(initial));
       X["cond_W_final"] = conditionNumber(model->design(best));
       X["max_constraint_violation"] = r.max_violation;
+      if (xo.torque_margin > 0) {
+        // the worst |tau_j| / tau_max,j the full model predicts at the samples
+        const Eigen::VectorXd tmax =
+            torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
+        const Eigen::MatrixXd tau = predictedTorques(model->robot(), best);
+        X["torque_margin"] = xo.torque_margin;
+        X["torque_ratio_max"] = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
+      }
       X["iterations"] = r.iterations;
       X["evaluations"] = Json(static_cast<long long>(r.evaluations));
       X["wall_s"] = r.wall_s;
@@ -749,12 +781,46 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         writeCsvAtomic(dir / "criterion_history.csv", h);
         X["trajectory_csv"] = "trajectory_optimal.csv";
       }
+      if (!opt.export_dir.empty()) {
+        TrajectoryExportOptions eo;
+        eo.rate_Hz = opt.export_rate_Hz;
+        eo.periods = opt.export_periods;
+        eo.torque_max = xo.torque_max;
+        eo.torque_margin = xo.torque_margin;
+        eo.plots = cfg.report.plots;
+        TrajectoryCheck chk;
+        X["export"] = exportTrajectory(*traj, cfg.trajectory->type, cfg.trajectory->params, r.z,
+                                       model->robot(), eo, opt.export_dir, &chk);
+        X["export"]["dir"] = fs::absolute(opt.export_dir).string();
+        if (!chk.ok)
+          warn(
+              fmt::format("excitation: the exported trajectory ({}) exceeds a limit of the robot "
+                          "at {} Hz:\n{}",
+                          opt.export_dir.string(), eo.rate_Hz, chk.text()));
+      }
       report.excitation(initial, best, r, *model);
+      if (xo.torque_margin > 0 || X.find("export")) {
+        Eigen::VectorXd tmax;
+        Eigen::MatrixXd tau;
+        if (xo.torque_margin > 0) {
+          tmax = torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
+          tau = predictedTorques(model->robot(), best);
+        }
+        report.excitationLimits(best, tau, tmax, xo.torque_margin, X.find("export"));
+      }
       reference = best;
     }
 
     // ---------------------------------------------------------------- experiment
     std::optional<Dataset> data;
+    // The inspection beside the estimator reads robot, model and data: it is waited for before
+    // they go (this guard is destroyed first, also when a stage throws); its result stays.
+    struct WaitForInspection {
+      std::future<Json>& f;
+      ~WaitForInspection() {
+        if (f.valid()) f.wait();
+      }
+    } wait_for_inspection{experiment_inspection};
     if (cfg.experiment) {
       setStage("experiment");
       t0 = std::chrono::steady_clock::now();
@@ -787,7 +853,18 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       }
       if (const Json* w = data->meta.find("warnings"); w && w->isArray())
         for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
-      if (!data->streamed()) inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
+      if (!data->streamed()) {
+        if (cfg.estimator) {
+          // The inspection runs beside the estimator (both only read the dataset and the
+          // model) and is put into the summary when the estimator is done, at the same place
+          // in the summary and among the warnings as if it had run here.
+          experiment_inspection = std::async(std::launch::async, [&robot, &model, &data, ectx] {
+            return inspectionOf(*robot, model.get(), *data, ectx);
+          });
+        } else {
+          inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
+        }
+      }
       // experiment.csv: simulated data always; recorded data are a copy of the input, written
       // (by default) only while small. What was written, or why not, is in the summary.
       const bool simulated_data =
@@ -841,6 +918,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         prior = buildPrior(*cfg.prior, *model);
       }
       est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
+      collectExperimentInspection();
       if (data->streamed()) {
         // The recording's statistics (and the samples kept for the inspection) are complete
         // after a whole pass: the estimator's, or one more here.
@@ -1017,6 +1095,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     S["status"] = "ok";
     res.ok = true;
   } catch (const std::exception& e) {
+    collectExperimentInspection();  // (a failed identification keeps the data's inspection)
     res.ok = false;
     const auto* io = dynamic_cast<const IoError*>(&e);
     const bool nomem = dynamic_cast<const std::bad_alloc*>(&e) != nullptr;
@@ -1078,6 +1157,54 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     }
   }
   return res;
+}
+
+StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry& reg,
+                       const fs::path& data) {
+  const std::string study = cfg.file.empty() ? cfg.name : cfg.file.string();
+  if (!data.empty() && stage != "identify")
+    throw Error(
+        fmt::format("a data file replaces the experiment of stage 'identify' alone (stage "
+                    "'{}')",
+                    stage));
+  if (stage == "excite") {
+    if (!cfg.hasExcitation()) throw Error(fmt::format("{}: no excitation section", study));
+    cfg.experiment.reset();
+    cfg.estimator.reset();
+    cfg.validation.reset();
+  } else if (stage == "simulate") {
+    if (!cfg.experiment) throw Error(fmt::format("{}: no experiment section", study));
+    cfg.estimator.reset();
+    cfg.validation.reset();
+  } else if (stage == "identify") {
+    if (!cfg.estimator) throw Error(fmt::format("{}: no estimator section", study));
+    cfg.trajectory.reset();
+    cfg.criterion.reset();
+    cfg.optimizer.reset();
+    cfg.validation.reset();
+    if (!data.empty()) {
+      // A ROS 2 bag is a folder holding metadata.yaml (experiment rosbag2, parameter `path`);
+      // anything else is a CSV file (experiment csv, parameter `file`).
+      const bool bag = fs::is_directory(data) && fs::exists(data / "metadata.yaml");
+      const char* type = bag ? "rosbag2" : "csv";
+      std::string esc;
+      for (char ch : fs::absolute(data).string())
+        esc += ch == '\'' ? std::string("''") : std::string(1, ch);
+      PluginSpec spec;
+      spec.kind = PluginKind::Experiment;
+      spec.type = type;
+      spec.key_path = "experiment";
+      spec.params = resolveParams(reg.get(PluginKind::Experiment, type),
+                                  fmt::format("{{{}: '{}'}}", bag ? "path" : "file", esc),
+                                  "experiment.params", fs::current_path());
+      cfg.experiment = spec;
+    }
+    if (!cfg.experiment)
+      throw Error(fmt::format("{}: no experiment section and no data file", study));
+  } else {
+    throw Error(fmt::format("unknown stage '{}'; stages: excite, simulate, identify", stage));
+  }
+  return cfg;
 }
 
 std::string briefTable(const Json& S) {

@@ -20,10 +20,10 @@
 
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
-#include "exid/estimators/common.hpp"
 #include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/signal.hpp"
 
 namespace {
 
@@ -890,20 +890,14 @@ class CsvExperiment : public exid::Experiment {
                    : rowOf(static_cast<std::size_t>(i)) * dt_;
       };
       if (ct_ && raw.size() >= 3) {
-        // step i: from kept row i to i + 1, per file row (computed again where needed: one
-        // array of steps, reordered by the median's selection, is the scan's peak)
+        // step i: from kept row i to i + 1, per file row (computed where needed, never held:
+        // the stamps are the scan's one array)
         auto stepAt = [&](std::size_t i) {
           return (timeOf(static_cast<long>(i + 1)) - timeOf(static_cast<long>(i))) /
                  static_cast<double>(rowOf(i + 1) - rowOf(i));
         };
-        std::vector<double> sorted(raw.size() - 1);
-        for (std::size_t i = 0; i < sorted.size(); ++i) sorted[i] = stepAt(i);
-        std::nth_element(sorted.begin(),
-                         sorted.begin() + static_cast<std::ptrdiff_t>(sorted.size() / 2),
-                         sorted.end());
-        const double med = sorted[sorted.size() / 2];
-        const std::size_t nsteps = sorted.size();
-        sorted = std::vector<double>();
+        const std::size_t nsteps = raw.size() - 1;
+        const double med = exid::medianOfValues(nsteps, stepAt);
         const double ratio = P_.getDouble("max_gap_ratio");
         const bool resample = P_.getDouble("resample_hz") > 0.0;
         for (std::size_t i = 0; i < nsteps; ++i) {
@@ -1125,7 +1119,6 @@ class CsvExperiment : public exid::Experiment {
 
   /// Optional: zero-phase low-pass of q (and tau, wrench), central differences, trim, decimate.
   Preprocessed preprocess(exid::Dataset* d, const std::string& file) const {
-    namespace est = exid::est;
     Preprocessed pp;
     pp.cutoff_hz = P_.getDouble("differentiate_cutoff_hz");
     pp.order = static_cast<int>(P_.getInt("filter_order"));
@@ -1146,7 +1139,7 @@ class CsvExperiment : public exid::Experiment {
                             "filter and differentiate",
                             file, K));
     double jitter = 0;
-    pp.fs = est::samplingRate(d->t, &jitter);
+    pp.fs = exid::samplingRate(d->t, &jitter);
     exid::check(pp.cutoff_hz < 0.5 * pp.fs,
                 fmt::format("experiment 'csv': differentiate_cutoff_hz = {} Hz must be below the "
                             "Nyquist frequency {} Hz of the data",
@@ -1155,13 +1148,13 @@ class CsvExperiment : public exid::Experiment {
                 fmt::format("experiment 'csv': decimation {} leaves a Nyquist frequency of {} Hz, "
                             "below differentiate_cutoff_hz = {} Hz (aliasing)",
                             pp.decimation, 0.5 * pp.fs / pp.decimation, pp.cutoff_hz));
-    const est::Sos sos = est::butterworthLowpass(pp.order, pp.cutoff_hz, pp.fs);
-    d->q = est::filtfiltColumns(sos, d->q);
-    d->qd = est::centralFirstDerivative(d->t, d->q);
-    d->qdd = est::centralSecondDerivative(d->t, d->q);
+    const exid::Sos sos = exid::butterworthLowpass(pp.order, pp.cutoff_hz, pp.fs);
+    d->q = exid::filtfiltColumns(sos, d->q);
+    d->qd = exid::centralFirstDerivative(d->t, d->q);
+    d->qdd = exid::centralSecondDerivative(d->t, d->q);
     if (pp.filter_torque) {
-      if (d->hasTorque()) d->tau = est::filtfiltColumns(sos, d->tau);
-      if (d->hasWrench()) d->wrench = est::filtfiltColumns(sos, d->wrench);
+      if (d->hasTorque()) d->tau = exid::filtfiltColumns(sos, d->tau);
+      if (d->hasWrench()) d->wrench = exid::filtfiltColumns(sos, d->wrench);
     }
     // Default trim: the filter's edge transient, 2 fs / fc samples (two periods of the cut-off)
     // at each end, but at most 5 % of the segment at each end, so that a default never discards

@@ -34,7 +34,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
-#include "model_common.hpp"
+#include "exid/payload.hpp"
 
 namespace {
 
@@ -194,13 +194,12 @@ class SimulateExperiment : public exid::Experiment {
                    "record the true qd and qdd; false: only t, q, tau (and wrench), as on a real "
                    "robot"),
     };
-    for (auto& d : exid::models::payloadParams("payload attached to the sensor frame"))
-      p.push_back(d);
+    for (auto& d : exid::payloadParams("payload attached to the sensor frame")) p.push_back(d);
     return p;
   }
 
   explicit SimulateExperiment(const exid::ParamSet& p)
-      : P_(p), payload_(exid::models::Payload::fromParams(p)) {
+      : P_(p), payload_(exid::Payload::fromParams(p)) {
     const auto nw = p.getDoubles("noise_wrench");
     exid::check(nw.size() == 1 || nw.size() == 2 || nw.size() == 6,
                 fmt::format("{}: noise_wrench: expected 1, 2 or 6 numbers, found {}", p.context,
@@ -629,7 +628,7 @@ class SimulateExperiment : public exid::Experiment {
   }
 
   exid::ParamSet P_;
-  exid::models::Payload payload_;
+  exid::Payload payload_;
   double noise_w_[6] = {0, 0, 0, 0, 0, 0};
   std::shared_ptr<const exid::RobotModel> nominal_;
   exid::RobotModel truth_;

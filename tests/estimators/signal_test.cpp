@@ -110,6 +110,54 @@ TEST(Decimation, PerEquationAndExactForConsistentRows) {
   EXPECT_NEAR(d.W(2 * 50, 1), std::cos(5 * 0.5), 1e-6);
 }
 
+TEST(RowAccumulator, NormalEquationsByEquationEqualTheDenseGramMatrix) {
+  // Rows of three equations (labels 4, 0, 7, interleaved as a model gives them), each zero in
+  // its own set of columns, some rows of an equation zero where the others are not; a row of
+  // zeros; then a plain block without labels.
+  std::mt19937_64 rng(11);
+  std::normal_distribution<double> N(0, 1);
+  const int m = 900, p = 9;
+  Eigen::MatrixXd W(m, p);
+  Eigen::VectorXd y(m);
+  std::vector<int> eq(m);
+  const int labels[3] = {4, 0, 7};
+  for (int i = 0; i < m; ++i) {
+    const int g = i % 3;
+    eq[static_cast<std::size_t>(i)] = labels[g];
+    for (int j = 0; j < p; ++j) {
+      const bool zero = (g == 0 && j < 3) || (g == 1 && (j == 5 || j == 8)) ||
+                        (g == 2 && j % 2 == 0) || (i % 17 == 0 && j == 4);
+      W(i, j) = zero ? 0.0 : N(rng);
+    }
+    y(i) = N(rng);
+  }
+  W.row(30).setZero();
+  Eigen::MatrixXd A(m, p + 1);
+  A << W, y;
+  const Eigen::MatrixXd G = A.transpose() * A;
+  using M = est::RowAccumulator::Method;
+  est::RowAccumulator by_eq(p, M::Normal), dense(p, M::Normal), qr(p, M::Qr);
+  by_eq.addEquations(W.topRows(600), y.head(600), std::vector<int>(eq.begin(), eq.begin() + 600));
+  by_eq.addEquations(W.bottomRows(300), y.tail(300), {});  // no labels: add()
+  dense.add(W, y);
+  qr.addEquations(W, y, eq);  // Qr: add()
+  EXPECT_EQ(by_eq.rows(), m);
+  for (const est::RowAccumulator* a : {&by_eq, &dense, &qr}) {
+    const Eigen::MatrixXd& F = a->factor();
+    EXPECT_LE((F.transpose() * F - G).cwiseAbs().maxCoeff(), 1e-12 * G.cwiseAbs().maxCoeff());
+  }
+  est::SolveOptions opt;
+  const est::LsSolution a = est::solveLeastSquares(by_eq, {}, opt, "test");
+  const est::LsSolution b = est::solveLeastSquares(dense, {}, opt, "test");
+  EXPECT_LE((a.theta - b.theta).cwiseAbs().maxCoeff(), 1e-12 * b.theta.cwiseAbs().maxCoeff());
+  EXPECT_NEAR(a.rss, b.rss, 1e-12 * b.rss);
+  // the wrong number of labels is refused rather than misread: add() of every row
+  est::RowAccumulator short_labels(p, M::Normal);
+  short_labels.addEquations(W, y, std::vector<int>(eq.begin(), eq.begin() + 10));
+  EXPECT_LE((short_labels.factor().transpose() * short_labels.factor() - G).cwiseAbs().maxCoeff(),
+            1e-12 * G.cwiseAbs().maxCoeff());
+}
+
 TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   std::mt19937_64 rng(7);
   std::normal_distribution<double> N(0, 1);

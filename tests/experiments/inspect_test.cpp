@@ -6,9 +6,11 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <random>
 
 #include "../models/model_test_util.hpp"
 #include "exid/drive.hpp"
@@ -343,4 +345,32 @@ TEST(Inspect, PositionAndVelocityCoverageAgainstTheLimits) {
       EXPECT_NE(e.find("limits")->asString().find("unknown"), std::string::npos);
     }
   }
+}
+
+TEST(Inspect, TheMedianWithoutHoldingTheValuesIsNthElementsValueBitForBit) {
+  std::mt19937_64 rng(7);
+  std::normal_distribution<double> N(0.0, 1.0);
+  for (std::size_t n : {1u, 2u, 3u, 10u, 1001u, 40000u}) {
+    for (int kind = 0; kind < 4; ++kind) {
+      std::vector<double> v(n);
+      for (std::size_t i = 0; i < n; ++i) {
+        const double x = N(rng);
+        // normal values of both signs; time steps of a 1 kHz log written with 3 decimals (many
+        // equal, a few one ulp apart); a few distinct values; values equal but for the sign of 0
+        v[i] = kind == 0   ? x
+               : kind == 1 ? (std::round(1000.0 * (1.0 + i)) - std::round(1000.0 * i)) * 1e-3 +
+                                 (i % 7 == 0 ? 1e-12 * x : 0.0)
+               : kind == 2 ? static_cast<double>(static_cast<int>(3 * x))
+                           : (i % 2 ? 0.0 : -0.0);
+      }
+      std::vector<double> s = v;
+      std::nth_element(s.begin(), s.begin() + static_cast<std::ptrdiff_t>(n / 2), s.end());
+      const double m = exid::medianOfValues(n, [&](std::size_t i) { return v[i]; });
+      EXPECT_EQ(m, s[n / 2]) << "n = " << n << ", kind " << kind;
+      if (kind != 3) {
+        EXPECT_EQ(std::signbit(m), std::signbit(s[n / 2]));
+      }
+    }
+  }
+  EXPECT_TRUE(std::isnan(exid::medianOfValues(0, [](std::size_t) { return 1.0; })));
 }

@@ -99,3 +99,29 @@ TEST(Differential, ErrorsNameTheProblem) {
 }
 
 }  // namespace
+
+// rows() and design() of a long dataset are built a block of samples at a time (about 1 MB of
+// full rows each) and keep only the base columns: the same numbers, rows, equations and times
+// as the base columns of the full rows of the whole dataset, for lengths around the block size.
+TEST(Differential, RowsAndDesignInBlocksEqualTheBaseColumnsOfTheWholeFullRows) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", "{offset: true}", r);
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 3, sample_period_s: 0.001}");
+  for (int K : {1, 17, 259, 260, 261, 1000, d.size()}) {
+    const exid::Dataset s = exid::sliceDataset(d, 0, K);
+    const exid::Rows full = m->fullRows(s, mtest::context());
+    const exid::Rows rows = m->rows(s, mtest::context());
+    const Eigen::MatrixXd Wb = m->base().columns(full.W);
+    ASSERT_EQ(rows.W.rows(), Wb.rows()) << K;
+    ASSERT_EQ(rows.W.cols(), Wb.cols()) << K;
+    EXPECT_EQ((rows.W - Wb).cwiseAbs().maxCoeff(), 0.0) << K;
+    EXPECT_EQ((rows.y - full.y).cwiseAbs().maxCoeff(), 0.0) << K;
+    EXPECT_EQ(rows.equation, full.equation) << K;
+    EXPECT_EQ(rows.t, full.t) << K;
+    EXPECT_EQ(rows.numEquations, full.numEquations) << K;
+    EXPECT_EQ(rows.equation_names, full.equation_names) << K;
+    const Eigen::MatrixXd D = m->design(s.samples());
+    ASSERT_EQ(D.rows(), Wb.rows()) << K;
+    EXPECT_EQ((D - m->base().columns(m->fullDesign(s.samples()))).cwiseAbs().maxCoeff(), 0.0) << K;
+  }
+}

@@ -89,6 +89,63 @@ void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
   dirty_ = true;
 }
 
+void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                                  const Eigen::Ref<const Eigen::VectorXd>& y,
+                                  const std::vector<int>& equation) {
+  const Eigen::Index r = W.rows();
+  if (method_ != Method::Normal || static_cast<Eigen::Index>(equation.size()) != r || r < 64) {
+    add(W, y);
+    return;
+  }
+  check(W.cols() == p_,
+        fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
+  check(y.size() == r, fmt::format("RowAccumulator: {} rows of W but {} of y", r, y.size()));
+  // the rows of each equation, in order (labels are few: joints, wrench components)
+  std::vector<int> labels(equation.begin(), equation.end());
+  std::sort(labels.begin(), labels.end());
+  labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
+  if (labels.size() > 64) {
+    add(W, y);
+    return;
+  }
+  std::vector<std::vector<Eigen::Index>> rows(labels.size());
+  for (Eigen::Index i = 0; i < r; ++i)
+    rows[static_cast<std::size_t>(
+             std::lower_bound(labels.begin(), labels.end(), equation[static_cast<std::size_t>(i)]) -
+             labels.begin())]
+        .push_back(i);
+  std::vector<Eigen::Index> cols;
+  Eigen::MatrixXd A, G;
+  for (const auto& idx : rows) {
+    // the columns not zero in these rows (y always), ascending: the lower triangle of their
+    // Gram matrix lands in the lower triangle of the whole one
+    cols.clear();
+    for (Eigen::Index c = 0; c < p_; ++c) {
+      bool nonzero = false;
+      for (Eigen::Index i : idx)
+        if (W(i, c) != 0.0) {
+          nonzero = true;
+          break;
+        }
+      if (nonzero) cols.push_back(c);
+    }
+    const auto q = static_cast<Eigen::Index>(cols.size());
+    A.resize(static_cast<Eigen::Index>(idx.size()), q + 1);
+    for (Eigen::Index k = 0; k < q; ++k)
+      for (std::size_t i = 0; i < idx.size(); ++i)
+        A(static_cast<Eigen::Index>(i), k) = W(idx[i], cols[static_cast<std::size_t>(k)]);
+    for (std::size_t i = 0; i < idx.size(); ++i) A(static_cast<Eigen::Index>(i), q) = y(idx[i]);
+    cols.push_back(p_);
+    G.setZero(q + 1, q + 1);
+    G.selfadjointView<Eigen::Lower>().rankUpdate(A.transpose());
+    for (Eigen::Index b = 0; b <= q; ++b)
+      for (Eigen::Index a = b; a <= q; ++a)
+        gram_(cols[static_cast<std::size_t>(a)], cols[static_cast<std::size_t>(b)]) += G(a, b);
+  }
+  m_ += r;
+  dirty_ = true;
+}
+
 void RowAccumulator::addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale) {
   check(w.size() == p_,
         fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));

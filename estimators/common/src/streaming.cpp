@@ -125,7 +125,7 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
                    ? model.rows(src, ctx)
                    : model.rows(sliceDataset(src, b - off, e - off), ctx);
       checkRows(r, p, who, b);
-      a.add(r.W, r.y);
+      a.addEquations(r.W, r.y, r.equation);
     }
     slot[static_cast<std::size_t>(c % T)] = std::move(a);
   };

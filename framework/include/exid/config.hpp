@@ -8,6 +8,7 @@
 //     trajectory: {type: fourier, params: {...}}
 //     criterion:  {type: cond}
 //     optimizer:  {type: nlopt, params: {...}}
+//     constraints: {torque_margin: 0.8}                  # optional: torque limits
 //   experiment: {type: simulate, params: {...}}
 //   estimator:  {type: batch_ls, params: {...}}
 //   validation: {type: simulate, params: {...}}          # optional: a second experiment
@@ -88,6 +89,9 @@ struct StudyConfig {
   std::optional<PluginSpec> robot;
   std::vector<PluginSpec> models;
   std::optional<PluginSpec> trajectory, criterion, optimizer;  // excitation (all or none)
+  /// excitation.constraints (excitationConstraintParams(); every key has its default when the
+  /// section is absent).
+  ParamSet excitation_constraints;
   std::optional<PluginSpec> experiment, estimator, validation;
   ReportOptions report;
   std::optional<PriorSpec> prior;
@@ -100,6 +104,11 @@ struct StudyConfig {
   /// Hash (16 hex digits, FNV-1a 64) of the resolved study: identifies a configuration.
   std::string hash() const;
 };
+
+/// The keys of `excitation.constraints`: torque_margin (fraction of the torque limits the
+/// predicted torques may reach; 0: no torque limits) and torque_max_Nm (the limits, when the
+/// robot description has none).
+std::vector<ParamDecl> excitationConstraintParams();
 
 /// Why a study (or matrix) name cannot be used, "" when it can. The name becomes a folder
 /// (out/<name>, a matrix's cells): a plain file name, so that no output can leave the output

@@ -138,6 +138,12 @@ struct TrajectorySpecs {
   bool periodic = false;
   /// Length of the motion [s] (the period when periodic); 0 when not declared.
   double duration_s = 0.0;
+  /// Starts and ends at rest: qd = qdd = 0 at t = 0 and t = duration_s (exactly, by
+  /// construction), so the motion can follow a move to its start.
+  bool rest_to_rest = false;
+  /// Ends in the state it starts in (q, qd, qdd): repetitions of it join continuously (periodic,
+  /// or rest to rest back to the start position).
+  bool repeatable = false;
 };
 
 /// Decision variables z -> q, qd, qdd at the sample times (measured coordinates).
@@ -167,6 +173,13 @@ class Trajectory : public PluginObject {
                                 const Samples& adj) const;
   /// Free-form description for the summary and the report; never read as a capability.
   virtual Json describe() const { return Json::object(); }
+  /// The trajectory's own parameters at z in its own terms (Fourier coefficients, spline knots),
+  /// per moving joint, for the exported parameter file; never read back as a capability.
+  /// Default: an empty object (the exporter always writes z itself).
+  virtual Json parametersAt(const Eigen::VectorXd& z) const {
+    (void)z;
+    return Json::object();
+  }
   /// Margin kept inside the position limits, and whether velocity/acceleration limits are
   /// imposed as constraints by the excitation problem.
   virtual double positionMargin() const { return 0.0; }
@@ -199,6 +212,13 @@ class ExcitationProblem {
   /// Inequality constraints g(z) <= 0 (joint, velocity, acceleration, torque limits; rest).
   virtual int numConstraints() const = 0;
   virtual void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) = 0;
+  /// The last numNonlinearConstraints() rows of g are nonlinear in the samples (the torque
+  /// limits): their Jacobian changes with z even for a linear trajectory, while the rows before
+  /// them (limits on q, qd, qdd) are affine in the samples and then have a constant Jacobian.
+  virtual int numNonlinearConstraints() const { return 0; }
+  /// g and the Jacobian (numNonlinearConstraints() x numVariables) of those last rows alone.
+  virtual void nonlinearConstraints(const Eigen::VectorXd& z, Eigen::VectorXd* g,
+                                    Eigen::MatrixXd* jac);
   virtual const Trajectory& trajectory() const = 0;
   virtual const ObservationModel& model() const = 0;
   virtual const Criterion& criterion() const = 0;

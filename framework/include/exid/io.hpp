@@ -122,7 +122,22 @@ class CsvReader {
   std::string_view text_;  // memory source
   std::size_t text_pos_ = 0;
   std::size_t block_;
-  std::vector<char> buf_;  // [beg_, end_) not consumed yet
+  // (bytes left uninitialised on resize: every byte used is read into first)
+  template <class T>
+  struct Uninitialised : std::allocator<T> {
+    template <class U>
+    struct rebind {
+      using other = Uninitialised<U>;
+    };
+    Uninitialised() = default;
+    template <class U>
+    Uninitialised(const Uninitialised<U>&) noexcept {}
+    template <class U>
+    void construct(U* p) noexcept {
+      ::new (static_cast<void*>(p)) U;
+    }
+  };
+  std::vector<char, Uninitialised<char>> buf_;  // [beg_, end_) not consumed yet
   const char* beg_ = nullptr;
   const char* end_ = nullptr;
   std::size_t scanned_ = 0;  // bytes after beg_ known to hold no newline

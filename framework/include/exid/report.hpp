@@ -18,6 +18,11 @@ class Report {
   void model(const ObservationModel& m);
   void excitation(const Samples& initial, const Samples& optimal, const OptimizerResult& r,
                   const ObservationModel& m);
+  /// Appended to the excitation section: with torque limits (tau_max not empty) the optimal
+  /// trajectory's predicted torques over their limits (plot, largest ratio, the margin); with an
+  /// export (exported: excitation.export of summary.json, or null) where it went and its check.
+  void excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau,
+                        const Eigen::VectorXd& tau_max, double margin, const Json* exported);
   void identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated);
   void validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& summary);
   /// Writes report.md, report.html, the plots (gnuplot, SVG + PNG, data as CSV) and the

@@ -30,6 +30,12 @@ struct RunOptions {
   /// ends the PROCESS with _exit(hard_stop_exit_code()).
   double hard_stop_s = 0.0;
   std::function<int()> hard_stop_exit_code;
+  /// `exid excite --export DIR`: the optimal excitation trajectory written for execution into
+  /// this folder (trajectory_export.hpp: at export_rate_Hz, export_periods repetitions, checked
+  /// against the robot's limits); "" = none. summary.json: excitation.export.
+  std::filesystem::path export_dir;
+  double export_rate_Hz = 1000.0;
+  int export_periods = 1;
   /// Remove the `*.tmp.PID` files and staging folders of dead processes beside out_dir first
   /// (a matrix does it once for all its cells instead).
   bool clean_stale = true;
@@ -48,6 +54,16 @@ struct StudyResult {
 
 /// Never throws for failures inside the study: they come back as ok = false.
 StudyResult runStudy(const StudyConfig& cfg, const Registry& registry, const RunOptions& options);
+
+/// The study trimmed to one of its stages, as `exid excite|simulate|identify` run it:
+///   excite   -- robot, model and excitation (no experiment, estimator or validation);
+///   simulate -- the excitation (if any) and the experiment (no estimator or validation);
+///   identify -- the experiment and the estimator (no excitation or validation); a non-empty
+///               `data` (a CSV file, or a ROS 2 bag folder: a folder holding metadata.yaml)
+///               replaces the experiment by the `csv` (or `rosbag2`) experiment reading it.
+/// Throws exid::Error when the study lacks the stage's section or `stage` is none of these.
+StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry& registry,
+                       const std::filesystem::path& data = {});
 
 /// The prior a study asks for (StudyConfig::prior) on the model's (bound) base parameters.
 /// Throws exid::Error when it cannot be built (missing file or names, zero variances).

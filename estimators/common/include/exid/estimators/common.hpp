@@ -15,6 +15,7 @@
 #include "exid/data.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
+#include "exid/signal.hpp"
 
 namespace exid::est {
 
@@ -39,6 +40,14 @@ class RowAccumulator {
   /// Adds rows (W: r x p, y: r), each multiplied by `scale` (a weight sqrt(w)).
   void add(const Eigen::Ref<const Eigen::MatrixXd>& W, const Eigen::Ref<const Eigen::VectorXd>& y,
            double scale = 1.0);
+  /// add(W, y) for rows of several equations (equation[i]: the label of row i, e.g. the joint
+  /// of a torque row). Normal: the Gram matrix of each equation's rows over only the columns
+  /// that are not zero in them (a joint's torque does not depend on the links before it nor on
+  /// the other joints' drives: about a third of the flops for a 6-joint arm), added into the
+  /// whole. Exact: the columns left out contribute exact zeros. Qr, or rows without labels:
+  /// add(W, y).
+  void addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                    const Eigen::Ref<const Eigen::VectorXd>& y, const std::vector<int>& equation);
   /// Adds one row.
   void addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale = 1.0);
   /// Adds everything another accumulator holds, multiplied by scale.
@@ -172,58 +181,23 @@ void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,
                      std::map<int, RowAccumulator>* acc);
 
 // ============================================================== signals
-
-/// Second-order sections b0 b1 b2 1 a1 a2 (transposed direct form II).
-struct Sos {
-  std::vector<std::array<double, 6>> sections;
-  int order = 0;
-};
-
-/// Digital Butterworth low-pass of `order` with -3 dB at cutoff_hz (single pass), designed by
-/// the bilinear transform with pre-warping; unit DC gain. Throws unless 0 < cutoff < fs/2.
-Sos butterworthLowpass(int order, double cutoff_hz, double fs_hz);
-/// Frequency response at f (Hz).
-std::complex<double> sosResponse(const Sos& sos, double f_hz, double fs_hz);
-/// Causal filtering in place with initial state zi (2 per section); zi updated.
-void sosFilter(const Sos& sos, Eigen::Ref<Eigen::VectorXd> x, std::vector<double>* zi);
-/// Steady-state state for a unit step input (scipy's sosfilt_zi).
-std::vector<double> sosStepState(const Sos& sos);
-/// Zero-phase forward-backward filtering (as scipy's sosfiltfilt): odd extension at each end
-/// (point reflection, keeps value and slope continuous) of 10 time constants of the slowest
-/// pole (at least 3 (2 sections + 1) samples), steady-state initial conditions. Magnitude |H|^2.
-Eigen::VectorXd filtfilt(const Sos& sos, const Eigen::Ref<const Eigen::VectorXd>& x);
-/// filtfilt of every column.
-Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X);
-/// Row-major samples x signals.
-using RowMajorMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
-/// filtfilt of every column of a row-major block, in place: the same padding, initial
-/// conditions and arithmetic per column as filtfilt (bit for bit), with the recursion run over
-/// all columns of a sample at once (vectorised across signals instead of latency-bound per
-/// signal).
-void filtfiltRowsInPlace(const Sos& sos, RowMajorMatrix* X);
-/// Samples after which the slowest pole's transient has decayed below `tol` (relative):
-/// ceil(log(tol) / log(r_max)); 0 for a filter without poles.
-long settlingSamples(const Sos& sos, double tol);
-
-/// Sampling rate 1 / median(dt); *jitter = max |dt - median| / median. Throws on < 3 samples
-/// or non-increasing t.
-double samplingRate(const Eigen::VectorXd& t, double* jitter);
-/// First derivative by three-point central differences (non-uniform t allowed), second-order
-/// one-sided three-point formulas at the ends.
-Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X);
-/// Second derivative by the three-point central formula; ends linearly extrapolated.
-Eigen::MatrixXd centralSecondDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X);
-
-/// Parallel decimation (Gautier): for each equation, its rows form a time series; every
-/// column of W and y is low-pass filtered with `sos` (zero phase) and one row in `factor` is
-/// kept. Equations keep their identity; output rows are sample-major.
-Rows decimateRows(const Rows& rows, int factor, const Sos& sos);
-
-/// White noise of variance s^2 passed through filtfilt(sos) and kept one sample in `factor` is
-/// correlated; its long-run variance (sum of its autocovariances, what the precision of a
-/// least-squares fit with slowly varying regressors depends on) is kappa times its marginal
-/// variance (what the residuals show). Returns kappa = sum_j g(j factor) / g(0), g the
-/// autocorrelation of the filtfilt impulse response.
-double decimationVarianceFactor(const Sos& sos, int factor);
+// Signal processing lives in the core (exid/signal.hpp, shared with the experiments); its names
+// are used here as est:: names too.
+using exid::butterworthLowpass;
+using exid::centralFirstDerivative;
+using exid::centralSecondDerivative;
+using exid::decimateRows;
+using exid::decimationVarianceFactor;
+using exid::filtfilt;
+using exid::filtfiltColumns;
+using exid::filtfiltRowsInPlace;
+using exid::LargeRows;
+using exid::RowMajorMatrix;
+using exid::samplingRate;
+using exid::settlingSamples;
+using exid::Sos;
+using exid::sosFilter;
+using exid::sosResponse;
+using exid::sosStepState;
 
 }  // namespace exid::est

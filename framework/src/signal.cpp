@@ -1,15 +1,17 @@
 // Butterworth design (bilinear transform), zero-phase filtering, central differences,
 // parallel decimation.
+#include "exid/signal.hpp"
+
 #include <fmt/format.h>
+#include <sys/mman.h>
 
 #include <algorithm>
 #include <cmath>
 #include <map>
 
 #include "exid/error.hpp"
-#include "exid/estimators/common.hpp"
 
-namespace exid::est {
+namespace exid {
 
 Sos butterworthLowpass(int order, double cutoff_hz, double fs_hz) {
   check(order >= 1 && order <= 20,
@@ -125,36 +127,49 @@ double slowestPoleRadius(const Sos& sos) {
   return rmax;
 }
 
-// One pass of the sections over rows [0, n) of E (row-major, c columns), in place, from the
-// steady state scaled by row 0. Per column exactly sosFilter's arithmetic.
-void sosFilterRows(const Sos& sos, double* E, Eigen::Index n, Eigen::Index c,
-                   const std::vector<double>& zstep) {
-  const std::size_t S = sos.sections.size();
-  std::vector<double> z(2 * S * static_cast<std::size_t>(c));
-  for (std::size_t k = 0; k < S; ++k)
-    for (Eigen::Index j = 0; j < c; ++j) {
-      z[(2 * k) * static_cast<std::size_t>(c) + static_cast<std::size_t>(j)] = zstep[2 * k] * E[j];
-      z[(2 * k + 1) * static_cast<std::size_t>(c) + static_cast<std::size_t>(j)] =
-          zstep[2 * k + 1] * E[j];
-    }
-  // Section by section over the whole block (as sosFilter does), columns innermost.
-  for (std::size_t k = 0; k < S; ++k) {
-    const auto& s = sos.sections[k];
-    const double b0 = s[0], b1 = s[1], b2 = s[2], a1 = s[4], a2 = s[5];
-    double* z0 = z.data() + (2 * k) * static_cast<std::size_t>(c);
-    double* z1 = z.data() + (2 * k + 1) * static_cast<std::size_t>(c);
+// The state of the sections of one pass over rows of c columns (row-major), carried from one
+// block of rows to the next, so that a signal held in several blocks (the pads and the data of
+// filtfilt) is filtered as one sequence without being copied into one.
+class SosRows {
+ public:
+  SosRows(const Sos& sos, Eigen::Index c) : sos_(sos), c_(c), z_(2 * sos.sections.size() * c) {}
+  /// The steady state of a constant input equal to `row`.
+  void start(const std::vector<double>& zstep, const double* row) {
+    const auto c = static_cast<std::size_t>(c_);
+    for (std::size_t k = 0; k < sos_.sections.size(); ++k)
+      for (std::size_t j = 0; j < c; ++j) {
+        z_[2 * k * c + j] = zstep[2 * k] * row[j];
+        z_[(2 * k + 1) * c + j] = zstep[2 * k + 1] * row[j];
+      }
+  }
+  /// Filters n rows in place: row i at first + i * step (step = +c forward, -c backward). Every
+  /// section on one row before the next row (the state stays in the cache); per column exactly
+  /// sosFilter's arithmetic.
+  void run(double* first, Eigen::Index n, Eigen::Index step) {
+    const auto c = static_cast<std::size_t>(c_);
     for (Eigen::Index i = 0; i < n; ++i) {
-      double* x = E + i * c;
-      for (Eigen::Index j = 0; j < c; ++j) {
-        const double xi = x[j];
-        const double yi = b0 * xi + z0[j];
-        z0[j] = b1 * xi - a1 * yi + z1[j];
-        z1[j] = b2 * xi - a2 * yi;
-        x[j] = yi;
+      double* x = first + i * step;
+      for (std::size_t k = 0; k < sos_.sections.size(); ++k) {
+        const auto& s = sos_.sections[k];
+        const double b0 = s[0], b1 = s[1], b2 = s[2], a1 = s[4], a2 = s[5];
+        double* z0 = z_.data() + 2 * k * c;
+        double* z1 = z0 + c;
+        for (std::size_t j = 0; j < c; ++j) {
+          const double xi = x[j];
+          const double yi = b0 * xi + z0[j];
+          z0[j] = b1 * xi - a1 * yi + z1[j];
+          z1[j] = b2 * xi - a2 * yi;
+          x[j] = yi;
+        }
       }
     }
   }
-}
+
+ private:
+  const Sos& sos_;
+  Eigen::Index c_;
+  std::vector<double> z_;
+};
 
 }  // namespace
 
@@ -164,8 +179,47 @@ long settlingSamples(const Sos& sos, double tol) {
   return static_cast<long>(std::ceil(std::log(tol) / std::log(r)));
 }
 
+LargeRows::LargeRows(Eigen::Index rows, Eigen::Index cols) : rows_(rows), cols_(cols) {
+  constexpr std::size_t kHuge = 2u << 20;
+  const std::size_t need = sizeof(double) * static_cast<std::size_t>(rows * cols);
+  bytes_ = std::max<std::size_t>(kHuge, (need + kHuge - 1) / kHuge * kHuge);
+  void* p = mmap(nullptr, bytes_, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+  if (p == MAP_FAILED)
+    throw Error(fmt::format("out of memory: {} x {} doubles ({:.0f} MB) could not be mapped", rows,
+                            cols, static_cast<double>(need) / 1e6));
+  madvise(p, bytes_, MADV_HUGEPAGE);  // advice only: without huge pages the block still works
+  data_ = static_cast<double*>(p);
+}
+
+LargeRows::~LargeRows() {
+  if (data_) munmap(data_, bytes_);
+}
+
+LargeRows::LargeRows(LargeRows&& o) noexcept
+    : data_(o.data_), bytes_(o.bytes_), rows_(o.rows_), cols_(o.cols_) {
+  o.data_ = nullptr;
+  o.bytes_ = 0;
+}
+
+LargeRows& LargeRows::operator=(LargeRows&& o) noexcept {
+  if (this != &o) {
+    if (data_) munmap(data_, bytes_);
+    data_ = o.data_;
+    bytes_ = o.bytes_;
+    rows_ = o.rows_;
+    cols_ = o.cols_;
+    o.data_ = nullptr;
+    o.bytes_ = 0;
+  }
+  return *this;
+}
+
 void filtfiltRowsInPlace(const Sos& sos, RowMajorMatrix* X) {
-  const Eigen::Index n = X->rows(), c = X->cols();
+  filtfiltRowsInPlace(sos, Eigen::Map<RowMajorMatrix>(X->data(), X->rows(), X->cols()));
+}
+
+void filtfiltRowsInPlace(const Sos& sos, Eigen::Map<RowMajorMatrix> X) {
+  const Eigen::Index n = X.rows(), c = X.cols();
   check(n >= 2, fmt::format("filtfilt: needs at least 2 samples, got {}", n));
   const double rmax = slowestPoleRadius(sos);
   const double tau = rmax > 0 && rmax < 1 ? -1.0 / std::log(rmax) : 0.0;
@@ -173,18 +227,23 @@ void filtfiltRowsInPlace(const Sos& sos, RowMajorMatrix* X) {
       std::max<double>(3.0 * (2.0 * static_cast<double>(sos.sections.size()) + 1.0),
                        std::ceil(10.0 * tau)),
       static_cast<double>(n - 1)));
-  RowMajorMatrix ext(n + 2 * padlen, c);
-  for (Eigen::Index i = 0; i < padlen; ++i) ext.row(i) = 2.0 * X->row(0) - X->row(padlen - i);
-  ext.middleRows(padlen, n) = *X;
-  for (Eigen::Index i = 0; i < padlen; ++i)
-    ext.row(padlen + n + i) = 2.0 * X->row(n - 1) - X->row(n - 2 - i);
+  // The odd extensions at both ends, held apart: the signal is [pre, X, post], filtered forward
+  // then backward in place (the same numbers as filtering one extended copy).
+  RowMajorMatrix pre(padlen, c), post(padlen, c);
+  for (Eigen::Index i = 0; i < padlen; ++i) pre.row(i) = 2.0 * X.row(0) - X.row(padlen - i);
+  for (Eigen::Index i = 0; i < padlen; ++i) post.row(i) = 2.0 * X.row(n - 1) - X.row(n - 2 - i);
   const std::vector<double> z = sosStepState(sos);
-  const Eigen::Index N = ext.rows();
-  sosFilterRows(sos, ext.data(), N, c, z);
-  ext.colwise().reverseInPlace();
-  sosFilterRows(sos, ext.data(), N, c, z);
-  ext.colwise().reverseInPlace();
-  *X = ext.middleRows(padlen, n);
+  SosRows f(sos, c);
+  f.start(z, padlen > 0 ? pre.data() : X.data());
+  f.run(pre.data(), padlen, c);
+  f.run(X.data(), n, c);
+  f.run(post.data(), padlen, c);
+  const Eigen::VectorXd last =  // the backward pass starts from the forward pass's last output
+      padlen > 0 ? Eigen::VectorXd(post.row(padlen - 1).transpose())
+                 : Eigen::VectorXd(X.row(n - 1).transpose());
+  f.start(z, last.data());
+  if (padlen > 0) f.run(post.data() + (padlen - 1) * c, padlen, -c);
+  f.run(X.data() + (n - 1) * c, n, -c);  // (the pre pad's backward output is not needed)
 }
 
 Eigen::MatrixXd filtfiltColumns(const Sos& sos, const Eigen::MatrixXd& X) {
@@ -329,4 +388,4 @@ double decimationVarianceFactor(const Sos& sos, int factor) {
   return sum / g0;
 }
 
-}  // namespace exid::est
+}  // namespace exid
