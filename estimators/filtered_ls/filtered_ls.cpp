@@ -11,8 +11,11 @@
 //      decimation_cutoff_ratio x the new Nyquist frequency) and one sample in `decimation` kept;
 //   4b. optionally (min_speed) the samples where a joint is nearly at rest are removed;
 //   5. least squares with batch_ls's solver (QR of [W y], rank-revealing SVD, covariance).
-// Holds the filtered signals and the rows of the whole dataset in memory (filtfilt is
-// non-causal): memory O(samples x rows per sample x p), unlike batch_ls.
+// Every step runs chunk by chunk, with margins: a chunk's rows are decimated with the decimation
+// filter's settling time of context at each side, and its signals filtered from the position
+// filter's settling time (to 1e-16) more, so that a chunk gives what the whole recording would
+// and memory is bounded by the chunk, not the recording. A recording is read whole or streamed
+// from its file alike (specs().streams), with the same result.
 #include <fmt/format.h>
 
 #include <algorithm>
@@ -111,6 +114,7 @@ class FilteredLs : public exid::Estimator {
     exid::EstimatorSpecs s;
     s.needs_raw_dataset = true;
     s.accepts_prior = true;
+    s.streams = true;  // chunks of samples with the filters' margins (process())
     return s;
   }
 
@@ -119,8 +123,8 @@ class FilteredLs : public exid::Estimator {
   struct Processed {
     exid::Rows rows;          // with keep_rows
     est::RowAccumulator acc;  // every kept row
-    bool streamed = false;
-    long chunk_samples = 0, margin_samples = 0;
+    bool streamed = false, per_sample = true;
+    long chunk_samples = 0, margin_samples = 0, signal_margin = 0;
     int threads = 1;
     double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
     bool filter_q = false, diff_qd = false, diff_qdd = false;
@@ -131,20 +135,19 @@ class FilteredLs : public exid::Estimator {
     std::string dec_note;
   };
 
-  Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
-                    const exid::RunContext& ctx, bool keep_rows) const {
-    Processed P;
+  /// Steps 1-3 decided before any sample is read: rates, filters, trim, decimation, chunks.
+  void plan(const exid::ObservationModel& model, const exid::Dataset& data, Processed* P,
+            est::Sos* sos, est::Sos* dsos) const {
     const int K = data.size();
     exid::check(K >= 8,
                 fmt::format("filtered_ls: dataset '{}' has {} samples; filtering needs at least 8",
                             data.source, K));
-    exid::check(data.q.rows() == K && data.q.cols() > 0,
+    exid::check((data.streamed() || data.q.rows() == K) && data.dof() > 0,
                 fmt::format("filtered_ls: dataset '{}' has no positions q", data.source));
-    P.fs = est::samplingRate(data.t, &P.jitter);
-    const double fs = P.fs;
-    P.filter_q = cutoff_ > 0.0;
-    const bool filter_q = P.filter_q;
-    if (filter_q)
+    P->fs = exid::samplingRate(data, &P->jitter);
+    const double fs = P->fs;
+    P->filter_q = cutoff_ > 0.0;
+    if (P->filter_q)
       exid::check(cutoff_ < 0.5 * fs,
                   fmt::format("filtered_ls: cutoff_hz = {:g} Hz must be below the Nyquist "
                               "frequency fs/2 = {:g} Hz of '{}'",
@@ -153,243 +156,290 @@ class FilteredLs : public exid::Estimator {
     exid::check(min_speed_.empty() || static_cast<int>(min_speed_.size()) == n,
                 fmt::format("filtered_ls: min_speed: expected {} values (one per joint), found {}",
                             n, min_speed_.size()));
-
-    // ---- 1-2. filtering and differentiation
-    ctx.report(0.0, "filtered_ls: filtering");
-    exid::Dataset f = data;
-    est::Sos sos;
-    if (filter_q) {
-      sos = est::butterworthLowpass(order_, cutoff_, fs);
-      f.q = est::filtfiltColumns(sos, data.q);
-    }
-    P.diff_qd = differentiate_ || !data.hasVelocity();
-    P.diff_qdd = differentiate_ || !data.hasAcceleration();
-    if (P.diff_qd) {
-      f.qd = est::centralFirstDerivative(data.t, f.q);
-    } else if (filter_q) {
-      f.qd = est::filtfiltColumns(sos, data.qd);
-    }
-    if (P.diff_qdd) {
-      f.qdd = P.diff_qd ? est::centralSecondDerivative(data.t, f.q)
-                        : est::centralFirstDerivative(data.t, f.qd);
-    } else if (filter_q) {
-      f.qdd = est::filtfiltColumns(sos, data.qdd);
-    }
-    if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped after filtering");
-
-    // ---- 3. trim: by default the filter's edge transient, ceil(2 fs / fc - eps) samples, but
-    // at most 5 % of the data at each end (the csv experiment's rule: a default never discards
-    // more than 10 %; the edges of a zero-phase filter with steady-state initial conditions
-    // are already close, and a short recording cannot spare its edges).
+    if (P->filter_q) *sos = est::butterworthLowpass(order_, cutoff_, fs);
+    P->diff_qd = differentiate_ || !data.hasVelocity();
+    P->diff_qdd = differentiate_ || !data.hasAcceleration();
+    // Trim: by default the filter's edge transient, ceil(2 fs / fc - eps) samples, but at most
+    // 5 % of the data at each end (the csv experiment's rule: a default never discards more
+    // than 10 %; the edges of a zero-phase filter with steady-state initial conditions are
+    // already close, and a short recording cannot spare its edges).
+    const bool diff = P->diff_qd || P->diff_qdd;
     long trim = trim_;
     if (trim < 0) {
-      P.trim_default = true;
-      P.trim_transient = filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_ - 1e-9))
-                                  : ((P.diff_qd || P.diff_qdd) ? 1 : 0);
-      trim = std::min(P.trim_transient, std::max<long>(P.diff_qd || P.diff_qdd ? 1 : 0, K / 20));
+      P->trim_default = true;
+      P->trim_transient = P->filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_ - 1e-9))
+                                      : (diff ? 1 : 0);
+      trim = std::min(P->trim_transient, std::max<long>(diff ? 1 : 0, K / 20));
     }
     exid::check(K - 2 * trim >= 8,
                 fmt::format("filtered_ls: trimming {} samples at each end of {} leaves too few; "
                             "lower trim_edges or raise cutoff_hz",
                             trim, K));
-    if (trim > 0) f = exid::sliceDataset(f, static_cast<int>(trim), static_cast<int>(K - trim));
-    P.trim = trim;
-
-    // ---- 4. rows and parallel decimation, in chunks of samples (memory bounded by the chunk,
-    // not the recording), on several threads, merged in chunk order (the same result for any
-    // thread count).
-    ctx.report(0.3, "filtered_ls: observation rows");
+    P->trim = trim;
     int R = decimation_;
     if (R == 0)
-      R = filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
-    const bool per_sample = est::modelIsPerSample(model);
-    if (R > 1 && !per_sample) {
-      P.dec_note = fmt::format(
+      R = P->filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
+    P->per_sample = est::modelIsPerSample(model);
+    if (R > 1 && !P->per_sample) {
+      P->dec_note = fmt::format(
           "decimation {} skipped: the model '{}' does not give one row per sample and equation", R,
           model.pluginName());
       R = 1;
     }
-    exid::check(min_speed_.empty() || per_sample,
+    exid::check(min_speed_.empty() || P->per_sample,
                 fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
                             "equation (model '{}' is not)",
                             model.pluginName()));
-    est::Sos dsos;
     if (R > 1) {
-      P.dec_cut = dec_ratio_ * 0.5 * fs / R;
-      dsos = est::butterworthLowpass(dec_order_, P.dec_cut, fs);
-      if (correct_) P.kappa = est::decimationVarianceFactor(dsos, R);
+      P->dec_cut = dec_ratio_ * 0.5 * fs / R;
+      *dsos = est::butterworthLowpass(dec_order_, P->dec_cut, fs);
+      if (correct_) P->kappa = est::decimationVarianceFactor(*dsos, R);
     }
-    P.R = R;
-    const long Kt = f.size();
-    // Chunks [a, b) (multiples of R, so the kept samples are those of the whole recording),
-    // each computed with `margin` samples of context on both sides: the decimation filter's
-    // transient from the chunk's artificial ends decays below 1e-13 before the chunk starts.
-    const long margin = R > 1 ? est::settlingSamples(dsos, 1e-13) : 0;
+    P->R = R;
+    // Chunks [a, b) of the trimmed samples (multiples of R, so the kept samples are those of the
+    // whole recording), each computed with `margin` samples of context on both sides: the
+    // decimation filter's transient from the chunk's artificial ends decays below 1e-13 before
+    // the chunk starts. The signals of a chunk and its margins are filtered and differentiated
+    // from `signal_margin` more samples on each side: the position filter's transient from those
+    // artificial ends decays below 1e-16 (the rounding of the doubles) before them, and the
+    // differences need two neighbours.
+    const long Kt = K - 2 * trim;
+    P->margin_samples = R > 1 ? est::settlingSamples(*dsos, 1e-13) : 0;
+    P->signal_margin = (P->filter_q ? est::settlingSamples(*sos, 1e-16) : 0) + (diff ? 4 : 0);
     // (at least 8 margins: the context computed twice costs at most a quarter more)
-    long C = std::max<long>(chunk_samples_, 8 * margin);
+    long C = std::max<long>(chunk_samples_, 8 * P->margin_samples);
     C = ((C + R - 1) / R) * R;
-    if (!per_sample) C = Kt;  // such a model's rows need the whole dataset at once
-    const long nchunks = (Kt + C - 1) / C;
-    P.streamed = per_sample;
-    P.chunk_samples = C;
-    P.margin_samples = margin;
+    if (!P->per_sample) C = Kt;  // such a model's rows need the whole dataset at once
+    P->chunk_samples = C;
+    P->streamed = P->per_sample;
+  }
+
+  /// Steps 1-2 on raw samples: the filtered (and differentiated) signals.
+  exid::Dataset filtered(exid::Dataset raw, const Processed& P, const est::Sos& sos) const {
+    exid::Dataset f = raw;
+    if (P.filter_q) f.q = est::filtfiltColumns(sos, raw.q);
+    if (P.diff_qd) {
+      f.qd = est::centralFirstDerivative(raw.t, f.q);
+    } else if (P.filter_q) {
+      f.qd = est::filtfiltColumns(sos, raw.qd);
+    }
+    if (P.diff_qdd) {
+      f.qdd = P.diff_qd ? est::centralSecondDerivative(raw.t, f.q)
+                        : est::centralFirstDerivative(raw.t, f.qd);
+    } else if (P.filter_q) {
+      f.qdd = est::filtfiltColumns(sos, raw.qdd);
+    }
+    return f;
+  }
+
+  struct ChunkOut {
+    exid::Rows rows;
+    est::RowAccumulator acc;
+    long slow = 0, kept = 0, rows_before = 0;
+  };
+
+  /// Step 4 for chunk [ca, cb) of the trimmed samples: f holds the filtered samples [lo, hi)
+  /// (the chunk and its decimation margins). The rows, one row of M per sample (equation g's p
+  /// base columns and its y at columns [g (p + 1), (g + 1)(p + 1))), built a block of samples at
+  /// a time (the model's rows of the whole chunk are never held), every column filtered at once,
+  /// one sample in R kept (4b: less the slow ones) and accumulated.
+  void chunkRows(const exid::ObservationModel& model, const Processed& P, const est::Sos& dsos,
+                 const exid::Dataset& f, long lo, long ca, long cb, bool keep_rows,
+                 const exid::RunContext& ctx, ChunkOut* o) const {
+    const int p = model.numBase();
+    const long trim = P.trim, hi = lo + f.size();
+    const int R = P.R;
+    if (!P.per_sample) {
+      exid::Rows rows = model.rows(f, ctx);
+      est::checkRows(rows, p, kName, static_cast<int>(trim));
+      o->rows_before = rows.y.size();
+      o->kept = rows.y.size();
+      o->acc = est::RowAccumulator(p);
+      o->acc.add(rows.W, rows.y);
+      if (keep_rows) o->rows = std::move(rows);
+      return;
+    }
+    const long L = hi - lo;
+    constexpr long kBlock = 1024;
+    est::LargeRows Mbuf;        // huge pages: written once, tens of MB
+    std::vector<int> labels;    // equation label of each group, ascending
+    std::vector<double> times;  // (keep_rows) per sample and group: the row's time
+    exid::Rows head;            // numEquations, equation_names
+    for (long a = lo; a < hi; a += kBlock) {
+      const long b = std::min(hi, a + kBlock);
+      exid::Rows rows = model.rows(
+          exid::sliceDataset(f, static_cast<int>(a - lo), static_cast<int>(b - lo)), ctx);
+      est::checkRows(rows, p, kName, static_cast<int>(trim + a));
+      if (a == lo) {
+        if (rows.equation.empty()) {
+          labels = {0};
+        } else {
+          labels = rows.equation;
+          std::sort(labels.begin(), labels.end());
+          labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
+        }
+        Mbuf = est::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
+        const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
+        if (keep_rows && has_t) times.resize(static_cast<std::size_t>(L) * labels.size());
+        head.numEquations = rows.numEquations;
+        head.equation_names = rows.equation_names;
+        o->rows_before =
+            static_cast<long>(std::min<long>(cb - ca, L) * std::max(1, rows.numEquations));
+      }
+      const auto G = labels.size();
+      auto M = Mbuf.map();
+      std::vector<long> next(G, a - lo);  // per group: the next sample's row of M
+      for (Eigen::Index i = 0; i < rows.y.size(); ++i) {
+        const int label = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(i)];
+        const auto g = static_cast<std::size_t>(
+            std::lower_bound(labels.begin(), labels.end(), label) - labels.begin());
+        if (g == G || labels[g] != label || next[g] >= b - lo)
+          throw exid::Error(fmt::format(
+              "filtered_ls: model '{}' gave rows of equation {} beyond one per sample and "
+              "equation of its first samples (samples {}-{})",
+              model.pluginName(), label, trim + a, trim + b - 1));
+        const long sm = next[g]++;
+        const Eigen::Index c0 = static_cast<Eigen::Index>(g) * (p + 1);
+        M.row(sm).segment(c0, p) = rows.W.row(i);
+        M(sm, c0 + p) = rows.y(i);
+        if (!times.empty())
+          times[static_cast<std::size_t>(sm) * G + g] = rows.t[static_cast<std::size_t>(i)];
+      }
+      for (std::size_t g = 0; g < G; ++g)
+        exid::check(next[g] == b - lo,
+                    fmt::format("filtered_ls: model '{}' gave {} rows of equation {} for {} "
+                                "samples",
+                                model.pluginName(), next[g] - (a - lo), labels[g], b - a));
+    }
+    auto M = Mbuf.map();
+    if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, M);
     const exid::RobotModel& robot = model.robot();
     const bool via_T = min_speed_joint_ && robot.hasTransmission();
+    std::vector<long> kept_samples;
+    for (long sidx = ((ca + R - 1) / R) * R; sidx < cb; sidx += R) {
+      if (!min_speed_.empty()) {
+        const auto v_row = f.qd.row(sidx - lo).transpose();
+        const Eigen::VectorXd v =
+            via_T ? Eigen::VectorXd(robot.transmission * v_row) : Eigen::VectorXd(v_row);
+        bool slow = false;
+        for (Eigen::Index j = 0; j < v.size(); ++j)
+          slow = slow || std::abs(v(j)) < min_speed_[static_cast<std::size_t>(j)];
+        if (slow) {
+          ++o->slow;
+          continue;
+        }
+      }
+      kept_samples.push_back(sidx);
+    }
+    const auto G = static_cast<Eigen::Index>(labels.size());
+    Eigen::MatrixXd W(static_cast<Eigen::Index>(kept_samples.size()) * G, p);
+    Eigen::VectorXd y(W.rows());
+    exid::Rows out;
+    out.numEquations = head.numEquations;
+    out.equation_names = head.equation_names;
+    for (std::size_t k = 0; k < kept_samples.size(); ++k) {
+      const long local = kept_samples[k] - lo;
+      for (Eigen::Index g = 0; g < G; ++g) {
+        const Eigen::Index r = static_cast<Eigen::Index>(k) * G + g;
+        W.row(r) = M.row(local).segment(g * (p + 1), p);
+        y(r) = M(local, g * (p + 1) + p);
+        if (keep_rows) {
+          out.equation.push_back(labels[static_cast<std::size_t>(g)]);
+          if (!times.empty()) out.t.push_back(times[static_cast<std::size_t>(local * G + g)]);
+        }
+      }
+    }
+    o->kept = static_cast<long>(kept_samples.size());
+    o->acc = est::RowAccumulator(p);
+    o->acc.add(W, y);
+    if (keep_rows) {
+      out.W = std::move(W);
+      out.y = std::move(y);
+      o->rows = std::move(out);
+    }
+  }
+
+  /// Steps 1-4 (also used for the validation rows of raw validation data, so that the held-out
+  /// error is measured on rows processed exactly like the identification rows). In chunks of
+  /// samples, in memory or streamed alike: each chunk's raw samples (with the margins of the
+  /// filters) read in order, filtered, differentiated, turned into rows, decimated and
+  /// accumulated on several threads, merged in chunk order (the same result for any thread
+  /// count, and for a recording read whole or streamed).
+  Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
+                    const exid::RunContext& ctx, bool keep_rows) const {
+    Processed P;
+    est::Sos sos, dsos;
+    ctx.report(0.0, "filtered_ls: planning");
+    plan(model, data, &P, &sos, &dsos);
+    const long K = data.size(), trim = P.trim, Kt = K - 2 * trim, C = P.chunk_samples;
+    const long margin = P.margin_samples, sm = P.signal_margin;
+    const long nchunks = (Kt + C - 1) / C;
     const int p = model.numBase();
-    struct ChunkOut {
-      exid::Rows rows;
-      est::RowAccumulator acc;
-      long slow = 0, kept = 0, rows_before = 0;
-    };
     const int T = static_cast<int>(std::min<long>(est::resolveThreads(threads_), nchunks));
     P.threads = T;
-    std::vector<ChunkOut> outs(static_cast<std::size_t>(T));  // one wave of chunks
-    auto work = [&](long c) {
-      ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
-      o = ChunkOut();
-      {
-        if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
-        const long ca = c * C, cb = std::min(Kt, ca + C);
-        const long lo = std::max<long>(0, ca - margin), hi = std::min(Kt, cb + margin);
-        if (!per_sample) {
-          exid::Rows rows = model.rows(f, ctx);
-          est::checkRows(rows, p, kName, static_cast<int>(trim));
-          o.rows_before = rows.y.size();
-          o.kept = rows.y.size();
-          o.acc = est::RowAccumulator(p);
-          o.acc.add(rows.W, rows.y);
-          if (keep_rows) o.rows = std::move(rows);
-          return;
-        }
-        // The chunk's rows, one row of M per sample: equation g's p base columns and its y at
-        // columns [g (p + 1), (g + 1)(p + 1)), built a block of samples at a time (the model's
-        // rows of the whole chunk are never held), then every column filtered at once.
-        const long L = hi - lo;
-        constexpr long kBlock = 1024;
-        est::LargeRows Mbuf;        // huge pages: written once, tens of MB
-        std::vector<int> labels;    // equation label of each group, ascending
-        std::vector<double> times;  // (keep_rows) per sample and group: the row's time
-        bool has_t = false;
-        exid::Rows head;  // numEquations, equation_names
-        for (long a = lo; a < hi; a += kBlock) {
-          const long b = std::min(hi, a + kBlock);
-          exid::Rows rows =
-              model.rows(exid::sliceDataset(f, static_cast<int>(a), static_cast<int>(b)), ctx);
-          est::checkRows(rows, p, kName, static_cast<int>(trim + a));
-          if (a == lo) {
-            if (rows.equation.empty()) {
-              labels = {0};
-            } else {
-              labels = rows.equation;
-              std::sort(labels.begin(), labels.end());
-              labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
-            }
-            Mbuf = est::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
-            has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
-            if (keep_rows && has_t) times.resize(static_cast<std::size_t>(L) * labels.size());
-            head.numEquations = rows.numEquations;
-            head.equation_names = rows.equation_names;
-            o.rows_before =
-                static_cast<long>(std::min<long>(cb - ca, L) * std::max(1, rows.numEquations));
-          }
-          const auto G = labels.size();
-          auto M = Mbuf.map();
-          std::vector<long> next(G, a - lo);  // per group: the next sample's row of M
-          for (Eigen::Index i = 0; i < rows.y.size(); ++i) {
-            const int label =
-                rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(i)];
-            const auto g = static_cast<std::size_t>(
-                std::lower_bound(labels.begin(), labels.end(), label) - labels.begin());
-            if (g == G || labels[g] != label || next[g] >= b - lo)
-              throw exid::Error(fmt::format(
-                  "filtered_ls: model '{}' gave rows of equation {} beyond one per sample and "
-                  "equation of its first samples (samples {}-{})",
-                  model.pluginName(), label, trim + a, trim + b - 1));
-            const long sm = next[g]++;
-            const Eigen::Index c0 = static_cast<Eigen::Index>(g) * (p + 1);
-            M.row(sm).segment(c0, p) = rows.W.row(i);
-            M(sm, c0 + p) = rows.y(i);
-            if (!times.empty())
-              times[static_cast<std::size_t>(sm) * G + g] = rows.t[static_cast<std::size_t>(i)];
-          }
-          for (std::size_t g = 0; g < G; ++g)
-            exid::check(next[g] == b - lo,
-                        fmt::format("filtered_ls: model '{}' gave {} rows of equation {} for {} "
-                                    "samples",
-                                    model.pluginName(), next[g] - (a - lo), labels[g], b - a));
-        }
-        auto M = Mbuf.map();
-        if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, M);
-        std::vector<long> kept_samples;
-        for (long sidx = ((ca + R - 1) / R) * R; sidx < cb; sidx += R) {
-          if (!min_speed_.empty()) {
-            const Eigen::VectorXd v =
-                via_T ? Eigen::VectorXd(robot.transmission * f.qd.row(sidx).transpose())
-                      : Eigen::VectorXd(f.qd.row(sidx).transpose());
-            bool slow = false;
-            for (Eigen::Index j = 0; j < v.size(); ++j)
-              slow = slow || std::abs(v(j)) < min_speed_[static_cast<std::size_t>(j)];
-            if (slow) {
-              ++o.slow;
-              continue;
-            }
-          }
-          kept_samples.push_back(sidx);
-        }
-        const auto G = static_cast<Eigen::Index>(labels.size());
-        Eigen::MatrixXd W(static_cast<Eigen::Index>(kept_samples.size()) * G, p);
-        Eigen::VectorXd y(W.rows());
-        exid::Rows out;
-        out.numEquations = head.numEquations;
-        out.equation_names = head.equation_names;
-        for (std::size_t k = 0; k < kept_samples.size(); ++k) {
-          const long local = kept_samples[k] - lo;
-          for (Eigen::Index g = 0; g < G; ++g) {
-            const Eigen::Index r = static_cast<Eigen::Index>(k) * G + g;
-            W.row(r) = M.row(local).segment(g * (p + 1), p);
-            y(r) = M(local, g * (p + 1) + p);
-            if (keep_rows) {
-              out.equation.push_back(labels[static_cast<std::size_t>(g)]);
-              if (!times.empty()) out.t.push_back(times[static_cast<std::size_t>(local * G + g)]);
-            }
-          }
-        }
-        o.kept = static_cast<long>(kept_samples.size());
-        o.acc = est::RowAccumulator(p);
-        o.acc.add(W, y);
-        if (keep_rows) {
-          out.W = std::move(W);
-          out.y = std::move(y);
-          o.rows = std::move(out);
-        }
-      }
+    // chunk c: trimmed samples [ca, cb), rows of [lo, hi), raw samples [rlo, rhi)
+    struct Span {
+      long ca, cb, lo, hi, rlo, rhi;
     };
+    auto spanOf = [&](long c) {
+      Span s;
+      s.ca = c * C;
+      s.cb = std::min(Kt, s.ca + C);
+      s.lo = P.per_sample ? std::max<long>(0, s.ca - margin) : 0;
+      s.hi = P.per_sample ? std::min(Kt, s.cb + margin) : Kt;
+      s.rlo = std::max<long>(0, trim + s.lo - sm);
+      s.rhi = std::min(K, trim + s.hi + sm);
+      return s;
+    };
+    std::vector<ChunkOut> outs(static_cast<std::size_t>(T));  // one wave of chunks
+    exid::SampleWindow window(data);
     P.acc = est::RowAccumulator(p);
     exid::Rows all;
-    est::parallelChunks(nchunks, T, work, [&](long c) {  // in chunk order: deterministic
-      ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
-      P.acc.merge(o.acc);
-      P.rows_before += o.rows_before;
-      P.slow_removed += o.slow;
-      P.samples_after_decimation += o.kept + o.slow;
-      if (keep_rows) {
-        const Eigen::Index r0 = all.W.rows();
-        all.W.conservativeResize(r0 + o.rows.W.rows(), p);
-        all.y.conservativeResize(r0 + o.rows.y.size());
-        all.W.bottomRows(o.rows.W.rows()) = o.rows.W;
-        all.y.tail(o.rows.y.size()) = o.rows.y;
-        all.equation.insert(all.equation.end(), o.rows.equation.begin(), o.rows.equation.end());
-        all.t.insert(all.t.end(), o.rows.t.begin(), o.rows.t.end());
-        all.numEquations = o.rows.numEquations;
-        all.equation_names = o.rows.equation_names;
-      }
-      o = ChunkOut();
-    });
+    ctx.report(0.1, "filtered_ls: filtering, rows and decimation");
+    est::pipelineChunks(
+        nchunks, T,
+        [&](long c, exid::Dataset* raw) {
+          const Span s = spanOf(c);
+          *raw = window.span(static_cast<int>(s.rlo), static_cast<int>(s.rhi));
+        },
+        [&](long c, const exid::Dataset& raw) {
+          if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
+          const Span s = spanOf(c);
+          const exid::Dataset f =
+              exid::sliceDataset(filtered(raw, P, sos), static_cast<int>(trim + s.lo - s.rlo),
+                                 static_cast<int>(trim + s.hi - s.rlo));
+          ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
+          o = ChunkOut();
+          chunkRows(model, P, dsos, f, s.lo, s.ca, s.cb, keep_rows, ctx, &o);
+        },
+        [&](long c) {  // in chunk order: deterministic
+          ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
+          P.acc.merge(o.acc);
+          P.rows_before += o.rows_before;
+          P.slow_removed += o.slow;
+          P.samples_after_decimation += o.kept + o.slow;
+          if (keep_rows) appendRows(&all, o.rows, p);
+          o = ChunkOut();
+          ctx.report(0.1 + 0.8 * static_cast<double>(c + 1) / static_cast<double>(nchunks),
+                     fmt::format("filtered_ls: {} / {} chunks", c + 1, nchunks));
+        });
     exid::check(P.acc.rows() > 0,
                 fmt::format("filtered_ls: no rows left of '{}'{}", data.source,
                             min_speed_.empty() ? "" : " (min_speed removed every sample)"));
     if (keep_rows) P.rows = std::move(all);
     return P;
+  }
+
+  static void appendRows(exid::Rows* all, const exid::Rows& r, int p) {
+    const Eigen::Index r0 = all->W.rows();
+    all->W.conservativeResize(r0 + r.W.rows(), p);
+    all->y.conservativeResize(r0 + r.y.size());
+    all->W.bottomRows(r.W.rows()) = r.W;
+    all->y.tail(r.y.size()) = r.y;
+    all->equation.insert(all->equation.end(), r.equation.begin(), r.equation.end());
+    all->t.insert(all->t.end(), r.t.begin(), r.t.end());
+    all->numEquations = r.numEquations;
+    all->equation_names = r.equation_names;
   }
 
   exid::Rows validationRows(const exid::ObservationModel& model, const exid::Dataset& data,
@@ -486,11 +536,13 @@ class FilteredLs : public exid::Estimator {
     d["streamed"] = P.streamed;
     d["chunk_samples"] = Json(static_cast<long long>(P.chunk_samples));
     d["chunk_margin_samples"] = Json(static_cast<long long>(P.margin_samples));
+    d["signal_margin_samples"] = Json(static_cast<long long>(P.signal_margin));
     d["threads"] = P.threads;
     d["memory"] =
         P.streamed
-            ? "rows built, filtered and accumulated per chunk of chunk_samples (+ the margin at "
-              "each side); the filtered signals q, qd, qdd, tau of the whole recording are held"
+            ? "per chunk of chunk_samples: its samples (with both filters' margins at each "
+              "side) read, filtered, differentiated, turned into rows, decimated and "
+              "accumulated; memory bounded by the chunk (times the threads), not the recording"
             : fmt::format(
                   "the model '{}' does not give one row per sample: its rows of the whole "
                   "recording are held at once",

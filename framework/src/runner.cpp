@@ -836,6 +836,13 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
           cfg.estimator && especs.streams && cfg.report.experiment_csv != "always";
       data = may_stream ? exp->stream(robot, reference ? &*reference : nullptr, ectx)
                         : exp->run(robot, reference ? &*reference : nullptr, ectx);
+      // A streamed recording that experiment.csv will copy (the `auto` policy: up to
+      // kExperimentCsvAutoSamples samples) is read whole once, here: the copy and the estimator
+      // then share one pass, and the inspection runs beside the estimator. Streaming pays only
+      // when nothing needs the whole recording.
+      if (data->streamed() && write && cfg.report.experiment_csv == "auto" &&
+          data->size() <= kExperimentCsvAutoSamples)
+        data = materialize(*data);
       checkDataset(*data, *robot, model.get(), "experiment", especs.needs_raw_dataset);
       checkDatasetFinite(*data, "experiment");
       Json& E = S["experiment"];

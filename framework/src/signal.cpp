@@ -272,6 +272,28 @@ double samplingRate(const Eigen::VectorXd& t, double* jitter) {
   return 1.0 / med;
 }
 
+double samplingRate(const Dataset& d, double* jitter) {
+  if (!d.streamed()) return samplingRate(d.t, jitter);
+  double fs = 0.0, jit = 0.0;
+  if (d.stream->samplingRate(&fs, &jit)) {
+    if (jitter) *jitter = jit;
+    return fs;
+  }
+  Eigen::VectorXd t(d.size());
+  Dataset chunk;
+  d.stream->rewind();
+  Eigen::Index k = 0;
+  while (const int got = d.stream->read(65536, &chunk)) {
+    check(k + got <= t.size(),
+          fmt::format("'{}': the stream gave more than its {} samples", d.source, t.size()));
+    t.segment(k, got) = chunk.t.head(got);
+    k += got;
+  }
+  check(k == t.size(),
+        fmt::format("'{}': the stream gave {} of its {} samples", d.source, k, t.size()));
+  return samplingRate(t, jitter);
+}
+
 Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X) {
   const Eigen::Index n = X.rows();
   check(n >= 3 && t.size() == n,

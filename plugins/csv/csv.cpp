@@ -383,6 +383,12 @@ class CsvExperiment : public exid::Experiment {
     bool passed() const override { return stats_done_; }
     void collectEvery(int stride) override { stride_ = std::max(1, stride); }
     const exid::Dataset& collected() const override { return collected_; }
+    bool samplingRate(double* fs_hz, double* jitter) const override {
+      if (!has_rate_) return false;
+      *fs_hz = fs_hz_;
+      *jitter = jitter_;
+      return true;
+    }
     exid::Json meta() const override { return metaAfter(size(), 0, 0.0, Preprocessed(), size()); }
 
     void rewind() override {
@@ -976,6 +982,26 @@ class CsvExperiment : public exid::Experiment {
       if (i0_ < 0) i0_ = i1_ = 0;
       t_first_ = timeOf(i0_);
       t_last_ = timeOf(i1_ - 1);
+      // The samples' sampling rate as exid::samplingRate computes it on a pass's t (the same
+      // differences of the same doubles, the same median): samplingRate() without a pass.
+      has_rate_ = false;
+      if (i1_ - i0_ >= 3) {
+        auto dtAt = [&](std::size_t k) {
+          const long i = i0_ + static_cast<long>(k);
+          return timeOf(i + 1) - timeOf(i);
+        };
+        const auto nd = static_cast<std::size_t>(i1_ - i0_ - 1);
+        bool increasing = true;
+        for (std::size_t k = 0; k < nd && increasing; ++k) increasing = dtAt(k) > 0;
+        if (increasing) {
+          const double med = exid::medianOfValues(nd, dtAt);
+          double jit = 0.0;
+          for (std::size_t k = 0; k < nd; ++k) jit = std::max(jit, std::abs(dtAt(k) - med) / med);
+          fs_hz_ = 1.0 / med;
+          jitter_ = jit;
+          has_rate_ = true;
+        }
+      }
       // Recording statistics: the timing now; the rest after the first whole pass.
       recording_ = exid::Json::object();
       recording_["file"] = file;
@@ -1105,6 +1131,8 @@ class CsvExperiment : public exid::Experiment {
     int in_segment_ = 0;
     double ts_ = 0, te_ = 0, sf_ = 0, tsplit_ = 0, seg_end_ = 0, span_ = 0;
     double t_first_abs_ = 0, t_first_ = 0, t_last_ = 0;
+    bool has_rate_ = false;  // samplingRate(): known from the scan
+    double fs_hz_ = 0, jitter_ = 0;
     exid::Json recording_;
     // a pass
     std::vector<std::unique_ptr<exid::CsvReader>> readers_;

@@ -438,7 +438,9 @@ TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGives
       make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 100000000, threads: 1}")
           ->estimate(*m, d, nullptr, ctx);
   EXPECT_EQ(whole.details.find("chunk_samples")->asInt(), 100000000);
-  // small chunks (the settling margin sets the floor: 8 margins), 1 and 3 threads
+  // small chunks (the settling margin sets the floor: 8 margins), 1 and 3 threads: each chunk's
+  // positions filtered and differentiated from its own samples and margins, its rows decimated
+  // with the decimation filter's margins
   const exid::Estimate c1 = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 1}")
                                 ->estimate(*m, d, nullptr, ctx);
   const exid::Estimate c3 = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 3}")

@@ -569,7 +569,14 @@ TEST(Cli, AStreamedRecordingGivesTheSameResultsAsTheWholeRead) {
       out << line << "\n";
     }
   }
-  for (const std::string est : {"batch_ls", "wls", "rls", "consistent_ls"}) {
+  for (const std::string est : {"batch_ls", "wls", "rls", "consistent_ls", "filtered_ls"}) {
+    // filtered_ls: its position filter, differences and decimation over chunks with margins,
+    // several chunks
+    const std::string params =
+        est == "consistent_ls" ? ", params: {}"
+        : est == "filtered_ls"
+            ? ", params: {cutoff_hz: 20, differentiate: true, chunk_samples: 64, threads: 2}"
+            : "";
     auto run = [&](const std::string& policy) {
       std::ofstream(dir / "s.yaml")
           << "robot: {type: planar2r}\n"
@@ -578,7 +585,7 @@ TEST(Cli, AStreamedRecordingGivesTheSameResultsAsTheWholeRead) {
              "0.2}}\n"
              "split: {identification_fraction: 0.7}\n"
              "estimator: {type: "
-          << est << (est == "consistent_ls" ? ", params: {}}\n" : "}\n")
+          << est << params << "}\n"
           << (est == "consistent_ls" || est == "rls"
                   ? "prior: {from: robot, relative_std: 0.5, absolute_std: 1}\n"
                   : "")

@@ -141,17 +141,29 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
         n, T, [&](long c) { accumulateTask(c, data, 0); }, merge);
     return total;
   }
-  // A streamed dataset is read in order, one wave of T tasks at a time; with several threads the
-  // next wave is read (on one more thread) while the T threads build this wave's rows, so that
-  // reading the file overlaps the model. At most two waves' samples are held. The merge is in
-  // task order, so the result is the same for any thread count.
+  // A streamed dataset is read in order, one wave of T tasks at a time, the next wave beside
+  // this wave's rows (pipelineChunks); the merge is in task order, so the result is the same for
+  // any thread count.
   SampleWindow window(data);
+  pipelineChunks(
+      n, T,
+      [&](long c, Dataset* in) {
+        const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+        *in = window.span(tb, te);
+      },
+      [&](long c, const Dataset& in) { accumulateTask(c, in, static_cast<int>(c * task)); },
+      merge);
+  return total;
+}
+
+void pipelineChunks(long n, int threads, const std::function<void(long, Dataset*)>& read,
+                    const std::function<void(long, const Dataset&)>& work,
+                    const std::function<void(long)>& consume) {
+  if (n <= 0) return;
+  const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));
   std::vector<Dataset> cur(static_cast<std::size_t>(T)), next(static_cast<std::size_t>(T));
   auto readWave = [&](long c0, std::vector<Dataset>* buf) {
-    for (long c = c0; c < std::min(n, c0 + T); ++c) {
-      const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
-      (*buf)[static_cast<std::size_t>(c - c0)] = window.span(tb, te);
-    }
+    for (long c = c0; c < std::min(n, c0 + T); ++c) read(c, &(*buf)[static_cast<std::size_t>(c - c0)]);
   };
   readWave(0, &cur);
   std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
@@ -159,7 +171,7 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
     const long w1 = std::min(n, w0 + T);
     auto one = [&](long c) {
       try {
-        accumulateTask(c, cur[static_cast<std::size_t>(c - w0)], static_cast<int>(c * task));
+        work(c, cur[static_cast<std::size_t>(c - w0)]);
       } catch (...) {
         err[static_cast<std::size_t>(c - w0)] = std::current_exception();
       }
@@ -185,10 +197,9 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
     for (long c = w0; c < w1; ++c)  // errors in the order of the data
       if (auto& e = err[static_cast<std::size_t>(c - w0)]) std::rethrow_exception(e);
     if (read_err) std::rethrow_exception(read_err);
-    for (long c = w0; c < w1; ++c) merge(c);
+    for (long c = w0; c < w1; ++c) consume(c);
     std::swap(cur, next);
   }
-  return total;
 }
 
 void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,

@@ -50,6 +50,11 @@ class DatasetStream {
   virtual void collectEvery(int stride) = 0;
   /// Those samples, once a whole pass has been read (empty before).
   virtual const Dataset& collected() const = 0;
+  /// The sampling rate 1 / median(dt) of a pass's time stamps and *jitter = max |dt - median| /
+  /// median, exactly as exid::samplingRate computes them on the t of a whole pass, when the
+  /// stream knows them without a pass (a recording's scan of its time stamps); false otherwise
+  /// (exid::samplingRate(const Dataset&) then reads a pass).
+  virtual bool samplingRate(double* /*fs_hz*/, double* /*jitter*/) const { return false; }
 };
 
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).

@@ -68,6 +68,9 @@ long settlingSamples(const Sos& sos, double tol);
 /// Sampling rate 1 / median(dt); *jitter = max |dt - median| / median. Throws on < 3 samples
 /// or non-increasing t.
 double samplingRate(const Eigen::VectorXd& t, double* jitter);
+/// The same for a dataset in memory or streamed: the stream's own figures when it has them
+/// (DatasetStream::samplingRate), else one pass that reads the time stamps (8 bytes a sample).
+double samplingRate(const Dataset& d, double* jitter);
 /// First derivative by three-point central differences (non-uniform t allowed), second-order
 /// one-sided three-point formulas at the ends.
 Eigen::MatrixXd centralFirstDerivative(const Eigen::VectorXd& t, const Eigen::MatrixXd& X);

@@ -154,6 +154,15 @@ int resolveThreads(long requested);
 /// results exist at once. An exception from a chunk is rethrown (the first by chunk order).
 void parallelChunks(long n, int threads, const std::function<void(long)>& work,
                     const std::function<void(long)>& consume);
+/// parallelChunks for chunks that each need an input read in order (the spans of a streamed
+/// dataset): read(c, &input) runs for the chunks of a wave in chunk order, on one thread at a
+/// time, then work(c, input) on the threads and consume(c) in chunk order. With several threads
+/// the next wave's inputs are read (on one more thread) while this wave's work runs, so that
+/// reading a file overlaps the computation; at most two waves' inputs exist at once. Exceptions:
+/// the first by chunk order, the work's before the read-ahead's.
+void pipelineChunks(long n, int threads, const std::function<void(long, Dataset*)>& read,
+                    const std::function<void(long, const Dataset&)>& work,
+                    const std::function<void(long)>& consume);
 /// The model's rows of the dataset in chunks of chunk_samples, accumulated per chunk on
 /// `threads` threads and merged in chunk order (the same bits for any thread count).
 RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data, int chunk_samples,
