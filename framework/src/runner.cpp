@@ -546,6 +546,584 @@ CsvTable datasetTable(const Dataset& d) {
   return t;
 }
 
+namespace {
+
+// One study, stage by stage: what the stages share (the study, the summary being built, the
+// run's context and folder) and what each leaves to the next (robot, model, trajectory, the
+// excitation's optimum, the dataset, the estimate). runStudy() sets up the run folder and the
+// watchdog, runs the stages in order and publishes the results; a stage that throws ends the
+// study with that stage named.
+class StudyRun {
+ public:
+  StudyRun(const StudyConfig& study, const Registry& registry, const RunOptions& options,
+           Json& summary, const fs::path& staging, Report& rep,
+           std::function<void(const char*)> set_stage)
+      : cfg(study),
+        reg(registry),
+        opt(options),
+        S(summary),
+        write(!options.out_dir.empty()),
+        dir(staging),
+        report(rep),
+        setStage(std::move(set_stage)) {
+    ctx.study_dir = cfg.dir;
+    ctx.out_dir = dir;
+    ctx.seed = cfg.seed;
+    ctx.deadline = Deadline(cfg.budget_s);
+    ctx.cancelled = opt.cancelled;
+  }
+  // The inspection beside the estimator reads robot, model and data: it is waited for before
+  // they go (also when a stage throws); its result stays.
+  ~StudyRun() {
+    if (experiment_inspection.valid()) experiment_inspection.wait();
+  }
+  StudyRun(const StudyRun&) = delete;
+  StudyRun& operator=(const StudyRun&) = delete;
+
+  void robotStage();
+  void modelStage();
+  void excitationStage();
+  void experimentStage();
+  void identificationStage();
+  void validationStage();
+
+  /// What a user should know about this run's results (also logged): the report lists them.
+  void warn(const std::string& text) {
+    logWarn(text);
+    S["warnings"].push_back(Json(text));
+  }
+  /// The experiment's inspection, when it ran beside the estimator, into the summary.
+  void collectExperimentInspection() {
+    if (experiment_inspection.valid())
+      applyInspection(S, warnFn(), "experiment", experiment_inspection.get());
+  }
+
+  const StudyConfig& cfg;
+  const Registry& reg;
+  const RunOptions& opt;
+  Json& S;
+  const bool write;
+  const fs::path dir;  // where this run writes ("" = nowhere)
+  Report& report;
+  std::function<void(const char*)> setStage;
+  RunContext ctx;
+
+ private:
+  std::function<void(const std::string&)> warnFn() {
+    return [this](const std::string& text) { warn(text); };
+  }
+  void excitationOutputs(const Samples& initial, const Samples& best, const OptimizerResult& r,
+                         const ExcitationOptions& xo, Json& X);
+  std::function<void(double, const std::string&)> progressFor(const std::string& st) const {
+    const RunOptions* o = &opt;
+    return [o, st](double f, const std::string& text) {
+      if (o->progress) o->progress(st, f, text);
+    };
+  }
+
+  std::shared_ptr<const RobotModel> robot;
+  std::shared_ptr<ObservationModel> model;
+  std::shared_ptr<Trajectory> traj;
+  std::optional<Samples> reference;  // the excitation's optimum
+  std::optional<Dataset> data;
+  std::optional<Estimate> est;
+  // The experiment's inspection when it runs beside the estimator (a recording in memory).
+  std::future<Json> experiment_inspection;
+};
+
+// The robot: its plugin builds the model of the arm.
+void StudyRun::robotStage() {
+  setStage("robot");
+  const auto t0 = std::chrono::steady_clock::now();
+  auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
+  robot = robotPlugin->build(ctx);
+  check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
+  Json& R = S["robot"];
+  R["type"] = cfg.robot->type;
+  R["name"] = robot->name;
+  R["dof"] = robot->dof();
+  R["n_parameters"] = robot->numInertialParameters();
+  if (!robot->notes.empty()) R["notes"] = Json(robot->notes);
+  for (const auto& w : robot->warnings) S["warnings"].push_back(Json(w));  // logged on load
+  R["wall_s"] = seconds(t0);
+}
+
+// The observation model, bound to the robot (and to the joints the excitation moves).
+void StudyRun::modelStage() {
+  if (!cfg.models.empty()) {
+    setStage("model");
+    const auto t0 = std::chrono::steady_clock::now();
+    if (cfg.models.size() == 1) {
+      model = reg.create<ObservationModel>(cfg.models[0].type, cfg.models[0].params);
+    } else {
+      std::vector<std::shared_ptr<ObservationModel>> parts;
+      std::vector<double> weights;
+      for (const auto& m : cfg.models) {
+        parts.push_back(reg.create<ObservationModel>(m.type, m.params));
+        weights.push_back(m.weight);
+      }
+      model = std::make_shared<StackedModel>(std::move(parts), std::move(weights));
+    }
+    // Joints the excitation trajectory holds still: the base parameters are those the motion
+    // of the moving joints can identify (paper section 4, one joint at a time).
+    if (cfg.hasExcitation()) {
+      traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+      traj->bind(robot, ctx);
+      std::vector<int> moving = traj->specs().moving_joints;
+      if (!moving.empty() && static_cast<int>(moving.size()) < robot->dof()) {
+        const Samples s0 = traj->evaluate(traj->initial());
+        model->restrictMotion(std::move(moving), s0.q.row(0).transpose());
+      }
+    }
+    model->bind(robot, ctx);
+    checkFinite(model->fullNominal(),
+                fmt::format("model '{}': the robot's nominal parameter", model->pluginName()),
+                model->fullNames());
+    checkFinite(model->baseNominal(),
+                fmt::format("model '{}': the nominal base parameter", model->pluginName()),
+                model->base().names);
+    S["robot"]["n_parameters"] = model->base().numFull();
+    S["robot"]["n_base_parameters"] = model->numBase();
+    Json& Mj = S["model"];
+    Mj["type"] = model->pluginName();
+    Mj["n_full"] = model->base().numFull();
+    Mj["n_base"] = model->numBase();
+    Mj["base_parameters"] = Json(model->base().names);
+    Mj["details"] = model->describe();
+    if (!model->movingJoints().empty()) {  // base parameters of the restricted motion
+      std::vector<double> mj;
+      for (int j : model->movingJoints()) mj.push_back(j + 1);
+      Mj["moving_joints"] = Json(mj);
+    }
+    Mj["wall_s"] = seconds(t0);
+    report.model(*model);
+  }
+}
+
+// Excitation design: the trajectory that optimises the criterion under the limits.
+void StudyRun::excitationStage() {
+  if (cfg.hasExcitation()) {
+    setStage("excitation");
+    if (!traj) {
+      traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
+      traj->bind(robot, ctx);
+    }
+    auto crit = reg.create<Criterion>(cfg.criterion->type, cfg.criterion->params);
+    auto optim = reg.create<Optimizer>(cfg.optimizer->type, cfg.optimizer->params);
+    ExcitationOptions xo;
+    xo.position_margin = traj->positionMargin();
+    xo.velocity_limits = traj->velocityLimits();
+    xo.acceleration_limits = traj->accelerationLimits();
+    xo.scale_columns = crit->specs().scale_columns;
+    xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
+    xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
+    auto problem = makeExcitationProblem(traj, model, crit, xo);
+    RunContext xctx = ctx;
+    xctx.progress = progressFor("excitation");
+    Samples initial = traj->evaluate(traj->initial());
+    // A criterion that is NaN (or fails) at the optimiser's answer makes it no answer: the
+    // optimisers skip such points, but one that found nothing better may return one (nlopt
+    // scores a failed evaluation 1e30). Checked before anything of the stage is written.
+    const std::string crit_place = fmt::format(
+        "{}{}: excitation.criterion '{}'", cfg.file.empty() ? "study" : cfg.file.string(),
+        cfg.criterion->line > 0 ? ":" + std::to_string(cfg.criterion->line) : "",
+        cfg.criterion->type);
+    auto criterionAt = [&](const Eigen::VectorXd& z, std::string* why) {
+      try {
+        const double J = problem->value(z, nullptr);
+        if (!std::isfinite(J)) *why = fmt::format("it evaluates to {}", J);
+        return J;
+      } catch (const Error& e) {
+        *why = e.what();
+        return static_cast<double>(NAN);
+      }
+    };
+    OptimizerResult r;
+    try {
+      r = optim->minimize(*problem, xctx);
+    } catch (const Error& e) {
+      std::string why;
+      if (ctx.shouldStop() || std::isfinite(criterionAt(traj->initial(), &why))) throw;
+      throw Error(fmt::format(
+          "{}: no finite value at the initial trajectory ({}) nor at any point optimizer '{}' "
+          "tried ({})",
+          crit_place, why, cfg.optimizer->type, e.what()));
+    }
+    if (std::string why; !std::isfinite(criterionAt(r.z, &why))) {
+      throw Error(fmt::format(
+          "{}: not finite at the trajectory optimizer '{}' returned ({}; {} evaluations, "
+          "stop: {}): no usable excitation trajectory",
+          crit_place, cfg.optimizer->type, why, r.evaluations, stopReasonText(r)));
+    }
+    Samples best = traj->evaluate(r.z);
+    Json& X = S["excitation"];
+    X["trajectory"] = cfg.trajectory->type;
+    X["criterion"] = cfg.criterion->type;
+    X["optimizer"] = cfg.optimizer->type;
+    X["criterion_initial"] = r.criterion_initial;
+    X["criterion_final"] = r.criterion_final;
+    X["cond_W_initial"] = conditionNumber(model->design(initial));
+    X["cond_W_final"] = conditionNumber(model->design(best));
+    X["max_constraint_violation"] = r.max_violation;
+    if (xo.torque_margin > 0) {
+      // the worst |tau_j| / tau_max,j the full model predicts at the samples
+      const Eigen::VectorXd tmax =
+          torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
+      const Eigen::MatrixXd tau = predictedTorques(model->robot(), best);
+      X["torque_margin"] = xo.torque_margin;
+      X["torque_ratio_max"] = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
+    }
+    X["iterations"] = r.iterations;
+    X["evaluations"] = Json(static_cast<long long>(r.evaluations));
+    X["wall_s"] = r.wall_s;
+    X["stop_reason"] = stopReasonText(r);
+    // A run cut by time gives another answer on another (or a busier) machine.
+    X["reproducible"] = !stoppedByTime(r.stop_reason);
+    if (!X["reproducible"].asBool())
+      warn(fmt::format(
+          "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "
+          "the trajectory depends on the speed of this machine; for a reproducible result give "
+          "an evaluation or iteration budget (max_evaluations, max_iterations)",
+          cfg.optimizer->type, stopReasonText(r), r.evaluations));
+    X["details"] = r.details;
+    X["history"]["t_s"] = Json(r.history_t_s);
+    X["history"]["value"] = Json(r.history_value);
+    excitationOutputs(initial, best, r, xo, X);
+    reference = best;
+  }
+}
+
+// The excitation's files (trajectories, the criterion's history), its export for execution
+// (--export) and its report section.
+void StudyRun::excitationOutputs(const Samples& initial, const Samples& best,
+                                 const OptimizerResult& r, const ExcitationOptions& xo, Json& X) {
+  if (write) {
+    writeCsvAtomic(dir / "trajectory_initial.csv", samplesTable(initial));
+    writeCsvAtomic(dir / "trajectory_optimal.csv", samplesTable(best));
+    CsvTable h;
+    h.columns = {"wall_s", "criterion"};
+    h.data.resize(static_cast<Eigen::Index>(r.history_value.size()), 2);
+    for (std::size_t i = 0; i < r.history_value.size(); ++i) {
+      h.data(static_cast<Eigen::Index>(i), 0) = i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
+      h.data(static_cast<Eigen::Index>(i), 1) = r.history_value[i];
+    }
+    writeCsvAtomic(dir / "criterion_history.csv", h);
+    X["trajectory_csv"] = "trajectory_optimal.csv";
+  }
+  if (!opt.export_dir.empty()) {
+    TrajectoryExportOptions eo;
+    eo.rate_Hz = opt.export_rate_Hz;
+    eo.periods = opt.export_periods;
+    eo.torque_max = xo.torque_max;
+    eo.torque_margin = xo.torque_margin;
+    eo.plots = cfg.report.plots;
+    TrajectoryCheck chk;
+    X["export"] = exportTrajectory(*traj, cfg.trajectory->type, cfg.trajectory->params, r.z,
+                                   model->robot(), eo, opt.export_dir, &chk);
+    X["export"]["dir"] = fs::absolute(opt.export_dir).string();
+    if (!chk.ok)
+      warn(
+          fmt::format("excitation: the exported trajectory ({}) exceeds a limit of the robot "
+                      "at {} Hz:\n{}",
+                      opt.export_dir.string(), eo.rate_Hz, chk.text()));
+  }
+  report.excitation(initial, best, r, *model);
+  if (xo.torque_margin > 0 || X.find("export")) {
+    Eigen::VectorXd tmax;
+    Eigen::MatrixXd tau;
+    if (xo.torque_margin > 0) {
+      tmax = torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
+      tau = predictedTorques(model->robot(), best);
+    }
+    report.excitationLimits(best, tau, tmax, xo.torque_margin, X.find("export"));
+  }
+}
+
+// The experiment: simulated, or a recording read whole or streamed.
+void StudyRun::experimentStage() {
+  if (cfg.experiment) {
+    setStage("experiment");
+    const auto t0 = std::chrono::steady_clock::now();
+    auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
+    RunContext ectx = ctx;
+    ectx.progress = progressFor("experiment");
+    const EstimatorSpecs especs =
+        cfg.estimator ? reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs()
+                      : EstimatorSpecs();
+    // Streamed (read in chunks, never held whole) when the estimator streams and nothing else
+    // needs the whole dataset (experiment.csv: always).
+    const bool may_stream =
+        cfg.estimator && especs.streams && cfg.report.experiment_csv != "always";
+    data = may_stream ? exp->stream(robot, reference ? &*reference : nullptr, ectx)
+                      : exp->run(robot, reference ? &*reference : nullptr, ectx);
+    // A streamed recording that experiment.csv will copy (the `auto` policy: up to
+    // kExperimentCsvAutoSamples samples) is read whole once, here: the copy and the estimator
+    // then share one pass, and the inspection runs beside the estimator. Streaming pays only
+    // when nothing needs the whole recording.
+    if (data->streamed() && write && cfg.report.experiment_csv == "auto" &&
+        data->size() <= kExperimentCsvAutoSamples)
+      data = materialize(*data);
+    checkDataset(*data, *robot, model.get(), "experiment", especs.needs_raw_dataset);
+    checkDatasetFinite(*data, "experiment");
+    Json& E = S["experiment"];
+    E["type"] = cfg.experiment->type;
+    E["samples"] = data->size();
+    E["duration_s"] = data->tLast() - data->tFirst();
+    E["wall_s"] = seconds(t0);
+    E["meta"] = data->meta;
+    if (data->streamed()) {
+      E["streamed"] = fmt::format(
+          "read from the file in chunks by the estimator '{}' (never held whole); the "
+          "recording's statistics and the inspection are from its first pass",
+          cfg.estimator->type);
+      data->stream->collectEvery(static_cast<int>(streamInspectStride(data->size())));
+    }
+    if (const Json* w = data->meta.find("warnings"); w && w->isArray())
+      for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
+    if (!data->streamed()) {
+      if (cfg.estimator) {
+        // The inspection runs beside the estimator (both only read the dataset and the
+        // model) and is put into the summary when the estimator is done, at the same place
+        // in the summary and among the warnings as if it had run here.
+        experiment_inspection = std::async(std::launch::async, [this, ectx] {
+          return inspectionOf(*robot, model.get(), *data, ectx);
+        });
+      } else {
+        inspectInto(S, warnFn(), "experiment", *robot, model.get(), *data, ectx);
+      }
+    }
+    // experiment.csv: simulated data always; recorded data are a copy of the input, written
+    // (by default) only while small. What was written, or why not, is in the summary.
+    const bool simulated_data =
+        data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+    const std::string& policy = cfg.report.experiment_csv;
+    const bool write_csv =
+        policy == "always" ||
+        (policy == "auto" && (simulated_data || data->size() <= kExperimentCsvAutoSamples));
+    if (write && !write_csv)
+      E["csv_not_written"] =
+          policy == "never"
+              ? std::string("report.params.experiment_csv: never")
+              : fmt::format(
+                    "recorded data of {} samples (more than {}): a copy of the input; "
+                    "report.params.experiment_csv: always writes it",
+                    data->size(), kExperimentCsvAutoSamples);
+    if (write && write_csv) {
+      // The joints named in a first comment line (readers skip it; exid's csv experiment too).
+      std::string joints;
+      for (int j = 0; j < robot->dof(); ++j) {
+        const std::string& jn = robot->hasTransmission()
+                                    ? std::string()
+                                    : robot->bodies[static_cast<std::size_t>(j)].joint_name;
+        joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
+                              jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
+      }
+      writeFileAtomic(
+          dir / "experiment.csv",
+          fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
+                      "units, t in s\n{}",
+                      cfg.name, robot->name, joints, toCsv(datasetTable(materialize(*data)))));
+      E["csv"] = "experiment.csv";
+    }
+  }
+}
+
+// Identification: the estimator on the dataset; the parameters against the truth or
+// the nominal values.
+void StudyRun::identificationStage() {
+  if (cfg.estimator) {
+    setStage("identification");
+    const auto t0 = std::chrono::steady_clock::now();
+    auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+    RunContext ictx = ctx;
+    ictx.progress = progressFor("identification");
+    std::optional<Prior> prior;
+    if (cfg.prior) {
+      check(estimator->specs().accepts_prior,
+            fmt::format(
+                "prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
+                "and rls do)",
+                cfg.estimator->type));
+      prior = buildPrior(*cfg.prior, *model);
+    }
+    est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
+    collectExperimentInspection();
+    if (data->streamed()) {
+      // The recording's statistics (and the samples kept for the inspection) are complete
+      // after a whole pass: the estimator's, or one more here.
+      if (!data->stream->passed()) {
+        Dataset chunk;
+        data->stream->rewind();
+        while (data->stream->read(8192, &chunk) > 0) {
+        }
+      }
+      data->meta = data->stream->meta();
+      S["experiment"]["meta"] = data->meta;
+      inspectInto(S, warnFn(), "experiment", *robot, model.get(), *data, ictx);
+    }
+    checkFinite(est->value, fmt::format("estimator '{}': the estimate of", cfg.estimator->type),
+                est->names);
+    if (est->std.size() > 0)
+      checkFinite(est->std,
+                  fmt::format("estimator '{}': the standard deviation of", cfg.estimator->type),
+                  est->names);
+    check(std::isfinite(est->residual_rms),
+          fmt::format("estimator '{}': the residual RMS is {} (a non-finite result is an "
+                      "error, never a result)",
+                      cfg.estimator->type, est->residual_rms));
+    Json& I = S["identification"];
+    I["estimator"] = cfg.estimator->type;
+    if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
+    I["wall_s"] = seconds(t0);
+    I["rows"] = Json(static_cast<long long>(est->rows));
+    I["cond_W"] = est->cond_W;
+    I["residual_rms"] = est->residual_rms;
+    I["sigma"] = est->sigma;
+    const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+    const Eigen::VectorXd nominal = model->baseNominal();
+    // A simulated study is judged against what the simulation used (its payload), never
+    // against a nominal value it did not use.
+    const Eigen::VectorXd truth =
+        simulated ? Eigen::VectorXd(model->base().reduce(model->fullTruth(data->meta))) : nominal;
+    Json params = Json::array();
+    double err2 = 0, tru2 = 0;
+    for (Eigen::Index i = 0; i < est->value.size(); ++i) {
+      Json p = Json::object();
+      p["name"] = est->names[static_cast<std::size_t>(i)];
+      p["expression"] = est->expressions[static_cast<std::size_t>(i)];
+      p["value"] = est->value(i);
+      p["std"] = est->std.size() > i ? est->std(i) : NAN;
+      p["rel_std_percent"] = est->std.size() > i && est->value(i) != 0
+                                 ? 100.0 * est->std(i) / std::abs(est->value(i))
+                                 : NAN;
+      p["nominal"] = nominal(i);
+      if (simulated) p["true"] = truth(i);
+      err2 += (est->value(i) - truth(i)) * (est->value(i) - truth(i));
+      tru2 += truth(i) * truth(i);
+      params.push_back(p);
+    }
+    if (simulated) {
+      I["param_abs_err"] = std::sqrt(err2);
+      if (tru2 > 0)
+        I["param_rel_err"] = std::sqrt(err2 / tru2);
+      else
+        warn(
+            "identification: every true parameter is zero (the simulation used none of the "
+            "model's parameters, e.g. no payload): param_rel_err is undefined; "
+            "param_abs_err is given");
+    }
+    I["parameters"] = params;
+    I["details"] = est->details;
+    if (const Json* w = est->details.find("warnings"); w && w->isArray())
+      for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());
+    report.identification(*est, truth, simulated);
+  }
+}
+
+// Validation on held-out data.
+void StudyRun::validationStage() {
+  if (cfg.validation) {
+    setStage("validation");
+    const auto t0 = std::chrono::steady_clock::now();
+    auto exp = reg.create<Experiment>(cfg.validation->type, cfg.validation->params);
+    RunContext vctx = ctx;
+    vctx.seed = ctx.seed + 1000003;  // independent noise
+    // The validation experiment runs its own trajectory (its own period, harmonics, seed):
+    // validating on the identification trajectory (the excitation's optimum) would not
+    // measure how the model generalises.
+    Dataset vd = exp->run(robot, nullptr, vctx);
+    // Raw validation data (no q̇/q̈ yet) for an estimator that processes its own data: its
+    // processing makes the validation rows too (the held-out error is then measured on rows
+    // processed like the identification rows). Otherwise the model's rows of the data as
+    // the validation experiment gives them.
+    auto vest = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+    const bool by_estimator =
+        vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
+    checkDataset(vd, *robot, model.get(), "validation", by_estimator);
+    checkDatasetFinite(vd, "validation");
+    Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx) : model->rows(vd, vctx);
+    Eigen::VectorXd pred = rows.W * est->value;
+    checkFinite(pred, "validation: the predicted measurement, row");
+    Eigen::VectorXd err = rows.y - pred;
+    Json& V = S["validation"];
+    V["type"] = cfg.validation->type;
+    V["samples"] = vd.size();
+    V["meta"] = vd.meta;
+    V["rows"] = Json(static_cast<long long>(rows.y.size()));
+    V["rows_processing"] = by_estimator
+                               ? fmt::format(
+                                     "the estimator's: '{}' filtered, differentiated and "
+                                     "decimated the raw validation data as it did its own",
+                                     cfg.estimator->type)
+                               : std::string("the model's rows of the validation data as given");
+    if (cfg.split) {
+      // One recording, two parts: where it was cut, and what each part holds.
+      Json sp = Json::object();
+      if (cfg.split->identification_fraction > 0)
+        sp["identification_fraction"] = cfg.split->identification_fraction;
+      else
+        sp["at_s"] = cfg.split->at_s;
+      if (const Json* m = vd.meta.find("split")) {
+        for (const char* k : {"split_at_s", "identification_s", "validation_s"})
+          if (const Json* x = m->find(k)) sp[k] = *x;
+      }
+      sp["identification_samples"] = data->size();
+      sp["validation_samples"] = vd.size();
+      sp["validation_overrides"] = Json(cfg.split->validation_overrides);
+      sp["rule"] =
+          "each part is read, filtered, differentiated and trimmed on its own: no sample of "
+          "one part enters the other";
+      S["split"] = sp;
+    }
+    if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
+      for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
+    inspectInto(S, warnFn(), "validation", *robot, model.get(), vd, vctx);
+    V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
+    std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
+        ref(rms.size(), 0.0);
+    for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
+      const auto e = static_cast<std::size_t>(
+          rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)]);
+      rms[e] += err(r) * err(r);
+      ref[e] += rows.y(r) * rows.y(r);
+      cnt[e] += 1;
+    }
+    std::vector<double> relj(rms.size());
+    for (std::size_t e = 0; e < rms.size(); ++e) {
+      relj[e] = ref[e] > 0 ? std::sqrt(rms[e] / ref[e]) : NAN;
+      rms[e] = cnt[e] > 0 ? std::sqrt(rms[e] / cnt[e]) : NAN;
+    }
+    V["rms_per_joint"] = Json(rms);
+    V["relative_error_per_joint"] = Json(relj);
+    V["wall_s"] = seconds(t0);
+    if (!rows.equation_names.empty()) V["equations"] = Json(rows.equation_names);
+    if (write) {
+      // t of each row's sample so rows can be matched with other tools; the equations named
+      // in a comment line.
+      CsvTable t;
+      t.columns = {"t", "row", "equation", "measured", "predicted"};
+      t.data.resize(rows.y.size(), 5);
+      const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
+      for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
+        t.data(r, 0) = has_t ? rows.t[static_cast<std::size_t>(r)] : NAN;
+        t.data(r, 1) = static_cast<double>(r);
+        t.data(r, 2) = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
+        t.data(r, 3) = rows.y(r);
+        t.data(r, 4) = pred(r);
+      }
+      std::string names;
+      for (std::size_t e = 0; e < rows.equation_names.size(); ++e)
+        names += fmt::format("{}{} = {}", e ? ", " : "", e, rows.equation_names[e]);
+      writeFileAtomic(dir / "validation.csv",
+                      fmt::format("# exid validation of study '{}': equation {}\n{}", cfg.name,
+                                  names.empty() ? std::string("indices") : names, toCsv(t)));
+    }
+    report.validation(rows, pred, V);
+  }
+}
+
+}  // namespace
+
 StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptions& opt) {
   const auto t_start = std::chrono::steady_clock::now();
   StudyResult res;
@@ -559,12 +1137,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   S["build"] = Registry::fingerprintText();
   S["config_hash"] = cfg.hash();
   S["seed"] = Json(static_cast<long long>(cfg.seed));
-  // What a user should know about this run's results (also logged): the report lists them.
-  S["warnings"] = Json::array();
-  auto warn = [&S](const std::string& text) {
-    logWarn(text);
-    S["warnings"].push_back(Json(text));
-  };
+  S["warnings"] = Json::array();  // StudyRun::warn
   const bool write = !opt.out_dir.empty();
   RunFolder folder;
   if (write) {
@@ -588,521 +1161,25 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     stage_now = name;
   };
   Watchdog watchdog(opt, write ? folder : RunFolder{}, cfg, stage_now, t_start);
-
-  RunContext ctx;
-  ctx.study_dir = cfg.dir;
-  ctx.out_dir = dir;
-  ctx.seed = cfg.seed;
-  ctx.deadline = Deadline(cfg.budget_s);
-  ctx.cancelled = opt.cancelled;
-  auto progressFor = [&](const std::string& st) {
-    return [&opt, st](double f, const std::string& text) {
-      if (opt.progress) opt.progress(st, f, text);
-    };
-  };
-
-  // The experiment's inspection when it runs beside the estimator (a recording in memory).
-  std::future<Json> experiment_inspection;
-  auto collectExperimentInspection = [&] {
-    if (experiment_inspection.valid())
-      applyInspection(S, warn, "experiment", experiment_inspection.get());
-  };
+  StudyRun run(cfg, reg, opt, S, dir, report, setStage);
+  const RunContext& ctx = run.ctx;
   try {
     if (write) {
       writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
     }
-    // ---------------------------------------------------------------- robot
-    setStage("robot");
-    auto t0 = std::chrono::steady_clock::now();
-    auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
-    std::shared_ptr<const RobotModel> robot = robotPlugin->build(ctx);
-    check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
-    Json& R = S["robot"];
-    R["type"] = cfg.robot->type;
-    R["name"] = robot->name;
-    R["dof"] = robot->dof();
-    R["n_parameters"] = robot->numInertialParameters();
-    if (!robot->notes.empty()) R["notes"] = Json(robot->notes);
-    for (const auto& w : robot->warnings) S["warnings"].push_back(Json(w));  // logged on load
-    R["wall_s"] = seconds(t0);
-
-    // ---------------------------------------------------------------- model
-    std::shared_ptr<ObservationModel> model;
-    std::shared_ptr<Trajectory> traj;
-    if (!cfg.models.empty()) {
-      setStage("model");
-      t0 = std::chrono::steady_clock::now();
-      if (cfg.models.size() == 1) {
-        model = reg.create<ObservationModel>(cfg.models[0].type, cfg.models[0].params);
-      } else {
-        std::vector<std::shared_ptr<ObservationModel>> parts;
-        std::vector<double> weights;
-        for (const auto& m : cfg.models) {
-          parts.push_back(reg.create<ObservationModel>(m.type, m.params));
-          weights.push_back(m.weight);
-        }
-        model = std::make_shared<StackedModel>(std::move(parts), std::move(weights));
-      }
-      // Joints the excitation trajectory holds still: the base parameters are those the motion
-      // of the moving joints can identify (paper section 4, one joint at a time).
-      if (cfg.hasExcitation()) {
-        traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
-        traj->bind(robot, ctx);
-        std::vector<int> moving = traj->specs().moving_joints;
-        if (!moving.empty() && static_cast<int>(moving.size()) < robot->dof()) {
-          const Samples s0 = traj->evaluate(traj->initial());
-          model->restrictMotion(std::move(moving), s0.q.row(0).transpose());
-        }
-      }
-      model->bind(robot, ctx);
-      checkFinite(model->fullNominal(),
-                  fmt::format("model '{}': the robot's nominal parameter", model->pluginName()),
-                  model->fullNames());
-      checkFinite(model->baseNominal(),
-                  fmt::format("model '{}': the nominal base parameter", model->pluginName()),
-                  model->base().names);
-      R["n_parameters"] = model->base().numFull();
-      R["n_base_parameters"] = model->numBase();
-      Json& Mj = S["model"];
-      Mj["type"] = model->pluginName();
-      Mj["n_full"] = model->base().numFull();
-      Mj["n_base"] = model->numBase();
-      Mj["base_parameters"] = Json(model->base().names);
-      Mj["details"] = model->describe();
-      if (!model->movingJoints().empty()) {  // base parameters of the restricted motion
-        std::vector<double> mj;
-        for (int j : model->movingJoints()) mj.push_back(j + 1);
-        Mj["moving_joints"] = Json(mj);
-      }
-      Mj["wall_s"] = seconds(t0);
-      report.model(*model);
-    }
-
-    // ---------------------------------------------------------------- excitation
-    std::optional<Samples> reference;
-    if (cfg.hasExcitation()) {
-      setStage("excitation");
-      t0 = std::chrono::steady_clock::now();
-      if (!traj) {
-        traj = reg.create<Trajectory>(cfg.trajectory->type, cfg.trajectory->params);
-        traj->bind(robot, ctx);
-      }
-      auto crit = reg.create<Criterion>(cfg.criterion->type, cfg.criterion->params);
-      auto optim = reg.create<Optimizer>(cfg.optimizer->type, cfg.optimizer->params);
-      ExcitationOptions xo;
-      xo.position_margin = traj->positionMargin();
-      xo.velocity_limits = traj->velocityLimits();
-      xo.acceleration_limits = traj->accelerationLimits();
-      xo.scale_columns = crit->specs().scale_columns;
-      xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
-      xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
-      auto problem = makeExcitationProblem(traj, model, crit, xo);
-      RunContext xctx = ctx;
-      xctx.progress = progressFor("excitation");
-      Samples initial = traj->evaluate(traj->initial());
-      // A criterion that is NaN (or fails) at the optimiser's answer makes it no answer: the
-      // optimisers skip such points, but one that found nothing better may return one (nlopt
-      // scores a failed evaluation 1e30). Checked before anything of the stage is written.
-      const std::string crit_place = fmt::format(
-          "{}{}: excitation.criterion '{}'", cfg.file.empty() ? "study" : cfg.file.string(),
-          cfg.criterion->line > 0 ? ":" + std::to_string(cfg.criterion->line) : "",
-          cfg.criterion->type);
-      auto criterionAt = [&](const Eigen::VectorXd& z, std::string* why) {
-        try {
-          const double J = problem->value(z, nullptr);
-          if (!std::isfinite(J)) *why = fmt::format("it evaluates to {}", J);
-          return J;
-        } catch (const Error& e) {
-          *why = e.what();
-          return static_cast<double>(NAN);
-        }
-      };
-      OptimizerResult r;
-      try {
-        r = optim->minimize(*problem, xctx);
-      } catch (const Error& e) {
-        std::string why;
-        if (ctx.shouldStop() || std::isfinite(criterionAt(traj->initial(), &why))) throw;
-        throw Error(fmt::format(
-            "{}: no finite value at the initial trajectory ({}) nor at any point optimizer '{}' "
-            "tried ({})",
-            crit_place, why, cfg.optimizer->type, e.what()));
-      }
-      if (std::string why; !std::isfinite(criterionAt(r.z, &why))) {
-        throw Error(fmt::format(
-            "{}: not finite at the trajectory optimizer '{}' returned ({}; {} evaluations, "
-            "stop: {}): no usable excitation trajectory",
-            crit_place, cfg.optimizer->type, why, r.evaluations, stopReasonText(r)));
-      }
-      Samples best = traj->evaluate(r.z);
-      Json& X = S["excitation"];
-      X["trajectory"] = cfg.trajectory->type;
-      X["criterion"] = cfg.criterion->type;
-      X["optimizer"] = cfg.optimizer->type;
-      X["criterion_initial"] = r.criterion_initial;
-      X["criterion_final"] = r.criterion_final;
-      X["cond_W_initial"] = conditionNumber(model->design(initial));
-      X["cond_W_final"] = conditionNumber(model->design(best));
-      X["max_constraint_violation"] = r.max_violation;
-      if (xo.torque_margin > 0) {
-        // the worst |tau_j| / tau_max,j the full model predicts at the samples
-        const Eigen::VectorXd tmax =
-            torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
-        const Eigen::MatrixXd tau = predictedTorques(model->robot(), best);
-        X["torque_margin"] = xo.torque_margin;
-        X["torque_ratio_max"] = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
-      }
-      X["iterations"] = r.iterations;
-      X["evaluations"] = Json(static_cast<long long>(r.evaluations));
-      X["wall_s"] = r.wall_s;
-      X["stop_reason"] = stopReasonText(r);
-      // A run cut by time gives another answer on another (or a busier) machine.
-      X["reproducible"] = !stoppedByTime(r.stop_reason);
-      if (!X["reproducible"].asBool())
-        warn(fmt::format(
-            "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "
-            "the trajectory depends on the speed of this machine; for a reproducible result give "
-            "an evaluation or iteration budget (max_evaluations, max_iterations)",
-            cfg.optimizer->type, stopReasonText(r), r.evaluations));
-      X["details"] = r.details;
-      X["history"]["t_s"] = Json(r.history_t_s);
-      X["history"]["value"] = Json(r.history_value);
-      if (write) {
-        writeCsvAtomic(dir / "trajectory_initial.csv", samplesTable(initial));
-        writeCsvAtomic(dir / "trajectory_optimal.csv", samplesTable(best));
-        CsvTable h;
-        h.columns = {"wall_s", "criterion"};
-        h.data.resize(static_cast<Eigen::Index>(r.history_value.size()), 2);
-        for (std::size_t i = 0; i < r.history_value.size(); ++i) {
-          h.data(static_cast<Eigen::Index>(i), 0) =
-              i < r.history_t_s.size() ? r.history_t_s[i] : NAN;
-          h.data(static_cast<Eigen::Index>(i), 1) = r.history_value[i];
-        }
-        writeCsvAtomic(dir / "criterion_history.csv", h);
-        X["trajectory_csv"] = "trajectory_optimal.csv";
-      }
-      if (!opt.export_dir.empty()) {
-        TrajectoryExportOptions eo;
-        eo.rate_Hz = opt.export_rate_Hz;
-        eo.periods = opt.export_periods;
-        eo.torque_max = xo.torque_max;
-        eo.torque_margin = xo.torque_margin;
-        eo.plots = cfg.report.plots;
-        TrajectoryCheck chk;
-        X["export"] = exportTrajectory(*traj, cfg.trajectory->type, cfg.trajectory->params, r.z,
-                                       model->robot(), eo, opt.export_dir, &chk);
-        X["export"]["dir"] = fs::absolute(opt.export_dir).string();
-        if (!chk.ok)
-          warn(
-              fmt::format("excitation: the exported trajectory ({}) exceeds a limit of the robot "
-                          "at {} Hz:\n{}",
-                          opt.export_dir.string(), eo.rate_Hz, chk.text()));
-      }
-      report.excitation(initial, best, r, *model);
-      if (xo.torque_margin > 0 || X.find("export")) {
-        Eigen::VectorXd tmax;
-        Eigen::MatrixXd tau;
-        if (xo.torque_margin > 0) {
-          tmax = torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
-          tau = predictedTorques(model->robot(), best);
-        }
-        report.excitationLimits(best, tau, tmax, xo.torque_margin, X.find("export"));
-      }
-      reference = best;
-    }
-
-    // ---------------------------------------------------------------- experiment
-    std::optional<Dataset> data;
-    // The inspection beside the estimator reads robot, model and data: it is waited for before
-    // they go (this guard is destroyed first, also when a stage throws); its result stays.
-    struct WaitForInspection {
-      std::future<Json>& f;
-      ~WaitForInspection() {
-        if (f.valid()) f.wait();
-      }
-    } wait_for_inspection{experiment_inspection};
-    if (cfg.experiment) {
-      setStage("experiment");
-      t0 = std::chrono::steady_clock::now();
-      auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
-      RunContext ectx = ctx;
-      ectx.progress = progressFor("experiment");
-      const EstimatorSpecs especs =
-          cfg.estimator ? reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs()
-                        : EstimatorSpecs();
-      // Streamed (read in chunks, never held whole) when the estimator streams and nothing else
-      // needs the whole dataset (experiment.csv: always).
-      const bool may_stream =
-          cfg.estimator && especs.streams && cfg.report.experiment_csv != "always";
-      data = may_stream ? exp->stream(robot, reference ? &*reference : nullptr, ectx)
-                        : exp->run(robot, reference ? &*reference : nullptr, ectx);
-      // A streamed recording that experiment.csv will copy (the `auto` policy: up to
-      // kExperimentCsvAutoSamples samples) is read whole once, here: the copy and the estimator
-      // then share one pass, and the inspection runs beside the estimator. Streaming pays only
-      // when nothing needs the whole recording.
-      if (data->streamed() && write && cfg.report.experiment_csv == "auto" &&
-          data->size() <= kExperimentCsvAutoSamples)
-        data = materialize(*data);
-      checkDataset(*data, *robot, model.get(), "experiment", especs.needs_raw_dataset);
-      checkDatasetFinite(*data, "experiment");
-      Json& E = S["experiment"];
-      E["type"] = cfg.experiment->type;
-      E["samples"] = data->size();
-      E["duration_s"] = data->tLast() - data->tFirst();
-      E["wall_s"] = seconds(t0);
-      E["meta"] = data->meta;
-      if (data->streamed()) {
-        E["streamed"] = fmt::format(
-            "read from the file in chunks by the estimator '{}' (never held whole); the "
-            "recording's statistics and the inspection are from its first pass",
-            cfg.estimator->type);
-        data->stream->collectEvery(static_cast<int>(streamInspectStride(data->size())));
-      }
-      if (const Json* w = data->meta.find("warnings"); w && w->isArray())
-        for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
-      if (!data->streamed()) {
-        if (cfg.estimator) {
-          // The inspection runs beside the estimator (both only read the dataset and the
-          // model) and is put into the summary when the estimator is done, at the same place
-          // in the summary and among the warnings as if it had run here.
-          experiment_inspection = std::async(std::launch::async, [&robot, &model, &data, ectx] {
-            return inspectionOf(*robot, model.get(), *data, ectx);
-          });
-        } else {
-          inspectInto(S, warn, "experiment", *robot, model.get(), *data, ectx);
-        }
-      }
-      // experiment.csv: simulated data always; recorded data are a copy of the input, written
-      // (by default) only while small. What was written, or why not, is in the summary.
-      const bool simulated_data =
-          data->meta.find("simulated") && data->meta.find("simulated")->asBool();
-      const std::string& policy = cfg.report.experiment_csv;
-      const bool write_csv =
-          policy == "always" ||
-          (policy == "auto" && (simulated_data || data->size() <= kExperimentCsvAutoSamples));
-      if (write && !write_csv)
-        E["csv_not_written"] =
-            policy == "never"
-                ? std::string("report.params.experiment_csv: never")
-                : fmt::format(
-                      "recorded data of {} samples (more than {}): a copy of the input; "
-                      "report.params.experiment_csv: always writes it",
-                      data->size(), kExperimentCsvAutoSamples);
-      if (write && write_csv) {
-        // The joints named in a first comment line (readers skip it; exid's csv experiment too).
-        std::string joints;
-        for (int j = 0; j < robot->dof(); ++j) {
-          const std::string& jn = robot->hasTransmission()
-                                      ? std::string()
-                                      : robot->bodies[static_cast<std::size_t>(j)].joint_name;
-          joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
-                                jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
-        }
-        writeFileAtomic(
-            dir / "experiment.csv",
-            fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
-                        "units, t in s\n{}",
-                        cfg.name, robot->name, joints, toCsv(datasetTable(materialize(*data)))));
-        E["csv"] = "experiment.csv";
-      }
-    }
-
-    // ---------------------------------------------------------------- estimator
-    std::optional<Estimate> est;
-    if (cfg.estimator) {
-      setStage("identification");
-      t0 = std::chrono::steady_clock::now();
-      auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
-      RunContext ictx = ctx;
-      ictx.progress = progressFor("identification");
-      std::optional<Prior> prior;
-      if (cfg.prior) {
-        check(estimator->specs().accepts_prior,
-              fmt::format(
-                  "prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
-                  "and rls do)",
-                  cfg.estimator->type));
-        prior = buildPrior(*cfg.prior, *model);
-      }
-      est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
-      collectExperimentInspection();
-      if (data->streamed()) {
-        // The recording's statistics (and the samples kept for the inspection) are complete
-        // after a whole pass: the estimator's, or one more here.
-        if (!data->stream->passed()) {
-          Dataset chunk;
-          data->stream->rewind();
-          while (data->stream->read(8192, &chunk) > 0) {
-          }
-        }
-        data->meta = data->stream->meta();
-        S["experiment"]["meta"] = data->meta;
-        inspectInto(S, warn, "experiment", *robot, model.get(), *data, ictx);
-      }
-      checkFinite(est->value, fmt::format("estimator '{}': the estimate of", cfg.estimator->type),
-                  est->names);
-      if (est->std.size() > 0)
-        checkFinite(est->std,
-                    fmt::format("estimator '{}': the standard deviation of", cfg.estimator->type),
-                    est->names);
-      check(std::isfinite(est->residual_rms),
-            fmt::format("estimator '{}': the residual RMS is {} (a non-finite result is an "
-                        "error, never a result)",
-                        cfg.estimator->type, est->residual_rms));
-      Json& I = S["identification"];
-      I["estimator"] = cfg.estimator->type;
-      if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
-      I["wall_s"] = seconds(t0);
-      I["rows"] = Json(static_cast<long long>(est->rows));
-      I["cond_W"] = est->cond_W;
-      I["residual_rms"] = est->residual_rms;
-      I["sigma"] = est->sigma;
-      const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
-      const Eigen::VectorXd nominal = model->baseNominal();
-      // A simulated study is judged against what the simulation used (its payload), never
-      // against a nominal value it did not use.
-      const Eigen::VectorXd truth =
-          simulated ? Eigen::VectorXd(model->base().reduce(model->fullTruth(data->meta))) : nominal;
-      Json params = Json::array();
-      double err2 = 0, tru2 = 0;
-      for (Eigen::Index i = 0; i < est->value.size(); ++i) {
-        Json p = Json::object();
-        p["name"] = est->names[static_cast<std::size_t>(i)];
-        p["expression"] = est->expressions[static_cast<std::size_t>(i)];
-        p["value"] = est->value(i);
-        p["std"] = est->std.size() > i ? est->std(i) : NAN;
-        p["rel_std_percent"] = est->std.size() > i && est->value(i) != 0
-                                   ? 100.0 * est->std(i) / std::abs(est->value(i))
-                                   : NAN;
-        p["nominal"] = nominal(i);
-        if (simulated) p["true"] = truth(i);
-        err2 += (est->value(i) - truth(i)) * (est->value(i) - truth(i));
-        tru2 += truth(i) * truth(i);
-        params.push_back(p);
-      }
-      if (simulated) {
-        I["param_abs_err"] = std::sqrt(err2);
-        if (tru2 > 0)
-          I["param_rel_err"] = std::sqrt(err2 / tru2);
-        else
-          warn(
-              "identification: every true parameter is zero (the simulation used none of the "
-              "model's parameters, e.g. no payload): param_rel_err is undefined; "
-              "param_abs_err is given");
-      }
-      I["parameters"] = params;
-      I["details"] = est->details;
-      if (const Json* w = est->details.find("warnings"); w && w->isArray())
-        for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());
-      report.identification(*est, truth, simulated);
-    }
-
-    // ---------------------------------------------------------------- validation
-    if (cfg.validation) {
-      setStage("validation");
-      t0 = std::chrono::steady_clock::now();
-      auto exp = reg.create<Experiment>(cfg.validation->type, cfg.validation->params);
-      RunContext vctx = ctx;
-      vctx.seed = ctx.seed + 1000003;  // independent noise
-      // The validation experiment runs its own trajectory (its own period, harmonics, seed):
-      // validating on the identification trajectory (the excitation's optimum) would not
-      // measure how the model generalises.
-      Dataset vd = exp->run(robot, nullptr, vctx);
-      // Raw validation data (no q̇/q̈ yet) for an estimator that processes its own data: its
-      // processing makes the validation rows too (the held-out error is then measured on rows
-      // processed like the identification rows). Otherwise the model's rows of the data as
-      // the validation experiment gives them.
-      auto vest = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
-      const bool by_estimator =
-          vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
-      checkDataset(vd, *robot, model.get(), "validation", by_estimator);
-      checkDatasetFinite(vd, "validation");
-      Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx) : model->rows(vd, vctx);
-      Eigen::VectorXd pred = rows.W * est->value;
-      checkFinite(pred, "validation: the predicted measurement, row");
-      Eigen::VectorXd err = rows.y - pred;
-      Json& V = S["validation"];
-      V["type"] = cfg.validation->type;
-      V["samples"] = vd.size();
-      V["meta"] = vd.meta;
-      V["rows"] = Json(static_cast<long long>(rows.y.size()));
-      V["rows_processing"] = by_estimator
-                                 ? fmt::format(
-                                       "the estimator's: '{}' filtered, differentiated and "
-                                       "decimated the raw validation data as it did its own",
-                                       cfg.estimator->type)
-                                 : std::string("the model's rows of the validation data as given");
-      if (cfg.split) {
-        // One recording, two parts: where it was cut, and what each part holds.
-        Json sp = Json::object();
-        if (cfg.split->identification_fraction > 0)
-          sp["identification_fraction"] = cfg.split->identification_fraction;
-        else
-          sp["at_s"] = cfg.split->at_s;
-        if (const Json* m = vd.meta.find("split")) {
-          for (const char* k : {"split_at_s", "identification_s", "validation_s"})
-            if (const Json* x = m->find(k)) sp[k] = *x;
-        }
-        sp["identification_samples"] = data->size();
-        sp["validation_samples"] = vd.size();
-        sp["validation_overrides"] = Json(cfg.split->validation_overrides);
-        sp["rule"] =
-            "each part is read, filtered, differentiated and trimmed on its own: no sample of "
-            "one part enters the other";
-        S["split"] = sp;
-      }
-      if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
-        for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
-      inspectInto(S, warn, "validation", *robot, model.get(), vd, vctx);
-      V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
-      std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0),
-          cnt(rms.size(), 0.0), ref(rms.size(), 0.0);
-      for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
-        const auto e = static_cast<std::size_t>(
-            rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)]);
-        rms[e] += err(r) * err(r);
-        ref[e] += rows.y(r) * rows.y(r);
-        cnt[e] += 1;
-      }
-      std::vector<double> relj(rms.size());
-      for (std::size_t e = 0; e < rms.size(); ++e) {
-        relj[e] = ref[e] > 0 ? std::sqrt(rms[e] / ref[e]) : NAN;
-        rms[e] = cnt[e] > 0 ? std::sqrt(rms[e] / cnt[e]) : NAN;
-      }
-      V["rms_per_joint"] = Json(rms);
-      V["relative_error_per_joint"] = Json(relj);
-      V["wall_s"] = seconds(t0);
-      if (!rows.equation_names.empty()) V["equations"] = Json(rows.equation_names);
-      if (write) {
-        // t of each row's sample so rows can be matched with other tools; the equations named
-        // in a comment line.
-        CsvTable t;
-        t.columns = {"t", "row", "equation", "measured", "predicted"};
-        t.data.resize(rows.y.size(), 5);
-        const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
-        for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
-          t.data(r, 0) = has_t ? rows.t[static_cast<std::size_t>(r)] : NAN;
-          t.data(r, 1) = static_cast<double>(r);
-          t.data(r, 2) = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
-          t.data(r, 3) = rows.y(r);
-          t.data(r, 4) = pred(r);
-        }
-        std::string names;
-        for (std::size_t e = 0; e < rows.equation_names.size(); ++e)
-          names += fmt::format("{}{} = {}", e ? ", " : "", e, rows.equation_names[e]);
-        writeFileAtomic(dir / "validation.csv",
-                        fmt::format("# exid validation of study '{}': equation {}\n{}", cfg.name,
-                                    names.empty() ? std::string("indices") : names, toCsv(t)));
-      }
-      report.validation(rows, pred, V);
-    }
+    run.robotStage();
+    run.modelStage();
+    run.excitationStage();
+    run.experimentStage();
+    run.identificationStage();
+    run.validationStage();
     if (ctx.shouldStop())
       throw Error(fmt::format("stopped: {}",
                               ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
     S["status"] = "ok";
     res.ok = true;
   } catch (const std::exception& e) {
-    collectExperimentInspection();  // (a failed identification keeps the data's inspection)
+    run.collectExperimentInspection();  // (a failed identification keeps the data's inspection)
     res.ok = false;
     const auto* io = dynamic_cast<const IoError*>(&e);
     const bool nomem = dynamic_cast<const std::bad_alloc*>(&e) != nullptr;
