@@ -1,4 +1,4 @@
-// Fuzz target: the rosbag2 experiment's readers (plugins/rosbag2/bag.hpp). The first byte picks
+// Fuzz target: the rosbag2 experiment's readers (experiments/rosbag2/bag.hpp). The first byte picks
 // the reader, the rest is its input:
 //   0: an MCAP file (every message of /joint_states decoded as JointState, of /ft as
 //      WrenchStamped), 1: a CDR JointState, 2: a CDR WrenchStamped, 3 / 4: a zstd / LZ4 chunk
