@@ -1,4 +1,4 @@
-#include "exid/plot.hpp"
+#include "plot.hpp"
 
 #include <fcntl.h>
 #include <fmt/format.h>

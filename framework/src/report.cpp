@@ -1,4 +1,4 @@
-#include "exid/report.hpp"
+#include "report.hpp"
 
 #include <fmt/format.h>
 

@@ -24,9 +24,9 @@
 #include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
-#include "exid/report.hpp"
 #include "exid/trajectory_export.hpp"
 #include "exid/version.hpp"
+#include "report.hpp"
 
 namespace exid {
 

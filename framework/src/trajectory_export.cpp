@@ -12,7 +12,7 @@
 #include "exid/excitation.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
-#include "exid/plot.hpp"
+#include "plot.hpp"
 
 namespace exid {
 

@@ -8,7 +8,7 @@
 
 #include "exid/config.hpp"
 #include "exid/interfaces.hpp"
-#include "exid/plot.hpp"
+#include "plot.hpp"
 
 namespace exid {
 
