@@ -167,8 +167,8 @@ class FilteredLs : public exid::Estimator {
     long trim = trim_;
     if (trim < 0) {
       P->trim_default = true;
-      P->trim_transient = P->filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_ - 1e-9))
-                                      : (diff ? 1 : 0);
+      P->trim_transient =
+          P->filter_q ? static_cast<long>(std::ceil(2.0 * fs / cutoff_ - 1e-9)) : (diff ? 1 : 0);
       trim = std::min(P->trim_transient, std::max<long>(diff ? 1 : 0, K / 20));
     }
     exid::check(K - 2 * trim >= 8,

@@ -151,8 +151,7 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
         const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
         *in = window.span(tb, te);
       },
-      [&](long c, const Dataset& in) { accumulateTask(c, in, static_cast<int>(c * task)); },
-      merge);
+      [&](long c, const Dataset& in) { accumulateTask(c, in, static_cast<int>(c * task)); }, merge);
   return total;
 }
 
@@ -163,7 +162,8 @@ void pipelineChunks(long n, int threads, const std::function<void(long, Dataset*
   const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));
   std::vector<Dataset> cur(static_cast<std::size_t>(T)), next(static_cast<std::size_t>(T));
   auto readWave = [&](long c0, std::vector<Dataset>* buf) {
-    for (long c = c0; c < std::min(n, c0 + T); ++c) read(c, &(*buf)[static_cast<std::size_t>(c - c0)]);
+    for (long c = c0; c < std::min(n, c0 + T); ++c)
+      read(c, &(*buf)[static_cast<std::size_t>(c - c0)]);
   };
   readWave(0, &cur);
   std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
