@@ -12,6 +12,8 @@
 //     static constexpr const char* kName, *kVersion, *kDoc;
 //     static std::vector<exid::ParamDecl> params();
 //     explicit MyCriterion(const exid::ParamSet&);
+// A library whose plugins are known only when it is loaded (data) fills the list itself:
+//     EXID_REGISTER_PLUGIN_LIST(fillList)   // void fillList(exid::PluginList&)
 #pragma once
 
 #include <Eigen/Core>
@@ -145,6 +147,19 @@ typedef const exid_manifest* (*exid_plugin_manifest_fn)(void);
     (list->push_back(exid::describePlugin<Ts>()), ...);                                           \
   }                                                                                               \
   void exid_list_plugins(void* out) { exid_list_plugins_impl<__VA_ARGS__>(out); }                 \
+  }                                                                                               \
+  extern "C" __attribute__((visibility("default"))) const exid_manifest* exid_plugin_manifest() { \
+    static const exid_manifest m{EXID_PLUGIN_ABI_OVERRIDE, sizeof(exid_manifest),                 \
+                                 EXID_BUILD_FINGERPRINT, &exid_list_plugins};                     \
+    return &m;                                                                                    \
+  }
+
+/// Registers the plugins of this library from a function `void fn(exid::PluginList&)` that fills
+/// the list at load time: for a library whose plugins are data (e.g. the shipped robots, one
+/// PluginInfo per catalogue entry, each with its own factory). Place once, at the end of a file.
+#define EXID_REGISTER_PLUGIN_LIST(fn)                                                             \
+  namespace {                                                                                     \
+  void exid_list_plugins(void* out) { fn(*static_cast<exid::PluginList*>(out)); }                 \
   }                                                                                               \
   extern "C" __attribute__((visibility("default"))) const exid_manifest* exid_plugin_manifest() { \
     static const exid_manifest m{EXID_PLUGIN_ABI_OVERRIDE, sizeof(exid_manifest),                 \
