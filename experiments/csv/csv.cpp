@@ -23,6 +23,7 @@
 #include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/segment.hpp"
 #include "exid/signal.hpp"
 
 namespace {
@@ -41,7 +42,7 @@ class CsvExperiment : public exid::Experiment {
 
   static std::vector<exid::ParamDecl> params() {
     using namespace exid;
-    return {
+    std::vector<ParamDecl> p = {
         param_path("file", std::nullopt, "the CSV file (relative paths: to the study file)"),
         param_bool("drop_bad_rows", false,
                    "drop rows with missing or non-finite values in the columns used (counted in "
@@ -76,24 +77,6 @@ class CsvExperiment : public exid::Experiment {
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the rows",
                      1.0, std::nullopt, true),
-        param_double("t_start_s", 0.0, "s",
-                     "segment start, in seconds after the first sample's time", 0.0),
-        param_double("t_end_s", 0.0, "s",
-                     "segment end, in seconds after the first sample's time; 0: to the end", 0.0),
-        param_string("split_part", std::string("none"),
-                     "none: the whole segment; identification / validation: the part of the "
-                     "segment before / after the split point (split_fraction or split_at_s; the "
-                     "study key `split` sets these); each part is filtered on its own, so no "
-                     "sample of one touches the other",
-                     {"none", "identification", "validation"}),
-        param_double("split_fraction", 0.0, "",
-                     "with split_part: the split point as a fraction of the segment's duration "
-                     "(e.g. 0.65: identification = first 65 %); 0: use split_at_s",
-                     0.0, 1.0, false, true),
-        param_double("split_at_s", 0.0, "s",
-                     "with split_part: the split point in seconds after the segment's start; "
-                     "0: use split_fraction",
-                     0.0),
         param_string("torque_from", std::string("tau"),
                      "tau: columns tau1..taun; current: columns <current_prefix>1..n times "
                      "torque_constants_Nm_per_A",
@@ -137,6 +120,11 @@ class CsvExperiment : public exid::Experiment {
                   "ceil(2 fs / cutoff) when filtering, else 0",
                   -1, 1e9),
     };
+    const auto segment = segmentParams("sample");
+    const auto at = std::find_if(p.begin(), p.end(),
+                                 [](const ParamDecl& d) { return d.name == "torque_from"; });
+    p.insert(at, segment.begin(), segment.end());
+    return p;
   }
 
   explicit CsvExperiment(const exid::ParamSet& p) : P_(p) {}
@@ -456,16 +444,7 @@ class CsvExperiment : public exid::Experiment {
       if (ct_) m["time_unit"] = tunit_;
       if (!ct_) m["sample_period_s"] = dt_;
       m["segment_s"] = exid::Json(std::vector<double>{ts_, te_});
-      if (part_ != "none") {
-        exid::Json& sp = m["split"];
-        sp["part"] = part_;
-        sp["split_at_s"] = tsplit_;
-        if (sf_ > 0.0) sp["fraction"] = sf_;
-        sp["identification_s"] = exid::Json(std::vector<double>{ts_, tsplit_});
-        sp["validation_s"] = exid::Json(std::vector<double>{tsplit_, seg_end_});
-        sp["segment_samples"] = in_segment_;
-        sp["part_samples"] = K;
-      }
+      if (part_ != "none") m["split"] = seg_.splitMeta(in_segment_, K);
       m["recording_span_s"] = span_;
       m["recording"] = recording_;
       {  // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
@@ -919,50 +898,20 @@ class CsvExperiment : public exid::Experiment {
                             step > med ? "" : ", or resample it (resample_hz)", ratio));
         }
       }
-      // Segment: inside the recording, never clamped.
-      ts_ = P_.getDouble("t_start_s");
-      te_ = P_.getDouble("t_end_s");
-      exid::check(te_ == 0.0 || te_ > ts_,
-                  fmt::format("experiment 'csv': t_end_s = {} must be after t_start_s = {} (or 0 "
-                              "for the end)",
-                              te_, ts_));
+      // Segment (inside the recording, never clamped) and its split into an identification and
+      // a validation part (half-open at the split point: no sample belongs to both).
       const double tfirst = t_first_abs_;
       span_ = timeOf(kept_rows_ - 1) - tfirst;
       const double step_tol =
           kept_rows_ > 1 ? 0.5 * span_ / static_cast<double>(kept_rows_ - 1) : 0.0;
-      exid::check(ts_ <= span_,
-                  fmt::format("experiment 'csv': {}: t_start_s = {} s is after the end of the "
-                              "recording ({} s after its first sample)",
-                              file, ts_, span_));
-      exid::check(te_ <= span_ + step_tol,
-                  fmt::format("experiment 'csv': {}: t_end_s = {} s is past the end of the "
-                              "recording ({} s after its first sample); the segment is never "
-                              "clamped (0: to the end)",
-                              file, te_, span_));
-      // Split of the segment into an identification and a validation part (half-open at the
-      // split point: no sample belongs to both).
-      part_ = P_.getString("split_part");
-      sf_ = P_.getDouble("split_fraction");
-      const double sat = P_.getDouble("split_at_s");
-      seg_end_ = te_ > 0.0 ? std::min(te_, span_) : span_;
-      if (part_ != "none") {
-        exid::check((sf_ > 0.0) != (sat > 0.0),
-                    fmt::format("experiment 'csv': split_part = {} needs exactly one of "
-                                "split_fraction (found {}) and split_at_s (found {})",
-                                part_, sf_, sat));
-        tsplit_ = sf_ > 0.0 ? ts_ + sf_ * (seg_end_ - ts_) : ts_ + sat;
-        exid::check(tsplit_ > ts_ && tsplit_ < seg_end_,
-                    fmt::format("experiment 'csv': {}: the split point {} s (split_at_s = {}) is "
-                                "not inside the segment [{}, {}] s",
-                                file, tsplit_, sat, ts_, seg_end_));
-      } else {
-        exid::check(sf_ == 0.0 && sat == 0.0,
-                    fmt::format("experiment 'csv': split_fraction / split_at_s need split_part "
-                                "(identification or validation; the study key `split` sets all "
-                                "three)"));
-      }
-      const double lo = part_ == "validation" ? tsplit_ : ts_;
-      const double hi = part_ == "identification" ? tsplit_ : seg_end_;
+      seg_ = exid::resolveSegment(P_, span_, step_tol, "experiment 'csv': ", file);
+      ts_ = seg_.t_start_s;
+      te_ = seg_.t_end_s;
+      part_ = seg_.part;
+      seg_end_ = seg_.end_s;
+      tsplit_ = seg_.split_s;
+      const double lo = seg_.lo_s;
+      const double hi = seg_.hi_s;
       // the samples: kept rows [i0_, i1_) (time increases, so the selection is one range)
       i0_ = -1;
       i1_ = -1;
@@ -1129,7 +1078,8 @@ class CsvExperiment : public exid::Experiment {
     std::vector<int> dropped_rows_;
     long i0_ = 0, i1_ = 0;
     int in_segment_ = 0;
-    double ts_ = 0, te_ = 0, sf_ = 0, tsplit_ = 0, seg_end_ = 0, span_ = 0;
+    double ts_ = 0, te_ = 0, tsplit_ = 0, seg_end_ = 0, span_ = 0;
+    exid::RecordingSegment seg_;
     double t_first_abs_ = 0, t_first_ = 0, t_last_ = 0;
     bool has_rate_ = false;  // samplingRate(): known from the scan
     double fs_hz_ = 0, jitter_ = 0;

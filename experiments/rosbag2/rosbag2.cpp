@@ -21,6 +21,7 @@
 #include "exid/error.hpp"
 #include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/segment.hpp"
 
 namespace {
 
@@ -40,7 +41,7 @@ class Rosbag2Experiment : public exid::Experiment {
 
   static std::vector<exid::ParamDecl> params() {
     using namespace exid;
-    return {
+    std::vector<ParamDecl> p = {
         param_path("path", std::nullopt,
                    "the bag folder (metadata.yaml and its .db3 or .mcap files; relative paths: to "
                    "the study file)"),
@@ -74,26 +75,10 @@ class Rosbag2Experiment : public exid::Experiment {
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the messages",
                      1.0, std::nullopt, true),
-        param_double("t_start_s", 0.0, "s",
-                     "segment start, in seconds after the first joint-state sample's time", 0.0),
-        param_double("t_end_s", 0.0, "s",
-                     "segment end, in seconds after the first joint-state sample's time; 0: to "
-                     "the end",
-                     0.0),
-        param_string("split_part", std::string("none"),
-                     "none: the whole segment; identification / validation: the part of the "
-                     "segment before / after the split point (split_fraction or split_at_s; the "
-                     "study key `split` sets these)",
-                     {"none", "identification", "validation"}),
-        param_double("split_fraction", 0.0, "",
-                     "with split_part: the split point as a fraction of the segment's duration; "
-                     "0: use split_at_s",
-                     0.0, 1.0, false, true),
-        param_double("split_at_s", 0.0, "s",
-                     "with split_part: the split point in seconds after the segment's start; "
-                     "0: use split_fraction",
-                     0.0),
     };
+    const auto segment = exid::segmentParams("joint-state sample");
+    p.insert(p.end(), segment.begin(), segment.end());
+    return p;
   }
 
   explicit Rosbag2Experiment(const exid::ParamSet& p) : P_(p) {}
@@ -382,42 +367,14 @@ class Rosbag2Experiment : public exid::Experiment {
     }
 
     // Segment and split, as the csv experiment.
-    const double ts = P_.getDouble("t_start_s"), te = P_.getDouble("t_end_s");
-    exid::check(
-        te == 0.0 || te > ts,
-        fmt::format("{}t_end_s = {} must be after t_start_s = {} (or 0 for the end)", pre, te, ts));
     const double span = tk.back();
     const double step_tol = tk.size() > 1 ? 0.5 * span / static_cast<double>(tk.size() - 1) : 0.0;
-    exid::check(ts <= span, fmt::format("{}{}: t_start_s = {} s is after the end of the recording "
-                                        "({} s after its first joint-state sample)",
-                                        pre, bagname, ts, span));
-    exid::check(te <= span + step_tol,
-                fmt::format("{}{}: t_end_s = {} s is past the end of the recording ({} s after its "
-                            "first joint-state sample); the segment is never clamped (0: to the "
-                            "end)",
-                            pre, bagname, te, span));
-    const std::string part = P_.getString("split_part");
-    const double sf = P_.getDouble("split_fraction"), sat = P_.getDouble("split_at_s");
-    const double seg_end = te > 0.0 ? std::min(te, span) : span;
-    double tsplit = 0.0;
-    if (part != "none") {
-      exid::check((sf > 0.0) != (sat > 0.0),
-                  fmt::format("{}split_part = {} needs exactly one of split_fraction (found {}) "
-                              "and split_at_s (found {})",
-                              pre, part, sf, sat));
-      tsplit = sf > 0.0 ? ts + sf * (seg_end - ts) : ts + sat;
-      exid::check(tsplit > ts && tsplit < seg_end,
-                  fmt::format("{}{}: the split point {} s (split_at_s = {}) is not inside the "
-                              "segment [{}, {}] s",
-                              pre, bagname, tsplit, sat, ts, seg_end));
-    } else {
-      exid::check(sf == 0.0 && sat == 0.0,
-                  fmt::format("{}split_fraction / split_at_s need split_part (identification or "
-                              "validation; the study key `split` sets all three)",
-                              pre));
-    }
-    const double lo = part == "validation" ? tsplit : ts;
-    const double hi = part == "identification" ? tsplit : seg_end;
+    const exid::RecordingSegment seg =
+        exid::resolveSegment(P_, span, step_tol, pre, bagname, "joint-state sample");
+    const double ts = seg.t_start_s, te = seg.t_end_s;
+    const std::string& part = seg.part;
+    const double lo = seg.lo_s;
+    const double hi = seg.hi_s;
     std::vector<std::size_t> sel;  // indices into keep / tk
     int in_segment = 0;
     for (std::size_t i = 0; i < keep.size(); ++i) {
@@ -534,16 +491,7 @@ class Rosbag2Experiment : public exid::Experiment {
     m["joint_names"] = exid::Json(names);
     m["samples"] = d.size();
     m["segment_s"] = exid::Json(std::vector<double>{ts, te});
-    if (part != "none") {
-      exid::Json& sp = m["split"];
-      sp["part"] = part;
-      sp["split_at_s"] = tsplit;
-      if (sf > 0.0) sp["fraction"] = sf;
-      sp["identification_s"] = exid::Json(std::vector<double>{ts, tsplit});
-      sp["validation_s"] = exid::Json(std::vector<double>{tsplit, seg_end});
-      sp["segment_samples"] = in_segment;
-      sp["part_samples"] = in_part;
-    }
+    if (part != "none") m["split"] = seg.splitMeta(in_segment, in_part);
     m["recording_span_s"] = span;
     {
       // Timing of the segment's samples (as the csv experiment's meta.recording).

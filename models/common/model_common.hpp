@@ -80,6 +80,35 @@ inline void requireSignal(const Dataset& d, const Eigen::MatrixXd& m, const char
                     cols));
 }
 
+/// The four signals of a torque model (q, qd, qdd, tau), each K x n.
+inline void requireTorqueSignals(const Dataset& d, int n, const std::string& who) {
+  requireSignal(d, d.q, "q", n, who);
+  requireSignal(d, d.qd, "qd", n, who);
+  requireSignal(d, d.qdd, "qdd", n, who);
+  requireSignal(d, d.tau, "tau", n, who);
+}
+
+/// Rows of K samples with m equations each: y, equation labels and times sized (the model
+/// fills W, y and the labels).
+inline void sizeRows(Rows* r, int K, int m) {
+  r->y.resize(static_cast<Eigen::Index>(K) * m);
+  r->equation.resize(static_cast<std::size_t>(K) * m);
+  r->numEquations = m;
+  r->t.resize(static_cast<std::size_t>(K) * m);
+}
+
+/// Row k of a design gradient from the joint-coordinate gradients of sample k (mapped to
+/// measured coordinates first).
+inline void storeSampleGrad(const RobotModel& r, int k, Eigen::VectorXd* gq, Eigen::VectorXd* gqd,
+                            Eigen::VectorXd* gqdd, Samples* grad) {
+  jointGradToMeasured(r, gq);
+  jointGradToMeasured(r, gqd);
+  jointGradToMeasured(r, gqdd);
+  grad->q.row(k) = gq->transpose();
+  grad->qd.row(k) = gqd->transpose();
+  grad->qdd.row(k) = gqdd->transpose();
+}
+
 inline void requireSamples(const Samples& s, int n, bool need_qdd, const std::string& who) {
   const int K = s.size();
   check(s.q.rows() == K && s.q.cols() == n && s.qd.rows() == K && s.qd.cols() == n,

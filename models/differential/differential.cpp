@@ -19,7 +19,7 @@
 
 namespace {
 
-using exid::models::requireSignal;
+using exid::models::requireTorqueSignals;
 
 class DifferentialModel : public exid::ObservationModel {
  public:
@@ -74,17 +74,11 @@ class DifferentialModel : public exid::ObservationModel {
   exid::Rows fullRows(const exid::Dataset& d, const exid::RunContext&) const override {
     const int n = robot().dof();
     const std::string who = "model 'differential'";
-    requireSignal(d, d.q, "q", n, who);
-    requireSignal(d, d.qd, "qd", n, who);
-    requireSignal(d, d.qdd, "qdd", n, who);
-    requireSignal(d, d.tau, "tau", n, who);
+    requireTorqueSignals(d, n, who);
     exid::Rows r;
     r.W = fullDesign(d.samples());
     const int K = d.size(), m = static_cast<int>(sel_.size());
-    r.y.resize(static_cast<Eigen::Index>(K) * m);
-    r.equation.resize(static_cast<std::size_t>(K) * m);
-    r.numEquations = m;
-    r.t.resize(static_cast<std::size_t>(K) * m);
+    exid::models::sizeRows(&r, K, m);
     for (int k = 0; k < K; ++k)
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];

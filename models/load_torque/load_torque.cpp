@@ -19,7 +19,7 @@
 
 namespace {
 
-using exid::models::requireSignal;
+using exid::models::requireTorqueSignals;
 
 class LoadTorqueModel : public exid::ObservationModel {
  public:
@@ -58,16 +58,11 @@ class LoadTorqueModel : public exid::ObservationModel {
     const exid::RobotModel& R = robot();
     const int n = R.dof();
     const std::string who = "model 'load_torque'";
-    requireSignal(d, d.q, "q", n, who);
-    requireSignal(d, d.qd, "qd", n, who);
-    requireSignal(d, d.qdd, "qdd", n, who);
-    requireSignal(d, d.tau, "tau", n, who);
+    requireTorqueSignals(d, n, who);
     exid::Rows r;
     r.W = fullDesign(d.samples());
     const int K = d.size(), m = static_cast<int>(sel_.size());
-    r.y.resize(static_cast<Eigen::Index>(K) * m);
-    r.equation.resize(static_cast<std::size_t>(K) * m);
-    r.numEquations = m;
+    exid::models::sizeRows(&r, K, m);
     exid::DriveColumns all{true, true, true, true};
     auto data = exid::makeDynamicsData(R);
     for (int k = 0; k < K; ++k) {
@@ -79,7 +74,6 @@ class LoadTorqueModel : public exid::ObservationModel {
         r.equation[static_cast<std::size_t>(k * m + i)] = i;
       }
     }
-    r.t.resize(static_cast<std::size_t>(K) * m);
     for (int k = 0; k < K; ++k)
       for (int i = 0; i < m; ++i) r.t[static_cast<std::size_t>(k * m + i)] = d.t[k];
     r.equation_names = exid::models::torqueEquationNames(R, sel_);
@@ -129,12 +123,7 @@ class LoadTorqueModel : public exid::ObservationModel {
       else
         G = Gm;
       exid::payloadTorqueRegressorVjp(R, *data, q, qd, qdd, G, &gq, &gqd, &gqdd);
-      exid::models::jointGradToMeasured(R, &gq);
-      exid::models::jointGradToMeasured(R, &gqd);
-      exid::models::jointGradToMeasured(R, &gqdd);
-      grad->q.row(k) = gq.transpose();
-      grad->qd.row(k) = gqd.transpose();
-      grad->qdd.row(k) = gqdd.transpose();
+      exid::models::storeSampleGrad(R, k, &gq, &gqd, &gqdd, grad);
     }
   }
 

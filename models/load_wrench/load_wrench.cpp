@@ -125,12 +125,7 @@ class LoadWrenchModel : public exid::ObservationModel {
                             s.qdd.row(k).transpose(), &q, &qd, &qdd);
       const Eigen::Matrix<double, 6, 10> G = dW.block(6 * k, 0, 6, 10);
       exid::wrenchRegressorVjp(R, *data, q, qd, qdd, G, &gq, &gqd, &gqdd);
-      exid::models::jointGradToMeasured(R, &gq);
-      exid::models::jointGradToMeasured(R, &gqd);
-      exid::models::jointGradToMeasured(R, &gqdd);
-      grad->q.row(k) = gq.transpose();
-      grad->qd.row(k) = gqd.transpose();
-      grad->qdd.row(k) = gqdd.transpose();
+      exid::models::storeSampleGrad(R, k, &gq, &gqd, &gqdd, grad);
     }
   }
 
