@@ -270,7 +270,7 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   opt.export_rate_Hz = ex.rate_Hz;
   opt.export_periods = ex.periods;
   StudyResult r = runStudy(cfg, reg, opt);
-  std::cout << briefTable(r.summary);
+  std::cout << briefTable(r.headline);
   if (!r.ok) {
     std::cerr << fmt::format(
         "exid {}: {}: {}{}\n", stage, r.cancelled ? "cancelled" : "failed", r.message,

@@ -150,7 +150,7 @@ int main(int argc, char** argv) {
       opt.hard_stop_exit_code = exid::cli::signalExitCode;
       exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
       exid::StudyResult r = exid::runStudy(cfg, registry, opt);
-      std::cout << exid::briefTable(r.summary);
+      std::cout << exid::briefTable(r.headline);
       if (!r.ok) {
         std::cerr << fmt::format(
             "exid: study '{}' {}: {}\n{}\n", cfg.name, r.cancelled ? "cancelled" : "failed",

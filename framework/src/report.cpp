@@ -216,7 +216,8 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
   sections_.push_back(s);
 }
 
-void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& v) {
+void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted,
+                        const StudySummary::Validation& v) {
   const std::size_t sec = sections_.size();
   for (int eq = 0; eq < rows.numEquations; ++eq) {
     PlotSpec p;
@@ -258,12 +259,10 @@ void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted, cons
   std::string s = fmt::format(
       "## Validation\n\n{} rows; relative error ||y - y_hat|| / ||y|| = {:.4g}.\n\n"
       "| equation | RMS error | relative |\n|---|---|---|\n",
-      rows.y.size(), v.find("relative_error")->asDouble());
-  const Json* rms = v.find("rms_per_joint");
-  const Json* rel = v.find("relative_error_per_joint");
-  for (std::size_t i = 0; rms && i < rms->size(); ++i)
-    s += fmt::format("| {} | {:.4g} | {:.4g} |\n", i + 1, rms->at(i).asDouble(),
-                     rel->at(i).asDouble());
+      rows.y.size(), v.relative_error);
+  for (std::size_t i = 0; i < v.rms_per_joint.size(); ++i)
+    s += fmt::format("| {} | {:.4g} | {:.4g} |\n", i + 1, v.rms_per_joint[i],
+                     v.relative_error_per_joint[i]);
   s += "\nMeasured vs predicted: `validation.csv`.\n";
   sections_.push_back(s);
 }
@@ -379,7 +378,7 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
 
 }  // namespace
 
-std::string Report::write(const Json& summary) {
+std::string Report::write(const StudySummary& summary) {
   if (dir_.empty()) return "";
   for (const auto& [name, text] : files_) writeFileAtomic(dir_ / name, text);
   // Plots, grouped under their sections.
@@ -404,15 +403,14 @@ std::string Report::write(const Json& summary) {
       "results in `summary.json`.\n\n",
       cfg_.hash());
   md += briefTable(summary) + "\n";
-  if (const Json* w = summary.find("warnings"); w && w->isArray() && w->size() > 0) {
+  if (!summary.warnings.empty()) {
     md += "## Warnings\n\n";
-    for (std::size_t i = 0; i < w->size(); ++i) md += "- " + w->at(i).asString() + "\n";
+    for (const auto& w : summary.warnings) md += "- " + w + "\n";
     md += "\n";
   }
-  if (const Json* r = summary.find("robot"); r && r->find("notes")) {
+  if (summary.robot && !summary.robot->notes.empty()) {
     md += "## Notes on the robot\n\n";
-    for (std::size_t i = 0; i < r->find("notes")->size(); ++i)
-      md += "- " + r->find("notes")->at(i).asString() + "\n";
+    for (const auto& n : summary.robot->notes) md += "- " + n + "\n";
     md += "\n";
   }
   for (std::size_t i = 0; i < sections_.size(); ++i) md += sections_[i] + plot_md[i] + "\n";

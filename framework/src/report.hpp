@@ -8,6 +8,7 @@
 
 #include "exid/config.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/summary.hpp"
 #include "plot.hpp"
 
 namespace exid {
@@ -24,10 +25,11 @@ class Report {
   void excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau,
                         const Eigen::VectorXd& tau_max, double margin, const Json* exported);
   void identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated);
-  void validation(const Rows& rows, const Eigen::VectorXd& predicted, const Json& summary);
+  void validation(const Rows& rows, const Eigen::VectorXd& predicted,
+                  const StudySummary::Validation& v);
   /// Writes report.md, report.html, the plots (gnuplot, SVG + PNG, data as CSV) and the
   /// tables, each atomically. Returns what the report says about missing plots ("" if none).
-  std::string write(const Json& summary);
+  std::string write(const StudySummary& summary);
 
  private:
   const StudyConfig& cfg_;

@@ -556,12 +556,13 @@ namespace {
 class StudyRun {
  public:
   StudyRun(const StudyConfig& study, const Registry& registry, const RunOptions& options,
-           Json& summary, const fs::path& staging, Report& rep,
+           Json& summary, StudySummary& typed, const fs::path& staging, Report& rep,
            std::function<void(const char*)> set_stage)
       : cfg(study),
         reg(registry),
         opt(options),
         S(summary),
+        T(typed),
         write(!options.out_dir.empty()),
         dir(staging),
         report(rep),
@@ -590,6 +591,7 @@ class StudyRun {
   /// What a user should know about this run's results (also logged): the report lists them.
   void warn(const std::string& text) {
     logWarn(text);
+    T.warnings.push_back(text);
     S["warnings"].push_back(Json(text));
   }
   /// The experiment's inspection, when it ran beside the estimator, into the summary.
@@ -601,7 +603,8 @@ class StudyRun {
   const StudyConfig& cfg;
   const Registry& reg;
   const RunOptions& opt;
-  Json& S;
+  Json& S;          // summary.json: the typed results (T) rendered, and what has no fixed type
+  StudySummary& T;  // the typed results
   const bool write;
   const fs::path dir;  // where this run writes ("" = nowhere)
   Report& report;
@@ -638,14 +641,18 @@ void StudyRun::robotStage() {
   auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
   robot = robotPlugin->build(ctx);
   check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
-  Json& R = S["robot"];
-  R["type"] = cfg.robot->type;
-  R["name"] = robot->name;
-  R["dof"] = robot->dof();
-  R["n_parameters"] = robot->numInertialParameters();
-  if (!robot->notes.empty()) R["notes"] = Json(robot->notes);
-  for (const auto& w : robot->warnings) S["warnings"].push_back(Json(w));  // logged on load
-  R["wall_s"] = seconds(t0);
+  auto& R = T.robot.emplace();
+  R.type = cfg.robot->type;
+  R.name = robot->name;
+  R.dof = robot->dof();
+  R.n_parameters = robot->numInertialParameters();
+  R.notes = robot->notes;
+  for (const auto& w : robot->warnings) {  // logged on load
+    T.warnings.push_back(w);
+    S["warnings"].push_back(Json(w));
+  }
+  R.wall_s = seconds(t0);
+  renderInto(R, &S["robot"]);
 }
 
 // The observation model, bound to the robot (and to the joints the excitation moves).
@@ -675,6 +682,7 @@ void StudyRun::modelStage() {
         model->restrictMotion(std::move(moving), s0.q.row(0).transpose());
       }
     }
+    if (!cfg.base_columns.empty()) model->preferBaseColumns(cfg.base_columns);
     model->bind(robot, ctx);
     checkFinite(model->fullNominal(),
                 fmt::format("model '{}': the robot's nominal parameter", model->pluginName()),
@@ -682,8 +690,9 @@ void StudyRun::modelStage() {
     checkFinite(model->baseNominal(),
                 fmt::format("model '{}': the nominal base parameter", model->pluginName()),
                 model->base().names);
-    S["robot"]["n_parameters"] = model->base().numFull();
-    S["robot"]["n_base_parameters"] = model->numBase();
+    T.robot->n_parameters = model->base().numFull();
+    T.robot->n_base_parameters = model->numBase();
+    renderInto(*T.robot, &S["robot"]);
     Json& Mj = S["model"];
     Mj["type"] = model->pluginName();
     Mj["n_full"] = model->base().numFull();
@@ -756,30 +765,33 @@ void StudyRun::excitationStage() {
           crit_place, cfg.optimizer->type, why, r.evaluations, stopReasonText(r)));
     }
     Samples best = traj->evaluate(r.z);
-    Json& X = S["excitation"];
-    X["trajectory"] = cfg.trajectory->type;
-    X["criterion"] = cfg.criterion->type;
-    X["optimizer"] = cfg.optimizer->type;
-    X["criterion_initial"] = r.criterion_initial;
-    X["criterion_final"] = r.criterion_final;
-    X["cond_W_initial"] = conditionNumber(model->design(initial));
-    X["cond_W_final"] = conditionNumber(model->design(best));
-    X["max_constraint_violation"] = r.max_violation;
+    auto& x = T.excitation.emplace();
+    x.trajectory = cfg.trajectory->type;
+    x.criterion = cfg.criterion->type;
+    x.optimizer = cfg.optimizer->type;
+    x.criterion_initial = r.criterion_initial;
+    x.criterion_final = r.criterion_final;
+    x.cond_W_initial = conditionNumber(model->design(initial));
+    x.cond_W_final = conditionNumber(model->design(best));
+    x.max_constraint_violation = r.max_violation;
     if (xo.torque_margin > 0) {
       // the worst |tau_j| / tau_max,j the full model predicts at the samples
       const Eigen::VectorXd tmax =
           torqueLimits(model->robot(), xo.torque_max, "excitation").tau_max;
       const Eigen::MatrixXd tau = predictedTorques(model->robot(), best);
-      X["torque_margin"] = xo.torque_margin;
-      X["torque_ratio_max"] = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
+      x.torque_margin = xo.torque_margin;
+      x.torque_ratio_max = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
     }
-    X["iterations"] = r.iterations;
-    X["evaluations"] = Json(static_cast<long long>(r.evaluations));
-    X["wall_s"] = r.wall_s;
-    X["stop_reason"] = stopReasonText(r);
+    x.iterations = r.iterations;
+    x.evaluations = static_cast<long long>(r.evaluations);
+    x.wall_s = r.wall_s;
+    x.stop_reason = r.stop_reason;
+    x.stop_reason_text = stopReasonText(r);
     // A run cut by time gives another answer on another (or a busier) machine.
-    X["reproducible"] = !stoppedByTime(r.stop_reason);
-    if (!X["reproducible"].asBool())
+    x.reproducible = !stoppedByTime(r.stop_reason);
+    Json& X = S["excitation"];
+    renderInto(x, &X);
+    if (!x.reproducible)
       warn(fmt::format(
           "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "
           "the trajectory depends on the speed of this machine; for a reproducible result give "
@@ -865,11 +877,13 @@ void StudyRun::experimentStage() {
       data = materialize(*data);
     checkDataset(*data, *robot, model.get(), "experiment", especs.needs_raw_dataset);
     checkDatasetFinite(*data, "experiment");
+    auto& ex = T.experiment.emplace();
+    ex.type = cfg.experiment->type;
+    ex.samples = data->size();
+    ex.duration_s = data->tLast() - data->tFirst();
+    ex.wall_s = seconds(t0);
     Json& E = S["experiment"];
-    E["type"] = cfg.experiment->type;
-    E["samples"] = data->size();
-    E["duration_s"] = data->tLast() - data->tFirst();
-    E["wall_s"] = seconds(t0);
+    renderInto(ex, &E);
     E["meta"] = data->meta;
     if (data->streamed()) {
       E["streamed"] = fmt::format(
@@ -971,14 +985,16 @@ void StudyRun::identificationStage() {
           fmt::format("estimator '{}': the residual RMS is {} (a non-finite result is an "
                       "error, never a result)",
                       cfg.estimator->type, est->residual_rms));
+    auto& id = T.identification.emplace();
+    id.estimator = cfg.estimator->type;
+    id.wall_s = seconds(t0);
+    id.rows = static_cast<long long>(est->rows);
+    id.cond_W = est->cond_W;
+    id.residual_rms = est->residual_rms;
+    id.sigma = est->sigma;
     Json& I = S["identification"];
-    I["estimator"] = cfg.estimator->type;
+    I["estimator"] = id.estimator;
     if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
-    I["wall_s"] = seconds(t0);
-    I["rows"] = Json(static_cast<long long>(est->rows));
-    I["cond_W"] = est->cond_W;
-    I["residual_rms"] = est->residual_rms;
-    I["sigma"] = est->sigma;
     const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
     const Eigen::VectorXd nominal = model->baseNominal();
     // A simulated study is judged against what the simulation used (its payload), never
@@ -1003,15 +1019,16 @@ void StudyRun::identificationStage() {
       params.push_back(p);
     }
     if (simulated) {
-      I["param_abs_err"] = std::sqrt(err2);
+      id.param_abs_err = std::sqrt(err2);
       if (tru2 > 0)
-        I["param_rel_err"] = std::sqrt(err2 / tru2);
+        id.param_rel_err = std::sqrt(err2 / tru2);
       else
         warn(
             "identification: every true parameter is zero (the simulation used none of the "
             "model's parameters, e.g. no payload): param_rel_err is undefined; "
             "param_abs_err is given");
     }
+    renderInto(id, &I);
     I["parameters"] = params;
     I["details"] = est->details;
     if (const Json* w = est->details.find("warnings"); w && w->isArray())
@@ -1045,11 +1062,14 @@ void StudyRun::validationStage() {
     Eigen::VectorXd pred = rows.W * est->value;
     checkFinite(pred, "validation: the predicted measurement, row");
     Eigen::VectorXd err = rows.y - pred;
+    auto& va = T.validation.emplace();
+    va.type = cfg.validation->type;
+    va.samples = vd.size();
+    va.rows = static_cast<long long>(rows.y.size());
     Json& V = S["validation"];
-    V["type"] = cfg.validation->type;
-    V["samples"] = vd.size();
+    V["type"] = va.type;
+    V["samples"] = Json(va.samples);
     V["meta"] = vd.meta;
-    V["rows"] = Json(static_cast<long long>(rows.y.size()));
     V["rows_processing"] = by_estimator
                                ? fmt::format(
                                      "the estimator's: '{}' filtered, differentiated and "
@@ -1078,7 +1098,7 @@ void StudyRun::validationStage() {
     if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
       for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
     inspectInto(S, warnFn(), "validation", *robot, model.get(), vd, vctx);
-    V["relative_error"] = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
+    va.relative_error = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
     std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
         ref(rms.size(), 0.0);
     for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
@@ -1093,9 +1113,10 @@ void StudyRun::validationStage() {
       relj[e] = ref[e] > 0 ? std::sqrt(rms[e] / ref[e]) : NAN;
       rms[e] = cnt[e] > 0 ? std::sqrt(rms[e] / cnt[e]) : NAN;
     }
-    V["rms_per_joint"] = Json(rms);
-    V["relative_error_per_joint"] = Json(relj);
-    V["wall_s"] = seconds(t0);
+    va.rms_per_joint = rms;
+    va.relative_error_per_joint = relj;
+    va.wall_s = seconds(t0);
+    renderInto(va, &V);
     if (!rows.equation_names.empty()) V["equations"] = Json(rows.equation_names);
     if (write) {
       // t of each row's sample so rows can be matched with other tools; the equations named
@@ -1118,7 +1139,7 @@ void StudyRun::validationStage() {
                       fmt::format("# exid validation of study '{}': equation {}\n{}", cfg.name,
                                   names.empty() ? std::string("indices") : names, toCsv(t)));
     }
-    report.validation(rows, pred, V);
+    report.validation(rows, pred, va);
   }
 }
 
@@ -1128,16 +1149,15 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   const auto t_start = std::chrono::steady_clock::now();
   StudyResult res;
   Json& S = res.summary;
+  StudySummary& T = res.headline;
+  T.study = cfg.name;
   S = Json::object();
-  S["status"] = "running";
-  S["message"] = "";
-  S["study"] = cfg.name;
+  renderInto(T, &S);  // status "running", message, study, warnings
   S["exid_version"] = EXID_VERSION_STRING;
   S["exid_commit"] = gitCommit();
   S["build"] = Registry::fingerprintText();
   S["config_hash"] = cfg.hash();
   S["seed"] = Json(static_cast<long long>(cfg.seed));
-  S["warnings"] = Json::array();  // StudyRun::warn
   const bool write = !opt.out_dir.empty();
   RunFolder folder;
   if (write) {
@@ -1146,9 +1166,10 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     } catch (const std::exception& e) {  // nothing written, nothing replaced
       res.ok = false;
       res.message = fmt::format("stage 'setup': {}", e.what());
-      S["status"] = "failed";
-      S["failed_stage"] = "setup";
-      S["message"] = res.message;
+      T.status = "failed";
+      T.failed_stage = "setup";
+      T.message = res.message;
+      renderInto(T, &S);
       return res;
     }
   }
@@ -1161,7 +1182,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     stage_now = name;
   };
   Watchdog watchdog(opt, write ? folder : RunFolder{}, cfg, stage_now, t_start);
-  StudyRun run(cfg, reg, opt, S, dir, report, setStage);
+  StudyRun run(cfg, reg, opt, S, T, dir, report, setStage);
   const RunContext& ctx = run.ctx;
   try {
     if (write) {
@@ -1176,7 +1197,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     if (ctx.shouldStop())
       throw Error(fmt::format("stopped: {}",
                               ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
-    S["status"] = "ok";
+    T.status = "ok";
     res.ok = true;
   } catch (const std::exception& e) {
     run.collectExperimentInspection();  // (a failed identification keeps the data's inspection)
@@ -1186,14 +1207,15 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     res.message = fmt::format("stage '{}': {}", stage,
                               nomem ? std::string("out of memory (std::bad_alloc)") : e.what());
     res.cancelled = opt.cancelled && opt.cancelled();
-    S["status"] = res.cancelled ? "cancelled" : "failed";
-    S["failed_stage"] = stage;
-    S["message"] = res.message;
+    T.status = res.cancelled ? "cancelled" : "failed";
+    T.failed_stage = stage;
+    T.message = res.message;
     if (io && io->outOfSpace()) S["out_of_space"] = true;  // the machine's, not the study's
     if (nomem) S["out_of_memory"] = true;
     if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
   }
-  S["wall_s"] = seconds(t_start);
+  T.wall_s = seconds(t_start);
+  renderInto(T, &S);
   const std::lock_guard<std::mutex> finishing(watchdog.finishing());
   watchdog.finished();
   if (write) {
@@ -1202,7 +1224,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     const fs::path target = beside ? folder.failed_dir : folder.final_dir;
     try {
       if (res.ok) {
-        const std::string missing = report.write(S);
+        const std::string missing = report.write(T);
         S["report"] = (folder.final_dir / "report.md").string();
         if (!missing.empty()) S["report_missing_plots"] = missing;
       }
@@ -1221,8 +1243,9 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       if (io && io->outOfSpace()) S["out_of_space"] = true;
       res.message +=
           (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
-      S["status"] = "failed";
-      S["message"] = res.message;
+      T.status = "failed";
+      T.message = res.message;
+      renderInto(T, &S);
       // Whatever was written stays in the staging folder's place only if publishing it
       // worked; the earlier results are never touched. Try to leave the failure visible.
       std::error_code ec;
@@ -1289,43 +1312,6 @@ StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry
     throw Error(fmt::format("unknown stage '{}'; stages: excite, simulate, identify", stage));
   }
   return cfg;
-}
-
-std::string briefTable(const Json& S) {
-  std::string out;
-  auto row = [&](const std::string& k, const std::string& v) {
-    out += fmt::format("| {} | {} |\n", k, v);
-  };
-  auto num = [](const Json* j) {
-    return j && j->isNumber() ? fmt::format("{:.6g}", j->asDouble()) : std::string("-");
-  };
-  out += "| quantity | value |\n|---|---|\n";
-  row("status", S.find("status") ? S.find("status")->asString() : "?");
-  if (const Json* r = S.find("robot")) {
-    row("robot", fmt::format("{} ({} dof)", r->find("name") ? r->find("name")->asString() : "?",
-                             num(r->find("dof"))));
-    if (r->find("n_base_parameters"))
-      row("base parameters",
-          fmt::format("{} of {}", num(r->find("n_base_parameters")), num(r->find("n_parameters"))));
-  }
-  if (const Json* x = S.find("excitation")) {
-    row("excitation criterion",
-        fmt::format("{} -> {} ({} iterations, {} s)", num(x->find("criterion_initial")),
-                    num(x->find("criterion_final")), num(x->find("iterations")),
-                    num(x->find("wall_s"))));
-    row("cond(W) of trajectory",
-        fmt::format("{} -> {}", num(x->find("cond_W_initial")), num(x->find("cond_W_final"))));
-  }
-  if (const Json* e = S.find("experiment")) row("experiment samples", num(e->find("samples")));
-  if (const Json* i = S.find("identification")) {
-    row("estimator", i->find("estimator")->asString());
-    row("cond(W) of identification", num(i->find("cond_W")));
-    row("residual RMS", num(i->find("residual_rms")));
-    if (i->find("param_rel_err")) row("parameter relative error", num(i->find("param_rel_err")));
-  }
-  if (const Json* v = S.find("validation"))
-    row("validation relative error", num(v->find("relative_error")));
-  return out;
 }
 
 }  // namespace exid

@@ -12,6 +12,7 @@
 #include "exid/data.hpp"
 #include "exid/io.hpp"
 #include "exid/json.hpp"
+#include "exid/summary.hpp"
 
 namespace exid {
 
@@ -45,6 +46,9 @@ struct StudyResult {
   bool ok = false;
   std::string message;
   Json summary;
+  /// The typed results summary.json's status, robot, excitation, experiment, identification and
+  /// validation keys are rendered from (summary.hpp).
+  StudySummary headline;
   /// Where the run's files are: out_dir, or (a failed run beside an earlier run's results,
   /// which it leaves untouched) out_dir + ".failed". Empty when nothing was written.
   std::filesystem::path written_to;
@@ -73,7 +77,5 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 CsvTable datasetTable(const Dataset& d);
 CsvTable samplesTable(const Samples& s);
 
-/// The Markdown table printed at the end of `exid run`.
-std::string briefTable(const Json& summary);
 
 }  // namespace exid

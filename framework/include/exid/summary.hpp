@@ -1,0 +1,91 @@
+// exid — a study's results, typed: the status, the robot, the excitation, the experiment, the
+// identification and the validation as the runner records them. summary.json's keys for these
+// values, the brief table `exid run` prints and the report's summary are all rendered from this
+// one record (summary.json adds what has no fixed type: meta, details, inspection, history).
+#pragma once
+
+#include <cmath>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "exid/interfaces.hpp"
+#include "exid/json.hpp"
+
+namespace exid {
+
+// The stages' parts of a study's results (StudySummary::Robot, ...).
+struct RobotSummary {
+  std::string type, name;
+  int dof = 0;
+  int n_parameters = 0;
+  std::optional<int> n_base_parameters;  // once a model is bound
+  std::vector<std::string> notes;        // known defects of shipped data, said once
+  double wall_s = NAN;
+};
+struct ExcitationSummary {
+  std::string trajectory, criterion, optimizer;
+  double criterion_initial = NAN, criterion_final = NAN;
+  double cond_W_initial = NAN, cond_W_final = NAN;
+  double max_constraint_violation = NAN;
+  std::optional<double> torque_margin, torque_ratio_max;  // with torque limits
+  int iterations = 0;
+  long long evaluations = 0;
+  double wall_s = NAN;
+  StopReason stop_reason = StopReason::None;
+  std::string stop_reason_text;  // the reason with the optimiser's own words
+  bool reproducible = true;      // false: stopped by a time budget
+};
+struct ExperimentSummary {
+  std::string type;
+  long long samples = 0;
+  double duration_s = NAN;
+  double wall_s = NAN;
+};
+struct IdentificationSummary {
+  std::string estimator;
+  double wall_s = NAN;
+  long long rows = 0;
+  double cond_W = NAN, residual_rms = NAN, sigma = NAN;
+  std::optional<double> param_abs_err, param_rel_err;  // simulated data: against the truth
+};
+struct ValidationSummary {
+  std::string type;
+  long long samples = 0, rows = 0;
+  double relative_error = NAN;
+  std::vector<double> rms_per_joint, relative_error_per_joint;
+  double wall_s = NAN;
+};
+
+struct StudySummary {
+  std::string study;
+  std::string status = "running";  // running, ok, failed, cancelled
+  std::string failed_stage;        // the stage that failed ("" unless failed or cancelled)
+  std::string message;
+  std::vector<std::string> warnings;  // what a user should know about the results
+  double wall_s = NAN;
+
+  using Robot = RobotSummary;
+  using Excitation = ExcitationSummary;
+  using Experiment = ExperimentSummary;
+  using Identification = IdentificationSummary;
+  using Validation = ValidationSummary;
+  std::optional<Robot> robot;
+  std::optional<Excitation> excitation;
+  std::optional<Experiment> experiment;
+  std::optional<Identification> identification;
+  std::optional<Validation> validation;
+};
+
+/// Writes the typed values into summary.json's objects (keys already there keep their place).
+void renderInto(const StudySummary& s, Json* summary);  // status, message, ..., warnings, wall_s
+void renderInto(const StudySummary::Robot& r, Json* robot);
+void renderInto(const StudySummary::Excitation& x, Json* excitation);
+void renderInto(const StudySummary::Experiment& e, Json* experiment);
+void renderInto(const StudySummary::Identification& i, Json* identification);
+void renderInto(const StudySummary::Validation& v, Json* validation);
+
+/// The Markdown table printed at the end of `exid run` and at the top of report.md.
+std::string briefTable(const StudySummary& s);
+
+}  // namespace exid
