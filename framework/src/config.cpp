@@ -372,8 +372,8 @@ std::string studyNameProblem(const std::string& name) {
 namespace {
 
 const std::vector<std::string> kTopKeys = {
-    "name",       "description", "seed",       "budget_s", "robot", "model", "excitation",
-    "experiment", "estimator",   "validation", "report",   "prior", "split"};
+    "name",       "description", "seed",      "budget_s",   "robot",  "model", "base_columns",
+    "excitation", "experiment",  "estimator", "validation", "report", "prior", "split"};
 
 std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_dir, Problems& pr) {
   if (!n.IsMap()) {
@@ -607,6 +607,24 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       cfg.models.push_back(*s);
     }
   }
+  if (YAML::Node b = root["base_columns"]) {
+    if (!b.IsSequence() || b.size() == 0) {
+      pr.add(b,
+             "base_columns: expected a non-empty list of full parameter names (e.g. [ZZ1, "
+             "XX2, MX2]); leave the key out for the natural order");
+    } else {
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        if (!b[i].IsScalar() || b[i].Scalar().empty())
+          pr.add(b[i], fmt::format("base_columns[{}]: expected a parameter name", i));
+        else if (std::find(cfg.base_columns.begin(), cfg.base_columns.end(), b[i].Scalar()) !=
+                 cfg.base_columns.end())
+          pr.add(b[i], fmt::format("base_columns[{}]: '{}' is named twice", i, b[i].Scalar()));
+        else
+          cfg.base_columns.push_back(b[i].Scalar());
+      }
+      if (!root["model"]) pr.add(b, "base_columns: needs a model section");
+    }
+  }
   if (YAML::Node x = root["excitation"]) {
     if (!x.IsMap()) {
       pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
@@ -807,6 +825,10 @@ std::string StudyConfig::resolvedYaml() const {
       e << YAML::EndSeq;
     }
   }
+  if (!base_columns.empty()) {
+    e << YAML::Key << "base_columns" << YAML::Value << YAML::Flow << base_columns;
+  }
+
   if (hasExcitation()) {
     e << YAML::Key << "excitation" << YAML::Value << YAML::BeginMap;
     e << YAML::Key << "trajectory" << YAML::Value;
@@ -881,6 +903,7 @@ Json StudyConfig::resolvedJson() const {
     }
     j["model"] = m;
   }
+  if (!base_columns.empty()) j["base_columns"] = Json(base_columns);
   if (hasExcitation()) {
     j["excitation"]["trajectory"] = specJson(*trajectory);
     j["excitation"]["criterion"] = specJson(*criterion);

@@ -3,6 +3,7 @@
 
 #include <gtest/gtest.h>
 
+#include <Eigen/QR>
 #include <algorithm>
 #include <random>
 
@@ -10,6 +11,7 @@
 #include "dyn_robots.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/error.hpp"
 
 using namespace exid;
 using namespace exid::testing;
@@ -123,4 +125,70 @@ TEST(BaseParameters, ExpressionsAndRandomTrees) {
   EXPECT_EQ(b.names, (std::vector<std::string>{"AR", "BR"}));
   EXPECT_EQ(b.expressions[0], "A + 2*C");
   EXPECT_EQ(b.expressions[1], "B - 0.5*C");
+}
+
+// A study may name the base columns to keep (BaseParameterOptions::preferred): the same
+// identifiable space (rank, exactness), other columns and regroupings; a dependent or unknown
+// name is an error naming it.
+TEST(BaseParameters, PreferredColumnsAreKeptAndTheSpaceIsTheSame) {
+  std::mt19937 rng(44);
+  const RobotModel m = planar2R(true);
+  const Eigen::MatrixXd W = stack(m, {}, 150, rng);
+  const auto names = parameterNames(m, {});
+  BaseParameterOptions o;
+  o.preferred = {"M2", "M1"};
+  const BaseParameters b = computeBaseParameters(W, names, o);
+  EXPECT_EQ(b.rank(), 6);
+  // In the natural order M2 regroups into ZZ2R = ZZ2 - a2^2 M2 and MX2R = MX2 + a2 M2 (and M1
+  // likewise): the column of M2 is a combination of those of ZZ2 and MX2. With M2 and M1
+  // named they are kept and MX2, MX1 regroup into them instead (names in the natural order).
+  EXPECT_EQ(b.names, (std::vector<std::string>{"ZZ1R", "MY1", "M1R", "ZZ2R", "MY2", "M2R"}))
+      << "got " << ::testing::PrintToString(b.names);
+  checkExact(m, {}, b, rng);
+  // Same identifiable space as the natural choice: each set's columns span the other's.
+  const BaseParameters nat = computeBaseParameters(W, names);
+  const Eigen::MatrixXd Wb = b.columns(W), Wn = nat.columns(W);
+  const Eigen::MatrixXd X = Wb.colPivHouseholderQr().solve(Wn);
+  EXPECT_LT((Wb * X - Wn).norm(), 1e-9 * Wn.norm());
+  // The PUMA 560: 36 base parameters whatever the (independent) choice.
+  const RobotModel puma = puma560Standard();
+  const Eigen::MatrixXd Wp = stack(puma, {}, 150, rng);
+  BaseParameterOptions op;
+  op.preferred = {"YY2", "M3", "YY3"};
+  const BaseParameters bp = computeBaseParameters(Wp, parameterNames(puma, {}), op);
+  EXPECT_EQ(bp.rank(), 36);
+  for (const char* kept : {"YY2", "M3", "YY3"}) {
+    const auto it = std::find(bp.names.begin(), bp.names.end(), std::string(kept));
+    const auto itR = std::find(bp.names.begin(), bp.names.end(), std::string(kept) + "R");
+    EXPECT_TRUE(it != bp.names.end() || itR != bp.names.end()) << kept;
+  }
+  checkExact(puma, {}, bp, rng);
+}
+
+TEST(BaseParameters, APreferredColumnThatIsDependentOrUnknownIsAnErrorNamingIt) {
+  std::mt19937 rng(45);
+  const RobotModel m = planar2R(true);
+  const Eigen::MatrixXd W = stack(m, {}, 150, rng);
+  const auto names = parameterNames(m, {});
+  auto message = [&](std::vector<std::string> preferred) {
+    BaseParameterOptions o;
+    o.preferred = std::move(preferred);
+    try {
+      computeBaseParameters(W, names, o);
+    } catch (const exid::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  // M2 regroups into ZZ1R, MX1R, ZZ2R and MX2R: its column is a combination of those four.
+  const std::string dep = message({"ZZ1", "MX1", "ZZ2", "MX2", "M2"});
+  EXPECT_NE(dep.find("'M2' is a combination of the columns named before it (ZZ1, MX1, ZZ2, MX2)"),
+            std::string::npos)
+      << dep;
+  const std::string zero = message({"XX1"});  // no torque in a planar arm
+  EXPECT_NE(zero.find("'XX1' is not identifiable"), std::string::npos) << zero;
+  const std::string unknown = message({"ZZ9"});
+  EXPECT_NE(unknown.find("'ZZ9' is not a parameter of the model"), std::string::npos) << unknown;
+  const std::string twice = message({"ZZ1", "ZZ1"});
+  EXPECT_NE(twice.find("'ZZ1' is named twice"), std::string::npos) << twice;
 }

@@ -36,6 +36,12 @@ struct BaseParameters {
 struct BaseParameterOptions {
   double tolerance = 1e-8;
   bool normalize_columns = true;  // scale each column to unit norm before the QR
+  /// Full parameters to keep as base columns: visited first, in this order, before the others
+  /// in their natural order. Each must exist and be independent of those named before it, or
+  /// computeBaseParameters throws naming it. Empty: the natural order (Khalil/Gautier's
+  /// lexicographically lowest set). The identifiable space is the same for any choice; the
+  /// base columns, their regrouping and the unscaled cond(W) are not.
+  std::vector<std::string> preferred;
 };
 
 /// From a stacked full regressor and its column names.

@@ -88,6 +88,9 @@ struct StudyConfig {
   double budget_s = 0.0;  // whole-study wall-clock budget (0 = none)
   std::optional<PluginSpec> robot;
   std::vector<PluginSpec> models;
+  /// base_columns: full parameters the model keeps as base columns, in this order before the
+  /// others (BaseParameterOptions::preferred; docs/base_parameters.md); empty: the natural order.
+  std::vector<std::string> base_columns;
   std::optional<PluginSpec> trajectory, criterion, optimizer;  // excitation (all or none)
   /// excitation.constraints (excitationConstraintParams(); every key has its default when the
   /// section is absent).

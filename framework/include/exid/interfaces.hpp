@@ -53,6 +53,11 @@ class ObservationModel : public PluginObject {
   /// moves. Call before bind(); the runner sets it from the excitation trajectory's joints.
   void restrictMotion(std::vector<int> moving, Eigen::VectorXd held);
   const std::vector<int>& movingJoints() const { return moving_; }
+  /// Full parameters bind() keeps as base columns, in this order before the others (the study
+  /// key `base_columns`; BaseParameterOptions::preferred). Call before bind().
+  void preferBaseColumns(std::vector<std::string> names) {
+    base_options_.preferred = std::move(names);
+  }
   const Eigen::VectorXd& heldPositions() const { return held_; }
   const RobotModel& robot() const { return *robot_; }
   std::shared_ptr<const RobotModel> robotPtr() const { return robot_; }

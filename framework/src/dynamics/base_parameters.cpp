@@ -39,9 +39,106 @@ std::string formatCoef(double c) {
 
 }  // namespace
 
+namespace {
+
+BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<std::string>& names,
+                            const BaseParameterOptions& opt);
+
+/// The preferred columns first: the algorithm on the permuted columns, mapped back to the
+/// natural order (independent and dependent ascending, beta, K, names and expressions with them).
+BaseParameters preferredFirst(const Eigen::MatrixXd& W, const std::vector<std::string>& names,
+                              const BaseParameterOptions& opt) {
+  const int p = static_cast<int>(names.size());
+  std::vector<int> perm;
+  std::vector<char> taken(static_cast<size_t>(p), 0);
+  for (const auto& want : opt.preferred) {
+    const auto it = std::find(names.begin(), names.end(), want);
+    if (it == names.end()) {
+      std::string all;
+      for (const auto& n : names) all += (all.empty() ? "" : ", ") + n;
+      throw Error("base columns: '" + want +
+                  "' is not a parameter of the model (parameters: " + all + ")");
+    }
+    const int j = static_cast<int>(it - names.begin());
+    check(!taken[static_cast<size_t>(j)], "base columns: '" + want + "' is named twice");
+    taken[static_cast<size_t>(j)] = 1;
+    perm.push_back(j);
+  }
+  for (int j = 0; j < p; ++j)
+    if (!taken[static_cast<size_t>(j)]) perm.push_back(j);
+  Eigen::MatrixXd Wp(W.rows(), p);
+  std::vector<std::string> np(static_cast<size_t>(p));
+  for (int k = 0; k < p; ++k) {
+    Wp.col(k) = W.col(perm[static_cast<size_t>(k)]);
+    np[static_cast<size_t>(k)] = names[static_cast<size_t>(perm[static_cast<size_t>(k)])];
+  }
+  BaseParameterOptions o = opt;
+  o.preferred.clear();
+  const BaseParameters bp = naturalOrder(Wp, np, o);
+  // Every preferred column must have been kept.
+  for (std::size_t k = 0; k < opt.preferred.size(); ++k) {
+    if (std::find(bp.independent.begin(), bp.independent.end(), static_cast<int>(k)) ==
+        bp.independent.end()) {
+      std::string before;
+      for (std::size_t i = 0; i < k; ++i) before += (i ? ", " : "") + opt.preferred[i];
+      throw Error("base columns: '" + opt.preferred[k] + "' is " +
+                  (bp.K.rows() > 0 && bp.K.col(static_cast<Eigen::Index>(k)).isZero()
+                       ? std::string("not identifiable (its column is zero)")
+                       : "a combination of the columns named before it (" +
+                             (before.empty() ? std::string("none") : before) + ")") +
+                  ": name independent columns only");
+    }
+  }
+  // Back to the natural order.
+  BaseParameters out;
+  out.full_names = names;
+  out.tolerance = bp.tolerance;
+  std::vector<int> ind_rows(bp.independent.size()), dep_cols(bp.dependent.size());
+  for (std::size_t i = 0; i < ind_rows.size(); ++i) ind_rows[i] = static_cast<int>(i);
+  for (std::size_t i = 0; i < dep_cols.size(); ++i) dep_cols[i] = static_cast<int>(i);
+  auto orig = [&](int k) { return perm[static_cast<size_t>(k)]; };
+  std::sort(ind_rows.begin(), ind_rows.end(), [&](int a, int b) {
+    return orig(bp.independent[static_cast<size_t>(a)]) <
+           orig(bp.independent[static_cast<size_t>(b)]);
+  });
+  std::sort(dep_cols.begin(), dep_cols.end(), [&](int a, int b) {
+    return orig(bp.dependent[static_cast<size_t>(a)]) < orig(bp.dependent[static_cast<size_t>(b)]);
+  });
+  const auto r = static_cast<Eigen::Index>(ind_rows.size());
+  const auto nd = static_cast<Eigen::Index>(dep_cols.size());
+  out.beta.resize(r, nd);
+  out.K = Eigen::MatrixXd::Zero(r, p);
+  for (Eigen::Index a = 0; a < r; ++a) {
+    const int ra = ind_rows[static_cast<size_t>(a)];
+    out.independent.push_back(orig(bp.independent[static_cast<size_t>(ra)]));
+    out.names.push_back(bp.names[static_cast<size_t>(ra)]);
+    out.expressions.push_back(bp.expressions[static_cast<size_t>(ra)]);
+    for (int k = 0; k < p; ++k) out.K(a, orig(k)) = bp.K(ra, k);
+    for (Eigen::Index c = 0; c < nd; ++c)
+      out.beta(a, c) = bp.beta(ra, dep_cols[static_cast<size_t>(c)]);
+  }
+  for (Eigen::Index c = 0; c < nd; ++c)
+    out.dependent.push_back(
+        orig(bp.dependent[static_cast<size_t>(dep_cols[static_cast<size_t>(c)])]));
+  return out;
+}
+
+}  // namespace
+
 BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
                                      const std::vector<std::string>& names,
                                      const BaseParameterOptions& opt) {
+  check(static_cast<Eigen::Index>(names.size()) == W_stacked.cols(),
+        "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
+            std::to_string(W_stacked.cols()) + " columns");
+  if (!opt.preferred.empty()) return preferredFirst(W_stacked, names, opt);
+  return naturalOrder(W_stacked, names, opt);
+}
+
+namespace {
+
+BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<std::string>& names,
+                            const BaseParameterOptions& opt) {
   const Eigen::Index p = W_stacked.cols();
   check(static_cast<Eigen::Index>(names.size()) == p,
         "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
@@ -224,6 +321,8 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
   }
   return bp;
 }
+
+}  // namespace
 
 BaseParameters computeBaseParameters(
     int samples, int rows_per_sample,
