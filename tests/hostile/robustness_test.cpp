@@ -736,8 +736,12 @@ TEST(Robustness, SignalDuringALongOptimiserCallIsHonoured) {
 // to its address space (RLIMIT_AS in the cell's process); the cell over it fails saying so, the
 // matrix goes on. (Not under AddressSanitizer: its shadow memory exceeds any such cap.)
 TEST(Robustness, MatrixCellMemoryCap) {
-#if defined(__SANITIZE_ADDRESS__)
+#if defined(__SANITIZE_ADDRESS__)  // gcc
   GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer do not mix";
+#elif defined(__has_feature)
+#if __has_feature(address_sanitizer)  // clang
+  GTEST_SKIP() << "RLIMIT_AS and AddressSanitizer do not mix";
+#endif
 #endif
   const fs::path dir = tempDir("mmem");
   std::ofstream(dir / "m.yaml") << R"(name: m

@@ -20,8 +20,14 @@ if [ -z "$prefix" ]; then
   prefix="$work/prefix"
 fi
 exid="$prefix/bin/exid"
+# The compiler exid was built with (a sanitized exid: its sanitizer runtime must be the plugin's).
+cxx=()
+if [ -f "$build/CMakeCache.txt" ]; then
+  c=$(sed -n 's/^CMAKE_CXX_COMPILER:[A-Z]*=//p' "$build/CMakeCache.txt")
+  if [ -n "$c" ]; then cxx=(-DCMAKE_CXX_COMPILER="$c"); fi
+fi
 cmake -S "$src/examples/out_of_tree_plugin" -B "$work/plugin" -DCMAKE_BUILD_TYPE=Release \
-  -DCMAKE_PREFIX_PATH="$prefix" >/dev/null
+  -DCMAKE_PREFIX_PATH="$prefix" "${cxx[@]}" >/dev/null
 cmake --build "$work/plugin" --parallel "${CMAKE_BUILD_PARALLEL_LEVEL:-2}" >/dev/null
 lib=$(find "$work/plugin" -name 'libexid_plugin_a_optimal.so' | head -n 1)
 test -n "$lib"
