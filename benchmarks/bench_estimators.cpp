@@ -106,7 +106,7 @@ void rowsOnly(benchmark::State& state, const Setup& s) {
   // The baseline for batch_ls: the model's rows alone, streamed in batch_ls's default chunks.
   exid::RunContext ctx;
   for (auto _ : state)
-    exid::est::forEachChunk(
+    exid::estimators::forEachChunk(
         *s.model, s.data, 64, ctx, "rows", 0.0, 1.0,
         [](const exid::Rows& r, int, int) { benchmark::DoNotOptimize(r.W.data()); });
   state.SetItemsProcessed(state.iterations() * s.data.size());

@@ -1,7 +1,7 @@
 // exid — estimator `batch_ls`: ordinary least squares on the base regressor, streamed.
 //
 // The dataset is processed in chunks of samples (model.rows on slices) and folded into a
-// (p+1) x (p+1) factor of [W y] (exid::est::RowAccumulator): memory is O(p^2 + chunk),
+// (p+1) x (p+1) factor of [W y] (exid::estimators::RowAccumulator): memory is O(p^2 + chunk),
 // independent of the number of samples. Two ways to fold:
 //   qr:     incremental Householder QR of [R; chunk]; cond(R) = cond([W y]), nothing squared;
 //   normal: the Gram matrix [W y]^T [W y] (a symmetric rank-k update, BLAS-3 speed); squares
@@ -66,13 +66,13 @@ class BatchLs : public exid::Estimator {
       : chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         accumulate_(p.getString("accumulate")),
         normal_max_cond_(p.getDouble("normal_max_cond")),
-        threads_(exid::est::resolveThreads(p.getInt("threads"))) {
+        threads_(exid::estimators::resolveThreads(p.getInt("threads"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
+    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
     s.accepts_prior = true;
     return s;
   }
@@ -80,12 +80,12 @@ class BatchLs : public exid::Estimator {
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
-    using Method = exid::est::RowAccumulator::Method;
+    using Method = exid::estimators::RowAccumulator::Method;
     auto fold = [&](Method m, double lo, double hi) {
-      return exid::est::accumulateRows(model, data, chunk_, ctx, kName, lo, hi, m, threads_);
+      return exid::estimators::accumulateRows(model, data, chunk_, ctx, kName, lo, hi, m, threads_);
     };
     const bool automatic = accumulate_ == "auto";
-    exid::est::RowAccumulator acc =
+    exid::estimators::RowAccumulator acc =
         fold(accumulate_ == "qr" ? Method::Qr : Method::Normal, 0.0, automatic ? 0.5 : 0.95);
     exid::Json choice = exid::Json::object();
     choice["requested"] = accumulate_;
@@ -128,20 +128,20 @@ class BatchLs : public exid::Estimator {
     ctx.report(0.97, "batch_ls: solving");
     exid::Estimate e;
     if (!prior) {
-      const exid::est::LsSolution s =
-          exid::est::solveLeastSquares(acc, model.base().names, opt_, kName);
-      exid::est::fillEstimate(&e, model, s, s.rss, s.m);
+      const exid::estimators::LsSolution s =
+          exid::estimators::solveLeastSquares(acc, model.base().names, opt_, kName);
+      exid::estimators::fillEstimate(&e, model, s, s.rss, s.m);
     } else {
       // Regularised least squares: the data rows divided by their noise std (from the
       // rank-tolerant fit), stacked with the prior's pseudo-observations S (theta - theta0) = 0,
       // S^T S = Sigma^-1. Directions the data do not excite fall back to the prior.
       double noise = 0.0;
-      const exid::est::LsSolution s =
-          exid::est::solveWithPrior(acc, *prior, model.base().names, opt_, kName, 1.0, &noise);
-      exid::est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
+      const exid::estimators::LsSolution s = exid::estimators::solveWithPrior(
+          acc, *prior, model.base().names, opt_, kName, 1.0, &noise);
+      exid::estimators::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
       e.rows = acc.rows();
       e.details["noise_std"] = noise;
-      e.details["prior"] = exid::est::priorDetails(*prior, s.theta, s.std);
+      e.details["prior"] = exid::estimators::priorDetails(*prior, s.theta, s.std);
       e.details["covariance_definition"] =
           "posterior (W^T W / noise_std^2 + Sigma_prior^-1)^-1, noise_std^2 = rss / (m - rank) of "
           "the rank-tolerant fit of the data alone";
@@ -153,7 +153,7 @@ class BatchLs : public exid::Estimator {
                       : "accumulated [W y]^T [W y] (cond squared), eigendecomposition, SVD";
     d["accumulate"] = choice;
     d["samples"] = data.size();
-    d["chunk_samples"] = exid::est::modelIsPerSample(model) ? chunk_ : data.size();
+    d["chunk_samples"] = exid::estimators::modelIsPerSample(model) ? chunk_ : data.size();
     d["threads"] = threads_;
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     ctx.report(1.0, "batch_ls: done");
@@ -165,7 +165,7 @@ class BatchLs : public exid::Estimator {
   std::string accumulate_;
   double normal_max_cond_;
   int threads_ = 1;
-  exid::est::SolveOptions opt_;
+  exid::estimators::SolveOptions opt_;
 };
 
 }  // namespace

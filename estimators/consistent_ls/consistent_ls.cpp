@@ -34,8 +34,8 @@
 namespace {
 
 using exid::Json;
-using exid::est::RowAccumulator;
-using exid::est::Vec10;
+using exid::estimators::RowAccumulator;
+using exid::estimators::Vec10;
 
 std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
@@ -104,7 +104,7 @@ class StandardMap {
     for (const auto& idx : bodies_) {
       Vec10 p;
       for (int k = 0; k < 10; ++k) p(k) = nominal(idx[static_cast<std::size_t>(k)]);
-      const double tr = exid::est::pseudoInertia(p).trace();
+      const double tr = exid::estimators::pseudoInertia(p).trace();
       diag_floor_.push_back(
           std::log(1e-5 * std::sqrt(std::max(std::isfinite(tr) ? tr : 0.0, 1e-6))));
     }
@@ -134,7 +134,7 @@ class StandardMap {
   Eigen::VectorXd pi(const Eigen::VectorXd& z) const {
     Eigen::VectorXd out = Eigen::VectorXd::Zero(nfull_);
     for (int b = 0; b < numBodies(); ++b) {
-      const Vec10 p = exid::est::logCholeskyToInertial(z.segment<10>(10 * b));
+      const Vec10 p = exid::estimators::logCholeskyToInertial(z.segment<10>(10 * b));
       for (int k = 0; k < 10; ++k) out(bodyIndices(b)[static_cast<std::size_t>(k)]) = p(k);
     }
     for (int s = 0; s < numScalars(); ++s)
@@ -146,7 +146,8 @@ class StandardMap {
   Eigen::MatrixXd jacobian(const Eigen::VectorXd& z) const {
     Eigen::MatrixXd Jz = Eigen::MatrixXd::Zero(nfull_, nz_);
     for (int b = 0; b < numBodies(); ++b) {
-      const Eigen::Matrix<double, 10, 10> J = exid::est::logCholeskyJacobian(z.segment<10>(10 * b));
+      const Eigen::Matrix<double, 10, 10> J =
+          exid::estimators::logCholeskyJacobian(z.segment<10>(10 * b));
       for (int k = 0; k < 10; ++k)
         Jz.block(bodyIndices(b)[static_cast<std::size_t>(k)], 10 * b, 1, 10) = J.row(k);
     }
@@ -161,7 +162,7 @@ class StandardMap {
     for (int b = 0; b < numBodies(); ++b) {
       Vec10 gb;
       for (int k = 0; k < 10; ++k) gb(k) = g(bodyIndices(b)[static_cast<std::size_t>(k)]);
-      out.segment<10>(10 * b) = exid::est::logCholeskyVjp(z.segment<10>(10 * b), gb);
+      out.segment<10>(10 * b) = exid::estimators::logCholeskyVjp(z.segment<10>(10 * b), gb);
     }
     for (int s = 0; s < numScalars(); ++s)
       out(zOfScalar(s)) = scale_[static_cast<std::size_t>(s)] * g(scalarIndex(s));
@@ -177,7 +178,7 @@ class StandardMap {
       Vec10 p;
       for (int k = 0; k < 10; ++k) p(k) = pi(bodyIndices(b)[static_cast<std::size_t>(k)]);
       bool proj = false;
-      z.segment<10>(10 * b) = exid::est::logCholeskyFromInertial(p, eig_floor, &proj);
+      z.segment<10>(10 * b) = exid::estimators::logCholeskyFromInertial(p, eig_floor, &proj);
       count += proj ? 1 : 0;
     }
     for (int s = 0; s < numScalars(); ++s) {
@@ -198,7 +199,7 @@ class StandardMap {
     for (int b = 0; b < numBodies(); ++b) {
       Vec10 p;
       for (int k = 0; k < 10; ++k) p(k) = pi(bodyIndices(b)[static_cast<std::size_t>(k)]);
-      big = std::max(big, exid::est::pseudoInertia(p).trace());
+      big = std::max(big, exid::estimators::pseudoInertia(p).trace());
     }
     return std::max(1e-8 * big, 1e-12);
   }
@@ -341,7 +342,7 @@ class ConsistentLs : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
+    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
     s.accepts_prior = true;
     return s;
   }
@@ -361,11 +362,11 @@ class ConsistentLs : public exid::Estimator {
     std::vector<std::map<int, RowAccumulator>> block_acc(static_cast<std::size_t>(blocks));
     std::map<int, std::vector<int>> idx;
     std::vector<int> sample_of_row, order;
-    exid::est::forEachChunk(
+    exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, 0.8, [&](const exid::Rows& r, int begin, int end) {
           for (auto& [eq, v] : idx) v.clear();
           const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
-          if (blocks > 0) exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
+          if (blocks > 0) exid::estimators::rowTimeOrder(r, end - begin, &sample_of_row, &order);
           for (Eigen::Index i = 0; i < r.y.size(); ++i)
             idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
                 static_cast<int>(i));
@@ -376,7 +377,7 @@ class ConsistentLs : public exid::Estimator {
           for (const auto& [eq, v] : idx) {
             if (v.empty()) continue;
             const auto n = static_cast<Eigen::Index>(v.size());
-            exid::est::addEquationRows(r, v, eq, &acc);
+            exid::estimators::addEquationRows(r, v, eq, &acc);
             for (Eigen::Index k = 0; k < n && blocks > 0; ++k) {
               // contiguous blocks in time: sample s of n_samples -> block s * blocks / n_samples
               const long s =
@@ -399,12 +400,13 @@ class ConsistentLs : public exid::Estimator {
     if (!prior) {
       // Without a prior every base parameter must be identified by the data (the message names
       // the directions that are not); with one, they fall back to it.
-      (void)exid::est::solveLeastSquares(all, names, opt_, kName);
+      (void)exid::estimators::solveLeastSquares(all, names, opt_, kName);
     }
 
     // ---- noise-normalised rows (+ prior): one factor
     int rank = 0;
-    const Eigen::VectorXd theta_mn = exid::est::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+    const Eigen::VectorXd theta_mn =
+        exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
     RowAccumulator weighted(p);
     Json eq_table = Json::array();
     std::map<int, double> sigma;
@@ -451,7 +453,7 @@ class ConsistentLs : public exid::Estimator {
       double scale = prior_scale_;
       scale_details["method"] = "fixed";
       if (scale_selection_ != "none") {
-        exid::est::PriorScaleChoice c;
+        exid::estimators::PriorScaleChoice c;
         if (select_cv) {
           std::vector<RowAccumulator> folds;
           for (const auto& blk : block_acc) {
@@ -459,24 +461,25 @@ class ConsistentLs : public exid::Estimator {
             for (const auto& [eq, a] : blk) f.merge(a, 1.0 / sigma.at(eq));
             folds.push_back(std::move(f));
           }
-          c = exid::est::selectPriorScaleCv(
-              folds, *prior, exid::est::logGrid(scale_range_[0], scale_range_[1], 8), kName);
+          c = exid::estimators::selectPriorScaleCv(
+              folds, *prior, exid::estimators::logGrid(scale_range_[0], scale_range_[1], 8), kName);
         } else {
-          c = exid::est::selectPriorScaleEvidence(weighted, *prior, scale_range_[0],
-                                                  scale_range_[1], kName);
+          c = exid::estimators::selectPriorScaleEvidence(weighted, *prior, scale_range_[0],
+                                                         scale_range_[1], kName);
         }
         scale = c.scale;
         scale_details = c.toJson();
       }
       scale_details["scale"] = scale;
-      used_prior = exid::est::scaledPrior(*prior, scale);
+      used_prior = exid::estimators::scaledPrior(*prior, scale);
     }
     RowAccumulator total = weighted;
-    if (used_prior) exid::est::addPriorRows(&total, *used_prior, kName);
-    exid::est::SolveOptions uo = opt_;
+    if (used_prior) exid::estimators::addPriorRows(&total, *used_prior, kName);
+    exid::estimators::SolveOptions uo = opt_;
     uo.unit_variance = true;
     if (prior) uo.rank_tolerance = 0.0;  // positive definite with the prior
-    const exid::est::LsSolution unc = exid::est::solveLeastSquares(total, names, uo, kName);
+    const exid::estimators::LsSolution unc =
+        exid::estimators::solveLeastSquares(total, names, uo, kName);
     const Eigen::MatrixXd& F = total.factor();
     const Eigen::MatrixXd Fw = F.leftCols(p);
     const Eigen::VectorXd fy = F.col(p);
@@ -608,7 +611,7 @@ class ConsistentLs : public exid::Estimator {
     const double rms_c = std::sqrt(rss_c / static_cast<double>(m));
     const double rms_u = std::sqrt(rss_u / static_cast<double>(m));
 
-    exid::est::LsSolution sol = unc;
+    exid::estimators::LsSolution sol = unc;
     sol.theta = theta;
     sol.covariance = cov;
     sol.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
@@ -616,7 +619,7 @@ class ConsistentLs : public exid::Estimator {
     sol.sigma2 = f_final / static_cast<double>(std::max<long>(1, total.rows() - p));
     // (with the standard prior, f_final also holds the standard prior's terms)
     exid::Estimate e;
-    exid::est::fillEstimate(&e, model, sol, rss_c, m);
+    exid::estimators::fillEstimate(&e, model, sol, rss_c, m);
     e.rows = m;
     Json& d = e.details;
     d["estimator"] = kName;
@@ -652,7 +655,7 @@ class ConsistentLs : public exid::Estimator {
     o["linearised_rank"] = lin_rank;
     d["optimization"] = o;
     if (used_prior) {
-      d["prior"] = exid::est::priorDetails(*used_prior, theta, sol.std);
+      d["prior"] = exid::estimators::priorDetails(*used_prior, theta, sol.std);
       d["prior"]["scale"] = scale_details;
       d["prior"]["on"] = std_prior ? "standard" : "base";
       if (std_prior) {
@@ -678,7 +681,7 @@ class ConsistentLs : public exid::Estimator {
       Vec10 pb;
       for (int k = 0; k < 10; ++k) pb(k) = pi(map.bodyIndices(b)[static_cast<std::size_t>(k)]);
       const exid::InertiaCheck chk = exid::checkPhysical(pb, 0.0);
-      const double lmin = exid::est::pseudoInertiaMinEigenvalue(pb);
+      const double lmin = exid::estimators::pseudoInertiaMinEigenvalue(pb);
       all_ok = all_ok && lmin > 0;
       Json jb = Json::object();
       jb["body"] = map.bodyNumber(b);
@@ -793,7 +796,7 @@ class ConsistentLs : public exid::Estimator {
   double prior_scale_;
   int cv_blocks_;
   int max_eval_, polish_, chunk_, max_eq_;
-  exid::est::SolveOptions opt_;
+  exid::estimators::SolveOptions opt_;
 };
 
 }  // namespace

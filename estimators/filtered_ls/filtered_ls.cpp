@@ -32,7 +32,7 @@
 
 namespace {
 
-namespace est = exid::est;
+namespace estimators = exid::estimators;
 
 class FilteredLs : public exid::Estimator {
  public:
@@ -121,8 +121,8 @@ class FilteredLs : public exid::Estimator {
   /// Steps 1-4 (also used for the validation rows of raw validation data, so that the held-out
   /// error is measured on rows processed exactly like the identification rows).
   struct Processed {
-    exid::Rows rows;          // with keep_rows
-    est::RowAccumulator acc;  // every kept row
+    exid::Rows rows;                 // with keep_rows
+    estimators::RowAccumulator acc;  // every kept row
     bool streamed = false, per_sample = true;
     long chunk_samples = 0, margin_samples = 0, signal_margin = 0;
     int threads = 1;
@@ -137,7 +137,7 @@ class FilteredLs : public exid::Estimator {
 
   /// Steps 1-3 decided before any sample is read: rates, filters, trim, decimation, chunks.
   void plan(const exid::ObservationModel& model, const exid::Dataset& data, Processed* P,
-            est::Sos* sos, est::Sos* dsos) const {
+            estimators::Sos* sos, estimators::Sos* dsos) const {
     const int K = data.size();
     exid::check(K >= 8,
                 fmt::format("filtered_ls: dataset '{}' has {} samples; filtering needs at least 8",
@@ -156,7 +156,7 @@ class FilteredLs : public exid::Estimator {
     exid::check(min_speed_.empty() || static_cast<int>(min_speed_.size()) == n,
                 fmt::format("filtered_ls: min_speed: expected {} values (one per joint), found {}",
                             n, min_speed_.size()));
-    if (P->filter_q) *sos = est::butterworthLowpass(order_, cutoff_, fs);
+    if (P->filter_q) *sos = estimators::butterworthLowpass(order_, cutoff_, fs);
     P->diff_qd = differentiate_ || !data.hasVelocity();
     P->diff_qdd = differentiate_ || !data.hasAcceleration();
     // Trim: by default the filter's edge transient, ceil(2 fs / fc - eps) samples, but at most
@@ -179,7 +179,7 @@ class FilteredLs : public exid::Estimator {
     int R = decimation_;
     if (R == 0)
       R = P->filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
-    P->per_sample = est::modelIsPerSample(model);
+    P->per_sample = estimators::modelIsPerSample(model);
     if (R > 1 && !P->per_sample) {
       P->dec_note = fmt::format(
           "decimation {} skipped: the model '{}' does not give one row per sample and equation", R,
@@ -192,8 +192,8 @@ class FilteredLs : public exid::Estimator {
                             model.pluginName()));
     if (R > 1) {
       P->dec_cut = dec_ratio_ * 0.5 * fs / R;
-      *dsos = est::butterworthLowpass(dec_order_, P->dec_cut, fs);
-      if (correct_) P->kappa = est::decimationVarianceFactor(*dsos, R);
+      *dsos = estimators::butterworthLowpass(dec_order_, P->dec_cut, fs);
+      if (correct_) P->kappa = estimators::decimationVarianceFactor(*dsos, R);
     }
     P->R = R;
     // Chunks [a, b) of the trimmed samples (multiples of R, so the kept samples are those of the
@@ -204,8 +204,9 @@ class FilteredLs : public exid::Estimator {
     // artificial ends decays below 1e-16 (the rounding of the doubles) before them, and the
     // differences need two neighbours.
     const long Kt = K - 2 * trim;
-    P->margin_samples = R > 1 ? est::settlingSamples(*dsos, 1e-13) : 0;
-    P->signal_margin = (P->filter_q ? est::settlingSamples(*sos, 1e-16) : 0) + (diff ? 4 : 0);
+    P->margin_samples = R > 1 ? estimators::settlingSamples(*dsos, 1e-13) : 0;
+    P->signal_margin =
+        (P->filter_q ? estimators::settlingSamples(*sos, 1e-16) : 0) + (diff ? 4 : 0);
     // (at least 8 margins: the context computed twice costs at most a quarter more)
     long C = std::max<long>(chunk_samples_, 8 * P->margin_samples);
     C = ((C + R - 1) / R) * R;
@@ -215,26 +216,26 @@ class FilteredLs : public exid::Estimator {
   }
 
   /// Steps 1-2 on raw samples: the filtered (and differentiated) signals.
-  exid::Dataset filtered(exid::Dataset raw, const Processed& P, const est::Sos& sos) const {
+  exid::Dataset filtered(exid::Dataset raw, const Processed& P, const estimators::Sos& sos) const {
     exid::Dataset f = raw;
-    if (P.filter_q) f.q = est::filtfiltColumns(sos, raw.q);
+    if (P.filter_q) f.q = estimators::filtfiltColumns(sos, raw.q);
     if (P.diff_qd) {
-      f.qd = est::centralFirstDerivative(raw.t, f.q);
+      f.qd = estimators::centralFirstDerivative(raw.t, f.q);
     } else if (P.filter_q) {
-      f.qd = est::filtfiltColumns(sos, raw.qd);
+      f.qd = estimators::filtfiltColumns(sos, raw.qd);
     }
     if (P.diff_qdd) {
-      f.qdd = P.diff_qd ? est::centralSecondDerivative(raw.t, f.q)
-                        : est::centralFirstDerivative(raw.t, f.qd);
+      f.qdd = P.diff_qd ? estimators::centralSecondDerivative(raw.t, f.q)
+                        : estimators::centralFirstDerivative(raw.t, f.qd);
     } else if (P.filter_q) {
-      f.qdd = est::filtfiltColumns(sos, raw.qdd);
+      f.qdd = estimators::filtfiltColumns(sos, raw.qdd);
     }
     return f;
   }
 
   struct ChunkOut {
     exid::Rows rows;
-    est::RowAccumulator acc;
+    estimators::RowAccumulator acc;
     long slow = 0, kept = 0, rows_before = 0;
   };
 
@@ -243,33 +244,33 @@ class FilteredLs : public exid::Estimator {
   /// base columns and its y at columns [g (p + 1), (g + 1)(p + 1))), built a block of samples at
   /// a time (the model's rows of the whole chunk are never held), every column filtered at once,
   /// one sample in R kept (4b: less the slow ones) and accumulated.
-  void chunkRows(const exid::ObservationModel& model, const Processed& P, const est::Sos& dsos,
-                 const exid::Dataset& f, long lo, long ca, long cb, bool keep_rows,
-                 const exid::RunContext& ctx, ChunkOut* o) const {
+  void chunkRows(const exid::ObservationModel& model, const Processed& P,
+                 const estimators::Sos& dsos, const exid::Dataset& f, long lo, long ca, long cb,
+                 bool keep_rows, const exid::RunContext& ctx, ChunkOut* o) const {
     const int p = model.numBase();
     const long trim = P.trim, hi = lo + f.size();
     const int R = P.R;
     if (!P.per_sample) {
       exid::Rows rows = model.rows(f, ctx);
-      est::checkRows(rows, p, kName, static_cast<int>(trim));
+      estimators::checkRows(rows, p, kName, static_cast<int>(trim));
       o->rows_before = rows.y.size();
       o->kept = rows.y.size();
-      o->acc = est::RowAccumulator(p);
+      o->acc = estimators::RowAccumulator(p);
       o->acc.add(rows.W, rows.y);
       if (keep_rows) o->rows = std::move(rows);
       return;
     }
     const long L = hi - lo;
     constexpr long kBlock = 1024;
-    est::LargeRows Mbuf;        // huge pages: written once, tens of MB
-    std::vector<int> labels;    // equation label of each group, ascending
-    std::vector<double> times;  // (keep_rows) per sample and group: the row's time
-    exid::Rows head;            // numEquations, equation_names
+    estimators::LargeRows Mbuf;  // huge pages: written once, tens of MB
+    std::vector<int> labels;     // equation label of each group, ascending
+    std::vector<double> times;   // (keep_rows) per sample and group: the row's time
+    exid::Rows head;             // numEquations, equation_names
     for (long a = lo; a < hi; a += kBlock) {
       const long b = std::min(hi, a + kBlock);
       exid::Rows rows = model.rows(
           exid::sliceDataset(f, static_cast<int>(a - lo), static_cast<int>(b - lo)), ctx);
-      est::checkRows(rows, p, kName, static_cast<int>(trim + a));
+      estimators::checkRows(rows, p, kName, static_cast<int>(trim + a));
       if (a == lo) {
         if (rows.equation.empty()) {
           labels = {0};
@@ -278,7 +279,7 @@ class FilteredLs : public exid::Estimator {
           std::sort(labels.begin(), labels.end());
           labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
         }
-        Mbuf = est::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
+        Mbuf = estimators::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
         const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
         if (keep_rows && has_t) times.resize(static_cast<std::size_t>(L) * labels.size());
         head.numEquations = rows.numEquations;
@@ -312,7 +313,7 @@ class FilteredLs : public exid::Estimator {
                                 model.pluginName(), next[g] - (a - lo), labels[g], b - a));
     }
     auto M = Mbuf.map();
-    if (R > 1 && L >= 2) est::filtfiltRowsInPlace(dsos, M);
+    if (R > 1 && L >= 2) estimators::filtfiltRowsInPlace(dsos, M);
     const exid::RobotModel& robot = model.robot();
     const bool via_T = min_speed_joint_ && robot.hasTransmission();
     std::vector<long> kept_samples;
@@ -350,7 +351,7 @@ class FilteredLs : public exid::Estimator {
       }
     }
     o->kept = static_cast<long>(kept_samples.size());
-    o->acc = est::RowAccumulator(p);
+    o->acc = estimators::RowAccumulator(p);
     o->acc.add(W, y);
     if (keep_rows) {
       out.W = std::move(W);
@@ -368,14 +369,14 @@ class FilteredLs : public exid::Estimator {
   Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
                     const exid::RunContext& ctx, bool keep_rows) const {
     Processed P;
-    est::Sos sos, dsos;
+    estimators::Sos sos, dsos;
     ctx.report(0.0, "filtered_ls: planning");
     plan(model, data, &P, &sos, &dsos);
     const long K = data.size(), trim = P.trim, Kt = K - 2 * trim, C = P.chunk_samples;
     const long margin = P.margin_samples, sm = P.signal_margin;
     const long nchunks = (Kt + C - 1) / C;
     const int p = model.numBase();
-    const int T = static_cast<int>(std::min<long>(est::resolveThreads(threads_), nchunks));
+    const int T = static_cast<int>(std::min<long>(estimators::resolveThreads(threads_), nchunks));
     P.threads = T;
     // chunk c: trimmed samples [ca, cb), rows of [lo, hi), raw samples [rlo, rhi)
     struct Span {
@@ -393,10 +394,10 @@ class FilteredLs : public exid::Estimator {
     };
     std::vector<ChunkOut> outs(static_cast<std::size_t>(T));  // one wave of chunks
     exid::SampleWindow window(data);
-    P.acc = est::RowAccumulator(p);
+    P.acc = estimators::RowAccumulator(p);
     exid::Rows all;
     ctx.report(0.1, "filtered_ls: filtering, rows and decimation");
-    est::pipelineChunks(
+    estimators::pipelineChunks(
         nchunks, T,
         [&](long c, exid::Dataset* raw) {
           const Span s = spanOf(c);
@@ -460,27 +461,28 @@ class FilteredLs : public exid::Estimator {
 
     // ---- 5. least squares
     ctx.report(0.9, "filtered_ls: solving");
-    const est::RowAccumulator& acc = P.acc;
+    const estimators::RowAccumulator& acc = P.acc;
     exid::Estimate e;
     if (!prior) {
-      const est::LsSolution s = est::solveLeastSquares(acc, model.base().names, opt_, kName);
-      est::fillEstimate(&e, model, s, s.rss, s.m);
+      const estimators::LsSolution s =
+          estimators::solveLeastSquares(acc, model.base().names, opt_, kName);
+      estimators::fillEstimate(&e, model, s, s.rss, s.m);
       if (kappa != 1.0) {  // decimated residuals are correlated: scale the covariance
         e.covariance *= kappa;
         e.std *= std::sqrt(kappa);
-        e.details["parameters"] = est::parameterTable(e);
+        e.details["parameters"] = estimators::parameterTable(e);
       }
     } else {
       // Regularised least squares (docs/consistent.md "Priors"): the rows divided by their noise
       // std, inflated by the decimation's variance factor (the data carry kappa times less
       // information than independent rows would), stacked with the prior's pseudo-observations.
       double noise = 0.0;
-      const est::LsSolution s =
-          est::solveWithPrior(acc, *prior, model.base().names, opt_, kName, kappa, &noise);
-      est::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
+      const estimators::LsSolution s =
+          estimators::solveWithPrior(acc, *prior, model.base().names, opt_, kName, kappa, &noise);
+      estimators::fillEstimate(&e, model, s, acc.residualSquared(s.theta), acc.rows());
       e.rows = acc.rows();
       e.details["noise_std"] = noise;
-      e.details["prior"] = est::priorDetails(*prior, s.theta, s.std);
+      e.details["prior"] = estimators::priorDetails(*prior, s.theta, s.std);
       e.details["covariance_definition"] =
           "posterior (W^T W / s^2 + Sigma_prior^-1)^-1, s^2 = kappa rss / (m - rank) of the "
           "rank-tolerant fit of the rows alone (kappa: the decimation's variance factor)";
@@ -573,7 +575,7 @@ class FilteredLs : public exid::Estimator {
   bool min_speed_joint_ = false;
   long chunk_samples_ = 8192;
   int threads_ = 0;
-  est::SolveOptions opt_;
+  estimators::SolveOptions opt_;
 };
 
 }  // namespace

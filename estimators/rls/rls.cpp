@@ -70,7 +70,7 @@ class Rls : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
+    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
     s.recursive = true;
     s.accepts_prior = true;
     return s;
@@ -122,11 +122,11 @@ class Rls : public exid::Estimator {
     long m = 0;
     double m_eff = 0.0;  // sum of the weights lambda^(K-k)
     std::vector<int> sample_of_row, order;
-    exid::est::forEachChunk(
+    exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
         [&](const exid::Rows& r, int begin, int end) {
           const Eigen::MatrixXd Wt = r.W.transpose();
-          exid::est::rowTimeOrder(r, end - begin, &sample_of_row, &order);
+          exid::estimators::rowTimeOrder(r, end - begin, &sample_of_row, &order);
           const auto R = static_cast<int>(order.size());
           for (int idx = 0; idx < R; ++idx) {
             const int i = order[static_cast<std::size_t>(idx)];
@@ -182,7 +182,7 @@ class Rls : public exid::Estimator {
     double rss = 0.0;
     std::string rss_method;
     if (residualPass()) {
-      exid::est::forEachChunk(
+      exid::estimators::forEachChunk(
           model, data, chunk_, ctx, kName, 0.5, 0.95,
           [&](const exid::Rows& r, int, int) { rss += (r.y - r.W * theta).squaredNorm(); });
       rss_method = "second pass over the data with the final estimate";
@@ -220,7 +220,7 @@ class Rls : public exid::Estimator {
     e.cond_W = lmin > 0 ? std::sqrt(lmax / lmin) : INFINITY;
     exid::Json& d = e.details;
     d["estimator"] = kName;
-    d["parameters"] = exid::est::parameterTable(e);
+    d["parameters"] = exid::estimators::parameterTable(e);
     d["rows"] = Json(static_cast<long long>(m));
     d["dof"] = Json(static_cast<long long>(m - p));
     d["effective_rows"] = m_eff;

@@ -21,7 +21,7 @@
 
 namespace {
 
-using exid::est::RowAccumulator;
+using exid::estimators::RowAccumulator;
 
 class Wls : public exid::Estimator {
  public:
@@ -58,7 +58,7 @@ class Wls : public exid::Estimator {
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (est::forEachChunk, est::accumulateRows)
+    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
     s.accepts_prior = true;
     return s;
   }
@@ -69,7 +69,7 @@ class Wls : public exid::Estimator {
     const int p = model.numBase();
     std::map<int, RowAccumulator> acc;
     std::map<int, std::vector<int>> idx;
-    exid::est::forEachChunk(
+    exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int, int) {
           for (auto& [eq, v] : idx) v.clear();
           const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
@@ -82,7 +82,7 @@ class Wls : public exid::Estimator {
                           "per-equation weighting needs many rows per equation",
                           max_eq_));
           for (const auto& [eq, v] : idx) {
-            exid::est::addEquationRows(r, v, eq, &acc);
+            exid::estimators::addEquationRows(r, v, eq, &acc);
           }
         });
 
@@ -92,22 +92,22 @@ class Wls : public exid::Estimator {
     const std::vector<std::string>& names = model.base().names;
     // With a prior, the data alone may not identify every direction: the first pass is the
     // rank-tolerant (minimum-norm) fit, whose residuals give the weights.
-    exid::est::LsSolution ols;
+    exid::estimators::LsSolution ols;
     if (prior) {
       int rank = 0;
-      ols.theta = exid::est::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+      ols.theta = exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
       ols.std = Eigen::VectorXd::Constant(p, NAN);
       ols.rss = all.residualSquared(ols.theta);
       ols.sigma2 = ols.rss / static_cast<double>(std::max<long>(1, all.rows() - rank));
       ols.cond_W = NAN;
     } else {
-      ols = exid::est::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
+      ols = exid::estimators::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
     }
     const long m = all.rows();
 
     // ---- 2-3. weights and WLS
     Eigen::VectorXd theta = ols.theta;
-    exid::est::LsSolution sol;
+    exid::estimators::LsSolution sol;
     exid::Json eq_table = exid::Json::array();
     for (int it = 0; it < iterations_; ++it) {
       if (ctx.shouldStop()) throw exid::Error("wls: stopped while re-weighting");
@@ -148,15 +148,15 @@ class Wls : public exid::Estimator {
       }
       if (prior) {
         // Weighted rows are in units of their noise std: stack the prior's pseudo-observations.
-        exid::est::addPriorRows(&weighted, *prior, kName);
-        exid::est::SolveOptions o = opt_;
+        exid::estimators::addPriorRows(&weighted, *prior, kName);
+        exid::estimators::SolveOptions o = opt_;
         o.unit_variance = true;
         // The prior makes the problem positive definite: no rank decision (noise-free data with
         // a prior are legitimately ill-conditioned: tiny noise std, large weights).
         o.rank_tolerance = 0.0;
-        sol = exid::est::solveLeastSquares(weighted, names, o, kName);
+        sol = exid::estimators::solveLeastSquares(weighted, names, o, kName);
       } else {
-        sol = exid::est::solveLeastSquares(weighted, names, opt_, kName);
+        sol = exid::estimators::solveLeastSquares(weighted, names, opt_, kName);
       }
       theta = sol.theta;
     }
@@ -164,10 +164,10 @@ class Wls : public exid::Estimator {
     for (const auto& [eq, a] : acc) rss_unweighted += a.residualSquared(theta);
 
     exid::Estimate e;
-    exid::est::fillEstimate(&e, model, sol, rss_unweighted, m);
+    exid::estimators::fillEstimate(&e, model, sol, rss_unweighted, m);
     if (prior) {
       e.rows = m;
-      e.details["prior"] = exid::est::priorDetails(*prior, theta, sol.std);
+      e.details["prior"] = exid::estimators::priorDetails(*prior, theta, sol.std);
       e.details["covariance_definition"] =
           "posterior (W^T S^-1 W + Sigma_prior^-1)^-1 of the weighted rows stacked with the prior";
     }
@@ -195,7 +195,7 @@ class Wls : public exid::Estimator {
  private:
   using Json = exid::Json;
   int iterations_, chunk_, max_eq_;
-  exid::est::SolveOptions opt_;
+  exid::estimators::SolveOptions opt_;
 };
 
 }  // namespace

@@ -41,26 +41,26 @@ class HuberLs final : public exid::Estimator {
     const auto& names = model.base().names;
     std::vector<double> weight;  // per row; empty: ordinary least squares
     auto fit = [&](double lo, double hi) {
-      exid::est::RowAccumulator acc(p);
+      exid::estimators::RowAccumulator acc(p);
       std::size_t row = 0;
-      exid::est::forEachChunk(
+      exid::estimators::forEachChunk(
           model, data, 256, ctx, kName, lo, hi, [&](const exid::Rows& r, int, int) {
             for (Eigen::Index i = 0; i < r.W.rows(); ++i, ++row)
               acc.addRow(r.W.row(i), r.y(i), weight.empty() ? 1.0 : std::sqrt(weight[row]));
           });
       return acc;
     };
-    exid::est::RowAccumulator acc = fit(0.0, 0.1);
-    exid::est::LsSolution s = exid::est::solveLeastSquares(acc, names, {}, kName);
+    exid::estimators::RowAccumulator acc = fit(0.0, 0.1);
+    exid::estimators::LsSolution s = exid::estimators::solveLeastSquares(acc, names, {}, kName);
     int it = 0;
     double scale = 0.0;
     for (; it < iterations_; ++it) {
       std::vector<double> res;  // residuals of the current estimate, row by row
-      exid::est::forEachChunk(model, data, 256, ctx, kName, 0.1, 0.1,
-                              [&](const exid::Rows& r, int, int) {
-                                const Eigen::VectorXd e = r.y - r.W * s.theta;
-                                res.insert(res.end(), e.data(), e.data() + e.size());
-                              });
+      exid::estimators::forEachChunk(model, data, 256, ctx, kName, 0.1, 0.1,
+                                     [&](const exid::Rows& r, int, int) {
+                                       const Eigen::VectorXd e = r.y - r.W * s.theta;
+                                       res.insert(res.end(), e.data(), e.data() + e.size());
+                                     });
       std::vector<double> a(res.size());
       std::transform(res.begin(), res.end(), a.begin(), [](double v) { return std::abs(v); });
       std::nth_element(a.begin(), a.begin() + static_cast<std::ptrdiff_t>(a.size() / 2), a.end());
@@ -70,7 +70,8 @@ class HuberLs final : public exid::Estimator {
       for (std::size_t i = 0; i < res.size(); ++i)
         weight[i] = std::min(1.0, k_ * scale / std::max(std::abs(res[i]), 1e-300));
       acc = fit(0.1 + 0.8 * it / iterations_, 0.1 + 0.8 * (it + 1) / iterations_);
-      const exid::est::LsSolution next = exid::est::solveLeastSquares(acc, names, {}, kName);
+      const exid::estimators::LsSolution next =
+          exid::estimators::solveLeastSquares(acc, names, {}, kName);
       const double moved =
           ((next.theta - s.theta).array() / next.std.array().max(1e-300)).abs().maxCoeff();
       s = next;
@@ -80,7 +81,7 @@ class HuberLs final : public exid::Estimator {
       }
     }
     exid::Estimate e;
-    exid::est::fillEstimate(&e, model, s, s.rss, s.m);
+    exid::estimators::fillEstimate(&e, model, s, s.rss, s.m);
     long down = 0;
     for (double w : weight) down += w < 1.0;
     e.details["estimator"] = kName;

@@ -31,7 +31,8 @@ class TemplateRandomSearch final : public exid::Optimizer {
       "seeded (1+1) random search within the bounds, feasible points only, evaluation budget "
       "(out-of-tree template)";
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(0.0, 500);  // max_time_s, max_cpu_s, max_evaluations, ...
+    auto p =
+        exid::optimizers::budgetParams(0.0, 500);  // max_time_s, max_cpu_s, max_evaluations, ...
     p.push_back(exid::param_int("seed", 0, "random seed (0: the study seed)", 0.0));
     p.push_back(exid::param_double("initial_step", 0.1, "",
                                    "first step as a fraction of each variable's bound range", 0.0,
@@ -43,7 +44,7 @@ class TemplateRandomSearch final : public exid::Optimizer {
     return p;
   }
   explicit TemplateRandomSearch(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)),
+      : budget_(exid::optimizers::readBudget(p)),
         seed_(static_cast<std::uint64_t>(p.getInt("seed"))),
         step0_(p.getDouble("initial_step")),
         min_step_(p.getDouble("min_step")),
@@ -52,11 +53,11 @@ class TemplateRandomSearch final : public exid::Optimizer {
   exid::OptimizerResult minimize(exid::ExcitationProblem& problem,
                                  const exid::RunContext& ctx) override {
     const std::string who = fmt::format("optimizer '{}'", kName);
-    exid::optim::Limits limits(problem);  // g(z) <= 0: joint, velocity, acceleration, torque
-    exid::optim::Tracker tracker(problem, limits, ctx, budget_, who);
+    exid::optimizers::Limits limits(problem);  // g(z) <= 0: joint, velocity, acceleration, torque
+    exid::optimizers::Tracker tracker(problem, limits, ctx, budget_, who);
     Eigen::VectorXd lo, hi;  // the bounds, infinite ones replaced by z0 -+ max(1, |z0_i|)
     const Eigen::VectorXd z0 = problem.initial();
-    exid::optim::finiteBounds(problem, z0, 1.0, &lo, &hi);
+    exid::optimizers::finiteBounds(problem, z0, 1.0, &lo, &hi);
     const Eigen::VectorXd range = hi - lo;
     const double J0 = tracker.evaluateAndOffer(z0);
     std::mt19937_64 rng(seed_ ? seed_ : ctx.seed);
@@ -107,7 +108,7 @@ class TemplateRandomSearch final : public exid::Optimizer {
   }
 
  private:
-  exid::optim::Budget budget_;
+  exid::optimizers::Budget budget_;
   std::uint64_t seed_;
   double step0_, min_step_;
   int max_iter_;

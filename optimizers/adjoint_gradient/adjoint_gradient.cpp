@@ -37,8 +37,8 @@
 
 namespace {
 
-using exid::optim::Limits;
-using exid::optim::Tracker;
+using exid::optimizers::Limits;
+using exid::optimizers::Tracker;
 
 class AdjointGradient final : public exid::Optimizer {
  public:
@@ -51,7 +51,7 @@ class AdjointGradient final : public exid::Optimizer {
       "sample limits penalised)";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(0.0, 0);
+    auto p = exid::optimizers::budgetParams(0.0, 0);
     p.push_back(exid::param_string("step", std::string("lbfgs"), "step rule", {"lbfgs", "paper"}));
     p.push_back(exid::param_string("constraints", std::string("augmented_lagrangian"),
                                    "how the limits are handled",
@@ -79,7 +79,7 @@ class AdjointGradient final : public exid::Optimizer {
   }
 
   explicit AdjointGradient(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)),
+      : budget_(exid::optimizers::readBudget(p)),
         paper_(p.getString("step") == "paper"),
         mode_(p.getString("constraints")),
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
@@ -248,7 +248,7 @@ class AdjointGradient final : public exid::Optimizer {
     double phi = merit(p, lim, tr, z, &g);
     cur_J_ = cur_J_trial_;
     if (!std::isfinite(phi)) return true;
-    exid::optim::LbfgsMemory mem(mem_);
+    exid::optimizers::LbfgsMemory mem(mem_);
     Eigen::MatrixXd A(0, z.size());  // held velocity rows: steps keep A dz = 0
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (tr.shouldStop()) return false;
@@ -310,7 +310,7 @@ class AdjointGradient final : public exid::Optimizer {
     return false;
   }
 
-  exid::optim::Budget budget_;
+  exid::optimizers::Budget budget_;
   bool paper_;
   std::string mode_;
   int max_iter_, inner_, mem_;

@@ -8,7 +8,7 @@
 
 #include "exid/error.hpp"
 
-namespace exid::optim {
+namespace exid::optimizers {
 
 // ---------------------------------------------------------------- Limits
 Limits::Limits(ExcitationProblem& p) : p_(p) {
@@ -285,4 +285,4 @@ void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale,
   }
 }
 
-}  // namespace exid::optim
+}  // namespace exid::optimizers

@@ -11,7 +11,7 @@
 
 #include "exid/interfaces.hpp"
 
-namespace exid::optim {
+namespace exid::optimizers {
 
 /// g(z) <= 0: the problem's constraints (joint limits less the margin, velocity and
 /// acceleration limits at every sample; a trajectory's own caps are part of them through
@@ -135,4 +135,4 @@ Eigen::VectorXd randomStart(ExcitationProblem& p, Limits& lim, const Eigen::Vect
 void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale,
                   Eigen::VectorXd* lo, Eigen::VectorXd* hi);
 
-}  // namespace exid::optim
+}  // namespace exid::optimizers

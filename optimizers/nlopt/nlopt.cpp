@@ -21,8 +21,8 @@
 
 namespace {
 
-using exid::optim::Limits;
-using exid::optim::Tracker;
+using exid::optimizers::Limits;
+using exid::optimizers::Tracker;
 
 std::string validNames() {
   std::string s;
@@ -249,7 +249,7 @@ class NloptOptimizer final : public exid::Optimizer {
       "local polish after global algorithms, best feasible point returned";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(0.0, 20000);
+    auto p = exid::optimizers::budgetParams(0.0, 20000);
     p.push_back(exid::param_string(
         "algorithm", std::string("LD_SLSQP"),
         "NLopt algorithm name (NLOPT_ prefix dropped); an unknown name lists the valid ones"));
@@ -331,7 +331,7 @@ class NloptOptimizer final : public exid::Optimizer {
   }
 
   explicit NloptOptimizer(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)),
+      : budget_(exid::optimizers::readBudget(p)),
         alg_name_(p.getString("algorithm")),
         local_name_(p.getString("local_algorithm")),
         polish_(p.getBool("polish")),
@@ -397,8 +397,9 @@ class NloptOptimizer final : public exid::Optimizer {
       if (problem.evaluations() - tr.evaluations0() >= starts_evals) break;
       Eigen::VectorXd x0 =
           s == 0 ? z0
-                 : (random_starts_ ? exid::optim::randomStart(problem, lim, z0, perturb_, rng)
-                                   : exid::optim::perturbedStart(problem, lim, z0, perturb_, rng));
+                 : (random_starts_
+                        ? exid::optimizers::randomStart(problem, lim, z0, perturb_, rng)
+                        : exid::optimizers::perturbedStart(problem, lim, z0, perturb_, rng));
       // A start may use up to max(1/starts, 0.3) of the starts' time (a local run usually
       // converges well before), never beyond the starts' time.
       // With start_evaluations the starts are bounded by evaluations (reproducible) instead.
@@ -546,7 +547,7 @@ class NloptOptimizer final : public exid::Optimizer {
     c.cpu_end = end.cpu;
     Eigen::VectorXd lo, hi;
     if (isGlobal(name))
-      exid::optim::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
+      exid::optimizers::finiteBounds(problem, x0, bound_scale_, &lo, &hi);
     else
       problem.bounds(&lo, &hi);
     std::vector<double> vlo(lo.data(), lo.data() + n), vhi(hi.data(), hi.data() + n);
@@ -659,7 +660,7 @@ class NloptOptimizer final : public exid::Optimizer {
   }
 
   bool time_cut_ = false;
-  exid::optim::Budget budget_;
+  exid::optimizers::Budget budget_;
   std::string alg_name_, local_name_;
   nlopt::algorithm alg_, local_;
   bool polish_;

@@ -24,7 +24,7 @@
 //
 // Update: projected L-BFGS with Armijo backtracking on the merit J + rho/2 sum max(0, g)^2,
 // g(z) <= 0 the excitation problem's limits at the sample grid plus the trajectory's own caps
-// (exid::optim::Limits); rho grows x10 per pass while the point is infeasible. Bounds on z by
+// (exid::optimizers::Limits); rho grows x10 per pass while the point is infeasible. Bounds on z by
 // projection. The best FEASIBLE point is returned.
 #include <cvodes/cvodes.h>
 #include <fmt/format.h>
@@ -409,7 +409,7 @@ class SundialsOptimizer final : public exid::Optimizer {
       "spline), models with rows per instant";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::optim::budgetParams(0.0, 0);
+    auto p = exid::optimizers::budgetParams(0.0, 0);
     p.push_back(exid::param_int("max_iterations", 500,
                                 "accepted steps in total (0: evaluate the start only)", 0.0));
     p.push_back(exid::param_int("inner_iterations", 60, "iterations per penalty pass", 1.0));
@@ -440,7 +440,7 @@ class SundialsOptimizer final : public exid::Optimizer {
   }
 
   explicit SundialsOptimizer(const exid::ParamSet& p)
-      : budget_(exid::optim::readBudget(p)),
+      : budget_(exid::optimizers::readBudget(p)),
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         inner_(static_cast<int>(p.getInt("inner_iterations"))),
         mem_(static_cast<int>(p.getInt("memory"))),
@@ -455,6 +455,11 @@ class SundialsOptimizer final : public exid::Optimizer {
 
   exid::OptimizerResult minimize(exid::ExcitationProblem& problem,
                                  const exid::RunContext& ctx) override {
+    // Its information matrix is the integral of Phi Phi^T over time, not the sum over the
+    // samples to which the information already known is scaled: refused rather than mixed.
+    exid::check(problem.priorInformation().size() == 0,
+                "optimizer 'sundials': excitation.information (an earlier study or a prior) is "
+                "not supported by the continuous-time design; use nlopt or adjoint_gradient");
     t0_ = std::chrono::steady_clock::now();
     ctx_ = &ctx;
     evals_ = 0;
@@ -462,7 +467,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     TimeTrajectory par;
     par.build(problem.trajectory(), "optimizer 'sundials'");
     ContinuousCriterion cc(problem, par, cs_);
-    exid::optim::Limits lim(problem);
+    exid::optimizers::Limits lim(problem);
     problem.bounds(&lo_, &hi_);
     const Eigen::VectorXd zs = problem.initial();
     // quadrature tolerance scale from the discrete M at the start
@@ -588,7 +593,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     return j;
   }
 
-  static double maxOf(exid::optim::Limits& lim, const Eigen::VectorXd& z) {
+  static double maxOf(exid::optimizers::Limits& lim, const Eigen::VectorXd& z) {
     Eigen::VectorXd g;
     lim.eval(z, &g);
     return g.size() ? g.maxCoeff() : 0.0;
@@ -611,7 +616,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     }
   }
 
-  double merit(ContinuousCriterion& cc, exid::optim::Limits& lim, const Eigen::VectorXd& z,
+  double merit(ContinuousCriterion& cc, exid::optimizers::Limits& lim, const Eigen::VectorXd& z,
                Eigen::VectorXd* grad) {
     double J;
     try {
@@ -636,13 +641,14 @@ class SundialsOptimizer final : public exid::Optimizer {
     return phi;
   }
 
-  bool inner(ContinuousCriterion& cc, exid::optim::Limits& lim, Eigen::VectorXd* zp, int* iters) {
+  bool inner(ContinuousCriterion& cc, exid::optimizers::Limits& lim, Eigen::VectorXd* zp,
+             int* iters) {
     Eigen::VectorXd& z = *zp;
     Eigen::VectorXd g;
     double phi = merit(cc, lim, z, &g);
     cur_J_ = trial_J_;
     if (!std::isfinite(phi)) return true;
-    exid::optim::LbfgsMemory mem(mem_);
+    exid::optimizers::LbfgsMemory mem(mem_);
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (stop()) return false;
       Eigen::VectorXd pg = g;
@@ -690,7 +696,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     return false;
   }
 
-  exid::optim::Budget budget_;
+  exid::optimizers::Budget budget_;
   int max_iter_, inner_, mem_;
   double gain_, rho_rel_, ftol_;
   bool check_grad_;

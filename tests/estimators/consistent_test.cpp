@@ -27,7 +27,7 @@
 #include "exid_test.hpp"
 
 namespace fs = std::filesystem;
-using exid::est::Vec10;
+using exid::estimators::Vec10;
 
 namespace {
 
@@ -42,15 +42,16 @@ TEST(LogCholesky, EveryPointIsConsistentAndTheMapInverts) {
   for (int trial = 0; trial < 200; ++trial) {
     Vec10 t;
     for (int k = 0; k < 10; ++k) t(k) = n(rng);
-    const Vec10 pi = exid::est::logCholeskyToInertial(t);
+    const Vec10 pi = exid::estimators::logCholeskyToInertial(t);
     EXPECT_TRUE(exid::checkPhysical(pi, 0.0).ok) << exid::checkPhysical(pi, 0.0).rule;
-    EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(pi), 0.0);
-    EXPECT_LE((exid::est::inertialFromPseudo(exid::est::pseudoInertia(pi)) - pi).norm(),
-              1e-12 * pi.norm());
+    EXPECT_GT(exid::estimators::pseudoInertiaMinEigenvalue(pi), 0.0);
+    EXPECT_LE(
+        (exid::estimators::inertialFromPseudo(exid::estimators::pseudoInertia(pi)) - pi).norm(),
+        1e-12 * pi.norm());
     bool projected = true;
-    const Vec10 back = exid::est::logCholeskyFromInertial(pi, 1e-300, &projected);
+    const Vec10 back = exid::estimators::logCholeskyFromInertial(pi, 1e-300, &projected);
     EXPECT_FALSE(projected);
-    EXPECT_LE((exid::est::logCholeskyToInertial(back) - pi).norm(), 1e-10 * pi.norm());
+    EXPECT_LE((exid::estimators::logCholeskyToInertial(back) - pi).norm(), 1e-10 * pi.norm());
   }
 }
 
@@ -65,11 +66,12 @@ TEST(LogCholesky, GradientMatchesFiniteDifferences) {
     }
     // f(t) = g . pi(t) + 0.5 |pi(t)|^2: df/dpi = g + pi.
     auto f = [&](const Vec10& x) {
-      const Vec10 p = exid::est::logCholeskyToInertial(x);
+      const Vec10 p = exid::estimators::logCholeskyToInertial(x);
       return g.dot(p) + 0.5 * p.squaredNorm();
     };
-    const Vec10 grad = exid::est::logCholeskyVjp(t, g + exid::est::logCholeskyToInertial(t));
-    const Eigen::Matrix<double, 10, 10> J = exid::est::logCholeskyJacobian(t);
+    const Vec10 grad =
+        exid::estimators::logCholeskyVjp(t, g + exid::estimators::logCholeskyToInertial(t));
+    const Eigen::Matrix<double, 10, 10> J = exid::estimators::logCholeskyJacobian(t);
     for (int k = 0; k < 10; ++k) {
       const double h = 1e-6;
       Vec10 a = t, b = t;
@@ -77,8 +79,9 @@ TEST(LogCholesky, GradientMatchesFiniteDifferences) {
       b(k) -= h;
       const double fd = (f(a) - f(b)) / (2 * h);
       EXPECT_NEAR(grad(k), fd, 1e-6 * std::max(1.0, std::abs(fd))) << "coordinate " << k;
-      const Vec10 dpi =
-          (exid::est::logCholeskyToInertial(a) - exid::est::logCholeskyToInertial(b)) / (2 * h);
+      const Vec10 dpi = (exid::estimators::logCholeskyToInertial(a) -
+                         exid::estimators::logCholeskyToInertial(b)) /
+                        (2 * h);
       EXPECT_LE((J.col(k) - dpi).norm(), 1e-6 * std::max(1.0, dpi.norm())) << "column " << k;
     }
   }
@@ -90,15 +93,15 @@ TEST(LogCholesky, ProjectionRepairsAnInconsistentBody) {
   bad << 0.01, 0, 0, 0.5, 0, 0.02, 0.1, 0, 0, 3.0;
   EXPECT_FALSE(exid::checkPhysical(bad).ok);
   bool projected = false;
-  const Vec10 t = exid::est::logCholeskyFromInertial(bad, 1e-6, &projected);
+  const Vec10 t = exid::estimators::logCholeskyFromInertial(bad, 1e-6, &projected);
   EXPECT_TRUE(projected);
-  EXPECT_TRUE(exid::checkPhysical(exid::est::logCholeskyToInertial(t), 0.0).ok);
+  EXPECT_TRUE(exid::checkPhysical(exid::estimators::logCholeskyToInertial(t), 0.0).ok);
   Vec10 neg = Vec10::Zero();
   neg(9) = -1.0;
-  EXPECT_TRUE(
-      exid::checkPhysical(
-          exid::est::logCholeskyToInertial(exid::est::logCholeskyFromInertial(neg, 1e-6)), 0.0)
-          .ok);
+  EXPECT_TRUE(exid::checkPhysical(exid::estimators::logCholeskyToInertial(
+                                      exid::estimators::logCholeskyFromInertial(neg, 1e-6)),
+                                  0.0)
+                  .ok);
 }
 
 // ---------------------------------------------------------------- priors
@@ -277,7 +280,7 @@ Panda panda(bool fat = false) {
     d.rotor_inertia = 0.05 + 0.01 * static_cast<double>(j);
   }
   for (const auto& b : p.truth->bodies)
-    EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(b.inertia), 0.0) << b.name;
+    EXPECT_GT(exid::estimators::pseudoInertiaMinEigenvalue(b.inertia), 0.0) << b.name;
   p.model = exid_test::create<exid::ObservationModel>("differential", "{}");
   exid::RunContext ctx;
   ctx.seed = 3;
@@ -347,7 +350,7 @@ void expectConsistent(const exid::Estimate& e) {
     EXPECT_EQ(names.at(i + 9).asString(), "M" + std::to_string(i / 10 + 1));
     EXPECT_TRUE(exid::checkPhysical(pi, 0.0).ok)
         << "body " << i / 10 + 1 << ": " << exid::checkPhysical(pi, 0.0).rule;
-    EXPECT_GT(exid::est::pseudoInertiaMinEigenvalue(pi), 0.0) << "body " << i / 10 + 1;
+    EXPECT_GT(exid::estimators::pseudoInertiaMinEigenvalue(pi), 0.0) << "body " << i / 10 + 1;
   }
   for (std::size_t i = 70; i < names.size(); ++i) {
     const std::string n = names.at(i).asString();
@@ -458,7 +461,7 @@ TEST(ConsistentLs, StandardPriorCompletesTheBodiesByThePrior) {
   EXPECT_LE((prior.covariance - K * D2.asDiagonal() * K.transpose()).norm(),
             1e-12 * prior.covariance.norm());
   // scaling the prior scales both forms
-  const exid::Prior half = exid::est::scaledPrior(prior, 0.5);
+  const exid::Prior half = exid::estimators::scaledPrior(prior, 0.5);
   EXPECT_LE((half.standard_std - 0.5 * prior.standard_std).norm(), 1e-15);
 
   const exid::Estimate s = make("consistent_ls")->estimate(*pa.model, d, &prior, ctx);
@@ -528,18 +531,18 @@ TEST(PriorScale, EvidenceAndCrossValidationRecoverTheScaleOfThePriorDraw) {
     for (int i = 0; i < p; ++i) theta(i) = prior.value(i) + a_true * sd(i) * nz(rng);
     Eigen::VectorXd y = W * theta;
     for (int r = 0; r < m; ++r) y(r) += nz(rng);
-    exid::est::RowAccumulator all(p);
+    exid::estimators::RowAccumulator all(p);
     all.add(W, y);
-    const exid::est::PriorScaleChoice ev =
-        exid::est::selectPriorScaleEvidence(all, prior, 1e-3, 1e3, "test");
-    std::vector<exid::est::RowAccumulator> folds;
+    const exid::estimators::PriorScaleChoice ev =
+        exid::estimators::selectPriorScaleEvidence(all, prior, 1e-3, 1e3, "test");
+    std::vector<exid::estimators::RowAccumulator> folds;
     for (int b = 0; b < blocks; ++b) {
       folds.emplace_back(p);
       folds.back().add(W.middleRows(b * m / blocks, m / blocks),
                        y.segment(b * m / blocks, m / blocks));
     }
-    const exid::est::PriorScaleChoice cv =
-        exid::est::selectPriorScaleCv(folds, prior, exid::est::logGrid(1e-3, 1e3, 8), "test");
+    const exid::estimators::PriorScaleChoice cv = exid::estimators::selectPriorScaleCv(
+        folds, prior, exid::estimators::logGrid(1e-3, 1e3, 8), "test");
     std::printf("a_true %g: evidence a = %.3g (s^2 = %.3g, gamma = %.1g), cv a = %.3g\n", a_true,
                 ev.scale, ev.noise_variance, ev.effective_parameters, cv.scale);
     EXPECT_GT(ev.scale, 0.7 * a_true);
@@ -725,8 +728,8 @@ TEST(Export, WriterRoundTripsADhRobotWithPostTransforms) {
   // The PUMA 560 (standard DH: post transforms) with consistent link parameters.
   exid::RobotModel r = *exid_test::robot("puma560");
   for (auto& b : r.bodies) {
-    const Vec10 t = exid::est::logCholeskyFromInertial(b.inertia, 1e-4);
-    b.inertia = exid::est::logCholeskyToInertial(t);
+    const Vec10 t = exid::estimators::logCholeskyFromInertial(b.inertia, 1e-4);
+    b.inertia = exid::estimators::logCholeskyToInertial(t);
   }
   const fs::path f =
       fs::temp_directory_path() / ("exid_puma_" + std::to_string(::getpid()) + ".urdf");

@@ -10,12 +10,12 @@
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
-namespace est = exid::est;
+namespace estimators = exid::estimators;
 
 TEST(Butterworth, MatchesPublishedCoefficients) {
   // scipy.signal.butter(2, 0.2): b = [0.06745527, 0.13491055, 0.06745527],
   // a = [1, -1.1429805, 0.4128016] (Wn = 0.2 of Nyquist: fc = 0.1 fs).
-  est::Sos s = est::butterworthLowpass(2, 10.0, 100.0);
+  estimators::Sos s = estimators::butterworthLowpass(2, 10.0, 100.0);
   ASSERT_EQ(s.sections.size(), 1u);
   const auto& c = s.sections[0];
   EXPECT_NEAR(c[0], 0.0674552738890719, 1e-12);
@@ -28,27 +28,28 @@ TEST(Butterworth, MatchesPublishedCoefficients) {
 TEST(Butterworth, MagnitudeIsTheBilinearButterworth) {
   for (int N : {1, 2, 3, 4, 5, 8}) {
     const double fs = 1000, fc = 37;
-    est::Sos s = est::butterworthLowpass(N, fc, fs);
+    estimators::Sos s = estimators::butterworthLowpass(N, fc, fs);
     EXPECT_EQ(static_cast<int>(s.sections.size()), (N + 1) / 2);
     for (double f : {0.0, 5.0, 37.0, 80.0, 300.0, 499.0}) {
       const double w = std::tan(M_PI * f / fs) / std::tan(M_PI * fc / fs);
       const double expect = 1.0 / std::sqrt(1.0 + std::pow(w, 2 * N));
-      EXPECT_NEAR(std::abs(est::sosResponse(s, f, fs)), expect, 1e-10) << "N=" << N << " f=" << f;
+      EXPECT_NEAR(std::abs(estimators::sosResponse(s, f, fs)), expect, 1e-10)
+          << "N=" << N << " f=" << f;
     }
   }
-  EXPECT_THROW(est::butterworthLowpass(4, 600, 1000), exid::Error);
+  EXPECT_THROW(estimators::butterworthLowpass(4, 600, 1000), exid::Error);
 }
 
 TEST(Filtfilt, ZeroPhaseAndNoEdgeTransient) {
   const double fs = 1000;
   const int n = 4000;
-  est::Sos s = est::butterworthLowpass(4, 20, fs);
+  estimators::Sos s = estimators::butterworthLowpass(4, 20, fs);
   Eigen::VectorXd x(n), y(n);
   for (int k = 0; k < n; ++k) {
     const double t = k / fs;
     x(k) = 3.0 + std::sin(2 * M_PI * 2 * t + 0.3);  // in band: passes unchanged, no phase lag
   }
-  y = est::filtfilt(s, x);
+  y = estimators::filtfilt(s, x);
   // |H(2 Hz)|^2 = 1 / (1 + (tan(2pi/1000)/tan(20pi/1000))^8) ~ 1 - 1e-8
   EXPECT_LE((y - x).segment(200, n - 400).cwiseAbs().maxCoeff(), 1e-7);
   // Edges: a long odd extension + steady-state initial conditions keep the error small (a pad
@@ -56,10 +57,10 @@ TEST(Filtfilt, ZeroPhaseAndNoEdgeTransient) {
   EXPECT_LE((y - x).cwiseAbs().maxCoeff(), 2e-3);
   // A constant passes exactly.
   Eigen::VectorXd c = Eigen::VectorXd::Constant(100, 2.5);
-  EXPECT_LE((est::filtfilt(s, c).array() - 2.5).abs().maxCoeff(), 1e-12);
+  EXPECT_LE((estimators::filtfilt(s, c).array() - 2.5).abs().maxCoeff(), 1e-12);
   // Out of band: 200 Hz attenuated by |H|^2 ~ (20/200... )^8
   for (int k = 0; k < n; ++k) x(k) = std::sin(2 * M_PI * 200 * k / fs);
-  y = est::filtfilt(s, x);
+  y = estimators::filtfilt(s, x);
   // (odd reflection about a non-zero end value puts a step in the pad: it decays within ~20 tau)
   EXPECT_LE(y.segment(500, n - 1000).cwiseAbs().maxCoeff(), 1e-6);
 }
@@ -78,8 +79,8 @@ TEST(CentralDifferences, ExactOnQuadraticsIncludingNonUniform) {
     X(k, 1) = 5 * t(k);
     dX(k, 1) = 5;
   }
-  EXPECT_LE((est::centralFirstDerivative(t, X) - dX).cwiseAbs().maxCoeff(), 1e-9);
-  Eigen::MatrixXd d2 = est::centralSecondDerivative(t, X);
+  EXPECT_LE((estimators::centralFirstDerivative(t, X) - dX).cwiseAbs().maxCoeff(), 1e-9);
+  Eigen::MatrixXd d2 = estimators::centralSecondDerivative(t, X);
   EXPECT_LE((d2.col(0).array() + 6).abs().maxCoeff(), 1e-6);
   EXPECT_LE(d2.col(1).cwiseAbs().maxCoeff(), 1e-6);
 }
@@ -100,7 +101,8 @@ TEST(Decimation, PerEquationAndExactForConsistentRows) {
       r.y(i) = r.W.row(i).dot(theta);
       r.equation.push_back(j);
     }
-  exid::Rows d = est::decimateRows(r, 10, est::butterworthLowpass(8, 0.8 * 0.5 * 1000 / 10, 1000));
+  exid::Rows d = estimators::decimateRows(
+      r, 10, estimators::butterworthLowpass(8, 0.8 * 0.5 * 1000 / 10, 1000));
   ASSERT_EQ(d.y.size(), 2 * 100);
   EXPECT_EQ(d.equation[0], 0);
   EXPECT_EQ(d.equation[1], 1);
@@ -135,24 +137,24 @@ TEST(RowAccumulator, NormalEquationsByEquationEqualTheDenseGramMatrix) {
   Eigen::MatrixXd A(m, p + 1);
   A << W, y;
   const Eigen::MatrixXd G = A.transpose() * A;
-  using M = est::RowAccumulator::Method;
-  est::RowAccumulator by_eq(p, M::Normal), dense(p, M::Normal), qr(p, M::Qr);
+  using M = estimators::RowAccumulator::Method;
+  estimators::RowAccumulator by_eq(p, M::Normal), dense(p, M::Normal), qr(p, M::Qr);
   by_eq.addEquations(W.topRows(600), y.head(600), std::vector<int>(eq.begin(), eq.begin() + 600));
   by_eq.addEquations(W.bottomRows(300), y.tail(300), {});  // no labels: add()
   dense.add(W, y);
   qr.addEquations(W, y, eq);  // Qr: add()
   EXPECT_EQ(by_eq.rows(), m);
-  for (const est::RowAccumulator* a : {&by_eq, &dense, &qr}) {
+  for (const estimators::RowAccumulator* a : {&by_eq, &dense, &qr}) {
     const Eigen::MatrixXd& F = a->factor();
     EXPECT_LE((F.transpose() * F - G).cwiseAbs().maxCoeff(), 1e-12 * G.cwiseAbs().maxCoeff());
   }
-  est::SolveOptions opt;
-  const est::LsSolution a = est::solveLeastSquares(by_eq, {}, opt, "test");
-  const est::LsSolution b = est::solveLeastSquares(dense, {}, opt, "test");
+  estimators::SolveOptions opt;
+  const estimators::LsSolution a = estimators::solveLeastSquares(by_eq, {}, opt, "test");
+  const estimators::LsSolution b = estimators::solveLeastSquares(dense, {}, opt, "test");
   EXPECT_LE((a.theta - b.theta).cwiseAbs().maxCoeff(), 1e-12 * b.theta.cwiseAbs().maxCoeff());
   EXPECT_NEAR(a.rss, b.rss, 1e-12 * b.rss);
   // the wrong number of labels is refused rather than misread: add() of every row
-  est::RowAccumulator short_labels(p, M::Normal);
+  estimators::RowAccumulator short_labels(p, M::Normal);
   short_labels.addEquations(W, y, std::vector<int>(eq.begin(), eq.begin() + 10));
   EXPECT_LE((short_labels.factor().transpose() * short_labels.factor() - G).cwiseAbs().maxCoeff(),
             1e-12 * G.cwiseAbs().maxCoeff());
@@ -171,7 +173,7 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   // Badly scaled, nearly collinear columns: cond(W) ~ 1e7, cond(W^T W) ~ 1e14.
   W.col(1) = W.col(0) + 1e-7 * W.col(1);
   W.col(3) *= 1e4;
-  est::RowAccumulator acc(p);
+  estimators::RowAccumulator acc(p);
   for (int b = 0; b < m; b += 333) {
     const int e = std::min(m, b + 333);
     acc.add(W.middleRows(b, e - b), y.segment(b, e - b));
@@ -182,9 +184,9 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   const Eigen::MatrixXd& F = acc.factor();
   EXPECT_LE((F.transpose() * F - A.transpose() * A).cwiseAbs().maxCoeff(),
             1e-10 * (A.transpose() * A).cwiseAbs().maxCoeff());
-  est::SolveOptions opt;
+  estimators::SolveOptions opt;
   opt.rank_tolerance = 1e-12;
-  est::LsSolution s = est::solveLeastSquares(acc, {}, opt, "test");
+  estimators::LsSolution s = estimators::solveLeastSquares(acc, {}, opt, "test");
   // Reference in long double: the accumulated QR keeps cond(W) ~ 1e7 (scaled), the normal
   // equations square it and lose about 7 more digits.
   using MatL = Eigen::Matrix<long double, Eigen::Dynamic, Eigen::Dynamic>;
@@ -196,13 +198,13 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   EXPECT_LE(err_qr, 1e-7);
   EXPECT_NEAR(s.rss, (y - W * ref).squaredNorm(), 1e-9 * s.rss);
   EXPECT_GT(s.cond_W_scaled, 1e6);
-  est::RowAccumulator nacc(p, est::RowAccumulator::Method::Normal);
+  estimators::RowAccumulator nacc(p, estimators::RowAccumulator::Method::Normal);
   nacc.add(W, y);
   // The scaled condition number: exact from the QR factor; from the Gram matrix it is only
   // known to be far beyond what the normal equations tolerate (cond^2 ~ 1/eps).
   EXPECT_NEAR(acc.scaledCondition(), s.cond_W_scaled, 1e-6 * s.cond_W_scaled);
   EXPECT_GT(nacc.scaledCondition(), 1e5);
-  est::LsSolution sn = est::solveLeastSquares(nacc, {}, opt, "test");
+  estimators::LsSolution sn = estimators::solveLeastSquares(nacc, {}, opt, "test");
   const double err_normal = (sn.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   EXPECT_GT(err_normal, 100 * err_qr);
   std::printf(
@@ -210,7 +212,7 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
       "scaled %.2e)\n",
       err_qr, err_normal, s.cond_W, s.cond_W_scaled);
   // merge and scale
-  est::RowAccumulator a2(p), b2(p);
+  estimators::RowAccumulator a2(p), b2(p);
   a2.add(W.topRows(100), y.head(100));
   b2.merge(a2, 2.0);
   Eigen::MatrixXd A2(100, p + 1);
@@ -226,25 +228,25 @@ TEST(RowAccumulator, ExplainsNullSpace) {
   N << 0.7071, -0.7071, 0.001;
   Eigen::VectorXd r(1);
   r << 1e-17;
-  const std::string s = est::explainNullSpace(N, r, {"Fc1", "OFF1", "MX1"}, 4);
+  const std::string s = estimators::explainNullSpace(N, r, {"Fc1", "OFF1", "MX1"}, 4);
   EXPECT_NE(s.find("0.707 Fc1 - 0.707 OFF1"), std::string::npos) << s;
   EXPECT_EQ(s.find("MX1"), std::string::npos) << s;
 }
 
 TEST(Filtfilt, RowMajorBlockEqualsPerColumnBitForBit) {
-  const exid::est::Sos sos = exid::est::butterworthLowpass(8, 12.0, 1000.0);
+  const exid::estimators::Sos sos = exid::estimators::butterworthLowpass(8, 12.0, 1000.0);
   Eigen::MatrixXd X(700, 5);
   for (Eigen::Index i = 0; i < X.rows(); ++i)
     for (Eigen::Index j = 0; j < X.cols(); ++j)
       X(i, j) = std::sin(0.01 * static_cast<double>(i * (j + 1))) + 0.1 * std::cos(0.9 * i + j);
-  exid::est::RowMajorMatrix R = X;
-  exid::est::filtfiltRowsInPlace(sos, &R);
+  exid::estimators::RowMajorMatrix R = X;
+  exid::estimators::filtfiltRowsInPlace(sos, &R);
   for (Eigen::Index j = 0; j < X.cols(); ++j) {
-    const Eigen::VectorXd ref = exid::est::filtfilt(sos, X.col(j));
+    const Eigen::VectorXd ref = exid::estimators::filtfilt(sos, X.col(j));
     for (Eigen::Index i = 0; i < X.rows(); ++i) ASSERT_EQ(R(i, j), ref(i)) << i << "," << j;
   }
   // the settling margin: the slowest pole decays below the tolerance within it
-  const long M = exid::est::settlingSamples(sos, 1e-13);
+  const long M = exid::estimators::settlingSamples(sos, 1e-13);
   EXPECT_GT(M, 100);
   EXPECT_LT(M, 5000);
 }

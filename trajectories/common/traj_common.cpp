@@ -7,7 +7,7 @@
 
 #include "exid/error.hpp"
 
-namespace exid::traj {
+namespace exid::trajectories {
 
 namespace {
 constexpr double kInf = HUGE_VAL;
@@ -373,4 +373,4 @@ void BasisTrajectory::scaleIntoLimits(Eigen::VectorXd* z, const Eigen::VectorXd&
   }
 }
 
-}  // namespace exid::traj
+}  // namespace exid::trajectories

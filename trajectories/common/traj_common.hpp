@@ -12,7 +12,7 @@
 
 #include "exid/interfaces.hpp"
 
-namespace exid::traj {
+namespace exid::trajectories {
 
 /// Parameters every trajectory declares: sample_period_s, samples, position_margin_rad,
 /// velocity_limits, acceleration_limits, velocity_limit_rad_s, acceleration_limit_rad_s2,
@@ -130,4 +130,4 @@ class BasisTrajectory : public Trajectory {
   mutable Eigen::MatrixXd J_;  // cached dense Jacobian
 };
 
-}  // namespace exid::traj
+}  // namespace exid::trajectories

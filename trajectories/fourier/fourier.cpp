@@ -19,7 +19,7 @@
 
 namespace {
 
-class Fourier final : public exid::traj::BasisTrajectory {
+class Fourier final : public exid::trajectories::BasisTrajectory {
  public:
   static constexpr const char* kName = "fourier";
   static constexpr const char* kVersion = "1.0";
@@ -29,7 +29,7 @@ class Fourier final : public exid::traj::BasisTrajectory {
       "sampled";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::traj::commonParams();
+    auto p = exid::trajectories::commonParams();
     p.push_back(
         exid::param_double("period_s", 10.0, "s", "fundamental period T", 0.0, std::nullopt, true));
     p.push_back(exid::param_int("harmonics", 5, "number of harmonics L", 1.0, 1000.0));
@@ -47,7 +47,7 @@ class Fourier final : public exid::traj::BasisTrajectory {
                                     "with init: coefficients, z itself (moving joint after joint: "
                                     "q0, a_1..a_L, b_1..b_L; with rest_to_rest: [q(0),] "
                                     "a_2..a_L, b_2..b_L)"));
-    for (auto& d : exid::traj::restToRestParams()) p.push_back(d);
+    for (auto& d : exid::trajectories::restToRestParams()) p.push_back(d);
     return p;
   }
 
@@ -60,7 +60,7 @@ class Fourier final : public exid::traj::BasisTrajectory {
         coeffs_(p.getDoubles("init_coefficients")),
         rest_(p.getBool("rest_to_rest")),
         start_(p.getDoubles("start_position_rad")) {
-    opt_ = exid::traj::readCommon(p);
+    opt_ = exid::trajectories::readCommon(p);
     exid::check(rest_ || start_.empty(),
                 "trajectory 'fourier': start_position_rad is given without rest_to_rest: true");
     exid::check(!rest_ || L_ >= 2,
@@ -70,15 +70,15 @@ class Fourier final : public exid::traj::BasisTrajectory {
 
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
     const std::string who = "trajectory 'fourier'";
-    js_ = exid::traj::resolveJoints(*robot, opt_, who);
-    const int K = exid::traj::sampleCount(opt_, period_, false, who, "period_s");
+    js_ = exid::trajectories::resolveJoints(*robot, opt_, who);
+    const int K = exid::trajectories::sampleCount(opt_, period_, false, who, "period_s");
     const double dt = opt_.samples > 0 ? period_ / K : opt_.sample_period;
     w_ = 2.0 * M_PI / period_;
     const double w = w_;
     Eigen::VectorXd t(K);
     const int mf = 1 + 2 * L_;  // full coefficients per joint
     // Reduced variables -> full coefficients (identity unless rest_to_rest).
-    q_offset_ = exid::traj::resolveStart(js_, start_, who);
+    q_offset_ = exid::trajectories::resolveStart(js_, start_, who);
     const bool fixed_start = q_offset_.size() > 0;
     const int m = rest_ ? 2 * (L_ - 1) + (fixed_start ? 0 : 1) : mf;
     P_ = Eigen::MatrixXd::Zero(mf, m);

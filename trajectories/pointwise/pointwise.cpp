@@ -27,7 +27,7 @@ class Pointwise final : public exid::Trajectory {
       "the backward costate recursion";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::traj::commonParams();
+    auto p = exid::trajectories::commonParams();
     p.push_back(exid::param_double("duration_s", 10.0, "s",
                                    "duration: K = duration_s / sample_period_s samples", 0.0,
                                    std::nullopt, true));
@@ -59,13 +59,13 @@ class Pointwise final : public exid::Trajectory {
         amp_(p.getDouble("init_amplitude_rad")),
         freq_(p.getDouble("init_frequency_hz")),
         csv_(p.getString("init_csv")) {
-    opt_ = exid::traj::readCommon(p);
+    opt_ = exid::trajectories::readCommon(p);
   }
 
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
     const std::string who = "trajectory 'pointwise'";
-    js_ = exid::traj::resolveJoints(*robot, opt_, who);
-    K_ = exid::traj::sampleCount(opt_, D_, false, who);
+    js_ = exid::trajectories::resolveJoints(*robot, opt_, who);
+    K_ = exid::trajectories::sampleCount(opt_, D_, false, who);
     dt_ = opt_.samples > 0 ? D_ / K_ : opt_.sample_period;
     const int n = js_.n;
     nm_ = static_cast<int>(js_.moving.size());
@@ -185,16 +185,16 @@ class Pointwise final : public exid::Trajectory {
     return opt_.acceleration_limits || js_.hasAccelerationCap();
   }
   void adjustLimits(std::vector<exid::JointLimits>* limits) const override {
-    exid::traj::adjustLimitsCommon(js_, opt_, limits);
+    exid::trajectories::adjustLimitsCommon(js_, opt_, limits);
   }
   // Defined at the samples only (the accelerations are the variables): not continuous.
   exid::TrajectorySpecs specs() const override {
-    exid::TrajectorySpecs sp = exid::traj::specsCommon(js_, true);
+    exid::TrajectorySpecs sp = exid::trajectories::specsCommon(js_, true);
     sp.duration_s = D_;
     return sp;
   }
   exid::Json describe() const override {
-    exid::Json d = exid::traj::describeCommon(js_, opt_, true);
+    exid::Json d = exid::trajectories::describeCommon(js_, opt_, true);
     d["samples"] = K_;
     d["sample_period_s"] = dt_;
     d["init"] = init_;
@@ -259,8 +259,8 @@ class Pointwise final : public exid::Trajectory {
     }
   }
 
-  exid::traj::CommonOptions opt_;
-  exid::traj::JointSpace js_;
+  exid::trajectories::CommonOptions opt_;
+  exid::trajectories::JointSpace js_;
   double D_;
   std::vector<double> q0_param_;
   std::string init_;

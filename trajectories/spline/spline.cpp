@@ -21,7 +21,7 @@
 
 namespace {
 
-class Spline final : public exid::traj::BasisTrajectory {
+class Spline final : public exid::trajectories::BasisTrajectory {
  public:
   static constexpr const char* kName = "spline";
   static constexpr const char* kVersion = "1.0";
@@ -30,7 +30,7 @@ class Spline final : public exid::traj::BasisTrajectory {
       "variables: knot values; boundary rest (starts and ends at rest) or periodic";
 
   static std::vector<exid::ParamDecl> params() {
-    auto p = exid::traj::commonParams();
+    auto p = exid::trajectories::commonParams();
     p.push_back(exid::param_double("duration_s", 10.0, "s", "duration (the period when periodic)",
                                    0.0, std::nullopt, true));
     p.push_back(exid::param_int("knots", 10, "number of knots, both ends included", 3.0, 10000.0));
@@ -49,7 +49,7 @@ class Spline final : public exid::traj::BasisTrajectory {
     p.push_back(exid::param_doubles("init_knots", std::vector<double>{}, "rad",
                                     "with init: knots, z itself (moving joint after joint; "
                                     "with start_position_rad: the interior knots less it)"));
-    for (auto& d : exid::traj::restToRestParams()) p.push_back(d);
+    for (auto& d : exid::trajectories::restToRestParams()) p.push_back(d);
     return p;
   }
 
@@ -64,7 +64,7 @@ class Spline final : public exid::traj::BasisTrajectory {
         init_knots_(p.getDoubles("init_knots")),
         rest_(p.getBool("rest_to_rest")),
         start_(p.getDoubles("start_position_rad")) {
-    opt_ = exid::traj::readCommon(p);
+    opt_ = exid::trajectories::readCommon(p);
     exid::check(degree_ == 3 || degree_ == 5,
                 fmt::format("trajectory 'spline': degree {} (use 3 or 5)", degree_));
     exid::check(rest_ || start_.empty(),
@@ -76,11 +76,11 @@ class Spline final : public exid::traj::BasisTrajectory {
 
   void bind(std::shared_ptr<const exid::RobotModel> robot, const exid::RunContext& ctx) override {
     const std::string who = "trajectory 'spline'";
-    js_ = exid::traj::resolveJoints(*robot, opt_, who);
+    js_ = exid::trajectories::resolveJoints(*robot, opt_, who);
     S_ = knots_ - 1;
     const int S = S_, d = degree_, nc = d + 1;
     const int nk = periodic_ ? knots_ - 1 : knots_;  // independent knots per joint
-    q_offset_ = exid::traj::resolveStart(js_, start_, who);
+    q_offset_ = exid::trajectories::resolveStart(js_, start_, who);
     const bool fixed_start = q_offset_.size() > 0;
     const int nv = fixed_start ? knots_ - 2 : nk;  // variables per joint
     h_ = D_ / S;
@@ -121,7 +121,7 @@ class Spline final : public exid::traj::BasisTrajectory {
       const Eigen::MatrixXd interior = C_.middleCols(1, nv);
       C_ = interior;  // the end knots are the start position (the constant offset)
     }
-    const int K = exid::traj::sampleCount(opt_, D_, !periodic_, who);
+    const int K = exid::trajectories::sampleCount(opt_, D_, !periodic_, who);
     const double dt = opt_.samples > 0 ? D_ / (periodic_ ? K : K - 1) : opt_.sample_period;
     Eigen::VectorXd t(K);
     for (int k = 0; k < K; ++k) t(k) = k * dt;

@@ -11,7 +11,7 @@
 
 #include "exid/error.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 namespace {
 
@@ -218,4 +218,4 @@ Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
   return j;
 }
 
-}  // namespace exid::est
+}  // namespace exid::estimators

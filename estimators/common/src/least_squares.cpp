@@ -13,7 +13,7 @@
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 namespace {
 std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
@@ -396,4 +396,4 @@ void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& 
   d["covariance_definition"] = "sigma^2 (W^T W)^-1, sigma^2 = ||y - W theta||^2 / (m - p)";
 }
 
-}  // namespace exid::est
+}  // namespace exid::estimators

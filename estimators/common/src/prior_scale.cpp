@@ -13,7 +13,7 @@
 #include "exid/error.hpp"
 #include "exid/estimators/consistent.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 Prior scaledPrior(const Prior& prior, double scale) {
   Prior out = prior;
@@ -195,4 +195,4 @@ PriorScaleChoice selectPriorScaleEvidence(const RowAccumulator& rows, const Prio
   return out;
 }
 
-}  // namespace exid::est
+}  // namespace exid::estimators

@@ -10,7 +10,7 @@
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 bool modelIsPerSample(const ObservationModel& model) { return model.specs().per_sample; }
 
@@ -257,4 +257,4 @@ void rowTimeOrder(const Rows& rows, int samples, std::vector<int>* sample_of_row
         std::min(samples - 1, static_cast<int>((static_cast<long long>(i) * samples) / R));
 }
 
-}  // namespace exid::est
+}  // namespace exid::estimators

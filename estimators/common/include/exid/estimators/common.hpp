@@ -17,7 +17,7 @@
 #include "exid/json.hpp"
 #include "exid/signal.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 // ============================================================== least squares
 
@@ -191,7 +191,7 @@ void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,
 
 // ============================================================== signals
 // Signal processing lives in the core (exid/signal.hpp, shared with the experiments); its names
-// are used here as est:: names too.
+// are used here as estimators:: names too.
 using exid::butterworthLowpass;
 using exid::centralFirstDerivative;
 using exid::centralSecondDerivative;
@@ -209,4 +209,4 @@ using exid::sosFilter;
 using exid::sosResponse;
 using exid::sosStepState;
 
-}  // namespace exid::est
+}  // namespace exid::estimators

@@ -17,7 +17,7 @@
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 using Vec10 = Eigen::Matrix<double, 10, 1>;
 
@@ -67,4 +67,4 @@ LsSolution solveWithPrior(const RowAccumulator& acc, const Prior& prior,
 Json priorDetails(const Prior& prior, const Eigen::VectorXd& estimate,
                   const Eigen::VectorXd& posterior_std);
 
-}  // namespace exid::est
+}  // namespace exid::estimators

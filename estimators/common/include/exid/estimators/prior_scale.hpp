@@ -17,7 +17,7 @@
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
 
-namespace exid::est {
+namespace exid::estimators {
 
 /// The prior with every standard deviation multiplied by `scale` (covariance by scale^2).
 Prior scaledPrior(const Prior& prior, double scale);
@@ -53,4 +53,4 @@ PriorScaleChoice selectPriorScaleCv(const std::vector<RowAccumulator>& folds, co
 PriorScaleChoice selectPriorScaleEvidence(const RowAccumulator& rows, const Prior& prior, double lo,
                                           double hi, const std::string& who);
 
-}  // namespace exid::est
+}  // namespace exid::estimators
