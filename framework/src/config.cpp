@@ -356,6 +356,36 @@ std::vector<ParamDecl> excitationConstraintParams() {
   };
 }
 
+std::vector<ParamDecl> excitationInformationParams() {
+  return {
+      param_path("earlier_study", std::string(),
+                 "an earlier run folder of the same robot, model and base columns: the "
+                 "information of its identification (covariance.csv: the inverse of the "
+                 "estimate's covariance) is added to the new trajectory's; empty: none"),
+      param_double("prior_relative_std", 0.0, "",
+                   "the robot description's parameters as a prior: std = relative_std * |value| "
+                   "(+ absolute_std) per standard parameter, its information added; 0 and "
+                   "prior_absolute_std 0: none",
+                   0.0),
+      param_double("prior_absolute_std", 0.0, "", "see prior_relative_std", 0.0),
+      param_double("noise_std", 0.0, "N m (the model's row units)",
+                   "std of the new experiment's measurement noise per row; required with an "
+                   "earlier study or a prior (it weighs the new rows against what is known)",
+                   0.0),
+      param_double("recording_rate_hz", 0.0, "Hz",
+                   "the rate the new experiment will be recorded at (rows per second of each "
+                   "equation); required with an earlier study or a prior",
+                   0.0),
+  };
+}
+
+bool StudyConfig::hasExcitationInformation() const {
+  return excitation_information.has("earlier_study") &&
+         (!excitation_information.getString("earlier_study").empty() ||
+          excitation_information.getDouble("prior_relative_std") > 0 ||
+          excitation_information.getDouble("prior_absolute_std") > 0);
+}
+
 std::string studyNameProblem(const std::string& name) {
   if (name.empty()) return "";  // unnamed: loadStudy names it after the file
   if (name.size() > 200) return fmt::format("has {} characters; at most 200", name.size());
@@ -630,7 +660,7 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
     } else {
       const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer",
-                                                "constraints"};
+                                                "constraints", "information"};
       for (const auto& kv : x) {
         const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
         if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
@@ -655,6 +685,18 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       cinfo.params = excitationConstraintParams();
       resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
                   cfg.excitation_constraints);
+      PluginInfo iinfo;
+      iinfo.params = excitationInformationParams();
+      resolveInto(iinfo, x["information"], "excitation.information", base_dir, pr,
+                  cfg.excitation_information);
+      if (cfg.hasExcitationInformation() &&
+          (!(cfg.excitation_information.getDouble("noise_std") > 0) ||
+           !(cfg.excitation_information.getDouble("recording_rate_hz") > 0)))
+        pr.add(x["information"],
+               "excitation.information: noise_std and recording_rate_hz are required with an "
+               "earlier study or a prior (the new experiment's noise std per row and its "
+               "recording rate weigh its information against what is known; exid cannot know "
+               "them)");
     }
   }
   bool split_done = false;
@@ -773,6 +815,10 @@ std::vector<fs::path> studyInputFiles(const StudyConfig& cfg, const Registry& re
   add(cfg.estimator);
   add(cfg.validation);
   if (cfg.prior && cfg.prior->from == "study") out.push_back(cfg.prior->study / "parameters.csv");
+  if (cfg.hasExcitationInformation() &&
+      !cfg.excitation_information.getString("earlier_study").empty())
+    out.push_back(fs::path(cfg.excitation_information.getString("earlier_study")) /
+                  "covariance.csv");
   return out;
 }
 
@@ -846,6 +892,14 @@ std::string StudyConfig::resolvedYaml() const {
       }
       e << YAML::EndMap;
     }
+    if (hasExcitationInformation()) {
+      e << YAML::Key << "information" << YAML::Value << YAML::BeginMap;
+      for (const auto& d : excitationInformationParams()) {
+        e << YAML::Key << d.name << YAML::Value;
+        emitValue(e, excitation_information.at(d.name));
+      }
+      e << YAML::EndMap;
+    }
     e << YAML::EndMap;
   }
   if (experiment) {
@@ -913,6 +967,13 @@ Json StudyConfig::resolvedJson() const {
           excitation_constraints.getDouble("torque_margin");
       j["excitation"]["constraints"]["torque_max_Nm"] =
           Json(excitation_constraints.getDoubles("torque_max_Nm"));
+    }
+    if (hasExcitationInformation()) {
+      Json& I = j["excitation"]["information"];
+      I["earlier_study"] = excitation_information.getString("earlier_study");
+      for (const char* k :
+           {"prior_relative_std", "prior_absolute_std", "noise_std", "recording_rate_hz"})
+        I[k] = excitation_information.getDouble(k);
     }
   }
   if (experiment) j["experiment"] = specJson(*experiment);

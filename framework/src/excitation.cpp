@@ -26,6 +26,16 @@ class Problem final : public ExcitationProblem {
       const double floor = std::max(1e-6, 1e-3 * nom.maxCoeff());
       for (int i = 0; i < p; ++i) scale_(i) = std::max(nom(i), floor);
     }
+    if (opt_.prior_information.size() > 0) {
+      check(opt_.prior_information.rows() == p && opt_.prior_information.cols() == p &&
+                opt_.prior_information.allFinite(),
+            fmt::format("excitation: the information already known must be a finite {} x {} "
+                        "matrix (the model's base parameters), found {} x {}",
+                        p, p, opt_.prior_information.rows(), opt_.prior_information.cols()));
+      M0_ = scale_.asDiagonal() *
+            (0.5 * (opt_.prior_information + opt_.prior_information.transpose())) *
+            scale_.asDiagonal();
+    }
     Samples s = traj_->evaluate(traj_->initial());
     K_ = s.size();
     n_ = s.dof();
@@ -73,6 +83,7 @@ class Problem final : public ExcitationProblem {
     Samples s = traj_->evaluate(z);
     Eigen::MatrixXd W = model_->design(s) * scale_.asDiagonal();
     Eigen::MatrixXd M = W.transpose() * W;
+    if (M0_.size() > 0) M += M0_;  // constant: the gradient through W is unchanged
     Eigen::MatrixXd dM;
     const double J = crit_->evaluate(M, grad ? &dM : nullptr);
     if (grad) {
@@ -89,8 +100,11 @@ class Problem final : public ExcitationProblem {
   Eigen::MatrixXd information(const Eigen::VectorXd& z) override {
     ++evaluations_;
     const Eigen::MatrixXd W = model_->design(traj_->evaluate(z)) * scale_.asDiagonal();
-    return W.transpose() * W;
+    Eigen::MatrixXd M = W.transpose() * W;
+    if (M0_.size() > 0) M += M0_;
+    return M;
   }
+  const Eigen::MatrixXd& priorInformation() const override { return M0_; }
 
   Eigen::MatrixXd informationGradients(const Eigen::VectorXd& z,
                                        const std::vector<Eigen::MatrixXd>& dM) override {
@@ -264,6 +278,7 @@ class Problem final : public ExcitationProblem {
   std::shared_ptr<Criterion> crit_;
   ExcitationOptions opt_;
   Eigen::VectorXd scale_;
+  Eigen::MatrixXd M0_;  // information already known, scaled like W's columns (empty: none)
   std::vector<Limit> active_;
   Eigen::MatrixXd T_;
   Eigen::VectorXd q0_;

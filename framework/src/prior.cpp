@@ -2,11 +2,14 @@
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <map>
 #include <sstream>
 
+#include "exid/base_parameters.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
@@ -123,6 +126,130 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   }
   prior.covariance = sd.cwiseAbs2().asDiagonal();
   return prior;
+}
+
+namespace {
+
+/// The inverse of a symmetric positive definite covariance; `what` names it in the error.
+Eigen::MatrixXd informationOf(const Eigen::MatrixXd& cov, const std::string& what) {
+  Eigen::LLT<Eigen::MatrixXd> llt(0.5 * (cov + cov.transpose()));
+  check(llt.info() == Eigen::Success && cov.allFinite(),
+        fmt::format("{}: the covariance is not positive definite (a base parameter the earlier "
+                    "data did not determine); its information cannot be added",
+                    what));
+  return llt.solve(Eigen::MatrixXd::Identity(cov.rows(), cov.cols()));
+}
+
+/// covariance.csv of an earlier study, reordered to the model's base parameters.
+Eigen::MatrixXd readCovariance(const std::filesystem::path& dir, const BaseParameters& b) {
+  const auto file = dir / "covariance.csv";
+  std::string text;
+  try {
+    text = readInputFile(file, "covariance", kMaxDataFileBytes);
+  } catch (const Error& e) {
+    throw Error(
+        fmt::format("excitation.information.earlier_study: {} (the output folder of a "
+                    "study whose identification succeeded)",
+                    e.what()));
+  }
+  std::istringstream in(text);
+  std::string line;
+  check(static_cast<bool>(std::getline(in, line)), fmt::format("{}: empty file", file.string()));
+  auto head = splitCsvLine(line);
+  check(!head.empty() && head[0] == "name",
+        fmt::format("{}:1: expected the header name,<base parameters>", file.string()));
+  head.erase(head.begin());
+  const auto m = static_cast<Eigen::Index>(head.size());
+  Eigen::MatrixXd C(m, m);
+  std::vector<std::string> rows;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line == "\r") continue;
+    const auto c = splitCsvLine(line);
+    const auto r = static_cast<Eigen::Index>(rows.size());
+    check(r < m && static_cast<Eigen::Index>(c.size()) == m + 1,
+          fmt::format("{}:{}: expected {} rows of a name and {} numbers", file.string(), lineno, m,
+                      m));
+    rows.push_back(c[0]);
+    for (Eigen::Index j = 0; j < m; ++j) {
+      try {
+        std::size_t used = 0;
+        const std::string& cell = c[static_cast<std::size_t>(j + 1)];
+        C(r, j) = std::stod(cell, &used);
+        check(used == cell.size(), "");
+      } catch (const std::exception&) {
+        throw Error(
+            fmt::format("{}:{}: column {}: expected a number", file.string(), lineno, j + 2));
+      }
+    }
+  }
+  check(static_cast<Eigen::Index>(rows.size()) == m && rows == head,
+        fmt::format("{}: expected a square table whose rows are named like its columns",
+                    file.string()));
+  const int p = b.rank();
+  Eigen::MatrixXd out(p, p);
+  std::vector<Eigen::Index> at(static_cast<std::size_t>(p));
+  for (int i = 0; i < p; ++i) {
+    const std::string& n = b.names[static_cast<std::size_t>(i)];
+    const auto it = std::find(head.begin(), head.end(), n);
+    check(it != head.end(),
+          fmt::format("excitation.information.earlier_study: {} has no base parameter '{}' (the "
+                      "studies must share the robot, the observation model and base_columns)",
+                      file.string(), n));
+    at[static_cast<std::size_t>(i)] = it - head.begin();
+  }
+  check(m == p, fmt::format("excitation.information.earlier_study: {} has {} base parameters, "
+                            "the model {} (the studies must share the robot, the observation "
+                            "model and base_columns)",
+                            file.string(), m, p));
+  for (int i = 0; i < p; ++i)
+    for (int j = 0; j < p; ++j)
+      out(i, j) = C(at[static_cast<std::size_t>(i)], at[static_cast<std::size_t>(j)]);
+  return out;
+}
+
+}  // namespace
+
+KnownInformation knownInformation(const StudyConfig& cfg, const ObservationModel& model,
+                                  const Samples& design) {
+  KnownInformation k;
+  if (!cfg.hasExcitationInformation()) return k;
+  const ParamSet& P = cfg.excitation_information;
+  const double sigma = P.getDouble("noise_std"), rate = P.getDouble("recording_rate_hz");
+  check(sigma > 0 && rate > 0,
+        "excitation.information: noise_std and recording_rate_hz are required with an earlier "
+        "study or a prior");
+  // The design's sample period: each design sample stands for rate * dt recorded samples.
+  check(design.size() >= 2, "excitation.information: the trajectory has fewer than 2 samples");
+  const double dt = (design.t(design.size() - 1) - design.t(0)) / (design.size() - 1);
+  check(dt > 0, "excitation.information: the trajectory's time does not increase");
+  k.rows_per_design_sample = rate * dt;
+  const int p = model.numBase();
+  Eigen::MatrixXd I = Eigen::MatrixXd::Zero(p, p);  // information, 1 / parameter units^2
+  const std::string earlier = P.getString("earlier_study");
+  if (!earlier.empty()) {
+    I += informationOf(
+        readCovariance(earlier, model.base()),
+        fmt::format("excitation.information.earlier_study: {}/covariance.csv", earlier));
+    k.sources.push_back(
+        fmt::format("earlier study {} (the inverse of its covariance.csv)", earlier));
+  }
+  const double rel = P.getDouble("prior_relative_std"), abs = P.getDouble("prior_absolute_std");
+  if (rel > 0 || abs > 0) {
+    PriorSpec spec;
+    spec.from = "robot";
+    spec.relative_std = rel;
+    spec.absolute_std = abs;
+    const Prior prior = buildPrior(spec, model);
+    I += informationOf(prior.covariance, "excitation.information: the prior");
+    k.sources.push_back(fmt::format(
+        "the robot description's values, std = {} |value| + {} per standard parameter", rel, abs));
+  }
+  // The new experiment's information is (rate dt / sigma^2) W^T W over the design's samples:
+  // the criterion sees M = W^T W + sigma^2 / (rate dt) I, the same matrix up to a factor.
+  k.matrix = (sigma * sigma / k.rows_per_design_sample) * I;
+  return k;
 }
 
 }  // namespace exid

@@ -172,6 +172,21 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
     named += fmt::format("{},{},{},{},{},{}\n", e.names[static_cast<std::size_t>(i)], i, e.value(i),
                          t.data(i, 2), t.data(i, 3), t.data(i, 4));
   files_.emplace_back("parameters.csv", named);
+  // The estimate's covariance (base x base), named: what a next excitation design adds as the
+  // information already known (excitation.information.earlier_study).
+  if (e.covariance.rows() == e.value.size() && e.covariance.cols() == e.value.size() &&
+      e.value.size() > 0) {
+    std::string cov = "name";
+    for (const auto& n : e.names) cov += "," + n;
+    cov += "\n";
+    for (Eigen::Index i = 0; i < e.covariance.rows(); ++i) {
+      cov += e.names[static_cast<std::size_t>(i)];
+      for (Eigen::Index j = 0; j < e.covariance.cols(); ++j)
+        cov += fmt::format(",{:.17g}", e.covariance(i, j));
+      cov += "\n";
+    }
+    files_.emplace_back("covariance.csv", cov);
+  }
   if (e.history_t.size() > 0) {
     CsvTable h;
     h.columns = {"t"};

@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <unistd.h>
 
+#include <Eigen/Eigenvalues>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -726,6 +727,8 @@ void StudyRun::excitationStage() {
     xo.scale_columns = crit->specs().scale_columns;
     xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
     xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
+    const KnownInformation known = knownInformation(cfg, *model, traj->evaluate(traj->initial()));
+    xo.prior_information = known.matrix;
     auto problem = makeExcitationProblem(traj, model, crit, xo);
     RunContext xctx = ctx;
     xctx.progress = progressFor("excitation");
@@ -791,6 +794,25 @@ void StudyRun::excitationStage() {
     x.reproducible = !stoppedByTime(r.stop_reason);
     Json& X = S["excitation"];
     renderInto(x, &X);
+    if (known.matrix.size() > 0) {
+      // What the design added as known, and the new trajectory's own cond(W) beside the
+      // criterion (which saw W^T W + the known information).
+      Json& K = X["known_information"];
+      K["sources"] = Json(known.sources);
+      K["rows_per_design_sample"] = known.rows_per_design_sample;
+      const Eigen::MatrixXd Wb = model->design(best), Wi = model->design(initial);
+      auto condTotal = [&](const Eigen::MatrixXd& W) {
+        Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(W.transpose() * W + known.matrix);
+        const Eigen::VectorXd l = es.eigenvalues();
+        return l(0) > 0 ? std::sqrt(l(l.size() - 1) / l(0)) : INFINITY;
+      };
+      K["cond_total_initial"] = condTotal(Wi);
+      K["cond_total_final"] = condTotal(Wb);
+      K["rule"] =
+          "the criterion sees M = W^T W + noise_std^2 / (recording_rate_hz dt) (sum of the known "
+          "inverse covariances): the total information up to a factor; cond_W_* are the new "
+          "trajectory's alone, cond_total_* sqrt(cond(M))";
+    }
     if (!x.reproducible)
       warn(fmt::format(
           "excitation: optimizer '{}' was stopped by a time budget ({}) after {} evaluations: "

@@ -95,6 +95,12 @@ struct StudyConfig {
   /// excitation.constraints (excitationConstraintParams(); every key has its default when the
   /// section is absent).
   ParamSet excitation_constraints;
+  /// excitation.information (excitationInformationParams()): what is already known, added to the
+  /// new trajectory's information (docs/excitation.md §11); every key has its default when the
+  /// section is absent.
+  ParamSet excitation_information;
+  /// The section says something (an earlier study or a prior).
+  bool hasExcitationInformation() const;
   std::optional<PluginSpec> experiment, estimator, validation;
   ReportOptions report;
   std::optional<PriorSpec> prior;
@@ -112,6 +118,12 @@ struct StudyConfig {
 /// predicted torques may reach; 0: no torque limits) and torque_max_Nm (the limits, when the
 /// robot description has none).
 std::vector<ParamDecl> excitationConstraintParams();
+
+/// The keys of `excitation.information`: earlier_study (a run folder whose identification's
+/// covariance.csv is added), prior_relative_std / prior_absolute_std (the robot description's
+/// values with that uncertainty), noise_std and recording_rate_hz (the new experiment's noise
+/// and rate, which weigh its information against what is known).
+std::vector<ParamDecl> excitationInformationParams();
 
 /// Why a study (or matrix) name cannot be used, "" when it can. The name becomes a folder
 /// (out/<name>, a matrix's cells): a plain file name, so that no output can leave the output

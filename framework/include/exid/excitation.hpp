@@ -29,6 +29,10 @@ struct ExcitationOptions {
   /// tau_max per measured coordinate [N m or N]; empty: the robot's limits (tau_max, the URDF
   /// `effort`), which must then be finite for every joint.
   std::vector<double> torque_max;
+  /// Information already known (base x base, the model's base columns, unscaled), added to the
+  /// trajectory's W^T W before the criterion: M = W^T W + prior_information (docs/excitation.md
+  /// §11). Empty: none.
+  Eigen::MatrixXd prior_information;
 };
 
 /// The torque model the torque constraint and the exported trajectory use: the robot's full

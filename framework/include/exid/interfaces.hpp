@@ -228,6 +228,13 @@ class ExcitationProblem {
   virtual const ObservationModel& model() const = 0;
   virtual const Criterion& criterion() const = 0;
   virtual long evaluations() const = 0;
+  /// Information already known that value() and information() add to W^T W (base columns,
+  /// scaled like them); empty when none. An optimiser that forms its own information matrix
+  /// must add it too, or refuse the problem.
+  virtual const Eigen::MatrixXd& priorInformation() const {
+    static const Eigen::MatrixXd none;
+    return none;
+  }
 };
 
 /// Why an optimiser stopped (OptimizerResult::stop_reason); toString() gives the text the

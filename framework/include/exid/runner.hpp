@@ -73,9 +73,23 @@ StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry
 /// Throws exid::Error when it cannot be built (missing file or names, zero variances).
 Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 
+/// What an excitation design adds as already known (excitation.information): the information of
+/// an earlier study's estimate and/or of a prior on the robot description's values, weighed
+/// against the new experiment's rows by its noise std and recording rate: `matrix` (base x base,
+/// the model's base columns) = noise_std^2 / (recording_rate_hz * dt) * (sum of the inverse
+/// covariances), dt the design's sample period, so that W^T W + matrix is the total information
+/// up to a factor. Empty when the study adds none. Throws exid::Error naming the file, the key
+/// or the parameter when it cannot be built.
+struct KnownInformation {
+  Eigen::MatrixXd matrix;
+  double rows_per_design_sample = 0.0;
+  std::vector<std::string> sources;
+};
+KnownInformation knownInformation(const StudyConfig& cfg, const ObservationModel& model,
+                                  const Samples& design);
+
 /// Dataset <-> CSV table (docs/conventions.md §1 column names).
 CsvTable datasetTable(const Dataset& d);
 CsvTable samplesTable(const Samples& s);
-
 
 }  // namespace exid
