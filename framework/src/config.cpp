@@ -570,6 +570,77 @@ bool expandSplit(const YAML::Node& root, const fs::path& base_dir, const Registr
   return true;
 }
 
+// `base_columns:` (StudyConfig::base_columns).
+void parseBaseColumns(const YAML::Node& root, Problems& pr, StudyConfig& cfg) {
+  if (const YAML::Node b = root["base_columns"]) {
+    if (!b.IsSequence() || b.size() == 0) {
+      pr.add(b,
+             "base_columns: expected a non-empty list of full parameter names (e.g. [ZZ1, "
+             "XX2, MX2]); leave the key out for the natural order");
+    } else {
+      for (std::size_t i = 0; i < b.size(); ++i) {
+        if (!b[i].IsScalar() || b[i].Scalar().empty())
+          pr.add(b[i], fmt::format("base_columns[{}]: expected a parameter name", i));
+        else if (std::find(cfg.base_columns.begin(), cfg.base_columns.end(), b[i].Scalar()) !=
+                 cfg.base_columns.end())
+          pr.add(b[i], fmt::format("base_columns[{}]: '{}' is named twice", i, b[i].Scalar()));
+        else
+          cfg.base_columns.push_back(b[i].Scalar());
+      }
+      if (!root["model"]) pr.add(b, "base_columns: needs a model section");
+    }
+  }
+}
+
+// `excitation:` trajectory, criterion, optimizer, constraints and information.
+void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Registry& reg,
+                     Problems& pr, StudyConfig& cfg) {
+  if (const YAML::Node x = root["excitation"]) {
+    if (!x.IsMap()) {
+      pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
+    } else {
+      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer",
+                                                "constraints", "information"};
+      for (const auto& kv : x) {
+        const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
+        if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
+          unknownKey(pr, kv.first, "excitation", *key, allowed);
+      }
+      if (x["trajectory"])
+        cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory",
+                                   base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
+      if (x["criterion"])
+        cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion",
+                                  base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.criterion: missing; name a criterion plugin");
+      if (x["optimizer"])
+        cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer",
+                                  base_dir, reg, pr, false);
+      else
+        pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
+      PluginInfo cinfo;
+      cinfo.params = excitationConstraintParams();
+      resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
+                  cfg.excitation_constraints);
+      PluginInfo iinfo;
+      iinfo.params = excitationInformationParams();
+      resolveInto(iinfo, x["information"], "excitation.information", base_dir, pr,
+                  cfg.excitation_information);
+      if (cfg.hasExcitationInformation() &&
+          (!(cfg.excitation_information.getDouble("noise_std") > 0) ||
+           !(cfg.excitation_information.getDouble("recording_rate_hz") > 0)))
+        pr.add(x["information"],
+               "excitation.information: noise_std and recording_rate_hz are required with an "
+               "earlier study or a prior (the new experiment's noise std per row and its "
+               "recording rate weigh its information against what is known; exid cannot know "
+               "them)");
+    }
+  }
+}
+
 }  // namespace
 
 static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
@@ -637,68 +708,8 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       cfg.models.push_back(*s);
     }
   }
-  if (YAML::Node b = root["base_columns"]) {
-    if (!b.IsSequence() || b.size() == 0) {
-      pr.add(b,
-             "base_columns: expected a non-empty list of full parameter names (e.g. [ZZ1, "
-             "XX2, MX2]); leave the key out for the natural order");
-    } else {
-      for (std::size_t i = 0; i < b.size(); ++i) {
-        if (!b[i].IsScalar() || b[i].Scalar().empty())
-          pr.add(b[i], fmt::format("base_columns[{}]: expected a parameter name", i));
-        else if (std::find(cfg.base_columns.begin(), cfg.base_columns.end(), b[i].Scalar()) !=
-                 cfg.base_columns.end())
-          pr.add(b[i], fmt::format("base_columns[{}]: '{}' is named twice", i, b[i].Scalar()));
-        else
-          cfg.base_columns.push_back(b[i].Scalar());
-      }
-      if (!root["model"]) pr.add(b, "base_columns: needs a model section");
-    }
-  }
-  if (YAML::Node x = root["excitation"]) {
-    if (!x.IsMap()) {
-      pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
-    } else {
-      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer",
-                                                "constraints", "information"};
-      for (const auto& kv : x) {
-        const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
-        if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
-          unknownKey(pr, kv.first, "excitation", *key, allowed);
-      }
-      if (x["trajectory"])
-        cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory",
-                                   base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
-      if (x["criterion"])
-        cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion",
-                                  base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.criterion: missing; name a criterion plugin");
-      if (x["optimizer"])
-        cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer",
-                                  base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
-      PluginInfo cinfo;
-      cinfo.params = excitationConstraintParams();
-      resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
-                  cfg.excitation_constraints);
-      PluginInfo iinfo;
-      iinfo.params = excitationInformationParams();
-      resolveInto(iinfo, x["information"], "excitation.information", base_dir, pr,
-                  cfg.excitation_information);
-      if (cfg.hasExcitationInformation() &&
-          (!(cfg.excitation_information.getDouble("noise_std") > 0) ||
-           !(cfg.excitation_information.getDouble("recording_rate_hz") > 0)))
-        pr.add(x["information"],
-               "excitation.information: noise_std and recording_rate_hz are required with an "
-               "earlier study or a prior (the new experiment's noise std per row and its "
-               "recording rate weigh its information against what is known; exid cannot know "
-               "them)");
-    }
-  }
+  parseBaseColumns(root, pr, cfg);
+  parseExcitation(root, base_dir, reg, pr, cfg);
   bool split_done = false;
   if (root["split"] && root["experiment"])
     split_done = expandSplit(root, base_dir, reg, pr, cfg);
