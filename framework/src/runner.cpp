@@ -727,12 +727,12 @@ void StudyRun::excitationStage() {
     xo.scale_columns = crit->specs().scale_columns;
     xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
     xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
-    const KnownInformation known = knownInformation(cfg, *model, traj->evaluate(traj->initial()));
+    Samples initial = traj->evaluate(traj->initial());
+    const KnownInformation known = knownInformation(cfg, *model, initial);
     xo.prior_information = known.matrix;
     auto problem = makeExcitationProblem(traj, model, crit, xo);
     RunContext xctx = ctx;
     xctx.progress = progressFor("excitation");
-    Samples initial = traj->evaluate(traj->initial());
     // A criterion that is NaN (or fails) at the optimiser's answer makes it no answer: the
     // optimisers skip such points, but one that found nothing better may return one (nlopt
     // scores a failed evaluation 1e30). Checked before anything of the stage is written.
@@ -774,8 +774,9 @@ void StudyRun::excitationStage() {
     x.optimizer = cfg.optimizer->type;
     x.criterion_initial = r.criterion_initial;
     x.criterion_final = r.criterion_final;
-    x.cond_W_initial = conditionNumber(model->design(initial));
-    x.cond_W_final = conditionNumber(model->design(best));
+    const Eigen::MatrixXd W_initial = model->design(initial), W_best = model->design(best);
+    x.cond_W_initial = conditionNumber(W_initial);
+    x.cond_W_final = conditionNumber(W_best);
     x.max_constraint_violation = r.max_violation;
     if (xo.torque_margin > 0) {
       // the worst |tau_j| / tau_max,j the full model predicts at the samples
@@ -800,14 +801,13 @@ void StudyRun::excitationStage() {
       Json& K = X["known_information"];
       K["sources"] = Json(known.sources);
       K["rows_per_design_sample"] = known.rows_per_design_sample;
-      const Eigen::MatrixXd Wb = model->design(best), Wi = model->design(initial);
       auto condTotal = [&](const Eigen::MatrixXd& W) {
         Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(W.transpose() * W + known.matrix);
         const Eigen::VectorXd l = es.eigenvalues();
         return l(0) > 0 ? std::sqrt(l(l.size() - 1) / l(0)) : INFINITY;
       };
-      K["cond_total_initial"] = condTotal(Wi);
-      K["cond_total_final"] = condTotal(Wb);
+      K["cond_total_initial"] = condTotal(W_initial);
+      K["cond_total_final"] = condTotal(W_best);
       K["rule"] =
           "the criterion sees M = W^T W + noise_std^2 / (recording_rate_hz dt) (sum of the known "
           "inverse covariances): the total information up to a factor; cond_W_* are the new "
