@@ -295,6 +295,519 @@ Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vec
   return J;
 }
 
+namespace {
+
+/// The velocities, accelerations and torque the checks read: the data's own, or (when the data
+/// has no qd or qdd) derived from q by a Savitzky-Golay fit that also smooths the torque.
+struct Signals {
+  MatrixXd qd, qdd, tau;
+  bool has_tau = false;
+};
+
+Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& J) {
+  Signals s;
+  s.qd = data.qd;
+  s.qdd = data.qdd;
+  s.tau = data.tau;
+  s.has_tau = data.hasTorque() && data.tau.cols() == n;
+  if (!data.hasVelocity() || !data.hasAcceleration()) {
+    const int m = std::max(
+        2, static_cast<int>(std::lround((1.5 * rate / kDifferentiateCutoffHz + 4.6) / 3.2)));
+    MatrixXd v, a;
+    savitzkyGolay(data.q, dt, m, nullptr, &v, &a);
+    if (!data.hasVelocity()) s.qd = v;
+    if (!data.hasAcceleration()) s.qdd = a;
+    if (s.has_tau) savitzkyGolay(data.tau, dt, m, &s.tau, nullptr, nullptr);
+    J["derivatives"] = fmt::format(
+        "the data has no {}: derived from q by a quadratic Savitzky-Golay fit over +-{} samples "
+        "(about {:g} Hz); the torque is smoothed by the same fit (zero phase)",
+        data.hasVelocity() ? "qdd" : "qd and qdd", m, kDifferentiateCutoffHz);
+  } else {
+    J["derivatives"] = "qd and qdd from the data";
+  }
+  return s;
+}
+
+/// A stretch of samples that all move or all stand still.
+struct MotionRun {
+  bool moving;
+  Index begin, end;  // [begin, end)
+};
+
+/// Per joint: the speed above which a sample counts as moving.
+std::vector<double> velocityThresholds(const MatrixXd& qd, int n) {
+  const Index K = qd.rows();
+  std::vector<double> thr(static_cast<std::size_t>(n));
+  for (int j = 0; j < n; ++j) {
+    std::vector<double> a(static_cast<std::size_t>(K));
+    for (Index k = 0; k < K; ++k) a[static_cast<std::size_t>(k)] = std::abs(qd(k, j));
+    thr[static_cast<std::size_t>(j)] =
+        std::max(kStandstillVelocityFraction * percentileOf(a, 0.99), kStandstillVelocityFloor);
+  }
+  return thr;
+}
+
+/// The stretches of moving and standing samples, those shorter than kMinSegmentS merged into
+/// their neighbours.
+std::vector<MotionRun> motionRuns(const std::vector<char>& moving, double dt) {
+  const auto K = static_cast<Index>(moving.size());
+  std::vector<MotionRun> runs;
+  for (Index k = 0; k < K; ++k) {
+    const bool mv = moving[static_cast<std::size_t>(k)] != 0;
+    if (runs.empty() || runs.back().moving != mv)
+      runs.push_back({mv, k, k + 1});
+    else
+      runs.back().end = k + 1;
+  }
+  auto lengthS = [&](const MotionRun& r) { return static_cast<double>(r.end - r.begin) * dt; };
+  std::vector<MotionRun> merged;
+  for (const MotionRun& r : runs) {
+    if (!merged.empty() && (lengthS(r) < kMinSegmentS || r.moving == merged.back().moving))
+      merged.back().end = r.end;
+    else
+      merged.push_back(r);
+  }
+  if (merged.size() > 1 && lengthS(merged[0]) < kMinSegmentS) {
+    merged[1].begin = 0;
+    merged.erase(merged.begin());
+  }
+  return merged;
+}
+
+/// J["motion"]: standstill and moving stretches. Returns per sample whether it moves (after the
+/// merging) and counts the moving samples.
+std::vector<char> motionCheck(const Dataset& data, const MatrixXd& qd, int n, double dt, Json& J,
+                              Index* moving_samples) {
+  const Index K = data.size();
+  const std::vector<double> thr = velocityThresholds(qd, n);
+  std::vector<char> moving(static_cast<std::size_t>(K), 0);
+  for (Index k = 0; k < K; ++k)
+    for (int j = 0; j < n; ++j)
+      if (std::abs(qd(k, j)) > thr[static_cast<std::size_t>(j)])
+        moving[static_cast<std::size_t>(k)] = 1;
+  const std::vector<MotionRun> merged = motionRuns(moving, dt);
+  Json standstill = Json::array(), movingS = Json::array();
+  *moving_samples = 0;
+  for (const MotionRun& r : merged) {
+    (r.moving ? movingS : standstill).push_back(pair(data.t(r.begin), data.t(r.end - 1)));
+    for (Index k = r.begin; k < r.end; ++k) moving[static_cast<std::size_t>(k)] = r.moving;
+    if (r.moving) *moving_samples += r.end - r.begin;
+  }
+  Json& M = J["motion"];
+  M["velocity_threshold"] = Json(thr);
+  M["velocity_threshold_rule"] = fmt::format(
+      "a sample moves when some joint's |qd| exceeds {:g} of its 99th percentile (and {:g} rad/s "
+      "or m/s); stretches shorter than {:g} s are merged into their neighbours",
+      kStandstillVelocityFraction, kStandstillVelocityFloor, kMinSegmentS);
+  M["moving_fraction"] = static_cast<double>(*moving_samples) / static_cast<double>(K);
+  M["moving_s"] = movingS;
+  M["standstill_s"] = standstill;
+  return moving;
+}
+
+/// One joint's position coverage and limits (entries of e), warning about samples outside the
+/// limits. Returns whether the limits are known.
+bool positionCoverage(const RobotModel& robot, const MatrixXd& qj, int j, Json& e,
+                      std::vector<std::string>* W) {
+  const Index K = qj.rows();
+  const JointLimits& L = robot.limits[static_cast<std::size_t>(j)];
+  const double lo = qj.col(j).minCoeff(), hi = qj.col(j).maxCoeff();
+  e["position_range"] = pair(lo, hi);
+  const bool qknown = L.q_max < kUnknownLimit && L.q_min > -kUnknownLimit && L.q_max > L.q_min;
+  if (qknown) {
+    e["position_limits"] = pair(L.q_min, L.q_max);
+    e["position_coverage"] = (hi - lo) / (L.q_max - L.q_min);
+    const double tol = 1e-9 * (L.q_max - L.q_min);
+    Index outside = 0;
+    for (Index k = 0; k < K; ++k) outside += qj(k, j) < L.q_min - tol || qj(k, j) > L.q_max + tol;
+    const double frac = static_cast<double>(outside) / static_cast<double>(K);
+    e["outside_limits_fraction"] = frac;
+    if (frac > kOutsideLimitsWarnFraction)
+      W->push_back(fmt::format(
+          "joint {} ({}): {:.1f} % of the samples lie outside its position limits [{:.4g}, "
+          "{:.4g}] (the data spans [{:.4g}, {:.4g}]): a wrong offset (offset_rad), sign or unit "
+          "(q_scale) of q, or motor angles read without the robot's transmission?",
+          j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, 100.0 * frac, L.q_min,
+          L.q_max, lo, hi));
+  } else {
+    e["position_limits"] = Json();
+    e["position_coverage"] = Json();
+  }
+  return qknown;
+}
+
+/// Per joint: the covered share of its position and velocity limits (joint coordinates), with
+/// warnings about motion outside them.
+std::vector<Json> coverageRows(const RobotModel& robot, const Dataset& data, const MatrixXd& qd,
+                               const MatrixXd& qdd, std::vector<std::string>* W) {
+  const int n = robot.dof();
+  const Index K = data.size();
+  MatrixXd qj(K, n), qdj(K, n);
+  for (Index k = 0; k < K; ++k) {
+    VectorXd a, b, c;
+    measuredToJoint(robot, data.q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(),
+                    &a, &b, &c);
+    qj.row(k) = a.transpose();
+    qdj.row(k) = b.transpose();
+  }
+  std::vector<Json> jrows;
+  for (int j = 0; j < n; ++j) {
+    const JointLimits& L = robot.limits[static_cast<std::size_t>(j)];
+    Json e = Json::object();
+    e["joint"] = j + 1;
+    e["name"] = robot.bodies[static_cast<std::size_t>(j)].joint_name;
+    const bool qknown = positionCoverage(robot, qj, j, e, W);
+    const double vmax = qdj.col(j).cwiseAbs().maxCoeff();
+    e["velocity_max"] = vmax;
+    const bool vknown = L.qd_max < kUnknownLimit && L.qd_max > 0;
+    e["velocity_limit"] = vknown ? Json(L.qd_max) : Json();
+    e["velocity_coverage"] = vknown ? Json(vmax / L.qd_max) : Json();
+    e["limits"] = qknown && vknown ? "known"
+                  : qknown         ? "velocity limit unknown"
+                  : vknown         ? "position limits unknown"
+                                   : "unknown";
+    if (vknown && vmax > 1.5 * L.qd_max)
+      W->push_back(fmt::format(
+          "joint {} ({}): moves at up to {:.2f} times its velocity limit {:.4g}: a wrong unit of "
+          "q (q_scale), motor angles read without the robot's transmission, or a wrong sample "
+          "period?",
+          j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, vmax / L.qd_max, L.qd_max));
+    jrows.push_back(e);
+  }
+  return jrows;
+}
+
+/// The joints whose torque fails the sign check, by verdict, with their correlation or gain.
+struct SignFindings {
+  std::vector<int> flipped, nofollow, weak, scale;
+  std::vector<double> r_flipped, r_nofollow, r_weak, g_scale;
+};
+
+/// One joint's sign check from its measured (a) and predicted (p) torque in motion (m) and at
+/// rest (r); records the verdict in F and the delay weight (+-1 where the torque follows well).
+Json signCheckJoint(int j, const std::vector<double>& am, const std::vector<double>& pm,
+                    const std::vector<double>& ar, const std::vector<double>& pr, SignFindings* F,
+                    double* weight) {
+  Json s = Json::object();
+  const double rm = static_cast<int>(am.size()) >= kMinCorrelationSamples ? pearson(am, pm) : NAN;
+  const double spread_move = stdOf(pm), spread_rest = stdOf(pr);
+  const double rr = static_cast<int>(ar.size()) >= kMinCorrelationSamples &&
+                            spread_rest > kRestMinSpread * spread_move && spread_rest > 0
+                        ? pearson(ar, pr)
+                        : NAN;
+  // the gain means something only where the torque follows the model
+  const double gain = std::isfinite(rm) && std::abs(rm) >= kNoFollowCorrelation && spread_move > 0
+                          ? rm * stdOf(am) / spread_move
+                          : NAN;
+  s["correlation_moving"] = numberOrNull(rm);
+  s["correlation_rest"] = numberOrNull(rr);
+  s["gain_moving"] = numberOrNull(gain);
+  s["samples_moving"] = static_cast<long long>(am.size());
+  s["samples_rest"] = static_cast<long long>(ar.size());
+  const double r = std::isfinite(rm) ? rm : rr;
+  s["judged_on"] = std::isfinite(rm) ? "motion" : std::isfinite(rr) ? "rest" : "nothing";
+  std::string verdict;
+  if (!std::isfinite(r)) {
+    verdict = "unknown";
+  } else if (r <= kFlippedCorrelation) {
+    verdict = "flipped";
+    F->flipped.push_back(j);
+    F->r_flipped.push_back(r);
+  } else if (std::abs(r) < kNoFollowCorrelation) {
+    verdict = "does not follow";
+    F->nofollow.push_back(j);
+    F->r_nofollow.push_back(r);
+  } else if (r < kGoodCorrelation) {
+    verdict = "weak";
+    F->weak.push_back(j);
+    F->r_weak.push_back(r);
+  } else if (std::isfinite(gain) && (gain > kGainFactor || gain < 1.0 / kGainFactor)) {
+    verdict = "scale";
+    F->scale.push_back(j);
+    F->g_scale.push_back(gain);
+  } else {
+    verdict = "ok";
+  }
+  if (std::isfinite(r) && std::abs(r) >= kGoodCorrelation) *weight = r > 0 ? 1.0 : -1.0;
+  s["verdict"] = verdict;
+  return s;
+}
+
+void signWarnings(const SignFindings& F, const char* where, std::vector<std::string>* W) {
+  auto plural = [](const std::vector<int>& v) { return v.size() > 1; };
+  if (!F.flipped.empty())
+    W->push_back(fmt::format(
+        "{} correlate{} {} with the nominal model's torque {}: torque sign looks flipped (set "
+        "tau_scale -1 for {}, or check the column's sign)",
+        jointList(F.flipped, "tau"), plural(F.flipped) ? "" : "s", valueList(F.r_flipped, "{:.2f}"),
+        where, plural(F.flipped) ? "those joints" : "that joint"));
+  if (!F.nofollow.empty())
+    W->push_back(fmt::format(
+        "{} correlate{} only {} with the nominal model's torque {}: torque does not follow the "
+        "model: scale, column or units?",
+        jointList(F.nofollow, "tau"), plural(F.nofollow) ? "" : "s",
+        valueList(F.r_nofollow, "{:.2f}"), where));
+  if (!F.weak.empty())
+    W->push_back(fmt::format(
+        "{} correlate{} weakly ({}) with the nominal model's torque {}: noise, friction the "
+        "model lacks, or a wrong column?",
+        jointList(F.weak, "tau"), plural(F.weak) ? "" : "s", valueList(F.r_weak, "{:.2f}"), where));
+  if (!F.scale.empty())
+    W->push_back(fmt::format(
+        "{} follow{} the nominal model's torque but with a gain of {}: scale, torque constant or "
+        "units (tau_scale, torque_constants_Nm_per_A)?",
+        jointList(F.scale, "tau"), plural(F.scale) ? "" : "s", valueList(F.g_scale, "{:.3g}")));
+}
+
+/// The nominal model's actuator torque at every sample (pred) and, at the standing samples, its
+/// torque at rest (pred_rest; zero where moving).
+void predictTorque(const RobotModel& robot, const Dataset& data, const Signals& sig,
+                   const std::vector<char>& moving, MatrixXd* pred, MatrixXd* pred_rest) {
+  const int n = robot.dof();
+  const Index K = data.size();
+  auto dd = makeDynamicsData(robot);
+  DriveColumns cols;
+  cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
+  pred->resize(K, n);
+  *pred_rest = MatrixXd::Zero(K, n);
+  const VectorXd zero = VectorXd::Zero(n);
+  for (Index k = 0; k < K; ++k) {
+    const VectorXd qk = data.q.row(k).transpose();
+    pred->row(k) =
+        actuatorTorque(robot, *dd, cols, qk, sig.qd.row(k).transpose(), sig.qdd.row(k).transpose())
+            .transpose();
+    if (!moving[static_cast<std::size_t>(k)])
+      pred_rest->row(k) = actuatorTorque(robot, *dd, cols, qk, zero, zero).transpose();
+  }
+}
+
+/// The measured torque against the nominal model's (sign_check of each joint row, warnings).
+/// Returns the per-joint weights of the delay estimate: +-1 where the torque follows the model
+/// well, else 0.
+std::vector<double> signCheck(const RobotModel& robot, const Dataset& data, const Signals& sig,
+                              const std::vector<char>& moving, Index moving_samples,
+                              std::vector<Json>* jrows, MatrixXd* pred,
+                              std::vector<std::string>* W) {
+  const int n = robot.dof();
+  const Index K = data.size();
+  std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
+  MatrixXd pred_rest;
+  predictTorque(robot, data, sig, moving, pred, &pred_rest);
+  SignFindings F;
+  for (int j = 0; j < n; ++j) {
+    std::vector<double> am, pm, ar, pr;
+    for (Index k = 0; k < K; ++k) {
+      if (moving[static_cast<std::size_t>(k)]) {
+        am.push_back(sig.tau(k, j));
+        pm.push_back((*pred)(k, j));
+      } else {
+        ar.push_back(sig.tau(k, j));
+        pr.push_back(pred_rest(k, j));
+      }
+    }
+    (*jrows)[static_cast<std::size_t>(j)]["sign_check"] =
+        signCheckJoint(j, am, pm, ar, pr, &F, &weight[static_cast<std::size_t>(j)]);
+  }
+  signWarnings(F, moving_samples > 0 ? "in motion" : "at rest", W);
+  return weight;
+}
+
+/// Peak of a correlation over lags -L..L with parabolic sub-sample refinement; at the window's
+/// edge: not refined.
+double correlationPeak(const std::vector<double>& y, int L, bool* edge, double* height) {
+  const auto it = std::max_element(y.begin(), y.end());
+  const int i = static_cast<int>(it - y.begin());
+  *height = *it;
+  *edge = i == 0 || i == 2 * L;
+  double off = 0;
+  if (!*edge) {
+    const double ym = y[static_cast<std::size_t>(i - 1)], y0 = *it,
+                 yp = y[static_cast<std::size_t>(i + 1)];
+    const double den = ym - 2 * y0 + yp;
+    if (den < 0) off = 0.5 * (ym - yp) / den;
+  }
+  return static_cast<double>(i - L) + off;
+}
+
+/// c_j(l) = corr(tau_j(k), pred_j(k - l)) over the same samples k in [L, K - L) for every lag (a
+/// window that changed with the lag would tilt the peak), signed by the joint's weight; sum: their
+/// weighted mean. The sub-sample part comes from the smooth part of the torques: the jumps of
+/// Coulomb friction at velocity reversals happen at a sample in the data and the prediction alike,
+/// and correlate in a cusp at a whole lag (averaged over many reversals, at the delay).
+void lagCorrelations(const MatrixXd& tau, const MatrixXd& pred, const std::vector<double>& weight,
+                     double wsum, Index K, int L, std::vector<std::vector<double>>* c,
+                     std::vector<double>* sum) {
+  const auto n = static_cast<int>(weight.size());
+  c->assign(static_cast<std::size_t>(n), std::vector<double>(static_cast<std::size_t>(2 * L + 1)));
+  sum->assign(static_cast<std::size_t>(2 * L + 1), 0.0);
+  for (int j = 0; j < n; ++j) {
+    if (weight[static_cast<std::size_t>(j)] == 0) continue;
+    const Index k0 = L, k1 = K - L;
+    const auto a = tau.col(j).segment(k0, k1 - k0);  // the same samples for every lag
+    const double sa = a.sum(), saa = a.squaredNorm();
+    for (int l = -L; l <= L; ++l) {
+      const auto b = pred.col(j).segment(k0 - l, k1 - k0);
+      const double sb = b.sum(), sbb = b.squaredNorm(), sab = a.dot(b);
+      const double m = static_cast<double>(k1 - k0);
+      const double cov = sab - sa * sb / m, va = saa - sa * sa / m, vb = sbb - sb * sb / m;
+      const double r = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;
+      (*c)[static_cast<std::size_t>(j)][static_cast<std::size_t>(l + L)] =
+          weight[static_cast<std::size_t>(j)] * r;
+      (*sum)[static_cast<std::size_t>(l + L)] += weight[static_cast<std::size_t>(j)] * r / wsum;
+    }
+  }
+}
+
+/// D["per_joint"] and D["per_joint_spread_s"]: each following joint's own delay.
+void perJointDelays(const std::vector<std::vector<double>>& c, const std::vector<double>& weight,
+                    int L, double dt, Json& D) {
+  const auto n = static_cast<int>(weight.size());
+  Json per = Json::array();
+  for (int j = 0; j < n; ++j) {
+    Json e = Json::object();
+    e["joint"] = j + 1;
+    if (weight[static_cast<std::size_t>(j)] == 0) {
+      e["delay_samples"] = Json();
+      e["delay_s"] = Json();
+    } else {
+      bool ej = false;
+      double hj = 0;
+      const double dj = correlationPeak(c[static_cast<std::size_t>(j)], L, &ej, &hj);
+      e["delay_samples"] = dj;
+      e["delay_s"] = dj * dt;
+      e["peak_correlation"] = hj;
+    }
+    per.push_back(e);
+  }
+  D["per_joint"] = per;
+  {  // how well the joints agree: their delays' standard deviation
+    std::vector<double> dj;
+    for (std::size_t i = 0; i < per.size(); ++i)
+      if (per.at(i).find("delay_s")->isNumber())
+        dj.push_back(per.at(i).find("delay_s")->asDouble());
+    D["per_joint_spread_s"] = dj.size() > 1 ? Json(stdOf(dj)) : Json();
+  }
+}
+
+/// D = J["delay"]: the measured torque's delay against the nominal model's prediction.
+void delayCheck(const MatrixXd& tau, const MatrixXd& pred, const std::vector<double>& weight,
+                bool has_tau, Index K, double rate, double dt, Json& D,
+                std::vector<std::string>* W) {
+  D["convention"] =
+      "positive: the measured torque lags the prediction, tau_measured(t) ~ "
+      "tau_predicted(t - delay_s)";
+  double wsum = 0;
+  for (double w : weight) wsum += std::abs(w);
+  const int L =
+      std::min(std::max(static_cast<int>(std::lround(kDelayMaxLagS * rate)), kDelayMinLagSamples),
+               static_cast<int>(K / 4));
+  D["max_lag_samples"] = L;
+  if (!has_tau || wsum == 0 || L < 1) {
+    D["delay_samples"] = Json();
+    D["delay_s"] = Json();
+    D["note"] = !has_tau ? "the data has no torque"
+                         : "no joint's torque follows the model (|r| >= 0.5): nothing to align";
+    return;
+  }
+  std::vector<std::vector<double>> c;
+  std::vector<double> sum;
+  lagCorrelations(tau, pred, weight, wsum, K, L, &c, &sum);
+  bool edge = false;
+  double height = 0;
+  const double d = correlationPeak(sum, L, &edge, &height);
+  D["delay_samples"] = d;
+  D["delay_s"] = d * dt;
+  D["peak_correlation"] = height;
+  D["at_window_edge"] = edge;
+  perJointDelays(c, weight, L, dt, D);
+  if (edge)
+    W->push_back(fmt::format(
+        "the torque's delay against the model lies at the edge of the searched window (+-{} "
+        "samples, {:.3g} s): a large delay, or a torque that does not follow the model",
+        L, L * dt));
+  else if (std::abs(d) >= kDelayWarnSamples && std::abs(d * dt) >= kDelayWarnS)
+    W->push_back(fmt::format(
+        "the measured torque {} the nominal model's prediction by {:.2f} samples ({:.4g} s): "
+        "a delay in the torque (or position) signal; shift one of them before identifying",
+        d > 0 ? "lags" : "leads", std::abs(d), std::abs(d * dt)));
+}
+
+/// sqrt of the extreme eigenvalues' ratio of a symmetric matrix (inf when singular).
+double conditionOfGram(const MatrixXd& A) {
+  Eigen::SelfAdjointEigenSolver<MatrixXd> es(A, Eigen::EigenvaluesOnly);
+  const VectorXd& ev = es.eigenvalues();
+  if (ev.size() == 0) return static_cast<double>(NAN);
+  const double lmax = ev(ev.size() - 1), lmin = ev(0);
+  return lmin > 0 && lmax > 0 ? std::sqrt(lmax / lmin) : HUGE_VAL;
+}
+
+/// W^T W of the model's base regressor over the recording, built block by block.
+MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const Signals& sig,
+                       const RunContext& ctx, long long* rows) {
+  const Index K = data.size();
+  const int p = model.numBase();
+  MatrixXd G = MatrixXd::Zero(p, p);
+  *rows = 0;
+  for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
+    if (ctx.shouldStop()) throw std::runtime_error("stopped");
+    const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
+    Samples s;
+    s.t = data.t.segment(k0, m);
+    s.q = data.q.middleRows(k0, m);
+    s.qd = sig.qd.middleRows(k0, m);
+    s.qdd = sig.qdd.middleRows(k0, m);
+    const MatrixXd Wb = model.design(s);
+    G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
+    *rows += Wb.rows();
+  }
+  G = G.selfadjointView<Eigen::Lower>();
+  return G;
+}
+
+/// R = J["regressor"]: the condition number of the model's base regressor on the recording.
+void regressorCheck(const ObservationModel& model, const Dataset& data, const Signals& sig,
+                    const RunContext& ctx, Json& R, std::vector<std::string>* W) {
+  R["model"] = model.pluginName();
+  R["base_columns"] = model.numBase();
+  try {
+    const int p = model.numBase();
+    long long rows = 0;
+    const MatrixXd G = regressorGram(model, data, sig, ctx, &rows);
+    const double c_raw = conditionOfGram(G);
+    VectorXd sc(p);
+    bool zero_col = false;
+    for (int i = 0; i < p; ++i) {
+      zero_col = zero_col || !(G(i, i) > 0);
+      sc(i) = G(i, i) > 0 ? 1.0 / std::sqrt(G(i, i)) : 0.0;
+    }
+    const double c_scaled =
+        zero_col ? HUGE_VAL : conditionOfGram(sc.asDiagonal() * G * sc.asDiagonal());
+    R["rows"] = rows;
+    R["cond"] = numberOrNull(c_raw);
+    R["cond_scaled"] = numberOrNull(c_scaled);
+    R["rank_deficient"] = !std::isfinite(c_scaled);
+    R["method"] =
+        "sqrt of the extreme eigenvalues of W^T W (base columns; scaled: each column to unit "
+        "norm); reliable up to about 1e7";
+    if (!std::isfinite(c_scaled))
+      W->push_back(fmt::format(
+          "the recording does not excite every base parameter of model '{}' (the regressor's "
+          "{} base columns are rank deficient): more or other motion is needed",
+          model.pluginName(), p));
+    else if (c_scaled > kCondWarn)
+      W->push_back(fmt::format(
+          "the regressor of model '{}' on this recording has condition number {:.3g} (columns "
+          "scaled to unit norm; above {:g}): some base parameters are poorly excited",
+          model.pluginName(), c_scaled, kCondWarn));
+  } catch (const std::exception& e) {
+    R["cond"] = Json();
+    R["cond_scaled"] = Json();
+    R["note"] = fmt::format("not computed: {}", e.what());
+  }
+}
+
+}  // namespace
+
 Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
                     const RunContext& ctx) {
   Json J = Json::object();
@@ -327,410 +840,26 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   const double dt = 1.0 / rate;
   J["rate_hz"] = rate;
 
-  // ------------------------------------------------------------ signals
-  MatrixXd qd = data.qd, qdd = data.qdd, tau = data.tau;
-  const bool has_tau = data.hasTorque() && data.tau.cols() == n;
-  if (!data.hasVelocity() || !data.hasAcceleration()) {
-    const int m = std::max(
-        2, static_cast<int>(std::lround((1.5 * rate / kDifferentiateCutoffHz + 4.6) / 3.2)));
-    MatrixXd v, a;
-    savitzkyGolay(data.q, dt, m, nullptr, &v, &a);
-    if (!data.hasVelocity()) qd = v;
-    if (!data.hasAcceleration()) qdd = a;
-    if (has_tau) savitzkyGolay(data.tau, dt, m, &tau, nullptr, nullptr);
-    J["derivatives"] = fmt::format(
-        "the data has no {}: derived from q by a quadratic Savitzky-Golay fit over +-{} samples "
-        "(about {:g} Hz); the torque is smoothed by the same fit (zero phase)",
-        data.hasVelocity() ? "qdd" : "qd and qdd", m, kDifferentiateCutoffHz);
-  } else {
-    J["derivatives"] = "qd and qdd from the data";
-  }
-
-  // ------------------------------------------------------------ motion: standstill / moving
-  std::vector<double> thr(static_cast<std::size_t>(n));
-  for (int j = 0; j < n; ++j) {
-    std::vector<double> a(static_cast<std::size_t>(K));
-    for (Index k = 0; k < K; ++k) a[static_cast<std::size_t>(k)] = std::abs(qd(k, j));
-    thr[static_cast<std::size_t>(j)] =
-        std::max(kStandstillVelocityFraction * percentileOf(a, 0.99), kStandstillVelocityFloor);
-  }
-  std::vector<char> moving(static_cast<std::size_t>(K), 0);
-  for (Index k = 0; k < K; ++k)
-    for (int j = 0; j < n; ++j)
-      if (std::abs(qd(k, j)) > thr[static_cast<std::size_t>(j)])
-        moving[static_cast<std::size_t>(k)] = 1;
-  struct Run {
-    bool moving;
-    Index begin, end;  // [begin, end)
-  };
-  std::vector<Run> runs;
-  for (Index k = 0; k < K; ++k) {
-    const bool mv = moving[static_cast<std::size_t>(k)] != 0;
-    if (runs.empty() || runs.back().moving != mv)
-      runs.push_back({mv, k, k + 1});
-    else
-      runs.back().end = k + 1;
-  }
-  auto lengthS = [&](const Run& r) { return static_cast<double>(r.end - r.begin) * dt; };
-  std::vector<Run> merged;
-  for (const Run& r : runs) {
-    if (!merged.empty() && (lengthS(r) < kMinSegmentS || r.moving == merged.back().moving))
-      merged.back().end = r.end;
-    else
-      merged.push_back(r);
-  }
-  if (merged.size() > 1 && lengthS(merged[0]) < kMinSegmentS) {
-    merged[1].begin = 0;
-    merged.erase(merged.begin());
-  }
-  Json standstill = Json::array(), movingS = Json::array();
+  const Signals sig = deriveSignals(data, n, rate, dt, J);
   Index moving_samples = 0;
-  for (const Run& r : merged) {
-    (r.moving ? movingS : standstill).push_back(pair(data.t(r.begin), data.t(r.end - 1)));
-    for (Index k = r.begin; k < r.end; ++k) moving[static_cast<std::size_t>(k)] = r.moving;
-    if (r.moving) moving_samples += r.end - r.begin;
-  }
-  {
-    Json& M = J["motion"];
-    M["velocity_threshold"] = Json(thr);
-    M["velocity_threshold_rule"] = fmt::format(
-        "a sample moves when some joint's |qd| exceeds {:g} of its 99th percentile (and {:g} rad/s "
-        "or m/s); stretches shorter than {:g} s are merged into their neighbours",
-        kStandstillVelocityFraction, kStandstillVelocityFloor, kMinSegmentS);
-    M["moving_fraction"] = static_cast<double>(moving_samples) / static_cast<double>(K);
-    M["moving_s"] = movingS;
-    M["standstill_s"] = standstill;
-  }
+  const std::vector<char> moving = motionCheck(data, sig.qd, n, dt, J, &moving_samples);
+  std::vector<Json> jrows = coverageRows(robot, data, sig.qd, sig.qdd, &W);
 
-  // ------------------------------------------------------------ coverage (joint coordinates)
-  MatrixXd qj(K, n), qdj(K, n);
-  for (Index k = 0; k < K; ++k) {
-    VectorXd a, b, c;
-    measuredToJoint(robot, data.q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(),
-                    &a, &b, &c);
-    qj.row(k) = a.transpose();
-    qdj.row(k) = b.transpose();
-  }
-  std::vector<Json> jrows;
-  for (int j = 0; j < n; ++j) {
-    const JointLimits& L = robot.limits[static_cast<std::size_t>(j)];
-    Json e = Json::object();
-    e["joint"] = j + 1;
-    e["name"] = robot.bodies[static_cast<std::size_t>(j)].joint_name;
-    const double lo = qj.col(j).minCoeff(), hi = qj.col(j).maxCoeff();
-    e["position_range"] = pair(lo, hi);
-    const bool qknown = L.q_max < kUnknownLimit && L.q_min > -kUnknownLimit && L.q_max > L.q_min;
-    if (qknown) {
-      e["position_limits"] = pair(L.q_min, L.q_max);
-      e["position_coverage"] = (hi - lo) / (L.q_max - L.q_min);
-      const double tol = 1e-9 * (L.q_max - L.q_min);
-      Index outside = 0;
-      for (Index k = 0; k < K; ++k) outside += qj(k, j) < L.q_min - tol || qj(k, j) > L.q_max + tol;
-      const double frac = static_cast<double>(outside) / static_cast<double>(K);
-      e["outside_limits_fraction"] = frac;
-      if (frac > kOutsideLimitsWarnFraction)
-        W.push_back(fmt::format(
-            "joint {} ({}): {:.1f} % of the samples lie outside its position limits [{:.4g}, "
-            "{:.4g}] (the data spans [{:.4g}, {:.4g}]): a wrong offset (offset_rad), sign or unit "
-            "(q_scale) of q, or motor angles read without the robot's transmission?",
-            j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, 100.0 * frac, L.q_min,
-            L.q_max, lo, hi));
-    } else {
-      e["position_limits"] = Json();
-      e["position_coverage"] = Json();
-    }
-    const double vmax = qdj.col(j).cwiseAbs().maxCoeff();
-    e["velocity_max"] = vmax;
-    const bool vknown = L.qd_max < kUnknownLimit && L.qd_max > 0;
-    e["velocity_limit"] = vknown ? Json(L.qd_max) : Json();
-    e["velocity_coverage"] = vknown ? Json(vmax / L.qd_max) : Json();
-    e["limits"] = qknown && vknown ? "known"
-                  : qknown         ? "velocity limit unknown"
-                  : vknown         ? "position limits unknown"
-                                   : "unknown";
-    if (vknown && vmax > 1.5 * L.qd_max)
-      W.push_back(fmt::format(
-          "joint {} ({}): moves at up to {:.2f} times its velocity limit {:.4g}: a wrong unit of "
-          "q (q_scale), motor angles read without the robot's transmission, or a wrong sample "
-          "period?",
-          j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name, vmax / L.qd_max, L.qd_max));
-    jrows.push_back(e);
-  }
-
-  // ------------------------------------------------------------ sign check
   std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
   MatrixXd pred;
-  if (!has_tau) {
+  if (!sig.has_tau) {
     J["sign_check"] = Json();
     J["sign_check_note"] = "the data has no torque";
   } else {
-    auto dd = makeDynamicsData(robot);
-    DriveColumns cols;
-    cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
-    pred.resize(K, n);
-    MatrixXd pred_rest = MatrixXd::Zero(K, n);
-    const VectorXd zero = VectorXd::Zero(n);
-    for (Index k = 0; k < K; ++k) {
-      const VectorXd qk = data.q.row(k).transpose();
-      pred.row(k) =
-          actuatorTorque(robot, *dd, cols, qk, qd.row(k).transpose(), qdd.row(k).transpose())
-              .transpose();
-      if (!moving[static_cast<std::size_t>(k)])
-        pred_rest.row(k) = actuatorTorque(robot, *dd, cols, qk, zero, zero).transpose();
-    }
-    std::vector<int> flipped, nofollow, weak, scale;
-    std::vector<double> r_flipped, r_nofollow, r_weak, g_scale;
-    for (int j = 0; j < n; ++j) {
-      std::vector<double> am, pm, ar, pr;
-      for (Index k = 0; k < K; ++k) {
-        if (moving[static_cast<std::size_t>(k)]) {
-          am.push_back(tau(k, j));
-          pm.push_back(pred(k, j));
-        } else {
-          ar.push_back(tau(k, j));
-          pr.push_back(pred_rest(k, j));
-        }
-      }
-      Json s = Json::object();
-      const double rm =
-          static_cast<int>(am.size()) >= kMinCorrelationSamples ? pearson(am, pm) : NAN;
-      const double spread_move = stdOf(pm), spread_rest = stdOf(pr);
-      const double rr = static_cast<int>(ar.size()) >= kMinCorrelationSamples &&
-                                spread_rest > kRestMinSpread * spread_move && spread_rest > 0
-                            ? pearson(ar, pr)
-                            : NAN;
-      // the gain means something only where the torque follows the model
-      const double gain =
-          std::isfinite(rm) && std::abs(rm) >= kNoFollowCorrelation && spread_move > 0
-              ? rm * stdOf(am) / spread_move
-              : NAN;
-      s["correlation_moving"] = numberOrNull(rm);
-      s["correlation_rest"] = numberOrNull(rr);
-      s["gain_moving"] = numberOrNull(gain);
-      s["samples_moving"] = static_cast<long long>(am.size());
-      s["samples_rest"] = static_cast<long long>(ar.size());
-      const double r = std::isfinite(rm) ? rm : rr;
-      s["judged_on"] = std::isfinite(rm) ? "motion" : std::isfinite(rr) ? "rest" : "nothing";
-      std::string verdict;
-      if (!std::isfinite(r)) {
-        verdict = "unknown";
-      } else if (r <= kFlippedCorrelation) {
-        verdict = "flipped";
-        flipped.push_back(j);
-        r_flipped.push_back(r);
-      } else if (std::abs(r) < kNoFollowCorrelation) {
-        verdict = "does not follow";
-        nofollow.push_back(j);
-        r_nofollow.push_back(r);
-      } else if (r < kGoodCorrelation) {
-        verdict = "weak";
-        weak.push_back(j);
-        r_weak.push_back(r);
-      } else if (std::isfinite(gain) && (gain > kGainFactor || gain < 1.0 / kGainFactor)) {
-        verdict = "scale";
-        scale.push_back(j);
-        g_scale.push_back(gain);
-      } else {
-        verdict = "ok";
-      }
-      if (std::isfinite(r) && std::abs(r) >= kGoodCorrelation)
-        weight[static_cast<std::size_t>(j)] = r > 0 ? 1.0 : -1.0;
-      s["verdict"] = verdict;
-      jrows[static_cast<std::size_t>(j)]["sign_check"] = s;
-    }
-    const char* where = moving_samples > 0 ? "in motion" : "at rest";
-    auto plural = [](const std::vector<int>& v) { return v.size() > 1; };
-    if (!flipped.empty())
-      W.push_back(fmt::format(
-          "{} correlate{} {} with the nominal model's torque {}: torque sign looks flipped (set "
-          "tau_scale -1 for {}, or check the column's sign)",
-          jointList(flipped, "tau"), plural(flipped) ? "" : "s", valueList(r_flipped, "{:.2f}"),
-          where, plural(flipped) ? "those joints" : "that joint"));
-    if (!nofollow.empty())
-      W.push_back(fmt::format(
-          "{} correlate{} only {} with the nominal model's torque {}: torque does not follow the "
-          "model: scale, column or units?",
-          jointList(nofollow, "tau"), plural(nofollow) ? "" : "s", valueList(r_nofollow, "{:.2f}"),
-          where));
-    if (!weak.empty())
-      W.push_back(fmt::format(
-          "{} correlate{} weakly ({}) with the nominal model's torque {}: noise, friction the "
-          "model lacks, or a wrong column?",
-          jointList(weak, "tau"), plural(weak) ? "" : "s", valueList(r_weak, "{:.2f}"), where));
-    if (!scale.empty())
-      W.push_back(fmt::format(
-          "{} follow{} the nominal model's torque but with a gain of {}: scale, torque constant or "
-          "units (tau_scale, torque_constants_Nm_per_A)?",
-          jointList(scale, "tau"), plural(scale) ? "" : "s", valueList(g_scale, "{:.3g}")));
+    weight = signCheck(robot, data, sig, moving, moving_samples, &jrows, &pred, &W);
   }
   {
     Json joints = Json::array();
     for (const Json& e : jrows) joints.push_back(e);
     J["joints"] = joints;
   }
-
-  // ------------------------------------------------------------ delay
-  {
-    Json& D = J["delay"];
-    D["convention"] =
-        "positive: the measured torque lags the prediction, tau_measured(t) ~ "
-        "tau_predicted(t - delay_s)";
-    double wsum = 0;
-    for (double w : weight) wsum += std::abs(w);
-    const int L =
-        std::min(std::max(static_cast<int>(std::lround(kDelayMaxLagS * rate)), kDelayMinLagSamples),
-                 static_cast<int>(K / 4));
-    D["max_lag_samples"] = L;
-    if (!has_tau || wsum == 0 || L < 1) {
-      D["delay_samples"] = Json();
-      D["delay_s"] = Json();
-      D["note"] = !has_tau ? "the data has no torque"
-                           : "no joint's torque follows the model (|r| >= 0.5): nothing to align";
-    } else {
-      // c_j(l) = corr(tau_j(k), pred_j(k - l)) over the same samples k in [L, K - L) for every
-      // lag (a window that changed with the lag would tilt the peak). The sub-sample part comes
-      // from the smooth part of the torques: the jumps of Coulomb friction at velocity reversals
-      // happen at a sample in the data and the prediction alike, and correlate in a cusp at a
-      // whole lag (averaged over many reversals, at the delay).
-      std::vector<std::vector<double>> c(static_cast<std::size_t>(n),
-                                         std::vector<double>(static_cast<std::size_t>(2 * L + 1)));
-      std::vector<double> sum(static_cast<std::size_t>(2 * L + 1), 0.0);
-      for (int j = 0; j < n; ++j) {
-        if (weight[static_cast<std::size_t>(j)] == 0) continue;
-        const Index k0 = L, k1 = K - L;
-        const auto a = tau.col(j).segment(k0, k1 - k0);  // the same samples for every lag
-        const double sa = a.sum(), saa = a.squaredNorm();
-        for (int l = -L; l <= L; ++l) {
-          const auto b = pred.col(j).segment(k0 - l, k1 - k0);
-          const double sb = b.sum(), sbb = b.squaredNorm(), sab = a.dot(b);
-          const double m = static_cast<double>(k1 - k0);
-          const double cov = sab - sa * sb / m, va = saa - sa * sa / m, vb = sbb - sb * sb / m;
-          const double r = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;
-          c[static_cast<std::size_t>(j)][static_cast<std::size_t>(l + L)] =
-              weight[static_cast<std::size_t>(j)] * r;
-          sum[static_cast<std::size_t>(l + L)] += weight[static_cast<std::size_t>(j)] * r / wsum;
-        }
-      }
-      // Peak and parabolic sub-sample refinement; at the window's edge: not refined.
-      auto peak = [&](const std::vector<double>& y, bool* edge, double* height) {
-        const auto it = std::max_element(y.begin(), y.end());
-        const int i = static_cast<int>(it - y.begin());
-        *height = *it;
-        *edge = i == 0 || i == 2 * L;
-        double off = 0;
-        if (!*edge) {
-          const double ym = y[static_cast<std::size_t>(i - 1)], y0 = *it,
-                       yp = y[static_cast<std::size_t>(i + 1)];
-          const double den = ym - 2 * y0 + yp;
-          if (den < 0) off = 0.5 * (ym - yp) / den;
-        }
-        return static_cast<double>(i - L) + off;
-      };
-      bool edge = false;
-      double height = 0;
-      const double d = peak(sum, &edge, &height);
-      D["delay_samples"] = d;
-      D["delay_s"] = d * dt;
-      D["peak_correlation"] = height;
-      D["at_window_edge"] = edge;
-      Json per = Json::array();
-      for (int j = 0; j < n; ++j) {
-        Json e = Json::object();
-        e["joint"] = j + 1;
-        if (weight[static_cast<std::size_t>(j)] == 0) {
-          e["delay_samples"] = Json();
-          e["delay_s"] = Json();
-        } else {
-          bool ej = false;
-          double hj = 0;
-          const double dj = peak(c[static_cast<std::size_t>(j)], &ej, &hj);
-          e["delay_samples"] = dj;
-          e["delay_s"] = dj * dt;
-          e["peak_correlation"] = hj;
-        }
-        per.push_back(e);
-      }
-      D["per_joint"] = per;
-      {  // how well the joints agree: their delays' standard deviation
-        std::vector<double> dj;
-        for (std::size_t i = 0; i < per.size(); ++i)
-          if (per.at(i).find("delay_s")->isNumber())
-            dj.push_back(per.at(i).find("delay_s")->asDouble());
-        D["per_joint_spread_s"] = dj.size() > 1 ? Json(stdOf(dj)) : Json();
-      }
-      if (edge)
-        W.push_back(fmt::format(
-            "the torque's delay against the model lies at the edge of the searched window (+-{} "
-            "samples, {:.3g} s): a large delay, or a torque that does not follow the model",
-            L, L * dt));
-      else if (std::abs(d) >= kDelayWarnSamples && std::abs(d * dt) >= kDelayWarnS)
-        W.push_back(fmt::format(
-            "the measured torque {} the nominal model's prediction by {:.2f} samples ({:.4g} s): "
-            "a delay in the torque (or position) signal; shift one of them before identifying",
-            d > 0 ? "lags" : "leads", std::abs(d), std::abs(d * dt)));
-    }
-  }
-
-  // ------------------------------------------------------------ regressor condition number
-  if (model) {
-    Json& R = J["regressor"];
-    R["model"] = model->pluginName();
-    R["base_columns"] = model->numBase();
-    try {
-      const int p = model->numBase();
-      MatrixXd G = MatrixXd::Zero(p, p);
-      long long rows = 0;
-      for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
-        if (ctx.shouldStop()) throw std::runtime_error("stopped");
-        const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
-        Samples s;
-        s.t = data.t.segment(k0, m);
-        s.q = data.q.middleRows(k0, m);
-        s.qd = qd.middleRows(k0, m);
-        s.qdd = qdd.middleRows(k0, m);
-        const MatrixXd Wb = model->design(s);
-        G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
-        rows += Wb.rows();
-      }
-      G = G.selfadjointView<Eigen::Lower>();
-      auto cond = [](const MatrixXd& A) {
-        Eigen::SelfAdjointEigenSolver<MatrixXd> es(A, Eigen::EigenvaluesOnly);
-        const VectorXd& ev = es.eigenvalues();
-        if (ev.size() == 0) return static_cast<double>(NAN);
-        const double lmax = ev(ev.size() - 1), lmin = ev(0);
-        return lmin > 0 && lmax > 0 ? std::sqrt(lmax / lmin) : HUGE_VAL;
-      };
-      const double c_raw = cond(G);
-      VectorXd sc(p);
-      bool zero_col = false;
-      for (int i = 0; i < p; ++i) {
-        zero_col = zero_col || !(G(i, i) > 0);
-        sc(i) = G(i, i) > 0 ? 1.0 / std::sqrt(G(i, i)) : 0.0;
-      }
-      const double c_scaled = zero_col ? HUGE_VAL : cond(sc.asDiagonal() * G * sc.asDiagonal());
-      R["rows"] = rows;
-      R["cond"] = numberOrNull(c_raw);
-      R["cond_scaled"] = numberOrNull(c_scaled);
-      R["rank_deficient"] = !std::isfinite(c_scaled);
-      R["method"] =
-          "sqrt of the extreme eigenvalues of W^T W (base columns; scaled: each column to unit "
-          "norm); reliable up to about 1e7";
-      if (!std::isfinite(c_scaled))
-        W.push_back(fmt::format(
-            "the recording does not excite every base parameter of model '{}' (the regressor's "
-            "{} base columns are rank deficient): more or other motion is needed",
-            model->pluginName(), p));
-      else if (c_scaled > kCondWarn)
-        W.push_back(fmt::format(
-            "the regressor of model '{}' on this recording has condition number {:.3g} (columns "
-            "scaled to unit norm; above {:g}): some base parameters are poorly excited",
-            model->pluginName(), c_scaled, kCondWarn));
-    } catch (const std::exception& e) {
-      R["cond"] = Json();
-      R["cond_scaled"] = Json();
-      R["note"] = fmt::format("not computed: {}", e.what());
-    }
-  }
+  delayCheck(sig.tau, pred, weight, sig.has_tau, K, rate, dt, J["delay"], &W);
+  if (model) regressorCheck(*model, data, sig, ctx, J["regressor"], &W);
   return finish();
 }
 
