@@ -255,6 +255,193 @@ nlopt::algorithm algorithmFromName(const std::string& a) {
   return nlopt::LD_VAR2;
 }
 
+/// The rows compressed per equation, and per block of samples and equation (for
+/// cross-validation of the prior's scale).
+struct EquationRows {
+  std::map<int, RowAccumulator> acc;
+  std::vector<std::map<int, RowAccumulator>> blocks;
+};
+
+/// The weighted linear problem ConsistentLs::estimate starts from: the noise-normalised rows,
+/// the prior (its scale chosen), and their unconstrained least-squares solution.
+struct LinearStage {
+  std::map<int, RowAccumulator> acc;  // per equation, unweighted
+  long m = 0;                         // rows
+  RowAccumulator weighted;            // noise-normalised rows
+  RowAccumulator total;               // weighted + the prior's pseudo-observations
+  Json eq_table = Json::array();
+  std::optional<exid::Prior> used_prior;
+  Json scale_details = Json::object();
+  exid::estimators::LsSolution unc;  // unconstrained solution of total
+  Eigen::MatrixXd Fw;                // total's factor [Fw fy]
+  Eigen::VectorXd fy;
+};
+
+/// The consistent problem's start: the nominal (or prior) standard parameters or the
+/// unconstrained solution completed with them, projected to consistency.
+struct StartPoint {
+  Eigen::VectorXd z0, pi_unc;
+  std::string started = "nominal";
+  int projected_nominal = 0, projected_unc = 0;
+};
+
+/// The consistent problem: f(z) = ||A pi(z) - b||^2 with
+///   prior on the base parameters:     A = F K,                  b = f      (F: data + prior)
+///   prior on the standard parameters: A = [F_d K; D^-1],        b = [f_d; D^-1 pi0]
+/// (F_d: data only, D = diag of the scaled standard prior std). In the linear problem both
+/// give the same base parameters (K pi ~ N(K pi0, K D^2 K^T)); with the consistency
+/// constraints, the standard form keeps each body near its prior instead of letting the
+/// unidentifiable combinations wander off to satisfy them. dinv: D^-1 (standard prior).
+void setObjective(const LinearStage& lin, const Eigen::MatrixXd& K, int p, int nfull,
+                  bool std_prior, Problem* P, Eigen::VectorXd* dinv, const char* name) {
+  if (std_prior) {
+    *dinv = lin.used_prior->standard_std.cwiseInverse();
+    exid::check(dinv->allFinite(),
+                fmt::format("{}: prior_on: standard needs every standard prior std > 0 (give "
+                            "prior.absolute_std > 0)",
+                            name));
+    const Eigen::MatrixXd& Fd = lin.weighted.factor();  // (p+1) x (p+1), last row: the residual
+    P->A.resize(p + 1 + nfull, nfull);
+    P->A.topRows(p + 1) = Fd.leftCols(p) * K;
+    P->A.bottomRows(nfull) = dinv->asDiagonal();
+    P->b.resize(p + 1 + nfull);
+    P->b.head(p + 1) = Fd.col(p);
+    P->b.tail(nfull) = dinv->cwiseProduct(lin.used_prior->standard_value);
+  } else {
+    P->A = lin.Fw * K;
+    P->b = lin.fy;
+  }
+}
+
+/// The start point (start: nominal, unconstrained or best; best compares f at both).
+StartPoint startPoint(const StandardMap& map, Problem& P, const Eigen::MatrixXd& K,
+                      const Eigen::VectorXd& theta_unc, const Eigen::VectorXd& pi0,
+                      const Eigen::VectorXd& dinv, bool std_prior, const std::string& start) {
+  StartPoint st;
+  const double floor = map.eigFloor(pi0);
+  const Eigen::VectorXd z_nom = map.fromStandard(pi0, floor, &st.projected_nominal);
+  st.z0 = z_nom;
+  // The unconstrained solution completed with the nominal values: pi_u = pi0 + dpi, K dpi =
+  // theta_u - K pi0, dpi of least norm (standard prior: least D^-1-weighted norm, which makes
+  // pi_u the linear problem's own minimiser, so f_unc below is the same objective's value).
+  Eigen::VectorXd dpi;
+  if (std_prior) {
+    const Eigen::MatrixXd KD = K * dinv.cwiseInverse().asDiagonal();
+    dpi = dinv.cwiseInverse().asDiagonal() *
+          KD.completeOrthogonalDecomposition().solve(theta_unc - K * pi0);
+  } else {
+    dpi = K.completeOrthogonalDecomposition().solve(theta_unc - K * pi0);
+  }
+  st.pi_unc = pi0 + dpi;
+  if (start != "nominal") {
+    const Eigen::VectorXd z_unc = map.fromStandard(st.pi_unc, floor, &st.projected_unc);
+    if (start == "unconstrained" || P.value(z_unc, nullptr) < P.value(z_nom, nullptr)) {
+      st.z0 = z_unc;
+      st.started = "unconstrained";
+    }
+  }
+  return st;
+}
+
+/// Linearised covariance of theta = K pi(z), the variables at an active bound held fixed:
+/// Cov = J_b (J_z^T A^T A J_z)^+ J_b^T, J_z = dpi/dz, J_b = K J_z.
+Eigen::MatrixXd linearisedCovariance(const StandardMap& map, const Problem& P,
+                                     const Eigen::MatrixXd& K, const Eigen::VectorXd& z,
+                                     const Eigen::VectorXd& pi, const std::vector<double>& lb,
+                                     int* lin_rank) {
+  Eigen::MatrixXd Jz = map.jacobian(z);
+  {
+    Eigen::VectorXd g = map.vjp(z, 2.0 * (P.A.transpose() * (P.A * pi - P.b)));
+    for (int k = 0; k < map.nz(); ++k)
+      if (std::isfinite(lb[static_cast<std::size_t>(k)]) &&
+          z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
+        Jz.col(k).setZero();
+  }
+  const Eigen::MatrixXd Jb = K * Jz;
+  const Eigen::MatrixXd JA = P.A * Jz;
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(JA, Eigen::ComputeThinV);
+  const Eigen::VectorXd sv = svd.singularValues();
+  Eigen::VectorXd sinv2 = Eigen::VectorXd::Zero(sv.size());
+  *lin_rank = 0;
+  for (Eigen::Index i = 0; i < sv.size(); ++i)
+    if (sv(0) > 0 && sv(i) > 1e-9 * sv(0)) {
+      sinv2(i) = 1.0 / (sv(i) * sv(i));
+      ++*lin_rank;
+    }
+  const Eigen::MatrixXd JV = Jb * svd.matrixV();
+  Eigen::MatrixXd cov = JV * sinv2.asDiagonal() * JV.transpose();
+  cov = 0.5 * (cov + cov.transpose());
+  return cov;
+}
+
+/// Per body of the consistent standard parameters: mass, COM and the physical checks; all_ok:
+/// every pseudo-inertia positive definite and every non-negative scalar >= 0.
+Json bodyChecks(const StandardMap& map, const Eigen::VectorXd& pi, bool* all_ok) {
+  Json bodies = Json::array();
+  *all_ok = true;
+  for (int b = 0; b < map.numBodies(); ++b) {
+    Vec10 pb;
+    for (int k = 0; k < 10; ++k) pb(k) = pi(map.bodyIndices(b)[static_cast<std::size_t>(k)]);
+    const exid::InertiaCheck chk = exid::checkPhysical(pb, 0.0);
+    const double lmin = exid::estimators::pseudoInertiaMinEigenvalue(pb);
+    *all_ok = *all_ok && lmin > 0;
+    Json jb = Json::object();
+    jb["body"] = map.bodyNumber(b);
+    jb["mass"] = pb(9);
+    jb["com"] = Json(std::vector<double>{pb(6) / pb(9), pb(7) / pb(9), pb(8) / pb(9)});
+    jb["pseudo_inertia_min_eigenvalue"] = lmin;
+    jb["check"] = chk.ok ? std::string("ok") : chk.rule;
+    bodies.push_back(jb);
+  }
+  for (int s = 0; s < map.numScalars(); ++s)
+    if (map.nonneg(s)) *all_ok = *all_ok && pi(map.scalarIndex(s)) >= 0.0;
+  return bodies;
+}
+
+/// A consistent fit the data disagree with is no result to trust silently: say so, with the
+/// likely causes (these reach summary.json's warnings).
+Json plausibilityWarnings(const StandardMap& map, const Eigen::VectorXd& pi,
+                          const Eigen::VectorXd& nom, double rms_c, double rms_u,
+                          const char* name) {
+  Json w = Json::array();
+  const double ratio = rms_u > 0 ? rms_c / rms_u : 1.0;
+  if (ratio > kResidualRatioWarn)
+    w.push_back(Json(fmt::format(
+        "{}: the physically consistent fit leaves a residual {:.2f} times the unconstrained "
+        "fit's ({:.4g} against {:.4g}): the data ask for a physically impossible model. "
+        "Likely causes: a torque of the opposite sign to the joint (tau_scale: -1 for it; "
+        "`exid inspect` checks each joint), a wrong transmission or torque scale, "
+        "unmodelled friction, or a delay between position and torque",
+        name, ratio, rms_c, rms_u)));
+  for (int b = 0; b < map.numBodies(); ++b) {
+    const double m_est = pi(map.bodyIndices(b)[9]), m_nom = nom(map.bodyIndices(b)[9]);
+    if (m_nom > 0 && std::isfinite(m_nom) && m_est > kMassRatioWarn * m_nom)
+      w.push_back(Json(fmt::format(
+          "{}: body {} has a mass of {:.4g} kg against {:.4g} kg in the robot description "
+          "(more than {:g} times heavier): the masses of a chain are identified only through "
+          "the torques they cause, so a mass this far off usually means a torque of the "
+          "opposite sign (tau_scale: -1 for it), a wrong torque scale or transmission, or a "
+          "body the motion does not excite",
+          name, map.bodyNumber(b), m_est, m_nom, kMassRatioWarn)));
+  }
+  return w;
+}
+
+/// standard_parameters.csv in the run's folder (exid export writes them into a URDF); a file
+/// that cannot be written is left out.
+void writeStandardCsv(const exid::RunContext& ctx, const std::vector<std::string>& full_names,
+                      const Eigen::VectorXd& pi, Json& d) {
+  if (ctx.out_dir.empty()) return;
+  std::string csv = "name,value\n";
+  for (Eigen::Index i = 0; i < pi.size(); ++i)
+    csv += fmt::format("{},{:.17g}\n", full_names[static_cast<std::size_t>(i)], pi(i));
+  try {
+    exid::writeFileAtomic(ctx.out_dir / "standard_parameters.csv", csv);
+    d["standard_parameters_csv"] = "standard_parameters.csv";
+  } catch (const std::exception&) {
+  }
+}
+
 class ConsistentLs : public exid::Estimator {
  public:
   static constexpr const char* kName = "consistent_ls";
@@ -352,14 +539,128 @@ class ConsistentLs : public exid::Estimator {
     const auto t0 = std::chrono::steady_clock::now();
     const int p = model.numBase();
     const exid::BaseParameters& base = model.base();
-    const std::vector<std::string>& names = base.names;
+    LinearStage lin = linearStage(model, data, prior, ctx);
 
-    // ---- rows compressed per equation (and per block of samples for cross-validation)
-    const bool select_cv = prior && scale_selection_ == "cv";
-    const int blocks = select_cv ? cv_blocks_ : 0;
+    // ---- the consistent problem (setObjective)
+    const StandardMap map(base.full_names, model.fullNominal());
+    const int nfull = static_cast<int>(base.full_names.size());
+    const bool std_prior = lin.used_prior && prior_on_ == "standard" &&
+                           lin.used_prior->standard_value.size() == nfull &&
+                           lin.used_prior->standard_std.size() == nfull;
+    Problem P;
+    P.map = &map;
+    P.ctx = &ctx;
+    Eigen::VectorXd dinv;  // D^-1 (standard prior)
+    setObjective(lin, base.K, p, nfull, std_prior, &P, &dinv, kName);
+    const Eigen::VectorXd pi0 = std_prior ? lin.used_prior->standard_value : model.fullNominal();
+    StartPoint st = startPoint(map, P, base.K, lin.unc.theta, pi0, dinv, std_prior, start_);
+    P.best_f = HUGE_VAL;
+    const double f_start = P.value(st.z0, nullptr);
+    const double f_unc = (P.A * st.pi_unc - P.b).squaredNorm();
+    ctx.report(0.85, fmt::format("{}: optimising {} variables", kName, map.nz()));
+
+    std::vector<double> lb;
+    map.lowerBounds(&lb);
+    for (int k = 0; k < map.nz(); ++k)
+      st.z0(k) = std::max(st.z0(k), lb[static_cast<std::size_t>(k)]);
+    const std::string stop = runNlopt(P, lb, st.z0);
+    Eigen::VectorXd z = P.best_z.size() == map.nz() ? P.best_z : st.z0;
+    const long nlopt_evals = P.evaluations;
+    const int lm_iters = polishLm(P, lb, &z);
+    if (ctx.shouldStop()) throw exid::Error(fmt::format("{}: stopped", kName));
+
+    // ---- results
+    const Eigen::VectorXd pi = map.pi(z);
+    const Eigen::VectorXd theta = base.K * pi;
+    const double f_final = (P.A * pi - P.b).squaredNorm();
+    int lin_rank = 0;
+    const Eigen::MatrixXd cov = linearisedCovariance(map, P, base.K, z, pi, lb, &lin_rank);
+
+    double rss_c = 0.0, rss_u = 0.0;
+    for (const auto& [eq, a] : lin.acc) {
+      rss_c += a.residualSquared(theta);
+      rss_u += a.residualSquared(lin.unc.theta);
+    }
+    const long m = lin.m;
+    const double rms_c = std::sqrt(rss_c / static_cast<double>(m));
+    const double rms_u = std::sqrt(rss_u / static_cast<double>(m));
+
+    exid::estimators::LsSolution sol = lin.unc;
+    sol.theta = theta;
+    sol.covariance = cov;
+    sol.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
+    sol.rss = f_final;
+    sol.sigma2 = f_final / static_cast<double>(std::max<long>(1, lin.total.rows() - p));
+    // (with the standard prior, f_final also holds the standard prior's terms)
+    exid::Estimate e;
+    exid::estimators::fillEstimate(&e, model, sol, rss_c, m);
+    e.rows = m;
+    Json& d = e.details;
+    d["estimator"] = kName;
+    d["weighting"] = weighting_;
+    d["equations"] = lin.eq_table;
+    d["covariance_definition"] =
+        "linearised: J (J^T F^T F J)^+ J^T with J = K dpi/dz at the estimate (variables at an "
+        "active "
+        "bound fixed), F the factor of the noise-normalised rows" +
+        std::string(prior ? " stacked with the prior" : "") +
+        "; equals the unconstrained covariance when no constraint is active";
+    d["residual_rms_unconstrained"] = rms_u;
+    d["residual_rms_ratio"] = rms_u > 0 ? rms_c / rms_u : 1.0;
+    // Distance from the unconstrained (prior-regularised) least-squares solution in units of its
+    // covariance: sqrt((theta - theta_u)^T Cov_u^-1 (theta - theta_u)) = ||F_w (theta - theta_u)||.
+    d["mahalanobis_from_unconstrained"] = (lin.Fw * (theta - lin.unc.theta)).norm();
+    Json u = Json::object();
+    u["value"] = Json(toStd(lin.unc.theta));
+    u["std"] = Json(toStd(lin.unc.std));
+    u["cost"] = f_unc;
+    d["unconstrained"] = u;
+    Json o = Json::object();
+    o["algorithm"] = algorithm_;
+    o["start"] = st.started;
+    o["bodies_projected_at_start"] =
+        st.started == "nominal" ? st.projected_nominal : st.projected_unc;
+    o["cost_start"] = f_start;
+    o["cost_final"] = f_final;
+    o["cost_unconstrained"] = f_unc;
+    o["nlopt_evaluations"] = Json(static_cast<long long>(nlopt_evals));
+    o["nlopt_stop"] = stop;
+    o["lm_iterations"] = lm_iters;
+    o["variables"] = map.nz();
+    o["linearised_rank"] = lin_rank;
+    d["optimization"] = o;
+    if (lin.used_prior) priorDetails(lin, theta, sol.std, pi, dinv, std_prior, nfull, d);
+
+    // Consistent standard parameters (exid export writes them into a URDF).
+    Json sp = Json::object();
+    sp["names"] = Json(base.full_names);
+    sp["values"] = Json(toStd(pi));
+    d["standard_parameters"] = sp;
+    bool all_ok = true;
+    d["bodies"] = bodyChecks(map, pi, &all_ok);
+    d["consistent"] = all_ok;
+    {
+      Json w = plausibilityWarnings(map, pi, model.fullNominal(), rms_c, rms_u, kName);
+      if (w.size() > 0) d["warnings"] = w;
+    }
+    d["samples"] = data.size();
+    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    writeStandardCsv(ctx, base.full_names, pi, d);
+    ctx.report(1.0, fmt::format("{}: done", kName));
+    return e;
+  }
+
+ private:
+  /// The rows, per equation (and per block of samples and equation for cross-validation, when
+  /// blocks > 0), compressed chunk by chunk.
+  EquationRows compressRows(const exid::ObservationModel& model, const exid::Dataset& data,
+                            const exid::RunContext& ctx, int blocks) const {
+    const int p = model.numBase();
     const int n_samples = data.size();
-    std::map<int, RowAccumulator> acc;
-    std::vector<std::map<int, RowAccumulator>> block_acc(static_cast<std::size_t>(blocks));
+    EquationRows out;
+    std::map<int, RowAccumulator>& acc = out.acc;
+    std::vector<std::map<int, RowAccumulator>>& block_acc = out.blocks;
+    block_acc.resize(static_cast<std::size_t>(blocks));
     std::map<int, std::vector<int>> idx;
     std::vector<int> sample_of_row, order;
     exid::estimators::forEachChunk(
@@ -394,352 +695,164 @@ class ConsistentLs : public exid::Estimator {
             }
           }
         });
-    RowAccumulator all(p);
-    for (const auto& [eq, a] : acc) all.merge(a);
+    return out;
+  }
+
+  /// Each equation's residual std (weighting: equation) or one for all rows, floored so that
+  /// exactly fitted data get finite weights; returns the rows divided by it (eq_table: the
+  /// weights).
+  RowAccumulator weightRows(const std::map<int, RowAccumulator>& acc, const RowAccumulator& all,
+                            int p, bool has_prior, std::map<int, double>* sigma,
+                            Json* eq_table) const {
     const long m = all.rows();
+    int rank = 0;
+    const Eigen::VectorXd theta_mn =
+        exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+    RowAccumulator weighted(p);
+    double smax = 0.0;
+    const double global = std::sqrt(std::max(0.0, all.residualSquared(theta_mn)) /
+                                    static_cast<double>(std::max<long>(1, m - rank)));
+    for (const auto& [eq, a] : acc) {
+      double s = global;
+      if (weighting_ == "equation") {
+        const Eigen::VectorXd nrm = a.columnNorms();
+        const double big = nrm.maxCoeff();
+        int pe = 0;
+        for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
+        double dof = static_cast<double>(a.rows() - pe);
+        if (dof <= 0)
+          dof = static_cast<double>(a.rows()) * static_cast<double>(std::max<long>(1, m - rank)) /
+                static_cast<double>(m);
+        s = std::sqrt(std::max(0.0, a.residualSquared(theta_mn)) / std::max(dof, 1e-300));
+      }
+      (*sigma)[eq] = s;
+      smax = std::max(smax, s);
+    }
+    // Floor: exactly fitted (noise-free) data must not get infinite weights.
+    double yrms = all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
+    const double floor =
+        std::max(smax > 0 ? 1e-6 * smax : 0.0, (has_prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
+    for (auto& [eq, s] : *sigma) {
+      Json row = Json::object();
+      row["equation"] = eq;
+      row["rows"] = Json(static_cast<long long>(acc.at(eq).rows()));
+      row["residual_std"] = s;
+      s = std::max(s, floor);
+      row["weight"] = 1.0 / s;
+      eq_table->push_back(row);
+      weighted.merge(acc.at(eq), 1.0 / s);
+    }
+    return weighted;
+  }
+
+  /// The prior, its scale fixed or chosen on the weighted rows (docs/consistent.md); details in
+  /// scale_details.
+  std::optional<exid::Prior> scalePrior(const exid::Prior& prior, bool select_cv,
+                                        const std::vector<std::map<int, RowAccumulator>>& blocks,
+                                        const std::map<int, double>& sigma,
+                                        const RowAccumulator& weighted, int p,
+                                        Json* scale_details) const {
+    double scale = prior_scale_;
+    (*scale_details)["method"] = "fixed";
+    if (scale_selection_ != "none") {
+      exid::estimators::PriorScaleChoice c;
+      if (select_cv) {
+        std::vector<RowAccumulator> folds;
+        for (const auto& blk : blocks) {
+          RowAccumulator f(p);
+          for (const auto& [eq, a] : blk) f.merge(a, 1.0 / sigma.at(eq));
+          folds.push_back(std::move(f));
+        }
+        c = exid::estimators::selectPriorScaleCv(
+            folds, prior, exid::estimators::logGrid(scale_range_[0], scale_range_[1], 8), kName);
+      } else {
+        c = exid::estimators::selectPriorScaleEvidence(weighted, prior, scale_range_[0],
+                                                       scale_range_[1], kName);
+      }
+      scale = c.scale;
+      *scale_details = c.toJson();
+    }
+    (*scale_details)["scale"] = scale;
+    return exid::estimators::scaledPrior(prior, scale);
+  }
+
+  /// The rows compressed per equation, noise-normalised, stacked with the prior: one factor, and
+  /// its unconstrained least-squares solution.
+  LinearStage linearStage(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) const {
+    const int p = model.numBase();
+    const std::vector<std::string>& names = model.base().names;
+    const bool select_cv = prior && scale_selection_ == "cv";
+    EquationRows rows = compressRows(model, data, ctx, select_cv ? cv_blocks_ : 0);
+    LinearStage lin;
+    lin.acc = std::move(rows.acc);
+    RowAccumulator all(p);
+    for (const auto& [eq, a] : lin.acc) all.merge(a);
+    lin.m = all.rows();
     if (!prior) {
       // Without a prior every base parameter must be identified by the data (the message names
       // the directions that are not); with one, they fall back to it.
       (void)exid::estimators::solveLeastSquares(all, names, opt_, kName);
     }
-
-    // ---- noise-normalised rows (+ prior): one factor
-    int rank = 0;
-    const Eigen::VectorXd theta_mn =
-        exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
-    RowAccumulator weighted(p);
-    Json eq_table = Json::array();
     std::map<int, double> sigma;
-    {
-      double smax = 0.0;
-      const double global = std::sqrt(std::max(0.0, all.residualSquared(theta_mn)) /
-                                      static_cast<double>(std::max<long>(1, m - rank)));
-      for (const auto& [eq, a] : acc) {
-        double s = global;
-        if (weighting_ == "equation") {
-          const Eigen::VectorXd nrm = a.columnNorms();
-          const double big = nrm.maxCoeff();
-          int pe = 0;
-          for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
-          double dof = static_cast<double>(a.rows() - pe);
-          if (dof <= 0)
-            dof = static_cast<double>(a.rows()) * static_cast<double>(std::max<long>(1, m - rank)) /
-                  static_cast<double>(m);
-          s = std::sqrt(std::max(0.0, a.residualSquared(theta_mn)) / std::max(dof, 1e-300));
-        }
-        sigma[eq] = s;
-        smax = std::max(smax, s);
-      }
-      // Floor: exactly fitted (noise-free) data must not get infinite weights.
-      double yrms =
-          all.factor().col(p).norm() / std::sqrt(static_cast<double>(std::max<long>(1, m)));
-      const double floor =
-          std::max(smax > 0 ? 1e-6 * smax : 0.0, (prior ? 1e-9 : 1e-12) * std::max(yrms, 1e-300));
-      for (auto& [eq, s] : sigma) {
-        Json row = Json::object();
-        row["equation"] = eq;
-        row["rows"] = Json(static_cast<long long>(acc.at(eq).rows()));
-        row["residual_std"] = s;
-        s = std::max(s, floor);
-        row["weight"] = 1.0 / s;
-        eq_table.push_back(row);
-        weighted.merge(acc.at(eq), 1.0 / s);
-      }
-    }
-    // ---- the prior, its scale chosen on the weighted rows when asked (docs/consistent.md)
-    std::optional<exid::Prior> used_prior;
-    Json scale_details = Json::object();
-    if (prior) {
-      double scale = prior_scale_;
-      scale_details["method"] = "fixed";
-      if (scale_selection_ != "none") {
-        exid::estimators::PriorScaleChoice c;
-        if (select_cv) {
-          std::vector<RowAccumulator> folds;
-          for (const auto& blk : block_acc) {
-            RowAccumulator f(p);
-            for (const auto& [eq, a] : blk) f.merge(a, 1.0 / sigma.at(eq));
-            folds.push_back(std::move(f));
-          }
-          c = exid::estimators::selectPriorScaleCv(
-              folds, *prior, exid::estimators::logGrid(scale_range_[0], scale_range_[1], 8), kName);
-        } else {
-          c = exid::estimators::selectPriorScaleEvidence(weighted, *prior, scale_range_[0],
-                                                         scale_range_[1], kName);
-        }
-        scale = c.scale;
-        scale_details = c.toJson();
-      }
-      scale_details["scale"] = scale;
-      used_prior = exid::estimators::scaledPrior(*prior, scale);
-    }
-    RowAccumulator total = weighted;
-    if (used_prior) exid::estimators::addPriorRows(&total, *used_prior, kName);
+    lin.weighted = weightRows(lin.acc, all, p, prior != nullptr, &sigma, &lin.eq_table);
+    if (prior)
+      lin.used_prior =
+          scalePrior(*prior, select_cv, rows.blocks, sigma, lin.weighted, p, &lin.scale_details);
+    lin.total = lin.weighted;
+    if (lin.used_prior) exid::estimators::addPriorRows(&lin.total, *lin.used_prior, kName);
     exid::estimators::SolveOptions uo = opt_;
     uo.unit_variance = true;
     if (prior) uo.rank_tolerance = 0.0;  // positive definite with the prior
-    const exid::estimators::LsSolution unc =
-        exid::estimators::solveLeastSquares(total, names, uo, kName);
-    const Eigen::MatrixXd& F = total.factor();
-    const Eigen::MatrixXd Fw = F.leftCols(p);
-    const Eigen::VectorXd fy = F.col(p);
-
-    // ---- the consistent problem: f(z) = ||A pi(z) - b||^2 with
-    //   prior on the base parameters:     A = F K,                  b = f      (F: data + prior)
-    //   prior on the standard parameters: A = [F_d K; D^-1],        b = [f_d; D^-1 pi0]
-    // (F_d: data only, D = diag of the scaled standard prior std). In the linear problem both
-    // give the same base parameters (K pi ~ N(K pi0, K D^2 K^T)); with the consistency
-    // constraints, the standard form keeps each body near its prior instead of letting the
-    // unidentifiable combinations wander off to satisfy them.
-    const StandardMap map(base.full_names, model.fullNominal());
-    const int nfull = static_cast<int>(base.full_names.size());
-    const bool std_prior = used_prior && prior_on_ == "standard" &&
-                           used_prior->standard_value.size() == nfull &&
-                           used_prior->standard_std.size() == nfull;
-    Problem P;
-    P.map = &map;
-    P.ctx = &ctx;
-    Eigen::VectorXd dinv;  // D^-1 (standard prior)
-    if (std_prior) {
-      dinv = used_prior->standard_std.cwiseInverse();
-      exid::check(dinv.allFinite(),
-                  fmt::format("{}: prior_on: standard needs every standard prior std > 0 (give "
-                              "prior.absolute_std > 0)",
-                              kName));
-      const Eigen::MatrixXd& Fd = weighted.factor();  // (p+1) x (p+1), last row: the residual
-      P.A.resize(p + 1 + nfull, nfull);
-      P.A.topRows(p + 1) = Fd.leftCols(p) * base.K;
-      P.A.bottomRows(nfull) = dinv.asDiagonal();
-      P.b.resize(p + 1 + nfull);
-      P.b.head(p + 1) = Fd.col(p);
-      P.b.tail(nfull) = dinv.cwiseProduct(used_prior->standard_value);
-    } else {
-      P.A = Fw * base.K;
-      P.b = fy;
-    }
-    const Eigen::VectorXd pi0 = std_prior ? used_prior->standard_value : model.fullNominal();
-    const double floor = map.eigFloor(pi0);
-    int projected_nominal = 0, projected_unc = 0;
-    const Eigen::VectorXd z_nom = map.fromStandard(pi0, floor, &projected_nominal);
-    Eigen::VectorXd z0 = z_nom;
-    std::string started = "nominal";
-    // The unconstrained solution completed with the nominal values: pi_u = pi0 + dpi, K dpi =
-    // theta_u - K pi0, dpi of least norm (standard prior: least D^-1-weighted norm, which makes
-    // pi_u the linear problem's own minimiser, so f_unc below is the same objective's value).
-    Eigen::VectorXd dpi;
-    if (std_prior) {
-      const Eigen::MatrixXd KD = base.K * dinv.cwiseInverse().asDiagonal();
-      dpi = dinv.cwiseInverse().asDiagonal() *
-            KD.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
-    } else {
-      dpi = base.K.completeOrthogonalDecomposition().solve(unc.theta - base.K * pi0);
-    }
-    const Eigen::VectorXd pi_unc = pi0 + dpi;
-    if (start_ != "nominal") {
-      const Eigen::VectorXd z_unc = map.fromStandard(pi_unc, floor, &projected_unc);
-      if (start_ == "unconstrained" || P.value(z_unc, nullptr) < P.value(z_nom, nullptr)) {
-        z0 = z_unc;
-        started = "unconstrained";
-      }
-    }
-    P.best_f = HUGE_VAL;
-    const double f_start = P.value(z0, nullptr);
-    const double f_unc = (P.A * pi_unc - P.b).squaredNorm();
-    ctx.report(0.85, fmt::format("{}: optimising {} variables", kName, map.nz()));
-
-    std::vector<double> lb;
-    map.lowerBounds(&lb);
-    for (int k = 0; k < map.nz(); ++k) z0(k) = std::max(z0(k), lb[static_cast<std::size_t>(k)]);
-    std::string stop = "not run";
-    if (algorithm_ != "none") {
-      nlopt::opt o(algorithmFromName(algorithm_), static_cast<unsigned>(map.nz()));
-      o.set_lower_bounds(lb);
-      o.set_min_objective(nloptObjective, &P);
-      o.set_maxeval(max_eval_);
-      o.set_ftol_rel(1e-14);
-      o.set_xtol_rel(1e-12);
-      std::vector<double> x(z0.data(), z0.data() + z0.size());
-      double fx = 0;
-      try {
-        const nlopt::result r = o.optimize(x, fx);
-        stop = fmt::format("nlopt result {}", static_cast<int>(r));
-      } catch (const nlopt::forced_stop&) {
-        throw exid::Error(fmt::format("{}: stopped", kName));
-      } catch (const std::exception& e) {
-        stop = fmt::format("nlopt: {} (best point kept)", e.what());
-      }
-    }
-    Eigen::VectorXd z = P.best_z.size() == map.nz() ? P.best_z : z0;
-    const long nlopt_evals = P.evaluations;
-    const int lm_iters = polishLm(P, lb, &z);
-    if (ctx.shouldStop()) throw exid::Error(fmt::format("{}: stopped", kName));
-
-    // ---- results
-    const Eigen::VectorXd pi = map.pi(z);
-    const Eigen::VectorXd theta = base.K * pi;
-    const double f_final = (P.A * pi - P.b).squaredNorm();
-    // Linearised covariance: theta = K pi(z), the variables at an active bound held fixed:
-    // Cov = J_b (J_z^T A^T A J_z)^+ J_b^T, J_z = dpi/dz, J_b = K J_z.
-    Eigen::MatrixXd Jz = map.jacobian(z);
-    {
-      Eigen::VectorXd g = map.vjp(z, 2.0 * (P.A.transpose() * (P.A * pi - P.b)));
-      for (int k = 0; k < map.nz(); ++k)
-        if (std::isfinite(lb[static_cast<std::size_t>(k)]) &&
-            z(k) <= lb[static_cast<std::size_t>(k)] && g(k) >= 0.0)
-          Jz.col(k).setZero();
-    }
-    const Eigen::MatrixXd Jb = base.K * Jz;
-    const Eigen::MatrixXd JA = P.A * Jz;
-    Eigen::JacobiSVD<Eigen::MatrixXd> svd(JA, Eigen::ComputeThinV);
-    const Eigen::VectorXd sv = svd.singularValues();
-    Eigen::VectorXd sinv2 = Eigen::VectorXd::Zero(sv.size());
-    int lin_rank = 0;
-    for (Eigen::Index i = 0; i < sv.size(); ++i)
-      if (sv(0) > 0 && sv(i) > 1e-9 * sv(0)) {
-        sinv2(i) = 1.0 / (sv(i) * sv(i));
-        ++lin_rank;
-      }
-    const Eigen::MatrixXd JV = Jb * svd.matrixV();
-    Eigen::MatrixXd cov = JV * sinv2.asDiagonal() * JV.transpose();
-    cov = 0.5 * (cov + cov.transpose());
-
-    double rss_c = 0.0, rss_u = 0.0;
-    for (const auto& [eq, a] : acc) {
-      rss_c += a.residualSquared(theta);
-      rss_u += a.residualSquared(unc.theta);
-    }
-    const double rms_c = std::sqrt(rss_c / static_cast<double>(m));
-    const double rms_u = std::sqrt(rss_u / static_cast<double>(m));
-
-    exid::estimators::LsSolution sol = unc;
-    sol.theta = theta;
-    sol.covariance = cov;
-    sol.std = cov.diagonal().cwiseMax(0.0).cwiseSqrt();
-    sol.rss = f_final;
-    sol.sigma2 = f_final / static_cast<double>(std::max<long>(1, total.rows() - p));
-    // (with the standard prior, f_final also holds the standard prior's terms)
-    exid::Estimate e;
-    exid::estimators::fillEstimate(&e, model, sol, rss_c, m);
-    e.rows = m;
-    Json& d = e.details;
-    d["estimator"] = kName;
-    d["weighting"] = weighting_;
-    d["equations"] = eq_table;
-    d["covariance_definition"] =
-        "linearised: J (J^T F^T F J)^+ J^T with J = K dpi/dz at the estimate (variables at an "
-        "active "
-        "bound fixed), F the factor of the noise-normalised rows" +
-        std::string(prior ? " stacked with the prior" : "") +
-        "; equals the unconstrained covariance when no constraint is active";
-    d["residual_rms_unconstrained"] = rms_u;
-    d["residual_rms_ratio"] = rms_u > 0 ? rms_c / rms_u : 1.0;
-    // Distance from the unconstrained (prior-regularised) least-squares solution in units of its
-    // covariance: sqrt((theta - theta_u)^T Cov_u^-1 (theta - theta_u)) = ||F_w (theta - theta_u)||.
-    d["mahalanobis_from_unconstrained"] = (Fw * (theta - unc.theta)).norm();
-    Json u = Json::object();
-    u["value"] = Json(toStd(unc.theta));
-    u["std"] = Json(toStd(unc.std));
-    u["cost"] = f_unc;
-    d["unconstrained"] = u;
-    Json o = Json::object();
-    o["algorithm"] = algorithm_;
-    o["start"] = started;
-    o["bodies_projected_at_start"] = started == "nominal" ? projected_nominal : projected_unc;
-    o["cost_start"] = f_start;
-    o["cost_final"] = f_final;
-    o["cost_unconstrained"] = f_unc;
-    o["nlopt_evaluations"] = Json(static_cast<long long>(nlopt_evals));
-    o["nlopt_stop"] = stop;
-    o["lm_iterations"] = lm_iters;
-    o["variables"] = map.nz();
-    o["linearised_rank"] = lin_rank;
-    d["optimization"] = o;
-    if (used_prior) {
-      d["prior"] = exid::estimators::priorDetails(*used_prior, theta, sol.std);
-      d["prior"]["scale"] = scale_details;
-      d["prior"]["on"] = std_prior ? "standard" : "base";
-      if (std_prior) {
-        // ||D^-1 (pi - pi0)||: the standard parameters' distance from the prior, in its std.
-        d["prior"]["standard_mahalanobis"] =
-            dinv.cwiseProduct(pi - used_prior->standard_value).norm();
-        d["prior"]["standard_parameters"] = nfull;
-      } else if (prior_on_ == "standard") {
-        d["prior"]["on_note"] =
-            "prior_on: standard asked, but the prior has no standard parameters (from: study): "
-            "it acts on the base parameters";
-      }
-    }
-
-    // Consistent standard parameters (exid export writes them into a URDF).
-    Json sp = Json::object();
-    sp["names"] = Json(base.full_names);
-    sp["values"] = Json(toStd(pi));
-    d["standard_parameters"] = sp;
-    Json bodies = Json::array();
-    bool all_ok = true;
-    for (int b = 0; b < map.numBodies(); ++b) {
-      Vec10 pb;
-      for (int k = 0; k < 10; ++k) pb(k) = pi(map.bodyIndices(b)[static_cast<std::size_t>(k)]);
-      const exid::InertiaCheck chk = exid::checkPhysical(pb, 0.0);
-      const double lmin = exid::estimators::pseudoInertiaMinEigenvalue(pb);
-      all_ok = all_ok && lmin > 0;
-      Json jb = Json::object();
-      jb["body"] = map.bodyNumber(b);
-      jb["mass"] = pb(9);
-      jb["com"] = Json(std::vector<double>{pb(6) / pb(9), pb(7) / pb(9), pb(8) / pb(9)});
-      jb["pseudo_inertia_min_eigenvalue"] = lmin;
-      jb["check"] = chk.ok ? std::string("ok") : chk.rule;
-      bodies.push_back(jb);
-    }
-    for (int s = 0; s < map.numScalars(); ++s)
-      if (map.nonneg(s)) all_ok = all_ok && pi(map.scalarIndex(s)) >= 0.0;
-    d["bodies"] = bodies;
-    d["consistent"] = all_ok;
-    // A consistent fit the data disagree with is no result to trust silently: say so, with the
-    // likely causes (these reach summary.json's warnings).
-    {
-      Json w = Json::array();
-      const double ratio = rms_u > 0 ? rms_c / rms_u : 1.0;
-      if (ratio > kResidualRatioWarn)
-        w.push_back(Json(fmt::format(
-            "{}: the physically consistent fit leaves a residual {:.2f} times the unconstrained "
-            "fit's ({:.4g} against {:.4g}): the data ask for a physically impossible model. "
-            "Likely causes: a torque of the opposite sign to the joint (tau_scale: -1 for it; "
-            "`exid inspect` checks each joint), a wrong transmission or torque scale, "
-            "unmodelled friction, or a delay between position and torque",
-            kName, ratio, rms_c, rms_u)));
-      const Eigen::VectorXd nom = model.fullNominal();
-      for (int b = 0; b < map.numBodies(); ++b) {
-        const double m_est = pi(map.bodyIndices(b)[9]), m_nom = nom(map.bodyIndices(b)[9]);
-        if (m_nom > 0 && std::isfinite(m_nom) && m_est > kMassRatioWarn * m_nom)
-          w.push_back(Json(fmt::format(
-              "{}: body {} has a mass of {:.4g} kg against {:.4g} kg in the robot description "
-              "(more than {:g} times heavier): the masses of a chain are identified only through "
-              "the torques they cause, so a mass this far off usually means a torque of the "
-              "opposite sign (tau_scale: -1 for it), a wrong torque scale or transmission, or a "
-              "body the motion does not excite",
-              kName, map.bodyNumber(b), m_est, m_nom, kMassRatioWarn)));
-      }
-      if (w.size() > 0) d["warnings"] = w;
-    }
-    d["samples"] = data.size();
-    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-
-    if (!ctx.out_dir.empty()) {
-      std::string csv = "name,value\n";
-      for (Eigen::Index i = 0; i < pi.size(); ++i)
-        csv += fmt::format("{},{:.17g}\n", base.full_names[static_cast<std::size_t>(i)], pi(i));
-      try {
-        exid::writeFileAtomic(ctx.out_dir / "standard_parameters.csv", csv);
-        d["standard_parameters_csv"] = "standard_parameters.csv";
-      } catch (const std::exception&) {
-      }
-    }
-    ctx.report(1.0, fmt::format("{}: done", kName));
-    return e;
+    lin.unc = exid::estimators::solveLeastSquares(lin.total, names, uo, kName);
+    const Eigen::MatrixXd& F = lin.total.factor();
+    lin.Fw = F.leftCols(p);
+    lin.fy = F.col(p);
+    return lin;
   }
 
- private:
+  /// NLopt from z0 (algorithm: none: not run); the best point is kept in P. Returns how it
+  /// stopped.
+  std::string runNlopt(Problem& P, const std::vector<double>& lb, const Eigen::VectorXd& z0) const {
+    std::string stop = "not run";
+    if (algorithm_ == "none") return stop;
+    nlopt::opt o(algorithmFromName(algorithm_), static_cast<unsigned>(P.map->nz()));
+    o.set_lower_bounds(lb);
+    o.set_min_objective(nloptObjective, &P);
+    o.set_maxeval(max_eval_);
+    o.set_ftol_rel(1e-14);
+    o.set_xtol_rel(1e-12);
+    std::vector<double> x(z0.data(), z0.data() + z0.size());
+    double fx = 0;
+    try {
+      const nlopt::result r = o.optimize(x, fx);
+      stop = fmt::format("nlopt result {}", static_cast<int>(r));
+    } catch (const nlopt::forced_stop&) {
+      throw exid::Error(fmt::format("{}: stopped", kName));
+    } catch (const std::exception& e) {
+      stop = fmt::format("nlopt: {} (best point kept)", e.what());
+    }
+    return stop;
+  }
+
+  /// d["prior"]: the prior's details, its scale and where it acts.
+  void priorDetails(const LinearStage& lin, const Eigen::VectorXd& theta,
+                    const Eigen::VectorXd& theta_std, const Eigen::VectorXd& pi,
+                    const Eigen::VectorXd& dinv, bool std_prior, int nfull, Json& d) const {
+    d["prior"] = exid::estimators::priorDetails(*lin.used_prior, theta, theta_std);
+    d["prior"]["scale"] = lin.scale_details;
+    d["prior"]["on"] = std_prior ? "standard" : "base";
+    if (std_prior) {
+      // ||D^-1 (pi - pi0)||: the standard parameters' distance from the prior, in its std.
+      d["prior"]["standard_mahalanobis"] =
+          dinv.cwiseProduct(pi - lin.used_prior->standard_value).norm();
+      d["prior"]["standard_parameters"] = nfull;
+    } else if (prior_on_ == "standard") {
+      d["prior"]["on_note"] =
+          "prior_on: standard asked, but the prior has no standard parameters (from: study): "
+          "it acts on the base parameters";
+    }
+  }
   /// Levenberg-Marquardt on r(z) = A pi(z) - b with the exact Jacobian A dpi/dz; variables with
   /// a lower bound stay feasible (projected steps, active bounds held). Returns the iterations.
   int polishLm(Problem& P, const std::vector<double>& lb, Eigen::VectorXd* z) const {
