@@ -175,11 +175,8 @@ MatrixSpec loadMatrix(const fs::path& file, const Registry& reg) {
 
 namespace {
 
-MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
-  YAML::Node root = loadStrictYaml(file, "matrix");
-  if (!root.IsMap())
-    throw Error(
-        fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
+// The keys a matrix file may hold; any other is an error naming the closest.
+void checkMatrixKeys(const YAML::Node& root, const fs::path& file) {
   const std::vector<std::string> allowed = {
       "name", "base", "study", "axes", "cells", "cell_budget_s", "cell_memory_mb", "description"};
   for (const auto& kv : root) {
@@ -191,6 +188,169 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
                               close.empty() ? "" : "; did you mean '" + close + "'?"));
     }
   }
+}
+
+// root[key]: a number in [0, max]; 0 means none (also when absent).
+double matrixLimit(const YAML::Node& root, const fs::path& file, const char* key, double max,
+                   const char* unit) {
+  YAML::Node v = root[key];
+  if (!v) return 0.0;
+  double x = NAN;
+  if (v.IsScalar()) {
+    try {
+      std::size_t pos = 0;
+      x = std::stod(v.Scalar(), &pos);
+      if (pos != v.Scalar().size()) x = NAN;
+    } catch (...) {
+      x = NAN;
+    }
+  }
+  if (!(x >= 0 && x <= max))
+    throw Error(fmt::format("{}:{}: {} = {}: must be a number in [0, {:g}] {} (0: none)",
+                            file.string(), v.Mark().line + 1, key,
+                            v.IsScalar() ? v.Scalar() : std::string("(not a number)"), max, unit));
+  return x;
+}
+
+// The study every cell starts from: a file (base) or inline (study).
+struct BaseStudy {
+  YAML::Node study;
+  fs::path dir;      // relative paths in the study: from here
+  std::string name;  // for messages
+};
+
+BaseStudy loadBaseStudy(const YAML::Node& root, const fs::path& file, const fs::path& abs_file) {
+  BaseStudy b;
+  b.dir = abs_file.parent_path();
+  if (root["base"] && root["study"])
+    throw Error(
+        fmt::format("{}: give either base (a file) or study (inline), not both", file.string()));
+  if (root["base"]) {
+    fs::path bp = root["base"].as<std::string>();
+    if (bp.is_relative()) bp = b.dir / bp;
+    try {
+      b.study = loadStrictYaml(bp, "base study");
+    } catch (const Error& e) {
+      throw Error(fmt::format("{}: base study: {}", file.string(), e.what()));
+    }
+    b.dir = fs::absolute(bp).parent_path();
+    b.name = bp.string();
+  } else if (root["study"]) {
+    b.study = YAML::Clone(root["study"]);
+    b.name = file.string() + ":study";
+  } else {
+    throw Error(fmt::format("{}: missing 'base' (a study file) or 'study' (an inline study)",
+                            file.string()));
+  }
+  if (!b.study.IsMap()) throw Error(fmt::format("{}: the base study is not a mapping", b.name));
+  return b;
+}
+
+// The cells of `axes`: every combination of the axes' values, one map {axis: value} each.
+std::vector<YAML::Node> axesOverrides(const YAML::Node& axes, const fs::path& file,
+                                      std::vector<std::string>* axis_names) {
+  if (!axes.IsMap() || axes.size() == 0)
+    throw Error(fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
+  double product = 1;
+  for (const auto& kv : axes) {
+    product *= kv.second.IsSequence() ? static_cast<double>(kv.second.size()) : 1.0;
+    if (product > kMaxMatrixCells)
+      throw Error(
+          fmt::format("{}:{}: axes: the product of the axes has more than {:g} cells "
+                      "(at axis '{}'); split the matrix",
+                      file.string(), kv.first.Mark().line + 1, kMaxMatrixCells,
+                      kv.first.IsScalar() ? kv.first.Scalar() : "?"));
+  }
+  std::vector<YAML::Node> overrides;
+  overrides.push_back(YAML::Node(YAML::NodeType::Map));
+  for (const auto& kv : axes) {
+    const std::string axis = keyText(kv.first, file);
+    if (!kv.second.IsSequence() || kv.second.size() == 0)
+      throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values", file.string(),
+                              kv.second.Mark().line + 1, axis));
+    axis_names->push_back(axis);
+    std::vector<YAML::Node> next;
+    for (const auto& o : overrides)
+      for (const auto& v : kv.second) {
+        YAML::Node c = YAML::Clone(o);
+        c[axis] = YAML::Clone(v);
+        next.push_back(c);
+      }
+    overrides = std::move(next);
+  }
+  return overrides;
+}
+
+// The cells listed in `cells`, one map {axis: value} each.
+std::vector<YAML::Node> listedOverrides(const YAML::Node& cells, const fs::path& file,
+                                        std::vector<std::string>* axis_names) {
+  if (!cells.IsSequence())
+    throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
+  if (static_cast<double>(cells.size()) > kMaxMatrixCells)
+    throw Error(fmt::format("{}: cells: {} cells, more than {:g}; split the matrix", file.string(),
+                            cells.size(), kMaxMatrixCells));
+  std::vector<YAML::Node> overrides;
+  for (const auto& c : cells) {
+    if (!c.IsMap())
+      throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(),
+                              c.Mark().line + 1));
+    for (const auto& kv : c) {
+      const std::string axis = keyText(kv.first, file);
+      if (std::find(axis_names->begin(), axis_names->end(), axis) == axis_names->end())
+        axis_names->push_back(axis);
+    }
+    overrides.push_back(YAML::Clone(c));
+  }
+  return overrides;
+}
+
+// One map {axis: value} per cell: from axes, from cells, or the base study alone.
+std::vector<YAML::Node> cellOverrides(const YAML::Node& root, const fs::path& file,
+                                      std::vector<std::string>* axis_names) {
+  if (root["axes"] && root["cells"])
+    throw Error(fmt::format("{}: give either axes or cells, not both", file.string()));
+  if (root["axes"]) return axesOverrides(root["axes"], file, axis_names);
+  if (root["cells"]) return listedOverrides(root["cells"], file, axis_names);
+  return {YAML::Node(YAML::NodeType::Map)};  // the base study alone
+}
+
+// Applies one cell's overrides to its study and records its coordinates; problems: each
+// override that cannot be applied.
+void applyOverrides(const YAML::Node& overrides, std::size_t i, YAML::Node study, MatrixCell* cell,
+                    std::vector<std::string>* problems) {
+  for (const auto& kv : overrides) {
+    const std::string axis = kv.first.as<std::string>();
+    try {
+      if (!axis.empty() && axis[0] == '@') {
+        // A composite axis: each value is a mapping of overrides, with an optional label.
+        if (!kv.second.IsMap())
+          throw Error(fmt::format(
+              "axis '{}': each value must be a mapping {{label: ..., path: value, ...}}", axis));
+        std::string label;
+        for (const auto& o : kv.second) {
+          const std::string path = o.first.as<std::string>();
+          if (path == "label")
+            label = o.second.as<std::string>();
+          else
+            setPath(study, path, o.second);
+        }
+        cell->coords.emplace_back(axis.substr(1), label.empty() ? flowText(kv.second) : label);
+        continue;
+      }
+      setPath(study, axis, kv.second);
+    } catch (const Error& e) {
+      problems->push_back(fmt::format("cell {}: {}", i, e.what()));
+    }
+    cell->coords.emplace_back(axis, valueLabel(kv.second));
+  }
+}
+
+MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
+  YAML::Node root = loadStrictYaml(file, "matrix");
+  if (!root.IsMap())
+    throw Error(
+        fmt::format("{}: expected a mapping (name, base or study, axes or cells)", file.string()));
+  checkMatrixKeys(root, file);
   MatrixSpec spec;
   spec.file = fs::absolute(file);
   spec.name = root["name"] ? root["name"].as<std::string>() : file.stem().string();
@@ -199,108 +359,10 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
     throw Error(fmt::format("{}{}: name = '{}': {}", file.string(),
                             root["name"] ? ":" + std::to_string(root["name"].Mark().line + 1) : "",
                             spec.name, why));
-  // A number in [0, max]; 0 means none.
-  auto limit = [&](const char* key, double max, const char* unit) {
-    YAML::Node v = root[key];
-    if (!v) return 0.0;
-    double x = NAN;
-    if (v.IsScalar()) {
-      try {
-        std::size_t pos = 0;
-        x = std::stod(v.Scalar(), &pos);
-        if (pos != v.Scalar().size()) x = NAN;
-      } catch (...) {
-        x = NAN;
-      }
-    }
-    if (!(x >= 0 && x <= max))
-      throw Error(fmt::format("{}:{}: {} = {}: must be a number in [0, {:g}] {} (0: none)",
-                              file.string(), v.Mark().line + 1, key,
-                              v.IsScalar() ? v.Scalar() : std::string("(not a number)"), max,
-                              unit));
-    return x;
-  };
-  spec.cell_budget_s = limit("cell_budget_s", 1e7, "s");
-  spec.cell_memory_mb = limit("cell_memory_mb", 1e8, "MB");
-  YAML::Node base;
-  fs::path base_dir = spec.file.parent_path();
-  std::string base_name;
-  if (root["base"] && root["study"])
-    throw Error(
-        fmt::format("{}: give either base (a file) or study (inline), not both", file.string()));
-  if (root["base"]) {
-    fs::path bp = root["base"].as<std::string>();
-    if (bp.is_relative()) bp = base_dir / bp;
-    try {
-      base = loadStrictYaml(bp, "base study");
-    } catch (const Error& e) {
-      throw Error(fmt::format("{}: base study: {}", file.string(), e.what()));
-    }
-    base_dir = fs::absolute(bp).parent_path();
-    base_name = bp.string();
-  } else if (root["study"]) {
-    base = YAML::Clone(root["study"]);
-    base_name = file.string() + ":study";
-  } else {
-    throw Error(fmt::format("{}: missing 'base' (a study file) or 'study' (an inline study)",
-                            file.string()));
-  }
-  if (!base.IsMap()) throw Error(fmt::format("{}: the base study is not a mapping", base_name));
-
-  std::vector<YAML::Node> overrides;  // one map {axis: value} per cell
-  if (root["axes"] && root["cells"])
-    throw Error(fmt::format("{}: give either axes or cells, not both", file.string()));
-  if (root["axes"]) {
-    YAML::Node axes = root["axes"];
-    if (!axes.IsMap() || axes.size() == 0)
-      throw Error(
-          fmt::format("{}: axes: expected a mapping axis -> list of values", file.string()));
-    double product = 1;
-    for (const auto& kv : axes) {
-      product *= kv.second.IsSequence() ? static_cast<double>(kv.second.size()) : 1.0;
-      if (product > kMaxMatrixCells)
-        throw Error(
-            fmt::format("{}:{}: axes: the product of the axes has more than {:g} cells "
-                        "(at axis '{}'); split the matrix",
-                        file.string(), kv.first.Mark().line + 1, kMaxMatrixCells,
-                        kv.first.IsScalar() ? kv.first.Scalar() : "?"));
-    }
-    overrides.push_back(YAML::Node(YAML::NodeType::Map));
-    for (const auto& kv : axes) {
-      const std::string axis = keyText(kv.first, file);
-      if (!kv.second.IsSequence() || kv.second.size() == 0)
-        throw Error(fmt::format("{}:{}: axes.{}: expected a non-empty list of values",
-                                file.string(), kv.second.Mark().line + 1, axis));
-      spec.axes.push_back(axis);
-      std::vector<YAML::Node> next;
-      for (const auto& o : overrides)
-        for (const auto& v : kv.second) {
-          YAML::Node c = YAML::Clone(o);
-          c[axis] = YAML::Clone(v);
-          next.push_back(c);
-        }
-      overrides = std::move(next);
-    }
-  } else if (root["cells"]) {
-    if (!root["cells"].IsSequence())
-      throw Error(fmt::format("{}: cells: expected a list of overrides", file.string()));
-    if (static_cast<double>(root["cells"].size()) > kMaxMatrixCells)
-      throw Error(fmt::format("{}: cells: {} cells, more than {:g}; split the matrix",
-                              file.string(), root["cells"].size(), kMaxMatrixCells));
-    for (const auto& c : root["cells"]) {
-      if (!c.IsMap())
-        throw Error(fmt::format("{}:{}: a cell must be a mapping axis -> value", file.string(),
-                                c.Mark().line + 1));
-      for (const auto& kv : c) {
-        const std::string axis = keyText(kv.first, file);
-        if (std::find(spec.axes.begin(), spec.axes.end(), axis) == spec.axes.end())
-          spec.axes.push_back(axis);
-      }
-      overrides.push_back(YAML::Clone(c));
-    }
-  } else {
-    overrides.push_back(YAML::Node(YAML::NodeType::Map));  // the base study alone
-  }
+  spec.cell_budget_s = matrixLimit(root, file, "cell_budget_s", 1e7, "s");
+  spec.cell_memory_mb = matrixLimit(root, file, "cell_memory_mb", 1e8, "MB");
+  const BaseStudy base = loadBaseStudy(root, file, spec.file);
+  const std::vector<YAML::Node> overrides = cellOverrides(root, file, &spec.axes);
 
   std::vector<std::string> problems;
   std::set<std::string> hashes;
@@ -308,32 +370,8 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
   for (std::size_t i = 0; i < overrides.size(); ++i) {
     MatrixCell cell;
     cell.index = static_cast<int>(i);
-    YAML::Node study = YAML::Clone(base);
-    for (const auto& kv : overrides[i]) {
-      const std::string axis = kv.first.as<std::string>();
-      try {
-        if (!axis.empty() && axis[0] == '@') {
-          // A composite axis: each value is a mapping of overrides, with an optional label.
-          if (!kv.second.IsMap())
-            throw Error(fmt::format(
-                "axis '{}': each value must be a mapping {{label: ..., path: value, ...}}", axis));
-          std::string label;
-          for (const auto& o : kv.second) {
-            const std::string path = o.first.as<std::string>();
-            if (path == "label")
-              label = o.second.as<std::string>();
-            else
-              setPath(study, path, o.second);
-          }
-          cell.coords.emplace_back(axis.substr(1), label.empty() ? flowText(kv.second) : label);
-          continue;
-        }
-        setPath(study, axis, kv.second);
-      } catch (const Error& e) {
-        problems.push_back(fmt::format("cell {}: {}", i, e.what()));
-      }
-      cell.coords.emplace_back(axis, valueLabel(kv.second));
-    }
+    YAML::Node study = YAML::Clone(base.study);
+    applyOverrides(overrides[i], i, study, &cell, &problems);
     for (const auto& [a, v] : cell.coords)
       cell.label += (cell.label.empty() ? "" : " ") + a + "=" + v;
     if (cell.label.empty()) cell.label = "base";
@@ -343,7 +381,7 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
     cell.yaml = std::string(e.c_str()) + "\n";
     try {
       cell.config = parseStudy(
-          cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base_dir, reg);
+          cell.yaml, fmt::format("{} cell {} ({})", file.string(), i, cell.label), base.dir, reg);
       cell.config_hash = cell.config.hash();
       cell.hash = cellKey(cell.config, cell.config_hash, reg, &file_hashes);
       if (!hashes.insert(cell.config_hash).second)
@@ -639,6 +677,238 @@ struct Child {
   bool killed_for_time = false;
 };
 
+// A cell gets this long past its budget to stop by itself before it is killed.
+constexpr double kCellGraceS = 5.0;
+
+// The matrix's row in the database (one per run of the matrix, resumed or not).
+void recordMatrixStart(Db& db, const MatrixSpec& spec) {
+  Db::Stmt(&db, "INSERT INTO matrices(name, file, started, exid_version, axes) VALUES(?,?,?,?,?)")
+      .bind(1, spec.name)
+      .bind(2, spec.file.string())
+      .bind(3, isoNow())
+      .bind(4, std::string(EXID_VERSION_STRING))
+      .bind(5, fmt::format("{}", fmt::join(spec.axes, ",")))
+      .step();
+}
+
+// The cells of this shard not finished yet (sum: total and skipped counted).
+std::vector<const MatrixCell*> cellsToRun(Db& db, const MatrixSpec& spec, const MatrixOptions& opt,
+                                          MatrixRunSummary* sum) {
+  std::map<std::string, std::string> done;  // hash -> status
+  {
+    Db::Stmt s(&db, "SELECT hash, status FROM runs");
+    while (s.step()) done[s.text(0)] = s.text(1);
+  }
+  std::vector<const MatrixCell*> todo;
+  for (const auto& c : spec.cells) {
+    if (c.index % opt.shard_count != opt.shard_index) continue;
+    ++sum->total;
+    auto it = done.find(c.hash);
+    // "incomplete": stopped by the machine (disk full), never a result: always run again.
+    if (!opt.force && it != done.end() && it->second != "incomplete" &&
+        (it->second == "ok" || !opt.retry_failed)) {
+      ++sum->skipped;
+      continue;
+    }
+    todo.push_back(&c);
+  }
+  return todo;
+}
+
+// The cell's status, message and summary from how its process ended and what it wrote.
+void cellOutcome(const MatrixSpec& spec, const Child& ch, int status, double wall, std::string* st,
+                 std::string* msg, Json* summary) {
+  if (ch.killed_for_time) {
+    *st = "timeout";
+    *msg = fmt::format("over the cell budget of {} s (killed after {:.1f} s)", spec.cell_budget_s,
+                       wall);
+  } else if (WIFSIGNALED(status)) {
+    *st = "failed";
+    *msg = fmt::format("the cell's process died with signal {} ({})", WTERMSIG(status),
+                       strsignal(WTERMSIG(status)));
+  } else {
+    try {
+      *summary = Json::parse(ch.output);
+      *st = summary->find("status") ? summary->find("status")->asString() : "failed";
+      *msg = summary->find("message") ? summary->find("message")->asString() : "";
+      const Json* to = summary->find("timed_out");
+      if (*st != "ok" && to && to->asBool()) *st = "timeout";
+      const Json* full = summary->find("out_of_space");
+      if (*st != "ok" && full && full->asBool()) {
+        *st = "incomplete";  // run again on resume
+        *msg = "no space left on device (or over the file size limit): " + *msg;
+      }
+      const Json* oom = summary->find("out_of_memory");
+      if (*st != "ok" && oom && oom->asBool() && spec.cell_memory_mb > 0)
+        *msg +=
+            fmt::format(" (over the cell memory cap cell_memory_mb = {} MB)", spec.cell_memory_mb);
+    } catch (const std::exception& e) {
+      *st = "failed";
+      *msg = fmt::format("the cell's process gave no summary (exit {}): {}",
+                         WIFEXITED(status) ? WEXITSTATUS(status) : -1, e.what());
+    }
+  }
+}
+
+// A cell's process has ended: its outcome recorded, counted and logged.
+void finishCell(Db& db, const MatrixSpec& spec, Child& ch, int status, MatrixRunSummary* sum) {
+  const double wall =
+      std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+  std::string st, msg;
+  Json summary = Json::object();
+  cellOutcome(spec, ch, status, wall, &st, &msg, &summary);
+  recordRun(db, spec, *ch.cell, st, msg, wall, ch.started, summary);
+  if (st == "incomplete") ++sum->incomplete;
+  if (st == "ok")
+    ++sum->ok;
+  else if (st == "timeout")
+    ++sum->timeout;
+  else
+    ++sum->failed;
+  logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall, ch.cell->label,
+                      st == "ok" ? "" : "  (" + msg + ")"));
+}
+
+// In the cell's process: caps what the cell adds to the address space it inherits (the
+// program, its libraries and plugins are already mapped when it is forked).
+void capCellMemory(double cell_memory_mb) {
+  double inherited = 0;
+  if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
+    unsigned long pages = 0;
+    if (std::fscanf(f, "%lu", &pages) == 1)
+      inherited = static_cast<double>(pages) * static_cast<double>(::sysconf(_SC_PAGESIZE));
+    std::fclose(f);
+  }
+  const rlim_t bytes = static_cast<rlim_t>(inherited + cell_memory_mb * 1048576.0);
+  struct rlimit rl {
+    bytes, bytes
+  };
+  ::setrlimit(RLIMIT_AS, &rl);
+}
+
+// The forked cell's process: runs the cell's study and writes its summary (or the failure) to
+// fds[1]; never returns.
+[[noreturn]] void runCellProcess(const MatrixSpec& spec, const Registry& reg,
+                                 const MatrixOptions& opt, const MatrixCell* cell, int fds[2],
+                                 pid_t parent) {
+  ::close(fds[0]);
+  // The cell dies with its parent (no orphans when the parent is killed, even by SIGKILL);
+  // the parent may have died before the request took effect.
+  ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+  if (::getppid() != parent) ::_exit(1);
+  if (spec.cell_memory_mb > 0) capCellMemory(spec.cell_memory_mb);
+  ::signal(SIGINT, SIG_IGN);  // the parent decides
+  ::signal(SIGTERM, SIG_DFL);
+  setLogLevel(LogLevel::Quiet);
+  std::string text;
+  try {
+    StudyConfig cfg = cell->config;
+    cfg.budget_s = spec.cell_budget_s;
+    cfg.report.plots = false;  // a cell's plots would dominate the matrix's overhead
+    RunOptions ro;
+    if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
+    ro.clean_stale = false;  // done once for all cells (a scan of cells/ per cell is O(n^2))
+    StudyResult r = runStudy(cfg, reg, ro);
+    text = r.summary.dump(-1);
+  } catch (const std::exception& e) {
+    Json j = Json::object();
+    j["status"] = "failed";
+    j["message"] = e.what();
+    if (dynamic_cast<const std::bad_alloc*>(&e)) j["out_of_memory"] = true;
+    text = j.dump(-1);
+  }
+  std::size_t off = 0;
+  while (off < text.size()) {
+    ssize_t n = ::write(fds[1], text.data() + off, text.size() - off);
+    if (n <= 0) break;
+    off += static_cast<std::size_t>(n);
+  }
+  ::_exit(0);
+}
+
+// Forks the cell's process; the parent reads its summary from the returned child's fd.
+Child startCell(const MatrixSpec& spec, const Registry& reg, const MatrixOptions& opt,
+                const MatrixCell* cell) {
+  int fds[2];
+  if (::pipe(fds) != 0) throw Error("matrix: cannot create a pipe");
+  Child ch;
+  ch.cell = cell;
+  ch.start = std::chrono::steady_clock::now();
+  ch.started = isoNow();
+  std::fflush(nullptr);
+  const pid_t parent = ::getpid();
+  pid_t pid = ::fork();
+  if (pid < 0) throw Error("matrix: fork failed");
+  if (pid == 0) runCellProcess(spec, reg, opt, cell, fds, parent);
+  ::close(fds[1]);
+  ::fcntl(fds[0], F_SETFL, O_NONBLOCK);
+  ch.pid = pid;
+  ch.fd = fds[0];
+  return ch;
+}
+
+// Appends what the cell's pipe holds now to its output (the pipe does not block).
+void readCellOutput(Child& ch) {
+  char buf[65536];
+  while (true) {
+    ssize_t n = ::read(ch.fd, buf, sizeof buf);
+    if (n > 0)
+      ch.output.append(buf, static_cast<std::size_t>(n));
+    else
+      break;
+  }
+}
+
+// Interrupted: the running cells are stopped and waited for, the rest counted as not run.
+void stopRunningCells(const MatrixSpec& spec, std::size_t not_started, std::vector<Child>* running,
+                      MatrixRunSummary* sum) {
+  for (auto& ch : *running) ::kill(ch.pid, SIGTERM);
+  for (auto& ch : *running) {
+    ::waitpid(ch.pid, nullptr, 0);
+    ::close(ch.fd);
+  }
+  sum->not_run = static_cast<int>(not_started + running->size());
+  running->clear();
+  logWarn(fmt::format("matrix '{}': interrupted; {} cells not run (finished cells are saved)",
+                      spec.name, sum->not_run));
+}
+
+// One round over the running cells: their output read, those over budget killed, those ended
+// recorded and removed. A cell that cannot be recorded stops every other one, then throws.
+void serviceRunningCells(Db& db, const MatrixSpec& spec, std::vector<Child>* running,
+                         MatrixRunSummary* sum) {
+  for (std::size_t i = 0; i < running->size();) {
+    Child& ch = (*running)[i];
+    readCellOutput(ch);
+    const double age =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
+    if (spec.cell_budget_s > 0 && !ch.killed_for_time && age > spec.cell_budget_s + kCellGraceS) {
+      ch.killed_for_time = true;
+      ::kill(ch.pid, SIGKILL);
+    }
+    int status = 0;
+    pid_t w = ::waitpid(ch.pid, &status, WNOHANG);
+    if (w == ch.pid) {
+      readCellOutput(ch);
+      ::close(ch.fd);
+      try {
+        finishCell(db, spec, ch, status, sum);
+      } catch (...) {  // e.g. the database cannot be written: stop, leave no cell running
+        for (auto& other : *running)
+          if (other.pid != ch.pid) {
+            ::kill(other.pid, SIGKILL);
+            ::waitpid(other.pid, nullptr, 0);
+            ::close(other.fd);
+          }
+        throw;
+      }
+      running->erase(running->begin() + static_cast<std::ptrdiff_t>(i));
+      continue;
+    }
+    ++i;
+  }
+}
+
 }  // namespace
 
 MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const MatrixOptions& opt) {
@@ -655,217 +925,27 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
   cleanStaleTemporaries(opt.out_dir);
   cleanStaleTemporaries(opt.out_dir / "cells");
   Db db(opt.out_dir / opt.database);
-  {
-    Db::Stmt(&db, "INSERT INTO matrices(name, file, started, exid_version, axes) VALUES(?,?,?,?,?)")
-        .bind(1, spec.name)
-        .bind(2, spec.file.string())
-        .bind(3, isoNow())
-        .bind(4, std::string(EXID_VERSION_STRING))
-        .bind(5, fmt::format("{}", fmt::join(spec.axes, ",")))
-        .step();
-  }
-  std::map<std::string, std::string> done;  // hash -> status
-  {
-    Db::Stmt s(&db, "SELECT hash, status FROM runs");
-    while (s.step()) done[s.text(0)] = s.text(1);
-  }
+  recordMatrixStart(db, spec);
   MatrixRunSummary sum;
-  std::vector<const MatrixCell*> todo;
-  for (const auto& c : spec.cells) {
-    if (c.index % opt.shard_count != opt.shard_index) continue;
-    ++sum.total;
-    auto it = done.find(c.hash);
-    // "incomplete": stopped by the machine (disk full), never a result: always run again.
-    if (!opt.force && it != done.end() && it->second != "incomplete" &&
-        (it->second == "ok" || !opt.retry_failed)) {
-      ++sum.skipped;
-      continue;
-    }
-    todo.push_back(&c);
-  }
+  const std::vector<const MatrixCell*> todo = cellsToRun(db, spec, opt, &sum);
   logInfo(fmt::format(
       "matrix '{}': {} cells in this shard, {} already finished, {} to run on {} job{}", spec.name,
       sum.total, sum.skipped, todo.size(), opt.jobs, opt.jobs == 1 ? "" : "s"));
 
   std::vector<Child> running;
   std::size_t next = 0;
-  const double grace_s = 5.0;
-  auto finish = [&](Child& ch, int status) {
-    const double wall =
-        std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
-    std::string st, msg;
-    Json summary = Json::object();
-    if (ch.killed_for_time) {
-      st = "timeout";
-      msg = fmt::format("over the cell budget of {} s (killed after {:.1f} s)", spec.cell_budget_s,
-                        wall);
-    } else if (WIFSIGNALED(status)) {
-      st = "failed";
-      msg = fmt::format("the cell's process died with signal {} ({})", WTERMSIG(status),
-                        strsignal(WTERMSIG(status)));
-    } else {
-      try {
-        summary = Json::parse(ch.output);
-        st = summary.find("status") ? summary.find("status")->asString() : "failed";
-        msg = summary.find("message") ? summary.find("message")->asString() : "";
-        const Json* to = summary.find("timed_out");
-        if (st != "ok" && to && to->asBool()) st = "timeout";
-        const Json* full = summary.find("out_of_space");
-        if (st != "ok" && full && full->asBool()) {
-          st = "incomplete";  // run again on resume
-          msg = "no space left on device (or over the file size limit): " + msg;
-        }
-        const Json* oom = summary.find("out_of_memory");
-        if (st != "ok" && oom && oom->asBool() && spec.cell_memory_mb > 0)
-          msg += fmt::format(" (over the cell memory cap cell_memory_mb = {} MB)",
-                             spec.cell_memory_mb);
-      } catch (const std::exception& e) {
-        st = "failed";
-        msg = fmt::format("the cell's process gave no summary (exit {}): {}",
-                          WIFEXITED(status) ? WEXITSTATUS(status) : -1, e.what());
-      }
-    }
-    recordRun(db, spec, *ch.cell, st, msg, wall, ch.started, summary);
-    if (st == "incomplete") ++sum.incomplete;
-    if (st == "ok")
-      ++sum.ok;
-    else if (st == "timeout")
-      ++sum.timeout;
-    else
-      ++sum.failed;
-    logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall,
-                        ch.cell->label, st == "ok" ? "" : "  (" + msg + ")"));
-  };
-
   while ((next < todo.size() || !running.empty())) {
     const bool stop = opt.cancelled && opt.cancelled();
-    while (!stop && next < todo.size() &&
-           static_cast<int>(running.size()) < std::max(1, opt.jobs)) {
-      const MatrixCell* cell = todo[next++];
-      int fds[2];
-      if (::pipe(fds) != 0) throw Error("matrix: cannot create a pipe");
-      Child ch;
-      ch.cell = cell;
-      ch.start = std::chrono::steady_clock::now();
-      ch.started = isoNow();
-      std::fflush(nullptr);
-      const pid_t parent = ::getpid();
-      pid_t pid = ::fork();
-      if (pid < 0) throw Error("matrix: fork failed");
-      if (pid == 0) {
-        ::close(fds[0]);
-        // The cell dies with its parent (no orphans when the parent is killed, even by SIGKILL);
-        // the parent may have died before the request took effect.
-        ::prctl(PR_SET_PDEATHSIG, SIGKILL);
-        if (::getppid() != parent) ::_exit(1);
-        if (spec.cell_memory_mb > 0) {
-          // The cap is on what the cell adds to the address space it inherits (the program,
-          // its libraries and plugins are already mapped when it is forked).
-          double inherited = 0;
-          if (std::FILE* f = std::fopen("/proc/self/statm", "r")) {
-            unsigned long pages = 0;
-            if (std::fscanf(f, "%lu", &pages) == 1)
-              inherited = static_cast<double>(pages) * static_cast<double>(::sysconf(_SC_PAGESIZE));
-            std::fclose(f);
-          }
-          const rlim_t bytes = static_cast<rlim_t>(inherited + spec.cell_memory_mb * 1048576.0);
-          struct rlimit rl {
-            bytes, bytes
-          };
-          ::setrlimit(RLIMIT_AS, &rl);
-        }
-        ::signal(SIGINT, SIG_IGN);  // the parent decides
-        ::signal(SIGTERM, SIG_DFL);
-        setLogLevel(LogLevel::Quiet);
-        std::string text;
-        try {
-          StudyConfig cfg = cell->config;
-          cfg.budget_s = spec.cell_budget_s;
-          cfg.report.plots = false;  // a cell's plots would dominate the matrix's overhead
-          RunOptions ro;
-          if (opt.write_cell_files) ro.out_dir = opt.out_dir / "cells" / cell->hash;
-          ro.clean_stale = false;  // done once for all cells (a scan of cells/ per cell is O(n^2))
-          StudyResult r = runStudy(cfg, reg, ro);
-          text = r.summary.dump(-1);
-        } catch (const std::exception& e) {
-          Json j = Json::object();
-          j["status"] = "failed";
-          j["message"] = e.what();
-          if (dynamic_cast<const std::bad_alloc*>(&e)) j["out_of_memory"] = true;
-          text = j.dump(-1);
-        }
-        std::size_t off = 0;
-        while (off < text.size()) {
-          ssize_t n = ::write(fds[1], text.data() + off, text.size() - off);
-          if (n <= 0) break;
-          off += static_cast<std::size_t>(n);
-        }
-        ::_exit(0);
-      }
-      ::close(fds[1]);
-      ::fcntl(fds[0], F_SETFL, O_NONBLOCK);
-      ch.pid = pid;
-      ch.fd = fds[0];
-      running.push_back(std::move(ch));
-    }
+    while (!stop && next < todo.size() && static_cast<int>(running.size()) < std::max(1, opt.jobs))
+      running.push_back(startCell(spec, reg, opt, todo[next++]));
     if (stop) {
-      for (auto& ch : running) ::kill(ch.pid, SIGTERM);
-      for (auto& ch : running) {
-        ::waitpid(ch.pid, nullptr, 0);
-        ::close(ch.fd);
-      }
-      sum.not_run = static_cast<int>(todo.size() - next + running.size());
-      running.clear();
-      logWarn(fmt::format("matrix '{}': interrupted; {} cells not run (finished cells are saved)",
-                          spec.name, sum.not_run));
+      stopRunningCells(spec, todo.size() - next, &running, &sum);
       break;
     }
     std::vector<pollfd> pfds;
     for (auto& ch : running) pfds.push_back({ch.fd, POLLIN, 0});
     ::poll(pfds.data(), pfds.size(), 50);
-    for (std::size_t i = 0; i < running.size();) {
-      Child& ch = running[i];
-      char buf[65536];
-      while (true) {
-        ssize_t n = ::read(ch.fd, buf, sizeof buf);
-        if (n > 0)
-          ch.output.append(buf, static_cast<std::size_t>(n));
-        else
-          break;
-      }
-      const double age =
-          std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
-      if (spec.cell_budget_s > 0 && !ch.killed_for_time && age > spec.cell_budget_s + grace_s) {
-        ch.killed_for_time = true;
-        ::kill(ch.pid, SIGKILL);
-      }
-      int status = 0;
-      pid_t w = ::waitpid(ch.pid, &status, WNOHANG);
-      if (w == ch.pid) {
-        while (true) {
-          ssize_t n = ::read(ch.fd, buf, sizeof buf);
-          if (n > 0)
-            ch.output.append(buf, static_cast<std::size_t>(n));
-          else
-            break;
-        }
-        ::close(ch.fd);
-        try {
-          finish(ch, status);
-        } catch (...) {  // e.g. the database cannot be written: stop, leave no cell running
-          for (auto& other : running)
-            if (other.pid != ch.pid) {
-              ::kill(other.pid, SIGKILL);
-              ::waitpid(other.pid, nullptr, 0);
-              ::close(other.fd);
-            }
-          throw;
-        }
-        running.erase(running.begin() + static_cast<std::ptrdiff_t>(i));
-        continue;
-      }
-      ++i;
-    }
+    serviceRunningCells(db, spec, &running, &sum);
   }
   sum.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return sum;
