@@ -510,8 +510,21 @@ class CsvExperiment : public exid::Experiment {
 
     // ---- columns, from the headers
     void resolveColumns(const exid::RunContext& ctx) {
-      const int n = n_;
-      const exid::RobotModel& robot = *robot_;
+      openFiles(ctx);
+      const int fq = 0, ftau = static_cast<int>(files_.size()) - 1;
+      std::vector<Ref> cq = namedColumns(fq, "q_columns");
+      if (cq.empty()) cq = columnGroup("q", true, "joint positions are required", fq);
+      const std::vector<Ref> cqd = columnGroup("qd", false, "");
+      const std::vector<Ref> cqdd = columnGroup("qdd", false, "");
+      const std::vector<Ref> ctau = torqueColumns(ftau);
+      const std::vector<Ref> cw = wrenchColumns();
+      const int ct = timeColumn();
+      readScales();
+      layoutColumns(cq, cqd, cqdd, ctau, cw, ct);
+    }
+
+    // The file (and torque_file), relative to the study, and their columns.
+    void openFiles(const exid::RunContext& ctx) {
       auto path = [&](fs::path p) {
         if (p.is_relative() && !ctx.study_dir.empty()) p = ctx.study_dir / p;
         return p.string();
@@ -524,94 +537,110 @@ class CsvExperiment : public exid::Experiment {
         exid::CsvReader r(f, opt, "CSV data");
         columns_.push_back(r.columns());
       }
-      const int fq = 0, ftau = static_cast<int>(files_.size()) - 1;
-      auto col = [&](int f, const std::string& c) {
-        const auto& C = columns_[static_cast<std::size_t>(f)];
-        const auto it = std::find(C.begin(), C.end(), c);
-        return it == C.end() ? -1 : static_cast<int>(it - C.begin());
-      };
-      auto named = [&](int f, const char* key) -> std::vector<Ref> {
-        std::vector<Ref> idx;
-        const std::vector<std::string> names = P_.getStrings(key);
-        if (names.empty()) return idx;
-        exid::check(static_cast<int>(names.size()) == n,
-                    fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
-                                "'{}'), found {}",
-                                key, n, robot.name, names.size()));
-        for (std::size_t a = 0; a < names.size(); ++a)
-          for (std::size_t b = 0; b < a; ++b)
-            exid::check(names[a] != names[b],
-                        fmt::format("experiment 'csv': {}: column '{}' is named twice (elements "
-                                    "{} and {}); each joint needs its own column",
-                                    key, names[a], b + 1, a + 1));
-        for (const auto& c : names) {
-          const int i = col(f, c);
-          exid::check(i >= 0, fmt::format("experiment 'csv': {}: {}: no column '{}' (found "
-                                          "columns: {})",
-                                          files_[static_cast<std::size_t>(f)], key, c,
-                                          fmt::join(columns_[static_cast<std::size_t>(f)], ", ")));
-          idx.push_back({f, i});
-        }
+    }
+
+    // Column c of source f, or -1.
+    int col(int f, const std::string& c) const {
+      const auto& C = columns_[static_cast<std::size_t>(f)];
+      const auto it = std::find(C.begin(), C.end(), c);
+      return it == C.end() ? -1 : static_cast<int>(it - C.begin());
+    }
+
+    // The n columns named by parameter `key` in source f (none when the list is empty).
+    std::vector<Ref> namedColumns(int f, const char* key) const {
+      const int n = n_;
+      std::vector<Ref> idx;
+      const std::vector<std::string> names = P_.getStrings(key);
+      if (names.empty()) return idx;
+      exid::check(static_cast<int>(names.size()) == n,
+                  fmt::format("experiment 'csv': {}: expected {} names (one per joint of robot "
+                              "'{}'), found {}",
+                              key, n, robot_->name, names.size()));
+      for (std::size_t a = 0; a < names.size(); ++a)
+        for (std::size_t b = 0; b < a; ++b)
+          exid::check(names[a] != names[b],
+                      fmt::format("experiment 'csv': {}: column '{}' is named twice (elements "
+                                  "{} and {}); each joint needs its own column",
+                                  key, names[a], b + 1, a + 1));
+      for (const auto& c : names) {
+        const int i = col(f, c);
+        exid::check(i >= 0, fmt::format("experiment 'csv': {}: {}: no column '{}' (found "
+                                        "columns: {})",
+                                        files_[static_cast<std::size_t>(f)], key, c,
+                                        fmt::join(columns_[static_cast<std::size_t>(f)], ", ")));
+        idx.push_back({f, i});
+      }
+      return idx;
+    }
+
+    // Columns prefix1..prefixn of source f: all n, or none (an error when required; `what`
+    // says why they are).
+    std::vector<Ref> columnGroup(const std::string& prefix, bool required, const char* what,
+                                 int f = 0) const {
+      const int n = n_;
+      const std::string& fileg = files_[static_cast<std::size_t>(f)];
+      const auto& C = columns_[static_cast<std::size_t>(f)];
+      std::vector<Ref> idx;
+      int found = 0;
+      while (col(f, prefix + std::to_string(found + 1)) >= 0) ++found;
+      if (found == 0) {
+        exid::check(!required,
+                    fmt::format("experiment 'csv': {}: missing column '{}1' ({}; expected "
+                                "columns {}1..{}{} for the {} joints of robot '{}'; found "
+                                "columns: {})",
+                                fileg, prefix, what, prefix, prefix, n, n, robot_->name,
+                                fmt::join(C, ", ")));
         return idx;
-      };
-      auto group = [&](const std::string& prefix, bool required, const char* what,
-                       int f = 0) -> std::vector<Ref> {
-        const std::string& fileg = files_[static_cast<std::size_t>(f)];
-        const auto& C = columns_[static_cast<std::size_t>(f)];
-        std::vector<Ref> idx;
-        int found = 0;
-        while (col(f, prefix + std::to_string(found + 1)) >= 0) ++found;
-        if (found == 0) {
-          exid::check(!required,
-                      fmt::format("experiment 'csv': {}: missing column '{}1' ({}; expected "
-                                  "columns {}1..{}{} for the {} joints of robot '{}'; found "
-                                  "columns: {})",
-                                  fileg, prefix, what, prefix, prefix, n, n, robot.name,
-                                  fmt::join(C, ", ")));
-          return idx;
-        }
-        exid::check(
-            found == n,
-            fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
-                        "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
-                        fileg, prefix, prefix, found, found, prefix, prefix, n, robot.name, n));
-        for (int j = 1; j <= n; ++j) idx.push_back({f, col(f, prefix + std::to_string(j))});
-        return idx;
-      };
-      std::vector<Ref> cq = named(fq, "q_columns");
-      if (cq.empty()) cq = group("q", true, "joint positions are required", fq);
-      const std::vector<Ref> cqd = group("qd", false, "");
-      const std::vector<Ref> cqdd = group("qdd", false, "");
+      }
+      exid::check(
+          found == n,
+          fmt::format("experiment 'csv': {}: wrong joint count: found columns {}1..{}{} "
+                      "({} joints), expected {}1..{}{} for robot '{}' ({} joints)",
+                      fileg, prefix, prefix, found, found, prefix, prefix, n, robot_->name, n));
+      for (int j = 1; j <= n; ++j) idx.push_back({f, col(f, prefix + std::to_string(j))});
+      return idx;
+    }
+
+    // The torque columns of source ftau (tau, or motor currents with their torque constants).
+    std::vector<Ref> torqueColumns(int ftau) {
       tfrom_ = P_.getString("torque_from");
-      std::vector<Ref> ctau = named(ftau, "tau_columns");
+      std::vector<Ref> ctau = namedColumns(ftau, "tau_columns");
       if (tfrom_ == "tau") {
-        if (ctau.empty()) ctau = group("tau", ftau > 0, "torque_file is given", ftau);
+        if (ctau.empty()) ctau = columnGroup("tau", ftau > 0, "torque_file is given", ftau);
       } else {
         const std::string pre = P_.getString("current_prefix");
         if (ctau.empty())
-          ctau = group(pre, true, "torque_from: current needs the motor currents", ftau);
+          ctau = columnGroup(pre, true, "torque_from: current needs the motor currents", ftau);
         Kt_ = P_.getDoubles("torque_constants_Nm_per_A");
-        exid::check(static_cast<int>(Kt_.size()) == n,
+        exid::check(static_cast<int>(Kt_.size()) == n_,
                     fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values "
                                 "(one per joint of robot '{}'), found {}",
-                                n, robot.name, Kt_.size()));
+                                n_, robot_->name, Kt_.size()));
       }
+      return ctau;
+    }
+
+    // fx fy fz mx my mz: all six, or none.
+    std::vector<Ref> wrenchColumns() const {
       std::vector<Ref> cw;
-      {
-        const char* wn[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
-        int present = 0;
-        for (const char* c : wn) present += col(0, c) >= 0;
-        if (present > 0) {
-          std::vector<std::string> missing;
-          for (const char* c : wn)
-            if (col(0, c) < 0) missing.push_back(c);
-          exid::check(missing.empty(),
-                      fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
-                                  "(expected all of fx fy fz mx my mz, or none)",
-                                  files_[0], fmt::join(missing, ", ")));
-          for (const char* c : wn) cw.push_back({0, col(0, c)});
-        }
+      const char* wn[6] = {"fx", "fy", "fz", "mx", "my", "mz"};
+      int present = 0;
+      for (const char* c : wn) present += col(0, c) >= 0;
+      if (present > 0) {
+        std::vector<std::string> missing;
+        for (const char* c : wn)
+          if (col(0, c) < 0) missing.push_back(c);
+        exid::check(missing.empty(),
+                    fmt::format("experiment 'csv': {}: incomplete wrench: missing column(s) {} "
+                                "(expected all of fx fy fz mx my mz, or none)",
+                                files_[0], fmt::join(missing, ", ")));
+        for (const char* c : wn) cw.push_back({0, col(0, c)});
       }
+      return cw;
+    }
+
+    // The time column of file (-1: none; sample_period_s is then needed) and its unit.
+    int timeColumn() {
       tname_ = P_.getString("time_column");
       const int ct = col(0, tname_);
       dt_ = P_.getDouble("sample_period_s");
@@ -623,17 +652,26 @@ class CsvExperiment : public exid::Experiment {
                               files_[0], tname_, fmt::join(columns_[0], ", ")));
       tunit_ = P_.getString("time_unit");
       tfactor_ = tunit_ == "ms" ? 1e-3 : tunit_ == "us" ? 1e-6 : tunit_ == "ns" ? 1e-9 : 1.0;
-      auto perJoint = [&](const char* key, std::vector<double> v, double dflt) {
-        if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
-        exid::check(static_cast<int>(v.size()) == n,
-                    fmt::format("experiment 'csv': {}: expected {} values (one per joint of "
-                                "robot '{}'), found {}",
-                                key, n, robot.name, v.size()));
-        for (double x : v)
-          exid::check(std::isfinite(x) && x != 0.0,
-                      fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
-        return v;
-      };
+      return ct;
+    }
+
+    // A per-joint scale: n finite non-zero values (empty: dflt for every joint).
+    std::vector<double> perJoint(const char* key, std::vector<double> v, double dflt) const {
+      const int n = n_;
+      if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
+      exid::check(static_cast<int>(v.size()) == n,
+                  fmt::format("experiment 'csv': {}: expected {} values (one per joint of "
+                              "robot '{}'), found {}",
+                              key, n, robot_->name, v.size()));
+      for (double x : v)
+        exid::check(std::isfinite(x) && x != 0.0,
+                    fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
+      return v;
+    }
+
+    // Scales, signs, offsets and the remaining options.
+    void readScales() {
+      const int n = n_;
       qscale_ = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
       qdscale_ = P_.getDoubles("qd_scale").empty()
                      ? qscale_
@@ -667,9 +705,13 @@ class CsvExperiment : public exid::Experiment {
                         sign_[static_cast<std::size_t>(j)]));
       joint_frame_ = P_.getString("current_frame") == "joint";
       drop_ = P_.getBool("drop_bad_rows");
+    }
 
-      // The used columns, in the order q, qd, qdd, tau, wrench, t; per source the columns it
-      // reads and where each value goes.
+    // The used columns, in the order q, qd, qdd, tau, wrench, t; per source the columns it
+    // reads and where each value goes.
+    void layoutColumns(const std::vector<Ref>& cq, const std::vector<Ref>& cqd,
+                       const std::vector<Ref>& cqdd, const std::vector<Ref>& ctau,
+                       const std::vector<Ref>& cw, int ct) {
       auto add = [&](const std::vector<Ref>& g, std::vector<int>* pos) {
         for (const Ref& r : g) {
           pos->push_back(static_cast<int>(used_.size()));
@@ -765,31 +807,60 @@ class CsvExperiment : public exid::Experiment {
       return l > 0 ? fmt::format("line {}", l) : fmt::format("data row {}", row + 1);
     }
     // ---- the scan: rows, bad values (drop_bad_rows), time, gaps, segment, split
+    // What the scan keeps of the kept rows: the time stamps as written (with a time column)
+    // and, only when rows were dropped, each one's file row.
+    struct ScanRows {
+      std::vector<double> raw;
+      std::vector<int> keep;
+    };
+    int rowOf(const ScanRows& s, std::size_t i) const {
+      return s.keep.empty() ? static_cast<int>(i) : s.keep[i];
+    }
+    double timeOf(const ScanRows& s, long i) const {
+      return ct_ ? tfactor_ * s.raw[static_cast<std::size_t>(i)]
+                 : rowOf(s, static_cast<std::size_t>(i)) * dt_;
+    }
+
     void scan() {
-      const std::string& file = files_[0];
-      // torque_file: row-aligned with file
-      if (files_.size() > 1) {
-        int tau_rows = 0, file_rows = 0;
-        for (int f = 0; f < 2; ++f) {
-          int& count = f == 0 ? file_rows : tau_rows;
-          exid::CsvReadOptions opt;
-          opt.allow_non_finite = true;
-          opt.text_columns = true;
-          exid::CsvReader r(files_[static_cast<std::size_t>(f)], opt, "CSV data");
-          r.select({});
-          while (r.next(nullptr)) ++count;
-        }
-        if (tau_rows != file_rows) {
-          const int f = tau_rows > file_rows ? 1 : 0;
-          const int k = std::min(file_rows, tau_rows);
-          const int line = lineOfRow(f, k);
-          throw exid::Error(fmt::format(
-              "experiment 'csv': torque_file {} has {} data rows, file {} has {}: the two files "
-              "must be row-aligned ({}: data row {} at line {} has no counterpart)",
-              files_[1], tau_rows, file, file_rows, files_[static_cast<std::size_t>(f)], k + 1,
-              line));
-        }
+      checkRowAligned();
+      ScanRows s;
+      s.raw = scanRows();
+      s.keep = keptFileRows();
+      checkUniformSteps(s);
+      selectSegment(s);
+      scanSamplingRate(s);
+      recordTiming(&s);
+    }
+
+    // torque_file: row-aligned with file
+    void checkRowAligned() const {
+      if (files_.size() <= 1) return;
+      int tau_rows = 0, file_rows = 0;
+      for (int f = 0; f < 2; ++f) {
+        int& count = f == 0 ? file_rows : tau_rows;
+        exid::CsvReadOptions opt;
+        opt.allow_non_finite = true;
+        opt.text_columns = true;
+        exid::CsvReader r(files_[static_cast<std::size_t>(f)], opt, "CSV data");
+        r.select({});
+        while (r.next(nullptr)) ++count;
       }
+      if (tau_rows != file_rows) {
+        const int f = tau_rows > file_rows ? 1 : 0;
+        const int k = std::min(file_rows, tau_rows);
+        const int line = lineOfRow(f, k);
+        throw exid::Error(fmt::format(
+            "experiment 'csv': torque_file {} has {} data rows, file {} has {}: the two files "
+            "must be row-aligned ({}: data row {} at line {} has no counterpart)",
+            files_[1], tau_rows, files_[0], file_rows, files_[static_cast<std::size_t>(f)], k + 1,
+            line));
+      }
+    }
+
+    // Every row once: bad rows dropped (drop_bad_rows) or refused, time checked to increase.
+    // Returns the kept rows' time stamps as written (with a time column).
+    std::vector<double> scanRows() {
+      const std::string& file = files_[0];
       // Readers for the scan: the time column alone, unless rows may be dropped (then every
       // used column decides).
       std::vector<std::unique_ptr<exid::CsvReader>> rd;
@@ -853,10 +924,12 @@ class CsvExperiment : public exid::Experiment {
       exid::check(kept_rows_ > 0,
                   fmt::format("experiment 'csv': {}: every row was dropped ({} with bad values)",
                               file, dropped_));
-      // Gaps and uneven stamps: one behaviour, refused with the place (a filter, a derivative
-      // and an energy integral all assume a uniform rate). Steps across dropped rows count per
-      // row.
-      std::vector<int> keep;  // file row of each kept row, only when rows were dropped
+      return raw;
+    }
+
+    // The file row of each kept row, only when rows were dropped (else empty).
+    std::vector<int> keptFileRows() const {
+      std::vector<int> keep;
       if (!dropped_rows_.empty()) {
         keep.reserve(static_cast<std::size_t>(kept_rows_));
         for (long i = 0, r = 0, d = 0; i < kept_rows_; ++r) {
@@ -869,39 +942,44 @@ class CsvExperiment : public exid::Experiment {
           ++i;
         }
       }
-      auto rowOf = [&](std::size_t i) { return keep.empty() ? static_cast<int>(i) : keep[i]; };
-      auto timeOf = [&](long i) {
-        return ct_ ? tfactor_ * raw[static_cast<std::size_t>(i)]
-                   : rowOf(static_cast<std::size_t>(i)) * dt_;
+      return keep;
+    }
+
+    // Gaps and uneven stamps: one behaviour, refused with the place (a filter, a derivative
+    // and an energy integral all assume a uniform rate). Steps across dropped rows count per
+    // row.
+    void checkUniformSteps(const ScanRows& s) const {
+      if (!ct_ || s.raw.size() < 3) return;
+      // step i: from kept row i to i + 1, per file row (computed where needed, never held:
+      // the stamps are the scan's one array)
+      auto stepAt = [&](std::size_t i) {
+        return (timeOf(s, static_cast<long>(i + 1)) - timeOf(s, static_cast<long>(i))) /
+               static_cast<double>(rowOf(s, i + 1) - rowOf(s, i));
       };
-      if (ct_ && raw.size() >= 3) {
-        // step i: from kept row i to i + 1, per file row (computed where needed, never held:
-        // the stamps are the scan's one array)
-        auto stepAt = [&](std::size_t i) {
-          return (timeOf(static_cast<long>(i + 1)) - timeOf(static_cast<long>(i))) /
-                 static_cast<double>(rowOf(i + 1) - rowOf(i));
-        };
-        const std::size_t nsteps = raw.size() - 1;
-        const double med = exid::medianOfValues(nsteps, stepAt);
-        const double ratio = P_.getDouble("max_gap_ratio");
-        const bool resample = P_.getDouble("resample_hz") > 0.0;
-        for (std::size_t i = 0; i < nsteps; ++i) {
-          const double step = stepAt(i);
-          if (!(step <= ratio * med && (resample || step >= med / ratio)))
-            throw exid::Error(
-                fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s "
-                            "against a median step of {} s: {} (a filter, derivatives and "
-                            "energy integrals need a uniform rate); cut the recording there "
-                            "with t_start_s/t_end_s{} (max_gap_ratio = {})",
-                            file, lineText(rowOf(i + 1)), rowOf(i + 1) + 1, step, med,
-                            step > med ? "a gap" : "uneven time stamps",
-                            step > med ? "" : ", or resample it (resample_hz)", ratio));
-        }
+      const std::size_t nsteps = s.raw.size() - 1;
+      const double med = exid::medianOfValues(nsteps, stepAt);
+      const double ratio = P_.getDouble("max_gap_ratio");
+      const bool resample = P_.getDouble("resample_hz") > 0.0;
+      for (std::size_t i = 0; i < nsteps; ++i) {
+        const double step = stepAt(i);
+        if (!(step <= ratio * med && (resample || step >= med / ratio)))
+          throw exid::Error(
+              fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s "
+                          "against a median step of {} s: {} (a filter, derivatives and "
+                          "energy integrals need a uniform rate); cut the recording there "
+                          "with t_start_s/t_end_s{} (max_gap_ratio = {})",
+                          files_[0], lineText(rowOf(s, i + 1)), rowOf(s, i + 1) + 1, step, med,
+                          step > med ? "a gap" : "uneven time stamps",
+                          step > med ? "" : ", or resample it (resample_hz)", ratio));
       }
-      // Segment (inside the recording, never clamped) and its split into an identification and
-      // a validation part (half-open at the split point: no sample belongs to both).
+    }
+
+    // Segment (inside the recording, never clamped) and its split into an identification and
+    // a validation part (half-open at the split point: no sample belongs to both).
+    void selectSegment(const ScanRows& s) {
+      const std::string& file = files_[0];
       const double tfirst = t_first_abs_;
-      span_ = timeOf(kept_rows_ - 1) - tfirst;
+      span_ = timeOf(s, kept_rows_ - 1) - tfirst;
       const double step_tol =
           kept_rows_ > 1 ? 0.5 * span_ / static_cast<double>(kept_rows_ - 1) : 0.0;
       seg_ = exid::resolveSegment(P_, span_, step_tol, "experiment 'csv': ", file);
@@ -917,7 +995,7 @@ class CsvExperiment : public exid::Experiment {
       i1_ = -1;
       in_segment_ = 0;
       for (long i = 0; i < kept_rows_; ++i) {
-        const double rel = timeOf(i) - tfirst;
+        const double rel = timeOf(s, i) - tfirst;
         if (rel < ts_) continue;
         if (te_ > 0.0 && rel > te_) break;
         ++in_segment_;
@@ -929,15 +1007,18 @@ class CsvExperiment : public exid::Experiment {
                                         "after the first sample (t = {} s; the file spans {} s)",
                                         file, lo, part_ == "none" ? te_ : hi, tfirst, span_));
       if (i0_ < 0) i0_ = i1_ = 0;
-      t_first_ = timeOf(i0_);
-      t_last_ = timeOf(i1_ - 1);
-      // The samples' sampling rate as exid::samplingRate computes it on a pass's t (the same
-      // differences of the same doubles, the same median): samplingRate() without a pass.
+      t_first_ = timeOf(s, i0_);
+      t_last_ = timeOf(s, i1_ - 1);
+    }
+
+    // The samples' sampling rate as exid::samplingRate computes it on a pass's t (the same
+    // differences of the same doubles, the same median): samplingRate() without a pass.
+    void scanSamplingRate(const ScanRows& s) {
       has_rate_ = false;
       if (i1_ - i0_ >= 3) {
         auto dtAt = [&](std::size_t k) {
           const long i = i0_ + static_cast<long>(k);
-          return timeOf(i + 1) - timeOf(i);
+          return timeOf(s, i + 1) - timeOf(s, i);
         };
         const auto nd = static_cast<std::size_t>(i1_ - i0_ - 1);
         bool increasing = true;
@@ -951,15 +1032,20 @@ class CsvExperiment : public exid::Experiment {
           has_rate_ = true;
         }
       }
-      // Recording statistics: the timing now; the rest after the first whole pass.
+    }
+
+    // Recording statistics: the timing now; the rest after the first whole pass. The samples'
+    // stamps are cut out of s->raw in place.
+    void recordTiming(ScanRows* s) {
       recording_ = exid::Json::object();
-      recording_["file"] = file;
+      recording_["file"] = files_[0];
       recording_["rows"] = static_cast<long long>(i1_ - i0_);
       if (ct_) {
+        std::vector<double>& raw = s->raw;
         raw.erase(raw.begin() + i1_, raw.end());  // the samples' stamps, in place
         raw.erase(raw.begin(), raw.begin() + i0_);
         std::vector<int> sel_rows;
-        if (!keep.empty()) sel_rows.assign(keep.begin() + i0_, keep.begin() + i1_);
+        if (!s->keep.empty()) sel_rows.assign(s->keep.begin() + i0_, s->keep.begin() + i1_);
         exid::Json t = exid::samplingStats(raw, tfactor_, sel_rows, P_.getDouble("max_gap_ratio"));
         t["source"] = fmt::format("time column '{}'", tname_);
         recording_["timing"] = t;
