@@ -31,6 +31,579 @@ namespace rb = exid::rosbag2;
 constexpr const char* kJointStateType = "sensor_msgs/msg/JointState";
 constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
 
+/// One reading of a bag by the rosbag2 experiment, stage by stage (Rosbag2Experiment::run):
+/// the robot's joints, the bag's topics, the messages, their order in time, gaps, the segment,
+/// the wrench's time range, the dataset and its meta.
+class BagReading {
+ public:
+  BagReading(const exid::ParamSet& P, const exid::RobotModel& robot, const exid::RunContext& ctx)
+      : P_(P), robot_(robot), n_(robot.dof()) {
+    fs::path dir = P_.getString("path");
+    if (dir.is_relative() && !ctx.study_dir.empty()) dir = ctx.study_dir / dir;
+    dir_ = dir;
+    bagname_ = dir.string();
+  }
+
+  const std::string& bagname() const { return bagname_; }
+
+  exid::Dataset read() {
+    resolveJoints();
+    openBag();
+    readAllMessages();
+    checkMessages();
+    orderByTime();
+    timeAxis();
+    checkSteps();
+    selectSegment();
+    matchWrenchRange();
+    exid::Dataset d = fillDataset();
+    interpolateWrench(&d);
+    describe(&d);
+    return d;
+  }
+
+ private:
+  struct Js {
+    std::int64_t ns;
+    long long msg;  // 1-based index among the topic's messages (bag order)
+  };
+  struct Wr {
+    std::int64_t ns;
+    long long msg;
+    double v[6];
+  };
+
+  // The robot's joints and their names in the messages; the joints' signs.
+  void resolveJoints() {
+    const int n = n_;
+    names_ = P_.getStrings("joint_names");
+    if (names_.empty()) {
+      for (const exid::Body& b : robot_.bodies) names_.push_back(b.joint_name);
+    } else {
+      exid::check(static_cast<int>(names_.size()) == n,
+                  fmt::format("{}joint_names: expected {} names (one per joint of robot '{}', in "
+                              "its order), found {}",
+                              pre_, n, robot_.name, names_.size()));
+    }
+    for (std::size_t a = 0; a < names_.size(); ++a) {
+      exid::check(!names_[a].empty(),
+                  fmt::format("{}joint {} of robot '{}' has no name; give joint_names", pre_, a + 1,
+                              robot_.name));
+      for (std::size_t b = 0; b < a; ++b)
+        exid::check(names_[a] != names_[b],
+                    fmt::format("{}joint_names: '{}' is named twice (joints {} and {}); each joint "
+                                "needs its own name",
+                                pre_, names_[a], b + 1, a + 1));
+    }
+    sign_ = P_.getDoubles("sign");
+    if (sign_.empty()) sign_.assign(static_cast<std::size_t>(n), 1.0);
+    exid::check(
+        static_cast<int>(sign_.size()) == n,
+        fmt::format("{}sign: expected {} values (one per joint), found {}", pre_, n, sign_.size()));
+    for (int j = 0; j < n; ++j)
+      exid::check(
+          sign_[static_cast<std::size_t>(j)] == 1.0 || sign_[static_cast<std::size_t>(j)] == -1.0,
+          fmt::format("{}sign: joint {}: expected +1 or -1, found {}", pre_, j + 1,
+                      sign_[static_cast<std::size_t>(j)]));
+  }
+
+  // A topic named by parameter `key` must be in the bag, of `type`, serialized as CDR.
+  void checkTopic(const std::string& topic, const char* key, const char* type) const {
+    auto topicList = [&] {
+      std::vector<std::string> v;
+      for (const rb::TopicInfo& t : bag_.topics) v.push_back(t.name + " (" + t.type + ")");
+      return v.empty() ? std::string("none") : fmt::format("{}", fmt::join(v, ", "));
+    };
+    exid::check(!topic.empty(), fmt::format("{}{}: empty topic name", pre_, key));
+    const rb::TopicInfo* t = bag_.topic(topic);
+    exid::check(t != nullptr,
+                fmt::format("{}{}: {} = '{}': no such topic in the bag (topics: "
+                            "{})",
+                            pre_, bag_.metadata_file.string(), key, topic, topicList()));
+    exid::check(t->type == type,
+                fmt::format("{}{}: {} = '{}' has type '{}', expected {}", pre_,
+                            bag_.metadata_file.string(), key, topic, t->type, type));
+    exid::check(t->serialization_format == "cdr",
+                fmt::format("{}{}: topic '{}': serialization_format '{}', expected cdr", pre_,
+                            bag_.metadata_file.string(), topic, t->serialization_format));
+  }
+
+  // The bag and its topics.
+  void openBag() {
+    try {
+      bag_ = rb::readMetadata(dir_);
+    } catch (const exid::Error& e) {
+      throw exid::Error(pre_ + e.what());
+    }
+    js_topic_ = P_.getString("joint_states_topic");
+    w_topic_ = P_.getString("wrench_topic");
+    checkTopic(js_topic_, "joint_states_topic", kJointStateType);
+    with_wrench_ = !w_topic_.empty();
+    if (with_wrench_) {
+      checkTopic(w_topic_, "wrench_topic", kWrenchType);
+      exid::check(w_topic_ != js_topic_, fmt::format("{}wrench_topic and joint_states_topic are "
+                                                     "both '{}'",
+                                                     pre_, w_topic_));
+    }
+  }
+
+  // A bad message: an error, or (drop_bad_messages) counted and kept as an example.
+  void bad(const std::string& topic, long long k, const std::string& where, const std::string& why,
+           long long* counter) {
+    const std::string msg = fmt::format("{}{}: topic '{}', message {}{}: {}", pre_, bagname_, topic,
+                                        k, where.empty() ? std::string() : " (" + where + ")", why);
+    if (!drop_) throw exid::Error(msg + " (set drop_bad_messages: true to drop such messages)");
+    ++*counter;
+    if (bad_examples_.size() < 10) bad_examples_.push_back(exid::Json(msg));
+  }
+
+  // Read the messages.
+  void readAllMessages() {
+    header_time_ = P_.getString("time") == "header";
+    use_vel_ = P_.getBool("use_velocity");
+    drop_ = P_.getBool("drop_bad_messages");
+    const std::set<std::string> wanted = with_wrench_ ? std::set<std::string>{js_topic_, w_topic_}
+                                                      : std::set<std::string>{js_topic_};
+    try {
+      rb::readMessages(bag_, wanted, [&](const rb::RawMessage& m) {
+        if (*m.topic == js_topic_)
+          onJointState(m);
+        else
+          onWrench(m);
+      });
+    } catch (const exid::Error& e) {
+      const std::string w = e.what();
+      if (w.rfind(pre_, 0) == 0) throw;
+      throw exid::Error(pre_ + w);
+    }
+  }
+
+  // Per robot joint: its index in a message with these names (-1: absent), cached while the
+  // names repeat.
+  void mapJointNames(const std::vector<std::string>& msg_names) {
+    if (msg_names == cache_names_) return;
+    cache_names_ = msg_names;
+    cache_idx_.assign(static_cast<std::size_t>(n_), -1);
+    for (int j = 0; j < n_; ++j)
+      for (std::size_t i = 0; i < msg_names.size(); ++i)
+        if (msg_names[i] == names_[static_cast<std::size_t>(j)]) {
+          cache_idx_[static_cast<std::size_t>(j)] = static_cast<int>(i);
+          break;
+        }
+  }
+
+  // What is wrong with a joint-state message's values for our joints ("" when nothing).
+  std::string jointStateProblem(const rb::JointStateMsg& s) const {
+    const std::size_t nn = s.name.size();
+    auto lenProblem = [&](const std::vector<double>& v, const char* field) {
+      return v.size() == nn ? std::string()
+                            : fmt::format("{} has {} values for {} names", field, v.size(), nn);
+    };
+    std::string why = lenProblem(s.position, "position");
+    if (why.empty()) why = lenProblem(s.effort, "effort");
+    if (why.empty() && use_vel_) why = lenProblem(s.velocity, "velocity");
+    if (why.empty())
+      for (int j = 0; j < n_ && why.empty(); ++j) {
+        const std::size_t i = static_cast<std::size_t>(cache_idx_[static_cast<std::size_t>(j)]);
+        if (!std::isfinite(s.position[i]) || !std::isfinite(s.effort[i]) ||
+            (use_vel_ && !std::isfinite(s.velocity[i])))
+          why = fmt::format("non-finite value for joint '{}'", s.name[i]);
+      }
+    return why;
+  }
+
+  void onJointState(const rb::RawMessage& m) {
+    const int n = n_;
+    const long long k = ++js_msgs_;
+    const std::string where = fmt::format("topic '{}', message {}, {}", js_topic_, k, m.where);
+    const rb::JointStateMsg s = rb::decodeJointState(m.data, m.size, where);
+    mapJointNames(s.name);
+    const long long present =
+        std::count_if(cache_idx_.begin(), cache_idx_.end(), [](int i) { return i >= 0; });
+    if (present == 0) {  // another publisher's joints (e.g. a gripper's)
+      ++js_other_;
+      if (js_found_names_.empty()) js_found_names_ = s.name;
+      return;
+    }
+    ++js_seq_;
+    if (present < n) {
+      std::vector<std::string> missing;
+      for (int j = 0; j < n; ++j)
+        if (cache_idx_[static_cast<std::size_t>(j)] < 0)
+          missing.push_back(names_[static_cast<std::size_t>(j)]);
+      throw exid::Error(fmt::format(
+          "{}{}: {}: no joint {} of robot '{}' (names in the message: {}); give "
+          "joint_names (the message's name of each robot joint, in the robot's order)",
+          pre_, bagname_, where, fmt::join(missing, ", "), robot_.name, fmt::join(s.name, ", ")));
+    }
+    const std::string why = jointStateProblem(s);
+    const std::int64_t ns = header_time_ ? s.stamp.ns() : m.receive_ns;
+    if (!why.empty()) {
+      bad(js_topic_, k, m.where, why, &js_bad_);
+      dropped_ns_.push_back(ns);  // its place in time: the step across it is no gap
+      return;
+    }
+    js_.push_back({ns, k});
+    for (int j = 0; j < n; ++j) {
+      const std::size_t i = static_cast<std::size_t>(cache_idx_[static_cast<std::size_t>(j)]);
+      qv_.push_back(s.position[i]);
+      tauv_.push_back(s.effort[i]);
+      if (use_vel_) qdv_.push_back(s.velocity[i]);
+    }
+  }
+
+  void onWrench(const rb::RawMessage& m) {
+    const long long k = ++wr_msgs_;
+    const std::string where = fmt::format("topic '{}', message {}, {}", w_topic_, k, m.where);
+    const rb::WrenchStampedMsg w = rb::decodeWrenchStamped(m.data, m.size, where);
+    Wr r{header_time_ ? w.stamp.ns() : m.receive_ns,
+         k,
+         {w.force[0], w.force[1], w.force[2], w.torque[0], w.torque[1], w.torque[2]}};
+    for (double x : r.v)
+      if (!std::isfinite(x)) return bad(w_topic_, k, m.where, "non-finite value", &wr_bad_);
+    wr_.push_back(r);
+  }
+
+  void checkMessages() const {
+    exid::check(js_msgs_ > 0,
+                fmt::format("{}{}: no message on topic '{}' (metadata.yaml lists {} "
+                            "messages)",
+                            pre_, bagname_, js_topic_, bag_.topic(js_topic_)->message_count));
+    exid::check(js_seq_ > 0 || js_other_ == 0,
+                fmt::format("{}{}: topic '{}': no message names any joint of robot '{}' ({}); "
+                            "names found: {}. Give joint_names (the message's name of each robot "
+                            "joint, in the robot's order)",
+                            pre_, bagname_, js_topic_, robot_.name, fmt::join(names_, ", "),
+                            fmt::join(js_found_names_, ", ")));
+    exid::check(!js_.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
+                                          "dropped ({} bad)",
+                                          pre_, bagname_, js_topic_, js_msgs_, js_bad_));
+    if (with_wrench_)
+      exid::check(wr_msgs_ > 0,
+                  fmt::format("{}{}: no message on wrench_topic '{}'", pre_, bagname_, w_topic_));
+  }
+
+  // Order by time; a repeated stamp is a bad message (the later one).
+  void orderByTime() {
+    std::vector<std::size_t> order(js_.size());
+    std::iota(order.begin(), order.end(), std::size_t{0});
+    for (std::size_t i = 1; i < js_.size(); ++i) js_reordered_ += js_[i].ns < js_[i - 1].ns;
+    std::stable_sort(order.begin(), order.end(),
+                     [&](std::size_t a, std::size_t b) { return js_[a].ns < js_[b].ns; });
+    for (std::size_t i : order) {
+      if (!keep_.empty() && js_[i].ns == js_[keep_.back()].ns) {
+        bad(js_topic_, js_[i].msg, "",
+            fmt::format("its time stamp {} ns repeats that of message {}", js_[i].ns,
+                        js_[keep_.back()].msg),
+            &js_dup_);
+        continue;
+      }
+      keep_.push_back(i);
+    }
+    if (with_wrench_) {
+      std::stable_sort(wr_.begin(), wr_.end(),
+                       [](const Wr& a, const Wr& b) { return a.ns < b.ns; });
+      std::vector<Wr> u;
+      for (const Wr& w : wr_) {
+        if (!u.empty() && w.ns == u.back().ns) {
+          bad(w_topic_, w.msg, "",
+              fmt::format("its time stamp {} ns repeats that of message {}", w.ns, u.back().msg),
+              &wr_dup_);
+          continue;
+        }
+        u.push_back(w);
+      }
+      wr_ = std::move(u);
+    }
+  }
+
+  void timeAxis() {
+    // Time in seconds after the first joint-state sample: the difference in integer nanoseconds
+    // first (an epoch stamp in double seconds would keep only a quarter microsecond), then one
+    // correctly rounded division (5 s is 5.0, not 5 * 1e-9 * 1e9).
+    t0_ = js_[keep_.front()].ns;
+    tk_.resize(keep_.size());
+    for (std::size_t i = 0; i < keep_.size(); ++i)
+      tk_[i] = static_cast<double>(js_[keep_[i]].ns - t0_) / 1e9;
+    // Position of each sample among the publisher's messages in time, dropped ones included:
+    // a step across a dropped message spans two periods and is no gap.
+    std::sort(dropped_ns_.begin(), dropped_ns_.end());
+    pos_.resize(keep_.size());
+    for (std::size_t i = 0; i < keep_.size(); ++i)
+      pos_[i] = static_cast<long long>(i) +
+                (std::lower_bound(dropped_ns_.begin(), dropped_ns_.end(), js_[keep_[i]].ns) -
+                 dropped_ns_.begin());
+  }
+
+  static double median(std::vector<double> v) {
+    std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
+    return v[v.size() / 2];
+  }
+
+  // Gaps and uneven stamps.
+  void checkSteps() {
+    ratio_ = P_.getDouble("max_gap_ratio");
+    const bool resample = P_.getDouble("resample_hz") > 0.0;
+    if (tk_.size() < 3) return;
+    std::vector<double> steps(tk_.size() - 1);
+    for (std::size_t i = 1; i < tk_.size(); ++i)
+      steps[i - 1] = (tk_[i] - tk_[i - 1]) / static_cast<double>(pos_[i] - pos_[i - 1]);
+    const double med = median(steps);
+    for (std::size_t i = 0; i < steps.size(); ++i)
+      exid::check(
+          steps[i] <= ratio_ * med && (resample || steps[i] >= med / ratio_),
+          fmt::format("{}{}: topic '{}', message {} (t = {} s): time step {} s against "
+                      "a median step of {} s after message {}: {} (a filter, "
+                      "derivatives and energy integrals need a uniform rate); cut the "
+                      "recording there with t_start_s/t_end_s{} (max_gap_ratio = {})",
+                      pre_, bagname_, js_topic_, js_[keep_[i + 1]].msg, tk_[i + 1], steps[i], med,
+                      js_[keep_[i]].msg, steps[i] > med ? "a gap" : "uneven time stamps",
+                      steps[i] > med ? "" : ", or resample it (resample_hz)", ratio_));
+  }
+
+  // Segment and split, as the csv experiment.
+  void selectSegment() {
+    span_ = tk_.back();
+    const double step_tol =
+        tk_.size() > 1 ? 0.5 * span_ / static_cast<double>(tk_.size() - 1) : 0.0;
+    seg_ = exid::resolveSegment(P_, span_, step_tol, pre_, bagname_, "joint-state sample");
+    const double ts = seg_.t_start_s, te = seg_.t_end_s;
+    const std::string& part = seg_.part;
+    const double lo = seg_.lo_s;
+    const double hi = seg_.hi_s;
+    for (std::size_t i = 0; i < keep_.size(); ++i) {
+      const double rel = tk_[i];
+      if (rel < ts) continue;
+      if (te > 0.0 && rel > te) break;
+      ++in_segment_;
+      if (rel < lo || (part == "identification" && rel >= hi)) continue;
+      sel_.push_back(i);
+    }
+    exid::check(!sel_.empty(),
+                fmt::format("{}{}: no joint-state sample in the segment [{}, {}] s after the first "
+                            "sample (the recording spans {} s)",
+                            pre_, bagname_, lo, part == "none" ? te : hi, span_));
+    in_part_ = static_cast<int>(sel_.size());
+  }
+
+  // The wrench: linear interpolation at each sample's time between the two wrench messages
+  // around it; samples outside the wrench's time range are cut (counted); a gap in the wrench
+  // around a sample is an error (nothing is invented across it).
+  void matchWrenchRange() {
+    if (!with_wrench_) return;
+    exid::check(!wr_.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
+                                          "dropped",
+                                          pre_, bagname_, w_topic_, wr_msgs_));
+    for (const Wr& w : wr_) tw_.push_back(static_cast<double>(w.ns - t0_) / 1e9);
+    if (tw_.size() >= 2) {
+      std::vector<double> st(tw_.size() - 1);
+      for (std::size_t i = 1; i < tw_.size(); ++i) st[i - 1] = tw_[i] - tw_[i - 1];
+      wr_med_ = median(st);
+    }
+    std::vector<std::size_t> inside;
+    for (std::size_t i : sel_)
+      if (tk_[i] >= tw_.front() && tk_[i] <= tw_.back()) inside.push_back(i);
+    outside_wrench_ = static_cast<int>(sel_.size() - inside.size());
+    sel_ = std::move(inside);
+    exid::check(!sel_.empty(),
+                fmt::format("{}{}: no joint-state sample of the segment lies within the time "
+                            "range of wrench_topic '{}' ([{}, {}] s after the first joint-state "
+                            "sample)",
+                            pre_, bagname_, w_topic_, tw_.front(), tw_.back()));
+  }
+
+  // The selected samples, signed; resampled on request (linear interpolation of every signal
+  // onto a uniform grid).
+  exid::Dataset fillDataset() {
+    const int n = n_;
+    K_ = static_cast<int>(sel_.size());
+    exid::Dataset d;
+    d.t.resize(K_);
+    d.q.resize(K_, n);
+    d.tau.resize(K_, n);
+    if (use_vel_) d.qd.resize(K_, n);
+    for (int k = 0; k < K_; ++k) {
+      const std::size_t i = sel_[static_cast<std::size_t>(k)];
+      const std::size_t s = keep_[i];
+      d.t[k] = tk_[i];
+      for (int j = 0; j < n; ++j) {
+        const double sg = sign_[static_cast<std::size_t>(j)];
+        const std::size_t at = s * static_cast<std::size_t>(n) + static_cast<std::size_t>(j);
+        d.q(k, j) = sg * qv_[at];
+        d.tau(k, j) = sg * tauv_[at];
+        if (use_vel_) d.qd(k, j) = sg * qdv_[at];
+      }
+    }
+    rs_hz_ = P_.getDouble("resample_hz");
+    if (rs_hz_ > 0.0) {
+      resampled_from_ = K_;
+      d = exid::resampleUniform(d, rs_hz_, fmt::format("{}{}", pre_, bagname_));
+    }
+    return d;
+  }
+
+  void interpolateWrench(exid::Dataset* dp) const {
+    if (!with_wrench_) return;
+    exid::Dataset& d = *dp;
+    d.wrench.resize(d.size(), 6);
+    std::size_t w = 0;
+    for (Eigen::Index k = 0; k < d.size(); ++k) {
+      const double t = d.t[k];
+      while (w + 2 < tw_.size() && tw_[w + 1] <= t) ++w;
+      if (tw_.size() == 1) {  // a single wrench message: only a sample at its very time
+        for (int c = 0; c < 6; ++c) d.wrench(k, c) = wr_[0].v[c];
+        continue;
+      }
+      const double len = tw_[w + 1] - tw_[w];
+      exid::check(len <= ratio_ * wr_med_,
+                  fmt::format("{}{}: wrench_topic '{}': a gap of {} s between messages {} and {} "
+                              "(median step {} s) around the joint-state sample at t = {} s: the "
+                              "wrench is not interpolated across it; cut the segment there "
+                              "(t_start_s/t_end_s; max_gap_ratio = {})",
+                              pre_, bagname_, w_topic_, len, wr_[w].msg, wr_[w + 1].msg, wr_med_, t,
+                              ratio_));
+      const double a = (t - tw_[w]) / len;
+      for (int c = 0; c < 6; ++c) d.wrench(k, c) = (1.0 - a) * wr_[w].v[c] + a * wr_[w + 1].v[c];
+    }
+  }
+
+  // Timing of the segment's samples (as the csv experiment's meta.recording).
+  exid::Json recordingMeta() const {
+    std::vector<double> raw;
+    std::vector<int> row;
+    for (std::size_t i : sel_) {
+      raw.push_back(static_cast<double>(js_[keep_[i]].ns - t0_));
+      row.push_back(static_cast<int>(std::min<long long>(pos_[i], 2000000000LL)));
+    }
+    exid::Json R = exid::Json::object();
+    R["file"] = bagname_;
+    R["rows"] = static_cast<long long>(raw.size());
+    exid::Json t = exid::samplingStats(raw, 1e-9, row, ratio_);
+    t["source"] = fmt::format("{} of topic '{}'", header_time_ ? "header stamps" : "receive stamps",
+                              js_topic_);
+    R["timing"] = t;
+    return R;
+  }
+
+  // Where the messages went: every one dropped or cut is counted (a = meta.accounting).
+  void accounting(int samples, exid::Json& a, exid::Json& m) const {
+    a["joint_state_messages"] = js_msgs_;
+    a["other_joints_messages"] = js_other_;
+    a["dropped_bad_messages"] = js_bad_;
+    a["dropped_repeated_stamps"] = js_dup_;
+    a["reordered_messages"] = js_reordered_;
+    a["outside_segment"] = static_cast<int>(keep_.size()) - in_segment_;
+    if (seg_.part != "none") a["other_part_of_split"] = in_segment_ - in_part_;
+    if (with_wrench_) {
+      a["outside_wrench_range"] = outside_wrench_;
+      a["wrench_messages"] = wr_msgs_;
+      a["wrench_dropped_bad_messages"] = wr_bad_;
+      a["wrench_dropped_repeated_stamps"] = wr_dup_;
+    }
+    a["segment_samples"] = K_;
+    if (resampled_from_ > 0) {
+      a["resampled_from"] = resampled_from_;
+      a["resampled_to"] = samples;
+      a["resample_hz"] = rs_hz_;
+    }
+    a["samples_used"] = samples;
+    exid::Json w = exid::Json::array();
+    if (js_bad_ + js_dup_ > 0)
+      w.push_back(exid::Json(
+          fmt::format("{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
+                      "drop_bad_messages)",
+                      pre_, bagname_, js_bad_ + js_dup_, js_msgs_, js_topic_, js_bad_, js_dup_)));
+    if (wr_bad_ + wr_dup_ > 0)
+      w.push_back(exid::Json(
+          fmt::format("{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
+                      "drop_bad_messages)",
+                      pre_, bagname_, wr_bad_ + wr_dup_, wr_msgs_, w_topic_, wr_bad_, wr_dup_)));
+    if (outside_wrench_ > 0)
+      w.push_back(exid::Json(
+          fmt::format("{}{}: {} joint-state samples of the segment lie outside the time range of "
+                      "wrench_topic '{}' and were cut",
+                      pre_, bagname_, outside_wrench_, w_topic_)));
+    if (bad_examples_.size() > 0) a["dropped_examples"] = bad_examples_;
+    if (w.size() > 0) m["warnings"] = w;
+  }
+
+  void describe(exid::Dataset* dp) const {
+    exid::Dataset& d = *dp;
+    d.source = bagname_;
+    exid::Json& m = d.meta;
+    m["simulated"] = false;
+    m["file"] = bagname_;
+    m["storage"] = bag_.storage;
+    {
+      std::vector<std::string> files;
+      for (const fs::path& f : bag_.files) files.push_back(f.filename().string());
+      m["storage_files"] = exid::Json(files);
+    }
+    m["joint_states_topic"] = js_topic_;
+    if (with_wrench_) {
+      m["wrench_topic"] = w_topic_;
+      m["wrench_matching"] =
+          "linear interpolation at the joint-state times between the two wrench messages around "
+          "each; joint-state samples outside the wrench's time range are cut "
+          "(accounting.outside_wrench_range)";
+    }
+    m["time"] = header_time_ ? "header stamps" : "receive stamps";
+    m["time_origin_ns"] = static_cast<long long>(t0_);
+    m["joint_names"] = exid::Json(names_);
+    m["samples"] = d.size();
+    m["segment_s"] = exid::Json(std::vector<double>{seg_.t_start_s, seg_.t_end_s});
+    if (seg_.part != "none") m["split"] = seg_.splitMeta(in_segment_, in_part_);
+    m["recording_span_s"] = span_;
+    m["recording"] = recordingMeta();
+    accounting(d.size(), m["accounting"], m);
+    std::vector<std::string> sig = {"q"};
+    if (use_vel_) sig.push_back("qd");
+    sig.push_back("tau");
+    if (with_wrench_) sig.push_back("wrench");
+    m["signals"] = exid::Json(sig);
+  }
+
+  const exid::ParamSet& P_;
+  const exid::RobotModel& robot_;
+  const int n_;
+  const std::string pre_ = "experiment 'rosbag2': ";
+  fs::path dir_;
+  std::string bagname_;
+  std::vector<std::string> names_;
+  std::vector<double> sign_;
+  rb::BagInfo bag_;
+  std::string js_topic_, w_topic_;
+  bool with_wrench_ = false, header_time_ = false, use_vel_ = false, drop_ = false;
+  // the messages
+  std::vector<Js> js_;
+  std::vector<double> qv_, qdv_, tauv_;  // n per sample
+  std::vector<Wr> wr_;
+  long long js_msgs_ = 0, js_other_ = 0, js_seq_ = 0, js_bad_ = 0, wr_msgs_ = 0, wr_bad_ = 0;
+  std::vector<std::int64_t> dropped_ns_;     // stamps of joint-state messages dropped as bad
+  std::vector<std::string> js_found_names_;  // names of the first message without our joints
+  exid::Json bad_examples_ = exid::Json::array();
+  std::vector<std::string> cache_names_;
+  std::vector<int> cache_idx_;  // per robot joint: its index in the message
+  // in time
+  long long js_reordered_ = 0, js_dup_ = 0, wr_dup_ = 0;
+  std::vector<std::size_t> keep_;  // indices into js_, by time, no repeated stamp
+  std::int64_t t0_ = 0;
+  std::vector<double> tk_;
+  std::vector<long long> pos_;
+  double ratio_ = 0;
+  // the segment and the wrench
+  double span_ = 0;
+  exid::RecordingSegment seg_;
+  std::vector<std::size_t> sel_;  // indices into keep_ / tk_
+  int in_segment_ = 0, in_part_ = 0;
+  std::vector<double> tw_;  // wrench times, s after t0_
+  int outside_wrench_ = 0;
+  double wr_med_ = 0.0;
+  // the dataset
+  int K_ = 0, resampled_from_ = 0;
+  double rs_hz_ = 0;
+};
+
 class Rosbag2Experiment : public exid::Experiment {
  public:
   static constexpr const char* kName = "rosbag2";
@@ -86,478 +659,9 @@ class Rosbag2Experiment : public exid::Experiment {
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples*,
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'rosbag2': no robot");
-    const int n = robot->dof();
-    fs::path dir = P_.getString("path");
-    if (dir.is_relative() && !ctx.study_dir.empty()) dir = ctx.study_dir / dir;
-    const std::string bagname = dir.string();
-    const std::string pre = "experiment 'rosbag2': ";
-
-    // The robot's joints and their names in the messages.
-    std::vector<std::string> names = P_.getStrings("joint_names");
-    if (names.empty()) {
-      for (const exid::Body& b : robot->bodies) names.push_back(b.joint_name);
-    } else {
-      exid::check(static_cast<int>(names.size()) == n,
-                  fmt::format("{}joint_names: expected {} names (one per joint of robot '{}', in "
-                              "its order), found {}",
-                              pre, n, robot->name, names.size()));
-    }
-    for (std::size_t a = 0; a < names.size(); ++a) {
-      exid::check(!names[a].empty(),
-                  fmt::format("{}joint {} of robot '{}' has no name; give joint_names", pre, a + 1,
-                              robot->name));
-      for (std::size_t b = 0; b < a; ++b)
-        exid::check(names[a] != names[b],
-                    fmt::format("{}joint_names: '{}' is named twice (joints {} and {}); each joint "
-                                "needs its own name",
-                                pre, names[a], b + 1, a + 1));
-    }
-    std::vector<double> sign = P_.getDoubles("sign");
-    if (sign.empty()) sign.assign(static_cast<std::size_t>(n), 1.0);
-    exid::check(
-        static_cast<int>(sign.size()) == n,
-        fmt::format("{}sign: expected {} values (one per joint), found {}", pre, n, sign.size()));
-    for (int j = 0; j < n; ++j)
-      exid::check(
-          sign[static_cast<std::size_t>(j)] == 1.0 || sign[static_cast<std::size_t>(j)] == -1.0,
-          fmt::format("{}sign: joint {}: expected +1 or -1, found {}", pre, j + 1,
-                      sign[static_cast<std::size_t>(j)]));
-
-    // The bag and its topics.
-    const rb::BagInfo bag = [&] {
-      try {
-        return rb::readMetadata(dir);
-      } catch (const exid::Error& e) {
-        throw exid::Error(pre + e.what());
-      }
-    }();
-    const std::string js_topic = P_.getString("joint_states_topic");
-    const std::string w_topic = P_.getString("wrench_topic");
-    auto topicList = [&] {
-      std::vector<std::string> v;
-      for (const rb::TopicInfo& t : bag.topics) v.push_back(t.name + " (" + t.type + ")");
-      return v.empty() ? std::string("none") : fmt::format("{}", fmt::join(v, ", "));
-    };
-    auto checkTopic = [&](const std::string& topic, const char* key, const char* type) {
-      exid::check(!topic.empty(), fmt::format("{}{}: empty topic name", pre, key));
-      const rb::TopicInfo* t = bag.topic(topic);
-      exid::check(t != nullptr,
-                  fmt::format("{}{}: {} = '{}': no such topic in the bag (topics: "
-                              "{})",
-                              pre, bag.metadata_file.string(), key, topic, topicList()));
-      exid::check(t->type == type,
-                  fmt::format("{}{}: {} = '{}' has type '{}', expected {}", pre,
-                              bag.metadata_file.string(), key, topic, t->type, type));
-      exid::check(t->serialization_format == "cdr",
-                  fmt::format("{}{}: topic '{}': serialization_format '{}', expected cdr", pre,
-                              bag.metadata_file.string(), topic, t->serialization_format));
-    };
-    checkTopic(js_topic, "joint_states_topic", kJointStateType);
-    const bool with_wrench = !w_topic.empty();
-    if (with_wrench) {
-      checkTopic(w_topic, "wrench_topic", kWrenchType);
-      exid::check(w_topic != js_topic,
-                  fmt::format("{}wrench_topic and joint_states_topic are both '{}'", pre, w_topic));
-    }
-
-    // Read the messages.
-    const bool header_time = P_.getString("time") == "header";
-    const bool use_vel = P_.getBool("use_velocity");
-    const bool drop = P_.getBool("drop_bad_messages");
-    struct Js {
-      std::int64_t ns;
-      long long msg;  // 1-based index among the topic's messages (bag order)
-    };
-    std::vector<Js> js;
-    std::vector<double> qv, qdv, tauv;  // n per sample
-    struct Wr {
-      std::int64_t ns;
-      long long msg;
-      double v[6];
-    };
-    std::vector<Wr> wr;
-    long long js_msgs = 0, js_other = 0, js_seq = 0, js_bad = 0, wr_msgs = 0, wr_bad = 0;
-    std::vector<std::int64_t> dropped_ns;     // stamps of joint-state messages dropped as bad
-    std::vector<std::string> js_found_names;  // names of the first message without our joints
-    exid::Json bad_examples = exid::Json::array();
-    std::vector<std::string> cache_names;
-    std::vector<int> cache_idx;  // per robot joint: its index in the message
-    auto bad = [&](const std::string& topic, long long k, const std::string& where,
-                   const std::string& why, long long* counter) {
-      const std::string msg =
-          fmt::format("{}{}: topic '{}', message {}{}: {}", pre, bagname, topic, k,
-                      where.empty() ? std::string() : " (" + where + ")", why);
-      if (!drop) throw exid::Error(msg + " (set drop_bad_messages: true to drop such messages)");
-      ++*counter;
-      if (bad_examples.size() < 10) bad_examples.push_back(exid::Json(msg));
-    };
-    const std::set<std::string> wanted =
-        with_wrench ? std::set<std::string>{js_topic, w_topic} : std::set<std::string>{js_topic};
-    try {
-      rb::readMessages(bag, wanted, [&](const rb::RawMessage& m) {
-        if (*m.topic == js_topic) {
-          const long long k = ++js_msgs;
-          const std::string where = fmt::format("topic '{}', message {}, {}", js_topic, k, m.where);
-          const rb::JointStateMsg s = rb::decodeJointState(m.data, m.size, where);
-          if (s.name != cache_names) {
-            cache_names = s.name;
-            cache_idx.assign(static_cast<std::size_t>(n), -1);
-            for (int j = 0; j < n; ++j)
-              for (std::size_t i = 0; i < s.name.size(); ++i)
-                if (s.name[i] == names[static_cast<std::size_t>(j)]) {
-                  cache_idx[static_cast<std::size_t>(j)] = static_cast<int>(i);
-                  break;
-                }
-          }
-          const long long present =
-              std::count_if(cache_idx.begin(), cache_idx.end(), [](int i) { return i >= 0; });
-          if (present == 0) {  // another publisher's joints (e.g. a gripper's)
-            ++js_other;
-            if (js_found_names.empty()) js_found_names = s.name;
-            return;
-          }
-          ++js_seq;
-          if (present < n) {
-            std::vector<std::string> missing;
-            for (int j = 0; j < n; ++j)
-              if (cache_idx[static_cast<std::size_t>(j)] < 0)
-                missing.push_back(names[static_cast<std::size_t>(j)]);
-            throw exid::Error(fmt::format(
-                "{}{}: {}: no joint {} of robot '{}' (names in the message: {}); give "
-                "joint_names (the message's name of each robot joint, in the robot's order)",
-                pre, bagname, where, fmt::join(missing, ", "), robot->name,
-                fmt::join(s.name, ", ")));
-          }
-          const std::size_t nn = s.name.size();
-          auto lenProblem = [&](const std::vector<double>& v, const char* field) {
-            return v.size() == nn
-                       ? std::string()
-                       : fmt::format("{} has {} values for {} names", field, v.size(), nn);
-          };
-          std::string why = lenProblem(s.position, "position");
-          if (why.empty()) why = lenProblem(s.effort, "effort");
-          if (why.empty() && use_vel) why = lenProblem(s.velocity, "velocity");
-          if (why.empty())
-            for (int j = 0; j < n && why.empty(); ++j) {
-              const std::size_t i =
-                  static_cast<std::size_t>(cache_idx[static_cast<std::size_t>(j)]);
-              if (!std::isfinite(s.position[i]) || !std::isfinite(s.effort[i]) ||
-                  (use_vel && !std::isfinite(s.velocity[i])))
-                why = fmt::format("non-finite value for joint '{}'", s.name[i]);
-            }
-          const std::int64_t ns = header_time ? s.stamp.ns() : m.receive_ns;
-          if (!why.empty()) {
-            bad(js_topic, k, m.where, why, &js_bad);
-            dropped_ns.push_back(ns);  // its place in time: the step across it is no gap
-            return;
-          }
-          js.push_back({ns, k});
-          for (int j = 0; j < n; ++j) {
-            const std::size_t i = static_cast<std::size_t>(cache_idx[static_cast<std::size_t>(j)]);
-            qv.push_back(s.position[i]);
-            tauv.push_back(s.effort[i]);
-            if (use_vel) qdv.push_back(s.velocity[i]);
-          }
-        } else {
-          const long long k = ++wr_msgs;
-          const std::string where = fmt::format("topic '{}', message {}, {}", w_topic, k, m.where);
-          const rb::WrenchStampedMsg w = rb::decodeWrenchStamped(m.data, m.size, where);
-          Wr r{header_time ? w.stamp.ns() : m.receive_ns,
-               k,
-               {w.force[0], w.force[1], w.force[2], w.torque[0], w.torque[1], w.torque[2]}};
-          for (double x : r.v)
-            if (!std::isfinite(x)) return bad(w_topic, k, m.where, "non-finite value", &wr_bad);
-          wr.push_back(r);
-        }
-      });
-    } catch (const exid::Error& e) {
-      const std::string w = e.what();
-      if (w.rfind(pre, 0) == 0) throw;
-      throw exid::Error(pre + w);
-    }
-    exid::check(js_msgs > 0,
-                fmt::format("{}{}: no message on topic '{}' (metadata.yaml lists {} "
-                            "messages)",
-                            pre, bagname, js_topic, bag.topic(js_topic)->message_count));
-    exid::check(js_seq > 0 || js_other == 0,
-                fmt::format("{}{}: topic '{}': no message names any joint of robot '{}' ({}); "
-                            "names found: {}. Give joint_names (the message's name of each robot "
-                            "joint, in the robot's order)",
-                            pre, bagname, js_topic, robot->name, fmt::join(names, ", "),
-                            fmt::join(js_found_names, ", ")));
-    exid::check(!js.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
-                                         "dropped ({} bad)",
-                                         pre, bagname, js_topic, js_msgs, js_bad));
-    if (with_wrench)
-      exid::check(wr_msgs > 0,
-                  fmt::format("{}{}: no message on wrench_topic '{}'", pre, bagname, w_topic));
-
-    // Order by time; a repeated stamp is a bad message (the later one).
-    long long js_reordered = 0, js_dup = 0, wr_dup = 0;
-    std::vector<std::size_t> order(js.size());
-    std::iota(order.begin(), order.end(), std::size_t{0});
-    for (std::size_t i = 1; i < js.size(); ++i) js_reordered += js[i].ns < js[i - 1].ns;
-    std::stable_sort(order.begin(), order.end(),
-                     [&](std::size_t a, std::size_t b) { return js[a].ns < js[b].ns; });
-    std::vector<std::size_t> keep;  // indices into js, by time, no repeated stamp
-    for (std::size_t i : order) {
-      if (!keep.empty() && js[i].ns == js[keep.back()].ns) {
-        bad(js_topic, js[i].msg, "",
-            fmt::format("its time stamp {} ns repeats that of message {}", js[i].ns,
-                        js[keep.back()].msg),
-            &js_dup);
-        continue;
-      }
-      keep.push_back(i);
-    }
-    if (with_wrench) {
-      std::stable_sort(wr.begin(), wr.end(), [](const Wr& a, const Wr& b) { return a.ns < b.ns; });
-      std::vector<Wr> u;
-      for (const Wr& w : wr) {
-        if (!u.empty() && w.ns == u.back().ns) {
-          bad(w_topic, w.msg, "",
-              fmt::format("its time stamp {} ns repeats that of message {}", w.ns, u.back().msg),
-              &wr_dup);
-          continue;
-        }
-        u.push_back(w);
-      }
-      wr = std::move(u);
-    }
-
-    // Time in seconds after the first joint-state sample: the difference in integer nanoseconds
-    // first (an epoch stamp in double seconds would keep only a quarter microsecond), then one
-    // correctly rounded division (5 s is 5.0, not 5 * 1e-9 * 1e9).
-    const std::int64_t t0 = js[keep.front()].ns;
-    std::vector<double> tk(keep.size());
-    for (std::size_t i = 0; i < keep.size(); ++i)
-      tk[i] = static_cast<double>(js[keep[i]].ns - t0) / 1e9;
-
-    // Position of each sample among the publisher's messages in time, dropped ones included:
-    // a step across a dropped message spans two periods and is no gap.
-    std::sort(dropped_ns.begin(), dropped_ns.end());
-    std::vector<long long> pos(keep.size());
-    for (std::size_t i = 0; i < keep.size(); ++i)
-      pos[i] = static_cast<long long>(i) +
-               (std::lower_bound(dropped_ns.begin(), dropped_ns.end(), js[keep[i]].ns) -
-                dropped_ns.begin());
-
-    // Gaps and uneven stamps.
-    const double ratio = P_.getDouble("max_gap_ratio");
-    const bool resample = P_.getDouble("resample_hz") > 0.0;
-    auto median = [](std::vector<double> v) {
-      std::nth_element(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(v.size() / 2), v.end());
-      return v[v.size() / 2];
-    };
-    if (tk.size() >= 3) {
-      std::vector<double> steps(tk.size() - 1);
-      for (std::size_t i = 1; i < tk.size(); ++i)
-        steps[i - 1] = (tk[i] - tk[i - 1]) / static_cast<double>(pos[i] - pos[i - 1]);
-      const double med = median(steps);
-      for (std::size_t i = 0; i < steps.size(); ++i)
-        exid::check(
-            steps[i] <= ratio * med && (resample || steps[i] >= med / ratio),
-            fmt::format("{}{}: topic '{}', message {} (t = {} s): time step {} s against "
-                        "a median step of {} s after message {}: {} (a filter, "
-                        "derivatives and energy integrals need a uniform rate); cut the "
-                        "recording there with t_start_s/t_end_s{} (max_gap_ratio = {})",
-                        pre, bagname, js_topic, js[keep[i + 1]].msg, tk[i + 1], steps[i], med,
-                        js[keep[i]].msg, steps[i] > med ? "a gap" : "uneven time stamps",
-                        steps[i] > med ? "" : ", or resample it (resample_hz)", ratio));
-    }
-
-    // Segment and split, as the csv experiment.
-    const double span = tk.back();
-    const double step_tol = tk.size() > 1 ? 0.5 * span / static_cast<double>(tk.size() - 1) : 0.0;
-    const exid::RecordingSegment seg =
-        exid::resolveSegment(P_, span, step_tol, pre, bagname, "joint-state sample");
-    const double ts = seg.t_start_s, te = seg.t_end_s;
-    const std::string& part = seg.part;
-    const double lo = seg.lo_s;
-    const double hi = seg.hi_s;
-    std::vector<std::size_t> sel;  // indices into keep / tk
-    int in_segment = 0;
-    for (std::size_t i = 0; i < keep.size(); ++i) {
-      const double rel = tk[i];
-      if (rel < ts) continue;
-      if (te > 0.0 && rel > te) break;
-      ++in_segment;
-      if (rel < lo || (part == "identification" && rel >= hi)) continue;
-      sel.push_back(i);
-    }
-    exid::check(!sel.empty(),
-                fmt::format("{}{}: no joint-state sample in the segment [{}, {}] s after the first "
-                            "sample (the recording spans {} s)",
-                            pre, bagname, lo, part == "none" ? te : hi, span));
-    const int in_part = static_cast<int>(sel.size());
-
-    // The wrench: linear interpolation at each sample's time between the two wrench messages
-    // around it; samples outside the wrench's time range are cut (counted); a gap in the wrench
-    // around a sample is an error (nothing is invented across it).
-    std::vector<double> tw;  // wrench times, s after t0
-    int outside_wrench = 0;
-    double wr_med = 0.0;
-    if (with_wrench) {
-      exid::check(!wr.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
-                                           "dropped",
-                                           pre, bagname, w_topic, wr_msgs));
-      for (const Wr& w : wr) tw.push_back(static_cast<double>(w.ns - t0) / 1e9);
-      if (tw.size() >= 2) {
-        std::vector<double> st(tw.size() - 1);
-        for (std::size_t i = 1; i < tw.size(); ++i) st[i - 1] = tw[i] - tw[i - 1];
-        wr_med = median(st);
-      }
-      std::vector<std::size_t> inside;
-      for (std::size_t i : sel)
-        if (tk[i] >= tw.front() && tk[i] <= tw.back()) inside.push_back(i);
-      outside_wrench = static_cast<int>(sel.size() - inside.size());
-      sel = std::move(inside);
-      exid::check(!sel.empty(),
-                  fmt::format("{}{}: no joint-state sample of the segment lies within the time "
-                              "range of wrench_topic '{}' ([{}, {}] s after the first joint-state "
-                              "sample)",
-                              pre, bagname, w_topic, tw.front(), tw.back()));
-    }
-
-    // Fill the dataset.
-    const int K = static_cast<int>(sel.size());
-    exid::Dataset d;
-    d.t.resize(K);
-    d.q.resize(K, n);
-    d.tau.resize(K, n);
-    if (use_vel) d.qd.resize(K, n);
-    for (int k = 0; k < K; ++k) {
-      const std::size_t i = sel[static_cast<std::size_t>(k)];
-      const std::size_t s = keep[i];
-      d.t[k] = tk[i];
-      for (int j = 0; j < n; ++j) {
-        const double sg = sign[static_cast<std::size_t>(j)];
-        const std::size_t at = s * static_cast<std::size_t>(n) + static_cast<std::size_t>(j);
-        d.q(k, j) = sg * qv[at];
-        d.tau(k, j) = sg * tauv[at];
-        if (use_vel) d.qd(k, j) = sg * qdv[at];
-      }
-    }
-    // Resampling on request: linear interpolation of every signal onto a uniform grid.
-    const double rs_hz = P_.getDouble("resample_hz");
-    int resampled_from = 0;
-    if (rs_hz > 0.0) {
-      resampled_from = K;
-      d = exid::resampleUniform(d, rs_hz, fmt::format("{}{}", pre, bagname));
-    }
-    if (with_wrench) {
-      d.wrench.resize(d.size(), 6);
-      std::size_t w = 0;
-      for (Eigen::Index k = 0; k < d.size(); ++k) {
-        const double t = d.t[k];
-        while (w + 2 < tw.size() && tw[w + 1] <= t) ++w;
-        if (tw.size() == 1) {  // a single wrench message: only a sample at its very time
-          for (int c = 0; c < 6; ++c) d.wrench(k, c) = wr[0].v[c];
-          continue;
-        }
-        const double len = tw[w + 1] - tw[w];
-        exid::check(
-            len <= ratio * wr_med,
-            fmt::format("{}{}: wrench_topic '{}': a gap of {} s between messages {} and {} "
-                        "(median step {} s) around the joint-state sample at t = {} s: the "
-                        "wrench is not interpolated across it; cut the segment there "
-                        "(t_start_s/t_end_s; max_gap_ratio = {})",
-                        pre, bagname, w_topic, len, wr[w].msg, wr[w + 1].msg, wr_med, t, ratio));
-        const double a = (t - tw[w]) / len;
-        for (int c = 0; c < 6; ++c) d.wrench(k, c) = (1.0 - a) * wr[w].v[c] + a * wr[w + 1].v[c];
-      }
-    }
-
-    d.source = bagname;
-    exid::Json& m = d.meta;
-    m["simulated"] = false;
-    m["file"] = bagname;
-    m["storage"] = bag.storage;
-    {
-      std::vector<std::string> files;
-      for (const fs::path& f : bag.files) files.push_back(f.filename().string());
-      m["storage_files"] = exid::Json(files);
-    }
-    m["joint_states_topic"] = js_topic;
-    if (with_wrench) {
-      m["wrench_topic"] = w_topic;
-      m["wrench_matching"] =
-          "linear interpolation at the joint-state times between the two wrench messages around "
-          "each; joint-state samples outside the wrench's time range are cut "
-          "(accounting.outside_wrench_range)";
-    }
-    m["time"] = header_time ? "header stamps" : "receive stamps";
-    m["time_origin_ns"] = static_cast<long long>(t0);
-    m["joint_names"] = exid::Json(names);
-    m["samples"] = d.size();
-    m["segment_s"] = exid::Json(std::vector<double>{ts, te});
-    if (part != "none") m["split"] = seg.splitMeta(in_segment, in_part);
-    m["recording_span_s"] = span;
-    {
-      // Timing of the segment's samples (as the csv experiment's meta.recording).
-      std::vector<double> raw;
-      std::vector<int> row;
-      for (std::size_t i : sel) {
-        raw.push_back(static_cast<double>(js[keep[i]].ns - t0));
-        row.push_back(static_cast<int>(std::min<long long>(pos[i], 2000000000LL)));
-      }
-      exid::Json R = exid::Json::object();
-      R["file"] = bagname;
-      R["rows"] = static_cast<long long>(raw.size());
-      exid::Json t = exid::samplingStats(raw, 1e-9, row, ratio);
-      t["source"] = fmt::format("{} of topic '{}'",
-                                header_time ? "header stamps" : "receive stamps", js_topic);
-      R["timing"] = t;
-      m["recording"] = R;
-    }
-    // Where the messages went: every one dropped or cut is counted.
-    {
-      exid::Json& a = m["accounting"];
-      a["joint_state_messages"] = js_msgs;
-      a["other_joints_messages"] = js_other;
-      a["dropped_bad_messages"] = js_bad;
-      a["dropped_repeated_stamps"] = js_dup;
-      a["reordered_messages"] = js_reordered;
-      a["outside_segment"] = static_cast<int>(keep.size()) - in_segment;
-      if (part != "none") a["other_part_of_split"] = in_segment - in_part;
-      if (with_wrench) {
-        a["outside_wrench_range"] = outside_wrench;
-        a["wrench_messages"] = wr_msgs;
-        a["wrench_dropped_bad_messages"] = wr_bad;
-        a["wrench_dropped_repeated_stamps"] = wr_dup;
-      }
-      a["segment_samples"] = K;
-      if (resampled_from > 0) {
-        a["resampled_from"] = resampled_from;
-        a["resampled_to"] = d.size();
-        a["resample_hz"] = rs_hz;
-      }
-      a["samples_used"] = d.size();
-      exid::Json w = exid::Json::array();
-      if (js_bad + js_dup > 0)
-        w.push_back(exid::Json(fmt::format(
-            "{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
-            "drop_bad_messages)",
-            pre, bagname, js_bad + js_dup, js_msgs, js_topic, js_bad, js_dup)));
-      if (wr_bad + wr_dup > 0)
-        w.push_back(exid::Json(fmt::format(
-            "{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
-            "drop_bad_messages)",
-            pre, bagname, wr_bad + wr_dup, wr_msgs, w_topic, wr_bad, wr_dup)));
-      if (outside_wrench > 0)
-        w.push_back(exid::Json(
-            fmt::format("{}{}: {} joint-state samples of the segment lie outside the time range of "
-                        "wrench_topic '{}' and were cut",
-                        pre, bagname, outside_wrench, w_topic)));
-      if (bad_examples.size() > 0) a["dropped_examples"] = bad_examples;
-      if (w.size() > 0) m["warnings"] = w;
-    }
-    std::vector<std::string> sig = {"q"};
-    if (use_vel) sig.push_back("qd");
-    sig.push_back("tau");
-    if (with_wrench) sig.push_back("wrench");
-    m["signals"] = exid::Json(sig);
-    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), bagname));
+    BagReading reading(P_, *robot, ctx);
+    exid::Dataset d = reading.read();
+    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), reading.bagname()));
     return d;
   }
 
