@@ -214,92 +214,15 @@ class SimulateExperiment : public exid::Experiment {
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'simulate': no robot");
     const auto wall0 = std::chrono::steady_clock::now();
-    nominal_ = robot;
-    const int n = robot->dof();
-    n_ = n;
-    // The true robot: the description with the payload merged into the sensor body.
-    truth_ = *robot;
-    if (!payload_.empty()) {
-      const int b = truth_.sensorBody();
-      truth_.bodies[static_cast<std::size_t>(b)].inertia +=
-          exid::transformInertial(payload_.pi(), truth_.sensor_pose);
-    }
-    data_ = exid::makeDynamicsData(truth_);
-    nominal_data_ = exid::makeDynamicsData(*robot);
-    drive_terms_ = P_.getBool("drive_terms");
-    tanh_ = P_.getString("coulomb") == "tanh";
-    vs_ = P_.getDouble("coulomb_velocity_scale");
-    computed_torque_ = P_.getString("controller") == "computed_torque";
-    kp_ = P_.getDouble("kp");
-    kd_ = P_.getDouble("kd");
-
-    // Reference.
-    exid::Json refmeta = exid::Json::object();
+    setUpPlant(robot);
+    const int n = n_;
     double duration = P_.getDouble("duration_s");
-    if (reference) {
-      exid::check(
-          reference->size() >= 1 && reference->dof() == n && reference->qd.cols() == n &&
-              reference->qdd.cols() == n && reference->qd.rows() == reference->size() &&
-              reference->qdd.rows() == reference->size(),
-          fmt::format("experiment 'simulate': the reference trajectory must have q, qd, qdd "
-                      "with {} columns (found q {} x {}, qd {} x {}, qdd {} x {})",
-                      n, reference->q.rows(), reference->q.cols(), reference->qd.rows(),
-                      reference->qd.cols(), reference->qdd.rows(), reference->qdd.cols()));
-      for (int k = 1; k < reference->size(); ++k)
-        exid::check(reference->t[k] > reference->t[k - 1],
-                    fmt::format("experiment 'simulate': reference time must increase (sample {} "
-                                "has t = {} after {})",
-                                k + 1, reference->t[k], reference->t[k - 1]));
-      ref_ = std::make_unique<SampledReference>(*reference);
-      const double span = ref_->t1() - ref_->t0();
-      if (duration == 0.0) duration = span;
-      exid::check(duration <= span * (1 + 1e-12) + 1e-12,
-                  fmt::format("experiment 'simulate': duration_s = {} exceeds the reference "
-                              "trajectory's duration {} s",
-                              duration, span));
-      refmeta["type"] = "excitation trajectory (quintic Hermite through its samples)";
-      refmeta["samples"] = reference->size();
-    } else {
-      auto F = buildFourier(*robot, ctx.seed);
-      if (duration == 0.0) duration = F->period;
-      F->duration = duration;
-      refmeta["type"] = "fourier";
-      refmeta["period_s"] = F->period;
-      refmeta["harmonics"] = static_cast<int>(F->a.cols());
-      refmeta["amplitude_fraction"] = P_.getDouble("amplitude_fraction");
-      refmeta["velocity_fraction"] = P_.getDouble("velocity_fraction");
-      refmeta["seed"] = exid::Json(static_cast<long long>(ctx.seed));
-      ref_ = std::move(F);
-    }
-    exid::check(duration > 0.0,
-                "experiment 'simulate': the duration is zero (a reference with one "
-                "sample needs duration_s)");
-
-    // D0 for the PD controller.
-    {
-      VectorXd q, qd, qdd;
-      ref_->eval(ref_->t0(), &q, &qd, &qdd);
-      MatrixXd Mm;
-      VectorXd hm;
-      plantTerms(q, qd, &Mm, &hm);
-      D0_ = Mm.diagonal();
-    }
+    const exid::Json refmeta = setUpReference(*robot, reference, ctx, &duration);
+    setPdScale();
 
     // Sample times.
     const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
-    // The count is checked in double before it sizes anything (the int overflowed, or a huge
-    // count ended in bad_alloc): at most kMaxValues values per recorded signal.
-    constexpr double kMaxValues = 2e7;
-    const double count = std::floor(duration / dt + 1e-9) + 1.0;
-    exid::check(std::isfinite(count) && count * n <= kMaxValues,
-                fmt::format("experiment 'simulate': duration_s = {} s / sample_period_s = {} s "
-                            "gives {:g} samples x {} joints, more than {:g} values per signal; "
-                            "shorten duration_s or lengthen sample_period_s",
-                            duration, dt, count, n, kMaxValues));
-    const int N = static_cast<int>(count);
-    exid::check(N >= 2, fmt::format("experiment 'simulate': duration {} s holds fewer than two "
-                                    "samples of {} s",
-                                    duration, dt));
+    const int N = sampleCount(duration, dt);
 
     exid::Dataset d;
     d.t.resize(N);
@@ -315,104 +238,28 @@ class SimulateExperiment : public exid::Experiment {
     x << qr, qdr;
     Integrator integ(this, x, t0, P_.getString("integrator"), P_.getDouble("rtol"),
                      P_.getDouble("atol"), P_.getInt("max_steps"));
-    double max_err = 0.0;
-    int recorded = 0;
-    bool stopped = false;
-    for (int k = 0; k < N; ++k) {
-      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
-      if (k > 0) {
-        if (ctx.shouldStop()) {
-          stopped = true;
-          break;
-        }
-        integ.advance(tk, &x);
-      }
-      const VectorXd qm = x.head(n), qdm = x.tail(n);
-      VectorXd tau, acc;
-      control(tk, qm, qdm, &tau, &acc);
-      ref_->eval(tk, &qr, &qdr, &qddr);
-      max_err = std::max(max_err, (qr - qm).cwiseAbs().maxCoeff());
-      d.t[k] = tk;
-      d.q.row(k) = qm.transpose();
-      qd.row(k) = qdm.transpose();
-      qdd.row(k) = acc.transpose();
-      d.tau.row(k) = tau.transpose();
-      if (want_wrench) {
-        VectorXd q, v, a;
-        exid::measuredToJoint(truth_, qm, qdm, acc, &q, &v, &a);
-        Eigen::Matrix<double, 6, 10> A;
-        exid::wrenchRegressor(truth_, *data_, q, v, a, A);
-        d.wrench.row(k) = (A * payload_.phi()).transpose();
-      }
-      ++recorded;
-      if (k % 50 == 0 || k == N - 1)
-        ctx.report(static_cast<double>(k + 1) / N,
-                   fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
-    }
-    if (recorded < N) {
-      d.t.conservativeResize(recorded);
-      d.q.conservativeResize(recorded, n);
-      qd.conservativeResize(recorded, n);
-      qdd.conservativeResize(recorded, n);
-      d.tau.conservativeResize(recorded, n);
-      if (want_wrench) d.wrench.conservativeResize(recorded, 6);
+    const Tracking tr = record(integ, x, t0, dt, N, duration, want_wrench, ctx, &d, &qd, &qdd);
+    if (tr.recorded < N) {
+      d.t.conservativeResize(tr.recorded);
+      d.q.conservativeResize(tr.recorded, n);
+      qd.conservativeResize(tr.recorded, n);
+      qdd.conservativeResize(tr.recorded, n);
+      d.tau.conservativeResize(tr.recorded, n);
+      if (want_wrench) d.wrench.conservativeResize(tr.recorded, 6);
       exid::logWarn(
           fmt::format("experiment 'simulate': stopped (cancelled or out of time) after "
                       "{} of {} samples",
-                      recorded, N));
+                      tr.recorded, N));
     }
-
-    // Measurement noise and quantisation.
-    std::mt19937_64 rng(ctx.seed ^ 0x5DEECE66Dull);
-    std::normal_distribution<double> nd(0.0, 1.0);
-    const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
-                 res = P_.getDouble("encoder_resolution_rad");
-    for (int k = 0; k < recorded; ++k) {
-      for (int j = 0; j < n; ++j) {
-        if (sq > 0) d.q(k, j) += sq * nd(rng);
-        if (res > 0) d.q(k, j) = res * std::round(d.q(k, j) / res);
-        if (st > 0) d.tau(k, j) += st * nd(rng);
-      }
-      if (want_wrench)
-        for (int e = 0; e < 6; ++e)
-          if (noise_w_[e] > 0) d.wrench(k, e) += noise_w_[e] * nd(rng);
-    }
+    addMeasurementNoise(tr.recorded, want_wrench, ctx.seed, &d);
     if (P_.getBool("output_qd_qdd")) {
       d.qd = std::move(qd);
       d.qdd = std::move(qdd);
     }
-
     d.source = fmt::format("simulate ({}, seed {})", robot->name, ctx.seed);
-    exid::Json& m = d.meta;
-    m["simulated"] = true;
-    m["robot"] = robot->name;
-    m["seed"] = exid::Json(static_cast<long long>(ctx.seed));
-    m["integrator"] = integ.description();
-    m["sundials_version"] = SUNDIALS_VERSION;
-    m["rtol"] = P_.getDouble("rtol");
-    m["atol"] = P_.getDouble("atol");
-    m["steps"] = exid::Json(static_cast<long long>(integ.steps()));
-    m["rhs_evaluations"] = exid::Json(static_cast<long long>(integ.rhsEvals() + rhs_calls_extra_));
-    m["controller"] = P_.getString("controller");
-    m["kp"] = kp_;
-    m["kd"] = kd_;
-    m["drive_terms"] = drive_terms_;
-    m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
-    m["reference"] = refmeta;
-    m["sample_period_s"] = dt;
-    m["samples"] = recorded;
-    m["stopped_early"] = stopped;
-    m["max_tracking_error_rad"] = max_err;
-    m["payload"] = payload_.json();
-    exid::Json& nz = m["noise"];
-    nz = exid::Json::object();
-    nz["q_rad"] = sq;
-    nz["tau_Nm"] = st;
-    nz["wrench"] = exid::Json(std::vector<double>(noise_w_, noise_w_ + 6));
-    nz["encoder_resolution_rad"] = res;
-    m["recorded"] =
-        P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)" : "t q tau (noisy q)";
-    m["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+    describe(*robot, ctx.seed, integ, refmeta, dt, tr, &d.meta);
+    d.meta["wall_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
   }
 
@@ -625,6 +472,205 @@ class SimulateExperiment : public exid::Experiment {
       F->b.row(j) *= s;
     }
     return F;
+  }
+
+  // The true robot (the description with the payload merged into the sensor body), its
+  // dynamics data and the plant's and controller's settings.
+  void setUpPlant(const std::shared_ptr<const exid::RobotModel>& robot) {
+    nominal_ = robot;
+    n_ = robot->dof();
+    truth_ = *robot;
+    if (!payload_.empty()) {
+      const int b = truth_.sensorBody();
+      truth_.bodies[static_cast<std::size_t>(b)].inertia +=
+          exid::transformInertial(payload_.pi(), truth_.sensor_pose);
+    }
+    data_ = exid::makeDynamicsData(truth_);
+    nominal_data_ = exid::makeDynamicsData(*robot);
+    drive_terms_ = P_.getBool("drive_terms");
+    tanh_ = P_.getString("coulomb") == "tanh";
+    vs_ = P_.getDouble("coulomb_velocity_scale");
+    computed_torque_ = P_.getString("controller") == "computed_torque";
+    kp_ = P_.getDouble("kp");
+    kd_ = P_.getDouble("kd");
+  }
+
+  // The reference tracked: the excitation trajectory, or without one a seeded Fourier series;
+  // duration: duration_s, 0 replaced by the reference's own. Returns meta.reference.
+  exid::Json setUpReference(const exid::RobotModel& robot, const exid::Samples* reference,
+                            const exid::RunContext& ctx, double* duration) {
+    const int n = n_;
+    exid::Json refmeta = exid::Json::object();
+    if (reference) {
+      exid::check(
+          reference->size() >= 1 && reference->dof() == n && reference->qd.cols() == n &&
+              reference->qdd.cols() == n && reference->qd.rows() == reference->size() &&
+              reference->qdd.rows() == reference->size(),
+          fmt::format("experiment 'simulate': the reference trajectory must have q, qd, qdd "
+                      "with {} columns (found q {} x {}, qd {} x {}, qdd {} x {})",
+                      n, reference->q.rows(), reference->q.cols(), reference->qd.rows(),
+                      reference->qd.cols(), reference->qdd.rows(), reference->qdd.cols()));
+      for (int k = 1; k < reference->size(); ++k)
+        exid::check(reference->t[k] > reference->t[k - 1],
+                    fmt::format("experiment 'simulate': reference time must increase (sample {} "
+                                "has t = {} after {})",
+                                k + 1, reference->t[k], reference->t[k - 1]));
+      ref_ = std::make_unique<SampledReference>(*reference);
+      const double span = ref_->t1() - ref_->t0();
+      if (*duration == 0.0) *duration = span;
+      exid::check(*duration <= span * (1 + 1e-12) + 1e-12,
+                  fmt::format("experiment 'simulate': duration_s = {} exceeds the reference "
+                              "trajectory's duration {} s",
+                              *duration, span));
+      refmeta["type"] = "excitation trajectory (quintic Hermite through its samples)";
+      refmeta["samples"] = reference->size();
+    } else {
+      auto F = buildFourier(robot, ctx.seed);
+      if (*duration == 0.0) *duration = F->period;
+      F->duration = *duration;
+      refmeta["type"] = "fourier";
+      refmeta["period_s"] = F->period;
+      refmeta["harmonics"] = static_cast<int>(F->a.cols());
+      refmeta["amplitude_fraction"] = P_.getDouble("amplitude_fraction");
+      refmeta["velocity_fraction"] = P_.getDouble("velocity_fraction");
+      refmeta["seed"] = exid::Json(static_cast<long long>(ctx.seed));
+      ref_ = std::move(F);
+    }
+    exid::check(*duration > 0.0,
+                "experiment 'simulate': the duration is zero (a reference with one "
+                "sample needs duration_s)");
+    return refmeta;
+  }
+
+  // D0 for the PD controller: the plant's mass-matrix diagonal at the start of the reference.
+  void setPdScale() {
+    VectorXd q, qd, qdd;
+    ref_->eval(ref_->t0(), &q, &qd, &qdd);
+    MatrixXd Mm;
+    VectorXd hm;
+    plantTerms(q, qd, &Mm, &hm);
+    D0_ = Mm.diagonal();
+  }
+
+  // The number of samples of `duration` at period dt. The count is checked in double before it
+  // sizes anything (the int overflowed, or a huge count ended in bad_alloc): at most kMaxValues
+  // values per recorded signal.
+  int sampleCount(double duration, double dt) const {
+    const int n = n_;
+    constexpr double kMaxValues = 2e7;
+    const double count = std::floor(duration / dt + 1e-9) + 1.0;
+    exid::check(std::isfinite(count) && count * n <= kMaxValues,
+                fmt::format("experiment 'simulate': duration_s = {} s / sample_period_s = {} s "
+                            "gives {:g} samples x {} joints, more than {:g} values per signal; "
+                            "shorten duration_s or lengthen sample_period_s",
+                            duration, dt, count, n, kMaxValues));
+    const int N = static_cast<int>(count);
+    exid::check(N >= 2, fmt::format("experiment 'simulate': duration {} s holds fewer than two "
+                                    "samples of {} s",
+                                    duration, dt));
+    return N;
+  }
+
+  struct Tracking {
+    double max_err = 0.0;  // the largest |qr - qm| at the samples
+    int recorded = 0;
+    bool stopped = false;  // cancelled or out of time
+  };
+
+  // The closed loop from state x at t0, sampled every dt (N samples; the last at most at the
+  // reference's end): states, torques and (want_wrench) the wrist wrench into d, qd, qdd.
+  Tracking record(Integrator& integ, VectorXd x, double t0, double dt, int N, double duration,
+                  bool want_wrench, const exid::RunContext& ctx, exid::Dataset* d, MatrixXd* qd,
+                  MatrixXd* qdd) {
+    const int n = n_;
+    Tracking tr;
+    VectorXd qr, qdr, qddr;
+    for (int k = 0; k < N; ++k) {
+      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
+      if (k > 0) {
+        if (ctx.shouldStop()) {
+          tr.stopped = true;
+          break;
+        }
+        integ.advance(tk, &x);
+      }
+      const VectorXd qm = x.head(n), qdm = x.tail(n);
+      VectorXd tau, acc;
+      control(tk, qm, qdm, &tau, &acc);
+      ref_->eval(tk, &qr, &qdr, &qddr);
+      tr.max_err = std::max(tr.max_err, (qr - qm).cwiseAbs().maxCoeff());
+      d->t[k] = tk;
+      d->q.row(k) = qm.transpose();
+      qd->row(k) = qdm.transpose();
+      qdd->row(k) = acc.transpose();
+      d->tau.row(k) = tau.transpose();
+      if (want_wrench) {
+        VectorXd q, v, a;
+        exid::measuredToJoint(truth_, qm, qdm, acc, &q, &v, &a);
+        Eigen::Matrix<double, 6, 10> A;
+        exid::wrenchRegressor(truth_, *data_, q, v, a, A);
+        d->wrench.row(k) = (A * payload_.phi()).transpose();
+      }
+      ++tr.recorded;
+      if (k % 50 == 0 || k == N - 1)
+        ctx.report(static_cast<double>(k + 1) / N,
+                   fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
+    }
+    return tr;
+  }
+
+  // Measurement noise and quantisation of the recorded samples.
+  void addMeasurementNoise(int recorded, bool want_wrench, std::uint64_t seed,
+                           exid::Dataset* d) const {
+    const int n = n_;
+    std::mt19937_64 rng(seed ^ 0x5DEECE66Dull);
+    std::normal_distribution<double> nd(0.0, 1.0);
+    const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
+                 res = P_.getDouble("encoder_resolution_rad");
+    for (int k = 0; k < recorded; ++k) {
+      for (int j = 0; j < n; ++j) {
+        if (sq > 0) d->q(k, j) += sq * nd(rng);
+        if (res > 0) d->q(k, j) = res * std::round(d->q(k, j) / res);
+        if (st > 0) d->tau(k, j) += st * nd(rng);
+      }
+      if (want_wrench)
+        for (int e = 0; e < 6; ++e)
+          if (noise_w_[e] > 0) d->wrench(k, e) += noise_w_[e] * nd(rng);
+    }
+  }
+
+  // The dataset's meta (without wall_s).
+  void describe(const exid::RobotModel& robot, std::uint64_t seed, const Integrator& integ,
+                const exid::Json& refmeta, double dt, const Tracking& tr, exid::Json* meta) const {
+    exid::Json& m = *meta;
+    m["simulated"] = true;
+    m["robot"] = robot.name;
+    m["seed"] = exid::Json(static_cast<long long>(seed));
+    m["integrator"] = integ.description();
+    m["sundials_version"] = SUNDIALS_VERSION;
+    m["rtol"] = P_.getDouble("rtol");
+    m["atol"] = P_.getDouble("atol");
+    m["steps"] = exid::Json(static_cast<long long>(integ.steps()));
+    m["rhs_evaluations"] = exid::Json(static_cast<long long>(integ.rhsEvals() + rhs_calls_extra_));
+    m["controller"] = P_.getString("controller");
+    m["kp"] = kp_;
+    m["kd"] = kd_;
+    m["drive_terms"] = drive_terms_;
+    m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
+    m["reference"] = refmeta;
+    m["sample_period_s"] = dt;
+    m["samples"] = tr.recorded;
+    m["stopped_early"] = tr.stopped;
+    m["max_tracking_error_rad"] = tr.max_err;
+    m["payload"] = payload_.json();
+    exid::Json& nz = m["noise"];
+    nz = exid::Json::object();
+    nz["q_rad"] = P_.getDouble("noise_q_rad");
+    nz["tau_Nm"] = P_.getDouble("noise_tau_Nm");
+    nz["wrench"] = exid::Json(std::vector<double>(noise_w_, noise_w_ + 6));
+    nz["encoder_resolution_rad"] = P_.getDouble("encoder_resolution_rad");
+    m["recorded"] =
+        P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)" : "t q tau (noisy q)";
   }
 
   exid::ParamSet P_;
