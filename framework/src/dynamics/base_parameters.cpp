@@ -137,24 +137,16 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
 
 namespace {
 
-BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<std::string>& names,
-                            const BaseParameterOptions& opt) {
+// Cost for large chains (p = 14 n columns for n joints with drives): every step of naturalOrder
+// uses only the relations between the columns, which W shares with R of W = Q R. So (1) at most
+// max(4 p, kMinRows) stacked rows are used (random samples: 4 p rows reveal the rank with a
+// wide margin; kMinRows keeps every row of the shipped robots, up to 200 samples x 7 joints),
+// and (2) they are compressed to R (p x p) by a blocked Householder QR, O(N p^2) at level-3
+// speed; the column-ordered QR, the pivoted rank check and the solve for beta then cost
+// O(p^3) instead of the unblocked O(N p^2) passes they made over W (a 50-link chain, N = 10000
+// rows, p = 700: 6.2 s). In all O(n^3) for n joints. triangular: W was compressed to R.
+Eigen::MatrixXd compressedRows(const Eigen::MatrixXd& W_stacked, bool* triangular) {
   const Eigen::Index p = W_stacked.cols();
-  check(static_cast<Eigen::Index>(names.size()) == p,
-        "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
-            std::to_string(p) + " columns");
-  check(W_stacked.allFinite(),
-        "computeBaseParameters: the stacked regressor contains non-finite numbers");
-  check(opt.tolerance > 0.0 && opt.tolerance < 1.0,
-        "computeBaseParameters: tolerance must be in (0, 1)");
-  // Cost for large chains (p = 14 n columns for n joints with drives): every step below uses
-  // only the relations between the columns, which W shares with R of W = Q R. So (1) at most
-  // max(4 p, kMinRows) stacked rows are used (random samples: 4 p rows reveal the rank with a
-  // wide margin; kMinRows keeps every row of the shipped robots, up to 200 samples x 7 joints),
-  // and (2) they are compressed to R (p x p) by a blocked Householder QR, O(N p^2) at level-3
-  // speed; the column-ordered QR, the pivoted rank check and the solve for beta then cost
-  // O(p^3) instead of the unblocked O(N p^2) passes they made over W (a 50-link chain, N = 10000
-  // rows, p = 700: 6.2 s). In all O(n^3) for n joints.
   constexpr Eigen::Index kMinRows = 2000;
   const Eigen::Index rows_used =
       std::min(W_stacked.rows(), std::max<Eigen::Index>(4 * p, kMinRows));
@@ -165,6 +157,176 @@ BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<
   } else {
     W = W_stacked.topRows(rows_used);
   }
+  *triangular = rows_used > p;
+  return W;
+}
+
+// The column-ordered QR of A: the kept columns, the factor B (R of the kept columns and, in each
+// dropped column, its coordinates on the kept columns left of it), and how clear the rank is.
+struct SequentialQr {
+  std::vector<int> ind;
+  Eigen::MatrixXd B;
+  std::vector<int> kept_before;  // kept columns left of each column
+  double r00 = -1.0;
+  double gap = HUGE_VAL;  // how far (factor) the closest residual is from the threshold
+};
+
+// Sequential Householder QR, keeping a column when |R_kk| > tol * |R_00|. On the compressed
+// (upper triangular) W, column k has no entry below row k, and a reflector of rows r..k keeps
+// that true for every later column: the reflectors are as long as the number of columns
+// dropped so far plus one, O(p^2 (p - rank)) in all instead of O(p^3).
+SequentialQr sequentialQr(const Eigen::MatrixXd& A, const std::vector<bool>& zero, bool triangular,
+                          double tolerance) {
+  const Eigen::Index N = A.rows(), p = A.cols();
+  SequentialQr s;
+  s.B = A;
+  s.kept_before.assign(static_cast<size_t>(p), 0);
+  Eigen::MatrixXd& B = s.B;
+  Eigen::Index r = 0;
+  for (Eigen::Index k = 0; k < p && r < N; ++k) {
+    s.kept_before[static_cast<size_t>(k)] = static_cast<int>(r);
+    if (zero[static_cast<size_t>(k)]) continue;
+    const Eigen::Index len = triangular ? std::min<Eigen::Index>(k + 1, N) - r : N - r;
+    const double res = B.col(k).segment(r, len).norm();
+    if (s.r00 < 0.0) {
+      if (res == 0.0) continue;
+      s.r00 = res;
+    }
+    const double ratio = res / (tolerance * s.r00);
+    s.gap = std::min(s.gap, ratio > 1.0 ? ratio : (ratio > 0.0 ? 1.0 / ratio : HUGE_VAL));
+    if (!(res > tolerance * s.r00)) continue;
+    double tau = 0.0, beta = 0.0;
+    Eigen::VectorXd essential(len - 1);
+    B.col(k).segment(r, len).makeHouseholder(essential, tau, beta);
+    B(r, k) = beta;
+    B.col(k).segment(r + 1, len - 1).setZero();
+    if (k + 1 < p) {
+      Eigen::VectorXd work(p);
+      B.block(r, k + 1, len, p - k - 1).applyHouseholderOnTheLeft(essential, tau, work.data());
+    }
+    s.ind.push_back(static_cast<int>(k));
+    ++r;
+  }
+  return s;
+}
+
+// An estimate of the smallest singular value of the upper triangular T (inverse iteration,
+// O(r^2) per step).
+double smallestSingularValue(const Eigen::MatrixXd& T) {
+  const auto r = static_cast<int>(T.rows());
+  if (r == 0) return 0.0;
+  Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(r, 1.0, 2.0);
+  x.normalize();
+  double growth = 1.0;
+  for (int it = 0; it < 30; ++it) {
+    Eigen::VectorXd y = T.triangularView<Eigen::Upper>().solve(x);
+    y = T.transpose().triangularView<Eigen::Lower>().solve(y);
+    growth = y.norm();
+    if (!(growth > 0.0) || !std::isfinite(growth)) break;
+    x = y / growth;
+  }
+  return std::isfinite(growth) && growth > 0.0 ? 1.0 / std::sqrt(growth) : 0.0;
+}
+
+// The rank by column-pivoted QR of A (O(p^3), unblocked); when it differs from r_seq, ind
+// becomes the pivoted set (ascending) and the result is true.
+bool pivotedRankCheck(const Eigen::MatrixXd& A, double tolerance, int r_seq,
+                      std::vector<int>* ind) {
+  const Eigen::Index N = A.rows(), p = A.cols();
+  Eigen::ColPivHouseholderQR<Eigen::MatrixXd> cpqr(A);
+  int rank_cp = 0;
+  const Eigen::MatrixXd& R = cpqr.matrixQR();
+  const Eigen::Index m = std::min(N, p);
+  const double R00 = m > 0 ? std::abs(R(0, 0)) : 0.0;
+  for (Eigen::Index k = 0; k < m; ++k)
+    if (std::abs(R(k, k)) > tolerance * R00 && R00 > 0.0) ++rank_cp;
+  if (rank_cp == r_seq) return false;
+  ind->clear();
+  for (int k = 0; k < rank_cp; ++k)
+    ind->push_back(static_cast<int>(cpqr.colsPermutation().indices()[k]));
+  std::sort(ind->begin(), ind->end());
+  return true;
+}
+
+// beta from R11 beta = R12. With the column-ordered set, R12 is in B: a dependent column j
+// depends on the kept columns left of it, its first kept_before[j] entries are its
+// coordinates (triangular solve, then back to the original column scaling). With the pivoted
+// set: least squares in the original scaling, exact when W2 = W1 beta.
+// (No solve with an empty right-hand side: Eigen binds a reference to its null data pointer.)
+Eigen::MatrixXd solveBeta(const BaseParameters& bp, const Eigen::MatrixXd& W,
+                          const std::vector<bool>& zero, const SequentialQr& s,
+                          const Eigen::MatrixXd& T, const Eigen::VectorXd& scale, bool pivoted) {
+  const Eigen::Index N = W.rows();
+  const std::vector<int>& ind = bp.independent;
+  const int r = bp.rank(), nd = static_cast<int>(bp.dependent.size());
+  Eigen::MatrixXd W1(N, r), W2(N, nd);
+  for (int k = 0; k < r; ++k) W1.col(k) = W.col(ind[static_cast<size_t>(k)]);
+  for (int k = 0; k < nd; ++k) {
+    const int c = bp.dependent[static_cast<size_t>(k)];
+    W2.col(k) = zero[static_cast<size_t>(c)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(c));
+  }
+  Eigen::MatrixXd beta;
+  if (r > 0 && nd > 0 && !pivoted) {
+    Eigen::MatrixXd R12 = Eigen::MatrixXd::Zero(r, nd);
+    for (int c = 0; c < nd; ++c) {
+      const int j = bp.dependent[static_cast<size_t>(c)];
+      const int rows = s.kept_before[static_cast<size_t>(j)];
+      if (!zero[static_cast<size_t>(j)]) R12.col(c).head(rows) = s.B.col(j).head(rows);
+    }
+    beta = T.triangularView<Eigen::Upper>().solve(R12);
+    for (int c = 0; c < nd; ++c)
+      for (int k = 0; k < r; ++k)
+        beta(k, c) *=
+            scale[ind[static_cast<size_t>(k)]] / scale[bp.dependent[static_cast<size_t>(c)]];
+  } else {
+    beta = (r > 0 && nd > 0) ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2))
+                             : Eigen::MatrixXd(Eigen::MatrixXd::Zero(r, nd));
+  }
+  for (Eigen::Index i = 0; i < beta.size(); ++i)
+    if (std::abs(beta.data()[i]) < 1e-10) beta.data()[i] = 0.0;
+  return beta;
+}
+
+// K, the base parameters' names (an R for a regrouped one) and their expressions from beta.
+void regroupedNames(const std::vector<std::string>& names, BaseParameters* bp) {
+  const std::vector<int>& ind = bp->independent;
+  const Eigen::Index p = static_cast<Eigen::Index>(names.size());
+  const int r = bp->rank(), nd = static_cast<int>(bp->dependent.size());
+  bp->K = Eigen::MatrixXd::Zero(r, p);
+  for (int k = 0; k < r; ++k) bp->K(k, ind[static_cast<size_t>(k)]) = 1.0;
+  for (int k = 0; k < nd; ++k) bp->K.col(bp->dependent[static_cast<size_t>(k)]) = bp->beta.col(k);
+
+  for (int k = 0; k < r; ++k) {
+    const std::string& base = names[static_cast<size_t>(ind[static_cast<size_t>(k)])];
+    std::string expr = base;
+    bool regrouped = false;
+    for (int c = 0; c < nd; ++c) {
+      const double b = bp->beta(k, c);
+      if (std::abs(b) < 1e-10) continue;
+      regrouped = true;
+      const std::string& nm = names[static_cast<size_t>(bp->dependent[static_cast<size_t>(c)])];
+      const double a = std::abs(b);
+      expr += b < 0 ? " - " : " + ";
+      const std::string num = formatCoef(a);
+      expr += num == "1" ? nm : num + "*" + nm;
+    }
+    bp->names.push_back(regrouped ? base + "R" : base);
+    bp->expressions.push_back(expr);
+  }
+}
+
+BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<std::string>& names,
+                            const BaseParameterOptions& opt) {
+  const Eigen::Index p = W_stacked.cols();
+  check(static_cast<Eigen::Index>(names.size()) == p,
+        "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
+            std::to_string(p) + " columns");
+  check(W_stacked.allFinite(),
+        "computeBaseParameters: the stacked regressor contains non-finite numbers");
+  check(opt.tolerance > 0.0 && opt.tolerance < 1.0,
+        "computeBaseParameters: tolerance must be in (0, 1)");
+  bool triangular = false;
+  const Eigen::MatrixXd W = compressedRows(W_stacked, &triangular);
   const Eigen::Index N = W.rows();
   BaseParameters bp;
   bp.full_names = names;
@@ -184,141 +346,26 @@ BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<
                                             : Eigen::VectorXd(W.col(k) * scale[k]);
   }
 
-  // Sequential Householder QR, keeping a column when |R_kk| > tol * |R_00|. On the compressed
-  // (upper triangular) W, column k has no entry below row k, and a reflector of rows r..k keeps
-  // that true for every later column: the reflectors are as long as the number of columns
-  // dropped so far plus one, O(p^2 (p - rank)) in all instead of O(p^3).
-  const bool triangular = rows_used > p;
-  std::vector<int> ind;
-  Eigen::MatrixXd B = A;
-  std::vector<int> kept_before(static_cast<size_t>(p), 0);  // kept columns left of each column
-  double r00 = -1.0;
-  double gap = HUGE_VAL;  // how far (factor) the closest residual is from the threshold
-  {
-    Eigen::Index r = 0;
-    for (Eigen::Index k = 0; k < p && r < N; ++k) {
-      kept_before[static_cast<size_t>(k)] = static_cast<int>(r);
-      if (zero[static_cast<size_t>(k)]) continue;
-      const Eigen::Index len = triangular ? std::min<Eigen::Index>(k + 1, N) - r : N - r;
-      const double res = B.col(k).segment(r, len).norm();
-      if (r00 < 0.0) {
-        if (res == 0.0) continue;
-        r00 = res;
-      }
-      const double ratio = res / (opt.tolerance * r00);
-      gap = std::min(gap, ratio > 1.0 ? ratio : (ratio > 0.0 ? 1.0 / ratio : HUGE_VAL));
-      if (!(res > opt.tolerance * r00)) continue;
-      double tau = 0.0, beta = 0.0;
-      Eigen::VectorXd essential(len - 1);
-      B.col(k).segment(r, len).makeHouseholder(essential, tau, beta);
-      B(r, k) = beta;
-      B.col(k).segment(r + 1, len - 1).setZero();
-      if (k + 1 < p) {
-        Eigen::VectorXd work(p);
-        B.block(r, k + 1, len, p - k - 1).applyHouseholderOnTheLeft(essential, tau, work.data());
-      }
-      ind.push_back(static_cast<int>(k));
-      ++r;
-    }
-  }
+  SequentialQr s = sequentialQr(A, zero, triangular, opt.tolerance);
+  std::vector<int> ind = s.ind;
   const int r_seq = static_cast<int>(ind.size());
-  // R11 of the kept columns (upper triangular) and an estimate of its smallest singular value
-  // (inverse iteration, O(r^2) per step).
+  // R11 of the kept columns (upper triangular) and an estimate of its smallest singular value.
   Eigen::MatrixXd T(r_seq, r_seq);
-  for (int k = 0; k < r_seq; ++k) T.col(k) = B.col(ind[static_cast<size_t>(k)]).head(r_seq);
-  double sigma_min = 0.0;
-  if (r_seq > 0) {
-    Eigen::VectorXd x = Eigen::VectorXd::LinSpaced(r_seq, 1.0, 2.0);
-    x.normalize();
-    double growth = 1.0;
-    for (int it = 0; it < 30; ++it) {
-      Eigen::VectorXd y = T.triangularView<Eigen::Upper>().solve(x);
-      y = T.transpose().triangularView<Eigen::Lower>().solve(y);
-      growth = y.norm();
-      if (!(growth > 0.0) || !std::isfinite(growth)) break;
-      x = y / growth;
-    }
-    sigma_min = std::isfinite(growth) && growth > 0.0 ? 1.0 / std::sqrt(growth) : 0.0;
-  }
-  // Independent check of the rank by column-pivoted QR (O(p^3), unblocked), when the rank is
-  // not clear: a residual within a factor 1e3 of the threshold, or R11 within that factor of
-  // singular. Otherwise both would find the same rank.
-  const bool clear = r00 > 0.0 && gap > 1e3 && sigma_min > 1e3 * opt.tolerance * r00;
-  bool pivoted = false;
-  if (!clear) {
-    Eigen::ColPivHouseholderQR<Eigen::MatrixXd> cpqr(A);
-    int rank_cp = 0;
-    const Eigen::MatrixXd& R = cpqr.matrixQR();
-    const Eigen::Index m = std::min(N, p);
-    const double R00 = m > 0 ? std::abs(R(0, 0)) : 0.0;
-    for (Eigen::Index k = 0; k < m; ++k)
-      if (std::abs(R(k, k)) > opt.tolerance * R00 && R00 > 0.0) ++rank_cp;
-    if (rank_cp != r_seq) {
-      pivoted = true;
-      ind.clear();
-      for (int k = 0; k < rank_cp; ++k)
-        ind.push_back(static_cast<int>(cpqr.colsPermutation().indices()[k]));
-      std::sort(ind.begin(), ind.end());
-    }
-  }
+  for (int k = 0; k < r_seq; ++k) T.col(k) = s.B.col(ind[static_cast<size_t>(k)]).head(r_seq);
+  const double sigma_min = smallestSingularValue(T);
+  // Independent check of the rank by column-pivoted QR, when the rank is not clear: a residual
+  // within a factor 1e3 of the threshold, or R11 within that factor of singular. Otherwise both
+  // would find the same rank.
+  const bool clear = s.r00 > 0.0 && s.gap > 1e3 && sigma_min > 1e3 * opt.tolerance * s.r00;
+  const bool pivoted = !clear && pivotedRankCheck(A, opt.tolerance, r_seq, &ind);
   bp.independent = ind;
   std::vector<bool> is_ind(static_cast<size_t>(p), false);
   for (int k : ind) is_ind[static_cast<size_t>(k)] = true;
   for (Eigen::Index k = 0; k < p; ++k)
     if (!is_ind[static_cast<size_t>(k)]) bp.dependent.push_back(static_cast<int>(k));
 
-  const int r = bp.rank(), nd = static_cast<int>(bp.dependent.size());
-  Eigen::MatrixXd W1(N, r), W2(N, nd);
-  for (int k = 0; k < r; ++k) W1.col(k) = W.col(ind[static_cast<size_t>(k)]);
-  for (int k = 0; k < nd; ++k) {
-    const int c = bp.dependent[static_cast<size_t>(k)];
-    W2.col(k) = zero[static_cast<size_t>(c)] ? Eigen::VectorXd::Zero(N) : Eigen::VectorXd(W.col(c));
-  }
-  // beta from R11 beta = R12. With the column-ordered set, R12 is in B: a dependent column j
-  // depends on the kept columns left of it, its first kept_before[j] entries are its
-  // coordinates (triangular solve, then back to the original column scaling). With the pivoted
-  // set: least squares in the original scaling, exact when W2 = W1 beta.
-  // (No solve with an empty right-hand side: Eigen binds a reference to its null data pointer.)
-  if (r > 0 && nd > 0 && !pivoted) {
-    Eigen::MatrixXd R12 = Eigen::MatrixXd::Zero(r, nd);
-    for (int c = 0; c < nd; ++c) {
-      const int j = bp.dependent[static_cast<size_t>(c)];
-      const int rows = kept_before[static_cast<size_t>(j)];
-      if (!zero[static_cast<size_t>(j)]) R12.col(c).head(rows) = B.col(j).head(rows);
-    }
-    bp.beta = T.triangularView<Eigen::Upper>().solve(R12);
-    for (int c = 0; c < nd; ++c)
-      for (int k = 0; k < r; ++k)
-        bp.beta(k, c) *=
-            scale[ind[static_cast<size_t>(k)]] / scale[bp.dependent[static_cast<size_t>(c)]];
-  } else {
-    bp.beta = (r > 0 && nd > 0) ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2))
-                                : Eigen::MatrixXd(Eigen::MatrixXd::Zero(r, nd));
-  }
-  for (Eigen::Index i = 0; i < bp.beta.size(); ++i)
-    if (std::abs(bp.beta.data()[i]) < 1e-10) bp.beta.data()[i] = 0.0;
-
-  bp.K = Eigen::MatrixXd::Zero(r, p);
-  for (int k = 0; k < r; ++k) bp.K(k, ind[static_cast<size_t>(k)]) = 1.0;
-  for (int k = 0; k < nd; ++k) bp.K.col(bp.dependent[static_cast<size_t>(k)]) = bp.beta.col(k);
-
-  for (int k = 0; k < r; ++k) {
-    const std::string& base = names[static_cast<size_t>(ind[static_cast<size_t>(k)])];
-    std::string expr = base;
-    bool regrouped = false;
-    for (int c = 0; c < nd; ++c) {
-      const double b = bp.beta(k, c);
-      if (std::abs(b) < 1e-10) continue;
-      regrouped = true;
-      const std::string& nm = names[static_cast<size_t>(bp.dependent[static_cast<size_t>(c)])];
-      const double a = std::abs(b);
-      expr += b < 0 ? " - " : " + ";
-      const std::string num = formatCoef(a);
-      expr += num == "1" ? nm : num + "*" + nm;
-    }
-    bp.names.push_back(regrouped ? base + "R" : base);
-    bp.expressions.push_back(expr);
-  }
+  bp.beta = solveBeta(bp, W, zero, s, T, scale, pivoted);
+  regroupedNames(names, &bp);
   return bp;
 }
 
