@@ -84,9 +84,63 @@ class Rls : public exid::Estimator {
     exid::check(K > 0, fmt::format("rls: the dataset '{}' is empty", data.source));
 
     // ---- initial state
-    Eigen::VectorXd theta0 = Eigen::VectorXd::Zero(p);
-    Eigen::MatrixXd P = Eigen::MatrixXd::Zero(p, p);  // lower triangle used
-    Eigen::MatrixXd P0inv;                            // for the residual identity
+    State st;
+    Eigen::VectorXd theta0;
+    Eigen::MatrixXd P0inv;  // for the residual identity
+    initialState(prior, p, &theta0, &st.P, &P0inv);
+    st.theta = theta0;
+
+    // ---- history
+    const long n_hist = (K - 1) / stride_ + 1 + ((K - 1) % stride_ != 0 ? 1 : 0);
+    exid::Estimate e;
+    e.history_t.resize(n_hist);
+    e.history_value.resize(n_hist, p);
+    e.history_pdiag.resize(n_hist, p);
+
+    // ---- recursion
+    recursion(model, data, ctx, n_hist, &st, &e);
+    e.history_t.conservativeResize(st.h);
+    e.history_value.conservativeResize(st.h, p);
+    e.history_pdiag.conservativeResize(st.h, p);
+    exid::check(st.theta.allFinite() && st.P.allFinite(),
+                "rls: the recursion diverged (non-finite estimate); "
+                "lower p0 or check the data scaling");
+
+    // ---- residuals
+    std::string rss_method;
+    const double rss = residuals(model, data, ctx, st, theta0, P0inv, &rss_method);
+    exid::check(st.m > p,
+                fmt::format("rls: {} observation rows for {} base parameters; the estimate is the "
+                            "prior's pull, not the data's (need more rows than parameters)",
+                            st.m, p));
+
+    // ---- result
+    fillResult(model, prior != nullptr, st, rss, rss_method, &e);
+    e.details["wall_s"] =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    ctx.report(1.0, "rls: done");
+    return e;
+  }
+
+ private:
+  using Json = exid::Json;
+
+  /// The recursion's state.
+  struct State {
+    Eigen::VectorXd theta;
+    Eigen::MatrixXd P;   // lower triangle used
+    double V = 0.0;      // weighted a-priori cost: V <- lambda V + e^2 / (lambda + s)
+    long m = 0;          // rows
+    double m_eff = 0.0;  // sum of the weights lambda^(K-k)
+    long h = 0;          // history records
+  };
+
+  /// theta0 and P0 (the prior's, its covariance scaled by 1 / noise_std^2; or 0 and p0 I), and
+  /// P0^-1.
+  void initialState(const exid::Prior* prior, int p, Eigen::VectorXd* theta0, Eigen::MatrixXd* P,
+                    Eigen::MatrixXd* P0inv) const {
+    *theta0 = Eigen::VectorXd::Zero(p);
+    *P = Eigen::MatrixXd::Zero(p, p);
     if (prior) {
       exid::check(
           prior->value.size() == p && prior->covariance.rows() == p &&
@@ -99,28 +153,23 @@ class Rls : public exid::Estimator {
       Eigen::LLT<Eigen::MatrixXd> llt(S);
       exid::check(llt.info() == Eigen::Success && S.allFinite(),
                   "rls: the prior covariance is not symmetric positive definite");
-      theta0 = prior->value;
-      P = S;
-      P0inv = llt.solve(Eigen::MatrixXd::Identity(p, p));
+      *theta0 = prior->value;
+      *P = S;
+      *P0inv = llt.solve(Eigen::MatrixXd::Identity(p, p));
     } else {
-      P.diagonal().setConstant(p0_);
-      P0inv = Eigen::MatrixXd::Identity(p, p) / p0_;
+      P->diagonal().setConstant(p0_);
+      *P0inv = Eigen::MatrixXd::Identity(p, p) / p0_;
     }
-    Eigen::VectorXd theta = theta0;
+  }
 
-    // ---- history
-    const long n_hist = (K - 1) / stride_ + 1 + ((K - 1) % stride_ != 0 ? 1 : 0);
-    exid::Estimate e;
-    e.history_t.resize(n_hist);
-    e.history_value.resize(n_hist, p);
-    e.history_pdiag.resize(n_hist, p);
-    long h = 0;
-
-    // ---- recursion
+  /// The recursion over every row in time order; the history (at most n_hist records) into e.
+  void recursion(const exid::ObservationModel& model, const exid::Dataset& data,
+                 const exid::RunContext& ctx, long n_hist, State* st, exid::Estimate* e) const {
+    const int p = model.numBase();
+    const int K = data.size();
+    Eigen::VectorXd& theta = st->theta;
+    Eigen::MatrixXd& P = st->P;
     Eigen::VectorXd g(p), k(p);
-    double V = 0.0;  // weighted a-priori cost: V <- lambda V + e^2 / (lambda + s)
-    long m = 0;
-    double m_eff = 0.0;  // sum of the weights lambda^(K-k)
     std::vector<int> sample_of_row, order;
     exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
@@ -137,8 +186,8 @@ class Rls : public exid::Estimator {
             k = g / den;
             const double err = r.y(i) - phi.dot(theta);
             theta.noalias() += err * k;
-            V = lambda_ * V + err * err / den;
-            m_eff = lambda_ * m_eff + 1.0;
+            st->V = lambda_ * st->V + err * err / den;
+            st->m_eff = lambda_ * st->m_eff + 1.0;
             if (joseph_) {
               P.selfadjointView<Eigen::Lower>().rankUpdate(k, g, -1.0);
               P.selfadjointView<Eigen::Lower>().rankUpdate(k, den);
@@ -153,55 +202,61 @@ class Rls : public exid::Estimator {
                 sample_of_row[static_cast<std::size_t>(order[static_cast<std::size_t>(idx + 1)])] !=
                     smp;
             const long global = begin + smp;
-            if (last_of_sample && (global % stride_ == 0 || global == K - 1) && h < n_hist) {
-              // (the row's own time: a streamed dataset holds no samples itself)
-              if (r.t.size() == static_cast<std::size_t>(r.y.size()))
-                e.history_t(h) = r.t[static_cast<std::size_t>(i)];
-              else if (!data.streamed())
-                e.history_t(h) = data.t(global);
-              else
-                throw exid::Error(fmt::format(
-                    "rls: the model '{}' gives no time per row, needed for the history of a "
-                    "streamed dataset",
-                    model.pluginName()));
-              e.history_value.row(h) = theta.transpose();
-              e.history_pdiag.row(h) = P.diagonal().transpose();
-              ++h;
-            }
+            if (last_of_sample && (global % stride_ == 0 || global == K - 1) && st->h < n_hist)
+              recordHistory(model, data, r, i, global, *st, e);
           }
-          m += R;
+          st->m += R;
         });
-    e.history_t.conservativeResize(h);
-    e.history_value.conservativeResize(h, p);
-    e.history_pdiag.conservativeResize(h, p);
-    exid::check(theta.allFinite() && P.allFinite(),
-                "rls: the recursion diverged (non-finite estimate); "
-                "lower p0 or check the data scaling");
+  }
 
-    // ---- residuals
+  /// One history record: the estimate and diag(P) after row i of chunk r (sample `global`).
+  void recordHistory(const exid::ObservationModel& model, const exid::Dataset& data,
+                     const exid::Rows& r, int i, long global, State& st, exid::Estimate* e) const {
+    const long h = st.h;
+    // (the row's own time: a streamed dataset holds no samples itself)
+    if (r.t.size() == static_cast<std::size_t>(r.y.size()))
+      e->history_t(h) = r.t[static_cast<std::size_t>(i)];
+    else if (!data.streamed())
+      e->history_t(h) = data.t(global);
+    else
+      throw exid::Error(
+          fmt::format("rls: the model '{}' gives no time per row, needed for the history of a "
+                      "streamed dataset",
+                      model.pluginName()));
+    e->history_value.row(h) = st.theta.transpose();
+    e->history_pdiag.row(h) = st.P.diagonal().transpose();
+    ++st.h;
+  }
+
+  /// ||y - W theta_K||^2: a second pass, or (lambda = 1) the exact identity; method: which.
+  double residuals(const exid::ObservationModel& model, const exid::Dataset& data,
+                   const exid::RunContext& ctx, const State& st, const Eigen::VectorXd& theta0,
+                   const Eigen::MatrixXd& P0inv, std::string* method) const {
     double rss = 0.0;
-    std::string rss_method;
     if (residualPass()) {
+      const Eigen::VectorXd& theta = st.theta;
       exid::estimators::forEachChunk(
           model, data, chunk_, ctx, kName, 0.5, 0.95,
           [&](const exid::Rows& r, int, int) { rss += (r.y - r.W * theta).squaredNorm(); });
-      rss_method = "second pass over the data with the final estimate";
+      *method = "second pass over the data with the final estimate";
     } else {
       // lambda = 1: RLS minimises ||y - W theta||^2 + (theta - theta0)^T P0^-1 (theta - theta0),
       // whose minimum is V; so ||y - W theta_K||^2 = V - (theta_K - theta0)^T P0^-1 (theta_K -
       // theta0).
-      const Eigen::VectorXd dth = theta - theta0;
-      rss = std::max(0.0, V - dth.dot(P0inv * dth));
-      rss_method =
-          "exact identity V_K - (theta_K - theta0)^T P0^-1 (theta_K - theta0) (lambda = 1)";
+      const Eigen::VectorXd dth = st.theta - theta0;
+      rss = std::max(0.0, st.V - dth.dot(P0inv * dth));
+      *method = "exact identity V_K - (theta_K - theta0)^T P0^-1 (theta_K - theta0) (lambda = 1)";
     }
-    exid::check(m > p,
-                fmt::format("rls: {} observation rows for {} base parameters; the estimate is the "
-                            "prior's pull, not the data's (need more rows than parameters)",
-                            m, p));
+    return rss;
+  }
 
-    // ---- result
-    const Eigen::MatrixXd Pfull = P.selfadjointView<Eigen::Lower>();
+  /// The estimate, its covariance sigma^2 P_K and the details (without wall_s).
+  void fillResult(const exid::ObservationModel& model, bool has_prior, const State& st, double rss,
+                  const std::string& rss_method, exid::Estimate* ep) const {
+    exid::Estimate& e = *ep;
+    const int p = model.numBase();
+    const long m = st.m;
+    const Eigen::MatrixXd Pfull = st.P.selfadjointView<Eigen::Lower>();
     const double sigma2 = rss / static_cast<double>(m - p);
     const exid::BaseParameters& b = model.base();
     for (int i = 0; i < p; ++i) {
@@ -209,7 +264,7 @@ class Rls : public exid::Estimator {
       e.names.push_back(u < b.names.size() ? b.names[u] : fmt::format("theta{}", i + 1));
       e.expressions.push_back(u < b.expressions.size() ? b.expressions[u] : e.names.back());
     }
-    e.value = theta;
+    e.value = st.theta;
     e.covariance = sigma2 * Pfull;
     e.std = e.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     e.sigma = std::sqrt(sigma2);
@@ -223,9 +278,9 @@ class Rls : public exid::Estimator {
     d["parameters"] = exid::estimators::parameterTable(e);
     d["rows"] = Json(static_cast<long long>(m));
     d["dof"] = Json(static_cast<long long>(m - p));
-    d["effective_rows"] = m_eff;
-    d["p0"] = prior ? Json(nullptr) : Json(p0_);
-    d["prior"] = prior != nullptr;
+    d["effective_rows"] = st.m_eff;
+    d["p0"] = has_prior ? Json(nullptr) : Json(p0_);
+    d["prior"] = has_prior;
     d["forgetting_factor"] = lambda_;
     d["update"] = joseph_ ? "joseph" : "standard";
     d["sigma2"] = sigma2;
@@ -238,14 +293,8 @@ class Rls : public exid::Estimator {
         "sqrt(cond(P_K)); P_K^-1 = W^T W + P0^-1 for lambda = 1, so ~ cond(W) when P0 is large";
     d["min_eig_P"] = lmin;
     d["history_stride"] = Json(static_cast<long long>(stride_));
-    d["history_records"] = Json(static_cast<long long>(h));
-    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    ctx.report(1.0, "rls: done");
-    return e;
+    d["history_records"] = Json(static_cast<long long>(st.h));
   }
-
- private:
-  using Json = exid::Json;
   bool residualPass() const { return residual_pass_ || lambda_ != 1.0; }
   double p0_, lambda_;
   long stride_;
