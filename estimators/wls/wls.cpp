@@ -67,42 +67,13 @@ class Wls : public exid::Estimator {
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     const int p = model.numBase();
-    std::map<int, RowAccumulator> acc;
-    std::map<int, std::vector<int>> idx;
-    exid::estimators::forEachChunk(
-        model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int, int) {
-          for (auto& [eq, v] : idx) v.clear();
-          const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
-          for (Eigen::Index i = 0; i < r.y.size(); ++i)
-            idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
-                static_cast<int>(i));
-          exid::check(
-              static_cast<int>(idx.size()) <= max_eq_,
-              fmt::format("wls: the model labels more than max_equations = {} distinct equations; "
-                          "per-equation weighting needs many rows per equation",
-                          max_eq_));
-          for (const auto& [eq, v] : idx) {
-            exid::estimators::addEquationRows(r, v, eq, &acc);
-          }
-        });
+    const std::map<int, RowAccumulator> acc = compressRows(model, data, ctx);
 
     // ---- 1. OLS
     RowAccumulator all(p);
     for (const auto& [eq, a] : acc) all.merge(a);
     const std::vector<std::string>& names = model.base().names;
-    // With a prior, the data alone may not identify every direction: the first pass is the
-    // rank-tolerant (minimum-norm) fit, whose residuals give the weights.
-    exid::estimators::LsSolution ols;
-    if (prior) {
-      int rank = 0;
-      ols.theta = exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
-      ols.std = Eigen::VectorXd::Constant(p, NAN);
-      ols.rss = all.residualSquared(ols.theta);
-      ols.sigma2 = ols.rss / static_cast<double>(std::max<long>(1, all.rows() - rank));
-      ols.cond_W = NAN;
-    } else {
-      ols = exid::estimators::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
-    }
+    const exid::estimators::LsSolution ols = firstPass(all, names, prior, p);
     const long m = all.rows();
 
     // ---- 2-3. weights and WLS
@@ -111,53 +82,7 @@ class Wls : public exid::Estimator {
     exid::Json eq_table = exid::Json::array();
     for (int it = 0; it < iterations_; ++it) {
       if (ctx.shouldStop()) throw exid::Error("wls: stopped while re-weighting");
-      std::map<int, double> sigma;
-      std::map<int, int> params_in;
-      double smax = 0.0;
-      for (const auto& [eq, a] : acc) {
-        const Eigen::VectorXd nrm = a.columnNorms();
-        const double big = nrm.maxCoeff();
-        int pe = 0;
-        for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
-        double dof = static_cast<double>(a.rows() - pe);
-        if (dof <= 0)
-          dof = static_cast<double>(a.rows()) * static_cast<double>(m - p) / static_cast<double>(m);
-        const double rss = a.residualSquared(theta);
-        sigma[eq] = std::sqrt(std::max(rss, 0.0) / std::max(dof, 1e-300));
-        params_in[eq] = pe;
-        smax = std::max(smax, sigma[eq]);
-      }
-      // Floor: an equation fitted exactly (noise-free data) must not get an infinite weight.
-      double floor = smax > 0 ? 1e-6 * smax : 1.0;
-      // With a prior the weights' absolute size matters: not above 1e9 / rms(y) (as batch_ls).
-      if (prior)
-        floor = std::max(floor, 1e-9 * all.factor().col(p).norm() /
-                                    std::sqrt(static_cast<double>(std::max<long>(1, m))));
-      RowAccumulator weighted(p);
-      eq_table = exid::Json::array();
-      for (const auto& [eq, a] : acc) {
-        const double s = std::max(sigma[eq], floor);
-        weighted.merge(a, 1.0 / s);
-        exid::Json row = exid::Json::object();
-        row["equation"] = eq;
-        row["rows"] = Json(static_cast<long long>(a.rows()));
-        row["parameters_in_equation"] = params_in[eq];
-        row["residual_std"] = sigma[eq];
-        row["weight"] = 1.0 / s;
-        eq_table.push_back(row);
-      }
-      if (prior) {
-        // Weighted rows are in units of their noise std: stack the prior's pseudo-observations.
-        exid::estimators::addPriorRows(&weighted, *prior, kName);
-        exid::estimators::SolveOptions o = opt_;
-        o.unit_variance = true;
-        // The prior makes the problem positive definite: no rank decision (noise-free data with
-        // a prior are legitimately ill-conditioned: tiny noise std, large weights).
-        o.rank_tolerance = 0.0;
-        sol = exid::estimators::solveLeastSquares(weighted, names, o, kName);
-      } else {
-        sol = exid::estimators::solveLeastSquares(weighted, names, opt_, kName);
-      }
+      sol = weightedPass(acc, all, theta, prior, names, &eq_table);
       theta = sol.theta;
     }
     double rss_unweighted = 0.0;
@@ -194,6 +119,108 @@ class Wls : public exid::Estimator {
 
  private:
   using Json = exid::Json;
+
+  /// Every row, compressed per equation (one pass over the data).
+  std::map<int, RowAccumulator> compressRows(const exid::ObservationModel& model,
+                                             const exid::Dataset& data,
+                                             const exid::RunContext& ctx) const {
+    std::map<int, RowAccumulator> acc;
+    std::map<int, std::vector<int>> idx;
+    exid::estimators::forEachChunk(
+        model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int, int) {
+          for (auto& [eq, v] : idx) v.clear();
+          const bool labelled = r.equation.size() == static_cast<std::size_t>(r.y.size());
+          for (Eigen::Index i = 0; i < r.y.size(); ++i)
+            idx[labelled ? r.equation[static_cast<std::size_t>(i)] : 0].push_back(
+                static_cast<int>(i));
+          exid::check(
+              static_cast<int>(idx.size()) <= max_eq_,
+              fmt::format("wls: the model labels more than max_equations = {} distinct equations; "
+                          "per-equation weighting needs many rows per equation",
+                          max_eq_));
+          for (const auto& [eq, v] : idx) {
+            exid::estimators::addEquationRows(r, v, eq, &acc);
+          }
+        });
+    return acc;
+  }
+
+  /// The first (unweighted) pass. With a prior, the data alone may not identify every
+  /// direction: the first pass is the rank-tolerant (minimum-norm) fit, whose residuals give the
+  /// weights.
+  exid::estimators::LsSolution firstPass(const RowAccumulator& all,
+                                         const std::vector<std::string>& names,
+                                         const exid::Prior* prior, int p) const {
+    exid::estimators::LsSolution ols;
+    if (prior) {
+      int rank = 0;
+      ols.theta = exid::estimators::solveMinimumNorm(all, opt_.rank_tolerance, &rank);
+      ols.std = Eigen::VectorXd::Constant(p, NAN);
+      ols.rss = all.residualSquared(ols.theta);
+      ols.sigma2 = ols.rss / static_cast<double>(std::max<long>(1, all.rows() - rank));
+      ols.cond_W = NAN;
+    } else {
+      ols = exid::estimators::solveLeastSquares(all, names, opt_, "wls (first OLS pass)");
+    }
+    return ols;
+  }
+
+  /// One weighting pass: each equation's residual std at theta, its rows divided by it (floored),
+  /// least squares again (with the prior stacked). eq_table: the weights.
+  exid::estimators::LsSolution weightedPass(const std::map<int, RowAccumulator>& acc,
+                                            const RowAccumulator& all, const Eigen::VectorXd& theta,
+                                            const exid::Prior* prior,
+                                            const std::vector<std::string>& names,
+                                            exid::Json* eq_table) const {
+    const int p = all.cols();
+    const long m = all.rows();
+    std::map<int, double> sigma;
+    std::map<int, int> params_in;
+    double smax = 0.0;
+    for (const auto& [eq, a] : acc) {
+      const Eigen::VectorXd nrm = a.columnNorms();
+      const double big = nrm.maxCoeff();
+      int pe = 0;
+      for (Eigen::Index j = 0; j < nrm.size(); ++j) pe += nrm(j) > 1e-12 * big ? 1 : 0;
+      double dof = static_cast<double>(a.rows() - pe);
+      if (dof <= 0)
+        dof = static_cast<double>(a.rows()) * static_cast<double>(m - p) / static_cast<double>(m);
+      const double rss = a.residualSquared(theta);
+      sigma[eq] = std::sqrt(std::max(rss, 0.0) / std::max(dof, 1e-300));
+      params_in[eq] = pe;
+      smax = std::max(smax, sigma[eq]);
+    }
+    // Floor: an equation fitted exactly (noise-free data) must not get an infinite weight.
+    double floor = smax > 0 ? 1e-6 * smax : 1.0;
+    // With a prior the weights' absolute size matters: not above 1e9 / rms(y) (as batch_ls).
+    if (prior)
+      floor = std::max(floor, 1e-9 * all.factor().col(p).norm() /
+                                  std::sqrt(static_cast<double>(std::max<long>(1, m))));
+    RowAccumulator weighted(p);
+    *eq_table = exid::Json::array();
+    for (const auto& [eq, a] : acc) {
+      const double s = std::max(sigma[eq], floor);
+      weighted.merge(a, 1.0 / s);
+      exid::Json row = exid::Json::object();
+      row["equation"] = eq;
+      row["rows"] = Json(static_cast<long long>(a.rows()));
+      row["parameters_in_equation"] = params_in[eq];
+      row["residual_std"] = sigma[eq];
+      row["weight"] = 1.0 / s;
+      eq_table->push_back(row);
+    }
+    if (prior) {
+      // Weighted rows are in units of their noise std: stack the prior's pseudo-observations.
+      exid::estimators::addPriorRows(&weighted, *prior, kName);
+      exid::estimators::SolveOptions o = opt_;
+      o.unit_variance = true;
+      // The prior makes the problem positive definite: no rank decision (noise-free data with
+      // a prior are legitimately ill-conditioned: tiny noise std, large weights).
+      o.rank_tolerance = 0.0;
+      return exid::estimators::solveLeastSquares(weighted, names, o, kName);
+    }
+    return exid::estimators::solveLeastSquares(weighted, names, opt_, kName);
+  }
   int iterations_, chunk_, max_eq_;
   exid::estimators::SolveOptions opt_;
 };
