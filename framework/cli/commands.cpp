@@ -632,24 +632,23 @@ int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
   return s.not_run > 0 ? signalExitCode() : 0;
 }
 
-}  // namespace
+// What the command line gives the commands (shared by the subcommands' options and the run).
+struct CommandArgs {
+  std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
+  bool json = false, rigid_body_only = false;
+  std::vector<std::string> matrix_args, inspect_args, sets;
+  std::string params, json_out;
+  int jobs = 1;
+  std::string shard, rows, cols, metric;
+  bool retry = false, force = false;
+  std::string export_dir;
+  double rate_hz = 1000.0;
+  int periods = 1;
+  std::vector<double> torque_max;
+};
 
-Commands addCommands(CLI::App& app, Registry& registry) {
-  struct State {
-    std::string robot, model = "differential", model_params = "{}", samples, what, out, study, data;
-    bool json = false, rigid_body_only = false;
-    std::vector<std::string> matrix_args, inspect_args, sets;
-    std::string params, json_out;
-    int jobs = 1;
-    std::string shard, rows, cols, metric;
-    bool retry = false, force = false;
-    std::string export_dir;
-    double rate_hz = 1000.0;
-    int periods = 1;
-    std::vector<double> torque_max;
-  };
-  auto st = std::make_shared<State>();
-
+// exid robot info ROBOT; returns the info subcommand.
+CLI::App* addRobotCommand(CLI::App& app, CommandArgs* st) {
   auto* robot = app.add_subcommand("robot", "robot descriptions: exid robot info ROBOT");
   auto* info = robot->add_subcommand("info", "parameters, base parameters and their expressions");
   robot->require_subcommand(1);
@@ -659,7 +658,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   info->add_option("--model-params", st->model_params,
                    "its parameters as YAML, e.g. '{rotor_inertia: true}'");
   info->add_flag("--json", st->json, "print JSON");
+  return info;
+}
 
+CLI::App* addEvalCommand(CLI::App& app, CommandArgs* st) {
   auto* eval =
       app.add_subcommand("eval", "evaluate torque, regressors or energy on a CSV of samples");
   eval->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
@@ -669,7 +671,11 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   eval->add_option("--out", st->out, "output CSV")->required();
   eval->add_flag("--rigid-body-only", st->rigid_body_only,
                  "torque: the rigid bodies alone (default: the full torque, drives included)");
+  return eval;
+}
 
+// excite, simulate, identify: one stage of a study each.
+std::vector<CLI::App*> addStageCommands(CLI::App& app, CommandArgs* st) {
   std::vector<CLI::App*> stages;
   for (const char* name : {"excite", "simulate", "identify"}) {
     auto* s = app.add_subcommand(name, fmt::format("run only the {} stage of a study", name));
@@ -690,7 +696,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     }
     stages.push_back(s);
   }
+  return stages;
+}
 
+CLI::App* addExportCommand(CLI::App& app, CommandArgs* st) {
   auto* exp = app.add_subcommand("export",
                                  "write identified consistent parameters into a URDF: "
                                  "exid export [ROBOT] --study DIR --out robot_identified.urdf");
@@ -699,7 +708,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")
       ->required();
   exp->add_option("--out", st->out, "URDF file to write")->required();
+  return exp;
+}
 
+CLI::App* addCheckTrajectoryCommand(CLI::App& app, CommandArgs* st) {
   auto* chk = app.add_subcommand(
       "check-trajectory",
       "check a trajectory CSV against a robot's limits at the file's rate: exid check-trajectory "
@@ -711,7 +723,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
                   "torque limits [N m or N] per joint when the robot description has none")
       ->delimiter(',');
   chk->add_option("--json", st->json_out, "write the result as JSON to this file");
+  return chk;
+}
 
+CLI::App* addMatrixCommand(CLI::App& app, CommandArgs* st) {
   auto* matrix = app.add_subcommand(
       "matrix",
       "comparison matrices: exid matrix MATRIX.yaml --out DIR [-j N] [--shard i/N] | "
@@ -727,7 +742,10 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   matrix->add_option("--rows", st->rows, "table: axes of the rows, comma-separated");
   matrix->add_option("--cols", st->cols, "table: axes of the columns, comma-separated");
   matrix->add_option("--metric", st->metric, "table: the metric (without: list the metrics)");
+  return matrix;
+}
 
+CLI::App* addInspectCommand(CLI::App& app, CommandArgs* st) {
   auto* inspect = app.add_subcommand(
       "inspect",
       "look at a recording before trusting it: exid inspect ROBOT DATA.csv|BAG_FOLDER [--set "
@@ -747,6 +765,20 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   inspect->add_option("--model-params", st->model_params,
                       "its parameters as YAML, e.g. '{offset: true}'");
   inspect->add_option("--json", st->json_out, "write the result as JSON to this file");
+  return inspect;
+}
+
+}  // namespace
+
+Commands addCommands(CLI::App& app, Registry& registry) {
+  auto st = std::make_shared<CommandArgs>();
+  auto* info = addRobotCommand(app, st.get());
+  auto* eval = addEvalCommand(app, st.get());
+  const std::vector<CLI::App*> stages = addStageCommands(app, st.get());
+  auto* exp = addExportCommand(app, st.get());
+  auto* chk = addCheckTrajectoryCommand(app, st.get());
+  auto* matrix = addMatrixCommand(app, st.get());
+  auto* inspect = addInspectCommand(app, st.get());
 
   Commands c;
   c.run = [st, info, eval, exp, chk, stages, matrix, inspect, &registry]() -> int {

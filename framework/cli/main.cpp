@@ -57,6 +57,57 @@ class ProgressPrinter {
   std::chrono::steady_clock::time_point last_{};
 };
 
+// exid run STUDY [--out DIR] / exid validate STUDY.
+int runOrValidate(exid::Registry& registry, const std::string& file, bool validate_only,
+                  std::string out_dir) {
+  exid::StudyConfig cfg = exid::loadStudy(file, registry);
+  if (validate_only) {
+    std::cout << fmt::format("{}: valid (configuration hash {})\n", file, cfg.hash());
+    std::cout << cfg.resolvedYaml();
+    return 0;
+  }
+  if (out_dir.empty()) out_dir = "out/" + cfg.name;  // a plain name (validated)
+  exid::RunOptions opt;
+  opt.out_dir = out_dir;
+  ProgressPrinter printer;
+  opt.progress = [&printer](const std::string& s, double f, const std::string& t) {
+    printer(s, f, t);
+  };
+  opt.cancelled = [] { return g_stop.load(); };
+  opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
+  opt.hard_stop_exit_code = exid::cli::signalExitCode;
+  exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
+  exid::StudyResult r = exid::runStudy(cfg, registry, opt);
+  std::cout << exid::briefTable(r.headline);
+  if (!r.ok) {
+    std::cerr << fmt::format(
+        "exid: study '{}' {}: {}\n{}\n", cfg.name, r.cancelled ? "cancelled" : "failed", r.message,
+        r.written_to.empty()
+            ? std::string("(nothing was written)")
+            : fmt::format("(details in {}/summary.json{})", r.written_to.string(),
+                          r.written_to != fs::path(out_dir).lexically_normal()
+                              ? fmt::format("; the earlier results in {} are untouched", out_dir)
+                              : ""));
+    return r.cancelled ? exid::cli::signalExitCode() : 1;
+  }
+  std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir,
+                           out_dir);
+  return 0;
+}
+
+// exid plugins [KIND] | exid plugins info NAME
+int pluginsCommand(const exid::Registry& registry, const std::vector<std::string>& plugins_args) {
+  if (!plugins_args.empty() && plugins_args[0] == "info") {
+    if (plugins_args.size() != 2) throw exid::Error("usage: exid plugins info NAME");
+    std::cout << exid::pluginInfoText(registry, plugins_args[1]);
+    return 0;
+  }
+  std::optional<exid::PluginKind> kind;
+  if (!plugins_args.empty()) kind = exid::pluginKindFromString(plugins_args[0]);
+  std::cout << exid::pluginListText(registry, kind);
+  return registry.plugins().empty() ? 1 : 0;
+}
+
 }  // namespace
 
 std::function<bool()> exid::cli::cancelled() {
@@ -130,55 +181,10 @@ int main(int argc, char** argv) {
 
   try {
     setup();
-    if (*run || *validate) {
-      const std::string file = *run ? study_file : validate_file;
-      exid::StudyConfig cfg = exid::loadStudy(file, registry);
-      if (*validate) {
-        std::cout << fmt::format("{}: valid (configuration hash {})\n", file, cfg.hash());
-        std::cout << cfg.resolvedYaml();
-        return 0;
-      }
-      if (out_dir.empty()) out_dir = "out/" + cfg.name;  // a plain name (validated)
-      exid::RunOptions opt;
-      opt.out_dir = out_dir;
-      ProgressPrinter printer;
-      opt.progress = [&printer](const std::string& s, double f, const std::string& t) {
-        printer(s, f, t);
-      };
-      opt.cancelled = [] { return g_stop.load(); };
-      opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
-      opt.hard_stop_exit_code = exid::cli::signalExitCode;
-      exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
-      exid::StudyResult r = exid::runStudy(cfg, registry, opt);
-      std::cout << exid::briefTable(r.headline);
-      if (!r.ok) {
-        std::cerr << fmt::format(
-            "exid: study '{}' {}: {}\n{}\n", cfg.name, r.cancelled ? "cancelled" : "failed",
-            r.message,
-            r.written_to.empty()
-                ? std::string("(nothing was written)")
-                : fmt::format(
-                      "(details in {}/summary.json{})", r.written_to.string(),
-                      r.written_to != fs::path(out_dir).lexically_normal()
-                          ? fmt::format("; the earlier results in {} are untouched", out_dir)
-                          : ""));
-        return r.cancelled ? exid::cli::signalExitCode() : 1;
-      }
-      std::cout << fmt::format("\nFull report: {}/report.md (summary: {}/summary.json)\n", out_dir,
-                               out_dir);
-      return 0;
-    }
-    if (*plugins) {
-      if (!plugins_args.empty() && plugins_args[0] == "info") {
-        if (plugins_args.size() != 2) throw exid::Error("usage: exid plugins info NAME");
-        std::cout << exid::pluginInfoText(registry, plugins_args[1]);
-        return 0;
-      }
-      std::optional<exid::PluginKind> kind;
-      if (!plugins_args.empty()) kind = exid::pluginKindFromString(plugins_args[0]);
-      std::cout << exid::pluginListText(registry, kind);
-      return registry.plugins().empty() ? 1 : 0;
-    }
+    if (*run || *validate)
+      return runOrValidate(registry, *run ? study_file : validate_file,
+                           static_cast<bool>(*validate), out_dir);
+    if (*plugins) return pluginsCommand(registry, plugins_args);
     return extra.run();
   } catch (const exid::Error& e) {
     std::cerr << "exid: " << e.what() << '\n';
