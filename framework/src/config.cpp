@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 
+#include "exid/collision_yaml.hpp"
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
 #include "exid/registry.hpp"
@@ -593,14 +594,141 @@ void parseBaseColumns(const YAML::Node& root, Problems& pr, StudyConfig& cfg) {
 }
 
 // `excitation:` trajectory, criterion, optimizer, constraints and information.
+// A YAML value as JSON: mappings, lists, numbers (what toDouble reads), true/false, text.
+Json yamlJson(const YAML::Node& n) {
+  if (n.IsMap()) {
+    Json j = Json::object();
+    for (const auto& kv : n) j[kv.first.Scalar()] = yamlJson(kv.second);
+    return j;
+  }
+  if (n.IsSequence()) {
+    Json j = Json::array();
+    for (const auto& e : n) j.push_back(yamlJson(e));
+    return j;
+  }
+  if (!n.IsScalar()) return Json();
+  const std::string& t = n.Scalar();
+  if (t == "true" || t == "false") return Json(t == "true");
+  if (const std::optional<double> d = toDouble(t); d && std::isfinite(*d)) return Json(*d);
+  return Json(t);
+}
+
+// JSON into a YAML emitter (flow style for lists of numbers and of texts).
+void emitJson(YAML::Emitter& e, const Json& j) {
+  switch (j.type()) {
+    case Json::Type::Object:
+      e << YAML::BeginMap;
+      for (const auto& [k, v] : j.items()) {
+        e << YAML::Key << k << YAML::Value;
+        emitJson(e, v);
+      }
+      e << YAML::EndMap;
+      break;
+    case Json::Type::Array: {
+      bool flat = true;
+      for (std::size_t i = 0; i < j.size(); ++i)
+        flat = flat && !j.at(i).isObject() && !j.at(i).isArray();
+      if (flat) e << YAML::Flow;
+      e << YAML::BeginSeq;
+      for (std::size_t i = 0; i < j.size(); ++i) emitJson(e, j.at(i));
+      e << YAML::EndSeq;
+      break;
+    }
+    case Json::Type::Bool:
+      e << j.asBool();
+      break;
+    case Json::Type::Int:
+    case Json::Type::Double:
+      e << formatValue(ParamValue(j.asDouble()));
+      break;
+    case Json::Type::String:
+      e << j.asString();
+      break;
+    default:
+      e << YAML::Null;
+  }
+}
+
+// excitation.collision: {margin_m, self, allowed_pairs, obstacles} (docs/excitation.md §12).
+void parseCollision(const YAML::Node& c, const fs::path& base_dir, Problems& pr, StudyConfig& cfg) {
+  const std::string path = "excitation.collision";
+  if (!c.IsMap()) {
+    pr.add(c, path + ": expected a mapping {margin_m, self, allowed_pairs, obstacles}");
+    return;
+  }
+  const std::vector<std::string> allowed = {"margin_m", "self", "allowed_pairs", "obstacles"};
+  for (const auto& kv : c) {
+    const std::optional<std::string> key = keyName(pr, kv.first, path);
+    if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
+      unknownKey(pr, kv.first, path, *key, allowed);
+  }
+  auto o = std::make_shared<CollisionOptions>();
+  o->mesh_dir = base_dir.string();
+  Json j = Json::object();
+  const YAML::Node m = c["margin_m"];
+  double margin = NAN;
+  if (m && m.IsScalar())
+    if (const std::optional<double> v = toDouble(m.Scalar())) margin = *v;
+  if (!m)
+    pr.add(c, path +
+                  ".margin_m: missing; the smallest distance [m] allowed between checked "
+                  "bodies and obstacles (exid cannot choose it for your robot)");
+  else if (!std::isfinite(margin) || margin < 0)
+    pr.add(m, path + ".margin_m: expected a finite distance >= 0 [m], found " + scalarText(m));
+  else
+    o->margin_m = margin;
+  if (const YAML::Node s = c["self"]) {
+    if (!s.IsScalar() || (s.Scalar() != "true" && s.Scalar() != "false"))
+      pr.add(s, path + ".self: expected true or false, found " + scalarText(s));
+    else
+      o->self = s.Scalar() == "true";
+  }
+  j["margin_m"] = o->margin_m;
+  j["self"] = o->self;
+  Json pairs = Json::array();
+  if (const YAML::Node a = c["allowed_pairs"]) {
+    if (!a.IsSequence()) pr.add(a, path + ".allowed_pairs: expected a list of [name, name]");
+    for (std::size_t i = 0; a.IsSequence() && i < a.size(); ++i) {
+      const YAML::Node e = a[i];
+      if (!e.IsSequence() || e.size() != 2 || !e[0].IsScalar() || !e[1].IsScalar()) {
+        pr.add(e, fmt::format("{}.allowed_pairs[{}]: expected [name, name] (bodies or obstacles)",
+                              path, i));
+        continue;
+      }
+      o->allowed_pairs.emplace_back(e[0].Scalar(), e[1].Scalar());
+      pairs.push_back(Json(std::vector<std::string>{e[0].Scalar(), e[1].Scalar()}));
+    }
+  }
+  j["allowed_pairs"] = pairs;
+  Json obs = Json::array();
+  if (const YAML::Node ob = c["obstacles"]) {
+    if (!ob.IsSequence()) pr.add(ob, path + ".obstacles: expected a list of shapes");
+    for (std::size_t i = 0; ob.IsSequence() && i < ob.size(); ++i) {
+      Obstacle x;
+      try {
+        x.shape = parseCollisionShape(ob[i], pr.source, fmt::format("{}.obstacles[{}]", path, i),
+                                      &x.name);
+      } catch (const Error& e) {
+        pr.items.push_back(e.what());
+        continue;
+      }
+      o->obstacles.push_back(x);
+      obs.push_back(yamlJson(ob[i]));
+    }
+  }
+  j["obstacles"] = obs;
+  cfg.excitation_collision = o;
+  cfg.excitation_collision_json = j;
+}
+
 void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Registry& reg,
                      Problems& pr, StudyConfig& cfg) {
   if (const YAML::Node x = root["excitation"]) {
     if (!x.IsMap()) {
       pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
     } else {
-      const std::vector<std::string> allowed = {"trajectory", "criterion", "optimizer",
-                                                "constraints", "information"};
+      const std::vector<std::string> allowed = {"trajectory",  "criterion",   "optimizer",
+                                                "constraints", "information", "collision"};
       for (const auto& kv : x) {
         const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
         if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
@@ -625,6 +753,7 @@ void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Reg
       cinfo.params = excitationConstraintParams();
       resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
                   cfg.excitation_constraints);
+      if (x["collision"]) parseCollision(x["collision"], base_dir, pr, cfg);
       PluginInfo iinfo;
       iinfo.params = excitationInformationParams();
       resolveInto(iinfo, x["information"], "excitation.information", base_dir, pr,
@@ -903,6 +1032,10 @@ std::string StudyConfig::resolvedYaml() const {
       }
       e << YAML::EndMap;
     }
+    if (excitation_collision) {
+      e << YAML::Key << "collision" << YAML::Value;
+      emitJson(e, excitation_collision_json);
+    }
     if (hasExcitationInformation()) {
       e << YAML::Key << "information" << YAML::Value << YAML::BeginMap;
       for (const auto& d : excitationInformationParams()) {
@@ -979,6 +1112,7 @@ Json StudyConfig::resolvedJson() const {
       j["excitation"]["constraints"]["torque_max_Nm"] =
           Json(excitation_constraints.getDoubles("torque_max_Nm"));
     }
+    if (excitation_collision) j["excitation"]["collision"] = excitation_collision_json;
     if (hasExcitationInformation()) {
       Json& I = j["excitation"]["information"];
       I["earlier_study"] = excitation_information.getString("earlier_study");

@@ -65,6 +65,10 @@ class Problem final : public ExcitationProblem {
       dyn_ = makeDynamicsData(r);
       nl_ = 2 * n_ * K_;
     }
+    if (opt_.collision) {
+      collision_ = std::make_unique<CollisionModel>(r, *opt_.collision);
+      nc_ = collision_->numPairs() * K_;
+    }
     if (r.hasTransmission()) {
       T_ = r.transmission;
       q0_ = r.transmission_offset.size() ? r.transmission_offset : Eigen::VectorXd::Zero(n_);
@@ -123,16 +127,17 @@ class Problem final : public ExcitationProblem {
     return out;
   }
 
-  int numConstraints() const override { return static_cast<int>(active_.size()) * K_ + nl_; }
-  int numNonlinearConstraints() const override { return nl_; }
+  int numConstraints() const override { return static_cast<int>(active_.size()) * K_ + nl_ + nc_; }
+  int numNonlinearConstraints() const override { return nl_ + nc_; }
 
   void nonlinearConstraints(const Eigen::VectorXd& z, Eigen::VectorXd* g,
                             Eigen::MatrixXd* jac) override {
-    if (g) g->resize(nl_);
-    if (jac) jac->resize(nl_, numVariables());
-    if (nl_ == 0) return;
+    if (g) g->resize(nl_ + nc_);
+    if (jac) jac->resize(nl_ + nc_, numVariables());
+    if (nl_ + nc_ == 0) return;
     const Samples s = traj_->evaluate(z);
-    torqueRows(z, s, g ? g->data() : nullptr, jac, 0);
+    if (nl_ > 0) torqueRows(z, s, g ? g->data() : nullptr, jac, 0);
+    if (nc_ > 0) collisionRows(z, s, g ? g->data() + nl_ : nullptr, jac, nl_);
   }
 
   void constraints(const Eigen::VectorXd& z, Eigen::VectorXd* g, Eigen::MatrixXd* jac) override {
@@ -169,6 +174,7 @@ class Problem final : public ExcitationProblem {
       }
     }
     if (nl_ > 0) torqueRows(z, s, g ? g->data() + row : nullptr, jac, row);
+    if (nc_ > 0) collisionRows(z, s, g ? g->data() + row + nl_ : nullptr, jac, row + nl_);
   }
 
   const Trajectory& trajectory() const override { return *traj_; }
@@ -243,6 +249,34 @@ class Problem final : public ExcitationProblem {
     }
   }
 
+  // Collision rows: K samples per checked pair p: margin - d_p(q(t_k)) <= 0, the Jacobian
+  // -(d d_p / d q at t_k) times the trajectory's position rows of sample k.
+  void collisionRows(const Eigen::VectorXd& z, const Samples& s, double* g, Eigen::MatrixXd* jac,
+                     int row0) {
+    const int n = n_, K = K_, P = collision_->numPairs();
+    const double margin = collision_->margin();
+    SampleRows rows_own;
+    const SampleRows* R = jac ? &sampleRows(z, &rows_own) : nullptr;
+    Eigen::VectorXd d;
+    Eigen::MatrixXd D;
+    for (int k = 0; k < K; ++k) {
+      collision_->distances(s.q.row(k).transpose(), &d, jac ? &D : nullptr);
+      for (int p = 0; p < P; ++p) {
+        const Eigen::Index row = row0 + static_cast<Eigen::Index>(p) * K + k;
+        if (g) g[row - row0] = margin - d(p);
+        if (!jac) continue;
+        jac->row(row).setZero();
+        for (int i = 0; i < n; ++i) {
+          if (D(p, i) == 0.0) continue;
+          const Eigen::Index src = static_cast<Eigen::Index>(3 * n) * k + i;  // q_i at sample k
+          const auto [c0, c1] = R->span[static_cast<std::size_t>(src)];
+          if (c1 > c0)
+            jac->row(row).segment(c0, c1 - c0) -= D(p, i) * R->J.row(src).segment(c0, c1 - c0);
+        }
+      }
+    }
+  }
+
   using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
   // The trajectory's Jacobian rows sample by sample (row 3n k + sig n + i: signal sig of joint i
   // at sample k), row-major, with the span of each row's non-zero columns (a basis trajectory's
@@ -285,6 +319,8 @@ class Problem final : public ExcitationProblem {
   int K_ = 0, n_ = 0;
   long evaluations_ = 0;
   int nl_ = 0;  // torque rows (2 n K when the torque limits are on)
+  int nc_ = 0;  // collision rows (pairs x K when collision avoidance is on)
+  std::unique_ptr<CollisionModel> collision_;
   Eigen::VectorXd tau_max_;
   DynamicsDataPtr dyn_;
   Eigen::MatrixXd jt_;

@@ -141,12 +141,45 @@ void Report::excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau
           continue;
         }
         const double m = w.find("margin")->asDouble();
+        const Json* pair = w.find("pair");
+        const Json* joint = w.find("joint");
         s += fmt::format("| {} | {} | {:.4f} | {:.6g} | {:.6g} | {:.6g}{} | {:.4f} |\n", what,
-                         w.find("joint")->asInt(), w.find("t_s")->asDouble(),
-                         w.find("value")->asDouble(), w.find("limit")->asDouble(), m,
-                         m < 0 ? " **violated**" : "", w.find("ratio")->asDouble());
+                         pair ? pair->asString() : std::to_string(joint ? joint->asInt() : 0),
+                         w.find("t_s")->asDouble(), w.find("value")->asDouble(),
+                         w.find("limit")->asDouble(), m, m < 0 ? " **violated**" : "",
+                         w.find("ratio")->asDouble());
       }
   }
+}
+
+void Report::excitationCollision(const Samples& optimal, const Eigen::VectorXd& dmin,
+                                 const StudySummary::Excitation& x) {
+  if (sections_.empty() || !x.distance_margin_m) return;
+  const std::size_t sec = sections_.size() - 1;
+  const double margin = *x.distance_margin_m;
+  if (dmin.size() == optimal.size() && optimal.size() > 0) {
+    PlotSpec p;
+    p.name = "min_distance";
+    p.title = "Smallest distance over the checked pairs, optimal trajectory (design samples)";
+    p.xlabel = "t [s]";
+    p.ylabel = "distance [m]";
+    p.series.push_back({"minimum distance", vec(optimal.t), vec(dmin), "lines", {}, {}});
+    p.series.push_back({"margin",
+                        {optimal.t(0), optimal.t(optimal.size() - 1)},
+                        {margin, margin},
+                        "lines",
+                        {},
+                        {}});
+    plots_.emplace_back(sec, p);
+  }
+  sections_.back() += fmt::format(
+      "\nCollision avoidance: signed distance >= {:.3g} m for {} pairs at every design sample "
+      "(docs/excitation.md §12); smallest distance {:.4g} m at the initial trajectory, {:.4g} m "
+      "at the optimum ({}). Not checked: {}.\n",
+      margin, x.collision_pairs, x.min_distance_initial_m.value_or(NAN),
+      x.min_distance_final_m.value_or(NAN), x.min_distance_pair,
+      x.collision_excluded.empty() ? std::string("none")
+                                   : fmt::format("{}", fmt::join(x.collision_excluded, "; ")));
 }
 
 void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated) {

@@ -24,6 +24,11 @@ class Report {
   /// export (exported: excitation.export of summary.json, or null) where it went and its check.
   void excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau,
                         const Eigen::VectorXd& tau_max, double margin, const Json* exported);
+  /// Appended to the excitation section with collision avoidance: the smallest distance over the
+  /// checked pairs at every design sample of the optimal trajectory (plot), the margin, the
+  /// pairs checked and excluded.
+  void excitationCollision(const Samples& optimal, const Eigen::VectorXd& min_distance,
+                           const StudySummary::Excitation& x);
   void identification(const Estimate& e, const Eigen::VectorXd& nominal, bool simulated);
   void validation(const Rows& rows, const Eigen::VectorXd& predicted,
                   const StudySummary::Validation& v);

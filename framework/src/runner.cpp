@@ -35,6 +35,33 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// The smallest distance over the design samples and checked pairs, initial and final.
+void collisionSummary(const CollisionOptions& o, const RobotModel& robot, const Samples& initial,
+                      const Samples& best, StudySummary::Excitation* x,
+                      Eigen::VectorXd* dmin_best) {
+  CollisionModel cm(robot, o);
+  auto smallest = [&](const Samples& s, std::string* pair) {
+    double m = HUGE_VAL;
+    Eigen::VectorXd d;
+    if (pair) dmin_best->resize(s.size());
+    for (int k = 0; k < s.size(); ++k) {
+      cm.distances(s.q.row(k).transpose(), &d);
+      Eigen::Index p = 0;
+      if (pair) (*dmin_best)(k) = d.minCoeff();
+      if (d.minCoeff(&p) < m) {
+        m = d(p);
+        if (pair) *pair = cm.pairNames()[static_cast<std::size_t>(p)];
+      }
+    }
+    return m;
+  };
+  x->distance_margin_m = o.margin_m;
+  x->collision_pairs = cm.numPairs();
+  x->collision_excluded = cm.excludedPairs();
+  x->min_distance_initial_m = smallest(initial, nullptr);
+  x->min_distance_final_m = smallest(best, &x->min_distance_pair);
+}
+
 double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
@@ -629,6 +656,7 @@ class StudyRun {
   std::shared_ptr<ObservationModel> model;
   std::shared_ptr<Trajectory> traj;
   std::optional<Samples> reference;  // the excitation's optimum
+  Eigen::VectorXd dmin_;             // its smallest distance per design sample (collision)
   std::optional<Dataset> data;
   std::optional<Estimate> est;
   // The experiment's inspection when it runs beside the estimator (a recording in memory).
@@ -727,6 +755,7 @@ void StudyRun::excitationStage() {
     xo.scale_columns = crit->specs().scale_columns;
     xo.torque_margin = cfg.excitation_constraints.getDouble("torque_margin");
     xo.torque_max = cfg.excitation_constraints.getDoubles("torque_max_Nm");
+    xo.collision = cfg.excitation_collision;
     Samples initial = traj->evaluate(traj->initial());
     const KnownInformation known = knownInformation(cfg, *model, initial);
     xo.prior_information = known.matrix;
@@ -786,6 +815,7 @@ void StudyRun::excitationStage() {
       x.torque_margin = xo.torque_margin;
       x.torque_ratio_max = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
     }
+    if (xo.collision) collisionSummary(*xo.collision, model->robot(), initial, best, &x, &dmin_);
     x.iterations = r.iterations;
     x.evaluations = static_cast<long long>(r.evaluations);
     x.wall_s = r.wall_s;
@@ -850,6 +880,7 @@ void StudyRun::excitationOutputs(const Samples& initial, const Samples& best,
     eo.periods = opt.export_periods;
     eo.torque_max = xo.torque_max;
     eo.torque_margin = xo.torque_margin;
+    eo.collision = xo.collision;
     eo.plots = cfg.report.plots;
     TrajectoryCheck chk;
     X["export"] = exportTrajectory(*traj, cfg.trajectory->type, cfg.trajectory->params, r.z,
@@ -871,6 +902,7 @@ void StudyRun::excitationOutputs(const Samples& initial, const Samples& best,
     }
     report.excitationLimits(best, tau, tmax, xo.torque_margin, X.find("export"));
   }
+  if (xo.collision && T.excitation) report.excitationCollision(best, dmin_, *T.excitation);
 }
 
 // The experiment: simulated, or a recording read whole or streamed.

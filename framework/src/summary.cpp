@@ -38,6 +38,15 @@ void renderInto(const StudySummary::Excitation& x, Json* X) {
   o["max_constraint_violation"] = x.max_constraint_violation;
   if (x.torque_margin) o["torque_margin"] = *x.torque_margin;
   if (x.torque_ratio_max) o["torque_ratio_max"] = *x.torque_ratio_max;
+  if (x.distance_margin_m) {
+    Json& c = o["collision"];
+    c["margin_m"] = *x.distance_margin_m;
+    c["pairs"] = x.collision_pairs;
+    c["excluded"] = Json(x.collision_excluded);
+    c["min_distance_initial_m"] = x.min_distance_initial_m.value_or(NAN);
+    c["min_distance_final_m"] = x.min_distance_final_m.value_or(NAN);
+    c["min_distance_pair"] = x.min_distance_pair;
+  }
   o["iterations"] = x.iterations;
   o["evaluations"] = Json(x.evaluations);
   o["wall_s"] = x.wall_s;

@@ -200,9 +200,42 @@ Samples resampleTrajectory(const Trajectory& traj, const Eigen::VectorXd& z, dou
   return s;
 }
 
+namespace {
+
+// The smallest signed distance over the checked pairs at every sample, and the worst of all.
+LimitWorst distanceWorst(const Samples& s, const RobotModel& robot, const CollisionOptions& o,
+                         Eigen::VectorXd* min_distance, std::string* pair) {
+  CollisionModel cm(robot, o);
+  const int K = s.size();
+  LimitWorst w;
+  w.what = "distance";
+  w.checked = true;
+  w.value = HUGE_VAL;
+  w.limit = o.margin_m;
+  if (min_distance) min_distance->resize(K);
+  Eigen::VectorXd d;
+  for (int k = 0; k < K; ++k) {
+    cm.distances(s.q.row(k).transpose(), &d);
+    Eigen::Index p = 0;
+    const double dk = d.minCoeff(&p);
+    if (min_distance) (*min_distance)(k) = dk;
+    if (dk < w.value) {
+      w.value = dk;
+      w.t_s = s.t(k);
+      *pair = cm.pairNames()[static_cast<std::size_t>(p)];
+    }
+  }
+  w.margin = w.value - o.margin_m;
+  w.ratio = w.value > 0 ? o.margin_m / w.value : HUGE_VAL;
+  return w;
+}
+
+}  // namespace
+
 TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
                                 const std::vector<double>& torque_max,
-                                const Eigen::MatrixXd* tau_file) {
+                                const Eigen::MatrixXd* tau_file, const CollisionOptions* collision,
+                                Eigen::VectorXd* min_distance_m) {
   const int n = robot.dof(), K = s.size();
   check(s.dof() == n && K >= 2,
         fmt::format("trajectory check: {} joints and {} samples (robot '{}' has {} joints; at "
@@ -287,11 +320,17 @@ TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
     c.worst.push_back(*w);
     if (w->checked && w->margin < 0) c.ok = false;
   }
+  if (collision) {
+    c.worst.push_back(distanceWorst(s, robot, *collision, min_distance_m, &c.distance_pair));
+    if (c.worst.back().margin < 0) c.ok = false;
+  }
   return c;
 }
 
 TrajectoryCheck checkTrajectoryCsv(const fs::path& csv, const RobotModel& robot,
-                                   const std::vector<double>& torque_max) {
+                                   const std::vector<double>& torque_max,
+                                   const CollisionOptions* collision,
+                                   Eigen::VectorXd* min_distance_m) {
   const CsvTable T = readCsv(csv);
   const int n = robot.dof();
   Samples s;
@@ -317,7 +356,7 @@ TrajectoryCheck checkTrajectoryCsv(const fs::path& csv, const RobotModel& robot,
     else
       has_tau = false;
   }
-  return checkTrajectory(s, robot, torque_max, has_tau ? &tau : nullptr);
+  return checkTrajectory(s, robot, torque_max, has_tau ? &tau : nullptr, collision, min_distance_m);
 }
 
 Json TrajectoryCheck::toJson() const {
@@ -331,7 +370,10 @@ Json TrajectoryCheck::toJson() const {
     Json e = Json::object();
     e["checked"] = x.checked;
     if (x.checked) {
-      e["joint"] = x.joint;
+      if (x.what == "distance")
+        e["pair"] = distance_pair;
+      else
+        e["joint"] = x.joint;
       e["t_s"] = x.t_s;
       e["value"] = x.value;
       e["limit"] = x.limit;
@@ -354,9 +396,9 @@ std::string TrajectoryCheck::text() const {
       s += fmt::format("| {} | - | - | - | none | - | - |\n", x.what);
       continue;
     }
-    s +=
-        fmt::format("| {} | {} | {:.4f} | {:.6g} | {:.6g} | {:.6g}{} | {:.4f} |\n", x.what, x.joint,
-                    x.t_s, x.value, x.limit, x.margin, x.margin < 0 ? " VIOLATED" : "", x.ratio);
+    s += fmt::format("| {} | {} | {:.4f} | {:.6g} | {:.6g} | {:.6g}{} | {:.4f} |\n", x.what,
+                     x.what == "distance" ? distance_pair : std::to_string(x.joint), x.t_s, x.value,
+                     x.limit, x.margin, x.margin < 0 ? " VIOLATED" : "", x.ratio);
   }
   if (std::isfinite(tau_file_deviation))
     s += fmt::format("torque in the file vs the robot's model: max difference {:.3g}\n",
@@ -435,7 +477,9 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     writeFileAtomic(stage / "joint_trajectory.yaml", r);
 
     // the check, on the file as written
-    const TrajectoryCheck c = checkTrajectoryCsv(stage / "trajectory.csv", robot, o.torque_max);
+    Eigen::VectorXd dmin;
+    const TrajectoryCheck c =
+        checkTrajectoryCsv(stage / "trajectory.csv", robot, o.torque_max, o.collision.get(), &dmin);
     Json out = Json::object();
     out["files"] = Json(std::vector<std::string>{"trajectory.csv", "trajectory.params.yaml",
                                                  "joint_trajectory.yaml", "trajectory_check.json"});
@@ -444,6 +488,7 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     out["duration_s"] = s.t(K - 1) - s.t(0);
     out["rest_to_rest"] = sp.rest_to_rest;
     if (o.torque_margin > 0) out["torque_margin"] = o.torque_margin;
+    if (o.collision) out["distance_margin_m"] = o.collision->margin_m;
     out["check"] = c.toJson();
     writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
 
@@ -483,6 +528,22 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
       } else {
         drawPlot({"trajectory_tau", "predicted torque (no torque limits known)", "t [s]",
                   "tau [N m or N]", series(tau, "tau", nullptr)},
+                 stage);
+      }
+      if (o.collision && dmin.size() == K) {
+        PlotSeries d;
+        d.title = "minimum distance";
+        d.x.assign(s.t.data(), s.t.data() + K);
+        d.y.assign(dmin.data(), dmin.data() + K);
+        PlotSeries m;
+        m.title = "margin";
+        m.x = {s.t(0), s.t(K - 1)};
+        m.y = {o.collision->margin_m, o.collision->margin_m};
+        drawPlot({"trajectory_distance",
+                  "minimum distance over the checked pairs",
+                  "t [s]",
+                  "distance [m]",
+                  {d, m}},
                  stage);
       }
     }

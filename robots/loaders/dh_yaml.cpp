@@ -6,6 +6,7 @@
 #include <set>
 #include <sstream>
 
+#include "exid/collision_yaml.hpp"
 #include "exid/dh.hpp"
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
@@ -147,11 +148,192 @@ struct LinkInfo {
   int line = 0;
 };
 
+void readInertial(const Reader& r, const YAML::Node& L, const std::string& lw, Body* body) {
+  Body& b = *body;
+  const double mass = L["mass"] ? r.number(L["mass"], lw + ".mass") : 0.0;
+  const Eigen::Vector3d com =
+      L["com"] ? Eigen::Vector3d(r.vector(L["com"], lw + ".com", 3)) : Eigen::Vector3d::Zero();
+  if (L["inertia_com"] && L["inertia_origin"]) {
+    r.fail(L["inertia_origin"], lw,
+           "give either 'inertia_com' (about the centre of mass) or 'inertia_origin' (about "
+           "the link frame origin), not both");
+  }
+  if (L["inertia_origin"]) {
+    const Eigen::Matrix3d I = readInertia(r, L["inertia_origin"], lw + ".inertia_origin");
+    b.inertia << I(0, 0), I(0, 1), I(0, 2), I(1, 1), I(1, 2), I(2, 2), mass * com.x(),
+        mass * com.y(), mass * com.z(), mass;
+  } else {
+    const Eigen::Matrix3d I = L["inertia_com"]
+                                  ? readInertia(r, L["inertia_com"], lw + ".inertia_com")
+                                  : Eigen::Matrix3d::Zero().eval();
+    b.inertia = inertialFromCom(mass, com, I);
+  }
+}
+
+JointLimits readLimits(const Reader& r, const YAML::Node& L, const std::string& lw, bool revolute) {
+  JointLimits lim;
+  if (const YAML::Node Y = L["limits"]) {
+    const std::string w = lw + ".limits";
+    r.requireMap(Y, w,
+                 {"q_min", "q_max", "q_min_deg", "q_max_deg", "qd_max", "qd_max_deg", "qdd_max",
+                  "qdd_max_deg", "tau_max"});
+    r.angle(Y, "q_min", w, revolute, &lim.q_min);
+    r.angle(Y, "q_max", w, revolute, &lim.q_max);
+    r.angle(Y, "qd_max", w, revolute, &lim.qd_max);
+    r.angle(Y, "qdd_max", w, revolute, &lim.qdd_max);
+    if (Y["tau_max"]) lim.tau_max = r.number(Y["tau_max"], w + ".tau_max");
+    if (lim.q_min >= lim.q_max) r.fail(Y, w, "q_min must be below q_max");
+    if (lim.qd_max <= 0 || lim.qdd_max <= 0 || lim.tau_max <= 0) {
+      r.fail(Y, w, "qd_max, qdd_max and tau_max must be positive");
+    }
+  }
+  return lim;
+}
+
+Drive readDrive(const Reader& r, const YAML::Node& L, const std::string& lw,
+                const LoadOptions& options) {
+  Drive drv;
+  if (const YAML::Node D = L["drive"]) {
+    const std::string w = lw + ".drive";
+    r.requireMap(D, w,
+                 {"gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous", "offset"});
+    if (D["gear_ratio"]) drv.gear_ratio = r.number(D["gear_ratio"], w + ".gear_ratio");
+    if (drv.gear_ratio == 0.0) r.fail(D["gear_ratio"], w, "gear_ratio must not be zero");
+    if (D["motor_inertia"] && D["rotor_inertia"]) {
+      r.fail(D, w,
+             "give either 'motor_inertia' (motor side Jm, reflected as Jm*G^2) or "
+             "'rotor_inertia' (already reflected to the joint), not both");
+    }
+    if (D["motor_inertia"]) {
+      drv.rotor_inertia =
+          r.number(D["motor_inertia"], w + ".motor_inertia") * drv.gear_ratio * drv.gear_ratio;
+    }
+    if (D["rotor_inertia"]) drv.rotor_inertia = r.number(D["rotor_inertia"], w + ".rotor_inertia");
+    if (D["coulomb"]) drv.coulomb = r.number(D["coulomb"], w + ".coulomb");
+    if (D["viscous"]) drv.viscous = r.number(D["viscous"], w + ".viscous");
+    if (D["offset"]) drv.offset = r.number(D["offset"], w + ".offset");
+    if (drv.rotor_inertia < 0 || drv.coulomb < 0 || drv.viscous < 0) {
+      // Published identified models contain such values (Panda fv6): always a warning.
+      reportWarning(options, r.source() + ":" + std::to_string(D.Mark().line + 1) + ": " + w +
+                                 ": negative rotor inertia or friction coefficient");
+    }
+  }
+  return drv;
+}
+
+// Transmission between measured and joint coordinates.
+void readTransmission(const Reader& r, const YAML::Node& T, RobotModel* m) {
+  RobotModel& model = *m;
+  const int n = model.dof();
+  const std::string w = "transmission";
+  r.requireMap(T, w,
+               {"matrix", "offset", "q_min_measured", "q_max_measured", "q_min_measured_deg",
+                "q_max_measured_deg", "notes"});
+  if (!T["matrix"]) r.fail(T, w, "missing key 'matrix' (q = matrix * q_measured + offset)");
+  const YAML::Node M = T["matrix"];
+  if (!M.IsSequence() || static_cast<int>(M.size()) != n) {
+    r.fail(M, w + ".matrix",
+           "expected " + std::to_string(n) + " rows (one per link), found " +
+               (M.IsSequence() ? std::to_string(M.size()) : Reader::describe(M)));
+  }
+  model.transmission.resize(n, n);
+  for (int i = 0; i < n; ++i) {
+    model.transmission.row(i) =
+        r.vector(M[static_cast<size_t>(i)], w + ".matrix[" + std::to_string(i) + "]", n)
+            .transpose();
+  }
+  const Eigen::FullPivLU<Eigen::MatrixXd> lu(model.transmission);
+  if (!lu.isInvertible()) r.fail(M, w + ".matrix", "the matrix is singular (not invertible)");
+  model.transmission_offset =
+      T["offset"] ? r.vector(T["offset"], w + ".offset", n) : Eigen::VectorXd::Zero(n);
+  // Limits of the measured coordinates -> interval hull in joint coordinates.
+  auto measured = [&](const char* key, double fallback, Eigen::VectorXd* out) {
+    const std::string k = key, kd = k + "_deg";
+    if (T[k] && T[kd]) r.fail(T[kd], w, "give either '" + k + "' or '" + kd + "', not both");
+    if (T[k]) {
+      *out = r.vector(T[k], w + "." + k, n);
+    } else if (T[kd]) {
+      *out = r.vector(T[kd], w + "." + kd, n) * kDeg;
+      for (int i = 0; i < n; ++i) {
+        if (model.bodies[static_cast<size_t>(i)].type == JointType::Prismatic) {
+          r.fail(T[kd], w + "." + kd, "degrees given for prismatic joint " + std::to_string(i + 1));
+        }
+      }
+    } else {
+      *out = Eigen::VectorXd::Constant(n, fallback);
+      return false;
+    }
+    return true;
+  };
+  Eigen::VectorXd lo, hi;
+  const bool has_lo = measured("q_min_measured", -kInf, &lo);
+  const bool has_hi = measured("q_max_measured", kInf, &hi);
+  if (has_lo || has_hi) {
+    if ((lo.array() >= hi.array()).any()) {
+      r.fail(T, w, "q_min_measured must be below q_max_measured");
+    }
+    Eigen::VectorXd qlo, qhi;
+    detail::transmissionHull(model.transmission, model.transmission_offset, lo, hi, &qlo, &qhi);
+    for (int i = 0; i < n; ++i) {
+      auto& L = model.limits[static_cast<size_t>(i)];
+      L.q_min = std::max(L.q_min, std::max(qlo(i), -kInf));
+      L.q_max = std::min(L.q_max, std::min(qhi(i), kInf));
+      if (L.q_min >= L.q_max) {
+        r.fail(T, w,
+               "joint " + std::to_string(i + 1) +
+                   ": the link's limits and the measured limits do not overlap");
+      }
+    }
+  }
+}
+
+// Wrist sensor frame.
+void readSensor(const Reader& r, const YAML::Node& S, const std::map<std::string, int>& link_index,
+                RobotModel* m) {
+  RobotModel& model = *m;
+  const int n = model.dof();
+  r.requireMap(S, "sensor", {"link", "xyz", "rpy", "rpy_deg", "notes"});
+  if (S["link"]) {
+    const std::string l = r.text(S["link"], "sensor.link");
+    auto it = link_index.find(l);
+    if (it != link_index.end()) {
+      model.sensor_body = it->second;
+    } else {
+      int k = 0;
+      try {
+        k = S["link"].as<int>();
+      } catch (const YAML::Exception&) {
+        r.fail(S["link"], "sensor.link",
+               "unknown link '" + l + "' (a link name or 1.." + std::to_string(n) + ")");
+      }
+      if (k < 1 || k > n) {
+        r.fail(S["link"], "sensor.link",
+               "link number " + l + " is out of range 1.." + std::to_string(n));
+      }
+      model.sensor_body = k - 1;
+    }
+  }
+  model.sensor_pose = readPose(r, S, "sensor");
+}
+
+// Collision geometry of a link (body >= 0) or of the base (-1): a list of shapes
+// (exid::parseCollisionShape).
+void readCollision(const Reader& r, const YAML::Node& C, const std::string& where, int body,
+                   RobotModel* model) {
+  if (!C) return;
+  if (!C.IsSequence()) r.fail(C, where, "expected a list of shapes, found " + Reader::describe(C));
+  for (std::size_t k = 0; k < C.size(); ++k) {
+    CollisionShape s = parseCollisionShape(C[k], r.source(), where + "[" + std::to_string(k) + "]");
+    s.body = body;
+    model->collision.push_back(s);
+  }
+}
+
 RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& options) {
   if (!root.IsDefined() || root.IsNull()) r.fail(root, "", "empty document");
   r.requireMap(root, "top level",
                {"name", "description", "source", "sources", "notes", "convention", "gravity",
-                "links", "transmission", "sensor"});
+                "links", "transmission", "sensor", "base_collision"});
 
   RobotModel model;
   model.source = r.source();
@@ -189,7 +371,7 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     r.requireMap(
         L, where,
         {"name", "joint", "type", "parent", "a", "alpha", "alpha_deg", "d", "theta", "theta_deg",
-         "mass", "com", "inertia_com", "inertia_origin", "limits", "drive", "notes"});
+         "mass", "com", "inertia_com", "inertia_origin", "limits", "drive", "collision", "notes"});
     const int line = L.Mark().line + 1;
     const std::string name =
         L["name"] ? r.text(L["name"], where + ".name") : "link" + std::to_string(i + 1);
@@ -245,168 +427,21 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
     joint_line[b.joint_name] = line;
     link_index[b.name] = i;
 
-    // Inertial data.
-    const double mass = L["mass"] ? r.number(L["mass"], lw + ".mass") : 0.0;
-    const Eigen::Vector3d com =
-        L["com"] ? Eigen::Vector3d(r.vector(L["com"], lw + ".com", 3)) : Eigen::Vector3d::Zero();
-    if (L["inertia_com"] && L["inertia_origin"]) {
-      r.fail(L["inertia_origin"], lw,
-             "give either 'inertia_com' (about the centre of mass) or 'inertia_origin' (about "
-             "the link frame origin), not both");
-    }
-    if (L["inertia_origin"]) {
-      const Eigen::Matrix3d I = readInertia(r, L["inertia_origin"], lw + ".inertia_origin");
-      b.inertia << I(0, 0), I(0, 1), I(0, 2), I(1, 1), I(1, 2), I(2, 2), mass * com.x(),
-          mass * com.y(), mass * com.z(), mass;
-    } else {
-      const Eigen::Matrix3d I = L["inertia_com"]
-                                    ? readInertia(r, L["inertia_com"], lw + ".inertia_com")
-                                    : Eigen::Matrix3d::Zero().eval();
-      b.inertia = inertialFromCom(mass, com, I);
-    }
+    readInertial(r, L, lw, &b);
 
-    // Limits.
-    JointLimits lim;
-    if (const YAML::Node Y = L["limits"]) {
-      const std::string w = lw + ".limits";
-      r.requireMap(Y, w,
-                   {"q_min", "q_max", "q_min_deg", "q_max_deg", "qd_max", "qd_max_deg", "qdd_max",
-                    "qdd_max_deg", "tau_max"});
-      r.angle(Y, "q_min", w, revolute, &lim.q_min);
-      r.angle(Y, "q_max", w, revolute, &lim.q_max);
-      r.angle(Y, "qd_max", w, revolute, &lim.qd_max);
-      r.angle(Y, "qdd_max", w, revolute, &lim.qdd_max);
-      if (Y["tau_max"]) lim.tau_max = r.number(Y["tau_max"], w + ".tau_max");
-      if (lim.q_min >= lim.q_max) r.fail(Y, w, "q_min must be below q_max");
-      if (lim.qd_max <= 0 || lim.qdd_max <= 0 || lim.tau_max <= 0) {
-        r.fail(Y, w, "qd_max, qdd_max and tau_max must be positive");
-      }
-    }
-
-    // Drive.
-    Drive drv;
-    if (const YAML::Node D = L["drive"]) {
-      const std::string w = lw + ".drive";
-      r.requireMap(
-          D, w, {"gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous", "offset"});
-      if (D["gear_ratio"]) drv.gear_ratio = r.number(D["gear_ratio"], w + ".gear_ratio");
-      if (drv.gear_ratio == 0.0) r.fail(D["gear_ratio"], w, "gear_ratio must not be zero");
-      if (D["motor_inertia"] && D["rotor_inertia"]) {
-        r.fail(D, w,
-               "give either 'motor_inertia' (motor side Jm, reflected as Jm*G^2) or "
-               "'rotor_inertia' (already reflected to the joint), not both");
-      }
-      if (D["motor_inertia"]) {
-        drv.rotor_inertia =
-            r.number(D["motor_inertia"], w + ".motor_inertia") * drv.gear_ratio * drv.gear_ratio;
-      }
-      if (D["rotor_inertia"])
-        drv.rotor_inertia = r.number(D["rotor_inertia"], w + ".rotor_inertia");
-      if (D["coulomb"]) drv.coulomb = r.number(D["coulomb"], w + ".coulomb");
-      if (D["viscous"]) drv.viscous = r.number(D["viscous"], w + ".viscous");
-      if (D["offset"]) drv.offset = r.number(D["offset"], w + ".offset");
-      if (drv.rotor_inertia < 0 || drv.coulomb < 0 || drv.viscous < 0) {
-        // Published identified models contain such values (Panda fv6): always a warning.
-        reportWarning(options, r.source() + ":" + std::to_string(D.Mark().line + 1) + ": " + w +
-                                   ": negative rotor inertia or friction coefficient");
-      }
-    }
+    const JointLimits lim = readLimits(r, L, lw, revolute);
+    const Drive drv = readDrive(r, L, lw, options);
+    readCollision(r, L["collision"], lw + ".collision", i, &model);
 
     model.bodies.push_back(b);
     model.limits.push_back(lim);
     model.drives.push_back(drv);
   }
 
-  // Transmission between measured and joint coordinates.
-  if (const YAML::Node T = root["transmission"]) {
-    const std::string w = "transmission";
-    r.requireMap(T, w,
-                 {"matrix", "offset", "q_min_measured", "q_max_measured", "q_min_measured_deg",
-                  "q_max_measured_deg", "notes"});
-    if (!T["matrix"]) r.fail(T, w, "missing key 'matrix' (q = matrix * q_measured + offset)");
-    const YAML::Node M = T["matrix"];
-    if (!M.IsSequence() || static_cast<int>(M.size()) != n) {
-      r.fail(M, w + ".matrix",
-             "expected " + std::to_string(n) + " rows (one per link), found " +
-                 (M.IsSequence() ? std::to_string(M.size()) : Reader::describe(M)));
-    }
-    model.transmission.resize(n, n);
-    for (int i = 0; i < n; ++i) {
-      model.transmission.row(i) =
-          r.vector(M[static_cast<size_t>(i)], w + ".matrix[" + std::to_string(i) + "]", n)
-              .transpose();
-    }
-    const Eigen::FullPivLU<Eigen::MatrixXd> lu(model.transmission);
-    if (!lu.isInvertible()) r.fail(M, w + ".matrix", "the matrix is singular (not invertible)");
-    model.transmission_offset =
-        T["offset"] ? r.vector(T["offset"], w + ".offset", n) : Eigen::VectorXd::Zero(n);
-    // Limits of the measured coordinates -> interval hull in joint coordinates.
-    auto measured = [&](const char* key, double fallback, Eigen::VectorXd* out) {
-      const std::string k = key, kd = k + "_deg";
-      if (T[k] && T[kd]) r.fail(T[kd], w, "give either '" + k + "' or '" + kd + "', not both");
-      if (T[k]) {
-        *out = r.vector(T[k], w + "." + k, n);
-      } else if (T[kd]) {
-        *out = r.vector(T[kd], w + "." + kd, n) * kDeg;
-        for (int i = 0; i < n; ++i) {
-          if (model.bodies[static_cast<size_t>(i)].type == JointType::Prismatic) {
-            r.fail(T[kd], w + "." + kd,
-                   "degrees given for prismatic joint " + std::to_string(i + 1));
-          }
-        }
-      } else {
-        *out = Eigen::VectorXd::Constant(n, fallback);
-        return false;
-      }
-      return true;
-    };
-    Eigen::VectorXd lo, hi;
-    const bool has_lo = measured("q_min_measured", -kInf, &lo);
-    const bool has_hi = measured("q_max_measured", kInf, &hi);
-    if (has_lo || has_hi) {
-      if ((lo.array() >= hi.array()).any()) {
-        r.fail(T, w, "q_min_measured must be below q_max_measured");
-      }
-      Eigen::VectorXd qlo, qhi;
-      detail::transmissionHull(model.transmission, model.transmission_offset, lo, hi, &qlo, &qhi);
-      for (int i = 0; i < n; ++i) {
-        auto& L = model.limits[static_cast<size_t>(i)];
-        L.q_min = std::max(L.q_min, std::max(qlo(i), -kInf));
-        L.q_max = std::min(L.q_max, std::min(qhi(i), kInf));
-        if (L.q_min >= L.q_max) {
-          r.fail(T, w,
-                 "joint " + std::to_string(i + 1) +
-                     ": the link's limits and the measured limits do not overlap");
-        }
-      }
-    }
-  }
+  if (const YAML::Node T = root["transmission"]) readTransmission(r, T, &model);
 
-  // Wrist sensor frame.
-  if (const YAML::Node S = root["sensor"]) {
-    r.requireMap(S, "sensor", {"link", "xyz", "rpy", "rpy_deg", "notes"});
-    if (S["link"]) {
-      const std::string l = r.text(S["link"], "sensor.link");
-      auto it = link_index.find(l);
-      if (it != link_index.end()) {
-        model.sensor_body = it->second;
-      } else {
-        int k = 0;
-        try {
-          k = S["link"].as<int>();
-        } catch (const YAML::Exception&) {
-          r.fail(S["link"], "sensor.link",
-                 "unknown link '" + l + "' (a link name or 1.." + std::to_string(n) + ")");
-        }
-        if (k < 1 || k > n) {
-          r.fail(S["link"], "sensor.link",
-                 "link number " + l + " is out of range 1.." + std::to_string(n));
-        }
-        model.sensor_body = k - 1;
-      }
-    }
-    model.sensor_pose = readPose(r, S, "sensor");
-  }
+  if (const YAML::Node S = root["sensor"]) readSensor(r, S, link_index, &model);
+  readCollision(r, root["base_collision"], "base_collision", -1, &model);
 
   try {
     model.validateStructure();

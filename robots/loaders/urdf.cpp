@@ -11,6 +11,7 @@
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
+#include <filesystem>
 #include <map>
 #include <mutex>
 #include <set>
@@ -505,6 +506,62 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
   (void)options;
 }
 
+// <collision> elements of every link, attached to the body the link is merged into (the base
+// for links fixed to it). Mesh file names relative to the URDF's folder; package:// URIs are kept
+// as given and refused only when a study asks for collision avoidance.
+void readCollisions(const urdf::ModelInterface& u, const std::string& src,
+                    const std::map<std::string, LinkPlace>& link_place, RobotModel* m) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(src).parent_path();
+  for (const auto& [name, place] : link_place) {
+    const urdf::LinkConstSharedPtr link = u.getLink(name);
+    if (!link) continue;
+    int k = 0;
+    for (const auto& c : link->collision_array) {
+      const std::string where = fmt::format("{}: link '{}' <collision> {}", src, name, ++k);
+      if (!c || !c->geometry) continue;
+      CollisionShape s;
+      s.body = place.body;
+      s.where = where;
+      const Pose origin = toPose(c->origin);
+      if (!finitePose(origin)) throw Error(where + ": <origin>: non-finite number");
+      s.pose = place.X * origin;
+      const urdf::Geometry& g = *c->geometry;
+      switch (g.type) {
+        case urdf::Geometry::SPHERE:
+          s.kind = CollisionShape::Kind::Sphere;
+          s.radius = static_cast<const urdf::Sphere&>(g).radius;
+          break;
+        case urdf::Geometry::BOX: {
+          const auto& b = static_cast<const urdf::Box&>(g);
+          s.kind = CollisionShape::Kind::Box;
+          s.size = Eigen::Vector3d(b.dim.x, b.dim.y, b.dim.z);
+          break;
+        }
+        case urdf::Geometry::CYLINDER: {
+          const auto& y = static_cast<const urdf::Cylinder&>(g);
+          s.kind = CollisionShape::Kind::Cylinder;
+          s.radius = y.radius;
+          s.length = y.length;
+          break;
+        }
+        case urdf::Geometry::MESH: {
+          const auto& h = static_cast<const urdf::Mesh&>(g);
+          s.kind = CollisionShape::Kind::Mesh;
+          s.mesh_file = h.filename;
+          if (fs::path(h.filename).is_relative() && h.filename.find("://") == std::string::npos)
+            s.mesh_file = (dir / h.filename).string();
+          s.mesh_scale = Eigen::Vector3d(h.scale.x, h.scale.y, h.scale.z);
+          break;
+        }
+        default:
+          throw Error(where + ": unknown geometry");
+      }
+      m->collision.push_back(s);
+    }
+  }
+}
+
 }  // namespace
 
 RobotModel loadUrdfString(const std::string& xml, const std::string& src,
@@ -608,6 +665,7 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
   if (m.dof() == 0) {
     throw Error(src + ": no movable joint (revolute, continuous or prismatic) in the robot");
   }
+  readCollisions(*u, src, link_place, &m);
   if (x.exid) applyExtension(x.exid, src, &m, joint_body, link_place, options);
   if (!options.urdf_extension.empty()) {
     const std::string esrc = options.urdf_extension.string();

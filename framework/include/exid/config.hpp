@@ -23,10 +23,12 @@
 
 #include <cstdint>
 #include <filesystem>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "exid/collision.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 #include "exid/plugin.hpp"
@@ -101,6 +103,11 @@ struct StudyConfig {
   ParamSet excitation_information;
   /// The section says something (an earlier study or a prior).
   bool hasExcitationInformation() const;
+  /// excitation.collision (docs/excitation.md §12): collision avoidance, null when absent;
+  /// obstacles' relative mesh files resolve in `dir`.
+  std::shared_ptr<const CollisionOptions> excitation_collision;
+  /// The same section as JSON (normalised: every key), for the resolved study and its hash.
+  Json excitation_collision_json;
   std::optional<PluginSpec> experiment, estimator, validation;
   ReportOptions report;
   std::optional<PriorSpec> prior;

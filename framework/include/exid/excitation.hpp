@@ -6,13 +6,15 @@
 // Constraints g(z) <= 0: joint positions within limits less a margin, velocities and
 // accelerations within limits, at every sample (only limits that are finite); optionally the
 // predicted actuator torques within a fraction of their limits, |tau_j| <= margin tau_max,j, with
-// tau the robot's full model (rigid body + drives, its own nominal parameters).
+// tau the robot's full model (rigid body + drives, its own nominal parameters); optionally
+// collision avoidance, d_p(q(t_k)) >= margin for every checked pair p (exid/collision.hpp).
 #pragma once
 
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "exid/collision.hpp"
 #include "exid/interfaces.hpp"
 
 namespace exid {
@@ -33,6 +35,9 @@ struct ExcitationOptions {
   /// trajectory's W^T W before the criterion: M = W^T W + prior_information (docs/excitation.md
   /// §11). Empty: none.
   Eigen::MatrixXd prior_information;
+  /// Collision avoidance: at every sample, the signed distance of every checked pair is at least
+  /// collision->margin_m (docs/excitation.md §12). Null: none.
+  std::shared_ptr<const CollisionOptions> collision;
 };
 
 /// The torque model the torque constraint and the exported trajectory use: the robot's full

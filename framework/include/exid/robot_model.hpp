@@ -56,6 +56,25 @@ struct Drive {
   double offset = 0.0;         // OFF [N m or N]
 };
 
+/// Collision geometry of one body (or of the fixed base) for collision-free excitation design
+/// (exid/collision.hpp). A capsule is the set of points within `radius` of a segment of `length`
+/// along the shape frame's z axis, centred at its origin; a cylinder is `length` long along z,
+/// centred; a box has edge lengths `size`, centred; a mesh is a triangle mesh read from
+/// `mesh_file` (STL, binary or ASCII; relative paths from the robot description's folder),
+/// scaled by `mesh_scale` in its own frame.
+struct CollisionShape {
+  enum class Kind { Sphere, Capsule, Cylinder, Box, Mesh };
+  Kind kind = Kind::Sphere;
+  int body = -1;        // the body it moves with; -1: fixed to the base
+  Pose pose;            // shape frame in the body frame (in the base frame when body is -1)
+  double radius = 0.0;  // sphere, capsule, cylinder [m]
+  double length = 0.0;  // capsule (between the end-cap centres), cylinder [m]
+  Eigen::Vector3d size = Eigen::Vector3d::Zero();  // box edge lengths [m]
+  std::string mesh_file;
+  Eigen::Vector3d mesh_scale = Eigen::Vector3d::Ones();
+  std::string where;  // where it was given (file:line, YAML key), for messages
+};
+
 struct RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
@@ -74,6 +93,9 @@ struct RobotModel {
   /// What loading found and the user may act on (physically impossible inertia in their own
   /// file, ...): also logged; the runner puts them in summary.json's `warnings`.
   std::vector<std::string> warnings;
+  /// Collision geometry (URDF <collision>, a DH description's `collision` keys); empty when the
+  /// description gives none. Used only when a study asks for collision avoidance.
+  std::vector<CollisionShape> collision;
   /// Facts about a shipped description worth stating once in a report (known defects of
   /// published data, kept as published): summary.json `robot.notes` and the report, not logged.
   std::vector<std::string> notes;

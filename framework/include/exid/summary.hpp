@@ -29,6 +29,12 @@ struct ExcitationSummary {
   double cond_W_initial = NAN, cond_W_final = NAN;
   double max_constraint_violation = NAN;
   std::optional<double> torque_margin, torque_ratio_max;  // with torque limits
+  /// With collision avoidance: the margin, the checked pairs, and the smallest distance over
+  /// the design samples and pairs at the initial and the final trajectory, and where.
+  std::optional<double> distance_margin_m, min_distance_initial_m, min_distance_final_m;
+  int collision_pairs = 0;
+  std::string min_distance_pair;
+  std::vector<std::string> collision_excluded;
   int iterations = 0;
   long long evaluations = 0;
   double wall_s = NAN;

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/collision.hpp"
 #include "exid/data.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
@@ -27,6 +28,9 @@ struct TrajectoryExportOptions {
   std::vector<double> torque_max;
   /// The fraction of tau_max the design was held to (0: none); reported beside the check.
   double torque_margin = 0.0;
+  /// Collision avoidance the design was held to (null: none): the check reports the minimum
+  /// distance over every sample and checked pair, and the plots draw it over time.
+  std::shared_ptr<const CollisionOptions> collision;
   bool plots = true;
 };
 
@@ -39,7 +43,7 @@ Samples resampleTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& 
 
 /// The worst case of one limit over a trajectory.
 struct LimitWorst {
-  std::string what;      // "position", "velocity", "acceleration", "torque"
+  std::string what;      // "position", "velocity", "acceleration", "torque", "distance"
   bool checked = false;  // false: the robot has no such limit
   int joint = 0;         // 1-based
   double t_s = 0.0;      // when
@@ -53,7 +57,10 @@ struct TrajectoryCheck {
   int samples = 0;
   double rate_Hz = 0.0;             // measured: (samples - 1) / duration
   double max_rate_deviation = 0.0;  // max |t_i+1 - t_i - 1/rate| / (1/rate)
-  std::vector<LimitWorst> worst;    // position, velocity, acceleration, torque
+  /// position, velocity, acceleration, torque[, distance: value = the smallest signed distance
+  /// [m], limit = the margin, ratio = margin / distance, joint 0 and distance_pair the pair]
+  std::vector<LimitWorst> worst;
+  std::string distance_pair;  // "link3 ~ table"
   /// max |tau in the file - tau the robot's model predicts| (NaN when the file has no tau).
   double tau_file_deviation = 0.0;
   bool ok = true;  // every checked limit holds
@@ -63,13 +70,19 @@ struct TrajectoryCheck {
 
 /// Checks samples (measured coordinates) against the robot's limits: q within [q_min, q_max],
 /// |qd| <= qd_max, |qdd| <= qdd_max, |tau| <= tau_max with tau the torque of the robot's full
-/// model (rigid body + drives, nominal parameters), at every sample.
+/// model (rigid body + drives, nominal parameters), at every sample; with collision options, the
+/// signed distance of every checked pair >= margin_m at every sample (min_distance_m gets the
+/// per-sample minimum over the pairs).
 TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
                                 const std::vector<double>& torque_max,
-                                const Eigen::MatrixXd* tau_file = nullptr);
+                                const Eigen::MatrixXd* tau_file = nullptr,
+                                const CollisionOptions* collision = nullptr,
+                                Eigen::VectorXd* min_distance_m = nullptr);
 /// Reads a trajectory CSV (t, q1..qn, qd1..qdn, qdd1..qddn, optional tau1..taun) and checks it.
 TrajectoryCheck checkTrajectoryCsv(const std::filesystem::path& csv, const RobotModel& robot,
-                                   const std::vector<double>& torque_max);
+                                   const std::vector<double>& torque_max,
+                                   const CollisionOptions* collision = nullptr,
+                                   Eigen::VectorXd* min_distance_m = nullptr);
 
 /// Writes dir/trajectory.csv, dir/trajectory.params.yaml, dir/joint_trajectory.yaml,
 /// dir/trajectory_check.json and the plots (dir/plots/trajectory_*): everything is written into
