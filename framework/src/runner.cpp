@@ -6,6 +6,7 @@
 #include <unistd.h>
 
 #include <Eigen/Eigenvalues>
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -34,6 +35,24 @@ namespace exid {
 namespace fs = std::filesystem;
 
 namespace {
+
+// What a study says when the optimiser found no trajectory within every constraint.
+std::string infeasibleText(const OptimizerResult& r, const StudySummary::Excitation& x) {
+  std::string s = fmt::format(
+      "excitation: no feasible trajectory found: the result violates the constraints by up to "
+      "{:.4g} (stop: {})",
+      r.max_violation, stopReasonText(r));
+  if (x.distance_margin_m && x.min_distance_final_m &&
+      *x.min_distance_final_m < *x.distance_margin_m)
+    s += fmt::format(
+        "; the pair {} comes within {:.4g} m (margin {:.4g} m): if the two cannot collide by "
+        "construction, list them in excitation.collision.allowed_pairs, or lower margin_m",
+        x.min_distance_pair, *x.min_distance_final_m, *x.distance_margin_m);
+  if (x.torque_ratio_max && x.torque_margin && *x.torque_ratio_max > *x.torque_margin)
+    s += fmt::format("; the predicted torque reaches {:.4g} of its limit (margin {:.4g})",
+                     *x.torque_ratio_max, *x.torque_margin);
+  return s;
+}
 
 // The smallest distance over the design samples and checked pairs, initial and final.
 void collisionSummary(const CollisionOptions& o, const RobotModel& robot, const Samples& initial,
@@ -816,6 +835,8 @@ void StudyRun::excitationStage() {
       x.torque_ratio_max = (tau.array().abs().rowwise() / tmax.transpose().array()).maxCoeff();
     }
     if (xo.collision) collisionSummary(*xo.collision, model->robot(), initial, best, &x, &dmin_);
+    x.feasible = r.feasible;
+    if (!r.feasible) warn(infeasibleText(r, x));
     x.iterations = r.iterations;
     x.evaluations = static_cast<long long>(r.evaluations);
     x.wall_s = r.wall_s;
@@ -1216,6 +1237,19 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   RunFolder folder;
   if (write) {
     try {
+      // The run folder is replaced as a whole when the run is written: an export inside it
+      // would be lost without a word.
+      if (!opt.export_dir.empty()) {
+        const fs::path out = fs::weakly_canonical(fs::absolute(opt.out_dir));
+        const fs::path exp = fs::weakly_canonical(fs::absolute(opt.export_dir));
+        const auto [o, e] = std::mismatch(out.begin(), out.end(), exp.begin(), exp.end());
+        if (o == out.end())
+          throw Error(
+              fmt::format("--export {}: inside the output folder {}, which is replaced "
+                          "as a whole when the run is written; export to a folder "
+                          "outside it",
+                          opt.export_dir.string(), opt.out_dir.string()));
+      }
       folder = prepareRunFolder(opt.out_dir, opt.clean_stale);
     } catch (const std::exception& e) {  // nothing written, nothing replaced
       res.ok = false;

@@ -36,6 +36,7 @@ void renderInto(const StudySummary::Excitation& x, Json* X) {
   o["cond_W_initial"] = x.cond_W_initial;
   o["cond_W_final"] = x.cond_W_final;
   o["max_constraint_violation"] = x.max_constraint_violation;
+  o["feasible"] = x.feasible;
   if (x.torque_margin) o["torque_margin"] = *x.torque_margin;
   if (x.torque_ratio_max) o["torque_ratio_max"] = *x.torque_ratio_max;
   if (x.distance_margin_m) {

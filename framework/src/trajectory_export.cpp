@@ -211,7 +211,6 @@ LimitWorst distanceWorst(const Samples& s, const RobotModel& robot, const Collis
   w.what = "distance";
   w.checked = true;
   w.value = HUGE_VAL;
-  w.limit = o.margin_m;
   if (min_distance) min_distance->resize(K);
   Eigen::VectorXd d;
   for (int k = 0; k < K; ++k) {
@@ -225,7 +224,10 @@ LimitWorst distanceWorst(const Samples& s, const RobotModel& robot, const Collis
       *pair = cm.pairNames()[static_cast<std::size_t>(p)];
     }
   }
-  w.margin = w.value - o.margin_m;
+  // The hard limit is contact (0), as the robot's own limits are for the joints; the design's
+  // margin is reported beside it (ratio = margin_m / distance: above 1 inside the margin).
+  w.limit = 0.0;
+  w.margin = w.value;
   w.ratio = w.value > 0 ? o.margin_m / w.value : HUGE_VAL;
   return w;
 }

@@ -129,7 +129,9 @@ TEST(RobotPlugins, TheLibraryListsDhUrdfAndEveryCatalogueRobot) {
     if (!dir.is_directory()) continue;
     const bool described = std::filesystem::exists(dir.path() / (n + ".yaml")) ||
                            std::filesystem::exists(dir.path() / (n + ".urdf"));
-    if (described) EXPECT_TRUE(names.count(n)) << "robots/" << n << " is not in catalogue.yaml";
+    if (described) {
+      EXPECT_TRUE(names.count(n)) << "robots/" << n << " is not in catalogue.yaml";
+    }
   }
 }
 

@@ -28,6 +28,7 @@ struct ExcitationSummary {
   double criterion_initial = NAN, criterion_final = NAN;
   double cond_W_initial = NAN, cond_W_final = NAN;
   double max_constraint_violation = NAN;
+  bool feasible = true;  // the result holds every constraint (else a warning says which)
   std::optional<double> torque_margin, torque_ratio_max;  // with torque limits
   /// With collision avoidance: the margin, the checked pairs, and the smallest distance over
   /// the design samples and pairs at the initial and the final trajectory, and where.

@@ -58,7 +58,8 @@ struct TrajectoryCheck {
   double rate_Hz = 0.0;             // measured: (samples - 1) / duration
   double max_rate_deviation = 0.0;  // max |t_i+1 - t_i - 1/rate| / (1/rate)
   /// position, velocity, acceleration, torque[, distance: value = the smallest signed distance
-  /// [m], limit = the margin, ratio = margin / distance, joint 0 and distance_pair the pair]
+  /// [m], limit 0 (contact: a violation only when the bodies overlap), ratio = the design's
+  /// margin_m / distance (above 1: inside the design margin), joint 0, distance_pair the pair]
   std::vector<LimitWorst> worst;
   std::string distance_pair;  // "link3 ~ table"
   /// max |tau in the file - tau the robot's model predicts| (NaN when the file has no tau).
