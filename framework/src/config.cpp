@@ -772,6 +772,35 @@ void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Reg
 
 }  // namespace
 
+// report: {type: standard, params: {plots, experiment_csv, title}}
+static void parseReport(const YAML::Node& r, const fs::path& base_dir, Problems& pr, StudyConfig& cfg) {
+  if (!r.IsMap()) {
+    pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
+  } else {
+    for (const auto& kv : r) {
+      const std::optional<std::string> key = keyName(pr, kv.first, "report");
+      if (key && *key != "type" && *key != "params")
+        unknownKey(pr, kv.first, "report", *key, {"type", "params"});
+    }
+    if (r["type"] && (!r["type"].IsScalar() || r["type"].Scalar() != "standard"))
+      pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard",
+                                    scalarText(r["type"])));
+    PluginInfo rep;
+    rep.name = "standard";
+    rep.params = {param_bool("plots", true, "draw plots with gnuplot when it is installed"),
+                  param_string("experiment_csv", std::string("auto"),
+                               "write experiment.csv: auto (simulated data always; recorded "
+                               "data, a copy of the input, up to 100000 samples), always, never",
+                               {"auto", "always", "never"}),
+                  param_string("title", std::string(), "title of the report")};
+    ParamSet ps;
+    resolveInto(rep, r["params"], "report.params", base_dir, pr, ps);
+    if (ps.has("plots")) cfg.report.plots = ps.getBool("plots");
+    if (ps.has("experiment_csv")) cfg.report.experiment_csv = ps.getString("experiment_csv");
+    if (ps.has("title")) cfg.report.title = ps.getString("title");
+  }
+}
+
 static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
                                        const fs::path& base_dir, const Registry& reg) {
   Problems pr;
@@ -853,33 +882,7 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
   if (root["validation"] && !split_done)
     cfg.validation = parseSpec(root["validation"], PluginKind::Experiment, "validation", base_dir,
                                reg, pr, false);
-  if (YAML::Node r = root["report"]) {
-    if (!r.IsMap()) {
-      pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
-    } else {
-      for (const auto& kv : r) {
-        const std::optional<std::string> key = keyName(pr, kv.first, "report");
-        if (key && *key != "type" && *key != "params")
-          unknownKey(pr, kv.first, "report", *key, {"type", "params"});
-      }
-      if (r["type"] && (!r["type"].IsScalar() || r["type"].Scalar() != "standard"))
-        pr.add(r["type"], fmt::format("report.type: unknown report '{}'; available: standard",
-                                      scalarText(r["type"])));
-      PluginInfo rep;
-      rep.name = "standard";
-      rep.params = {param_bool("plots", true, "draw plots with gnuplot when it is installed"),
-                    param_string("experiment_csv", std::string("auto"),
-                                 "write experiment.csv: auto (simulated data always; recorded "
-                                 "data, a copy of the input, up to 100000 samples), always, never",
-                                 {"auto", "always", "never"}),
-                    param_string("title", std::string(), "title of the report")};
-      ParamSet ps;
-      resolveInto(rep, r["params"], "report.params", base_dir, pr, ps);
-      if (ps.has("plots")) cfg.report.plots = ps.getBool("plots");
-      if (ps.has("experiment_csv")) cfg.report.experiment_csv = ps.getString("experiment_csv");
-      if (ps.has("title")) cfg.report.title = ps.getString("title");
-    }
-  }
+  if (YAML::Node r = root["report"]) parseReport(r, base_dir, pr, cfg);
   if (root["prior"]) cfg.prior = parsePrior(root["prior"], base_dir, pr);
   // Which stages need which.
   if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() &&

@@ -36,6 +36,21 @@ namespace fs = std::filesystem;
 
 namespace {
 
+// The run folder is replaced as a whole when the run is written: an export inside it would be
+// lost without a word.
+void refuseExportInsideRun(const RunOptions& opt) {
+  if (!opt.export_dir.empty()) {
+    const fs::path out = fs::weakly_canonical(fs::absolute(opt.out_dir));
+    const fs::path exp = fs::weakly_canonical(fs::absolute(opt.export_dir));
+    if (std::mismatch(out.begin(), out.end(), exp.begin(), exp.end()).first == out.end())
+      throw Error(
+          fmt::format("--export {}: inside the output folder {}, which is replaced "
+                      "as a whole when the run is written; export to a folder "
+                      "outside it",
+                      opt.export_dir.string(), opt.out_dir.string()));
+  }
+}
+
 // What a study says when the optimiser found no trajectory within every constraint.
 std::string infeasibleText(const OptimizerResult& r, const StudySummary::Excitation& x) {
   std::string s = fmt::format(
@@ -79,6 +94,18 @@ void collisionSummary(const CollisionOptions& o, const RobotModel& robot, const 
   x->collision_excluded = cm.excludedPairs();
   x->min_distance_initial_m = smallest(initial, nullptr);
   x->min_distance_final_m = smallest(best, &x->min_distance_pair);
+  Eigen::VectorXd per_pair = Eigen::VectorXd::Constant(cm.numPairs(), HUGE_VAL), d;
+  for (int k = 0; k < best.size(); ++k) {
+    cm.distances(best.q.row(k).transpose(), &d);
+    per_pair = per_pair.cwiseMin(d);
+  }
+  std::vector<int> order(static_cast<std::size_t>(cm.numPairs()));
+  for (int i = 0; i < cm.numPairs(); ++i) order[static_cast<std::size_t>(i)] = i;
+  std::stable_sort(order.begin(), order.end(),
+                   [&](int a, int b) { return per_pair(a) < per_pair(b); });
+  for (std::size_t i = 0; i < order.size() && i < 5; ++i)
+    x->closest_pairs_m.emplace_back(cm.pairNames()[static_cast<std::size_t>(order[i])],
+                                    per_pair(order[i]));
 }
 
 double seconds(std::chrono::steady_clock::time_point since) {
@@ -1220,36 +1247,33 @@ void StudyRun::validationStage() {
 
 }  // namespace
 
-StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptions& opt) {
-  const auto t_start = std::chrono::steady_clock::now();
+namespace {
+// A study's result before its stages: status "running", the build, the configuration's hash.
+StudyResult startedResult(const StudyConfig& cfg) {
   StudyResult res;
   Json& S = res.summary;
-  StudySummary& T = res.headline;
-  T.study = cfg.name;
+  res.headline.study = cfg.name;
   S = Json::object();
-  renderInto(T, &S);  // status "running", message, study, warnings
+  renderInto(res.headline, &S);  // status "running", message, study, warnings
   S["exid_version"] = EXID_VERSION_STRING;
   S["exid_commit"] = gitCommit();
   S["build"] = Registry::fingerprintText();
   S["config_hash"] = cfg.hash();
   S["seed"] = Json(static_cast<long long>(cfg.seed));
+  return res;
+}
+}  // namespace
+
+StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptions& opt) {
+  const auto t_start = std::chrono::steady_clock::now();
+  StudyResult res = startedResult(cfg);
+  Json& S = res.summary;
+  StudySummary& T = res.headline;
   const bool write = !opt.out_dir.empty();
   RunFolder folder;
   if (write) {
     try {
-      // The run folder is replaced as a whole when the run is written: an export inside it
-      // would be lost without a word.
-      if (!opt.export_dir.empty()) {
-        const fs::path out = fs::weakly_canonical(fs::absolute(opt.out_dir));
-        const fs::path exp = fs::weakly_canonical(fs::absolute(opt.export_dir));
-        const auto [o, e] = std::mismatch(out.begin(), out.end(), exp.begin(), exp.end());
-        if (o == out.end())
-          throw Error(
-              fmt::format("--export {}: inside the output folder {}, which is replaced "
-                          "as a whole when the run is written; export to a folder "
-                          "outside it",
-                          opt.export_dir.string(), opt.out_dir.string()));
-      }
+      refuseExportInsideRun(opt);
       folder = prepareRunFolder(opt.out_dir, opt.clean_stale);
     } catch (const std::exception& e) {  // nothing written, nothing replaced
       res.ok = false;

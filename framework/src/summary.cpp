@@ -47,6 +47,14 @@ void renderInto(const StudySummary::Excitation& x, Json* X) {
     c["min_distance_initial_m"] = x.min_distance_initial_m.value_or(NAN);
     c["min_distance_final_m"] = x.min_distance_final_m.value_or(NAN);
     c["min_distance_pair"] = x.min_distance_pair;
+    Json cl = Json::array();
+    for (const auto& [pair, dist] : x.closest_pairs_m) {
+      Json e = Json::object();
+      e["pair"] = pair;
+      e["min_distance_m"] = dist;
+      cl.push_back(e);
+    }
+    c["closest_pairs"] = cl;
   }
   o["iterations"] = x.iterations;
   o["evaluations"] = Json(x.evaluations);

@@ -408,13 +408,165 @@ std::string TrajectoryCheck::text() const {
   return s;
 }
 
+namespace {
+
+// trajectory.csv: the dataset columns (docs/conventions.md §1), tau predicted
+void writeTrajectoryCsv(const fs::path& file, const Samples& s, const Eigen::MatrixXd& tau) {
+  const int n = s.dof();
+  const Eigen::Index K = s.size();
+  CsvTable table;
+  table.columns = {"t"};
+  for (const char* p : {"q", "qd", "qdd", "tau"})
+    for (auto& c : names(p, n)) table.columns.push_back(c);
+  table.data.resize(K, 1 + 4 * n);
+  table.data.col(0) = s.t;
+  table.data.middleCols(1, n) = s.q;
+  table.data.middleCols(1 + n, n) = s.qd;
+  table.data.middleCols(1 + 2 * n, n) = s.qdd;
+  table.data.middleCols(1 + 3 * n, n) = tau;
+  writeCsvAtomic(file, table);
+}
+
+std::vector<std::string> quotedJointNames(const RobotModel& robot) {
+  std::vector<std::string> jn;
+  for (const Body& b : robot.bodies) jn.push_back(quoted(b.joint_name));
+  return jn;
+}
+
+// trajectory.params.yaml: the trajectory's own parameters (the same trajectory again)
+void writeParamsYaml(const fs::path& file, const Trajectory& traj, const std::string& type,
+                     const ParamSet& params, const Eigen::VectorXd& z, const RobotModel& robot,
+                     const TrajectoryExportOptions& o) {
+  const TrajectorySpecs sp = traj.specs();
+  std::string y;
+  y += "# exid excitation trajectory: its own parameters. `variables` is z in the trajectory's\n"
+       "# order: with init: coefficients (fourier) or init: knots (spline) and\n"
+       "# init_coefficients / init_knots set to it, the same parameters give this trajectory.\n";
+  y += "trajectory:\n  type: " + quoted(type) + "\n  params:\n";
+  for (const auto& [k, v] : params.values()) y += "    " + k + ": " + paramYaml(v) + "\n";
+  y += "variables: " + flowList(z.data(), z.size()) + "\n";
+  y += fmt::format("duration_s: {}\nperiods: {}\nrate_Hz: {}\nrest_to_rest: {}\n",
+                   number(sp.duration_s), o.periods, number(o.rate_Hz),
+                   sp.rest_to_rest ? "true" : "false");
+  const std::vector<std::string> jn = quotedJointNames(robot);
+  y += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\n";
+  const Json pj = traj.parametersAt(z);
+  if (pj.isObject() && pj.size() > 0) {
+    y += "parameters:\n";
+    jsonYaml(pj, 2, y);
+  }
+  writeFileAtomic(file, y);
+}
+
+// joint_trajectory.yaml: trajectory_msgs/msg/JointTrajectory
+void writeJointTrajectoryYaml(const fs::path& file, const Samples& s, const Eigen::MatrixXd& tau,
+                              const RobotModel& robot, double rate_Hz) {
+  const int n = s.dof();
+  const Eigen::Index K = s.size();
+  const std::vector<std::string> jn = quotedJointNames(robot);
+  std::string r;
+  r.reserve(static_cast<std::size_t>(K) * static_cast<std::size_t>(n) * 100 + 256);
+  r += "# trajectory_msgs/msg/JointTrajectory (ROS 2), measured coordinates, SI units;\n"
+       "# effort: the torque the robot's model predicts (rigid body + drives)\n";
+  r += "header:\n  stamp: {sec: 0, nanosec: 0}\n  frame_id: \"\"\n";
+  r += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\npoints:\n";
+  const double ns_per_sample = 1e9 / rate_Hz;
+  for (Eigen::Index k = 0; k < K; ++k) {
+    const long long ns = std::llround(static_cast<double>(k) * ns_per_sample);
+    const Eigen::RowVectorXd qr = s.q.row(k), vr = s.qd.row(k), ar = s.qdd.row(k), er = tau.row(k);
+    r += "  - positions: " + flowList(qr.data(), n) + "\n";
+    r += "    velocities: " + flowList(vr.data(), n) + "\n";
+    r += "    accelerations: " + flowList(ar.data(), n) + "\n";
+    r += "    effort: " + flowList(er.data(), n) + "\n";
+    r += fmt::format("    time_from_start: {{sec: {}, nanosec: {}}}\n", ns / 1000000000LL,
+                     ns % 1000000000LL);
+  }
+  writeFileAtomic(file, r);
+}
+
+// plots/trajectory_{q,qd,tau_ratio or tau,distance}
+void drawExportPlots(const fs::path& stage, const Samples& s, const Eigen::MatrixXd& tau,
+                     const RobotModel& robot, const TrajectoryExportOptions& o,
+                     const Eigen::VectorXd& dmin) {
+  const int n = s.dof();
+  const Eigen::Index K = s.size();
+  auto series = [&](const Eigen::MatrixXd& m, const char* prefix, const Eigen::VectorXd* scale) {
+    std::vector<PlotSeries> v;
+    for (int j = 0; j < n; ++j) {
+      PlotSeries ps;
+      ps.title = fmt::format("{}{}", prefix, j + 1);
+      ps.x.assign(s.t.data(), s.t.data() + K);
+      ps.y.resize(static_cast<std::size_t>(K));
+      for (Eigen::Index k = 0; k < K; ++k)
+        ps.y[static_cast<std::size_t>(k)] = m(k, j) / (scale ? (*scale)(j) : 1.0);
+      v.push_back(std::move(ps));
+    }
+    return v;
+  };
+  drawPlot({"trajectory_q", "positions at the controller rate", "t [s]", "q [rad or m]",
+            series(s.q, "q", nullptr)},
+           stage);
+  drawPlot({"trajectory_qd", "velocities at the controller rate", "t [s]", "qd [rad/s or m/s]",
+            series(s.qd, "qd", nullptr)},
+           stage);
+  const Eigen::VectorXd tmax = knownTorqueLimits(robot, o.torque_max);
+  if (tmax.size() == n) {
+    PlotSpec ts{"trajectory_tau_ratio", "predicted torque / torque limit", "t [s]", "tau / tau_max",
+                series(tau, "tau", &tmax)};
+    for (double lvl : {-1.0, 1.0}) {
+      PlotSeries b;
+      b.title = lvl > 0 ? "limit" : "";
+      b.x = {s.t(0), s.t(K - 1)};
+      b.y = {lvl, lvl};
+      ts.series.push_back(b);
+    }
+    drawPlot(ts, stage);
+  } else {
+    drawPlot({"trajectory_tau", "predicted torque (no torque limits known)", "t [s]",
+              "tau [N m or N]", series(tau, "tau", nullptr)},
+             stage);
+  }
+  if (o.collision && dmin.size() == K) {
+    PlotSeries d;
+    d.title = "minimum distance";
+    d.x.assign(s.t.data(), s.t.data() + K);
+    d.y.assign(dmin.data(), dmin.data() + K);
+    PlotSeries m;
+    m.title = "margin";
+    m.x = {s.t(0), s.t(K - 1)};
+    m.y = {o.collision->margin_m, o.collision->margin_m};
+    drawPlot({"trajectory_distance",
+              "minimum distance over the checked pairs",
+              "t [s]",
+              "distance [m]",
+              {d, m}},
+             stage);
+  }
+}
+
+// Moves every entry of the staging folder into dir.
+void publishStaging(const fs::path& stage, const fs::path& dir) {
+  for (const auto& e : fs::directory_iterator(stage)) {
+    const fs::path target = dir / e.path().filename();
+    if (e.is_directory()) {
+      fs::create_directories(target);
+      for (const auto& f : fs::directory_iterator(e.path()))
+        fs::rename(f.path(), target / f.path().filename());
+    } else {
+      fs::rename(e.path(), target);
+    }
+  }
+  fs::remove_all(stage);
+}
+
+}  // namespace
+
 Json exportTrajectory(const Trajectory& traj, const std::string& type, const ParamSet& params,
                       const Eigen::VectorXd& z, const RobotModel& robot,
                       const TrajectoryExportOptions& o, const fs::path& dir,
                       TrajectoryCheck* check_out) {
   const Samples s = resampleTrajectory(traj, z, o.rate_Hz, o.periods);
   const Eigen::MatrixXd tau = predictedTorques(robot, s);
-  const int n = robot.dof();
   const Eigen::Index K = s.size();
   const TrajectorySpecs sp = traj.specs();
 
@@ -423,61 +575,9 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
   fs::remove_all(stage);
   fs::create_directories(stage);
   try {
-    // trajectory.csv: the dataset columns (docs/conventions.md §1), tau predicted
-    CsvTable table;
-    table.columns = {"t"};
-    for (const char* p : {"q", "qd", "qdd", "tau"})
-      for (auto& c : names(p, n)) table.columns.push_back(c);
-    table.data.resize(K, 1 + 4 * n);
-    table.data.col(0) = s.t;
-    table.data.middleCols(1, n) = s.q;
-    table.data.middleCols(1 + n, n) = s.qd;
-    table.data.middleCols(1 + 2 * n, n) = s.qdd;
-    table.data.middleCols(1 + 3 * n, n) = tau;
-    writeCsvAtomic(stage / "trajectory.csv", table);
-
-    // trajectory.params.yaml
-    std::string y;
-    y += "# exid excitation trajectory: its own parameters. `variables` is z in the trajectory's\n"
-         "# order: with init: coefficients (fourier) or init: knots (spline) and\n"
-         "# init_coefficients / init_knots set to it, the same parameters give this trajectory.\n";
-    y += "trajectory:\n  type: " + quoted(type) + "\n  params:\n";
-    for (const auto& [k, v] : params.values()) y += "    " + k + ": " + paramYaml(v) + "\n";
-    y += "variables: " + flowList(z.data(), z.size()) + "\n";
-    y += fmt::format("duration_s: {}\nperiods: {}\nrate_Hz: {}\nrest_to_rest: {}\n",
-                     number(sp.duration_s), o.periods, number(o.rate_Hz),
-                     sp.rest_to_rest ? "true" : "false");
-    std::vector<std::string> jn;
-    for (const Body& b : robot.bodies) jn.push_back(quoted(b.joint_name));
-    y += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\n";
-    const Json pj = traj.parametersAt(z);
-    if (pj.isObject() && pj.size() > 0) {
-      y += "parameters:\n";
-      jsonYaml(pj, 2, y);
-    }
-    writeFileAtomic(stage / "trajectory.params.yaml", y);
-
-    // joint_trajectory.yaml: trajectory_msgs/msg/JointTrajectory
-    std::string r;
-    r.reserve(static_cast<std::size_t>(K) * static_cast<std::size_t>(n) * 100 + 256);
-    r += "# trajectory_msgs/msg/JointTrajectory (ROS 2), measured coordinates, SI units;\n"
-         "# effort: the torque the robot's model predicts (rigid body + drives)\n";
-    r += "header:\n  stamp: {sec: 0, nanosec: 0}\n  frame_id: \"\"\n";
-    r += "joint_names: [" + fmt::format("{}", fmt::join(jn, ", ")) + "]\npoints:\n";
-    const double ns_per_sample = 1e9 / o.rate_Hz;
-    for (Eigen::Index k = 0; k < K; ++k) {
-      const long long ns = std::llround(static_cast<double>(k) * ns_per_sample);
-      const Eigen::RowVectorXd qr = s.q.row(k), vr = s.qd.row(k), ar = s.qdd.row(k),
-                               er = tau.row(k);
-      r += "  - positions: " + flowList(qr.data(), n) + "\n";
-      r += "    velocities: " + flowList(vr.data(), n) + "\n";
-      r += "    accelerations: " + flowList(ar.data(), n) + "\n";
-      r += "    effort: " + flowList(er.data(), n) + "\n";
-      r += fmt::format("    time_from_start: {{sec: {}, nanosec: {}}}\n", ns / 1000000000LL,
-                       ns % 1000000000LL);
-    }
-    writeFileAtomic(stage / "joint_trajectory.yaml", r);
-
+    writeTrajectoryCsv(stage / "trajectory.csv", s, tau);
+    writeParamsYaml(stage / "trajectory.params.yaml", traj, type, params, z, robot, o);
+    writeJointTrajectoryYaml(stage / "joint_trajectory.yaml", s, tau, robot, o.rate_Hz);
     // the check, on the file as written
     Eigen::VectorXd dmin;
     const TrajectoryCheck c =
@@ -494,74 +594,8 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     out["check"] = c.toJson();
     writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
 
-    if (o.plots) {
-      auto series = [&](const Eigen::MatrixXd& m, const char* prefix,
-                        const Eigen::VectorXd* scale) {
-        std::vector<PlotSeries> v;
-        for (int j = 0; j < n; ++j) {
-          PlotSeries ps;
-          ps.title = fmt::format("{}{}", prefix, j + 1);
-          ps.x.assign(s.t.data(), s.t.data() + K);
-          ps.y.resize(static_cast<std::size_t>(K));
-          for (Eigen::Index k = 0; k < K; ++k)
-            ps.y[static_cast<std::size_t>(k)] = m(k, j) / (scale ? (*scale)(j) : 1.0);
-          v.push_back(std::move(ps));
-        }
-        return v;
-      };
-      drawPlot({"trajectory_q", "positions at the controller rate", "t [s]", "q [rad or m]",
-                series(s.q, "q", nullptr)},
-               stage);
-      drawPlot({"trajectory_qd", "velocities at the controller rate", "t [s]", "qd [rad/s or m/s]",
-                series(s.qd, "qd", nullptr)},
-               stage);
-      const Eigen::VectorXd tmax = knownTorqueLimits(robot, o.torque_max);
-      if (tmax.size() == n) {
-        PlotSpec ts{"trajectory_tau_ratio", "predicted torque / torque limit", "t [s]",
-                    "tau / tau_max", series(tau, "tau", &tmax)};
-        for (double lvl : {-1.0, 1.0}) {
-          PlotSeries b;
-          b.title = lvl > 0 ? "limit" : "";
-          b.x = {s.t(0), s.t(K - 1)};
-          b.y = {lvl, lvl};
-          ts.series.push_back(b);
-        }
-        drawPlot(ts, stage);
-      } else {
-        drawPlot({"trajectory_tau", "predicted torque (no torque limits known)", "t [s]",
-                  "tau [N m or N]", series(tau, "tau", nullptr)},
-                 stage);
-      }
-      if (o.collision && dmin.size() == K) {
-        PlotSeries d;
-        d.title = "minimum distance";
-        d.x.assign(s.t.data(), s.t.data() + K);
-        d.y.assign(dmin.data(), dmin.data() + K);
-        PlotSeries m;
-        m.title = "margin";
-        m.x = {s.t(0), s.t(K - 1)};
-        m.y = {o.collision->margin_m, o.collision->margin_m};
-        drawPlot({"trajectory_distance",
-                  "minimum distance over the checked pairs",
-                  "t [s]",
-                  "distance [m]",
-                  {d, m}},
-                 stage);
-      }
-    }
-
-    // publish: move every entry of the staging folder into dir
-    for (const auto& e : fs::directory_iterator(stage)) {
-      const fs::path target = dir / e.path().filename();
-      if (e.is_directory()) {
-        fs::create_directories(target);
-        for (const auto& f : fs::directory_iterator(e.path()))
-          fs::rename(f.path(), target / f.path().filename());
-      } else {
-        fs::rename(e.path(), target);
-      }
-    }
-    fs::remove_all(stage);
+    if (o.plots) drawExportPlots(stage, s, tau, robot, o, dmin);
+    publishStaging(stage, dir);
     if (check_out) *check_out = c;
     return out;
   } catch (...) {

@@ -329,6 +329,45 @@ void readCollision(const Reader& r, const YAML::Node& C, const std::string& wher
   }
 }
 
+// The DH row of a link: joint type, a, d, alpha, theta.
+DhRow readDhRow(const Reader& r, const YAML::Node& L, const std::string& lw) {
+  DhRow row;
+  std::string type = L["type"] ? r.text(L["type"], lw + ".type") : "revolute";
+  if (type == "revolute") {
+    row.type = JointType::Revolute;
+  } else if (type == "prismatic") {
+    row.type = JointType::Prismatic;
+  } else {
+    r.fail(L["type"], lw + ".type", "expected 'revolute' or 'prismatic', found '" + type + "'");
+  }
+  if (L["a"]) row.a = r.number(L["a"], lw + ".a");
+  if (L["d"]) row.d = r.number(L["d"], lw + ".d");
+  r.angle(L, "alpha", lw, true, &row.alpha);
+  r.angle(L, "theta", lw, true, &row.theta);
+  return row;
+}
+
+// The parent body of link i: the previous link, `base` (-1) or a link listed before it.
+int readParent(const Reader& r, const YAML::Node& L, const std::string& lw, int i,
+               const std::map<std::string, int>& link_index) {
+  int parent = i - 1;
+  if (L["parent"]) {
+    const std::string p = r.text(L["parent"], lw + ".parent");
+    if (p == "base") {
+      parent = -1;
+    } else {
+      auto it = link_index.find(p);
+      if (it == link_index.end()) {
+        r.fail(L["parent"], lw + ".parent",
+               "unknown link '" + p + "' (a parent must be listed before its children, or " +
+                   "be 'base')");
+      }
+      parent = it->second;
+    }
+  }
+  return parent;
+}
+
 RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& options) {
   if (!root.IsDefined() || root.IsNull()) r.fail(root, "", "empty document");
   r.requireMap(root, "top level",
@@ -379,36 +418,9 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
         L["joint"] ? r.text(L["joint"], where + ".joint") : "joint" + std::to_string(i + 1);
     const std::string lw = where + " (link '" + name + "')";
 
-    DhRow row;
-    std::string type = L["type"] ? r.text(L["type"], lw + ".type") : "revolute";
-    if (type == "revolute") {
-      row.type = JointType::Revolute;
-    } else if (type == "prismatic") {
-      row.type = JointType::Prismatic;
-    } else {
-      r.fail(L["type"], lw + ".type", "expected 'revolute' or 'prismatic', found '" + type + "'");
-    }
+    const DhRow row = readDhRow(r, L, lw);
     const bool revolute = row.type == JointType::Revolute;
-    if (L["a"]) row.a = r.number(L["a"], lw + ".a");
-    if (L["d"]) row.d = r.number(L["d"], lw + ".d");
-    r.angle(L, "alpha", lw, true, &row.alpha);
-    r.angle(L, "theta", lw, true, &row.theta);
-
-    int parent = i - 1;
-    if (L["parent"]) {
-      const std::string p = r.text(L["parent"], lw + ".parent");
-      if (p == "base") {
-        parent = -1;
-      } else {
-        auto it = link_index.find(p);
-        if (it == link_index.end()) {
-          r.fail(L["parent"], lw + ".parent",
-                 "unknown link '" + p + "' (a parent must be listed before its children, or " +
-                     "be 'base')");
-        }
-        parent = it->second;
-      }
-    }
+    const int parent = readParent(r, L, lw, i, link_index);
 
     Body b = dhBody(row, conv, parent);
     b.name = name;

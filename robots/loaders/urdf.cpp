@@ -173,82 +173,48 @@ void checkJointNumbers(const TiXmlElement* j, const std::string& src, const std:
   }
 }
 
-XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
-  const TiXmlElement* robot = doc.RootElement();
-  if (!robot || std::string(robot->Value()) != "robot") {
-    throw Error(at(src, robot) + ": the root element must be <robot>, found <" +
-                (robot ? robot->Value() : "nothing") + ">");
+// One <joint>: name, type (supported ones only), parent and child links, numbers checked.
+XJoint readJointElement(const TiXmlElement* e, const std::string& src,
+                        std::map<std::string, int>* lines) {
+  XJoint j;
+  j.name = attr(e, "name");
+  j.type = attr(e, "type");
+  j.line = e->Row();
+  if (j.name.empty()) throw Error(at(src, e) + ": <joint> without a name attribute");
+  if (lines->count(j.name)) {
+    throw Error(at(src, e) + ": joint '" + j.name + "': duplicate joint (first at line " +
+                std::to_string(lines->at(j.name)) + ")");
   }
-  XRobot x;
-  x.name = attr(robot, "name");
-  std::map<std::string, int> link_line, joint_line;
-  for (const TiXmlElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
-    const std::string tag = e->Value();
-    if (tag == "link") {
-      XLink l{attr(e, "name"), e->Row()};
-      if (l.name.empty()) throw Error(at(src, e) + ": <link> without a name attribute");
-      if (link_line.count(l.name)) {
-        throw Error(at(src, e) + ": link '" + l.name + "': duplicate link (first at line " +
-                    std::to_string(link_line[l.name]) + ")");
-      }
-      link_line[l.name] = l.line;
-      checkLinkNumbers(e, src, "link '" + l.name + "'");
-      x.links.push_back(l);
-    } else if (tag == "joint") {
-      XJoint j;
-      j.name = attr(e, "name");
-      j.type = attr(e, "type");
-      j.line = e->Row();
-      if (j.name.empty()) throw Error(at(src, e) + ": <joint> without a name attribute");
-      if (joint_line.count(j.name)) {
-        throw Error(at(src, e) + ": joint '" + j.name + "': duplicate joint (first at line " +
-                    std::to_string(joint_line[j.name]) + ")");
-      }
-      joint_line[j.name] = j.line;
-      static const std::set<std::string> kSupported = {"revolute", "continuous", "prismatic",
-                                                       "fixed"};
-      if (!kSupported.count(j.type)) {
-        throw Error(at(src, e) + ": joint '" + j.name + "': " +
-                    (j.type.empty() ? std::string("missing type") : j.type + " joints are") +
-                    " not supported (only revolute, continuous, prismatic and fixed; a "
-                    "floating base is not modelled, fix the base link to the world instead)");
-      }
-      if (e->FirstChildElement("mimic")) {
-        throw Error(at(src, e) + ": joint '" + j.name +
-                    "': <mimic> is not supported (use the <exid><transmission> matrix)");
-      }
-      const TiXmlElement* p = e->FirstChildElement("parent");
-      const TiXmlElement* c = e->FirstChildElement("child");
-      if (!p || attr(p, "link").empty()) {
-        throw Error(at(src, e) + ": joint '" + j.name + "': missing <parent link=\"...\"/>");
-      }
-      if (!c || attr(c, "link").empty()) {
-        throw Error(at(src, e) + ": joint '" + j.name + "': missing <child link=\"...\"/>");
-      }
-      checkJointNumbers(e, src, "joint '" + j.name + "'");
-      j.parent = attr(p, "link");
-      j.child = attr(c, "link");
-      x.joints.push_back(j);
-    } else if (tag == "exid") {
-      if (x.exid) throw Error(at(src, e) + ": a second <exid> element (one is allowed)");
-      x.exid = e;
-    }
+  (*lines)[j.name] = j.line;
+  static const std::set<std::string> kSupported = {"revolute", "continuous", "prismatic", "fixed"};
+  if (!kSupported.count(j.type)) {
+    throw Error(at(src, e) + ": joint '" + j.name +
+                "': " + (j.type.empty() ? std::string("missing type") : j.type + " joints are") +
+                " not supported (only revolute, continuous, prismatic and fixed; a "
+                "floating base is not modelled, fix the base link to the world instead)");
   }
-  if (x.links.empty()) {
-    const TiXmlElement* root = doc.RootElement();
-    const bool xacro = src.size() >= 6 && src.compare(src.size() - 6, 6, ".xacro") == 0;
-    bool macros = false;
-    for (const TiXmlElement* e = root ? root->FirstChildElement() : nullptr; e && !macros;
-         e = e->NextSiblingElement())
-      macros = std::string(e->Value()).rfind("xacro:", 0) == 0;
-    if (xacro || macros)
-      throw Error(src +
-                  ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
-                  "expand it first: xacro " +
-                  src + " > robot.urdf");
-    throw Error(src + ": no <link> in the robot");
+  if (e->FirstChildElement("mimic")) {
+    throw Error(at(src, e) + ": joint '" + j.name +
+                "': <mimic> is not supported (use the <exid><transmission> matrix)");
   }
+  const TiXmlElement* p = e->FirstChildElement("parent");
+  const TiXmlElement* c = e->FirstChildElement("child");
+  if (!p || attr(p, "link").empty()) {
+    throw Error(at(src, e) + ": joint '" + j.name + "': missing <parent link=\"...\"/>");
+  }
+  if (!c || attr(c, "link").empty()) {
+    throw Error(at(src, e) + ": joint '" + j.name + "': missing <child link=\"...\"/>");
+  }
+  checkJointNumbers(e, src, "joint '" + j.name + "'");
+  j.parent = attr(p, "link");
+  j.child = attr(c, "link");
+  return j;
+}
 
+// The joints form one tree over the links: every joint names existing links, every link has
+// at most one parent joint, no cycle, one root (x->root); fills x->children.
+void linkTree(const std::string& src, const std::map<std::string, int>& link_line, XRobot* xp) {
+  XRobot& x = *xp;
   // Every joint names existing links; every link has at most one parent joint.
   std::map<std::string, int> parent_joint;
   for (size_t k = 0; k < x.joints.size(); ++k) {
@@ -301,6 +267,52 @@ XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
                 "): every link but one must be the child of a joint");
   }
   x.root = roots.front();
+}
+
+XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
+  const TiXmlElement* robot = doc.RootElement();
+  if (!robot || std::string(robot->Value()) != "robot") {
+    throw Error(at(src, robot) + ": the root element must be <robot>, found <" +
+                (robot ? robot->Value() : "nothing") + ">");
+  }
+  XRobot x;
+  x.name = attr(robot, "name");
+  std::map<std::string, int> link_line, joint_line;
+  for (const TiXmlElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
+    const std::string tag = e->Value();
+    if (tag == "link") {
+      XLink l{attr(e, "name"), e->Row()};
+      if (l.name.empty()) throw Error(at(src, e) + ": <link> without a name attribute");
+      if (link_line.count(l.name)) {
+        throw Error(at(src, e) + ": link '" + l.name + "': duplicate link (first at line " +
+                    std::to_string(link_line[l.name]) + ")");
+      }
+      link_line[l.name] = l.line;
+      checkLinkNumbers(e, src, "link '" + l.name + "'");
+      x.links.push_back(l);
+    } else if (tag == "joint") {
+      x.joints.push_back(readJointElement(e, src, &joint_line));
+    } else if (tag == "exid") {
+      if (x.exid) throw Error(at(src, e) + ": a second <exid> element (one is allowed)");
+      x.exid = e;
+    }
+  }
+  if (x.links.empty()) {
+    const TiXmlElement* root = doc.RootElement();
+    const bool xacro = src.size() >= 6 && src.compare(src.size() - 6, 6, ".xacro") == 0;
+    bool macros = false;
+    for (const TiXmlElement* e = root ? root->FirstChildElement() : nullptr; e && !macros;
+         e = e->NextSiblingElement())
+      macros = std::string(e->Value()).rfind("xacro:", 0) == 0;
+    if (xacro || macros)
+      throw Error(src +
+                  ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
+                  "expand it first: xacro " +
+                  src + " > robot.urdf");
+    throw Error(src + ": no <link> in the robot");
+  }
+
+  linkTree(src, link_line, &x);
   return x;
 }
 
@@ -506,83 +518,16 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
   (void)options;
 }
 
-// <collision> elements of every link, attached to the body the link is merged into (the base
-// for links fixed to it). Mesh file names relative to the URDF's folder; package:// URIs are kept
-// as given and refused only when a study asks for collision avoidance.
-void readCollisions(const urdf::ModelInterface& u, const std::string& src,
-                    const std::map<std::string, LinkPlace>& link_place, RobotModel* m) {
-  namespace fs = std::filesystem;
-  const fs::path dir = fs::path(src).parent_path();
-  for (const auto& [name, place] : link_place) {
-    const urdf::LinkConstSharedPtr link = u.getLink(name);
-    if (!link) continue;
-    int k = 0;
-    for (const auto& c : link->collision_array) {
-      const std::string where = fmt::format("{}: link '{}' <collision> {}", src, name, ++k);
-      if (!c || !c->geometry) continue;
-      CollisionShape s;
-      s.body = place.body;
-      s.where = where;
-      const Pose origin = toPose(c->origin);
-      if (!finitePose(origin)) throw Error(where + ": <origin>: non-finite number");
-      s.pose = place.X * origin;
-      const urdf::Geometry& g = *c->geometry;
-      switch (g.type) {
-        case urdf::Geometry::SPHERE:
-          s.kind = CollisionShape::Kind::Sphere;
-          s.radius = static_cast<const urdf::Sphere&>(g).radius;
-          break;
-        case urdf::Geometry::BOX: {
-          const auto& b = static_cast<const urdf::Box&>(g);
-          s.kind = CollisionShape::Kind::Box;
-          s.size = Eigen::Vector3d(b.dim.x, b.dim.y, b.dim.z);
-          break;
-        }
-        case urdf::Geometry::CYLINDER: {
-          const auto& y = static_cast<const urdf::Cylinder&>(g);
-          s.kind = CollisionShape::Kind::Cylinder;
-          s.radius = y.radius;
-          s.length = y.length;
-          break;
-        }
-        case urdf::Geometry::MESH: {
-          const auto& h = static_cast<const urdf::Mesh&>(g);
-          s.kind = CollisionShape::Kind::Mesh;
-          s.mesh_file = h.filename;
-          if (fs::path(h.filename).is_relative() && h.filename.find("://") == std::string::npos)
-            s.mesh_file = (dir / h.filename).string();
-          s.mesh_scale = Eigen::Vector3d(h.scale.x, h.scale.y, h.scale.z);
-          break;
-        }
-        default:
-          throw Error(where + ": unknown geometry");
-      }
-      m->collision.push_back(s);
-    }
-  }
-}
-
-}  // namespace
-
-RobotModel loadUrdfString(const std::string& xml, const std::string& src,
-                          const LoadOptions& options) {
-  checkUtf8(xml, src);
-  TiXmlDocument doc;
-  doc.Parse(xml.c_str());
-  if (doc.Error()) {
-    throw Error(src + ":" + std::to_string(doc.ErrorRow()) + ": invalid XML: " + doc.ErrorDesc());
-  }
-  const XRobot x = readStructure(doc, src);
-  const urdf::ModelInterfaceSharedPtr u = parseWithUrdfdom(xml, src);
-
-  RobotModel m;
-  m.name = x.name.empty() ? "robot" : x.name;
-  m.source = src;
-  std::map<std::string, int> joint_body;
-  std::map<std::string, LinkPlace> link_place;
-  std::vector<std::string> ignored_dynamics;  // joints whose <dynamics> were not used
-
-  // Depth first from the root, children in document order: parents get lower indices.
+// The bodies, depth first from the root, children in document order (parents get lower
+// indices): a movable joint makes a body; a fixed one merges its child link into the owning body.
+void buildBodies(const XRobot& x, const urdf::ModelInterface& u0, const std::string& src,
+                 const LoadOptions& options, RobotModel* mp, std::map<std::string, int>* jb,
+                 std::map<std::string, LinkPlace>* lp, std::vector<std::string>* ignored) {
+  const urdf::ModelInterface* u = &u0;
+  RobotModel& m = *mp;
+  std::map<std::string, int>& joint_body = *jb;
+  std::map<std::string, LinkPlace>& link_place = *lp;
+  std::vector<std::string>& ignored_dynamics = *ignored;
   struct Item {
     std::string link;
     LinkPlace place;
@@ -662,38 +607,121 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
     // Push in reverse so that the first child in document order is visited first.
     for (auto r = next.rbegin(); r != next.rend(); ++r) stack.push_back(*r);
   }
+}
+
+// A companion file's <exid> element (options.urdf_extension), refused beside the URDF's own.
+void applyCompanion(const XRobot& x, const std::string& src, const LoadOptions& options,
+                    RobotModel* mp, const std::map<std::string, int>& joint_body,
+                    const std::map<std::string, LinkPlace>& link_place) {
+  RobotModel& m = *mp;
+  const std::string esrc = options.urdf_extension.string();
+  if (x.exid) {
+    throw Error(at(src, x.exid) + ": the URDF has its own <exid> element and a companion " + esrc +
+                " is given as well (use one of them)");
+  }
+  const std::string ext_text =
+      detail::readTextFile(options.urdf_extension, "URDF companion (<exid>)");
+  checkUtf8(ext_text, esrc);
+  TiXmlDocument ext;
+  ext.Parse(ext_text.c_str());
+  if (ext.Error()) {
+    throw Error(esrc + ":" + std::to_string(ext.ErrorRow()) + ": invalid XML: " + ext.ErrorDesc());
+  }
+  const TiXmlElement* root = ext.RootElement();
+  if (!root || std::string(root->Value()) != "exid") {
+    throw Error(at(esrc, root) + ": the root element of a URDF companion must be <exid>, found " +
+                (root ? "<" + std::string(root->Value()) + ">" : std::string("no element")));
+  }
+  if (root->NextSiblingElement()) {
+    throw Error(at(esrc, root->NextSiblingElement()) +
+                ": a second root element (one <exid> is allowed)");
+  }
+  applyExtension(root, esrc, &m, joint_body, link_place, options);
+}
+
+// <collision> elements of every link, attached to the body the link is merged into (the base
+// for links fixed to it). Mesh file names relative to the URDF's folder; package:// URIs are kept
+// as given and refused only when a study asks for collision avoidance.
+void readCollisions(const urdf::ModelInterface& u, const std::string& src,
+                    const std::map<std::string, LinkPlace>& link_place, RobotModel* m) {
+  namespace fs = std::filesystem;
+  const fs::path dir = fs::path(src).parent_path();
+  for (const auto& [name, place] : link_place) {
+    const urdf::LinkConstSharedPtr link = u.getLink(name);
+    if (!link) continue;
+    int k = 0;
+    for (const auto& c : link->collision_array) {
+      const std::string where = fmt::format("{}: link '{}' <collision> {}", src, name, ++k);
+      if (!c || !c->geometry) continue;
+      CollisionShape s;
+      s.body = place.body;
+      s.where = where;
+      const Pose origin = toPose(c->origin);
+      if (!finitePose(origin)) throw Error(where + ": <origin>: non-finite number");
+      s.pose = place.X * origin;
+      const urdf::Geometry& g = *c->geometry;
+      switch (g.type) {
+        case urdf::Geometry::SPHERE:
+          s.kind = CollisionShape::Kind::Sphere;
+          s.radius = static_cast<const urdf::Sphere&>(g).radius;
+          break;
+        case urdf::Geometry::BOX: {
+          const auto& b = static_cast<const urdf::Box&>(g);
+          s.kind = CollisionShape::Kind::Box;
+          s.size = Eigen::Vector3d(b.dim.x, b.dim.y, b.dim.z);
+          break;
+        }
+        case urdf::Geometry::CYLINDER: {
+          const auto& y = static_cast<const urdf::Cylinder&>(g);
+          s.kind = CollisionShape::Kind::Cylinder;
+          s.radius = y.radius;
+          s.length = y.length;
+          break;
+        }
+        case urdf::Geometry::MESH: {
+          const auto& h = static_cast<const urdf::Mesh&>(g);
+          s.kind = CollisionShape::Kind::Mesh;
+          s.mesh_file = h.filename;
+          if (fs::path(h.filename).is_relative() && h.filename.find("://") == std::string::npos)
+            s.mesh_file = (dir / h.filename).string();
+          s.mesh_scale = Eigen::Vector3d(h.scale.x, h.scale.y, h.scale.z);
+          break;
+        }
+        default:
+          throw Error(where + ": unknown geometry");
+      }
+      m->collision.push_back(s);
+    }
+  }
+}
+
+}  // namespace
+
+RobotModel loadUrdfString(const std::string& xml, const std::string& src,
+                          const LoadOptions& options) {
+  checkUtf8(xml, src);
+  TiXmlDocument doc;
+  doc.Parse(xml.c_str());
+  if (doc.Error()) {
+    throw Error(src + ":" + std::to_string(doc.ErrorRow()) + ": invalid XML: " + doc.ErrorDesc());
+  }
+  const XRobot x = readStructure(doc, src);
+  const urdf::ModelInterfaceSharedPtr u = parseWithUrdfdom(xml, src);
+
+  RobotModel m;
+  m.name = x.name.empty() ? "robot" : x.name;
+  m.source = src;
+  std::map<std::string, int> joint_body;
+  std::map<std::string, LinkPlace> link_place;
+  std::vector<std::string> ignored_dynamics;  // joints whose <dynamics> were not used
+
+  buildBodies(x, *u, src, options, &m, &joint_body, &link_place, &ignored_dynamics);
   if (m.dof() == 0) {
     throw Error(src + ": no movable joint (revolute, continuous or prismatic) in the robot");
   }
   readCollisions(*u, src, link_place, &m);
   if (x.exid) applyExtension(x.exid, src, &m, joint_body, link_place, options);
-  if (!options.urdf_extension.empty()) {
-    const std::string esrc = options.urdf_extension.string();
-    if (x.exid) {
-      throw Error(at(src, x.exid) + ": the URDF has its own <exid> element and a companion " +
-                  esrc + " is given as well (use one of them)");
-    }
-    const std::string ext_text =
-        detail::readTextFile(options.urdf_extension, "URDF companion (<exid>)");
-    checkUtf8(ext_text, esrc);
-    TiXmlDocument ext;
-    ext.Parse(ext_text.c_str());
-    if (ext.Error()) {
-      throw Error(esrc + ":" + std::to_string(ext.ErrorRow()) +
-                  ": invalid XML: " + ext.ErrorDesc());
-    }
-    const TiXmlElement* root = ext.RootElement();
-    if (!root || std::string(root->Value()) != "exid") {
-      throw Error(at(esrc, root) + ": the root element of a URDF companion must be <exid>, found " +
-                  (root ? "<" + std::string(root->Value()) + ">" : std::string("no element")));
-    }
-    if (root->NextSiblingElement()) {
-      throw Error(at(esrc, root->NextSiblingElement()) +
-                  ": a second root element (one <exid> is allowed)");
-    }
-    applyExtension(root, esrc, &m, joint_body, link_place, options);
-  }
-
+  if (!options.urdf_extension.empty()) applyCompanion(x, src, options, &m, joint_body, link_place);
   try {
     m.validateStructure();
   } catch (const Error& e) {

@@ -36,6 +36,8 @@ struct ExcitationSummary {
   int collision_pairs = 0;
   std::string min_distance_pair;
   std::vector<std::string> collision_excluded;
+  /// The five pairs that come closest at the final trajectory's design samples, closest first.
+  std::vector<std::pair<std::string, double>> closest_pairs_m;
   int iterations = 0;
   long long evaluations = 0;
   double wall_s = NAN;
