@@ -24,7 +24,6 @@
 namespace exid {
 namespace {
 
-constexpr double kInf = 1e300;
 
 std::string at(const std::string& source, const TiXmlNode* node) {
   return node && node->Row() > 0 ? source + ":" + std::to_string(node->Row()) : source;
