@@ -18,7 +18,9 @@ endif()
 # The helpers each plugin kind shares, so that an out-of-tree plugin links them instead of
 # copying them: least-squares accumulation, signals and streaming (exid::estimators_common,
 # <exid/estimators/...>), model helpers ("model_common.hpp", exid::models_common), optimiser
-# limits, budgets, tracker, starts and L-BFGS ("optim_common.hpp", exid::optimizers_common).
+# limits, budgets, tracker, starts and L-BFGS ("optim_common.hpp", exid::optimizers_common),
+# trajectory helpers ("traj_common.hpp", exid::trajectories_common), the criteria's spectrum and
+# SpectralCriterion ("spectrum.hpp", exid::criteria_common).
 if(TARGET exid_estimators_common)
   list(APPEND EXID_EXPORTED_TARGETS exid_estimators_common)
   set_target_properties(exid_estimators_common PROPERTIES EXPORT_NAME estimators_common)
@@ -36,6 +38,18 @@ if(TARGET exid_optim_common)
   set_target_properties(exid_optim_common PROPERTIES EXPORT_NAME optimizers_common)
   install(FILES ${PROJECT_SOURCE_DIR}/optimizers/common/optim_common.hpp
           DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/optimizers)
+endif()
+if(TARGET exid_trajectory_common)
+  list(APPEND EXID_EXPORTED_TARGETS exid_trajectory_common)
+  set_target_properties(exid_trajectory_common PROPERTIES EXPORT_NAME trajectories_common)
+  install(FILES ${PROJECT_SOURCE_DIR}/trajectories/common/traj_common.hpp
+          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/trajectories)
+endif()
+if(TARGET exid_criteria_common)
+  list(APPEND EXID_EXPORTED_TARGETS exid_criteria_common)
+  set_target_properties(exid_criteria_common PROPERTIES EXPORT_NAME criteria_common)
+  install(FILES ${PROJECT_SOURCE_DIR}/criteria/common/spectrum.hpp
+          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/criteria)
 endif()
 install(TARGETS ${EXID_EXPORTED_TARGETS} EXPORT exidTargets
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}

@@ -8,20 +8,13 @@
 
 namespace {
 
-class Cond final : public exid::Criterion {
+class Cond final : public exid::criteria::SpectralCriterion {
  public:
   static constexpr const char* kName = "cond";
   static constexpr const char* kVersion = "1.0";
   static constexpr const char* kDoc =
       "condition number of W: sigma_max/sigma_min (cond(M) is its square)";
-  static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
-  explicit Cond(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  exid::CriterionSpecs specs() const override {
-    exid::CriterionSpecs sp;
-    sp.scale_columns = scale_;
-    sp.condition_number = true;
-    return sp;
-  }
+  explicit Cond(const exid::ParamSet& p) : SpectralCriterion(p, true) {}
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const Eigen::Index n = s.lambda.size();
@@ -33,9 +26,6 @@ class Cond final : public exid::Criterion {
     }
     return J;
   }
-
- private:
-  bool scale_;
 };
 
 }  // namespace

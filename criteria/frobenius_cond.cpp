@@ -7,18 +7,12 @@
 
 namespace {
 
-class FrobeniusCond final : public exid::Criterion {
+class FrobeniusCond final : public exid::criteria::SpectralCriterion {
  public:
   static constexpr const char* kName = "frobenius_cond";
   static constexpr const char* kVersion = "1.0";
   static constexpr const char* kDoc = "Frobenius condition number ||W||_F ||W^+||_F";
-  static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
-  explicit FrobeniusCond(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  exid::CriterionSpecs specs() const override {
-    exid::CriterionSpecs sp;
-    sp.scale_columns = scale_;
-    return sp;
-  }
+  explicit FrobeniusCond(const exid::ParamSet& p) : SpectralCriterion(p) {}
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const double tr = s.lambda.sum();
@@ -31,9 +25,6 @@ class FrobeniusCond final : public exid::Criterion {
     }
     return J;
   }
-
- private:
-  bool scale_;
 };
 
 }  // namespace

@@ -6,26 +6,17 @@
 
 namespace {
 
-class LogDet final : public exid::Criterion {
+class LogDet final : public exid::criteria::SpectralCriterion {
  public:
   static constexpr const char* kName = "log_det";
   static constexpr const char* kVersion = "1.0";
   static constexpr const char* kDoc = "D-optimality: -log det(W^T W)";
-  static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
-  explicit LogDet(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  exid::CriterionSpecs specs() const override {
-    exid::CriterionSpecs sp;
-    sp.scale_columns = scale_;
-    return sp;
-  }
+  explicit LogDet(const exid::ParamSet& p) : SpectralCriterion(p) {}
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     if (dM) *dM = -(s.V * s.lambda.cwiseInverse().asDiagonal() * s.V.transpose());
     return -s.lambda.array().log().sum();
   }
-
- private:
-  bool scale_;
 };
 
 }  // namespace

@@ -6,27 +6,18 @@
 
 namespace {
 
-class MinSv final : public exid::Criterion {
+class MinSv final : public exid::criteria::SpectralCriterion {
  public:
   static constexpr const char* kName = "min_sv";
   static constexpr const char* kVersion = "1.0";
   static constexpr const char* kDoc = "reciprocal of the smallest singular value of W";
-  static std::vector<exid::ParamDecl> params() { return {exid::criteria::scaleColumnsParam()}; }
-  explicit MinSv(const exid::ParamSet& p) : scale_(p.getBool("scale_columns")) {}
-  exid::CriterionSpecs specs() const override {
-    exid::CriterionSpecs sp;
-    sp.scale_columns = scale_;
-    return sp;
-  }
+  explicit MinSv(const exid::ParamSet& p) : SpectralCriterion(p) {}
   double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dM) const override {
     auto s = exid::criteria::spectrum(M, kName);
     const double J = 1.0 / std::sqrt(s.lambda(0));
     if (dM) *dM = -0.5 * J * J * J * s.V.col(0) * s.V.col(0).transpose();
     return J;
   }
-
- private:
-  bool scale_;
 };
 
 }  // namespace

@@ -55,10 +55,7 @@ class BatchLs : public exid::Estimator {
                         "thread's block of samples is merged in order, so the result is the "
                         "same for any count",
                         0, 256),
-        exid::param_double("rank_tolerance", 1e-8, "",
-                           "a direction is unidentifiable when its singular value of the "
-                           "column-scaled W is below this times the largest",
-                           0.0, 1.0, true, true),
+        exid::estimators::rankToleranceParam(),
     };
   }
 
@@ -70,12 +67,7 @@ class BatchLs : public exid::Estimator {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 
-  exid::EstimatorSpecs specs() const override {
-    exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
-    s.accepts_prior = true;
-    return s;
-  }
+  exid::EstimatorSpecs specs() const override { return exid::estimators::streamingSpecs(); }
 
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {

@@ -499,11 +499,7 @@ class ConsistentLs : public exid::Estimator {
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
         exid::param_int("max_equations", 1000, "refuse more distinct equations than this", 1.0,
                         1e6),
-        exid::param_double(
-            "rank_tolerance", 1e-8, "",
-            "a direction is unidentifiable when its singular value of the column-scaled "
-            "W is below this times the largest",
-            0.0, 1.0, true, true),
+        exid::estimators::rankToleranceParam(),
     };
   }
 
@@ -527,12 +523,7 @@ class ConsistentLs : public exid::Estimator {
         fmt::format("{}: prior_scale_range must be [lo, hi] with 0 < lo <= hi < inf", kName));
   }
 
-  exid::EstimatorSpecs specs() const override {
-    exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
-    s.accepts_prior = true;
-    return s;
-  }
+  exid::EstimatorSpecs specs() const override { return exid::estimators::streamingSpecs(); }
 
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {

@@ -87,10 +87,7 @@ class FilteredLs : public exid::Estimator {
                         "threads building the chunks (0: the machine's cores, at most 8); the "
                         "chunks are merged in order, so the result is the same for any count",
                         0, 256),
-        exid::param_double("rank_tolerance", 1e-8, "",
-                           "a direction is unidentifiable when its singular value of the "
-                           "column-scaled W is below this times the largest",
-                           0.0, 1.0, true, true),
+        exid::estimators::rankToleranceParam(),
     };
   }
 

@@ -69,10 +69,8 @@ class Rls : public exid::Estimator {
         chunk_(static_cast<int>(p.getInt("chunk_samples"))) {}
 
   exid::EstimatorSpecs specs() const override {
-    exid::EstimatorSpecs s;
-    s.streams = true;  // the rows in chunks (estimators::forEachChunk, estimators::accumulateRows)
+    exid::EstimatorSpecs s = exid::estimators::streamingSpecs();
     s.recursive = true;
-    s.accepts_prior = true;
     return s;
   }
 

@@ -299,13 +299,8 @@ class AdjointGradient final : public exid::Optimizer {
       }
       ++*iters;
       if (paper_) paper_gain_ = std::min(paper_gain_ * 1.5, 1e6 * gain_);
-      mem.update(zn - z, gn - g);
-      const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
-      z = zn;
-      g = gn;
-      phi = phin;
       cur_J_ = cur_J_trial_;
-      if (rel < 1e-12) return true;
+      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) return true;
     }
     return false;
   }

@@ -285,4 +285,14 @@ void finiteBounds(ExcitationProblem& p, const Eigen::VectorXd& z0, double scale,
   }
 }
 
+bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& phi,
+              const Eigen::VectorXd& zn, const Eigen::VectorXd& gn, double phin) {
+  mem.update(zn - z, gn - g);
+  const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
+  z = zn;
+  g = gn;
+  phi = phin;
+  return rel < 1e-12;
+}
+
 }  // namespace exid::optimizers

@@ -120,6 +120,12 @@ class LbfgsMemory {
   std::deque<double> R_;
 };
 
+/// Takes an accepted step of a descent on phi: the curvature pair (zn - z, gn - g) into mem,
+/// then z, g, phi := zn, gn, phin. Returns true when the relative decrease
+/// (phi - phin) / max(1, |phi|) is below 1e-12 (converged).
+bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& phi,
+              const Eigen::VectorXd& zn, const Eigen::VectorXd& gn, double phin);
+
 Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
                                double perturbation, std::mt19937_64& rng);
 

@@ -685,13 +685,8 @@ class SundialsOptimizer final : public exid::Optimizer {
       }
       if (!accepted) return true;
       ++*iters;
-      mem.update(zn - z, gn - g);
-      const double rel = (phi - phin) / std::max(1.0, std::abs(phi));
-      z = zn;
-      g = gn;
-      phi = phin;
       cur_J_ = trial_J_;
-      if (rel < 1e-12) return true;
+      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) return true;
     }
     return false;
   }

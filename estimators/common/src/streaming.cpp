@@ -63,6 +63,20 @@ int resolveThreads(long requested) {
   return std::max(1, std::min(8, static_cast<int>(hw == 0 ? 1 : hw)));
 }
 
+ParamDecl rankToleranceParam() {
+  return param_double("rank_tolerance", 1e-8, "",
+                      "a direction is unidentifiable when its singular value of the "
+                      "column-scaled W is below this times the largest",
+                      0.0, 1.0, true, true);
+}
+
+EstimatorSpecs streamingSpecs() {
+  EstimatorSpecs s;
+  s.streams = true;  // the rows in chunks (forEachChunk, accumulateRows)
+  s.accepts_prior = true;
+  return s;
+}
+
 void parallelChunks(long n, int threads, const std::function<void(long)>& work,
                     const std::function<void(long)>& consume) {
   const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));

@@ -148,6 +148,13 @@ bool modelIsPerSample(const ObservationModel& model);
 /// Reports progress in [lo, hi] of the stage and throws exid::Error when ctx.shouldStop().
 /// Threads for a `threads` parameter: n > 0 as given, 0 the machine's cores (at most 8).
 int resolveThreads(long requested);
+
+/// The `rank_tolerance` parameter of the least-squares estimators (BaseSolveOptions).
+ParamDecl rankToleranceParam();
+
+/// The capabilities of an estimator that reads its rows in chunks (forEachChunk,
+/// accumulateRows) and takes a prior.
+EstimatorSpecs streamingSpecs();
 /// Runs work(c) for the chunks c in [0, n) on `threads` threads, in waves of `threads`
 /// consecutive chunks; after each wave consume(c) runs on the calling thread in chunk order. So
 /// a reduction done in consume is the same for any thread count, and at most `threads` chunks'

@@ -6,6 +6,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/interfaces.hpp"
 #include "exid/params.hpp"
 
 namespace exid::criteria {
@@ -21,5 +22,25 @@ Spectrum spectrum(const Eigen::MatrixXd& M, const char* who);
 
 /// The parameter every criterion declares.
 ParamDecl scaleColumnsParam();
+
+/// What every criterion of the information matrix's spectrum shares: the `scale_columns`
+/// parameter and the capabilities it gives. A criterion derives from it and adds kName,
+/// kVersion, kDoc and evaluate().
+class SpectralCriterion : public Criterion {
+ public:
+  static std::vector<ParamDecl> params() { return {scaleColumnsParam()}; }
+  explicit SpectralCriterion(const ParamSet& p, bool condition_number = false)
+      : scale_(p.getBool("scale_columns")), condition_number_(condition_number) {}
+  CriterionSpecs specs() const override {
+    CriterionSpecs sp;
+    sp.scale_columns = scale_;
+    sp.condition_number = condition_number_;
+    return sp;
+  }
+
+ private:
+  bool scale_;
+  bool condition_number_;
+};
 
 }  // namespace exid::criteria
