@@ -301,10 +301,22 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
 
 /// exid check-trajectory: a trajectory CSV (t, q, qd, qdd[, tau]) against the robot's limits at
 /// the file's own rate; exit 1 when a limit is exceeded.
+/// With a study (--collision), the smallest distance of the pairs its excitation.collision
+/// checks as well.
 int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const std::string& file,
-                           const std::vector<double>& torque_max, const std::string& json_out) {
+                           const std::vector<double>& torque_max, const std::string& json_out,
+                           const std::string& collision_study) {
   const auto model = loadRobot(reg, robot);
-  const TrajectoryCheck c = checkTrajectoryCsv(file, *model, torque_max);
+  std::shared_ptr<const CollisionOptions> collision;
+  if (!collision_study.empty()) {
+    collision = loadStudy(collision_study, reg).excitation_collision;
+    if (!collision)
+      throw Error(
+          fmt::format("--collision {}: the study has no excitation.collision section (the "
+                      "margin, obstacles and allowed pairs to check the distances with)",
+                      collision_study));
+  }
+  const TrajectoryCheck c = checkTrajectoryCsv(file, *model, torque_max, collision.get());
   std::cout << c.text();
   if (!json_out.empty()) writeFileAtomic(json_out, c.toJson().dump(2) + "\n");
   if (!c.ok) {
@@ -645,6 +657,7 @@ struct CommandArgs {
   double rate_hz = 1000.0;
   int periods = 1;
   std::vector<double> torque_max;
+  std::string collision_study;  // check-trajectory --collision
 };
 
 // exid robot info ROBOT; returns the info subcommand.
@@ -715,13 +728,16 @@ CLI::App* addCheckTrajectoryCommand(CLI::App& app, CommandArgs* st) {
   auto* chk = app.add_subcommand(
       "check-trajectory",
       "check a trajectory CSV against a robot's limits at the file's rate: exid check-trajectory "
-      "ROBOT FILE.csv [--torque-max-nm T1,...,Tn] [--json FILE]");
+      "ROBOT FILE.csv [--torque-max-nm T1,...,Tn] [--collision STUDY.yaml] [--json FILE]");
   chk->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
   chk->add_option("file", st->samples, "CSV with t, q1..qn, qd1..qdn, qdd1..qddn [, tau1..taun]")
       ->required();
   chk->add_option("--torque-max-nm", st->torque_max,
                   "torque limits [N m or N] per joint when the robot description has none")
       ->delimiter(',');
+  chk->add_option("--collision", st->collision_study,
+                  "a study whose excitation.collision (obstacles, allowed pairs, margin) the "
+                  "smallest distance between the checked pairs is measured with");
   chk->add_option("--json", st->json_out, "write the result as JSON to this file");
   return chk;
 }
@@ -783,7 +799,8 @@ Commands addCommands(CLI::App& app, Registry& registry) {
   Commands c;
   c.run = [st, info, eval, exp, chk, stages, matrix, inspect, &registry]() -> int {
     if (*chk)
-      return checkTrajectoryCommand(registry, st->robot, st->samples, st->torque_max, st->json_out);
+      return checkTrajectoryCommand(registry, st->robot, st->samples, st->torque_max, st->json_out,
+                                    st->collision_study);
     if (*inspect)
       return inspectCommand(registry, st->inspect_args, st->sets, st->params, st->model,
                             st->model_params, st->json_out);

@@ -350,3 +350,47 @@ excitation:
   m = problem(base + "  constrains: {torque_margin: 0.5}\n");
   EXPECT_NE(m.find("did you mean 'constraints'"), std::string::npos) << m;
 }
+
+// check-trajectory --collision STUDY: the distances of the study's pairs at the file's rate; a
+// file whose motion passes through the study's obstacle fails, naming the pair.
+TEST(TrajectoryExport, CheckMeasuresTheDistancesOfAStudysCollisionPairs) {
+  const fs::path dir = exid_cli::freshTempDir("exid_check_collision_", "files");
+  exid::CsvTable T;
+  T.columns = {"t"};
+  for (const char* g : {"q", "qd", "qdd"})
+    for (int j = 1; j <= 7; ++j) T.columns.push_back(g + std::to_string(j));
+  T.data = Eigen::MatrixXd::Zero(3, 22);
+  T.data.col(0) << 0.0, 0.001, 0.002;
+  T.data.col(4).setConstant(-1.0);            // q4 within its limits [-3.07, -0.07]
+  exid::writeCsvAtomic(dir / "home.csv", T);  // the Panda at rest
+  // link 1's capsule: the segment z in [0, 0.283] on the base z axis, radius 0.06
+  std::ofstream(dir / "hit.yaml") << "robot: {type: panda}\nmodel: {type: differential}\n"
+                                     "excitation:\n  trajectory: {type: fourier}\n"
+                                     "  criterion: {type: cond}\n  optimizer: {type: nlopt}\n"
+                                     "  collision:\n    margin_m: 0.01\n    self: false\n"
+                                     "    obstacles: [{name: ball, sphere: {radius_m: 0.05}, "
+                                     "xyz_m: [0.1, 0, 0.1]}]\n";
+  exid_cli::CmdResult r =
+      exid_cli::runExid("check-trajectory panda " + (dir / "home.csv").string() + " --collision " +
+                        (dir / "hit.yaml").string());
+  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_NE(r.out.find("| distance | link1 ~ ball |"), std::string::npos) << r.out;
+  std::ofstream(dir / "clear.yaml") << "robot: {type: panda}\nmodel: {type: differential}\n"
+                                       "excitation:\n  trajectory: {type: fourier}\n"
+                                       "  criterion: {type: cond}\n  optimizer: {type: nlopt}\n"
+                                       "  collision:\n    margin_m: 0.01\n    self: false\n"
+                                       "    obstacles: [{name: ball, sphere: {radius_m: 0.05}, "
+                                       "xyz_m: [0.5, 0, 0.1]}]\n";
+  r = exid_cli::runExid("check-trajectory panda " + (dir / "home.csv").string() + " --collision " +
+                        (dir / "clear.yaml").string() + " --json " + (dir / "check.json").string());
+  EXPECT_EQ(r.code, 0) << r.out;
+  const std::string json = exid_cli::slurp(dir / "check.json");
+  EXPECT_NE(json.find("\"pair\": \"link1 ~ ball\""), std::string::npos) << json;
+  EXPECT_NE(json.find("\"value\": 0.39"), std::string::npos) << json;  // 0.5 - 0.06 - 0.05
+  // a study without the section is refused, by name
+  std::ofstream(dir / "none.yaml") << "robot: {type: panda}\n";
+  r = exid_cli::runExid("check-trajectory panda " + (dir / "home.csv").string() + " --collision " +
+                        (dir / "none.yaml").string());
+  EXPECT_NE(r.code, 0);
+  EXPECT_NE(r.out.find("has no excitation.collision section"), std::string::npos) << r.out;
+}
