@@ -773,7 +773,8 @@ void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Reg
 }  // namespace
 
 // report: {type: standard, params: {plots, experiment_csv, title}}
-static void parseReport(const YAML::Node& r, const fs::path& base_dir, Problems& pr, StudyConfig& cfg) {
+static void parseReport(const YAML::Node& r, const fs::path& base_dir, Problems& pr,
+                        StudyConfig& cfg) {
   if (!r.IsMap()) {
     pr.add(r, "report: expected a mapping {type: standard, params: {plots: true}}");
   } else {

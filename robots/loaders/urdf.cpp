@@ -24,7 +24,6 @@
 namespace exid {
 namespace {
 
-
 std::string at(const std::string& source, const TiXmlNode* node) {
   return node && node->Row() > 0 ? source + ":" + std::to_string(node->Row()) : source;
 }
