@@ -464,8 +464,7 @@ void CollisionModel::distances(const Eigen::VectorXd& qm, Eigen::VectorXd* d,
   for (auto& p : m.parts) {
     const Pose W = p.body < 0 ? p.pose : m.X[static_cast<std::size_t>(p.body)] * p.pose;
     p.world = W;
-    p.obj->setTransform(toFcl(W));
-    p.obj->computeAABB();
+    p.obj->setTransform(toFcl(W));  // (no AABB: no broad phase, every pair is measured)
   }
   const int P = numPairs();
   d->resize(P);

@@ -74,31 +74,27 @@ void collisionSummary(const CollisionOptions& o, const RobotModel& robot, const 
                       const Samples& best, StudySummary::Excitation* x,
                       Eigen::VectorXd* dmin_best) {
   CollisionModel cm(robot, o);
-  auto smallest = [&](const Samples& s, std::string* pair) {
-    double m = HUGE_VAL;
+  // Per pair, the smallest distance over the samples; per sample, the smallest over the pairs.
+  auto sweep = [&](const Samples& s, Eigen::VectorXd* per_pair, Eigen::VectorXd* per_sample) {
+    per_pair->setConstant(cm.numPairs(), HUGE_VAL);
+    per_sample->resize(s.size());
     Eigen::VectorXd d;
-    if (pair) dmin_best->resize(s.size());
     for (int k = 0; k < s.size(); ++k) {
       cm.distances(s.q.row(k).transpose(), &d);
-      Eigen::Index p = 0;
-      if (pair) (*dmin_best)(k) = d.minCoeff();
-      if (d.minCoeff(&p) < m) {
-        m = d(p);
-        if (pair) *pair = cm.pairNames()[static_cast<std::size_t>(p)];
-      }
+      *per_pair = per_pair->cwiseMin(d);
+      (*per_sample)(k) = d.minCoeff();
     }
-    return m;
   };
+  Eigen::VectorXd per_pair, per_sample;
   x->distance_margin_m = o.margin_m;
   x->collision_pairs = cm.numPairs();
   x->collision_excluded = cm.excludedPairs();
-  x->min_distance_initial_m = smallest(initial, nullptr);
-  x->min_distance_final_m = smallest(best, &x->min_distance_pair);
-  Eigen::VectorXd per_pair = Eigen::VectorXd::Constant(cm.numPairs(), HUGE_VAL), d;
-  for (int k = 0; k < best.size(); ++k) {
-    cm.distances(best.q.row(k).transpose(), &d);
-    per_pair = per_pair.cwiseMin(d);
-  }
+  sweep(initial, &per_pair, &per_sample);
+  x->min_distance_initial_m = per_pair.minCoeff();
+  sweep(best, &per_pair, dmin_best);
+  Eigen::Index closest = 0;
+  x->min_distance_final_m = per_pair.minCoeff(&closest);
+  x->min_distance_pair = cm.pairNames()[static_cast<std::size_t>(closest)];
   std::vector<int> order(static_cast<std::size_t>(cm.numPairs()));
   for (int i = 0; i < cm.numPairs(); ++i) order[static_cast<std::size_t>(i)] = i;
   std::stable_sort(order.begin(), order.end(),

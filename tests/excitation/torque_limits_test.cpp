@@ -89,17 +89,8 @@ TEST(TorqueLimits, JacobianMatchesCentralDifferences) {
     EXPECT_NEAR(gt(K + 3), -tau(3, 0) / 87.0 - 0.8, 1e-14);
     EXPECT_NEAR(gt(2 * 6 * K + 4), tau(4, 6) / 12.0 - 0.8, 1e-14);
     // central differences of every torque row along every variable
-    const double h = 1e-6;
-    double worst = 0;
-    for (int i = 0; i < p.numVariables(); ++i) {
-      Eigen::VectorXd zp = z, zm = z, gp, gm;
-      zp(i) += h;
-      zm(i) -= h;
-      p.nonlinearConstraints(zp, &gp, nullptr);
-      p.nonlinearConstraints(zm, &gm, nullptr);
-      const Eigen::VectorXd fd = (gp - gm) / (2 * h);
-      worst = std::max(worst, (fd - Jtail.col(i)).cwiseAbs().maxCoeff());
-    }
+    const double worst =
+        (exid_test::nonlinearConstraintDifferences(p, z, 1e-6) - Jtail).cwiseAbs().maxCoeff();
     const double scale = Jtail.cwiseAbs().maxCoeff();
     EXPECT_GT(scale, 0.0);
     EXPECT_LE(worst, 1e-6 * scale) << traj << ": worst " << worst << " of " << scale;

@@ -44,4 +44,20 @@ inline std::filesystem::path sourceDir() { return EXID_SOURCE_DIR; }
 /// Recordings shipped in the repository (data/).
 inline std::filesystem::path dataDir() { return std::filesystem::path(EXID_SOURCE_DIR) / "data"; }
 
+/// Central differences (step h) of an excitation problem's nonlinear constraint rows along each
+/// variable: rows x numVariables, to compare with the analytic Jacobian.
+inline Eigen::MatrixXd nonlinearConstraintDifferences(exid::ExcitationProblem& p,
+                                                      const Eigen::VectorXd& z, double h) {
+  Eigen::MatrixXd D(p.numNonlinearConstraints(), p.numVariables());
+  for (int i = 0; i < p.numVariables(); ++i) {
+    Eigen::VectorXd zp = z, zm = z, gp, gm;
+    zp(i) += h;
+    zm(i) -= h;
+    p.nonlinearConstraints(zp, &gp, nullptr);
+    p.nonlinearConstraints(zm, &gm, nullptr);
+    D.col(i) = (gp - gm) / (2 * h);
+  }
+  return D;
+}
+
 }  // namespace exid_test
