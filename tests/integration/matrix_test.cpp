@@ -68,7 +68,7 @@ TEST(Matrix, ProductOfAxesAndEveryCellValidatedFirst) {
 TEST(Matrix, AFailingCellAndATimeoutDoNotLoseTheOthers) {
   fs::path d = tempDir("isolation");
   std::ofstream(d / "m.yaml") << R"(name: iso
-cell_budget_s: 1
+cell_budget_s: 6
 study:
   robot: {type: planar2r}
   model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}
