@@ -390,6 +390,16 @@ class CsvExperiment : public exid::Experiment {
       }
       row_ = -1;
       kept_ = -1;
+      dptr_ = 0;
+      settled_ = 0;
+      if (protos_.empty())  // the files' columns and selection, for decode()
+        for (std::size_t f = 0; f < files_.size(); ++f) {
+          exid::CsvReadOptions opt;
+          opt.allow_non_finite = true;
+          opt.text_columns = true;
+          protos_.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
+          protos_.back()->select(select_[f]);
+        }
       stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size());
       collecting_ = !stats_done_;
       if (collecting_) collected_ = exid::Dataset();
@@ -403,13 +413,7 @@ class CsvExperiment : public exid::Experiment {
         finishPass();
         return 0;
       }
-      chunk->t.resize(want);
-      chunk->q.resize(want, n_);
-      chunk->qd.resize(pqd_.empty() ? 0 : want, pqd_.empty() ? 0 : n_);
-      chunk->qdd.resize(pqdd_.empty() ? 0 : want, pqdd_.empty() ? 0 : n_);
-      chunk->tau.resize(ptau_.empty() ? 0 : want, ptau_.empty() ? 0 : n_);
-      chunk->wrench.resize(pw_.empty() ? 0 : want, pw_.empty() ? 0 : 6);
-      chunk->source = files_[0];
+      sizeChunk(want, chunk);
       int k = 0;
       while (k < want) {
         if (!nextKeptRow()) break;
@@ -427,6 +431,94 @@ class CsvExperiment : public exid::Experiment {
                                          files_[0], kept_ - i0_ + 1, size()));
       if (kept_ + 1 >= i1_) finishPass();
       return k;
+    }
+
+    // ---- a pass in pieces (fetch, decode on any thread, settle in order)
+    struct CsvPiece : Piece {
+      std::vector<std::string> text;  // per file: the rows' lines
+      std::vector<int> line_before;   // per file: the file line before them
+      int first_row = 0;              // file data row of the first line's row (0-based)
+      int rows = 0;                   // data rows in text (samples and dropped rows)
+      std::vector<double> values;     // decoded: per sample, its used values (for settle)
+      std::vector<int> row_of;        // decoded: per sample, its file data row
+    };
+
+    std::unique_ptr<Piece> fetch(int count) override {
+      exid::check(!readers_.empty(), "experiment 'csv': a pass read before rewind()");
+      auto piece = std::make_unique<CsvPiece>();
+      const long first = std::max(i0_, kept_ + 1);
+      const int want = static_cast<int>(std::max<long>(0, std::min<long>(count, i1_ - first)));
+      piece->count = want;
+      if (want == 0) return piece;
+      // file rows: those before the first sample passed over, then the piece's (with the
+      // dropped rows among them: decode finds them bad again, by the same rule)
+      const int skip = fileRowsFor(row_ + 1, first - (kept_ + 1));
+      const int take = fileRowsFor(row_ + 1 + skip, want);
+      piece->first_row = row_ + 1 + skip;
+      piece->rows = take;
+      piece->text.resize(readers_.size());
+      piece->line_before.resize(readers_.size());
+      for (std::size_t f = 0; f < readers_.size(); ++f) {
+        const int skipped = readers_[f]->skipRows(skip);
+        const int got = readers_[f]->takeRows(take, &piece->text[f], &piece->line_before[f]);
+        exid::check(skipped == skip && got == take,
+                    fmt::format("experiment 'csv': {}: the file changed while it was read (a "
+                                "pass found fewer rows than the scan)",
+                                files_[f]));
+      }
+      row_ += skip + take;
+      kept_ = first + want - 1;
+      return piece;
+    }
+
+    void decode(Piece& piece, exid::Dataset* chunk) const override {
+      auto& pc = dynamic_cast<CsvPiece&>(piece);
+      sizeChunk(pc.count, chunk);
+      std::vector<std::unique_ptr<exid::CsvReader>> rd;
+      for (std::size_t f = 0; f < pc.text.size(); ++f)
+        rd.push_back(std::make_unique<exid::CsvReader>(pc.text[f], *protos_[f], pc.line_before[f]));
+      std::vector<std::vector<double>> vals = vals_;
+      const std::size_t U = used_.size();
+      pc.values.resize(static_cast<std::size_t>(pc.count) * U);
+      pc.row_of.resize(static_cast<std::size_t>(pc.count));
+      Eigen::VectorXd tau;
+      int k = 0;
+      for (int r = 0; r < pc.rows; ++r) {
+        double* uv = pc.values.data() + static_cast<std::size_t>(std::min(k, pc.count - 1)) * U;
+        exid::check(
+            readRow(rd, &vals, uv),
+            fmt::format("experiment 'csv': {}: the file changed while it was read", files_[0]));
+        const int row = pc.first_row + r;
+        if (const int bad = badColumn(uv); bad >= 0) {
+          if (!drop_) badValue(rd, bad, row);
+          continue;
+        }
+        exid::check(k < pc.count,
+                    fmt::format("experiment 'csv': {}: the file changed while it was read (more "
+                                "good rows than the scan found, at data row {})",
+                                files_[0], row + 1));
+        convert(k, uv, row, chunk, &tau);
+        pc.row_of[static_cast<std::size_t>(k)] = row;
+        ++k;
+      }
+      exid::check(k == pc.count, fmt::format("experiment 'csv': {}: the file changed while it was "
+                                             "read (a piece found {} of its {} samples)",
+                                             files_[0], k, pc.count));
+    }
+
+    void settle(const Piece& piece, const exid::Dataset& chunk) override {
+      const auto& pc = dynamic_cast<const CsvPiece&>(piece);
+      if (collecting_) {
+        const std::size_t U = used_.size();
+        for (int k = 0; k < pc.count; ++k) {
+          stats_->add(pc.values.data() + static_cast<std::size_t>(k) * U,
+                      pc.row_of[static_cast<std::size_t>(k)]);
+          if (stride_ > 0 && taken_ % stride_ == 0) collect(chunk, k);
+          ++taken_;
+        }
+      }
+      settled_ += pc.count;
+      if (settled_ >= size()) finishPass();
     }
 
     /// The meta of the dataset after resampling (resampled_from > 0), filtering (pp) and
@@ -756,23 +848,29 @@ class CsvExperiment : public exid::Experiment {
     // One row of every source into uv_ (false at the end of the first file); the sources must
     // have the same number of rows (the scan checks).
     bool readRow(std::vector<std::unique_ptr<exid::CsvReader>>& rd) {
+      return readRow(rd, &vals_, uv_.data());
+    }
+    // The same into the given buffers (vals: per source, one row's values; uv: used values).
+    bool readRow(std::vector<std::unique_ptr<exid::CsvReader>>& rd,
+                 std::vector<std::vector<double>>* vals, double* uv) const {
       bool more = true;
       for (std::size_t f = 0; f < rd.size(); ++f) {
-        const bool got = rd[f]->next(vals_[f].data());
+        const bool got = rd[f]->next((*vals)[f].data());
         if (f == 0) more = got;
         if (!more) return false;
         exid::check(got, "experiment 'csv': internal error: the torque file ended early");
       }
       for (std::size_t u = 0; u < used_.size(); ++u)
-        uv_[u] = vals_[static_cast<std::size_t>(slot_[u].source)]
-                      [static_cast<std::size_t>(slot_[u].column)];
+        uv[u] = (*vals)[static_cast<std::size_t>(slot_[u].source)]
+                       [static_cast<std::size_t>(slot_[u].column)];
       return true;
     }
 
-    // The first used column whose value in uv_ is not finite, or -1.
-    int badColumn() const {
+    // The first used column whose value in uv_ (or uv) is not finite, or -1.
+    int badColumn() const { return badColumn(uv_.data()); }
+    int badColumn(const double* uv) const {
       for (std::size_t u = 0; u < used_.size(); ++u)
-        if (!std::isfinite(uv_[u])) return static_cast<int>(u);
+        if (!std::isfinite(uv[u])) return static_cast<int>(u);
       return -1;
     }
 
@@ -1062,6 +1160,45 @@ class CsvExperiment : public exid::Experiment {
     }
 
     // ---- a pass
+    void sizeChunk(int want, exid::Dataset* chunk) const {
+      chunk->t.resize(want);
+      chunk->q.resize(want, n_);
+      chunk->qd.resize(pqd_.empty() ? 0 : want, pqd_.empty() ? 0 : n_);
+      chunk->qdd.resize(pqdd_.empty() ? 0 : want, pqdd_.empty() ? 0 : n_);
+      chunk->tau.resize(ptau_.empty() ? 0 : want, ptau_.empty() ? 0 : n_);
+      chunk->wrench.resize(pw_.empty() ? 0 : want, pw_.empty() ? 0 : 6);
+      chunk->source = files_[0];
+    }
+
+    // The file rows from data row `from` on that hold the next m kept rows (the dropped rows
+    // among them counted, from the scan's list); advances dptr_ past those dropped rows.
+    int fileRowsFor(long from, long m) {
+      long r = from;
+      const long start = r;
+      long kept = 0;
+      while (kept < m) {
+        if (dptr_ < dropped_rows_.size()) {
+          const long d = dropped_rows_[dptr_];
+          if (d < r) {
+            ++dptr_;
+            continue;
+          }
+          // kept rows up to the next dropped one
+          const long run = std::min(m - kept, d - r);
+          kept += run;
+          r += run;
+          if (kept < m && r == d) {
+            ++dptr_;
+            ++r;
+          }
+        } else {
+          r += m - kept;
+          kept = m;
+        }
+      }
+      return static_cast<int>(r - start);
+    }
+
     // The next kept row into uv_ (its file row in row_, its kept index in kept_); false at the
     // end of the file. A bad value is an error, or the row is skipped as the scan dropped it.
     bool nextKeptRow() {
@@ -1078,34 +1215,35 @@ class CsvExperiment : public exid::Experiment {
       }
     }
 
-    void convert(int k, exid::Dataset* d) {
+    void convert(int k, exid::Dataset* d) { convert(k, uv_.data(), row_, d, &tau_); }
+    // Used values uv of file data row `row` into sample k of *d (tau: a work vector).
+    void convert(int k, const double* uv, int row, exid::Dataset* d, Eigen::VectorXd* tau) const {
       const int n = n_;
-      d->t[k] = ct_ ? tfactor_ * uv_[static_cast<std::size_t>(pt_)] : row_ * dt_;
+      d->t[k] = ct_ ? tfactor_ * uv[static_cast<std::size_t>(pt_)] : row * dt_;
       for (int j = 0; j < n; ++j) {
         const auto u = static_cast<std::size_t>(j);
         const double s = sign_[u];
-        d->q(k, j) = s * qscale_[u] * uv_[static_cast<std::size_t>(pq_[u])] + off_[u];
-        if (!pqd_.empty()) d->qd(k, j) = s * qdscale_[u] * uv_[static_cast<std::size_t>(pqd_[u])];
-        if (!pqdd_.empty())
-          d->qdd(k, j) = s * qdscale_[u] * uv_[static_cast<std::size_t>(pqdd_[u])];
+        d->q(k, j) = s * qscale_[u] * uv[static_cast<std::size_t>(pq_[u])] + off_[u];
+        if (!pqd_.empty()) d->qd(k, j) = s * qdscale_[u] * uv[static_cast<std::size_t>(pqd_[u])];
+        if (!pqdd_.empty()) d->qdd(k, j) = s * qdscale_[u] * uv[static_cast<std::size_t>(pqdd_[u])];
       }
       if (!ptau_.empty()) {
-        tau_.resize(n);
+        tau->resize(n);
         for (int j = 0; j < n; ++j) {
           const auto u = static_cast<std::size_t>(j);
-          double v = uv_[static_cast<std::size_t>(ptau_[u])];
+          double v = uv[static_cast<std::size_t>(ptau_[u])];
           if (!Kt_.empty()) v *= Kt_[u];
-          tau_[j] = v;
+          (*tau)[j] = v;
         }
         if (!Kt_.empty() && joint_frame_ && robot_->hasTransmission())
-          tau_ = robot_->transmission.transpose() * tau_;
+          *tau = robot_->transmission.transpose() * *tau;
         for (int j = 0; j < n; ++j)
-          d->tau(k, j) =
-              sign_[static_cast<std::size_t>(j)] * tauscale_[static_cast<std::size_t>(j)] * tau_[j];
+          d->tau(k, j) = sign_[static_cast<std::size_t>(j)] *
+                         tauscale_[static_cast<std::size_t>(j)] * (*tau)[j];
       }
       for (std::size_t e = 0; e < pw_.size(); ++e)
         d->wrench(k, static_cast<Eigen::Index>(e)) =
-            wscale_[e] * uv_[static_cast<std::size_t>(pw_[e])];
+            wscale_[e] * uv[static_cast<std::size_t>(pw_[e])];
     }
 
     void collect(const exid::Dataset& chunk, int k) {
@@ -1172,8 +1310,11 @@ class CsvExperiment : public exid::Experiment {
     exid::Json recording_;
     // a pass
     std::vector<std::unique_ptr<exid::CsvReader>> readers_;
+    std::vector<std::unique_ptr<exid::CsvReader>> protos_;  // never read: decode()'s template
     int row_ = -1;
     long kept_ = -1;
+    std::size_t dptr_ = 0;  // fetch(): dropped_rows_ before row_ + 1
+    long settled_ = 0;      // samples of the pass settled
     std::unique_ptr<RecordingStats> stats_;
     bool stats_done_ = false, collecting_ = false;
     int stride_ = 0;  // collectEvery(); 0: nothing kept

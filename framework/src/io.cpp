@@ -218,6 +218,25 @@ CsvReader::CsvReader(std::string_view text, const std::string& source, const Csv
   readHeader();
 }
 
+CsvReader::CsvReader(std::string_view body, const CsvReader& like, int like_line)
+    : opt_(like.opt_),
+      source_(like.source_),
+      what_(like.what_),
+      text_(body),
+      text_pos_(body.size()),
+      block_(0),
+      beg_(body.data()),
+      end_(body.data() + body.size()),
+      eof_(true),
+      lineno_(like_line),
+      header_line_(like.header_line_),
+      delim_(like.delim_),
+      columns_(like.columns_),
+      not_numeric_(like.columns_.size()),
+      sel_(like.sel_),
+      slot_(like.slot_),
+      cells_read_(like.cells_read_) {}
+
 CsvReader::~CsvReader() {
   if (fd_ >= 0) ::close(fd_);
 }
@@ -437,6 +456,29 @@ bool CsvReader::next(double* values) {
     return true;
   }
   return false;
+}
+
+int CsvReader::takeRows(int count, std::string* out, int* line_before) {
+  *line_before = lineno_;
+  int taken = 0;
+  const char *b = nullptr, *e = nullptr;
+  while (taken < count && nextLine(&b, &e)) {
+    // the line as it is in the file (its '\r' kept), then '\n'
+    const char* end = e;
+    if (end < end_ && *end == '\r') ++end;
+    out->append(b, static_cast<std::size_t>(end - b));
+    out->push_back('\n');
+    if (!skipLine(b, e)) ++taken;
+  }
+  return taken;
+}
+
+int CsvReader::skipRows(int count) {
+  int skipped = 0;
+  const char *b = nullptr, *e = nullptr;
+  while (skipped < count && nextLine(&b, &e))
+    if (!skipLine(b, e)) ++skipped;
+  return skipped;
 }
 
 CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool all) {

@@ -8,6 +8,7 @@
 #include <fstream>
 #include <iterator>
 #include <sstream>
+#include <thread>
 #include <vector>
 
 #include "../models/model_test_util.hpp"
@@ -421,6 +422,88 @@ TEST(CsvStream, WindowsOverAStreamGiveTheSamplesAndStatisticsOfTheWholeRead) {
   EXPECT_EQ(m.t, whole.t);
   EXPECT_EQ(m.q, whole.q);
   EXPECT_EQ(m.tau, whole.tau);
+}
+
+// A pass in pieces (fetch in order, decode on any thread in any order, settle in order): the
+// samples, the statistics and the collected samples of the whole read, whatever the pieces'
+// sizes; comment and blank lines, dropped rows at pieces' edges, a segment, held rows (the
+// statistics) and a bad value named by its file line.
+TEST(CsvStream, PiecesDecodedOnThreadsGiveTheSamplesAndStatisticsOfTheWholeRead) {
+  std::string text = "# a recording\n" + header(6);
+  for (int k = 0; k < 700; ++k) {
+    const double t = 0.01 * k;
+    if (k % 97 == 5) text += "\n# note\n";
+    std::string line = fmt::format("{}", t);
+    // held positions for rows 300-305 (a frozen run)
+    const double tq = (k >= 300 && k <= 305) ? 0.01 * 300 : t;
+    for (int j = 0; j < 6; ++j) line += "," + fmt::format("{}", 0.3 * std::sin(1.3 * tq + j));
+    for (int j = 0; j < 6; ++j)
+      line += "," + (k % 61 == 7 && j == 2 ? std::string("nan")
+                                           : fmt::format("{}", 2.0 * std::cos(0.7 * t + j)));
+    text += line + "\n";
+  }
+  const fs::path f = writeText("pieces.csv", text);
+  const std::string extra = "drop_bad_rows: true, t_start_s: 0.3";
+  const exid::Dataset whole = readCsv(f, extra);
+  ASSERT_GT(whole.size(), 600);
+  for (int piece : {1, 7, 64, 5000}) {
+    auto e =
+        exid_test::create<exid::Experiment>("csv", "{file: " + f.string() + ", " + extra + "}");
+    const exid::Dataset s = e->stream(mtest::robot("puma560"), nullptr, mtest::context());
+    exid::DatasetStream& st = *s.stream;
+    st.collectEvery(10);
+    st.rewind();
+    std::vector<std::unique_ptr<exid::DatasetStream::Piece>> pieces;
+    for (int got = 0; got < s.size();) {
+      pieces.push_back(st.fetch(piece));
+      ASSERT_NE(pieces.back(), nullptr);
+      ASSERT_GT(pieces.back()->count, 0);
+      got += pieces.back()->count;
+    }
+    EXPECT_EQ(st.fetch(piece)->count, 0);
+    // decoded on threads, the last pieces first
+    std::vector<exid::Dataset> chunk(pieces.size());
+    std::vector<std::thread> pool;
+    for (int th = 0; th < 3; ++th)
+      pool.emplace_back([&, th] {
+        for (std::size_t i = pieces.size(); i-- > 0;)
+          if (static_cast<int>(i % 3) == th) st.decode(*pieces[i], &chunk[i]);
+      });
+    for (auto& t : pool) t.join();
+    EXPECT_FALSE(st.passed());
+    int b = 0;
+    for (std::size_t i = 0; i < pieces.size(); ++i) {
+      const int n = chunk[i].size();
+      ASSERT_EQ(n, pieces[i]->count);
+      EXPECT_EQ(chunk[i].t, whole.t.segment(b, n)) << piece << " " << i;
+      EXPECT_EQ(chunk[i].q, whole.q.middleRows(b, n));
+      EXPECT_EQ(chunk[i].tau, whole.tau.middleRows(b, n));
+      st.settle(*pieces[i], chunk[i]);
+      b += n;
+    }
+    EXPECT_EQ(b, whole.size());
+    EXPECT_TRUE(st.passed());
+    EXPECT_EQ(st.meta().dump(), whole.meta.dump()) << piece;
+    EXPECT_EQ(st.collected().t.size(), (whole.size() + 9) / 10);
+    EXPECT_EQ(st.collected().t(3), whole.t(30));
+  }
+  EXPECT_EQ(whole.meta.find("recording")->find("frozen_rows")->find("rows")->asInt(), 5);
+  EXPECT_GT(whole.meta.find("dropped_rows")->asInt(), 5);
+  // a bad value (drop_bad_rows off) found by a decode names its file line
+  auto e = exid_test::create<exid::Experiment>("csv", "{file: " + f.string() + "}");
+  const exid::Dataset s = e->stream(mtest::robot("puma560"), nullptr, mtest::context());
+  s.stream->rewind();
+  auto p = s.stream->fetch(s.size());
+  exid::Dataset d;
+  try {
+    s.stream->decode(*p, &d);
+    ADD_FAILURE() << "no error";
+  } catch (const exid::Error& err) {
+    // data row 8 (k = 7) is file line 12: the comment, the header, the blank line and the note
+    const std::string m = err.what();
+    EXPECT_NE(m.find("line 12 (data row 8)"), std::string::npos) << m;
+    EXPECT_NE(m.find("tau3"), std::string::npos) << m;
+  }
 }
 
 TEST(CsvStream, ABadValueFoundWhileStreamingNamesItsLineAndDroppedRowsAreSkippedAlike) {

@@ -157,7 +157,37 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
   }
   // A streamed dataset is read in order, one wave of T tasks at a time, the next wave beside
   // this wave's rows (pipelineChunks); the merge is in task order, so the result is the same for
-  // any thread count.
+  // any thread count. A stream that reads in pieces (DatasetStream::fetch) is parsed by the
+  // tasks themselves: only the fetch of the raw rows is in order.
+  DatasetStream& stream = *data.stream;
+  stream.rewind();
+  std::unique_ptr<DatasetStream::Piece> first = stream.fetch(std::min(K, task));
+  if (first) {
+    std::vector<std::unique_ptr<DatasetStream::Piece>> piece(2 * static_cast<std::size_t>(T));
+    std::vector<Dataset> decoded(static_cast<std::size_t>(T));
+    auto ring = [&](long c) { return static_cast<std::size_t>(c % (2 * T)); };
+    pipelineChunks(
+        n, T,
+        [&](long c, Dataset*) {
+          const int tb = static_cast<int>(c * task), te = std::min(K, tb + task);
+          piece[ring(c)] = c == 0 ? std::move(first) : stream.fetch(te - tb);
+          check(piece[ring(c)] && piece[ring(c)]->count == te - tb,
+                fmt::format("{}: the stream of '{}' ended at sample {} of {}", who, data.source, tb,
+                            K));
+        },
+        [&](long c, const Dataset&) {
+          Dataset& d = decoded[static_cast<std::size_t>(c % T)];
+          stream.decode(*piece[ring(c)], &d);
+          d.meta = data.meta;
+          accumulateTask(c, d, static_cast<int>(c * task));
+        },
+        [&](long c) {
+          stream.settle(*piece[ring(c)], decoded[static_cast<std::size_t>(c % T)]);
+          piece[ring(c)].reset();
+          merge(c);
+        });
+    return total;
+  }
   SampleWindow window(data);
   pipelineChunks(
       n, T,

@@ -55,6 +55,21 @@ class DatasetStream {
   /// stream knows them without a pass (a recording's scan of its time stamps); false otherwise
   /// (exid::samplingRate(const Dataset&) then reads a pass).
   virtual bool samplingRate(double* /*fs_hz*/, double* /*jitter*/) const { return false; }
+
+  /// A pass read in three steps, so that its costly part (parsing) runs on the caller's
+  /// threads: fetch() takes the next min(count, left) samples of the pass in order, in a raw
+  /// form (a file's bytes), cheaply; decode() turns a fetched piece into samples (t, q, ...,
+  /// source; meta left as it is) and may run on any thread, beside other decode() calls and
+  /// beside fetch(); settle() takes each decoded piece back in the order of fetch() (the pass's
+  /// statistics, collectEvery), never beside fetch() (later pieces may be fetched already).
+  /// decode() throws exid::Error as read() does. A stream that does not split its reading returns nullptr from fetch() (read() then).
+  struct Piece {
+    virtual ~Piece() = default;
+    int count = 0;  // samples
+  };
+  virtual std::unique_ptr<Piece> fetch(int /*count*/) { return nullptr; }
+  virtual void decode(Piece& /*piece*/, Dataset* /*chunk*/) const {}
+  virtual void settle(const Piece& /*piece*/, const Dataset& /*chunk*/) {}
 };
 
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).

@@ -84,6 +84,11 @@ class CsvReader {
   /// whole text at once (no copy).
   CsvReader(std::string_view text, const std::string& source, const CsvReadOptions& opt = {},
             std::size_t block_bytes = 0);
+  /// The rows that follow `like`'s rows, in memory: `body` holds whole lines of the same file
+  /// (as takeRows() copied them), the first being file line like_line + 1. Same columns,
+  /// delimiter, options and selection as `like`; no header is read. `body` must outlive the
+  /// reader. For parsing pieces of one file on several threads.
+  CsvReader(std::string_view body, const CsvReader& like, int like_line);
   ~CsvReader();
   CsvReader(const CsvReader&) = delete;
   CsvReader& operator=(const CsvReader&) = delete;
@@ -100,6 +105,14 @@ class CsvReader {
   /// False at the end of the file. Rows with non-finite values are dropped (and counted) with
   /// drop_non_finite_rows; any other error throws exid::Error.
   bool next(double* values);
+  /// The next `count` data rows (fewer at the end of the file) as text, unparsed: their lines,
+  /// with the blank and comment lines between them, appended to *out, each ending in '\n'.
+  /// *line_before: the file line before the first copied (a reader made with the body
+  /// constructor from *out then numbers its lines as the file does). Returns the data rows
+  /// taken.
+  int takeRows(int count, std::string* out, int* line_before);
+  /// Passes over the next `count` data rows without reading them; returns how many.
+  int skipRows(int count);
   /// 1-based file line of the row that next() returned last.
   int line() const { return line_; }
   /// Rows dropped so far (drop_non_finite_rows).
