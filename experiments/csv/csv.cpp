@@ -485,18 +485,19 @@ class CsvExperiment : public exid::Experiment {
       int k = 0;
       for (int r = 0; r < pc.rows; ++r) {
         double* uv = pc.values.data() + static_cast<std::size_t>(std::min(k, pc.count - 1)) * U;
-        exid::check(
-            readRow(rd, &vals, uv),
-            fmt::format("experiment 'csv': {}: the file changed while it was read", files_[0]));
+        if (!readRow(rd, &vals, uv))  // (messages built only when a check fails: per row)
+          throw exid::Error(
+              fmt::format("experiment 'csv': {}: the file changed while it was read", files_[0]));
         const int row = pc.first_row + r;
         if (const int bad = badColumn(uv); bad >= 0) {
           if (!drop_) badValue(rd, bad, row);
           continue;
         }
-        exid::check(k < pc.count,
-                    fmt::format("experiment 'csv': {}: the file changed while it was read (more "
-                                "good rows than the scan found, at data row {})",
-                                files_[0], row + 1));
+        if (k >= pc.count)
+          throw exid::Error(
+              fmt::format("experiment 'csv': {}: the file changed while it was read "
+                          "(more good rows than the scan found, at data row {})",
+                          files_[0], row + 1));
         convert(k, uv, row, chunk, &tau);
         pc.row_of[static_cast<std::size_t>(k)] = row;
         ++k;

@@ -173,8 +173,60 @@ double strtodCell(const std::string& s, std::size_t* used) {
 }
 }  // namespace
 
+namespace {
+// Clinger's exact case: a decimal [+-]digits[.digits][(e|E)[+-]digits] whose digits make an
+// integer m <= 2^53 and whose power of ten e is within [-22, 22]: m and 10^|e| are exact
+// doubles, so the one IEEE multiplication or division is the correctly rounded value, the
+// same bits as std::from_chars and strtod. False (nothing decided) for anything else.
+bool parseShortDecimal(const char* p, const char* b, double* v) {
+  static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
+                                      1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
+                                      1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+  constexpr std::uint64_t kMaxExact = std::uint64_t{1} << 53;
+  bool neg = false;
+  if (p < b && (*p == '-' || *p == '+')) neg = *p++ == '-';
+  std::uint64_t m = 0;
+  int digits = 0, frac = 0;
+  for (; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p, ++digits) {
+    if (m > (kMaxExact - 9) / 10) return false;
+    m = 10 * m + static_cast<unsigned>(*p - '0');
+  }
+  if (p < b && *p == '.') {
+    for (++p; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p, ++digits, ++frac) {
+      if (m > (kMaxExact - 9) / 10) return false;
+      m = 10 * m + static_cast<unsigned>(*p - '0');
+    }
+  }
+  if (digits == 0) return false;
+  int e = 0;
+  if (p < b && (*p == 'e' || *p == 'E')) {
+    ++p;
+    bool eneg = false;
+    if (p < b && (*p == '-' || *p == '+')) eneg = *p++ == '-';
+    if (p == b) return false;
+    for (; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p) {
+      if (e > 1000) return false;
+      e = 10 * e + (*p - '0');
+    }
+    if (eneg) e = -e;
+  }
+  if (p != b) return false;
+  e -= frac;
+  if (e < -22 || e > 22) return false;
+  double x = static_cast<double>(m);
+  x = e < 0 ? x / kPow10[-e] : x * kPow10[e];
+  *v = neg ? -x : x;
+  return true;
+}
+}  // namespace
+
 bool parseCsvNumber(const char* a, const char* b, double* v, std::size_t* used) {
-  // Fast path: std::from_chars on the whole cell, a leading '+' skipped (strtod takes it).
+  // The common short decimal, exactly; then std::from_chars on the whole cell, a leading '+'
+  // skipped (strtod takes it).
+  if (parseShortDecimal(a, b, v)) {
+    *used = static_cast<std::size_t>(b - a);
+    return true;
+  }
   const char* p = a;
   if (b - a >= 2 && *p == '+' && p[1] != '+' && p[1] != '-') ++p;
   double x = 0;

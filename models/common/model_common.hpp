@@ -70,14 +70,16 @@ inline void jointGradToMeasured(const RobotModel& r, Eigen::VectorXd* g) {
 /// Checks that a dataset carries a signal with the expected number of columns and rows.
 inline void requireSignal(const Dataset& d, const Eigen::MatrixXd& m, const char* name, int cols,
                           const std::string& who) {
-  check(m.cols() > 0,
+  // (messages built only when a check fails: this runs once per chunk)
+  if (m.cols() == 0)
+    throw Error(
         fmt::format("{}: the dataset ({}) has no '{}' signal (columns {}1..{}{}); "
                     "record it, or use an estimator that differentiates q",
                     who, d.source.empty() ? "unnamed" : d.source, name, name, name, cols));
-  check(m.cols() == cols && m.rows() == d.size(),
-        fmt::format("{}: the dataset ({}) signal '{}' is {} x {} (expected {} x {})", who,
-                    d.source.empty() ? "unnamed" : d.source, name, m.rows(), m.cols(), d.size(),
-                    cols));
+  if (!(m.cols() == cols && m.rows() == d.size()))
+    throw Error(fmt::format("{}: the dataset ({}) signal '{}' is {} x {} (expected {} x {})", who,
+                            d.source.empty() ? "unnamed" : d.source, name, m.rows(), m.cols(),
+                            d.size(), cols));
 }
 
 /// The four signals of a torque model (q, qd, qdd, tau), each K x n.
@@ -111,13 +113,14 @@ inline void storeSampleGrad(const RobotModel& r, int k, Eigen::VectorXd* gq, Eig
 
 inline void requireSamples(const Samples& s, int n, bool need_qdd, const std::string& who) {
   const int K = s.size();
-  check(s.q.rows() == K && s.q.cols() == n && s.qd.rows() == K && s.qd.cols() == n,
+  // (messages built only when a check fails: this runs once per chunk)
+  if (!(s.q.rows() == K && s.q.cols() == n && s.qd.rows() == K && s.qd.cols() == n))
+    throw Error(
         fmt::format("{}: samples must have q and qd of size {} x {} (found q {} x {}, qd {} x {})",
                     who, K, n, s.q.rows(), s.q.cols(), s.qd.rows(), s.qd.cols()));
-  if (need_qdd)
-    check(s.qdd.rows() == K && s.qdd.cols() == n,
-          fmt::format("{}: samples must have qdd of size {} x {} (found {} x {})", who, K, n,
-                      s.qdd.rows(), s.qdd.cols()));
+  if (need_qdd && !(s.qdd.rows() == K && s.qdd.cols() == n))
+    throw Error(fmt::format("{}: samples must have qdd of size {} x {} (found {} x {})", who, K, n,
+                            s.qdd.rows(), s.qdd.cols()));
 }
 
 /// Zero-filled gradient with the shapes of s.

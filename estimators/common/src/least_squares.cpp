@@ -53,10 +53,11 @@ void RowAccumulator::compress() const {
 
 void RowAccumulator::add(const Eigen::Ref<const Eigen::MatrixXd>& W,
                          const Eigen::Ref<const Eigen::VectorXd>& y, double scale) {
-  check(W.cols() == p_,
-        fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
-  check(W.rows() == y.size(),
-        fmt::format("RowAccumulator: {} rows of W but {} of y", W.rows(), y.size()));
+  if (W.cols() != p_ || W.rows() != y.size())  // (the message only when it fails: hot path)
+    throw Error(
+        fmt::format("RowAccumulator: rows of {} x {} and y of {}, expected {} columns "
+                    "and one y per row",
+                    W.rows(), W.cols(), y.size(), p_));
   const Eigen::Index r = W.rows();
   if (method_ == Method::Normal && fill_ == 0 && r >= 64) {
     // A large block goes straight into the Gram matrix (no copy into the buffer):
@@ -97,9 +98,11 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
     add(W, y);
     return;
   }
-  check(W.cols() == p_,
-        fmt::format("RowAccumulator: rows have {} columns, expected {}", W.cols(), p_));
-  check(y.size() == r, fmt::format("RowAccumulator: {} rows of W but {} of y", r, y.size()));
+  if (W.cols() != p_ || y.size() != r)
+    throw Error(
+        fmt::format("RowAccumulator: rows of {} x {} and y of {}, expected {} columns "
+                    "and one y per row",
+                    r, W.cols(), y.size(), p_));
   // the rows of each equation, in order (labels are few: joints, wrench components)
   std::vector<int> labels(equation.begin(), equation.end());
   std::sort(labels.begin(), labels.end());
@@ -147,8 +150,8 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
 }
 
 void RowAccumulator::addRow(const Eigen::Ref<const Eigen::RowVectorXd>& w, double y, double scale) {
-  check(w.size() == p_,
-        fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));
+  if (w.size() != p_)  // (the message only when it fails: once per row)
+    throw Error(fmt::format("RowAccumulator: row has {} columns, expected {}", w.size(), p_));
   if (fill_ == buf_.rows()) compress();
   buf_.block(fill_, 0, 1, p_) = scale * w;
   buf_(fill_, p_) = scale * y;

@@ -15,15 +15,16 @@ namespace exid::estimators {
 bool modelIsPerSample(const ObservationModel& model) { return model.specs().per_sample; }
 
 void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
-  check(rows.W.cols() == p,
-        fmt::format("{}: the model returned {} columns, expected {} base parameters", who,
-                    rows.W.cols(), p));
-  check(rows.W.rows() == rows.y.size(),
-        fmt::format("{}: the model returned {} rows of W but {} measurements", who, rows.W.rows(),
-                    rows.y.size()));
-  check(rows.equation.empty() || rows.equation.size() == static_cast<std::size_t>(rows.y.size()),
-        fmt::format("{}: the model returned {} equation labels for {} rows", who,
-                    rows.equation.size(), rows.y.size()));
+  // (messages built only when a check fails: this runs once per chunk)
+  if (rows.W.cols() != p)
+    throw Error(fmt::format("{}: the model returned {} columns, expected {} base parameters", who,
+                            rows.W.cols(), p));
+  if (rows.W.rows() != rows.y.size())
+    throw Error(fmt::format("{}: the model returned {} rows of W but {} measurements", who,
+                            rows.W.rows(), rows.y.size()));
+  if (!rows.equation.empty() && rows.equation.size() != static_cast<std::size_t>(rows.y.size()))
+    throw Error(fmt::format("{}: the model returned {} equation labels for {} rows", who,
+                            rows.equation.size(), rows.y.size()));
   // One vectorised sum is finite whenever every entry is (a NaN or inf propagates); only a
   // non-finite sum (or an overflow of finite entries) pays for the entry-by-entry search.
   if (!std::isfinite(rows.W.sum() + rows.y.sum()) && (!rows.W.allFinite() || !rows.y.allFinite())) {
