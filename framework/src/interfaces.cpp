@@ -144,6 +144,47 @@ Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
   return out;
 }
 
+Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta,
+                                  Eigen::MatrixXd* dW, const RunContext& ctx) const {
+  if (eta.size() != 0)
+    throw Error(fmt::format("model '{}': it has no nonlinear parameter, {} given", pluginName(),
+                            eta.size()));
+  Rows r = fullRows(data, ctx);
+  if (dW) dW->resize(r.W.rows(), 0);
+  return r;
+}
+
+Rows ObservationModel::rowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
+                              const RunContext& ctx) const {
+  const std::vector<NonlinearParameter> nl = nonlinearParameters();
+  if (eta.size() != static_cast<Eigen::Index>(nl.size()))
+    throw Error(fmt::format("model '{}': {} nonlinear parameter values given, expected {}",
+                            pluginName(), eta.size(), nl.size()));
+  Rows full = fullRowsAt(data, eta, dW, ctx);
+  check(full.W.cols() == base_.numFull(),
+        fmt::format("model '{}': fullRowsAt gave {} columns, expected {}", pluginName(),
+                    full.W.cols(), base_.numFull()));
+  Rows out;
+  out.W = base_.columns(full.W);
+  out.y = std::move(full.y);
+  out.equation = std::move(full.equation);
+  out.numEquations = full.numEquations;
+  out.t = std::move(full.t);
+  out.equation_names = std::move(full.equation_names);
+  return out;
+}
+
+std::vector<int> ObservationModel::nonlinearColumnsInBase() const {
+  std::vector<int> out;
+  for (const NonlinearParameter& p : nonlinearParameters())
+    for (int c : p.columns) {
+      const auto it = std::find(base_.independent.begin(), base_.independent.end(), c);
+      out.push_back(
+          it == base_.independent.end() ? -1 : static_cast<int>(it - base_.independent.begin()));
+    }
+  return out;
+}
+
 Eigen::MatrixXd ObservationModel::design(const Samples& s) const {
   const int K = s.size();
   const int block = fullBlockSamples(base_.numFull(), s.dof());

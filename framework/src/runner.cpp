@@ -1128,6 +1128,31 @@ void StudyRun::identificationStage() {
     }
     renderInto(id, &I);
     I["parameters"] = params;
+    if (est->nonlinear.size() > 0) {  // fitted with the linear ones (varpro)
+      Json nl = Json::array();
+      const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
+      for (Eigen::Index k = 0; k < est->nonlinear.size(); ++k) {
+        Json p = Json::object();
+        const auto u = static_cast<std::size_t>(k);
+        p["name"] = u < est->nonlinear_names.size() ? est->nonlinear_names[u] : std::string();
+        p["value"] = est->nonlinear(k);
+        p["std"] = est->nonlinear_std.size() > k ? est->nonlinear_std(k) : NAN;
+        if (u < decl.size()) {
+          p["unit"] = decl[u].unit;
+          p["initial"] = decl[u].value;
+        }
+        nl.push_back(p);
+      }
+      I["nonlinear_parameters"] = nl;
+    } else if (!model->nonlinearParameters().empty()) {
+      std::string names;
+      for (const auto& p : model->nonlinearParameters())
+        names += (names.empty() ? "" : ", ") + fmt::format("{} = {:g} {}", p.name, p.value, p.unit);
+      warn(
+          fmt::format("identification: estimator '{}' kept the model's nonlinear parameters at "
+                      "the study's values ({}); the `varpro` estimator fits them",
+                      cfg.estimator->type, names));
+    }
     I["details"] = est->details;
     if (const Json* w = est->details.find("warnings"); w && w->isArray())
       for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());
@@ -1156,7 +1181,10 @@ void StudyRun::validationStage() {
         vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
     checkDataset(vd, *robot, model.get(), "validation", by_estimator);
     checkDatasetFinite(vd, "validation");
-    Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx) : model->rows(vd, vctx);
+    // (fitted nonlinear parameters: the held-out rows at the fitted values)
+    Rows rows = by_estimator                ? vest->validationRows(*model, vd, vctx)
+                : est->nonlinear.size() > 0 ? model->rowsAt(vd, est->nonlinear, nullptr, vctx)
+                                            : model->rows(vd, vctx);
     Eigen::VectorXd pred = rows.W * est->value;
     checkFinite(pred, "validation: the predicted measurement, row");
     Eigen::VectorXd err = rows.y - pred;

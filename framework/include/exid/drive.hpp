@@ -27,7 +27,8 @@ struct DriveColumns {
 std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
 Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
 int numParameters(const RobotModel& model, const DriveColumns& cols);
-/// True for a drive column's name as parameterNames writes it (Ia3, Fc3, Fv3, OFF3).
+/// True for a drive column's name as parameterNames writes it (Ia3, Fc3, Fv3, OFF3), or a
+/// nonlinear friction column of the `differential` model (FcP3, FcN3, Fs3).
 bool isDriveParameterName(const std::string& name);
 
 /// Joint coordinates from measured ones (identity when the model has no transmission).

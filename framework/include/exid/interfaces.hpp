@@ -40,6 +40,16 @@ struct ModelSpecs {
 /// Turns a Dataset (or, for excitation design, bare trajectory samples) into observation rows.
 /// A model works on FULL columns (fullNames); bind() finds its base parameters (QR with column
 /// pivoting over random samples) and the base-column methods below follow from that.
+/// A parameter on which some of a model's columns depend nonlinearly (a Stribeck velocity, the
+/// width of a smoothed sign): rows() uses `value` (the study's); the `varpro` estimator fits it
+/// together with the linear parameters (docs/estimators.md, "Variable projection").
+struct NonlinearParameter {
+  std::string name;          // e.g. "vs2"
+  std::string unit;          // e.g. "rad/s"
+  double value = 0.0;        // the study's value: rows() uses it; varpro starts from it
+  std::vector<int> columns;  // the full columns it moves (indices into fullNames())
+};
+
 class ObservationModel : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Model;
@@ -82,6 +92,16 @@ class ObservationModel : public PluginObject {
   /// Given dJ/dW_full (shape of fullDesign(s)), the gradient with respect to s.q, s.qd, s.qdd
   /// (written into grad, same shapes as s). Exact.
   virtual void fullDesignVjp(const Samples& s, const Eigen::MatrixXd& dW, Samples* grad) const = 0;
+  /// The parameters some full columns depend on nonlinearly (none by default); fullRows and
+  /// fullDesign use their `value`.
+  virtual std::vector<NonlinearParameter> nonlinearParameters() const { return {}; }
+  /// fullRows with the nonlinear parameters at eta (one per nonlinearParameters(), same order)
+  /// and, when dW is given, the derivatives of the columns they move: dW is rows x L, column l
+  /// the derivative of full column nonlinearParameters()[k].columns[i] with respect to eta_k,
+  /// for k in order and i in order within k. Exact. Default (no nonlinear parameter): fullRows,
+  /// eta empty.
+  virtual Rows fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
+                          const RunContext& ctx) const;
   /// Random samples within the robot's limits used by bind() to find the base parameters.
   virtual Samples randomSamples(int count, std::uint64_t seed) const;
   /// The model's capabilities (per-sample rows, required signals).
@@ -91,6 +111,13 @@ class ObservationModel : public PluginObject {
 
   // Base-column forms (defined once here from the full forms).
   Rows rows(const Dataset& data, const RunContext& ctx) const;
+  /// rows() with the nonlinear parameters at eta: W in base columns, dW (rows x L) as
+  /// fullRowsAt gives it (the full columns moved by eta; nonlinearColumnsInBase() says which
+  /// base column each is, or -1).
+  Rows rowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
+              const RunContext& ctx) const;
+  /// For each column of fullRowsAt's dW: the base column it is (-1: not a base column).
+  std::vector<int> nonlinearColumnsInBase() const;
   Eigen::MatrixXd design(const Samples& s) const;
   void designVjp(const Samples& s, const Eigen::MatrixXd& dW_base, Samples* grad) const;
   Eigen::VectorXd baseNominal() const { return base_.reduce(fullNominal()); }
@@ -326,6 +353,11 @@ struct Estimate {
   double cond_W = 0.0;        // of the (weighted) base regressor
   double residual_rms = 0.0;  // unweighted
   long rows = 0;
+  // Nonlinear parameters fitted with the linear ones (ObservationModel::nonlinearParameters,
+  // the `varpro` estimator): names, values and standard deviations. The held-out rows are
+  // built at these values (ObservationModel::rowsAt). Empty: the model's own values.
+  std::vector<std::string> nonlinear_names;
+  Eigen::VectorXd nonlinear, nonlinear_std;
   // Recursive estimators: estimate and diag(P) at each step (time in s).
   Eigen::VectorXd history_t;
   Eigen::MatrixXd history_value, history_pdiag;

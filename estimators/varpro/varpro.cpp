@@ -1,0 +1,332 @@
+// exid — estimator `varpro`: least squares over a model's linear parameters and the few
+// parameters its columns depend on nonlinearly (ObservationModel::nonlinearParameters: a
+// Stribeck velocity, the width of a smoothed sign), by variable projection (Golub-Pereyra).
+//
+// For given nonlinear parameters eta the linear parameters are the usual least-squares fit,
+// theta(eta); the outer problem min_eta ||y - W(eta) theta(eta)||^2 is small (a handful of
+// parameters) and is solved by Levenberg-Marquardt on lambda = log(eta) (eta stays positive)
+// with Kaufman's Jacobian J = -P_W^perp (dW/dlambda) theta, exact column derivatives from the
+// model (ObservationModel::rowsAt).
+//
+// One pass over the data per evaluation, streamed in chunks: the rows [W D y], D the columns
+// the nonlinear parameters move and their derivatives, are folded into the triangular factor R
+// of a QR (exid::estimators::RowAccumulator). Everything the step needs is in R:
+//   theta:  R11 theta = r1y (the rank-revealing solve of batch_ls);
+//   J^T J = (R22 Theta)^T (R22 Theta),  J^T r = -(R22 Theta)^T r2y,
+// with V = D Theta the derivative of W theta (Theta: theta's entries placed by column).
+// Standard deviations of every parameter, linear and nonlinear, from the Gauss-Newton matrix
+// of the whole problem [W V] at the optimum: sigma^2 ([W V]^T [W V])^-1, sigma^2 = rss / (m -
+// p - q). Memory: one chunk and the (p + L + 1)^2 factor, whatever the number of samples.
+// See docs/estimators.md, "Variable projection".
+#include <fmt/format.h>
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <chrono>
+#include <cmath>
+#include <limits>
+
+#include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
+#include "exid/interfaces.hpp"
+
+namespace {
+
+using exid::estimators::RowAccumulator;
+
+class VarPro : public exid::Estimator {
+ public:
+  static constexpr const char* kName = "varpro";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "variable projection: the linear parameters by least squares for given nonlinear ones "
+      "(Stribeck velocities, smoothing widths), those by Levenberg-Marquardt with exact "
+      "derivatives; standard deviations of all parameters";
+
+  static std::vector<exid::ParamDecl> params() {
+    return {
+        exid::param_int("max_evaluations", 60,
+                        "passes over the data at most (each evaluates the fit at one set of "
+                        "nonlinear parameters)",
+                        2, 10000),
+        exid::param_double("step_tolerance", 1e-10, "",
+                           "stop when the largest step in log(eta) is below this", 0.0, 1.0, true),
+        exid::param_int("chunk_samples", 2048, "samples per chunk passed to the model", 1, 1e9),
+        exid::param_string("accumulate", std::string("qr"),
+                           "qr: Householder QR of [W D y] (cond not squared); normal: the Gram "
+                           "matrix (faster, squares cond)",
+                           {"qr", "normal"}),
+        exid::estimators::rankToleranceParam(),
+    };
+  }
+
+  explicit VarPro(const exid::ParamSet& p)
+      : max_evals_(static_cast<int>(p.getInt("max_evaluations"))),
+        xtol_(p.getDouble("step_tolerance")),
+        chunk_(static_cast<int>(p.getInt("chunk_samples"))),
+        method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
+                                                      : RowAccumulator::Method::Qr) {
+    opt_.rank_tolerance = p.getDouble("rank_tolerance");
+  }
+
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.streams = true;  // one pass per evaluation, in chunks
+    return s;
+  }
+
+  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) override {
+    const auto t0 = std::chrono::steady_clock::now();
+    exid::check(prior == nullptr, "varpro: a prior is not supported (use batch_ls)");
+    setUp(model);
+    const int q = static_cast<int>(nl_.size());
+    Eigen::VectorXd lambda(q);
+    for (int k = 0; k < q; ++k) lambda[k] = std::log(nl_[static_cast<std::size_t>(k)].value);
+    // ---- Levenberg-Marquardt on lambda = log(eta)
+    Eval cur = evaluate(model, data, lambda, ctx);
+    int evals = 1, iterations = 0;
+    double mu = 1e-3;
+    std::string stop = "max_evaluations reached";
+    exid::Json trace = exid::Json::array();
+    auto record = [&](const Eval& e) {
+      exid::Json t = exid::Json::object();
+      t["rss"] = e.rss;
+      t["eta"] = exid::Json(std::vector<double>(e.eta.data(), e.eta.data() + e.eta.size()));
+      trace.push_back(t);
+    };
+    record(cur);
+    while (evals < max_evals_) {
+      if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+      const Eigen::MatrixXd H = cur.JtJ;
+      if (cur.Jtr.norm() == 0.0) {
+        stop = "zero gradient";
+        break;
+      }
+      bool accepted = false;
+      Eigen::VectorXd delta;
+      while (evals < max_evals_) {
+        Eigen::MatrixXd A = H;
+        A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
+        delta = A.ldlt().solve(-cur.Jtr);
+        if (!delta.allFinite()) {
+          mu *= 10;
+          continue;
+        }
+        Eval trial = evaluate(model, data, lambda + delta, ctx);
+        ++evals;
+        if (trial.rss <= cur.rss) {
+          lambda += delta;
+          cur = std::move(trial);
+          record(cur);
+          mu = std::max(mu / 3.0, 1e-12);
+          accepted = true;
+          break;
+        }
+        mu *= 4.0;
+        if (delta.cwiseAbs().maxCoeff() < xtol_) break;
+      }
+      ++iterations;
+      if (!accepted) {
+        stop = "no step decreases the residual (at a minimum to working precision)";
+        break;
+      }
+      if (delta.cwiseAbs().maxCoeff() < xtol_) {
+        stop = fmt::format("step in log(eta) below step_tolerance = {:g}", xtol_);
+        break;
+      }
+    }
+    if (evals >= max_evals_)
+      stop = fmt::format("max_evaluations = {} reached (not converged: raise it)", max_evals_);
+    return finish(model, cur, lambda, evals, iterations, stop, trace, t0);
+  }
+
+ private:
+  // The fit at one set of nonlinear parameters.
+  struct Eval {
+    Eigen::VectorXd eta, theta;
+    double rss = 0.0;
+    Eigen::MatrixXd R;      // (p + L + 1)^2 triangular factor of [W D y]
+    Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
+    Eigen::VectorXd Jtr;    // q
+    Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
+    exid::estimators::LsSolution ls;
+    long m = 0;
+  };
+
+  void setUp(const exid::ObservationModel& model) {
+    nl_ = model.nonlinearParameters();
+    exid::check(!nl_.empty(),
+                fmt::format("varpro: model '{}' has no nonlinear parameter (e.g. differential "
+                            "with stribeck or coulomb_smoothing_rad_s); batch_ls gives its fit",
+                            model.pluginName()));
+    // the moved columns that are base columns (the others do not enter the rows)
+    const std::vector<int> in_base = model.nonlinearColumnsInBase();
+    keep_.clear();
+    owner_.clear();
+    base_col_.clear();
+    std::size_t l = 0;
+    for (std::size_t k = 0; k < nl_.size(); ++k) {
+      bool any = false;
+      for (std::size_t i = 0; i < nl_[k].columns.size(); ++i, ++l)
+        if (in_base[l] >= 0) {
+          keep_.push_back(static_cast<int>(l));
+          owner_.push_back(static_cast<int>(k));
+          base_col_.push_back(in_base[l]);
+          any = true;
+        }
+      exid::check(any, fmt::format("varpro: nonlinear parameter '{}' moves no base column of "
+                                   "model '{}' (its columns are not identifiable from this "
+                                   "motion): it cannot be fitted",
+                                   nl_[k].name, model.pluginName()));
+    }
+  }
+
+  Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
+                const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const {
+    const int p = model.numBase(), L = static_cast<int>(keep_.size()),
+              q = static_cast<int>(nl_.size());
+    Eval e;
+    e.eta = lambda.array().exp();
+    RowAccumulator acc(p + L, method_);
+    const int K = data.size();
+    exid::SampleWindow window(data);
+    Eigen::MatrixXd dW, A;
+    for (int b = 0; b < K; b += chunk_) {
+      const int end = std::min(K, b + chunk_);
+      const exid::Rows r = model.rowsAt(window.span(b, end), e.eta, &dW, ctx);
+      exid::estimators::checkRows(r, p, kName, b);
+      A.resize(r.W.rows(), p + L);
+      A.leftCols(p) = r.W;
+      for (int l = 0; l < L; ++l) A.col(p + l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+      if (!A.allFinite() || !r.y.allFinite())
+        throw exid::Error(
+            fmt::format("varpro: a row from samples {}..{} is not finite at eta = "
+                        "[{}]",
+                        b, end, fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
+      acc.add(A, r.y);
+    }
+    e.m = acc.rows();
+    // R of [W D y] (any factor F with F^T F = [W D y]^T [W D y] gives the same R)
+    Eigen::HouseholderQR<Eigen::MatrixXd> qr(acc.factor());
+    e.R = qr.matrixQR().triangularView<Eigen::Upper>();
+    // theta: the rank-revealing solve of [W y] (its Gram matrix from R's columns)
+    RowAccumulator aw(p);
+    Eigen::MatrixXd Rw(e.R.rows(), p);
+    Rw = e.R.leftCols(p);
+    aw.add(Rw, e.R.col(p + L));
+    e.ls = exid::estimators::solveLeastSquares(aw, model.base().names, opt_, kName);
+    e.theta = e.ls.theta;
+    e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
+    // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k
+    e.Theta = Eigen::MatrixXd::Zero(L, q);
+    for (int l = 0; l < L; ++l) {
+      const int k = owner_[static_cast<std::size_t>(l)];
+      e.Theta(l, k) = e.theta[base_col_[static_cast<std::size_t>(l)]] * e.eta[k];
+    }
+    const Eigen::MatrixXd R22T = e.R.block(p, p, L, L).triangularView<Eigen::Upper>() * e.Theta;
+    e.JtJ = R22T.transpose() * R22T;
+    e.Jtr = -R22T.transpose() * e.R.col(p + L).segment(p, L);
+    return e;
+  }
+
+  exid::Estimate finish(const exid::ObservationModel& model, const Eval& cur,
+                        const Eigen::VectorXd& lambda, int evals, int iterations,
+                        const std::string& stop, const exid::Json& trace,
+                        std::chrono::steady_clock::time_point t0) const {
+    const int p = model.numBase(), L = static_cast<int>(keep_.size()),
+              q = static_cast<int>(nl_.size());
+    exid::Estimate e;
+    exid::estimators::fillEstimate(&e, model, cur.ls, cur.rss, cur.m);
+    e.rows = cur.m;
+    e.details["rows"] = static_cast<long long>(cur.m);
+    // The whole problem's Gauss-Newton matrix [W V]^T [W V] = M^T M,
+    // M = [R11, R12 Theta; 0, R22 Theta] (the rows of [W D] in the QR basis).
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p + L, p + q);
+    M.topLeftCorner(p, p) = cur.R.topLeftCorner(p, p);
+    M.topRightCorner(p, q) = cur.R.block(0, p, p, L) * cur.Theta;
+    M.bottomRightCorner(L, q) = cur.R.block(p, p, L, L) * cur.Theta;
+    const long dof = cur.m - p - q;
+    exid::check(dof > 0, fmt::format("varpro: {} rows for {} linear and {} nonlinear parameters",
+                                     cur.m, p, q));
+    const double sigma2 = cur.rss / static_cast<double>(dof);
+    // column-scaled SVD: (M^T M)^-1 = S (Ms^T Ms)^-1 S
+    Eigen::VectorXd sc = M.colwise().norm().transpose();
+    for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(M * sc.asDiagonal(), Eigen::ComputeThinV);
+    const Eigen::VectorXd sv = svd.singularValues();
+    const bool singular = !(sv.size() > 0 && sv[sv.size() - 1] > opt_.rank_tolerance * sv[0]);
+    if (singular)
+      throw exid::Error(fmt::format(
+          "varpro: the nonlinear parameters [{}] are not identifiable together with the linear "
+          "ones at the fit (the joint problem is singular: a friction term the data does not "
+          "excite, e.g. no motion near zero velocity for a Stribeck velocity)",
+          fmt::join(names(), ", ")));
+    const Eigen::MatrixXd Vs = svd.matrixV() * sv.cwiseInverse().asDiagonal();
+    const Eigen::MatrixXd cov = sigma2 * sc.asDiagonal() * (Vs * Vs.transpose()) * sc.asDiagonal();
+    e.covariance = cov.topLeftCorner(p, p);
+    e.std = e.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
+    e.sigma = std::sqrt(sigma2);
+    e.nonlinear_names = names();
+    e.nonlinear = lambda.array().exp();
+    e.nonlinear_std = Eigen::VectorXd(q);
+    for (int k = 0; k < q; ++k)  // delta method: sigma_eta = eta sigma_lambda
+      e.nonlinear_std[k] = e.nonlinear[k] * std::sqrt(std::max(0.0, cov(p + k, p + k)));
+    exid::Json& d = e.details;
+    d["parameters"] = exid::estimators::parameterTable(e);
+    d["estimator"] = kName;
+    d["sigma2"] = sigma2;
+    d["dof"] = static_cast<long long>(dof);
+    exid::Json nl = exid::Json::array();
+    for (int k = 0; k < q; ++k) {
+      exid::Json o = exid::Json::object();
+      o["name"] = nl_[static_cast<std::size_t>(k)].name;
+      o["unit"] = nl_[static_cast<std::size_t>(k)].unit;
+      o["initial"] = nl_[static_cast<std::size_t>(k)].value;
+      o["value"] = e.nonlinear[k];
+      o["std"] = e.nonlinear_std[k];
+      nl.push_back(o);
+    }
+    d["nonlinear_parameters"] = nl;
+    d["evaluations"] = evals;
+    d["iterations"] = iterations;
+    d["stop"] = stop;
+    d["trace"] = trace;
+    d["method"] =
+        "variable projection (Golub-Pereyra, Kaufman's Jacobian), Levenberg-Marquardt on "
+        "log(eta); theta by the rank-revealing solve of batch_ls at each eta";
+    d["covariance_definition"] =
+        "sigma^2 ([W V]^T [W V])^-1 over the linear and the nonlinear parameters (V = "
+        "d(W theta)/d log(eta)), sigma^2 = rss / (m - p - q); the linear parameters' std "
+        "include the nonlinear ones' uncertainty";
+    d["accumulate"] = method_ == RowAccumulator::Method::Qr ? "qr" : "normal";
+    d["memory"] =
+        "one chunk of rows and the (p + L + 1)^2 factor per pass, one pass per evaluation";
+    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (evals >= max_evals_) {
+      exid::Json w = exid::Json::array();
+      w.push_back(exid::Json(fmt::format("varpro: {}", stop)));
+      d["warnings"] = w;
+    }
+    return e;
+  }
+
+  std::vector<std::string> names() const {
+    std::vector<std::string> out;
+    for (const auto& p : nl_) out.push_back(p.name);
+    return out;
+  }
+
+  int max_evals_;
+  double xtol_;
+  int chunk_;
+  RowAccumulator::Method method_;
+  exid::estimators::SolveOptions opt_;
+  std::vector<exid::NonlinearParameter> nl_;
+  std::vector<int> keep_, owner_, base_col_;  // per kept derivative column
+};
+
+}  // namespace
+
+EXID_REGISTER_PLUGIN(VarPro)
