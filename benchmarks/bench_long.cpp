@@ -173,8 +173,23 @@ void BM_Tx40FilteredLs(benchmark::State& state) {
       fmt::format("{:8.2f} s {:8.0f} MB", c.wall_s, c.max_rss_kb / 1024.0);
 }
 
+// Variable projection on the real recording (examples/real/tx40_varpro.yaml: 12 nonlinear
+// friction parameters and 64 base parameters), whole process.
+void BM_Tx40Varpro(benchmark::State& state) {
+  Child c;
+  for (auto _ : state) {
+    c = runExid({"-q", "run", std::string(EXID_SOURCE_DIR) + "/examples/real/tx40_varpro.yaml",
+                 "--out", (workDir() / "out_tx40_varpro").string()});
+    state.SetIterationTime(c.wall_s);
+  }
+  if (c.status != 0) state.SkipWithError("exid run failed");
+  state.counters["wall_s"] = c.wall_s;
+  table()["tx40_varpro"] = fmt::format("{:8.2f} s {:8.0f} MB", c.wall_s, c.max_rss_kb / 1024.0);
+}
+
 }  // namespace
 
+BENCHMARK(BM_Tx40Varpro)->UseManualTime()->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_BatchLs)
     ->Args({100000, 1})
     ->Args({1000000, 1})

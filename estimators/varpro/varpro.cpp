@@ -52,6 +52,10 @@ class VarPro : public exid::Estimator {
                         2, 10000),
         exid::param_double("step_tolerance", 1e-10, "",
                            "stop when the largest step in log(eta) is below this", 0.0, 1.0, true),
+        exid::param_double("rss_tolerance", 1e-10, "",
+                           "stop when an accepted step lowers the residual sum of squares by "
+                           "less than this fraction of it",
+                           0.0, 1.0),
         exid::param_int("chunk_samples", 2048, "samples per chunk passed to the model", 1, 1e9),
         exid::param_string("accumulate", std::string("qr"),
                            "qr: Householder QR of [W D y] (cond not squared); normal: the Gram "
@@ -64,6 +68,7 @@ class VarPro : public exid::Estimator {
   explicit VarPro(const exid::ParamSet& p)
       : max_evals_(static_cast<int>(p.getInt("max_evaluations"))),
         xtol_(p.getDouble("step_tolerance")),
+        ftol_(p.getDouble("rss_tolerance")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
                                                       : RowAccumulator::Method::Qr) {
@@ -80,6 +85,7 @@ class VarPro : public exid::Estimator {
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     exid::check(prior == nullptr, "varpro: a prior is not supported (use batch_ls)");
+    rejected_singular_ = 0;
     setUp(model);
     const int q = static_cast<int>(nl_.size());
     Eigen::VectorXd lambda(q);
@@ -88,7 +94,7 @@ class VarPro : public exid::Estimator {
     Eval cur = evaluate(model, data, lambda, ctx);
     int evals = 1, iterations = 0;
     double mu = 1e-3;
-    std::string stop = "max_evaluations reached";
+    std::string stop;
     exid::Json trace = exid::Json::array();
     auto record = [&](const Eval& e) {
       exid::Json t = exid::Json::object();
@@ -105,19 +111,31 @@ class VarPro : public exid::Estimator {
         break;
       }
       bool accepted = false;
+      double decrease = 0.0;
       Eigen::VectorXd delta;
       while (evals < max_evals_) {
         Eigen::MatrixXd A = H;
         A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
         delta = A.ldlt().solve(-cur.Jtr);
-        if (!delta.allFinite()) {
+        if (!delta.allFinite() && mu < 1e30) {
           mu *= 10;
           continue;
         }
-        Eval trial = evaluate(model, data, lambda + delta, ctx);
+        if (!delta.allFinite()) break;
+        // A trial where the fit is singular (a width so large that s is constant, say) or not
+        // finite is a rejected step, as one that raises the residual.
+        Eval trial;
+        bool ok = true;
+        try {
+          trial = evaluate(model, data, lambda + delta, ctx);
+        } catch (const exid::Error&) {
+          ok = false;
+          ++rejected_singular_;
+        }
         ++evals;
-        if (trial.rss <= cur.rss) {
+        if (ok && std::isfinite(trial.rss) && trial.rss <= cur.rss) {
           lambda += delta;
+          decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
           cur = std::move(trial);
           record(cur);
           mu = std::max(mu / 3.0, 1e-12);
@@ -128,6 +146,7 @@ class VarPro : public exid::Estimator {
         if (delta.cwiseAbs().maxCoeff() < xtol_) break;
       }
       ++iterations;
+      if (!accepted && evals >= max_evals_) break;  // (not converged)
       if (!accepted) {
         stop = "no step decreases the residual (at a minimum to working precision)";
         break;
@@ -136,10 +155,16 @@ class VarPro : public exid::Estimator {
         stop = fmt::format("step in log(eta) below step_tolerance = {:g}", xtol_);
         break;
       }
+      if (decrease < ftol_) {
+        stop = fmt::format("the residual fell by {:.2g} of itself, below rss_tolerance = {:g}",
+                           decrease, ftol_);
+        break;
+      }
     }
-    if (evals >= max_evals_)
+    const bool converged = !stop.empty();
+    if (!converged)
       stop = fmt::format("max_evaluations = {} reached (not converged: raise it)", max_evals_);
-    return finish(model, cur, lambda, evals, iterations, stop, trace, t0);
+    return finish(model, cur, lambda, evals, iterations, stop, converged, trace, t0);
   }
 
  private:
@@ -216,6 +241,7 @@ class VarPro : public exid::Estimator {
     Eigen::MatrixXd Rw(e.R.rows(), p);
     Rw = e.R.leftCols(p);
     aw.add(Rw, e.R.col(p + L));
+    aw.setRowCount(e.m);
     e.ls = exid::estimators::solveLeastSquares(aw, model.base().names, opt_, kName);
     e.theta = e.ls.theta;
     e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
@@ -233,7 +259,7 @@ class VarPro : public exid::Estimator {
 
   exid::Estimate finish(const exid::ObservationModel& model, const Eval& cur,
                         const Eigen::VectorXd& lambda, int evals, int iterations,
-                        const std::string& stop, const exid::Json& trace,
+                        const std::string& stop, bool converged, const exid::Json& trace,
                         std::chrono::steady_clock::time_point t0) const {
     const int p = model.numBase(), L = static_cast<int>(keep_.size()),
               q = static_cast<int>(nl_.size());
@@ -290,6 +316,7 @@ class VarPro : public exid::Estimator {
     }
     d["nonlinear_parameters"] = nl;
     d["evaluations"] = evals;
+    d["rejected_singular_trials"] = rejected_singular_;
     d["iterations"] = iterations;
     d["stop"] = stop;
     d["trace"] = trace;
@@ -304,7 +331,8 @@ class VarPro : public exid::Estimator {
     d["memory"] =
         "one chunk of rows and the (p + L + 1)^2 factor per pass, one pass per evaluation";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    if (evals >= max_evals_) {
+    d["converged"] = converged;
+    if (!converged) {
       exid::Json w = exid::Json::array();
       w.push_back(exid::Json(fmt::format("varpro: {}", stop)));
       d["warnings"] = w;
@@ -319,12 +347,13 @@ class VarPro : public exid::Estimator {
   }
 
   int max_evals_;
-  double xtol_;
+  double xtol_, ftol_;
   int chunk_;
   RowAccumulator::Method method_;
   exid::estimators::SolveOptions opt_;
   std::vector<exid::NonlinearParameter> nl_;
   std::vector<int> keep_, owner_, base_col_;  // per kept derivative column
+  int rejected_singular_ = 0;                 // trial steps where the fit was singular
 };
 
 }  // namespace

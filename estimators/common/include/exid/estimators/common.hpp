@@ -55,6 +55,9 @@ class RowAccumulator {
 
   int cols() const { return p_; }
   long rows() const { return m_; }
+  /// The number of data rows the accumulated factor stands for, when it was built from another
+  /// factor's rows (varpro): what rows() reports and the solves count as m.
+  void setRowCount(long m) { m_ = m; }
   Method method() const { return method_; }
   /// (p+1) x (p+1) factor with F^T F = [W y]^T [W y] (compresses pending rows first).
   const Eigen::MatrixXd& factor() const;
