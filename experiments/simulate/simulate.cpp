@@ -6,7 +6,10 @@
 //   Mm(q) qddm + hm(q, qd, qdm) = tau_m
 //   Mm = T^T M(q) T + diag(Ia),  hm = T^T h(q, qd) + Fc s(qdm) + Fv qdm + OFF
 // M, h from exid::massMatrix / exid::inverseDynamics (gravity included in h) with the payload
-// merged into the sensor body; s = sign (exact, default) or tanh(qdm / v_s).
+// merged into the sensor body; s = sign (exact, default) or tanh(qdm / v_s). Friction beyond
+// that (docs/experiments.md): a Coulomb level FcN_j for qdm < 0 (Fc s becomes
+// Fc (1 + s)/2 - FcN (1 - s)/2) and a Stribeck term Fs_j s exp(-(|qdm_j| / vs_j)^delta), the
+// forms of the `differential` model's nonlinear friction.
 // Controllers (reference qr, qdr, qddr in measured coordinates):
 //   computed_torque: tau_m = Mm (qddr + kd (qdr - qdm) + kp (qr - qm)) + hm   (true model)
 //   pd_feedforward:  tau_m = tau_ff(qr, qdr, qddr) + D0 (kp (qr - qm) + kd (qdr - qdm)),
@@ -168,6 +171,16 @@ class SimulateExperiment : public exid::Experiment {
                      {"sign", "tanh"}),
         param_double("coulomb_velocity_scale", 1e-3, "rad/s",
                      "velocity scale of the tanh Coulomb law", 0.0, std::nullopt, true),
+        param_doubles("coulomb_negative_Nm", std::vector<double>{}, "N m",
+                      "plant: the Coulomb level for qdm < 0 per drive (one value: every drive); "
+                      "the robot's Fc is then the level for qdm > 0; empty: symmetric"),
+        param_doubles("stribeck_Nm", std::vector<double>{}, "N m",
+                      "plant: Stribeck level Fs per drive (one value: every drive), term Fs s "
+                      "exp(-(|qdm| / vs)^stribeck_exponent); empty: none"),
+        param_doubles("stribeck_velocity_rad_s", std::vector<double>{}, "rad/s",
+                      "plant: Stribeck velocity vs per drive (one value: every drive); required "
+                      "with stribeck_Nm"),
+        param_double("stribeck_exponent", 2.0, "", "plant: the Stribeck exponent delta", 0.5, 4.0),
         param_double("period_s", 10.0, "s", "own reference: period of the Fourier series", 0.0,
                      std::nullopt, true),
         param_int("harmonics", 5, "own reference: harmonics per joint", 1, 100),
@@ -286,7 +299,12 @@ class SimulateExperiment : public exid::Experiment {
       const double v = qdm[j];
       const double s = tanh_ ? std::tanh(v / vs_) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
       (*Mm)(j, j) += D.rotor_inertia;
-      (*hm)[j] += D.coulomb * s + D.viscous * v + D.offset;
+      const auto u = static_cast<std::size_t>(j);
+      const double coulomb =
+          fcn_.empty() ? D.coulomb * s : D.coulomb * 0.5 * (1 + s) - fcn_[u] * 0.5 * (1 - s);
+      const double stribeck =
+          fs_.empty() ? 0.0 : fs_[u] * s * std::exp(-std::pow(std::abs(v) / svs_[u], sdelta_));
+      (*hm)[j] += coulomb + stribeck + D.viscous * v + D.offset;
     }
   }
 
@@ -490,6 +508,7 @@ class SimulateExperiment : public exid::Experiment {
     drive_terms_ = P_.getBool("drive_terms");
     tanh_ = P_.getString("coulomb") == "tanh";
     vs_ = P_.getDouble("coulomb_velocity_scale");
+    frictionOptions();
     computed_torque_ = P_.getString("controller") == "computed_torque";
     kp_ = P_.getDouble("kp");
     kd_ = P_.getDouble("kd");
@@ -657,6 +676,12 @@ class SimulateExperiment : public exid::Experiment {
     m["kd"] = kd_;
     m["drive_terms"] = drive_terms_;
     m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
+    if (!fcn_.empty()) m["coulomb_negative_Nm"] = exid::Json(fcn_);
+    if (!fs_.empty()) {
+      m["stribeck_Nm"] = exid::Json(fs_);
+      m["stribeck_velocity_rad_s"] = exid::Json(svs_);
+      m["stribeck_exponent"] = sdelta_;
+    }
     m["reference"] = refmeta;
     m["sample_period_s"] = dt;
     m["samples"] = tr.recorded;
@@ -673,6 +698,33 @@ class SimulateExperiment : public exid::Experiment {
         P_.getBool("output_qd_qdd") ? "t q qd qdd tau (true states, noisy q)" : "t q tau (noisy q)";
   }
 
+  // The plant's friction beyond Fc s + Fv qdm, per drive (empty: none).
+  void frictionOptions() {
+    auto perDrive = [&](const char* key) {
+      std::vector<double> v = P_.getDoubles(key);
+      exid::check(v.empty() || v.size() == 1 || static_cast<int>(v.size()) == n_,
+                  fmt::format("experiment 'simulate': {}: {} values for robot '{}' of {} drives "
+                              "(expected one, or one per drive)",
+                              key, v.size(), truth_.name, n_));
+      if (v.size() == 1) v.assign(static_cast<std::size_t>(n_), v[0]);
+      return v;
+    };
+    fcn_ = perDrive("coulomb_negative_Nm");
+    fs_ = perDrive("stribeck_Nm");
+    svs_ = perDrive("stribeck_velocity_rad_s");
+    sdelta_ = P_.getDouble("stribeck_exponent");
+    exid::check(fs_.empty() == svs_.empty(),
+                "experiment 'simulate': stribeck_Nm and stribeck_velocity_rad_s go together (the "
+                "level and the velocity of the Stribeck term)");
+    for (double v : svs_)
+      exid::check(v > 0, fmt::format("experiment 'simulate': stribeck_velocity_rad_s: {} is not "
+                                     "positive",
+                                     v));
+    exid::check((fcn_.empty() && fs_.empty()) || drive_terms_,
+                "experiment 'simulate': coulomb_negative_Nm and stribeck_Nm are drive terms: "
+                "they need drive_terms: true");
+  }
+
   exid::ParamSet P_;
   exid::Payload payload_;
   double noise_w_[6] = {0, 0, 0, 0, 0, 0};
@@ -683,6 +735,8 @@ class SimulateExperiment : public exid::Experiment {
   int n_ = 0;
   bool drive_terms_ = true, tanh_ = false, computed_torque_ = true;
   double vs_ = 1e-3, kp_ = 100.0, kd_ = 20.0;
+  std::vector<double> fcn_, fs_, svs_;  // plant friction beyond Fc s + Fv qdm (empty: none)
+  double sdelta_ = 2.0;
   VectorXd D0_;
   long rhs_calls_extra_ = 0;
 };

@@ -6,6 +6,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -229,6 +230,42 @@ TEST(Varpro, RecoversEveryParameterFromNoiseFreeData) {
   auto b = exid_test::create<exid::Estimator>("batch_ls", "{}");
   const exid::Estimate eb = b->estimate(*m, d, nullptr, mtest::context());
   EXPECT_GT(eb.residual_rms, 1e3 * std::max(e.residual_rms, 1e-12));
+}
+
+// End to end: the `simulate` experiment's plant with asymmetric, smoothed Coulomb friction and a
+// Stribeck term (closed loop, SUNDIALS), identified by varpro from a model started elsewhere.
+TEST(Varpro, RecoversTheSimulatedPlantsFriction) {
+  auto r = mtest::robot("puma560");
+  const exid::Dataset d = mtest::simulate(
+      r,
+      "{duration_s: 6, sample_period_s: 0.002, coulomb: tanh, coulomb_velocity_scale: 0.01, "
+      "coulomb_negative_Nm: [0.3], stribeck_Nm: [0.4], stribeck_velocity_rad_s: [0.05]}");
+  EXPECT_NE(d.meta.find("stribeck_Nm"), nullptr);
+  auto m = mtest::model("differential", kModel, r);
+  auto v = exid_test::create<exid::Estimator>("varpro", "{}");
+  const exid::Estimate e = v->estimate(*m, d, nullptr, mtest::context());
+  for (Eigen::Index k = 0; k < e.nonlinear.size(); ++k) {
+    const bool eps = e.nonlinear_names[static_cast<std::size_t>(k)][0] == 'e';
+    EXPECT_NEAR(e.nonlinear[k], eps ? 0.01 : 0.05, 1e-6 * (eps ? 0.01 : 0.05))
+        << e.nonlinear_names[static_cast<std::size_t>(k)];
+  }
+  double worst = 0;
+  for (std::size_t i = 0; i < e.names.size(); ++i) {
+    const std::string& n = e.names[i];
+    const int j = std::isdigit(static_cast<unsigned char>(n.back())) ? n.back() - '1' : -1;
+    // The plant's drive offset OFF (no offset column here) is the constant part of the
+    // asymmetric levels, (FcP - FcN)/2: FcP + OFF and FcN - OFF are identified.
+    const double off = j >= 0 ? r->drives[static_cast<std::size_t>(j)].offset : 0.0;
+    const double want = n.rfind("FcN", 0) == 0  ? 0.3 - off
+                        : n.rfind("Fs", 0) == 0 ? 0.4
+                        : n.rfind("FcP", 0) == 0
+                            ? r->drives[static_cast<std::size_t>(j)].coulomb + off
+                            : NAN;
+    if (std::isnan(want)) continue;
+    worst = std::max(worst, std::abs(e.value[static_cast<Eigen::Index>(i)] - want));
+  }
+  EXPECT_LT(worst, 1e-6);
+  EXPECT_GT(std::abs(r->drives[0].offset), 0.1);  // (so the offset's part is tested)
 }
 
 TEST(Varpro, NoisyEstimatesLieWithinTheirReportedStandardDeviations) {
