@@ -99,6 +99,20 @@ int fullBlockSamples(int full_columns, int dof) {
 
 }  // namespace
 
+namespace {
+// Full-column rows reduced to the base columns (the rest moved over as they are).
+Rows baseRowsOf(const BaseParameters& base, Rows&& full) {
+  Rows out;
+  out.W = base.columns(full.W);
+  out.y = std::move(full.y);
+  out.equation = std::move(full.equation);
+  out.numEquations = full.numEquations;
+  out.t = std::move(full.t);
+  out.equation_names = std::move(full.equation_names);
+  return out;
+}
+}  // namespace
+
 Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
   // A per-sample model's full rows are built a block of samples at a time (a block's full W
   // about 1 MB, cache resident and reused) and only the base columns are kept: the full W of a
@@ -134,14 +148,7 @@ Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
     return out;
   }
   Rows full = fullRows(data, ctx);
-  Rows out;
-  out.W = base_.columns(full.W);
-  out.y = std::move(full.y);
-  out.equation = std::move(full.equation);
-  out.numEquations = full.numEquations;
-  out.t = std::move(full.t);
-  out.equation_names = std::move(full.equation_names);
-  return out;
+  return baseRowsOf(base_, std::move(full));
 }
 
 Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta,
@@ -164,14 +171,7 @@ Rows ObservationModel::rowsAt(const Dataset& data, const Eigen::VectorXd& eta, E
   check(full.W.cols() == base_.numFull(),
         fmt::format("model '{}': fullRowsAt gave {} columns, expected {}", pluginName(),
                     full.W.cols(), base_.numFull()));
-  Rows out;
-  out.W = base_.columns(full.W);
-  out.y = std::move(full.y);
-  out.equation = std::move(full.equation);
-  out.numEquations = full.numEquations;
-  out.t = std::move(full.t);
-  out.equation_names = std::move(full.equation_names);
-  return out;
+  return baseRowsOf(base_, std::move(full));
 }
 
 std::vector<int> ObservationModel::nonlinearColumnsInBase() const {

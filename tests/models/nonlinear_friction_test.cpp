@@ -103,22 +103,29 @@ exid::Dataset recording(const std::shared_ptr<const exid::RobotModel>& r, const 
   return d;
 }
 
+// Random samples at slow speeds (around the Stribeck and smoothing velocities) as a dataset with
+// a zero torque (only the columns are looked at).
+exid::Dataset slowSamples(const exid::RobotModel& r, int K, std::uint64_t seed) {
+  const exid::Samples s = mtest::randomSamples(r, K, 0.01, seed);
+  exid::Dataset d;
+  d.t = s.t;
+  d.q = s.q;
+  d.qd = 0.05 * s.qd;
+  d.qdd = s.qdd;
+  d.tau = Eigen::MatrixXd::Zero(s.size(), r.dof());
+  return d;
+}
+
 TEST(NonlinearFriction, ColumnsAreTheFrictionTorque) {
   auto r = mtest::robot("puma560");
   auto m = mtest::model("differential", kModel, r);
   const Truth T = truth(r->dof());
   Eigen::VectorXd full, eta;
   truthVectors(*m, T, &full, &eta);
-  const exid::Samples s = mtest::randomSamples(*r, 40, 0.01, 5);
-  exid::Dataset d;
-  d.t = s.t;
-  d.q = s.q;
-  d.qd = 0.05 * s.qd;  // around the Stribeck and smoothing velocities
-  d.qdd = s.qdd;
-  d.tau = Eigen::MatrixXd::Zero(s.size(), r->dof());
+  const exid::Dataset d = slowSamples(*r, 40, 5);
   const exid::Rows rows = m->fullRowsAt(d, eta, nullptr, mtest::context());
   double worst = 0, scale = 0;
-  for (int k = 0; k < s.size(); ++k) {
+  for (int k = 0; k < d.size(); ++k) {
     const Eigen::VectorXd tau = plantTorque(*r, T, 2.0, d.q.row(k).transpose(),
                                             d.qd.row(k).transpose(), d.qdd.row(k).transpose());
     const Eigen::VectorXd pred = rows.W.middleRows(k * r->dof(), r->dof()) * full;
@@ -140,14 +147,7 @@ TEST(NonlinearFriction, ColumnDerivativesEqualCentralDifferences) {
   const Truth T = truth(r->dof());
   Eigen::VectorXd full, eta;
   truthVectors(*m, T, &full, &eta);
-  exid::Samples s = mtest::randomSamples(*r, 30, 0.01, 9);
-  s.qd *= 0.05;
-  exid::Dataset d;
-  d.t = s.t;
-  d.q = s.q;
-  d.qd = s.qd;
-  d.qdd = s.qdd;
-  d.tau = Eigen::MatrixXd::Zero(s.size(), r->dof());
+  const exid::Dataset d = slowSamples(*r, 30, 9);
   Eigen::MatrixXd dW;
   m->fullRowsAt(d, eta, &dW, mtest::context());
   const auto nl = m->nonlinearParameters();
@@ -175,7 +175,7 @@ TEST(NonlinearFriction, ColumnDerivativesEqualCentralDifferences) {
   EXPECT_EQ(l, dW.cols());
   EXPECT_LT(worst, 1e-6) << worst;
   // the design's derivative in the samples (excitation design) includes the smooth columns
-  EXPECT_LT(mtest::vjpError(*m, s, true), 1e-6);
+  EXPECT_LT(mtest::vjpError(*m, d.samples(), true), 1e-6);
 }
 
 TEST(NonlinearFriction, OptionsWithoutTheirValuesAreRefused) {
