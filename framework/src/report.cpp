@@ -197,6 +197,16 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
                      e.names[static_cast<std::size_t>(i)], e.value(i), sd, rel, nominal(i));
     t.data.row(i) << static_cast<double>(i), e.value(i), sd, rel, nominal(i);
   }
+  if (e.nonlinear.size() > 0) {  // fitted with the linear ones (varpro)
+    s += "\nNonlinear parameters, fitted with the linear ones:\n\n| parameter | estimate | std |\n"
+         "|---|---|---|\n";
+    for (Eigen::Index k = 0; k < e.nonlinear.size(); ++k)
+      s += fmt::format("| {} | {:.6g} | {:.3g} |\n",
+                       static_cast<std::size_t>(k) < e.nonlinear_names.size()
+                           ? e.nonlinear_names[static_cast<std::size_t>(k)]
+                           : std::string("?"),
+                       e.nonlinear(k), e.nonlinear_std.size() > k ? e.nonlinear_std(k) : NAN);
+  }
   std::string csv = "name," + toCsv(t);
   // prepend names column
   std::string named =

@@ -340,6 +340,7 @@ TEST(Varpro, AStudyReportsTheFittedValuesAndValidatesAtThem) {
       EXPECT_NEAR(nl->at(1).find("value")->asDouble(), T.vs[0], 1e-6 * T.vs[0]);
       EXPECT_EQ(nl->at(1).find("initial")->asDouble(), 0.1);
       EXPECT_LT(verr, 1e-6);  // held-out rows at the fitted values
+      EXPECT_NE(exid_cli::slurp(dir / est / "report.md").find("| vs1 | 0.05 |"), std::string::npos);
     } else {
       EXPECT_EQ(I.find("nonlinear_parameters"), nullptr);
       EXPECT_GT(verr, 1e-3);
