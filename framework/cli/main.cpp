@@ -62,6 +62,19 @@ int runOrValidate(exid::Registry& registry, const std::string& file, bool valida
                   std::string out_dir) {
   exid::StudyConfig cfg = exid::loadStudy(file, registry);
   if (validate_only) {
+    // The models, experiments and estimator are made (not run): the checks their constructors
+    // make across parameters (stribeck without its velocities, say) are a validation error too.
+    auto make = [&](const exid::PluginSpec& spec) {
+      try {
+        const exid::PluginInfo& info = registry.get(spec.kind, spec.type);
+        registry.createObject(info, spec.params);
+      } catch (const exid::Error& e) {
+        throw exid::Error(fmt::format("{}:{}: {}: {}", file, spec.line, spec.key_path, e.what()));
+      }
+    };
+    for (const exid::PluginSpec& m : cfg.models) make(m);
+    for (const auto* s : {&cfg.experiment, &cfg.estimator, &cfg.validation})
+      if (*s) make(**s);
     std::cout << fmt::format("{}: valid (configuration hash {})\n", file, cfg.hash());
     std::cout << cfg.resolvedYaml();
     return 0;

@@ -193,6 +193,16 @@ TEST(NonlinearFriction, OptionsWithoutTheirValuesAreRefused) {
       EXPECT_NE(std::string(e.what()).find(what), std::string::npos) << e.what();
     }
   }
+  // exid validate makes the model: the same message, with the study's place
+  const fs::path dir = exid_cli::freshTempDir("exid_varpro_", "validate");
+  std::ofstream(dir / "bad.yaml") << "name: bad\nrobot: {type: puma560}\n"
+                                  << "model: {type: differential, params: {stribeck: true}}\n"
+                                  << "experiment: {type: simulate, params: {duration_s: 1}}\n"
+                                  << "estimator: {type: varpro}\n";
+  const auto res = exid_cli::runExid("validate " + (dir / "bad.yaml").string());
+  EXPECT_NE(res.code, 0) << res.out;
+  EXPECT_NE(res.out.find("bad.yaml:3: model"), std::string::npos) << res.out;
+  EXPECT_NE(res.out.find("needs stribeck_velocity_rad_s"), std::string::npos) << res.out;
   // a batch fit of a model without nonlinear parameters: varpro says so
   auto r = mtest::robot("puma560");
   auto m = mtest::model("differential", "{}", r);
