@@ -148,19 +148,17 @@ class DifferentialModel : public exid::ObservationModel {
   std::vector<exid::NonlinearParameter> nonlinearParameters() const override {
     std::vector<exid::NonlinearParameter> out;
     const int P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();
-    std::vector<int> joints = sel_;
-    std::sort(joints.begin(), joints.end());
-    for (int j : joints) {
-      const int c0 = P0 + E * j;
-      const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
-      if (!eps_param_.empty() && (coulomb_extra_ || stribeck_)) {
+    const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
+    for (const Slot& sl : slots()) {
+      const int j = sl.joint, c0 = P0 + E * j;
+      if (sl.eps) {
         exid::NonlinearParameter e{
             "eps" + std::to_string(j + 1), "rad/s", perJoint(eps_param_, j), {}};
         for (int c = 0; c < nc + (stribeck_ ? 1 : 0); ++c) e.columns.push_back(c0 + c);
         out.push_back(e);
-      }
-      if (stribeck_)
+      } else {
         out.push_back({"vs" + std::to_string(j + 1), "rad/s", perJoint(vs_param_, j), {c0 + nc}});
+      }
     }
     return out;
   }
@@ -215,16 +213,15 @@ class DifferentialModel : public exid::ObservationModel {
       if (!eps_param_.empty()) f.eps[static_cast<std::size_t>(j)] = perJoint(eps_param_, j);
       if (stribeck_) f.vs[static_cast<std::size_t>(j)] = perJoint(vs_param_, j);
     }
-    const std::vector<exid::NonlinearParameter> nl = nonlinearParameters();
-    exid::check(eta.size() == static_cast<Eigen::Index>(nl.size()),
+    const std::vector<Slot> sl = slots();
+    exid::check(eta.size() == static_cast<Eigen::Index>(sl.size()),
                 "model 'differential': wrong number of nonlinear parameter values");
-    for (std::size_t k = 0; k < nl.size(); ++k) {
+    for (std::size_t k = 0; k < sl.size(); ++k) {
       const double v = eta[static_cast<Eigen::Index>(k)];
       if (!(v > 0 && std::isfinite(v)))
-        throw exid::Error(
-            fmt::format("model 'differential': {} = {} (must be positive)", nl[k].name, v));
-      const int j = std::stoi(nl[k].name.substr(nl[k].name[0] == 'e' ? 3 : 2)) - 1;
-      (nl[k].name[0] == 'e' ? f.eps : f.vs)[static_cast<std::size_t>(j)] = v;
+        throw exid::Error(fmt::format("model 'differential': {}{} = {} (must be positive)",
+                                      sl[k].eps ? "eps" : "vs", sl[k].joint + 1, v));
+      (sl[k].eps ? f.eps : f.vs)[static_cast<std::size_t>(sl[k].joint)] = v;
     }
     return f;
   }
@@ -270,14 +267,13 @@ class DifferentialModel : public exid::ObservationModel {
     const int n = robot().dof(), K = s.size(), m = static_cast<int>(sel_.size());
     const int P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();
     W->rightCols(E * n).setZero();
-    const std::vector<exid::NonlinearParameter> nl = nonlinearParameters();
-    // where each drive's derivative columns start in dW
+    // where each drive's derivative columns start in dW (nonlinearParameters() order)
     std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
     int L = 0;
-    for (const auto& p : nl) {
-      const int j = std::stoi(p.name.substr(p.name[0] == 'e' ? 3 : 2)) - 1;
-      (p.name[0] == 'e' ? deps : dvs)[static_cast<std::size_t>(j)] = L;
-      L += static_cast<int>(p.columns.size());
+    const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
+    for (const Slot& sl : slots()) {
+      (sl.eps ? deps : dvs)[static_cast<std::size_t>(sl.joint)] = L;
+      L += sl.eps ? nc + (stribeck_ ? 1 : 0) : 1;
     }
     if (dW) dW->setZero(W->rows(), L);
     for (int k = 0; k < K; ++k)
@@ -417,6 +413,22 @@ class DifferentialModel : public exid::ObservationModel {
   exid::Drive drive(int j) const {
     const auto& dr = robot().drives;
     return j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
+  }
+  // The nonlinear parameters in order: per selected joint (ascending), its width then its
+  // Stribeck velocity.
+  struct Slot {
+    bool eps = false;
+    int joint = 0;
+  };
+  std::vector<Slot> slots() const {
+    std::vector<int> joints = sel_;
+    std::sort(joints.begin(), joints.end());
+    std::vector<Slot> out;
+    for (int j : joints) {
+      if (!eps_param_.empty()) out.push_back({true, j});
+      if (stribeck_) out.push_back({false, j});
+    }
+    return out;
   }
   int extraPerJoint() const { return (coulomb_extra_ ? (asym_ ? 2 : 1) : 0) + (stribeck_ ? 1 : 0); }
   double perJoint(const std::vector<double>& v, int j) const {
