@@ -9,6 +9,7 @@
 
 #include "estimator_test_model.hpp"
 #include "exid/error.hpp"
+#include "exid/estimators/common.hpp"
 #include "exid_test.hpp"
 
 namespace {
@@ -476,3 +477,55 @@ TEST(Estimators, BatchLsGivesTheSameBitsForAnyThreadCount) {
   for (Eigen::Index i = 0; i < truth.size(); ++i)
     EXPECT_LE(std::abs(a.value(i) - truth(i)), 4.0 * a.std(i));
 }
+
+namespace {
+
+// pipelineChunks: inputs read in order, each chunk worked on its own input, results consumed in
+// order (each chunk's result in slot c % 2T still its own when consumed), and a failing chunk
+// stops the run with the waves before it consumed and none after.
+TEST(Streaming, PipelineConsumesEveryChunkInOrderFromItsOwnSlot) {
+  const long n = 37;
+  for (int T : {1, 2, 3, 4}) {
+    SCOPED_TRACE(T);
+    for (long fail : {-1L, 20L}) {
+      std::vector<long> slot(2 * static_cast<std::size_t>(T), -1), read_order, consumed;
+      auto run = [&] {
+        exid::estimators::pipelineChunks(
+            n, T,
+            [&](long c, exid::Dataset* in) {
+              read_order.push_back(c);
+              in->t = Eigen::VectorXd::Constant(1, static_cast<double>(c));
+            },
+            [&](long c, const exid::Dataset& in) {
+              ASSERT_EQ(in.t.size(), 1);
+              ASSERT_EQ(in.t[0], static_cast<double>(c));  // its own input
+              if (c == fail) throw exid::Error(fmt::format("chunk {} failed", c));
+              slot[static_cast<std::size_t>(c % (2 * T))] = c;
+            },
+            [&](long c) {
+              EXPECT_EQ(slot[static_cast<std::size_t>(c % (2 * T))], c);  // not overwritten
+              consumed.push_back(c);
+            });
+      };
+      if (fail < 0) {
+        run();
+        ASSERT_EQ(static_cast<long>(consumed.size()), n);
+      } else {
+        try {
+          run();
+          ADD_FAILURE() << "no error";
+        } catch (const exid::Error& e) {
+          EXPECT_NE(std::string(e.what()).find("chunk 20 failed"), std::string::npos);
+        }
+        // the waves before the failing one, and no other
+        EXPECT_EQ(static_cast<long>(consumed.size()), (fail / T) * T);
+      }
+      for (std::size_t i = 0; i < consumed.size(); ++i)
+        EXPECT_EQ(consumed[i], static_cast<long>(i));
+      for (std::size_t i = 0; i < read_order.size(); ++i)
+        EXPECT_EQ(read_order[i], static_cast<long>(i));
+    }
+  }
+}
+
+}  // namespace

@@ -61,7 +61,8 @@ class DatasetStream {
   /// form (a file's bytes), cheaply; decode() turns a fetched piece into samples (t, q, ...,
   /// source; meta left as it is) and may run on any thread, beside other decode() calls and
   /// beside fetch(); settle() takes each decoded piece back in the order of fetch() (the pass's
-  /// statistics, collectEvery), never beside fetch() (later pieces may be fetched already).
+  /// statistics, collectEvery), one at a time, possibly beside fetch() of later pieces (a
+  /// stream keeps the state of the two apart).
   /// decode() throws exid::Error as read() does. A stream that does not split its reading returns nullptr from fetch() (read() then).
   struct Piece {
     virtual ~Piece() = default;
