@@ -63,7 +63,8 @@ class DatasetStream {
   /// beside fetch(); settle() takes each decoded piece back in the order of fetch() (the pass's
   /// statistics, collectEvery), one at a time, possibly beside fetch() of later pieces (a
   /// stream keeps the state of the two apart).
-  /// decode() throws exid::Error as read() does. A stream that does not split its reading returns nullptr from fetch() (read() then).
+  /// decode() throws exid::Error as read() does. A stream that does not split its reading returns
+  /// nullptr from fetch() (read() then).
   struct Piece {
     virtual ~Piece() = default;
     int count = 0;  // samples
