@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <ostream>
 #include <random>
 
@@ -97,9 +98,6 @@ int fullBlockSamples(int full_columns, int dof) {
   return static_cast<int>(std::clamp(kBlockBytes / sample_bytes, 16.0, 65536.0));
 }
 
-}  // namespace
-
-namespace {
 // Full-column rows reduced to the base columns (the rest moved over as they are).
 Rows baseRowsOf(const BaseParameters& base, Rows&& full) {
   Rows out;
@@ -111,21 +109,23 @@ Rows baseRowsOf(const BaseParameters& base, Rows&& full) {
   out.equation_names = std::move(full.equation_names);
   return out;
 }
-}  // namespace
 
-Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
-  // A per-sample model's full rows are built a block of samples at a time (a block's full W
-  // about 1 MB, cache resident and reused) and only the base columns are kept: the full W of a
-  // long chunk (84 columns for a 6-joint arm with drives, twice the base ones) is never held.
+// A per-sample model's full rows are built a block of samples at a time (a block's full W
+// about 1 MB, cache resident and reused) and only the base columns are kept: the full W of a
+// long chunk (84 columns for a 6-joint arm with drives, twice the base ones) is never held.
+// full_of(d): the full rows of the samples d.
+Rows baseRowsByBlocks(const ObservationModel& model, const Dataset& data,
+                      const std::function<Rows(const Dataset&)>& full_of) {
+  const BaseParameters& base = model.base();
   const int K = data.size();
-  const int block = fullBlockSamples(base_.numFull(), data.dof());
-  if (!data.streamed() && K > block && specs().per_sample) {
-    const int p = base_.rank();
+  const int block = fullBlockSamples(base.numFull(), data.dof());
+  if (!data.streamed() && K > block && model.specs().per_sample) {
+    const int p = base.rank();
     Rows out;
     Eigen::Index m = 0;  // rows per sample
     for (int b = 0; b < K; b += block) {
       const int e = std::min(K, b + block);
-      Rows full = fullRows(sliceDataset(data, b, e), ctx);
+      Rows full = full_of(sliceDataset(data, b, e));
       if (b == 0) {
         m = full.W.rows() / std::max(1, e - b);
         out.W.resize(static_cast<Eigen::Index>(K) * m, p);
@@ -135,20 +135,29 @@ Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
       }
       const Eigen::Index r0 = static_cast<Eigen::Index>(b) * m, nr = full.W.rows();
       check(nr == static_cast<Eigen::Index>(e - b) * m && full.y.size() == nr &&
-                full.W.cols() == base_.numFull(),
+                full.W.cols() == base.numFull(),
             fmt::format("model '{}': {} rows of {} columns for samples [{}, {}) (expected {} "
                         "per sample, as for the first samples, of {} columns)",
-                        pluginName(), nr, full.W.cols(), b, e, m, base_.numFull()));
+                        model.pluginName(), nr, full.W.cols(), b, e, m, base.numFull()));
       for (int k = 0; k < p; ++k)
-        out.W.col(k).segment(r0, nr) = full.W.col(base_.independent[static_cast<size_t>(k)]);
+        out.W.col(k).segment(r0, nr) = full.W.col(base.independent[static_cast<size_t>(k)]);
       out.y.segment(r0, nr) = full.y;
       out.equation.insert(out.equation.end(), full.equation.begin(), full.equation.end());
       out.t.insert(out.t.end(), full.t.begin(), full.t.end());
     }
     return out;
   }
-  Rows full = fullRows(data, ctx);
-  return baseRowsOf(base_, std::move(full));
+  Rows full = full_of(data);
+  if (full.W.cols() != base.numFull())  // (the message only when it fails: once per chunk)
+    throw Error(fmt::format("model '{}': {} full columns, expected {}", model.pluginName(),
+                            full.W.cols(), base.numFull()));
+  return baseRowsOf(base, std::move(full));
+}
+
+}  // namespace
+
+Rows ObservationModel::rows(const Dataset& data, const RunContext& ctx) const {
+  return baseRowsByBlocks(*this, data, [&](const Dataset& d) { return fullRows(d, ctx); });
 }
 
 Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta,
@@ -167,10 +176,13 @@ Rows ObservationModel::rowsAt(const Dataset& data, const Eigen::VectorXd& eta, E
   if (eta.size() != static_cast<Eigen::Index>(nl.size()))
     throw Error(fmt::format("model '{}': {} nonlinear parameter values given, expected {}",
                             pluginName(), eta.size(), nl.size()));
+  if (!dW)  // (block by block, as rows())
+    return baseRowsByBlocks(*this, data,
+                            [&](const Dataset& d) { return fullRowsAt(d, eta, nullptr, ctx); });
   Rows full = fullRowsAt(data, eta, dW, ctx);
-  check(full.W.cols() == base_.numFull(),
-        fmt::format("model '{}': fullRowsAt gave {} columns, expected {}", pluginName(),
-                    full.W.cols(), base_.numFull()));
+  if (full.W.cols() != base_.numFull())
+    throw Error(fmt::format("model '{}': fullRowsAt gave {} columns, expected {}", pluginName(),
+                            full.W.cols(), base_.numFull()));
   return baseRowsOf(base_, std::move(full));
 }
 

@@ -1144,9 +1144,10 @@ void StudyRun::identificationStage() {
         nl.push_back(p);
       }
       I["nonlinear_parameters"] = nl;
-    } else if (!model->nonlinearParameters().empty()) {
+    } else if (const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
+               !decl.empty()) {
       std::string names;
-      for (const auto& p : model->nonlinearParameters())
+      for (const auto& p : decl)
         names += (names.empty() ? "" : ", ") + fmt::format("{} = {:g} {}", p.name, p.value, p.unit);
       warn(
           fmt::format("identification: estimator '{}' kept the model's nonlinear parameters at "

@@ -403,9 +403,7 @@ class DifferentialModel : public exid::ObservationModel {
 
  private:
   double frictionTorque(int j, double qdm) const {
-    const auto& dr = robot().drives;
-    const exid::Drive D =
-        j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
+    const exid::Drive D = drive(j);
     const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
     return D.coulomb * sg + D.viscous * qdm + (cols_.offset ? 0.0 : D.offset);
   }
