@@ -17,6 +17,15 @@
 // Standard deviations of every parameter, linear and nonlinear, from the Gauss-Newton matrix
 // of the whole problem [W V] at the optimum: sigma^2 ([W V]^T [W V])^-1, sigma^2 = rss / (m -
 // p - q). Memory: one chunk and the (p + L + 1)^2 factor, whatever the number of samples.
+//
+// A delay d between the measurement (torque, wrench) and the positions (measurement_delay:
+// true) is one more nonlinear parameter, taken directly (lambda = d / median sample period).
+// The measurement is never interpolated (interpolating noise lowers its variance by an amount
+// that depends on d, which would pull d towards half samples): the model's rows of sample k
+// are read at t_k - d instead (exid::shiftedRows, cubic Hermite across the samples), with
+// their exact derivative in d, p more columns in D. The model must be per-sample. The first
+// and last M samples (M from measurement_delay_max_s) give no rows, for every d: the rows
+// compared are always the same.
 // See docs/estimators.md, "Variable projection".
 #include <fmt/format.h>
 
@@ -27,9 +36,11 @@
 #include <cmath>
 #include <limits>
 
+#include "exid/delay.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/signal.hpp"
 
 namespace {
 
@@ -61,6 +72,17 @@ class VarPro : public exid::Estimator {
                            "qr: Householder QR of [W D y] (cond not squared); normal: the Gram "
                            "matrix (faster, squares cond)",
                            {"qr", "normal"}),
+        exid::param_bool("measurement_delay", false,
+                         "fit a delay d of the measurement (torque or wrench) behind the "
+                         "positions, with the other parameters: the model's rows of sample k are "
+                         "read at t_k - d (d > 0: the measurement lags); needs "
+                         "measurement_delay_max_s and a per-sample model"),
+        exid::param_double("measurement_delay_initial_s", 0.0, "s",
+                           "the delay the fit starts from"),
+        exid::param_double("measurement_delay_max_s", 0.0, "s",
+                           "the largest |d| searched: the samples within it (plus 3) of either "
+                           "end give no rows, whatever d is (counted in the details)",
+                           0.0),
         exid::estimators::rankToleranceParam(),
     };
   }
@@ -73,6 +95,20 @@ class VarPro : public exid::Estimator {
         method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
                                                       : RowAccumulator::Method::Qr) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
+    delay_ = p.getBool("measurement_delay");
+    delay0_ = p.getDouble("measurement_delay_initial_s");
+    delay_max_ = p.getDouble("measurement_delay_max_s");
+    exid::check(!delay_ || delay_max_ > 0,
+                "varpro: measurement_delay: true needs measurement_delay_max_s > 0 (how large "
+                "the delay may be: the samples within it of the recording's ends give no rows; "
+                "exid does not guess it)");
+    exid::check(delay_ || (delay_max_ == 0 && delay0_ == 0),
+                "varpro: measurement_delay_initial_s or measurement_delay_max_s is given but "
+                "measurement_delay is false");
+    exid::check(!delay_ || std::abs(delay0_) < delay_max_,
+                fmt::format("varpro: measurement_delay_initial_s = {} s lies outside +-"
+                            "measurement_delay_max_s = {} s",
+                            delay0_, delay_max_));
   }
 
   exid::EstimatorSpecs specs() const override {
@@ -85,11 +121,12 @@ class VarPro : public exid::Estimator {
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     exid::check(prior == nullptr, "varpro: a prior is not supported (use batch_ls)");
-    rejected_singular_ = 0;
-    setUp(model);
+    rejected_singular_ = rejected_bound_ = 0;
+    setUp(model, data);
     const int q = static_cast<int>(nl_.size());
     Eigen::VectorXd lambda(q);
-    for (int k = 0; k < q; ++k) lambda[k] = std::log(nl_[static_cast<std::size_t>(k)].value);
+    for (int k = 0; k < q_model_; ++k) lambda[k] = std::log(nl_[static_cast<std::size_t>(k)].value);
+    if (delay_) lambda[q - 1] = delay0_ / ts_;
     // ---- Levenberg-Marquardt on lambda = log(eta)
     Eval cur = evaluate(model, data, lambda, ctx);
     int evals = 1, iterations = 0;
@@ -99,6 +136,7 @@ class VarPro : public exid::Estimator {
     auto record = [&](const Eval& e) {
       exid::Json t = exid::Json::object();
       t["rss"] = e.rss;
+      // (eta: the nonlinear parameters in their units, the delay in s)
       t["eta"] = exid::Json(std::vector<double>(e.eta.data(), e.eta.data() + e.eta.size()));
       trace.push_back(t);
     };
@@ -126,11 +164,16 @@ class VarPro : public exid::Estimator {
         // finite is a rejected step, as one that raises the residual.
         Eval trial;
         bool ok = true;
-        try {
-          trial = evaluate(model, data, lambda + delta, ctx);
-        } catch (const exid::Error&) {
-          ok = false;
-          ++rejected_singular_;
+        if (delay_ && std::abs(ts_ * (lambda[q - 1] + delta[q - 1])) > delay_max_) {
+          ok = false;  // outside the delays the kept rows allow
+          ++rejected_bound_;
+        } else {
+          try {
+            trial = evaluate(model, data, lambda + delta, ctx);
+          } catch (const exid::Error&) {
+            ok = false;
+            ++rejected_singular_;
+          }
         }
         ++evals;
         if (ok && std::isfinite(trial.rss) && trial.rss <= cur.rss) {
@@ -180,11 +223,13 @@ class VarPro : public exid::Estimator {
     long m = 0;
   };
 
-  void setUp(const exid::ObservationModel& model) {
+  void setUp(const exid::ObservationModel& model, const exid::Dataset& data) {
     nl_ = model.nonlinearParameters();
-    exid::check(!nl_.empty(),
+    q_model_ = static_cast<int>(nl_.size());
+    exid::check(!nl_.empty() || delay_,
                 fmt::format("varpro: model '{}' has no nonlinear parameter (e.g. differential "
-                            "with stribeck or coulomb_smoothing_rad_s); batch_ls gives its fit",
+                            "with stribeck or coulomb_smoothing_rad_s) and measurement_delay is "
+                            "false; batch_ls gives its fit",
                             model.pluginName()));
     // the moved columns that are base columns (the others do not enter the rows)
     const std::vector<int> in_base = model.nonlinearColumnsInBase();
@@ -206,6 +251,92 @@ class VarPro : public exid::Estimator {
                                    "motion): it cannot be fitted",
                                    nl_[k].name, model.pluginName()));
     }
+    margin_ = 0;
+    ts_ = 1.0;
+    if (!delay_) return;
+    // The delay: one more parameter; its columns in D are dW/dd (every base column).
+    exid::check(model.specs().per_sample,
+                fmt::format("varpro: measurement_delay needs a model whose rows are per sample "
+                            "(model '{}' builds rows from several samples)",
+                            model.pluginName()));
+    double jitter = 0.0;
+    const double fs = exid::samplingRate(data, &jitter);
+    exid::check(std::isfinite(fs) && fs > 0 && jitter < 0.5,
+                fmt::format("varpro: measurement_delay needs time stamps of a steady rate "
+                            "(found {:g} Hz with steps {:.0f} % off the median)",
+                            fs, 100 * jitter));
+    ts_ = 1.0 / fs;
+    // samples within measurement_delay_max_s of an end (the shortest step: median (1 -
+    // jitter)), plus the three the interpolation's stencil needs
+    // (a hair below: a bound of exactly n samples is n, not n + 1 by a rounding)
+    margin_ = static_cast<int>(std::ceil(delay_max_ * fs / (1.0 - jitter) * (1 - 1e-12))) + 3;
+    exid::check(
+        data.size() - 2 * margin_ >= 8,
+        fmt::format("varpro: measurement_delay_max_s = {} s leaves {} of {} samples at "
+                    "{:g} Hz ({} without rows at each end)",
+                    delay_max_, std::max(0, data.size() - 2 * margin_), data.size(), fs, margin_));
+    exid::NonlinearParameter d;
+    d.name = "measurement_delay_s";
+    d.unit = "s";
+    d.value = delay0_;
+    nl_.push_back(d);
+    for (int c = 0; c < model.numBase(); ++c) {
+      keep_.push_back(-1);
+      owner_.push_back(static_cast<int>(nl_.size()) - 1);
+      base_col_.push_back(c);
+    }
+  }
+
+  // eta from lambda: exp for the model's parameters, d = ts lambda for the delay.
+  Eigen::VectorXd etaOf(const Eigen::VectorXd& lambda) const {
+    Eigen::VectorXd eta = lambda;
+    for (int k = 0; k < q_model_; ++k) eta[k] = std::exp(lambda[k]);
+    if (delay_) eta[eta.size() - 1] = ts_ * lambda[lambda.size() - 1];
+    return eta;
+  }
+
+  // The rows of samples [b, end) at eta (model parameters and the delay): W, y and the
+  // derivative columns [dW_kept, dW/dd] into *D.
+  exid::Rows chunkRows(const exid::ObservationModel& model, exid::SampleWindow& window, int b,
+                       int end, const Eigen::VectorXd& eta, Eigen::MatrixXd* D,
+                       const exid::RunContext& ctx) const {
+    const int L = static_cast<int>(keep_.size()), Lm = L - (delay_ ? model.numBase() : 0);
+    const Eigen::VectorXd eta_m = eta.head(q_model_);
+    Eigen::MatrixXd dW;
+    if (!delay_) {
+      exid::Rows r = model.rowsAt(window.span(b, end), eta_m, &dW, ctx);
+      D->resize(r.W.rows(), L);
+      for (int l = 0; l < L; ++l) D->col(l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+      return r;
+    }
+    // the rows of the chunk and its margins, W (and dW) read at t_k - d
+    const double d = eta[eta.size() - 1];
+    const exid::Dataset span = window.span(b - margin_, end + margin_);
+    const int S = span.size(), first = margin_, last = margin_ + end - b;
+    const exid::Rows rs = model.rowsAt(span, eta_m, q_model_ > 0 ? &dW : nullptr, ctx);
+    const auto R = static_cast<int>(rs.y.size());
+    exid::check(R % S == 0 && rs.W.rows() == R,
+                fmt::format("varpro: measurement_delay: model '{}' gave {} rows for {} samples "
+                            "(not the same number per sample)",
+                            model.pluginName(), R, S));
+    const int P = R / S;
+    exid::Rows r;
+    Eigen::MatrixXd dWd;
+    exid::shiftedRows(span.t, rs.W, P, -d, first, last, &r.W, &dWd);  // dWd: d/d(-d)
+    r.y = rs.y.segment(static_cast<Eigen::Index>(first) * P,
+                       static_cast<Eigen::Index>(last - first) * P);
+    if (rs.equation.size() == static_cast<std::size_t>(R))
+      r.equation.assign(rs.equation.begin() + first * P, rs.equation.begin() + last * P);
+    r.numEquations = rs.numEquations;
+    D->resize(r.W.rows(), L);
+    if (Lm > 0) {
+      Eigen::MatrixXd kept(R, Lm), kept_d;
+      for (int l = 0; l < Lm; ++l) kept.col(l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+      exid::shiftedRows(span.t, kept, P, -d, first, last, &kept_d, nullptr);
+      D->leftCols(Lm) = kept_d;
+    }
+    D->rightCols(L - Lm) = -dWd;
+    return r;
   }
 
   Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
@@ -213,18 +344,18 @@ class VarPro : public exid::Estimator {
     const int p = model.numBase(), L = static_cast<int>(keep_.size()),
               q = static_cast<int>(nl_.size());
     Eval e;
-    e.eta = lambda.array().exp();
+    e.eta = etaOf(lambda);
     RowAccumulator acc(p + L, method_);
-    const int K = data.size();
+    const int first = margin_, last = data.size() - margin_;
     exid::SampleWindow window(data);
-    Eigen::MatrixXd dW, A;
-    for (int b = 0; b < K; b += chunk_) {
-      const int end = std::min(K, b + chunk_);
-      const exid::Rows r = model.rowsAt(window.span(b, end), e.eta, &dW, ctx);
+    Eigen::MatrixXd D, A;
+    for (int b = first; b < last; b += chunk_) {
+      const int end = std::min(last, b + chunk_);
+      const exid::Rows r = chunkRows(model, window, b, end, e.eta, &D, ctx);
       exid::estimators::checkRows(r, p, kName, b);
       A.resize(r.W.rows(), p + L);
       A.leftCols(p) = r.W;
-      for (int l = 0; l < L; ++l) A.col(p + l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+      A.rightCols(L) = D;
       if (!A.allFinite() || !r.y.allFinite())
         throw exid::Error(
             fmt::format("varpro: a row from samples {}..{} is not finite at eta = "
@@ -245,11 +376,12 @@ class VarPro : public exid::Estimator {
     e.ls = exid::estimators::solveLeastSquares(aw, model.base().names, opt_, kName);
     e.theta = e.ls.theta;
     e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
-    // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k
+    // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k; the delay: d = ts lambda
     e.Theta = Eigen::MatrixXd::Zero(L, q);
     for (int l = 0; l < L; ++l) {
       const int k = owner_[static_cast<std::size_t>(l)];
-      e.Theta(l, k) = e.theta[base_col_[static_cast<std::size_t>(l)]] * e.eta[k];
+      e.Theta(l, k) =
+          e.theta[base_col_[static_cast<std::size_t>(l)]] * (k < q_model_ ? e.eta[k] : ts_);
     }
     const Eigen::MatrixXd R22T = e.R.block(p, p, L, L).triangularView<Eigen::Upper>() * e.Theta;
     e.JtJ = R22T.transpose() * R22T;
@@ -295,10 +427,12 @@ class VarPro : public exid::Estimator {
     e.std = e.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     e.sigma = std::sqrt(sigma2);
     e.nonlinear_names = names();
-    e.nonlinear = lambda.array().exp();
+    e.nonlinear = etaOf(lambda);
     e.nonlinear_std = Eigen::VectorXd(q);
-    for (int k = 0; k < q; ++k)  // delta method: sigma_eta = eta sigma_lambda
-      e.nonlinear_std[k] = e.nonlinear[k] * std::sqrt(std::max(0.0, cov(p + k, p + k)));
+    for (int k = 0; k < q; ++k) {  // delta method: sigma_eta = eta sigma_lambda; d = ts lambda
+      const double sl = std::sqrt(std::max(0.0, cov(p + k, p + k)));
+      e.nonlinear_std[k] = k < q_model_ ? e.nonlinear[k] * sl : ts_ * sl;
+    }
     exid::Json& d = e.details;
     d["parameters"] = exid::estimators::parameterTable(e);
     d["estimator"] = kName;
@@ -317,6 +451,21 @@ class VarPro : public exid::Estimator {
     d["nonlinear_parameters"] = nl;
     d["evaluations"] = evals;
     d["rejected_singular_trials"] = rejected_singular_;
+    if (delay_) {
+      exid::Json td = exid::Json::object();
+      td["value_s"] = e.nonlinear[q - 1];
+      td["std_s"] = e.nonlinear_std[q - 1];
+      td["initial_s"] = delay0_;
+      td["max_s"] = delay_max_;
+      td["sample_period_s"] = ts_;
+      td["samples_without_rows_each_end"] = margin_;
+      td["rejected_trials_beyond_max"] = rejected_bound_;
+      td["convention"] =
+          "the measurement lags the positions by value_s: the rows of sample k are the model's "
+          "at t_k - value_s (cubic Hermite interpolation), the measurement as recorded; the "
+          "validation rows are compensated the same way";
+      d["measurement_delay"] = td;
+    }
     d["iterations"] = iterations;
     d["stop"] = stop;
     d["trace"] = trace;
@@ -332,11 +481,14 @@ class VarPro : public exid::Estimator {
         "one chunk of rows and the (p + L + 1)^2 factor per pass, one pass per evaluation";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     d["converged"] = converged;
-    if (!converged) {
-      exid::Json w = exid::Json::array();
-      w.push_back(exid::Json(fmt::format("varpro: {}", stop)));
-      d["warnings"] = w;
-    }
+    exid::Json w = exid::Json::array();
+    if (!converged) w.push_back(exid::Json(fmt::format("varpro: {}", stop)));
+    if (delay_ && std::abs(e.nonlinear[q - 1]) > 0.99 * delay_max_)
+      w.push_back(exid::Json(fmt::format(
+          "varpro: the fitted measurement delay {:g} s is at the bound measurement_delay_max_s = "
+          "{:g} s (raise it)",
+          e.nonlinear[q - 1], delay_max_)));
+    if (w.size() > 0) d["warnings"] = w;
     return e;
   }
 
@@ -352,8 +504,14 @@ class VarPro : public exid::Estimator {
   RowAccumulator::Method method_;
   exid::estimators::SolveOptions opt_;
   std::vector<exid::NonlinearParameter> nl_;
-  std::vector<int> keep_, owner_, base_col_;  // per kept derivative column
+  std::vector<int> keep_, owner_, base_col_;  // per derivative column (the delay's: keep -1)
   int rejected_singular_ = 0;                 // trial steps where the fit was singular
+  int rejected_bound_ = 0;                    // trial delays beyond measurement_delay_max_s
+  int q_model_ = 0;                           // the model's nonlinear parameters (first in nl_)
+  bool delay_ = false;
+  double delay0_ = 0.0, delay_max_ = 0.0;
+  double ts_ = 1.0;  // [s] the median sample period (the delay's lambda unit)
+  int margin_ = 0;   // samples at each end without rows (measurement_delay)
 };
 
 }  // namespace

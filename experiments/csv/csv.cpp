@@ -18,6 +18,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/delay.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/inspect.hpp"
@@ -71,6 +72,13 @@ class CsvExperiment : public exid::Experiment {
                      "longer than max_gap_ratio times the median step is still an error: nothing "
                      "is invented across it); 0: the stamps must be uniform",
                      0.0),
+        param_double("measurement_delay_s", 0.0, "s",
+                     "a known delay of the torque (and wrench) behind the positions: q, qd, qdd "
+                     "of sample k are read at t_k - measurement_delay_s (cubic Hermite "
+                     "interpolation, before any filter), the torque stays as recorded; the "
+                     "samples at the ends without positions then are dropped and counted "
+                     "(meta.measurement_delay); the dataset is then held in memory; 0: none "
+                     "(varpro can fit an unknown delay)"),
         param_doubles("wrench_scale", std::vector<double>{}, "",
                       "6 values multiplying fx fy fz mx my mz (a unit, a sign); empty: 1"),
         param_double("max_gap_ratio", 1.5, "",
@@ -144,9 +152,22 @@ class CsvExperiment : public exid::Experiment {
       resampled_from = K;
       d = exid::resampleUniform(d, rs_hz, "experiment 'csv': " + src->file());
     }
-    const int K_grid = d.size();  // samples entering the filter (after any resampling)
+    // A known measurement delay: the positions read at t - delay, the ends without them
+    // dropped (counted).
+    const double delay = P_.getDouble("measurement_delay_s");
+    int delay_front = 0, delay_back = 0;
+    if (delay != 0.0)
+      d = exid::compensateDelay(d, delay, "experiment 'csv': measurement_delay_s", &delay_front,
+                                &delay_back);
+    const int K_grid = d.size();  // samples entering the filter (after resampling, delay)
     const Preprocessed pp = preprocess(&d, src->file());
     d.meta = src->metaAfter(K_grid, resampled_from, rs_hz, pp, d.size());
+    if (delay != 0.0) {
+      exid::Json& td = d.meta["measurement_delay"];
+      td["delay_s"] = delay;
+      td["dropped_samples_front"] = delay_front;
+      td["dropped_samples_back"] = delay_back;
+    }
     ctx.report(1.0, fmt::format("{} samples from {}", d.size(), src->file()));
     return d;
   }
@@ -156,7 +177,8 @@ class CsvExperiment : public exid::Experiment {
   /// differentiating filter need the whole segment at once: then the dataset is in memory.
   exid::Dataset stream(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* ref,
                        const exid::RunContext& ctx) override {
-    if (P_.getDouble("resample_hz") > 0.0 || P_.getDouble("differentiate_cutoff_hz") > 0.0)
+    if (P_.getDouble("resample_hz") > 0.0 || P_.getDouble("differentiate_cutoff_hz") > 0.0 ||
+        P_.getDouble("measurement_delay_s") != 0.0)
       return run(robot, ref, ctx);
     exid::check(P_.getInt("decimation") == 1 && !P_.getBool("filter_torque"),
                 "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");

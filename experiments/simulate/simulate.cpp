@@ -195,6 +195,10 @@ class SimulateExperiment : public exid::Experiment {
         param_double("duration_s", 0.0, "s",
                      "recorded duration; 0: one period (own reference) or the reference's duration",
                      0.0),
+        param_double("torque_delay_s", 0.0, "s",
+                     "the recorded torque lags the positions by this: tau recorded at t_k is the "
+                     "plant's torque at t_k - torque_delay_s (a second integration gives it); "
+                     "the samples without one are dropped and counted (meta.torque_delay)"),
         param_bool("wrench", false, "record the wrist wrench fx..mz (sensor frame)"),
         param_double("noise_q_rad", 0.0, "rad", "std of Gaussian noise on the recorded q", 0.0),
         param_double("noise_tau_Nm", 0.0, "N m", "std of Gaussian noise on the recorded tau", 0.0),
@@ -264,13 +268,21 @@ class SimulateExperiment : public exid::Experiment {
                       "{} of {} samples",
                       tr.recorded, N));
     }
-    addMeasurementNoise(tr.recorded, want_wrench, ctx.seed, &d);
+    exid::Json delay_meta;
+    if (const double delay = P_.getDouble("torque_delay_s"); delay != 0.0 && tr.recorded > 0) {
+      VectorXd x0(2 * n);
+      ref_->eval(t0, &qr, &qdr, &qddr);
+      x0 << qr, qdr;
+      delay_meta = delayTorque(delay, t0, x0, &d, &qd, &qdd);
+    }
+    addMeasurementNoise(d.size(), want_wrench, ctx.seed, &d);
     if (P_.getBool("output_qd_qdd")) {
       d.qd = std::move(qd);
       d.qdd = std::move(qdd);
     }
     d.source = fmt::format("simulate ({}, seed {})", robot->name, ctx.seed);
     describe(*robot, ctx.seed, integ, refmeta, dt, tr, &d.meta);
+    if (!delay_meta.isNull()) d.meta["torque_delay"] = delay_meta;
     d.meta["wall_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
@@ -588,6 +600,55 @@ class SimulateExperiment : public exid::Experiment {
                                     "samples of {} s",
                                     duration, dt));
     return N;
+  }
+
+  // The torque channel `delay` behind the positions: the torque recorded at t_k is the plant's
+  // at t_k - delay, from a second integration from the same start (x0 at t0) to those times.
+  // The samples whose t_k - delay lies outside [t0, t_last] have none: they are dropped from
+  // every signal and counted.
+  exid::Json delayTorque(double delay, double t0, const VectorXd& x0, exid::Dataset* d,
+                         MatrixXd* qd, MatrixXd* qdd) {
+    const int K = static_cast<int>(d->t.size());
+    const double t_last = d->t[K - 1];
+    int a = 0, b = K;
+    while (a < K && d->t[a] - delay < t0) ++a;
+    while (b > a && d->t[b - 1] - delay > t_last) --b;
+    exid::check(b - a >= 2, fmt::format("experiment 'simulate': torque_delay_s = {} s leaves {} "
+                                        "of {} samples",
+                                        delay, b - a, K));
+    Integrator integ(this, x0, t0, P_.getString("integrator"), P_.getDouble("rtol"),
+                     P_.getDouble("atol"), P_.getInt("max_steps"));
+    VectorXd x = x0, tau, acc;
+    double at = t0;
+    MatrixXd tau_d(b - a, n_);
+    for (int k = a; k < b; ++k) {
+      const double tk = d->t[k] - delay;
+      if (tk > at) {
+        integ.advance(tk, &x);
+        at = tk;
+      }
+      control(tk, x.head(n_), x.tail(n_), &tau, &acc);
+      tau_d.row(k - a) = tau.transpose();
+    }
+    auto keep = [&](MatrixXd* M) {
+      if (M->rows() == K) {
+        MatrixXd kept = M->middleRows(a, b - a);
+        M->swap(kept);
+      }
+    };
+    Eigen::VectorXd t = d->t.segment(a, b - a);
+    d->t.swap(t);
+    keep(&d->q);
+    keep(qd);
+    keep(qdd);
+    keep(&d->wrench);
+    d->tau = std::move(tau_d);
+    exid::Json m = exid::Json::object();
+    m["delay_s"] = delay;
+    m["dropped_samples_front"] = a;
+    m["dropped_samples_back"] = K - b;
+    m["convention"] = "tau recorded at t is the plant's torque at t - delay_s";
+    return m;
   }
 
   struct Tracking {

@@ -19,6 +19,7 @@
 #include <optional>
 #include <thread>
 
+#include "exid/delay.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
@@ -1140,6 +1141,10 @@ void StudyRun::identificationStage() {
         if (u < decl.size()) {
           p["unit"] = decl[u].unit;
           p["initial"] = decl[u].value;
+        } else if (const Json* en = est->details.find("nonlinear_parameters");
+                   en && en->isArray() && u < en->size()) {  // the estimator's own (a delay)
+          if (const Json* v = en->at(u).find("unit")) p["unit"] = *v;
+          if (const Json* v = en->at(u).find("initial")) p["initial"] = *v;
         }
         nl.push_back(p);
       }
@@ -1182,10 +1187,30 @@ void StudyRun::validationStage() {
         vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
     checkDataset(vd, *robot, model.get(), "validation", by_estimator);
     checkDatasetFinite(vd, "validation");
-    // (fitted nonlinear parameters: the held-out rows at the fitted values)
-    Rows rows = by_estimator                ? vest->validationRows(*model, vd, vctx)
-                : est->nonlinear.size() > 0 ? model->rowsAt(vd, est->nonlinear, nullptr, vctx)
-                                            : model->rows(vd, vctx);
+    // (fitted nonlinear parameters: the held-out rows at the fitted values; the model's own
+    // come first in est->nonlinear, then the estimator's, e.g. a delay)
+    // (an estimator that does not fit them, e.g. batch_ls, leaves est->nonlinear empty: rows()
+    // then uses the study's values)
+    const auto n_model = static_cast<Eigen::Index>(model->nonlinearParameters().size());
+    const bool fitted = n_model > 0 && est->nonlinear.size() >= n_model;
+    Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx)
+                : fitted     ? model->rowsAt(vd, est->nonlinear.head(n_model), nullptr, vctx)
+                             : model->rows(vd, vctx);
+    // A fitted measurement delay (varpro): the held-out rows are compensated by it as the fit's
+    // were (the model's rows read at t - delay), the samples without them dropped and counted.
+    Json delay_meta;
+    if (const Json* md = est->details.find("measurement_delay"); md && !by_estimator) {
+      const Json* dv = md->find("value_s");
+      check(dv && dv->isNumber(), "validation: the estimator's measurement_delay has no value_s");
+      const double d = dv->asDouble();
+      int front = 0, back = 0;
+      const Dataset times = vd.streamed() ? materialize(vd) : Dataset();
+      rows = delayedRows(rows, vd.streamed() ? times.t : vd.t, d, "validation", &front, &back);
+      delay_meta = Json::object();
+      delay_meta["delay_s"] = d;
+      delay_meta["samples_without_rows_front"] = front;
+      delay_meta["samples_without_rows_back"] = back;
+    }
     Eigen::VectorXd pred = rows.W * est->value;
     checkFinite(pred, "validation: the predicted measurement, row");
     Eigen::VectorXd err = rows.y - pred;
@@ -1197,6 +1222,7 @@ void StudyRun::validationStage() {
     V["type"] = va.type;
     V["samples"] = Json(va.samples);
     V["meta"] = vd.meta;
+    if (!delay_meta.isNull()) V["measurement_delay_compensation"] = delay_meta;
     V["rows_processing"] = by_estimator
                                ? fmt::format(
                                      "the estimator's: '{}' filtered, differentiated and "
