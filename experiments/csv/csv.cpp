@@ -107,6 +107,13 @@ class CsvExperiment : public exid::Experiment {
         param_path("torque_file", std::string(),
                    "a second CSV holding the torque (or current) columns, row-aligned with file "
                    "(same number of data rows); empty: file"),
+        param_path("payload_file", std::string(),
+                   "a second recording of the same robot carrying a known payload (the drive "
+                   "gains' reference, model differential's drive_gains), read with the same "
+                   "parameters and appended after the first (its times moved to follow them; "
+                   "meta.payload_part); empty: none"),
+        param_path("payload_torque_file", std::string(),
+                   "the payload part's torque_file (needed when torque_file is given)"),
         param_strings("tau_columns", std::vector<std::string>{},
                       "names of the n torque columns (or currents with torque_from: current), "
                       "instead of tau1..taun / <current_prefix>1..n"),
@@ -139,7 +146,70 @@ class CsvExperiment : public exid::Experiment {
 
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples*,
                     const exid::RunContext& ctx) override {
-    auto src = CsvStream::open(P_, robot, ctx);
+    const std::string pfile = P_.getString("payload_file"),
+                      ptfile = P_.getString("payload_torque_file");
+    exid::check(!pfile.empty() || ptfile.empty(),
+                "experiment 'csv': payload_torque_file is given without payload_file");
+    exid::check(pfile.empty() || P_.getString("torque_file").empty() || !ptfile.empty(),
+                "experiment 'csv': the torques come from torque_file: the payload part needs "
+                "its own, payload_torque_file");
+    exid::Dataset d = runPart(P_, robot, ctx);
+    if (pfile.empty()) return d;
+    exid::ParamSet P2 = P_;
+    P2.set("file", pfile);
+    P2.set("torque_file", ptfile);
+    return appendPayloadPart(std::move(d), runPart(P2, robot, ctx));
+  }
+
+  /// The recording with a known payload (payload_file) after the first: its time stamps moved
+  /// to follow the first part's by one median step (the signals are not joined: each part was
+  /// filtered alone), meta.payload_part describes it and meta.payload_part_from_t_s marks its
+  /// first sample for the models (differential's drive_gains).
+  static exid::Dataset appendPayloadPart(exid::Dataset a, const exid::Dataset& b) {
+    const int Ka = a.size(), Kb = b.size();
+    exid::check(Ka >= 2 && Kb >= 2,
+                fmt::format("experiment 'csv': {} samples without and {} with the payload (at "
+                            "least 2 each)",
+                            Ka, Kb));
+    std::vector<double> steps(static_cast<std::size_t>(Ka - 1));
+    for (int k = 1; k < Ka; ++k) steps[static_cast<std::size_t>(k - 1)] = a.t[k] - a.t[k - 1];
+    std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2),
+                     steps.end());
+    const double dt = steps[steps.size() / 2];
+    const double offset = a.t[Ka - 1] + dt - b.t[0];
+    Eigen::VectorXd t(Ka + Kb);
+    t << a.t, b.t.array() + offset;
+    a.t.swap(t);
+    auto stack = [&](Eigen::MatrixXd* x, const Eigen::MatrixXd& y, const char* what) {
+      exid::check(x->cols() == y.cols(),
+                  fmt::format("experiment 'csv': the payload part has {} {} columns, the first "
+                              "part {}",
+                              y.cols(), what, x->cols()));
+      if (x->cols() == 0) return;
+      Eigen::MatrixXd s(Ka + Kb, x->cols());
+      s << *x, y;
+      x->swap(s);
+    };
+    stack(&a.q, b.q, "q");
+    stack(&a.qd, b.qd, "qd");
+    stack(&a.qdd, b.qdd, "qdd");
+    stack(&a.tau, b.tau, "torque");
+    stack(&a.wrench, b.wrench, "wrench");
+    exid::Json part = exid::Json::object();
+    part["source"] = b.source;
+    part["samples"] = Kb;
+    part["from_t_s"] = a.t[Ka];
+    part["time_offset_s"] = offset;
+    part["meta"] = b.meta;
+    a.meta["payload_part"] = part;
+    a.meta["payload_part_from_t_s"] = a.t[Ka];
+    a.source += " + " + b.source;
+    return a;
+  }
+
+  exid::Dataset runPart(const exid::ParamSet& P, std::shared_ptr<const exid::RobotModel> robot,
+                        const exid::RunContext& ctx) const {
+    auto src = CsvStream::open(P, robot, ctx);
     exid::Dataset d;
     d.stream = src;
     d.source = src->file();
@@ -178,7 +248,7 @@ class CsvExperiment : public exid::Experiment {
   exid::Dataset stream(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* ref,
                        const exid::RunContext& ctx) override {
     if (P_.getDouble("resample_hz") > 0.0 || P_.getDouble("differentiate_cutoff_hz") > 0.0 ||
-        P_.getDouble("measurement_delay_s") != 0.0)
+        P_.getDouble("measurement_delay_s") != 0.0 || !P_.getString("payload_file").empty())
       return run(robot, ref, ctx);
     exid::check(P_.getInt("decimation") == 1 && !P_.getBool("filter_torque"),
                 "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");

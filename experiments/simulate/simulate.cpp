@@ -199,6 +199,10 @@ class SimulateExperiment : public exid::Experiment {
                      "the recorded torque lags the positions by this: tau recorded at t_k is the "
                      "plant's torque at t_k - torque_delay_s (a second integration gives it); "
                      "the samples without one are dropped and counted (meta.torque_delay)"),
+        param_doubles("recorded_torque_gain", std::vector<double>{}, "",
+                      "per joint (one value: every joint): the recorded torque is this times the "
+                      "plant's (a drive gain's error: differential's drive_gains identifies dK = "
+                      "1 / gain - 1); empty: 1"),
         param_bool("wrench", false, "record the wrist wrench fx..mz (sensor frame)"),
         param_double("noise_q_rad", 0.0, "rad", "std of Gaussian noise on the recorded q", 0.0),
         param_double("noise_tau_Nm", 0.0, "N m", "std of Gaussian noise on the recorded tau", 0.0),
@@ -275,6 +279,14 @@ class SimulateExperiment : public exid::Experiment {
       x0 << qr, qdr;
       delay_meta = delayTorque(delay, t0, x0, &d, &qd, &qdd);
     }
+    if (const std::vector<double> g = P_.getDoubles("recorded_torque_gain"); !g.empty()) {
+      exid::check(g.size() == 1 || static_cast<int>(g.size()) == n,
+                  fmt::format("experiment 'simulate': recorded_torque_gain: expected 1 or {} "
+                              "values, found {}",
+                              n, g.size()));
+      for (int j = 0; j < n; ++j)
+        d.tau.col(j) *= g[g.size() == 1 ? 0 : static_cast<std::size_t>(j)];
+    }
     addMeasurementNoise(d.size(), want_wrench, ctx.seed, &d);
     if (P_.getBool("output_qd_qdd")) {
       d.qd = std::move(qd);
@@ -283,6 +295,8 @@ class SimulateExperiment : public exid::Experiment {
     d.source = fmt::format("simulate ({}, seed {})", robot->name, ctx.seed);
     describe(*robot, ctx.seed, integ, refmeta, dt, tr, &d.meta);
     if (!delay_meta.isNull()) d.meta["torque_delay"] = delay_meta;
+    if (const std::vector<double> g = P_.getDoubles("recorded_torque_gain"); !g.empty())
+      d.meta["recorded_torque_gain"] = exid::Json(g);
     d.meta["wall_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;

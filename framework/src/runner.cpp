@@ -1159,6 +1159,22 @@ void StudyRun::identificationStage() {
                       "the study's values ({}); the `varpro` estimator fits them",
                       cfg.estimator->type, names));
     }
+    // Drive gains' columns hold the recorded torque: an estimator other than gains_ls has
+    // errors in variables there (docs/estimators.md, "gains_ls").
+    if (cfg.estimator->type != "gains_ls") {
+      std::string gains;
+      for (const std::string& n : est->names)
+        if (n.size() > 2 && n.compare(0, 2, "dK") == 0 &&
+            n.find_first_not_of("0123456789", 2) == std::string::npos)
+          gains += (gains.empty() ? "" : ", ") + n;
+      if (!gains.empty())
+        warn(fmt::format(
+            "identification: the drive gains' columns ({}) hold the recorded torque: estimator "
+            "'{}' has errors in variables there, which biases the gains towards the recorded "
+            "scale (many standard deviations at 1 % torque noise); gains_ls fits them with the "
+            "torque in the measurement only",
+            gains, cfg.estimator->type));
+    }
     I["details"] = est->details;
     if (const Json* w = est->details.find("warnings"); w && w->isArray())
       for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());

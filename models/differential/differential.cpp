@@ -13,6 +13,12 @@
 //   Stribeck: Fs_j s_j exp(-(|qdm_j| / vs_j)^delta) (vs_j nonlinear, delta fixed).
 // The nonlinear parameters (eps_j, vs_j) take the study's values in rows(); the `varpro`
 // estimator fits them (ObservationModel::fullRowsAt gives the exact column derivatives).
+//
+// Drive gains (drive_gains, docs/models.md "Drive gains"): the true torque of drive j is
+// (1 + dK_j) times the recorded one, dK_j identified with the rest from a recording whose
+// second part carries a known payload phi (meta.payload_part_from_t_s, csv payload_file):
+//   tau_m,j - [T^T Yp phi]_j (payload part only) = Y_j pi - dK_j tau_m,j.
+// Without the payload part the scale of pi and the gains is not identifiable: refused.
 #include <fmt/format.h>
 
 #include <Eigen/Core>
@@ -25,6 +31,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/payload.hpp"
 #include "model_common.hpp"
 
 namespace {
@@ -40,7 +47,7 @@ class DifferentialModel : public exid::ObservationModel {
       "joint (paper eqns 1, 3); drive columns Ia, Fc, Fv, OFF optional";
 
   static std::vector<exid::ParamDecl> params() {
-    return {
+    std::vector<exid::ParamDecl> p = {
         exid::param_ints("joints", std::vector<std::int64_t>{},
                          "1-based joints whose torque equations are used; empty: all (the paper's "
                          "eqn 3 uses joint 1 alone)",
@@ -76,7 +83,15 @@ class DifferentialModel : public exid::ObservationModel {
         exid::param_double("stribeck_exponent", 2.0, "",
                            "the exponent delta of the Stribeck curve (fixed, not fitted)", 0.5,
                            4.0),
+        exid::param_bool("drive_gains", false,
+                         "identify a gain correction dK_j per drive: the true torque is (1 + "
+                         "dK_j) times the recorded one; needs the data's payload part (csv "
+                         "payload_file) and that payload (payload_mass_kg, ...)"),
     };
+    for (const auto& d :
+         exid::payloadParams("known payload carried in the recording's payload part (drive_gains)"))
+      p.push_back(d);
+    return p;
   }
 
   explicit DifferentialModel(const exid::ParamSet& p)
@@ -113,6 +128,15 @@ class DifferentialModel : public exid::ObservationModel {
                   fmt::format("model 'differential': stribeck_velocity_rad_s: {} is not a "
                               "positive velocity",
                               v));
+    gains_ = p.getBool("drive_gains");
+    const exid::Payload load = exid::Payload::fromParams(p);
+    exid::check(!gains_ || load.mass > 0,
+                "model 'differential': drive_gains: true needs the known payload of the "
+                "recording's payload part (payload_mass_kg > 0, payload_com_m, "
+                "payload_inertia_kg_m2): it sets the scale of the gains");
+    exid::check(gains_ || load.mass == 0,
+                "model 'differential': payload_mass_kg is given but drive_gains is false");
+    phi_ = load.phi();
     coulomb_extra_ = cols_.coulomb && (asym_ || !eps_param_.empty());
     if (coulomb_extra_) cols_.coulomb = false;  // the Coulomb columns are the extra ones
   }
@@ -128,12 +152,13 @@ class DifferentialModel : public exid::ObservationModel {
       }
       if (stribeck_) names.push_back("Fs" + k);
     }
+    for (int j = 0; j < gainCount(); ++j) names.push_back("dK" + std::to_string(j + 1));
     return names;
   }
   Eigen::VectorXd fullNominal() const override {
     const Eigen::VectorXd v = exid::parameterValues(robot(), cols_);
     const int n = robot().dof(), E = extraPerJoint();
-    Eigen::VectorXd out(v.size() + E * n);
+    Eigen::VectorXd out = Eigen::VectorXd::Zero(v.size() + E * n + gainCount());  // dK: 0
     out.head(v.size()) = v;
     for (int j = 0; j < n; ++j) {
       const double fc = drive(j).coulomb;
@@ -180,18 +205,38 @@ class DifferentialModel : public exid::ObservationModel {
     const std::string who = "model 'differential'";
     requireTorqueSignals(d, n, who);
     exid::Rows r;
-    r.W = designAt(d.samples(), frictionAt(eta), dW);
+    r.W = designAt(d.samples(), frictionAt(eta), dW, false);
     const int K = d.size(), m = static_cast<int>(sel_.size());
     exid::models::sizeRows(&r, K, m);
-    for (int k = 0; k < K; ++k)
+    // drive gains: the payload part's samples (t >= its first) carry the known payload
+    double loaded_from = HUGE_VAL;
+    if (gains_) {
+      const exid::Json* from = d.meta.find("payload_part_from_t_s");
+      if (!from || !from->isNumber())
+        throw exid::Error(
+            fmt::format("{}: drive_gains needs a part of the recording with the known payload (csv "
+                        "payload_file; meta.payload_part_from_t_s): without it the gains and the "
+                        "parameters' scale are not identifiable ({})",
+                        who, d.source));
+      loaded_from = from->asDouble();
+    }
+    const int Pg = static_cast<int>(r.W.cols()) - gainCount();
+    auto data = gains_ ? exid::makeDynamicsData(robot()) : nullptr;
+    Eigen::VectorXd tp;
+    for (int k = 0; k < K; ++k) {
+      const bool loaded = gains_ && d.t[k] >= loaded_from;
+      if (loaded) tp = payloadTorque(*data, d.q.row(k), d.qd.row(k), d.qdd.row(k));
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];
         double y = d.tau(k, j);
         if (friction_ == "subtract") y -= frictionTorque(j, d.qd(k, j));
+        if (gains_) r.W(k * m + i, Pg + j) = -d.tau(k, j);
+        if (loaded) y -= tp[j];
         r.y[k * m + i] = y;
         r.equation[static_cast<std::size_t>(k * m + i)] = i;
         r.t[static_cast<std::size_t>(k * m + i)] = d.t[k];
       }
+    }
     r.equation_names = exid::models::torqueEquationNames(robot(), sel_);
     return r;
   }
@@ -228,12 +273,16 @@ class DifferentialModel : public exid::ObservationModel {
 
   // Full design rows at the friction f; dW (optional): the derivatives of the columns the
   // nonlinear parameters move, in nonlinearParameters() order.
-  Eigen::MatrixXd designAt(const exid::Samples& s, const Friction& f, Eigen::MatrixXd* dW) const {
+  // With drive gains and gain_design, the dK columns are those of a design (no measurement):
+  // minus the nominal robot's torque, with the known payload on every other sample (the
+  // identifiable space of a recording with and without it); else zero (fullRowsAt fills them).
+  Eigen::MatrixXd designAt(const exid::Samples& s, const Friction& f, Eigen::MatrixXd* dW,
+                           bool gain_design = true) const {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     exid::models::requireSamples(s, n, true, "model 'differential'");
     const int P0 = exid::numParameters(R, cols_), E = extraPerJoint();
-    const int P = P0 + E * n;
+    const int P = P0 + E * n + gainCount();
     // One sample's rows are a block of m consecutive rows of W: each column receives m
     // contiguous numbers (cache friendly), and nothing is allocated per sample.
     Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, P);
@@ -249,7 +298,7 @@ class DifferentialModel : public exid::ObservationModel {
       if (all && E == 0) {
         // Written in place (a strided block of W): no per-sample copy.
         exid::actuatorRegressor(R, *data, cols_, q, qd, qdd,
-                                W.middleRows(static_cast<Eigen::Index>(k) * m, m));
+                                W.middleRows(static_cast<Eigen::Index>(k) * m, m).leftCols(P0));
       } else {
         exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
         for (int i = 0; i < m; ++i)
@@ -257,7 +306,45 @@ class DifferentialModel : public exid::ObservationModel {
       }
     }
     if (E > 0) extraColumns(s, f, &W, dW);
+    if (gains_) gainColumns(s, gain_design, &W);
     return W;
+  }
+
+  // The dK columns of a design (see designAt), or zeros.
+  void gainColumns(const exid::Samples& s, bool gain_design, Eigen::MatrixXd* W) const {
+    const int n = robot().dof(), K = s.size(), m = static_cast<int>(sel_.size());
+    const int Pg = static_cast<int>(W->cols()) - n;
+    W->rightCols(n).setZero();
+    if (!gain_design) return;
+    const Eigen::VectorXd nominal = fullNominal().head(Pg);
+    auto data = exid::makeDynamicsData(robot());
+    Eigen::VectorXd tp = Eigen::VectorXd::Zero(n);
+    for (int k = 0; k < K; ++k) {
+      if (k % 2 == 1)
+        tp = payloadTorque(*data, s.q.row(k), s.qd.row(k), s.qdd.row(k));
+      else
+        tp.setZero();
+      for (int i = 0; i < m; ++i) {
+        const int j = sel_[static_cast<std::size_t>(i)];
+        const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+        (*W)(row, Pg + j) = -(W->row(row).head(Pg).dot(nominal) + tp[j]);
+      }
+    }
+  }
+
+  // The known payload's torque at a sample, in the measured coordinates: T^T Yp phi.
+  Eigen::VectorXd payloadTorque(exid::DynamicsData& data,
+                                const Eigen::Ref<const Eigen::RowVectorXd>& qm,
+                                const Eigen::Ref<const Eigen::RowVectorXd>& qdm,
+                                const Eigen::Ref<const Eigen::RowVectorXd>& qddm) const {
+    const exid::RobotModel& R = robot();
+    Eigen::VectorXd q, qd, qdd;
+    exid::measuredToJoint(R, qm.transpose(), qdm.transpose(), qddm.transpose(), &q, &qd, &qdd);
+    Eigen::MatrixXd Yp(R.dof(), 10);
+    exid::payloadTorqueRegressor(R, data, q, qd, qdd, Yp);
+    const Eigen::VectorXd t = Yp * phi_;
+    if (R.hasTransmission()) return R.transmission.transpose() * t;
+    return t;
   }
 
   // The nonlinear friction columns (after the P0 drive columns) of W, and their derivatives
@@ -266,7 +353,7 @@ class DifferentialModel : public exid::ObservationModel {
                     Eigen::MatrixXd* dW) const {
     const int n = robot().dof(), K = s.size(), m = static_cast<int>(sel_.size());
     const int P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();
-    W->rightCols(E * n).setZero();
+    W->middleCols(P0, E * n).setZero();
     // where each drive's derivative columns start in dW (nonlinearParameters() order)
     std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
     int L = 0;
@@ -311,9 +398,63 @@ class DifferentialModel : public exid::ObservationModel {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
-    exid::check(dW.rows() == static_cast<Eigen::Index>(K) * m && dW.cols() == P,
+    exid::check(dW.rows() == static_cast<Eigen::Index>(K) * m && dW.cols() == P + gainCount(),
                 fmt::format("model 'differential': fullDesignVjp: dW is {} x {} (expected {} x {})",
-                            dW.rows(), dW.cols(), K * m, P));
+                            dW.rows(), dW.cols(), K * m, P + gainCount()));
+    if (gains_) {
+      // the dK columns -(W_row nominal + [odd k] T^T Yp phi): their part of the gradient goes
+      // through the other columns (times the nominal values) and the payload's torque
+      Eigen::MatrixXd dWe = dW.leftCols(P);
+      const Eigen::VectorXd nominal = fullNominal().head(P);
+      for (int k = 0; k < K; ++k)
+        for (int i = 0; i < m; ++i) {
+          const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+          dWe.row(row) -= dW(row, P + sel_[static_cast<std::size_t>(i)]) * nominal.transpose();
+        }
+      designVjpNoGains(s, dWe, grad);
+      payloadTorqueVjp(s, dW, P, grad);
+      return;
+    }
+    designVjpNoGains(s, dW, grad);
+  }
+
+  // The gradient of sum_k,j c_kj [T^T Yp phi]_j over the odd samples, c = -dW's dK columns,
+  // added to grad.
+  void payloadTorqueVjp(const exid::Samples& s, const Eigen::MatrixXd& dW, int P,
+                        exid::Samples* grad) const {
+    const exid::RobotModel& R = robot();
+    const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
+    auto data = exid::makeDynamicsData(R);
+    Eigen::MatrixXd Gm(n, 10), G(n, 10);
+    Eigen::VectorXd q, qd, qdd, gq, gqd, gqdd;
+    for (int k = 1; k < K; k += 2) {
+      exid::measuredToJoint(R, s.q.row(k).transpose(), s.qd.row(k).transpose(),
+                            s.qdd.row(k).transpose(), &q, &qd, &qdd);
+      Gm.setZero();
+      for (int i = 0; i < m; ++i) {
+        const int j = sel_[static_cast<std::size_t>(i)];
+        Gm.row(j) -= dW(static_cast<Eigen::Index>(k) * m + i, P + j) * phi_.transpose();
+      }
+      if (R.hasTransmission())
+        G.noalias() = R.transmission * Gm;
+      else
+        G = Gm;
+      exid::payloadTorqueRegressorVjp(R, *data, q, qd, qdd, G, &gq, &gqd, &gqdd);
+      exid::models::jointGradToMeasured(R, &gq);
+      exid::models::jointGradToMeasured(R, &gqd);
+      exid::models::jointGradToMeasured(R, &gqdd);
+      grad->q.row(k) += gq.transpose();
+      grad->qd.row(k) += gqd.transpose();
+      grad->qdd.row(k) += gqdd.transpose();
+    }
+  }
+
+  // fullDesignVjp of every column but the dK ones (dW: K m x P).
+  void designVjpNoGains(const exid::Samples& s, const Eigen::MatrixXd& dW,
+                        exid::Samples* grad) const {
+    const exid::RobotModel& R = robot();
+    const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
+    const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
     exid::models::zeroGrad(s, grad);
     Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, P0);
     Eigen::VectorXd gq, gqd, gqdd;
@@ -391,6 +532,15 @@ class DifferentialModel : public exid::ObservationModel {
       f["nonlinear_parameters"] = nl;
       j["nonlinear_friction"] = f;
     }
+    if (gains_) {
+      exid::Json g = exid::Json::object();
+      g["equation"] =
+          "(1 + dK_j) tau_m,j = Y_j pi + [T^T Yp phi]_j (the payload part only): rows tau_m,j - "
+          "[T^T Yp phi]_j = Y_j pi - dK_j tau_m,j";
+      g["payload_phi"] = exid::Json(std::vector<double>(phi_.data(), phi_.data() + 10));
+      g["design"] = "dK columns: minus the nominal torque, the payload on every other sample";
+      j["drive_gains"] = g;
+    }
     j["rows_per_sample"] = static_cast<int>(sel_.size());
     return j;
   }
@@ -447,7 +597,9 @@ class DifferentialModel : public exid::ObservationModel {
   std::string friction_;
   exid::DriveColumns cols_;
   std::vector<int> sel_;
-  bool asym_ = false, stribeck_ = false, coulomb_extra_ = false;
+  bool asym_ = false, stribeck_ = false, coulomb_extra_ = false, gains_ = false;
+  Eigen::Matrix<double, 10, 1> phi_ = Eigen::Matrix<double, 10, 1>::Zero();  // drive_gains' payload
+  int gainCount() const { return gains_ ? robot().dof() : 0; }
   std::vector<double> eps_param_, vs_param_;
   double delta_ = 2.0;
 };

@@ -1,0 +1,237 @@
+// Drive gains (`differential`'s drive_gains): the true torque of each drive is (1 + dK_j) times
+// the recorded one. From a recording in two parts, the second with a known payload, the gains
+// and the base parameters are recovered (noise-free: to 1e-6; noisy: within their reported
+// standard deviations); without the payload part the scale is not identifiable and the model
+// says so; the design's derivative is exact; a study reads the two parts through csv's
+// payload_file.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <random>
+
+#include "exid/error.hpp"
+#include "exid/json.hpp"
+#include "exid_cli.hpp"
+#include "model_test_util.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::vector<double> kGain = {0.9, 1.1, 1.05, 0.95, 1.2, 0.8};  // recorded / true
+constexpr const char* kPayload =
+    "payload_mass_kg: 2.5, payload_com_m: [0.01, -0.02, 0.08], "
+    "payload_inertia_kg_m2: [0.02, 0.001, 0, 0.03, -0.002, 0.015]";
+std::string model() { return fmt::format("{{offset: true, drive_gains: true, {}}}", kPayload); }
+
+// Part one without the payload, part two with it, both recorded through the gains; the second
+// part's time follows the first's (as csv's payload_file does).
+exid::Dataset twoParts(const std::shared_ptr<const exid::RobotModel>& r, double noise_rel,
+                       std::uint64_t seed) {
+  const std::string gains = fmt::format("[{}]", fmt::join(kGain, ", "));
+  exid::Dataset a = mtest::simulate(
+      r, fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}}}", gains),
+      3);
+  const exid::Dataset b = mtest::simulate(
+      r,
+      fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}, {}}}", gains,
+                  kPayload),
+      4);
+  const int Ka = a.size(), Kb = b.size();
+  const double from = a.t[Ka - 1] + 0.005;
+  Eigen::VectorXd t(Ka + Kb);
+  t << a.t, b.t.array() - b.t[0] + from;
+  a.t = t;
+  for (auto [x, y] : {std::pair{&a.q, &b.q}, {&a.qd, &b.qd}, {&a.qdd, &b.qdd}, {&a.tau, &b.tau}}) {
+    Eigen::MatrixXd s(Ka + Kb, x->cols());
+    s << *x, *y;
+    *x = s;
+  }
+  a.meta["payload_part_from_t_s"] = from;
+  // noise: noise_rel times each joint's rms recorded torque
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  if (noise_rel > 0)
+    for (Eigen::Index j = 0; j < a.tau.cols(); ++j) {
+      const double rms = a.tau.col(j).norm() / std::sqrt(static_cast<double>(a.tau.rows()));
+      for (Eigen::Index k = 0; k < a.tau.rows(); ++k) a.tau(k, j) += noise_rel * rms * nd(rng);
+    }
+  return a;
+}
+
+// dK_j = 1 / gain_j - 1, the rest the robot's nominal values (the plant's).
+Eigen::VectorXd truth(const exid::ObservationModel& m) {
+  Eigen::VectorXd full = m.fullNominal();
+  const std::vector<std::string> names = m.fullNames();
+  for (std::size_t i = 0; i < names.size(); ++i)
+    if (names[i].rfind("dK", 0) == 0)
+      full[static_cast<Eigen::Index>(i)] =
+          1.0 / kGain[static_cast<std::size_t>(std::stoi(names[i].substr(2)) - 1)] - 1.0;
+  return m.base().reduce(full);
+}
+
+TEST(DriveGains, RecoveredWithTheBaseParametersFromARecordingWithAKnownPayloadPart) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", model(), r);
+  const std::vector<std::string> names = m->base().names;
+  int gains = 0;
+  for (const auto& n : names) gains += n.rfind("dK", 0) == 0;
+  EXPECT_EQ(gains, 6);  // every gain is a base parameter
+  const exid::Dataset d = twoParts(r, 0.0, 1);
+  const Eigen::VectorXd want = truth(*m);
+  for (const char* est : {"gains_ls", "batch_ls"}) {
+    auto b = exid_test::create<exid::Estimator>(est, "{}");
+    const exid::Estimate e = b->estimate(*m, d, nullptr, mtest::context());
+    double worst_gain = 0, worst = 0;
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      const auto k = static_cast<Eigen::Index>(i);
+      const double err = std::abs(e.value[k] - want[k]) / std::max(1.0, std::abs(want[k]));
+      worst = std::max(worst, err);
+      if (names[i].rfind("dK", 0) == 0) worst_gain = std::max(worst_gain, err);
+    }
+    std::printf("[drive gains] noise free, %s: gains %.2e, every base parameter %.2e (relative)\n",
+                est, worst_gain, worst);
+    EXPECT_LT(worst_gain, 1e-6) << est;
+    EXPECT_LT(worst, 1e-6) << est;
+  }
+}
+
+// gains_ls keeps the recorded torque in the measurement (tau = g (w theta + p)): its estimates
+// are unbiased and within their reported standard deviations. batch_ls on the same rows has the
+// torque in a column too (errors in variables): at 1 % noise every gain is off by many sigma.
+TEST(DriveGains, NoisyEstimatesLieWithinTheirReportedStandardDeviations) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", model(), r);
+  const Eigen::VectorXd want = truth(*m);
+  const std::vector<std::string> names = m->base().names;
+  int within2 = 0, count = 0, ls_within2 = 0;
+  double z2 = 0;
+  for (int seed = 1; seed <= 16; ++seed) {
+    const exid::Dataset d = twoParts(r, 0.01, static_cast<std::uint64_t>(seed));
+    auto g = exid_test::create<exid::Estimator>("gains_ls", "{}");
+    const exid::Estimate e = g->estimate(*m, d, nullptr, mtest::context());
+    auto b = exid_test::create<exid::Estimator>("batch_ls", "{}");
+    const exid::Estimate eb = b->estimate(*m, d, nullptr, mtest::context());
+    for (std::size_t i = 0; i < names.size(); ++i) {
+      if (names[i].rfind("dK", 0) != 0) continue;
+      const auto k = static_cast<Eigen::Index>(i);
+      const double z = (e.value[k] - want[k]) / e.std[k];
+      ls_within2 += std::abs((eb.value[k] - want[k]) / eb.std[k]) < 2.0;
+      z2 += z * z;
+      within2 += std::abs(z) < 2.0;
+      ++count;
+    }
+  }
+  const double mean_z2 = z2 / count;
+  std::printf(
+      "[drive gains] noisy: gains_ls %d of %d within 2 sigma, mean z^2 = %.2f; batch_ls %d\n",
+      within2, count, mean_z2, ls_within2);
+  EXPECT_LT(ls_within2, count / 2);  // (why gains_ls exists)
+  EXPECT_GE(within2, static_cast<int>(0.8 * count));
+  EXPECT_GT(mean_z2, 0.3);
+  EXPECT_LT(mean_z2, 2.5);
+}
+
+TEST(DriveGains, WithoutTheKnownPayloadTheScaleIsRefused) {
+  auto r = mtest::robot("puma560");
+  try {
+    (void)mtest::model("differential", "{drive_gains: true}", r);
+    ADD_FAILURE() << "drive_gains without a payload was accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("payload_mass_kg"), std::string::npos) << e.what();
+  }
+  auto m = mtest::model("differential", model(), r);
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 1, sample_period_s: 0.01}");
+  try {
+    (void)m->rows(d, mtest::context());
+    ADD_FAILURE() << "a recording without its payload part was accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("payload_file"), std::string::npos) << e.what();
+  }
+}
+
+TEST(DriveGains, TheDesignsDerivativeEqualsCentralDifferences) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", model(), r);
+  const exid::Samples s = mtest::randomSamples(*r, 4, 0.01, 9);
+  const double err = mtest::vjpError(*m, s, true);
+  std::printf("[drive gains] design VJP against central differences: %.2e\n", err);
+  EXPECT_LT(err, 1e-6);
+}
+
+// End to end: two CSV recordings, the second with the payload, read by csv's payload_file.
+TEST(DriveGains, AStudyReadsThePayloadPartFromItsOwnFile) {
+  auto r = mtest::robot("puma560");
+  const exid::Dataset d = twoParts(r, 0.0, 1);
+  const double from = d.meta.find("payload_part_from_t_s")->asDouble();
+  const fs::path dir = exid_cli::freshTempDir("exid_gains_", "study");
+  std::ofstream fa(dir / "free.csv"), fb(dir / "loaded.csv");
+  for (std::ofstream* f : {&fa, &fb}) {
+    *f << "t";
+    for (const char* g : {"q", "qd", "qdd", "tau"})
+      for (int j = 1; j <= r->dof(); ++j) *f << "," << g << j;
+    *f << "\n";
+  }
+  for (int k = 0; k < d.size(); ++k) {
+    std::ofstream& f = d.t[k] < from ? fa : fb;
+    f << fmt::format("{:.17g}", d.t[k] - (d.t[k] < from ? 0.0 : from - 0.7));  // own clock
+    for (const Eigen::MatrixXd* M : {&d.q, &d.qd, &d.qdd, &d.tau})
+      for (int j = 0; j < r->dof(); ++j) f << fmt::format(",{:.17g}", (*M)(k, j));
+    f << "\n";
+  }
+  fa.close();
+  fb.close();
+  std::ofstream(dir / "gains.yaml")
+      << "name: gains\nrobot: {type: puma560}\n"
+      << "model: {type: differential, params: " << model() << "}\n"
+      << "experiment: {type: csv, params: {file: free.csv, payload_file: loaded.csv}}\n"
+      << "estimator: {type: gains_ls}\n"
+      << "report: {type: standard, params: {plots: false}}\n";
+  const auto res = exid_cli::runExid(
+      fmt::format("-q run {} --out {}", (dir / "gains.yaml").string(), (dir / "out").string()));
+  ASSERT_EQ(res.code, 0) << res.out;
+  const exid::Json S = exid::Json::parse(exid_cli::slurp(dir / "out" / "summary.json"));
+  const exid::Json* part = S.find("experiment")->find("meta")->find("payload_part");
+  ASSERT_NE(part, nullptr);
+  EXPECT_EQ(part->find("samples")->asInt(),
+            d.size() - static_cast<int>((d.t.array() < from).count()));
+  EXPECT_NEAR(part->find("from_t_s")->asDouble(), from, 1e-9);
+  const exid::Json& P = *S.find("identification")->find("parameters");
+  int found = 0;
+  for (std::size_t i = 0; i < P.size(); ++i) {
+    const std::string n = P.at(i).find("name")->asString();
+    if (n.rfind("dK", 0) != 0) continue;
+    const double want = 1.0 / kGain[static_cast<std::size_t>(n[2] - '1')] - 1.0;
+    EXPECT_NEAR(P.at(i).find("value")->asDouble(), want, 1e-6) << n;
+    ++found;
+  }
+  EXPECT_EQ(found, 6);
+  EXPECT_EQ(S.dump().find("gains_ls fits them"), std::string::npos);
+  // batch_ls on the same study: the errors in variables are said
+  std::ofstream(dir / "ls.yaml")
+      << "name: gains_ls_batch\nrobot: {type: puma560}\n"
+      << "model: {type: differential, params: " << model() << "}\n"
+      << "experiment: {type: csv, params: {file: free.csv, payload_file: loaded.csv}}\n"
+      << "estimator: {type: batch_ls}\n";
+  const auto ls = exid_cli::runExid(
+      fmt::format("-q run {} --out {}", (dir / "ls.yaml").string(), (dir / "ls").string()));
+  ASSERT_EQ(ls.code, 0) << ls.out;
+  EXPECT_NE(exid_cli::slurp(dir / "ls" / "summary.json").find("gains_ls fits them"),
+            std::string::npos);
+  // the payload part needs its own torque file when the torques come from one
+  std::ofstream(dir / "bad.yaml")
+      << "name: bad\nrobot: {type: puma560}\n"
+      << "model: {type: differential, params: " << model() << "}\n"
+      << "experiment: {type: csv, params: {file: free.csv, torque_file: free.csv, "
+         "payload_file: loaded.csv}}\n"
+      << "estimator: {type: batch_ls}\n";
+  const auto bad = exid_cli::runExid(
+      fmt::format("-q run {} --out {}", (dir / "bad.yaml").string(), (dir / "bad").string()));
+  EXPECT_NE(bad.code, 0);
+  EXPECT_NE(bad.out.find("payload_torque_file"), std::string::npos) << bad.out;
+}
+
+}  // namespace
