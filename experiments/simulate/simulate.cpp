@@ -749,6 +749,13 @@ class SimulateExperiment : public exid::Experiment {
     m["controller"] = P_.getString("controller");
     m["kp"] = kp_;
     m["kd"] = kd_;
+    if (!computed_torque_) {  // the gains the PD applies: D0 kp, D0 kd (the `iv` estimator's)
+      exid::Json g = exid::Json::object();
+      const VectorXd kp = D0_ * kp_, kd = D0_ * kd_;
+      g["kp_Nm_per_rad"] = exid::Json(std::vector<double>(kp.data(), kp.data() + kp.size()));
+      g["kd_Nm_s_per_rad"] = exid::Json(std::vector<double>(kd.data(), kd.data() + kd.size()));
+      m["pd_gains"] = g;
+    }
     m["drive_terms"] = drive_terms_;
     m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
     if (!fcn_.empty()) m["coulomb_negative_Nm"] = exid::Json(fcn_);
