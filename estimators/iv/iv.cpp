@@ -34,6 +34,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/estimators/closed_loop.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
@@ -43,37 +44,6 @@ namespace {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 using exid::estimators::RowAccumulator;
-
-// The commanded trajectory: quintic Hermite interpolation of (q, qd, qdd) samples in measured
-// coordinates (the `simulate` experiment's interpolation of a sampled reference).
-struct Reference {
-  VectorXd t;
-  MatrixXd q, qd, qdd;  // K x n
-  void eval(double at, VectorXd* qo, VectorXd* qdo, VectorXd* qddo) const {
-    const int K = static_cast<int>(t.size()), n = static_cast<int>(q.cols());
-    int i = static_cast<int>(std::upper_bound(t.data(), t.data() + K, at) - t.data()) - 1;
-    i = std::max(0, std::min(i, K - 2));
-    const double h = t[i + 1] - t[i], x = (at - t[i]) / h;
-    qo->resize(n);
-    qdo->resize(n);
-    qddo->resize(n);
-    for (int j = 0; j < n; ++j) {
-      const double p0 = q(i, j), v0 = qd(i, j), a0 = qdd(i, j);
-      const double p1 = q(i + 1, j), v1 = qd(i + 1, j), a1 = qdd(i + 1, j);
-      const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
-                   A = (a1 - a0) * h * h;
-      const double c[6] = {p0,
-                           v0 * h,
-                           0.5 * a0 * h * h,
-                           10 * P - 4 * V + 0.5 * A,
-                           -15 * P + 7 * V - A,
-                           6 * P - 3 * V + 0.5 * A};
-      (*qo)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
-      (*qdo)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
-      (*qddo)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
-    }
-  }
-};
 
 class Iv : public exid::Estimator {
  public:
@@ -85,46 +55,33 @@ class Iv : public exid::Estimator {
       "and feed-forward; CVODE), iterated from least squares (IDIM-IV, BIRDy)";
 
   static std::vector<exid::ParamDecl> params() {
-    return {
-        exid::param_path("reference_file", std::string(),
-                         "the commanded trajectory of the recording: a CSV with t, q1..qn, "
-                         "qd1..qdn, qdd1..qddn in joint coordinates (as `exid excite --export` "
-                         "writes trajectory.csv); required"),
-        exid::param_doubles("kp_Nm_per_rad", std::vector<double>{}, "N m/rad",
-                            "the controller's position gain per joint (one value: every joint; "
-                            "required)"),
-        exid::param_doubles("kd_Nm_s_per_rad", std::vector<double>{}, "N m s/rad",
-                            "the controller's velocity gain per joint (one value: every joint; "
-                            "required)"),
-        exid::param_string("feedforward", std::string("nominal"),
-                           "nominal: the controller adds the robot description's torque of the "
-                           "reference (all drive terms); none: PD alone",
-                           {"nominal", "none"}),
-        exid::param_int("max_iterations", 20, "IV iterations at most", 1, 1000),
-        exid::param_double("tolerance", 1e-6, "",
-                           "stop when theta changes by less than this relative to its norm", 0.0,
-                           1.0, true),
-        exid::param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0, true),
-        exid::param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0,
-                           true),
-        exid::param_int("max_steps", 20000, "CVODE steps between two samples at most", 1, 1e9),
-    };
+    std::vector<exid::ParamDecl> p = exid::estimators::ClosedLoop::params();
+    for (auto& d : std::vector<exid::ParamDecl>{
+             exid::param_int("max_iterations", 20, "IV iterations at most", 1, 1000),
+             exid::param_double("tolerance", 1e-6, "",
+                                "stop when theta changes by less than this relative to its norm",
+                                0.0, 1.0, true),
+             exid::param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0,
+                                true),
+             exid::param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0,
+                                true),
+             exid::param_int("max_steps", 20000, "CVODE steps between two samples at most", 1, 1e9),
+         })
+      p.push_back(d);
+    return p;
   }
 
   explicit Iv(const exid::ParamSet& p)
-      : file_(p.getString("reference_file")),
-        kp_(p.getDoubles("kp_Nm_per_rad")),
-        kd_(p.getDoubles("kd_Nm_s_per_rad")),
-        ff_(p.getString("feedforward") == "nominal"),
+      : P_(p),
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         tol_(p.getDouble("tolerance")),
         rtol_(p.getDouble("rtol")),
         atol_(p.getDouble("atol")),
         max_steps_(p.getInt("max_steps")) {
-    exid::check(!file_.empty(),
+    exid::check(!p.getString("reference_file").empty(),
                 "iv: reference_file is required (the trajectory the robot was commanded to "
                 "follow: the instrument is simulated from it)");
-    exid::check(!kp_.empty() && !kd_.empty(),
+    exid::check(!p.getDoubles("kp_Nm_per_rad").empty() && !p.getDoubles("kd_Nm_s_per_rad").empty(),
                 "iv: kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
                 "simulated closed loop must be the robot's; exid does not guess them)");
   }
@@ -136,7 +93,7 @@ class Iv : public exid::Estimator {
     const auto t0 = std::chrono::steady_clock::now();
     exid::check(prior == nullptr, "iv: a prior is not supported");
     const exid::Dataset data = exid::materialize(data_in);
-    setUp(model, data, ctx);
+    loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
     const int p = model.numBase();
     const exid::Rows R = model.rows(data, ctx);
     exid::estimators::checkRows(R, p, kName, 0);
@@ -152,7 +109,7 @@ class Iv : public exid::Estimator {
     std::string stop;
     for (it = 1; it <= max_iter_; ++it) {
       if (ctx.shouldStop()) throw exid::Error("iv: stopped");
-      const exid::Dataset sim = simulate(model, theta, data);
+      const exid::Dataset sim = simulate(theta, data);
       const exid::Rows Z = model.rows(sim, ctx);
       exid::check(Z.y.size() == m, "iv: the simulated rows differ in number from the recording's");
       ZtW = Z.W.transpose() * R.W;
@@ -181,122 +138,18 @@ class Iv : public exid::Estimator {
   }
 
  private:
-  exid::Samples oneSample() const {
-    const int n = robot_->dof();
-    exid::Samples one;
-    one.t = VectorXd::Zero(1);
-    one.q = MatrixXd::Zero(1, n);
-    one.qd = MatrixXd::Zero(1, n);
-    one.qdd = MatrixXd::Zero(1, n);
-    return one;
-  }
-
-  void setUp(const exid::ObservationModel& model, const exid::Dataset& data,
-             const exid::RunContext& ctx) {
-    robot_ = model.robotPtr();
-    const int n = robot_->dof();
-    exid::check(model.specs().per_sample,
-                fmt::format("iv: model '{}' must give rows per sample", model.pluginName()));
-    // one row per joint, in joint order (the design's rows are the joint torques)
-    exid::check(model.design(oneSample()).rows() == n,
-                fmt::format("iv: model '{}' must give one row per joint of all {} joints (the "
-                            "simulation needs every joint's torque; e.g. differential with every "
-                            "joint)",
-                            model.pluginName(), n));
-    auto perJoint = [&](const std::vector<double>& v, const char* name) {
-      exid::check(v.size() == 1 || static_cast<int>(v.size()) == n,
-                  fmt::format("iv: {}: expected 1 or {} values, found {}", name, n, v.size()));
-      VectorXd out(n);
-      for (int j = 0; j < n; ++j) out[j] = v[v.size() == 1 ? 0 : static_cast<std::size_t>(j)];
-      return out;
-    };
-    Kp_ = perJoint(kp_, "kp_Nm_per_rad");
-    Kd_ = perJoint(kd_, "kd_Nm_s_per_rad");
-    std::filesystem::path f = file_;
-    if (f.is_relative() && !ctx.study_dir.empty()) f = ctx.study_dir / f;
-    const exid::CsvTable T = exid::readCsv(f);
-    exid::check(T.has("t"), fmt::format("iv: {}: no column 't'", f.string()));
-    ref_.t = T.column("t");
-    const Eigen::Index K = ref_.t.size();
-    exid::check(K >= 2, fmt::format("iv: {}: {} samples (at least 2)", f.string(), K));
-    MatrixXd q(K, n), qd(K, n), qdd(K, n);
-    for (int j = 0; j < n; ++j)
-      for (auto [pre, M] :
-           {std::pair<const char*, MatrixXd*>{"q", &q}, {"qd", &qd}, {"qdd", &qdd}}) {
-        const std::string c = fmt::format("{}{}", pre, j + 1);
-        exid::check(T.has(c), fmt::format("iv: {}: no column '{}' (expected t, q1..q{}, qd1..qd{}, "
-                                          "qdd1..qdd{})",
-                                          f.string(), c, n, n, n));
-        M->col(j) = T.column(c);
-      }
-    for (Eigen::Index k = 1; k < K; ++k)
-      exid::check(
-          ref_.t[k] > ref_.t[k - 1],
-          fmt::format("iv: {}: time not strictly increasing at data row {}", f.string(), k + 1));
-    ref_.q.resize(K, n);
-    ref_.qd.resize(K, n);
-    ref_.qdd.resize(K, n);
-    for (Eigen::Index k = 0; k < K; ++k) {
-      VectorXd a, b, c;
-      exid::jointToMeasured(*robot_, q.row(k).transpose(), qd.row(k).transpose(),
-                            qdd.row(k).transpose(), &a, &b, &c);
-      ref_.q.row(k) = a.transpose();
-      ref_.qd.row(k) = b.transpose();
-      ref_.qdd.row(k) = c.transpose();
-    }
-    exid::check(data.tFirst() >= ref_.t[0] && data.tLast() <= ref_.t[K - 1],
-                fmt::format("iv: the recording's times [{}, {}] s are not within the reference's "
-                            "[{}, {}] s ({}): the simulation is driven by the reference",
-                            data.tFirst(), data.tLast(), ref_.t[0], ref_.t[K - 1], f.string()));
-    dyn_ = exid::makeDynamicsData(*robot_);
-    ref_file_ = f.string();
-  }
-
-  // The closed loop of the model at theta, from the reference's start, sampled at the
-  // recording's times: q, qd, qdd (the recording's torque kept: rows need it).
   struct Loop {
     const Iv* self;
-    const exid::ObservationModel* model;
     const VectorXd* theta;
-    exid::Samples s;  // n + 1 samples for the model's rows at one state
     std::string error;
   };
 
-  // qdd of the closed loop at (t, q, qd); *tau the controller's torque.
-  VectorXd acceleration(Loop& L, double t, const VectorXd& q, const VectorXd& qd) const {
-    const int n = robot_->dof();
-    VectorXd qr, qdr, qddr;
-    ref_.eval(std::min(std::max(t, ref_.t[0]), ref_.t[ref_.t.size() - 1]), &qr, &qdr, &qddr);
-    VectorXd tau = Kp_.cwiseProduct(qr - q) + Kd_.cwiseProduct(qdr - qd);
-    if (ff_) {
-      exid::DriveColumns all{true, true, true, true};
-      tau += exid::actuatorTorque(*robot_, *dyn_, all, qr, qdr, qddr);
-    }
-    for (int k = 0; k <= n; ++k) {
-      L.s.q.row(k) = q.transpose();
-      L.s.qd.row(k) = qd.transpose();
-    }
-    L.s.qdd.setZero();
-    for (int i = 0; i < n; ++i) L.s.qdd(i + 1, i) = 1.0;
-    const VectorXd f = L.model->design(L.s) * (*L.theta);  // (n + 1) n torques
-    const VectorXd h = f.head(n);
-    MatrixXd M(n, n);
-    for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
-    Eigen::LDLT<MatrixXd> ldlt(0.5 * (M + M.transpose()));
-    if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all())
-      throw exid::Error(fmt::format(
-          "iv: the estimate's mass matrix is not positive definite at t = {} s (the estimate is "
-          "too far from a physical robot to simulate: try consistent_ls first)",
-          t));
-    return ldlt.solve(tau - h);
-  }
-
   static int rhs(double t, N_Vector y, N_Vector yd, void* user) {
     auto* L = static_cast<Loop*>(user);
-    const int n = L->self->robot_->dof();
+    const int n = L->self->loop_->dof();
     try {
       Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-      const VectorXd a = L->self->acceleration(*L, t, x.head(n), x.tail(n));
+      const VectorXd a = L->self->loop_->acceleration(*L->theta, t, x.head(n), x.tail(n));
       Eigen::Map<VectorXd> xd(NV_DATA_S(yd), 2 * n);
       xd.head(n) = x.tail(n);
       xd.tail(n) = a;
@@ -307,20 +160,15 @@ class Iv : public exid::Estimator {
     }
   }
 
-  exid::Dataset simulate(const exid::ObservationModel& model, const VectorXd& theta,
-                         const exid::Dataset& data) const {
-    const int n = robot_->dof(), K = data.size();
-    Loop L{this, &model, &theta, {}, {}};
-    L.s.t = VectorXd::Zero(n + 1);
-    L.s.q.resize(n + 1, n);
-    L.s.qd.resize(n + 1, n);
-    L.s.qdd.resize(n + 1, n);
+  exid::Dataset simulate(const VectorXd& theta, const exid::Dataset& data) const {
+    const int n = loop_->dof(), K = data.size();
+    Loop L{this, &theta, {}};
     SUNContext sctx = nullptr;
     exid::check(SUNContext_Create(nullptr, &sctx) == 0, "iv: SUNContext_Create failed");
     N_Vector y = N_VNew_Serial(2 * n, sctx);
-    const double t0 = ref_.t[0];
+    const double t0 = loop_->reference().t0();
     VectorXd qr, qdr, qddr;
-    ref_.eval(t0, &qr, &qdr, &qddr);
+    loop_->reference().eval(t0, &qr, &qdr, &qddr);
     for (int j = 0; j < n; ++j) {
       NV_Ith_S(y, j) = qr[j];
       NV_Ith_S(y, n + j) = qdr[j];
@@ -367,7 +215,7 @@ class Iv : public exid::Estimator {
         Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
         out.q.row(k) = x.head(n).transpose();
         out.qd.row(k) = x.tail(n).transpose();
-        out.qdd.row(k) = acceleration(L, tk, x.head(n), x.tail(n)).transpose();
+        out.qdd.row(k) = loop_->acceleration(theta, tk, x.head(n), x.tail(n)).transpose();
       }
     } catch (...) {
       cleanup();
@@ -394,7 +242,7 @@ class Iv : public exid::Estimator {
     // rows of one sample and larger on some joints, so neither is assumed away.
     const MatrixXd A = ZtW.fullPivLu().inverse();
     const VectorXd res = R.y - R.W * theta;
-    const int per = static_cast<int>(model.design(oneSample()).rows());
+    const int per = loop_->dof();
     MatrixXd S = MatrixXd::Zero(p, p);
     for (long b = 0; b < m; b += per) {
       const VectorXd g = Z.middleRows(b, per).transpose() * res.segment(b, per);
@@ -422,9 +270,7 @@ class Iv : public exid::Estimator {
         "(Z^T W)^-1 (sum_k g_k g_k^T) (Z^T W)^-T m / (m - p), g_k = Z_k^T (y_k - W_k theta) over "
         "the rows of sample k (robust to noise shared by a sample's rows and unequal per "
         "joint)";
-    d["reference_file"] = ref_file_;
-    d["controller"] = fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd)",
-                                  ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "");
+    d["controller"] = loop_->describe();
     d["iterations"] = iterations;
     d["trace"] = trace;
     d["stop"] = stop;
@@ -439,16 +285,11 @@ class Iv : public exid::Estimator {
     return e;
   }
 
-  std::string file_, ref_file_;
-  std::vector<double> kp_, kd_;
-  bool ff_;
+  exid::ParamSet P_;
   int max_iter_;
   double tol_, rtol_, atol_;
   std::int64_t max_steps_;
-  std::shared_ptr<const exid::RobotModel> robot_;
-  exid::DynamicsDataPtr dyn_;
-  VectorXd Kp_, Kd_;
-  Reference ref_;
+  std::unique_ptr<exid::estimators::ClosedLoop> loop_;
 };
 
 }  // namespace

@@ -1,0 +1,72 @@
+// exid — the closed loop of a robot described by a model's rows at estimated base parameters,
+// for the estimators that simulate it (`iv`, `didim`): the commanded trajectory read from a
+// file, the PD + feed-forward controller, and the acceleration from the model's own rows
+// (docs/estimators.md, "iv").
+#pragma once
+
+#include <Eigen/Core>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "exid/dynamics.hpp"
+#include "exid/interfaces.hpp"
+
+namespace exid::estimators {
+
+/// The commanded trajectory: quintic Hermite interpolation of (q, qd, qdd) samples in measured
+/// coordinates (the `simulate` experiment's interpolation of a sampled reference).
+struct Reference {
+  Eigen::VectorXd t;
+  Eigen::MatrixXd q, qd, qdd;  // K x n
+  /// At time `at` (clamped to the samples' span).
+  void eval(double at, Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd) const;
+  double t0() const { return t[0]; }
+  double t1() const { return t[t.size() - 1]; }
+};
+
+/// A CSV of t, q1..qn, qd1..qdn, qdd1..qddn in joint coordinates (`exid excite --export`'s
+/// trajectory.csv), mapped to measured coordinates. `who` starts the messages.
+Reference readReference(const std::filesystem::path& file, const RobotModel& robot,
+                        const std::string& who);
+
+/// The closed loop tau_c = tau_ff(qr, qdr, qddr) + Kp (qr - q) + Kd (qdr - qd) of the robot
+/// whose torque is w(q, qd, qdd) theta (the model's design rows, one per joint, all joints):
+/// M e_i = w(q, qd, e_i) theta - w(q, qd, 0) theta, h = w(q, qd, 0) theta.
+class ClosedLoop {
+ public:
+  /// The controller and its inputs (parameters of the estimator `who`): reference_file,
+  /// kp_Nm_per_rad, kd_Nm_s_per_rad, feedforward. Checks the model (per sample, one row per
+  /// joint of every joint) and that the recording's times lie within the reference.
+  ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
+             const RunContext& ctx, const std::string& who);
+  /// The estimator parameters of the controller.
+  static std::vector<ParamDecl> params();
+
+  int dof() const { return n_; }
+  const Reference& reference() const { return ref_; }
+  std::string describe() const;
+  /// The controller's torque at (t, q, qd).
+  Eigen::VectorXd control(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
+  /// qdd of the loop at theta; *M (if not null) the mass matrix there. exid::Error when M is
+  /// not positive definite.
+  Eigen::VectorXd acceleration(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
+                               const Eigen::VectorXd& qd, Eigen::MatrixXd* M = nullptr) const;
+  const Eigen::VectorXd& kp() const { return Kp_; }
+  const Eigen::VectorXd& kd() const { return Kd_; }
+
+ private:
+  const ObservationModel* model_;
+  std::shared_ptr<const RobotModel> robot_;
+  int n_ = 0;
+  std::string who_;
+  Reference ref_;
+  std::string file_;
+  Eigen::VectorXd Kp_, Kd_;
+  bool ff_ = true;
+  DynamicsDataPtr dyn_;
+  mutable Samples s_;  // n + 1 samples: the rows at one state
+};
+
+}  // namespace exid::estimators

@@ -1,0 +1,183 @@
+// exid — the closed loop of a model at estimated parameters (exid/estimators/closed_loop.hpp).
+#include "exid/estimators/closed_loop.hpp"
+
+#include <fmt/format.h>
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+
+#include "exid/drive.hpp"
+#include "exid/error.hpp"
+#include "exid/io.hpp"
+
+namespace exid::estimators {
+
+using Eigen::MatrixXd;
+using Eigen::VectorXd;
+
+void Reference::eval(double at, VectorXd* qo, VectorXd* qdo, VectorXd* qddo) const {
+  const int K = static_cast<int>(t.size()), n = static_cast<int>(q.cols());
+  at = std::min(std::max(at, t[0]), t[K - 1]);
+  int i = static_cast<int>(std::upper_bound(t.data(), t.data() + K, at) - t.data()) - 1;
+  i = std::max(0, std::min(i, K - 2));
+  const double h = t[i + 1] - t[i], x = (at - t[i]) / h;
+  qo->resize(n);
+  qdo->resize(n);
+  qddo->resize(n);
+  for (int j = 0; j < n; ++j) {
+    const double p0 = q(i, j), v0 = qd(i, j), a0 = qdd(i, j);
+    const double p1 = q(i + 1, j), v1 = qd(i + 1, j), a1 = qdd(i + 1, j);
+    const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
+                 A = (a1 - a0) * h * h;
+    const double c[6] = {p0,
+                         v0 * h,
+                         0.5 * a0 * h * h,
+                         10 * P - 4 * V + 0.5 * A,
+                         -15 * P + 7 * V - A,
+                         6 * P - 3 * V + 0.5 * A};
+    (*qo)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
+    (*qdo)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
+    (*qddo)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
+  }
+}
+
+Reference readReference(const std::filesystem::path& f, const RobotModel& robot,
+                        const std::string& who) {
+  const int n = robot.dof();
+  const CsvTable T = readCsv(f);
+  check(T.has("t"), fmt::format("{}: {}: no column 't'", who, f.string()));
+  Reference r;
+  r.t = T.column("t");
+  const Eigen::Index K = r.t.size();
+  check(K >= 2, fmt::format("{}: {}: {} samples (at least 2)", who, f.string(), K));
+  MatrixXd q(K, n), qd(K, n), qdd(K, n);
+  for (int j = 0; j < n; ++j)
+    for (auto [pre, M] : {std::pair<const char*, MatrixXd*>{"q", &q}, {"qd", &qd}, {"qdd", &qdd}}) {
+      const std::string c = fmt::format("{}{}", pre, j + 1);
+      check(T.has(c), fmt::format("{}: {}: no column '{}' (expected t, q1..q{}, qd1..qd{}, "
+                                  "qdd1..qdd{})",
+                                  who, f.string(), c, n, n, n));
+      M->col(j) = T.column(c);
+    }
+  for (Eigen::Index k = 1; k < K; ++k)
+    check(r.t[k] > r.t[k - 1], fmt::format("{}: {}: time not strictly increasing at data row {}",
+                                           who, f.string(), k + 1));
+  r.q.resize(K, n);
+  r.qd.resize(K, n);
+  r.qdd.resize(K, n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    VectorXd a, b, c;
+    jointToMeasured(robot, q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(), &a,
+                    &b, &c);
+    r.q.row(k) = a.transpose();
+    r.qd.row(k) = b.transpose();
+    r.qdd.row(k) = c.transpose();
+  }
+  return r;
+}
+
+std::vector<ParamDecl> ClosedLoop::params() {
+  return {
+      param_path("reference_file", std::string(),
+                 "the commanded trajectory of the recording: a CSV with t, q1..qn, qd1..qdn, "
+                 "qdd1..qddn in joint coordinates (as `exid excite --export` writes "
+                 "trajectory.csv); required"),
+      param_doubles("kp_Nm_per_rad", std::vector<double>{}, "N m/rad",
+                    "the controller's position gain per joint (one value: every joint; "
+                    "required)"),
+      param_doubles("kd_Nm_s_per_rad", std::vector<double>{}, "N m s/rad",
+                    "the controller's velocity gain per joint (one value: every joint; "
+                    "required)"),
+      param_string("feedforward", std::string("nominal"),
+                   "nominal: the controller adds the robot description's torque of the "
+                   "reference (all drive terms); none: PD alone",
+                   {"nominal", "none"}),
+  };
+}
+
+ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
+                       const RunContext& ctx, const std::string& who)
+    : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who) {
+  const std::string file = p.getString("reference_file");
+  const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),
+                            kd = p.getDoubles("kd_Nm_s_per_rad");
+  check(!file.empty(), who +
+                           ": reference_file is required (the trajectory the robot was "
+                           "commanded to follow: the loop is simulated from it)");
+  check(!kp.empty() && !kd.empty(),
+        who +
+            ": kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
+            "simulated closed loop must be the robot's; exid does not guess them)");
+  ff_ = p.getString("feedforward") == "nominal";
+  check(model.specs().per_sample,
+        fmt::format("{}: model '{}' must give rows per sample", who, model.pluginName()));
+  s_.t = VectorXd::Zero(n_ + 1);
+  s_.q = MatrixXd::Zero(n_ + 1, n_);
+  s_.qd = MatrixXd::Zero(n_ + 1, n_);
+  s_.qdd = MatrixXd::Zero(n_ + 1, n_);
+  check(model.design(s_).rows() == static_cast<Eigen::Index>(n_ + 1) * n_,
+        fmt::format("{}: model '{}' must give one row per joint of all {} joints (the "
+                    "simulation needs every joint's torque; e.g. differential with every joint)",
+                    who, model.pluginName(), n_));
+  auto perJoint = [&](const std::vector<double>& v, const char* name) {
+    check(v.size() == 1 || static_cast<int>(v.size()) == n_,
+          fmt::format("{}: {}: expected 1 or {} values, found {}", who, name, n_, v.size()));
+    VectorXd out(n_);
+    for (int j = 0; j < n_; ++j) out[j] = v[v.size() == 1 ? 0 : static_cast<std::size_t>(j)];
+    return out;
+  };
+  Kp_ = perJoint(kp, "kp_Nm_per_rad");
+  Kd_ = perJoint(kd, "kd_Nm_s_per_rad");
+  std::filesystem::path f = file;
+  if (f.is_relative() && !ctx.study_dir.empty()) f = ctx.study_dir / f;
+  ref_ = readReference(f, *robot_, who);
+  file_ = f.string();
+  check(data.tFirst() >= ref_.t0() && data.tLast() <= ref_.t1(),
+        fmt::format("{}: the recording's times [{}, {}] s are not within the reference's [{}, "
+                    "{}] s ({}): the simulation is driven by the reference",
+                    who, data.tFirst(), data.tLast(), ref_.t0(), ref_.t1(), file_));
+  dyn_ = makeDynamicsData(*robot_);
+}
+
+std::string ClosedLoop::describe() const {
+  return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",
+                     ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "", file_);
+}
+
+VectorXd ClosedLoop::control(double t, const VectorXd& q, const VectorXd& qd) const {
+  VectorXd qr, qdr, qddr;
+  ref_.eval(t, &qr, &qdr, &qddr);
+  VectorXd tau = Kp_.cwiseProduct(qr - q) + Kd_.cwiseProduct(qdr - qd);
+  if (ff_) {
+    DriveColumns all{true, true, true, true};
+    tau += actuatorTorque(*robot_, *dyn_, all, qr, qdr, qddr);
+  }
+  return tau;
+}
+
+VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorXd& q,
+                                  const VectorXd& qd, MatrixXd* Mo) const {
+  const int n = n_;
+  for (int k = 0; k <= n; ++k) {
+    s_.q.row(k) = q.transpose();
+    s_.qd.row(k) = qd.transpose();
+  }
+  s_.qdd.setZero();
+  for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
+  const VectorXd f = model_->design(s_) * theta;  // (n + 1) n torques
+  const VectorXd h = f.head(n);
+  MatrixXd M(n, n);
+  for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
+  M = 0.5 * (M + M.transpose());
+  Eigen::LDLT<MatrixXd> ldlt(M);
+  if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all())
+    throw Error(fmt::format(
+        "{}: the estimate's mass matrix is not positive definite at t = {} s (the estimate is "
+        "too far from a physical robot to simulate: try consistent_ls first)",
+        who_, t));
+  if (Mo) *Mo = M;
+  return ldlt.solve(control(t, q, qd) - h);
+}
+
+}  // namespace exid::estimators
