@@ -144,6 +144,9 @@ class Iv : public exid::Estimator {
     std::string error;
   };
 
+  // CVODE's own messages: the failure is reported once, as an exid::Error with the time.
+  static void silent(int, const char*, const char*, char*, void*) {}
+
   static int rhs(double t, N_Vector y, N_Vector yd, void* user) {
     auto* L = static_cast<Loop*>(user);
     const int n = L->self->loop_->dof();
@@ -187,6 +190,7 @@ class Iv : public exid::Estimator {
     try {
       exid::check(mem != nullptr && CVodeInit(mem, &Iv::rhs, t0, y) == 0 &&
                       CVodeSStolerances(mem, rtol_, atol_) == 0 && CVodeSetUserData(mem, &L) == 0 &&
+                      CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
                       CVodeSetLinearSolver(mem, LS, A) == 0 &&
                       CVodeSetMaxNumSteps(mem, static_cast<long>(max_steps_)) == 0,
                   "iv: setting up CVODE failed");

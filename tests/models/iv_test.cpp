@@ -11,6 +11,7 @@
 #include <fstream>
 #include <random>
 
+#include "closed_loop_test_util.hpp"
 #include "exid/error.hpp"
 #include "exid/json.hpp"
 #include "exid_cli.hpp"
@@ -20,73 +21,23 @@ namespace {
 
 namespace fs = std::filesystem;
 
-// A smooth commanded trajectory of every joint (sums of sines), sampled at 1 kHz.
-exid::Samples reference(int n, double duration) {
-  const double dt = 0.001;
-  const int K = static_cast<int>(std::round(duration / dt)) + 1;
-  exid::Samples s;
-  s.t = Eigen::VectorXd::LinSpaced(K, 0.0, (K - 1) * dt);
-  s.q.resize(K, n);
-  s.qd.resize(K, n);
-  s.qdd.resize(K, n);
-  for (int k = 0; k < K; ++k)
-    for (int j = 0; j < n; ++j) {
-      s.q(k, j) = s.qd(k, j) = s.qdd(k, j) = 0.0;
-      for (int l = 1; l <= 4; ++l) {  // four sines per joint, frequencies apart
-        const double t = s.t[k], a = 0.5 / l, w = 0.9 * l + 0.23 * j, ph = 0.7 * j + l;
-        s.q(k, j) += a * std::sin(w * t + ph);
-        s.qd(k, j) += a * w * std::cos(w * t + ph);
-        s.qdd(k, j) += -a * w * w * std::sin(w * t + ph);
-      }
-    }
-  return s;
-}
-
-// The reference as the export writes it: t, q1..qn, qd1..qdn, qdd1..qddn.
-void writeReference(const exid::Samples& s, const fs::path& f) {
-  std::ofstream o(f);
-  const int n = s.dof();
-  o << "t";
-  for (const char* g : {"q", "qd", "qdd"})
-    for (int j = 1; j <= n; ++j) o << "," << g << j;
-  o << "\n";
-  for (int k = 0; k < s.size(); ++k) {
-    o << fmt::format("{:.17g}", s.t[k]);
-    for (const Eigen::MatrixXd* M : {&s.q, &s.qd, &s.qdd})
-      for (int j = 0; j < n; ++j) o << fmt::format(",{:.17g}", (*M)(k, j));
-    o << "\n";
-  }
-}
-
-std::string gains(const exid::Json& meta) {
-  const exid::Json& g = *meta.find("pd_gains");
-  auto list = [](const exid::Json& a) {
-    std::string s;
-    for (std::size_t i = 0; i < a.size(); ++i)
-      s += (i ? ", " : "") + fmt::format("{:.17g}", a.at(i).asDouble());
-    return "[" + s + "]";
-  };
-  return fmt::format("kp_Nm_per_rad: {}, kd_Nm_s_per_rad: {}", list(*g.find("kp_Nm_per_rad")),
-                     list(*g.find("kd_Nm_s_per_rad")));
-}
-
 TEST(Iv, StaysWithinItsStandardDeviationsWhereNoisyPositionsBiasLeastSquares) {
   auto r = mtest::robot("puma560");
   const int n = r->dof();
-  const exid::Samples ref = reference(n, 6.0);
+  const exid::Samples ref = cltest::reference(n, 6.0);
   const exid::Dataset clean = mtest::simulate(
       r,
       "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
       "coulomb_velocity_scale: 0.05}",
       7, &ref);
   const fs::path dir = exid_cli::freshTempDir("exid_iv_", "ref");
-  writeReference(ref, dir / "reference.csv");
+  cltest::writeReference(ref, dir / "reference.csv");
   // (the plant's smooth Coulomb friction: a sign(qd) would make a simulation with a wrong
   // estimate chatter where a joint sticks)
   auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", r);
   const Eigen::VectorXd truth = m->baseNominal();
-  const std::string params = fmt::format("{{reference_file: {}, {}}}",
-                                         (dir / "reference.csv").string(), gains(clean.meta));
+  const std::string params = fmt::format(
+      "{{reference_file: {}, {}}}", (dir / "reference.csv").string(), cltest::gains(clean.meta));
   {  // noise-free: the simulation with the true parameters is the plant (same controller)
     auto iv = exid_test::create<exid::Estimator>("iv", params);
     const exid::Estimate e = iv->estimate(*m, clean, nullptr, mtest::context());
@@ -147,7 +98,7 @@ TEST(Iv, ItsInputsAreCheckedByName) {
   expectError("{reference_file: x.csv}", "kp_Nm_per_rad");
   auto r = mtest::robot("puma560");
   const fs::path dir = exid_cli::freshTempDir("exid_iv_", "bad");
-  writeReference(reference(r->dof(), 1.0), dir / "short.csv");
+  cltest::writeReference(cltest::reference(r->dof(), 1.0), dir / "short.csv");
   const exid::Dataset d = mtest::simulate(r, "{duration_s: 2, sample_period_s: 0.01}");
   auto m = mtest::model("differential", "{}", r);
   auto iv = exid_test::create<exid::Estimator>(

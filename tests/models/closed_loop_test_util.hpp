@@ -1,0 +1,68 @@
+// Helpers of the tests of the estimators that simulate the closed loop (iv, didim): a
+// commanded trajectory, written as `exid excite --export` writes it, and the PD gains the
+// `simulate` experiment applied.
+#pragma once
+
+#include <fmt/format.h>
+
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include "exid/data.hpp"
+#include "exid/json.hpp"
+
+namespace cltest {
+
+// A smooth commanded trajectory of every joint (sums of sines), sampled at 1 kHz.
+inline exid::Samples reference(int n, double duration) {
+  const double dt = 0.001;
+  const int K = static_cast<int>(std::round(duration / dt)) + 1;
+  exid::Samples s;
+  s.t = Eigen::VectorXd::LinSpaced(K, 0.0, (K - 1) * dt);
+  s.q.resize(K, n);
+  s.qd.resize(K, n);
+  s.qdd.resize(K, n);
+  for (int k = 0; k < K; ++k)
+    for (int j = 0; j < n; ++j) {
+      s.q(k, j) = s.qd(k, j) = s.qdd(k, j) = 0.0;
+      for (int l = 1; l <= 4; ++l) {  // four sines per joint, frequencies apart
+        const double t = s.t[k], a = 0.5 / l, w = 0.9 * l + 0.23 * j, ph = 0.7 * j + l;
+        s.q(k, j) += a * std::sin(w * t + ph);
+        s.qd(k, j) += a * w * std::cos(w * t + ph);
+        s.qdd(k, j) += -a * w * w * std::sin(w * t + ph);
+      }
+    }
+  return s;
+}
+
+// The reference as the export writes it: t, q1..qn, qd1..qdn, qdd1..qddn.
+inline void writeReference(const exid::Samples& s, const std::filesystem::path& f) {
+  std::ofstream o(f);
+  const int n = s.dof();
+  o << "t";
+  for (const char* g : {"q", "qd", "qdd"})
+    for (int j = 1; j <= n; ++j) o << "," << g << j;
+  o << "\n";
+  for (int k = 0; k < s.size(); ++k) {
+    o << fmt::format("{:.17g}", s.t[k]);
+    for (const Eigen::MatrixXd* M : {&s.q, &s.qd, &s.qdd})
+      for (int j = 0; j < n; ++j) o << fmt::format(",{:.17g}", (*M)(k, j));
+    o << "\n";
+  }
+}
+
+inline std::string gains(const exid::Json& meta) {
+  const exid::Json& g = *meta.find("pd_gains");
+  auto list = [](const exid::Json& a) {
+    std::string s;
+    for (std::size_t i = 0; i < a.size(); ++i)
+      s += (i ? ", " : "") + fmt::format("{:.17g}", a.at(i).asDouble());
+    return "[" + s + "]";
+  };
+  return fmt::format("kp_Nm_per_rad: {}, kd_Nm_s_per_rad: {}", list(*g.find("kp_Nm_per_rad")),
+                     list(*g.find("kd_Nm_s_per_rad")));
+}
+
+}  // namespace cltest
