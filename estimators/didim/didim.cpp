@@ -11,12 +11,7 @@
 // the derivatives of w theta from the model's exact design VJP (one per joint). Outputs:
 // d tau_c / dtheta = -Kp S_q - Kd S_qd, or d q / dtheta = S_q. Covariance sigma^2 (J^T J)^-1,
 // sigma^2 = rss / (m - p) (docs/estimators.md, "didim").
-#include <cvodes/cvodes.h>
 #include <fmt/format.h>
-#include <nvector/nvector_serial.h>
-#include <sundials/sundials_context.h>
-#include <sunlinsol/sunlinsol_dense.h>
-#include <sunmatrix/sunmatrix_dense.h>
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
@@ -82,9 +77,7 @@ class Didim : public exid::Estimator {
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         ftol_(p.getDouble("rss_tolerance")),
         xtol_(p.getDouble("step_tolerance")),
-        rtol_(p.getDouble("rtol")),
-        atol_(p.getDouble("atol")),
-        max_steps_(p.getInt("max_steps")),
+        tol_loop_{p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")},
         check_(static_cast<int>(p.getInt("gradient_check"))) {
     exid::check(!p.getString("reference_file").empty(),
                 "didim: reference_file is required (the trajectory the robot was commanded to "
@@ -102,7 +95,6 @@ class Didim : public exid::Estimator {
     exid::check(prior == nullptr, "didim: a prior is not supported");
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
-    model_ = &model;
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
     // the measured output, sample-major
     y_.resize(static_cast<Eigen::Index>(K) * n);
@@ -223,175 +215,22 @@ class Didim : public exid::Estimator {
     double rss = 0.0;
   };
 
-  struct User {
-    const Didim* self;
-    const VectorXd* theta;
-    std::string error;
-    bool lin_valid = false;  // the last linearization (sensRhs)
-    double lin_t = 0.0;
-    VectorXd lin_x;
-    MatrixXd A_q, A_qd, B;
-  };
-
-  // CVODE's own messages: the failure is reported once, as an exid::Error with the time.
-  static void silent(int, const char*, const char*, char*, void*) {}
-
-  static int rhs(double t, N_Vector y, N_Vector yd, void* user) {
-    auto* U = static_cast<User*>(user);
-    const int n = U->self->loop_->dof();
-    try {
-      Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-      const VectorXd a = U->self->loop_->acceleration(*U->theta, t, x.head(n), x.tail(n));
-      Eigen::Map<VectorXd> xd(NV_DATA_S(yd), 2 * n);
-      xd.head(n) = x.tail(n);
-      xd.tail(n) = a;
-      return a.allFinite() ? 0 : 1;
-    } catch (const std::exception& e) {
-      U->error = e.what();
-      return -1;
-    }
-  }
-
-  // The sensitivity equations' right-hand side: S' = (df/dx) S + df/dtheta, exact.
-  static int sensRhs(int Ns, double t, N_Vector y, N_Vector, N_Vector* yS, N_Vector* ySdot,
-                     void* user, N_Vector, N_Vector) {
-    auto* U = static_cast<User*>(user);
-    const Didim& D = *U->self;
-    const int n = D.loop_->dof();
-    try {
-      Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-      // (the corrector asks again at the same point: the linearization is kept)
-      if (!(U->lin_valid && U->lin_t == t && U->lin_x == x)) {
-        D.linearize(*U->theta, t, x.head(n), x.tail(n), &U->A_q, &U->A_qd, &U->B);
-        U->lin_t = t;
-        U->lin_x = x;
-        U->lin_valid = true;
-      }
-      const MatrixXd &A_q = U->A_q, &A_qd = U->A_qd, &B = U->B;
-      for (int j = 0; j < Ns; ++j) {
-        Eigen::Map<const VectorXd> s(NV_DATA_S(yS[j]), 2 * n);
-        Eigen::Map<VectorXd> sd(NV_DATA_S(ySdot[j]), 2 * n);
-        sd.head(n) = s.tail(n);
-        sd.tail(n) = A_q * s.head(n) + A_qd * s.tail(n) + B.col(j);
-      }
-      return 0;
-    } catch (const std::exception& e) {
-      U->error = e.what();
-      return -1;
-    }
-  }
-
-  // da/dq, da/dqd and da/dtheta of the loop's acceleration at (t, q, qd).
-  void linearize(const VectorXd& theta, double t, const VectorXd& q, const VectorXd& qd,
-                 MatrixXd* A_q, MatrixXd* A_qd, MatrixXd* B) const {
-    const int n = loop_->dof();
-    MatrixXd M;
-    const VectorXd a = loop_->acceleration(theta, t, q, qd, &M);
-    exid::Samples s;
-    s.t = VectorXd::Zero(1);
-    s.q = q.transpose();
-    s.qd = qd.transpose();
-    s.qdd = a.transpose();
-    const MatrixXd w = model_->design(s);  // n x p at (q, qd, a)
-    const Eigen::LDLT<MatrixXd> ldlt(M);
-    *B = -ldlt.solve(w);
-    // d(w theta)_i / d(q, qd) at fixed a: the design's VJP with row i = theta
-    MatrixXd Tq(n, n), Tqd(n, n);
-    MatrixXd G = MatrixXd::Zero(n, theta.size());
-    exid::Samples grad;
-    for (int i = 0; i < n; ++i) {
-      G.setZero();
-      G.row(i) = theta.transpose();
-      model_->designVjp(s, G, &grad);
-      Tq.row(i) = grad.q.row(0);
-      Tqd.row(i) = grad.qd.row(0);
-    }
-    *A_q = ldlt.solve(MatrixXd(-MatrixXd(loop_->kp().asDiagonal()) - Tq));
-    *A_qd = ldlt.solve(MatrixXd(-MatrixXd(loop_->kd().asDiagonal()) - Tqd));
-  }
-
   Sim simulate(const VectorXd& theta, const exid::Dataset& data, bool sens) const {
     const int n = loop_->dof(), K = data.size(), p = static_cast<int>(theta.size());
-    User U{this, &theta, {}, false, 0.0, {}, {}, {}, {}};
-    SUNContext sctx = nullptr;
-    exid::check(SUNContext_Create(nullptr, &sctx) == 0, "didim: SUNContext_Create failed");
-    N_Vector y = N_VNew_Serial(2 * n, sctx);
-    const double t0 = loop_->reference().t0();
-    VectorXd qr, qdr, qddr;
-    loop_->reference().eval(t0, &qr, &qdr, &qddr);
-    for (int j = 0; j < n; ++j) {
-      NV_Ith_S(y, j) = qr[j];
-      NV_Ith_S(y, n + j) = qdr[j];
-    }
-    void* mem = CVodeCreate(CV_BDF, sctx);
-    SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
-    SUNLinearSolver LS = SUNLinSol_Dense(y, A, sctx);
-    N_Vector* yS = nullptr;
-    auto cleanup = [&] {
-      CVodeFree(&mem);
-      if (yS) N_VDestroyVectorArray(yS, p);
-      SUNLinSolFree(LS);
-      SUNMatDestroy(A);
-      N_VDestroy(y);
-      SUNContext_Free(&sctx);
-    };
     Sim out;
-    try {
-      exid::check(mem != nullptr && CVodeInit(mem, &Didim::rhs, t0, y) == 0 &&
-                      CVodeSStolerances(mem, rtol_, atol_) == 0 && CVodeSetUserData(mem, &U) == 0 &&
-                      CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
-                      CVodeSetLinearSolver(mem, LS, A) == 0 &&
-                      CVodeSetMaxNumSteps(mem, static_cast<long>(max_steps_)) == 0,
-                  "didim: setting up CVODES failed");
-      if (sens) {
-        yS = N_VCloneVectorArray(p, y);
-        for (int j = 0; j < p; ++j) N_VConst(0.0, yS[j]);  // the start does not depend on theta
-        std::vector<double> abstol(static_cast<std::size_t>(p), atol_);
-        // staggered: the sensitivities are corrected once the state has converged, and they
-        // do not shorten the state's steps (their accuracy is checked against central
-        // differences: gradient_check)
-        exid::check(CVodeSensInit(mem, p, CV_STAGGERED, &Didim::sensRhs, yS) == 0 &&
-                        CVodeSensSStolerances(mem, std::sqrt(rtol_), abstol.data()) == 0 &&
-                        CVodeSetSensErrCon(mem, SUNFALSE) == 0,
-                    "didim: setting up the CVODES sensitivities failed");
-        out.J.resize(static_cast<Eigen::Index>(K) * n, p);
-      }
-      out.y.resize(static_cast<Eigen::Index>(K) * n);
-      double at = t0;
-      for (int k = 0; k < K; ++k) {
-        const double tk = data.t[k];
-        if (tk > at) {
-          double tret = at;
-          const int flag = CVode(mem, tk, y, &tret, CV_NORMAL);
-          if (!U.error.empty()) throw exid::Error(U.error);
-          exid::check(flag >= 0,
-                      fmt::format("didim: the simulation failed at t = {} s (CVODES flag {}; a "
-                                  "Coulomb friction through sign(qd) can make the closed loop "
-                                  "chatter where a joint sticks: differential's "
-                                  "coulomb_smoothing_rad_s smooths it; else try other rtol, "
-                                  "atol, max_steps)",
-                                  tret, flag));
-          at = tk;
-          if (sens) CVodeGetSens(mem, &tret, yS);
-        }
-        Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-        const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
-        out.y.segment(r0, n) =
-            position_ ? VectorXd(x.head(n)) : loop_->control(tk, x.head(n), x.tail(n));
-        if (sens)
-          for (int j = 0; j < p; ++j) {
-            Eigen::Map<const VectorXd> s(NV_DATA_S(yS[j]), 2 * n);
-            out.J.col(j).segment(r0, n) = position_
-                                              ? VectorXd(s.head(n))
-                                              : VectorXd(-loop_->kp().cwiseProduct(s.head(n)) -
-                                                         loop_->kd().cwiseProduct(s.tail(n)));
-          }
-      }
-    } catch (...) {
-      cleanup();
-      throw;
-    }
-    cleanup();
+    out.y.resize(static_cast<Eigen::Index>(K) * n);
+    if (sens) out.J.resize(static_cast<Eigen::Index>(K) * n, p);
+    loop_->simulate(
+        theta, data.t, tol_loop_, sens, [&](int k, const VectorXd& x, const MatrixXd* S) {
+          const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
+          out.y.segment(r0, n) =
+              position_ ? VectorXd(x.head(n)) : loop_->control(data.t[k], x.head(n), x.tail(n));
+          if (S)  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q
+            out.J.middleRows(r0, n) = position_
+                                          ? MatrixXd(S->topRows(n))
+                                          : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
+                                                     loop_->kd().asDiagonal() * S->bottomRows(n));
+        });
     out.rss = (y_ - out.y).squaredNorm();
     return out;
   }
@@ -462,11 +301,10 @@ class Didim : public exid::Estimator {
   exid::ParamSet P_;
   bool position_;
   int max_iter_;
-  double ftol_, xtol_, rtol_, atol_;
-  std::int64_t max_steps_;
+  double ftol_, xtol_;
+  exid::estimators::ClosedLoop::Tolerances tol_loop_;
   int check_;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
-  const exid::ObservationModel* model_ = nullptr;
   VectorXd y_;
 };
 

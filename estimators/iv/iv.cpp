@@ -5,7 +5,7 @@
 // them (errors in variables) biases least squares. The instrument Z is the same model's rows
 // built from a simulation instead: the closed loop of the robot with the current estimate,
 // driven by the recording's reference (reference_file) through the robot's controller (PD
-// gains and the feed-forward, given), integrated by CVODE. Z is noise-free and correlated with
+// gains and the feed-forward, given), integrated by CVODES. Z is noise-free and correlated with
 // W, so
 //   theta_{i+1} = (Z^T W)^-1 Z^T y
 // is consistent. Start: ordinary least squares; iterate until theta settles. Covariance: the
@@ -15,12 +15,7 @@
 // the design rows (one per joint), tau = w(q, qd, qdd) theta is affine in qdd, so
 // M e_i = w(q, qd, e_i) theta - w(q, qd, 0) theta and h = w(q, qd, 0) theta; qdd = M^-1 (tau_c
 // - h), tau_c = tau_ff(qr, qdr, qddr) + Kp (qr - q) + Kd (qdr - qd).
-#include <cvode/cvode.h>
 #include <fmt/format.h>
-#include <nvector/nvector_serial.h>
-#include <sundials/sundials_context.h>
-#include <sunlinsol/sunlinsol_dense.h>
-#include <sunmatrix/sunmatrix_dense.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/LU>
@@ -52,7 +47,7 @@ class Iv : public exid::Estimator {
   static constexpr const char* kDoc =
       "instrumental variables: the instrument is the model's rows from a closed-loop "
       "simulation with the current estimate (the recording's reference, the robot's PD gains "
-      "and feed-forward; CVODE), iterated from least squares (IDIM-IV, BIRDy)";
+      "and feed-forward; CVODES), iterated from least squares (IDIM-IV, BIRDy)";
 
   static std::vector<exid::ParamDecl> params() {
     std::vector<exid::ParamDecl> p = exid::estimators::ClosedLoop::params();
@@ -65,7 +60,8 @@ class Iv : public exid::Estimator {
                                 true),
              exid::param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0,
                                 true),
-             exid::param_int("max_steps", 20000, "CVODE steps between two samples at most", 1, 1e9),
+             exid::param_int("max_steps", 20000, "CVODES steps between two samples at most", 1,
+                             1e9),
          })
       p.push_back(d);
     return p;
@@ -75,9 +71,7 @@ class Iv : public exid::Estimator {
       : P_(p),
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         tol_(p.getDouble("tolerance")),
-        rtol_(p.getDouble("rtol")),
-        atol_(p.getDouble("atol")),
-        max_steps_(p.getInt("max_steps")) {
+        tol_loop_{p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")} {
     exid::check(!p.getString("reference_file").empty(),
                 "iv: reference_file is required (the trajectory the robot was commanded to "
                 "follow: the instrument is simulated from it)");
@@ -138,94 +132,23 @@ class Iv : public exid::Estimator {
   }
 
  private:
-  struct Loop {
-    const Iv* self;
-    const VectorXd* theta;
-    std::string error;
-  };
-
-  // CVODE's own messages: the failure is reported once, as an exid::Error with the time.
-  static void silent(int, const char*, const char*, char*, void*) {}
-
-  static int rhs(double t, N_Vector y, N_Vector yd, void* user) {
-    auto* L = static_cast<Loop*>(user);
-    const int n = L->self->loop_->dof();
-    try {
-      Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-      const VectorXd a = L->self->loop_->acceleration(*L->theta, t, x.head(n), x.tail(n));
-      Eigen::Map<VectorXd> xd(NV_DATA_S(yd), 2 * n);
-      xd.head(n) = x.tail(n);
-      xd.tail(n) = a;
-      return a.allFinite() ? 0 : 1;
-    } catch (const std::exception& e) {
-      L->error = e.what();
-      return -1;
-    }
-  }
-
+  // The loop at theta sampled at the recording's times: q, qd, qdd (the recording's torque
+  // kept: rows need it).
   exid::Dataset simulate(const VectorXd& theta, const exid::Dataset& data) const {
     const int n = loop_->dof(), K = data.size();
-    Loop L{this, &theta, {}};
-    SUNContext sctx = nullptr;
-    exid::check(SUNContext_Create(nullptr, &sctx) == 0, "iv: SUNContext_Create failed");
-    N_Vector y = N_VNew_Serial(2 * n, sctx);
-    const double t0 = loop_->reference().t0();
-    VectorXd qr, qdr, qddr;
-    loop_->reference().eval(t0, &qr, &qdr, &qddr);
-    for (int j = 0; j < n; ++j) {
-      NV_Ith_S(y, j) = qr[j];
-      NV_Ith_S(y, n + j) = qdr[j];
-    }
-    void* mem = CVodeCreate(CV_BDF, sctx);
-    SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
-    SUNLinearSolver LS = SUNLinSol_Dense(y, A, sctx);
-    auto cleanup = [&] {
-      CVodeFree(&mem);
-      SUNLinSolFree(LS);
-      SUNMatDestroy(A);
-      N_VDestroy(y);
-      SUNContext_Free(&sctx);
-    };
     exid::Dataset out;
-    try {
-      exid::check(mem != nullptr && CVodeInit(mem, &Iv::rhs, t0, y) == 0 &&
-                      CVodeSStolerances(mem, rtol_, atol_) == 0 && CVodeSetUserData(mem, &L) == 0 &&
-                      CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
-                      CVodeSetLinearSolver(mem, LS, A) == 0 &&
-                      CVodeSetMaxNumSteps(mem, static_cast<long>(max_steps_)) == 0,
-                  "iv: setting up CVODE failed");
-      out.t = data.t;
-      out.q.resize(K, n);
-      out.qd.resize(K, n);
-      out.qdd.resize(K, n);
-      out.tau = data.tau;
-      out.source = "iv simulation";
-      double at = t0;
-      for (int k = 0; k < K; ++k) {
-        const double tk = data.t[k];
-        if (tk > at) {
-          double tret = at;
-          const int flag = CVode(mem, tk, y, &tret, CV_NORMAL);
-          if (!L.error.empty()) throw exid::Error(L.error);
-          exid::check(flag >= 0,
-                      fmt::format("iv: the simulation failed at t = {} s (CVODE flag {}; a "
-                                  "Coulomb friction through sign(qd) can make the closed loop "
-                                  "chatter where a joint sticks: differential's "
-                                  "coulomb_smoothing_rad_s smooths it; else try other rtol, "
-                                  "atol, max_steps)",
-                                  tret, flag));
-          at = tk;
-        }
-        Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-        out.q.row(k) = x.head(n).transpose();
-        out.qd.row(k) = x.tail(n).transpose();
-        out.qdd.row(k) = loop_->acceleration(theta, tk, x.head(n), x.tail(n)).transpose();
-      }
-    } catch (...) {
-      cleanup();
-      throw;
-    }
-    cleanup();
+    out.t = data.t;
+    out.q.resize(K, n);
+    out.qd.resize(K, n);
+    out.qdd.resize(K, n);
+    out.tau = data.tau;
+    out.source = "iv simulation";
+    loop_->simulate(
+        theta, data.t, tol_loop_, false, [&](int k, const VectorXd& x, const MatrixXd*) {
+          out.q.row(k) = x.head(n).transpose();
+          out.qd.row(k) = x.tail(n).transpose();
+          out.qdd.row(k) = loop_->acceleration(theta, data.t[k], x.head(n), x.tail(n)).transpose();
+        });
     return out;
   }
 
@@ -269,7 +192,7 @@ class Iv : public exid::Estimator {
     d["estimator"] = kName;
     d["method"] =
         "theta_{i+1} = (Z^T W)^-1 Z^T y, Z the model's rows from the closed-loop simulation "
-        "with theta_i (CVODE BDF), W and y the recording's; theta_0 least squares";
+        "with theta_i (CVODES BDF), W and y the recording's; theta_0 least squares";
     d["covariance_definition"] =
         "(Z^T W)^-1 (sum_k g_k g_k^T) (Z^T W)^-T m / (m - p), g_k = Z_k^T (y_k - W_k theta) over "
         "the rows of sample k (robust to noise shared by a sample's rows and unequal per "
@@ -291,8 +214,8 @@ class Iv : public exid::Estimator {
 
   exid::ParamSet P_;
   int max_iter_;
-  double tol_, rtol_, atol_;
-  std::int64_t max_steps_;
+  double tol_;
+  exid::estimators::ClosedLoop::Tolerances tol_loop_;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
 };
 

@@ -5,7 +5,9 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cstdint>
 #include <filesystem>
+#include <functional>
 #include <memory>
 #include <string>
 #include <vector>
@@ -55,6 +57,26 @@ class ClosedLoop {
                                const Eigen::VectorXd& qd, Eigen::MatrixXd* M = nullptr) const;
   const Eigen::VectorXd& kp() const { return Kp_; }
   const Eigen::VectorXd& kd() const { return Kd_; }
+  /// The loop's linearisation at theta: da/dq, da/dqd (n x n) and da/dtheta (n x p), exact
+  /// (the model's design VJP, one per joint): with w theta = M a + h,
+  /// da/dtheta = -M^-1 w(q, qd, a), da/dq = M^-1 (-Kp - d(w theta)/dq |a), and likewise qd.
+  void linearize(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
+                 const Eigen::VectorXd& qd, Eigen::MatrixXd* A_q, Eigen::MatrixXd* A_qd,
+                 Eigen::MatrixXd* B) const;
+
+  struct Tolerances {
+    double rtol = 1e-8, atol = 1e-10;
+    std::int64_t max_steps = 20000;
+  };
+  /// The loop at theta from the reference's start, integrated by CVODES (BDF), and at each of
+  /// `times` (increasing, within the reference): at(k, x, S), x = (q, qd) and, with
+  /// `sensitivities`, S = dx/dtheta (2n x p; forward sensitivities, staggered, their
+  /// right-hand side from linearize(), tolerance sqrt(rtol), outside the steps' error control;
+  /// else S is null). A failure is an exid::Error naming the time.
+  void simulate(
+      const Eigen::VectorXd& theta, const Eigen::VectorXd& times, const Tolerances& tol,
+      bool sensitivities,
+      const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at) const;
 
  private:
   const ObservationModel* model_;
