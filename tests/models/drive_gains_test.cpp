@@ -168,22 +168,10 @@ TEST(DriveGains, AStudyReadsThePayloadPartFromItsOwnFile) {
   const exid::Dataset d = twoParts(r, 0.0, 1);
   const double from = d.meta.find("payload_part_from_t_s")->asDouble();
   const fs::path dir = exid_cli::freshTempDir("exid_gains_", "study");
-  std::ofstream fa(dir / "free.csv"), fb(dir / "loaded.csv");
-  for (std::ofstream* f : {&fa, &fb}) {
-    *f << "t";
-    for (const char* g : {"q", "qd", "qdd", "tau"})
-      for (int j = 1; j <= r->dof(); ++j) *f << "," << g << j;
-    *f << "\n";
-  }
-  for (int k = 0; k < d.size(); ++k) {
-    std::ofstream& f = d.t[k] < from ? fa : fb;
-    f << fmt::format("{:.17g}", d.t[k] - (d.t[k] < from ? 0.0 : from - 0.7));  // own clock
-    for (const Eigen::MatrixXd* M : {&d.q, &d.qd, &d.qdd, &d.tau})
-      for (int j = 0; j < r->dof(); ++j) f << fmt::format(",{:.17g}", (*M)(k, j));
-    f << "\n";
-  }
-  fa.close();
-  fb.close();
+  int split = 0;  // the first sample of the payload part
+  while (d.t[split] < from) ++split;
+  mtest::writeCsv(d, dir / "free.csv", 0, split);
+  mtest::writeCsv(d, dir / "loaded.csv", split, d.size(), 0.7 - from);  // its own clock
   std::ofstream(dir / "gains.yaml")
       << "name: gains\nrobot: {type: puma560}\n"
       << "model: {type: differential, params: " << model() << "}\n"

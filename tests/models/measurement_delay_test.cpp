@@ -251,19 +251,7 @@ TEST(Varpro, AStudyFitsTheDelayAndValidatesOnRowsCompensatedByIt) {
   const exid::Dataset d = mtest::simulate(
       r, "{duration_s: 6, sample_period_s: 0.002, drive_terms: false, torque_delay_s: 0.0027}");
   const fs::path dir = exid_cli::freshTempDir("exid_delay_", "study");
-  {
-    std::ofstream f(dir / "rec.csv");
-    f << "t";
-    for (const char* g : {"q", "qd", "qdd", "tau"})
-      for (int j = 1; j <= r->dof(); ++j) f << "," << g << j;
-    f << "\n";
-    for (int k = 0; k < d.size(); ++k) {
-      f << fmt::format("{:.17g}", d.t[k]);
-      for (const Eigen::MatrixXd* M : {&d.q, &d.qd, &d.qdd, &d.tau})
-        for (int j = 0; j < r->dof(); ++j) f << fmt::format(",{:.17g}", (*M)(k, j));
-      f << "\n";
-    }
-  }
+  mtest::writeCsv(d, dir / "rec.csv");
   const std::string model =
       "model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: "
       "false}}\n";

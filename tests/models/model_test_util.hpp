@@ -1,11 +1,14 @@
 // Helpers for the observation-model and experiment tests (tests/models, tests/experiments).
 #pragma once
 
+#include <fmt/format.h>
 #include <gtest/gtest.h>
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <memory>
 #include <random>
 #include <string>
@@ -29,6 +32,24 @@ inline std::shared_ptr<const exid::RobotModel> robot(const std::string& name) {
     return std::make_shared<const exid::RobotModel>(exid::testing::puma560Standard());
   if (name == "panda") return std::make_shared<const exid::RobotModel>(exid::testing::panda());
   return nullptr;
+}
+
+/// Samples [begin, end) of a dataset as a csv experiment reads them: t, q, qd, qdd, tau columns,
+/// full precision; `t_offset` is added to the time stamps.
+inline void writeCsv(const exid::Dataset& d, const std::filesystem::path& f, int begin = 0,
+                     int end = -1, double t_offset = 0.0) {
+  std::ofstream o(f);
+  const int n = d.dof();
+  o << "t";
+  for (const char* g : {"q", "qd", "qdd", "tau"})
+    for (int j = 1; j <= n; ++j) o << "," << g << j;
+  o << "\n";
+  for (int k = begin; k < (end < 0 ? d.size() : end); ++k) {
+    o << fmt::format("{:.17g}", d.t[k] + t_offset);
+    for (const Eigen::MatrixXd* M : {&d.q, &d.qd, &d.qdd, &d.tau})
+      for (int j = 0; j < n; ++j) o << fmt::format(",{:.17g}", (*M)(k, j));
+    o << "\n";
+  }
 }
 
 inline exid::RunContext context(std::uint64_t seed = 7) {

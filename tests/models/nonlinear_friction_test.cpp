@@ -315,19 +315,7 @@ TEST(Varpro, AStudyReportsTheFittedValuesAndValidatesAtThem) {
   const Truth T = truth(r->dof());
   const exid::Dataset d = recording(r, T, 6.0, 0.0, 1);
   const fs::path dir = exid_cli::freshTempDir("exid_varpro_", "study");
-  {
-    std::ofstream f(dir / "rec.csv");
-    f << "t";
-    for (const char* g : {"q", "qd", "qdd", "tau"})
-      for (int j = 1; j <= r->dof(); ++j) f << "," << g << j;
-    f << "\n";
-    for (int k = 0; k < d.size(); ++k) {
-      f << fmt::format("{:.17g}", d.t[k]);
-      for (const Eigen::MatrixXd* M : {&d.q, &d.qd, &d.qdd, &d.tau})
-        for (int j = 0; j < r->dof(); ++j) f << fmt::format(",{:.17g}", (*M)(k, j));
-      f << "\n";
-    }
-  }
+  mtest::writeCsv(d, dir / "rec.csv");
   for (const char* est : {"varpro", "batch_ls"}) {
     std::ofstream(dir / fmt::format("{}.yaml", est))
         << "name: nl_" << est << "\nrobot: {type: puma560}\n"

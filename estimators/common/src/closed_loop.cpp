@@ -10,6 +10,7 @@
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/io.hpp"
+#include "exid/sampled_reference.hpp"
 
 namespace exid::estimators {
 
@@ -17,29 +18,7 @@ using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
 void Reference::eval(double at, VectorXd* qo, VectorXd* qdo, VectorXd* qddo) const {
-  const int K = static_cast<int>(t.size()), n = static_cast<int>(q.cols());
-  at = std::min(std::max(at, t[0]), t[K - 1]);
-  int i = static_cast<int>(std::upper_bound(t.data(), t.data() + K, at) - t.data()) - 1;
-  i = std::max(0, std::min(i, K - 2));
-  const double h = t[i + 1] - t[i], x = (at - t[i]) / h;
-  qo->resize(n);
-  qdo->resize(n);
-  qddo->resize(n);
-  for (int j = 0; j < n; ++j) {
-    const double p0 = q(i, j), v0 = qd(i, j), a0 = qdd(i, j);
-    const double p1 = q(i + 1, j), v1 = qd(i + 1, j), a1 = qdd(i + 1, j);
-    const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
-                 A = (a1 - a0) * h * h;
-    const double c[6] = {p0,
-                         v0 * h,
-                         0.5 * a0 * h * h,
-                         10 * P - 4 * V + 0.5 * A,
-                         -15 * P + 7 * V - A,
-                         6 * P - 3 * V + 0.5 * A};
-    (*qo)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
-    (*qdo)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
-    (*qddo)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
-  }
+  quinticHermite(s, std::min(std::max(at, t0()), t1()), qo, qdo, qddo);
 }
 
 Reference readReference(const std::filesystem::path& f, const RobotModel& robot,
@@ -48,8 +27,8 @@ Reference readReference(const std::filesystem::path& f, const RobotModel& robot,
   const CsvTable T = readCsv(f);
   check(T.has("t"), fmt::format("{}: {}: no column 't'", who, f.string()));
   Reference r;
-  r.t = T.column("t");
-  const Eigen::Index K = r.t.size();
+  r.s.t = T.column("t");
+  const Eigen::Index K = r.s.t.size();
   check(K >= 2, fmt::format("{}: {}: {} samples (at least 2)", who, f.string(), K));
   MatrixXd q(K, n), qd(K, n), qdd(K, n);
   for (int j = 0; j < n; ++j)
@@ -61,18 +40,19 @@ Reference readReference(const std::filesystem::path& f, const RobotModel& robot,
       M->col(j) = T.column(c);
     }
   for (Eigen::Index k = 1; k < K; ++k)
-    check(r.t[k] > r.t[k - 1], fmt::format("{}: {}: time not strictly increasing at data row {}",
-                                           who, f.string(), k + 1));
-  r.q.resize(K, n);
-  r.qd.resize(K, n);
-  r.qdd.resize(K, n);
+    check(
+        r.s.t[k] > r.s.t[k - 1],
+        fmt::format("{}: {}: time not strictly increasing at data row {}", who, f.string(), k + 1));
+  r.s.q.resize(K, n);
+  r.s.qd.resize(K, n);
+  r.s.qdd.resize(K, n);
   for (Eigen::Index k = 0; k < K; ++k) {
     VectorXd a, b, c;
     jointToMeasured(robot, q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(), &a,
                     &b, &c);
-    r.q.row(k) = a.transpose();
-    r.qd.row(k) = b.transpose();
-    r.qdd.row(k) = c.transpose();
+    r.s.q.row(k) = a.transpose();
+    r.s.qd.row(k) = b.transpose();
+    r.s.qdd.row(k) = c.transpose();
   }
   return r;
 }

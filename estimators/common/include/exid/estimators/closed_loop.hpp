@@ -17,15 +17,15 @@
 
 namespace exid::estimators {
 
-/// The commanded trajectory: quintic Hermite interpolation of (q, qd, qdd) samples in measured
-/// coordinates (the `simulate` experiment's interpolation of a sampled reference).
+/// The commanded trajectory: samples of (q, qd, qdd) in measured coordinates, read between
+/// them by quintic Hermite interpolation (exid::quinticHermite, as the `simulate` experiment
+/// reads a sampled reference).
 struct Reference {
-  Eigen::VectorXd t;
-  Eigen::MatrixXd q, qd, qdd;  // K x n
+  Samples s;
   /// At time `at` (clamped to the samples' span).
   void eval(double at, Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd) const;
-  double t0() const { return t[0]; }
-  double t1() const { return t[t.size() - 1]; }
+  double t0() const { return s.t[0]; }
+  double t1() const { return s.t[s.size() - 1]; }
 };
 
 /// A CSV of t, q1..qn, qd1..qdn, qdd1..qddn in joint coordinates (`exid excite --export`'s

@@ -1,0 +1,17 @@
+// exid — a trajectory given by samples (q, qd, qdd at every knot), read between them: the
+// quintic Hermite interpolant, C2 and exact at the knots. The `simulate` experiment's sampled
+// reference and the closed loop of the `iv` and `didim` estimators use it.
+#pragma once
+
+#include <Eigen/Core>
+
+#include "exid/data.hpp"
+
+namespace exid {
+
+/// q, qd, qdd of the samples' quintic Hermite interpolant at time t (the polynomial of the
+/// first or last interval outside the samples' span; one sample: its values).
+void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                    Eigen::VectorXd* qdd);
+
+}  // namespace exid

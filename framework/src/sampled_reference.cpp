@@ -1,0 +1,41 @@
+// exid — the quintic Hermite interpolant of sampled q, qd, qdd (exid/sampled_reference.hpp).
+#include "exid/sampled_reference.hpp"
+
+#include <algorithm>
+
+namespace exid {
+
+void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                    Eigen::VectorXd* qdd) {
+  const int K = s.size(), n = s.dof();
+  if (K == 1) {
+    *q = s.q.row(0).transpose();
+    *qd = s.qd.row(0).transpose();
+    *qdd = s.qdd.row(0).transpose();
+    return;
+  }
+  const double* b = s.t.data();
+  int i = static_cast<int>(std::upper_bound(b, b + K, t) - b) - 1;
+  i = std::max(0, std::min(i, K - 2));
+  const double h = s.t[i + 1] - s.t[i], x = (t - s.t[i]) / h;
+  q->resize(n);
+  qd->resize(n);
+  qdd->resize(n);
+  for (int j = 0; j < n; ++j) {
+    const double p0 = s.q(i, j), v0 = s.qd(i, j), a0 = s.qdd(i, j);
+    const double p1 = s.q(i + 1, j), v1 = s.qd(i + 1, j), a1 = s.qdd(i + 1, j);
+    const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
+                 A = (a1 - a0) * h * h;
+    const double c[6] = {p0,
+                         v0 * h,
+                         0.5 * a0 * h * h,
+                         10 * P - 4 * V + 0.5 * A,
+                         -15 * P + 7 * V - A,
+                         6 * P - 3 * V + 0.5 * A};
+    (*q)[j] = c[0] + x * (c[1] + x * (c[2] + x * (c[3] + x * (c[4] + x * c[5]))));
+    (*qd)[j] = (c[1] + x * (2 * c[2] + x * (3 * c[3] + x * (4 * c[4] + x * 5 * c[5])))) / h;
+    (*qdd)[j] = (2 * c[2] + x * (6 * c[3] + x * (12 * c[4] + x * 20 * c[5]))) / (h * h);
+  }
+}
+
+}  // namespace exid
