@@ -55,12 +55,6 @@ class Didim : public exid::Estimator {
                                 "stop when an accepted step moves theta by less than this "
                                 "relative to its norm (the simulation's precision is near)",
                                 0.0, 1.0, true),
-             exid::param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0,
-                                true),
-             exid::param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0,
-                                true),
-             exid::param_int("max_steps", 20000, "CVODES steps between two samples at most", 1,
-                             1e9),
              exid::param_int("gradient_check", 0,
                              "> 0: compare the Jacobian along this many random directions with "
                              "central differences of the simulation at the start "
@@ -77,14 +71,9 @@ class Didim : public exid::Estimator {
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         ftol_(p.getDouble("rss_tolerance")),
         xtol_(p.getDouble("step_tolerance")),
-        tol_loop_{p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")},
+        tol_loop_(exid::estimators::ClosedLoop::Tolerances::from(p)),
         check_(static_cast<int>(p.getInt("gradient_check"))) {
-    exid::check(!p.getString("reference_file").empty(),
-                "didim: reference_file is required (the trajectory the robot was commanded to "
-                "follow: the closed loop is simulated from it)");
-    exid::check(!p.getDoubles("kp_Nm_per_rad").empty() && !p.getDoubles("kd_Nm_s_per_rad").empty(),
-                "didim: kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
-                "simulated closed loop must be the robot's; exid does not guess them)");
+    exid::estimators::ClosedLoop::checkParams(p, kName);
   }
 
   exid::EstimatorSpecs specs() const override { return {}; }  // the Jacobian held in memory

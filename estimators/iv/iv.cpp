@@ -56,12 +56,6 @@ class Iv : public exid::Estimator {
              exid::param_double("tolerance", 1e-6, "",
                                 "stop when theta changes by less than this relative to its norm",
                                 0.0, 1.0, true),
-             exid::param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0,
-                                true),
-             exid::param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0,
-                                true),
-             exid::param_int("max_steps", 20000, "CVODES steps between two samples at most", 1,
-                             1e9),
          })
       p.push_back(d);
     return p;
@@ -71,13 +65,8 @@ class Iv : public exid::Estimator {
       : P_(p),
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         tol_(p.getDouble("tolerance")),
-        tol_loop_{p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")} {
-    exid::check(!p.getString("reference_file").empty(),
-                "iv: reference_file is required (the trajectory the robot was commanded to "
-                "follow: the instrument is simulated from it)");
-    exid::check(!p.getDoubles("kp_Nm_per_rad").empty() && !p.getDoubles("kd_Nm_s_per_rad").empty(),
-                "iv: kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
-                "simulated closed loop must be the robot's; exid does not guess them)");
+        tol_loop_(exid::estimators::ClosedLoop::Tolerances::from(p)) {
+    exid::estimators::ClosedLoop::checkParams(p, kName);
   }
 
   exid::EstimatorSpecs specs() const override { return {}; }  // the rows held in memory

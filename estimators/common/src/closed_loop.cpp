@@ -73,22 +73,30 @@ std::vector<ParamDecl> ClosedLoop::params() {
                    "nominal: the controller adds the robot description's torque of the "
                    "reference (all drive terms); none: PD alone",
                    {"nominal", "none"}),
+      param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0, true),
+      param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0, true),
+      param_int("max_steps", 20000, "CVODES steps between two samples at most", 1, 1e9),
   };
+}
+
+void ClosedLoop::checkParams(const ParamSet& p, const std::string& who) {
+  check(!p.getString("reference_file").empty(),
+        who +
+            ": reference_file is required (the trajectory the robot was commanded to follow: "
+            "the closed loop is simulated from it)");
+  check(!p.getDoubles("kp_Nm_per_rad").empty() && !p.getDoubles("kd_Nm_s_per_rad").empty(),
+        who +
+            ": kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
+            "simulated closed loop must be the robot's; exid does not guess them)");
 }
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
                        const RunContext& ctx, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who) {
+  checkParams(p, who);
   const std::string file = p.getString("reference_file");
   const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),
                             kd = p.getDoubles("kd_Nm_s_per_rad");
-  check(!file.empty(), who +
-                           ": reference_file is required (the trajectory the robot was "
-                           "commanded to follow: the loop is simulated from it)");
-  check(!kp.empty() && !kd.empty(),
-        who +
-            ": kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
-            "simulated closed loop must be the robot's; exid does not guess them)");
   ff_ = p.getString("feedforward") == "nominal";
   check(model.specs().per_sample,
         fmt::format("{}: model '{}' must give rows per sample", who, model.pluginName()));

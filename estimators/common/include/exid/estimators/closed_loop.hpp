@@ -43,8 +43,11 @@ class ClosedLoop {
   /// joint of every joint) and that the recording's times lie within the reference.
   ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
              const RunContext& ctx, const std::string& who);
-  /// The estimator parameters of the controller.
+  /// The estimator parameters of the controller and of the simulation's tolerances
+  /// (reference_file, kp_Nm_per_rad, kd_Nm_s_per_rad, feedforward, rtol, atol, max_steps).
   static std::vector<ParamDecl> params();
+  /// Refuses, naming them, the required parameters left out (at construction of `who`).
+  static void checkParams(const ParamSet& p, const std::string& who);
 
   int dof() const { return n_; }
   const Reference& reference() const { return ref_; }
@@ -67,6 +70,9 @@ class ClosedLoop {
   struct Tolerances {
     double rtol = 1e-8, atol = 1e-10;
     std::int64_t max_steps = 20000;
+    static Tolerances from(const ParamSet& p) {
+      return {p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")};
+    }
   };
   /// The loop at theta from the reference's start, integrated by CVODES (BDF), and at each of
   /// `times` (increasing, within the reference): at(k, x, S), x = (q, qd) and, with
