@@ -97,7 +97,7 @@ class Didim : public exid::Estimator {
     // start: the inverse model's least squares
     const exid::Rows R = model.rows(data, ctx);
     exid::estimators::checkRows(R, p, kName, 0);
-    VectorXd theta = R.W.colPivHouseholderQr().solve(R.y);
+    VectorXd theta = startFit(model, R);
     const VectorXd theta0 = theta;
     Sim cur = simulate(theta, data, true);
     exid::Json check_json;
@@ -198,6 +198,15 @@ class Didim : public exid::Estimator {
   }
 
  private:
+  // The inverse model's least squares: batch_ls's rank-revealing solve (an unidentifiable
+  // direction is refused by name).
+  static VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R) {
+    exid::estimators::RowAccumulator acc(model.numBase());
+    acc.add(R.W, R.y);
+    return exid::estimators::solveLeastSquares(acc, model.base().names,
+                                               exid::estimators::SolveOptions(), kName)
+        .theta;
+  }
   struct Sim {
     VectorXd y;  // simulated output, sample-major
     MatrixXd J;  // d y / d theta (with sensitivities)

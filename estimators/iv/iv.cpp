@@ -83,7 +83,7 @@ class Iv : public exid::Estimator {
     const long m = R.y.size();
     exid::check(m > p, fmt::format("iv: {} rows for {} parameters", m, p));
     // start: least squares
-    VectorXd theta = R.W.colPivHouseholderQr().solve(R.y);
+    VectorXd theta = startFit(model, R);
     exid::Json trace = exid::Json::array();
     MatrixXd ZtW, Zlast;
     VectorXd Zty;
@@ -121,6 +121,15 @@ class Iv : public exid::Estimator {
   }
 
  private:
+  // The inverse model's least squares: batch_ls's rank-revealing solve (an unidentifiable
+  // direction is refused by name).
+  static VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R) {
+    RowAccumulator acc(model.numBase());
+    acc.add(R.W, R.y);
+    return exid::estimators::solveLeastSquares(acc, model.base().names,
+                                               exid::estimators::SolveOptions(), kName)
+        .theta;
+  }
   // The loop at theta sampled at the recording's times: q, qd, qdd (the recording's torque
   // kept: rows need it).
   exid::Dataset simulate(const VectorXd& theta, const exid::Dataset& data) const {

@@ -167,15 +167,12 @@ class CsvExperiment : public exid::Experiment {
   /// first sample for the models (differential's drive_gains).
   static exid::Dataset appendPayloadPart(exid::Dataset a, const exid::Dataset& b) {
     const int Ka = a.size(), Kb = b.size();
-    exid::check(Ka >= 2 && Kb >= 2,
+    exid::check(Ka >= 3 && Kb >= 2,
                 fmt::format("experiment 'csv': {} samples without and {} with the payload (at "
-                            "least 2 each)",
+                            "least 3 and 2)",
                             Ka, Kb));
-    std::vector<double> steps(static_cast<std::size_t>(Ka - 1));
-    for (int k = 1; k < Ka; ++k) steps[static_cast<std::size_t>(k - 1)] = a.t[k] - a.t[k - 1];
-    std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2),
-                     steps.end());
-    const double dt = steps[steps.size() / 2];
+    double jitter = 0.0;
+    const double dt = 1.0 / exid::samplingRate(a.t, &jitter);  // the median step
     const double offset = a.t[Ka - 1] + dt - b.t[0];
     Eigen::VectorXd t(Ka + Kb);
     t << a.t, b.t.array() + offset;
