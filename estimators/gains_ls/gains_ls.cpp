@@ -14,6 +14,12 @@
 // gradient and the Gauss-Newton matrix of (theta, g) follow exactly from the S_j, so
 // Levenberg-Marquardt runs on them without another pass. Covariance sigma^2 H^-1 at the
 // optimum, sigma^2 = rss / (m - p), carried to dK_j = 1 / g_j - 1 by the delta method.
+//
+// A prior on the gains (gain_prior_std, gain_prior_dK: a datasheet's torque constants and their
+// tolerance) adds the pseudo-observations sigma (dK_j - mu_j) / s_j, sigma the data's noise std
+// (from the fit, to a fixed point), so the objective is the negative log posterior times
+// sigma^2 and sigma^2 H^-1 the posterior covariance. With drive_gains_scale: prior (no payload
+// part) the data fix the gains' ratios and the prior alone their common scale.
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
@@ -46,6 +52,12 @@ class GainsLs : public exid::Estimator {
                            "stop when the largest relative step is below this", 0.0, 1.0, true),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1, 1e9),
         exid::estimators::rankToleranceParam(),
+        exid::param_doubles("gain_prior_std", std::vector<double>{}, "",
+                            "prior std of each drive's dK (one value: every drive; empty: no "
+                            "prior), e.g. a datasheet torque constant's relative tolerance"),
+        exid::param_doubles("gain_prior_dK", std::vector<double>{}, "",
+                            "prior mean of each drive's dK (one value: every drive; empty: 0, "
+                            "the recorded torque is the true one)"),
     };
   }
 
@@ -53,7 +65,18 @@ class GainsLs : public exid::Estimator {
       : max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         xtol_(p.getDouble("step_tolerance")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
-        rank_tol_(p.getDouble("rank_tolerance")) {}
+        rank_tol_(p.getDouble("rank_tolerance")),
+        prior_std_(p.getDoubles("gain_prior_std")),
+        prior_mean_(p.getDoubles("gain_prior_dK")) {
+    for (double v : prior_std_)
+      exid::check(v > 0 && std::isfinite(v),
+                  fmt::format("gains_ls: gain_prior_std: {} is not a positive std", v));
+    for (double v : prior_mean_)
+      exid::check(std::isfinite(v) && v > -1.0,
+                  fmt::format("gains_ls: gain_prior_dK: {} is not a gain correction above -1", v));
+    exid::check(prior_mean_.empty() || !prior_std_.empty(),
+                "gains_ls: gain_prior_dK is given without gain_prior_std");
+  }
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s;
@@ -64,8 +87,11 @@ class GainsLs : public exid::Estimator {
   exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
-    exid::check(prior == nullptr, "gains_ls: a prior is not supported");
+    exid::check(prior == nullptr,
+                "gains_ls: the study's prior is not supported (a prior on the gains: "
+                "gain_prior_std, gain_prior_dK)");
     split(model);
+    setPrior(model);
     const Sums S = accumulate(model, data, ctx);
     Fit f = solve(S);
     return finish(model, S, f, t0);
@@ -88,6 +114,27 @@ class GainsLs : public exid::Estimator {
                             "(differential with drive_gains: true); batch_ls gives its fit",
                             model.pluginName()));
   }
+
+  // The gain prior per gain column (mu_, sd_; empty: none).
+  void setPrior(const exid::ObservationModel& model) {
+    const auto ng = gain_cols_.size();
+    mu_.resize(0);
+    sd_.resize(0);
+    if (prior_std_.empty()) return;
+    auto expand = [&](const std::vector<double>& v, const char* key, double def) {
+      exid::check(v.empty() || v.size() == 1 || v.size() == ng,
+                  fmt::format("gains_ls: {} has {} values; expected 1 or one per drive gain ({}: "
+                              "{})",
+                              key, v.size(), ng, model.pluginName()));
+      Eigen::VectorXd out(static_cast<Eigen::Index>(ng));
+      for (std::size_t k = 0; k < ng; ++k)
+        out[static_cast<Eigen::Index>(k)] = v.empty() ? def : (v.size() == 1 ? v[0] : v[k]);
+      return out;
+    };
+    sd_ = expand(prior_std_, "gain_prior_std", 0.0);
+    mu_ = expand(prior_mean_, "gain_prior_dK", 0.0);
+  }
+  bool hasPrior() const { return sd_.size() > 0; }
 
   // Per equation (joint): its gain's base column and the sums of u u^T, u = [w, p, tau].
   struct Sums {
@@ -167,16 +214,23 @@ class GainsLs : public exid::Estimator {
 
   struct Fit {
     Eigen::VectorXd theta, g;  // other base parameters, per-gain g = recorded / true
-    double rss = 0.0;
-    Eigen::MatrixXd H;  // Gauss-Newton matrix of (theta, g)
+    double rss = 0.0;          // the data's residual sum of squares
+    double objective = 0.0;    // rss + the prior's weighted pseudo-residuals
+    double noise = 0.0;        // the noise std the prior was weighed with (0: no prior)
+    int noise_rounds = 0;      // fits to the noise std's fixed point
+    double noise_floor = 0.0;  // its floor; floored: the floor was used
+    bool floored = false;
+    Eigen::MatrixXd H;         // Gauss-Newton matrix of (theta, g), the prior's part included
     int iterations = 0;
     std::string stop;
     bool converged = false;
   };
 
-  // rss, gradient and Gauss-Newton matrix at (theta, g) from the sums.
+  // The objective (rss, plus the gain prior's squared pseudo-residuals weighted by noise^2), its
+  // gradient and Gauss-Newton matrix at (theta, g) from the sums; *data_rss: the rss alone.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
-                  const Eigen::VectorXd& g, Eigen::VectorXd* grad, Eigen::MatrixXd* H) const {
+                  const Eigen::VectorXd& g, double noise, Eigen::VectorXd* grad,
+                  Eigen::MatrixXd* H, double* data_rss = nullptr) const {
     const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(g.size());
     if (grad) grad->setZero(p0 + ng);
     if (H) H->setZero(p0 + ng, p0 + ng);
@@ -205,6 +259,15 @@ class GainsLs : public exid::Estimator {
         (*H)(p0 + k, p0 + k) += q;
       }
     }
+    if (data_rss) *data_rss = rss;
+    for (Eigen::Index k = 0; k < sd_.size(); ++k) {
+      // rho = noise (dK - mu) / s, dK = 1 / g - 1
+      const double rho = noise * (1.0 / g[k] - 1.0 - mu_[k]) / sd_[k];
+      const double drho = -noise / (sd_[k] * g[k] * g[k]);
+      rss += rho * rho;
+      if (grad) (*grad)[p0 + k] += rho * drho;
+      if (H) (*H)(p0 + k, p0 + k) += drho * drho;
+    }
     return rss;
   }
 
@@ -213,20 +276,55 @@ class GainsLs : public exid::Estimator {
     std::vector<Eigen::MatrixXd> G;
     for (const auto& [eq, a] : S.acc) G.push_back(a.factor().transpose() * a.factor());
     Fit f;
-    f.g = Eigen::VectorXd::Ones(ng);  // start: the recorded torque is the true one
-    // theta at g = 1: (sum A) theta = sum (a - c)
+    // start: the prior's gains (or the recorded torque is the true one), theta by least squares
+    f.g = Eigen::VectorXd::Ones(ng);
+    for (Eigen::Index k = 0; k < mu_.size(); ++k) f.g[k] = 1.0 / (1.0 + mu_[k]);
     {
       Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
       Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
-      for (const Eigen::MatrixXd& M : G) {
-        A += M.topLeftCorner(p0, p0);
-        b += M.col(p0 + 1).head(p0) - M.col(p0).head(p0);
+      std::size_t e = 0;
+      for (const auto& [eq, a] : S.acc) {
+        const Eigen::MatrixXd& M = G[e++];
+        const double gk = f.g[S.gain_of.at(eq)];
+        A += gk * gk * M.topLeftCorner(p0, p0);
+        b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
       }
       f.theta = A.ldlt().solve(b);
     }
+    if (!hasPrior()) {
+      iterate(S, G, 0.0, &f);
+      return f;
+    }
+    // The prior is weighed by the data's noise std: from the start's rss, then the fit's, to a
+    // fixed point (the gains' common scale, which the prior sets, does not change the rss).
+    const double dof = static_cast<double>(std::max<long>(1, S.m - p0 - ng));
+    double rss0 = 0.0, tt = 0.0;
+    (void)evaluate(S, G, f.theta, f.g, 0.0, nullptr, nullptr, &rss0);
+    for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
+    // Near noise-free data the prior's weight (noise^2 / s^2) would vanish against the data's
+    // and the scale it sets would drown in rounding: the noise std is floored at 1e-3 of the
+    // recorded torque's rms (said in the details; it only widens the posterior).
+    f.noise_floor = 1e-3 * std::sqrt(tt / static_cast<double>(std::max<long>(1, S.m)));
+    double noise = std::sqrt(std::max(rss0, 0.0) / dof);
+    for (f.noise_rounds = 1; f.noise_rounds <= 20; ++f.noise_rounds) {
+      f.noise = std::max(noise, f.noise_floor);
+      iterate(S, G, f.noise, &f);
+      const double next = std::max(std::sqrt(std::max(f.rss, 0.0) / dof), f.noise_floor);
+      if (std::abs(next - f.noise) <= 1e-6 * f.noise) break;
+      noise = next;
+    }
+    f.floored = f.noise <= f.noise_floor;
+    return f;
+  }
+
+  // Levenberg-Marquardt from f's (theta, g) with the prior weighed by `noise`.
+  void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise, Fit* fp) const {
+    Fit& f = *fp;
+    const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
     Eigen::VectorXd grad;
     double mu = 1e-3;
-    f.rss = evaluate(S, G, f.theta, f.g, &grad, &f.H);
+    f.converged = false;
+    f.objective = evaluate(S, G, f.theta, f.g, noise, &grad, &f.H, &f.rss);
     for (f.iterations = 0; f.iterations < max_iter_; ++f.iterations) {
       bool accepted = false;
       Eigen::VectorXd step;
@@ -239,11 +337,11 @@ class GainsLs : public exid::Estimator {
           continue;
         }
         const Eigen::VectorXd th = f.theta + step.head(p0), g = f.g + step.tail(ng);
-        const double rss = evaluate(S, G, th, g, nullptr, nullptr);
-        if (std::isfinite(rss) && rss <= f.rss) {
+        const double obj = evaluate(S, G, th, g, noise, nullptr, nullptr);
+        if (std::isfinite(obj) && obj <= f.objective && (g.array() > 0).all()) {
           f.theta = th;
           f.g = g;
-          f.rss = evaluate(S, G, f.theta, f.g, &grad, &f.H);
+          f.objective = evaluate(S, G, f.theta, f.g, noise, &grad, &f.H, &f.rss);
           mu = std::max(mu / 3, 1e-15);
           accepted = true;
         } else {
@@ -267,7 +365,6 @@ class GainsLs : public exid::Estimator {
     if (!f.converged)
       f.stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
     f.rss = std::max(f.rss, 0.0);
-    return f;
   }
 
   exid::Estimate finish(const exid::ObservationModel& model, const Sums& S, const Fit& f,
@@ -281,15 +378,19 @@ class GainsLs : public exid::Estimator {
     const Eigen::MatrixXd Hs = sc.asDiagonal() * f.H * sc.asDiagonal();
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> eig(Hs);
     const Eigen::VectorXd ev = eig.eigenvalues();  // ascending
-    exid::check(ev[0] > rank_tol_ * rank_tol_ * ev[ev.size() - 1],
+    // with a prior: positive definite is enough (its weight is small against near noise-free data)
+    const double tol = hasPrior() ? 0.0 : rank_tol_ * rank_tol_;
+    exid::check(ev[0] > tol * ev[ev.size() - 1],
                 "gains_ls: the gains and the base parameters are not identifiable together (the "
                 "Gauss-Newton matrix is singular: does the payload part move every joint whose "
-                "gain is fitted?)");
+                "gain is fitted? Without a payload part the gains' common scale needs a prior: "
+                "gain_prior_std)");
     exid::estimators::LsSolution s;
     s.p = p;
     s.m = S.m;
     s.rss = f.rss;
-    s.sigma2 = f.rss / static_cast<double>(S.m - p);
+    // with a prior: the noise it was weighed with (the fixed point of rss / (m - p))
+    s.sigma2 = hasPrior() ? f.noise * f.noise : f.rss / static_cast<double>(S.m - p);
     const Eigen::MatrixXd Hinv =
         sc.asDiagonal() *
         (eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose()) *
@@ -324,8 +425,11 @@ class GainsLs : public exid::Estimator {
         "measurement only (no errors in variables), Levenberg-Marquardt on per-joint sums of one "
         "pass; dK_j = 1 / g_j - 1";
     d["covariance_definition"] =
-        "sigma^2 H^-1 of (theta, g), H = J^T J, sigma^2 = rss / (m - p), carried to dK by the "
-        "delta method";
+        hasPrior() ? "the posterior sigma^2 H^-1 of (theta, g), H = J^T J + sigma^2 (d dK / d g)^2 "
+                     "/ s^2 (the gain prior), sigma^2 = rss / (m - p) at its fixed point, carried "
+                     "to dK by the delta method"
+                   : "sigma^2 H^-1 of (theta, g), H = J^T J, sigma^2 = rss / (m - p), carried to "
+                     "dK by the delta method";
     exid::Json gains = exid::Json::array();
     for (int k = 0; k < ng; ++k) {
       exid::Json o = exid::Json::object();
@@ -335,9 +439,30 @@ class GainsLs : public exid::Estimator {
       o["dK_std"] = s.std[static_cast<Eigen::Index>(c)];
       o["recorded_over_true"] = f.g[k];
       o["recorded_over_true_std"] = std::sqrt(std::max(0.0, s.sigma2 * Hinv(p0 + k, p0 + k)));
+      if (hasPrior()) {
+        o["prior_dK"] = mu_[k];
+        o["prior_std"] = sd_[k];
+        // posterior variance / prior variance: 1 = the prior alone, 0 = the data decide
+        o["prior_share"] = std::pow(s.std[static_cast<Eigen::Index>(c)] / sd_[k], 2);
+      }
       gains.push_back(o);
     }
     d["gains"] = gains;
+    if (hasPrior()) {
+      exid::Json pr = exid::Json::object();
+      pr["definition"] =
+          "pseudo-observations noise_std (dK_j - prior_dK_j) / prior_std_j added to the rows; "
+          "noise_std = sqrt(rss / (m - p)) at its fixed point";
+      pr["noise_std"] = f.noise;
+      pr["noise_rounds"] = f.noise_rounds;
+      pr["noise_std_floor"] = f.noise_floor;
+      pr["noise_std_floored"] = f.floored;
+      if (f.floored)
+        pr["noise_std_floor_note"] =
+            "the data's noise std is below 1e-3 of the recorded torque's rms: the floor was used, "
+            "so the prior weighs more and the posterior is wider than the data alone would give";
+      d["gain_prior"] = pr;
+    }
     d["iterations"] = f.iterations;
     d["stop"] = f.stop;
     d["converged"] = f.converged;
@@ -355,7 +480,9 @@ class GainsLs : public exid::Estimator {
   double xtol_;
   int chunk_;
   double rank_tol_;
-  std::vector<int> gain_cols_, other_cols_;  // base columns
+  std::vector<double> prior_std_, prior_mean_;  // as given
+  Eigen::VectorXd mu_, sd_;                      // the gain prior per gain column (empty: none)
+  std::vector<int> gain_cols_, other_cols_;      // base columns
 };
 
 }  // namespace

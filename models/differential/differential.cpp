@@ -18,7 +18,8 @@
 // (1 + dK_j) times the recorded one, dK_j identified with the rest from a recording whose
 // second part carries a known payload phi (meta.payload_part_from_t_s, csv payload_file):
 //   tau_m,j - [T^T Yp phi]_j (payload part only) = Y_j pi - dK_j tau_m,j.
-// Without the payload part the scale of pi and the gains is not identifiable: refused.
+// Without the payload part the scale of pi and the gains is not identifiable: refused, unless
+// drive_gains_scale: prior says that a prior on the gains (gains_ls's gain_prior_std) sets it.
 #include <fmt/format.h>
 
 #include <Eigen/Core>
@@ -86,7 +87,14 @@ class DifferentialModel : public exid::ObservationModel {
         exid::param_bool("drive_gains", false,
                          "identify a gain correction dK_j per drive: the true torque is (1 + "
                          "dK_j) times the recorded one; needs the data's payload part (csv "
-                         "payload_file) and that payload (payload_mass_kg, ...)"),
+                         "payload_file) and that payload (payload_mass_kg, ...), or "
+                         "drive_gains_scale: prior"),
+        exid::param_string("drive_gains_scale", "payload",
+                           "what sets the gains' common scale: payload (a known payload in the "
+                           "recording's payload part) or prior (the gains_ls estimator's "
+                           "gain_prior_std on dK; no payload part, the data fix the gains' "
+                           "ratios only)",
+                           {"payload", "prior"}),
     };
     for (const auto& d :
          exid::payloadParams("known payload carried in the recording's payload part (drive_gains)"))
@@ -129,14 +137,35 @@ class DifferentialModel : public exid::ObservationModel {
                               "positive velocity",
                               v));
     gains_ = p.getBool("drive_gains");
+    gains_prior_ = p.getString("drive_gains_scale") == "prior";
     const exid::Payload load = exid::Payload::fromParams(p);
-    exid::check(!gains_ || load.mass > 0,
+    exid::check(!gains_ || gains_prior_ || load.mass > 0,
                 "model 'differential': drive_gains: true needs the known payload of the "
                 "recording's payload part (payload_mass_kg > 0, payload_com_m, "
-                "payload_inertia_kg_m2): it sets the scale of the gains");
+                "payload_inertia_kg_m2): it sets the scale of the gains (or "
+                "drive_gains_scale: prior, with gains_ls's gain_prior_std)");
     exid::check(gains_ || load.mass == 0,
                 "model 'differential': payload_mass_kg is given but drive_gains is false");
+    exid::check(!gains_prior_ || load.mass == 0,
+                "model 'differential': payload_mass_kg is given with drive_gains_scale: prior "
+                "(a known payload sets the scale: drive_gains_scale: payload)");
+    exid::check(gains_ || !gains_prior_,
+                "model 'differential': drive_gains_scale: prior is given but drive_gains is "
+                "false");
     phi_ = load.phi();
+    // The design's structural payload under drive_gains_scale: prior (the base parameters only;
+    // never in rows): 1 kg, 5 cm off the flange's axis, with some inertia. With it the dK
+    // columns are base columns; the data alone then lack one direction (the gains' common
+    // scale), which the estimator's prior fixes.
+    if (gains_prior_) {
+      exid::Payload structural;
+      structural.mass = 1.0;
+      structural.com = Eigen::Vector3d(0.05, 0.03, 0.08);
+      structural.I_com = Eigen::Vector3d(0.002, 0.003, 0.0025).asDiagonal();
+      design_phi_ = structural.phi();
+    } else {
+      design_phi_ = phi_;
+    }
     coulomb_extra_ = cols_.coulomb && (asym_ || !eps_param_.empty());
     if (coulomb_extra_) cols_.coulomb = false;  // the Coulomb columns are the extra ones
   }
@@ -210,7 +239,13 @@ class DifferentialModel : public exid::ObservationModel {
     exid::models::sizeRows(&r, K, m);
     // drive gains: the payload part's samples (t >= its first) carry the known payload
     double loaded_from = HUGE_VAL;
-    if (gains_) {
+    if (gains_ && gains_prior_) {
+      exid::check(d.meta.find("payload_part_from_t_s") == nullptr,
+                  fmt::format("{}: the data have a payload part (meta.payload_part_from_t_s) "
+                              "but drive_gains_scale is prior: give the payload "
+                              "(payload_mass_kg, ...) and drive_gains_scale: payload ({})",
+                              who, d.source));
+    } else if (gains_) {
       const exid::Json* from = d.meta.find("payload_part_from_t_s");
       if (!from || !from->isNumber())
         throw exid::Error(
@@ -225,7 +260,7 @@ class DifferentialModel : public exid::ObservationModel {
     Eigen::VectorXd tp;
     for (int k = 0; k < K; ++k) {
       const bool loaded = gains_ && d.t[k] >= loaded_from;
-      if (loaded) tp = payloadTorque(*data, d.q.row(k), d.qd.row(k), d.qdd.row(k));
+      if (loaded) tp = payloadTorque(*data, phi_, d.q.row(k), d.qd.row(k), d.qdd.row(k));
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];
         double y = d.tau(k, j);
@@ -321,7 +356,7 @@ class DifferentialModel : public exid::ObservationModel {
     Eigen::VectorXd tp = Eigen::VectorXd::Zero(n);
     for (int k = 0; k < K; ++k) {
       if (k % 2 == 1)
-        tp = payloadTorque(*data, s.q.row(k), s.qd.row(k), s.qdd.row(k));
+        tp = payloadTorque(*data, design_phi_, s.q.row(k), s.qd.row(k), s.qdd.row(k));
       else
         tp.setZero();
       for (int i = 0; i < m; ++i) {
@@ -333,7 +368,7 @@ class DifferentialModel : public exid::ObservationModel {
   }
 
   // The known payload's torque at a sample, in the measured coordinates: T^T Yp phi.
-  Eigen::VectorXd payloadTorque(exid::DynamicsData& data,
+  Eigen::VectorXd payloadTorque(exid::DynamicsData& data, const Eigen::Matrix<double, 10, 1>& phi,
                                 const Eigen::Ref<const Eigen::RowVectorXd>& qm,
                                 const Eigen::Ref<const Eigen::RowVectorXd>& qdm,
                                 const Eigen::Ref<const Eigen::RowVectorXd>& qddm) const {
@@ -342,7 +377,7 @@ class DifferentialModel : public exid::ObservationModel {
     exid::measuredToJoint(R, qm.transpose(), qdm.transpose(), qddm.transpose(), &q, &qd, &qdd);
     Eigen::MatrixXd Yp(R.dof(), 10);
     exid::payloadTorqueRegressor(R, data, q, qd, qdd, Yp);
-    const Eigen::VectorXd t = Yp * phi_;
+    const Eigen::VectorXd t = Yp * phi;
     if (R.hasTransmission()) return R.transmission.transpose() * t;
     return t;
   }
@@ -433,7 +468,7 @@ class DifferentialModel : public exid::ObservationModel {
       Gm.setZero();
       for (int i = 0; i < m; ++i) {
         const int j = sel_[static_cast<std::size_t>(i)];
-        Gm.row(j) -= dW(static_cast<Eigen::Index>(k) * m + i, P + j) * phi_.transpose();
+        Gm.row(j) -= dW(static_cast<Eigen::Index>(k) * m + i, P + j) * design_phi_.transpose();
       }
       if (R.hasTransmission())
         G.noalias() = R.transmission * Gm;
@@ -538,7 +573,13 @@ class DifferentialModel : public exid::ObservationModel {
           "(1 + dK_j) tau_m,j = Y_j pi + [T^T Yp phi]_j (the payload part only): rows tau_m,j - "
           "[T^T Yp phi]_j = Y_j pi - dK_j tau_m,j";
       g["payload_phi"] = exid::Json(std::vector<double>(phi_.data(), phi_.data() + 10));
-      g["design"] = "dK columns: minus the nominal torque, the payload on every other sample";
+      g["scale"] = gains_prior_ ? "prior: no payload part; the gains' common scale comes from "
+                                  "the estimator's gain prior (gains_ls gain_prior_std)"
+                                : "payload: the known payload in the recording's payload part";
+      g["design"] = gains_prior_
+                        ? "dK columns: minus the nominal torque, a structural 1 kg payload on "
+                          "every other sample (the base parameters only)"
+                        : "dK columns: minus the nominal torque, the payload on every other sample";
       j["drive_gains"] = g;
     }
     j["rows_per_sample"] = static_cast<int>(sel_.size());
@@ -598,7 +639,9 @@ class DifferentialModel : public exid::ObservationModel {
   exid::DriveColumns cols_;
   std::vector<int> sel_;
   bool asym_ = false, stribeck_ = false, coulomb_extra_ = false, gains_ = false;
+  bool gains_prior_ = false;  // drive_gains_scale: prior
   Eigen::Matrix<double, 10, 1> phi_ = Eigen::Matrix<double, 10, 1>::Zero();  // drive_gains' payload
+  Eigen::Matrix<double, 10, 1> design_phi_ = Eigen::Matrix<double, 10, 1>::Zero();  // the design's
   int gainCount() const { return gains_ ? robot().dof() : 0; }
   std::vector<double> eps_param_, vs_param_;
   double delta_ = 2.0;

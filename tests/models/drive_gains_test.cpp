@@ -153,13 +153,135 @@ TEST(DriveGains, WithoutTheKnownPayloadTheScaleIsRefused) {
   }
 }
 
+// drive_gains_scale: prior -- no payload part; the data fix the gains' ratios (the rigid body
+// couples the joints' equations), a prior on dK (a datasheet's tolerance) their common scale.
+// gains_ls weighs the prior by the noise it finds: noise-free data with the prior at the truth
+// give the truth; noisy data with priors drawn around the truth give estimates within their
+// posterior standard deviations, and the ratios are known better than the prior says.
+TEST(DriveGains, FromAPriorTheDataFixTheRatiosAndThePriorTheScale) {
+  auto r = mtest::robot("puma560");
+  const std::string prior_model = "{offset: true, drive_gains: true, drive_gains_scale: prior}";
+  auto m = mtest::model("differential", prior_model, r);
+  const std::vector<std::string> names = m->base().names;
+  int gains = 0;
+  for (const auto& n : names) gains += n.rfind("dK", 0) == 0;
+  EXPECT_EQ(gains, 6);  // the structural payload of the design keeps every gain a base column
+  const exid::Dataset clean = mtest::simulate(
+      r,
+      fmt::format("{{duration_s: 6, sample_period_s: 0.005, recorded_torque_gain: [{}]}}",
+                  fmt::join(kGain, ", ")),
+      3);
+  const Eigen::VectorXd want = truth(*m);
+  std::vector<double> dk;
+  for (double g : kGain) dk.push_back(1.0 / g - 1.0);
+  constexpr double kPriorStd = 0.05;
+  {  // noise-free, the prior's mean at the truth
+    auto g = exid_test::create<exid::Estimator>(
+        "gains_ls", fmt::format("{{gain_prior_std: [{}], gain_prior_dK: [{}]}}", kPriorStd,
+                                fmt::join(dk, ", ")));
+    const exid::Estimate e = g->estimate(*m, clean, nullptr, mtest::context());
+    double worst = 0;
+    for (Eigen::Index k = 0; k < want.size(); ++k)
+      worst = std::max(worst, std::abs(e.value[k] - want[k]) / std::max(1.0, std::abs(want[k])));
+    std::printf("[drive gains] prior, noise free: every base parameter %.2e (relative)\n", worst);
+    EXPECT_LT(worst, 1e-6);
+    ASSERT_NE(e.details.find("gain_prior"), nullptr);
+  }
+  {  // without the prior: the common scale is refused by name
+    auto g = exid_test::create<exid::Estimator>("gains_ls", "{}");
+    try {
+      (void)g->estimate(*m, clean, nullptr, mtest::context());
+      ADD_FAILURE() << "gains without a payload part or a prior were accepted";
+    } catch (const exid::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("gain_prior_std"), std::string::npos) << e.what();
+    }
+  }
+  // noisy: 1 % torque noise, each drive's prior mean drawn around the truth with the prior std
+  std::mt19937_64 rng(77);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  int within2 = 0, count = 0;
+  double z2 = 0, share = 0, ratio_std = 0;
+  for (int seed = 1; seed <= 12; ++seed) {
+    exid::Dataset d = clean;
+    for (Eigen::Index j = 0; j < d.tau.cols(); ++j) {
+      const double rms = d.tau.col(j).norm() / std::sqrt(static_cast<double>(d.tau.rows()));
+      for (Eigen::Index k = 0; k < d.tau.rows(); ++k) d.tau(k, j) += 0.01 * rms * nd(rng);
+    }
+    std::vector<double> mean;
+    for (double v : dk) mean.push_back(v + kPriorStd * nd(rng));
+    auto g = exid_test::create<exid::Estimator>(
+        "gains_ls",
+        fmt::format("{{gain_prior_std: [{}], gain_prior_dK: [{}]}}", kPriorStd, fmt::join(mean, ", ")));
+    const exid::Estimate e = g->estimate(*m, d, nullptr, mtest::context());
+    std::vector<Eigen::Index> gk;
+    for (std::size_t i = 0; i < names.size(); ++i)
+      if (names[i].rfind("dK", 0) == 0) gk.push_back(static_cast<Eigen::Index>(i));
+    for (Eigen::Index k : gk) {
+      const double z = (e.value[k] - want[k]) / e.std[k];
+      z2 += z * z;
+      within2 += std::abs(z) < 2.0;
+      share += std::pow(e.std[k] / kPriorStd, 2);
+      ++count;
+    }
+    // the ratio (1 + dK_2) / (1 + dK_1): its std by the delta method from the posterior
+    const Eigen::Index a = gk[0], b = gk[1];
+    const double ua = 1 + e.value[a], ub = 1 + e.value[b];
+    Eigen::Vector2d grad(-ub / (ua * ua), 1.0 / ua);
+    Eigen::Matrix2d C;
+    C << e.covariance(a, a), e.covariance(a, b), e.covariance(b, a), e.covariance(b, b);
+    ratio_std += std::sqrt(grad.dot(C * grad)) / (ub / ua);
+  }
+  const double mean_z2 = z2 / count;
+  std::printf(
+      "[drive gains] prior (std %.2f), noisy: %d of %d within 2 sigma, mean z^2 = %.2f; mean "
+      "posterior/prior variance of dK %.2f; relative std of (1+dK2)/(1+dK1) %.1e\n",
+      kPriorStd, within2, count, mean_z2, share / count, ratio_std / 12);
+  EXPECT_GE(within2, static_cast<int>(0.8 * count));
+  EXPECT_GT(mean_z2, 0.3);
+  EXPECT_LT(mean_z2, 2.5);
+  // the data know the ratios better than the prior (whose ratio std is about sqrt(2) s)
+  EXPECT_LT(ratio_std / 12, 0.5 * std::sqrt(2.0) * kPriorStd);
+}
+
+TEST(DriveGains, APriorScaleRefusesAPayloadAndAPayloadPart) {
+  auto r = mtest::robot("puma560");
+  try {
+    (void)mtest::model("differential",
+                       fmt::format("{{drive_gains: true, drive_gains_scale: prior, {}}}", kPayload),
+                       r);
+    ADD_FAILURE() << "a payload with drive_gains_scale: prior was accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("drive_gains_scale"), std::string::npos) << e.what();
+  }
+  auto m = mtest::model("differential", "{drive_gains: true, drive_gains_scale: prior}", r);
+  exid::Dataset d = mtest::simulate(r, "{duration_s: 1, sample_period_s: 0.01}");
+  d.meta["payload_part_from_t_s"] = 0.5;
+  try {
+    (void)m->rows(d, mtest::context());
+    ADD_FAILURE() << "a payload part with drive_gains_scale: prior was accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("drive_gains_scale is prior"), std::string::npos)
+        << e.what();
+  }
+  try {
+    (void)exid_test::create<exid::Estimator>("gains_ls", "{gain_prior_dK: [0.1]}");
+    ADD_FAILURE() << "a prior mean without a std was accepted";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("gain_prior_std"), std::string::npos) << e.what();
+  }
+}
+
 TEST(DriveGains, TheDesignsDerivativeEqualsCentralDifferences) {
   auto r = mtest::robot("puma560");
-  auto m = mtest::model("differential", model(), r);
   const exid::Samples s = mtest::randomSamples(*r, 4, 0.01, 9);
-  const double err = mtest::vjpError(*m, s, true);
-  std::printf("[drive gains] design VJP against central differences: %.2e\n", err);
-  EXPECT_LT(err, 1e-6);
+  for (const std::string& params :
+       {model(), std::string("{drive_gains: true, drive_gains_scale: prior}")}) {
+    auto m = mtest::model("differential", params, r);
+    const double err = mtest::vjpError(*m, s, true);
+    std::printf("[drive gains] design VJP against central differences (%s): %.2e\n",
+                params.c_str(), err);
+    EXPECT_LT(err, 1e-6) << params;
+  }
 }
 
 // End to end: two CSV recordings, the second with the payload, read by csv's payload_file.
