@@ -1,19 +1,19 @@
-// exid — estimator `gains_ls`: drive gains identified with the base parameters, the recorded
-// torque in the measurement only (docs/estimators.md, "gains_ls").
+// exid — estimator `gains_ls`: the parameters of the recorded torque's own columns (drive gains
+// dK_j, load-dependent Coulomb FcL_j) identified with the base parameters, the recorded torque
+// in the measurement only (docs/estimators.md, "gains_ls").
 //
-// With the `differential` model's drive_gains, the rows of joint j are
-//   tau_j - p_j = w theta - dK_j tau_j,
-// tau_j the recorded torque, p_j the known payload's torque (the payload part only). The
-// recorded torque is in a column: least squares on these rows has errors in variables, and
-// since the gains' common scale is set by the payload alone (a small part of the torque), the
-// bias is large (30 % on a PUMA at 1 % torque noise). gains_ls fits the same model written
-// with the noise in the measurement only:
-//   tau_j = g_j (w theta + p_j),   g_j = 1 / (1 + dK_j)   (the recorded / true gain),
-// bilinear in (theta, g). Everything the fit needs is in per-joint sums taken in one pass:
-// with u = [w, p, tau] per row of joint j, S_j = sum u u^T. The residual sum of squares, its
-// gradient and the Gauss-Newton matrix of (theta, g) follow exactly from the S_j, so
-// Levenberg-Marquardt runs on them without another pass. Covariance sigma^2 H^-1 at the
-// optimum, sigma^2 = rss / (m - p), carried to dK_j = 1 / g_j - 1 by the delta method.
+// The `differential` model's torque columns hold the recorded torque itself: with drive_gains
+// the rows of joint j are tau_j - p_j = w theta - dK_j tau_j (p_j the known payload's torque,
+// the payload part only); with coulomb_load, tau_j = w theta + FcL_j |tau_j| sign(qdm_j). Least
+// squares on such rows has errors in variables: the column's noise is the measurement's. Both
+// are one form, a_i = -W(i, c) / tau_i per row (dK: a = 1; FcL: a = -sign(tau qdm)):
+//   tau_i (1 + a_i phi_c) = w_i theta + p_i,   i.e.   tau_i = g_i (w_i theta + p_i),
+//   g_i = 1 / (1 + a_i phi_c)   (phi_c = dK_j or FcL_j),
+// bilinear in (theta, phi) once the rows are grouped by (equation, a). Everything the fit needs
+// is in per-group sums taken in one pass: with u = [w, p, tau] per row, S = sum u u^T. The
+// residual sum of squares, its gradient and the Gauss-Newton matrix of (theta, phi) follow
+// exactly from the S, so Levenberg-Marquardt runs on them without another pass. Covariance
+// sigma^2 H^-1 at the optimum, sigma^2 = rss / (m - p).
 //
 // A prior on the gains (gain_prior_std, gain_prior_dK: a datasheet's torque constants and their
 // tolerance) adds the pseudo-observations sigma (dK_j - mu_j) / s_j, sigma the data's noise std
@@ -27,6 +27,7 @@
 #include <chrono>
 #include <cmath>
 #include <map>
+#include <tuple>
 
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
@@ -41,9 +42,10 @@ class GainsLs : public exid::Estimator {
   static constexpr const char* kName = "gains_ls";
   static constexpr const char* kVersion = "1.0";
   static constexpr const char* kDoc =
-      "drive gains with the base parameters (differential's drive_gains), the recorded torque "
-      "in the measurement only: tau = g (w theta + p), Levenberg-Marquardt on per-joint sums of "
-      "one pass; no errors-in-variables bias";
+      "the recorded torque's own columns (differential's drive_gains dK, coulomb_load FcL) with "
+      "the base parameters, the recorded torque in the measurement only: tau = (w theta + p) / "
+      "(1 + a phi), Levenberg-Marquardt on per-group sums of one pass; no errors-in-variables "
+      "bias";
 
   static std::vector<exid::ParamDecl> params() {
     return {
@@ -98,29 +100,38 @@ class GainsLs : public exid::Estimator {
   }
 
  private:
-  // The base columns: the gains' (dK<j>) and the others'.
+  // The base columns: the torque columns' (dK<j>, FcL<j>) and the others'.
   void split(const exid::ObservationModel& model) {
     gain_cols_.clear();
     other_cols_.clear();
+    is_gain_.clear();
     const std::vector<std::string>& names = model.base().names;
+    auto named = [](const std::string& n, const char* pre) {
+      const std::size_t l = std::char_traits<char>::length(pre);
+      return n.size() > l && n.compare(0, l, pre) == 0 &&
+             n.find_first_not_of("0123456789", l) == std::string::npos;
+    };
     for (int c = 0; c < static_cast<int>(names.size()); ++c) {
       const std::string& n = names[static_cast<std::size_t>(c)];
-      const bool gain = n.size() > 2 && n.compare(0, 2, "dK") == 0 &&
-                        n.find_first_not_of("0123456789", 2) == std::string::npos;
-      (gain ? gain_cols_ : other_cols_).push_back(c);
+      const bool gain = named(n, "dK"), load = named(n, "FcL");
+      if (gain || load) is_gain_.push_back(gain);
+      (gain || load ? gain_cols_ : other_cols_).push_back(c);
     }
     exid::check(!gain_cols_.empty(),
-                fmt::format("gains_ls: model '{}' has no drive gain among its base parameters "
-                            "(differential with drive_gains: true); batch_ls gives its fit",
+                fmt::format("gains_ls: model '{}' has no column of the recorded torque among its "
+                            "base parameters (differential with drive_gains or coulomb_load); "
+                            "batch_ls gives its fit",
                             model.pluginName()));
   }
 
   // The gain prior per gain column (mu_, sd_; empty: none).
   void setPrior(const exid::ObservationModel& model) {
-    const auto ng = gain_cols_.size();
+    std::size_t ng = 0;  // the dK columns (a prior is on the gains only)
+    for (bool g : is_gain_) ng += g;
     mu_.resize(0);
     sd_.resize(0);
     if (prior_std_.empty()) return;
+    exid::check(ng > 0, "gains_ls: gain_prior_std is given but the model has no drive gain");
     auto expand = [&](const std::vector<double>& v, const char* key, double def) {
       exid::check(v.empty() || v.size() == 1 || v.size() == ng,
                   fmt::format("gains_ls: {} has {} values; expected 1 or one per drive gain ({}: "
@@ -131,15 +142,32 @@ class GainsLs : public exid::Estimator {
         out[static_cast<Eigen::Index>(k)] = v.empty() ? def : (v.size() == 1 ? v[0] : v[k]);
       return out;
     };
-    sd_ = expand(prior_std_, "gain_prior_std", 0.0);
-    mu_ = expand(prior_mean_, "gain_prior_dK", 0.0);
+    const Eigen::VectorXd sd = expand(prior_std_, "gain_prior_std", 0.0);
+    const Eigen::VectorXd mu = expand(prior_mean_, "gain_prior_dK", 0.0);
+    // per torque column (sd 0: no prior on it)
+    sd_ = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(gain_cols_.size()));
+    mu_ = Eigen::VectorXd::Zero(sd_.size());
+    Eigen::Index g = 0;
+    for (std::size_t k = 0; k < gain_cols_.size(); ++k)
+      if (is_gain_[k]) {
+        sd_[static_cast<Eigen::Index>(k)] = sd[g];
+        mu_[static_cast<Eigen::Index>(k)] = mu[g++];
+      }
   }
   bool hasPrior() const { return sd_.size() > 0; }
 
-  // Per equation (joint): its gain's base column and the sums of u u^T, u = [w, p, tau].
+  // Per group of rows (equation, torque column, a): the sums of u u^T, u = [w, p, tau].
+  struct Group {
+    int eq = 0;
+    int k = -1;     // its torque column (index in gain_cols_); -1: none (g = 1)
+    double a = 0;   // g = 1 / (1 + a phi_k)
+  };
   struct Sums {
-    std::map<int, RowAccumulator> acc;  // [w, p] with tau as the "y" column
-    std::map<int, int> gain_of;         // equation -> its gain's index in gain_cols_
+    std::vector<Group> groups;
+    std::vector<RowAccumulator> acc;
+    std::map<std::tuple<int, int, int>, std::size_t> index;  // (eq, k, a) -> group
+    std::map<int, std::size_t> rows_of_col;                   // torque column -> its rows
+    std::map<int, int> eq_of_col;                             // torque column -> its equation
     long m = 0;
   };
 
@@ -147,99 +175,122 @@ class GainsLs : public exid::Estimator {
                   const exid::RunContext& ctx) const {
     Sums S;
     const int p0 = static_cast<int>(other_cols_.size());
+    bool has_gain = false;
+    for (bool g : is_gain_) has_gain = has_gain || g;
     Eigen::MatrixXd U;
     Eigen::VectorXd tau;
+    std::map<std::size_t, std::vector<Eigen::Index>> rows_of;  // group -> rows of the chunk
     exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, 0.9, [&](const exid::Rows& r, int b, int) {
           const Eigen::Index R = r.y.size();
           exid::check(r.equation.size() == static_cast<std::size_t>(R),
                       "gains_ls: the model's rows carry no equation labels");
-          std::map<int, std::vector<Eigen::Index>> rows_of;
+          rows_of.clear();
+          std::vector<double> tau_of(static_cast<std::size_t>(R), 0.0);
           for (Eigen::Index i = 0; i < R; ++i) {
             const int eq = r.equation[static_cast<std::size_t>(i)];
-            int gain = -1;
-            for (std::size_t g = 0; g < gain_cols_.size(); ++g)
-              if (r.W(i, gain_cols_[g]) != 0.0) {
-                exid::check(gain < 0, fmt::format("gains_ls: a row (sample {} on) has two drive "
-                                                  "gains' columns: one gain per equation",
-                                                  b));
-                gain = static_cast<int>(g);
+            int k = -1;
+            for (std::size_t c = 0; c < gain_cols_.size(); ++c)
+              if (r.W(i, gain_cols_[c]) != 0.0) {
+                if (k >= 0)
+                  throw exid::Error(fmt::format("gains_ls: a row (sample {} on) has two columns "
+                                                "of the recorded torque: one per equation",
+                                                b));
+                k = static_cast<int>(c);
               }
-            if (gain >= 0) {
-              auto [it, fresh] = S.gain_of.emplace(eq, gain);
-              exid::check(fresh || it->second == gain,
-                          fmt::format("gains_ls: equation {} has rows with two drive gains' "
-                                      "columns",
-                                      eq));
+            // the recorded torque: minus a gain column; else the measurement (no payload part
+            // without gains)
+            double t = r.y[i], a = 0.0;
+            if (k >= 0) {
+              const double w = r.W(i, gain_cols_[static_cast<std::size_t>(k)]);
+              if (is_gain_[static_cast<std::size_t>(k)]) {
+                t = -w;
+                a = 1.0;
+              } else {
+                a = t != 0.0 ? (-w / t > 0 ? 1.0 : -1.0) : 0.0;  // -sign(tau qdm)
+                if (a == 0.0) k = -1;
+              }
+              auto [it, fresh] = S.eq_of_col.emplace(k, eq);
+              if (!fresh && it->second != eq)
+                throw exid::Error(fmt::format(
+                    "gains_ls: '{}' appears in two equations (one expected)",
+                    model.base().names[static_cast<std::size_t>(
+                        gain_cols_[static_cast<std::size_t>(k)])]));
+            } else if (has_gain) {
+              t = 0.0;  // (a gain's equation with a zero recorded torque: p = -y)
             }
-            rows_of[eq].push_back(i);
+            tau_of[static_cast<std::size_t>(i)] = t;
+            const auto key = std::make_tuple(eq, k, static_cast<int>(a));
+            auto g = S.index.find(key);
+            if (g == S.index.end()) {
+              g = S.index.emplace(key, S.groups.size()).first;
+              S.groups.push_back({eq, k, a});
+              S.acc.emplace_back(p0 + 1);
+            }
+            rows_of[g->second].push_back(i);
           }
-          for (const auto& [eq, idx] : rows_of) {
+          for (const auto& [gi, idx] : rows_of) {
             const auto n = static_cast<Eigen::Index>(idx.size());
             U.resize(n, p0 + 1);
             tau.resize(n);
-            const auto it = S.gain_of.find(eq);
-            for (Eigen::Index k = 0; k < n; ++k) {
-              const Eigen::Index i = idx[static_cast<std::size_t>(k)];
+            for (Eigen::Index q = 0; q < n; ++q) {
+              const Eigen::Index i = idx[static_cast<std::size_t>(q)];
               for (int c = 0; c < p0; ++c)
-                U(k, c) = r.W(i, other_cols_[static_cast<std::size_t>(c)]);
-              // tau from the gain's column (-tau), 0 where it is 0 (a row before the equation's
-              // gain column was seen has tau 0 there); p = tau - y
-              const double t = it == S.gain_of.end()
-                                   ? 0.0
-                                   : -r.W(i, gain_cols_[static_cast<std::size_t>(it->second)]);
-              tau[k] = t;
-              U(k, p0) = t - r.y[i];
+                U(q, c) = r.W(i, other_cols_[static_cast<std::size_t>(c)]);
+              tau[q] = tau_of[static_cast<std::size_t>(i)];
+              U(q, p0) = tau[q] - r.y[i];  // p = tau - y
             }
-            auto a = S.acc.find(eq);
-            if (a == S.acc.end()) a = S.acc.emplace(eq, RowAccumulator(p0 + 1)).first;
-            a->second.add(U, tau);
+            S.acc[gi].add(U, tau);
             S.m += n;
+            const int k = S.groups[gi].k;
+            if (k >= 0) S.rows_of_col[k] += static_cast<std::size_t>(n);
           }
         });
-    for (const auto& [eq, a] : S.acc)
-      exid::check(S.gain_of.count(eq) > 0,
-                  fmt::format("gains_ls: equation {} has no drive gain column (its recorded "
-                              "torque is zero throughout, or its gain is not identifiable)",
-                              eq));
-    std::vector<int> seen(gain_cols_.size(), 0);
-    for (const auto& [eq, g] : S.gain_of) ++seen[static_cast<std::size_t>(g)];
-    for (std::size_t g = 0; g < seen.size(); ++g)
-      exid::check(
-          seen[g] == 1,
-          fmt::format("gains_ls: drive gain '{}' appears in {} equations (one expected)",
-                      model.base().names[static_cast<std::size_t>(gain_cols_[g])], seen[g]));
+    for (std::size_t k = 0; k < gain_cols_.size(); ++k)
+      exid::check(S.rows_of_col.count(static_cast<int>(k)) > 0,
+                  fmt::format("gains_ls: '{}' has no row with a nonzero recorded torque (not "
+                              "identifiable)",
+                              model.base().names[static_cast<std::size_t>(gain_cols_[k])]));
     return S;
   }
 
   struct Fit {
-    Eigen::VectorXd theta, g;  // other base parameters, per-gain g = recorded / true
-    double rss = 0.0;          // the data's residual sum of squares
-    double objective = 0.0;    // rss + the prior's weighted pseudo-residuals
-    double noise = 0.0;        // the noise std the prior was weighed with (0: no prior)
-    int noise_rounds = 0;      // fits to the noise std's fixed point
-    double noise_floor = 0.0;  // its floor; floored: the floor was used
+    Eigen::VectorXd theta, phi;  // other base parameters; torque columns' (dK, FcL)
+    double rss = 0.0;            // the data's residual sum of squares
+    double objective = 0.0;      // rss + the prior's weighted pseudo-residuals
+    double noise = 0.0;          // the noise std the prior was weighed with (0: no prior)
+    int noise_rounds = 0;        // fits to the noise std's fixed point
+    double noise_floor = 0.0;    // its floor; floored: the floor was used
     bool floored = false;
-    Eigen::MatrixXd H;         // Gauss-Newton matrix of (theta, g), the prior's part included
+    Eigen::MatrixXd H;           // Gauss-Newton matrix of (theta, phi), the prior's included
     int iterations = 0;
     std::string stop;
     bool converged = false;
   };
 
+  // Whether every group's 1 + a phi_k is positive (the recorded torque keeps its sign).
+  static bool admissible(const Sums& S, const Eigen::VectorXd& phi) {
+    for (const Group& g : S.groups)
+      if (g.k >= 0 && !(1.0 + g.a * phi[g.k] > 0.0)) return false;
+    return true;
+  }
+
   // The objective (rss, plus the gain prior's squared pseudo-residuals weighted by noise^2), its
-  // gradient and Gauss-Newton matrix at (theta, g) from the sums; *data_rss: the rss alone.
+  // gradient and Gauss-Newton matrix at (theta, phi) from the sums; *data_rss: the rss alone.
+  // Per group r = tau - g (w theta + p), g = 1 / (1 + a phi): dr/dtheta = -g w, dr/dphi =
+  // -(w theta + p) g', g' = -a g^2.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
-                  const Eigen::VectorXd& g, double noise, Eigen::VectorXd* grad,
+                  const Eigen::VectorXd& phi, double noise, Eigen::VectorXd* grad,
                   Eigen::MatrixXd* H, double* data_rss = nullptr) const {
-    const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(g.size());
+    const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(phi.size());
     if (grad) grad->setZero(p0 + ng);
     if (H) H->setZero(p0 + ng, p0 + ng);
     double rss = 0.0;
-    std::size_t e = 0;
-    for (const auto& [eq, a] : S.acc) {
-      const Eigen::MatrixXd& M = G[e++];  // [w p tau]^T [w p tau]
-      const int k = S.gain_of.at(eq);
-      const double gk = g[k];
+    for (std::size_t e = 0; e < S.groups.size(); ++e) {
+      const Group& gr = S.groups[e];
+      const Eigen::MatrixXd& M = G[e];  // [w p tau]^T [w p tau]
+      const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
+      const double dg = -gr.a * gk * gk;
       const auto A = M.topLeftCorner(p0, p0);
       const Eigen::VectorXd c = M.col(p0).head(p0), at = M.col(p0 + 1).head(p0);
       const double pp = M(p0, p0), tp = M(p0, p0 + 1), tt = M(p0 + 1, p0 + 1);
@@ -247,23 +298,24 @@ class GainsLs : public exid::Estimator {
       const double q = th.dot(Ath) + 2 * th.dot(c) + pp;  // ||w theta + p||^2
       const double s = th.dot(at) + tp;                   // tau . (w theta + p)
       rss += tt - 2 * gk * s + gk * gk * q;
-      if (grad) {  // d rss / d(theta, g) / 2 = -J^T r
+      if (grad) {  // d rss / d(theta, phi) / 2 = J^T r
         grad->head(p0) += -gk * at + gk * gk * (Ath + c);
-        (*grad)[p0 + k] += -s + gk * q;
+        if (gr.k >= 0) (*grad)[p0 + gr.k] += (-s + gk * q) * dg;
       }
-      if (H) {  // J^T J: J = -[g w, w theta + p]
+      if (H) {  // J^T J
         H->topLeftCorner(p0, p0) += gk * gk * A;
-        const Eigen::VectorXd x = gk * (Ath + c);
-        H->col(p0 + k).head(p0) += x;
-        H->row(p0 + k).head(p0) += x.transpose();
-        (*H)(p0 + k, p0 + k) += q;
+        if (gr.k >= 0) {
+          const Eigen::VectorXd x = gk * dg * (Ath + c);
+          H->col(p0 + gr.k).head(p0) += x;
+          H->row(p0 + gr.k).head(p0) += x.transpose();
+          (*H)(p0 + gr.k, p0 + gr.k) += dg * dg * q;
+        }
       }
     }
     if (data_rss) *data_rss = rss;
     for (Eigen::Index k = 0; k < sd_.size(); ++k) {
-      // rho = noise (dK - mu) / s, dK = 1 / g - 1
-      const double rho = noise * (1.0 / g[k] - 1.0 - mu_[k]) / sd_[k];
-      const double drho = -noise / (sd_[k] * g[k] * g[k]);
+      if (sd_[k] == 0.0) continue;  // (no prior on a load term)
+      const double rho = noise * (phi[k] - mu_[k]) / sd_[k], drho = noise / sd_[k];
       rss += rho * rho;
       if (grad) (*grad)[p0 + k] += rho * drho;
       if (H) (*H)(p0 + k, p0 + k) += drho * drho;
@@ -274,24 +326,28 @@ class GainsLs : public exid::Estimator {
   Fit solve(const Sums& S) const {
     const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
     std::vector<Eigen::MatrixXd> G;
-    for (const auto& [eq, a] : S.acc) G.push_back(a.factor().transpose() * a.factor());
+    for (const RowAccumulator& a : S.acc) G.push_back(a.factor().transpose() * a.factor());
     Fit f;
-    // start: the prior's gains (or the recorded torque is the true one), theta by least squares
-    f.g = Eigen::VectorXd::Ones(ng);
-    for (Eigen::Index k = 0; k < mu_.size(); ++k) f.g[k] = 1.0 / (1.0 + mu_[k]);
+    // start: the prior's gains (else 0: the recorded torque is the true one), theta by least
+    // squares at them
+    f.phi = mu_.size() > 0 ? mu_ : Eigen::VectorXd::Zero(ng);
     {
       Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
       Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
-      std::size_t e = 0;
-      for (const auto& [eq, a] : S.acc) {
-        const Eigen::MatrixXd& M = G[e++];
-        const double gk = f.g[S.gain_of.at(eq)];
+      for (std::size_t e = 0; e < S.groups.size(); ++e) {
+        const Eigen::MatrixXd& M = G[e];
+        const Group& gr = S.groups[e];
+        const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * f.phi[gr.k]) : 1.0;
         A += gk * gk * M.topLeftCorner(p0, p0);
         b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
       }
       f.theta = A.ldlt().solve(b);
     }
     if (!hasPrior()) {
+      // Start from least squares on the rows themselves (tau - p = w theta - a phi tau: errors
+      // in variables, but near): from phi = 0 LM can walk to a spurious fit with some
+      // 1 + a phi -> 0 (a drive of small torques, its sign flipped by noise).
+      linearStart(S, G, &f);
       iterate(S, G, 0.0, &f);
       return f;
     }
@@ -299,7 +355,7 @@ class GainsLs : public exid::Estimator {
     // fixed point (the gains' common scale, which the prior sets, does not change the rss).
     const double dof = static_cast<double>(std::max<long>(1, S.m - p0 - ng));
     double rss0 = 0.0, tt = 0.0;
-    (void)evaluate(S, G, f.theta, f.g, 0.0, nullptr, nullptr, &rss0);
+    (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, nullptr, &rss0);
     for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
     // Near noise-free data the prior's weight (noise^2 / s^2) would vanish against the data's
     // and the scale it sets would drown in rounding: the noise std is floored at 1e-3 of the
@@ -317,14 +373,39 @@ class GainsLs : public exid::Estimator {
     return f;
   }
 
-  // Levenberg-Marquardt from f's (theta, g) with the prior weighed by `noise`.
+  // (theta, phi) of least squares on the rows tau - p = w theta - a phi tau, from the sums: per
+  // group the regressor [w, -a tau] and the target tau - p are linear in u = [w, p, tau].
+  void linearStart(const Sums& S, const std::vector<Eigen::MatrixXd>& G, Fit* f) const {
+    const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0 + ng, p0 + ng);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(p0 + ng);
+    for (std::size_t e = 0; e < S.groups.size(); ++e) {
+      const Group& gr = S.groups[e];
+      // L u = [w; -a tau at k] (regressor), t u = tau - p (target)
+      Eigen::MatrixXd L = Eigen::MatrixXd::Zero(p0 + ng, p0 + 2);
+      L.topLeftCorner(p0, p0).setIdentity();
+      if (gr.k >= 0) L(p0 + gr.k, p0 + 1) = -gr.a;
+      Eigen::VectorXd t = Eigen::VectorXd::Zero(p0 + 2);
+      t[p0] = -1.0;
+      t[p0 + 1] = 1.0;
+      A += L * G[e] * L.transpose();
+      b += L * (G[e] * t);
+    }
+    Eigen::LDLT<Eigen::MatrixXd> ldlt(A);
+    const Eigen::VectorXd x = ldlt.solve(b);
+    if (ldlt.info() != Eigen::Success || !x.allFinite() || !admissible(S, x.tail(ng))) return;
+    f->theta = x.head(p0);
+    f->phi = x.tail(ng);
+  }
+
+  // Levenberg-Marquardt from f's (theta, phi) with the prior weighed by `noise`.
   void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise, Fit* fp) const {
     Fit& f = *fp;
     const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
     Eigen::VectorXd grad;
     double mu = 1e-3;
     f.converged = false;
-    f.objective = evaluate(S, G, f.theta, f.g, noise, &grad, &f.H, &f.rss);
+    f.objective = evaluate(S, G, f.theta, f.phi, noise, &grad, &f.H, &f.rss);
     for (f.iterations = 0; f.iterations < max_iter_; ++f.iterations) {
       bool accepted = false;
       Eigen::VectorXd step;
@@ -336,20 +417,22 @@ class GainsLs : public exid::Estimator {
           mu *= 10;
           continue;
         }
-        const Eigen::VectorXd th = f.theta + step.head(p0), g = f.g + step.tail(ng);
-        const double obj = evaluate(S, G, th, g, noise, nullptr, nullptr);
-        if (std::isfinite(obj) && obj <= f.objective && (g.array() > 0).all()) {
+        const Eigen::VectorXd th = f.theta + step.head(p0), phi = f.phi + step.tail(ng);
+        const double obj =
+            admissible(S, phi) ? evaluate(S, G, th, phi, noise, nullptr, nullptr) : HUGE_VAL;
+        if (std::isfinite(obj) && obj <= f.objective) {
           f.theta = th;
-          f.g = g;
-          f.objective = evaluate(S, G, f.theta, f.g, noise, &grad, &f.H, &f.rss);
+          f.phi = phi;
+          f.objective = evaluate(S, G, f.theta, f.phi, noise, &grad, &f.H, &f.rss);
           mu = std::max(mu / 3, 1e-15);
           accepted = true;
         } else {
           mu *= 4;
         }
       }
+      // relative step: phi against 1 (the gain and load terms are relative corrections)
       Eigen::VectorXd scale(p0 + ng);
-      scale << f.theta.cwiseAbs(), f.g.cwiseAbs();
+      scale << f.theta.cwiseAbs(), Eigen::VectorXd::Ones(ng);
       const double rel = (step.array().abs() / (scale.array() + 1e-300)).maxCoeff();
       if (!accepted) {
         f.stop = "no step lowers the residual (a minimum to working precision)";
@@ -372,6 +455,18 @@ class GainsLs : public exid::Estimator {
     const int p = model.numBase(), p0 = static_cast<int>(other_cols_.size()),
               ng = static_cast<int>(gain_cols_.size());
     exid::check(S.m > p, fmt::format("gains_ls: {} rows for {} parameters", S.m, p));
+    // A load term at |FcL| -> 1 is the fit's degenerate branch, not friction: the groups follow
+    // the recorded torque's sign, and where noise flips it often (a drive whose torque is near
+    // its noise) one group's 1 + a FcL goes to 0.
+    for (int k = 0; k < ng; ++k)
+      exid::check(is_gain_[static_cast<std::size_t>(k)] || std::abs(f.phi[k]) < 0.9,
+                  fmt::format("gains_ls: '{}' went to {:.6g}, the degenerate branch 1 +- FcL -> "
+                              "0: the recorded torque of this drive is near its noise, so its "
+                              "sign (which the load term follows) is not known; leave the drive "
+                              "out (the model's joints) or fit it with batch_ls",
+                              model.base().names[static_cast<std::size_t>(
+                                  gain_cols_[static_cast<std::size_t>(k)])],
+                              f.phi[k]));
     // the Gauss-Newton matrix must be regular (column-scaled)
     Eigen::VectorXd sc = f.H.diagonal().cwiseMax(0.0).cwiseSqrt();
     for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
@@ -381,10 +476,10 @@ class GainsLs : public exid::Estimator {
     // with a prior: positive definite is enough (its weight is small against near noise-free data)
     const double tol = hasPrior() ? 0.0 : rank_tol_ * rank_tol_;
     exid::check(ev[0] > tol * ev[ev.size() - 1],
-                "gains_ls: the gains and the base parameters are not identifiable together (the "
-                "Gauss-Newton matrix is singular: does the payload part move every joint whose "
-                "gain is fitted? Without a payload part the gains' common scale needs a prior: "
-                "gain_prior_std)");
+                "gains_ls: the torque columns' parameters and the base parameters are not "
+                "identifiable together (the Gauss-Newton matrix is singular: does the payload "
+                "part move every joint whose gain is fitted? Without a payload part the gains' "
+                "common scale needs a prior: gain_prior_std)");
     exid::estimators::LsSolution s;
     s.p = p;
     s.m = S.m;
@@ -395,7 +490,7 @@ class GainsLs : public exid::Estimator {
         sc.asDiagonal() *
         (eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose()) *
         sc.asDiagonal();
-    // (theta, g) -> base order, dK = 1 / g - 1: d dK / d g = -1 / g^2
+    // (theta, phi) -> base order
     Eigen::MatrixXd T = Eigen::MatrixXd::Zero(p, p0 + ng);
     s.theta.resize(p);
     for (int c = 0; c < p0; ++c) {
@@ -403,13 +498,13 @@ class GainsLs : public exid::Estimator {
       T(other_cols_[static_cast<std::size_t>(c)], c) = 1.0;
     }
     for (int k = 0; k < ng; ++k) {
-      s.theta[gain_cols_[static_cast<std::size_t>(k)]] = 1.0 / f.g[k] - 1.0;
-      T(gain_cols_[static_cast<std::size_t>(k)], p0 + k) = -1.0 / (f.g[k] * f.g[k]);
+      s.theta[gain_cols_[static_cast<std::size_t>(k)]] = f.phi[k];
+      T(gain_cols_[static_cast<std::size_t>(k)], p0 + k) = 1.0;
     }
     s.covariance = s.sigma2 * T * Hinv * T.transpose();
     s.std = s.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     s.rel_std_percent = exid::estimators::relativeStdPercent(s.theta, s.std);
-    // singular values of the Jacobian [g w, w theta + p]: square roots of H's eigenvalues
+    // singular values of the Jacobian: square roots of H's eigenvalues
     Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> he(f.H, Eigen::EigenvaluesOnly);
     s.singular_values = he.eigenvalues().reverse().cwiseMax(0.0).cwiseSqrt();
     s.singular_values_scaled = ev.reverse().cwiseMax(0.0).cwiseSqrt();
@@ -421,24 +516,31 @@ class GainsLs : public exid::Estimator {
     exid::Json& d = e.details;
     d["estimator"] = kName;
     d["method"] =
-        "tau_j = g_j (w theta + p_j), bilinear least squares with the recorded torque in the "
-        "measurement only (no errors in variables), Levenberg-Marquardt on per-joint sums of one "
-        "pass; dK_j = 1 / g_j - 1";
+        "tau_i = (w_i theta + p_i) / (1 + a_i phi) per row (phi = dK_j: a = 1; phi = FcL_j: a = "
+        "-sign(tau qdm)), bilinear least squares with the recorded torque in the measurement only "
+        "(no errors in variables), Levenberg-Marquardt on per-group sums of one pass";
     d["covariance_definition"] =
-        hasPrior() ? "the posterior sigma^2 H^-1 of (theta, g), H = J^T J + sigma^2 (d dK / d g)^2 "
-                     "/ s^2 (the gain prior), sigma^2 = rss / (m - p) at its fixed point, carried "
-                     "to dK by the delta method"
-                   : "sigma^2 H^-1 of (theta, g), H = J^T J, sigma^2 = rss / (m - p), carried to "
-                     "dK by the delta method";
-    exid::Json gains = exid::Json::array();
+        hasPrior() ? "the posterior sigma^2 H^-1 of (theta, phi), H = J^T J + sigma^2 / s^2 on "
+                     "the gains (their prior), sigma^2 = rss / (m - p) at its fixed point"
+                   : "sigma^2 H^-1 of (theta, phi), H = J^T J, sigma^2 = rss / (m - p)";
+    exid::Json gains = exid::Json::array(), loads = exid::Json::array();
     for (int k = 0; k < ng; ++k) {
       exid::Json o = exid::Json::object();
       const auto c = static_cast<std::size_t>(gain_cols_[static_cast<std::size_t>(k)]);
+      const auto ci = static_cast<Eigen::Index>(c);
       o["name"] = model.base().names[c];
-      o["dK"] = s.theta[static_cast<Eigen::Index>(c)];
-      o["dK_std"] = s.std[static_cast<Eigen::Index>(c)];
-      o["recorded_over_true"] = f.g[k];
-      o["recorded_over_true_std"] = std::sqrt(std::max(0.0, s.sigma2 * Hinv(p0 + k, p0 + k)));
+      if (!is_gain_[static_cast<std::size_t>(k)]) {
+        o["FcL"] = s.theta[ci];
+        o["FcL_std"] = s.std[ci];
+        loads.push_back(o);
+        continue;
+      }
+      o["dK"] = s.theta[ci];
+      o["dK_std"] = s.std[ci];
+      // g = 1 / (1 + dK): d g / d dK = -g^2
+      const double g = 1.0 / (1.0 + f.phi[k]);
+      o["recorded_over_true"] = g;
+      o["recorded_over_true_std"] = g * g * s.std[ci];
       if (hasPrior()) {
         o["prior_dK"] = mu_[k];
         o["prior_std"] = sd_[k];
@@ -447,7 +549,8 @@ class GainsLs : public exid::Estimator {
       }
       gains.push_back(o);
     }
-    d["gains"] = gains;
+    if (gains.size() > 0) d["gains"] = gains;
+    if (loads.size() > 0) d["load_coulomb"] = loads;
     if (hasPrior()) {
       exid::Json pr = exid::Json::object();
       pr["definition"] =
@@ -466,7 +569,8 @@ class GainsLs : public exid::Estimator {
     d["iterations"] = f.iterations;
     d["stop"] = f.stop;
     d["converged"] = f.converged;
-    d["memory"] = "per joint a (p + 2)^2 factor, whatever the number of samples";
+    d["memory"] =
+        "per group of rows (equation, sign) a (p + 2)^2 factor, whatever the number of samples";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!f.converged) {
       exid::Json w = exid::Json::array();
@@ -482,7 +586,8 @@ class GainsLs : public exid::Estimator {
   double rank_tol_;
   std::vector<double> prior_std_, prior_mean_;  // as given
   Eigen::VectorXd mu_, sd_;                      // the gain prior per gain column (empty: none)
-  std::vector<int> gain_cols_, other_cols_;      // base columns
+  std::vector<int> gain_cols_, other_cols_;      // base columns: torque columns', others'
+  std::vector<bool> is_gain_;                    // per torque column: dK (else FcL)
 };
 
 }  // namespace

@@ -1162,11 +1162,22 @@ void StudyRun::identificationStage() {
     // Drive gains' columns hold the recorded torque: an estimator other than gains_ls has
     // errors in variables there (docs/estimators.md, "gains_ls").
     if (cfg.estimator->type != "gains_ls") {
-      std::string gains;
-      for (const std::string& n : est->names)
-        if (n.size() > 2 && n.compare(0, 2, "dK") == 0 &&
-            n.find_first_not_of("0123456789", 2) == std::string::npos)
-          gains += (gains.empty() ? "" : ", ") + n;
+      std::string gains, loads;
+      auto named = [](const std::string& n, const char* pre) {
+        const std::size_t l = std::char_traits<char>::length(pre);
+        return n.size() > l && n.compare(0, l, pre) == 0 &&
+               n.find_first_not_of("0123456789", l) == std::string::npos;
+      };
+      for (const std::string& n : est->names) {
+        if (named(n, "dK")) gains += (gains.empty() ? "" : ", ") + n;
+        if (named(n, "FcL")) loads += (loads.empty() ? "" : ", ") + n;
+      }
+      if (!loads.empty())
+        warn(fmt::format(
+            "identification: the load-dependent Coulomb columns ({}) hold the recorded torque: "
+            "estimator '{}' has errors in variables there, a bias of many standard deviations on "
+            "long recordings; gains_ls fits them with the torque in the measurement only",
+            loads, cfg.estimator->type));
       if (!gains.empty())
         warn(fmt::format(
             "identification: the drive gains' columns ({}) hold the recorded torque: estimator "

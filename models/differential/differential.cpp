@@ -10,7 +10,10 @@
 // drive columns, per selected joint j:
 //   s_j = sign(qdm_j), or tanh(qdm_j / eps_j) with coulomb_smoothing_rad_s (eps_j nonlinear);
 //   Coulomb: Fc_j s_j, or asymmetric FcP_j (1 + s_j)/2 - FcN_j (1 - s_j)/2;
-//   Stribeck: Fs_j s_j exp(-(|qdm_j| / vs_j)^delta) (vs_j nonlinear, delta fixed).
+//   Stribeck: Fs_j s_j exp(-(|qdm_j| / vs_j)^delta) (vs_j nonlinear, delta fixed);
+//   load-dependent Coulomb (coulomb_load): FcL_j |tau_m,j| sign(qdm_j), the friction of a
+//   gear growing with the torque it carries (the recorded torque in rows; the nominal robot's
+//   in a design).
 // The nonlinear parameters (eps_j, vs_j) take the study's values in rows(); the `varpro`
 // estimator fits them (ObservationModel::fullRowsAt gives the exact column derivatives).
 //
@@ -84,6 +87,9 @@ class DifferentialModel : public exid::ObservationModel {
         exid::param_double("stribeck_exponent", 2.0, "",
                            "the exponent delta of the Stribeck curve (fixed, not fitted)", 0.5,
                            4.0),
+        exid::param_bool("coulomb_load", false,
+                         "a load-dependent Coulomb term FcL_j |tau_m,j| sign(qdm_j) per drive "
+                         "(FcL dimensionless: Coulomb torque per N m carried)"),
         exid::param_bool("drive_gains", false,
                          "identify a gain correction dK_j per drive: the true torque is (1 + "
                          "dK_j) times the recorded one; needs the data's payload part (csv "
@@ -136,7 +142,16 @@ class DifferentialModel : public exid::ObservationModel {
                   fmt::format("model 'differential': stribeck_velocity_rad_s: {} is not a "
                               "positive velocity",
                               v));
+    load_ = p.getBool("coulomb_load");
+    exid::check(!load_ || friction_ == "model",
+                "model 'differential': coulomb_load needs friction: model (an identified column)");
+    exid::check(!load_ || eps_param_.empty(),
+                "model 'differential': coulomb_load multiplies sign(qdm): it is not combined with "
+                "coulomb_smoothing_rad_s");
     gains_ = p.getBool("drive_gains");
+    exid::check(!(load_ && gains_),
+                "model 'differential': coulomb_load and drive_gains both put the recorded torque "
+                "in a column; they are not combined");
     gains_prior_ = p.getString("drive_gains_scale") == "prior";
     const exid::Payload load = exid::Payload::fromParams(p);
     exid::check(!gains_ || gains_prior_ || load.mass > 0,
@@ -181,13 +196,15 @@ class DifferentialModel : public exid::ObservationModel {
       }
       if (stribeck_) names.push_back("Fs" + k);
     }
+    for (int j = 0; j < loadCount(); ++j) names.push_back("FcL" + std::to_string(j + 1));
     for (int j = 0; j < gainCount(); ++j) names.push_back("dK" + std::to_string(j + 1));
     return names;
   }
   Eigen::VectorXd fullNominal() const override {
     const Eigen::VectorXd v = exid::parameterValues(robot(), cols_);
     const int n = robot().dof(), E = extraPerJoint();
-    Eigen::VectorXd out = Eigen::VectorXd::Zero(v.size() + E * n + gainCount());  // dK: 0
+    // FcL, dK: 0
+    Eigen::VectorXd out = Eigen::VectorXd::Zero(v.size() + E * n + loadCount() + gainCount());
     out.head(v.size()) = v;
     for (int j = 0; j < n; ++j) {
       const double fc = drive(j).coulomb;
@@ -255,7 +272,7 @@ class DifferentialModel : public exid::ObservationModel {
                         who, d.source));
       loaded_from = from->asDouble();
     }
-    const int Pg = static_cast<int>(r.W.cols()) - gainCount();
+    const int Pg = static_cast<int>(r.W.cols()) - gainCount(), Pl = Pg - loadCount();
     auto data = gains_ ? exid::makeDynamicsData(robot()) : nullptr;
     Eigen::VectorXd tp;
     for (int k = 0; k < K; ++k) {
@@ -266,6 +283,7 @@ class DifferentialModel : public exid::ObservationModel {
         double y = d.tau(k, j);
         if (friction_ == "subtract") y -= frictionTorque(j, d.qd(k, j));
         if (gains_) r.W(k * m + i, Pg + j) = -d.tau(k, j);
+        if (load_) r.W(k * m + i, Pl + j) = std::abs(d.tau(k, j)) * signum(d.qd(k, j));
         if (loaded) y -= tp[j];
         r.y[k * m + i] = y;
         r.equation[static_cast<std::size_t>(k * m + i)] = i;
@@ -317,7 +335,7 @@ class DifferentialModel : public exid::ObservationModel {
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     exid::models::requireSamples(s, n, true, "model 'differential'");
     const int P0 = exid::numParameters(R, cols_), E = extraPerJoint();
-    const int P = P0 + E * n + gainCount();
+    const int P = P0 + E * n + loadCount() + gainCount();
     // One sample's rows are a block of m consecutive rows of W: each column receives m
     // contiguous numbers (cache friendly), and nothing is allocated per sample.
     Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, P);
@@ -341,8 +359,25 @@ class DifferentialModel : public exid::ObservationModel {
       }
     }
     if (E > 0) extraColumns(s, f, &W, dW);
+    if (load_) loadColumns(s, &W);
     if (gains_) gainColumns(s, gain_design, &W);
     return W;
+  }
+
+  static double signum(double v) { return v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0); }
+
+  // The FcL columns of a design: |nominal torque| sign(qdm) (rows() puts the recorded torque).
+  void loadColumns(const exid::Samples& s, Eigen::MatrixXd* W) const {
+    const int n = robot().dof(), K = s.size(), m = static_cast<int>(sel_.size());
+    const int Pl = static_cast<int>(W->cols()) - n;
+    const Eigen::VectorXd nominal = fullNominal().head(Pl);
+    W->rightCols(n).setZero();  // (a row has its own joint's column only)
+    for (int k = 0; k < K; ++k)
+      for (int i = 0; i < m; ++i) {
+        const int j = sel_[static_cast<std::size_t>(i)];
+        const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+        (*W)(row, Pl + j) = std::abs(W->row(row).head(Pl).dot(nominal)) * signum(s.qd(k, j));
+      }
   }
 
   // The dK columns of a design (see designAt), or zeros.
@@ -433,9 +468,28 @@ class DifferentialModel : public exid::ObservationModel {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
-    exid::check(dW.rows() == static_cast<Eigen::Index>(K) * m && dW.cols() == P + gainCount(),
+    const int T = loadCount() + gainCount();  // the torque columns
+    exid::check(dW.rows() == static_cast<Eigen::Index>(K) * m && dW.cols() == P + T,
                 fmt::format("model 'differential': fullDesignVjp: dW is {} x {} (expected {} x {})",
-                            dW.rows(), dW.cols(), K * m, P + gainCount()));
+                            dW.rows(), dW.cols(), K * m, P + T));
+    if (load_) {
+      // the FcL columns |W_row nominal| sign(qdm_j): their part of the gradient goes through the
+      // other columns, times sign(nominal torque) sign(qdm_j) the nominal values (sign(qdm)'s
+      // derivative is 0)
+      const Eigen::MatrixXd Wd = designAt(s, frictionAt(studyEta()), nullptr);
+      Eigen::MatrixXd dWe = dW.leftCols(P);
+      const Eigen::VectorXd nominal = fullNominal().head(P);
+      for (int k = 0; k < K; ++k)
+        for (int i = 0; i < m; ++i) {
+          const int j = sel_[static_cast<std::size_t>(i)];
+          const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+          const double c = dW(row, P + j) * signum(Wd.row(row).head(P).dot(nominal)) *
+                           signum(s.qd(k, j));
+          if (c != 0.0) dWe.row(row) += c * nominal.transpose();
+        }
+      designVjpNoGains(s, dWe, grad);
+      return;
+    }
     if (gains_) {
       // the dK columns -(W_row nominal + [odd k] T^T Yp phi): their part of the gradient goes
       // through the other columns (times the nominal values) and the payload's torque
@@ -548,6 +602,10 @@ class DifferentialModel : public exid::ObservationModel {
     j["coulomb"] = cols_.coulomb;
     j["viscous"] = cols_.viscous;
     j["offset"] = cols_.offset;
+    if (load_)
+      j["coulomb_load"] =
+          "FcL_j |tau_m,j| sign(qdm_j): the recorded torque in rows, the nominal robot's in a "
+          "design";
     if (coulomb_extra_ || stribeck_) {
       exid::Json f = exid::Json::object();
       f["coulomb_asymmetric"] = asym_;
@@ -643,6 +701,8 @@ class DifferentialModel : public exid::ObservationModel {
   Eigen::Matrix<double, 10, 1> phi_ = Eigen::Matrix<double, 10, 1>::Zero();  // drive_gains' payload
   Eigen::Matrix<double, 10, 1> design_phi_ = Eigen::Matrix<double, 10, 1>::Zero();  // the design's
   int gainCount() const { return gains_ ? robot().dof() : 0; }
+  bool load_ = false;  // coulomb_load
+  int loadCount() const { return load_ ? robot().dof() : 0; }
   std::vector<double> eps_param_, vs_param_;
   double delta_ = 2.0;
 };

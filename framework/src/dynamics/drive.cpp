@@ -35,8 +35,9 @@ std::vector<std::string> parameterNames(const RobotModel& model, const DriveColu
 }
 
 bool isDriveParameterName(const std::string& name) {
-  // (FcP, FcN, Fs: the `differential` model's asymmetric Coulomb and Stribeck columns)
-  for (const char* pre : {"Ia", "Fc", "Fv", "OFF", "FcP", "FcN", "Fs"}) {
+  // (FcP, FcN, Fs, FcL: the `differential` model's asymmetric Coulomb, Stribeck and
+  // load-dependent Coulomb columns)
+  for (const char* pre : {"Ia", "Fc", "Fv", "OFF", "FcP", "FcN", "Fs", "FcL"}) {
     const std::size_t n = std::char_traits<char>::length(pre);
     if (name.size() > n && name.compare(0, n, pre) == 0 && name[n] != '0' &&
         name.find_first_not_of("0123456789", n) == std::string::npos)
