@@ -619,6 +619,17 @@ CsvTable datasetTable(const Dataset& d) {
 
 namespace {
 
+// A base column that holds the recorded torque (dK<j>, FcL<j>): 1 for dK, 2 for FcL, else 0.
+int torqueColumnKind(const std::string& n) {
+  auto named = [&](const char* pre) {
+    const std::size_t l = std::char_traits<char>::length(pre);
+    return n.size() > l && n.compare(0, l, pre) == 0 &&
+           n.find_first_not_of("0123456789", l) == std::string::npos;
+  };
+  return named("dK") ? 1 : (named("FcL") ? 2 : 0);
+}
+
+
 // One study, stage by stage: what the stages share (the study, the summary being built, the
 // run's context and folder) and what each leaves to the next (robot, model, trajectory, the
 // excitation's optimum, the dataset, the estimate). runStudy() sets up the run folder and the
@@ -1163,14 +1174,9 @@ void StudyRun::identificationStage() {
     // errors in variables there (docs/estimators.md, "gains_ls").
     if (cfg.estimator->type != "gains_ls") {
       std::string gains, loads;
-      auto named = [](const std::string& n, const char* pre) {
-        const std::size_t l = std::char_traits<char>::length(pre);
-        return n.size() > l && n.compare(0, l, pre) == 0 &&
-               n.find_first_not_of("0123456789", l) == std::string::npos;
-      };
       for (const std::string& n : est->names) {
-        if (named(n, "dK")) gains += (gains.empty() ? "" : ", ") + n;
-        if (named(n, "FcL")) loads += (loads.empty() ? "" : ", ") + n;
+        if (torqueColumnKind(n) == 1) gains += (gains.empty() ? "" : ", ") + n;
+        if (torqueColumnKind(n) == 2) loads += (loads.empty() ? "" : ", ") + n;
       }
       if (!loads.empty())
         warn(fmt::format(
@@ -1191,6 +1197,40 @@ void StudyRun::identificationStage() {
       for (std::size_t i = 0; i < w->size(); ++i) warn("identification: " + w->at(i).asString());
     report.identification(*est, truth, simulated);
   }
+}
+
+// The held-out prediction of rows whose columns hold the recorded torque, from the model alone:
+// the row tau - p = u - a phi tau (u the other columns' part; dK: a = 1, the column -tau; FcL:
+// the column |tau| sign(qdm), a = -sign(tau qdm), p = 0) solved for the torque, tau_hat = (u +
+// p) / (1 + a phi) with sign(tau_hat) = sign(u + p); *pred receives tau_hat - p (the rows' y
+// units). Returns what was done ("" when the model has no such column).
+std::string predictTorqueColumns(const Rows& rows, const Estimate& est, Eigen::VectorXd* pred) {
+  std::vector<int> cols, kind;
+  for (std::size_t c = 0; c < est.names.size(); ++c)
+    if (const int k = torqueColumnKind(est.names[c])) {
+      cols.push_back(static_cast<int>(c));
+      kind.push_back(k);
+    }
+  if (cols.empty()) return "";
+  for (Eigen::Index i = 0; i < rows.W.rows(); ++i) {
+    int c = -1, kd = 0;
+    for (std::size_t k = 0; k < cols.size(); ++k)
+      if (rows.W(i, cols[k]) != 0.0) {
+        c = cols[k];
+        kd = kind[k];
+      }
+    if (c < 0) continue;
+    const double w = rows.W(i, c), phi = est.value[c];
+    const double u = (*pred)[i] - w * phi;       // the other columns' part
+    const double tau = kd == 1 ? -w : rows.y[i];  // the recorded torque
+    const double p = tau - rows.y[i];             // the known payload's torque (dK only)
+    const double sgn = u + p > 0 ? 1.0 : (u + p < 0 ? -1.0 : 0.0);
+    const double a = kd == 1 ? 1.0 : -sgn * (w > 0 ? 1.0 : -1.0);
+    (*pred)[i] = (u + p) / (1.0 + a * phi) - p;
+  }
+  return "the rows with a column of the recorded torque (dK, FcL) are predicted from the model "
+         "alone: tau_hat = (w theta + p) / (1 + a phi), not from the recorded torque in their "
+         "column";
 }
 
 // Validation on held-out data.
@@ -1239,6 +1279,10 @@ void StudyRun::validationStage() {
       delay_meta["samples_without_rows_back"] = back;
     }
     Eigen::VectorXd pred = rows.W * est->value;
+    // Columns that hold the recorded torque itself (drive gains dK, load-dependent Coulomb FcL):
+    // W theta would predict the torque from its own measurement. The held-out prediction solves
+    // the row for the torque instead (docs/estimators.md, "gains_ls").
+    const std::string torque_prediction = predictTorqueColumns(rows, *est, &pred);
     checkFinite(pred, "validation: the predicted measurement, row");
     Eigen::VectorXd err = rows.y - pred;
     auto& va = T.validation.emplace();
@@ -1250,6 +1294,7 @@ void StudyRun::validationStage() {
     V["samples"] = Json(va.samples);
     V["meta"] = vd.meta;
     if (!delay_meta.isNull()) V["measurement_delay_compensation"] = delay_meta;
+    if (!torque_prediction.empty()) V["torque_columns_prediction"] = torque_prediction;
     V["rows_processing"] = by_estimator
                                ? fmt::format(
                                      "the estimator's: '{}' filtered, differentiated and "

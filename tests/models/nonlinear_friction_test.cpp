@@ -333,6 +333,43 @@ TEST(NonlinearFriction, LoadDependentCoulombIsRecoveredFromTheRecordedTorque) {
   }
 }
 
+// The held-out prediction of a model with the recorded torque in a column solves the row for
+// the torque (tau_hat = w theta / (1 - FcL sign(tau_hat qdm))): it never reads the recorded
+// torque it predicts. Validation data with the torque scaled by 1.5 then show an error of
+// exactly 1/3; a prediction reading it (W theta) would follow part of the scale.
+TEST(NonlinearFriction, TheHeldOutPredictionDoesNotReadTheRecordedTorque) {
+  auto r = mtest::robot("puma560");
+  std::vector<double> FcL;
+  for (int j = 0; j < r->dof(); ++j) FcL.push_back(0.04 + 0.01 * j);
+  exid::Dataset d = loadRecording(r, FcL, 0.0, 1);
+  const fs::path dir = exid_cli::freshTempDir("exid_fcl_", "study");
+  const int half = d.size() / 2;
+  mtest::writeCsv(d, dir / "id.csv", 0, half);
+  mtest::writeCsv(d, dir / "val.csv", half, d.size());
+  d.tau *= 1.5;
+  mtest::writeCsv(d, dir / "scaled.csv", half, d.size());
+  for (const char* val : {"val.csv", "scaled.csv"}) {
+    std::ofstream(dir / "s.yaml") << "name: fcl\nrobot: {type: puma560}\n"
+                                  << "model: {type: differential, params: {coulomb_load: true}}\n"
+                                  << "experiment: {type: csv, params: {file: id.csv}}\n"
+                                  << "estimator: {type: gains_ls}\n"
+                                  << "validation: {type: csv, params: {file: " << val << "}}\n";
+    const fs::path out = dir / (std::string("out_") + val);
+    const auto res = exid_cli::runExid(
+        fmt::format("-q run {} --out {}", (dir / "s.yaml").string(), out.string()));
+    ASSERT_EQ(res.code, 0) << res.out;
+    const exid::Json S = exid::Json::parse(exid_cli::slurp(out / "summary.json"));
+    const exid::Json& V = *S.find("validation");
+    EXPECT_NE(V.find("torque_columns_prediction"), nullptr);
+    const double rel = V.find("relative_error")->asDouble();
+    std::printf("[coulomb_load] held-out relative error, %s: %.3e\n", val, rel);
+    if (std::string(val) == "val.csv")
+      EXPECT_LT(rel, 1e-8);
+    else
+      EXPECT_NEAR(rel, 1.0 / 3.0, 1e-6);
+  }
+}
+
 TEST(Varpro, RecoversEveryParameterFromNoiseFreeData) {
   auto r = mtest::robot("puma560");
   auto m = mtest::model("differential", kModel, r);
