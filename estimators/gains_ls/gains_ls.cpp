@@ -159,15 +159,15 @@ class GainsLs : public exid::Estimator {
   // Per group of rows (equation, torque column, a): the sums of u u^T, u = [w, p, tau].
   struct Group {
     int eq = 0;
-    int k = -1;     // its torque column (index in gain_cols_); -1: none (g = 1)
-    double a = 0;   // g = 1 / (1 + a phi_k)
+    int k = -1;    // its torque column (index in gain_cols_); -1: none (g = 1)
+    double a = 0;  // g = 1 / (1 + a phi_k)
   };
   struct Sums {
     std::vector<Group> groups;
     std::vector<RowAccumulator> acc;
     std::map<std::tuple<int, int, int>, std::size_t> index;  // (eq, k, a) -> group
-    std::map<int, std::size_t> rows_of_col;                   // torque column -> its rows
-    std::map<int, int> eq_of_col;                             // torque column -> its equation
+    std::map<int, std::size_t> rows_of_col;                  // torque column -> its rows
+    std::map<int, int> eq_of_col;                            // torque column -> its equation
     long m = 0;
   };
 
@@ -193,9 +193,10 @@ class GainsLs : public exid::Estimator {
             for (std::size_t c = 0; c < gain_cols_.size(); ++c)
               if (r.W(i, gain_cols_[c]) != 0.0) {
                 if (k >= 0)
-                  throw exid::Error(fmt::format("gains_ls: a row (sample {} on) has two columns "
-                                                "of the recorded torque: one per equation",
-                                                b));
+                  throw exid::Error(
+                      fmt::format("gains_ls: a row (sample {} on) has two columns "
+                                  "of the recorded torque: one per equation",
+                                  b));
                 k = static_cast<int>(c);
               }
             // the recorded torque: minus a gain column; else the measurement (no payload part
@@ -214,8 +215,8 @@ class GainsLs : public exid::Estimator {
               if (!fresh && it->second != eq)
                 throw exid::Error(fmt::format(
                     "gains_ls: '{}' appears in two equations (one expected)",
-                    model.base().names[static_cast<std::size_t>(
-                        gain_cols_[static_cast<std::size_t>(k)])]));
+                    model.base()
+                        .names[static_cast<std::size_t>(gain_cols_[static_cast<std::size_t>(k)])]));
             } else if (has_gain) {
               t = 0.0;  // (a gain's equation with a zero recorded torque: p = -y)
             }
@@ -262,7 +263,7 @@ class GainsLs : public exid::Estimator {
     int noise_rounds = 0;        // fits to the noise std's fixed point
     double noise_floor = 0.0;    // its floor; floored: the floor was used
     bool floored = false;
-    Eigen::MatrixXd H;           // Gauss-Newton matrix of (theta, phi), the prior's included
+    Eigen::MatrixXd H;  // Gauss-Newton matrix of (theta, phi), the prior's included
     int iterations = 0;
     std::string stop;
     bool converged = false;
@@ -459,14 +460,15 @@ class GainsLs : public exid::Estimator {
     // the recorded torque's sign, and where noise flips it often (a drive whose torque is near
     // its noise) one group's 1 + a FcL goes to 0.
     for (int k = 0; k < ng; ++k)
-      exid::check(is_gain_[static_cast<std::size_t>(k)] || std::abs(f.phi[k]) < 0.9,
-                  fmt::format("gains_ls: '{}' went to {:.6g}, the degenerate branch 1 +- FcL -> "
-                              "0: the recorded torque of this drive is near its noise, so its "
-                              "sign (which the load term follows) is not known; leave the drive "
-                              "out (the model's joints) or fit it with batch_ls",
-                              model.base().names[static_cast<std::size_t>(
-                                  gain_cols_[static_cast<std::size_t>(k)])],
-                              f.phi[k]));
+      exid::check(
+          is_gain_[static_cast<std::size_t>(k)] || std::abs(f.phi[k]) < 0.9,
+          fmt::format(
+              "gains_ls: '{}' went to {:.6g}, the degenerate branch 1 +- FcL -> "
+              "0: the recorded torque of this drive is near its noise, so its "
+              "sign (which the load term follows) is not known; leave the drive "
+              "out (the model's joints) or fit it with batch_ls",
+              model.base().names[static_cast<std::size_t>(gain_cols_[static_cast<std::size_t>(k)])],
+              f.phi[k]));
     // the Gauss-Newton matrix must be regular (column-scaled)
     Eigen::VectorXd sc = f.H.diagonal().cwiseMax(0.0).cwiseSqrt();
     for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
@@ -585,9 +587,9 @@ class GainsLs : public exid::Estimator {
   int chunk_;
   double rank_tol_;
   std::vector<double> prior_std_, prior_mean_;  // as given
-  Eigen::VectorXd mu_, sd_;                      // the gain prior per gain column (empty: none)
-  std::vector<int> gain_cols_, other_cols_;      // base columns: torque columns', others'
-  std::vector<bool> is_gain_;                    // per torque column: dK (else FcL)
+  Eigen::VectorXd mu_, sd_;                     // the gain prior per gain column (empty: none)
+  std::vector<int> gain_cols_, other_cols_;     // base columns: torque columns', others'
+  std::vector<bool> is_gain_;                   // per torque column: dK (else FcL)
 };
 
 }  // namespace

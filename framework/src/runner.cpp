@@ -629,7 +629,6 @@ int torqueColumnKind(const std::string& n) {
   return named("dK") ? 1 : (named("FcL") ? 2 : 0);
 }
 
-
 // One study, stage by stage: what the stages share (the study, the summary being built, the
 // run's context and folder) and what each leaves to the next (robot, model, trajectory, the
 // excitation's optimum, the dataset, the estimate). runStudy() sets up the run folder and the
@@ -1221,7 +1220,7 @@ std::string predictTorqueColumns(const Rows& rows, const Estimate& est, Eigen::V
       }
     if (c < 0) continue;
     const double w = rows.W(i, c), phi = est.value[c];
-    const double u = (*pred)[i] - w * phi;       // the other columns' part
+    const double u = (*pred)[i] - w * phi;        // the other columns' part
     const double tau = kd == 1 ? -w : rows.y[i];  // the recorded torque
     const double p = tau - rows.y[i];             // the known payload's torque (dK only)
     const double sgn = u + p > 0 ? 1.0 : (u + p < 0 ? -1.0 : 0.0);

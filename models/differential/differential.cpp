@@ -483,8 +483,8 @@ class DifferentialModel : public exid::ObservationModel {
         for (int i = 0; i < m; ++i) {
           const int j = sel_[static_cast<std::size_t>(i)];
           const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
-          const double c = dW(row, P + j) * signum(Wd.row(row).head(P).dot(nominal)) *
-                           signum(s.qd(k, j));
+          const double c =
+              dW(row, P + j) * signum(Wd.row(row).head(P).dot(nominal)) * signum(s.qd(k, j));
           if (c != 0.0) dWe.row(row) += c * nominal.transpose();
         }
       designVjpNoGains(s, dWe, grad);

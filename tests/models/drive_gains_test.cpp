@@ -210,8 +210,8 @@ TEST(DriveGains, FromAPriorTheDataFixTheRatiosAndThePriorTheScale) {
     std::vector<double> mean;
     for (double v : dk) mean.push_back(v + kPriorStd * nd(rng));
     auto g = exid_test::create<exid::Estimator>(
-        "gains_ls",
-        fmt::format("{{gain_prior_std: [{}], gain_prior_dK: [{}]}}", kPriorStd, fmt::join(mean, ", ")));
+        "gains_ls", fmt::format("{{gain_prior_std: [{}], gain_prior_dK: [{}]}}", kPriorStd,
+                                fmt::join(mean, ", ")));
     const exid::Estimate e = g->estimate(*m, d, nullptr, mtest::context());
     std::vector<Eigen::Index> gk;
     for (std::size_t i = 0; i < names.size(); ++i)
@@ -278,8 +278,8 @@ TEST(DriveGains, TheDesignsDerivativeEqualsCentralDifferences) {
        {model(), std::string("{drive_gains: true, drive_gains_scale: prior}")}) {
     auto m = mtest::model("differential", params, r);
     const double err = mtest::vjpError(*m, s, true);
-    std::printf("[drive gains] design VJP against central differences (%s): %.2e\n",
-                params.c_str(), err);
+    std::printf("[drive gains] design VJP against central differences (%s): %.2e\n", params.c_str(),
+                err);
     EXPECT_LT(err, 1e-6) << params;
   }
 }

@@ -221,8 +221,8 @@ TEST(NonlinearFriction, OptionsWithoutTheirValuesAreRefused) {
 // sign(tau_0)), tau_0 the robot's rigid body, rotor inertia, Coulomb and viscous torque.
 exid::Dataset loadRecording(const std::shared_ptr<const exid::RobotModel>& r,
                             const std::vector<double>& FcL, double noise_Nm, std::uint64_t seed) {
-  exid::Dataset d = mtest::simulate(
-      r, "{duration_s: 6, sample_period_s: 0.002, drive_terms: false}", 7);
+  exid::Dataset d =
+      mtest::simulate(r, "{duration_s: 6, sample_period_s: 0.002, drive_terms: false}", 7);
   exid::DriveColumns c;
   c.rotor_inertia = c.coulomb = c.viscous = true;
   auto data = exid::makeDynamicsData(*r);
@@ -260,13 +260,12 @@ TEST(NonlinearFriction, LoadDependentCoulombIsRecoveredFromTheRecordedTorque) {
   for (std::size_t i = 0; i < base.size(); ++i)
     if (base[i].rfind("FcL", 0) == 0) cols.push_back(static_cast<Eigen::Index>(i));
   EXPECT_EQ(cols.size(), 6u);  // every load term is a base parameter
-  {  // noise-free: every base parameter
+  {                            // noise-free: every base parameter
     const exid::Dataset d = loadRecording(r, FcL, 0.0, 1);
     auto b = exid_test::create<exid::Estimator>("batch_ls", "{}");
-    const exid::Estimate e = exid_test::create<exid::Estimator>("gains_ls", "{}")->estimate(
-        *m, d, nullptr, mtest::context());
-    const double err =
-        ((e.value - want).array().abs() / want.array().abs().max(1.0)).maxCoeff();
+    const exid::Estimate e = exid_test::create<exid::Estimator>("gains_ls", "{}")
+                                 ->estimate(*m, d, nullptr, mtest::context());
+    const double err = ((e.value - want).array().abs() / want.array().abs().max(1.0)).maxCoeff();
     std::printf("[coulomb_load] noise free (gains_ls): every base parameter to %.2e (relative)\n",
                 err);
     // without the term the same data leave a residual the term explains
@@ -308,8 +307,8 @@ TEST(NonlinearFriction, LoadDependentCoulombIsRecoveredFromTheRecordedTorque) {
   {
     const exid::Dataset d = loadRecording(r, FcL, 0.3, 1);
     try {
-      (void)exid_test::create<exid::Estimator>("gains_ls", "{}")->estimate(*m, d, nullptr,
-                                                                          mtest::context());
+      (void)exid_test::create<exid::Estimator>("gains_ls", "{}")
+          ->estimate(*m, d, nullptr, mtest::context());
       ADD_FAILURE() << "a load term on a drive with its torque near the noise was accepted";
     } catch (const exid::Error& e) {
       EXPECT_NE(std::string(e.what()).find("degenerate branch"), std::string::npos) << e.what();
