@@ -55,6 +55,10 @@ class Didim : public exid::Estimator {
                                 "stop when an accepted step moves theta by less than this "
                                 "relative to its norm (the simulation's precision is near)",
                                 0.0, 1.0, true),
+             exid::param_bool("fit_nonlinear", true,
+                              "fit the model's nonlinear parameters (friction widths, Stribeck "
+                              "velocities: ObservationModel::nonlinearParameters) with theta, "
+                              "from the model's values, on log scale; false: keep them"),
              exid::param_int("gradient_check", 0,
                              "> 0: compare the Jacobian along this many random directions with "
                              "central differences of the simulation at the start "
@@ -72,7 +76,8 @@ class Didim : public exid::Estimator {
         ftol_(p.getDouble("rss_tolerance")),
         xtol_(p.getDouble("step_tolerance")),
         tol_loop_(exid::estimators::ClosedLoop::Tolerances::from(p)),
-        check_(static_cast<int>(p.getInt("gradient_check"))) {
+        check_(static_cast<int>(p.getInt("gradient_check"))),
+        fit_nl_(p.getBool("fit_nonlinear")) {
     exid::estimators::ClosedLoop::checkParams(p, kName);
   }
 
@@ -97,7 +102,19 @@ class Didim : public exid::Estimator {
     // start: the inverse model's least squares
     const exid::Rows R = model.rows(data, ctx);
     exid::estimators::checkRows(R, p, kName, 0);
-    VectorXd theta = startFit(model, R);
+    // x = (theta, log eta): the model's nonlinear parameters fitted with theta (fit_nonlinear)
+    L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
+    VectorXd theta(p + L_);
+    theta.head(p) = startFit(model, R);
+    for (int k = 0; k < L_; ++k) {
+      const double v = loop_->nonlinear()[k];
+      exid::check(v > 0, fmt::format("didim: nonlinear parameter {} = {} is not positive (fitted "
+                                     "on log scale)",
+                                     model.nonlinearParameters()[static_cast<std::size_t>(k)].name,
+                                     v));
+      theta[p + k] = std::log(v);
+    }
+    p_ = p;
     const VectorXd theta0 = theta;
     Sim cur = simulate(theta, data, true);
     exid::Json check_json;
@@ -145,7 +162,9 @@ class Didim : public exid::Estimator {
         ++sims;
         if (ok && trial.rss <= cur.rss) {
           decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
-          moved = step.norm() / std::max(theta.norm(), 1e-300);
+          // theta relative to its norm; log eta as it is (a relative change of eta)
+          moved = step.head(p).norm() / std::max(theta.head(p).norm(), 1e-300);
+          if (L_ > 0) moved = std::max(moved, step.tail(L_).cwiseAbs().maxCoeff());
           theta += step;
           cur = simulate(theta, data, true);
           ++sims;
@@ -186,7 +205,8 @@ class Didim : public exid::Estimator {
     d["converged"] = converged;
     d["trace"] = trace;
     d["start"] = "least squares on the recording's rows (the inverse model)";
-    d["start_change"] = (theta - theta0).norm() / std::max(theta.norm(), 1e-300);
+    d["start_change"] =
+        (theta.head(p) - theta0.head(p)).norm() / std::max(theta.head(p).norm(), 1e-300);
     if (!check_json.isNull()) d["gradient_check"] = check_json;
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!converged) {
@@ -213,8 +233,11 @@ class Didim : public exid::Estimator {
     double rss = 0.0;
   };
 
-  Sim simulate(const VectorXd& theta, const exid::Dataset& data, bool sens) const {
-    const int n = loop_->dof(), K = data.size(), p = static_cast<int>(theta.size());
+  // The loop at x = (theta, log eta); J = d y / d x (the eta columns times eta: d/d log eta).
+  Sim simulate(const VectorXd& xv, const exid::Dataset& data, bool sens) const {
+    const int n = loop_->dof(), K = data.size(), p = static_cast<int>(xv.size());
+    const VectorXd theta = xv.head(p_);
+    if (L_ > 0) loop_->setNonlinear(xv.tail(L_).array().exp().matrix(), sens);
     Sim out;
     out.y.resize(static_cast<Eigen::Index>(K) * n);
     if (sens) out.J.resize(static_cast<Eigen::Index>(K) * n, p);
@@ -229,6 +252,8 @@ class Didim : public exid::Estimator {
                                           : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
                                                      loop_->kd().asDiagonal() * S->bottomRows(n));
         });
+    if (sens && L_ > 0)
+      for (int k = 0; k < L_; ++k) out.J.col(p_ + k) *= std::exp(xv[p_ + k]);
     out.rss = (y_ - out.y).squaredNorm();
     return out;
   }
@@ -255,33 +280,44 @@ class Didim : public exid::Estimator {
     return c;
   }
 
-  exid::Estimate finish(const exid::ObservationModel& model, const Sim& s, const VectorXd& theta,
+  exid::Estimate finish(const exid::ObservationModel& model, const Sim& s, const VectorXd& x,
                         long m) const {
-    const int p = model.numBase();
+    const int p = model.numBase(), q = p + L_;
     exid::estimators::LsSolution L;
     L.p = p;
     L.m = m;
-    L.theta = theta;
+    L.theta = x.head(p);
     L.rss = s.rss;
-    L.sigma2 = s.rss / static_cast<double>(m - p);
+    L.sigma2 = s.rss / static_cast<double>(m - q);
     VectorXd sc = s.J.colwise().norm().transpose();
     for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
     Eigen::JacobiSVD<MatrixXd> svd(s.J * sc.asDiagonal(), Eigen::ComputeThinV);
     const VectorXd sv = svd.singularValues();
-    exid::check(sv.size() == p && sv[p - 1] > 1e-10 * sv[0],
-                "didim: the simulated output does not identify every base parameter (its "
-                "Jacobian is singular)");
+    exid::check(sv.size() == q && sv[q - 1] > 1e-10 * sv[0],
+                "didim: the simulated output does not identify every parameter (its Jacobian is "
+                "singular)");
     const MatrixXd Vs = svd.matrixV() * sv.cwiseInverse().asDiagonal();
-    L.covariance = L.sigma2 * sc.asDiagonal() * (Vs * Vs.transpose()) * sc.asDiagonal();
+    const MatrixXd C = L.sigma2 * sc.asDiagonal() * (Vs * Vs.transpose()) * sc.asDiagonal();
+    L.covariance = C.topLeftCorner(p, p);
     L.std = L.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     L.rel_std_percent = exid::estimators::relativeStdPercent(L.theta, L.std);
     Eigen::JacobiSVD<MatrixXd> raw(s.J);
     L.singular_values = raw.singularValues();
-    L.cond_W = L.singular_values[0] / L.singular_values[p - 1];
+    L.cond_W = L.singular_values[0] / L.singular_values[q - 1];
     L.singular_values_scaled = sv;
-    L.cond_W_scaled = sv[0] / sv[p - 1];
+    L.cond_W_scaled = sv[0] / sv[q - 1];
     exid::Estimate e;
     exid::estimators::fillEstimate(&e, model, L, s.rss, m);
+    if (L_ > 0) {  // eta = exp(lambda): std eta * std(lambda)
+      const std::vector<exid::NonlinearParameter> nl = model.nonlinearParameters();
+      e.nonlinear.resize(L_);
+      e.nonlinear_std.resize(L_);
+      for (int k = 0; k < L_; ++k) {
+        e.nonlinear_names.push_back(nl[static_cast<std::size_t>(k)].name);
+        e.nonlinear[k] = std::exp(x[p + k]);
+        e.nonlinear_std[k] = e.nonlinear[k] * std::sqrt(std::max(0.0, C(p + k, p + k)));
+      }
+    }
     exid::Json& d = e.details;
     d["estimator"] = kName;
     d["output"] = position_ ? "position" : "torque";
@@ -290,7 +326,9 @@ class Didim : public exid::Estimator {
         "against the recorded output; Jacobian from forward sensitivities with an exact "
         "right-hand side";
     d["covariance_definition"] =
-        "sigma^2 (J^T J)^-1, J = d y_sim / d theta, sigma^2 = rss / (m - p); cond_W is that of J";
+        "sigma^2 (J^T J)^-1, J = d y_sim / d (theta, log eta), sigma^2 = rss / (m - p - L); "
+        "eta's std = eta std(log eta); cond_W is that of J";
+    d["nonlinear_fitted"] = L_ > 0;
     d["controller"] = loop_->describe();
     d["memory"] = "the Jacobian (m x p doubles): not streamed";
     return e;
@@ -302,6 +340,8 @@ class Didim : public exid::Estimator {
   double ftol_, xtol_;
   exid::estimators::ClosedLoop::Tolerances tol_loop_;
   int check_;
+  bool fit_nl_;
+  int L_ = 0, p_ = 0;  // nonlinear parameters fitted; base parameters
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
   VectorXd y_;
 };

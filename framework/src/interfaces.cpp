@@ -170,6 +170,39 @@ Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& et
   return r;
 }
 
+Eigen::MatrixXd ObservationModel::fullDesignAt(const Samples& s, const Eigen::VectorXd& eta,
+                                               Eigen::MatrixXd* dW) const {
+  if (eta.size() != 0)
+    throw Error(fmt::format("model '{}': it has no nonlinear parameter, {} given", pluginName(),
+                            eta.size()));
+  Eigen::MatrixXd W = fullDesign(s);
+  if (dW) dW->resize(W.rows(), 0);
+  return W;
+}
+
+void ObservationModel::fullDesignVjpAt(const Samples& s, const Eigen::VectorXd& eta,
+                                       const Eigen::MatrixXd& dW, Samples* grad) const {
+  if (eta.size() != 0)
+    throw Error(fmt::format("model '{}': it has no nonlinear parameter, {} given", pluginName(),
+                            eta.size()));
+  fullDesignVjp(s, dW, grad);
+}
+
+Eigen::MatrixXd ObservationModel::designAt(const Samples& s, const Eigen::VectorXd& eta,
+                                           Eigen::MatrixXd* dW) const {
+  check(eta.size() == static_cast<Eigen::Index>(nonlinearParameters().size()),
+        fmt::format("model '{}': {} nonlinear parameter values given, expected {}", pluginName(),
+                    eta.size(), nonlinearParameters().size()));
+  return base_.columns(fullDesignAt(s, eta, dW));
+}
+
+void ObservationModel::designVjpAt(const Samples& s, const Eigen::VectorXd& eta,
+                                   const Eigen::MatrixXd& dW_base, Samples* grad) const {
+  Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base_.numFull());
+  for (int i = 0; i < base_.rank(); ++i) dW.col(base_.independent[i]) = dW_base.col(i);
+  fullDesignVjpAt(s, eta, dW, grad);
+}
+
 Rows ObservationModel::rowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
                               const RunContext& ctx) const {
   const std::vector<NonlinearParameter> nl = nonlinearParameters();

@@ -297,6 +297,10 @@ class DifferentialModel : public exid::ObservationModel {
   Eigen::MatrixXd fullDesign(const exid::Samples& s) const override {
     return designAt(s, frictionAt(studyEta()), nullptr);
   }
+  Eigen::MatrixXd fullDesignAt(const exid::Samples& s, const Eigen::VectorXd& eta,
+                               Eigen::MatrixXd* dW) const override {
+    return designAt(s, frictionAt(eta), dW);
+  }
 
   // The per-drive widths and Stribeck velocities at eta (nonlinearParameters() order).
   struct Friction {
@@ -465,6 +469,12 @@ class DifferentialModel : public exid::ObservationModel {
 
   void fullDesignVjp(const exid::Samples& s, const Eigen::MatrixXd& dW,
                      exid::Samples* grad) const override {
+    fullDesignVjpAt(s, studyEta(), dW, grad);
+  }
+
+  void fullDesignVjpAt(const exid::Samples& s, const Eigen::VectorXd& eta,
+                       const Eigen::MatrixXd& dW, exid::Samples* grad) const override {
+    const Friction f = frictionAt(eta);
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
     const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
@@ -476,7 +486,7 @@ class DifferentialModel : public exid::ObservationModel {
       // the FcL columns |W_row nominal| sign(qdm_j): their part of the gradient goes through the
       // other columns, times sign(nominal torque) sign(qdm_j) the nominal values (sign(qdm)'s
       // derivative is 0)
-      const Eigen::MatrixXd Wd = designAt(s, frictionAt(studyEta()), nullptr);
+      const Eigen::MatrixXd Wd = designAt(s, f, nullptr);
       Eigen::MatrixXd dWe = dW.leftCols(P);
       const Eigen::VectorXd nominal = fullNominal().head(P);
       for (int k = 0; k < K; ++k)
@@ -487,7 +497,7 @@ class DifferentialModel : public exid::ObservationModel {
               dW(row, P + j) * signum(Wd.row(row).head(P).dot(nominal)) * signum(s.qd(k, j));
           if (c != 0.0) dWe.row(row) += c * nominal.transpose();
         }
-      designVjpNoGains(s, dWe, grad);
+      designVjpNoGains(s, f, dWe, grad);
       return;
     }
     if (gains_) {
@@ -500,11 +510,11 @@ class DifferentialModel : public exid::ObservationModel {
           const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
           dWe.row(row) -= dW(row, P + sel_[static_cast<std::size_t>(i)]) * nominal.transpose();
         }
-      designVjpNoGains(s, dWe, grad);
+      designVjpNoGains(s, f, dWe, grad);
       payloadTorqueVjp(s, dW, P, grad);
       return;
     }
-    designVjpNoGains(s, dW, grad);
+    designVjpNoGains(s, f, dW, grad);
   }
 
   // The gradient of sum_k,j c_kj [T^T Yp phi]_j over the odd samples, c = -dW's dK columns,
@@ -539,7 +549,7 @@ class DifferentialModel : public exid::ObservationModel {
   }
 
   // fullDesignVjp of every column but the dK ones (dW: K m x P).
-  void designVjpNoGains(const exid::Samples& s, const Eigen::MatrixXd& dW,
+  void designVjpNoGains(const exid::Samples& s, const Friction& f, const Eigen::MatrixXd& dW,
                         exid::Samples* grad) const {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
@@ -548,7 +558,6 @@ class DifferentialModel : public exid::ObservationModel {
     Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, P0);
     Eigen::VectorXd gq, gqd, gqdd;
     auto data = exid::makeDynamicsData(R);
-    const Friction f = frictionAt(studyEta());
     for (int k = 0; k < K; ++k) {
       G.setZero();
       for (int i = 0; i < m; ++i)

@@ -126,6 +126,21 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
                     "{}] s ({}): the simulation is driven by the reference",
                     who, data.tFirst(), data.tLast(), ref_.t0(), ref_.t1(), file_));
   dyn_ = makeDynamicsData(*robot_);
+  const std::vector<NonlinearParameter> nl = model.nonlinearParameters();
+  eta_.resize(static_cast<Eigen::Index>(nl.size()));
+  for (std::size_t k = 0; k < nl.size(); ++k) {
+    eta_[static_cast<Eigen::Index>(k)] = nl[k].value;
+    for (std::size_t c = 0; c < nl[k].columns.size(); ++c)
+      nl_param_.push_back(static_cast<int>(k));
+  }
+  nl_base_ = model.nonlinearColumnsInBase();
+}
+
+void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
+  check(eta.size() == eta_.size(),
+        fmt::format("{}: {} nonlinear parameter values, expected {}", who_, eta.size(), eta_.size()));
+  eta_ = eta;
+  eta_sens_ = sensitivities && eta.size() > 0;
 }
 
 std::string ClosedLoop::describe() const {
@@ -153,7 +168,7 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
   }
   s_.qdd.setZero();
   for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
-  const VectorXd f = model_->design(s_) * theta;  // (n + 1) n torques
+  const VectorXd f = model_->designAt(s_, eta_, nullptr) * theta;  // (n + 1) n torques
   const VectorXd h = f.head(n);
   MatrixXd M(n, n);
   for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;

@@ -29,9 +29,22 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   s.q = q.transpose();
   s.qd = qd.transpose();
   s.qdd = a.transpose();
-  const MatrixXd w = model_->design(s);  // n x p at (q, qd, a)
+  MatrixXd dWn;
+  const MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
   const Eigen::LDLT<MatrixXd> ldlt(M);
-  *B = -ldlt.solve(w);
+  if (eta_sens_) {
+    // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
+    MatrixXd wn(n, theta.size() + eta_.size());
+    wn.leftCols(theta.size()) = w;
+    wn.rightCols(eta_.size()).setZero();
+    for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
+      const int b = nl_base_[static_cast<std::size_t>(l)];
+      if (b >= 0) wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * theta[b];
+    }
+    *B = -ldlt.solve(wn);
+  } else {
+    *B = -ldlt.solve(w);
+  }
   // d(w theta)_i / d(q, qd) at fixed a: the design's VJP with row i = theta
   MatrixXd Tq(n, n), Tqd(n, n);
   MatrixXd G = MatrixXd::Zero(n, theta.size());
@@ -39,7 +52,7 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   for (int i = 0; i < n; ++i) {
     G.setZero();
     G.row(i) = theta.transpose();
-    model_->designVjp(s, G, &grad);
+    model_->designVjpAt(s, eta_, G, &grad);
     Tq.row(i) = grad.q.row(0);
     Tqd.row(i) = grad.qd.row(0);
   }
@@ -110,7 +123,7 @@ int sensRhs(int Ns, double t, N_Vector y, N_Vector, N_Vector* yS, N_Vector* ySdo
 void ClosedLoop::simulate(
     const VectorXd& theta, const VectorXd& times, const Tolerances& tol, bool sens,
     const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
-  const int n = n_, p = static_cast<int>(theta.size());
+  const int n = n_, p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
   User U{this, &theta, {}, false, 0.0, {}, {}, {}, {}};
   SUNContext sctx = nullptr;
   check(SUNContext_Create(nullptr, &sctx) == 0, who_ + ": SUNContext_Create failed");

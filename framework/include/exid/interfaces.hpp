@@ -102,6 +102,15 @@ class ObservationModel : public PluginObject {
   /// eta empty.
   virtual Rows fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
                           const RunContext& ctx) const;
+  /// fullDesign with the nonlinear parameters at eta and, when dW is given, the derivatives of
+  /// the columns they move (as fullRowsAt: rows x L). Exact. Default (no nonlinear parameter):
+  /// fullDesign, eta empty.
+  virtual Eigen::MatrixXd fullDesignAt(const Samples& s, const Eigen::VectorXd& eta,
+                                       Eigen::MatrixXd* dW) const;
+  /// fullDesignVjp of fullDesignAt(s, eta). Exact. Default (no nonlinear parameter):
+  /// fullDesignVjp, eta empty.
+  virtual void fullDesignVjpAt(const Samples& s, const Eigen::VectorXd& eta,
+                               const Eigen::MatrixXd& dW, Samples* grad) const;
   /// Random samples within the robot's limits used by bind() to find the base parameters.
   virtual Samples randomSamples(int count, std::uint64_t seed) const;
   /// The model's capabilities (per-sample rows, required signals).
@@ -120,6 +129,12 @@ class ObservationModel : public PluginObject {
   std::vector<int> nonlinearColumnsInBase() const;
   Eigen::MatrixXd design(const Samples& s) const;
   void designVjp(const Samples& s, const Eigen::MatrixXd& dW_base, Samples* grad) const;
+  /// design() and designVjp() with the nonlinear parameters at eta; dW (optional) as
+  /// fullDesignAt gives it (full columns; nonlinearColumnsInBase() maps them). Not blocked:
+  /// for the few samples of a simulation step.
+  Eigen::MatrixXd designAt(const Samples& s, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW) const;
+  void designVjpAt(const Samples& s, const Eigen::VectorXd& eta, const Eigen::MatrixXd& dW_base,
+                   Samples* grad) const;
   Eigen::VectorXd baseNominal() const { return base_.reduce(fullNominal()); }
 
  protected:

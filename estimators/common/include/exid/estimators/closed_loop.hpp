@@ -50,6 +50,11 @@ class ClosedLoop {
   static void checkParams(const ParamSet& p, const std::string& who);
 
   int dof() const { return n_; }
+  /// The model's nonlinear parameters (ObservationModel::nonlinearParameters) at which the
+  /// rows are taken: the model's own values until set. With `sensitivities`, simulate()'s
+  /// sensitivities are with respect to (theta, eta): S is 2n x (p + L).
+  void setNonlinear(const Eigen::VectorXd& eta, bool sensitivities);
+  const Eigen::VectorXd& nonlinear() const { return eta_; }
   const Reference& reference() const { return ref_; }
   std::string describe() const;
   /// The controller's torque at (t, q, qd).
@@ -63,6 +68,8 @@ class ClosedLoop {
   /// The loop's linearisation at theta: da/dq, da/dqd (n x n) and da/dtheta (n x p), exact
   /// (the model's design VJP, one per joint): with w theta = M a + h,
   /// da/dtheta = -M^-1 w(q, qd, a), da/dq = M^-1 (-Kp - d(w theta)/dq |a), and likewise qd.
+  /// With the nonlinear parameters' sensitivities on, B has L more columns, da/deta =
+  /// -M^-1 d(w(q, qd, a) theta)/deta (the model's exact column derivatives).
   void linearize(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
                  const Eigen::VectorXd& qd, Eigen::MatrixXd* A_q, Eigen::MatrixXd* A_qd,
                  Eigen::MatrixXd* B) const;
@@ -76,7 +83,8 @@ class ClosedLoop {
   };
   /// The loop at theta from the reference's start, integrated by CVODES (BDF), and at each of
   /// `times` (increasing, within the reference): at(k, x, S), x = (q, qd) and, with
-  /// `sensitivities`, S = dx/dtheta (2n x p; forward sensitivities, staggered, their
+  /// `sensitivities`, S = dx/dtheta (2n x p, or 2n x (p + L): setNonlinear; forward
+  /// sensitivities, staggered, their
   /// right-hand side from linearize(), tolerance sqrt(rtol), outside the steps' error control;
   /// else S is null). A failure is an exid::Error naming the time.
   void simulate(
@@ -95,6 +103,9 @@ class ClosedLoop {
   bool ff_ = true;
   DynamicsDataPtr dyn_;
   mutable Samples s_;  // n + 1 samples: the rows at one state
+  Eigen::VectorXd eta_;                     // the nonlinear parameters the rows are taken at
+  bool eta_sens_ = false;                   // sensitivities with respect to them too
+  std::vector<int> nl_base_, nl_param_;     // per column of fullDesignAt's dW: base column, eta
 };
 
 }  // namespace exid::estimators
