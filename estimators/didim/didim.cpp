@@ -108,10 +108,10 @@ class Didim : public exid::Estimator {
     theta.head(p) = startFit(model, R);
     for (int k = 0; k < L_; ++k) {
       const double v = loop_->nonlinear()[k];
-      exid::check(v > 0, fmt::format("didim: nonlinear parameter {} = {} is not positive (fitted "
-                                     "on log scale)",
-                                     model.nonlinearParameters()[static_cast<std::size_t>(k)].name,
-                                     v));
+      exid::check(v > 0,
+                  fmt::format("didim: nonlinear parameter {} = {} is not positive (fitted "
+                              "on log scale)",
+                              model.nonlinearParameters()[static_cast<std::size_t>(k)].name, v));
       theta[p + k] = std::log(v);
     }
     p_ = p;

@@ -127,8 +127,7 @@ TEST(Didim, APositionOutputRecoversThePlantToo) {
 // The sensitivities with respect to log eta come from the model's exact column derivatives.
 TEST(Didim, FitsTheFrictionWidthsWithTheBaseParameters) {
   Loop s = setup(6.0);
-  s.model = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.1]}",
-                         s.robot);
+  s.model = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.1]}", s.robot);
   const exid::Dataset d = noisyPositions(s.clean, 0.0, 3);
   auto didim = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", gradient_check: 2}");
   const exid::Estimate e = didim->estimate(*s.model, d, nullptr, mtest::context());

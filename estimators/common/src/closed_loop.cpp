@@ -130,15 +130,14 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
   eta_.resize(static_cast<Eigen::Index>(nl.size()));
   for (std::size_t k = 0; k < nl.size(); ++k) {
     eta_[static_cast<Eigen::Index>(k)] = nl[k].value;
-    for (std::size_t c = 0; c < nl[k].columns.size(); ++c)
-      nl_param_.push_back(static_cast<int>(k));
+    for (std::size_t c = 0; c < nl[k].columns.size(); ++c) nl_param_.push_back(static_cast<int>(k));
   }
   nl_base_ = model.nonlinearColumnsInBase();
 }
 
 void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
-  check(eta.size() == eta_.size(),
-        fmt::format("{}: {} nonlinear parameter values, expected {}", who_, eta.size(), eta_.size()));
+  check(eta.size() == eta_.size(), fmt::format("{}: {} nonlinear parameter values, expected {}",
+                                               who_, eta.size(), eta_.size()));
   eta_ = eta;
   eta_sens_ = sensitivities && eta.size() > 0;
 }

@@ -39,7 +39,8 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
     wn.rightCols(eta_.size()).setZero();
     for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
       const int b = nl_base_[static_cast<std::size_t>(l)];
-      if (b >= 0) wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * theta[b];
+      if (b >= 0)
+        wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * theta[b];
     }
     *B = -ldlt.solve(wn);
   } else {

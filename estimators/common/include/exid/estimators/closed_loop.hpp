@@ -102,10 +102,10 @@ class ClosedLoop {
   Eigen::VectorXd Kp_, Kd_;
   bool ff_ = true;
   DynamicsDataPtr dyn_;
-  mutable Samples s_;  // n + 1 samples: the rows at one state
-  Eigen::VectorXd eta_;                     // the nonlinear parameters the rows are taken at
-  bool eta_sens_ = false;                   // sensitivities with respect to them too
-  std::vector<int> nl_base_, nl_param_;     // per column of fullDesignAt's dW: base column, eta
+  mutable Samples s_;                    // n + 1 samples: the rows at one state
+  Eigen::VectorXd eta_;                  // the nonlinear parameters the rows are taken at
+  bool eta_sens_ = false;                // sensitivities with respect to them too
+  std::vector<int> nl_base_, nl_param_;  // per column of fullDesignAt's dW: base column, eta
 };
 
 }  // namespace exid::estimators
