@@ -29,6 +29,7 @@
 #include <map>
 #include <tuple>
 
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
@@ -106,16 +107,10 @@ class GainsLs : public exid::Estimator {
     other_cols_.clear();
     is_gain_.clear();
     const std::vector<std::string>& names = model.base().names;
-    auto named = [](const std::string& n, const char* pre) {
-      const std::size_t l = std::char_traits<char>::length(pre);
-      return n.size() > l && n.compare(0, l, pre) == 0 &&
-             n.find_first_not_of("0123456789", l) == std::string::npos;
-    };
     for (int c = 0; c < static_cast<int>(names.size()); ++c) {
-      const std::string& n = names[static_cast<std::size_t>(c)];
-      const bool gain = named(n, "dK"), load = named(n, "FcL");
-      if (gain || load) is_gain_.push_back(gain);
-      (gain || load ? gain_cols_ : other_cols_).push_back(c);
+      const int kind = exid::torqueColumnKind(names[static_cast<std::size_t>(c)]);
+      if (kind != 0) is_gain_.push_back(kind == 1);
+      (kind != 0 ? gain_cols_ : other_cols_).push_back(c);
     }
     exid::check(!gain_cols_.empty(),
                 fmt::format("gains_ls: model '{}' has no column of the recorded torque among its "

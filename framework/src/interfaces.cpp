@@ -170,6 +170,17 @@ Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& et
   return r;
 }
 
+namespace {
+
+// dJ/dW of the base columns as dJ/dW of the full ones (zero on the dependent columns).
+Eigen::MatrixXd fullOfBase(const BaseParameters& base, const Eigen::MatrixXd& dW_base) {
+  Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base.numFull());
+  for (int i = 0; i < base.rank(); ++i) dW.col(base.independent[i]) = dW_base.col(i);
+  return dW;
+}
+
+}  // namespace
+
 Eigen::MatrixXd ObservationModel::fullDesignAt(const Samples& s, const Eigen::VectorXd& eta,
                                                Eigen::MatrixXd* dW) const {
   if (eta.size() != 0)
@@ -198,9 +209,7 @@ Eigen::MatrixXd ObservationModel::designAt(const Samples& s, const Eigen::Vector
 
 void ObservationModel::designVjpAt(const Samples& s, const Eigen::VectorXd& eta,
                                    const Eigen::MatrixXd& dW_base, Samples* grad) const {
-  Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base_.numFull());
-  for (int i = 0; i < base_.rank(); ++i) dW.col(base_.independent[i]) = dW_base.col(i);
-  fullDesignVjpAt(s, eta, dW, grad);
+  fullDesignVjpAt(s, eta, fullOfBase(base_, dW_base), grad);
 }
 
 Rows ObservationModel::rowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
@@ -263,9 +272,7 @@ Eigen::MatrixXd ObservationModel::design(const Samples& s) const {
 
 void ObservationModel::designVjp(const Samples& s, const Eigen::MatrixXd& dW_base,
                                  Samples* grad) const {
-  Eigen::MatrixXd dW = Eigen::MatrixXd::Zero(dW_base.rows(), base_.numFull());
-  for (int i = 0; i < base_.rank(); ++i) dW.col(base_.independent[i]) = dW_base.col(i);
-  fullDesignVjp(s, dW, grad);
+  fullDesignVjp(s, fullOfBase(base_, dW_base), grad);
 }
 
 void ExcitationProblem::nonlinearConstraints(const Eigen::VectorXd& z, Eigen::VectorXd* g,

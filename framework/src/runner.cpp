@@ -619,16 +619,6 @@ CsvTable datasetTable(const Dataset& d) {
 
 namespace {
 
-// A base column that holds the recorded torque (dK<j>, FcL<j>): 1 for dK, 2 for FcL, else 0.
-int torqueColumnKind(const std::string& n) {
-  auto named = [&](const char* pre) {
-    const std::size_t l = std::char_traits<char>::length(pre);
-    return n.size() > l && n.compare(0, l, pre) == 0 &&
-           n.find_first_not_of("0123456789", l) == std::string::npos;
-  };
-  return named("dK") ? 1 : (named("FcL") ? 2 : 0);
-}
-
 // One study, stage by stage: what the stages share (the study, the summary being built, the
 // run's context and folder) and what each leaves to the next (robot, model, trajectory, the
 // excitation's optimum, the dataset, the estimate). runStudy() sets up the run folder and the

@@ -443,7 +443,7 @@ class DifferentialModel : public exid::ObservationModel {
         const auto u = static_cast<std::size_t>(j);
         const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
         const double v = s.qd(k, j), eps = f.eps[u];
-        const double sg = eps > 0 ? std::tanh(v / eps) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
+        const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
         const double ds_deps = eps > 0 ? -(v / (eps * eps)) * (1.0 - sg * sg) : 0.0;
         int c = P0 + E * j, l = deps[u];
         if (coulomb_extra_ && !asym_) {
@@ -580,7 +580,7 @@ class DifferentialModel : public exid::ObservationModel {
                          const Eigen::Ref<const Eigen::RowVectorXd>& g) const {
     const auto u = static_cast<std::size_t>(j);
     const double eps = f.eps[u];
-    const double sg = eps > 0 ? std::tanh(v / eps) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
+    const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
     const double ds = eps > 0 ? (1.0 - sg * sg) / eps : 0.0;
     double out = 0.0;
     int e = 0;

@@ -30,6 +30,11 @@ int numParameters(const RobotModel& model, const DriveColumns& cols);
 /// True for a drive column's name as parameterNames writes it (Ia3, Fc3, Fv3, OFF3), or a
 /// nonlinear friction column of the `differential` model (FcP3, FcN3, Fs3).
 bool isDriveParameterName(const std::string& name);
+/// Whether `name` is `prefix` followed by a joint number (1, 2, ...), e.g. "Fc3" for "Fc".
+bool isIndexedParameterName(const std::string& name, const char* prefix);
+/// A column that holds the recorded torque itself: the `differential` model's drive gains
+/// dK<j> (1) and load-dependent Coulomb FcL<j> (2); else 0.
+int torqueColumnKind(const std::string& name);
 
 /// Joint coordinates from measured ones (identity when the model has no transmission).
 void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,

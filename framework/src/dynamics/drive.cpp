@@ -37,13 +37,19 @@ std::vector<std::string> parameterNames(const RobotModel& model, const DriveColu
 bool isDriveParameterName(const std::string& name) {
   // (FcP, FcN, Fs, FcL: the `differential` model's asymmetric Coulomb, Stribeck and
   // load-dependent Coulomb columns)
-  for (const char* pre : {"Ia", "Fc", "Fv", "OFF", "FcP", "FcN", "Fs", "FcL"}) {
-    const std::size_t n = std::char_traits<char>::length(pre);
-    if (name.size() > n && name.compare(0, n, pre) == 0 && name[n] != '0' &&
-        name.find_first_not_of("0123456789", n) == std::string::npos)
-      return true;
-  }
+  for (const char* pre : {"Ia", "Fc", "Fv", "OFF", "FcP", "FcN", "Fs", "FcL"})
+    if (isIndexedParameterName(name, pre)) return true;
   return false;
+}
+
+bool isIndexedParameterName(const std::string& name, const char* prefix) {
+  const std::size_t n = std::char_traits<char>::length(prefix);
+  return name.size() > n && name.compare(0, n, prefix) == 0 && name[n] != '0' &&
+         name.find_first_not_of("0123456789", n) == std::string::npos;
+}
+
+int torqueColumnKind(const std::string& name) {
+  return isIndexedParameterName(name, "dK") ? 1 : (isIndexedParameterName(name, "FcL") ? 2 : 0);
 }
 
 int numParameters(const RobotModel& model, const DriveColumns& cols) {
