@@ -11,6 +11,12 @@
 // the derivatives of w theta from the model's exact design VJP (one per joint). Outputs:
 // d tau_c / dtheta = -Kp S_q - Kd S_qd, or d q / dtheta = S_q. Covariance sigma^2 (J^T J)^-1,
 // sigma^2 = rss / (m - p) (docs/estimators.md, "didim").
+// Drive gains (dK) and load-dependent Coulomb (FcL) act in the loop on the command
+// (ClosedLoop): the drives deliver tau_c (1 + dK) - FcL |tau_c| sign(qd). The gains' common
+// scale with theta needs a prior (gain_prior_std): pseudo-observations sigma (mu - dK) / s,
+// sigma the output's noise std (two rounds: the fixed point of sqrt(rss / (m - q))), as gains_ls.
+// A measurement delay d (torque output): the torque recorded at t_k is the command at t_k - d,
+// d y_k / d d = -d tau_c / dt there (exact: the reference's jerk through the feed-forward).
 #include <fmt/format.h>
 
 #include <Eigen/QR>
@@ -19,6 +25,7 @@
 #include <cmath>
 #include <random>
 
+#include "exid/delay.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 #include "exid/estimators/common.hpp"
@@ -59,6 +66,22 @@ class Didim : public exid::Estimator {
                               "fit the model's nonlinear parameters (friction widths, Stribeck "
                               "velocities: ObservationModel::nonlinearParameters) with theta, "
                               "from the model's values, on log scale; false: keep them"),
+             exid::param_doubles("gain_prior_std", std::vector<double>{}, "",
+                                 "prior std of each drive's dK (one value: every drive); "
+                                 "required with drive gains (their scale with theta)"),
+             exid::param_doubles("gain_prior_dK", std::vector<double>{}, "",
+                                 "prior mean of each drive's dK (one value: every drive; empty: "
+                                 "0); the start takes the gains there"),
+             exid::param_bool("measurement_delay", false,
+                              "fit a delay d of the recorded torque behind the controller: the "
+                              "torque recorded at t_k is the command at t_k - d (output: torque; "
+                              "needs measurement_delay_max_s)"),
+             exid::param_double("measurement_delay_initial_s", 0.0, "s",
+                                "the delay the fit starts from"),
+             exid::param_double("measurement_delay_max_s", 0.0, "s",
+                                "the largest |d|: the samples within it of the reference's ends "
+                                "are left out (counted in details.measurement_delay)",
+                                0.0),
              exid::param_int("gradient_check", 0,
                              "> 0: compare the Jacobian along this many random directions with "
                              "central differences of the simulation at the start "
@@ -77,8 +100,34 @@ class Didim : public exid::Estimator {
         xtol_(p.getDouble("step_tolerance")),
         tol_loop_(exid::estimators::ClosedLoop::Tolerances::from(p)),
         check_(static_cast<int>(p.getInt("gradient_check"))),
-        fit_nl_(p.getBool("fit_nonlinear")) {
+        fit_nl_(p.getBool("fit_nonlinear")),
+        prior_std_(p.getDoubles("gain_prior_std")),
+        prior_mean_(p.getDoubles("gain_prior_dK")),
+        delay_(p.getBool("measurement_delay")),
+        delay0_(p.getDouble("measurement_delay_initial_s")),
+        delay_max_(p.getDouble("measurement_delay_max_s")) {
     exid::estimators::ClosedLoop::checkParams(p, kName);
+    for (double v : prior_std_)
+      exid::check(v > 0 && std::isfinite(v),
+                  fmt::format("didim: gain_prior_std: {} is not a positive std", v));
+    for (double v : prior_mean_)
+      exid::check(std::isfinite(v) && v > -1.0,
+                  fmt::format("didim: gain_prior_dK: {} is not a gain correction above -1", v));
+    exid::check(prior_mean_.empty() || !prior_std_.empty(),
+                "didim: gain_prior_dK is given without gain_prior_std");
+    exid::check(!delay_ || delay_max_ > 0,
+                "didim: measurement_delay: true needs measurement_delay_max_s > 0 (how large the "
+                "delay may be: the samples within it of the reference's ends are left out)");
+    exid::check(delay_ || (delay_max_ == 0 && delay0_ == 0),
+                "didim: measurement_delay_initial_s or measurement_delay_max_s is given but "
+                "measurement_delay is false");
+    exid::check(!delay_ || std::abs(delay0_) < delay_max_,
+                fmt::format("didim: measurement_delay_initial_s = {} s lies outside "
+                            "+-measurement_delay_max_s = {} s",
+                            delay0_, delay_max_));
+    exid::check(!delay_ || !position_,
+                "didim: measurement_delay is for output: torque (the torque channel behind the "
+                "controller); with output: position the positions are the controller's own");
   }
 
   exid::EstimatorSpecs specs() const override { return {}; }  // the Jacobian held in memory
@@ -90,22 +139,44 @@ class Didim : public exid::Estimator {
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
+    setPrior(model);
+    // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the reference
+    keep_t_.clear();
+    std::vector<int> keep;
+    for (int k = 0; k < K; ++k)
+      if (!delay_ || (data.t[k] - delay_max_ >= loop_->reference().t0() &&
+                      data.t[k] + delay_max_ <= loop_->reference().t1())) {
+        keep.push_back(k);
+        keep_t_.push_back(data.t[k]);
+      }
+    dropped_ = K - static_cast<int>(keep.size());
     // the measured output, sample-major
-    y_.resize(static_cast<Eigen::Index>(K) * n);
+    y_.resize(static_cast<Eigen::Index>(keep.size()) * n);
     const MatrixXd& Y = position_ ? data.q : data.tau;
     exid::check(
         Y.rows() == K && Y.cols() == n,
         fmt::format("didim: the data has no {} of {} joints", position_ ? "q" : "torque", n));
-    for (int k = 0; k < K; ++k) y_.segment(static_cast<Eigen::Index>(k) * n, n) = Y.row(k);
+    for (std::size_t i = 0; i < keep.size(); ++i)
+      y_.segment(static_cast<Eigen::Index>(i) * n, n) = Y.row(keep[i]);
     const long m = y_.size();
     exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
-    // start: the inverse model's least squares
-    const exid::Rows R = model.rows(data, ctx);
+    // start: the inverse model's least squares (drive gains at their prior mean; the rows
+    // compensated for the initial delay)
+    exid::Rows R = model.rows(data, ctx);
     exid::estimators::checkRows(R, p, kName, 0);
-    // x = (theta, log eta): the model's nonlinear parameters fitted with theta (fit_nonlinear)
+    if (delay_ && delay0_ != 0.0) {
+      exid::check(model.specs().per_sample,
+                  "didim: measurement_delay_initial_s needs a model whose rows are per sample");
+      int front = 0, back = 0;
+      R = exid::delayedRows(R, data.t, delay0_, kName, &front, &back);
+    }
+    // x = (theta, log eta, d): the model's nonlinear parameters fitted with theta
+    // (fit_nonlinear), the delay (measurement_delay)
     L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
-    VectorXd theta(p + L_);
+    D_ = delay_ ? 1 : 0;
+    VectorXd theta(p + L_ + D_);
     theta.head(p) = startFit(model, R);
+    if (D_) theta[p + L_] = delay0_;
     for (int k = 0; k < L_; ++k) {
       const double v = loop_->nonlinear()[k];
       exid::check(v > 0,
@@ -123,17 +194,35 @@ class Didim : public exid::Estimator {
     auto record = [&](const Sim& s) {
       exid::Json t = exid::Json::object();
       t["rss"] = s.rss;
+      if (!prior_col_.empty()) t["prior_rss"] = s.prior_rss;
       trace.push_back(t);
     };
+    // the prior's weight sigma / s: sigma from the output's residual (floored at 1e-3 of its
+    // rms: near noise-free data would give the prior no weight and the scale no anchor)
+    const double floor_sigma = 1e-3 * std::sqrt(y_.squaredNorm() / static_cast<double>(m));
+    const int q_all = p + L_ + D_;
+    auto noiseStd = [&](const Sim& s) {
+      return std::max(std::sqrt(s.rss / static_cast<double>(m - q_all)), floor_sigma);
+    };
+    if (!prior_col_.empty()) {
+      sigma_ = noiseStd(cur);
+      priorTerms(theta, &cur);
+    }
     record(cur);
     double mu = 1e-3;
-    int it = 0, sims = 1;
+    int it = 0, sims = 1, round = 1;
     std::string stop;
     for (it = 1; it <= max_iter_; ++it) {
       if (ctx.shouldStop()) throw exid::Error("didim: stopped");
       // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + mu D) d = J^T r
-      const MatrixXd H = cur.J.transpose() * cur.J;
-      const VectorXd g = cur.J.transpose() * (y_ - cur.y);
+      MatrixXd H = cur.J.transpose() * cur.J;
+      VectorXd g = cur.J.transpose() * (y_ - cur.y);
+      for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations
+        const int c = prior_col_[i];
+        const double w = sigma_ / prior_sd_[i];
+        H(c, c) += w * w;
+        g[c] += w * w * (prior_mu_[i] - theta[c]);
+      }
       bool accepted = false, flat = false;
       double decrease = 0.0, moved = 0.0;
       for (int tries = 0; tries < 12 && !accepted; ++tries) {
@@ -147,26 +236,35 @@ class Didim : public exid::Estimator {
         // the decrease the linearisation predicts: below rss_tolerance, theta is at the
         // minimum to the simulation's precision (trials would only see its noise)
         const double predicted = 2 * g.dot(step) - step.dot(H * step);
-        if (tries == 0 && predicted < ftol_ * cur.rss) {
+        if (tries == 0 && predicted < ftol_ * cur.total()) {
           flat = true;
           break;
         }
         // trials without the sensitivities; the accepted point gets them
+        if (D_ && std::abs(theta[p + L_] + step[p + L_]) > delay_max_) {
+          ++rejected_bound_;  // (a delay beyond measurement_delay_max_s is a rejected step)
+          mu *= 4;
+          continue;
+        }
         Sim trial;
         bool ok = true;
         try {
           trial = simulate(theta + step, data, false);
+          priorTerms(theta + step, &trial);
         } catch (const exid::Error&) {
           ok = false;  // (a trial that cannot be simulated is a rejected step)
         }
         ++sims;
-        if (ok && trial.rss <= cur.rss) {
-          decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
-          // theta relative to its norm; log eta as it is (a relative change of eta)
+        if (ok && trial.total() <= cur.total()) {
+          decrease = (cur.total() - trial.total()) / std::max(cur.total(), 1e-300);
+          // theta relative to its norm; log eta as it is (a relative change of eta); the
+          // delay relative to its bound
           moved = step.head(p).norm() / std::max(theta.head(p).norm(), 1e-300);
-          if (L_ > 0) moved = std::max(moved, step.tail(L_).cwiseAbs().maxCoeff());
+          if (L_ > 0) moved = std::max(moved, step.segment(p, L_).cwiseAbs().maxCoeff());
+          if (D_) moved = std::max(moved, std::abs(step[p + L_]) / delay_max_);
           theta += step;
           cur = simulate(theta, data, true);
+          priorTerms(theta, &cur);
           ++sims;
           record(cur);
           mu = std::max(mu / 3, 1e-12);
@@ -178,22 +276,30 @@ class Didim : public exid::Estimator {
       if (flat) {
         stop = fmt::format("the predicted decrease is below rss_tolerance = {:g} of the residual",
                            ftol_);
-        break;
-      }
-      if (!accepted) {
+      } else if (!accepted) {
         stop = "no step lowers the residual (a minimum to the simulation's precision)";
-        break;
-      }
-      if (moved < xtol_) {
+      } else if (moved < xtol_) {
         stop = fmt::format("the step moved theta by {:.2g} of itself, below step_tolerance = {:g}",
                            moved, xtol_);
-        break;
-      }
-      if (decrease < ftol_) {
+      } else if (decrease < ftol_) {
         stop = fmt::format("the residual fell by {:.2g} of itself, below rss_tolerance = {:g}",
                            decrease, ftol_);
-        break;
       }
+      if (stop.empty()) continue;
+      // with a prior: its weight from the noise std at this minimum, once more (the fixed point
+      // of sqrt(rss / (m - q)): a second round settles it)
+      if (!prior_col_.empty() && round == 1) {
+        const double s2 = noiseStd(cur);
+        ++round;
+        if (std::abs(s2 - sigma_) > 1e-3 * sigma_) {
+          sigma_ = s2;
+          priorTerms(theta, &cur);
+          stop.clear();
+          mu = 1e-3;
+          continue;
+        }
+      }
+      break;
     }
     const bool converged = !stop.empty();
     if (!converged) stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
@@ -201,16 +307,20 @@ class Didim : public exid::Estimator {
     exid::Json& d = e.details;
     d["iterations"] = std::min(it, max_iter_);
     d["simulations"] = sims;
+    if (!prior_col_.empty()) d["gain_prior"]["rounds"] = round;
     d["stop"] = stop;
     d["converged"] = converged;
     d["trace"] = trace;
-    d["start"] = "least squares on the recording's rows (the inverse model)";
+    d["start"] = prior_col_.empty()
+                     ? "least squares on the recording's rows (the inverse model)"
+                     : "least squares on the recording's rows (the inverse model) with the drive "
+                       "gains at their prior mean";
     d["start_change"] =
         (theta.head(p) - theta0.head(p)).norm() / std::max(theta.head(p).norm(), 1e-300);
     if (!check_json.isNull()) d["gradient_check"] = check_json;
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!converged) {
-      exid::Json w = exid::Json::array();
+      exid::Json w = d.find("warnings") ? *d.find("warnings") : exid::Json::array();
       w.push_back(exid::Json(fmt::format("didim: {}", stop)));
       d["warnings"] = w;
     }
@@ -219,38 +329,113 @@ class Didim : public exid::Estimator {
 
  private:
   // The inverse model's least squares: batch_ls's rank-revealing solve (an unidentifiable
-  // direction is refused by name).
-  static VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R) {
-    exid::estimators::RowAccumulator acc(model.numBase());
-    acc.add(R.W, R.y);
-    return exid::estimators::solveLeastSquares(acc, model.base().names,
-                                               exid::estimators::SolveOptions(), kName)
-        .theta;
+  // direction is refused by name). With a gain prior the gains are held at its mean (their
+  // scale with theta is not in the rows).
+  VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R) const {
+    const int p = model.numBase();
+    std::vector<int> free;
+    std::vector<std::string> names;
+    VectorXd fixed = VectorXd::Zero(p);
+    std::vector<bool> held(static_cast<std::size_t>(p), false);
+    for (std::size_t i = 0; i < prior_col_.size(); ++i) {
+      held[static_cast<std::size_t>(prior_col_[i])] = true;
+      fixed[prior_col_[i]] = prior_mu_[static_cast<Eigen::Index>(i)];
+    }
+    for (int c = 0; c < p; ++c)
+      if (!held[static_cast<std::size_t>(c)]) {
+        free.push_back(c);
+        names.push_back(model.base().names[static_cast<std::size_t>(c)]);
+      }
+    MatrixXd W(R.W.rows(), static_cast<Eigen::Index>(free.size()));
+    for (std::size_t i = 0; i < free.size(); ++i)
+      W.col(static_cast<Eigen::Index>(i)) = R.W.col(free[i]);
+    exid::estimators::RowAccumulator acc(static_cast<int>(free.size()));
+    acc.add(W, R.y - R.W * fixed);
+    const VectorXd th =
+        exid::estimators::solveLeastSquares(acc, names, exid::estimators::SolveOptions(), kName)
+            .theta;
+    VectorXd out = fixed;
+    for (std::size_t i = 0; i < free.size(); ++i) out[free[i]] = th[static_cast<Eigen::Index>(i)];
+    return out;
   }
   struct Sim {
     VectorXd y;  // simulated output, sample-major
     MatrixXd J;  // d y / d theta (with sensitivities)
     double rss = 0.0;
+    double prior_rss = 0.0;  // the gain prior's pseudo-observations
+    double total() const { return rss + prior_rss; }
   };
 
-  // The loop at x = (theta, log eta); J = d y / d x (the eta columns times eta: d/d log eta).
+  // The gain prior's columns (the model's dK, base order) and its std and mean per column.
+  void setPrior(const exid::ObservationModel& model) {
+    prior_col_ = loop_->driveGainColumns();
+    const std::size_t ng = prior_col_.size();
+    if (ng == 0) {
+      exid::check(prior_std_.empty(),
+                  "didim: gain_prior_std is given but the model has no drive "
+                  "gain (differential's drive_gains)");
+      prior_col_.clear();
+      prior_sd_.resize(0);
+      prior_mu_.resize(0);
+      return;
+    }
+    exid::check(!prior_std_.empty(),
+                fmt::format("didim: model '{}' has drive gains (dK): their scale with theta is "
+                            "not in the closed loop (a common factor of theta and 1 + dK "
+                            "gives the same motion and command); give gain_prior_std",
+                            model.pluginName()));
+    auto expand = [&](const std::vector<double>& v, const char* key, double def) {
+      exid::check(v.empty() || v.size() == 1 || v.size() == ng,
+                  fmt::format("didim: {} has {} values; expected 1 or one per drive gain ({})", key,
+                              v.size(), ng));
+      VectorXd out(static_cast<Eigen::Index>(ng));
+      for (std::size_t k = 0; k < ng; ++k)
+        out[static_cast<Eigen::Index>(k)] = v.empty() ? def : (v.size() == 1 ? v[0] : v[k]);
+      return out;
+    };
+    prior_sd_ = expand(prior_std_, "gain_prior_std", 0.0);
+    prior_mu_ = expand(prior_mean_, "gain_prior_dK", 0.0);
+  }
+  // The prior's pseudo-observations' sum of squares at x (weight sigma_ / s).
+  void priorTerms(const VectorXd& x, Sim* s) const {
+    s->prior_rss = 0.0;
+    for (std::size_t i = 0; i < prior_col_.size(); ++i) {
+      const auto k = static_cast<Eigen::Index>(i);
+      const double r = sigma_ * (prior_mu_[k] - x[prior_col_[i]]) / prior_sd_[k];
+      s->prior_rss += r * r;
+    }
+  }
+
+  // The loop at x = (theta, log eta, d) at the kept samples' times less d; J = d y / d x (the
+  // eta columns times eta: d/d log eta; the delay's: -d tau_c / dt).
   Sim simulate(const VectorXd& xv, const exid::Dataset& data, bool sens) const {
-    const int n = loop_->dof(), K = data.size(), p = static_cast<int>(xv.size());
+    (void)data;
+    const int n = loop_->dof(), K = static_cast<int>(keep_t_.size()),
+              p = static_cast<int>(xv.size());
     const VectorXd theta = xv.head(p_);
-    if (L_ > 0) loop_->setNonlinear(xv.tail(L_).array().exp().matrix(), sens);
+    if (L_ > 0) loop_->setNonlinear(xv.segment(p_, L_).array().exp().matrix(), sens);
+    const double d = D_ ? xv[p_ + L_] : 0.0;
+    VectorXd times(K);
+    for (int k = 0; k < K; ++k) times[k] = keep_t_[static_cast<std::size_t>(k)] - d;
     Sim out;
     out.y.resize(static_cast<Eigen::Index>(K) * n);
     if (sens) out.J.resize(static_cast<Eigen::Index>(K) * n, p);
     loop_->simulate(
-        theta, data.t, tol_loop_, sens, [&](int k, const VectorXd& x, const MatrixXd* S) {
+        theta, times, tol_loop_, sens, [&](int k, const VectorXd& x, const MatrixXd* S) {
           const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
           out.y.segment(r0, n) =
-              position_ ? VectorXd(x.head(n)) : loop_->control(data.t[k], x.head(n), x.tail(n));
-          if (S)  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q
-            out.J.middleRows(r0, n) = position_
-                                          ? MatrixXd(S->topRows(n))
-                                          : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
-                                                     loop_->kd().asDiagonal() * S->bottomRows(n));
+              position_ ? VectorXd(x.head(n)) : loop_->control(times[k], x.head(n), x.tail(n));
+          if (S) {  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q
+            out.J.block(r0, 0, n, S->cols()) =
+                position_ ? MatrixXd(S->topRows(n))
+                          : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
+                                     loop_->kd().asDiagonal() * S->bottomRows(n));
+            if (D_) {
+              const VectorXd a = loop_->acceleration(theta, times[k], x.head(n), x.tail(n));
+              out.J.block(r0, p_ + L_, n, 1) =
+                  -loop_->controlRate(times[k], x.head(n), x.tail(n), a);
+            }
+          }
         });
     if (sens && L_ > 0)
       for (int k = 0; k < L_; ++k) out.J.col(p_ + k) *= std::exp(xv[p_ + k]);
@@ -282,16 +467,26 @@ class Didim : public exid::Estimator {
 
   exid::Estimate finish(const exid::ObservationModel& model, const Sim& s, const VectorXd& x,
                         long m) const {
-    const int p = model.numBase(), q = p + L_;
+    const int p = model.numBase(), q = p + L_ + D_;
     exid::estimators::LsSolution L;
     L.p = p;
     L.m = m;
     L.theta = x.head(p);
     L.rss = s.rss;
     L.sigma2 = s.rss / static_cast<double>(m - q);
-    VectorXd sc = s.J.colwise().norm().transpose();
+    // with a gain prior: the noise std its weight used (floored), so that the covariance is
+    // the posterior of the problem solved
+    if (!prior_col_.empty()) L.sigma2 = sigma_ * sigma_;
+    // J with the gain prior's pseudo-observations (sigma / s on each dK): the posterior
+    MatrixXd Jp(s.J.rows() + static_cast<Eigen::Index>(prior_col_.size()), s.J.cols());
+    Jp.topRows(s.J.rows()) = s.J;
+    Jp.bottomRows(static_cast<Eigen::Index>(prior_col_.size())).setZero();
+    for (std::size_t i = 0; i < prior_col_.size(); ++i)
+      Jp(s.J.rows() + static_cast<Eigen::Index>(i), prior_col_[i]) =
+          std::sqrt(L.sigma2) / prior_sd_[static_cast<Eigen::Index>(i)];
+    VectorXd sc = Jp.colwise().norm().transpose();
     for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
-    Eigen::JacobiSVD<MatrixXd> svd(s.J * sc.asDiagonal(), Eigen::ComputeThinV);
+    Eigen::JacobiSVD<MatrixXd> svd(Jp * sc.asDiagonal(), Eigen::ComputeThinV);
     const VectorXd sv = svd.singularValues();
     exid::check(sv.size() == q && sv[q - 1] > 1e-10 * sv[0],
                 "didim: the simulated output does not identify every parameter (its Jacobian is "
@@ -308,17 +503,67 @@ class Didim : public exid::Estimator {
     L.cond_W_scaled = sv[0] / sv[q - 1];
     exid::Estimate e;
     exid::estimators::fillEstimate(&e, model, L, s.rss, m);
-    if (L_ > 0) {  // eta = exp(lambda): std eta * std(lambda)
+    if (L_ + D_ > 0) {  // eta = exp(lambda): std eta * std(lambda); the delay as it is
       const std::vector<exid::NonlinearParameter> nl = model.nonlinearParameters();
-      e.nonlinear.resize(L_);
-      e.nonlinear_std.resize(L_);
+      e.nonlinear.resize(L_ + D_);
+      e.nonlinear_std.resize(L_ + D_);
       for (int k = 0; k < L_; ++k) {
         e.nonlinear_names.push_back(nl[static_cast<std::size_t>(k)].name);
         e.nonlinear[k] = std::exp(x[p + k]);
         e.nonlinear_std[k] = e.nonlinear[k] * std::sqrt(std::max(0.0, C(p + k, p + k)));
       }
+      if (D_) {
+        e.nonlinear_names.push_back("measurement_delay_s");
+        e.nonlinear[L_] = x[p + L_];
+        e.nonlinear_std[L_] = std::sqrt(std::max(0.0, C(p + L_, p + L_)));
+      }
     }
     exid::Json& d = e.details;
+    if (D_) {
+      exid::Json td = exid::Json::object();
+      td["value_s"] = x[p + L_];
+      td["std_s"] = e.nonlinear_std[L_];
+      td["initial_s"] = delay0_;
+      td["max_s"] = delay_max_;
+      td["samples_left_out"] = dropped_;
+      td["rejected_trials_beyond_max"] = rejected_bound_;
+      td["convention"] =
+          "the torque recorded at t_k is the controller's command at t_k - value_s; the samples "
+          "whose t_k -+ max_s leave the reference are left out";
+      d["measurement_delay"] = td;
+      if (std::abs(x[p + L_]) > 0.99 * delay_max_) {
+        exid::Json w = exid::Json::array();
+        w.push_back(exid::Json(fmt::format(
+            "didim: the fitted measurement delay {:g} s is at the bound measurement_delay_max_s "
+            "= {:g} s",
+            x[p + L_], delay_max_)));
+        d["warnings"] = w;
+      }
+    }
+    if (!prior_col_.empty()) {
+      exid::Json gp = exid::Json::object();
+      gp["noise_std"] = std::sqrt(L.sigma2);
+      gp["prior_weight_noise_std"] = sigma_;
+      exid::Json gs = exid::Json::array();
+      for (std::size_t i = 0; i < prior_col_.size(); ++i) {
+        const auto k = static_cast<Eigen::Index>(i);
+        const int c = prior_col_[i];
+        exid::Json g = exid::Json::object();
+        g["name"] = model.base().names[static_cast<std::size_t>(c)];
+        g["prior_dK"] = prior_mu_[k];
+        g["prior_std"] = prior_sd_[k];
+        g["value"] = x[c];
+        g["std"] = L.std[c];
+        g["prior_share"] = L.std[c] * L.std[c] / (prior_sd_[k] * prior_sd_[k]);
+        gs.push_back(g);
+      }
+      gp["gains"] = gs;
+      gp["definition"] =
+          "pseudo-observations sigma (mu - dK) / s added to the output's residual, sigma the "
+          "output's noise std (sqrt(rss / (m - q)), floored at 1e-3 of its rms); prior_share: "
+          "posterior variance over prior variance";
+      d["gain_prior"] = gp;
+    }
     d["estimator"] = kName;
     d["output"] = position_ ? "position" : "torque";
     d["method"] =
@@ -326,7 +571,8 @@ class Didim : public exid::Estimator {
         "against the recorded output; Jacobian from forward sensitivities with an exact "
         "right-hand side";
     d["covariance_definition"] =
-        "sigma^2 (J^T J)^-1, J = d y_sim / d (theta, log eta), sigma^2 = rss / (m - p - L); "
+        "sigma^2 (J^T J + P)^-1, J = d y_sim / d (theta, log eta, d), sigma^2 = rss / (m - p - "
+        "L - D); P = sigma^2 / s^2 on each drive gain with a prior (gain_prior_std), else 0; "
         "eta's std = eta std(log eta); cond_W is that of J";
     d["nonlinear_fitted"] = L_ > 0;
     d["controller"] = loop_->describe();
@@ -341,7 +587,16 @@ class Didim : public exid::Estimator {
   exid::estimators::ClosedLoop::Tolerances tol_loop_;
   int check_;
   bool fit_nl_;
-  int L_ = 0, p_ = 0;  // nonlinear parameters fitted; base parameters
+  std::vector<double> prior_std_, prior_mean_;
+  bool delay_ = false;
+  double delay0_ = 0.0, delay_max_ = 0.0;
+  int L_ = 0, p_ = 0, D_ = 0;   // nonlinear parameters fitted; base parameters; the delay (0, 1)
+  std::vector<int> prior_col_;  // the drive gains' base columns
+  VectorXd prior_sd_, prior_mu_;
+  double sigma_ = 0.0;          // the noise std the prior's weight uses
+  std::vector<double> keep_t_;  // the times of the samples fitted
+  int dropped_ = 0;             // samples left out (measurement_delay_max_s)
+  mutable int rejected_bound_ = 0;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
   VectorXd y_;
 };

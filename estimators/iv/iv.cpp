@@ -77,6 +77,10 @@ class Iv : public exid::Estimator {
     exid::check(prior == nullptr, "iv: a prior is not supported");
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
+    exid::check(!loop_->hasDriveGains(),
+                "iv: the model has drive gains (dK): their scale needs a known payload part or a "
+                "prior, and the simulated closed loop has neither (use gains_ls, or didim with "
+                "gain_prior_std)");
     const int p = model.numBase();
     const exid::Rows R = model.rows(data, ctx);
     exid::estimators::checkRows(R, p, kName, 0);
@@ -85,8 +89,7 @@ class Iv : public exid::Estimator {
     // start: least squares
     VectorXd theta = startFit(model, R);
     exid::Json trace = exid::Json::array();
-    MatrixXd ZtW, Zlast;
-    VectorXd Zty;
+    MatrixXd ZtWinv, Zlast;
     int it = 0;
     double change = HUGE_VAL;
     std::string stop;
@@ -95,14 +98,8 @@ class Iv : public exid::Estimator {
       const exid::Dataset sim = simulate(theta, data);
       const exid::Rows Z = model.rows(sim, ctx);
       exid::check(Z.y.size() == m, "iv: the simulated rows differ in number from the recording's");
-      ZtW = Z.W.transpose() * R.W;
-      Zty = Z.W.transpose() * R.y;
       Zlast = Z.W;
-      Eigen::FullPivLU<MatrixXd> lu(ZtW);
-      exid::check(lu.rank() == p,
-                  "iv: Z^T W is singular (the simulated motion does not excite every base "
-                  "parameter)");
-      const VectorXd next = lu.solve(Zty);
+      const VectorXd next = solveIv(Z.W, R.W, R.y, &ZtWinv);
       change = (next - theta).norm() / std::max(next.norm(), 1e-300);
       theta = next;
       exid::Json t = exid::Json::object();
@@ -117,7 +114,8 @@ class Iv : public exid::Estimator {
     }
     const bool converged = !stop.empty();
     if (!converged) stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
-    return finish(model, R, Zlast, theta, ZtW, std::min(it, max_iter_), stop, converged, trace, t0);
+    return finish(model, R, Zlast, theta, ZtWinv, std::min(it, max_iter_), stop, converged, trace,
+                  t0);
   }
 
  private:
@@ -130,8 +128,37 @@ class Iv : public exid::Estimator {
                                                exid::estimators::SolveOptions(), kName)
         .theta;
   }
-  // The loop at theta sampled at the recording's times: q, qd, qdd (the recording's torque
-  // kept: rows need it).
+  // theta = (Z^T W)^-1 Z^T y without forming Z^T W (its condition number is about W's squared):
+  // with column scalings E, D and Z E = Q Rz (thin QR), Z^T W = E^-1 Rz^T (Q^T W D) D^-1, so
+  // theta = D (Q^T W D)^-1 Q^T y, a p x p system as well conditioned as W D. *inv: (Z^T W)^-1.
+  static VectorXd solveIv(const MatrixXd& Z, const MatrixXd& W, const VectorXd& y, MatrixXd* inv) {
+    const Eigen::Index p = W.cols();
+    const VectorXd D = W.colwise().norm().transpose().cwiseMax(1e-300).cwiseInverse();
+    const VectorXd E = Z.colwise().norm().transpose().cwiseMax(1e-300).cwiseInverse();
+    Eigen::HouseholderQR<MatrixXd> qr(Z * E.asDiagonal());
+    const MatrixXd Q = qr.householderQ() * MatrixXd::Identity(Z.rows(), p);
+    const MatrixXd Rz = qr.matrixQR().topRows(p).triangularView<Eigen::Upper>();
+    const MatrixXd A = Q.transpose() * (W * D.asDiagonal());
+    Eigen::JacobiSVD<MatrixXd> svd(A);
+    const VectorXd sv = svd.singularValues();
+    Eigen::JacobiSVD<MatrixXd> svr(Rz);
+    const VectorXd svz = svr.singularValues();
+    exid::check(sv[p - 1] > 1e-13 * sv[0] && svz[p - 1] > 1e-13 * svz[0],
+                fmt::format("iv: Z^T W is singular (the simulated motion does not excite every "
+                            "base parameter: condition numbers {:.3g} of the scaled Q^T W, {:.3g} "
+                            "of the scaled instrument)",
+                            sv[0] / sv[p - 1], svz[0] / svz[p - 1]));
+    const Eigen::PartialPivLU<MatrixXd> lu(A);
+    // (Z^T W)^-1 = D A^-1 Rz^-T E
+    const MatrixXd RzinvT =
+        Rz.transpose().triangularView<Eigen::Lower>().solve(MatrixXd::Identity(p, p));
+    *inv = D.asDiagonal() * lu.solve(RzinvT) * E.asDiagonal();
+    return D.asDiagonal() * lu.solve(VectorXd(Q.transpose() * y));
+  }
+
+  // The loop at theta sampled at the recording's times: q, qd, qdd and the controller's torque
+  // (the command the drives record: a column holding the recorded torque, e.g. coulomb_load's,
+  // gets its noise-free simulated value).
   exid::Dataset simulate(const VectorXd& theta, const exid::Dataset& data) const {
     const int n = loop_->dof(), K = data.size();
     exid::Dataset out;
@@ -146,12 +173,13 @@ class Iv : public exid::Estimator {
           out.q.row(k) = x.head(n).transpose();
           out.qd.row(k) = x.tail(n).transpose();
           out.qdd.row(k) = loop_->acceleration(theta, data.t[k], x.head(n), x.tail(n)).transpose();
+          out.tau.row(k) = loop_->control(data.t[k], x.head(n), x.tail(n)).transpose();
         });
     return out;
   }
 
   exid::Estimate finish(const exid::ObservationModel& model, const exid::Rows& R, const MatrixXd& Z,
-                        const VectorXd& theta, const MatrixXd& ZtW, int iterations,
+                        const VectorXd& theta, const MatrixXd& ZtWinv, int iterations,
                         const std::string& stop, bool converged, const exid::Json& trace,
                         std::chrono::steady_clock::time_point t0) const {
     const int p = model.numBase();
@@ -165,7 +193,7 @@ class Iv : public exid::Estimator {
     // The sandwich A^-1 (sum_k g_k g_k^T) A^-T, g_k = Z_k^T e_k over the rows of sample k:
     // the residual e = y - W theta holds the noise of W's inputs (q, qd, qdd), shared by the
     // rows of one sample and larger on some joints, so neither is assumed away.
-    const MatrixXd A = ZtW.fullPivLu().inverse();
+    const MatrixXd& A = ZtWinv;
     const VectorXd res = R.y - R.W * theta;
     const int per = loop_->dof();
     MatrixXd S = MatrixXd::Zero(p, p);

@@ -172,6 +172,15 @@ class SimulateExperiment : public exid::Experiment {
                       "per joint (one value: every joint): the recorded torque is this times the "
                       "plant's (a drive gain's error: differential's drive_gains identifies dK = "
                       "1 / gain - 1); empty: 1"),
+        param_doubles("drive_torque_gain", std::vector<double>{}, "",
+                      "plant: each drive delivers this times the controller's command, which is "
+                      "the recorded torque (a true torque constant over the controller's nominal "
+                      "one: differential's drive_gains identifies dK = gain - 1; the `iv` and "
+                      "`didim` closed loop's convention); one value: every drive; empty: 1"),
+        param_doubles("coulomb_load_Nm_per_Nm", std::vector<double>{}, "",
+                      "plant: a Coulomb friction FcL |tau_c| s(qdm) growing with the drive's "
+                      "command tau_c (differential's coulomb_load); one value: every drive; "
+                      "empty: none"),
         param_bool("wrench", false, "record the wrist wrench fx..mz (sensor frame)"),
         param_double("noise_q_rad", 0.0, "rad", "std of Gaussian noise on the recorded q", 0.0),
         param_double("noise_tau_Nm", 0.0, "N m", "std of Gaussian noise on the recorded tau", 0.0),
@@ -292,7 +301,7 @@ class SimulateExperiment : public exid::Experiment {
                                 ? R.drives[static_cast<std::size_t>(j)]
                                 : exid::Drive{};
       const double v = qdm[j];
-      const double s = tanh_ ? std::tanh(v / vs_) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
+      const double s = coulombShape(v);
       (*Mm)(j, j) += D.rotor_inertia;
       const auto u = static_cast<std::size_t>(j);
       const double coulomb =
@@ -301,6 +310,11 @@ class SimulateExperiment : public exid::Experiment {
           fs_.empty() ? 0.0 : fs_[u] * s * std::exp(-std::pow(std::abs(v) / svs_[u], sdelta_));
       (*hm)[j] += coulomb + stribeck + D.viscous * v + D.offset;
     }
+  }
+
+  // The plant's Coulomb law: sign(v) or tanh(v / coulomb_velocity_scale).
+  double coulombShape(double v) const {
+    return tanh_ ? std::tanh(v / vs_) : (v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0));
   }
 
   // Controller torque and the resulting plant acceleration at (t, qm, qdm).
@@ -323,7 +337,14 @@ class SimulateExperiment : public exid::Experiment {
                 fmt::format("experiment 'simulate': the mass matrix of robot '{}' is not positive "
                             "definite at t = {} s (check masses, inertias and rotor inertias)",
                             truth_.name, t));
-    *acc = llt.solve(*tau - hm);
+    // what the drives deliver for the command *tau (the recorded torque)
+    VectorXd u = *tau;
+    for (int j = 0; j < n_; ++j) {
+      const auto k = static_cast<std::size_t>(j);
+      if (!gain_.empty()) u[j] *= gain_[k];
+      if (!fcl_.empty()) u[j] -= fcl_[k] * std::abs((*tau)[j]) * coulombShape(qdm[j]);
+    }
+    *acc = llt.solve(u - hm);
   }
 
   // x = [qm; qdm] -> xdot = [qdm; qddm]
@@ -728,6 +749,8 @@ class SimulateExperiment : public exid::Experiment {
     m["drive_terms"] = drive_terms_;
     m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
     if (!fcn_.empty()) m["coulomb_negative_Nm"] = exid::Json(fcn_);
+    if (!gain_.empty()) m["drive_torque_gain"] = exid::Json(gain_);
+    if (!fcl_.empty()) m["coulomb_load_Nm_per_Nm"] = exid::Json(fcl_);
     if (!fs_.empty()) {
       m["stribeck_Nm"] = exid::Json(fs_);
       m["stribeck_velocity_rad_s"] = exid::Json(svs_);
@@ -761,6 +784,14 @@ class SimulateExperiment : public exid::Experiment {
       return v;
     };
     fcn_ = perDrive("coulomb_negative_Nm");
+    gain_ = perDrive("drive_torque_gain");
+    fcl_ = perDrive("coulomb_load_Nm_per_Nm");
+    for (double v : gain_)
+      exid::check(v > 0 && std::isfinite(v),
+                  fmt::format("experiment 'simulate': drive_torque_gain: {} is not positive", v));
+    exid::check(gain_.empty() || P_.getDoubles("recorded_torque_gain").empty(),
+                "experiment 'simulate': drive_torque_gain and recorded_torque_gain are two "
+                "conventions of one gain error: give one");
     fs_ = perDrive("stribeck_Nm");
     svs_ = perDrive("stribeck_velocity_rad_s");
     sdelta_ = P_.getDouble("stribeck_exponent");
@@ -787,6 +818,7 @@ class SimulateExperiment : public exid::Experiment {
   bool drive_terms_ = true, tanh_ = false, computed_torque_ = true;
   double vs_ = 1e-3, kp_ = 100.0, kd_ = 20.0;
   std::vector<double> fcn_, fs_, svs_;  // plant friction beyond Fc s + Fv qdm (empty: none)
+  std::vector<double> gain_, fcl_;      // drive_torque_gain, coulomb_load_Nm_per_Nm (empty: none)
   double sdelta_ = 2.0;
   VectorXd D0_;
   long rhs_calls_extra_ = 0;

@@ -38,4 +38,24 @@ void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::Vecto
   }
 }
 
+Eigen::VectorXd quinticHermiteJerk(const Samples& s, double t) {
+  const int K = s.size(), n = s.dof();
+  Eigen::VectorXd j3 = Eigen::VectorXd::Zero(n);
+  if (K == 1) return j3;
+  const double* b = s.t.data();
+  int i = static_cast<int>(std::upper_bound(b, b + K, t) - b) - 1;
+  i = std::max(0, std::min(i, K - 2));
+  const double h = s.t[i + 1] - s.t[i], x = (t - s.t[i]) / h;
+  for (int j = 0; j < n; ++j) {
+    const double p0 = s.q(i, j), v0 = s.qd(i, j), a0 = s.qdd(i, j);
+    const double p1 = s.q(i + 1, j), v1 = s.qd(i + 1, j), a1 = s.qdd(i + 1, j);
+    const double P = p1 - p0 - v0 * h - 0.5 * a0 * h * h, V = (v1 - v0 - a0 * h) * h,
+                 A = (a1 - a0) * h * h;
+    const double c3 = 10 * P - 4 * V + 0.5 * A, c4 = -15 * P + 7 * V - A,
+                 c5 = 6 * P - 3 * V + 0.5 * A;
+    j3[j] = (6 * c3 + x * (24 * c4 + x * 60 * c5)) / (h * h * h);
+  }
+  return j3;
+}
+
 }  // namespace exid

@@ -133,6 +133,55 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
     for (std::size_t c = 0; c < nl[k].columns.size(); ++c) nl_param_.push_back(static_cast<int>(k));
   }
   nl_base_ = model.nonlinearColumnsInBase();
+  const std::vector<std::string>& names = model.base().names;
+  for (std::size_t b = 0; b < names.size(); ++b)
+    if (const int kind = torqueColumnKind(names[b])) {
+      const int j = std::stoi(names[b].substr(kind == 1 ? 2 : 3)) - 1;
+      check(j >= 0 && j < n_,
+            fmt::format("{}: base parameter {} names no drive of the {}", who, names[b], n_));
+      tcol_.push_back({static_cast<int>(b), j, kind});
+    }
+  check(
+      data.meta.find("payload_part_from_t_s") == nullptr,
+      fmt::format("{}: the recording has a part with a known payload (meta.payload_part_from_t_s, "
+                  "{}): the closed loop does not simulate that payload; give the part without "
+                  "it, and for drive gains a prior (didim's gain_prior_std) or gains_ls",
+                  who, data.source));
+}
+
+VectorXd ClosedLoop::restOf(const VectorXd& theta) const {
+  if (tcol_.empty()) return theta;
+  VectorXd r = theta;
+  for (const TorqueColumn& c : tcol_) r[c.base] = 0.0;
+  return r;
+}
+
+VectorXd ClosedLoop::delivered(const VectorXd& theta, const VectorXd& tau_c, const VectorXd& qd,
+                               VectorXd* slope) const {
+  VectorXd u = tau_c;
+  if (slope) *slope = VectorXd::Ones(n_);
+  for (const TorqueColumn& c : tcol_) {
+    const double v = theta[c.base], tj = tau_c[c.joint];
+    if (c.kind == 1) {  // dK: the true torque constant over the nominal one, minus 1
+      u[c.joint] += v * tj;
+      if (slope) (*slope)[c.joint] += v;
+    } else {  // FcL: -FcL |tau| sign(qd)
+      const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
+      const double st = tj > 0 ? 1.0 : (tj < 0 ? -1.0 : 0.0);
+      u[c.joint] -= v * std::abs(tj) * sq;
+      if (slope) (*slope)[c.joint] -= v * st * sq;
+    }
+  }
+  return u;
+}
+
+bool ClosedLoop::hasDriveGains() const { return !driveGainColumns().empty(); }
+
+std::vector<int> ClosedLoop::driveGainColumns() const {
+  std::vector<int> out;
+  for (const TorqueColumn& c : tcol_)
+    if (c.kind == 1) out.push_back(c.base);
+  return out;
 }
 
 void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
@@ -158,6 +207,30 @@ VectorXd ClosedLoop::control(double t, const VectorXd& q, const VectorXd& qd) co
   return tau;
 }
 
+VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd,
+                                 const VectorXd& a) const {
+  (void)q;
+  VectorXd qr, qdr, qddr;
+  const double tc = std::min(std::max(t, ref_.t0()), ref_.t1());
+  ref_.eval(tc, &qr, &qdr, &qddr);
+  // outside the reference's span it is held: its rates are zero there
+  const bool inside = t >= ref_.t0() && t <= ref_.t1();
+  const VectorXd jr = inside ? quinticHermiteJerk(ref_.s, tc) : VectorXd::Zero(n_);
+  if (!inside) {
+    qdr.setZero();
+    qddr.setZero();
+  }
+  VectorXd rate = Kp_.cwiseProduct(qdr - qd) + Kd_.cwiseProduct(qddr - a);
+  if (ff_ && inside) {
+    DriveColumns all{true, true, true, true};
+    VectorXd tff;
+    MatrixXd Dq, Dqd, Dqdd;
+    actuatorTorqueDerivatives(*robot_, *dyn_, all, qr, qdr, qddr, &tff, &Dq, &Dqd, &Dqdd);
+    rate += Dq * qdr + Dqd * qddr + Dqdd * jr;
+  }
+  return rate;
+}
+
 VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorXd& q,
                                   const VectorXd& qd, MatrixXd* Mo) const {
   const int n = n_;
@@ -167,7 +240,7 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
   }
   s_.qdd.setZero();
   for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
-  const VectorXd f = model_->designAt(s_, eta_, nullptr) * theta;  // (n + 1) n torques
+  const VectorXd f = model_->designAt(s_, eta_, nullptr) * restOf(theta);  // (n + 1) n torques
   const VectorXd h = f.head(n);
   MatrixXd M(n, n);
   for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
@@ -179,7 +252,7 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
         "too far from a physical robot to simulate: try consistent_ls first)",
         who_, t));
   if (Mo) *Mo = M;
-  return ldlt.solve(control(t, q, qd) - h);
+  return ldlt.solve(delivered(theta, control(t, q, qd), qd, nullptr) - h);
 }
 
 }  // namespace exid::estimators

@@ -30,8 +30,18 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   s.qd = qd.transpose();
   s.qdd = a.transpose();
   MatrixXd dWn;
-  const MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
+  MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
   const Eigen::LDLT<MatrixXd> ldlt(M);
+  // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
+  const VectorXd tau_c = control(t, q, qd);
+  VectorXd slope;
+  delivered(theta, tau_c, qd, &slope);
+  for (const TorqueColumn& c : tcol_) {
+    w.col(c.base).setZero();
+    const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
+    w(c.joint, c.base) = c.kind == 1 ? -tau_c[c.joint] : std::abs(tau_c[c.joint]) * sq;
+  }
+  const VectorXd rest = restOf(theta);
   if (eta_sens_) {
     // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
     MatrixXd wn(n, theta.size() + eta_.size());
@@ -40,25 +50,26 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
     for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
       const int b = nl_base_[static_cast<std::size_t>(l)];
       if (b >= 0)
-        wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * theta[b];
+        wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * rest[b];
     }
     *B = -ldlt.solve(wn);
   } else {
     *B = -ldlt.solve(w);
   }
-  // d(w theta)_i / d(q, qd) at fixed a: the design's VJP with row i = theta
+  // d(w theta)_i / d(q, qd) at fixed a: the design's VJP with row i = theta (its part in w)
   MatrixXd Tq(n, n), Tqd(n, n);
   MatrixXd G = MatrixXd::Zero(n, theta.size());
   Samples grad;
   for (int i = 0; i < n; ++i) {
     G.setZero();
-    G.row(i) = theta.transpose();
+    G.row(i) = rest.transpose();
     model_->designVjpAt(s, eta_, G, &grad);
     Tq.row(i) = grad.q.row(0);
     Tqd.row(i) = grad.qd.row(0);
   }
-  *A_q = ldlt.solve(MatrixXd(-MatrixXd(Kp_.asDiagonal()) - Tq));
-  *A_qd = ldlt.solve(MatrixXd(-MatrixXd(Kd_.asDiagonal()) - Tqd));
+  // du/d(q, qd) = du/dtau_c dtau_c/d(q, qd) (sign(qd) has zero derivative)
+  *A_q = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kp_).asDiagonal()) - Tq));
+  *A_qd = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kd_).asDiagonal()) - Tqd));
 }
 
 namespace {

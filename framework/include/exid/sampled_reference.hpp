@@ -13,5 +13,8 @@ namespace exid {
 /// first or last interval outside the samples' span; one sample: its values).
 void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::VectorXd* qd,
                     Eigen::VectorXd* qdd);
+/// The same interpolant's third derivative (jerk) at time t: piecewise quadratic, one-sided
+/// at the knots (the interval t falls in, as quinticHermite); zero for one sample.
+Eigen::VectorXd quinticHermiteJerk(const Samples& s, double t);
 
 }  // namespace exid

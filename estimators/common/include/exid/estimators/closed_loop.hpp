@@ -36,6 +36,12 @@ Reference readReference(const std::filesystem::path& file, const RobotModel& rob
 /// The closed loop tau_c = tau_ff(qr, qdr, qddr) + Kp (qr - q) + Kd (qdr - qd) of the robot
 /// whose torque is w(q, qd, qdd) theta (the model's design rows, one per joint, all joints):
 /// M e_i = w(q, qd, e_i) theta - w(q, qd, 0) theta, h = w(q, qd, 0) theta.
+/// Columns that hold the recorded torque (exid::torqueColumnKind: the `differential` model's
+/// drive gains dK<j> and load-dependent Coulomb FcL<j>) are not part of w: the recorded torque
+/// is the controller's command tau_c, and the drive delivers
+///   u_j(tau_c) = tau_c,j (1 + dK_j) - FcL_j |tau_c,j| sign(qd_j)
+/// (a drive's true torque constant over the controller's nominal one; the gear's friction
+/// growing with the torque it carries), so M a + h = u(tau_c) with theta's other entries.
 class ClosedLoop {
  public:
   /// The controller and its inputs (parameters of the estimator `who`): reference_file,
@@ -57,8 +63,17 @@ class ClosedLoop {
   const Eigen::VectorXd& nonlinear() const { return eta_; }
   const Reference& reference() const { return ref_; }
   std::string describe() const;
-  /// The controller's torque at (t, q, qd).
+  /// The controller's torque at (t, q, qd): the command, which the drives record.
   Eigen::VectorXd control(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd) const;
+  /// d tau_c / dt along the motion (q, qd, qdd = a) at t, exact: Kp (qdr - qd) + Kd (qddr - a)
+  /// plus the feed-forward's rate (its partial derivatives times the reference's qd, qdd and
+  /// jerk; sign(qd) has zero derivative).
+  Eigen::VectorXd controlRate(double t, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                              const Eigen::VectorXd& a) const;
+  /// Whether the model has drive-gain columns (dK<j>).
+  bool hasDriveGains() const;
+  /// The base indices of the drive-gain columns (dK<j>), in base order.
+  std::vector<int> driveGainColumns() const;
   /// qdd of the loop at theta; *M (if not null) the mass matrix there. exid::Error when M is
   /// not positive definite.
   Eigen::VectorXd acceleration(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
@@ -106,6 +121,17 @@ class ClosedLoop {
   Eigen::VectorXd eta_;                  // the nonlinear parameters the rows are taken at
   bool eta_sens_ = false;                // sensitivities with respect to them too
   std::vector<int> nl_base_, nl_param_;  // per column of fullDesignAt's dW: base column, eta
+  struct TorqueColumn {
+    int base = 0;   // base index
+    int joint = 0;  // the drive (row) it acts on
+    int kind = 0;   // 1: dK, 2: FcL (exid::torqueColumnKind)
+  };
+  std::vector<TorqueColumn> tcol_;
+  // theta without the torque columns (w's part), and the drives' torque u(tau_c) with
+  // du_j/dtau_c,j in *slope
+  Eigen::VectorXd restOf(const Eigen::VectorXd& theta) const;
+  Eigen::VectorXd delivered(const Eigen::VectorXd& theta, const Eigen::VectorXd& tau_c,
+                            const Eigen::VectorXd& qd, Eigen::VectorXd* slope) const;
 };
 
 }  // namespace exid::estimators

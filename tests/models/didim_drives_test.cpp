@@ -1,0 +1,247 @@
+// The closed loop of `iv` and `didim` with what acts on the drives' command: drive gains (the
+// drives deliver (1 + dK) times the recorded command), a Coulomb friction growing with the
+// command (FcL), and a delay of the recorded torque behind the controller. The plant is the
+// `simulate` experiment's (drive_torque_gain, coulomb_load_Nm_per_Nm, torque_delay_s); the
+// output error recovers each from exact torques, its Jacobian (forward sensitivities, and the
+// delay's column -d tau_c / dt with the reference's jerk) equals central differences, and what
+// the closed loop cannot simulate is refused by name.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+#include "closed_loop_test_util.hpp"
+#include "exid/error.hpp"
+#include "exid/json.hpp"
+#include "exid_cli.hpp"
+#include "model_test_util.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct Loop {
+  std::shared_ptr<const exid::RobotModel> robot;
+  std::shared_ptr<exid::ObservationModel> model;
+  exid::Dataset data;
+  std::string params;
+  Eigen::VectorXd truth;
+};
+
+// The PUMA tracking a smooth reference through PD + feed-forward for `duration` s; `plant` adds
+// the experiment's keys, `model` the differential model's.
+// A reference whose joints never reverse: q_j = v_j t + small sines, |qd_j| >= 0.1 rad/s (a
+// Coulomb friction through sign(qd) is then smooth along the motion).
+exid::Samples monotonic(int n, double duration) {
+  exid::Samples s = cltest::reference(n, duration);
+  for (int k = 0; k < s.size(); ++k)
+    for (int j = 0; j < n; ++j) {
+      const double v = (j % 2 ? -1.0 : 1.0) * (0.45 + 0.05 * j);
+      s.q(k, j) = v * s.t[k] + 0.1 * s.q(k, j);
+      s.qd(k, j) = v + 0.1 * s.qd(k, j);
+      s.qdd(k, j) = 0.1 * s.qdd(k, j);
+    }
+  return s;
+}
+
+Loop setup(double duration, const std::string& plant, const std::string& model,
+           bool never_reversing = false, double period_s = 0.005) {
+  Loop s;
+  s.robot = mtest::robot("puma560");
+  const exid::Samples ref = never_reversing ? monotonic(s.robot->dof(), duration)
+                                            : cltest::reference(s.robot->dof(), duration);
+  s.data = mtest::simulate(
+      s.robot,
+      fmt::format("{{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: {}, {}}}",
+                  period_s, plant),
+      7, &ref);
+  const fs::path dir = exid_cli::freshTempDir("exid_didim_drives_", "ref");
+  cltest::writeReference(ref, dir / "reference.csv");
+  s.model = mtest::model("differential", "{" + model + "}", s.robot);
+  s.truth = s.model->baseNominal();
+  s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
+                         cltest::gains(s.data.meta));
+  return s;
+}
+
+int baseIndex(const exid::ObservationModel& m, const std::string& name) {
+  const auto& n = m.base().names;
+  for (std::size_t i = 0; i < n.size(); ++i)
+    if (n[i] == name) return static_cast<int>(i);
+  return -1;
+}
+
+const double kGain[6] = {1.06, 0.95, 1.03, 0.92, 1.08, 0.97};
+
+std::string gainList() {
+  std::string g;
+  for (int j = 0; j < 6; ++j) g += fmt::format("{}{}", j ? ", " : "", kGain[j]);
+  return "[" + g + "]";
+}
+
+// Drive gains: the plant's drives deliver gain times the command. With a prior at the true
+// gains (their scale with theta), the output error recovers every base parameter and gain.
+TEST(DidimDrives, RecoversDriveGainsWithAPrior) {
+  Loop s =
+      setup(3.0, "coulomb: tanh, coulomb_velocity_scale: 0.05, drive_torque_gain: " + gainList(),
+            "offset: true, coulomb_smoothing_rad_s: [0.05], drive_gains: true, "
+            "drive_gains_scale: prior");
+  std::string mu;
+  for (int j = 0; j < 6; ++j) {
+    const int b = baseIndex(*s.model, fmt::format("dK{}", j + 1));
+    ASSERT_GE(b, 0);
+    s.truth[b] = kGain[j] - 1.0;
+    mu += fmt::format("{}{:.17g}", j ? ", " : "", kGain[j] - 1.0);
+  }
+  auto didim = exid_test::create<exid::Estimator>(
+      "didim", "{" + s.params +
+                   ", fit_nonlinear: false, gradient_check: 2, gain_prior_std: [0.05], "
+                   "gain_prior_dK: [" +
+                   mu + "]}");
+  const exid::Estimate e = didim->estimate(*s.model, s.data, nullptr, mtest::context());
+  const double err = (e.value - s.truth).norm() / s.truth.norm();
+  const double grad = e.details.find("gradient_check")->find("max_relative_difference")->asDouble();
+  double gerr = 0;
+  for (int j = 0; j < 6; ++j)
+    gerr = std::max(gerr, std::abs(e.value[baseIndex(*s.model, fmt::format("dK{}", j + 1))] -
+                                   (kGain[j] - 1.0)));
+  std::printf(
+      "[didim] drive gains with a prior at the truth: parameters %.2e, gains %.2e; Jacobian "
+      "against central differences %.2e; %s simulations\n",
+      err, gerr, grad, e.details.find("simulations")->dump().c_str());
+  EXPECT_LT(grad, 1e-3);
+  EXPECT_LT(err, 1e-6);
+  EXPECT_LT(gerr, 1e-6);
+  ASSERT_NE(e.details.find("gain_prior"), nullptr);
+  EXPECT_EQ(e.details.find("gain_prior")->find("gains")->size(), 6u);
+
+  // Without the loop's gains (the model without drive_gains) the fit is biased: the gains act.
+  auto plain =
+      mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", s.robot);
+  auto d2 = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", fit_nonlinear: false}");
+  const exid::Estimate e2 = d2->estimate(*plain, s.data, nullptr, mtest::context());
+  const Eigen::VectorXd nominal = plain->baseNominal();
+  EXPECT_GT((e2.value - nominal).norm() / nominal.norm(), 1e-3);
+}
+
+// A prior away from the truth (mean 0): the data fix the gains' ratios, the prior their common
+// scale; every gain lies within 3 posterior std of the truth, below the prior's std.
+TEST(DidimDrives, APriorOffTheTruthGivesAPosteriorThatHoldsTheTruth) {
+  Loop s =
+      setup(3.0, "coulomb: tanh, coulomb_velocity_scale: 0.05, drive_torque_gain: " + gainList(),
+            "offset: true, coulomb_smoothing_rad_s: [0.05], drive_gains: true, "
+            "drive_gains_scale: prior");
+  auto didim = exid_test::create<exid::Estimator>(
+      "didim", "{" + s.params + ", fit_nonlinear: false, gain_prior_std: [0.05]}");
+  const exid::Estimate e = didim->estimate(*s.model, s.data, nullptr, mtest::context());
+  double worst_z = 0, worst_std = 0;
+  for (int j = 0; j < 6; ++j) {
+    const int b = baseIndex(*s.model, fmt::format("dK{}", j + 1));
+    worst_z = std::max(worst_z, std::abs(e.value[b] - (kGain[j] - 1.0)) / e.std[b]);
+    worst_std = std::max(worst_std, e.std[b]);
+  }
+  std::printf(
+      "[didim] gain prior at 0 (std 0.05): gains within %.2f posterior std of the truth, the "
+      "largest posterior std %.3f; %s\n",
+      worst_z, worst_std, e.details.find("stop")->asString().c_str());
+  EXPECT_LT(worst_z, 3.0);
+  EXPECT_LT(worst_std, 0.05);
+  EXPECT_TRUE(e.details.find("converged")->asBool());
+}
+
+// Load-dependent Coulomb: the plant's friction FcL |tau_c| sign(qd), along a motion that never
+// reverses (sign(qd) fixed: the offset would be Coulomb's twin, so the model has none); didim
+// recovers FcL with the rest; iv, whose instrument holds the simulated command, too.
+TEST(DidimDrives, RecoversLoadDependentCoulombFriction) {
+  Loop s = setup(3.0, "coulomb_load_Nm_per_Nm: [0.03]", "coulomb_load: true", true);
+  for (int j = 0; j < 6; ++j) {
+    const int b = baseIndex(*s.model, fmt::format("FcL{}", j + 1));
+    ASSERT_GE(b, 0);
+    s.truth[b] = 0.03;
+    // the plant's offset rides on Coulomb (sign(qd_j) is the reference's sign throughout)
+    const int c = baseIndex(*s.model, fmt::format("Fc{}", j + 1));
+    ASSERT_GE(c, 0);
+    s.truth[c] += (j % 2 ? -1.0 : 1.0) * s.robot->drives[static_cast<std::size_t>(j)].offset;
+  }
+  auto didim = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", gradient_check: 2}");
+  const exid::Estimate e = didim->estimate(*s.model, s.data, nullptr, mtest::context());
+  const double err = (e.value - s.truth).norm() / s.truth.norm();
+  const double grad = e.details.find("gradient_check")->find("max_relative_difference")->asDouble();
+  std::printf(
+      "[didim] load-dependent Coulomb 0.03: parameters %.2e; Jacobian against central "
+      "differences %.2e\n",
+      err, grad);
+  auto iv = exid_test::create<exid::Estimator>("iv", "{" + s.params + "}");
+  const exid::Estimate ei = iv->estimate(*s.model, s.data, nullptr, mtest::context());
+  const double err_iv = (ei.value - s.truth).norm() / s.truth.norm();
+  std::printf("[iv] load-dependent Coulomb 0.03: parameters %.2e\n", err_iv);
+  EXPECT_LT(grad, 1e-3);
+  EXPECT_LT(err, 1e-6);
+  EXPECT_LT(err_iv, 1e-6);
+}
+
+// The recorded torque 4.2 ms (4.2 samples) behind the controller: didim fits the delay with
+// the parameters from a start near it (measurement_delay_initial_s, e.g. varpro's delay); its
+// column -d tau_c / dt is checked against central differences.
+TEST(DidimDrives, FitsAMeasurementDelay) {
+  Loop s = setup(3.0, "coulomb: tanh, coulomb_velocity_scale: 0.05, torque_delay_s: 0.0042",
+                 "offset: true, coulomb_smoothing_rad_s: [0.05]", false, 0.001);
+  const std::string base = s.params + ", fit_nonlinear: false";
+  auto didim = exid_test::create<exid::Estimator>(
+      "didim", "{" + base +
+                   ", measurement_delay: true, measurement_delay_max_s: 0.01, "
+                   "measurement_delay_initial_s: 0.0038, gradient_check: 2}");
+  const exid::Estimate e = didim->estimate(*s.model, s.data, nullptr, mtest::context());
+  ASSERT_EQ(e.nonlinear.size(), 1);
+  EXPECT_EQ(e.nonlinear_names[0], "measurement_delay_s");
+  const double err = (e.value - s.truth).norm() / s.truth.norm();
+  const double derr = std::abs(e.nonlinear[0] - 0.0042);
+  const double grad = e.details.find("gradient_check")->find("max_relative_difference")->asDouble();
+  auto plain = exid_test::create<exid::Estimator>("batch_ls", "{}");
+  const exid::Estimate ep = plain->estimate(*s.model, s.data, nullptr, mtest::context());
+  const double err_plain = (ep.value - s.truth).norm() / s.truth.norm();
+  std::printf(
+      "[didim] delay 4.2 ms: delay to %.2e s (std %.2e s), parameters %.2e (batch_ls, the delay "
+      "ignored: %.2e); Jacobian against central differences %.2e; %lld samples left out\n",
+      derr, e.nonlinear_std[0], err, err_plain, grad,
+      static_cast<long long>(
+          e.details.find("measurement_delay")->find("samples_left_out")->asDouble()));
+  EXPECT_LT(grad, 1e-3);
+  EXPECT_LT(derr, 1e-7);
+  EXPECT_LT(err, 1e-6);
+  EXPECT_GT(err_plain, 1e-3);
+  EXPECT_GT(e.details.find("measurement_delay")->find("samples_left_out")->asDouble(), 0);
+}
+
+TEST(DidimDrives, RefusesWhatTheClosedLoopCannotSimulate) {
+  Loop s = setup(1.0, "coulomb: tanh, coulomb_velocity_scale: 0.05",
+                 "offset: true, coulomb_smoothing_rad_s: [0.05], drive_gains: true, "
+                 "drive_gains_scale: prior");
+  auto expectError = [&](const std::string& est, const std::string& extra, const exid::Dataset& d,
+                         const std::string& needle) {
+    auto e = exid_test::create<exid::Estimator>(est, "{" + s.params + extra + "}");
+    try {
+      e->estimate(*s.model, d, nullptr, mtest::context());
+      ADD_FAILURE() << est << extra << ": no error";
+    } catch (const exid::Error& err) {
+      EXPECT_NE(std::string(err.what()).find(needle), std::string::npos) << err.what();
+    }
+  };
+  expectError("didim", "", s.data, "gain_prior_std");
+  expectError("iv", "", s.data, "drive gains");
+  exid::Dataset loaded = s.data;
+  loaded.meta["payload_part_from_t_s"] = 0.5;
+  expectError("didim", ", gain_prior_std: [0.1]", loaded, "payload_part_from_t_s");
+  EXPECT_THROW(exid_test::create<exid::Estimator>(
+                   "didim", "{" + s.params +
+                                ", output: position, measurement_delay: true, "
+                                "measurement_delay_max_s: 0.01}"),
+               exid::Error);
+  EXPECT_THROW(
+      exid_test::create<exid::Estimator>("didim", "{" + s.params + ", measurement_delay: true}"),
+      exid::Error);
+}
+
+}  // namespace
