@@ -215,6 +215,58 @@ TEST(DidimDrives, FitsAMeasurementDelay) {
   EXPECT_GT(e.details.find("measurement_delay")->find("samples_left_out")->asDouble(), 0);
 }
 
+// Noisy torques (0.1 N m) with the delay and drive gains (a prior at the truth, std 0.05):
+// the parameters, gains and delay lie within their reported standard deviations.
+TEST(DidimDrives, NoisyTorquesGiveDelayGainsAndParametersWithinTheirStd) {
+  Loop s = setup(3.0,
+                 "coulomb: tanh, coulomb_velocity_scale: 0.05, torque_delay_s: 0.0042, "
+                 "drive_torque_gain: " +
+                     gainList(),
+                 "offset: true, coulomb_smoothing_rad_s: [0.05], drive_gains: true, "
+                 "drive_gains_scale: prior",
+                 false, 0.001);
+  std::string mu;
+  for (int j = 0; j < 6; ++j) {
+    s.truth[baseIndex(*s.model, fmt::format("dK{}", j + 1))] = kGain[j] - 1.0;
+    mu += fmt::format("{}{:.17g}", j ? ", " : "", kGain[j] - 1.0);
+  }
+  int within2 = 0, count = 0;
+  double z2 = 0, zd2 = 0;
+  for (int seed = 1; seed <= 2; ++seed) {
+    exid::Dataset d = s.data;
+    std::mt19937_64 rng(static_cast<std::uint64_t>(seed));
+    std::normal_distribution<double> nd(0.0, 0.1);
+    for (int k = 0; k < d.size(); ++k)
+      for (int j = 0; j < d.dof(); ++j) d.tau(k, j) += nd(rng);
+    auto didim = exid_test::create<exid::Estimator>(
+        "didim", "{" + s.params +
+                     ", fit_nonlinear: false, measurement_delay: true, measurement_delay_max_s: "
+                     "0.01, measurement_delay_initial_s: 0.0038, gain_prior_std: [0.05], "
+                     "gain_prior_dK: [" +
+                     mu + "]}");
+    const exid::Estimate e = didim->estimate(*s.model, d, nullptr, mtest::context());
+    for (Eigen::Index i = 0; i < s.truth.size(); ++i) {
+      const double z = (e.value[i] - s.truth[i]) / e.std[i];
+      z2 += z * z;
+      within2 += std::abs(z) < 2.0;
+      ++count;
+    }
+    const double zd = (e.nonlinear[0] - 0.0042) / e.nonlinear_std[0];
+    zd2 += zd * zd;
+    within2 += std::abs(zd) < 2.0;
+    ++count;
+    std::printf("[didim] noisy, seed %d: delay %.6f s (std %.2e s)\n", seed, e.nonlinear[0],
+                e.nonlinear_std[0]);
+  }
+  std::printf("[didim] noisy torques with a delay and gains: %d of %d within 2 sigma, mean z^2 "
+              "%.2f (delay's z^2 %.2f over 2 draws)\n",
+              within2, count, z2 / (count - 2), zd2 / 2);
+  EXPECT_GE(within2, static_cast<int>(0.8 * count));
+  EXPECT_GT(z2 / (count - 2), 0.3);
+  EXPECT_LT(z2 / (count - 2), 2.5);
+  EXPECT_LT(zd2 / 2, 9.0);
+}
+
 TEST(DidimDrives, RefusesWhatTheClosedLoopCannotSimulate) {
   Loop s = setup(1.0, "coulomb: tanh, coulomb_velocity_scale: 0.05",
                  "offset: true, coulomb_smoothing_rad_s: [0.05], drive_gains: true, "
