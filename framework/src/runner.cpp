@@ -1159,9 +1159,11 @@ void StudyRun::identificationStage() {
                       "the study's values ({}); the `varpro` estimator fits them",
                       cfg.estimator->type, names));
     }
-    // Drive gains' columns hold the recorded torque: an estimator other than gains_ls has
-    // errors in variables there (docs/estimators.md, "gains_ls").
-    if (cfg.estimator->type != "gains_ls") {
+    // Drive gains' columns hold the recorded torque: an estimator other than gains_ls (the
+    // torque in the measurement only), iv (a simulated instrument) or didim (the simulated
+    // command) has errors in variables there (docs/estimators.md, "gains_ls").
+    if (const std::string& et = cfg.estimator->type;
+        et != "gains_ls" && et != "iv" && et != "didim") {
       std::string gains, loads;
       for (const std::string& n : est->names) {
         if (torqueColumnKind(n) == 1) gains += (gains.empty() ? "" : ", ") + n;

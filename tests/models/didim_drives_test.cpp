@@ -180,6 +180,27 @@ TEST(DidimDrives, RecoversLoadDependentCoulombFriction) {
   EXPECT_LT(grad, 1e-3);
   EXPECT_LT(err, 1e-6);
   EXPECT_LT(err_iv, 1e-6);
+
+  // End to end: a study with iv reads the recording; no errors-in-variables warning is given
+  // (the instrument is simulated), batch_ls gets one.
+  const fs::path dir = exid_cli::freshTempDir("exid_didim_drives_", "study");
+  mtest::writeCsv(s.data, dir / "rec.csv");
+  for (const char* est : {"iv", "batch_ls"}) {
+    std::ofstream(dir / fmt::format("{}.yaml", est))
+        << "name: fcl\nrobot: {type: puma560}\n"
+        << "model: {type: differential, params: {coulomb_load: true}}\n"
+        << "experiment: {type: csv, params: {file: rec.csv}}\n"
+        << "estimator: {type: " << est << ", params: {"
+        << (std::string(est) == "iv" ? s.params : std::string()) << "}}\n"
+        << "report: {type: standard, params: {plots: false}}\n";
+    const auto res = exid_cli::runExid(fmt::format(
+        "-q run {} --out {}", (dir / fmt::format("{}.yaml", est)).string(), (dir / est).string()));
+    ASSERT_EQ(res.code, 0) << res.out;
+    const std::string summary = exid_cli::slurp(dir / est / "summary.json");
+    EXPECT_EQ(summary.find("errors in variables there") == std::string::npos,
+              std::string(est) == "iv")
+        << est;
+  }
 }
 
 // The recorded torque 4.2 ms (4.2 samples) behind the controller: didim fits the delay with
@@ -258,9 +279,10 @@ TEST(DidimDrives, NoisyTorquesGiveDelayGainsAndParametersWithinTheirStd) {
     std::printf("[didim] noisy, seed %d: delay %.6f s (std %.2e s)\n", seed, e.nonlinear[0],
                 e.nonlinear_std[0]);
   }
-  std::printf("[didim] noisy torques with a delay and gains: %d of %d within 2 sigma, mean z^2 "
-              "%.2f (delay's z^2 %.2f over 2 draws)\n",
-              within2, count, z2 / (count - 2), zd2 / 2);
+  std::printf(
+      "[didim] noisy torques with a delay and gains: %d of %d within 2 sigma, mean z^2 "
+      "%.2f (delay's z^2 %.2f over 2 draws)\n",
+      within2, count, z2 / (count - 2), zd2 / 2);
   EXPECT_GE(within2, static_cast<int>(0.8 * count));
   EXPECT_GT(z2 / (count - 2), 0.3);
   EXPECT_LT(z2 / (count - 2), 2.5);
