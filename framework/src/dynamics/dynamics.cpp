@@ -136,6 +136,7 @@ struct DynamicsData {
   int n = 0;
   std::vector<JointC> J;
   std::vector<int> anc_off, anc_idx;  // ancestors of j (j itself first) at anc_off[j]..anc_off[j+1]
+  std::vector<int> off_off, off_idx;  // the other bodies (not ancestors of j), likewise
   // forward quantities (body frames)
   std::vector<M3> R;
   std::vector<V3> p;
@@ -171,6 +172,24 @@ Eigen::VectorXd& scratchVector(DynamicsData& d, int slot) { return d.scratch_v[s
 void DynamicsDataDeleter::operator()(DynamicsData* d) const { delete d; }
 
 namespace {
+
+// Per body j, the bodies that are not its ancestors (the rows of j's regressor columns that
+// stay zero), in the layout of the ancestors' lists.
+void nonAncestors(int n, const std::vector<int>& anc_off, const std::vector<int>& anc_idx,
+                  std::vector<int>* off, std::vector<int>* idx) {
+  off->assign(static_cast<size_t>(n + 1), 0);
+  idx->clear();
+  for (int j = 0; j < n; ++j) {
+    (*off)[static_cast<size_t>(j)] = static_cast<int>(idx->size());
+    for (int i = 0; i < n; ++i) {
+      bool ancestor = false;
+      for (int t = anc_off[static_cast<size_t>(j)]; t < anc_off[static_cast<size_t>(j) + 1]; ++t)
+        ancestor = ancestor || anc_idx[static_cast<size_t>(t)] == i;
+      if (!ancestor) idx->push_back(i);
+    }
+  }
+  (*off)[static_cast<size_t>(n)] = static_cast<int>(idx->size());
+}
 
 void setup(const RobotModel& model, DynamicsData& d) {
   const int n = model.dof();
@@ -211,6 +230,7 @@ void setup(const RobotModel& model, DynamicsData& d) {
     for (int i = j; i >= 0; i = model.bodies[static_cast<size_t>(i)].parent) d.anc_idx.push_back(i);
   }
   d.anc_off[static_cast<size_t>(n)] = static_cast<int>(d.anc_idx.size());
+  nonAncestors(n, d.anc_off, d.anc_idx, &d.off_off, &d.off_idx);
   const size_t N = static_cast<size_t>(n), P = d.anc_idx.size();
   d.R.assign(N, M3::Identity());
   d.p.assign(N, V3::Zero());
@@ -450,11 +470,14 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   check(Y.rows() == n && Y.cols() == 10 * n, "torqueRegressor: Y must be n x 10n");
   forwardPass(model, d, q.data(), qd.data(), qdd.data(), Level::Acceleration, true);
   ancestorSubspaces(d);
-  Y.setZero();
   for (int j = 0; j < n; ++j) {
     const int oj = d.anc_off[static_cast<size_t>(j)],
               cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
     const Kin& k = d.kin[static_cast<size_t>(j)];
+    // the rows of the bodies that are not ancestors of j are zero; the ancestors' are written
+    for (int t = d.off_off[static_cast<size_t>(j)]; t < d.off_off[static_cast<size_t>(j) + 1];
+         ++t)
+      for (int col = 0; col < 10; ++col) Y(d.off_idx[static_cast<size_t>(t)], 10 * j + col) = 0.0;
     for (int t = 0; t < cnt; ++t) {
       const int i = d.anc_idx[static_cast<size_t>(oj + t)];
       pairRow(d.s[static_cast<size_t>(oj + t)], k,
