@@ -1138,25 +1138,40 @@ void StudyRun::identificationStage() {
         p["name"] = u < est->nonlinear_names.size() ? est->nonlinear_names[u] : std::string();
         p["value"] = est->nonlinear(k);
         p["std"] = est->nonlinear_std.size() > k ? est->nonlinear_std(k) : NAN;
-        if (u < decl.size()) {
-          p["unit"] = decl[u].unit;
-          p["initial"] = decl[u].value;
+        // the model's by name; else the estimator's own (a delay)
+        const std::string name = p["name"].asString();
+        const auto it = std::find_if(decl.begin(), decl.end(),
+                                     [&](const NonlinearParameter& d) { return d.name == name; });
+        if (it != decl.end()) {
+          p["unit"] = it->unit;
+          p["initial"] = it->value;
         } else if (const Json* en = est->details.find("nonlinear_parameters");
-                   en && en->isArray() && u < en->size()) {  // the estimator's own (a delay)
+                   en && en->isArray() && u < en->size()) {
           if (const Json* v = en->at(u).find("unit")) p["unit"] = *v;
           if (const Json* v = en->at(u).find("initial")) p["initial"] = *v;
+        } else if (name == "measurement_delay_s") {
+          p["unit"] = "s";
         }
         nl.push_back(p);
       }
       I["nonlinear_parameters"] = nl;
-    } else if (const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
-               !decl.empty()) {
+    }
+    // the model's nonlinear parameters the estimator did not fit (matched by name)
+    if (const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
+        !decl.empty() &&
+        std::any_of(decl.begin(), decl.end(), [&](const NonlinearParameter& d) {
+          return std::find(est->nonlinear_names.begin(), est->nonlinear_names.end(), d.name) ==
+                 est->nonlinear_names.end();
+        })) {
       std::string names;
       for (const auto& p : decl)
-        names += (names.empty() ? "" : ", ") + fmt::format("{} = {:g} {}", p.name, p.value, p.unit);
+        if (std::find(est->nonlinear_names.begin(), est->nonlinear_names.end(), p.name) ==
+            est->nonlinear_names.end())
+          names +=
+              (names.empty() ? "" : ", ") + fmt::format("{} = {:g} {}", p.name, p.value, p.unit);
       warn(
           fmt::format("identification: estimator '{}' kept the model's nonlinear parameters at "
-                      "the study's values ({}); the `varpro` estimator fits them",
+                      "the study's values ({}); the `varpro` and `didim` estimators fit them",
                       cfg.estimator->type, names));
     }
     // Drive gains' columns hold the recorded torque: an estimator other than gains_ls (the
@@ -1249,8 +1264,14 @@ void StudyRun::validationStage() {
     // come first in est->nonlinear, then the estimator's, e.g. a delay)
     // (an estimator that does not fit them, e.g. batch_ls, leaves est->nonlinear empty: rows()
     // then uses the study's values)
-    const auto n_model = static_cast<Eigen::Index>(model->nonlinearParameters().size());
-    const bool fitted = n_model > 0 && est->nonlinear.size() >= n_model;
+    // (matched by name: didim with fit_nonlinear: false reports only its delay)
+    const std::vector<NonlinearParameter> model_nl = model->nonlinearParameters();
+    const auto n_model = static_cast<Eigen::Index>(model_nl.size());
+    bool fitted = n_model > 0 && est->nonlinear.size() >= n_model &&
+                  static_cast<Eigen::Index>(est->nonlinear_names.size()) >= n_model;
+    for (Eigen::Index k = 0; fitted && k < n_model; ++k)
+      fitted = est->nonlinear_names[static_cast<std::size_t>(k)] ==
+               model_nl[static_cast<std::size_t>(k)].name;
     Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx)
                 : fitted     ? model->rowsAt(vd, est->nonlinear.head(n_model), nullptr, vctx)
                              : model->rows(vd, vctx);

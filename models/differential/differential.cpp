@@ -216,6 +216,50 @@ class DifferentialModel : public exid::ObservationModel {
     return out;
   }
 
+  // The parameters of the `simulate` experiment's plant, from the dataset's meta: its payload
+  // (merged into the sensor body), its drive terms (none with drive_terms: false), its
+  // friction beyond Coulomb + viscous (coulomb_negative_Nm, stribeck_Nm,
+  // coulomb_load_Nm_per_Nm) and its gain errors (recorded_torque_gain: dK = 1/g - 1;
+  // drive_torque_gain: dK = g - 1). What the model has no column for is left out.
+  Eigen::VectorXd fullTruth(const exid::Json& meta) const override {
+    Eigen::VectorXd out = fullNominal();
+    const exid::RobotModel& R = robot();
+    const int n = R.dof(), P0 = exid::numParameters(R, cols_), E = extraPerJoint();
+    if (const exid::Json* p = meta.find("payload"); p && p->isObject()) {
+      const exid::Payload load = exid::Payload::fromJson(*p);
+      if (!load.empty())
+        out.segment<10>(10 * R.sensorBody()) += exid::transformInertial(load.pi(), R.sensor_pose);
+    }
+    auto perDrive = [&](const char* key, std::vector<double>* v) {
+      const exid::Json* j = meta.find(key);
+      if (!j || !j->isArray() || j->size() == 0) return false;
+      v->assign(static_cast<std::size_t>(n), 0.0);
+      for (int d = 0; d < n; ++d)
+        (*v)[static_cast<std::size_t>(d)] =
+            j->at(j->size() == 1 ? 0 : static_cast<std::size_t>(d)).asDouble();
+      return j->size() == 1 || static_cast<int>(j->size()) == n;
+    };
+    if (const exid::Json* dt = meta.find("drive_terms");
+        dt && dt->type() == exid::Json::Type::Bool && !dt->asBool()) {
+      out.segment(10 * n, P0 - 10 * n).setZero();
+      out.segment(P0, E * n).setZero();
+    }
+    std::vector<double> v;
+    const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
+    if (asym_ && coulomb_extra_ && perDrive("coulomb_negative_Nm", &v))
+      for (int j = 0; j < n; ++j) out[P0 + E * j + 1] = v[static_cast<std::size_t>(j)];
+    if (stribeck_ && perDrive("stribeck_Nm", &v))
+      for (int j = 0; j < n; ++j) out[P0 + E * j + nc] = v[static_cast<std::size_t>(j)];
+    const int Pl = P0 + E * n, Pg = Pl + loadCount();
+    if (load_ && perDrive("coulomb_load_Nm_per_Nm", &v))
+      for (int j = 0; j < n; ++j) out[Pl + j] = v[static_cast<std::size_t>(j)];
+    if (gains_ && perDrive("recorded_torque_gain", &v))
+      for (int j = 0; j < n; ++j) out[Pg + j] = 1.0 / v[static_cast<std::size_t>(j)] - 1.0;
+    if (gains_ && perDrive("drive_torque_gain", &v))
+      for (int j = 0; j < n; ++j) out[Pg + j] = v[static_cast<std::size_t>(j)] - 1.0;
+    return out;
+  }
+
   std::vector<exid::NonlinearParameter> nonlinearParameters() const override {
     std::vector<exid::NonlinearParameter> out;
     const int P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();

@@ -475,8 +475,7 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
               cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
     const Kin& k = d.kin[static_cast<size_t>(j)];
     // the rows of the bodies that are not ancestors of j are zero; the ancestors' are written
-    for (int t = d.off_off[static_cast<size_t>(j)]; t < d.off_off[static_cast<size_t>(j) + 1];
-         ++t)
+    for (int t = d.off_off[static_cast<size_t>(j)]; t < d.off_off[static_cast<size_t>(j) + 1]; ++t)
       for (int col = 0; col < 10; ++col) Y(d.off_idx[static_cast<size_t>(t)], 10 * j + col) = 0.0;
     for (int t = 0; t < cnt; ++t) {
       const int i = d.anc_idx[static_cast<size_t>(oj + t)];
