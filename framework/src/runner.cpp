@@ -1158,8 +1158,7 @@ void StudyRun::identificationStage() {
     }
     // the model's nonlinear parameters the estimator did not fit (matched by name)
     if (const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
-        !decl.empty() &&
-        std::any_of(decl.begin(), decl.end(), [&](const NonlinearParameter& d) {
+        !decl.empty() && std::any_of(decl.begin(), decl.end(), [&](const NonlinearParameter& d) {
           return std::find(est->nonlinear_names.begin(), est->nonlinear_names.end(), d.name) ==
                  est->nonlinear_names.end();
         })) {

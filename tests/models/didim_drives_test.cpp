@@ -10,6 +10,7 @@
 
 #include <cmath>
 #include <filesystem>
+#include <fstream>
 #include <random>
 
 #include "closed_loop_test_util.hpp"
@@ -234,6 +235,31 @@ TEST(DidimDrives, FitsAMeasurementDelay) {
   EXPECT_LT(err, 1e-6);
   EXPECT_GT(err_plain, 1e-3);
   EXPECT_GT(e.details.find("measurement_delay")->find("samples_left_out")->asDouble(), 0);
+
+  // End to end: the summary names the delay with its unit, says the model's widths were kept,
+  // and the held-out rows are compensated for the delay.
+  const fs::path dir = exid_cli::freshTempDir("exid_didim_drives_", "delay_study");
+  mtest::writeCsv(s.data, dir / "rec.csv");
+  std::ofstream(dir / "delay.yaml")
+      << "name: delay\nrobot: {type: puma560}\n"
+      << "model: {type: differential, params: {offset: true, coulomb_smoothing_rad_s: [0.05]}}\n"
+      << "experiment: {type: csv, params: {file: rec.csv}}\n"
+      << "estimator: {type: didim, params: {" << base
+      << ", max_iterations: 2, measurement_delay: true, measurement_delay_max_s: 0.01, "
+         "measurement_delay_initial_s: 0.0038}}\n"
+      << "validation: {type: csv, params: {file: rec.csv}}\n"
+      << "report: {type: standard, params: {plots: false}}\n";
+  const auto res = exid_cli::runExid(
+      fmt::format("-q run {} --out {}", (dir / "delay.yaml").string(), (dir / "out").string()));
+  ASSERT_EQ(res.code, 0) << res.out;
+  const exid::Json S = exid::Json::parse(exid_cli::slurp(dir / "out" / "summary.json"));
+  const exid::Json* nl = S.find("identification")->find("nonlinear_parameters");
+  ASSERT_NE(nl, nullptr);
+  ASSERT_EQ(nl->size(), 1u);
+  EXPECT_EQ(nl->at(0).find("name")->asString(), "measurement_delay_s");
+  EXPECT_EQ(nl->at(0).find("unit")->asString(), "s");
+  EXPECT_NE(S.dump().find("kept the model's nonlinear parameters"), std::string::npos);
+  EXPECT_NE(S.find("validation")->find("measurement_delay_compensation"), nullptr);
 }
 
 // Noisy torques (0.1 N m) with the delay and drive gains (a prior at the truth, std 0.05):
