@@ -71,14 +71,7 @@ class GainsLs : public exid::Estimator {
         rank_tol_(p.getDouble("rank_tolerance")),
         prior_std_(p.getDoubles("gain_prior_std")),
         prior_mean_(p.getDoubles("gain_prior_dK")) {
-    for (double v : prior_std_)
-      exid::check(v > 0 && std::isfinite(v),
-                  fmt::format("gains_ls: gain_prior_std: {} is not a positive std", v));
-    for (double v : prior_mean_)
-      exid::check(std::isfinite(v) && v > -1.0,
-                  fmt::format("gains_ls: gain_prior_dK: {} is not a gain correction above -1", v));
-    exid::check(prior_mean_.empty() || !prior_std_.empty(),
-                "gains_ls: gain_prior_dK is given without gain_prior_std");
+    exid::estimators::checkGainPrior(prior_std_, prior_mean_, "gains_ls");
   }
 
   exid::EstimatorSpecs specs() const override {
@@ -127,18 +120,11 @@ class GainsLs : public exid::Estimator {
     sd_.resize(0);
     if (prior_std_.empty()) return;
     exid::check(ng > 0, "gains_ls: gain_prior_std is given but the model has no drive gain");
-    auto expand = [&](const std::vector<double>& v, const char* key, double def) {
-      exid::check(v.empty() || v.size() == 1 || v.size() == ng,
-                  fmt::format("gains_ls: {} has {} values; expected 1 or one per drive gain ({}: "
-                              "{})",
-                              key, v.size(), ng, model.pluginName()));
-      Eigen::VectorXd out(static_cast<Eigen::Index>(ng));
-      for (std::size_t k = 0; k < ng; ++k)
-        out[static_cast<Eigen::Index>(k)] = v.empty() ? def : (v.size() == 1 ? v[0] : v[k]);
-      return out;
-    };
-    const Eigen::VectorXd sd = expand(prior_std_, "gain_prior_std", 0.0);
-    const Eigen::VectorXd mu = expand(prior_mean_, "gain_prior_dK", 0.0);
+    const std::string who = "gains_ls (model " + model.pluginName() + ")";
+    const Eigen::VectorXd sd =
+        exid::estimators::perGain(prior_std_, ng, "gain_prior_std", 0.0, who);
+    const Eigen::VectorXd mu =
+        exid::estimators::perGain(prior_mean_, ng, "gain_prior_dK", 0.0, who);
     // per torque column (sd 0: no prior on it)
     sd_ = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(gain_cols_.size()));
     mu_ = Eigen::VectorXd::Zero(sd_.size());

@@ -95,20 +95,11 @@ class VarPro : public exid::Estimator {
         method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
                                                       : RowAccumulator::Method::Qr) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
-    delay_ = p.getBool("measurement_delay");
-    delay0_ = p.getDouble("measurement_delay_initial_s");
-    delay_max_ = p.getDouble("measurement_delay_max_s");
-    exid::check(!delay_ || delay_max_ > 0,
-                "varpro: measurement_delay: true needs measurement_delay_max_s > 0 (how large "
-                "the delay may be: the samples within it of the recording's ends give no rows; "
-                "exid does not guess it)");
-    exid::check(delay_ || (delay_max_ == 0 && delay0_ == 0),
-                "varpro: measurement_delay_initial_s or measurement_delay_max_s is given but "
-                "measurement_delay is false");
-    exid::check(!delay_ || std::abs(delay0_) < delay_max_,
-                fmt::format("varpro: measurement_delay_initial_s = {} s lies outside +-"
-                            "measurement_delay_max_s = {} s",
-                            delay0_, delay_max_));
+    const auto ds = exid::estimators::DelaySettings::from(
+        p, "varpro", "the samples within it of the recording's ends give no rows");
+    delay_ = ds.on;
+    delay0_ = ds.initial_s;
+    delay_max_ = ds.max_s;
   }
 
   exid::EstimatorSpecs specs() const override {

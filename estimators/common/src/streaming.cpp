@@ -71,6 +71,51 @@ ParamDecl rankToleranceParam() {
                       0.0, 1.0, true, true);
 }
 
+DelaySettings DelaySettings::from(const ParamSet& p, const std::string& who,
+                                  const std::string& ends) {
+  DelaySettings d;
+  d.on = p.getBool("measurement_delay");
+  d.initial_s = p.getDouble("measurement_delay_initial_s");
+  d.max_s = p.getDouble("measurement_delay_max_s");
+  check(!d.on || d.max_s > 0,
+        fmt::format("{}: measurement_delay: true needs measurement_delay_max_s > 0 (how large the "
+                    "delay may be: {}; exid does not guess it)",
+                    who, ends));
+  check(d.on || (d.max_s == 0 && d.initial_s == 0),
+        fmt::format("{}: measurement_delay_initial_s or measurement_delay_max_s is given but "
+                    "measurement_delay is false",
+                    who));
+  check(!d.on || std::abs(d.initial_s) < d.max_s,
+        fmt::format("{}: measurement_delay_initial_s = {} s lies outside +-"
+                    "measurement_delay_max_s = {} s",
+                    who, d.initial_s, d.max_s));
+  return d;
+}
+
+void checkGainPrior(const std::vector<double>& std_dev, const std::vector<double>& mean,
+                    const std::string& who) {
+  for (double v : std_dev)
+    check(v > 0 && std::isfinite(v),
+          fmt::format("{}: gain_prior_std: {} is not a positive std", who, v));
+  for (double v : mean)
+    check(std::isfinite(v) && v > -1.0,
+          fmt::format("{}: gain_prior_dK: {} is not a gain correction above -1", who, v));
+  check(mean.empty() || !std_dev.empty(),
+        fmt::format("{}: gain_prior_dK is given without gain_prior_std", who));
+}
+
+Eigen::VectorXd perGain(const std::vector<double>& values, std::size_t gains, const char* key,
+                        double fallback, const std::string& who) {
+  check(values.empty() || values.size() == 1 || values.size() == gains,
+        fmt::format("{}: {} has {} values; expected 1 or one per drive gain ({})", who, key,
+                    values.size(), gains));
+  Eigen::VectorXd out(static_cast<Eigen::Index>(gains));
+  for (std::size_t k = 0; k < gains; ++k)
+    out[static_cast<Eigen::Index>(k)] =
+        values.empty() ? fallback : (values.size() == 1 ? values[0] : values[k]);
+  return out;
+}
+
 EstimatorSpecs streamingSpecs() {
   EstimatorSpecs s;
   s.streams = true;  // the rows in chunks (forEachChunk, accumulateRows)

@@ -155,6 +155,24 @@ int resolveThreads(long requested);
 /// The `rank_tolerance` parameter of the least-squares estimators (BaseSolveOptions).
 ParamDecl rankToleranceParam();
 
+/// A fitted measurement delay's settings (the estimator parameters measurement_delay,
+/// measurement_delay_initial_s, measurement_delay_max_s), checked: a bound is required and
+/// holds the start; without the delay neither is given. `who` starts the messages; `ends`
+/// says what the bound leaves out.
+struct DelaySettings {
+  bool on = false;
+  double initial_s = 0.0, max_s = 0.0;
+  static DelaySettings from(const ParamSet& p, const std::string& who, const std::string& ends);
+};
+
+/// A prior on the drive gains (gain_prior_std, gain_prior_dK), checked: positive stds, means
+/// above -1, no mean without a std.
+void checkGainPrior(const std::vector<double>& std_dev, const std::vector<double>& mean,
+                    const std::string& who);
+/// One value per drive gain from `key`'s values (none: `fallback`; one: every gain).
+Eigen::VectorXd perGain(const std::vector<double>& values, std::size_t gains, const char* key,
+                        double fallback, const std::string& who);
+
 /// The capabilities of an estimator that reads its rows in chunks (forEachChunk,
 /// accumulateRows) and takes a prior.
 EstimatorSpecs streamingSpecs();
