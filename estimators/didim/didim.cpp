@@ -62,6 +62,14 @@ class Didim : public exid::Estimator {
                                 "stop when an accepted step moves theta by less than this "
                                 "relative to its norm (the simulation's precision is near)",
                                 0.0, 1.0, true),
+             exid::param_string("loop", std::string("closed"),
+                                "closed: the robot's closed loop (reference_file and its PD "
+                                "gains); open: driven by the recorded torque in windows of "
+                                "window_s, each from its recorded start (q, qd), fitting the "
+                                "positions (output: position): no reference or gains needed",
+                                {"closed", "open"}),
+             exid::param_double("window_s", 0.0, "s",
+                                "loop: open: the length of each simulated window (required)", 0.0),
              exid::param_bool("fit_nonlinear", true,
                               "fit the model's nonlinear parameters (friction widths, Stribeck "
                               "velocities: ObservationModel::nonlinearParameters) with theta, "
@@ -102,29 +110,31 @@ class Didim : public exid::Estimator {
         check_(static_cast<int>(p.getInt("gradient_check"))),
         fit_nl_(p.getBool("fit_nonlinear")),
         prior_std_(p.getDoubles("gain_prior_std")),
-        prior_mean_(p.getDoubles("gain_prior_dK")),
-        delay_(p.getBool("measurement_delay")),
-        delay0_(p.getDouble("measurement_delay_initial_s")),
-        delay_max_(p.getDouble("measurement_delay_max_s")) {
-    exid::estimators::ClosedLoop::checkParams(p, kName);
-    for (double v : prior_std_)
-      exid::check(v > 0 && std::isfinite(v),
-                  fmt::format("didim: gain_prior_std: {} is not a positive std", v));
-    for (double v : prior_mean_)
-      exid::check(std::isfinite(v) && v > -1.0,
-                  fmt::format("didim: gain_prior_dK: {} is not a gain correction above -1", v));
-    exid::check(prior_mean_.empty() || !prior_std_.empty(),
-                "didim: gain_prior_dK is given without gain_prior_std");
-    exid::check(!delay_ || delay_max_ > 0,
-                "didim: measurement_delay: true needs measurement_delay_max_s > 0 (how large the "
-                "delay may be: the samples within it of the reference's ends are left out)");
-    exid::check(delay_ || (delay_max_ == 0 && delay0_ == 0),
-                "didim: measurement_delay_initial_s or measurement_delay_max_s is given but "
-                "measurement_delay is false");
-    exid::check(!delay_ || std::abs(delay0_) < delay_max_,
-                fmt::format("didim: measurement_delay_initial_s = {} s lies outside "
-                            "+-measurement_delay_max_s = {} s",
-                            delay0_, delay_max_));
+        prior_mean_(p.getDoubles("gain_prior_dK")) {
+    open_ = p.getString("loop") == "open";
+    window_s_ = p.getDouble("window_s");
+    if (open_) {
+      exid::check(window_s_ > 0,
+                  "didim: loop: open needs window_s > 0 (how long each window is simulated from "
+                  "its recorded start: short enough that the open loop does not drift, e.g. "
+                  "0.1-0.5 s; exid does not guess it)");
+      exid::check(position_,
+                  "didim: loop: open is driven by the recorded torque and fits the positions: "
+                  "give output: position");
+      exid::check(p.getString("reference_file").empty() && p.getDoubles("kp_Nm_per_rad").empty() &&
+                      p.getDoubles("kd_Nm_s_per_rad").empty(),
+                  "didim: reference_file, kp_Nm_per_rad and kd_Nm_s_per_rad are for loop: "
+                  "closed (loop: open is driven by the recorded torque)");
+    } else {
+      exid::check(window_s_ == 0, "didim: window_s is for loop: open");
+      exid::estimators::ClosedLoop::checkParams(p, kName);
+    }
+    exid::estimators::checkGainPrior(prior_std_, prior_mean_, kName);
+    const auto ds = exid::estimators::DelaySettings::from(
+        p, kName, "the samples within it of the reference's ends are left out");
+    delay_ = ds.on;
+    delay0_ = ds.initial_s;
+    delay_max_ = ds.max_s;
     exid::check(!delay_ || !position_,
                 "didim: measurement_delay is for output: torque (the torque channel behind the "
                 "controller); with output: position the positions are the controller's own");
@@ -137,18 +147,42 @@ class Didim : public exid::Estimator {
     const auto t0 = std::chrono::steady_clock::now();
     exid::check(prior == nullptr, "didim: a prior is not supported");
     const exid::Dataset data = exid::materialize(data_in);
-    loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
+    loop_ = open_ ? std::make_unique<exid::estimators::ClosedLoop>(model, data, kName)
+                  : std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
     setPrior(model);
-    // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the reference
+    // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the
+    // reference; with loop: open, the windows' samples after their starts
     keep_t_.clear();
+    windows_.clear();
     std::vector<int> keep;
-    for (int k = 0; k < K; ++k)
-      if (!delay_ || (data.t[k] - delay_max_ >= loop_->reference().t0() &&
-                      data.t[k] + delay_max_ <= loop_->reference().t1())) {
-        keep.push_back(k);
-        keep_t_.push_back(data.t[k]);
+    if (open_) {
+      exid::check(data.qd.rows() == K && data.qd.cols() == n,
+                  "didim: loop: open starts each window from the recorded q and qd: the data "
+                  "has no qd (the csv experiment's differentiate_cutoff_hz gives it)");
+      int a = 0;
+      while (a < K && data.t[a] < loop_->firstTime()) ++a;
+      int last = K - 1;
+      while (last > a && data.t[last] > loop_->lastTime()) --last;
+      while (a < last) {
+        int b = a + 1;
+        while (b < last && data.t[b + 1] - data.t[a] <= window_s_ * (1 + 1e-12)) ++b;
+        windows_.push_back({a, static_cast<int>(keep.size()), b - a});
+        for (int k = a + 1; k <= b; ++k) {
+          keep.push_back(k);
+          keep_t_.push_back(data.t[k]);
+        }
+        a = b;
       }
+      exid::check(!windows_.empty(), "didim: loop: open: no window fits in the recording");
+    } else {
+      for (int k = 0; k < K; ++k)
+        if (!delay_ || (data.t[k] - delay_max_ >= loop_->reference().t0() &&
+                        data.t[k] + delay_max_ <= loop_->reference().t1())) {
+          keep.push_back(k);
+          keep_t_.push_back(data.t[k]);
+        }
+    }
     dropped_ = K - static_cast<int>(keep.size());
     // the measured output, sample-major
     y_.resize(static_cast<Eigen::Index>(keep.size()) * n);
@@ -384,17 +418,8 @@ class Didim : public exid::Estimator {
                             "not in the closed loop (a common factor of theta and 1 + dK "
                             "gives the same motion and command); give gain_prior_std",
                             model.pluginName()));
-    auto expand = [&](const std::vector<double>& v, const char* key, double def) {
-      exid::check(v.empty() || v.size() == 1 || v.size() == ng,
-                  fmt::format("didim: {} has {} values; expected 1 or one per drive gain ({})", key,
-                              v.size(), ng));
-      VectorXd out(static_cast<Eigen::Index>(ng));
-      for (std::size_t k = 0; k < ng; ++k)
-        out[static_cast<Eigen::Index>(k)] = v.empty() ? def : (v.size() == 1 ? v[0] : v[k]);
-      return out;
-    };
-    prior_sd_ = expand(prior_std_, "gain_prior_std", 0.0);
-    prior_mu_ = expand(prior_mean_, "gain_prior_dK", 0.0);
+    prior_sd_ = exid::estimators::perGain(prior_std_, ng, "gain_prior_std", 0.0, kName);
+    prior_mu_ = exid::estimators::perGain(prior_mean_, ng, "gain_prior_dK", 0.0, kName);
   }
   // The prior's pseudo-observations' sum of squares at x (weight sigma_ / s).
   void priorTerms(const VectorXd& x, Sim* s) const {
@@ -409,7 +434,6 @@ class Didim : public exid::Estimator {
   // The loop at x = (theta, log eta, d) at the kept samples' times less d; J = d y / d x (the
   // eta columns times eta: d/d log eta; the delay's: -d tau_c / dt).
   Sim simulate(const VectorXd& xv, const exid::Dataset& data, bool sens) const {
-    (void)data;
     const int n = loop_->dof(), K = static_cast<int>(keep_t_.size()),
               p = static_cast<int>(xv.size());
     const VectorXd theta = xv.head(p_);
@@ -420,23 +444,32 @@ class Didim : public exid::Estimator {
     Sim out;
     out.y.resize(static_cast<Eigen::Index>(K) * n);
     if (sens) out.J.resize(static_cast<Eigen::Index>(K) * n, p);
-    loop_->simulate(
-        theta, times, tol_loop_, sens, [&](int k, const VectorXd& x, const MatrixXd* S) {
-          const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
-          out.y.segment(r0, n) =
-              position_ ? VectorXd(x.head(n)) : loop_->control(times[k], x.head(n), x.tail(n));
-          if (S) {  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q
-            out.J.block(r0, 0, n, S->cols()) =
-                position_ ? MatrixXd(S->topRows(n))
-                          : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
-                                     loop_->kd().asDiagonal() * S->bottomRows(n));
-            if (D_) {
-              const VectorXd a = loop_->acceleration(theta, times[k], x.head(n), x.tail(n));
-              out.J.block(r0, p_ + L_, n, 1) =
-                  -loop_->controlRate(times[k], x.head(n), x.tail(n), a);
-            }
-          }
-        });
+    auto at = [&](int k, const VectorXd& x, const MatrixXd* S) {
+      const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
+      out.y.segment(r0, n) =
+          position_ ? VectorXd(x.head(n)) : loop_->control(times[k], x.head(n), x.tail(n));
+      if (S) {  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q
+        out.J.block(r0, 0, n, S->cols()) =
+            position_ ? MatrixXd(S->topRows(n))
+                      : MatrixXd(-(loop_->kp().asDiagonal() * S->topRows(n)) -
+                                 loop_->kd().asDiagonal() * S->bottomRows(n));
+        if (D_) {
+          const VectorXd a = loop_->acceleration(theta, times[k], x.head(n), x.tail(n));
+          out.J.block(r0, p_ + L_, n, 1) = -loop_->controlRate(times[k], x.head(n), x.tail(n), a);
+        }
+      }
+    };
+    if (!open_) {
+      loop_->simulate(theta, times, tol_loop_, sens, at);
+    } else {  // each window from its recorded start (which does not depend on theta)
+      for (const Window& w : windows_) {
+        VectorXd x0(2 * n);
+        x0 << data.q.row(w.start).transpose(), data.qd.row(w.start).transpose();
+        loop_->simulateFrom(
+            theta, data.t[w.start], x0, times.segment(w.first, w.count), tol_loop_, sens,
+            [&](int k, const VectorXd& x, const MatrixXd* S) { at(w.first + k, x, S); });
+      }
+    }
     if (sens && L_ > 0)
       for (int k = 0; k < L_; ++k) out.J.col(p_ + k) *= std::exp(xv[p_ + k]);
     out.rss = (y_ - out.y).squaredNorm();
@@ -576,6 +609,19 @@ class Didim : public exid::Estimator {
         "eta's std = eta std(log eta); cond_W is that of J";
     d["nonlinear_fitted"] = L_ > 0;
     d["controller"] = loop_->describe();
+    d["loop"] = open_ ? "open" : "closed";
+    if (open_) {
+      exid::Json w = exid::Json::object();
+      w["window_s"] = window_s_;
+      w["windows"] = static_cast<long long>(windows_.size());
+      w["samples_fitted"] = static_cast<long long>(keep_t_.size());
+      w["samples_not_fitted"] = dropped_;
+      w["start"] =
+          "each window from its first sample's recorded q and qd (not fitted), driven by the "
+          "recorded torque read between samples by a cubic Hermite spline; the samples before "
+          "the fourth and after the fifth-to-last are not simulated";
+      d["windows"] = w;
+    }
     d["memory"] = "the Jacobian (m x p doubles): not streamed";
     return e;
   }
@@ -595,7 +641,15 @@ class Didim : public exid::Estimator {
   VectorXd prior_sd_, prior_mu_;
   double sigma_ = 0.0;          // the noise std the prior's weight uses
   std::vector<double> keep_t_;  // the times of the samples fitted
-  int dropped_ = 0;             // samples left out (measurement_delay_max_s)
+  bool open_ = false;           // loop: open
+  double window_s_ = 0.0;
+  struct Window {
+    int start = 0;  // the recorded sample it starts from
+    int first = 0;  // its first fitted sample's index in keep_t_
+    int count = 0;  // fitted samples (start + 1 .. start + count)
+  };
+  std::vector<Window> windows_;
+  int dropped_ = 0;  // samples left out (measurement_delay_max_s)
   mutable int rejected_bound_ = 0;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
   VectorXd y_;

@@ -7,6 +7,7 @@
 #include <algorithm>
 #include <cmath>
 
+#include "exid/delay.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/io.hpp"
@@ -98,16 +99,7 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
   const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),
                             kd = p.getDoubles("kd_Nm_s_per_rad");
   ff_ = p.getString("feedforward") == "nominal";
-  check(model.specs().per_sample,
-        fmt::format("{}: model '{}' must give rows per sample", who, model.pluginName()));
-  s_.t = VectorXd::Zero(n_ + 1);
-  s_.q = MatrixXd::Zero(n_ + 1, n_);
-  s_.qd = MatrixXd::Zero(n_ + 1, n_);
-  s_.qdd = MatrixXd::Zero(n_ + 1, n_);
-  check(model.design(s_).rows() == static_cast<Eigen::Index>(n_ + 1) * n_,
-        fmt::format("{}: model '{}' must give one row per joint of all {} joints (the "
-                    "simulation needs every joint's torque; e.g. differential with every joint)",
-                    who, model.pluginName(), n_));
+  setUpRows(model);
   auto perJoint = [&](const std::vector<double>& v, const char* name) {
     check(v.size() == 1 || static_cast<int>(v.size()) == n_,
           fmt::format("{}: {}: expected 1 or {} values, found {}", who, name, n_, v.size()));
@@ -126,6 +118,61 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
                     "{}] s ({}): the simulation is driven by the reference",
                     who, data.tFirst(), data.tLast(), ref_.t0(), ref_.t1(), file_));
   dyn_ = makeDynamicsData(*robot_);
+  setUpColumns(model, data);
+}
+
+ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who)
+    : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who), open_(true) {
+  setUpRows(model);
+  check(data.size() >= 10 && data.tau.rows() == data.size() && data.tau.cols() == n_,
+        fmt::format("{}: the torque-driven loop needs the recorded torque of all {} joints and "
+                    "at least 10 samples ({})",
+                    who, n_, data.source));
+  Kp_ = VectorXd::Zero(n_);
+  Kd_ = VectorXd::Zero(n_);
+  ff_ = false;
+  rec_t_ = data.t;
+  rec_tau_ = data.tau;
+  file_ = "the recorded torque";
+  dyn_ = makeDynamicsData(*robot_);
+  setUpColumns(model, data);
+}
+
+double ClosedLoop::firstTime() const { return open_ ? rec_t_[3] : ref_.t0(); }
+double ClosedLoop::lastTime() const { return open_ ? rec_t_[rec_t_.size() - 5] : ref_.t1(); }
+
+VectorXd ClosedLoop::recordedTorque(double t) const {
+  const Eigen::Index K = rec_t_.size();
+  const double* b = rec_t_.data();
+  Eigen::Index k = static_cast<Eigen::Index>(std::upper_bound(b, b + K, t) - b) - 1;
+  k = std::max<Eigen::Index>(3, std::min<Eigen::Index>(k, K - 5));
+  check(t >= rec_t_[3] - 1e-12 && t <= rec_t_[K - 5] + 1e-12,
+        fmt::format("{}: t = {} s is outside the recorded torque's span [{}, {}] s", who_, t,
+                    rec_t_[3], rec_t_[K - 5]));
+  // eight samples about t: the spline's interval [t_k, t_k+1] and its slopes' neighbours
+  const VectorXd tl = rec_t_.segment(k - 3, 8);
+  const MatrixXd Xl = rec_tau_.middleRows(k - 3, 8);
+  MatrixXd out;
+  shiftedRows(tl, Xl, 1, t - rec_t_[k], 3, 4, &out, nullptr);
+  return out.row(0).transpose();
+}
+
+void ClosedLoop::setUpRows(const ObservationModel& model) {
+  const std::string& who = who_;
+  check(model.specs().per_sample,
+        fmt::format("{}: model '{}' must give rows per sample", who, model.pluginName()));
+  s_.t = VectorXd::Zero(n_ + 1);
+  s_.q = MatrixXd::Zero(n_ + 1, n_);
+  s_.qd = MatrixXd::Zero(n_ + 1, n_);
+  s_.qdd = MatrixXd::Zero(n_ + 1, n_);
+  check(model.design(s_).rows() == static_cast<Eigen::Index>(n_ + 1) * n_,
+        fmt::format("{}: model '{}' must give one row per joint of all {} joints (the "
+                    "simulation needs every joint's torque; e.g. differential with every joint)",
+                    who, model.pluginName(), n_));
+}
+
+void ClosedLoop::setUpColumns(const ObservationModel& model, const Dataset& data) {
+  const std::string& who = who_;
   const std::vector<NonlinearParameter> nl = model.nonlinearParameters();
   eta_.resize(static_cast<Eigen::Index>(nl.size()));
   for (std::size_t k = 0; k < nl.size(); ++k) {
@@ -192,11 +239,15 @@ void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
 }
 
 std::string ClosedLoop::describe() const {
+  if (open_)
+    return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
+           "samples)";
   return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",
                      ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "", file_);
 }
 
 VectorXd ClosedLoop::control(double t, const VectorXd& q, const VectorXd& qd) const {
+  if (open_) return recordedTorque(t);
   VectorXd qr, qdr, qddr;
   ref_.eval(t, &qr, &qdr, &qddr);
   VectorXd tau = Kp_.cwiseProduct(qr - q) + Kd_.cwiseProduct(qdr - qd);
@@ -210,6 +261,7 @@ VectorXd ClosedLoop::control(double t, const VectorXd& q, const VectorXd& qd) co
 VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd,
                                  const VectorXd& a) const {
   (void)q;
+  check(!open_, who_ + ": the torque-driven loop's command rate is not defined");
   VectorXd qr, qdr, qddr;
   const double tc = std::min(std::max(t, ref_.t0()), ref_.t1());
   ref_.eval(tc, &qr, &qdr, &qddr);

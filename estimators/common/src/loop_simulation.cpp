@@ -135,18 +135,26 @@ int sensRhs(int Ns, double t, N_Vector y, N_Vector, N_Vector* yS, N_Vector* ySdo
 void ClosedLoop::simulate(
     const VectorXd& theta, const VectorXd& times, const Tolerances& tol, bool sens,
     const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
+  check(!open_, who_ + ": the torque-driven loop has no reference to start from");
+  VectorXd qr, qdr, qddr;
+  ref_.eval(ref_.t0(), &qr, &qdr, &qddr);
+  VectorXd x0(2 * n_);
+  x0 << qr, qdr;
+  simulateFrom(theta, ref_.t0(), x0, times, tol, sens, at_sample);
+}
+
+void ClosedLoop::simulateFrom(
+    const VectorXd& theta, double t0, const VectorXd& x0, const VectorXd& times,
+    const Tolerances& tol, bool sens,
+    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
   const int n = n_, p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
+  check(x0.size() == 2 * n,
+        fmt::format("{}: a start state of {} values, expected {}", who_, x0.size(), 2 * n));
   User U{this, &theta, {}, false, 0.0, {}, {}, {}, {}};
   SUNContext sctx = nullptr;
   check(SUNContext_Create(nullptr, &sctx) == 0, who_ + ": SUNContext_Create failed");
   N_Vector y = N_VNew_Serial(2 * n, sctx);
-  const double t0 = ref_.t0();
-  VectorXd qr, qdr, qddr;
-  ref_.eval(t0, &qr, &qdr, &qddr);
-  for (int j = 0; j < n; ++j) {
-    NV_Ith_S(y, j) = qr[j];
-    NV_Ith_S(y, n + j) = qdr[j];
-  }
+  for (int j = 0; j < 2 * n; ++j) NV_Ith_S(y, j) = x0[j];
   void* mem = CVodeCreate(CV_BDF, sctx);
   SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
   SUNLinearSolver LS = SUNLinSol_Dense(y, A, sctx);
@@ -164,7 +172,9 @@ void ClosedLoop::simulate(
               CVodeSStolerances(mem, tol.rtol, tol.atol) == 0 && CVodeSetUserData(mem, &U) == 0 &&
               CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
               CVodeSetLinearSolver(mem, LS, A) == 0 &&
-              CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0,
+              CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
+              // (no step past the last time: the torque-driven loop's input ends there)
+              (times.size() == 0 || CVodeSetStopTime(mem, times[times.size() - 1]) == 0),
           who_ + ": setting up CVODES failed");
     MatrixXd S;
     if (sens) {

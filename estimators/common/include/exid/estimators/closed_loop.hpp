@@ -49,6 +49,15 @@ class ClosedLoop {
   /// joint of every joint) and that the recording's times lie within the reference.
   ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
              const RunContext& ctx, const std::string& who);
+  /// The torque-driven (open) loop: the drives' command is the recorded torque, read between
+  /// the samples by the cubic Hermite spline of exid::shiftedRows (slopes from the five-point
+  /// derivative: fourth order); no reference, no gains. Defined from the fourth to the
+  /// fifth-to-last sample (firstTime(), lastTime()).
+  ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who);
+  bool torqueDriven() const { return open_; }
+  /// The span where the torque-driven loop's command is defined.
+  double firstTime() const;
+  double lastTime() const;
   /// The estimator parameters of the controller and of the simulation's tolerances
   /// (reference_file, kp_Nm_per_rad, kd_Nm_s_per_rad, feedforward, rtol, atol, max_steps).
   static std::vector<ParamDecl> params();
@@ -106,6 +115,12 @@ class ClosedLoop {
       const Eigen::VectorXd& theta, const Eigen::VectorXd& times, const Tolerances& tol,
       bool sensitivities,
       const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at) const;
+  /// The same from the state x0 = (q, qd) at t0 (which does not depend on theta: S starts at
+  /// 0); `times` after t0.
+  void simulateFrom(
+      const Eigen::VectorXd& theta, double t0, const Eigen::VectorXd& x0,
+      const Eigen::VectorXd& times, const Tolerances& tol, bool sensitivities,
+      const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at) const;
 
  private:
   const ObservationModel* model_;
@@ -127,6 +142,14 @@ class ClosedLoop {
     int kind = 0;   // 1: dK, 2: FcL (exid::torqueColumnKind)
   };
   std::vector<TorqueColumn> tcol_;
+  bool open_ = false;        // torque-driven: the command is the recorded torque
+  Eigen::VectorXd rec_t_;    // its time stamps
+  Eigen::MatrixXd rec_tau_;  // and torques (K x n)
+  Eigen::VectorXd recordedTorque(double t) const;
+  // the model checked (per sample, every joint's row) and the one-state samples s_
+  void setUpRows(const ObservationModel& model);
+  // the nonlinear parameters' and the torque columns' bookkeeping; a payload part refused
+  void setUpColumns(const ObservationModel& model, const Dataset& data);
   // theta without the torque columns (w's part), and the drives' torque u(tau_c) with
   // du_j/dtau_c,j in *slope
   Eigen::VectorXd restOf(const Eigen::VectorXd& theta) const;
