@@ -173,8 +173,9 @@ void ClosedLoop::simulateFrom(
               CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
               CVodeSetLinearSolver(mem, LS, A) == 0 &&
               CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
-              // (no step past the last time: the torque-driven loop's input ends there)
-              (times.size() == 0 || CVodeSetStopTime(mem, times[times.size() - 1]) == 0),
+              // (the torque-driven loop: no step past the last time, where its input may end;
+              // the closed loop keeps its free steps, which the stop time changes)
+              (!open_ || times.size() == 0 || CVodeSetStopTime(mem, times[times.size() - 1]) == 0),
           who_ + ": setting up CVODES failed");
     MatrixXd S;
     if (sens) {
