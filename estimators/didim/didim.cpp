@@ -80,22 +80,18 @@ class Didim : public exid::Estimator {
              exid::param_doubles("gain_prior_dK", std::vector<double>{}, "",
                                  "prior mean of each drive's dK (one value: every drive; empty: "
                                  "0); the start takes the gains there"),
-             exid::param_bool("measurement_delay", false,
-                              "fit a delay d of the recorded torque behind the controller: the "
-                              "torque recorded at t_k is the command at t_k - d (output: torque; "
-                              "needs measurement_delay_max_s)"),
-             exid::param_double("measurement_delay_initial_s", 0.0, "s",
-                                "the delay the fit starts from"),
-             exid::param_double("measurement_delay_max_s", 0.0, "s",
-                                "the largest |d|: the samples within it of the reference's ends "
-                                "are left out (counted in details.measurement_delay)",
-                                0.0),
              exid::param_int("gradient_check", 0,
                              "> 0: compare the Jacobian along this many random directions with "
                              "central differences of the simulation at the start "
                              "(details.gradient_check)",
                              0, 1000),
          })
+      p.push_back(d);
+    for (auto& d : exid::estimators::DelaySettings::params(
+             "fit a delay d of the recorded torque behind the controller: the torque recorded at "
+             "t_k is the command at t_k - d (output: torque; needs measurement_delay_max_s)",
+             "the largest |d|: the samples within it of the reference's ends are left out "
+             "(counted in details.measurement_delay)"))
       p.push_back(d);
     return p;
   }

@@ -56,7 +56,7 @@ class VarPro : public exid::Estimator {
       "derivatives; standard deviations of all parameters";
 
   static std::vector<exid::ParamDecl> params() {
-    return {
+    std::vector<exid::ParamDecl> p = {
         exid::param_int("max_evaluations", 60,
                         "passes over the data at most (each evaluates the fit at one set of "
                         "nonlinear parameters)",
@@ -72,19 +72,16 @@ class VarPro : public exid::Estimator {
                            "qr: Householder QR of [W D y] (cond not squared); normal: the Gram "
                            "matrix (faster, squares cond)",
                            {"qr", "normal"}),
-        exid::param_bool("measurement_delay", false,
-                         "fit a delay d of the measurement (torque or wrench) behind the "
-                         "positions, with the other parameters: the model's rows of sample k are "
-                         "read at t_k - d (d > 0: the measurement lags); needs "
-                         "measurement_delay_max_s and a per-sample model"),
-        exid::param_double("measurement_delay_initial_s", 0.0, "s",
-                           "the delay the fit starts from"),
-        exid::param_double("measurement_delay_max_s", 0.0, "s",
-                           "the largest |d| searched: the samples within it (plus 3) of either "
-                           "end give no rows, whatever d is (counted in the details)",
-                           0.0),
         exid::estimators::rankToleranceParam(),
     };
+    for (auto& d : exid::estimators::DelaySettings::params(
+             "fit a delay d of the measurement (torque or wrench) behind the positions, with the "
+             "other parameters: the model's rows of sample k are read at t_k - d (d > 0: the "
+             "measurement lags); needs measurement_delay_max_s and a per-sample model",
+             "the largest |d| searched: the samples within it (plus 3) of either end give no "
+             "rows, whatever d is (counted in the details)"))
+      p.push_back(d);
+    return p;
   }
 
   explicit VarPro(const exid::ParamSet& p)

@@ -1157,21 +1157,18 @@ void StudyRun::identificationStage() {
       I["nonlinear_parameters"] = nl;
     }
     // the model's nonlinear parameters the estimator did not fit (matched by name)
-    if (const std::vector<NonlinearParameter> decl = model->nonlinearParameters();
-        !decl.empty() && std::any_of(decl.begin(), decl.end(), [&](const NonlinearParameter& d) {
-          return std::find(est->nonlinear_names.begin(), est->nonlinear_names.end(), d.name) ==
-                 est->nonlinear_names.end();
-        })) {
+    {
       std::string names;
-      for (const auto& p : decl)
+      for (const auto& p : model->nonlinearParameters())
         if (std::find(est->nonlinear_names.begin(), est->nonlinear_names.end(), p.name) ==
             est->nonlinear_names.end())
           names +=
               (names.empty() ? "" : ", ") + fmt::format("{} = {:g} {}", p.name, p.value, p.unit);
-      warn(
-          fmt::format("identification: estimator '{}' kept the model's nonlinear parameters at "
-                      "the study's values ({}); the `varpro` and `didim` estimators fit them",
-                      cfg.estimator->type, names));
+      if (!names.empty())
+        warn(fmt::format(
+            "identification: estimator '{}' kept the model's nonlinear parameters at the study's "
+            "values ({}); the `varpro` and `didim` estimators fit them",
+            cfg.estimator->type, names));
     }
     // Drive gains' columns hold the recorded torque: an estimator other than gains_ls (the
     // torque in the measurement only), iv (a simulated instrument) or didim (the simulated

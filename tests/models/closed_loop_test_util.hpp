@@ -8,12 +8,24 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <memory>
 #include <string>
 
 #include "exid/data.hpp"
+#include "exid/interfaces.hpp"
 #include "exid/json.hpp"
 
 namespace cltest {
+
+// A closed-loop case: the robot, the model, the recording, the estimators' loop parameters
+// (reference_file and gains) and the true base parameters.
+struct Loop {
+  std::shared_ptr<const exid::RobotModel> robot;
+  std::shared_ptr<exid::ObservationModel> model;
+  exid::Dataset data;
+  std::string params;
+  Eigen::VectorXd truth;
+};
 
 // A smooth commanded trajectory of every joint (sums of sines), sampled at 1 kHz.
 inline exid::Samples reference(int n, double duration) {

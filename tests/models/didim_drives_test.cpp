@@ -23,13 +23,7 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Loop {
-  std::shared_ptr<const exid::RobotModel> robot;
-  std::shared_ptr<exid::ObservationModel> model;
-  exid::Dataset data;
-  std::string params;
-  Eigen::VectorXd truth;
-};
+using cltest::Loop;
 
 // The PUMA tracking a smooth reference through PD + feed-forward for `duration` s; `plant` adds
 // the experiment's keys, `model` the differential model's.

@@ -20,19 +20,13 @@ namespace {
 
 namespace fs = std::filesystem;
 
-struct Loop {
-  std::shared_ptr<const exid::RobotModel> robot;
-  std::shared_ptr<exid::ObservationModel> model;
-  exid::Dataset clean;
-  std::string params;
-  Eigen::VectorXd truth;
-};
+using cltest::Loop;
 
 Loop setup(double duration) {
   Loop s;
   s.robot = mtest::robot("puma560");
   const exid::Samples ref = cltest::reference(s.robot->dof(), duration);
-  s.clean = mtest::simulate(
+  s.data = mtest::simulate(
       s.robot,
       "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
       "coulomb_velocity_scale: 0.05}",
@@ -43,7 +37,7 @@ Loop setup(double duration) {
       mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", s.robot);
   s.truth = s.model->baseNominal();
   s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
-                         cltest::gains(s.clean.meta));
+                         cltest::gains(s.data.meta));
   return s;
 }
 
@@ -64,7 +58,7 @@ exid::Dataset noisyPositions(const exid::Dataset& clean, double tau_noise, std::
 
 TEST(Didim, RecoversThePlantFromExactTorquesWhereTheInverseModelIsBiased) {
   const Loop s = setup(6.0);
-  const exid::Dataset d = noisyPositions(s.clean, 0.0, 1);
+  const exid::Dataset d = noisyPositions(s.data, 0.0, 1);
   auto ls = exid_test::create<exid::Estimator>("batch_ls", "{}");
   const exid::Estimate el = ls->estimate(*s.model, d, nullptr, mtest::context());
   auto didim = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", gradient_check: 2}");
@@ -89,7 +83,7 @@ TEST(Didim, NoisyTorquesGiveEstimatesWithinTheirReportedStandardDeviations) {
   int within2 = 0, count = 0;
   double z2 = 0;
   for (int seed = 1; seed <= 2; ++seed) {
-    const exid::Dataset d = noisyPositions(s.clean, 0.3, static_cast<std::uint64_t>(seed));
+    const exid::Dataset d = noisyPositions(s.data, 0.3, static_cast<std::uint64_t>(seed));
     auto didim =
         exid_test::create<exid::Estimator>("didim", "{" + s.params + ", fit_nonlinear: false}");
     const exid::Estimate e = didim->estimate(*s.model, d, nullptr, mtest::context());
@@ -109,9 +103,9 @@ TEST(Didim, NoisyTorquesGiveEstimatesWithinTheirReportedStandardDeviations) {
 
 TEST(Didim, APositionOutputRecoversThePlantToo) {
   const Loop s = setup(6.0);
-  const exid::Dataset d = noisyPositions(s.clean, 0.0, 2);
+  const exid::Dataset d = noisyPositions(s.data, 0.0, 2);
   exid::Dataset exact_q = d;
-  exact_q.q = s.clean.q;  // the output fitted: the recorded positions, exact here
+  exact_q.q = s.data.q;  // the output fitted: the recorded positions, exact here
   auto didim = exid_test::create<exid::Estimator>(
       "didim", "{" + s.params + ", output: position, fit_nonlinear: false}");
   const exid::Estimate e = didim->estimate(*s.model, exact_q, nullptr, mtest::context());
@@ -128,7 +122,7 @@ TEST(Didim, APositionOutputRecoversThePlantToo) {
 TEST(Didim, FitsTheFrictionWidthsWithTheBaseParameters) {
   Loop s = setup(6.0);
   s.model = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.1]}", s.robot);
-  const exid::Dataset d = noisyPositions(s.clean, 0.0, 3);
+  const exid::Dataset d = noisyPositions(s.data, 0.0, 3);
   auto didim = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", gradient_check: 2}");
   const exid::Estimate e = didim->estimate(*s.model, d, nullptr, mtest::context());
   ASSERT_EQ(e.nonlinear.size(), 6);

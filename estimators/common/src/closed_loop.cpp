@@ -284,7 +284,7 @@ VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd
 }
 
 VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorXd& q,
-                                  const VectorXd& qd, MatrixXd* Mo) const {
+                                  const VectorXd& qd, MatrixXd* Mo, VectorXd* command) const {
   const int n = n_;
   for (int k = 0; k <= n; ++k) {
     s_.q.row(k) = q.transpose();
@@ -292,7 +292,9 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
   }
   s_.qdd.setZero();
   for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
-  const VectorXd f = model_->designAt(s_, eta_, nullptr) * restOf(theta);  // (n + 1) n torques
+  // (n + 1) n torques (theta's torque columns, if any, act through delivered())
+  const MatrixXd W = model_->designAt(s_, eta_, nullptr);
+  const VectorXd f = tcol_.empty() ? VectorXd(W * theta) : VectorXd(W * restOf(theta));
   const VectorXd h = f.head(n);
   MatrixXd M(n, n);
   for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
@@ -304,7 +306,9 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
         "too far from a physical robot to simulate: try consistent_ls first)",
         who_, t));
   if (Mo) *Mo = M;
-  return ldlt.solve(delivered(theta, control(t, q, qd), qd, nullptr) - h);
+  const VectorXd tau_c = control(t, q, qd);
+  if (command) *command = tau_c;
+  return ldlt.solve(delivered(theta, tau_c, qd, nullptr) - h);
 }
 
 }  // namespace exid::estimators

@@ -23,7 +23,8 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
                            MatrixXd* A_q, MatrixXd* A_qd, MatrixXd* B) const {
   const int n = n_;
   MatrixXd M;
-  const VectorXd a = acceleration(theta, t, q, qd, &M);
+  VectorXd tau_c;
+  const VectorXd a = acceleration(theta, t, q, qd, &M, &tau_c);
   Samples s;
   s.t = VectorXd::Zero(1);
   s.q = q.transpose();
@@ -33,7 +34,6 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
   const Eigen::LDLT<MatrixXd> ldlt(M);
   // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
-  const VectorXd tau_c = control(t, q, qd);
   VectorXd slope;
   delivered(theta, tau_c, qd, &slope);
   for (const TorqueColumn& c : tcol_) {

@@ -92,6 +92,14 @@ DelaySettings DelaySettings::from(const ParamSet& p, const std::string& who,
   return d;
 }
 
+std::vector<ParamDecl> DelaySettings::params(const std::string& what, const std::string& bound) {
+  return {
+      param_bool("measurement_delay", false, what),
+      param_double("measurement_delay_initial_s", 0.0, "s", "the delay the fit starts from"),
+      param_double("measurement_delay_max_s", 0.0, "s", bound, 0.0),
+  };
+}
+
 void checkGainPrior(const std::vector<double>& std_dev, const std::vector<double>& mean,
                     const std::string& who) {
   for (double v : std_dev)

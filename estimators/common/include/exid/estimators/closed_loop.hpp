@@ -83,10 +83,11 @@ class ClosedLoop {
   bool hasDriveGains() const;
   /// The base indices of the drive-gain columns (dK<j>), in base order.
   std::vector<int> driveGainColumns() const;
-  /// qdd of the loop at theta; *M (if not null) the mass matrix there. exid::Error when M is
-  /// not positive definite.
+  /// qdd of the loop at theta; *M (if not null) the mass matrix there, *command (if not null)
+  /// the controller's torque. exid::Error when M is not positive definite.
   Eigen::VectorXd acceleration(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
-                               const Eigen::VectorXd& qd, Eigen::MatrixXd* M = nullptr) const;
+                               const Eigen::VectorXd& qd, Eigen::MatrixXd* M = nullptr,
+                               Eigen::VectorXd* command = nullptr) const;
   const Eigen::VectorXd& kp() const { return Kp_; }
   const Eigen::VectorXd& kd() const { return Kd_; }
   /// The loop's linearisation at theta: da/dq, da/dqd (n x n) and da/dtheta (n x p), exact

@@ -163,6 +163,9 @@ struct DelaySettings {
   bool on = false;
   double initial_s = 0.0, max_s = 0.0;
   static DelaySettings from(const ParamSet& p, const std::string& who, const std::string& ends);
+  /// The three parameters' declarations: `what` documents measurement_delay, `bound`
+  /// measurement_delay_max_s.
+  static std::vector<ParamDecl> params(const std::string& what, const std::string& bound);
 };
 
 /// A prior on the drive gains (gain_prior_std, gain_prior_dK), checked: positive stds, means
