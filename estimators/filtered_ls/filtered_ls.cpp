@@ -389,7 +389,7 @@ class FilteredLs : public exid::Estimator {
       s.rhi = std::min(K, trim + s.hi + sm);
       return s;
     };
-    std::vector<ChunkOut> outs(static_cast<std::size_t>(T));  // one wave of chunks
+    std::vector<ChunkOut> outs(2 * static_cast<std::size_t>(T));  // the chunks in flight
     exid::SampleWindow window(data);
     P.acc = estimators::RowAccumulator(p);
     exid::Rows all;
@@ -406,12 +406,12 @@ class FilteredLs : public exid::Estimator {
           const exid::Dataset f =
               exid::sliceDataset(filtered(raw, P, sos), static_cast<int>(trim + s.lo - s.rlo),
                                  static_cast<int>(trim + s.hi - s.rlo));
-          ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
+          ChunkOut& o = outs[static_cast<std::size_t>(c % (2 * T))];
           o = ChunkOut();
           chunkRows(model, P, dsos, f, s.lo, s.ca, s.cb, keep_rows, ctx, &o);
         },
         [&](long c) {  // in chunk order: deterministic
-          ChunkOut& o = outs[static_cast<std::size_t>(c % T)];
+          ChunkOut& o = outs[static_cast<std::size_t>(c % (2 * T))];
           P.acc.merge(o.acc);
           P.rows_before += o.rows_before;
           P.slow_removed += o.slow;

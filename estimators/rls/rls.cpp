@@ -9,6 +9,13 @@
 // exactly symmetric; the Joseph form is first-order insensitive to rounding errors in k.
 // P is the normalised covariance ((W^T W + P0^-1)^-1 for lambda = 1); the reported covariance is
 // sigma^2 P with sigma^2 = ||y - W theta||^2 / (m - p) (see docs/estimators.md).
+//
+// With random_walk_std (the parameters drift as a random walk), the recursion is the Kalman
+// filter of that state model: theta_k = theta_{k-1} + w_k, w_k ~ N(0, diag(q^2) dt_k), and each
+// row y = phi^T theta_k + v, v ~ N(0, noise_std^2). Before the rows of a sample (after the
+// first), the prediction P <- P + diag(q^2) dt_k / noise_std^2 (dt_k: the time since the
+// previous sample); the rows then update as above with lambda = 1. The covariance of the final
+// estimate is noise_std^2 P_K (the state model's, not a refit of sigma).
 #include <fmt/format.h>
 
 #include <Eigen/Cholesky>
@@ -56,6 +63,11 @@ class Rls : public exid::Estimator {
             "recompute the final residuals in a second pass over the data (always done "
             "when forgetting_factor < 1)"),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1.0, 1e9),
+        exid::param_doubles(
+            "random_walk_std", std::vector<double>{}, "base parameter units per sqrt(s)",
+            "Kalman filter of parameters that drift as a random walk: the std of each base "
+            "parameter's drift over one second (one value for every base parameter, or one per "
+            "base parameter; needs noise_std); empty: no drift (least squares)"),
     };
   }
 
@@ -66,7 +78,18 @@ class Rls : public exid::Estimator {
         joseph_(p.getString("update") == "joseph"),
         noise_std_(p.getDouble("noise_std")),
         residual_pass_(p.getBool("residual_pass")),
-        chunk_(static_cast<int>(p.getInt("chunk_samples"))) {}
+        chunk_(static_cast<int>(p.getInt("chunk_samples"))),
+        walk_(p.getDoubles("random_walk_std")) {
+    for (double v : walk_)
+      exid::check(v >= 0 && std::isfinite(v),
+                  fmt::format("rls: random_walk_std: {} is not a std (finite, >= 0)", v));
+    exid::check(walk_.empty() || noise_std_ > 0,
+                "rls: random_walk_std needs noise_std (the std of one measurement, in units of "
+                "y): the drift is weighed against it, and exid does not guess it");
+    exid::check(walk_.empty() || lambda_ == 1.0,
+                "rls: random_walk_std and forgetting_factor < 1 are two models of drifting "
+                "parameters; give one");
+  }
 
   exid::EstimatorSpecs specs() const override {
     exid::EstimatorSpecs s = exid::estimators::streamingSpecs();
@@ -169,6 +192,8 @@ class Rls : public exid::Estimator {
     Eigen::MatrixXd& P = st->P;
     Eigen::VectorXd g(p), k(p);
     std::vector<int> sample_of_row, order;
+    const Eigen::VectorXd q2 = driftVariance(model);  // per second, normalised; empty: none
+    double t_prev = NAN;
     exid::estimators::forEachChunk(
         model, data, chunk_, ctx, kName, 0.0, residualPass() ? 0.5 : 0.95,
         [&](const exid::Rows& r, int begin, int end) {
@@ -177,6 +202,22 @@ class Rls : public exid::Estimator {
           const auto R = static_cast<int>(order.size());
           for (int idx = 0; idx < R; ++idx) {
             const int i = order[static_cast<std::size_t>(idx)];
+            if (q2.size() > 0 &&
+                (idx == 0 || sample_of_row[static_cast<std::size_t>(i)] !=
+                                 sample_of_row[static_cast<std::size_t>(
+                                     order[static_cast<std::size_t>(idx - 1)])])) {
+              // the Kalman prediction to this sample's time
+              const double t = rowTime(model, data, r, i,
+                                       begin + sample_of_row[static_cast<std::size_t>(i)]);
+              if (!std::isnan(t_prev)) {
+                exid::check(t >= t_prev,
+                            fmt::format("rls: random_walk_std: the rows' times go back from {} s "
+                                        "to {} s",
+                                        t_prev, t));
+                P.diagonal() += q2 * (t - t_prev);
+              }
+              t_prev = t;
+            }
             const auto phi = Wt.col(i);
             g.noalias() = P.selfadjointView<Eigen::Lower>() * phi;
             const double s = phi.dot(g);
@@ -211,19 +252,39 @@ class Rls : public exid::Estimator {
   void recordHistory(const exid::ObservationModel& model, const exid::Dataset& data,
                      const exid::Rows& r, int i, long global, State& st, exid::Estimate* e) const {
     const long h = st.h;
-    // (the row's own time: a streamed dataset holds no samples itself)
-    if (r.t.size() == static_cast<std::size_t>(r.y.size()))
-      e->history_t(h) = r.t[static_cast<std::size_t>(i)];
-    else if (!data.streamed())
-      e->history_t(h) = data.t(global);
-    else
-      throw exid::Error(
-          fmt::format("rls: the model '{}' gives no time per row, needed for the history of a "
-                      "streamed dataset",
-                      model.pluginName()));
+    e->history_t(h) = rowTime(model, data, r, i, global);
     e->history_value.row(h) = st.theta.transpose();
     e->history_pdiag.row(h) = st.P.diagonal().transpose();
     ++st.h;
+  }
+
+  /// The time of row i of chunk r (sample `global`): the row's own (a streamed dataset holds
+  /// no samples itself), else the dataset's.
+  static double rowTime(const exid::ObservationModel& model, const exid::Dataset& data,
+                        const exid::Rows& r, int i, long global) {
+    if (r.t.size() == static_cast<std::size_t>(r.y.size()))
+      return r.t[static_cast<std::size_t>(i)];
+    if (!data.streamed()) return data.t(global);
+    throw exid::Error(
+        fmt::format("rls: the model '{}' gives no time per row, needed for the history or the "
+                    "drift of a streamed dataset",
+                    model.pluginName()));
+  }
+
+  /// random_walk_std^2 / noise_std^2 per base parameter (empty without drift).
+  Eigen::VectorXd driftVariance(const exid::ObservationModel& model) const {
+    if (walk_.empty()) return {};
+    const int p = model.numBase();
+    exid::check(walk_.size() == 1 || walk_.size() == static_cast<std::size_t>(p),
+                fmt::format("rls: random_walk_std has {} values; expected 1 or one per base "
+                            "parameter ({})",
+                            walk_.size(), p));
+    Eigen::VectorXd q2(p);
+    for (int j = 0; j < p; ++j) {
+      const double v = walk_.size() == 1 ? walk_[0] : walk_[static_cast<std::size_t>(j)];
+      q2[j] = v * v / (noise_std_ * noise_std_);
+    }
+    return q2;
   }
 
   /// ||y - W theta_K||^2: a second pass, or (lambda = 1) the exact identity; method: which.
@@ -255,7 +316,8 @@ class Rls : public exid::Estimator {
     const int p = model.numBase();
     const long m = st.m;
     const Eigen::MatrixXd Pfull = st.P.selfadjointView<Eigen::Lower>();
-    const double sigma2 = rss / static_cast<double>(m - p);
+    // (the Kalman filter: the state model's noise; least squares: refitted from the residuals)
+    const double sigma2 = kalman() ? noise_std_ * noise_std_ : rss / static_cast<double>(m - p);
     const exid::BaseParameters& b = model.base();
     for (int i = 0; i < p; ++i) {
       const auto u = static_cast<std::size_t>(i);
@@ -285,21 +347,28 @@ class Rls : public exid::Estimator {
     d["rss"] = rss;
     d["rss_method"] = rss_method;
     d["std_definition"] =
-        "covariance = sigma^2 P_K, sigma^2 = ||y - W theta_K||^2 / (m - p); with forgetting "
-        "(lambda < 1) this over-states the covariance of theta_K (conservative)";
+        kalman() ? "covariance = noise_std^2 P_K: the Kalman filter's covariance of the final "
+                   "parameters under its random-walk model (noise_std, random_walk_std given)"
+                 : "covariance = sigma^2 P_K, sigma^2 = ||y - W theta_K||^2 / (m - p); with "
+                   "forgetting (lambda < 1) this over-states the covariance of theta_K "
+                   "(conservative)";
+    d["filter"] = kalman() ? "kalman (random-walk parameters)" : "least squares";
+    if (kalman()) d["random_walk_std"] = Json(walk_);
     d["cond_W_definition"] =
         "sqrt(cond(P_K)); P_K^-1 = W^T W + P0^-1 for lambda = 1, so ~ cond(W) when P0 is large";
     d["min_eig_P"] = lmin;
     d["history_stride"] = Json(static_cast<long long>(stride_));
     d["history_records"] = Json(static_cast<long long>(st.h));
   }
-  bool residualPass() const { return residual_pass_ || lambda_ != 1.0; }
+  bool residualPass() const { return residual_pass_ || lambda_ != 1.0 || kalman(); }
+  bool kalman() const { return !walk_.empty(); }
   double p0_, lambda_;
   long stride_;
   bool joseph_;
   double noise_std_;
   bool residual_pass_;
   int chunk_;
+  std::vector<double> walk_;
 };
 
 }  // namespace

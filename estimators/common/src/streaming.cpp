@@ -4,6 +4,8 @@
 #include <algorithm>
 #include <cmath>
 #include <exception>
+#include <condition_variable>
+#include <mutex>
 #include <numeric>
 #include <thread>
 
@@ -133,33 +135,8 @@ EstimatorSpecs streamingSpecs() {
 
 void parallelChunks(long n, int threads, const std::function<void(long)>& work,
                     const std::function<void(long)>& consume) {
-  const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));
-  std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
-  for (long w0 = 0; w0 < n; w0 += T) {
-    const long w1 = std::min(n, w0 + T);
-    auto one = [&](long c) {
-      try {
-        work(c);
-      } catch (...) {
-        err[static_cast<std::size_t>(c - w0)] = std::current_exception();
-      }
-    };
-    if (T == 1) {
-      one(w0);
-    } else {
-      std::vector<std::thread> pool;
-      for (long c = w0 + 1; c < w1; ++c) pool.emplace_back(one, c);
-      one(w0);
-      for (auto& th : pool) th.join();
-    }
-    for (long c = w0; c < w1; ++c)
-      if (auto& e = err[static_cast<std::size_t>(c - w0)]) {
-        std::exception_ptr first = e;
-        std::fill(err.begin(), err.end(), nullptr);
-        std::rethrow_exception(first);
-      }
-    for (long c = w0; c < w1; ++c) consume(c);
-  }
+  pipelineChunks(
+      n, threads, [](long, Dataset*) {}, [&](long c, const Dataset&) { work(c); }, consume);
 }
 
 RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data, int chunk_samples,
@@ -178,7 +155,9 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
   const int task = per_sample ? std::max(chunk, (span / chunk) * chunk) : K;
   const long n = (K + task - 1) / task;
   const int T = std::max(1, threads);
-  std::vector<RowAccumulator> slot(static_cast<std::size_t>(T));
+  // (the chunks in flight: pipelineChunks's slots c % 2T)
+  std::vector<RowAccumulator> slot(2 * static_cast<std::size_t>(T));
+  auto ring = [&](long c) { return static_cast<std::size_t>(c % (2 * T)); };
   RowAccumulator total(p, method);
   // One task's rows, from src (holding samples [off, off + src->size()) of the dataset).
   auto accumulateTask = [&](long c, const Dataset& src, int off) {
@@ -195,11 +174,11 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
       checkRows(r, p, who, b);
       a.addEquations(r.W, r.y, r.equation);
     }
-    slot[static_cast<std::size_t>(c % T)] = std::move(a);
+    slot[ring(c)] = std::move(a);
   };
   auto merge = [&](long c) {
-    total.merge(slot[static_cast<std::size_t>(c % T)]);
-    slot[static_cast<std::size_t>(c % T)] = RowAccumulator();
+    total.merge(slot[ring(c)]);
+    slot[ring(c)] = RowAccumulator();
     const long e = std::min<long>(K, (c + 1) * task);
     ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
                fmt::format("{}: {} / {} samples", who, e, K));
@@ -209,17 +188,16 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
         n, T, [&](long c) { accumulateTask(c, data, 0); }, merge);
     return total;
   }
-  // A streamed dataset is read in order, one wave of T tasks at a time, the next wave beside
-  // this wave's rows (pipelineChunks); the merge is in task order, so the result is the same for
-  // any thread count. A stream that reads in pieces (DatasetStream::fetch) is parsed by the
+  // A streamed dataset is read in order, task by task, beside the other tasks' rows
+  // (pipelineChunks); the merge is in task order, so the result is the same for any thread
+  // count. A stream that reads in pieces (DatasetStream::fetch) is parsed by the
   // tasks themselves: only the fetch of the raw rows is in order.
   DatasetStream& stream = *data.stream;
   stream.rewind();
   std::unique_ptr<DatasetStream::Piece> first = stream.fetch(std::min(K, task));
   if (first) {
     std::vector<std::unique_ptr<DatasetStream::Piece>> piece(2 * static_cast<std::size_t>(T));
-    std::vector<Dataset> decoded(static_cast<std::size_t>(T));
-    auto ring = [&](long c) { return static_cast<std::size_t>(c % (2 * T)); };
+    std::vector<Dataset> decoded(2 * static_cast<std::size_t>(T));
     pipelineChunks(
         n, T,
         [&](long c, Dataset*) {
@@ -230,13 +208,13 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
                             K));
         },
         [&](long c, const Dataset&) {
-          Dataset& d = decoded[static_cast<std::size_t>(c % T)];
+          Dataset& d = decoded[ring(c)];
           stream.decode(*piece[ring(c)], &d);
           d.meta = data.meta;
           accumulateTask(c, d, static_cast<int>(c * task));
         },
         [&](long c) {
-          stream.settle(*piece[ring(c)], decoded[static_cast<std::size_t>(c % T)]);
+          stream.settle(*piece[ring(c)], decoded[ring(c)]);
           piece[ring(c)].reset();
           merge(c);
         });
@@ -257,47 +235,89 @@ void pipelineChunks(long n, int threads, const std::function<void(long, Dataset*
                     const std::function<void(long, const Dataset&)>& work,
                     const std::function<void(long)>& consume) {
   if (n <= 0) return;
-  const int T = static_cast<int>(std::max<long>(1, std::min<long>(threads, n)));
-  std::vector<Dataset> cur(static_cast<std::size_t>(T)), next(static_cast<std::size_t>(T));
-  auto readWave = [&](long c0, std::vector<Dataset>* buf) {
-    for (long c = c0; c < std::min(n, c0 + T); ++c)
-      read(c, &(*buf)[static_cast<std::size_t>(c - c0)]);
-  };
-  readWave(0, &cur);
-  std::vector<std::exception_ptr> err(static_cast<std::size_t>(T));
-  for (long w0 = 0; w0 < n; w0 += T) {
-    const long w1 = std::min(n, w0 + T);
-    auto one = [&](long c) {
-      try {
-        work(c, cur[static_cast<std::size_t>(c - w0)]);
-      } catch (...) {
-        err[static_cast<std::size_t>(c - w0)] = std::current_exception();
-      }
-    };
-    std::exception_ptr read_err;
-    if (T == 1) {
-      one(w0);
-      if (!err[0] && w1 < n) readWave(w1, &next);
-    } else {
-      std::thread reader([&] {
-        try {
-          if (w1 < n) readWave(w1, &next);
-        } catch (...) {
-          read_err = std::current_exception();
-        }
-      });
-      std::vector<std::thread> pool;
-      for (long c = w0 + 1; c < w1; ++c) pool.emplace_back(one, c);
-      one(w0);
-      for (auto& th : pool) th.join();
-      reader.join();
+  const long T = std::max<long>(1, std::min<long>(threads, n));
+  if (T == 1) {
+    Dataset in;
+    for (long c = 0; c < n; ++c) {
+      read(c, &in);
+      work(c, in);
+      consume(c);
     }
-    for (long c = w0; c < w1; ++c)  // errors in the order of the data
-      if (auto& e = err[static_cast<std::size_t>(c - w0)]) std::rethrow_exception(e);
-    if (read_err) std::rethrow_exception(read_err);
-    for (long c = w0; c < w1; ++c) consume(c);
-    std::swap(cur, next);
+    return;
   }
+  // Every thread (the caller's too) claims the next chunk and reads its input (in chunk order,
+  // under the lock), works on it unlocked, marks it done, and then consumes, one thread at a
+  // time and in chunk order, every done chunk that is next. No thread waits for a wave: one
+  // waits only when `window` chunks are claimed and not yet consumed (the slots c % window).
+  const long window = 2 * T;
+  std::vector<Dataset> input(static_cast<std::size_t>(window));
+  std::vector<char> done(static_cast<std::size_t>(window), 0);
+  std::mutex m;
+  std::condition_variable cv;
+  long next = 0, consumed = 0;
+  bool consuming = false;
+  long fail_at = n;  // the first failing chunk (n: none)
+  std::exception_ptr failure;
+  auto fail = [&](long c, std::exception_ptr e) {  // (under m)
+    if (c < fail_at) {
+      fail_at = c;
+      failure = std::move(e);
+    }
+    cv.notify_all();
+  };
+  auto slot = [&](long c) { return static_cast<std::size_t>(c % window); };
+  auto worker = [&] {
+    std::unique_lock<std::mutex> lk(m);
+    for (;;) {
+      cv.wait(lk, [&] { return next >= n || fail_at < n || next - consumed < window; });
+      if (next >= n || fail_at < n) return;
+      const long c = next++;
+      try {
+        read(c, &input[slot(c)]);
+      } catch (...) {
+        fail(c, std::current_exception());
+        return;
+      }
+      lk.unlock();
+      std::exception_ptr err;
+      try {
+        work(c, input[slot(c)]);
+      } catch (...) {
+        err = std::current_exception();
+      }
+      lk.lock();
+      if (err) {
+        fail(c, err);
+        continue;
+      }
+      done[slot(c)] = 1;
+      while (!consuming && consumed < fail_at && done[slot(consumed)]) {
+        consuming = true;
+        const long k = consumed;
+        lk.unlock();
+        try {
+          consume(k);
+        } catch (...) {
+          err = std::current_exception();
+        }
+        lk.lock();
+        consuming = false;
+        if (err) {
+          fail(k, err);
+          break;
+        }
+        done[slot(k)] = 0;
+        ++consumed;
+        cv.notify_all();
+      }
+    }
+  };
+  std::vector<std::thread> pool;
+  for (long i = 1; i < T; ++i) pool.emplace_back(worker);
+  worker();
+  for (auto& th : pool) th.join();
+  if (failure) std::rethrow_exception(failure);
+  check(consumed == n, fmt::format("pipelineChunks: {} of {} chunks consumed", consumed, n));
 }
 
 void addEquationRows(const Rows& rows, const std::vector<int>& index, int eq,

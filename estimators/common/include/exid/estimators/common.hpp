@@ -179,18 +179,20 @@ Eigen::VectorXd perGain(const std::vector<double>& values, std::size_t gains, co
 /// The capabilities of an estimator that reads its rows in chunks (forEachChunk,
 /// accumulateRows) and takes a prior.
 EstimatorSpecs streamingSpecs();
-/// Runs work(c) for the chunks c in [0, n) on `threads` threads, in waves of `threads`
-/// consecutive chunks; after each wave consume(c) runs on the calling thread in chunk order. So
-/// a reduction done in consume is the same for any thread count, and at most `threads` chunks'
-/// results exist at once. An exception from a chunk is rethrown (the first by chunk order).
+/// Runs work(c) for the chunks c in [0, n) on `threads` threads (the caller's among them), and
+/// consume(c) in chunk order, one at a time, on whichever thread finished the chunk that was
+/// waited for. So a reduction done in consume is the same for any thread count. No thread waits
+/// for a wave: a thread takes the next chunk as soon as it is free, while fewer than
+/// 2 * threads chunks are taken and not yet consumed (so a chunk's result may live in slot
+/// c % (2 * threads)). A failure (work or consume) stops the taking of chunks; the chunks
+/// before the first failing one are consumed, none after it, and that failure is rethrown.
 void parallelChunks(long n, int threads, const std::function<void(long)>& work,
                     const std::function<void(long)>& consume);
 /// parallelChunks for chunks that each need an input read in order (the spans of a streamed
-/// dataset): read(c, &input) runs for the chunks of a wave in chunk order, on one thread at a
-/// time, then work(c, input) on the threads and consume(c) in chunk order. With several threads
-/// the next wave's inputs are read (on one more thread) while this wave's work runs, so that
-/// reading a file overlaps the computation; at most two waves' inputs exist at once. Exceptions:
-/// the first by chunk order, the work's before the read-ahead's.
+/// dataset): read(c, &input) runs in chunk order, one at a time (beside work and consume of
+/// other chunks), when chunk c is taken; then work(c, input) and consume(c) as above. The
+/// inputs of at most 2 * threads chunks exist at once. A failing read counts as its chunk's
+/// failure.
 void pipelineChunks(long n, int threads, const std::function<void(long, Dataset*)>& read,
                     const std::function<void(long, const Dataset&)>& work,
                     const std::function<void(long)>& consume);
