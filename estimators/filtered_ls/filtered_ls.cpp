@@ -122,6 +122,7 @@ class FilteredLs : public exid::Estimator {
     estimators::RowAccumulator acc;  // every kept row
     bool streamed = false, per_sample = true;
     long chunk_samples = 0, margin_samples = 0, signal_margin = 0;
+    long chunks = 0;
     int threads = 1;
     double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
     bool filter_q = false, diff_qd = false, diff_qdd = false;
@@ -206,6 +207,10 @@ class FilteredLs : public exid::Estimator {
         (P->filter_q ? estimators::settlingSamples(*sos, 1e-16) : 0) + (diff ? 4 : 0);
     // (at least 8 margins: the context computed twice costs at most a quarter more)
     long C = std::max<long>(chunk_samples_, 8 * P->margin_samples);
+    // The same number of chunks, of equal sizes: the same work (each chunk's context is the
+    // same), shared evenly between threads (a short last chunk would leave one thread idle).
+    // It does not depend on the thread count, so neither do the results.
+    if (Kt > 0) C = (Kt + (Kt + C - 1) / C - 1) / ((Kt + C - 1) / C);
     C = ((C + R - 1) / R) * R;
     if (!P->per_sample) C = Kt;  // such a model's rows need the whole dataset at once
     P->chunk_samples = C;
@@ -372,6 +377,7 @@ class FilteredLs : public exid::Estimator {
     const long K = data.size(), trim = P.trim, Kt = K - 2 * trim, C = P.chunk_samples;
     const long margin = P.margin_samples, sm = P.signal_margin;
     const long nchunks = (Kt + C - 1) / C;
+    P.chunks = nchunks;
     const int p = model.numBase();
     const int T = static_cast<int>(std::min<long>(estimators::resolveThreads(threads_), nchunks));
     P.threads = T;
@@ -534,6 +540,7 @@ class FilteredLs : public exid::Estimator {
     d["rows_before_decimation"] = Json(static_cast<long long>(rows_before));
     d["streamed"] = P.streamed;
     d["chunk_samples"] = Json(static_cast<long long>(P.chunk_samples));
+    d["chunks"] = Json(static_cast<long long>(P.chunks));
     d["chunk_margin_samples"] = Json(static_cast<long long>(P.margin_samples));
     d["signal_margin_samples"] = Json(static_cast<long long>(P.signal_margin));
     d["threads"] = P.threads;

@@ -744,8 +744,8 @@ double conditionOfGram(const MatrixXd& A) {
 
 /// W^T W of the model's base regressor over the recording, built block by block.
 MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const Signals& sig,
-                       const RunContext& ctx, long long* rows) {
-  const Index K = data.size();
+                       const RunContext& ctx, Index stride, long long* rows) {
+  const Index K = (data.size() + stride - 1) / stride;  // samples used: 0, stride, ...
   const int p = model.numBase();
   MatrixXd G = MatrixXd::Zero(p, p);
   *rows = 0;
@@ -753,10 +753,24 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
     if (ctx.shouldStop()) throw std::runtime_error("stopped");
     const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
     Samples s;
-    s.t = data.t.segment(k0, m);
-    s.q = data.q.middleRows(k0, m);
-    s.qd = sig.qd.middleRows(k0, m);
-    s.qdd = sig.qdd.middleRows(k0, m);
+    if (stride == 1) {
+      s.t = data.t.segment(k0, m);
+      s.q = data.q.middleRows(k0, m);
+      s.qd = sig.qd.middleRows(k0, m);
+      s.qdd = sig.qdd.middleRows(k0, m);
+    } else {
+      const Eigen::Map<const VectorXd, 0, Eigen::InnerStride<>> t(
+          data.t.data() + k0 * stride, m, Eigen::InnerStride<>(stride));
+      s.t = t;
+      auto every = [&](const MatrixXd& A) {
+        MatrixXd B(m, A.cols());
+        for (Index i = 0; i < m; ++i) B.row(i) = A.row((k0 + i) * stride);
+        return B;
+      };
+      s.q = every(data.q);
+      s.qd = every(sig.qd);
+      s.qdd = every(sig.qdd);
+    }
     const MatrixXd Wb = model.design(s);
     G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
     *rows += Wb.rows();
@@ -767,13 +781,21 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
 
 /// R = J["regressor"]: the condition number of the model's base regressor on the recording.
 void regressorCheck(const ObservationModel& model, const Dataset& data, const Signals& sig,
-                    const RunContext& ctx, Json& R, std::vector<std::string>* W) {
+                    const RunContext& ctx, long max_samples, Json& R,
+                    std::vector<std::string>* W) {
   R["model"] = model.pluginName();
   R["base_columns"] = model.numBase();
   try {
     const int p = model.numBase();
+    const Index K = data.size();
+    const Index stride = max_samples > 0 ? std::max<Index>(1, (K + max_samples - 1) / max_samples)
+                                         : 1;
+    if (stride > 1) {
+      R["stride"] = static_cast<long long>(stride);
+      R["samples_used"] = static_cast<long long>((K + stride - 1) / stride);
+    }
     long long rows = 0;
-    const MatrixXd G = regressorGram(model, data, sig, ctx, &rows);
+    const MatrixXd G = regressorGram(model, data, sig, ctx, stride, &rows);
     const double c_raw = conditionOfGram(G);
     VectorXd sc(p);
     bool zero_col = false;
@@ -787,9 +809,10 @@ void regressorCheck(const ObservationModel& model, const Dataset& data, const Si
     R["cond"] = numberOrNull(c_raw);
     R["cond_scaled"] = numberOrNull(c_scaled);
     R["rank_deficient"] = !std::isfinite(c_scaled);
-    R["method"] =
+    R["method"] = fmt::format(
         "sqrt of the extreme eigenvalues of W^T W (base columns; scaled: each column to unit "
-        "norm); reliable up to about 1e7";
+        "norm){}; reliable up to about 1e7",
+        stride > 1 ? fmt::format(", W from one sample in {}", stride) : std::string());
     if (!std::isfinite(c_scaled))
       W->push_back(fmt::format(
           "the recording does not excite every base parameter of model '{}' (the regressor's "
@@ -810,7 +833,7 @@ void regressorCheck(const ObservationModel& model, const Dataset& data, const Si
 }  // namespace
 
 Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
-                    const RunContext& ctx) {
+                    const RunContext& ctx, long regressor_max_samples) {
   Json J = Json::object();
   std::vector<std::string> W;
   const int n = robot.dof();
@@ -849,7 +872,8 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   std::future<void> regressor_done;
   if (model)
     regressor_done = std::async(std::launch::async, [&] {
-      regressorCheck(*model, data, sig, ctx, regressor, &regressor_warnings);
+      regressorCheck(*model, data, sig, ctx, regressor_max_samples, regressor,
+                     &regressor_warnings);
     });
   Index moving_samples = 0;
   const std::vector<char> moving = motionCheck(data, sig.qd, n, dt, J, &moving_samples);

@@ -502,6 +502,10 @@ class Watchdog {
 // cost a fraction of the identification, never several times it. `exid inspect` looks at every
 // sample.
 constexpr long kRunInspectSamples = 100000;
+// Of those, the regressor's condition number (the costliest check: the model's rows again, which
+// the estimator builds itself) uses every s-th, at most this many. The estimator reports its own
+// condition number over every row (identification.cond_W).
+constexpr long kRunRegressorSamples = 20000;
 long streamInspectStride(long K) { return (K + kRunInspectSamples - 1) / kRunInspectSamples; }
 
 // exid inspect's checks on a dataset of the study (inspect.hpp): the whole result under
@@ -518,7 +522,7 @@ Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const 
       check(d.stream->passed(), "inspection: the stream has not been read");
       Dataset sub = d.stream->collected();
       sub.meta = d.meta;
-      I = inspectDataset(robot, model, sub, ctx);
+      I = inspectDataset(robot, model, sub, ctx, kRunRegressorSamples);
       if (stride > 1)
         I["subsampled"] = fmt::format(
             "every {}th of the {} samples ({} inspected; `exid inspect` looks at every sample)",
@@ -542,12 +546,12 @@ Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const 
       sub.wrench = take(d.wrench);
       sub.source = d.source;
       sub.meta = d.meta;
-      I = inspectDataset(robot, model, sub, ctx);
+      I = inspectDataset(robot, model, sub, ctx, kRunRegressorSamples);
       I["subsampled"] = fmt::format(
           "every {}th of the {} samples ({} inspected; `exid inspect` looks at every sample)",
           stride, K, M);
     } else {
-      I = inspectDataset(robot, model, d, ctx);
+      I = inspectDataset(robot, model, d, ctx, kRunRegressorSamples);
     }
     return I;
   } catch (const std::exception& e) {

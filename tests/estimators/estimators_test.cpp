@@ -509,7 +509,7 @@ TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGives
   const exid::Estimate whole =
       make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 100000000, threads: 1}")
           ->estimate(*m, d, nullptr, ctx);
-  EXPECT_EQ(whole.details.find("chunk_samples")->asInt(), 100000000);
+  EXPECT_EQ(whole.details.find("chunks")->asInt(), 1);
   // small chunks (the settling margin sets the floor: 8 margins), 1 and 3 threads: each chunk's
   // positions filtered and differentiated from its own samples and margins, its rows decimated
   // with the decimation filter's margins
@@ -518,7 +518,11 @@ TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGives
   const exid::Estimate c3 = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 3}")
                                 ->estimate(*m, d, nullptr, ctx);
   const long C = c1.details.find("chunk_samples")->asInt();
-  EXPECT_LT(C, 10000);  // several chunks
+  EXPECT_LT(C, 10000);  // several chunks, of equal sizes (the last one at most R shorter)
+  const long chunks = c1.details.find("chunks")->asInt();
+  EXPECT_GT(chunks, 3);
+  const long Kt = 30000 - 2 * c1.details.find("trimmed_samples_each_end")->asInt();
+  EXPECT_GT(Kt - (chunks - 1) * C, C - c1.details.find("decimation")->asInt() * chunks);
   EXPECT_EQ(c1.details.find("threads")->asInt(), 1);
   EXPECT_EQ(c3.details.find("threads")->asInt(), 3);
   EXPECT_EQ(c1.rows, whole.rows);

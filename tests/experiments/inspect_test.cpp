@@ -133,6 +133,29 @@ TEST(Inspect, CleanSimulatedDataGivesNoWarning) {
   EXPECT_EQ(J.find("recording")->find("frozen_rows")->find("rows")->asInt(), 0);
 }
 
+// The regressor's condition number from one sample in s (the runner's cap): stated, with the
+// samples it used, and close to the one from every sample (a smooth motion at 100 Hz).
+TEST(Inspect, TheRegressorCheckFromEverySthSampleSaysSoAndAgrees) {
+  auto r = puma();
+  const exid::Dataset d = mtest::simulate(r, "{duration_s: 10, noise_tau_Nm: 0.05}");
+  auto m = mtest::model("differential", "{}", r);
+  const exid::Json full = *exid::inspectDataset(*r, m.get(), d, mtest::context()).find("regressor");
+  const exid::Json some =
+      *exid::inspectDataset(*r, m.get(), d, mtest::context(), 300).find("regressor");
+  EXPECT_EQ(full.find("stride"), nullptr);
+  EXPECT_EQ(full.find("rows")->asInt(), 6 * d.size());
+  const long stride = (d.size() + 299) / 300;
+  EXPECT_EQ(some.find("stride")->asInt(), stride);
+  EXPECT_EQ(some.find("samples_used")->asInt(), (d.size() + stride - 1) / stride);
+  EXPECT_LE(some.find("samples_used")->asInt(), 300);
+  EXPECT_EQ(some.find("rows")->asInt(), 6 * some.find("samples_used")->asInt());
+  EXPECT_NE(some.find("method")->asString().find(fmt::format("one sample in {}", stride)),
+            std::string::npos);
+  const double a = full.find("cond_scaled")->asDouble(), b = some.find("cond_scaled")->asDouble();
+  EXPECT_NE(a, b);  // other rows
+  EXPECT_LT(std::abs(b - a), 0.2 * a);
+}
+
 TEST(Inspect, FlippedTorqueSignsAreFoundForExactlyThoseJoints) {
   auto r = puma();
   exid::Dataset d = mtest::simulate(r, "{duration_s: 10, noise_tau_Nm: 0.05}");

@@ -77,8 +77,11 @@ inline constexpr int kRegressorBlockSamples = 2000;
 /// The checks on one dataset (measured coordinates, torques in N m or N). `model` may be null
 /// (no condition number). Missing qd/qdd are derived from q (see kDifferentiateCutoffHz).
 /// Never throws on data it cannot judge: such a check is null with a `note`.
+/// regressor_max_samples > 0: the regressor's condition number from every s-th sample, s the
+/// smallest stride that keeps at most that many (`regressor.stride`, `regressor.samples_used`);
+/// 0: every sample.
 Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
-                    const RunContext& ctx);
+                    const RunContext& ctx, long regressor_max_samples = 0);
 
 /// A readable text summary of inspectDataset()'s result (several lines).
 std::string inspectionText(const Json& inspection);
