@@ -201,9 +201,7 @@ void ObservationModel::fullDesignVjpAt(const Samples& s, const Eigen::VectorXd& 
 
 Eigen::MatrixXd ObservationModel::designAt(const Samples& s, const Eigen::VectorXd& eta,
                                            Eigen::MatrixXd* dW) const {
-  check(eta.size() == static_cast<Eigen::Index>(nonlinearParameters().size()),
-        fmt::format("model '{}': {} nonlinear parameter values given, expected {}", pluginName(),
-                    eta.size(), nonlinearParameters().size()));
+  // (fullDesignAt checks eta's size against its own nonlinear parameters: a hot path)
   return base_.columns(fullDesignAt(s, eta, dW));
 }
 

@@ -28,6 +28,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -317,7 +318,7 @@ class DifferentialModel : public exid::ObservationModel {
       loaded_from = from->asDouble();
     }
     const int Pg = static_cast<int>(r.W.cols()) - gainCount(), Pl = Pg - loadCount();
-    auto data = gains_ ? exid::makeDynamicsData(robot()) : nullptr;
+    auto data = gains_ ? exid::makeDynamicsData(robot()) : nullptr;  // (once per call)
     Eigen::VectorXd tp;
     for (int k = 0; k < K; ++k) {
       const bool loaded = gains_ && d.t[k] >= loaded_from;
@@ -391,7 +392,7 @@ class DifferentialModel : public exid::ObservationModel {
     Eigen::VectorXd q(n), qd(n), qdd(n);
     bool all = m == n;
     for (int i = 0; all && i < m; ++i) all = sel_[static_cast<std::size_t>(i)] == i;
-    auto data = exid::makeDynamicsData(R);
+    const Workspace data(*this);
     for (int k = 0; k < K; ++k) {
       q = s.q.row(k).transpose();
       qd = s.qd.row(k).transpose();
@@ -601,7 +602,7 @@ class DifferentialModel : public exid::ObservationModel {
     exid::models::zeroGrad(s, grad);
     Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, P0);
     Eigen::VectorXd gq, gqd, gqdd;
-    auto data = exid::makeDynamicsData(R);
+    const Workspace data(*this);
     for (int k = 0; k < K; ++k) {
       G.setZero();
       for (int i = 0; i < m; ++i)
@@ -704,6 +705,44 @@ class DifferentialModel : public exid::ObservationModel {
   }
 
  private:
+  // The dynamics algorithms' workspaces, reused from call to call (a simulation asks for the
+  // design of one state thousands of times; a workspace costs more to make than to use). A call
+  // on any thread takes one for its duration.
+  class Workspace {
+   public:
+    Workspace(const DifferentialModel& m) : m_(m), d_(m.takeData()) {}
+    ~Workspace() { m_.giveData(std::move(d_)); }
+    Workspace(const Workspace&) = delete;
+    Workspace& operator=(const Workspace&) = delete;
+    exid::DynamicsData& operator*() const { return *d_; }
+
+   private:
+    const DifferentialModel& m_;
+    exid::DynamicsDataPtr d_;
+  };
+  exid::DynamicsDataPtr takeData() const {
+    {
+      std::lock_guard<std::mutex> lock(pool_mutex_);
+      if (pool_robot_ == &robot() && !pool_.empty()) {
+        exid::DynamicsDataPtr d = std::move(pool_.back());
+        pool_.pop_back();
+        return d;
+      }
+    }
+    return exid::makeDynamicsData(robot());
+  }
+  void giveData(exid::DynamicsDataPtr d) const {
+    std::lock_guard<std::mutex> lock(pool_mutex_);
+    if (pool_robot_ != &robot()) {  // (bound to another robot since: those are of no use)
+      pool_.clear();
+      pool_robot_ = &robot();
+    }
+    if (pool_.size() < 64) pool_.push_back(std::move(d));
+  }
+  mutable std::mutex pool_mutex_;
+  mutable std::vector<exid::DynamicsDataPtr> pool_;
+  mutable const exid::RobotModel* pool_robot_ = nullptr;
+
   double frictionTorque(int j, double qdm) const {
     const exid::Drive D = drive(j);
     const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
@@ -732,10 +771,11 @@ class DifferentialModel : public exid::ObservationModel {
   }
   int extraPerJoint() const { return (coulomb_extra_ ? (asym_ ? 2 : 1) : 0) + (stribeck_ ? 1 : 0); }
   double perJoint(const std::vector<double>& v, int j) const {
-    exid::check(v.size() == 1 || static_cast<int>(v.size()) == robot().dof(),
-                fmt::format("model 'differential': {} values given for robot '{}' of {} drives "
-                            "(expected one, or one per drive)",
-                            v.size(), robot().name, robot().dof()));
+    if (v.size() != 1 && static_cast<int>(v.size()) != robot().dof())  // (a hot path)
+      throw exid::Error(
+          fmt::format("model 'differential': {} values given for robot '{}' of {} drives "
+                      "(expected one, or one per drive)",
+                      v.size(), robot().name, robot().dof()));
     return v.size() == 1 ? v[0] : v[static_cast<std::size_t>(j)];
   }
   Eigen::VectorXd studyEta() const {

@@ -21,9 +21,9 @@
 namespace exid {
 
 Eigen::MatrixXd BaseParameters::columns(const Eigen::MatrixXd& W_full) const {
-  check(W_full.cols() == numFull(), "BaseParameters::columns: the regressor has " +
-                                        std::to_string(W_full.cols()) + " columns (expected " +
-                                        std::to_string(numFull()) + ")");
+  if (W_full.cols() != numFull())  // (a hot path: the message only when it fails)
+    throw Error("BaseParameters::columns: the regressor has " + std::to_string(W_full.cols()) +
+                " columns (expected " + std::to_string(numFull()) + ")");
   Eigen::MatrixXd W(W_full.rows(), rank());
   for (int k = 0; k < rank(); ++k) W.col(k) = W_full.col(independent[static_cast<size_t>(k)]);
   return W;

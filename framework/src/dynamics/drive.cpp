@@ -149,7 +149,9 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
       Eigen::MatrixXd& Yj = detail::scratchMatrix(data, 0);
       Yj.resize(n, 10 * n);
       torqueRegressor(model, data, q, qd, qdd, Yj);
-      Y.leftCols(10 * n).noalias() = model.transmission.transpose() * Yj;
+      // (a product of depth n: coefficient by coefficient; the blocked product packs its
+      // operands first, which costs more than it saves at this size)
+      Y.leftCols(10 * n).noalias() = model.transmission.transpose().lazyProduct(Yj);
     } else {
       torqueRegressor(model, data, q, qd, qdd, Y.leftCols(10 * n));
     }
@@ -182,7 +184,7 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
   const bool T = model.hasTransmission();
   Eigen::MatrixXd& Gj = detail::scratchMatrix(data, 1);
   if (T)
-    Gj.noalias() = model.transmission * G.leftCols(10 * n);  // <G, T^T Y> = <T G, Y>
+    Gj.noalias() = model.transmission.lazyProduct(G.leftCols(10 * n));  // <G, T^T Y> = <T G, Y>
   else
     Gj = G.leftCols(10 * n);
   torqueRegressorVjp(model, data, q, qd, qdd, Gj, d_qm, d_qdm, d_qddm);
