@@ -9,6 +9,7 @@
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
@@ -94,7 +95,9 @@ class PendulumModel : public exid::ObservationModel {
     exid::check(d.hasVelocity() && d.hasAcceleration() && d.hasTorque(),
                 "test model: needs q, qd, qdd, tau");
     const int K = d.size();
-    max_samples_per_call = std::max(max_samples_per_call, K);
+    for (int seen = max_samples_per_call.load(); K > seen &&
+                                                 !max_samples_per_call.compare_exchange_weak(seen, K);) {
+    }  // (rows may be asked for on several threads at once)
     exid::Rows r;
     r.W.resize(static_cast<Eigen::Index>(K) * n_, numFullCols());
     r.y.resize(static_cast<Eigen::Index>(K) * n_);
@@ -126,7 +129,7 @@ class PendulumModel : public exid::ObservationModel {
     throw exid::Error("test model: no VJP");
   }
   /// The largest number of samples one fullRows() call has seen (streaming check).
-  mutable int max_samples_per_call = 0;
+  mutable std::atomic<int> max_samples_per_call{0};
 
   exid::ModelSpecs specs() const override {
     exid::ModelSpecs sp;

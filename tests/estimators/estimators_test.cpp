@@ -149,7 +149,7 @@ TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
   for (const std::string name : {"batch_ls", "rls", "wls"}) {
     m->max_samples_per_call = 0;
     exid::Estimate e = make(name, "{chunk_samples: 500}")->estimate(*m, d, nullptr, ctx);
-    EXPECT_EQ(m->max_samples_per_call, 500) << name;  // rows never materialised for all samples
+    EXPECT_EQ(m->max_samples_per_call.load(), 500) << name;  // rows never materialised for all samples
     EXPECT_EQ(e.rows, 40000) << name;
   }
   // A model that does not declare per-sample rows gets the whole dataset at once.
@@ -160,7 +160,7 @@ TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
   auto w = std::make_shared<Windowed>(2);
   w->bind(est_test::makeRobot(2), ctx);
   make("batch_ls", "{chunk_samples: 500}")->estimate(*w, d, nullptr, ctx);
-  EXPECT_EQ(w->max_samples_per_call, 20000);
+  EXPECT_EQ(w->max_samples_per_call.load(), 20000);
 }
 
 TEST(Estimators, BatchLsRefusesRankDeficientNamingDirections) {
