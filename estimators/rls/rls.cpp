@@ -202,18 +202,17 @@ class Rls : public exid::Estimator {
           const auto R = static_cast<int>(order.size());
           for (int idx = 0; idx < R; ++idx) {
             const int i = order[static_cast<std::size_t>(idx)];
-            if (q2.size() > 0 &&
-                (idx == 0 || sample_of_row[static_cast<std::size_t>(i)] !=
-                                 sample_of_row[static_cast<std::size_t>(
-                                     order[static_cast<std::size_t>(idx - 1)])])) {
+            if (q2.size() > 0 && (idx == 0 || sample_of_row[static_cast<std::size_t>(i)] !=
+                                                  sample_of_row[static_cast<std::size_t>(
+                                                      order[static_cast<std::size_t>(idx - 1)])])) {
               // the Kalman prediction to this sample's time
-              const double t = rowTime(model, data, r, i,
-                                       begin + sample_of_row[static_cast<std::size_t>(i)]);
+              const double t =
+                  rowTime(model, data, r, i, begin + sample_of_row[static_cast<std::size_t>(i)]);
               if (!std::isnan(t_prev)) {
-                exid::check(t >= t_prev,
-                            fmt::format("rls: random_walk_std: the rows' times go back from {} s "
-                                        "to {} s",
-                                        t_prev, t));
+                if (t < t_prev)  // (per sample: the message only on failure)
+                  throw exid::Error(
+                      fmt::format("rls: random_walk_std: the rows' times go back from {} s to {} s",
+                                  t_prev, t));
                 P.diagonal() += q2 * (t - t_prev);
               }
               t_prev = t;
@@ -262,8 +261,7 @@ class Rls : public exid::Estimator {
   /// no samples itself), else the dataset's.
   static double rowTime(const exid::ObservationModel& model, const exid::Dataset& data,
                         const exid::Rows& r, int i, long global) {
-    if (r.t.size() == static_cast<std::size_t>(r.y.size()))
-      return r.t[static_cast<std::size_t>(i)];
+    if (r.t.size() == static_cast<std::size_t>(r.y.size())) return r.t[static_cast<std::size_t>(i)];
     if (!data.streamed()) return data.t(global);
     throw exid::Error(
         fmt::format("rls: the model '{}' gives no time per row, needed for the history or the "

@@ -759,8 +759,8 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
       s.qd = sig.qd.middleRows(k0, m);
       s.qdd = sig.qdd.middleRows(k0, m);
     } else {
-      const Eigen::Map<const VectorXd, 0, Eigen::InnerStride<>> t(
-          data.t.data() + k0 * stride, m, Eigen::InnerStride<>(stride));
+      const Eigen::Map<const VectorXd, 0, Eigen::InnerStride<>> t(data.t.data() + k0 * stride, m,
+                                                                  Eigen::InnerStride<>(stride));
       s.t = t;
       auto every = [&](const MatrixXd& A) {
         MatrixXd B(m, A.cols());
@@ -781,15 +781,14 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
 
 /// R = J["regressor"]: the condition number of the model's base regressor on the recording.
 void regressorCheck(const ObservationModel& model, const Dataset& data, const Signals& sig,
-                    const RunContext& ctx, long max_samples, Json& R,
-                    std::vector<std::string>* W) {
+                    const RunContext& ctx, long max_samples, Json& R, std::vector<std::string>* W) {
   R["model"] = model.pluginName();
   R["base_columns"] = model.numBase();
   try {
     const int p = model.numBase();
     const Index K = data.size();
-    const Index stride = max_samples > 0 ? std::max<Index>(1, (K + max_samples - 1) / max_samples)
-                                         : 1;
+    const Index stride =
+        max_samples > 0 ? std::max<Index>(1, (K + max_samples - 1) / max_samples) : 1;
     if (stride > 1) {
       R["stride"] = static_cast<long long>(stride);
       R["samples_used"] = static_cast<long long>((K + stride - 1) / stride);
@@ -872,8 +871,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   std::future<void> regressor_done;
   if (model)
     regressor_done = std::async(std::launch::async, [&] {
-      regressorCheck(*model, data, sig, ctx, regressor_max_samples, regressor,
-                     &regressor_warnings);
+      regressorCheck(*model, data, sig, ctx, regressor_max_samples, regressor, &regressor_warnings);
     });
   Index moving_samples = 0;
   const std::vector<char> moving = motionCheck(data, sig.qd, n, dt, J, &moving_samples);

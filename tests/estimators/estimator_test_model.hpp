@@ -95,8 +95,8 @@ class PendulumModel : public exid::ObservationModel {
     exid::check(d.hasVelocity() && d.hasAcceleration() && d.hasTorque(),
                 "test model: needs q, qd, qdd, tau");
     const int K = d.size();
-    for (int seen = max_samples_per_call.load(); K > seen &&
-                                                 !max_samples_per_call.compare_exchange_weak(seen, K);) {
+    for (int seen = max_samples_per_call.load();
+         K > seen && !max_samples_per_call.compare_exchange_weak(seen, K);) {
     }  // (rows may be asked for on several threads at once)
     exid::Rows r;
     r.W.resize(static_cast<Eigen::Index>(K) * n_, numFullCols());

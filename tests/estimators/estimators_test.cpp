@@ -149,7 +149,8 @@ TEST(Estimators, StreamedInChunksWhatEverTheDatasetSize) {
   for (const std::string name : {"batch_ls", "rls", "wls"}) {
     m->max_samples_per_call = 0;
     exid::Estimate e = make(name, "{chunk_samples: 500}")->estimate(*m, d, nullptr, ctx);
-    EXPECT_EQ(m->max_samples_per_call.load(), 500) << name;  // rows never materialised for all samples
+    EXPECT_EQ(m->max_samples_per_call.load(), 500)
+        << name;  // rows never materialised for all samples
     EXPECT_EQ(e.rows, 40000) << name;
   }
   // A model that does not declare per-sample rows gets the whole dataset at once.
@@ -282,8 +283,7 @@ TEST(Estimators, RlsKalmanTracksARandomWalkWithinItsCovariance) {
     for (int k = 0; k < d.size(); ++k) {
       if (k > 0)
         for (int i = 0; i < p; ++i) theta[i] += walk * std::sqrt(d.t[k] - d.t[k - 1]) * N01(rng);
-      for (int j = 0; j < n; ++j)
-        d.tau(k, j) = rows.W.row(k * n + j).dot(theta) + noise * N01(rng);
+      for (int j = 0; j < n; ++j) d.tau(k, j) = rows.W.row(k * n + j).dot(theta) + noise * N01(rng);
     }
     exid::Estimate kf =
         make("rls", fmt::format("{{noise_std: {}, random_walk_std: [{}], history_stride: 500}}",
@@ -323,9 +323,9 @@ TEST(Estimators, RlsKalmanTracksARandomWalkWithinItsCovariance) {
   EXPECT_THROW(make("rls", "{random_walk_std: [0.1]}"), exid::Error);  // no noise_std
   EXPECT_THROW(make("rls", "{noise_std: 0.1, random_walk_std: [0.1], forgetting_factor: 0.99}"),
                exid::Error);
-  EXPECT_THROW(make("rls", "{noise_std: 0.1, random_walk_std: [0.1, 0.2]}")
-                   ->estimate(*m, d, nullptr, ctx),
-               exid::Error);  // neither 1 nor p values
+  EXPECT_THROW(
+      make("rls", "{noise_std: 0.1, random_walk_std: [0.1, 0.2]}")->estimate(*m, d, nullptr, ctx),
+      exid::Error);  // neither 1 nor p values
 }
 
 TEST(Estimators, RlsPriorSeedsThetaAndP) {

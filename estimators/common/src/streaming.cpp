@@ -3,8 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
-#include <exception>
 #include <condition_variable>
+#include <exception>
 #include <mutex>
 #include <numeric>
 #include <thread>
