@@ -28,6 +28,7 @@
 #include <Eigen/Core>
 #include <algorithm>
 #include <cmath>
+#include <memory>
 #include <mutex>
 #include <string>
 #include <vector>
@@ -710,20 +711,21 @@ class DifferentialModel : public exid::ObservationModel {
   // on any thread takes one for its duration.
   class Workspace {
    public:
-    Workspace(const DifferentialModel& m) : m_(m), d_(m.takeData()) {}
-    ~Workspace() { m_.giveData(std::move(d_)); }
+    explicit Workspace(const DifferentialModel& m) : m_(m), r_(&m.robot()), d_(m.takeData()) {}
+    ~Workspace() { m_.giveData(std::move(d_), r_); }
     Workspace(const Workspace&) = delete;
     Workspace& operator=(const Workspace&) = delete;
     exid::DynamicsData& operator*() const { return *d_; }
 
    private:
     const DifferentialModel& m_;
+    const exid::RobotModel* r_;  // the robot it was made for
     exid::DynamicsDataPtr d_;
   };
   exid::DynamicsDataPtr takeData() const {
     {
       std::lock_guard<std::mutex> lock(pool_mutex_);
-      if (pool_robot_ == &robot() && !pool_.empty()) {
+      if (pool_robot_.get() == &robot() && !pool_.empty()) {
         exid::DynamicsDataPtr d = std::move(pool_.back());
         pool_.pop_back();
         return d;
@@ -731,17 +733,18 @@ class DifferentialModel : public exid::ObservationModel {
     }
     return exid::makeDynamicsData(robot());
   }
-  void giveData(exid::DynamicsDataPtr d) const {
+  void giveData(exid::DynamicsDataPtr d, const exid::RobotModel* made_for) const {
+    if (made_for != &robot()) return;  // (bound to another robot during the call: dropped)
     std::lock_guard<std::mutex> lock(pool_mutex_);
-    if (pool_robot_ != &robot()) {  // (bound to another robot since: those are of no use)
+    if (pool_robot_.get() != &robot()) {  // (bound to another robot since: of no use)
       pool_.clear();
-      pool_robot_ = &robot();
+      pool_robot_ = robotPtr();  // (held: no other robot can take its address while pooled)
     }
     if (pool_.size() < 64) pool_.push_back(std::move(d));
   }
   mutable std::mutex pool_mutex_;
   mutable std::vector<exid::DynamicsDataPtr> pool_;
-  mutable const exid::RobotModel* pool_robot_ = nullptr;
+  mutable std::shared_ptr<const exid::RobotModel> pool_robot_;
 
   double frictionTorque(int j, double qdm) const {
     const exid::Drive D = drive(j);

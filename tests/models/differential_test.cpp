@@ -50,6 +50,22 @@ TEST(Differential, PumaJointOneOnly) {
   checkRobot("puma560", "{joints: [1], friction: subtract}");
 }
 
+// The model reuses its dynamics workspaces from call to call; bound to another robot (other
+// sizes), it gives what a model bound to that robot from the start gives, and again after
+// going back (ASan in CI: no workspace of the first robot is used for the second).
+TEST(Differential, ReboundToAnotherRobotItsDesignIsThatRobots) {
+  const auto puma = mtest::robot("puma560"), panda = mtest::robot("panda");
+  auto m = mtest::model("differential", "{}", puma);
+  const exid::Samples sp = mtest::randomSamples(*puma, 4, 0.0, 3);
+  const exid::Samples sq = mtest::randomSamples(*panda, 4, 0.0, 3);
+  const Eigen::MatrixXd w_puma = m->design(sp);
+  m->bind(panda, mtest::context(11));
+  const Eigen::MatrixXd w_panda = m->design(sq);
+  EXPECT_EQ(w_panda, mtest::model("differential", "{}", panda)->design(sq));
+  m->bind(puma, mtest::context(11));
+  EXPECT_EQ(m->design(sp), w_puma);
+}
+
 TEST(Differential, Panda) { checkRobot("panda", "{offset: true}"); }
 
 TEST(Differential, Irp6) { checkRobot("irp6", "{offset: true}"); }
