@@ -14,6 +14,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <new>
 #include <sstream>
 #include <string>
 #include <vector>
@@ -1062,6 +1063,11 @@ class CsvExperiment : public exid::Experiment {
                   : (f == 0 && ct_ ? std::vector<int>{used_.back().column} : std::vector<int>{}));
       }
       std::vector<double> raw;  // per kept row: the time stamp as written
+      std::error_code size_err;
+      const auto file_size = std::filesystem::file_size(file, size_err);
+      const double file_bytes = size_err ? 0.0 : static_cast<double>(file_size);
+      bool reserved = false;
+      const std::uint64_t header_bytes = rd[0]->bytesRead();  // (the header's lines)
       int rows = 0, prev_line = 0;
       double prev_t = 0;
       std::vector<double> v0(std::max<std::size_t>(1, vals_[0].size()));
@@ -1103,7 +1109,24 @@ class CsvExperiment : public exid::Experiment {
         if (kept_rows_ == 0) t_first_abs_ = t;
         prev_t = t;
         prev_line = rd[0]->line();
-        if (ct_) raw.push_back(rv);
+        if (ct_) {
+          // After 4096 rows, room for the whole file's time stamps at those rows' density
+          // (+10 %): growing by doubling would copy them, holding both copies at once (the
+          // peak memory of a long recording's run). Pages never written are never resident,
+          // so an estimate too high costs little; one too low grows as before.
+          if (!reserved && raw.size() == 4096) {
+            reserved = true;
+            const double used = static_cast<double>(rd[0]->bytesRead() - header_bytes);
+            if (used > 0 && file_bytes > used) {
+              try {
+                raw.reserve(static_cast<std::size_t>(
+                    1.1 * 4096.0 * (file_bytes - static_cast<double>(header_bytes)) / used));
+              } catch (const std::bad_alloc&) {  // (then it grows as it goes)
+              }
+            }
+          }
+          raw.push_back(rv);
+        }
         ++kept_rows_;
       }
       rows_ = rows;
