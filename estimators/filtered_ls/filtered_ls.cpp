@@ -396,6 +396,7 @@ class FilteredLs : public exid::Estimator {
       return s;
     };
     std::vector<ChunkOut> outs(2 * static_cast<std::size_t>(T));  // the chunks in flight
+    auto out = [&](long c) -> ChunkOut& { return outs[static_cast<std::size_t>(c % (2 * T))]; };
     exid::SampleWindow window(data);
     P.acc = estimators::RowAccumulator(p);
     exid::Rows all;
@@ -412,12 +413,12 @@ class FilteredLs : public exid::Estimator {
           const exid::Dataset f =
               exid::sliceDataset(filtered(raw, P, sos), static_cast<int>(trim + s.lo - s.rlo),
                                  static_cast<int>(trim + s.hi - s.rlo));
-          ChunkOut& o = outs[static_cast<std::size_t>(c % (2 * T))];
+          ChunkOut& o = out(c);
           o = ChunkOut();
           chunkRows(model, P, dsos, f, s.lo, s.ca, s.cb, keep_rows, ctx, &o);
         },
         [&](long c) {  // in chunk order: deterministic
-          ChunkOut& o = outs[static_cast<std::size_t>(c % (2 * T))];
+          ChunkOut& o = out(c);
           P.acc.merge(o.acc);
           P.rows_before += o.rows_before;
           P.slow_removed += o.slow;

@@ -752,25 +752,13 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
   for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
     if (ctx.shouldStop()) throw std::runtime_error("stopped");
     const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
+    // the block's samples: (k0, k0 + 1, ..., k0 + m - 1) * stride
+    const auto used = Eigen::seqN(k0 * stride, m, stride);
     Samples s;
-    if (stride == 1) {
-      s.t = data.t.segment(k0, m);
-      s.q = data.q.middleRows(k0, m);
-      s.qd = sig.qd.middleRows(k0, m);
-      s.qdd = sig.qdd.middleRows(k0, m);
-    } else {
-      const Eigen::Map<const VectorXd, 0, Eigen::InnerStride<>> t(data.t.data() + k0 * stride, m,
-                                                                  Eigen::InnerStride<>(stride));
-      s.t = t;
-      auto every = [&](const MatrixXd& A) {
-        MatrixXd B(m, A.cols());
-        for (Index i = 0; i < m; ++i) B.row(i) = A.row((k0 + i) * stride);
-        return B;
-      };
-      s.q = every(data.q);
-      s.qd = every(sig.qd);
-      s.qdd = every(sig.qdd);
-    }
+    s.t = data.t(used);
+    s.q = data.q(used, Eigen::all);
+    s.qd = sig.qd(used, Eigen::all);
+    s.qdd = sig.qdd(used, Eigen::all);
     const MatrixXd Wb = model.design(s);
     G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
     *rows += Wb.rows();
