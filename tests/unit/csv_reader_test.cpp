@@ -482,6 +482,36 @@ TEST(CsvReader, UnselectedColumnsAreNeverConverted) {
   EXPECT_EQ(msg, "s.csv:3: expected 3 values (as in the header), found 2");
 }
 
+// The cells after the last selected one are counted, not split: counts far above a byte's range
+// (the counter is byte-wide per block of 255 bytes: a run of 699 delimiters) are exact, one value
+// too many or too few is found on any line.
+TEST(CsvReader, LongTailsOfUnselectedCellsAreCountedExactly) {
+  const int nc = 700;
+  std::string header = "t";
+  for (int c = 1; c < nc; ++c) header += fmt::format(",c{}", c);
+  auto line = [](int values) {  // empty unselected cells: a block of delimiters only
+    return "0.5" + std::string(static_cast<std::size_t>(values - 1), ',');
+  };
+  for (int values : {nc, nc - 1, nc + 1, nc - 256, nc + 255}) {
+    const std::string text = header + "\n" + line(nc) + "\n" + line(values) + "\n";
+    exid::CsvReader r(std::string_view(text), "w.csv");
+    std::string msg;
+    try {
+      const exid::CsvTable t =
+          exid::readCsvColumns(r, [](const std::string& c) { return c == "t"; });
+      EXPECT_EQ(t.data.rows(), 2);
+      EXPECT_EQ(t.data(1, 0), 0.5);
+    } catch (const exid::Error& e) {
+      msg = e.what();
+    }
+    if (values == nc)
+      EXPECT_EQ(msg, "") << values;
+    else
+      EXPECT_EQ(
+          msg, fmt::format("w.csv:3: expected {} values (as in the header), found {}", nc, values));
+  }
+}
+
 // A file: the checks of readInputFile (regular file, readable) without its size limit, and the
 // reader's errors name the file as the caller calls it.
 TEST(CsvReader, FileChecksAndMessages) {
