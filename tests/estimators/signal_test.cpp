@@ -158,6 +158,13 @@ TEST(RowAccumulator, NormalEquationsByEquationEqualTheDenseGramMatrix) {
   short_labels.addEquations(W, y, std::vector<int>(eq.begin(), eq.begin() + 10));
   EXPECT_LE((short_labels.factor().transpose() * short_labels.factor() - G).cwiseAbs().maxCoeff(),
             1e-12 * G.cwiseAbs().maxCoeff());
+  // more than 64 labels (here 70, in descending order): add() of every row, the same Gram matrix
+  estimators::RowAccumulator many_labels(p, M::Normal);
+  std::vector<int> many(m);
+  for (int i = 0; i < m; ++i) many[static_cast<std::size_t>(i)] = 69 - i % 70;
+  many_labels.addEquations(W, y, many);
+  EXPECT_LE((many_labels.factor().transpose() * many_labels.factor() - G).cwiseAbs().maxCoeff(),
+            1e-12 * G.cwiseAbs().maxCoeff());
 }
 
 TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {

@@ -103,13 +103,17 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
         fmt::format("RowAccumulator: rows of {} x {} and y of {}, expected {} columns "
                     "and one y per row",
                     r, W.cols(), y.size(), p_));
-  // the rows of each equation, in order (labels are few: joints, wrench components)
-  std::vector<int> labels(equation.begin(), equation.end());
-  std::sort(labels.begin(), labels.end());
-  labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
-  if (labels.size() > 64) {
-    add(W, y);
-    return;
+  // the rows of each equation, in order (labels are few: joints, wrench components; found by
+  // a search among those seen, not by sorting every row's label)
+  std::vector<int> labels;
+  for (const int l : equation) {
+    const auto at = std::lower_bound(labels.begin(), labels.end(), l);
+    if (at != labels.end() && *at == l) continue;
+    if (labels.size() == 64) {
+      add(W, y);
+      return;
+    }
+    labels.insert(at, l);
   }
   std::vector<std::vector<Eigen::Index>> rows(labels.size());
   for (Eigen::Index i = 0; i < r; ++i)
