@@ -85,12 +85,32 @@ TEST(Differential, VjpMatchesFiniteDifferences) {
   for (const char* name : {"puma560", "panda", "irp6"}) {
     auto r = mtest::robot(name);
     if (!r) continue;
-    for (const char* p : {"{offset: true}", "{joints: [1, 3], friction: subtract}"}) {
+    for (const char* p :
+         {"{offset: true}", "{joints: [1, 3], friction: subtract}",
+          "{rotor_inertia: true, coulomb_asymmetric: true, coulomb_smoothing_rad_s: [1], "
+          "stribeck: true, stribeck_velocity_rad_s: [2]}"}) {
       auto m = mtest::model("differential", p, r);
       const double err = mtest::vjpError(*m, mtest::randomSamples(*r, 3, 0.01, 5), true);
       std::printf("[%s %s] VJP vs FD relative error %.2e\n", name, p, err);
       EXPECT_LT(err, 1e-6) << name << " " << p;
     }
+  }
+}
+
+// The Staubli TX40 as the real studies read it: a coupled wrist (motor 6 turns with joints 5 and
+// 6) under the drive terms of examples/real/tx40_varpro.yaml.
+TEST(Differential, VjpMatchesFiniteDifferencesThroughACoupledWrist) {
+  auto r = exid_test::robot("urdf",
+                            "{file: data/staubli_tx40/urdf/tx40_mdh_modified.urdf, extension: "
+                            "robots/tx40/tx40_exid.xml}");
+  for (const char* p :
+       {"{}", "{rotor_inertia: true, coulomb: true, viscous: true}",
+        "{rotor_inertia: true, coulomb: true, viscous: true, coulomb_asymmetric: true, "
+        "coulomb_smoothing_rad_s: [1], stribeck: true, stribeck_velocity_rad_s: [2]}"}) {
+    auto m = mtest::model("differential", p, r);
+    const double err = mtest::vjpError(*m, mtest::randomSamples(*r, 3, 0.01, 5), true);
+    std::printf("[tx40 %s] VJP vs FD relative error %.2e\n", p, err);
+    EXPECT_LT(err, 1e-6) << p;
   }
 }
 
