@@ -27,37 +27,79 @@ bool IoError::outOfSpace() const {
   return errno_value == ENOSPC || errno_value == EDQUOT || errno_value == EFBIG;
 }
 
-void writeFileAtomic(const fs::path& path, const std::string& text) {
+AtomicFileWriter::AtomicFileWriter(fs::path path) : path_(std::move(path)) {
   std::error_code ec;
-  if (path.has_parent_path()) fs::create_directories(path.parent_path(), ec);
-  const fs::path tmp = path.string() + fmt::format(".tmp.{}", ::getpid());
-  int fd = ::open(tmp.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
-  if (fd < 0) {
+  if (path_.has_parent_path()) fs::create_directories(path_.parent_path(), ec);
+  tmp_ = path_.string() + fmt::format(".tmp.{}", ::getpid());
+  fd_ = ::open(tmp_.c_str(), O_WRONLY | O_CREAT | O_TRUNC | O_CLOEXEC, 0644);
+  if (fd_ < 0) {
     const int err = errno;
-    throw IoError(fmt::format("{}: cannot write: {}", path.string(), std::strerror(err)), err);
+    throw IoError(fmt::format("{}: cannot write: {}", path_.string(), std::strerror(err)), err);
   }
+  buf_.reserve(1 << 20);
+}
+
+AtomicFileWriter::~AtomicFileWriter() {
+  if (fd_ >= 0) {  // not committed: nothing is left
+    ::close(fd_);
+    ::unlink(tmp_.c_str());
+  }
+}
+
+void AtomicFileWriter::fail(const std::string& what, int err) {
+  ::close(fd_);
+  fd_ = -1;
+  ::unlink(tmp_.c_str());
+  throw IoError(fmt::format("{}: {}: {}", path_.string(), what, std::strerror(err)), err);
+}
+
+void AtomicFileWriter::flush() {
   std::size_t done = 0;
-  while (done < text.size()) {
-    ssize_t n = ::write(fd, text.data() + done, text.size() - done);
+  while (done < buf_.size()) {
+    const ssize_t n = ::write(fd_, buf_.data() + done, buf_.size() - done);
     if (n < 0) {
       if (errno == EINTR) continue;
-      int err = errno;
-      ::close(fd);
-      ::unlink(tmp.c_str());
-      throw IoError(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)), err);
+      fail("write failed", errno);
     }
     done += static_cast<std::size_t>(n);
   }
-  if (::fsync(fd) != 0 || ::close(fd) != 0) {
-    int err = errno;
-    ::unlink(tmp.c_str());
-    throw IoError(fmt::format("{}: write failed: {}", path.string(), std::strerror(err)), err);
+  buf_.clear();
+}
+
+void AtomicFileWriter::write(std::string_view text) {
+  check(fd_ >= 0, fmt::format("{}: written after its commit", path_.string()));
+  if (buf_.size() + text.size() > (1u << 20)) flush();
+  if (text.size() > (1u << 20)) {  // (a large piece goes out as it is)
+    buf_.assign(text.data(), text.size());
+    flush();
+    return;
   }
-  if (std::rename(tmp.c_str(), path.c_str()) != 0) {
-    int err = errno;
-    ::unlink(tmp.c_str());
-    throw Error(fmt::format("{}: cannot rename into place: {}", path.string(), std::strerror(err)));
+  buf_.append(text.data(), text.size());
+}
+
+void AtomicFileWriter::commit() {
+  check(fd_ >= 0, fmt::format("{}: committed twice", path_.string()));
+  flush();
+  if (::fsync(fd_) != 0) fail("write failed", errno);
+  const int fd = fd_;
+  fd_ = -1;
+  if (::close(fd) != 0) {
+    const int err = errno;
+    ::unlink(tmp_.c_str());
+    throw IoError(fmt::format("{}: write failed: {}", path_.string(), std::strerror(err)), err);
   }
+  if (std::rename(tmp_.c_str(), path_.c_str()) != 0) {
+    const int err = errno;
+    ::unlink(tmp_.c_str());
+    throw Error(
+        fmt::format("{}: cannot rename into place: {}", path_.string(), std::strerror(err)));
+  }
+}
+
+void writeFileAtomic(const fs::path& path, const std::string& text) {
+  AtomicFileWriter out(path);
+  out.write(text);
+  out.commit();
 }
 
 int cleanStaleTemporaries(const fs::path& dir) {
@@ -617,10 +659,14 @@ CsvTable readCsv(const fs::path& path, const CsvReadOptions& opt, int* dropped_r
   return t;
 }
 
-std::string toCsv(const CsvTable& t) {
-  std::string out;
-  for (std::size_t i = 0; i < t.columns.size(); ++i) out += (i ? "," : "") + t.columns[i];
-  out += '\n';
+namespace {
+// The header line, then each row's line, to `put`.
+template <class Put>
+void csvLines(const CsvTable& t, Put&& put) {
+  std::string head;
+  for (std::size_t i = 0; i < t.columns.size(); ++i) head += (i ? "," : "") + t.columns[i];
+  head += '\n';
+  put(std::string_view(head));
   fmt::memory_buffer buf;
   for (Eigen::Index r = 0; r < t.data.rows(); ++r) {
     buf.clear();
@@ -629,11 +675,25 @@ std::string toCsv(const CsvTable& t) {
       fmt::format_to(std::back_inserter(buf), "{}", t.data(r, c));
     }
     buf.push_back('\n');
-    out.append(buf.data(), buf.size());
+    put(std::string_view(buf.data(), buf.size()));
   }
+}
+}  // namespace
+
+std::string toCsv(const CsvTable& t) {
+  std::string out;
+  csvLines(t, [&](std::string_view s) { out.append(s.data(), s.size()); });
   return out;
 }
 
-void writeCsvAtomic(const fs::path& path, const CsvTable& t) { writeFileAtomic(path, toCsv(t)); }
+void writeCsv(AtomicFileWriter& out, const CsvTable& t) {
+  csvLines(t, [&](std::string_view s) { out.write(s); });
+}
+
+void writeCsvAtomic(const fs::path& path, const CsvTable& t) {
+  AtomicFileWriter out(path);
+  writeCsv(out, t);
+  out.commit();
+}
 
 }  // namespace exid

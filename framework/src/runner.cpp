@@ -1035,11 +1035,14 @@ void StudyRun::experimentStage() {
         joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
                               jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
       }
-      writeFileAtomic(
-          dir / "experiment.csv",
-          fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI "
-                      "units, t in s\n{}",
-                      cfg.name, robot->name, joints, toCsv(datasetTable(materialize(*data)))));
+      // written a row at a time: the text is never held whole
+      AtomicFileWriter out(dir / "experiment.csv");
+      out.write(
+          fmt::format("# exid experiment of study '{}', robot '{}': joints {}; SI units, t in s\n",
+                      cfg.name, robot->name, joints));
+      const Dataset whole = data->streamed() ? materialize(*data) : Dataset();
+      writeCsv(out, datasetTable(data->streamed() ? whole : *data));
+      out.commit();
       E["csv"] = "experiment.csv";
     }
   }

@@ -48,6 +48,51 @@ TEST(AtomicWrite, ReplacesWholeFileAndLeavesNoTemporary) {
   fs::remove_all(d);
 }
 
+// Piece by piece: small and large pieces (beside and beyond its 1 MB buffer) give exactly their
+// concatenation; nothing is at the path before the commit; a writer destroyed without a commit
+// (an exception on the way) leaves the old file and no temporary; toCsv and writeCsv agree.
+TEST(AtomicWrite, PieceByPieceIsTheConcatenationAndAnUncommittedWriterLeavesNothing) {
+  const fs::path d = tempDir() / "pieces";
+  fs::remove_all(d);
+  std::string expect;
+  {
+    exid::AtomicFileWriter out(d / "p.txt");
+    for (std::size_t n : {1u, 1000u, (1u << 20) - 5u, 7u, (3u << 20) + 11u, 0u, 12345u}) {
+      const std::string piece(n, static_cast<char>('a' + n % 26));
+      out.write(piece);
+      expect += piece;
+    }
+    EXPECT_FALSE(fs::exists(d / "p.txt"));
+    out.commit();
+    EXPECT_THROW(out.write("x"), exid::Error);
+  }
+  std::ifstream in(d / "p.txt", std::ios::binary);
+  const std::string got((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  EXPECT_EQ(got.size(), expect.size());
+  EXPECT_TRUE(got == expect);
+  exid::writeFileAtomic(d / "keep.txt", "old");
+  try {
+    exid::AtomicFileWriter out(d / "keep.txt");
+    out.write(std::string(3u << 20, 'n'));
+    throw std::runtime_error("on the way");
+  } catch (const std::runtime_error&) {
+  }
+  std::ifstream keep(d / "keep.txt");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(keep)), std::istreambuf_iterator<char>()),
+            "old");
+  for (const auto& e : fs::directory_iterator(d))
+    EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
+  exid::CsvTable t;
+  t.columns = {"t", "q1"};
+  t.data.resize(3, 2);
+  t.data << 0.0, 0.1, 0.001, 1.0 / 3.0, 0.002, -2.5e-17;
+  exid::writeCsvAtomic(d / "t.csv", t);
+  std::ifstream tc(d / "t.csv");
+  EXPECT_EQ(std::string((std::istreambuf_iterator<char>(tc)), std::istreambuf_iterator<char>()),
+            exid::toCsv(t));
+  fs::remove_all(d);
+}
+
 TEST(AtomicWrite, FailureLeavesTheOldFileAndNamesThePath) {
   if (::geteuid() == 0) {
     // root ignores directory permissions; use a path whose parent is a file instead

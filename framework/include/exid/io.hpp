@@ -28,6 +28,26 @@ class IoError : public Error {
 /// exid::Error names the file and the reason (e.g. disk full).
 void writeFileAtomic(const std::filesystem::path& path, const std::string& text);
 
+/// The same written piece by piece (a large file is never held as one string): write() as
+/// often as needed, then commit() flushes, syncs and renames over path. Destroyed without a
+/// commit (an exception on the way), it removes its temporary file: nothing is left at path.
+class AtomicFileWriter {
+ public:
+  explicit AtomicFileWriter(std::filesystem::path path);
+  ~AtomicFileWriter();
+  AtomicFileWriter(const AtomicFileWriter&) = delete;
+  AtomicFileWriter& operator=(const AtomicFileWriter&) = delete;
+  void write(std::string_view text);
+  void commit();
+
+ private:
+  std::filesystem::path path_, tmp_;
+  int fd_ = -1;
+  std::string buf_;
+  void flush();
+  [[noreturn]] void fail(const std::string& what, int err);
+};
+
 /// Removes `*.tmp.PID` files and `.*.staging.PID` folders in dir whose process PID is gone (left
 /// by a process killed with SIGKILL). Returns how many were removed; never throws.
 int cleanStaleTemporaries(const std::filesystem::path& dir);
@@ -184,6 +204,8 @@ CsvTable readCsvColumns(CsvReader& reader, const Wanted& wanted) {
 }
 /// CSV text (full double precision).
 std::string toCsv(const CsvTable& table);
+/// The same text into a writer, a row at a time.
+void writeCsv(AtomicFileWriter& out, const CsvTable& table);
 void writeCsvAtomic(const std::filesystem::path& path, const CsvTable& table);
 
 }  // namespace exid
