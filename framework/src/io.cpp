@@ -36,7 +36,7 @@ AtomicFileWriter::AtomicFileWriter(fs::path path) : path_(std::move(path)) {
     const int err = errno;
     throw IoError(fmt::format("{}: cannot write: {}", path_.string(), std::strerror(err)), err);
   }
-  buf_.reserve(1 << 20);
+  buf_.reserve(kBuffer);
 }
 
 AtomicFileWriter::~AtomicFileWriter() {
@@ -53,28 +53,30 @@ void AtomicFileWriter::fail(const std::string& what, int err) {
   throw IoError(fmt::format("{}: {}: {}", path_.string(), what, std::strerror(err)), err);
 }
 
-void AtomicFileWriter::flush() {
+void AtomicFileWriter::put(const char* p, std::size_t n) {
   std::size_t done = 0;
-  while (done < buf_.size()) {
-    const ssize_t n = ::write(fd_, buf_.data() + done, buf_.size() - done);
-    if (n < 0) {
+  while (done < n) {
+    const ssize_t w = ::write(fd_, p + done, n - done);
+    if (w < 0) {
       if (errno == EINTR) continue;
       fail("write failed", errno);
     }
-    done += static_cast<std::size_t>(n);
+    done += static_cast<std::size_t>(w);
   }
+}
+
+void AtomicFileWriter::flush() {
+  put(buf_.data(), buf_.size());
   buf_.clear();
 }
 
 void AtomicFileWriter::write(std::string_view text) {
   check(fd_ >= 0, fmt::format("{}: written after its commit", path_.string()));
-  if (buf_.size() + text.size() > (1u << 20)) flush();
-  if (text.size() > (1u << 20)) {  // (a large piece goes out as it is)
-    buf_.assign(text.data(), text.size());
-    flush();
-    return;
-  }
-  buf_.append(text.data(), text.size());
+  if (buf_.size() + text.size() > kBuffer) flush();
+  if (text.size() > kBuffer)  // (a large piece goes out as it is, never copied)
+    put(text.data(), text.size());
+  else
+    buf_.append(text.data(), text.size());
 }
 
 void AtomicFileWriter::commit() {

@@ -41,9 +41,11 @@ class AtomicFileWriter {
   void commit();
 
  private:
+  static constexpr std::size_t kBuffer = std::size_t{1} << 20;
   std::filesystem::path path_, tmp_;
   int fd_ = -1;
   std::string buf_;
+  void put(const char* p, std::size_t n);
   void flush();
   [[noreturn]] void fail(const std::string& what, int err);
 };
