@@ -81,19 +81,25 @@ TEST(Differential, FrictionNoneIgnoresFrictionAndSubtractRemovesIt) {
   EXPECT_EQ(none->fullNames().size(), 60u + 12u);  // Ia, OFF per joint
 }
 
+// The model's design VJP against finite differences, for each drive-term setting on robot r.
+void expectExactVjp(const std::shared_ptr<const exid::RobotModel>& r, const std::string& name,
+                    std::initializer_list<const char*> settings) {
+  for (const char* p : settings) {
+    auto m = mtest::model("differential", p, r);
+    const double err = mtest::vjpError(*m, mtest::randomSamples(*r, 3, 0.01, 5), true);
+    std::printf("[%s %s] VJP vs FD relative error %.2e\n", name.c_str(), p, err);
+    EXPECT_LT(err, 1e-6) << name << " " << p;
+  }
+}
+
 TEST(Differential, VjpMatchesFiniteDifferences) {
   for (const char* name : {"puma560", "panda", "irp6"}) {
     auto r = mtest::robot(name);
     if (!r) continue;
-    for (const char* p :
-         {"{offset: true}", "{joints: [1, 3], friction: subtract}",
-          "{rotor_inertia: true, coulomb_asymmetric: true, coulomb_smoothing_rad_s: [1], "
-          "stribeck: true, stribeck_velocity_rad_s: [2]}"}) {
-      auto m = mtest::model("differential", p, r);
-      const double err = mtest::vjpError(*m, mtest::randomSamples(*r, 3, 0.01, 5), true);
-      std::printf("[%s %s] VJP vs FD relative error %.2e\n", name, p, err);
-      EXPECT_LT(err, 1e-6) << name << " " << p;
-    }
+    expectExactVjp(r, name,
+                   {"{offset: true}", "{joints: [1, 3], friction: subtract}",
+                    "{rotor_inertia: true, coulomb_asymmetric: true, coulomb_smoothing_rad_s: "
+                    "[1], stribeck: true, stribeck_velocity_rad_s: [2]}"});
   }
 }
 
@@ -103,15 +109,10 @@ TEST(Differential, VjpMatchesFiniteDifferencesThroughACoupledWrist) {
   auto r = exid_test::robot("urdf",
                             "{file: data/staubli_tx40/urdf/tx40_mdh_modified.urdf, extension: "
                             "robots/tx40/tx40_exid.xml}");
-  for (const char* p :
-       {"{}", "{rotor_inertia: true, coulomb: true, viscous: true}",
-        "{rotor_inertia: true, coulomb: true, viscous: true, coulomb_asymmetric: true, "
-        "coulomb_smoothing_rad_s: [1], stribeck: true, stribeck_velocity_rad_s: [2]}"}) {
-    auto m = mtest::model("differential", p, r);
-    const double err = mtest::vjpError(*m, mtest::randomSamples(*r, 3, 0.01, 5), true);
-    std::printf("[tx40 %s] VJP vs FD relative error %.2e\n", p, err);
-    EXPECT_LT(err, 1e-6) << p;
-  }
+  expectExactVjp(r, "tx40",
+                 {"{}", "{rotor_inertia: true, coulomb: true, viscous: true}",
+                  "{rotor_inertia: true, coulomb: true, viscous: true, coulomb_asymmetric: true, "
+                  "coulomb_smoothing_rad_s: [1], stribeck: true, stribeck_velocity_rad_s: [2]}"});
 }
 
 TEST(Differential, ErrorsNameTheProblem) {
