@@ -3,7 +3,8 @@
 //
 //   - recorded PUMA 560 CSV (t, q, qd, qdd, tau: 25 columns, 1 kHz) of 100 k and 1 M samples
 //     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M) -> batch_ls on 1 thread, and 1 M on 2 (the
-//     recording is streamed from the file: summary experiment.streamed);
+//     recording is streamed from the file: summary experiment.streamed; the experiment's
+//     scan of the time stamps uses as many threads as the estimator);
 //   - the same 1 M samples without qd, qdd -> filtered_ls {cutoff_hz: 20} on 1 and 2 threads;
 //   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz).
 //
@@ -119,12 +120,14 @@ std::map<std::string, std::string>& table() {
   return t;
 }
 
+// threads: the estimator's and the experiment's (its scan of the time stamps)
 void runStudyBench(benchmark::State& state, const std::string& label, const fs::path& data,
-                   const std::string& estimator) {
+                   const std::string& estimator, long threads) {
   const fs::path study = workDir() / (label + ".yaml");
   std::ofstream(study) << "name: " << label << "\nrobot: {type: puma560}\n"
                        << "model: {type: differential}\n"
-                       << "experiment: {type: csv, params: {file: " << data.string() << "}}\n"
+                       << "experiment: {type: csv, params: {file: " << data.string()
+                       << ", threads: " << threads << "}}\n"
                        << "estimator: " << estimator << "\n"
                        << "report: {type: standard, params: {plots: false}}\n";
   Child c;
@@ -143,12 +146,12 @@ void runStudyBench(benchmark::State& state, const std::string& label, const fs::
                                static_cast<double>(fs::file_size(data)) / 1e6);
 }
 
-// range(1): batch_ls threads (0: the machine's cores)
+// range(1): threads of batch_ls and of the scan (0: the cores the process may run on)
 void BM_BatchLs(benchmark::State& state) {
   const long n = state.range(0);
   const long threads = state.range(1);
   runStudyBench(state, fmt::format("batch_ls_{}_threads{}", n, threads), recording(n, true),
-                fmt::format("{{type: batch_ls, params: {{threads: {}}}}}", threads));
+                fmt::format("{{type: batch_ls, params: {{threads: {}}}}}", threads), threads);
 }
 
 void BM_FilteredLs(benchmark::State& state) {
@@ -156,7 +159,8 @@ void BM_FilteredLs(benchmark::State& state) {
   const int threads = static_cast<int>(state.range(1));
   runStudyBench(
       state, fmt::format("filtered_ls_{}_threads{}", n, threads), recording(n, false),
-      fmt::format("{{type: filtered_ls, params: {{cutoff_hz: 20, threads: {}}}}}", threads));
+      fmt::format("{{type: filtered_ls, params: {{cutoff_hz: 20, threads: {}}}}}", threads),
+      threads);
 }
 
 void BM_Tx40FilteredLs(benchmark::State& state) {

@@ -50,11 +50,12 @@ class BatchLs : public exid::Estimator {
                            "accumulate: auto keeps the normal equations while the column-scaled "
                            "cond(W) is at most this (relative error ~ 2.2e-16 cond^2)",
                            1.0, 1e8),
-        exid::param_int("threads", 0,
-                        "threads building the rows (0: the machine's cores, at most 8); each "
-                        "thread's block of samples is merged in order, so the result is the "
-                        "same for any count",
-                        0, 256),
+        exid::param_int(
+            "threads", 0,
+            "threads building the rows (0: the cores this process may run on, at most 8); each "
+            "thread's block of samples is merged in order, so the result is the "
+            "same for any count",
+            0, 256),
         exid::estimators::rankToleranceParam(),
     };
   }

@@ -83,10 +83,11 @@ class FilteredLs : public exid::Estimator {
                         "accumulation): memory is bounded by the chunk (plus the decimation "
                         "filter's settling margin at each side), not by the recording",
                         64, 1e8),
-        exid::param_int("threads", 0,
-                        "threads building the chunks (0: the machine's cores, at most 8); the "
-                        "chunks are merged in order, so the result is the same for any count",
-                        0, 256),
+        exid::param_int(
+            "threads", 0,
+            "threads building the chunks (0: the cores this process may run on, at most 8); the "
+            "chunks are merged in order, so the result is the same for any count",
+            0, 256),
         exid::estimators::rankToleranceParam(),
     };
   }

@@ -6,19 +6,28 @@
 // Extensions for recordings as published (docs/experiments.md): other column names
 // (q_columns, tau_columns), torques from a second row-aligned file (torque_file), and optional
 // zero-phase low-pass + central differences (+ decimation) of the segment.
+#include <fcntl.h>
 #include <fmt/format.h>
 #include <fmt/ranges.h>
+#include <sys/mman.h>
+#include <unistd.h>
 
 #include <Eigen/Core>
 #include <algorithm>
+#include <atomic>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <mutex>
 #include <new>
 #include <sstream>
 #include <string>
+#include <string_view>
+#include <thread>
 #include <vector>
 
+#include "exid/context.hpp"
 #include "exid/delay.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
@@ -131,6 +140,11 @@ class CsvExperiment : public exid::Experiment {
                   "differentiate_cutoff_hz and filter_torque, and the cut-off below the new "
                   "Nyquist frequency)",
                   1, 1e6),
+        param_int("threads", 0,
+                  "threads for the scan of the time stamps before the first pass (the file in "
+                  "pieces read at once; the result does not depend on the count); 0: the cores "
+                  "this process may run on, at most 8",
+                  0, 256),
         param_int("trim_edges", -1,
                   "samples dropped at each end of the segment after filtering; -1: "
                   "ceil(2 fs / cutoff) when filtering, else 0",
@@ -630,6 +644,8 @@ class CsvExperiment : public exid::Experiment {
       if (part_ != "none") m["split"] = seg_.splitMeta(in_segment_, K);
       m["recording_span_s"] = span_;
       m["recording"] = recording_;
+      m["scan"]["pieces"] = scan_pieces_;  // the first reading of the file (threads)
+      m["scan"]["threads"] = scan_threads_;
       {  // Where the rows went: every sample dropped, cut, trimmed or decimated is counted.
         exid::Json& a = m["accounting"];
         a["rows_in_file"] = rows_;
@@ -1063,6 +1079,8 @@ class CsvExperiment : public exid::Experiment {
                   : (f == 0 && ct_ ? std::vector<int>{used_.back().column} : std::vector<int>{}));
       }
       std::vector<double> raw;  // per kept row: the time stamp as written
+      if (!drop_ && scanInPieces(*rd[0], &raw)) return raw;
+      raw.clear();
       std::error_code size_err;
       const auto file_size = std::filesystem::file_size(file, size_err);
       const double file_bytes = size_err ? 0.0 : static_cast<double>(file_size);
@@ -1136,6 +1154,142 @@ class CsvExperiment : public exid::Experiment {
                   fmt::format("experiment 'csv': {}: every row was dropped ({} with bad values)",
                               file, dropped_));
       return raw;
+    }
+
+    // scanRows() without dropped rows (only the time column read, or only rows counted) on
+    // several threads: the data in byte ranges that start at a line, each parsed by a reader
+    // of whole lines (CsvReader's body constructor), the pieces' stamps appended in file
+    // order as they are done (memory: the stamps and a few pieces in flight). False (nothing
+    // set) on one thread, a small file, or anything the serial scan must report with its line
+    // (a bad or non-increasing time, no rows): the serial scan then runs.
+    bool scanInPieces(const exid::CsvReader& like, std::vector<double>* raw) {
+      const long requested = P_.getInt("threads");
+      const int threads = static_cast<int>(requested > 0 ? std::min<long>(requested, 256)
+                                                         : std::min(8, exid::usableCores()));
+      const std::string& file = files_[0];
+      std::error_code err;
+      const auto size = std::filesystem::file_size(file, err);
+      const std::uint64_t begin = like.bytesRead();  // the data after the header's lines
+      constexpr std::uint64_t kPiece = std::uint64_t{4} << 20;
+      if (threads < 2 || err || size < begin + 2 * kPiece) return false;
+      const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
+      if (fd < 0) return false;
+      struct Closer {
+        int fd;
+        ~Closer() { ::close(fd); }
+      } closer{fd};
+      // piece starts: after the first newline at or after each nominal start - 1
+      const std::uint64_t data = size - begin;
+      const auto count = static_cast<std::size_t>(std::min<std::uint64_t>(4096, data / kPiece));
+      std::vector<std::uint64_t> start{begin};
+      std::vector<char> probe(std::size_t{1} << 16);
+      for (std::size_t i = 1; i < count; ++i) {
+        std::uint64_t at = begin + data * i / count - 1;
+        if (at < start.back()) continue;
+        bool found = false;
+        while (!found && at < size) {
+          const ssize_t got = ::pread(fd, probe.data(), probe.size(), static_cast<off_t>(at));
+          if (got <= 0) return false;
+          const void* nl = std::memchr(probe.data(), '\n', static_cast<std::size_t>(got));
+          if (nl) {
+            at += static_cast<std::uint64_t>(static_cast<const char*>(nl) - probe.data()) + 1;
+            found = true;
+          } else {
+            at += static_cast<std::uint64_t>(got);
+          }
+        }
+        if (!found || at >= size) break;
+        if (at > start.back()) start.push_back(at);
+      }
+      start.push_back(size);
+      const std::size_t pieces = start.size() - 1;
+      if (pieces < 2) return false;
+      // each piece: its rows and, with a time column, their stamps; ok false when a reader
+      // failed or a stamp is not finite (the serial scan names the line)
+      struct Part {
+        std::vector<double> t;
+        long rows = 0;
+        bool ok = true, done = false;
+      };
+      std::vector<Part> piece(pieces);
+      std::mutex mu;
+      std::size_t merged = 0;
+      bool failed = false;
+      std::atomic<std::size_t> next{0};
+      std::atomic<bool> stop{false};
+      long rows = 0;
+      double prev = 0.0;
+      bool increasing = true;
+      auto merge = [&](std::size_t k) {  // (under mu) piece k is done: append what is ready
+        piece[k].done = true;
+        while (merged < pieces && piece[merged].done) {
+          Part& m = piece[merged];
+          failed = failed || !m.ok;
+          if (!failed) {
+            for (std::size_t i = 0; i < m.t.size() && increasing; ++i) {
+              increasing = (rows == 0 && i == 0) || m.t[i] > prev;
+              prev = m.t[i];
+            }
+            raw->insert(raw->end(), m.t.begin(), m.t.end());
+            rows += m.rows;
+          }
+          std::vector<double>().swap(m.t);
+          ++merged;
+        }
+        if (failed || !increasing) stop = true;
+      };
+      const auto page = static_cast<std::uint64_t>(::sysconf(_SC_PAGESIZE));
+      auto work = [&] {
+        std::vector<double> v(std::max<std::size_t>(1, like.selected().size()));
+        for (std::size_t k; !stop && (k = next++) < pieces;) {
+          Part& pc = piece[k];
+          // the piece's whole lines mapped (no copy of the text; unmapped when parsed, so the
+          // file's pages stay out of the process's memory)
+          const std::uint64_t from = start[k] / page * page;
+          const auto len = static_cast<std::size_t>(start[k + 1] - from);
+          void* map = ::mmap(nullptr, len, PROT_READ, MAP_PRIVATE | MAP_POPULATE, fd,
+                             static_cast<off_t>(from));
+          if (map == MAP_FAILED) {
+            pc.ok = false;
+          } else {
+            try {
+              exid::CsvReader r(std::string_view(static_cast<const char*>(map) + (start[k] - from),
+                                                 static_cast<std::size_t>(start[k + 1] - start[k])),
+                                like, 0);
+              while (r.next(v.data())) {
+                ++pc.rows;
+                if (ct_) {
+                  if (!std::isfinite(v[0])) throw exid::Error("not finite");
+                  pc.t.push_back(v[0]);
+                }
+              }
+            } catch (const std::exception&) {
+              pc.ok = false;
+            }
+            ::munmap(map, len);
+          }
+          std::lock_guard<std::mutex> lock(mu);
+          merge(k);
+        }
+      };
+      {
+        std::vector<std::thread> pool;
+        for (int i = 1; i < threads && static_cast<std::size_t>(i) < pieces; ++i)
+          pool.emplace_back(work);
+        work();
+        for (std::thread& t : pool) t.join();
+      }
+      if (failed || !increasing || merged < pieces || rows == 0) {
+        std::vector<double>().swap(*raw);
+        return false;
+      }
+      rows_ = static_cast<int>(rows);
+      kept_rows_ = rows;
+      t_first_abs_ = ct_ ? tfactor_ * (*raw)[0] : 0.0;
+      scan_pieces_ = static_cast<int>(pieces);
+      scan_threads_ =
+          static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(threads), pieces));
+      return true;
     }
 
     // The file row of each kept row, only when rows were dropped (else empty).
@@ -1412,6 +1566,7 @@ class CsvExperiment : public exid::Experiment {
     // the scan
     int rows_ = 0, dropped_ = 0;
     long kept_rows_ = 0;
+    int scan_pieces_ = 1, scan_threads_ = 1;  // how the scan read the file (scanInPieces)
     std::vector<int> dropped_rows_;
     long i0_ = 0, i1_ = 0;
     int in_segment_ = 0;

@@ -1,9 +1,12 @@
 #include "exid/context.hpp"
 
+#include <sched.h>
+
 #include <atomic>
 #include <iostream>
 #include <limits>
 #include <mutex>
+#include <thread>
 
 namespace exid {
 
@@ -26,6 +29,17 @@ void logInfo(const std::string& msg) {
 }
 void logDebug(const std::string& msg) {
   if (g_level >= static_cast<int>(LogLevel::Debug)) emit("debug: ", msg);
+}
+
+int usableCores() {
+  cpu_set_t set;
+  CPU_ZERO(&set);
+  if (sched_getaffinity(0, sizeof(set), &set) == 0) {
+    const int n = CPU_COUNT(&set);
+    if (n > 0) return n;
+  }
+  const unsigned hw = std::thread::hardware_concurrency();
+  return hw == 0 ? 1 : static_cast<int>(hw);
 }
 
 Deadline::Deadline(double seconds) {

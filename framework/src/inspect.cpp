@@ -12,6 +12,7 @@
 
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 
 namespace exid {
@@ -440,17 +441,17 @@ bool positionCoverage(const RobotModel& robot, const MatrixXd& qj, int j, Json& 
 /// Per joint: the covered share of its position and velocity limits (joint coordinates), with
 /// warnings about motion outside them.
 std::vector<Json> coverageRows(const RobotModel& robot, const Dataset& data, const MatrixXd& qd,
-                               const MatrixXd& qdd, std::vector<std::string>* W) {
+                               std::vector<std::string>* W) {
   const int n = robot.dof();
-  const Index K = data.size();
-  MatrixXd qj(K, n), qdj(K, n);
-  for (Index k = 0; k < K; ++k) {
-    VectorXd a, b, c;
-    measuredToJoint(robot, data.q.row(k).transpose(), qd.row(k).transpose(), qdd.row(k).transpose(),
-                    &a, &b, &c);
-    qj.row(k) = a.transpose();
-    qdj.row(k) = b.transpose();
-  }
+  // joint coordinates, as measuredToJoint maps each sample: q = T qm + offset, qd = T qdm
+  check(data.q.cols() == n && qd.cols() == n,
+        fmt::format("inspection: q and qd have {} and {} columns, expected {}", data.q.cols(),
+                    qd.cols(), n));
+  MatrixXd qj = robot.hasTransmission() ? MatrixXd(data.q * robot.transmission.transpose())
+                                        : MatrixXd(data.q);
+  const MatrixXd qdj =
+      robot.hasTransmission() ? MatrixXd(qd * robot.transmission.transpose()) : MatrixXd(qd);
+  if (robot.transmission_offset.size() == n) qj.rowwise() += robot.transmission_offset.transpose();
   std::vector<Json> jrows;
   for (int j = 0; j < n; ++j) {
     const JointLimits& L = robot.limits[static_cast<std::size_t>(j)];
@@ -561,25 +562,32 @@ void signWarnings(const SignFindings& F, const char* where, std::vector<std::str
 }
 
 /// The nominal model's actuator torque at every sample (pred) and, at the standing samples, its
-/// torque at rest (pred_rest; zero where moving).
+/// torque at rest (pred_rest; zero where moving). The samples in two halves on two threads (each
+/// sample's torque is the same on either).
 void predictTorque(const RobotModel& robot, const Dataset& data, const Signals& sig,
                    const std::vector<char>& moving, MatrixXd* pred, MatrixXd* pred_rest) {
   const int n = robot.dof();
   const Index K = data.size();
-  auto dd = makeDynamicsData(robot);
   DriveColumns cols;
   cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
   pred->resize(K, n);
   *pred_rest = MatrixXd::Zero(K, n);
-  const VectorXd zero = VectorXd::Zero(n);
-  for (Index k = 0; k < K; ++k) {
-    const VectorXd qk = data.q.row(k).transpose();
-    pred->row(k) =
-        actuatorTorque(robot, *dd, cols, qk, sig.qd.row(k).transpose(), sig.qdd.row(k).transpose())
-            .transpose();
-    if (!moving[static_cast<std::size_t>(k)])
-      pred_rest->row(k) = actuatorTorque(robot, *dd, cols, qk, zero, zero).transpose();
-  }
+  auto part = [&](Index k0, Index k1) {
+    auto dd = makeDynamicsData(robot);
+    const VectorXd zero = VectorXd::Zero(n);
+    VectorXd qk(n), qdk(n), qddk(n);
+    for (Index k = k0; k < k1; ++k) {
+      qk = data.q.row(k).transpose();
+      qdk = sig.qd.row(k).transpose();
+      qddk = sig.qdd.row(k).transpose();
+      pred->row(k) = actuatorTorque(robot, *dd, cols, qk, qdk, qddk).transpose();
+      if (!moving[static_cast<std::size_t>(k)])
+        pred_rest->row(k) = actuatorTorque(robot, *dd, cols, qk, zero, zero).transpose();
+    }
+  };
+  std::future<void> first = std::async(std::launch::async, part, Index{0}, K / 2);
+  part(K / 2, K);
+  first.get();
 }
 
 /// The measured torque against the nominal model's (sign_check of each joint row, warnings).
@@ -863,7 +871,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     });
   Index moving_samples = 0;
   const std::vector<char> moving = motionCheck(data, sig.qd, n, dt, J, &moving_samples);
-  std::vector<Json> jrows = coverageRows(robot, data, sig.qd, sig.qdd, &W);
+  std::vector<Json> jrows = coverageRows(robot, data, sig.qd, &W);
 
   std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
   MatrixXd pred;

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -551,4 +552,62 @@ TEST(CsvStream, ABadValueFoundWhileStreamingNamesItsLineAndDroppedRowsAreSkipped
   EXPECT_EQ(st.t, whole.t);
   EXPECT_EQ(st.q, whole.q);
   EXPECT_EQ(st.meta.dump(), whole.meta.dump());
+}
+
+// The scan before the first pass reads a large file in pieces on several threads: the samples,
+// the meta and every error are those of the serial scan, with a time column or without, with
+// comment and blank lines, CRLF line ends and no newline after the last row.
+TEST(CsvStream, TheScanInPiecesGivesTheSerialScansSamplesMetaAndErrors) {
+  auto without = [](const exid::Json& meta) {  // the meta without how the scan ran
+    exid::Json m = exid::Json::object();
+    for (const auto& [k, v] : meta.items())
+      if (k != "scan") m[k] = v;
+    return m.dump();
+  };
+  for (const bool with_t : {true, false}) {
+    std::string text = "# a long recording\n" + header(6, with_t);
+    const int K = 130000;  // about 15 MB: three pieces of 4 MB or more
+    for (int k = 0; k < K; ++k) {
+      if (k % 9973 == 17) text += "# note\n\n";
+      std::string line = row(0.001 * k, 6, 0.1 * std::sin(0.001 * k), with_t);
+      if (k % 7 == 3) line.pop_back(), line += "\r\n";  // (row() ends its line in '\n')
+      if (k == K - 1) line.pop_back();                  // no newline after the last row
+      text += line;
+    }
+    const fs::path f = writeText(with_t ? "long_t.csv" : "long_not.csv", text);
+    const std::string period = with_t ? "" : "sample_period_s: 0.001, ";
+    const exid::Dataset one = readCsv(f, period + "threads: 1");
+    ASSERT_EQ(one.size(), K);
+    EXPECT_EQ(one.meta.find("scan")->find("pieces")->asInt(), 1);
+    for (int threads : {2, 3}) {
+      const exid::Dataset d = readCsv(f, period + fmt::format("threads: {}", threads));
+      EXPECT_GT(d.meta.find("scan")->find("pieces")->asInt(), 2) << threads;
+      EXPECT_EQ(d.meta.find("scan")->find("threads")->asInt(), threads);
+      EXPECT_EQ(d.t, one.t);
+      EXPECT_EQ(d.q, one.q);
+      EXPECT_EQ(d.tau, one.tau);
+      EXPECT_EQ(without(d.meta), without(one.meta));
+      auto e = exid_test::create<exid::Experiment>(
+          "csv", "{file: " + f.string() + ", " + period + fmt::format("threads: {}}}", threads));
+      const exid::Dataset s =
+          exid::materialize(e->stream(mtest::robot("puma560"), nullptr, mtest::context()));
+      EXPECT_EQ(s.t, one.t);
+      EXPECT_EQ(without(s.meta), without(one.meta));
+    }
+    if (!with_t) continue;
+    // a time that does not increase, then one that is text, in the last piece: the serial
+    // scan's message, naming the line
+    for (const std::string& bad : {std::string("0.5"), std::string("abc")}) {
+      std::string t2 = text;
+      const std::string key = "\n" + std::to_string(0.001 * (K - 10)) + ",";
+      const std::size_t p = t2.find(key);
+      ASSERT_NE(p, std::string::npos);
+      t2.replace(p + 1, key.size() - 2, bad);
+      const long line = std::count(t2.begin(), t2.begin() + static_cast<long>(p) + 1, '\n') + 1;
+      const fs::path g = writeText("long_bad.csv", t2);
+      const std::string serial = errorOf(g, "threads: 1");
+      EXPECT_NE(serial.find(std::to_string(line)), std::string::npos) << serial;
+      EXPECT_EQ(errorOf(g, "threads: 2"), serial);
+    }
+  }
 }

@@ -9,6 +9,7 @@
 #include <numeric>
 #include <thread>
 
+#include "exid/context.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
@@ -62,8 +63,7 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
 
 int resolveThreads(long requested) {
   if (requested > 0) return static_cast<int>(std::min<long>(requested, 256));
-  const unsigned hw = std::thread::hardware_concurrency();
-  return std::max(1, std::min(8, static_cast<int>(hw == 0 ? 1 : hw)));
+  return std::max(1, std::min(8, usableCores()));
 }
 
 ParamDecl rankToleranceParam() {

@@ -19,6 +19,10 @@ void logWarn(const std::string& msg);
 void logInfo(const std::string& msg);
 void logDebug(const std::string& msg);
 
+/// The CPUs this process may run on (its affinity mask, as `taskset` sets it; the machine's
+/// count where the mask cannot be read), at least 1.
+int usableCores();
+
 /// A wall-clock budget; zero or negative seconds means none.
 class Deadline {
  public:
