@@ -348,6 +348,45 @@ class DifferentialModel : public exid::ObservationModel {
     return designAt(s, frictionAt(eta), dW);
   }
 
+  bool fullTorqueAt(const Eigen::VectorXd& q, const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                    const Eigen::VectorXd& eta, const Eigen::VectorXd& phi, Eigen::VectorXd* tau,
+                    Eigen::MatrixXd* d_q, Eigen::MatrixXd* d_qd,
+                    Eigen::MatrixXd* d_qdd) const override {
+    const exid::RobotModel& R = robot();
+    const int n = R.dof(), P0 = exid::numParameters(R, cols_), E = extraPerJoint();
+    const int T = loadCount() + gainCount();
+    exid::check(phi.size() == P0 + E * n + T,
+                fmt::format("model 'differential': fullTorqueAt: {} parameters, expected {}",
+                            phi.size(), P0 + E * n + T));
+    exid::check(tau != nullptr, "model 'differential': fullTorqueAt: tau must be given");
+    if (static_cast<int>(sel_.size()) != n) return false;
+    for (int i = 0; i < n; ++i)
+      if (sel_[static_cast<std::size_t>(i)] != i) return false;
+    if (T > 0 && !phi.tail(T).isZero(0.0)) return false;  // (the torque columns: the design's)
+    const Friction f = frictionAt(eta);
+    {
+      const Workspace data(*this);
+      exid::actuatorTorqueWith(R, *data, cols_, phi.head(P0), q, qd, qdd, tau, d_q, d_qd, d_qdd);
+    }
+    for (int j = 0; j < n && E > 0; ++j) {  // the nonlinear friction columns (extraColumns)
+      const auto u = static_cast<std::size_t>(j);
+      const auto g = phi.segment(P0 + E * j, E);
+      const double v = qd[j], eps = f.eps[u];
+      const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
+      double t = 0.0;
+      int e = 0;
+      if (coulomb_extra_ && !asym_) t += g[e++] * sg;
+      if (coulomb_extra_ && asym_) {
+        t += g[e++] * 0.5 * (1.0 + sg);
+        t -= g[e++] * 0.5 * (1.0 - sg);
+      }
+      if (stribeck_) t += g[e] * sg * std::exp(-std::pow(std::abs(v) / f.vs[u], delta_));
+      (*tau)[j] += t;
+      if (d_qd) (*d_qd)(j, j) += extraColumnsVjp(v, f, j, g.transpose());
+    }
+    return true;
+  }
+
   // The per-drive widths and Stribeck velocities at eta (nonlinearParameters() order).
   struct Friction {
     std::vector<double> eps, vs;  // per drive (eps 0: sign)

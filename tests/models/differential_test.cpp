@@ -1,5 +1,8 @@
 // Observation model `differential`: rows reproduce noise-free simulated torques, batch least
 // squares recovers the true base parameters, fullDesignVjp matches finite differences.
+#include <random>
+
+#include "exid/drive.hpp"
 #include "model_test_util.hpp"
 
 namespace {
@@ -113,6 +116,93 @@ TEST(Differential, VjpMatchesFiniteDifferencesThroughACoupledWrist) {
                  {"{}", "{rotor_inertia: true, coulomb: true, viscous: true}",
                   "{rotor_inertia: true, coulomb: true, viscous: true, coulomb_asymmetric: true, "
                   "coulomb_smoothing_rad_s: [1], stribeck: true, stribeck_velocity_rad_s: [2]}"});
+}
+
+// The torque at given full parameters (fullTorqueAt, which a simulation calls at every step):
+// the design times them, and its derivatives those of the design's VJP (row by row), both
+// exact, on the robots above and the TX40's coupled wrist, with every drive term; with the
+// mass matrix alone, the same. Where the model cannot give it (not every joint's row, a torque
+// column in phi) it says so.
+TEST(Differential, TorqueAtParametersIsTheDesignTimesThemWithExactDerivatives) {
+  std::vector<std::pair<std::string, std::shared_ptr<const exid::RobotModel>>> robots;
+  for (const char* name : {"puma560", "panda"}) robots.emplace_back(name, mtest::robot(name));
+  robots.emplace_back("tx40", exid_test::robot("urdf",
+                                               "{file: data/staubli_tx40/urdf/"
+                                               "tx40_mdh_modified.urdf, extension: "
+                                               "robots/tx40/tx40_exid.xml}"));
+  const std::vector<const char*> settings = {
+      "{offset: true}", "{friction: subtract, rotor_inertia: true}",
+      "{rotor_inertia: true, coulomb_asymmetric: true, coulomb_smoothing_rad_s: [1], stribeck: "
+      "true, stribeck_velocity_rad_s: [2]}",
+      "{rotor_inertia: true, coulomb_smoothing_rad_s: [0.5], stribeck: true, "
+      "stribeck_velocity_rad_s: [0.3], stribeck_exponent: 1.5, drive_gains: true, "
+      "drive_gains_scale: prior}"};
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  for (const auto& [name, r] : robots) {
+    ASSERT_TRUE(r) << name;
+    const int n = r->dof();
+    for (const char* p : settings) {
+      auto m = mtest::model("differential", p, r);
+      const std::vector<std::string> names = m->fullNames();
+      Eigen::VectorXd eta(static_cast<Eigen::Index>(m->nonlinearParameters().size()));
+      for (Eigen::Index k = 0; k < eta.size(); ++k)
+        eta[k] = m->nonlinearParameters()[static_cast<std::size_t>(k)].value * (1.0 + 0.2 * k);
+      const exid::Samples s = mtest::randomSamples(*r, 4, 0.01, 7);
+      for (int k = 0; k < s.size(); ++k) {
+        exid::Samples one;
+        one.t = Eigen::VectorXd::Zero(1);
+        one.q = s.q.row(k);
+        one.qd = s.qd.row(k);
+        one.qdd = s.qdd.row(k);
+        Eigen::VectorXd phi = m->fullNominal();
+        for (Eigen::Index i = 0; i < phi.size(); ++i) {
+          phi[i] *= 1.0 + 0.1 * nd(rng);
+          if (exid::torqueColumnKind(names[static_cast<std::size_t>(i)]) != 0) phi[i] = 0.0;
+        }
+        const Eigen::MatrixXd W = m->fullDesignAt(one, eta, nullptr);
+        const Eigen::VectorXd want = W * phi;
+        Eigen::VectorXd tau, tau2;
+        Eigen::MatrixXd dq, dqd, dqdd, M;
+        const Eigen::VectorXd q = one.q.row(0).transpose(), qd = one.qd.row(0).transpose(),
+                              qdd = one.qdd.row(0).transpose();
+        ASSERT_TRUE(m->fullTorqueAt(q, qd, qdd, eta, phi, &tau, &dq, &dqd, &dqdd)) << name << p;
+        const double scale = std::max(1.0, want.norm());
+        EXPECT_LT((tau - want).norm() / scale, 1e-12) << name << " " << p;
+        // the derivatives: row i is the VJP of row i of W phi
+        for (int i = 0; i < n; ++i) {
+          Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, phi.size());
+          G.row(i) = phi.transpose();
+          exid::Samples grad;
+          m->fullDesignVjpAt(one, eta, G, &grad);
+          const double gs = std::max(1.0, grad.q.norm() + grad.qd.norm() + grad.qdd.norm());
+          EXPECT_LT((dq.row(i) - grad.q.row(0)).norm() / gs, 1e-11) << name << " " << p << " " << i;
+          EXPECT_LT((dqd.row(i) - grad.qd.row(0)).norm() / gs, 1e-11) << name << " " << p;
+          EXPECT_LT((dqdd.row(i) - grad.qdd.row(0)).norm() / gs, 1e-11) << name << " " << p;
+        }
+        ASSERT_TRUE(m->fullTorqueAt(q, qd, qdd, eta, phi, &tau2, nullptr, nullptr, &M));
+        EXPECT_LT((tau2 - want).norm() / scale, 1e-12) << name << " " << p;
+        EXPECT_LT((M - dqdd).norm() / std::max(1.0, dqdd.norm()), 1e-12) << name << " " << p;
+      }
+    }
+  }
+  // where the model does not give it
+  auto r = mtest::robot("puma560");
+  const exid::Samples s = mtest::randomSamples(*r, 1, 0.01, 7);
+  const Eigen::VectorXd q = s.q.row(0).transpose(), qd = s.qd.row(0).transpose(),
+                        qdd = s.qdd.row(0).transpose();
+  Eigen::VectorXd tau;
+  auto part = mtest::model("differential", "{joints: [1, 3]}", r);
+  EXPECT_FALSE(part->fullTorqueAt(q, qd, qdd, Eigen::VectorXd(), part->fullNominal(), &tau, nullptr,
+                                  nullptr, nullptr));
+  auto gains = mtest::model("differential", "{drive_gains: true, drive_gains_scale: prior}", r);
+  Eigen::VectorXd phi = gains->fullNominal();
+  phi.tail(6).setConstant(0.1);  // the dK columns: the recorded torque's, not the model's
+  EXPECT_FALSE(
+      gains->fullTorqueAt(q, qd, qdd, Eigen::VectorXd(), phi, &tau, nullptr, nullptr, nullptr));
+  EXPECT_THROW(gains->fullTorqueAt(q, qd, qdd, Eigen::VectorXd(), phi.head(10), &tau, nullptr,
+                                   nullptr, nullptr),
+               exid::Error);
 }
 
 TEST(Differential, ErrorsNameTheProblem) {

@@ -283,21 +283,35 @@ VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd
   return rate;
 }
 
+VectorXd ClosedLoop::fullOf(const VectorXd& theta) const {
+  const BaseParameters& B = model_->base();
+  VectorXd phi = VectorXd::Zero(B.numFull());
+  const VectorXd rest = restOf(theta);
+  for (int i = 0; i < B.rank(); ++i) phi[B.independent[static_cast<std::size_t>(i)]] = rest[i];
+  return phi;
+}
+
 VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorXd& q,
                                   const VectorXd& qd, MatrixXd* Mo, VectorXd* command) const {
   const int n = n_;
-  for (int k = 0; k <= n; ++k) {
-    s_.q.row(k) = q.transpose();
-    s_.qd.row(k) = qd.transpose();
+  // h = w(q, qd, 0) theta and M: the model's torque at theta when it gives it (O(n^2)), else
+  // (n + 1) n torques of its rows (theta's torque columns, if any, act through delivered())
+  VectorXd h;
+  MatrixXd M;
+  if (!model_->fullTorqueAt(q, qd, VectorXd::Zero(n), eta_, fullOf(theta), &h, nullptr, nullptr,
+                            &M)) {
+    for (int k = 0; k <= n; ++k) {
+      s_.q.row(k) = q.transpose();
+      s_.qd.row(k) = qd.transpose();
+    }
+    s_.qdd.setZero();
+    for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
+    const MatrixXd W = model_->designAt(s_, eta_, nullptr);
+    const VectorXd f = tcol_.empty() ? VectorXd(W * theta) : VectorXd(W * restOf(theta));
+    h = f.head(n);
+    M.resize(n, n);
+    for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
   }
-  s_.qdd.setZero();
-  for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
-  // (n + 1) n torques (theta's torque columns, if any, act through delivered())
-  const MatrixXd W = model_->designAt(s_, eta_, nullptr);
-  const VectorXd f = tcol_.empty() ? VectorXd(W * theta) : VectorXd(W * restOf(theta));
-  const VectorXd h = f.head(n);
-  MatrixXd M(n, n);
-  for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - h;
   M = 0.5 * (M + M.transpose());
   Eigen::LDLT<MatrixXd> ldlt(M);
   if (ldlt.info() != Eigen::Success || !(ldlt.vectorD().array() > 0).all())

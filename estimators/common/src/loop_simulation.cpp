@@ -56,16 +56,20 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   } else {
     *B = -ldlt.solve(w);
   }
-  // d(w theta)_i / d(q, qd) at fixed a: the design's VJP with row i = theta (its part in w)
+  // d(w theta)_i / d(q, qd) at fixed a: the model's torque derivatives at theta when it gives
+  // them, else the design's VJP with row i = theta (its part in w)
   MatrixXd Tq(n, n), Tqd(n, n);
-  MatrixXd G = MatrixXd::Zero(n, theta.size());
-  Samples grad;
-  for (int i = 0; i < n; ++i) {
-    G.setZero();
-    G.row(i) = rest.transpose();
-    model_->designVjpAt(s, eta_, G, &grad);
-    Tq.row(i) = grad.q.row(0);
-    Tqd.row(i) = grad.qd.row(0);
+  VectorXd tau;
+  if (!model_->fullTorqueAt(q, qd, a, eta_, fullOf(theta), &tau, &Tq, &Tqd, nullptr)) {
+    MatrixXd G = MatrixXd::Zero(n, theta.size());
+    Samples grad;
+    for (int i = 0; i < n; ++i) {
+      G.setZero();
+      G.row(i) = rest.transpose();
+      model_->designVjpAt(s, eta_, G, &grad);
+      Tq.row(i) = grad.q.row(0);
+      Tqd.row(i) = grad.qd.row(0);
+    }
   }
   // du/d(q, qd) = du/dtau_c dtau_c/d(q, qd) (sign(qd) has zero derivative)
   *A_q = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kp_).asDiagonal()) - Tq));

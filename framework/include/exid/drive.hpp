@@ -67,4 +67,16 @@ void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
                                Eigen::VectorXd* tau_m, Eigen::MatrixXd* dtau_dqm,
                                Eigen::MatrixXd* dtau_dqdm, Eigen::MatrixXd* dtau_dqddm);
 
+/// actuatorTorqueDerivatives with the full parameters `params` (numParameters(model, cols)
+/// values in parameterValues()'s order: the 10n standard inertial parameters, then each measured
+/// coordinate's enabled drive parameters) in place of the model's own: tau_m = Y params with
+/// Y = actuatorRegressor(qm, qdm, qddm), and its exact partial derivatives (sign(qd) has zero
+/// derivative). With dq and dqd null, dqdd (the mass matrix) comes from the composite rigid
+/// body algorithm and tau_m from recursive Newton-Euler, without tangents. Outputs other than
+/// tau_m may be null.
+void actuatorTorqueWith(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                        const Eigen::VectorXd& params, const Eigen::VectorXd& qm,
+                        const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                        Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq, Eigen::MatrixXd* dqd,
+                        Eigen::MatrixXd* dqdd);
 }  // namespace exid

@@ -111,6 +111,21 @@ class ObservationModel : public PluginObject {
   /// fullDesignVjp, eta empty.
   virtual void fullDesignVjpAt(const Samples& s, const Eigen::VectorXd& eta,
                                const Eigen::MatrixXd& dW, Samples* grad) const;
+  /// For a simulation of the model's robot (the estimators' closed loop): at one sample (q, qd,
+  /// qdd) of a model whose rows are one per joint, all joints, the rows times the full
+  /// parameters phi, tau = fullDesignAt(s, eta) phi, and (outputs not null) its exact partial
+  /// derivatives with respect to q, qd and qdd (n x n, row i the gradient of tau_i). phi is
+  /// zero in the torque columns (exid::torqueColumnKind). False when the model does not give
+  /// it; the caller then uses fullDesignAt and fullDesignVjpAt. The `differential` model gives
+  /// it by recursive Newton-Euler and the composite rigid body algorithm, without a regressor.
+  virtual bool fullTorqueAt(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                            const Eigen::VectorXd& qdd, const Eigen::VectorXd& eta,
+                            const Eigen::VectorXd& phi, Eigen::VectorXd* tau, Eigen::MatrixXd* d_q,
+                            Eigen::MatrixXd* d_qd, Eigen::MatrixXd* d_qdd) const {
+    (void)q, (void)qd, (void)qdd, (void)eta, (void)phi, (void)tau, (void)d_q, (void)d_qd,
+        (void)d_qdd;
+    return false;
+  }
   /// Random samples within the robot's limits used by bind() to find the base parameters.
   virtual Samples randomSamples(int count, std::uint64_t seed) const;
   /// The model's capabilities (per-sample rows, required signals).

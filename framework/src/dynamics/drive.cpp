@@ -265,4 +265,52 @@ void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
   }
 }
 
+void actuatorTorqueWith(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                        const Eigen::VectorXd& params, const Eigen::VectorXd& qm,
+                        const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                        Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq, Eigen::MatrixXd* dqd,
+                        Eigen::MatrixXd* dqdd) {
+  const int n = model.dof();
+  check(tau_m != nullptr, "actuatorTorqueWith: tau_m must be given");
+  if (params.size() != numParameters(model, cols))
+    throw Error("actuatorTorqueWith: params has " + std::to_string(params.size()) +
+                " entries (expected " + std::to_string(numParameters(model, cols)) + ")");
+  Eigen::VectorXd& q = detail::scratchVector(data, 0);
+  Eigen::VectorXd& qd = detail::scratchVector(data, 1);
+  Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
+  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+  Eigen::VectorXd& tau = detail::scratchVector(data, 3);
+  const Eigen::VectorXd pi = params.head(10 * n);
+  if (dq || dqd) {
+    inverseDynamicsDerivatives(model, data, q, qd, qdd, &pi, &tau, dq, dqd, dqdd);
+  } else {
+    tau = inverseDynamics(model, data, q, qd, qdd, &pi);
+    if (dqdd) *dqdd = massMatrix(model, data, q, &pi);
+  }
+  if (model.hasTransmission()) {
+    const Eigen::MatrixXd& T = model.transmission;
+    *tau_m = T.transpose() * tau;
+    for (Eigen::MatrixXd* x : {dq, dqd, dqdd})
+      if (x) *x = T.transpose() * *x * T;  // q = T qm + q0, tau_m = T^T tau
+  } else {
+    *tau_m = tau;
+  }
+  const int k = cols.count();
+  for (int j = 0; j < n && k > 0; ++j) {
+    int c = 10 * n + k * j;
+    if (cols.rotor_inertia) {
+      (*tau_m)[j] += params[c] * qddm[j];
+      if (dqdd) (*dqdd)(j, j) += params[c];
+      ++c;
+    }
+    if (cols.coulomb) (*tau_m)[j] += params[c++] * sgn(qdm[j]);
+    if (cols.viscous) {
+      (*tau_m)[j] += params[c] * qdm[j];
+      if (dqd) (*dqd)(j, j) += params[c];
+      ++c;
+    }
+    if (cols.offset) (*tau_m)[j] += params[c];
+  }
+}
+
 }  // namespace exid

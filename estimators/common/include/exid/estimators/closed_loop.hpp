@@ -154,6 +154,9 @@ class ClosedLoop {
   // theta without the torque columns (w's part), and the drives' torque u(tau_c) with
   // du_j/dtau_c,j in *slope
   Eigen::VectorXd restOf(const Eigen::VectorXd& theta) const;
+  /// The full parameters of restOf(theta): its base columns' entries, zero elsewhere (the model's
+  /// rows times it are the rows in base columns times restOf(theta)).
+  Eigen::VectorXd fullOf(const Eigen::VectorXd& theta) const;
   Eigen::VectorXd delivered(const Eigen::VectorXd& theta, const Eigen::VectorXd& tau_c,
                             const Eigen::VectorXd& qd, Eigen::VectorXd* slope) const;
 };
