@@ -158,6 +158,7 @@ void ClosedLoop::simulateFrom(
   SUNContext sctx = nullptr;
   check(SUNContext_Create(nullptr, &sctx) == 0, who_ + ": SUNContext_Create failed");
   N_Vector y = N_VNew_Serial(2 * n, sctx);
+  N_VEnableFusedOps_Serial(y, SUNTRUE);
   for (int j = 0; j < 2 * n; ++j) NV_Ith_S(y, j) = x0[j];
   void* mem = CVodeCreate(CV_BDF, sctx);
   SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
