@@ -355,10 +355,10 @@ class DifferentialModel : public exid::ObservationModel {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), P0 = exid::numParameters(R, cols_), E = extraPerJoint();
     const int T = loadCount() + gainCount();
-    exid::check(phi.size() == P0 + E * n + T,
-                fmt::format("model 'differential': fullTorqueAt: {} parameters, expected {}",
-                            phi.size(), P0 + E * n + T));
-    exid::check(tau != nullptr, "model 'differential': fullTorqueAt: tau must be given");
+    if (phi.size() != P0 + E * n + T || tau == nullptr)  // (a simulation's every step)
+      throw exid::Error(
+          fmt::format("model 'differential': fullTorqueAt: {} parameters, expected {}{}",
+                      phi.size(), P0 + E * n + T, tau ? "" : "; tau must be given"));
     if (static_cast<int>(sel_.size()) != n) return false;
     for (int i = 0; i < n; ++i)
       if (sel_[static_cast<std::size_t>(i)] != i) return false;

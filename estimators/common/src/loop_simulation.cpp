@@ -8,6 +8,7 @@
 #include <sunmatrix/sunmatrix_dense.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/LU>
 #include <cmath>
 #include <vector>
 
@@ -82,10 +83,6 @@ struct User {
   const ClosedLoop* loop;
   const VectorXd* theta;
   std::string error;
-  bool lin_valid = false;  // the last linearisation (sensRhs)
-  double lin_t = 0.0;
-  VectorXd lin_x;
-  MatrixXd A_q, A_qd, B;
 };
 
 // CVODES's own messages: the failure is reported once, as an exid::Error with the time.
@@ -107,33 +104,6 @@ int rhs(double t, N_Vector y, N_Vector yd, void* user) {
   }
 }
 
-// The sensitivity equations' right-hand side: S' = (df/dx) S + df/dtheta, exact.
-int sensRhs(int Ns, double t, N_Vector y, N_Vector, N_Vector* yS, N_Vector* ySdot, void* user,
-            N_Vector, N_Vector) {
-  auto* U = static_cast<User*>(user);
-  const int n = U->loop->dof();
-  try {
-    Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
-    // (the corrector asks again at the same point: the linearisation is kept)
-    if (!(U->lin_valid && U->lin_t == t && U->lin_x == x)) {
-      U->loop->linearize(*U->theta, t, x.head(n), x.tail(n), &U->A_q, &U->A_qd, &U->B);
-      U->lin_t = t;
-      U->lin_x = x;
-      U->lin_valid = true;
-    }
-    for (int j = 0; j < Ns; ++j) {
-      Eigen::Map<const VectorXd> s(NV_DATA_S(yS[j]), 2 * n);
-      Eigen::Map<VectorXd> sd(NV_DATA_S(ySdot[j]), 2 * n);
-      sd.head(n) = s.tail(n);
-      sd.tail(n) = U->A_q * s.head(n) + U->A_qd * s.tail(n) + U->B.col(j);
-    }
-    return 0;
-  } catch (const std::exception& e) {
-    U->error = e.what();
-    return -1;
-  }
-}
-
 }  // namespace
 
 void ClosedLoop::simulate(
@@ -147,6 +117,40 @@ void ClosedLoop::simulate(
   simulateFrom(theta, ref_.t0(), x0, times, tol, sens, at_sample);
 }
 
+// The sensitivities S = dx/dtheta obey S' = J(t) S + B(t), J = [0 I; A_q A_qd], B = [0; da/dtheta]
+// (linearize(), exact). They are integrated along CVODES's own steps of the state (which the
+// sensitivities never change: the state's path is the same with them or without), as one
+// 2n x p matrix, by the variable-step BDF2 formula (backward Euler on a first step and where a
+// step grows more than twice: BDF2's stability bound is 1 + sqrt 2), both L-stable: the loop's
+// fast modes (the friction's slope through a light link) are damped as they are, at any step.
+// Between steps S is read by the cubic Hermite interpolant of S and S' at the steps' ends.
+namespace {
+
+struct SensStep {
+  MatrixXd A_q, A_qd, B;  // at the step's end
+  MatrixXd S, Sd;         // S and S' there
+};
+
+void sensDerivative(SensStep* e) {
+  const Eigen::Index n = e->A_q.rows();
+  e->Sd.resize(e->S.rows(), e->S.cols());
+  e->Sd.topRows(n) = e->S.bottomRows(n);
+  e->Sd.bottomRows(n).noalias() = e->A_q * e->S.topRows(n) + e->B;
+  e->Sd.bottomRows(n).noalias() += e->A_qd * e->S.bottomRows(n);
+}
+
+// (I - g J) X = R for X = [Xq; Xv]: Xq = Rq + g Xv, (I - g A_qd - g^2 A_q) Xv = Rv + g A_q Rq.
+MatrixXd solveShifted(const SensStep& e, double g, const MatrixXd& R) {
+  const Eigen::Index n = e.A_q.rows();
+  MatrixXd A = MatrixXd::Identity(n, n) - g * e.A_qd - (g * g) * e.A_q;
+  MatrixXd X(R.rows(), R.cols());
+  X.bottomRows(n) = A.partialPivLu().solve(R.bottomRows(n) + g * (e.A_q * R.topRows(n)));
+  X.topRows(n) = R.topRows(n) + g * X.bottomRows(n);
+  return X;
+}
+
+}  // namespace
+
 void ClosedLoop::simulateFrom(
     const VectorXd& theta, double t0, const VectorXd& x0, const VectorXd& times,
     const Tolerances& tol, bool sens,
@@ -154,25 +158,25 @@ void ClosedLoop::simulateFrom(
   const int n = n_, p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
   check(x0.size() == 2 * n,
         fmt::format("{}: a start state of {} values, expected {}", who_, x0.size(), 2 * n));
-  User U{this, &theta, {}, false, 0.0, {}, {}, {}, {}};
+  User U{this, &theta, {}};
   SUNContext sctx = nullptr;
   check(SUNContext_Create(nullptr, &sctx) == 0, who_ + ": SUNContext_Create failed");
   N_Vector y = N_VNew_Serial(2 * n, sctx);
-  N_VEnableFusedOps_Serial(y, SUNTRUE);
+  N_Vector yk = N_VNew_Serial(2 * n, sctx);
   for (int j = 0; j < 2 * n; ++j) NV_Ith_S(y, j) = x0[j];
   void* mem = CVodeCreate(CV_BDF, sctx);
   SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
   SUNLinearSolver LS = SUNLinSol_Dense(y, A, sctx);
-  N_Vector* yS = nullptr;
   auto cleanup = [&] {
     CVodeFree(&mem);
-    if (yS) N_VDestroyVectorArray(yS, p);
     SUNLinSolFree(LS);
     SUNMatDestroy(A);
+    N_VDestroy(yk);
     N_VDestroy(y);
     SUNContext_Free(&sctx);
   };
   try {
+    const double t_end = times.size() > 0 ? times[times.size() - 1] : t0;
     check(mem != nullptr && CVodeInit(mem, &rhs, t0, y) == 0 &&
               CVodeSStolerances(mem, tol.rtol, tol.atol) == 0 && CVodeSetUserData(mem, &U) == 0 &&
               CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
@@ -180,43 +184,85 @@ void ClosedLoop::simulateFrom(
               CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
               // (the torque-driven loop: no step past the last time, where its input may end;
               // the closed loop keeps its free steps, which the stop time changes)
-              (!open_ || times.size() == 0 || CVodeSetStopTime(mem, times[times.size() - 1]) == 0),
+              (!open_ || times.size() == 0 || CVodeSetStopTime(mem, t_end) == 0),
           who_ + ": setting up CVODES failed");
-    MatrixXd S;
+    SensStep cur, next;
+    MatrixXd S_prev, S_k;
+    auto linearizeAt = [&](double t, const VectorXd& x, SensStep* e) {
+      linearize(theta, t, x.head(n), x.tail(n), &e->A_q, &e->A_qd, &e->B);
+    };
     if (sens) {
-      yS = N_VCloneVectorArray(p, y);
-      for (int j = 0; j < p; ++j) N_VConst(0.0, yS[j]);  // the start does not depend on theta
-      std::vector<double> abstol(static_cast<std::size_t>(p), tol.atol);
-      // staggered: the sensitivities are corrected once the state has converged, and they do
-      // not shorten the state's steps
-      check(CVodeSensInit(mem, p, CV_STAGGERED, &sensRhs, yS) == 0 &&
-                CVodeSensSStolerances(mem, std::sqrt(tol.rtol), abstol.data()) == 0 &&
-                CVodeSetSensErrCon(mem, SUNFALSE) == 0,
-            who_ + ": setting up the CVODES sensitivities failed");
-      S = MatrixXd::Zero(2 * n, p);
+      cur.S = MatrixXd::Zero(2 * n, p);  // the start does not depend on theta
+      linearizeAt(t0, x0, &cur);
+      sensDerivative(&cur);
     }
-    double at = t0;
-    for (Eigen::Index k = 0; k < times.size(); ++k) {
-      const double tk = times[k];
-      if (tk > at) {
-        double tret = at;
-        const int flag = CVode(mem, tk, y, &tret, CV_NORMAL);
-        if (!U.error.empty()) throw Error(U.error);
-        check(flag >= 0,
-              fmt::format("{}: the simulation failed at t = {} s (CVODES flag {}; a Coulomb "
-                          "friction through sign(qd) can make the closed loop chatter where a "
-                          "joint sticks: differential's coulomb_smoothing_rad_s smooths it; else "
-                          "try other rtol, atol, max_steps)",
-                          who_, tret, flag));
-        at = tk;
-        if (sens) {
-          CVodeGetSens(mem, &tret, yS);
-          for (int j = 0; j < p; ++j)
-            S.col(j) = Eigen::Map<const VectorXd>(NV_DATA_S(yS[j]), 2 * n);
+    double tn = t0, h_prev = 0.0;
+    Eigen::Index k = 0;
+    VectorXd x = x0;
+    auto emit = [&](double t1, const SensStep* end, double h) {
+      // the samples up to t1 (the state interpolated by CVODES, S by Hermite)
+      for (; k < times.size() && times[k] <= t1; ++k) {
+        const double tk = times[k];
+        if (tk == t1) {
+          x = Eigen::Map<const VectorXd>(NV_DATA_S(y), 2 * n);
+        } else {
+          if (CVodeGetDky(mem, tk, 0, yk) != 0)
+            throw Error(fmt::format("{}: the state at t = {} s cannot be read", who_, tk));
+          x = Eigen::Map<const VectorXd>(NV_DATA_S(yk), 2 * n);
         }
+        if (sens) {
+          if (tk == t1 || h <= 0.0) {
+            S_k = end->S;
+          } else {
+            const double u = (tk - tn) / h, u2 = u * u, u3 = u2 * u;
+            S_k = (2 * u3 - 3 * u2 + 1) * cur.S + ((u3 - 2 * u2 + u) * h) * cur.Sd +
+                  (3 * u2 - 2 * u3) * end->S + ((u3 - u2) * h) * end->Sd;
+          }
+        }
+        at_sample(static_cast<int>(k), x, sens ? &S_k : nullptr);
       }
-      const VectorXd x = Eigen::Map<const VectorXd>(NV_DATA_S(y), 2 * n);
-      at_sample(static_cast<int>(k), x, sens ? &S : nullptr);
+    };
+    emit(t0, &cur, 0.0);  // (samples at the start)
+    while (k < times.size()) {
+      double tret = tn;
+      // (tout, the next sample, sets the first step's size and the direction)
+      const int flag = CVode(mem, times[k], y, &tret, CV_ONE_STEP);
+      if (!U.error.empty()) throw Error(U.error);
+      if (flag < 0)
+        throw Error(
+            fmt::format("{}: the simulation failed at t = {} s (CVODES flag {}; a Coulomb "
+                        "friction through sign(qd) can make the closed loop chatter where a "
+                        "joint sticks: differential's coulomb_smoothing_rad_s smooths it; else "
+                        "try other rtol, atol, max_steps)",
+                        who_, tret, flag));
+      const double h = tret - tn;
+      if (!(h > 0.0))
+        throw Error(fmt::format("{}: the simulation made no progress at t = {} s", who_, tret));
+      if (sens) {
+        const VectorXd xe = Eigen::Map<const VectorXd>(NV_DATA_S(y), 2 * n);
+        linearizeAt(tret, xe, &next);
+        MatrixXd R;
+        const double w = h_prev > 0.0 ? h / h_prev : 0.0;
+        if (w > 0.0 && w <= 2.0) {  // BDF2 with steps h_prev, h
+          const double c = (1 + w) * (1 + w) / (1 + 2 * w), d = w * w / (1 + 2 * w),
+                       beta = (1 + w) / (1 + 2 * w);
+          R = c * cur.S - d * S_prev;
+          R.bottomRows(n) += (beta * h) * next.B;
+          next.S = solveShifted(next, beta * h, R);
+        } else {  // backward Euler
+          R = cur.S;
+          R.bottomRows(n) += h * next.B;
+          next.S = solveShifted(next, h, R);
+        }
+        sensDerivative(&next);
+      }
+      emit(tret, &next, h);
+      if (sens) {
+        S_prev.swap(cur.S);
+        std::swap(cur, next);
+      }
+      tn = tret;
+      h_prev = h;
     }
   } catch (...) {
     cleanup();
