@@ -146,9 +146,9 @@ VectorXd ClosedLoop::recordedTorque(double t) const {
   const double* b = rec_t_.data();
   Eigen::Index k = static_cast<Eigen::Index>(std::upper_bound(b, b + K, t) - b) - 1;
   k = std::max<Eigen::Index>(3, std::min<Eigen::Index>(k, K - 5));
-  check(t >= rec_t_[3] - 1e-12 && t <= rec_t_[K - 5] + 1e-12,
-        fmt::format("{}: t = {} s is outside the recorded torque's span [{}, {}] s", who_, t,
-                    rec_t_[3], rec_t_[K - 5]));
+  if (!(t >= rec_t_[3] - 1e-12 && t <= rec_t_[K - 5] + 1e-12))  // (every step: no format)
+    throw Error(fmt::format("{}: t = {} s is outside the recorded torque's span [{}, {}] s", who_,
+                            t, rec_t_[3], rec_t_[K - 5]));
   // eight samples about t: the spline's interval [t_k, t_k+1] and its slopes' neighbours
   const VectorXd tl = rec_t_.segment(k - 3, 8);
   const MatrixXd Xl = rec_tau_.middleRows(k - 3, 8);

@@ -31,31 +31,33 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   s.q = q.transpose();
   s.qd = qd.transpose();
   s.qdd = a.transpose();
-  MatrixXd dWn;
-  MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
   const Eigen::LDLT<MatrixXd> ldlt(M);
-  // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
   VectorXd slope;
   delivered(theta, tau_c, qd, &slope);
-  for (const TorqueColumn& c : tcol_) {
-    w.col(c.base).setZero();
-    const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
-    w(c.joint, c.base) = c.kind == 1 ? -tau_c[c.joint] : std::abs(tau_c[c.joint]) * sq;
-  }
   const VectorXd rest = restOf(theta);
-  if (eta_sens_) {
-    // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
-    MatrixXd wn(n, theta.size() + eta_.size());
-    wn.leftCols(theta.size()) = w;
-    wn.rightCols(eta_.size()).setZero();
-    for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
-      const int b = nl_base_[static_cast<std::size_t>(l)];
-      if (b >= 0)
-        wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * rest[b];
+  if (B) {
+    MatrixXd dWn;
+    MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
+    // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
+    for (const TorqueColumn& c : tcol_) {
+      w.col(c.base).setZero();
+      const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
+      w(c.joint, c.base) = c.kind == 1 ? -tau_c[c.joint] : std::abs(tau_c[c.joint]) * sq;
     }
-    *B = -ldlt.solve(wn);
-  } else {
-    *B = -ldlt.solve(w);
+    if (eta_sens_) {
+      // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
+      MatrixXd wn(n, theta.size() + eta_.size());
+      wn.leftCols(theta.size()) = w;
+      wn.rightCols(eta_.size()).setZero();
+      for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
+        const int b = nl_base_[static_cast<std::size_t>(l)];
+        if (b >= 0)
+          wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * rest[b];
+      }
+      *B = -ldlt.solve(wn);
+    } else {
+      *B = -ldlt.solve(w);
+    }
   }
   // d(w theta)_i / d(q, qd) at fixed a: the model's torque derivatives at theta when it gives
   // them, else the design's VJP with row i = theta (its part in w)
@@ -84,6 +86,31 @@ struct User {
   const VectorXd* theta;
   std::string error;
 };
+
+// The state's Jacobian for CVODES's Newton iterations: [0 I; A_q A_qd] (linearize(), exact).
+int jacobian(double t, N_Vector y, N_Vector, SUNMatrix J, void* user, N_Vector, N_Vector,
+             N_Vector) {
+  auto* U = static_cast<User*>(user);
+  const int n = U->loop->dof();
+  try {
+    Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
+    MatrixXd A_q, A_qd;
+    U->loop->linearize(*U->theta, t, x.head(n), x.tail(n), &A_q, &A_qd, nullptr);
+    if (!A_q.allFinite() || !A_qd.allFinite()) return 1;
+    SUNMatZero(J);
+    for (int i = 0; i < n; ++i) {
+      SM_ELEMENT_D(J, i, n + i) = 1.0;
+      for (int j = 0; j < n; ++j) {
+        SM_ELEMENT_D(J, n + i, j) = A_q(i, j);
+        SM_ELEMENT_D(J, n + i, n + j) = A_qd(i, j);
+      }
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    U->error = e.what();
+    return -1;
+  }
+}
 
 // CVODES's own messages: the failure is reported once, as an exid::Error with the time.
 void silent(int, const char*, const char*, char*, void*) {}
@@ -180,7 +207,7 @@ void ClosedLoop::simulateFrom(
     check(mem != nullptr && CVodeInit(mem, &rhs, t0, y) == 0 &&
               CVodeSStolerances(mem, tol.rtol, tol.atol) == 0 && CVodeSetUserData(mem, &U) == 0 &&
               CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
-              CVodeSetLinearSolver(mem, LS, A) == 0 &&
+              CVodeSetLinearSolver(mem, LS, A) == 0 && CVodeSetJacFn(mem, &jacobian) == 0 &&
               CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
               // (the torque-driven loop: no step past the last time, where its input may end;
               // the closed loop keeps its free steps, which the stop time changes)

@@ -147,7 +147,11 @@ struct DynamicsData {
   std::vector<V3> wb, wdb, aob;
   // RNEA / CRBA
   std::vector<SV> f;
-  std::vector<Eigen::Matrix<double, 6, 6>> Ic;
+  // the composite rigid bodies of the CRBA: rotational inertia about the frame's origin, first
+  // moment of mass, mass (a body's spatial inertia [I [h]x; [h]x^T m 1])
+  std::vector<M3> cI;
+  std::vector<V3> ch;
+  std::vector<double> cm;
   std::vector<Pose> X0;
   // sensor frame
   M3 Rs;
@@ -245,7 +249,9 @@ void setup(const RobotModel& model, DynamicsData& d) {
   d.wdb.assign(N, V3::Zero());
   d.aob.assign(N, V3::Zero());
   d.f.assign(N, SV());
-  d.Ic.assign(N, Eigen::Matrix<double, 6, 6>::Zero());
+  d.cI.assign(N, M3::Zero());
+  d.ch.assign(N, V3::Zero());
+  d.cm.assign(N, 0.0);
   d.X0.assign(N, Pose{});
   d.s.assign(P, SV());
   d.sb.assign(P, SV());
@@ -760,53 +766,50 @@ Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& d, const Eigen
   checkState(model, q, nullptr, nullptr, "massMatrix");
   if (pi) checkSize(*pi, 10 * n, "pi", "massMatrix");
   forwardPass(model, d, q.data(), nullptr, nullptr, Level::Position, false);
-  using M6 = Eigen::Matrix<double, 6, 6>;
+  // Composite rigid bodies, leaves first, each as (I about its origin, h = m c, m) in its own
+  // frame: moved to the parent's frame (R, p: the child's frame there) by
+  //   m' = m,  h' = R h + m p,  I' = R I R^T - [R h]x [p]x - [p]x [R h]x - m [p]x^2,
+  // which is X^T I6 X of the spatial inertia, in 3 x 3 blocks.
   for (int j = 0; j < n; ++j) {
     const double* g =
         pi ? pi->data() + 10 * j : model.bodies[static_cast<size_t>(j)].inertia.data();
-    M6& I = d.Ic[static_cast<size_t>(j)];
-    M3 In;
-    In << g[0], g[1], g[2], g[1], g[3], g[4], g[2], g[4], g[5];
-    M3 H;
-    H << 0, -g[8], g[7], g[8], 0, -g[6], -g[7], g[6], 0;
-    I.topLeftCorner<3, 3>() = In;
-    I.topRightCorner<3, 3>() = H;
-    I.bottomLeftCorner<3, 3>() = H.transpose();
-    I.bottomRightCorner<3, 3>() = g[9] * M3::Identity();
+    M3& I = d.cI[static_cast<size_t>(j)];
+    I << g[0], g[1], g[2], g[1], g[3], g[4], g[2], g[4], g[5];
+    d.ch[static_cast<size_t>(j)] = V3(g[6], g[7], g[8]);
+    d.cm[static_cast<size_t>(j)] = g[9];
   }
-  auto Xmat = [&](int j) {
-    M6 X = M6::Zero();
-    const M3& R = d.R[static_cast<size_t>(j)];
-    const V3& p = d.p[static_cast<size_t>(j)];
-    M3 P;
-    P << 0, -p[2], p[1], p[2], 0, -p[0], -p[1], p[0], 0;
-    X.topLeftCorner<3, 3>() = R.transpose();
-    X.bottomRightCorner<3, 3>() = R.transpose();
-    X.bottomLeftCorner<3, 3>() = -R.transpose() * P;
-    return X;
-  };
   for (int j = n - 1; j >= 0; --j) {
     const int par = d.J[static_cast<size_t>(j)].parent;
-    if (par >= 0) {
-      const M6 X = Xmat(j);
-      d.Ic[static_cast<size_t>(par)] += X.transpose() * d.Ic[static_cast<size_t>(j)] * X;
-    }
+    if (par < 0) continue;
+    const auto u = static_cast<size_t>(j), w = static_cast<size_t>(par);
+    const M3& R = d.R[u];
+    const V3& p = d.p[u];
+    const double m = d.cm[u];
+    const V3 Rh = R * d.ch[u];
+    const M3 P = skew(p), RH = skew(Rh);
+    d.cI[w].noalias() += R * d.cI[u] * R.transpose();
+    d.cI[w] -= RH * P + P * RH + m * (P * P);
+    d.ch[w] += Rh + m * p;
+    d.cm[w] += m;
   }
   Eigen::MatrixXd M = Eigen::MatrixXd::Zero(n, n);
-  auto toVec = [](const SV& s) {
-    Eigen::Matrix<double, 6, 1> x;
-    x << s.w, s.v;
-    return x;
-  };
   for (int i = 0; i < n; ++i) {
-    Eigen::Matrix<double, 6, 1> F =
-        d.Ic[static_cast<size_t>(i)] * toVec(d.J[static_cast<size_t>(i)].S);
-    M(i, i) = toVec(d.J[static_cast<size_t>(i)].S).dot(F);
+    const auto u = static_cast<size_t>(i);
+    const SV& S = d.J[u].S;
+    // the force the composite body i needs for a unit qdd_i, carried to each ancestor:
+    // n' = R n + p x (R f), f' = R f
+    V3 fn = d.cI[u] * S.w + d.ch[u].cross(S.v);
+    V3 ff = d.cm[u] * S.v - d.ch[u].cross(S.w);
+    M(i, i) = S.w.dot(fn) + S.v.dot(ff);
     int j = i;
     while (d.J[static_cast<size_t>(j)].parent >= 0) {
-      F = Xmat(j).transpose() * F;
-      j = d.J[static_cast<size_t>(j)].parent;
-      M(i, j) = M(j, i) = toVec(d.J[static_cast<size_t>(j)].S).dot(F);
+      const auto v = static_cast<size_t>(j);
+      const V3 Rf = d.R[v] * ff;
+      fn = d.R[v] * fn + d.p[v].cross(Rf);
+      ff = Rf;
+      j = d.J[v].parent;
+      const SV& Sj = d.J[static_cast<size_t>(j)].S;
+      M(i, j) = M(j, i) = Sj.w.dot(fn) + Sj.v.dot(ff);
     }
   }
   return M;
