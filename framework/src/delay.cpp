@@ -72,21 +72,23 @@ void shiftedRows(const Eigen::VectorXd& t, const Eigen::MatrixXd& X, int per_sam
                  int first, int last, Eigen::MatrixXd* out, Eigen::MatrixXd* d_out) {
   const int K = static_cast<int>(t.size());
   const Eigen::Index P = per_sample, n = X.cols();
-  check(per_sample >= 1 && X.rows() == K * P && K >= 6,
+  // (messages formatted only on failure: a simulation reads its input here at every step)
+  if (!(per_sample >= 1 && X.rows() == K * P && K >= 6))
+    throw Error(
         fmt::format("shiftedRows: {} samples of {} rows each and {} rows (at least 6 samples)", K,
                     per_sample, X.rows()));
-  check(0 <= first && first <= last && last <= K,
-        fmt::format("shiftedRows: samples [{}, {}) outside {}", first, last, K));
+  if (!(0 <= first && first <= last && last <= K))
+    throw Error(fmt::format("shiftedRows: samples [{}, {}) outside {}", first, last, K));
   out->setZero((last - first) * P, n);
   if (d_out) d_out->setZero((last - first) * P, n);
   int i = 2;  // interval [t_i, t_{i+1}], 2 <= i <= K - 4
   double w[6], dw[6];
   for (int k = first; k < last; ++k) {
     const double at = t[k] + shift_s;
-    check(at >= t[2] && at <= t[K - 3],
-          fmt::format("shiftedRows: t = {} s shifted by {} s lies outside the interpolable "
-                      "samples [{}, {}] s",
-                      t[k], shift_s, t[2], t[K - 3]));
+    if (!(at >= t[2] && at <= t[K - 3]))
+      throw Error(fmt::format("shiftedRows: t = {} s shifted by {} s lies outside the "
+                              "interpolable samples [{}, {}] s",
+                              t[k], shift_s, t[2], t[K - 3]));
     // the interval holding `at` (the targets increase with k: move forward, rarely back)
     while (i > 2 && at < t[i]) --i;
     while (i < K - 4 && at > t[i + 1]) ++i;
