@@ -239,7 +239,11 @@ class Didim : public exid::Estimator {
       priorTerms(theta, &cur);
     }
     record(cur);
-    double mu = 1e-3;
+    // Levenberg-Marquardt's damping (relative to diag(J^T J)) by Nielsen's rule: after an
+    // accepted step mu *= max(1/3, 1 - (2 rho - 1)^3), rho the actual over the predicted
+    // decrease; after a rejected one mu *= nu, nu doubling (a fixed up/down factor makes the
+    // damping oscillate: a rejected trial, a whole simulation, every other iteration)
+    double mu = 1e-3, nu = 2.0;
     int it = 0, sims = 1, round = 1;
     std::string stop;
     for (it = 1; it <= max_iter_; ++it) {
@@ -273,7 +277,8 @@ class Didim : public exid::Estimator {
         // trials without the sensitivities; the accepted point gets them
         if (D_ && std::abs(theta[p + L_] + step[p + L_]) > delay_max_) {
           ++rejected_bound_;  // (a delay beyond measurement_delay_max_s is a rejected step)
-          mu *= 4;
+          mu *= nu;
+          nu *= 2;
           continue;
         }
         Sim trial;
@@ -287,6 +292,7 @@ class Didim : public exid::Estimator {
         ++sims;
         if (ok && trial.total() <= cur.total()) {
           decrease = (cur.total() - trial.total()) / std::max(cur.total(), 1e-300);
+          const double rho = (cur.total() - trial.total()) / std::max(predicted, 1e-300);
           // theta relative to its norm; log eta as it is (a relative change of eta); the
           // delay relative to its bound
           moved = step.head(p).norm() / std::max(theta.head(p).norm(), 1e-300);
@@ -297,10 +303,12 @@ class Didim : public exid::Estimator {
           priorTerms(theta, &cur);
           ++sims;
           record(cur);
-          mu = std::max(mu / 3, 1e-12);
+          mu = std::max(mu * std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3)), 1e-12);
+          nu = 2.0;
           accepted = true;
         } else {
-          mu *= 4;
+          mu *= nu;
+          nu *= 2;
         }
       }
       if (flat) {
