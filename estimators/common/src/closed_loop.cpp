@@ -77,6 +77,7 @@ std::vector<ParamDecl> ClosedLoop::params() {
       param_double("rtol", 1e-8, "", "the simulation's relative tolerance", 0.0, 1.0, true),
       param_double("atol", 1e-10, "", "the simulation's absolute tolerance", 0.0, 1.0, true),
       param_int("max_steps", 20000, "CVODES steps between two samples at most", 1, 1e9),
+
   };
 }
 

@@ -85,6 +85,10 @@ struct User {
   const ClosedLoop* loop;
   const VectorXd* theta;
   std::string error;
+  bool lin_valid = false;  // the last linearisation (sensRhs)
+  double lin_t = 0.0;
+  VectorXd lin_x;
+  MatrixXd A_q, A_qd, B;
 };
 
 // The state's Jacobian for CVODES's Newton iterations: [0 I; A_q A_qd] (linearize(), exact).
@@ -104,6 +108,33 @@ int jacobian(double t, N_Vector y, N_Vector, SUNMatrix J, void* user, N_Vector, 
         SM_ELEMENT_D(J, n + i, j) = A_q(i, j);
         SM_ELEMENT_D(J, n + i, n + j) = A_qd(i, j);
       }
+    }
+    return 0;
+  } catch (const std::exception& e) {
+    U->error = e.what();
+    return -1;
+  }
+}
+
+// CVODES's forward sensitivities' right-hand side: S' = (df/dx) S + df/dtheta, exact.
+int sensRhs(int Ns, double t, N_Vector y, N_Vector, N_Vector* yS, N_Vector* ySdot, void* user,
+            N_Vector, N_Vector) {
+  auto* U = static_cast<User*>(user);
+  const int n = U->loop->dof();
+  try {
+    Eigen::Map<const VectorXd> x(NV_DATA_S(y), 2 * n);
+    // (the corrector asks again at the same point: the linearisation is kept)
+    if (!(U->lin_valid && U->lin_t == t && U->lin_x == x)) {
+      U->loop->linearize(*U->theta, t, x.head(n), x.tail(n), &U->A_q, &U->A_qd, &U->B);
+      U->lin_t = t;
+      U->lin_x = x;
+      U->lin_valid = true;
+    }
+    for (int j = 0; j < Ns; ++j) {
+      Eigen::Map<const VectorXd> s(NV_DATA_S(yS[j]), 2 * n);
+      Eigen::Map<VectorXd> sd(NV_DATA_S(ySdot[j]), 2 * n);
+      sd.head(n) = s.tail(n);
+      sd.tail(n) = U->A_q * s.head(n) + U->A_qd * s.tail(n) + U->B.col(j);
     }
     return 0;
   } catch (const std::exception& e) {
@@ -135,13 +166,13 @@ int rhs(double t, N_Vector y, N_Vector yd, void* user) {
 
 void ClosedLoop::simulate(
     const VectorXd& theta, const VectorXd& times, const Tolerances& tol, bool sens,
-    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
+    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample, Path* path) const {
   check(!open_, who_ + ": the torque-driven loop has no reference to start from");
   VectorXd qr, qdr, qddr;
   ref_.eval(ref_.t0(), &qr, &qdr, &qddr);
   VectorXd x0(2 * n_);
   x0 << qr, qdr;
-  simulateFrom(theta, ref_.t0(), x0, times, tol, sens, at_sample);
+  simulateFrom(theta, ref_.t0(), x0, times, tol, sens, at_sample, path);
 }
 
 // The sensitivities S = dx/dtheta obey S' = J(t) S + B(t), J = [0 I; A_q A_qd], B = [0; da/dtheta]
@@ -181,11 +212,25 @@ MatrixXd solveShifted(const SensStep& e, double g, const MatrixXd& R) {
 void ClosedLoop::simulateFrom(
     const VectorXd& theta, double t0, const VectorXd& x0, const VectorXd& times,
     const Tolerances& tol, bool sens,
-    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
-  const int n = n_, p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
+    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample, Path* path) const {
+  const int n = n_;
   check(x0.size() == 2 * n,
         fmt::format("{}: a start state of {} values, expected {}", who_, x0.size(), 2 * n));
-  User U{this, &theta, {}};
+  // with the sensitivities: the state's path first, then the sensitivities along it (or
+  // CVODES's forward sensitivities with it)
+  const bool cv = sens && tol.cvodes_sensitivities;
+  const int p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
+  Path own;
+  Path* rec = sens && !cv ? &own : (sens ? nullptr : path);
+  if (rec) {
+    rec->t0 = t0;
+    rec->x0 = x0;
+    rec->t.clear();
+    rec->x.clear();
+    rec->samples.resize(2 * n, times.size());
+    rec->times = times;
+  }
+  User U{this, &theta, {}, false, 0.0, {}, {}, {}, {}};
   SUNContext sctx = nullptr;
   check(SUNContext_Create(nullptr, &sctx) == 0, who_ + ": SUNContext_Create failed");
   N_Vector y = N_VNew_Serial(2 * n, sctx);
@@ -194,8 +239,10 @@ void ClosedLoop::simulateFrom(
   void* mem = CVodeCreate(CV_BDF, sctx);
   SUNMatrix A = SUNDenseMatrix(2 * n, 2 * n, sctx);
   SUNLinearSolver LS = SUNLinSol_Dense(y, A, sctx);
+  N_Vector* yS = nullptr;
   auto cleanup = [&] {
     CVodeFree(&mem);
+    if (yS) N_VDestroyVectorArray(yS, p);
     SUNLinSolFree(LS);
     SUNMatDestroy(A);
     N_VDestroy(yk);
@@ -213,43 +260,44 @@ void ClosedLoop::simulateFrom(
               // the closed loop keeps its free steps, which the stop time changes)
               (!open_ || times.size() == 0 || CVodeSetStopTime(mem, t_end) == 0),
           who_ + ": setting up CVODES failed");
-    SensStep cur, next;
-    MatrixXd S_prev, S_k;
-    auto linearizeAt = [&](double t, const VectorXd& x, SensStep* e) {
-      linearize(theta, t, x.head(n), x.tail(n), &e->A_q, &e->A_qd, &e->B);
-    };
-    if (sens) {
-      cur.S = MatrixXd::Zero(2 * n, p);  // the start does not depend on theta
-      linearizeAt(t0, x0, &cur);
-      sensDerivative(&cur);
+    MatrixXd S;
+    if (cv) {
+      N_VEnableFusedOps_Serial(y, SUNTRUE);
+      yS = N_VCloneVectorArray(p, y);
+      for (int j = 0; j < p; ++j) N_VConst(0.0, yS[j]);  // the start does not depend on theta
+      std::vector<double> abstol(static_cast<std::size_t>(p), tol.atol);
+      check(CVodeSensInit(mem, p, CV_STAGGERED, &sensRhs, yS) == 0 &&
+                CVodeSensSStolerances(mem, std::sqrt(tol.rtol), abstol.data()) == 0 &&
+                CVodeSetSensErrCon(mem, SUNFALSE) == 0,
+            who_ + ": setting up the CVODES sensitivities failed");
+      S = MatrixXd::Zero(2 * n, p);
     }
-    double tn = t0, h_prev = 0.0;
+    double tn = t0;
     Eigen::Index k = 0;
     VectorXd x = x0;
-    auto emit = [&](double t1, const SensStep* end, double h) {
-      // the samples up to t1 (the state interpolated by CVODES, S by Hermite)
+    auto emit = [&](double t1) {  // the samples up to t1 (interpolated by CVODES)
       for (; k < times.size() && times[k] <= t1; ++k) {
         const double tk = times[k];
         if (tk == t1) {
           x = Eigen::Map<const VectorXd>(NV_DATA_S(y), 2 * n);
+        } else if (tk == t0) {
+          x = x0;
         } else {
           if (CVodeGetDky(mem, tk, 0, yk) != 0)
             throw Error(fmt::format("{}: the state at t = {} s cannot be read", who_, tk));
           x = Eigen::Map<const VectorXd>(NV_DATA_S(yk), 2 * n);
         }
-        if (sens) {
-          if (tk == t1 || h <= 0.0) {
-            S_k = end->S;
-          } else {
-            const double u = (tk - tn) / h, u2 = u * u, u3 = u2 * u;
-            S_k = (2 * u3 - 3 * u2 + 1) * cur.S + ((u3 - 2 * u2 + u) * h) * cur.Sd +
-                  (3 * u2 - 2 * u3) * end->S + ((u3 - u2) * h) * end->Sd;
-          }
+        if (rec) rec->samples.col(k) = x;
+        if (cv && tk > t0) {
+          if (CVodeGetSensDky(mem, tk, 0, yS) != 0)
+            throw Error(fmt::format("{}: the sensitivities at t = {} s cannot be read", who_, tk));
+          for (int j = 0; j < p; ++j)
+            S.col(j) = Eigen::Map<const VectorXd>(NV_DATA_S(yS[j]), 2 * n);
         }
-        at_sample(static_cast<int>(k), x, sens ? &S_k : nullptr);
+        if (!sens || cv) at_sample(static_cast<int>(k), x, cv ? &S : nullptr);
       }
     };
-    emit(t0, &cur, 0.0);  // (samples at the start)
+    emit(t0);  // (samples at the start)
     while (k < times.size()) {
       double tret = tn;
       // (tout, the next sample, sets the first step's size and the direction)
@@ -262,40 +310,75 @@ void ClosedLoop::simulateFrom(
                         "joint sticks: differential's coulomb_smoothing_rad_s smooths it; else "
                         "try other rtol, atol, max_steps)",
                         who_, tret, flag));
-      const double h = tret - tn;
-      if (!(h > 0.0))
+      if (!(tret > tn))
         throw Error(fmt::format("{}: the simulation made no progress at t = {} s", who_, tret));
-      if (sens) {
-        const VectorXd xe = Eigen::Map<const VectorXd>(NV_DATA_S(y), 2 * n);
-        linearizeAt(tret, xe, &next);
-        MatrixXd R;
-        const double w = h_prev > 0.0 ? h / h_prev : 0.0;
-        if (w > 0.0 && w <= 2.0) {  // BDF2 with steps h_prev, h
-          const double c = (1 + w) * (1 + w) / (1 + 2 * w), d = w * w / (1 + 2 * w),
-                       beta = (1 + w) / (1 + 2 * w);
-          R = c * cur.S - d * S_prev;
-          R.bottomRows(n) += (beta * h) * next.B;
-          next.S = solveShifted(next, beta * h, R);
-        } else {  // backward Euler
-          R = cur.S;
-          R.bottomRows(n) += h * next.B;
-          next.S = solveShifted(next, h, R);
-        }
-        sensDerivative(&next);
+      if (rec) {
+        rec->t.push_back(tret);
+        rec->x.insert(rec->x.end(), NV_DATA_S(y), NV_DATA_S(y) + 2 * n);
       }
-      emit(tret, &next, h);
-      if (sens) {
-        S_prev.swap(cur.S);
-        std::swap(cur, next);
-      }
+      emit(tret);
       tn = tret;
-      h_prev = h;
     }
   } catch (...) {
     cleanup();
     throw;
   }
   cleanup();
+  if (sens && !cv) sensitivitiesAlong(theta, own, at_sample);
+}
+
+void ClosedLoop::sensitivitiesAlong(
+    const VectorXd& theta, const Path& path,
+    const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample) const {
+  const int n = n_, p = static_cast<int>(theta.size() + (eta_sens_ ? eta_.size() : 0));
+  const VectorXd& times = path.times;
+  check(path.x0.size() == 2 * n && path.x.size() == path.t.size() * 2 * n &&
+            path.samples.rows() == 2 * n && path.samples.cols() == times.size(),
+        who_ + ": sensitivitiesAlong: not the path of a whole simulation");
+  SensStep cur, next;
+  MatrixXd S_prev, S_k;
+  cur.S = MatrixXd::Zero(2 * n, p);  // the start does not depend on theta
+  linearize(theta, path.t0, path.x0.head(n), path.x0.tail(n), &cur.A_q, &cur.A_qd, &cur.B);
+  sensDerivative(&cur);
+  double tn = path.t0, h_prev = 0.0;
+  Eigen::Index k = 0;
+  for (; k < times.size() && times[k] <= path.t0; ++k)
+    at_sample(static_cast<int>(k), path.samples.col(k), &cur.S);
+  for (std::size_t i = 0; i < path.t.size() && k < times.size(); ++i) {
+    const double t1 = path.t[i], h = t1 - tn;
+    const Eigen::Map<const VectorXd> xe(path.x.data() + 2 * n * i, 2 * n);
+    linearize(theta, t1, xe.head(n), xe.tail(n), &next.A_q, &next.A_qd, &next.B);
+    MatrixXd R;
+    const double w = h_prev > 0.0 ? h / h_prev : 0.0;
+    if (w > 0.0 && w <= 2.0) {  // BDF2 with steps h_prev, h
+      const double c = (1 + w) * (1 + w) / (1 + 2 * w), d = w * w / (1 + 2 * w),
+                   beta = (1 + w) / (1 + 2 * w);
+      R = c * cur.S - d * S_prev;
+      R.bottomRows(n) += (beta * h) * next.B;
+      next.S = solveShifted(next, beta * h, R);
+    } else {  // backward Euler
+      R = cur.S;
+      R.bottomRows(n) += h * next.B;
+      next.S = solveShifted(next, h, R);
+    }
+    sensDerivative(&next);
+    for (; k < times.size() && times[k] <= t1; ++k) {  // S between the steps' ends: Hermite
+      const double tk = times[k];
+      if (tk == t1) {
+        S_k = next.S;
+      } else {
+        const double u = (tk - tn) / h, u2 = u * u, u3 = u2 * u;
+        S_k = (2 * u3 - 3 * u2 + 1) * cur.S + ((u3 - 2 * u2 + u) * h) * cur.Sd +
+              (3 * u2 - 2 * u3) * next.S + ((u3 - u2) * h) * next.Sd;
+      }
+      at_sample(static_cast<int>(k), path.samples.col(k), &S_k);
+    }
+    S_prev.swap(cur.S);
+    std::swap(cur, next);
+    tn = t1;
+    h_prev = h;
+  }
+  check(k == times.size(), who_ + ": sensitivitiesAlong: the path ends before the last sample");
 }
 
 }  // namespace exid::estimators

@@ -103,8 +103,9 @@ class ClosedLoop {
   struct Tolerances {
     double rtol = 1e-8, atol = 1e-10;
     std::int64_t max_steps = 20000;
+    bool cvodes_sensitivities = false;  // CVODES's forward sensitivities, not BDF2 along its steps
     static Tolerances from(const ParamSet& p) {
-      return {p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps")};
+      return {p.getDouble("rtol"), p.getDouble("atol"), p.getInt("max_steps"), false};
     }
   };
   /// The loop at theta from the reference's start, integrated by CVODES (BDF), and at each of
@@ -115,17 +116,36 @@ class ClosedLoop {
   /// they never change (the state's path is the same with them or without), by the
   /// variable-step BDF2 formula (L-stable; backward Euler on a first step and where a step
   /// grows more than twice), and read between steps by cubic Hermite interpolation: second
-  /// order in the steps, to about 1e-4 of central differences in the tests. A failure is an
+  /// order in the steps, to about 1e-4 of central differences in the tests. With
+  /// tol.cvodes_sensitivities, CVODES's own forward sensitivities instead (staggered, their
+  /// right-hand side from linearize(), outside the steps' error control). A failure is an
   /// exid::Error naming the time.
-  void simulate(
-      const Eigen::VectorXd& theta, const Eigen::VectorXd& times, const Tolerances& tol,
-      bool sensitivities,
-      const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at) const;
+  /// The path of a simulation: CVODES's steps (their ends' times and states) and the states at
+  /// the samples. Recorded by simulate()/simulateFrom() (path not null), it gives that
+  /// simulation's sensitivities by sensitivitiesAlong() without integrating the state again.
+  struct Path {
+    double t0 = 0.0;
+    Eigen::VectorXd x0, times;
+    std::vector<double> t;    // the steps' ends
+    std::vector<double> x;    // the states there, 2n each
+    Eigen::MatrixXd samples;  // the states at `times`, one column each
+  };
+  void simulate(const Eigen::VectorXd& theta, const Eigen::VectorXd& times, const Tolerances& tol,
+                bool sensitivities,
+                const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at,
+                Path* path = nullptr) const;
   /// The same from the state x0 = (q, qd) at t0 (which does not depend on theta: S starts at
   /// 0); `times` after t0.
   void simulateFrom(
       const Eigen::VectorXd& theta, double t0, const Eigen::VectorXd& x0,
       const Eigen::VectorXd& times, const Tolerances& tol, bool sensitivities,
+      const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at,
+      Path* path = nullptr) const;
+  /// The sensitivities of the simulation at theta that recorded `path` (with the same
+  /// nonlinear parameters and setNonlinear's sensitivities), as simulateFrom() gives them:
+  /// at(k, x, S) for each of its samples, in order.
+  void sensitivitiesAlong(
+      const Eigen::VectorXd& theta, const Path& path,
       const std::function<void(int, const Eigen::VectorXd&, const Eigen::MatrixXd*)>& at) const;
 
  private:
