@@ -57,6 +57,23 @@ TEST(DidimOpen, RecoversThePlantFromTheRecordedTorqueWithoutItsController) {
   EXPECT_GT(err_ls, 1e-3);
   EXPECT_EQ(e.details.find("loop")->asString(), "open");
   EXPECT_EQ(w.find("windows")->asInt(), 8);
+  // every accepted step's Jacobian was taken along its trial's path, not simulated again
+  EXPECT_EQ(e.details.find("jacobians")->asInt(), e.details.find("iterations")->asInt() + 1);
+  // CVODES's own sensitivities: the same estimate, the Jacobian closer to central differences
+  auto cv = exid_test::create<exid::Estimator>(
+      "didim",
+      "{loop: open, window_s: 0.25, output: position, fit_nonlinear: false, gradient_check: 2, "
+      "rtol: 1e-10, atol: 1e-12, sensitivities: cvodes}");
+  const exid::Estimate ec = cv->estimate(*model, d, nullptr, mtest::context());
+  const double grad_cv =
+      ec.details.find("gradient_check")->find("max_relative_difference")->asDouble();
+  std::printf("[didim open] sensitivities: cvodes: parameters %.2e, Jacobian %.2e, %.1f s\n",
+              (ec.value - truth).norm() / truth.norm(), grad_cv,
+              ec.details.find("wall_s")->asDouble());
+  EXPECT_LT((ec.value - truth).norm() / truth.norm(), 1e-5);
+  EXPECT_LT((ec.value - e.value).norm() / truth.norm(), 1e-5);
+  EXPECT_LT(grad_cv, 1e-4);
+  EXPECT_LT(grad_cv, grad);
 }
 
 TEST(DidimOpen, ItsInputsAreCheckedByName) {
