@@ -654,9 +654,13 @@ class Didim : public exid::Estimator {
     d["estimator"] = kName;
     d["output"] = position_ ? "position" : "torque";
     d["method"] =
-        "output error: Levenberg-Marquardt on theta, the closed-loop simulation (CVODES BDF) "
-        "against the recorded output; Jacobian from forward sensitivities with an exact "
-        "right-hand side";
+        std::string(
+            "output error: Levenberg-Marquardt on theta, the closed-loop simulation "
+            "(CVODES BDF) against the recorded output; Jacobian from forward "
+            "sensitivities with an exact right-hand side, ") +
+        (tol_loop_.cvodes_sensitivities ? "CVODES's own (staggered)"
+                                        : "integrated by BDF2 along CVODES's steps of the state");
+    d["sensitivities"] = tol_loop_.cvodes_sensitivities ? "cvodes" : "steps";
     d["covariance_definition"] =
         "sigma^2 (J^T J + P)^-1, J = d y_sim / d (theta, log eta, d), sigma^2 = rss / (m - p - "
         "L - D); P = sigma^2 / s^2 on each drive gain with a prior (gain_prior_std), else 0; "
