@@ -24,6 +24,7 @@
 #include <sstream>
 #include <string>
 #include <string_view>
+#include <system_error>
 #include <thread>
 #include <vector>
 
@@ -1269,13 +1270,25 @@ class CsvExperiment : public exid::Experiment {
             ::munmap(map, len);
           }
           std::lock_guard<std::mutex> lock(mu);
-          merge(k);
+          try {
+            merge(k);
+          } catch (...) {   // (no room for the stamps: the serial scan says so; a thread never
+            failed = true;  // lets an exception out)
+            stop = true;
+          }
         }
       };
+      std::size_t used = 1;
       {
         std::vector<std::thread> pool;
-        for (int i = 1; i < threads && static_cast<std::size_t>(i) < pieces; ++i)
-          pool.emplace_back(work);
+        for (int i = 1; i < threads && static_cast<std::size_t>(i) < pieces; ++i) {
+          try {
+            pool.emplace_back(work);
+          } catch (const std::system_error&) {  // (no more threads: fewer do the pieces)
+            break;
+          }
+        }
+        used += pool.size();
         work();
         for (std::thread& t : pool) t.join();
       }
@@ -1287,8 +1300,7 @@ class CsvExperiment : public exid::Experiment {
       kept_rows_ = rows;
       t_first_abs_ = ct_ ? tfactor_ * (*raw)[0] : 0.0;
       scan_pieces_ = static_cast<int>(pieces);
-      scan_threads_ =
-          static_cast<int>(std::min<std::size_t>(static_cast<std::size_t>(threads), pieces));
+      scan_threads_ = static_cast<int>(used);
       return true;
     }
 
