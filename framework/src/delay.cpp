@@ -86,9 +86,10 @@ void shiftedRows(const Eigen::VectorXd& t, const Eigen::MatrixXd& X, int per_sam
   for (int k = first; k < last; ++k) {
     const double at = t[k] + shift_s;
     if (!(at >= t[2] && at <= t[K - 3]))
-      throw Error(fmt::format("shiftedRows: t = {} s shifted by {} s lies outside the "
-                              "interpolable samples [{}, {}] s",
-                              t[k], shift_s, t[2], t[K - 3]));
+      throw Error(
+          fmt::format("shiftedRows: t = {} s shifted by {} s lies outside the "
+                      "interpolable samples [{}, {}] s",
+                      t[k], shift_s, t[2], t[K - 3]));
     // the interval holding `at` (the targets increase with k: move forward, rarely back)
     while (i > 2 && at < t[i]) --i;
     while (i < K - 4 && at > t[i + 1]) ++i;
