@@ -64,7 +64,7 @@ class BatchLs : public exid::Estimator {
       : chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         accumulate_(p.getString("accumulate")),
         normal_max_cond_(p.getDouble("normal_max_cond")),
-        threads_(exid::estimators::resolveThreads(p.getInt("threads"))) {
+        threads_(exid::resolveThreads(p.getInt("threads"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
   }
 

@@ -380,7 +380,7 @@ class FilteredLs : public exid::Estimator {
     const long nchunks = (Kt + C - 1) / C;
     P.chunks = nchunks;
     const int p = model.numBase();
-    const int T = static_cast<int>(std::min<long>(estimators::resolveThreads(threads_), nchunks));
+    const int T = static_cast<int>(std::min<long>(exid::resolveThreads(threads_), nchunks));
     P.threads = T;
     // chunk c: trimmed samples [ca, cb), rows of [lo, hi), raw samples [rlo, rhi)
     struct Span {

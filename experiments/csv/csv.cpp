@@ -1164,9 +1164,7 @@ class CsvExperiment : public exid::Experiment {
     // set) on one thread, a small file, or anything the serial scan must report with its line
     // (a bad or non-increasing time, no rows): the serial scan then runs.
     bool scanInPieces(const exid::CsvReader& like, std::vector<double>* raw) {
-      const long requested = P_.getInt("threads");
-      const int threads = static_cast<int>(requested > 0 ? std::min<long>(requested, 256)
-                                                         : std::min(8, exid::usableCores()));
+      const int threads = exid::resolveThreads(P_.getInt("threads"));
       const std::string& file = files_[0];
       std::error_code err;
       const auto size = std::filesystem::file_size(file, err);

@@ -2,6 +2,7 @@
 
 #include <sched.h>
 
+#include <algorithm>
 #include <atomic>
 #include <iostream>
 #include <limits>
@@ -40,6 +41,11 @@ int usableCores() {
   }
   const unsigned hw = std::thread::hardware_concurrency();
   return hw == 0 ? 1 : static_cast<int>(hw);
+}
+
+int resolveThreads(long requested) {
+  if (requested > 0) return static_cast<int>(std::min<long>(requested, 256));
+  return std::max(1, std::min(8, usableCores()));
 }
 
 Deadline::Deadline(double seconds) {

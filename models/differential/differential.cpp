@@ -362,8 +362,8 @@ class DifferentialModel : public exid::ObservationModel {
     if (static_cast<int>(sel_.size()) != n) return false;
     for (int i = 0; i < n; ++i)
       if (sel_[static_cast<std::size_t>(i)] != i) return false;
-    if (T > 0 && !phi.tail(T).isZero(0.0)) return false;  // (the torque columns: the design's)
-    const Friction f = frictionAt(eta);
+    if (T > 0 && !phi.tail(T).isZero(0.0)) return false;      // (the torque columns: the design's)
+    const Friction f = E > 0 ? frictionAt(eta) : Friction{};  // (only the extra columns read it)
     {
       const Workspace data(*this);
       exid::actuatorTorqueWith(R, *data, cols_, phi.head(P0), q, qd, qdd, tau, d_q, d_qd, d_qdd);

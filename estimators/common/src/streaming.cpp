@@ -9,7 +9,6 @@
 #include <numeric>
 #include <thread>
 
-#include "exid/context.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
@@ -59,11 +58,6 @@ void forEachChunk(const ObservationModel& model, const Dataset& data, int chunk_
     ctx.report(lo + (hi - lo) * static_cast<double>(e) / K,
                fmt::format("{}: {} / {} samples", who, e, K));
   }
-}
-
-int resolveThreads(long requested) {
-  if (requested > 0) return static_cast<int>(std::min<long>(requested, 256));
-  return std::max(1, std::min(8, usableCores()));
 }
 
 ParamDecl rankToleranceParam() {

@@ -22,6 +22,8 @@ void logDebug(const std::string& msg);
 /// The CPUs this process may run on (its affinity mask, as `taskset` sets it; the machine's
 /// count where the mask cannot be read), at least 1.
 int usableCores();
+/// Threads for a `threads` parameter: n > 0 as given (at most 256), 0 usableCores() (at most 8).
+int resolveThreads(long requested);
 
 /// A wall-clock budget; zero or negative seconds means none.
 class Deadline {

@@ -149,9 +149,6 @@ bool modelIsPerSample(const ObservationModel& model);
 /// most chunk_samples samples (the whole dataset at once when the model is not per sample: a
 /// streamed dataset is then read whole into memory).
 /// Reports progress in [lo, hi] of the stage and throws exid::Error when ctx.shouldStop().
-/// Threads for a `threads` parameter: n > 0 as given, 0 the machine's cores (at most 8).
-int resolveThreads(long requested);
-
 /// The `rank_tolerance` parameter of the least-squares estimators (BaseSolveOptions).
 ParamDecl rankToleranceParam();
 
