@@ -3,8 +3,9 @@
 // that the closed-loop simulation of the robot (the recording's reference through the robot's
 // PD gains and feed-forward: exid::estimators::ClosedLoop) reproduces the measured torques
 // (output: torque, the controller's output along the simulated motion) or positions (output:
-// position). Levenberg-Marquardt on theta; the Jacobian from CVODES forward sensitivities of
-// the closed loop, with the sensitivity equations' right-hand side exact:
+// position). Levenberg-Marquardt on theta (J^T J plus the residual's second-order term by
+// secant updates, NL2SOL's, unless hessian: gauss_newton); the Jacobian from forward sensitivities
+// of the closed loop, with the sensitivity equations' right-hand side exact:
 //   x = (q, qd),  f = (qd, a),  a = M^-1 (tau_c(t, q, qd) - h(q, qd)),
 //   df/dtheta = (0, -M^-1 w(q, qd, a))                  (w theta = M a + h),
 //   da/dq = M^-1 (-Kp - d(w theta)/dq |a),  da/dqd = M^-1 (-Kd - d(w theta)/dqd |a),
@@ -60,6 +61,13 @@ class Didim : public exid::Estimator {
                                 "positions to the recorded ones",
                                 {"torque", "position"}),
              exid::param_int("max_iterations", 30, "Levenberg-Marquardt steps at most", 1, 10000),
+             exid::param_string(
+                 "hessian", std::string("secant"),
+                 "secant: J^T J plus the residual's second-order term by secant updates "
+                 "(Dennis, Gay and Welsch's, as NL2SOL): fast where the residual stays large (a "
+                 "model that cannot reproduce the recording exactly), where Gauss-Newton "
+                 "converges slowly; gauss_newton: J^T J alone",
+                 {"secant", "gauss_newton"}),
              exid::param_double("rss_tolerance", 1e-10, "",
                                 "stop when an accepted step lowers the residual sum of squares "
                                 "by less than this fraction of it and the linearisation "
@@ -112,6 +120,7 @@ class Didim : public exid::Estimator {
         tol_loop_(withSensitivities(exid::estimators::ClosedLoop::Tolerances::from(p),
                                     p.getString("sensitivities"))),
         check_(static_cast<int>(p.getInt("gradient_check"))),
+        secant_(p.getString("hessian") == "secant"),
         fit_nl_(p.getBool("fit_nonlinear")),
         prior_std_(p.getDoubles("gain_prior_std")),
         prior_mean_(p.getDoubles("gain_prior_dK")) {
@@ -229,10 +238,15 @@ class Didim : public exid::Estimator {
     exid::Json check_json;
     if (check_ > 0) check_json = gradientCheck(theta, data, cur);
     exid::Json trace = exid::Json::array();
-    auto record = [&](const Sim& s) {
+    auto record = [&](const Sim& s, double rho = 0.0, double damping = 0.0, int trials = 0) {
       exid::Json t = exid::Json::object();
       t["rss"] = s.rss;
       if (!prior_col_.empty()) t["prior_rss"] = s.prior_rss;
+      if (trials > 0) {
+        t["gain_ratio"] = rho;  // actual / predicted decrease
+        t["damping"] = damping;
+        t["trials"] = trials;
+      }
       trace.push_back(t);
     };
     // the prior's weight sigma / s: sigma from the output's residual (floored at 1e-3 of its
@@ -256,11 +270,34 @@ class Didim : public exid::Estimator {
     // own simulation, the others along an accepted trial's)
     int it = 0, sims = 1, jacobians = 1, round = 1;
     std::string stop;
+    // The second-order term sum r_i d2 y_i / dtheta2 of the residual's Hessian, by secant
+    // updates (Dennis, Gay and Welsch, NL2SOL): Gauss-Newton's J^T J alone converges slowly
+    // where the residual stays large (a model that cannot reproduce the recording exactly).
+    MatrixXd Ssec = MatrixXd::Zero(q_all, q_all);
+    VectorXd g_prev, s_prev, Jr_prev_at_new;  // (the last accepted step's)
     for (it = 1; it <= max_iter_; ++it) {
       if (ctx.shouldStop()) throw exid::Error("didim: stopped");
-      // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + mu D) d = J^T r
+      // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + S + mu D) d = J^T r,
+      // D = diag(J^T J), S the secant term (hessian: secant) or 0 (a damped matrix that is not
+      // positive definite is a rejected try)
       MatrixXd H = cur.J.transpose() * cur.J;
       VectorXd g = cur.J.transpose() * (y_ - cur.y);
+      if (secant_ && s_prev.size() > 0) {
+        // secant pair: s, yv = grad f(new) - grad f(old) of f = rss / 2 (without the prior's
+        // pseudo-observations, linear in theta), y# = (J_new - J_old)^T r_new
+        const VectorXd yv = -(g - g_prev);
+        const VectorXd ysharp = -g + Jr_prev_at_new;
+        const double ys = yv.dot(s_prev);
+        if (ys > 1e-12 * yv.norm() * s_prev.norm()) {
+          const double sSs = s_prev.dot(Ssec * s_prev);
+          if (sSs != 0.0)  // NL2SOL's sizing
+            Ssec *= std::min(1.0, std::abs(s_prev.dot(ysharp)) / std::abs(sSs));
+          const VectorXd v = ysharp - Ssec * s_prev;
+          Ssec += (v * yv.transpose() + yv * v.transpose()) / ys -
+                  (v.dot(s_prev) / (ys * ys)) * (yv * yv.transpose());
+        }
+      }
+      g_prev = g;
       for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations
         const int c = prior_col_[i];
         const double w = sigma_ / prior_sd_[i];
@@ -271,15 +308,18 @@ class Didim : public exid::Estimator {
       double decrease = 0.0, predicted_decrease = 0.0, moved = 0.0;
       for (int tries = 0; tries < 12 && !accepted; ++tries) {
         MatrixXd A = H;
+        if (secant_) A += Ssec;
         A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
-        const VectorXd step = A.ldlt().solve(g);
-        if (!step.allFinite()) {
+        const Eigen::LDLT<MatrixXd> ldlt(A);
+        const VectorXd step = ldlt.solve(g);
+        if (!step.allFinite() || !ldlt.isPositive() || ldlt.info() != Eigen::Success) {
           mu *= 10;
           continue;
         }
         // the decrease the linearisation predicts: below rss_tolerance, theta is at the
         // minimum to the simulation's precision (trials would only see its noise)
-        const double predicted = 2 * g.dot(step) - step.dot(H * step);
+        const double predicted =
+            2 * g.dot(step) - step.dot(H * step) - (secant_ ? step.dot(Ssec * step) : 0.0);
         if (tries == 0 && predicted < ftol_ * cur.total()) {
           flat = true;
           break;
@@ -309,11 +349,15 @@ class Didim : public exid::Estimator {
           moved = step.head(p).norm() / std::max(theta.head(p).norm(), 1e-300);
           if (L_ > 0) moved = std::max(moved, step.segment(p, L_).cwiseAbs().maxCoeff());
           if (D_) moved = std::max(moved, std::abs(step[p + L_]) / delay_max_);
+          if (secant_) {
+            s_prev = step;
+            Jr_prev_at_new = cur.J.transpose() * (y_ - trial.y);
+          }
           theta += step;
           cur = simulate(theta, data, true, &trial);  // (along the trial's paths)
           priorTerms(theta, &cur);
           ++jacobians;
-          record(cur);
+          record(cur, rho, mu, tries + 1);
           mu = std::max(mu * std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3)), 1e-12);
           nu = 2.0;
           accepted = true;
@@ -362,6 +406,7 @@ class Didim : public exid::Estimator {
     d["iterations"] = std::min(it, max_iter_);
     d["simulations"] = sims;
     d["jacobians"] = jacobians;
+    d["hessian"] = secant_ ? "secant" : "gauss_newton";
     if (!prior_col_.empty()) d["gain_prior"]["rounds"] = round;
     d["stop"] = stop;
     d["converged"] = converged;
@@ -656,8 +701,10 @@ class Didim : public exid::Estimator {
     d["method"] =
         std::string(
             "output error: Levenberg-Marquardt on theta, the closed-loop simulation "
-            "(CVODES BDF) against the recorded output; Jacobian from forward "
-            "sensitivities with an exact right-hand side, ") +
+            "(CVODES BDF) against the recorded output; ") +
+        (secant_ ? "J^T J plus the second-order term by secant updates (NL2SOL's); "
+                 : "Gauss-Newton's J^T J; ") +
+        "Jacobian from forward sensitivities with an exact right-hand side, " +
         (tol_loop_.cvodes_sensitivities ? "CVODES's own (staggered)"
                                         : "integrated by BDF2 along CVODES's steps of the state");
     d["sensitivities"] = tol_loop_.cvodes_sensitivities ? "cvodes" : "steps";
@@ -690,6 +737,7 @@ class Didim : public exid::Estimator {
   double ftol_, xtol_;
   exid::estimators::ClosedLoop::Tolerances tol_loop_;
   int check_;
+  bool secant_;
   bool fit_nl_;
   std::vector<double> prior_std_, prior_mean_;
   bool delay_ = false;
