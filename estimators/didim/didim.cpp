@@ -285,17 +285,8 @@ class Didim : public exid::Estimator {
       if (secant_ && s_prev.size() > 0) {
         // secant pair: s, yv = grad f(new) - grad f(old) of f = rss / 2 (without the prior's
         // pseudo-observations, linear in theta), y# = (J_new - J_old)^T r_new
-        const VectorXd yv = -(g - g_prev);
-        const VectorXd ysharp = -g + Jr_prev_at_new;
-        const double ys = yv.dot(s_prev);
-        if (ys > 1e-12 * yv.norm() * s_prev.norm()) {
-          const double sSs = s_prev.dot(Ssec * s_prev);
-          if (sSs != 0.0)  // NL2SOL's sizing
-            Ssec *= std::min(1.0, std::abs(s_prev.dot(ysharp)) / std::abs(sSs));
-          const VectorXd v = ysharp - Ssec * s_prev;
-          Ssec += (v * yv.transpose() + yv * v.transpose()) / ys -
-                  (v.dot(s_prev) / (ys * ys)) * (yv * yv.transpose());
-        }
+        exid::estimators::secantSecondOrderUpdate(&Ssec, s_prev, -(g - g_prev),
+                                                  -g + Jr_prev_at_new);
       }
       g_prev = g;
       for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations

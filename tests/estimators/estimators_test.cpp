@@ -604,3 +604,49 @@ TEST(Streaming, PipelineConsumesEveryChunkInOrderFromItsOwnSlot) {
 }
 
 }  // namespace
+
+namespace {
+
+// The secant update of a least-squares Hessian's second-order term (didim's hessian: secant):
+// symmetric, and the updated S maps the step to y# (the secant condition); a step along which
+// the gradient did not grow leaves S as it was.
+TEST(Estimators, SecantSecondOrderUpdateMeetsTheSecantConditionAndStaysSymmetric) {
+  std::mt19937 rng(5);
+  std::normal_distribution<double> N(0.0, 1.0);
+  auto randomVector = [&](int n) {
+    Eigen::VectorXd v(n);
+    for (int i = 0; i < n; ++i) v[i] = N(rng);
+    return v;
+  };
+  for (int trial = 0; trial < 20; ++trial) {
+    const int n = 2 + trial % 7;
+    Eigen::MatrixXd S0(n, n);
+    for (int i = 0; i < n; ++i)
+      for (int j = 0; j < n; ++j) S0(i, j) = N(rng);
+    S0 = (trial % 3 == 0) ? Eigen::MatrixXd::Zero(n, n) : Eigen::MatrixXd(S0 + S0.transpose());
+    const Eigen::VectorXd s = randomVector(n), ysharp = randomVector(n);
+    Eigen::VectorXd y = randomVector(n);
+    if (y.dot(s) < 0) y = -y;
+    Eigen::MatrixXd S = S0;
+    ASSERT_TRUE(exid::estimators::secantSecondOrderUpdate(&S, s, y, ysharp));
+    EXPECT_LT((S * s - ysharp).norm(), 1e-10 * (1 + ysharp.norm())) << "trial " << trial;
+    EXPECT_LT((S - S.transpose()).norm(), 1e-12 * (1 + S.norm())) << "trial " << trial;
+    // the change is of rank two at most, in the span of y and y# - S s
+    const Eigen::JacobiSVD<Eigen::MatrixXd> svd(
+        S - S0 * std::min(1.0, std::abs(s.dot(ysharp)) / std::abs(s.dot(S0 * s))));
+    if (n > 2 && trial % 3 != 0) {
+      EXPECT_LT(svd.singularValues()[2], 1e-10 * svd.singularValues()[0]) << "trial " << trial;
+    }
+    // a step along which the gradient fell: no update
+    Eigen::MatrixXd T = S0;
+    EXPECT_FALSE(exid::estimators::secantSecondOrderUpdate(&T, s, -y, ysharp));
+    EXPECT_EQ(T, S0);
+  }
+  Eigen::MatrixXd S = Eigen::MatrixXd::Zero(3, 3);
+  EXPECT_THROW(
+      exid::estimators::secantSecondOrderUpdate(&S, Eigen::VectorXd::Ones(2),
+                                                Eigen::VectorXd::Ones(3), Eigen::VectorXd::Ones(3)),
+      exid::Error);
+}
+
+}  // namespace

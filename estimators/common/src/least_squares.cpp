@@ -403,4 +403,18 @@ void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& 
   d["covariance_definition"] = "sigma^2 (W^T W)^-1, sigma^2 = ||y - W theta||^2 / (m - p)";
 }
 
+bool secantSecondOrderUpdate(Eigen::MatrixXd* S, const Eigen::VectorXd& s, const Eigen::VectorXd& y,
+                             const Eigen::VectorXd& ysharp) {
+  check(S->rows() == s.size() && S->cols() == s.size() && y.size() == s.size() &&
+            ysharp.size() == s.size(),
+        "secantSecondOrderUpdate: sizes differ");
+  const double ys = y.dot(s);
+  if (!(ys > 1e-12 * y.norm() * s.norm())) return false;
+  const double sSs = s.dot(*S * s);
+  if (sSs != 0.0) *S *= std::min(1.0, std::abs(s.dot(ysharp)) / std::abs(sSs));  // sizing
+  const Eigen::VectorXd v = ysharp - *S * s;
+  *S += (v * y.transpose() + y * v.transpose()) / ys - (v.dot(s) / (ys * ys)) * (y * y.transpose());
+  return true;
+}
+
 }  // namespace exid::estimators

@@ -173,6 +173,16 @@ void checkGainPrior(const std::vector<double>& std_dev, const std::vector<double
 Eigen::VectorXd perGain(const std::vector<double>& values, std::size_t gains, const char* key,
                         double fallback, const std::string& who);
 
+/// The secant update of the second-order term S of a nonlinear least-squares Hessian
+/// (J^T J + S, S ~ sum r_i d2 r_i / dtheta2), Dennis, Gay and Welsch's as in NL2SOL: for the
+/// step s, y = grad f(new) - grad f(old) and y# = (J_new - J_old)^T r_new (f = ||r||^2 / 2),
+/// S is first scaled by min(1, |s^T y#| / |s^T S s|), then
+/// S += (v y^T + y v^T) / (y^T s) - (v^T s) y y^T / (y^T s)^2, v = y# - S s, so that the
+/// updated S is symmetric and S s = y#. Skipped (false, S unchanged) when y^T s is not
+/// positive (a step along which the gradient did not grow).
+bool secantSecondOrderUpdate(Eigen::MatrixXd* S, const Eigen::VectorXd& s, const Eigen::VectorXd& y,
+                             const Eigen::VectorXd& ysharp);
+
 /// The capabilities of an estimator that reads its rows in chunks (forEachChunk,
 /// accumulateRows) and takes a prior.
 EstimatorSpecs streamingSpecs();
