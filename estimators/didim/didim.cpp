@@ -275,18 +275,26 @@ class Didim : public exid::Estimator {
     // where the residual stays large (a model that cannot reproduce the recording exactly).
     MatrixXd Ssec = MatrixXd::Zero(q_all, q_all);
     VectorXd g_prev, s_prev, Jr_prev_at_new;  // (the last accepted step's)
-    for (it = 1; it <= max_iter_; ++it) {
-      if (ctx.shouldStop()) throw exid::Error("didim: stopped");
-      // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + S + mu D) d = J^T r,
-      // D = diag(J^T J), S the secant term (hessian: secant) or 0 (a damped matrix that is not
-      // positive definite is a rejected try)
-      MatrixXd H = cur.J.transpose() * cur.J;
-      VectorXd g = cur.J.transpose() * (y_ - cur.y);
+    // At the current point: H = J^T J (+ the prior's), g = J^T r (+ the prior's), S updated
+    // with the last accepted step, and the decrease the undamped model predicts,
+    // g^T (J^T J + S)^-1 g: below rss_tolerance, theta is at the minimum to the simulation's
+    // precision (trials would only see its noise). The damped step's prediction is no test: a
+    // large damping shrinks it wherever the model is poor (Gauss-Newton on the TX40 stopped
+    // there 7.5 % above the minimum). Infinite where the undamped matrix is not positive
+    // definite (no minimum claimed).
+    MatrixXd H;
+    VectorXd g;
+    double undamped = 0.0;
+    bool prepared = false;  // (H, g, undamped are those of theta)
+    auto prepare = [&] {
+      H = cur.J.transpose() * cur.J;
+      g = cur.J.transpose() * (y_ - cur.y);
       if (secant_ && s_prev.size() > 0) {
         // secant pair: s, yv = grad f(new) - grad f(old) of f = rss / 2 (without the prior's
         // pseudo-observations, linear in theta), y# = (J_new - J_old)^T r_new
         exid::estimators::secantSecondOrderUpdate(&Ssec, s_prev, -(g - g_prev),
                                                   -g + Jr_prev_at_new);
+        s_prev.resize(0);
       }
       g_prev = g;
       for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations
@@ -295,21 +303,22 @@ class Didim : public exid::Estimator {
         H(c, c) += w * w;
         g[c] += w * w * (prior_mu_[i] - theta[c]);
       }
-      // The decrease the undamped model predicts, g^T (J^T J + S)^-1 g: below rss_tolerance,
-      // theta is at the minimum to the simulation's precision (trials would only see its
-      // noise). The damped step's prediction is no test: a large damping shrinks it wherever
-      // the model is poor (Gauss-Newton on the TX40 stopped there 7.5 % above the minimum).
-      // Infinite where the undamped matrix is not positive definite (no minimum claimed).
-      double undamped = std::numeric_limits<double>::infinity();
-      {
-        MatrixXd A = H;
-        if (secant_) A += Ssec;
-        const Eigen::LDLT<MatrixXd> ldlt(A);
-        if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
-          const double gd = g.dot(ldlt.solve(g));
-          if (std::isfinite(gd) && gd >= 0) undamped = gd;
-        }
+      undamped = std::numeric_limits<double>::infinity();
+      MatrixXd A = H;
+      if (secant_) A += Ssec;
+      const Eigen::LDLT<MatrixXd> ldlt(A);
+      if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
+        const double gd = g.dot(ldlt.solve(g));
+        if (std::isfinite(gd) && gd >= 0) undamped = gd;
       }
+      prepared = true;
+    };
+    for (it = 1; it <= max_iter_; ++it) {
+      if (ctx.shouldStop()) throw exid::Error("didim: stopped");
+      // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + S + mu D) d = J^T r,
+      // D = diag(J^T J), S the secant term (hessian: secant) or 0 (a damped matrix that is not
+      // positive definite is a rejected try)
+      if (!prepared) prepare();
       const double undamped_relative = undamped / std::max(cur.total(), 1e-300);
       bool accepted = false, flat = undamped_relative < ftol_;
       double moved = 0.0;
@@ -354,6 +363,7 @@ class Didim : public exid::Estimator {
             Jr_prev_at_new = cur.J.transpose() * (y_ - trial.y);
           }
           theta += step;
+          prepared = false;
           cur = simulate(theta, data, true, &trial);  // (along the trial's paths)
           priorTerms(theta, &cur);
           ++jacobians;
@@ -386,6 +396,7 @@ class Didim : public exid::Estimator {
         if (std::abs(s2 - sigma_) > 1e-3 * sigma_) {
           sigma_ = s2;
           priorTerms(theta, &cur);
+          prepared = false;
           stop.clear();
           mu = 1e-3;
           nu = 2.0;
@@ -396,8 +407,30 @@ class Didim : public exid::Estimator {
     }
     const bool converged = !stop.empty();
     if (!converged) stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
+    if (!prepared) prepare();
     exid::Estimate e = finish(model, cur, theta, m);
     exid::Json& d = e.details;
+    {
+      // how far the estimate is from the minimum the undamped model predicts: the decrease
+      // it predicts, and that decrease over sigma^2 = rss / (m - q), whose square root is the
+      // distance in standard deviations along the covariance's metric
+      exid::Json r = exid::Json::object();
+      if (std::isfinite(undamped)) {
+        const double s2 = cur.rss / static_cast<double>(std::max(m - q_all, 1L));
+        r["predicted_decrease"] = undamped;
+        r["relative"] = undamped / std::max(cur.total(), 1e-300);
+        r["distance_std"] = std::sqrt(undamped / std::max(s2, 1e-300));
+      } else {
+        r["predicted_decrease"] = exid::Json();
+      }
+      r["definition"] =
+          "at the estimate: g^T (J^T J + S)^-1 g, the decrease of the residual sum of squares "
+          "the undamped model predicts (S the secant term, or 0; null where that matrix is not "
+          "positive definite); relative: over the residual; distance_std: sqrt(it / sigma^2), "
+          "the estimate's distance from the predicted minimum in standard deviations along the "
+          "covariance's metric";
+      d["remaining"] = r;
+    }
     d["iterations"] = std::min(it, max_iter_);
     d["simulations"] = sims;
     d["jacobians"] = jacobians;

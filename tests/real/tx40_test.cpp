@@ -334,9 +334,10 @@ TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
 // windows of 0.2 s fitted to the recorded positions). The residual stays large (the model cannot
 // reproduce the recording exactly), so Gauss-Newton's J^T J misses the residual's second-order
 // term and creeps along a valley; the secant term (hessian: secant, the default) reaches the
-// minimum. Measured: secant 11 iterations, rss 6691.9 (the minimum at rss_tolerance 1e-6: 6680.8);
-// Gauss-Newton after 11 iterations 7695.7, after 44 about 7150, after 60 7078 (not converged).
-// Held-out torque error 0.1059: fitting the positions does not lower it (wls 0.0915).
+// minimum. Measured: secant 14 iterations, rss 6681.8, 0.87 std from the predicted minimum (the
+// minimum at rss_tolerance 1e-6: 6680.8); Gauss-Newton after 42 iterations about 7170, after 60
+// 7078 (not converged). Held-out torque error 0.1086: fitting the positions does not lower it
+// (wls 0.0915).
 TEST(RealTx40, OutputErrorReachesTheMinimumWhereGaussNewtonCreeps) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"));
   const ::Run s = runStudy("tx40_didim_open");
@@ -346,17 +347,20 @@ TEST(RealTx40, OutputErrorReachesTheMinimumWhereGaussNewtonCreeps) {
   EXPECT_TRUE(ds.find("converged")->asBool()) << ds.find("stop")->asString();
   const long its = ds.find("iterations")->asInt();
   const double rss = ds.find("rss")->asDouble();
-  EXPECT_LE(its, 16);
-  EXPECT_LT(rss, 6700.0);
+  EXPECT_LE(its, 20);
+  EXPECT_LT(rss, 6690.0);
   EXPECT_GT(rss, 6600.0);  // (6680.8 is the minimum)
+  const exid::Json& rem = *ds.find("remaining");
+  EXPECT_LT(rem.find("relative")->asDouble(), 1e-4);
+  EXPECT_LT(rem.find("distance_std")->asDouble(), 1.0);
   const double held_out = s.summary.find("validation")->find("relative_error")->asDouble();
   EXPECT_LT(held_out, 0.12);
-  // Gauss-Newton with four times the iterations stays well above it and says it has not
+  // Gauss-Newton with three times the iterations stays well above it and says it has not
   // converged (the damped step's prediction, the old stop, reported "converged" at the 40th,
   // rss 7184)
   const ::Run g =
       runVariant("tx40_didim_open", "max_iterations: 60",
-                 "max_iterations: " + std::to_string(4 * its) + ", hessian: gauss_newton");
+                 "max_iterations: " + std::to_string(3 * its) + ", hessian: gauss_newton");
   ASSERT_EQ(g.code, 0) << g.out;
   const exid::Json& dg = *g.summary.find("identification")->find("details");
   EXPECT_EQ(dg.find("hessian")->asString(), "gauss_newton");
@@ -364,7 +368,7 @@ TEST(RealTx40, OutputErrorReachesTheMinimumWhereGaussNewtonCreeps) {
   std::printf(
       "output error: secant %ld iterations, rss %.1f, held-out %.4f; Gauss-Newton after "
       "%ld: %.1f (%s)\n",
-      its, rss, held_out, 4 * its, rss_gn, dg.find("stop")->asString().c_str());
+      its, rss, held_out, 3 * its, rss_gn, dg.find("stop")->asString().c_str());
   EXPECT_GT(rss_gn, 1.05 * rss);
   EXPECT_FALSE(dg.find("converged")->asBool()) << dg.find("stop")->asString();
 }
