@@ -6,7 +6,8 @@
 //     recording is streamed from the file: summary experiment.streamed; the experiment's
 //     scan of the time stamps uses as many threads as the estimator);
 //   - the same 1 M samples without qd, qdd -> filtered_ls {cutoff_hz: 20} on 1 and 2 threads;
-//   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz).
+//   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz), tx40_varpro.yaml and
+//     tx40_didim_open.yaml (output error; wall and CPU time).
 //
 // Baseline in the same run: reading the same file once (std::fread into a 4 MB buffer), so that
 // the figures are quoted as "times the plain read" as well as in seconds.
@@ -79,6 +80,7 @@ fs::path recording(long samples, bool derivatives) {
 
 struct Child {
   double wall_s = 0;
+  double cpu_s = 0;  // user + system
   long max_rss_kb = 0;
   int status = -1;
 };
@@ -101,6 +103,8 @@ Child runExid(const std::vector<std::string>& args) {
   wait4(pid, &c.status, 0, &ru);
   c.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   c.max_rss_kb = ru.ru_maxrss;
+  c.cpu_s = static_cast<double>(ru.ru_utime.tv_sec + ru.ru_stime.tv_sec) +
+            1e-6 * static_cast<double>(ru.ru_utime.tv_usec + ru.ru_stime.tv_usec);
   return c;
 }
 
@@ -163,37 +167,40 @@ void BM_FilteredLs(benchmark::State& state) {
       threads);
 }
 
-void BM_Tx40FilteredLs(benchmark::State& state) {
+/// examples/real/STUDY.yaml, whole process (wall, CPU and max RSS under `label` in the table).
+void runExample(benchmark::State& state, const std::string& study, const std::string& label) {
   Child c;
   for (auto _ : state) {
-    c = runExid({"-q", "run", std::string(EXID_SOURCE_DIR) + "/examples/real/tx40_filtered_ls.yaml",
-                 "--out", (workDir() / "out_tx40").string()});
+    c = runExid({"-q", "run", std::string(EXID_SOURCE_DIR) + "/examples/real/" + study + ".yaml",
+                 "--out", (workDir() / ("out_" + label)).string()});
     state.SetIterationTime(c.wall_s);
   }
   if (c.status != 0) state.SkipWithError("exid run failed");
   state.counters["wall_s"] = c.wall_s;
+  state.counters["cpu_s"] = c.cpu_s;
   state.counters["max_rss_MB"] = static_cast<double>(c.max_rss_kb) / 1024.0;
-  table()["tx40_filtered_ls"] =
-      fmt::format("{:8.2f} s {:8.0f} MB", c.wall_s, c.max_rss_kb / 1024.0);
+  table()[label] =
+      fmt::format("{:8.2f} s {:8.0f} MB  (CPU {:.2f} s)", c.wall_s, c.max_rss_kb / 1024.0, c.cpu_s);
+}
+
+void BM_Tx40FilteredLs(benchmark::State& state) {
+  runExample(state, "tx40_filtered_ls", "tx40_filtered_ls");
 }
 
 // Variable projection on the real recording (examples/real/tx40_varpro.yaml: 12 nonlinear
 // friction parameters and 64 base parameters), whole process.
-void BM_Tx40Varpro(benchmark::State& state) {
-  Child c;
-  for (auto _ : state) {
-    c = runExid({"-q", "run", std::string(EXID_SOURCE_DIR) + "/examples/real/tx40_varpro.yaml",
-                 "--out", (workDir() / "out_tx40_varpro").string()});
-    state.SetIterationTime(c.wall_s);
-  }
-  if (c.status != 0) state.SkipWithError("exid run failed");
-  state.counters["wall_s"] = c.wall_s;
-  table()["tx40_varpro"] = fmt::format("{:8.2f} s {:8.0f} MB", c.wall_s, c.max_rss_kb / 1024.0);
+void BM_Tx40Varpro(benchmark::State& state) { runExample(state, "tx40_varpro", "tx40_varpro"); }
+
+// Output error on the real recording (examples/real/tx40_didim_open.yaml: 30 torque-driven
+// windows of 0.2 s, 64 parameters; CVODES and the sensitivities on one thread), whole process.
+void BM_Tx40DidimOpen(benchmark::State& state) {
+  runExample(state, "tx40_didim_open", "tx40_didim_open");
 }
 
 }  // namespace
 
 BENCHMARK(BM_Tx40Varpro)->UseManualTime()->Iterations(1)->Unit(benchmark::kSecond);
+BENCHMARK(BM_Tx40DidimOpen)->UseManualTime()->Iterations(1)->Unit(benchmark::kSecond);
 BENCHMARK(BM_BatchLs)
     ->Args({100000, 1})
     ->Args({1000000, 1})
