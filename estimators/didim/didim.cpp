@@ -282,10 +282,10 @@ class Didim : public exid::Estimator {
     // large damping shrinks it wherever the model is poor (Gauss-Newton on the TX40 stopped
     // there 7.5 % above the minimum). Infinite where the undamped matrix is not positive
     // definite (no minimum claimed).
-    MatrixXd H;
+    MatrixXd H, Hm;  // J^T J (+ the prior's); the model's Hessian H + S (or H)
     VectorXd g;
     double undamped = 0.0;
-    bool prepared = false;  // (H, g, undamped are those of theta)
+    bool prepared = false;  // (H, Hm, g, undamped are those of theta)
     auto prepare = [&] {
       H = cur.J.transpose() * cur.J;
       g = cur.J.transpose() * (y_ - cur.y);
@@ -304,9 +304,9 @@ class Didim : public exid::Estimator {
         g[c] += w * w * (prior_mu_[i] - theta[c]);
       }
       undamped = std::numeric_limits<double>::infinity();
-      MatrixXd A = H;
-      if (secant_) A += Ssec;
-      const Eigen::LDLT<MatrixXd> ldlt(A);
+      Hm = H;
+      if (secant_) Hm += Ssec;
+      const Eigen::LDLT<MatrixXd> ldlt(Hm);
       if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
         const double gd = g.dot(ldlt.solve(g));
         if (std::isfinite(gd) && gd >= 0) undamped = gd;
@@ -323,8 +323,7 @@ class Didim : public exid::Estimator {
       bool accepted = false, flat = undamped_relative < ftol_;
       double moved = 0.0;
       for (int tries = 0; tries < 12 && !accepted && !flat; ++tries) {
-        MatrixXd A = H;
-        if (secant_) A += Ssec;
+        MatrixXd A = Hm;
         A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
         const Eigen::LDLT<MatrixXd> ldlt(A);
         const VectorXd step = ldlt.solve(g);
@@ -333,8 +332,7 @@ class Didim : public exid::Estimator {
           continue;
         }
         // the decrease the damped model predicts for this step (the gain ratio's denominator)
-        const double predicted =
-            2 * g.dot(step) - step.dot(H * step) - (secant_ ? step.dot(Ssec * step) : 0.0);
+        const double predicted = 2 * g.dot(step) - step.dot(Hm * step);
         // trials without the sensitivities; the accepted point gets them
         if (D_ && std::abs(theta[p + L_] + step[p + L_]) > delay_max_) {
           ++rejected_bound_;  // (a delay beyond measurement_delay_max_s is a rejected step)

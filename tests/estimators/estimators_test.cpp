@@ -603,10 +603,6 @@ TEST(Streaming, PipelineConsumesEveryChunkInOrderFromItsOwnSlot) {
   }
 }
 
-}  // namespace
-
-namespace {
-
 // The secant update of a least-squares Hessian's second-order term (didim's hessian: secant):
 // symmetric, and the updated S maps the step to y# (the secant condition); a step along which
 // the gradient did not grow leaves S as it was.
