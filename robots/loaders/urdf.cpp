@@ -479,6 +479,7 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
     } else if (tag == "gravity") {
       r.allow(e, {"xyz"});
       auto g = r.numbers(e, "xyz", 3);
+      if (g.empty()) r.fail(e, "missing attribute 'xyz' (gravity in m/s^2, in the base frame)");
       m->gravity = Eigen::Vector3d(g[0], g[1], g[2]);
     } else if (tag == "transmission") {
       r.allow(e, {"matrix", "offset"});

@@ -310,6 +310,16 @@ TEST(UrdfErrors, NonFiniteNumber) {
   EXPECT_HAS(m, "non-finite");
 }
 
+// (found by fuzz_urdf: an empty <gravity/> read three numbers from none)
+TEST(UrdfErrors, ExtensionGravityWithoutItsVector) {
+  const std::string m =
+      urdfError(urdf(link("base") + link("a") + joint("j1", "revolute", "base", "a") +
+                     "  <exid><gravity/></exid>\n"));
+  EXPECT_HAS(m, "bad.urdf:6");
+  EXPECT_HAS(m, "<gravity>");
+  EXPECT_HAS(m, "missing attribute 'xyz'");
+}
+
 TEST(UrdfErrors, ExtensionUnknownElementAttributeJoint) {
   std::string m = urdfError(urdf(link("base") + link("a") + joint("j1", "revolute", "base", "a") +
                                  "  <exid>\n    <motor joint=\"j1\"/>\n  </exid>\n"));
