@@ -632,7 +632,8 @@ class ConsistentLs : public exid::Estimator {
     d["consistent"] = all_ok;
     {
       Json w = plausibilityWarnings(map, pi, model.fullNominal(), rms_c, rms_u, kName);
-      if (w.size() > 0) d["warnings"] = w;
+      if (w.size() > 0 && !d.find("warnings")) d["warnings"] = exid::Json::array();
+      for (std::size_t i = 0; i < w.size(); ++i) d["warnings"].push_back(w.at(i));
     }
     d["samples"] = data.size();
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
@@ -762,6 +763,8 @@ class ConsistentLs : public exid::Estimator {
       }
       scale = c.scale;
       *scale_details = c.toJson();
+      if (const std::string doubt = c.edgeText(kName); !doubt.empty())
+        (*scale_details)["suspect"] = doubt;
     }
     (*scale_details)["scale"] = scale;
     return exid::estimators::scaledPrior(prior, scale);
@@ -832,6 +835,12 @@ class ConsistentLs : public exid::Estimator {
                     const Eigen::VectorXd& dinv, bool std_prior, int nfull, Json& d) const {
     d["prior"] = exid::estimators::priorDetails(*lin.used_prior, theta, theta_std);
     d["prior"]["scale"] = lin.scale_details;
+    if (const exid::Json* doubt = lin.scale_details.find("suspect")) {
+      if (!d.find("suspect")) d["suspect"] = exid::Json::array();
+      d["suspect"].push_back(*doubt);
+      if (!d.find("warnings")) d["warnings"] = exid::Json::array();
+      d["warnings"].push_back(*doubt);
+    }
     d["prior"]["on"] = std_prior ? "standard" : "base";
     if (std_prior) {
       // ||D^-1 (pi - pi0)||: the standard parameters' distance from the prior, in its std.

@@ -284,59 +284,66 @@ class CsvExperiment : public exid::Experiment {
   };
 
   /// Recording-level statistics of the rows the experiment uses (the segment's rows of the file,
-  /// before any filtering), accumulated row by row in one pass: duplicate rows (identical to the
-  /// previous row in every used column, the time stamp included: with a time column such a row
-  /// is refused before, time must increase); frozen rows (every q repeats the previous row while
-  /// the robot moves: some joint stepped by at least kFrozenQuanta times its column's resolution
-  /// before the run and by more than kFrozenJump times that step after it, which sets
-  /// sample-and-hold apart from a standstill, a slow encoder or a file printed with few digits);
-  /// saturation of each torque column (samples at the column's minimum or maximum in runs of >=
-  /// 3). Timing statistics come from the scan of the time stamps. meta.recording;
-  /// exid::inspectDataset warns from it. Memory: the previous row, and per run of held rows
-  /// after which some joint jumps, one step per joint (the column's resolution, which decides
+  /// before any filtering), accumulated row by row in one pass. Held runs: consecutive rows whose
+  /// every q repeats the previous row. A run is in motion when, for some joint, the position moved
+  /// by at least kFrozenQuanta times its column's resolution into the run and out of it, and the
+  /// speed out of it (the step over the run's length + 1 rows) is at least kFrozenSpeedRatio
+  /// times the speed into it (the step into the run over the rows it took): the robot went on
+  /// moving while the positions were held. Otherwise it is a standstill (a stop and a start, or a
+  /// slow joint below its encoder's resolution). In a run in motion, a row that repeats every
+  /// used column but the time stamp is a duplicate (a logger writing one sample twice); one
+  /// whose other columns change is frozen (sample-and-hold positions). Runs at rest are counted
+  /// apart and never warned about. Saturation of each torque column: samples at the column's
+  /// minimum or maximum in runs of >= 3. Timing statistics come from the scan of the time
+  /// stamps. meta.recording; exid::inspectDataset warns from it. Memory: the previous row, and
+  /// per held run, one step into and out of it per joint (the column's resolution, which decides
   /// whether it counts, is known only at the end).
   class RecordingStats {
    public:
-    static constexpr double kFrozenJump = 1.5, kFrozenQuanta = 3.0;
+    static constexpr double kFrozenSpeedRatio = 0.5, kFrozenQuanta = 3.0;
     static constexpr int kSaturationRun = 3;
 
-    RecordingStats(std::vector<int> q_pos, std::vector<int> tau_pos, std::size_t used)
+    /// used: the used columns, the time column (when the file has one) the last of them.
+    RecordingStats(std::vector<int> q_pos, std::vector<int> tau_pos, std::size_t used,
+                   bool has_time)
         : pq_(std::move(q_pos)),
           ptau_(std::move(tau_pos)),
           prev_(used),
-          prev2_q_(pq_.size()),
+          compared_(has_time && used > 0 ? used - 1 : used),
           quantum_(pq_.size(), HUGE_VAL),
+          step_(pq_.size(), 0.0),
           sat_(ptau_.size()) {}
 
     /// The next row (values of the used columns) and its data row in the file (0-based).
     void add(const double* v, int row) {
       if (N_ > 0) {
-        bool dup = true;
-        for (std::size_t c = 0; c < prev_.size() && dup; ++c) dup = v[c] == prev_[c];
         bool same_q = true;
         for (int c : pq_) same_q = same_q && v[c] == prev_[static_cast<std::size_t>(c)];
-        const bool held = !dup && same_q;
-        if (dup && ++ndup_ <= 20) dup_at_.push_back(exid::Json(row + 1));
-        for (std::size_t j = 0; j < pq_.size(); ++j) {
-          const double d = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
-          if (d > 0) quantum_[j] = std::min(quantum_[j], d);
-        }
-        if (held) {
-          if (run_len_ == 0) {  // a run starts: the step into the held value (a-2 -> a-1)
+        if (same_q) {
+          bool dup = true;
+          for (std::size_t c = 0; c < compared_ && dup; ++c) dup = v[c] == prev_[c];
+          if (run_len_ == 0) {  // a run starts: the step into the held value and its rows
             run_first_row_ = row;
-            run_has_before_ = N_ >= 2;
-            before_.assign(pq_.size(), 0.0);
-            for (std::size_t j = 0; j < pq_.size() && run_has_before_; ++j)
-              before_[j] = std::abs(prev_[static_cast<std::size_t>(pq_[j])] - prev2_q_[j]);
+            run_has_before_ = step_rows_ > 0;
+            before_ = step_;
+            before_rows_ = step_rows_;
+            run_dup_rows_.clear();
           }
           ++run_len_;
-        } else if (run_len_ > 0) {  // the run ends here (b + 1 = this row)
-          endRun(v);
+          if (dup) run_dup_rows_.push_back(row);
+        } else {
+          std::vector<double> d(pq_.size());
+          for (std::size_t j = 0; j < pq_.size(); ++j) {
+            d[j] = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
+            if (d[j] > 0) quantum_[j] = std::min(quantum_[j], d[j]);
+          }
+          if (run_len_ > 0) endRun(d);  // the run ends here
+          step_ = std::move(d);
+          step_rows_ = N_ - last_change_;
+          last_change_ = N_;
         }
       }
       for (std::size_t k = 0; k < ptau_.size(); ++k) saturationAdd(k, v[ptau_[k]]);
-      for (std::size_t j = 0; j < pq_.size(); ++j)
-        prev2_q_[j] = N_ > 0 ? prev_[static_cast<std::size_t>(pq_[j])] : 0.0;
       std::copy(v, v + prev_.size(), prev_.begin());
       ++N_;
     }
@@ -344,22 +351,56 @@ class CsvExperiment : public exid::Experiment {
     /// The statistics (after every row): duplicate_rows, frozen_rows, saturation.
     void finish(exid::Json* R, const std::vector<std::string>& tau_names) const {
       (*R)["rows"] = N_;
-      (*R)["duplicate_rows"]["count"] = ndup_;
-      (*R)["duplicate_rows"]["data_rows"] = dup_at_;
-      long long runs = 0, frozen = 0;
-      exid::Json frozen_at = exid::Json::array();
-      for (const Run& r : runs_) {
-        bool jumps = false;
-        for (std::size_t j = 0; j < pq_.size() && !jumps; ++j)
-          jumps = r.before[j] > 0 && r.before[j] >= kFrozenQuanta * quantum_[j];
-        if (!jumps) continue;
-        ++runs;
-        frozen += r.length;
-        if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(r.first_row + 1));
+      long long runs = 0, frozen = 0, dups = 0, rest_runs = 0, rest_rows = 0, rest_dups = 0;
+      exid::Json frozen_at = exid::Json::array(), dup_at = exid::Json::array();
+      auto runs_of = runs_;
+      if (run_len_ > 0) {  // a run at the end of the rows: nothing after it, so never in motion
+        Run r;
+        r.length = run_len_;
+        r.dup_rows = run_dup_rows_;
+        runs_of.push_back(std::move(r));
       }
+      for (const Run& r : runs_of) {
+        bool moves = false;
+        for (std::size_t j = 0; j < pq_.size() && !moves && r.before_rows > 0; ++j) {
+          const double q3 = kFrozenQuanta * quantum_[j];
+          moves = r.before[j] >= q3 && r.after[j] >= q3 &&
+                  r.after[j] / static_cast<double>(r.length + 1) >=
+                      kFrozenSpeedRatio * r.before[j] / static_cast<double>(r.before_rows);
+        }
+        const auto nd = static_cast<long long>(r.dup_rows.size());
+        if (!moves) {
+          ++rest_runs;
+          rest_rows += r.length;
+          rest_dups += nd;
+          continue;
+        }
+        dups += nd;
+        for (int dr : r.dup_rows)
+          if (dup_at.size() < 20) dup_at.push_back(exid::Json(dr + 1));
+        if (r.length > nd) {
+          ++runs;
+          frozen += r.length - nd;
+          if (frozen_at.size() < 20) frozen_at.push_back(exid::Json(r.first_row + 1));
+        }
+      }
+      (*R)["duplicate_rows"]["count"] = dups;
+      (*R)["duplicate_rows"]["data_rows"] = dup_at;
+      (*R)["duplicate_rows"]["definition"] =
+          "rows that repeat the previous row in every used column but the time stamp while the "
+          "robot moves";
       (*R)["frozen_rows"]["rows"] = frozen;
       (*R)["frozen_rows"]["runs"] = runs;
       (*R)["frozen_rows"]["first_data_rows"] = frozen_at;
+      (*R)["frozen_rows"]["definition"] =
+          "rows that repeat every joint position (but not every other column) while the robot "
+          "moves: the speed out of the held run is at least half the speed into it";
+      (*R)["held_at_rest"]["rows"] = rest_rows;
+      (*R)["held_at_rest"]["runs"] = rest_runs;
+      (*R)["held_at_rest"]["exact_repeats"] = rest_dups;
+      (*R)["held_at_rest"]["note"] =
+          "rows holding every position at a standstill (or below the encoders' resolution): "
+          "normal, not warned about";
       exid::Json sat = exid::Json::array();
       for (std::size_t k = 0; k < ptau_.size(); ++k) {
         Saturation s = sat_[k];
@@ -381,7 +422,9 @@ class CsvExperiment : public exid::Experiment {
     struct Run {
       int first_row = 0;
       long long length = 0;
-      std::vector<double> before;  // per joint: the step before the run, where it jumps after
+      std::vector<double> before, after;  // per joint: the step into and out of the run
+      long long before_rows = 0;          // rows the step into the run took
+      std::vector<int> dup_rows;          // the run's rows that repeat every compared column
     };
     struct Saturation {
       double lo = HUGE_VAL, hi = -HUGE_VAL;
@@ -411,34 +454,35 @@ class CsvExperiment : public exid::Experiment {
       s.value = v;
       ++s.run;
     }
-    void endRun(const double* v) {
-      // a joint that stepped by kFrozenQuanta resolutions or more into the run and jumps by
-      // more than kFrozenJump times that after it; the resolution is applied in finish()
+    void endRun(const std::vector<double>& after) {
       if (run_has_before_) {
         Run r;
         r.first_row = run_first_row_;
         r.length = run_len_;
-        r.before.assign(pq_.size(), 0.0);
-        bool any = false;
-        for (std::size_t j = 0; j < pq_.size(); ++j) {
-          const double after = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
-          if (before_[j] > 0 && after > kFrozenJump * before_[j]) {
-            r.before[j] = before_[j];
-            any = true;
-          }
-        }
-        if (any) runs_.push_back(std::move(r));
+        r.before = before_;
+        r.after = after;
+        r.before_rows = before_rows_;
+        r.dup_rows = std::move(run_dup_rows_);
+        runs_.push_back(std::move(r));
+      } else {
+        Run r;  // no step into it (the first rows): at rest
+        r.length = run_len_;
+        r.dup_rows = std::move(run_dup_rows_);
+        runs_.push_back(std::move(r));
       }
+      run_dup_rows_.clear();
       run_len_ = 0;
     }
 
     std::vector<int> pq_, ptau_;
-    std::vector<double> prev_, prev2_q_, quantum_, before_;
-    long long N_ = 0, ndup_ = 0;
-    exid::Json dup_at_ = exid::Json::array();
+    std::vector<double> prev_;
+    std::size_t compared_;  // the columns a duplicate repeats: every used one but the time
+    std::vector<double> quantum_, step_, before_;
+    long long N_ = 0, last_change_ = 0, step_rows_ = 0, before_rows_ = 0;
     long long run_len_ = 0;
     int run_first_row_ = 0;
     bool run_has_before_ = false;
+    std::vector<int> run_dup_rows_;
     std::vector<Run> runs_;
     std::vector<Saturation> sat_;
   };
@@ -505,7 +549,7 @@ class CsvExperiment : public exid::Experiment {
           protos_.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
           protos_.back()->select(select_[f]);
         }
-      stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size());
+      stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size(), ct_);
       collecting_ = !stats_done_;
       if (collecting_) collected_ = exid::Dataset();
       taken_ = 0;
@@ -1338,14 +1382,18 @@ class CsvExperiment : public exid::Experiment {
       for (std::size_t i = 0; i < nsteps; ++i) {
         const double step = stepAt(i);
         if (!(step <= ratio * med && (resample || step >= med / ratio)))
-          throw exid::Error(
-              fmt::format("experiment 'csv': {}: {} (data row {}): time step {} s "
-                          "against a median step of {} s: {} (a filter, derivatives and "
-                          "energy integrals need a uniform rate); cut the recording there "
-                          "with t_start_s/t_end_s{} (max_gap_ratio = {})",
-                          files_[0], lineText(rowOf(s, i + 1)), rowOf(s, i + 1) + 1, step, med,
-                          step > med ? "a gap" : "uneven time stamps",
-                          step > med ? "" : ", or resample it (resample_hz)", ratio));
+          throw exid::Error(fmt::format(
+              "experiment 'csv': {}: {} (data row {}): time step {} s "
+              "against a median step of {} s: {} (a filter, derivatives and "
+              "energy integrals need a uniform rate); {} (max_gap_ratio = {})",
+              files_[0], lineText(rowOf(s, i + 1)), rowOf(s, i + 1) + 1, step, med,
+              step > med ? "a gap" : "uneven time stamps",
+              step > med ? "resample the recording onto a uniform grid (resample_hz; a gap "
+                           "is then bridged by interpolation), or cut the recording there "
+                           "with t_start_s/t_end_s"
+                         : "resample the recording onto a uniform grid (resample_hz), or "
+                           "cut the recording there with t_start_s/t_end_s",
+              ratio));
       }
     }
 

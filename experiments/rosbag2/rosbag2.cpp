@@ -354,11 +354,12 @@ class BagReading {
           steps[i] <= ratio_ * med && (resample || steps[i] >= med / ratio_),
           fmt::format("{}{}: topic '{}', message {} (t = {} s): time step {} s against "
                       "a median step of {} s after message {}: {} (a filter, "
-                      "derivatives and energy integrals need a uniform rate); cut the "
-                      "recording there with t_start_s/t_end_s{} (max_gap_ratio = {})",
+                      "derivatives and energy integrals need a uniform rate); resample the "
+                      "recording onto a uniform grid (resample_hz{}), or cut it there with "
+                      "t_start_s/t_end_s (max_gap_ratio = {})",
                       pre_, bagname_, js_topic_, js_[keep_[i + 1]].msg, tk_[i + 1], steps[i], med,
                       js_[keep_[i]].msg, steps[i] > med ? "a gap" : "uneven time stamps",
-                      steps[i] > med ? "" : ", or resample it (resample_hz)", ratio_));
+                      steps[i] > med ? "; a gap is then bridged by interpolation" : "", ratio_));
   }
 
   // Segment and split, as the csv experiment.

@@ -270,6 +270,12 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   opt.export_rate_Hz = ex.rate_Hz;
   opt.export_periods = ex.periods;
   StudyResult r = runStudy(cfg, reg, opt);
+  if (r.ok && r.headline.verdict == "suspect") {
+    std::cout << "VERDICT: SUSPECT: the stage ran to the end, but its results fail checks of their "
+                 "own:\n";
+    for (const auto& reason : r.headline.verdict_reasons) std::cout << "  - " << reason << "\n";
+    std::cout << "\n";
+  }
   std::cout << briefTable(r.headline);
   if (!r.ok) {
     std::cerr << fmt::format(

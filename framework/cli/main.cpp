@@ -91,6 +91,12 @@ int runOrValidate(exid::Registry& registry, const std::string& file, bool valida
   opt.hard_stop_exit_code = exid::cli::signalExitCode;
   exid::logInfo(fmt::format("running study '{}' ({}) -> {}", cfg.name, file, out_dir));
   exid::StudyResult r = exid::runStudy(cfg, registry, opt);
+  if (r.ok && r.headline.verdict == "suspect") {
+    std::cout << "VERDICT: SUSPECT: the study ran to the end, but its results fail checks of their "
+                 "own:\n";
+    for (const auto& reason : r.headline.verdict_reasons) std::cout << "  - " << reason << "\n";
+    std::cout << "\n";
+  }
   std::cout << exid::briefTable(r.headline);
   if (!r.ok) {
     std::cerr << fmt::format(

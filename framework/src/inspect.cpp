@@ -8,12 +8,14 @@
 #include <cmath>
 #include <future>
 #include <limits>
+#include <random>
 #include <stdexcept>
 
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
+#include "inspect_torque.hpp"
 
 namespace exid {
 
@@ -52,41 +54,13 @@ int decimalResolution(const std::vector<double>& v) {
   return -1;
 }
 
-double pearson(const std::vector<double>& a, const std::vector<double>& b) {
-  const auto n = static_cast<double>(a.size());
-  if (a.size() < 2) return NAN;
-  double ma = 0, mb = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    ma += a[i];
-    mb += b[i];
-  }
-  ma /= n;
-  mb /= n;
-  double sab = 0, saa = 0, sbb = 0;
-  for (std::size_t i = 0; i < a.size(); ++i) {
-    sab += (a[i] - ma) * (b[i] - mb);
-    saa += (a[i] - ma) * (a[i] - ma);
-    sbb += (b[i] - mb) * (b[i] - mb);
-  }
-  return saa > 0 && sbb > 0 ? sab / std::sqrt(saa * sbb) : NAN;
-}
-
-double stdOf(const std::vector<double>& a) {
-  if (a.size() < 2) return 0.0;
-  double m = 0;
-  for (double x : a) m += x;
-  m /= static_cast<double>(a.size());
-  double s = 0;
-  for (double x : a) s += (x - m) * (x - m);
-  return std::sqrt(s / static_cast<double>(a.size()));
-}
-
 Json pair(double a, double b) { return Json(std::vector<double>{a, b}); }
 
 Json numberOrNull(double x) { return std::isfinite(x) ? Json(x) : Json(); }
 
-/// Quadratic Savitzky-Golay fit over +-m samples at every sample (the window shrinks at the
-/// ends): smoothed value, first and second derivative of each column, uniform step dt.
+/// Quadratic Savitzky-Golay fit over +-m samples at every sample (near the ends, the fit to the
+/// first or last 2m + 1 samples evaluated off its centre): smoothed value, first and second
+/// derivative of each column, uniform step dt.
 void savitzkyGolay(const MatrixXd& X, double dt, int m, MatrixXd* value, MatrixXd* d1,
                    MatrixXd* d2) {
   const Index K = X.rows();
@@ -122,49 +96,34 @@ void savitzkyGolay(const MatrixXd& X, double dt, int m, MatrixXd* value, MatrixX
     }
     return w;
   };
+  // Near the ends the window does not shrink (a fit to three samples differentiates their noise
+  // twice): the fit to the first (last) 2h + 1 samples, evaluated off its centre, u samples away.
+  const Index hw = std::min<Index>(static_cast<Index>(m), (K - 1) / 2);
+  if (hw < 1) {
+    for (MatrixXd* M : {d1, d2})
+      if (M) M->setZero();
+    if (value) *value = X;
+    return;
+  }
+  const Weights& w = weights(hw);
   for (Index j = 0; j < X.cols(); ++j) {
     const double* x = X.col(j).data();
     for (Index k = 0; k < K; ++k) {
-      const Index h = std::min<Index>({static_cast<Index>(m), k, K - 1 - k});
-      if (h == 0) continue;  // the two end samples: copied from their neighbour below
-      const Weights& w = weights(h);
-      const double* xk = x + (k - h);
+      const Index c = std::clamp<Index>(k, hw, K - 1 - hw);  // the window's centre
+      const double u = static_cast<double>(k - c);
+      const double* xk = x + (c - hw);
       double s0 = 0, s1 = 0, s2 = 0;
-      for (Index i = 0; i <= 2 * h; ++i) {
+      for (Index i = 0; i <= 2 * hw; ++i) {
         s0 += w.w0[static_cast<std::size_t>(i)] * xk[i];
         s1 += w.w1[static_cast<std::size_t>(i)] * xk[i];
         s2 += w.w2[static_cast<std::size_t>(i)] * xk[i];
       }
-      if (value) (*value)(k, j) = s0;
-      if (d1) (*d1)(k, j) = s1;
+      // s0, s1, s2: value, slope and curvature at the centre (a0, a1 / dt, 2 a2 / dt^2)
+      if (value) (*value)(k, j) = s0 + s1 * dt * u + 0.5 * s2 * dt * dt * u * u;
+      if (d1) (*d1)(k, j) = s1 + s2 * dt * u;
       if (d2) (*d2)(k, j) = s2;
     }
   }
-  if (K >= 3) {
-    for (MatrixXd* M : {value, d1, d2}) {
-      if (!M) continue;
-      M->row(0) = M->row(1);
-      M->row(K - 1) = M->row(K - 2);
-    }
-    if (value) {
-      value->row(0) = X.row(0);
-      value->row(K - 1) = X.row(K - 1);
-    }
-  }
-}
-
-std::string jointList(const std::vector<int>& joints, const char* prefix) {
-  std::string s;
-  for (std::size_t i = 0; i < joints.size(); ++i)
-    s += fmt::format("{}{}{}", i ? ", " : "", prefix, joints[i] + 1);
-  return s;
-}
-
-std::string valueList(const std::vector<double>& v, const char* format) {
-  std::string s;
-  for (std::size_t i = 0; i < v.size(); ++i)
-    s += (i ? ", " : "") + fmt::format(fmt::runtime(format), v[i]);
-  return s;
 }
 
 /// Warnings from the file-level statistics of an experiment (meta.recording of the csv one).
@@ -195,8 +154,9 @@ void recordingWarnings(const Json& rec, std::vector<std::string>* W) {
     const auto c = dup->find("count")->asInt();
     if (c > 0)
       W->push_back(fmt::format(
-          "{}{} row(s) repeat the previous row in every used column: duplicated rows (a logger "
-          "writing the same sample twice); the sample rate and derivatives are wrong there",
+          "{}{} row(s) repeat the previous row in every used column but the time stamp while "
+          "the robot moves: duplicated rows (a logger writing the same sample twice); the "
+          "derivatives are wrong there",
           file, c));
   }
   if (const Json* fr = rec.find("frozen_rows"); fr && fr->find("rows")) {
@@ -304,8 +264,41 @@ namespace {
 struct Signals {
   MatrixXd qd, qdd, tau;
   bool has_tau = false;
+  int sg_half_width = 0;  // > 0: qd (and qdd) derived from q by Savitzky-Golay over +-this
+  bool derived_qd = false, derived_qdd = false;
 };
 
+/// A second version of the positions with an error of the same kind as theirs: where a joint's
+/// positions are quantised (their resolution / sqrt(12) above their noise), the smoothed
+/// positions quantised again on a grid shifted by half a step (a staircase error with the same
+/// spectrum); otherwise the positions plus white noise of their own level. Derivatives of both
+/// differ by about the error the positions' own derivatives carry. Fixed seed.
+MatrixXd alternativePositions(const MatrixXd& q, const MatrixXd& smooth) {
+  const Index K = q.rows();
+  std::mt19937_64 rng(0x5eedu);
+  std::normal_distribution<double> nz(0.0, 1.0);
+  MatrixXd alt = q;
+  for (Index j = 0; j < q.cols(); ++j) {
+    double quantum = HUGE_VAL;
+    for (Index k = 1; k < K; ++k) {
+      const double d = std::abs(q(k, j) - q(k - 1, j));
+      if (d > 0) quantum = std::min(quantum, d);
+    }
+    const double white = inspect_torque::noiseLevel(q.col(j));
+    if (std::isfinite(quantum) && quantum / std::sqrt(12.0) > white) {
+      for (Index k = 0; k < K; ++k)
+        alt(k, j) = (std::floor(smooth(k, j) / quantum) + 0.5) * quantum;
+    } else {
+      for (Index k = 0; k < K; ++k) alt(k, j) += white * nz(rng);
+    }
+  }
+  return alt;
+}
+
+/// Missing qd/qdd from q by a quadratic Savitzky-Golay fit, at kDifferentiateCutoffHz, or at half
+/// that (down to kMinDifferentiateCutoffHz) while the accelerations' own error (estimated from
+/// alternativePositions) is above kMaxDerivedAccelError of their RMS for some joint: coarse or
+/// noisy positions get a narrower band, where their derivatives still mean something.
 Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& J) {
   Signals s;
   s.qd = data.qd;
@@ -313,17 +306,43 @@ Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& 
   s.tau = data.tau;
   s.has_tau = data.hasTorque() && data.tau.cols() == n;
   if (!data.hasVelocity() || !data.hasAcceleration()) {
-    const int m = std::max(
-        2, static_cast<int>(std::lround((1.5 * rate / kDifferentiateCutoffHz + 4.6) / 3.2)));
+    double cutoff = kDifferentiateCutoffHz;
+    const Index K = data.size();
+    int m = 0;
     MatrixXd v, a;
-    savitzkyGolay(data.q, dt, m, nullptr, &v, &a);
+    double worst = 0;
+    for (;;) {
+      m = std::max(2, static_cast<int>(std::lround((1.5 * rate / cutoff + 4.6) / 3.2)));
+      MatrixXd smooth;
+      savitzkyGolay(data.q, dt, m, &smooth, &v, &a);
+      MatrixXd va, aa;
+      savitzkyGolay(alternativePositions(data.q, smooth), dt, m, nullptr, &va, &aa);
+      worst = 0;
+      for (int j = 0; j < n; ++j) {
+        const double ref = a.col(j).norm();
+        if (ref > 0) worst = std::max(worst, (aa.col(j) - a.col(j)).norm() / ref);
+      }
+      if (!(worst > kMaxDerivedAccelError) || cutoff / 2 < kMinDifferentiateCutoffHz ||
+          2 * m + 1 > K / 4)
+        break;
+      cutoff /= 2;
+    }
     if (!data.hasVelocity()) s.qd = v;
     if (!data.hasAcceleration()) s.qdd = a;
+    s.sg_half_width = m;
+    s.derived_qd = !data.hasVelocity();
+    s.derived_qdd = !data.hasAcceleration();
     if (s.has_tau) savitzkyGolay(data.tau, dt, m, &s.tau, nullptr, nullptr);
     J["derivatives"] = fmt::format(
         "the data has no {}: derived from q by a quadratic Savitzky-Golay fit over +-{} samples "
-        "(about {:g} Hz); the torque is smoothed by the same fit (zero phase)",
-        data.hasVelocity() ? "qdd" : "qd and qdd", m, kDifferentiateCutoffHz);
+        "(about {:g} Hz{}); the torque is smoothed by the same fit (zero phase)",
+        data.hasVelocity() ? "qdd" : "qd and qdd", m, cutoff,
+        cutoff < kDifferentiateCutoffHz
+            ? fmt::format(", lowered from {:g} Hz: the positions' resolution or noise left the "
+                          "accelerations {:.0f} % error there",
+                          kDifferentiateCutoffHz, 100 * kMaxDerivedAccelError)
+            : std::string());
+    J["derivatives_accel_error"] = worst;
   } else {
     J["derivatives"] = "qd and qdd from the data";
   }
@@ -479,97 +498,18 @@ std::vector<Json> coverageRows(const RobotModel& robot, const Dataset& data, con
   return jrows;
 }
 
-/// The joints whose torque fails the sign check, by verdict, with their correlation or gain.
-struct SignFindings {
-  std::vector<int> flipped, nofollow, weak, scale;
-  std::vector<double> r_flipped, r_nofollow, r_weak, g_scale;
-};
-
-/// One joint's sign check from its measured (a) and predicted (p) torque in motion (m) and at
-/// rest (r); records the verdict in F and the delay weight (+-1 where the torque follows well).
-Json signCheckJoint(int j, const std::vector<double>& am, const std::vector<double>& pm,
-                    const std::vector<double>& ar, const std::vector<double>& pr, SignFindings* F,
-                    double* weight) {
-  Json s = Json::object();
-  const double rm = static_cast<int>(am.size()) >= kMinCorrelationSamples ? pearson(am, pm) : NAN;
-  const double spread_move = stdOf(pm), spread_rest = stdOf(pr);
-  const double rr = static_cast<int>(ar.size()) >= kMinCorrelationSamples &&
-                            spread_rest > kRestMinSpread * spread_move && spread_rest > 0
-                        ? pearson(ar, pr)
-                        : NAN;
-  // the gain means something only where the torque follows the model
-  const double gain = std::isfinite(rm) && std::abs(rm) >= kNoFollowCorrelation && spread_move > 0
-                          ? rm * stdOf(am) / spread_move
-                          : NAN;
-  s["correlation_moving"] = numberOrNull(rm);
-  s["correlation_rest"] = numberOrNull(rr);
-  s["gain_moving"] = numberOrNull(gain);
-  s["samples_moving"] = static_cast<long long>(am.size());
-  s["samples_rest"] = static_cast<long long>(ar.size());
-  const double r = std::isfinite(rm) ? rm : rr;
-  s["judged_on"] = std::isfinite(rm) ? "motion" : std::isfinite(rr) ? "rest" : "nothing";
-  std::string verdict;
-  if (!std::isfinite(r)) {
-    verdict = "unknown";
-  } else if (r <= kFlippedCorrelation) {
-    verdict = "flipped";
-    F->flipped.push_back(j);
-    F->r_flipped.push_back(r);
-  } else if (std::abs(r) < kNoFollowCorrelation) {
-    verdict = "does not follow";
-    F->nofollow.push_back(j);
-    F->r_nofollow.push_back(r);
-  } else if (r < kGoodCorrelation) {
-    verdict = "weak";
-    F->weak.push_back(j);
-    F->r_weak.push_back(r);
-  } else if (std::isfinite(gain) && (gain > kGainFactor || gain < 1.0 / kGainFactor)) {
-    verdict = "scale";
-    F->scale.push_back(j);
-    F->g_scale.push_back(gain);
-  } else {
-    verdict = "ok";
-  }
-  if (std::isfinite(r) && std::abs(r) >= kGoodCorrelation) *weight = r > 0 ? 1.0 : -1.0;
-  s["verdict"] = verdict;
-  return s;
-}
-
-void signWarnings(const SignFindings& F, const char* where, std::vector<std::string>* W) {
-  auto plural = [](const std::vector<int>& v) { return v.size() > 1; };
-  if (!F.flipped.empty())
-    W->push_back(fmt::format(
-        "{} correlate{} {} with the nominal model's torque {}: torque sign looks flipped (set "
-        "tau_scale -1 for {}, or check the column's sign)",
-        jointList(F.flipped, "tau"), plural(F.flipped) ? "" : "s", valueList(F.r_flipped, "{:.2f}"),
-        where, plural(F.flipped) ? "those joints" : "that joint"));
-  if (!F.nofollow.empty())
-    W->push_back(fmt::format(
-        "{} correlate{} only {} with the nominal model's torque {}: torque does not follow the "
-        "model: scale, column or units?",
-        jointList(F.nofollow, "tau"), plural(F.nofollow) ? "" : "s",
-        valueList(F.r_nofollow, "{:.2f}"), where));
-  if (!F.weak.empty())
-    W->push_back(fmt::format(
-        "{} correlate{} weakly ({}) with the nominal model's torque {}: noise, friction the "
-        "model lacks, or a wrong column?",
-        jointList(F.weak, "tau"), plural(F.weak) ? "" : "s", valueList(F.r_weak, "{:.2f}"), where));
-  if (!F.scale.empty())
-    W->push_back(fmt::format(
-        "{} follow{} the nominal model's torque but with a gain of {}: scale, torque constant or "
-        "units (tau_scale, torque_constants_Nm_per_A)?",
-        jointList(F.scale, "tau"), plural(F.scale) ? "" : "s", valueList(F.g_scale, "{:.3g}")));
-}
-
-/// The nominal model's actuator torque at every sample (pred) and, at the standing samples, its
-/// torque at rest (pred_rest; zero where moving). The samples in two halves on two threads (each
-/// sample's torque is the same on either).
+/// The nominal model's torque without friction at every sample (pred: rigid bodies and rotor
+/// inertia) and, at the standing samples, its torque at rest (pred_rest; zero where moving). The
+/// checks put friction columns of their own beside it (inspect_torque.cpp): the description's
+/// Coulomb term, sign(qd), flips at random where a derived velocity hovers around zero (coarse
+/// positions, a standstill), which no check should read as the torque's fault. The samples in
+/// two halves on two threads (each sample's torque is the same on either).
 void predictTorque(const RobotModel& robot, const Dataset& data, const Signals& sig,
                    const std::vector<char>& moving, MatrixXd* pred, MatrixXd* pred_rest) {
   const int n = robot.dof();
   const Index K = data.size();
   DriveColumns cols;
-  cols.rotor_inertia = cols.coulomb = cols.viscous = cols.offset = true;
+  cols.rotor_inertia = true;
   pred->resize(K, n);
   *pred_rest = MatrixXd::Zero(K, n);
   auto part = [&](Index k0, Index k1) {
@@ -590,155 +530,39 @@ void predictTorque(const RobotModel& robot, const Dataset& data, const Signals& 
   first.get();
 }
 
-/// The measured torque against the nominal model's (sign_check of each joint row, warnings).
-/// Returns the per-joint weights of the delay estimate: +-1 where the torque follows the model
-/// well, else 0.
-std::vector<double> signCheck(const RobotModel& robot, const Dataset& data, const Signals& sig,
-                              const std::vector<char>& moving, Index moving_samples,
-                              std::vector<Json>* jrows, MatrixXd* pred,
-                              std::vector<std::string>* W) {
+/// Per joint, the std of the nominal model's torque that comes from the position error through
+/// derived velocities and accelerations (zero when the data has them): the prediction from
+/// alternativePositions, differentiated the same way, against the prediction; the change's RMS
+/// over the moving samples (for quantised positions an upper bound, by up to sqrt(2)).
+VectorXd predictionNoise(const RobotModel& robot, const Dataset& data, const Signals& sig,
+                         const std::vector<char>& moving, const MatrixXd& pred, double dt) {
   const int n = robot.dof();
+  VectorXd out = VectorXd::Zero(n);
+  if (!sig.derived_qd && !sig.derived_qdd) return out;
   const Index K = data.size();
-  std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
-  MatrixXd pred_rest;
-  predictTorque(robot, data, sig, moving, pred, &pred_rest);
-  SignFindings F;
+  MatrixXd smooth;
+  savitzkyGolay(data.q, dt, sig.sg_half_width, &smooth, nullptr, nullptr);
+  Dataset alt;
+  alt.t = data.t;
+  alt.q = alternativePositions(data.q, smooth);
+  Signals as = sig;
+  MatrixXd v, a;
+  savitzkyGolay(alt.q, dt, sig.sg_half_width, nullptr, &v, &a);
+  if (sig.derived_qd) as.qd = v;
+  if (sig.derived_qdd) as.qdd = a;
+  MatrixXd p2, p2_rest;
+  predictTorque(robot, alt, as, moving, &p2, &p2_rest);
   for (int j = 0; j < n; ++j) {
-    std::vector<double> am, pm, ar, pr;
-    for (Index k = 0; k < K; ++k) {
+    double ss = 0;
+    Index m = 0;
+    for (Index k = 0; k < K; ++k)
       if (moving[static_cast<std::size_t>(k)]) {
-        am.push_back(sig.tau(k, j));
-        pm.push_back((*pred)(k, j));
-      } else {
-        ar.push_back(sig.tau(k, j));
-        pr.push_back(pred_rest(k, j));
+        ss += (p2(k, j) - pred(k, j)) * (p2(k, j) - pred(k, j));
+        ++m;
       }
-    }
-    (*jrows)[static_cast<std::size_t>(j)]["sign_check"] =
-        signCheckJoint(j, am, pm, ar, pr, &F, &weight[static_cast<std::size_t>(j)]);
+    out(j) = m > 0 ? std::sqrt(ss / static_cast<double>(m)) : 0.0;
   }
-  signWarnings(F, moving_samples > 0 ? "in motion" : "at rest", W);
-  return weight;
-}
-
-/// Peak of a correlation over lags -L..L with parabolic sub-sample refinement; at the window's
-/// edge: not refined.
-double correlationPeak(const std::vector<double>& y, int L, bool* edge, double* height) {
-  const auto it = std::max_element(y.begin(), y.end());
-  const int i = static_cast<int>(it - y.begin());
-  *height = *it;
-  *edge = i == 0 || i == 2 * L;
-  double off = 0;
-  if (!*edge) {
-    const double ym = y[static_cast<std::size_t>(i - 1)], y0 = *it,
-                 yp = y[static_cast<std::size_t>(i + 1)];
-    const double den = ym - 2 * y0 + yp;
-    if (den < 0) off = 0.5 * (ym - yp) / den;
-  }
-  return static_cast<double>(i - L) + off;
-}
-
-/// c_j(l) = corr(tau_j(k), pred_j(k - l)) over the same samples k in [L, K - L) for every lag (a
-/// window that changed with the lag would tilt the peak), signed by the joint's weight; sum: their
-/// weighted mean. The sub-sample part comes from the smooth part of the torques: the jumps of
-/// Coulomb friction at velocity reversals happen at a sample in the data and the prediction alike,
-/// and correlate in a cusp at a whole lag (averaged over many reversals, at the delay).
-void lagCorrelations(const MatrixXd& tau, const MatrixXd& pred, const std::vector<double>& weight,
-                     double wsum, Index K, int L, std::vector<std::vector<double>>* c,
-                     std::vector<double>* sum) {
-  const auto n = static_cast<int>(weight.size());
-  c->assign(static_cast<std::size_t>(n), std::vector<double>(static_cast<std::size_t>(2 * L + 1)));
-  sum->assign(static_cast<std::size_t>(2 * L + 1), 0.0);
-  for (int j = 0; j < n; ++j) {
-    if (weight[static_cast<std::size_t>(j)] == 0) continue;
-    const Index k0 = L, k1 = K - L;
-    const auto a = tau.col(j).segment(k0, k1 - k0);  // the same samples for every lag
-    const double sa = a.sum(), saa = a.squaredNorm();
-    for (int l = -L; l <= L; ++l) {
-      const auto b = pred.col(j).segment(k0 - l, k1 - k0);
-      const double sb = b.sum(), sbb = b.squaredNorm(), sab = a.dot(b);
-      const double m = static_cast<double>(k1 - k0);
-      const double cov = sab - sa * sb / m, va = saa - sa * sa / m, vb = sbb - sb * sb / m;
-      const double r = va > 0 && vb > 0 ? cov / std::sqrt(va * vb) : 0.0;
-      (*c)[static_cast<std::size_t>(j)][static_cast<std::size_t>(l + L)] =
-          weight[static_cast<std::size_t>(j)] * r;
-      (*sum)[static_cast<std::size_t>(l + L)] += weight[static_cast<std::size_t>(j)] * r / wsum;
-    }
-  }
-}
-
-/// D["per_joint"] and D["per_joint_spread_s"]: each following joint's own delay.
-void perJointDelays(const std::vector<std::vector<double>>& c, const std::vector<double>& weight,
-                    int L, double dt, Json& D) {
-  const auto n = static_cast<int>(weight.size());
-  Json per = Json::array();
-  for (int j = 0; j < n; ++j) {
-    Json e = Json::object();
-    e["joint"] = j + 1;
-    if (weight[static_cast<std::size_t>(j)] == 0) {
-      e["delay_samples"] = Json();
-      e["delay_s"] = Json();
-    } else {
-      bool ej = false;
-      double hj = 0;
-      const double dj = correlationPeak(c[static_cast<std::size_t>(j)], L, &ej, &hj);
-      e["delay_samples"] = dj;
-      e["delay_s"] = dj * dt;
-      e["peak_correlation"] = hj;
-    }
-    per.push_back(e);
-  }
-  D["per_joint"] = per;
-  {  // how well the joints agree: their delays' standard deviation
-    std::vector<double> dj;
-    for (std::size_t i = 0; i < per.size(); ++i)
-      if (per.at(i).find("delay_s")->isNumber())
-        dj.push_back(per.at(i).find("delay_s")->asDouble());
-    D["per_joint_spread_s"] = dj.size() > 1 ? Json(stdOf(dj)) : Json();
-  }
-}
-
-/// D = J["delay"]: the measured torque's delay against the nominal model's prediction.
-void delayCheck(const MatrixXd& tau, const MatrixXd& pred, const std::vector<double>& weight,
-                bool has_tau, Index K, double rate, double dt, Json& D,
-                std::vector<std::string>* W) {
-  D["convention"] =
-      "positive: the measured torque lags the prediction, tau_measured(t) ~ "
-      "tau_predicted(t - delay_s)";
-  double wsum = 0;
-  for (double w : weight) wsum += std::abs(w);
-  const int L =
-      std::min(std::max(static_cast<int>(std::lround(kDelayMaxLagS * rate)), kDelayMinLagSamples),
-               static_cast<int>(K / 4));
-  D["max_lag_samples"] = L;
-  if (!has_tau || wsum == 0 || L < 1) {
-    D["delay_samples"] = Json();
-    D["delay_s"] = Json();
-    D["note"] = !has_tau ? "the data has no torque"
-                         : "no joint's torque follows the model (|r| >= 0.5): nothing to align";
-    return;
-  }
-  std::vector<std::vector<double>> c;
-  std::vector<double> sum;
-  lagCorrelations(tau, pred, weight, wsum, K, L, &c, &sum);
-  bool edge = false;
-  double height = 0;
-  const double d = correlationPeak(sum, L, &edge, &height);
-  D["delay_samples"] = d;
-  D["delay_s"] = d * dt;
-  D["peak_correlation"] = height;
-  D["at_window_edge"] = edge;
-  perJointDelays(c, weight, L, dt, D);
-  if (edge)
-    W->push_back(fmt::format(
-        "the torque's delay against the model lies at the edge of the searched window (+-{} "
-        "samples, {:.3g} s): a large delay, or a torque that does not follow the model",
-        L, L * dt));
-  else if (std::abs(d) >= kDelayWarnSamples && std::abs(d * dt) >= kDelayWarnS)
-    W->push_back(fmt::format(
-        "the measured torque {} the nominal model's prediction by {:.2f} samples ({:.4g} s): "
-        "a delay in the torque (or position) signal; shift one of them before identifying",
-        d > 0 ? "lags" : "leads", std::abs(d), std::abs(d * dt)));
+  return out;
 }
 
 /// sqrt of the extreme eigenvalues' ratio of a symmetric matrix (inf when singular).
@@ -873,20 +697,34 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   const std::vector<char> moving = motionCheck(data, sig.qd, n, dt, J, &moving_samples);
   std::vector<Json> jrows = coverageRows(robot, data, sig.qd, &W);
 
-  std::vector<double> weight(static_cast<std::size_t>(n), 0.0);
-  MatrixXd pred;
+  (void)moving_samples;
   if (!sig.has_tau) {
     J["sign_check"] = Json();
     J["sign_check_note"] = "the data has no torque";
+    J["delay"]["delay_samples"] = Json();
+    J["delay"]["delay_s"] = Json();
+    J["delay"]["note"] = "the data has no torque";
   } else {
-    weight = signCheck(robot, data, sig, moving, moving_samples, &jrows, &pred, &W);
+    MatrixXd pred, pred_rest;
+    predictTorque(robot, data, sig, moving, &pred, &pred_rest);
+    const VectorXd pred_noise = predictionNoise(robot, data, sig, moving, pred, dt);
+    inspect_torque::Input in;
+    in.pred_noise = &pred_noise;
+    in.tau = &sig.tau;
+    in.tau_raw = &data.tau;
+    in.pred = &pred;
+    in.pred_rest = &pred_rest;
+    in.qd = &sig.qd;
+    in.moving = &moving;
+    in.dt = dt;
+    const std::vector<char> usable = inspect_torque::signCheck(in, &jrows, &W);
+    inspect_torque::delayCheck(in, usable, J["delay"], &W);
   }
   {
     Json joints = Json::array();
     for (const Json& e : jrows) joints.push_back(e);
     J["joints"] = joints;
   }
-  delayCheck(sig.tau, pred, weight, sig.has_tau, K, rate, dt, J["delay"], &W);
   if (model) {
     regressor_done.get();  // (regressorCheck catches its own errors)
     J["regressor"] = std::move(regressor);
@@ -924,9 +762,11 @@ std::string inspectionText(const Json& J) {
     }
     const Json* dup = rec->find("duplicate_rows");
     const Json* fr = rec->find("frozen_rows");
-    out += fmt::format("rows: {} duplicate, {} frozen (sample-and-hold)\n",
-                       dup ? num(dup->find("count"), "{:.0f}") : "-",
-                       fr ? num(fr->find("rows"), "{:.0f}") : "-");
+    const Json* rest = rec->find("held_at_rest");
+    out += fmt::format(
+        "rows while moving: {} duplicate, {} frozen (sample-and-hold); held at rest: {}\n",
+        dup ? num(dup->find("count"), "{:.0f}") : "-", fr ? num(fr->find("rows"), "{:.0f}") : "-",
+        rest ? num(rest->find("rows"), "{:.0f}") : "-");
     if (const Json* sat = rec->find("saturation"); sat && sat->isArray()) {
       std::string s;
       for (std::size_t i = 0; i < sat->size(); ++i) {
@@ -962,26 +802,31 @@ std::string inspectionText(const Json& J) {
                        segs(m->find("standstill_s")));
   }
   if (const Json* js = J.find("joints")) {
-    out += "joint  range covered  |qd| covered  r moving  r rest  gain   verdict\n";
+    out += "joint  range covered  |qd| covered  gain +- std      noise  model signal  verdict\n";
     for (std::size_t i = 0; i < js->size(); ++i) {
       const Json& e = js->at(i);
       const Json* s = e.find("sign_check");
-      out +=
-          fmt::format("{:>5}  {:>13}  {:>12}  {:>8}  {:>6}  {:>5}  {}\n", e.find("joint")->asInt(),
-                      pct(e.find("position_coverage")), pct(e.find("velocity_coverage")),
-                      s ? num(s->find("correlation_moving"), "{:.2f}") : "-",
-                      s ? num(s->find("correlation_rest"), "{:.2f}") : "-",
-                      s ? num(s->find("gain_moving"), "{:.2f}") : "-",
-                      s && s->find("verdict") ? s->find("verdict")->asString() : "-");
+      out += fmt::format("{:>5}  {:>13}  {:>12}  {:>15}  {:>5}  {:>12}  {}\n",
+                         e.find("joint")->asInt(), pct(e.find("position_coverage")),
+                         pct(e.find("velocity_coverage")),
+                         s ? fmt::format("{} +- {}", num(s->find("gain"), "{:.2f}"),
+                                         num(s->find("gain_std"), "{:.2f}"))
+                           : "-",
+                         s ? num(s->find("noise"), "{:.2g}") : "-",
+                         s ? num(s->find("model_signal"), "{:.3g}") : "-",
+                         s && s->find("verdict") ? s->find("verdict")->asString() : "-");
     }
   }
   if (const Json* d = J.find("delay")) {
     if (d->find("delay_samples") && d->find("delay_samples")->isNumber())
       out += fmt::format(
-          "delay: {:.2f} samples = {:.4g} s (positive: measured torque lags the model; joints "
-          "spread {} s){}\n",
-          d->find("delay_samples")->asDouble(), d->find("delay_s")->asDouble(),
-          num(d->find("per_joint_spread_s"), "{:.2g}"),
+          "delay: {:.2f} +- {} samples = {:.4g} s (positive: measured torque lags the model; "
+          "joints spread {} s; {}){}\n",
+          d->find("delay_samples")->asDouble(), num(d->find("std_samples"), "{:.2f}"),
+          d->find("delay_s")->asDouble(), num(d->find("per_joint_spread_s"), "{:.2g}"),
+          d->find("reported") && d->find("reported")->asBool()
+              ? "reported"
+              : "not reported: not significant, not consistent, or no better fit",
           d->find("at_window_edge") && d->find("at_window_edge")->asBool()
               ? " [at the edge of the window]"
               : "");

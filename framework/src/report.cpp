@@ -460,6 +460,13 @@ std::string Report::write(const StudySummary& summary) {
       "Configuration hash `{}`; resolved study in `study.resolved.yaml`; machine-readable "
       "results in `summary.json`.\n\n",
       cfg_.hash());
+  if (summary.verdict == "suspect") {
+    md +=
+        "## Verdict: suspect\n\nThe study ran to the end, but its results fail checks of their own "
+        "(summary.json `verdict`):\n\n";
+    for (const auto& r : summary.verdict_reasons) md += "- " + r + "\n";
+    md += "\n";
+  }
   md += briefTable(summary) + "\n";
   if (!summary.warnings.empty()) {
     md += "## Warnings\n\n";

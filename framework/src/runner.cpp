@@ -1339,6 +1339,8 @@ void StudyRun::validationStage() {
       for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
     inspectInto(S, warnFn(), "validation", *robot, model.get(), vd, vctx);
     va.relative_error = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
+    va.residual_rms =
+        rows.y.size() > 0 ? err.norm() / std::sqrt(static_cast<double>(rows.y.size())) : NAN;
     std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
         ref(rms.size(), 0.0);
     for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
@@ -1448,6 +1450,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       throw Error(fmt::format("stopped: {}",
                               ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
     T.status = "ok";
+    renderInto(T, &S);
+    judgeResults(S, &T);  // the results' own verdict, from what the stages wrote
     res.ok = true;
   } catch (const std::exception& e) {
     run.collectExperimentInspection();  // (a failed identification keeps the data's inspection)

@@ -2,6 +2,9 @@
 #include "exid/summary.hpp"
 
 #include <fmt/format.h>
+#include <fmt/ranges.h>
+
+#include <cmath>
 
 namespace exid {
 
@@ -11,6 +14,12 @@ void renderInto(const StudySummary& s, Json* S) {
   o["message"] = s.message;
   o["study"] = s.study;
   if (!s.failed_stage.empty()) o["failed_stage"] = s.failed_stage;
+  if (!s.verdict.empty()) {
+    Json v = Json::object();
+    v["value"] = s.verdict;
+    v["reasons"] = Json(s.verdict_reasons);
+    o["verdict"] = v;
+  }
   o["warnings"] = Json(s.warnings);
   if (std::isfinite(s.wall_s)) o["wall_s"] = s.wall_s;
 }
@@ -89,6 +98,7 @@ void renderInto(const StudySummary::Validation& v, Json* V) {
   o["samples"] = Json(v.samples);
   o["rows"] = Json(v.rows);
   o["relative_error"] = v.relative_error;
+  o["residual_rms"] = v.residual_rms;
   o["rms_per_joint"] = Json(v.rms_per_joint);
   o["relative_error_per_joint"] = Json(v.relative_error_per_joint);
   o["wall_s"] = v.wall_s;
@@ -104,6 +114,10 @@ std::string briefTable(const StudySummary& s) {
   };
   out += "| quantity | value |\n|---|---|\n";
   row("status", s.status);
+  if (!s.verdict.empty())
+    row("verdict", s.verdict_reasons.empty()
+                       ? s.verdict
+                       : fmt::format("{}: {}", s.verdict, fmt::join(s.verdict_reasons, "; ")));
   if (s.robot) {
     row("robot", fmt::format("{} ({} dof)", s.robot->name, s.robot->dof));
     if (s.robot->n_base_parameters)
@@ -126,6 +140,65 @@ std::string briefTable(const StudySummary& s) {
   }
   if (s.validation) row("validation relative error", num(s.validation->relative_error));
   return out;
+}
+
+namespace {
+const Json* path(const Json& j, std::initializer_list<const char*> keys) {
+  const Json* cur = &j;
+  for (const char* k : keys) {
+    if (!cur->isObject()) return nullptr;
+    cur = cur->find(k);
+    if (!cur) return nullptr;
+  }
+  return cur;
+}
+double number(const Json* j) { return j && j->isNumber() ? j->asDouble() : NAN; }
+}  // namespace
+
+std::vector<std::string> verdictReasons(const Json& S) {
+  std::vector<std::string> r;
+  const double rel = number(path(S, {"validation", "relative_error"}));
+  const double val_rms = number(path(S, {"validation", "residual_rms"}));
+  const double id_rms = number(path(S, {"identification", "residual_rms"}));
+  if (rel >= kVerdictHeldOutNoBetterThanZero)
+    r.push_back(fmt::format(
+        "the held-out relative error is {:.4g}: the identified model predicts the held-out data "
+        "no better than predicting zero (>= {:g}); look for a flipped sign, a wrong scale or "
+        "column, misaligned or unevenly stamped samples (`exid inspect`)",
+        rel, kVerdictHeldOutNoBetterThanZero));
+  else if (rel > kVerdictHeldOutMaterial && id_rms > 0 &&
+           val_rms > kVerdictHeldOutOverResidual * id_rms)
+    r.push_back(fmt::format(
+        "the held-out RMS error ({:.4g}) is {:.3g} times the identification residual RMS "
+        "({:.4g}; suspect above {:g} times): the model fits its own data but does not predict "
+        "other data (overfitting, too little excitation, or parts recorded differently)",
+        val_rms, val_rms / id_rms, id_rms, kVerdictHeldOutOverResidual));
+  if (const Json* sus = path(S, {"identification", "details", "suspect"}); sus && sus->isArray())
+    for (std::size_t i = 0; i < sus->size(); ++i)
+      if (sus->at(i).isString()) r.push_back(sus->at(i).asString());
+  // The fit's distance from its prior (base parameters, in the prior's covariance): for p
+  // parameters drawn from the prior, d^2 is chi-square with p degrees of freedom (mean p, std
+  // sqrt(2p)).
+  if (const Json* pr = path(S, {"identification", "details", "prior"})) {
+    const double d = number(pr->find("mahalanobis_from_prior"));
+    const Json* v = pr->find("value");
+    const double p = v && v->isArray() ? static_cast<double>(v->size()) : NAN;
+    if (std::isfinite(d) && p > 0) {
+      const double limit = p + kVerdictPriorTailSigma * std::sqrt(2.0 * p);
+      if (d * d > limit)
+        r.push_back(fmt::format(
+            "the estimate lies far outside its prior: squared Mahalanobis distance {:.4g} for {} "
+            "parameters (a chi-square of mean {} and std {:.3g}; suspect above {:.4g}): the "
+            "prior's values or standard deviations, or the data, are wrong",
+            d * d, static_cast<int>(p), static_cast<int>(p), std::sqrt(2.0 * p), limit));
+    }
+  }
+  return r;
+}
+
+void judgeResults(const Json& summary, StudySummary* s) {
+  s->verdict_reasons = verdictReasons(summary);
+  s->verdict = s->verdict_reasons.empty() ? "ok" : "suspect";
 }
 
 }  // namespace exid

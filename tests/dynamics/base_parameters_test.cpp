@@ -127,6 +127,33 @@ TEST(BaseParameters, ExpressionsAndRandomTrees) {
   EXPECT_EQ(b.expressions[1], "B - 0.5*C");
 }
 
+// A coefficient at the level of rounding (its share of the dependent column, on the columns'
+// scale, far below the rank tolerance) neither renames a parameter nor enters its expression;
+// a small but real one does. B's column is a thousandth of A's: the raw coefficient of a 1e-12
+// share is 2e-9 (an absolute threshold would keep it), of a 1e-6 share 2e-3.
+TEST(BaseParameters, CoefficientsBelowRoundingOnTheColumnsScaleAreZero) {
+  Eigen::MatrixXd W = Eigen::MatrixXd::Random(30, 3);
+  W.col(1) *= 1e-3;
+  const double ratio = W.col(0).norm() / W.col(1).norm();  // ~1e3
+  for (const double share : {1e-12, 1e-6}) {
+    SCOPED_TRACE(share);
+    const double delta = share * 2 * ratio;  // C = 2 A + delta B: B's share of C is ~share
+    W.col(2) = 2 * W.col(0) + delta * W.col(1);
+    const BaseParameters b = computeBaseParameters(W, {"A", "B", "C"});
+    ASSERT_EQ(b.rank(), 2);
+    EXPECT_EQ(b.names[0], "AR");
+    EXPECT_EQ(b.expressions[0], "A + 2*C");
+    if (share < 1e-10) {
+      EXPECT_EQ(b.names[1], "B");
+      EXPECT_EQ(b.expressions[1], "B");
+      EXPECT_EQ(b.K(1, 2), 0.0);
+    } else {
+      EXPECT_EQ(b.names[1], "BR");
+      EXPECT_NEAR(b.K(1, 2), delta, 1e-9 * delta);
+    }
+  }
+}
+
 // A study may name the base columns to keep (BaseParameterOptions::preferred): the same
 // identifiable space (rank, exactness), other columns and regroupings; a dependent or unknown
 // name is an error naming it.

@@ -551,6 +551,24 @@ TEST(PriorScale, EvidenceAndCrossValidationRecoverTheScaleOfThePriorDraw) {
     EXPECT_GT(cv.scale, a_true / 4);
     EXPECT_LT(cv.scale, 4 * a_true);
     ASSERT_EQ(cv.criterion.size(), cv.grid.size());
+    // inside the range [1e-3, 1e3]: no doubt said
+    EXPECT_EQ(cv.at_edge, "");
+    EXPECT_EQ(ev.at_edge, "");
+    EXPECT_EQ(cv.edgeText("test"), "");
+    // a range that ends below the truth: the choice sits at its upper end, and says so
+    const exid::estimators::PriorScaleChoice cv_low = exid::estimators::selectPriorScaleCv(
+        folds, prior, exid::estimators::logGrid(a_true / 100, a_true / 30, 8), "test");
+    EXPECT_EQ(cv_low.at_edge, "high");
+    EXPECT_NE(cv_low.edgeText("test").find("upper end"), std::string::npos);
+    const exid::estimators::PriorScaleChoice ev_low =
+        exid::estimators::selectPriorScaleEvidence(all, prior, a_true / 100, a_true / 30, "test");
+    EXPECT_EQ(ev_low.at_edge, "high");
+    // and one that starts above it: the lower end
+    const exid::estimators::PriorScaleChoice cv_high = exid::estimators::selectPriorScaleCv(
+        folds, prior, exid::estimators::logGrid(a_true * 30, a_true * 100, 8), "test");
+    EXPECT_EQ(cv_high.at_edge, "low");
+    EXPECT_NE(cv_high.toJson().find("at_range_edge"), nullptr);
+    EXPECT_EQ(cv_high.toJson().find("at_range_edge")->asString(), "low");
   }
 }
 

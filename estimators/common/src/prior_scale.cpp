@@ -36,10 +36,21 @@ std::vector<double> logGrid(double lo, double hi, int per_decade) {
   return g;
 }
 
+std::string PriorScaleChoice::edgeText(const std::string& who) const {
+  if (at_edge.empty() || grid.empty()) return "";
+  return fmt::format(
+      "{}: the prior scale chosen by {} ({:.4g}) sits at the {} end of the searched range [{:.4g}, "
+      "{:.4g}] (prior_scale_range): the best scale may lie beyond it; widen the range, or state "
+      "the scale (prior_scale_selection: none, prior_scale)",
+      who, method == "cv" ? "cross-validation" : "the evidence", scale,
+      at_edge == "low" ? "lower" : "upper", grid.front(), grid.back());
+}
+
 Json PriorScaleChoice::toJson() const {
   Json j = Json::object();
   j["method"] = method;
   j["scale"] = scale;
+  j["at_range_edge"] = at_edge.empty() ? Json() : Json(at_edge);
   if (method == "cv") {
     j["grid"] = Json(grid);
     j["cv_error"] = Json(criterion);
@@ -99,6 +110,7 @@ PriorScaleChoice selectPriorScaleCv(const std::vector<RowAccumulator>& folds, co
   check(std::isfinite(out.criterion[best]),
         fmt::format("{}: the cross-validation error is not finite", who));
   out.scale = grid[best];
+  if (grid.size() > 1) out.at_edge = best == 0 ? "low" : best + 1 == grid.size() ? "high" : "";
   return out;
 }
 
@@ -186,6 +198,10 @@ PriorScaleChoice selectPriorScaleEvidence(const RowAccumulator& rows, const Prio
   }
   const Terms tf = terms(a2, s2);
   out.scale = std::sqrt(a2);
+  if (hi > lo) {  // the fixed point clamped to the range, or the grid's best at its end
+    if (a2 <= lo * lo * (1 + 1e-9)) out.at_edge = "low";
+    if (a2 >= hi * hi * (1 - 1e-9)) out.at_edge = "high";
+  }
   out.noise_variance = s2;
   out.effective_parameters = tf.gamma;
   out.log_evidence = logEvidence(a2, s2, tf);

@@ -36,31 +36,42 @@ inline constexpr double kStandstillVelocityFraction = 0.05;
 inline constexpr double kStandstillVelocityFloor = 1e-3;
 /// Moving or standstill stretches shorter than this are merged into their neighbours [s].
 inline constexpr double kMinSegmentS = 0.1;
-/// Sign check, on the correlation r of measured with predicted torque (in motion, else at rest):
-/// r <= kFlippedCorrelation: "torque sign looks flipped"; |r| < kNoFollowCorrelation: "does not
-/// follow the model"; otherwise below kGoodCorrelation: a weak agreement.
-inline constexpr double kFlippedCorrelation = -0.5;
-inline constexpr double kNoFollowCorrelation = 0.3;
-inline constexpr double kGoodCorrelation = 0.5;
-/// The correlation at rest is computed only when the predicted torque at rest varies by at
-/// least this fraction of its variation in motion (several rest poses), else it is null.
-inline constexpr double kRestMinSpread = 0.05;
-/// Fewest samples a correlation is computed from.
-inline constexpr int kMinCorrelationSamples = 20;
-/// The gain (least-squares slope of measured on predicted torque, in motion) outside
-/// [1 / kGainFactor, kGainFactor] with a good correlation: "scale or units?".
+/// Sign check (inspect_torque.cpp): the gain g of the measured torque on the nominal model's,
+/// beside friction columns, and its std (residual autocorrelation included). Every verdict holds
+/// at kZ std: flipped when g + kZ std < 0; "does not follow" when |g| + kZ std < kNoFollowGain
+/// (g not significantly positive); "scale" when g is significantly outside
+/// [1 / kGainFactor, kGainFactor]. A joint is checkable only when the model's torque beyond
+/// friction varies by more than kSignalOverNoise times the recording's noise on that torque and
+/// kZ std of g is below kMaxGainHalfWidth; otherwise "not checkable" (never a warning).
+inline constexpr double kZ = 3.0;
+inline constexpr double kSignalOverNoise = 3.0;
+inline constexpr double kMaxGainHalfWidth = 0.5;
+inline constexpr double kNoFollowGain = 0.2;
 inline constexpr double kGainFactor = 5.0;
-/// Delay: cross-correlation over lags |l| <= max(kDelayMaxLagS * rate, kDelayMinLagSamples),
-/// at most a quarter of the samples; warned about when |delay| >= kDelayWarnSamples samples and
-/// >= kDelayWarnS seconds.
+/// Fewest samples a joint is judged on.
+inline constexpr int kMinCorrelationSamples = 20;
+/// Delay: the regression's residual over lags |l| <= max(kDelayMaxLagS * rate,
+/// kDelayMinLagSamples), at most an eighth of the samples. Warned about only when |delay| >=
+/// kDelayMinSamples and > kZ std (the std from the spread of the estimates of kDelayParts
+/// contiguous parts of the recording), at least two joints are judged and two thirds agree with
+/// it, every part gives the same sign within kDelayAgreeSamples or kDelayAgreeFraction of it, and
+/// shifting by it lowers the joints' residuals by kDelayMinImprovement on average.
 inline constexpr double kDelayMaxLagS = 0.05;
 inline constexpr int kDelayMinLagSamples = 10;
-inline constexpr double kDelayWarnSamples = 1.5;
-inline constexpr double kDelayWarnS = 0.002;
+inline constexpr double kDelayMinSamples = 1.0;
+inline constexpr double kDelayAgreeSamples = 1.0;
+inline constexpr double kDelayAgreeFraction = 0.5;
+inline constexpr int kDelayParts = 4;
+inline constexpr double kDelayMinImprovement = 0.02;
 /// Derivatives absent from the data: a quadratic Savitzky-Golay fit whose -3 dB frequency is
 /// about this [Hz] (window half-width M = round((1.5 fs / fc + 4.6) / 3.2), at least 2 samples);
 /// the torque is smoothed by the same fit (zero phase: no delay).
 inline constexpr double kDifferentiateCutoffHz = 20.0;
+/// ... lowered by halves, down to kMinDifferentiateCutoffHz, while the derived accelerations'
+/// own error (from the positions' resolution or noise) exceeds kMaxDerivedAccelError of their
+/// RMS for some joint.
+inline constexpr double kMinDifferentiateCutoffHz = 2.5;
+inline constexpr double kMaxDerivedAccelError = 0.25;
 /// Condition number of the base regressor with columns scaled to unit norm above which the
 /// recording is said to excite the base parameters poorly.
 inline constexpr double kCondWarn = 1e5;

@@ -62,6 +62,7 @@ struct ValidationSummary {
   std::string type;
   long long samples = 0, rows = 0;
   double relative_error = NAN;
+  double residual_rms = NAN;  // RMS of the held-out prediction error over every row
   std::vector<double> rms_per_joint, relative_error_per_joint;
   double wall_s = NAN;
 };
@@ -72,6 +73,10 @@ struct StudySummary {
   std::string failed_stage;        // the stage that failed ("" unless failed or cancelled)
   std::string message;
   std::vector<std::string> warnings;  // what a user should know about the results
+  /// What the results say of themselves (status ok only): "ok", or "suspect" with the reasons
+  /// (judgeResults). Empty until judged.
+  std::string verdict;
+  std::vector<std::string> verdict_reasons;
   double wall_s = NAN;
 
   using Robot = RobotSummary;
@@ -96,5 +101,20 @@ void renderInto(const StudySummary::Validation& v, Json* validation);
 
 /// The Markdown table printed at the end of `exid run` and at the top of report.md.
 std::string briefTable(const StudySummary& s);
+
+/// Thresholds of the verdict (docs/study.md, "The verdict").
+inline constexpr double kVerdictHeldOutNoBetterThanZero = 1.0;  // held-out relative error
+inline constexpr double kVerdictHeldOutOverResidual = 3.0;      // held-out RMS / identification's
+inline constexpr double kVerdictHeldOutMaterial = 0.05;  // the ratio counts above this rel. error
+inline constexpr double kVerdictPriorTailSigma = 6.0;    // chi-square tail, in its std
+
+/// The reasons a finished study's results are suspect, read from its summary.json tree (empty:
+/// nothing found): a held-out error no better than zero torque, a held-out error far above the
+/// identification residual, an estimator's own doubts (identification.details.suspect, e.g. a
+/// scale chosen at the edge of its grid), a fit far outside its prior.
+std::vector<std::string> verdictReasons(const Json& summary);
+
+/// Sets s->verdict and s->verdict_reasons from the summary tree (verdictReasons).
+void judgeResults(const Json& summary, StudySummary* s);
 
 }  // namespace exid

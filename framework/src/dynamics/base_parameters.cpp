@@ -255,7 +255,8 @@ bool pivotedRankCheck(const Eigen::MatrixXd& A, double tolerance, int r_seq,
 // (No solve with an empty right-hand side: Eigen binds a reference to its null data pointer.)
 Eigen::MatrixXd solveBeta(const BaseParameters& bp, const Eigen::MatrixXd& W,
                           const std::vector<bool>& zero, const SequentialQr& s,
-                          const Eigen::MatrixXd& T, const Eigen::VectorXd& scale, bool pivoted) {
+                          const Eigen::MatrixXd& T, const Eigen::VectorXd& scale, bool pivoted,
+                          const Eigen::VectorXd& norms, double tolerance) {
   const Eigen::Index N = W.rows();
   const std::vector<int>& ind = bp.independent;
   const int r = bp.rank(), nd = static_cast<int>(bp.dependent.size());
@@ -282,8 +283,18 @@ Eigen::MatrixXd solveBeta(const BaseParameters& bp, const Eigen::MatrixXd& W,
     beta = (r > 0 && nd > 0) ? Eigen::MatrixXd(W1.colPivHouseholderQr().solve(W2))
                              : Eigen::MatrixXd(Eigen::MatrixXd::Zero(r, nd));
   }
-  for (Eigen::Index i = 0; i < beta.size(); ++i)
-    if (std::abs(beta.data()[i]) < 1e-10) beta.data()[i] = 0.0;
+  // A coefficient whose share of the dependent column is below a hundredth of the rank tolerance
+  // is rounding, not structure (W_dep = sum_k beta_k W_k: beta_k ||W_k|| / ||W_dep|| is its
+  // share, on the scale the rank was decided on; the solve's rounding is about eps cond(R11),
+  // 1e-14..1e-11): zero, so that it neither renames a parameter nor enters its expression.
+  for (int c = 0; c < nd; ++c) {
+    const double nd_norm = norms[bp.dependent[static_cast<size_t>(c)]];
+    for (int k = 0; k < r; ++k) {
+      const double share =
+          nd_norm > 0 ? std::abs(beta(k, c)) * norms[ind[static_cast<size_t>(k)]] / nd_norm : 0.0;
+      if (!(share > 1e-2 * tolerance)) beta(k, c) = 0.0;
+    }
+  }
   return beta;
 }
 
@@ -302,7 +313,7 @@ void regroupedNames(const std::vector<std::string>& names, BaseParameters* bp) {
     bool regrouped = false;
     for (int c = 0; c < nd; ++c) {
       const double b = bp->beta(k, c);
-      if (std::abs(b) < 1e-10) continue;
+      if (b == 0.0) continue;  // (rounding was zeroed by solveBeta)
       regrouped = true;
       const std::string& nm = names[static_cast<size_t>(bp->dependent[static_cast<size_t>(c)])];
       const double a = std::abs(b);
@@ -364,7 +375,7 @@ BaseParameters naturalOrder(const Eigen::MatrixXd& W_stacked, const std::vector<
   for (Eigen::Index k = 0; k < p; ++k)
     if (!is_ind[static_cast<size_t>(k)]) bp.dependent.push_back(static_cast<int>(k));
 
-  bp.beta = solveBeta(bp, W, zero, s, T, scale, pivoted);
+  bp.beta = solveBeta(bp, W, zero, s, T, scale, pivoted, norms, opt.tolerance);
   regroupedNames(names, &bp);
   return bp;
 }

@@ -34,6 +34,11 @@ struct PriorScaleChoice {
   double effective_parameters = 0.0;  // evidence: gamma = p - tr(posterior cov * prior info)
   double log_evidence = 0.0;          // evidence: at the optimum
   int iterations = 0;                 // evidence: fixed-point iterations
+  /// "low" / "high": the choice sits at that end of the searched range (the best scale may lie
+  /// beyond it: widen the range or state the scale); "" inside it.
+  std::string at_edge;
+  /// The doubt about the choice in words ("" when inside the range), for the study's verdict.
+  std::string edgeText(const std::string& who) const;
   Json toJson() const;
 };
 
