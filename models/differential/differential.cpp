@@ -453,7 +453,7 @@ class DifferentialModel : public exid::ObservationModel {
     return W;
   }
 
-  static double signum(double v) { return v > 0 ? 1.0 : (v < 0 ? -1.0 : 0.0); }
+  static double signum(double v) { return exid::coulombSign(v); }
 
   // The FcL columns of a design: |nominal torque| sign(qdm) (rows() puts the recorded torque).
   void loadColumns(const exid::Samples& s, Eigen::MatrixXd* W) const {
@@ -787,7 +787,7 @@ class DifferentialModel : public exid::ObservationModel {
 
   double frictionTorque(int j, double qdm) const {
     const exid::Drive D = drive(j);
-    const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
+    const double sg = exid::coulombSign(qdm);
     return D.coulomb * sg + D.viscous * qdm + (cols_.offset ? 0.0 : D.offset);
   }
 

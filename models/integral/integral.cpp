@@ -176,7 +176,7 @@ class IntegralModel : public exid::ObservationModel {
         int c = 10 * n + nd * j;
         const double v = qdm[j];
         if (cols_.rotor_inertia) gqd[j] += dE(k, c++) * v;
-        if (cols_.coulomb) gqd[j] += dF(k, c++) * (v > 0.0 ? 1.0 : (v < 0.0 ? -1.0 : 0.0));
+        if (cols_.coulomb) gqd[j] += dF(k, c++) * exid::coulombSign(v);
         if (cols_.viscous) gqd[j] += dF(k, c++) * 2.0 * v;
         if (cols_.offset) gq[j] += dE(k, c++);
       }
@@ -224,7 +224,7 @@ class IntegralModel : public exid::ObservationModel {
     const auto& dr = robot().drives;
     const exid::Drive D =
         j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
-    const double sg = qdm > 0.0 ? 1.0 : (qdm < 0.0 ? -1.0 : 0.0);
+    const double sg = exid::coulombSign(qdm);
     return D.coulomb * sg + D.viscous * qdm + (cols_.offset ? 0.0 : D.offset);
   }
 

@@ -214,7 +214,7 @@ VectorXd ClosedLoop::delivered(const VectorXd& theta, const VectorXd& tau_c, con
       u[c.joint] += v * tj;
       if (slope) (*slope)[c.joint] += v;
     } else {  // FcL: -FcL |tau| sign(qd)
-      const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
+      const double sq = exid::coulombSign(qd[c.joint]);
       const double st = tj > 0 ? 1.0 : (tj < 0 ? -1.0 : 0.0);
       u[c.joint] -= v * std::abs(tj) * sq;
       if (slope) (*slope)[c.joint] -= v * st * sq;

@@ -12,6 +12,7 @@
 #include <cmath>
 #include <vector>
 
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 
@@ -41,7 +42,7 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
     // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
     for (const TorqueColumn& c : tcol_) {
       w.col(c.base).setZero();
-      const double sq = qd[c.joint] > 0 ? 1.0 : (qd[c.joint] < 0 ? -1.0 : 0.0);
+      const double sq = exid::coulombSign(qd[c.joint]);
       w(c.joint, c.base) = c.kind == 1 ? -tau_c[c.joint] : std::abs(tau_c[c.joint]) * sq;
     }
     if (eta_sens_) {

@@ -11,7 +11,7 @@ namespace exid {
 
 namespace {
 
-inline double sgn(double x) { return x > 0.0 ? 1.0 : (x < 0.0 ? -1.0 : 0.0); }
+inline double sgn(double x) { return coulombSign(x); }
 
 void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* what,
                    const char* fn) {
