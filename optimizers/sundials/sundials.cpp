@@ -20,7 +20,11 @@
 // and the backward quadrature give
 //     dJ/dz = lambda(0)^T dy0/dz + int_0^T (dw/dqdd + lqd)^T dqdd/dz dt,
 // dw/d(q, qd, qdd) being the model's exact VJP with dW = 2 W S G S / dt. This is the
-// continuous-time form of the paper's costate recursion (eqn 15).
+// continuous-time form of the paper's costate recursion (eqn 15). Where a moving joint's velocity
+// changes sign, the integrand may jump (a Coulomb column sign(qd)); the crossing time moves with
+// z and adds <G, P(t*-) - P(t*+)> dt*/dz (crossingTerms), which the costates do not carry.
+// The quadratures' absolute tolerances are per entry of M, on the scale of the criterion's
+// (scaled) M (setQuadScale).
 //
 // Update: projected L-BFGS with Armijo backtracking on the merit J + rho/2 sum max(0, g)^2,
 // g(z) <= 0 the excitation problem's limits at the sample grid plus the trajectory's own caps
@@ -35,11 +39,13 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <limits>
 #include <memory>
 #include <string>
 #include <vector>
 
 #include "exid/error.hpp"
+#include "exid/gradient_check.hpp"
 #include "optim_common.hpp"
 
 namespace {
@@ -86,6 +92,10 @@ class TimeTrajectory {
   exid::Samples at(const Eigen::VectorXd& z, double t) const {
     t1_(0) = t;
     return traj_->evaluateAt(z, t1_);
+  }
+  /// q, qd, qdd at the times t.
+  exid::Samples atTimes(const Eigen::VectorXd& z, const Eigen::VectorXd& t) const {
+    return traj_->evaluateAt(z, t);
   }
   /// Gradient with respect to z of <adj, signals at time t> (adj: one sample).
   Eigen::VectorXd vjpAt(const Eigen::VectorXd& z, double t, const exid::Samples& adj) const {
@@ -143,8 +153,20 @@ class ContinuousCriterion {
   ContinuousCriterion(const ContinuousCriterion&) = delete;
   ContinuousCriterion& operator=(const ContinuousCriterion&) = delete;
 
-  /// Magnitude of M's diagonal, for the quadrature tolerances.
-  void setQuadScale(double s) { quad_scale_ = std::max(s, 1e-300); }
+  /// The quadrature tolerances from the discrete information matrix at the start (unscaled
+  /// base columns): entry (r, c) of M is integrated to an absolute tolerance of atol_quad_rel *
+  /// sqrt(M_rr M_cc), M scaled like the criterion's (S M S): each entry on its own scale, so
+  /// that the columns the scaling makes small are integrated as accurately as the others.
+  void setQuadScale(const Eigen::MatrixXd& M_unscaled) {
+    const Eigen::VectorXd d =
+        (scale_.asDiagonal() * M_unscaled * scale_.asDiagonal()).diagonal().cwiseAbs();
+    const double floor = std::max(1e-300, 1e-12 * d.maxCoeff());
+    quad_atol_.resize(nq_);
+    for (int c = 0, idx = 0; c < nb_; ++c)
+      for (int r = 0; r <= c; ++r, ++idx)
+        quad_atol_(idx) =
+            cs_.atol_quad_rel * std::sqrt(std::max(d(r), floor) * std::max(d(c), floor));
+  }
   long stepsForward() const { return steps_f_; }
   long stepsBackward() const { return steps_b_; }
 
@@ -175,8 +197,10 @@ class ContinuousCriterion {
     h.nls = SUNNonlinSol_FixedPoint(h.y, 0, sctx_);
     check(CVodeSetNonlinearSolver(h.mem, h.nls), "CVodeSetNonlinearSolver");
     check(CVodeQuadInit(h.mem, &ContinuousCriterion::rhsQuad, h.q), "CVodeQuadInit");
-    check(CVodeQuadSStolerances(h.mem, cs_.rtol, cs_.atol_quad_rel * quad_scale_),
-          "CVodeQuadSStolerances");
+    h.qatol = N_VNew_Serial(nq_, sctx_);
+    for (int i = 0; i < nq_; ++i)
+      N_VGetArrayPointer(h.qatol)[i] = quad_atol_.size() == nq_ ? quad_atol_(i) : cs_.atol_quad_rel;
+    check(CVodeQuadSVtolerances(h.mem, cs_.rtol, h.qatol), "CVodeQuadSVtolerances");
     check(CVodeSetQuadErrCon(h.mem, SUNTRUE), "CVodeSetQuadErrCon");
     check(CVodeSetStopTime(h.mem, T), "CVodeSetStopTime");
     if (grad) check(CVodeAdjInit(h.mem, cs_.checkpoint_steps, CV_HERMITE), "CVodeAdjInit");
@@ -238,6 +262,7 @@ class ContinuousCriterion {
       adj0.qd(0, j) = lam[nm + i];
     }
     *grad += par_.vjpAt(z, 0.0, adj0);
+    *grad += crossingTerms(z);
     return J;
   }
 
@@ -247,12 +272,12 @@ class ContinuousCriterion {
       if (mem) CVodeFree(&mem);
       if (nls) SUNNonlinSolFree(nls);
       if (nlsB) SUNNonlinSolFree(nlsB);
-      for (N_Vector v : {y, q, yB, qB})
+      for (N_Vector v : {y, q, yB, qB, qatol})
         if (v) N_VDestroy(v);
     }
     void* mem = nullptr;
     SUNNonlinearSolver nls = nullptr, nlsB = nullptr;
-    N_Vector y = nullptr, q = nullptr, yB = nullptr, qB = nullptr;
+    N_Vector y = nullptr, q = nullptr, yB = nullptr, qB = nullptr, qatol = nullptr;
   };
   static void check(int flag, const char* what, int code = 0) {
     if (flag < 0)
@@ -261,6 +286,56 @@ class ContinuousCriterion {
   }
   static void check(bool ok, const char* what) {
     if (!ok) throw exid::Error(fmt::format("optimizer 'sundials': {} failed", what));
+  }
+
+  // The terms of dJ/dz the costates do not carry: where a moving joint's velocity changes sign,
+  // the integrand S Phi Phi^T S / dt may jump (a Coulomb column sign(qd)); the crossing time t*
+  // moves with z, dt*/dz = -(dqd_j(t*)/dz) / qdd_j(t*), and dM/dz gains (P(t*-) - P(t*+))
+  // dt*/dz (Leibniz's rule at the discontinuity). Crossings are bracketed on a grid of 8 points
+  // per sample period and bisected; P(t*-+) is the model's design at t* -+ 1e-9 T. A model
+  // whose rows are continuous in qd (no Coulomb column, or a smoothed one) has no jump, and these
+  // terms vanish.
+  Eigen::VectorXd crossingTerms(const Eigen::VectorXd& z) {
+    Eigen::VectorXd g = Eigen::VectorXd::Zero(z.size());
+    const double T = par_.duration();
+    const int steps = std::max(64, static_cast<int>(std::ceil(8.0 * T / par_.dt())));
+    const Eigen::VectorXd grid = Eigen::VectorXd::LinSpaced(steps + 1, 0.0, T);
+    const exid::Samples s = par_.atTimes(z, grid);
+    const double delta = 1e-9 * T;
+    for (int j : par_.moving()) {
+      for (int k = 0; k < steps; ++k) {
+        double a = grid(k), b = grid(k + 1);
+        double va = s.qd(k, j);
+        if (!(va * s.qd(k + 1, j) < 0.0)) continue;
+        for (int it = 0; it < 60 && b - a > 4.0 * std::numeric_limits<double>::epsilon() * T;
+             ++it) {
+          const double m = 0.5 * (a + b), vm = par_.at(z, m).qd(0, j);
+          if (vm == 0.0) {
+            a = b = m;
+            break;
+          }
+          if ((vm < 0.0) == (va < 0.0)) {
+            a = m;
+            va = vm;
+          } else {
+            b = m;
+          }
+        }
+        const double ts = 0.5 * (a + b);
+        const exid::Samples at = par_.at(z, ts);
+        const double qdd = at.qdd(0, j);
+        if (!(std::abs(qdd) > 0.0) || ts - delta <= 0.0 || ts + delta >= T) continue;
+        const Eigen::MatrixXd Wm = model_.design(par_.at(z, ts - delta)) * scale_.asDiagonal();
+        const Eigen::MatrixXd Wp = model_.design(par_.at(z, ts + delta)) * scale_.asDiagonal();
+        const double jump =
+            (G_.cwiseProduct(Wm.transpose() * Wm - Wp.transpose() * Wp)).sum() / par_.dt();
+        if (jump == 0.0) continue;
+        exid::Samples e = zeroSample();
+        e.qd(0, j) = 1.0;
+        g -= (jump / qdd) * par_.vjpAt(z, ts, e);  // dt*/dz = -(dqd_j/dz) / qdd_j
+      }
+    }
+    return g;
   }
 
   // One sample of zeros (n joints).
@@ -387,7 +462,7 @@ class ContinuousCriterion {
   CvodesSettings cs_;
   SUNContext sctx_ = nullptr;
   int nb_ = 0, nq_ = 0;
-  double quad_scale_ = 1.0;
+  Eigen::VectorXd quad_atol_;  // per entry of M's upper triangle (setQuadScale)
   Eigen::VectorXd scale_, z_;
   Eigen::MatrixXd G_;
   exid::Samples sample_, adj_, adjB_;
@@ -474,7 +549,7 @@ class SundialsOptimizer final : public exid::Optimizer {
     {
       const exid::Samples s = problem.trajectory().evaluate(zs);
       const Eigen::MatrixXd W = problem.model().design(s);
-      cc.setQuadScale((W.transpose() * W).diagonal().cwiseAbs().maxCoeff());
+      cc.setQuadScale(W.transpose() * W);
     }
     Eigen::VectorXd z = project(zs);
     Json gcheck;
@@ -560,7 +635,8 @@ class SundialsOptimizer final : public exid::Optimizer {
     if (ctx_ && ctx_->shouldStop()) return exid::StopReason::Cancelled;
     return exid::StopReason::None;
   }
-  // Adjoint gradient vs central differences; cost of J + gradient relative to J alone.
+  // Adjoint gradient vs central differences (exid::checkGradient, steps fd_step * max(1, |z_i|));
+  // cost of J + gradient relative to J alone.
   Json gradientCheck(ContinuousCriterion& cc, const Eigen::VectorXd& z) {
     using clock = std::chrono::steady_clock;
     Eigen::VectorXd g;
@@ -571,20 +647,16 @@ class SundialsOptimizer final : public exid::Optimizer {
     t0 = clock::now();
     for (int i = 0; i < reps; ++i) cc.evaluate(z, &g);
     const double tG = std::chrono::duration<double>(clock::now() - t0).count() / reps;
-    Eigen::VectorXd fd(z.size());
-    for (Eigen::Index i = 0; i < z.size(); ++i) {
-      const double h = fd_step_ * std::max(1.0, std::abs(z(i)));
-      Eigen::VectorXd zp = z, zm = z;
-      zp(i) += h;
-      zm(i) -= h;
-      fd(i) = (cc.evaluate(zp, nullptr) - cc.evaluate(zm, nullptr)) / (2.0 * h);
-    }
-    evals_ += 2 * reps + 2 * z.size();
-    Json j = Json::object();
-    const double gmax = std::max(1e-300, fd.cwiseAbs().maxCoeff());
-    j["max_abs_error"] = (g - fd).cwiseAbs().maxCoeff();
-    j["max_rel_error"] = (g - fd).cwiseAbs().maxCoeff() / gmax;
-    j["max_abs_gradient"] = gmax;
+    exid::DerivativeCheckOptions o;
+    o.relative_step = fd_step_;
+    o.tolerance = kGradientTolerance;
+    const exid::DerivativeCheck c = exid::checkGradient(
+        [&](const Eigen::VectorXd& v) { return cc.evaluate(v, nullptr); }, z, g, o,
+        "optimizer 'sundials': adjoint gradient of the continuous criterion");
+    evals_ += 2 * reps + c.evaluations;
+    Json j = c.toJson();
+    const Eigen::VectorXd fd = c.numeric.row(0).transpose();
+    j["max_abs_gradient"] = std::max(1e-300, fd.cwiseAbs().maxCoeff());
     j["adjoint"] = Json(std::vector<double>(g.data(), g.data() + g.size()));
     j["finite_difference"] = Json(std::vector<double>(fd.data(), fd.data() + fd.size()));
     j["time_value_s"] = tJ;
@@ -691,6 +763,8 @@ class SundialsOptimizer final : public exid::Optimizer {
     return false;
   }
 
+  // check_gradient: the relative error (exid::checkGradient) above which `ok` is false.
+  static constexpr double kGradientTolerance = 1e-4;
   exid::optimizers::Budget budget_;
   int max_iter_, inner_, mem_;
   double gain_, rho_rel_, ftol_;

@@ -188,6 +188,13 @@ YAML
 run_study tpl_grad
 gerr=$(num "$work/tpl_grad" excitation max_rel_error)
 expect "adjoint gradient vs central differences: max_rel_error $gerr < 1e-4" "$gerr < 1e-4"
+# Testing your derivatives (docs/plugins.md): the example's own test, check_derivatives, checks
+# a_optimal's dJ/dM, template_sine's and template_model's derivatives with the installed
+# exid/gradient_check.hpp, and that the check fails on a wrong dJ/dM.
+dout=$(ctest --test-dir "$work/plugin" -V 2>&1) || fail "check_derivatives failed: $dout"
+grep -q "derivatives: OK" <<<"$dout" || fail "check_derivatives: no 'derivatives: OK' in: $dout"
+grep -q "criterion 'a_optimal_slip': dJ/dM: FAILED" <<<"$dout" ||
+  fail "check_derivatives did not show the wrong derivative caught: $dout"
 cat >"$work/tpl_slsqp.yaml" <<'YAML'
 name: template_slsqp
 robot: {type: template_robot, params: {drives: false}}
@@ -205,4 +212,5 @@ expect "SLSQP on template_sine: criterion_final $s1 < criterion_initial $s0 / 2"
 expect "SLSQP on template_sine: max_constraint_violation $sv <= 1e-9" "$sv <= 1e-9"
 echo "templates: OK (identification param_rel_err $e_ident, with drives $e_drives," \
   "noisy $e_n1 with sigma $sigma; excitation cond $j0 -> $j1 in $evals evaluations ($stop)," \
-  "violation $viol, then param_rel_err $e_x; gradient rel. error $gerr; SLSQP $s0 -> $s1)"
+  "violation $viol, then param_rel_err $e_x; gradient rel. error $gerr; SLSQP $s0 -> $s1;" \
+  "check_derivatives passed)"

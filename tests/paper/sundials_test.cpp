@@ -1,7 +1,8 @@
 // Optimizer `sundials` (continuous time, CVODES): the adjoint gradient against central finite
 // differences of the same continuous criterion (fourier and spline, differential and load_wrench
 // models; friction subtracted: the Coulomb column sign(qd) makes the continuous criterion depend
-// on the zero-crossing times of qd, whose event terms the adjoint does not include), the
+// on the zero-crossing times of qd, whose terms the adjoint adds (checked with the friction
+// columns in sundials_scaled_test.cpp, with a larger step), the
 // continuous criterion against the discrete one on a fine grid, and a short
 // optimisation that lowers the criterion and keeps the limits.
 #include <gtest/gtest.h>
