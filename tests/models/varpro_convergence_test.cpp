@@ -99,6 +99,12 @@ double etaError(const exid::Estimate& e, const Eigen::VectorXd& eta) {
 
 bool converged(const exid::Estimate& e) { return e.details.find("converged")->asBool(); }
 
+// a detail as text ("(none)" when missing)
+std::string detail(const exid::Estimate& e, const char* key) {
+  const exid::Json* j = e.details.find(key);
+  return j ? (j->isString() ? j->asString() : j->dump()) : std::string("(none)");
+}
+
 std::string warnings(const exid::Estimate& e) {
   const exid::Json* w = e.details.find("warnings");
   return w ? w->dump() : std::string();
@@ -133,8 +139,8 @@ TEST(VarproConvergence, RecoversTheTruthFromStartsOnBothSides) {
                                  ->estimate(*m, P.d, nullptr, mtest::context());
     const exid::Json& D = e.details;
     std::printf("[varpro] start eps x%g, vs x%g: eta %.2e, %s evaluations, start %s won, %s\n", fe,
-                fv, etaError(e, eta), D.find("evaluations")->dump().c_str(),
-                D.find("start_won")->dump().c_str(), D.find("stop")->asString().c_str());
+                fv, etaError(e, eta), detail(e, "evaluations").c_str(),
+                detail(e, "start_won").c_str(), detail(e, "stop").c_str());
     Eigen::Index worst = 0;
     ((e.nonlinear - eta).array() / eta.array()).abs().maxCoeff(&worst);
     EXPECT_LT(etaError(e, eta), 1e-6)
@@ -145,6 +151,7 @@ TEST(VarproConvergence, RecoversTheTruthFromStartsOnBothSides) {
     ASSERT_NE(D.find("starts"), nullptr);
     EXPECT_GE(D.find("starts")->size(), 1u);
     EXPECT_NE(D.find("gradient_norm"), nullptr);
+    ASSERT_NE(D.find("grid"), nullptr);
     EXPECT_EQ(D.find("grid")->find("groups")->size(), 6u);  // one per joint: eps_j, vs_j
   }
 }
@@ -163,12 +170,13 @@ TEST(VarproConvergence, ALocalMinimumOfOneStartIsEscapedByTheStarts) {
                                  ->estimate(*m, P.d, nullptr, mtest::context());
   std::printf(
       "[varpro] one start: eta off by %.3g, rms %.3g (%s); default starts: %.2e, rms %.3g\n",
-      etaError(one, eta), one.residual_rms, one.details.find("stop")->asString().c_str(),
-      etaError(all, eta), all.residual_rms);
+      etaError(one, eta), one.residual_rms, detail(one, "stop").c_str(), etaError(all, eta),
+      all.residual_rms);
   EXPECT_GT(etaError(one, eta), 0.5);
   EXPECT_GT(one.residual_rms, 1e6 * std::max(all.residual_rms, 1e-15));
   EXPECT_LT(etaError(all, eta), 1e-6);
   EXPECT_TRUE(converged(all));
+  ASSERT_NE(all.details.find("grid"), nullptr);
   EXPECT_EQ(all.details.find("grid")->find("multipliers")->size(), 3u);  // x1, x1/2, x2
   // a start that ends where the joint problem is singular
   auto m2 = mtest::model("differential", modelYaml(P.T, 2.0, 2.0), P.r);
