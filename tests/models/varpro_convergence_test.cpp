@@ -236,6 +236,8 @@ TEST(VarproConvergence, StandardDeviationsMatchTheSpreadForRevoluteAndPrismaticJ
   const exid::Dataset clean = recording(r, T, 4.0, 0.0, 1);
   const auto nl = m->nonlinearParameters();
   ASSERT_EQ(nl.size(), 2u);
+  EXPECT_EQ(nl[0].unit, "rad/s");
+  EXPECT_EQ(nl[1].unit, "m/s");  // (the prismatic joint's velocity)
   const Eigen::Vector2d eta(T.vs[1], T.vs[2]);
   const int draws = 60;
   Eigen::MatrixXd est(draws, 2), rep(draws, 2);
