@@ -77,6 +77,13 @@ class Didim : public exid::Estimator {
                                 "stop when an accepted step moves theta by less than this "
                                 "relative to its norm (the simulation's precision is near)",
                                 0.0, 1.0, true),
+             exid::param_double("first_order_std", 1.0, "",
+                                "first-order test of convergence (whatever stopped the "
+                                "iterations): the minimum the undamped model predicts lies "
+                                "within this many standard deviations of the result, along the "
+                                "covariance's metric (or its predicted decrease is below "
+                                "rss_tolerance)",
+                                0.0, 1e3, true),
              exid::param_string("loop", std::string("closed"),
                                 "closed: the robot's closed loop (reference_file and its PD "
                                 "gains); open: driven by the recorded torque in windows of "
@@ -117,6 +124,7 @@ class Didim : public exid::Estimator {
         max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         ftol_(p.getDouble("rss_tolerance")),
         xtol_(p.getDouble("step_tolerance")),
+        first_order_std_(p.getDouble("first_order_std")),
         tol_loop_(withSensitivities(exid::estimators::ClosedLoop::Tolerances::from(p),
                                     p.getString("sensitivities"))),
         check_(static_cast<int>(p.getInt("gradient_check"))),
@@ -403,9 +411,20 @@ class Didim : public exid::Estimator {
       }
       break;
     }
-    const bool converged = !stop.empty();
-    if (!converged) stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
+    const bool stopped = !stop.empty();
+    if (!stopped) stop = fmt::format("max_iterations = {} reached", max_iter_);
     if (!prepared) prepare();
+    // "converged" only where the first-order test holds: the minimum the undamped model
+    // predicts within first_order_std standard deviations (or its decrease below
+    // rss_tolerance), whatever stopped the iterations
+    const double s2_end = cur.rss / static_cast<double>(std::max(m - q_all, 1L));
+    const double distance_std = std::isfinite(undamped)
+                                    ? std::sqrt(undamped / std::max(s2_end, 1e-300))
+                                    : std::numeric_limits<double>::infinity();
+    const double undamped_rel = undamped / std::max(cur.total(), 1e-300);
+    const bool first_order =
+        std::isfinite(undamped) && (undamped_rel < ftol_ || distance_std <= first_order_std_);
+    const bool converged = stopped && first_order;
     exid::Estimate e = finish(model, cur, theta, m);
     exid::Json& d = e.details;
     {
@@ -456,9 +475,26 @@ class Didim : public exid::Estimator {
       d["gradient_check"] = check_json;
     }
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    d["gradient_norm"] = 2.0 * g.norm();
+    d["convergence_test"] = fmt::format(
+        "converged: a stop test held and the minimum the undamped model predicts lies within "
+        "first_order_std = {:g} standard deviations (remaining.distance_std), or its decrease "
+        "below rss_tolerance; gradient_norm = ||d objective / d theta||",
+        first_order_std_);
     if (!converged) {
       exid::Json w = d.find("warnings") ? *d.find("warnings") : exid::Json::array();
-      w.push_back(exid::Json(fmt::format("didim: {}", stop)));
+      std::vector<std::string> names = e.names;
+      Eigen::VectorXd values(e.value.size() + e.nonlinear.size());
+      values << e.value, e.nonlinear;
+      names.insert(names.end(), e.nonlinear_names.begin(), e.nonlinear_names.end());
+      w.push_back(exid::Json(fmt::format(
+          "didim: not converged: from {}, stopped after {} iterations at {} with rss {:.6g}, "
+          "gradient norm {:.3g}, the predicted minimum {:.3g} standard deviations away "
+          "(first_order_std = {:g}): {}",
+          prior_col_.empty() ? "least squares on the recording's rows"
+                             : "least squares with the gains at their prior mean",
+          std::min(it, max_iter_), exid::estimators::describePoint(names, values), cur.rss,
+          2.0 * g.norm(), distance_std, first_order_std_, stop)));
       d["warnings"] = w;
     }
     return e;
@@ -760,7 +796,7 @@ class Didim : public exid::Estimator {
   exid::ParamSet P_;
   bool position_;
   int max_iter_;
-  double ftol_, xtol_;
+  double ftol_, xtol_, first_order_std_;
   exid::estimators::ClosedLoop::Tolerances tol_loop_;
   int check_;
   bool secant_;

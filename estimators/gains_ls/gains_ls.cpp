@@ -24,6 +24,7 @@
 
 #include <Eigen/Cholesky>
 #include <Eigen/Eigenvalues>
+#include <Eigen/SVD>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -53,6 +54,11 @@ class GainsLs : public exid::Estimator {
         exid::param_int("max_iterations", 100, "Levenberg-Marquardt steps at most", 1, 10000),
         exid::param_double("step_tolerance", 1e-12, "",
                            "stop when the largest relative step is below this", 0.0, 1.0, true),
+        exid::param_double("gradient_tolerance", 1e-6, "",
+                           "first-order test of convergence: a Gauss-Newton step from the result "
+                           "would lower the objective by at most this fraction of it (or the "
+                           "fit is exact to the sums' precision, rss <= 1e-12 sum tau^2)",
+                           0.0, 1.0, true),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1, 1e9),
         exid::estimators::rankToleranceParam(),
         exid::param_doubles("gain_prior_std", std::vector<double>{}, "",
@@ -67,6 +73,7 @@ class GainsLs : public exid::Estimator {
   explicit GainsLs(const exid::ParamSet& p)
       : max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         xtol_(p.getDouble("step_tolerance")),
+        gtol_(p.getDouble("gradient_tolerance")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         rank_tol_(p.getDouble("rank_tolerance")),
         prior_std_(p.getDoubles("gain_prior_std")),
@@ -248,6 +255,9 @@ class GainsLs : public exid::Estimator {
     int iterations = 0;
     std::string stop;
     bool converged = false;
+    double gradient_norm = 0.0;  // ||d objective / d(theta, phi)|| at the end
+    double gn_fraction = 0.0;    // the part of the objective a Gauss-Newton step would remove
+    bool first_order = false;    // the first-order test holds there
   };
 
   // Whether every group's 1 + a phi_k is positive (the recorded torque keeps its sign).
@@ -427,8 +437,22 @@ class GainsLs : public exid::Estimator {
         break;
       }
     }
-    if (!f.converged)
-      f.stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
+    // "converged" only where the first-order test holds: g^T H^+ g, the decrease a
+    // Gauss-Newton step predicts, at most gradient_tolerance of the objective, or the fit exact
+    // to the precision of the sums (whatever the stop test said)
+    {
+      Eigen::JacobiSVD<Eigen::MatrixXd> sv(f.H, Eigen::ComputeThinU | Eigen::ComputeThinV);
+      sv.setThreshold(1e-14);
+      const double pred = grad.dot(sv.solve(grad));
+      double tt = 0.0;
+      for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
+      f.gradient_norm = 2.0 * grad.norm();
+      f.gn_fraction = f.objective > 0 ? pred / f.objective : 0.0;
+      const bool exact = f.objective <= 1e-12 * tt;
+      f.first_order = exact || (std::isfinite(f.gn_fraction) && f.gn_fraction <= gtol_);
+    }
+    if (!f.converged) f.stop = fmt::format("max_iterations = {} reached", max_iter_);
+    f.converged = f.converged && f.first_order;
     f.rss = std::max(f.rss, 0.0);
   }
 
@@ -552,19 +576,31 @@ class GainsLs : public exid::Estimator {
     d["iterations"] = f.iterations;
     d["stop"] = f.stop;
     d["converged"] = f.converged;
+    d["gradient_norm"] = f.gradient_norm;
+    d["gauss_newton_fraction"] = f.gn_fraction;
+    d["convergence_test"] = fmt::format(
+        "converged: a stop test held and a Gauss-Newton step would lower the objective by at "
+        "most gradient_tolerance = {:g} of it (or rss <= 1e-12 sum tau^2); gradient_norm = "
+        "||d objective / d(theta, phi)||",
+        gtol_);
     d["memory"] =
         "per group of rows (equation, sign) a (p + 2)^2 factor, whatever the number of samples";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!f.converged) {
       exid::Json w = exid::Json::array();
-      w.push_back(exid::Json(fmt::format("gains_ls: {}", f.stop)));
+      w.push_back(exid::Json(fmt::format(
+          "gains_ls: not converged: from least squares on the rows, stopped after {} iterations "
+          "at {} with rss {:.6g}, gradient norm {:.3g} (a Gauss-Newton step would remove {:.2g} "
+          "of the objective; gradient_tolerance = {:g}): {}",
+          f.iterations, exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm,
+          f.gn_fraction, gtol_, f.stop)));
       d["warnings"] = w;
     }
     return e;
   }
 
   int max_iter_;
-  double xtol_;
+  double xtol_, gtol_;
   int chunk_;
   double rank_tol_;
   std::vector<double> prior_std_, prior_mean_;  // as given

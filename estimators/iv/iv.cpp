@@ -112,8 +112,14 @@ class Iv : public exid::Estimator {
         break;
       }
     }
+    // converged: theta a fixed point of the iteration (the instrument from theta gives theta
+    // back to tolerance), the IV equations' first-order condition
     const bool converged = !stop.empty();
-    if (!converged) stop = fmt::format("max_iterations = {} reached (not converged)", max_iter_);
+    if (!converged)
+      stop = fmt::format(
+          "max_iterations = {} reached, theta still changing by {:.2g} of itself "
+          "(tolerance = {:g})",
+          max_iter_, change, tol_);
     return finish(model, R, Zlast, theta, ZtWinv, std::min(it, max_iter_), stop, converged, trace,
                   t0);
   }
@@ -232,7 +238,12 @@ class Iv : public exid::Estimator {
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
     if (!converged) {
       exid::Json w = exid::Json::array();
-      w.push_back(exid::Json(fmt::format("iv: {}", stop)));
+      const exid::Json& last = trace.at(trace.size() - 1);
+      w.push_back(exid::Json(fmt::format(
+          "iv: not converged: from least squares, stopped after {} iterations at {} with rss "
+          "{:.6g}, the simulation tracking the recording to {:.3g} rad rms: {}",
+          iterations, exid::estimators::describePoint(e.names, e.value), s.rss,
+          last.find("tracking_rms_rad")->asDouble(), stop)));
       d["warnings"] = w;
     }
     return e;

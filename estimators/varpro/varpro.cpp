@@ -72,6 +72,21 @@ class VarPro : public exid::Estimator {
                            "qr: Householder QR of [W D y] (cond not squared); normal: the Gram "
                            "matrix (faster, squares cond)",
                            {"qr", "normal"}),
+        exid::param_int("starts", 3,
+                        "globalisation: the multiples of the study's nonlinear parameters tried, "
+                        "the first `starts` of x1, x1/2, x2, x1/4, x4, x1/8, ... (both sides), "
+                        "per group of parameters moving the same columns (a joint's eps and vs), "
+                        "the other groups at the best point so far, in sweeps until one improves "
+                        "nothing (3 at most); the linear part solved exactly at each point; "
+                        "Levenberg-Marquardt from "
+                        "the best point and from the study's values, the better kept; 1: the "
+                        "study's values only",
+                        1, 9),
+        exid::param_double("gradient_tolerance", 1e-6, "",
+                           "first-order test of convergence: a Gauss-Newton step from the result "
+                           "would remove at most this fraction of the residual sum of squares "
+                           "(or the fit is exact to rounding)",
+                           0.0, 1.0, true),
         exid::estimators::rankToleranceParam(),
     };
     for (auto& d : exid::estimators::DelaySettings::params(
@@ -88,6 +103,8 @@ class VarPro : public exid::Estimator {
       : max_evals_(static_cast<int>(p.getInt("max_evaluations"))),
         xtol_(p.getDouble("step_tolerance")),
         ftol_(p.getDouble("rss_tolerance")),
+        starts_(static_cast<int>(p.getInt("starts"))),
+        gtol_(p.getDouble("gradient_tolerance")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
                                                       : RowAccumulator::Method::Qr) {
@@ -112,21 +129,220 @@ class VarPro : public exid::Estimator {
     rejected_singular_ = rejected_bound_ = 0;
     setUp(model, data);
     const int q = static_cast<int>(nl_.size());
-    Eigen::VectorXd lambda(q);
-    for (int k = 0; k < q_model_; ++k) lambda[k] = std::log(nl_[static_cast<std::size_t>(k)].value);
-    if (delay_) lambda[q - 1] = delay0_ / ts_;
-    // ---- Levenberg-Marquardt on lambda = log(eta)
-    Eval cur = evaluate(model, data, lambda, ctx);
+    Eigen::VectorXd lambda0(q);
+    for (int k = 0; k < q_model_; ++k)
+      lambda0[k] = std::log(nl_[static_cast<std::size_t>(k)].value);
+    if (delay_) lambda0[q - 1] = delay0_ / ts_;
+    // At the study's values: a regressor without full rank there is refused by
+    // solveLeastSquares, naming the directions the data do not determine (the evidence).
+    Eval at_study = evaluate(model, data, lambda0, ctx);
+    // ---- globalisation: a grid over each group's multiples, the linear part exact
+    Grid grid = searchGrid(model, data, lambda0, at_study, ctx);
+    // ---- Levenberg-Marquardt from the study's values and from the grid's best point
+    std::vector<Run> runs;
+    runs.push_back(levenbergMarquardt(model, data, lambda0, at_study, "the study's values", ctx));
+    if (grid.best != lambda0)
+      runs.push_back(
+          levenbergMarquardt(model, data, grid.best, grid.best_eval, "the grid's best point", ctx));
+    // ---- the best end checked against the grid around it (multiples of its own values): a
+    // point there with a lower residual is one more start (twice at most)
+    for (int round = 0; round < 2 && grid.multipliers.size() > 1; ++round) {
+      const Run* best = &runs.front();
+      for (const Run& r : runs)
+        if (r.cur.rss < best->cur.rss) best = &r;
+      Grid around;
+      around.best = best->lambda;
+      around.best_eval = best->cur;
+      around.groups = grid.groups;
+      around.multipliers = grid.multipliers;
+      const Eigen::VectorXd centre = best->lambda;
+      sweep(model, data, centre, &around, ctx);
+      grid.evaluations += around.evaluations;
+      grid.singular += around.singular;
+      ++grid.checks;
+      if (around.best == centre) break;  // no point around it is lower
+      runs.push_back(levenbergMarquardt(model, data, around.best, around.best_eval,
+                                        "a grid point around the best end", ctx));
+    }
+    for (Run& r : runs) firstOrder(model, &r);
+    // the winner: the lowest residual among the runs whose joint problem is regular there
+    int won = -1;
+    for (std::size_t i = 0; i < runs.size(); ++i)
+      if (!runs[i].singular &&
+          (won < 0 || runs[i].cur.rss < runs[static_cast<std::size_t>(won)].cur.rss))
+        won = static_cast<int>(i);
+    if (won < 0) {
+      const Run& r = runs.front().cur.rss <= runs.back().cur.rss ? runs.front() : runs.back();
+      throw exid::Error(fmt::format(
+          "varpro: no start ended where the nonlinear parameters are determined together with "
+          "the linear ones: the best, from {}, stopped at {} with rss {:.6g} and gradient norm "
+          "{:.3g} ({}), where the joint problem [W V] is singular (e.g. a Stribeck velocity so "
+          "large that its term is a Coulomb term, or a width so large that the sign is flat). "
+          "The regressor at the study's values has full rank: start elsewhere (the model's "
+          "values) or remove the term",
+          r.origin, where(r.cur.eta), r.cur.rss, r.gradient_norm, r.stop));
+    }
+    return finish(model, runs, won, grid, t0);
+  }
+
+ private:
+  // The fit at one set of nonlinear parameters.
+  struct Eval {
+    Eigen::VectorXd eta, theta;
+    double rss = 0.0;
+    double yy = 0.0;        // ||y||^2
+    Eigen::MatrixXd R;      // (p + L + 1)^2 triangular factor of [W D y]
+    Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
+    Eigen::VectorXd Jtr;    // q
+    Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
+    exid::estimators::LsSolution ls;
+    long m = 0;
+  };
+
+  // One Levenberg-Marquardt run and where it ended.
+  struct Run {
+    std::string origin;
+    Eigen::VectorXd eta0, lambda;
+    Eval cur;
+    int evals = 0, iterations = 0;
+    std::string stop;
+    exid::Json trace = exid::Json::array();
+    double gradient_norm = 0.0;  // ||d rss / d log(eta)||
+    double gn_fraction = 0.0;    // the part of rss a Gauss-Newton step would remove
+    bool exact = false;          // the fit is exact to rounding
+    bool stationary = false;     // the first-order test holds
+    bool singular = false;       // the joint problem [W V] is singular there
+    // the column-scaled SVD of the joint problem (the covariance's)
+    Eigen::MatrixXd M;
+  };
+
+  // The grid of the globalisation.
+  struct Grid {
+    Eigen::VectorXd best;  // lambda
+    Eval best_eval;
+    std::vector<std::vector<int>> groups;
+    std::vector<double> multipliers;
+    int evaluations = 0, singular = 0, sweeps = 0;
+    int checks = 0;  // sweeps around the best end
+  };
+
+  // "vs1 = 0.05 rad/s, eps1 = ..." (the delay in s)
+  std::string where(const Eigen::VectorXd& eta) const {
+    std::string out;
+    for (std::size_t k = 0; k < nl_.size(); ++k)
+      out += fmt::format("{}{} = {:.6g} {}", k ? ", " : "", nl_[k].name,
+                         eta[static_cast<Eigen::Index>(k)], nl_[k].unit);
+    return out;
+  }
+
+  // The model's nonlinear parameters in groups that move common columns (union-find; for
+  // `differential`: one joint's eps and vs); the delay is in none (it is not a scale).
+  std::vector<std::vector<int>> groups() const {
+    std::vector<int> parent(static_cast<std::size_t>(q_model_));
+    for (int k = 0; k < q_model_; ++k) parent[static_cast<std::size_t>(k)] = k;
+    auto find = [&](int k) {
+      while (parent[static_cast<std::size_t>(k)] != k) k = parent[static_cast<std::size_t>(k)];
+      return k;
+    };
+    for (int a = 0; a < q_model_; ++a)
+      for (int b = a + 1; b < q_model_; ++b) {
+        const auto& ca = nl_[static_cast<std::size_t>(a)].columns;
+        const auto& cb = nl_[static_cast<std::size_t>(b)].columns;
+        const bool shared = std::any_of(ca.begin(), ca.end(), [&](int c) {
+          return std::find(cb.begin(), cb.end(), c) != cb.end();
+        });
+        if (shared) parent[static_cast<std::size_t>(find(b))] = find(a);
+      }
+    std::vector<std::vector<int>> out;
+    std::vector<int> slot(static_cast<std::size_t>(q_model_), -1);
+    for (int k = 0; k < q_model_; ++k) {
+      const int r = find(k);
+      if (slot[static_cast<std::size_t>(r)] < 0) {
+        slot[static_cast<std::size_t>(r)] = static_cast<int>(out.size());
+        out.emplace_back();
+      }
+      out[static_cast<std::size_t>(slot[static_cast<std::size_t>(r)])].push_back(k);
+    }
+    return out;
+  }
+
+  // Block-coordinate search over the grid: for each group in turn, every combination of the
+  // multipliers on its parameters (one common multiplier when the combinations would exceed
+  // 125), the other groups at the best point so far; the linear part solved exactly at each.
+  Grid searchGrid(const exid::ObservationModel& model, const exid::Dataset& data,
+                  const Eigen::VectorXd& lambda0, const Eval& at_study,
+                  const exid::RunContext& ctx) {
+    Grid g;
+    g.best = lambda0;
+    g.best_eval = at_study;
+    g.groups = groups();
+    for (int i = 0; i < starts_; ++i)
+      g.multipliers.push_back(i == 0 ? 1.0 : std::pow(2.0, (i % 2 ? -1.0 : 1.0) * ((i + 1) / 2)));
+    const int S = static_cast<int>(g.multipliers.size());
+    if (S < 2) return g;
+    // sweeps over the groups until one improves nothing (at most 3): a group scanned while the
+    // others were far off can prefer a wrong point, which the next sweep corrects
+    for (g.sweeps = 1; g.sweeps <= 3; ++g.sweeps) {
+      const double before = g.best_eval.rss;
+      sweep(model, data, lambda0, &g, ctx);
+      if (!(g.best_eval.rss < before)) break;
+    }
+    g.sweeps = std::min(g.sweeps, 3);
+    return g;
+  }
+
+  void sweep(const exid::ObservationModel& model, const exid::Dataset& data,
+             const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx) {
+    Grid& g = *gp;
+    const int S = static_cast<int>(g.multipliers.size());
+    for (const auto& grp : g.groups) {
+      const int n = static_cast<int>(grp.size());
+      const bool common = std::pow(S, n) > 125;
+      const long combos = common ? S : static_cast<long>(std::lround(std::pow(S, n)));
+      const Eigen::VectorXd base = g.best;
+      for (long c = 0; c < combos; ++c) {
+        if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+        Eigen::VectorXd lambda = base;
+        long rest = c;
+        for (int i = 0; i < n; ++i) {
+          const int digit = common ? static_cast<int>(c) : static_cast<int>(rest % S);
+          rest /= S;
+          lambda[grp[static_cast<std::size_t>(i)]] =
+              lambda0[grp[static_cast<std::size_t>(i)]] +
+              std::log(g.multipliers[static_cast<std::size_t>(digit)]);
+        }
+        if (lambda == base) continue;  // (the point itself: known)
+        ++g.evaluations;
+        try {
+          Eval e = evaluate(model, data, lambda, ctx);
+          if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
+            g.best = lambda;
+            g.best_eval = std::move(e);
+          }
+        } catch (const exid::Error&) {
+          ++g.singular;
+        }
+      }
+    }
+  }
+
+  // Levenberg-Marquardt on lambda = log(eta) from `lambda` (its fit `cur`).
+  Run levenbergMarquardt(const exid::ObservationModel& model, const exid::Dataset& data,
+                         Eigen::VectorXd lambda, Eval cur, const std::string& origin,
+                         const exid::RunContext& ctx) {
+    const int q = static_cast<int>(nl_.size());
+    Run run;
+    run.origin = origin;
+    run.eta0 = cur.eta;
     int evals = 1, iterations = 0;
     double mu = 1e-3;
     std::string stop;
-    exid::Json trace = exid::Json::array();
     auto record = [&](const Eval& e) {
       exid::Json t = exid::Json::object();
       t["rss"] = e.rss;
       // (eta: the nonlinear parameters in their units, the delay in s)
       t["eta"] = exid::Json(std::vector<double>(e.eta.data(), e.eta.data() + e.eta.size()));
-      trace.push_back(t);
+      run.trace.push_back(t);
     };
     record(cur);
     while (evals < max_evals_) {
@@ -179,7 +395,7 @@ class VarPro : public exid::Estimator {
       ++iterations;
       if (!accepted && evals >= max_evals_) break;  // (not converged)
       if (!accepted) {
-        stop = "no step decreases the residual (at a minimum to working precision)";
+        stop = "no step decreases the residual";
         break;
       }
       if (delta.cwiseAbs().maxCoeff() < xtol_) {
@@ -192,24 +408,54 @@ class VarPro : public exid::Estimator {
         break;
       }
     }
-    const bool converged = !stop.empty();
-    if (!converged)
-      stop = fmt::format("max_evaluations = {} reached (not converged: raise it)", max_evals_);
-    return finish(model, cur, lambda, evals, iterations, stop, converged, trace, t0);
+    if (stop.empty()) stop = fmt::format("max_evaluations = {} reached", max_evals_);
+    run.lambda = lambda;
+    run.cur = std::move(cur);
+    run.evals = evals;
+    run.iterations = iterations;
+    run.stop = stop;
+    return run;
   }
 
- private:
-  // The fit at one set of nonlinear parameters.
-  struct Eval {
-    Eigen::VectorXd eta, theta;
-    double rss = 0.0;
-    Eigen::MatrixXd R;      // (p + L + 1)^2 triangular factor of [W D y]
-    Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
-    Eigen::VectorXd Jtr;    // q
-    Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
-    exid::estimators::LsSolution ls;
-    long m = 0;
-  };
+  // The first-order test at a run's end, and whether the joint problem is regular there.
+  void firstOrder(const exid::ObservationModel& model, Run* r) const {
+    const Eval& e = r->cur;
+    r->gradient_norm = 2.0 * e.Jtr.norm();  // ||d rss / d lambda|| = 2 ||J^T r||
+    // g^T (J^T J)^+ g: the decrease of rss the Gauss-Newton step predicts
+    Eigen::JacobiSVD<Eigen::MatrixXd> s(e.JtJ, Eigen::ComputeThinU | Eigen::ComputeThinV);
+    s.setThreshold(1e-14);
+    const double pred = e.Jtr.dot(s.solve(e.Jtr));
+    r->gn_fraction = e.rss > 0 ? pred / e.rss : 0.0;
+    // exact to rounding: the residual below 1e-12 of the measurement, relatively
+    r->exact = e.rss <= 1e-24 * e.yy;
+    r->stationary = r->exact || (std::isfinite(r->gn_fraction) && r->gn_fraction <= gtol_);
+    r->M = jointMatrix(model, e);
+    r->singular = !regular(r->M);
+  }
+
+  // The whole problem's Gauss-Newton matrix [W V]^T [W V] = M^T M,
+  // M = [R11, R12 Theta; 0, R22 Theta] (the rows of [W D] in the QR basis).
+  Eigen::MatrixXd jointMatrix(const exid::ObservationModel& model, const Eval& cur) const {
+    const int p = model.numBase(), L = static_cast<int>(keep_.size()),
+              q = static_cast<int>(nl_.size());
+    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p + L, p + q);
+    M.topLeftCorner(p, p) = cur.R.topLeftCorner(p, p);
+    M.topRightCorner(p, q) = cur.R.block(0, p, p, L) * cur.Theta;
+    M.bottomRightCorner(L, q) = cur.R.block(p, p, L, L) * cur.Theta;
+    return M;
+  }
+
+  static Eigen::VectorXd columnScale(const Eigen::MatrixXd& M) {
+    Eigen::VectorXd sc = M.colwise().norm().transpose();
+    for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
+    return sc;
+  }
+
+  bool regular(const Eigen::MatrixXd& M) const {
+    Eigen::JacobiSVD<Eigen::MatrixXd> svd(M * columnScale(M).asDiagonal());
+    const Eigen::VectorXd sv = svd.singularValues();
+    return sv.size() > 0 && sv[sv.size() - 1] > opt_.rank_tolerance * sv[0];
+  }
 
   void setUp(const exid::ObservationModel& model, const exid::Dataset& data) {
     nl_ = model.nonlinearParameters();
@@ -364,6 +610,7 @@ class VarPro : public exid::Estimator {
     e.ls = exid::estimators::solveLeastSquares(aw, model.base().names, opt_, kName);
     e.theta = e.ls.theta;
     e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
+    e.yy = e.R.col(p + L).head(p + L + 1).squaredNorm();
     // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k; the delay: d = ts lambda
     e.Theta = Eigen::MatrixXd::Zero(L, q);
     for (int l = 0; l < L; ++l) {
@@ -377,38 +624,25 @@ class VarPro : public exid::Estimator {
     return e;
   }
 
-  exid::Estimate finish(const exid::ObservationModel& model, const Eval& cur,
-                        const Eigen::VectorXd& lambda, int evals, int iterations,
-                        const std::string& stop, bool converged, const exid::Json& trace,
-                        std::chrono::steady_clock::time_point t0) const {
-    const int p = model.numBase(), L = static_cast<int>(keep_.size()),
-              q = static_cast<int>(nl_.size());
+  exid::Estimate finish(const exid::ObservationModel& model, const std::vector<Run>& runs, int won,
+                        const Grid& grid, std::chrono::steady_clock::time_point t0) const {
+    const Run& run = runs[static_cast<std::size_t>(won)];
+    const Eval& cur = run.cur;
+    const Eigen::VectorXd& lambda = run.lambda;
+    const int p = model.numBase(), q = static_cast<int>(nl_.size());
     exid::Estimate e;
     exid::estimators::fillEstimate(&e, model, cur.ls, cur.rss, cur.m);
     e.rows = cur.m;
     e.details["rows"] = static_cast<long long>(cur.m);
-    // The whole problem's Gauss-Newton matrix [W V]^T [W V] = M^T M,
-    // M = [R11, R12 Theta; 0, R22 Theta] (the rows of [W D] in the QR basis).
-    Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p + L, p + q);
-    M.topLeftCorner(p, p) = cur.R.topLeftCorner(p, p);
-    M.topRightCorner(p, q) = cur.R.block(0, p, p, L) * cur.Theta;
-    M.bottomRightCorner(L, q) = cur.R.block(p, p, L, L) * cur.Theta;
+    const Eigen::MatrixXd& M = run.M;
     const long dof = cur.m - p - q;
     exid::check(dof > 0, fmt::format("varpro: {} rows for {} linear and {} nonlinear parameters",
                                      cur.m, p, q));
     const double sigma2 = cur.rss / static_cast<double>(dof);
     // column-scaled SVD: (M^T M)^-1 = S (Ms^T Ms)^-1 S
-    Eigen::VectorXd sc = M.colwise().norm().transpose();
-    for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
+    const Eigen::VectorXd sc = columnScale(M);
     Eigen::JacobiSVD<Eigen::MatrixXd> svd(M * sc.asDiagonal(), Eigen::ComputeThinV);
     const Eigen::VectorXd sv = svd.singularValues();
-    const bool singular = !(sv.size() > 0 && sv[sv.size() - 1] > opt_.rank_tolerance * sv[0]);
-    if (singular)
-      throw exid::Error(fmt::format(
-          "varpro: the nonlinear parameters [{}] are not identifiable together with the linear "
-          "ones at the fit (the joint problem is singular: a friction term the data does not "
-          "excite, e.g. no motion near zero velocity for a Stribeck velocity)",
-          fmt::join(names(), ", ")));
     const Eigen::MatrixXd Vs = svd.matrixV() * sv.cwiseInverse().asDiagonal();
     const Eigen::MatrixXd cov = sigma2 * sc.asDiagonal() * (Vs * Vs.transpose()) * sc.asDiagonal();
     e.covariance = cov.topLeftCorner(p, p);
@@ -437,6 +671,8 @@ class VarPro : public exid::Estimator {
       nl.push_back(o);
     }
     d["nonlinear_parameters"] = nl;
+    int evals = grid.evaluations + 1;
+    for (const Run& r : runs) evals += r.evals - 1;  // (each run's first fit is known)
     d["evaluations"] = evals;
     d["rejected_singular_trials"] = rejected_singular_;
     if (delay_) {
@@ -454,9 +690,53 @@ class VarPro : public exid::Estimator {
           "validation rows are compensated the same way";
       d["measurement_delay"] = td;
     }
-    d["iterations"] = iterations;
-    d["stop"] = stop;
-    d["trace"] = trace;
+    d["iterations"] = run.iterations;
+    d["stop"] = run.stop;
+    d["trace"] = run.trace;
+    // the globalisation: the grid, every start's end, which won, the first-order test
+    {
+      exid::Json G = exid::Json::object();
+      G["multipliers"] = exid::Json(grid.multipliers);
+      exid::Json groups = exid::Json::array();
+      for (const auto& grp : grid.groups) {
+        std::vector<std::string> n;
+        for (int k : grp) n.push_back(nl_[static_cast<std::size_t>(k)].name);
+        groups.push_back(exid::Json(n));
+      }
+      G["groups"] = groups;
+      G["evaluations"] = grid.evaluations;
+      G["sweeps"] = grid.sweeps;
+      G["sweeps_around_the_best_end"] = grid.checks;
+      G["singular_points"] = grid.singular;
+      G["best_rss"] = grid.best_eval.rss;
+      G["best_eta"] =
+          exid::Json(std::vector<double>(grid.best_eval.eta.data(), grid.best_eval.eta.data() + q));
+      d["grid"] = G;
+    }
+    exid::Json S = exid::Json::array();
+    for (const Run& r : runs) {
+      exid::Json o = exid::Json::object();
+      o["from"] = r.origin;
+      o["initial_eta"] = exid::Json(std::vector<double>(r.eta0.data(), r.eta0.data() + q));
+      o["final_eta"] = exid::Json(std::vector<double>(r.cur.eta.data(), r.cur.eta.data() + q));
+      o["final_rss"] = r.cur.rss;
+      o["evaluations"] = r.evals;
+      o["stop"] = r.stop;
+      o["gradient_norm"] = r.gradient_norm;
+      o["gauss_newton_fraction"] = r.gn_fraction;
+      o["first_order_test"] = r.stationary;
+      o["singular"] = r.singular;
+      S.push_back(o);
+    }
+    d["starts"] = S;
+    d["start_won"] = won;
+    d["gradient_norm"] = run.gradient_norm;
+    d["gauss_newton_fraction"] = run.gn_fraction;
+    d["convergence_test"] = fmt::format(
+        "converged: at the best of the starts, a Gauss-Newton step would remove at most "
+        "gradient_tolerance = {:g} of the rss (or the fit is exact to rounding, rss <= 1e-24 "
+        "||y||^2); gradient_norm = ||d rss / d log(eta)||",
+        gtol_);
     d["method"] =
         "variable projection (Golub-Pereyra, Kaufman's Jacobian), Levenberg-Marquardt on "
         "log(eta); theta by the rank-revealing solve of batch_ls at each eta";
@@ -468,9 +748,20 @@ class VarPro : public exid::Estimator {
     d["memory"] =
         "one chunk of rows and the (p + L + 1)^2 factor per pass, one pass per evaluation";
     d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    // converged: the first-order test holds at a point no other start beat
+    bool beaten = false;
+    for (const Run& r : runs) beaten = beaten || r.cur.rss < cur.rss;
+    const bool converged = run.stationary && !beaten;
     d["converged"] = converged;
     exid::Json w = exid::Json::array();
-    if (!converged) w.push_back(exid::Json(fmt::format("varpro: {}", stop)));
+    if (!converged)
+      w.push_back(exid::Json(fmt::format(
+          "varpro: not converged: from {}, stopped at {} with rss {:.6g}, gradient norm {:.3g} "
+          "(a Gauss-Newton step would remove {:.2g} of the rss, above gradient_tolerance = "
+          "{:g}){}: {}",
+          run.origin, where(cur.eta), cur.rss, run.gradient_norm, run.gn_fraction, gtol_,
+          beaten ? "; a start with a lower rss ended where the joint problem is singular" : "",
+          run.stop)));
     if (delay_ && std::abs(e.nonlinear[q - 1]) > 0.99 * delay_max_)
       w.push_back(exid::Json(fmt::format(
           "varpro: the fitted measurement delay {:g} s is at the bound measurement_delay_max_s = "
@@ -488,6 +779,8 @@ class VarPro : public exid::Estimator {
 
   int max_evals_;
   double xtol_, ftol_;
+  int starts_;
+  double gtol_;
   int chunk_;
   RowAccumulator::Method method_;
   exid::estimators::SolveOptions opt_;

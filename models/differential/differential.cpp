@@ -268,13 +268,19 @@ class DifferentialModel : public exid::ObservationModel {
     const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
     for (const Slot& sl : slots()) {
       const int j = sl.joint, c0 = P0 + E * j;
+      // a velocity of the measured coordinate: m/s for a prismatic joint measured directly
+      const auto u = static_cast<std::size_t>(j);
+      const char* unit = !robot().hasTransmission() && u < robot().bodies.size() &&
+                                 robot().bodies[u].type == exid::JointType::Prismatic
+                             ? "m/s"
+                             : "rad/s";
       if (sl.eps) {
         exid::NonlinearParameter e{
-            "eps" + std::to_string(j + 1), "rad/s", perJoint(eps_param_, j), {}};
+            "eps" + std::to_string(j + 1), unit, perJoint(eps_param_, j), {}};
         for (int c = 0; c < nc + (stribeck_ ? 1 : 0); ++c) e.columns.push_back(c0 + c);
         out.push_back(e);
       } else {
-        out.push_back({"vs" + std::to_string(j + 1), "rad/s", perJoint(vs_param_, j), {c0 + nc}});
+        out.push_back({"vs" + std::to_string(j + 1), unit, perJoint(vs_param_, j), {c0 + nc}});
       }
     }
     return out;

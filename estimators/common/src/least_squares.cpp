@@ -369,6 +369,19 @@ Json parameterTable(const Estimate& e) {
   return t;
 }
 
+std::string describePoint(const std::vector<std::string>& names, const Eigen::VectorXd& values,
+                          int max_terms) {
+  std::string out;
+  const int n = static_cast<int>(values.size());
+  for (int i = 0; i < n && i < max_terms; ++i) {
+    const auto k = static_cast<std::size_t>(i);
+    out += fmt::format("{}{} = {:.6g}", i ? ", " : "",
+                       k < names.size() ? names[k] : fmt::format("theta{}", i + 1), values[i]);
+  }
+  if (n > max_terms) out += fmt::format(" ({} more: details.parameters)", n - max_terms);
+  return out;
+}
+
 void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& s,
                   double rss_unweighted, long m_unweighted) {
   const BaseParameters& b = model.base();

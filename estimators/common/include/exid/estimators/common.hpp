@@ -135,6 +135,10 @@ void fillEstimate(Estimate* e, const ObservationModel& model, const LsSolution& 
                   double rss_unweighted, long m_unweighted);
 /// The per-parameter table of details: [{name, expression, value, std, rel_std_percent}].
 Json parameterTable(const Estimate& e);
+/// Where a fit stopped, for its messages: "name = value" for the first `max_terms` of names
+/// (values in the same order), then "(N more: details.parameters)".
+std::string describePoint(const std::vector<std::string>& names, const Eigen::VectorXd& values,
+                          int max_terms = 12);
 
 // ============================================================== streaming rows
 
