@@ -86,6 +86,7 @@ constexpr double kMaxMatrixCells = 100000;
 // Parses a YAML file read with the input-file checks; duplicate keys are errors.
 YAML::Node loadStrictYaml(const fs::path& file, const std::string& what) {
   const std::string text = readInputFile(file, what, kMaxStudyFileBytes);
+  checkYamlAliases(text, file.string());  // before any node is built
   YAML::Node root;
   try {
     root = YAML::Load(text);
