@@ -230,7 +230,7 @@ TEST(Budgets, YamlAliasesBeyondTheirBudgetAreRefusedNamingTheKey) {
                                         "validation: *sim\n";
   CmdResult r = runExid({"validate", "shared.yaml"}, dir);
   EXPECT_EQ(r.code, 0) << r.out;
-  // ten levels of ten aliases each: 10^7 nodes from a file of 400 bytes
+  // seven levels of ten aliases over a list of ten: about 10^8 nodes from 526 bytes
   std::string lol =
       "robot: {type: planar2r}\nreport:\n  params:\n    l0: &l0 [x, x, x, x, x, x, "
       "x, x, x, x]\n";
@@ -492,6 +492,51 @@ TEST(Budgets, GeometryBeyondTheBoundIsRefusedNamingTheKey) {
     EXPECT_TRUE(contains(e.what(), "far.yaml:4: links[0]")) << e.what();
     EXPECT_TRUE(contains(e.what(), "collision[0].xyz_m[2]: -30000 m is beyond the bound"))
         << e.what();
+  }
+  // shapes that come from no YAML (a URDF's <collision>): bounded where their geometry is made
+  exid::RobotModel robot =
+      exid::loadDhYamlString(dh.substr(0, dh.find("xyz_m")) + "xyz_m: [0, 0, 0]}]}\n", "near.yaml");
+  exid::CollisionOptions opt;
+  opt.self = false;
+  exid::Obstacle ball;
+  ball.name = "ball";
+  ball.shape.kind = exid::CollisionShape::Kind::Sphere;
+  ball.shape.radius = 0.1;
+  ball.shape.pose.p = Eigen::Vector3d(1.0, 0.0, 0.0);
+  opt.obstacles = {ball};
+  {
+    exid::CollisionModel near(robot, opt);  // within the bound: measured
+    Eigen::VectorXd d;
+    near.distances(Eigen::VectorXd::Zero(1), &d);
+    ASSERT_EQ(d.size(), 1);
+    EXPECT_NEAR(d(0), 1.0 - 0.3 - 0.05 - 0.1,
+                1e-9);  // the link's sphere sits at its frame, x = 0.3
+  }
+  for (const auto& [what, shape] : std::vector<std::pair<std::string, exid::CollisionShape>>{
+           {"position",
+            [] {
+              exid::CollisionShape c;
+              c.radius = 0.05;
+              c.pose.p = Eigen::Vector3d(0, 2e4, 0);
+              return c;
+            }()},
+           {"radius", [] {
+              exid::CollisionShape c;
+              c.radius = 2e4;
+              return c;
+            }()}}) {
+    exid::RobotModel far = robot;
+    exid::CollisionShape c = shape;
+    c.body = 0;
+    c.where = "far.urdf:12";
+    far.collision = {c};
+    try {
+      exid::CollisionModel cm(far, opt);
+      ADD_FAILURE() << "a " << what << " beyond the bound was accepted";
+    } catch (const exid::Error& e) {
+      EXPECT_TRUE(contains(e.what(), "far.urdf:12")) << e.what();
+      EXPECT_TRUE(contains(e.what(), "beyond the bound of 10000 m")) << e.what();
+    }
   }
   fs::remove_all(dir);
 }
