@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -313,6 +314,19 @@ int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const 
                            const std::vector<double>& torque_max, const std::string& json_out,
                            const std::string& collision_study) {
   const auto model = loadRobot(reg, robot);
+  // A limit that is not a finite positive torque would switch its check off (NaN compares
+  // false): refused, naming the flag.
+  if (!torque_max.empty() && static_cast<int>(torque_max.size()) != model->dof())
+    throw Error(
+        fmt::format("--torque-max-nm: {} values; robot '{}' has {} joints (one limit "
+                    "per joint, N m or N)",
+                    torque_max.size(), model->name, model->dof()));
+  for (std::size_t j = 0; j < torque_max.size(); ++j)
+    if (!std::isfinite(torque_max[j]) || !(torque_max[j] > 0))
+      throw Error(
+          fmt::format("--torque-max-nm: value {} (joint {}) is {}; each limit must be a "
+                      "finite torque > 0 [N m or N]",
+                      j + 1, j + 1, torque_max[j]));
   std::shared_ptr<const CollisionOptions> collision;
   if (!collision_study.empty()) {
     collision = loadStudy(collision_study, reg).excitation_collision;

@@ -14,6 +14,7 @@
 #include <set>
 #include <sstream>
 
+#include "exid/collision_yaml.hpp"  // kMaxGeometryCoordinate_m
 #include "exid/error.hpp"
 
 namespace exid {
@@ -21,6 +22,10 @@ namespace exid {
 namespace {
 
 namespace fs = std::filesystem;
+
+// The largest distance two shapes within the coordinates' bound can have, with a robot of
+// any sensible reach: beyond it a distance is an overflow, not a margin.
+constexpr double kMaxDistance_m = 1e3 * kMaxGeometryCoordinate_m;
 
 // ---------------------------------------------------------------- STL meshes
 struct Mesh {
@@ -41,7 +46,13 @@ Mesh readStl(const fs::path& file, const Eigen::Vector3d& scale, const std::stri
     const int base = static_cast<int>(m.vertices.size());
     for (const auto& p : v) {
       check(p.allFinite(), fmt::format("{}: mesh {}: a vertex is not finite", who, file.string()));
-      m.vertices.push_back(p.cwiseProduct(scale));
+      const Eigen::Vector3d x = p.cwiseProduct(scale);
+      check(x.cwiseAbs().maxCoeff() <= kMaxGeometryCoordinate_m,
+            fmt::format("{}: mesh {}: vertex {} of triangle {} is ({:g}, {:g}, {:g}) m after the "
+                        "scale, beyond the bound of {:g} m on geometry coordinates",
+                        who, file.string(), &p - v.data() + 1, m.triangles.size() + 1, x(0), x(1),
+                        x(2), kMaxGeometryCoordinate_m));
+      m.vertices.push_back(x);
     }
     m.triangles.emplace_back(base, base + 1, base + 2);
   };
@@ -118,6 +129,9 @@ std::shared_ptr<fcl::CollisionGeometryd> makeGeometry(const CollisionShape& s,
     check(std::isfinite(v) && v > 0,
           fmt::format("{}: {}: {} must be a positive finite length [m], found {}", who, describe(s),
                       what, v));
+    check(v <= kMaxGeometryCoordinate_m,
+          fmt::format("{}: {}: {} {:g} m is beyond the bound of {:g} m on geometry coordinates",
+                      who, describe(s), what, v, kMaxGeometryCoordinate_m));
   };
   switch (s.kind) {
     case CollisionShape::Kind::Sphere:
@@ -125,8 +139,9 @@ std::shared_ptr<fcl::CollisionGeometryd> makeGeometry(const CollisionShape& s,
       return std::make_shared<fcl::Sphered>(s.radius);
     case CollisionShape::Kind::Capsule:
       positive(s.radius, "radius");
-      check(std::isfinite(s.length) && s.length >= 0,
-            fmt::format("{}: {}: length must be finite and >= 0 [m]", who, describe(s)));
+      check(std::isfinite(s.length) && s.length >= 0 && s.length <= kMaxGeometryCoordinate_m,
+            fmt::format("{}: {}: length must be finite, >= 0 and at most {:g} [m]", who,
+                        describe(s), kMaxGeometryCoordinate_m));
       return std::make_shared<fcl::Capsuled>(s.radius, s.length);
     case CollisionShape::Kind::Cylinder:
       positive(s.radius, "radius");
@@ -145,8 +160,10 @@ std::shared_ptr<fcl::CollisionGeometryd> makeGeometry(const CollisionShape& s,
       if (f.rfind("file://", 0) == 0) f = f.substr(7);
       fs::path p(f);
       if (p.is_relative() && !mesh_dir.empty()) p = fs::path(mesh_dir) / p;
-      check(s.mesh_scale.allFinite() && s.mesh_scale.minCoeff() > 0,
-            fmt::format("{}: mesh '{}': scale must be three positive numbers", who, f));
+      check(s.mesh_scale.allFinite() && s.mesh_scale.minCoeff() > 0 &&
+                s.mesh_scale.maxCoeff() <= kMaxMeshScale,
+            fmt::format("{}: mesh '{}': scale must be three positive numbers, at most {:g}", who, f,
+                        kMaxMeshScale));
       const Mesh m = readStl(p, s.mesh_scale, who);
       auto model = std::make_shared<fcl::BVHModel<fcl::OBBRSSd>>();
       model->beginModel();
@@ -357,6 +374,10 @@ CollisionModel::CollisionModel(const RobotModel& robot, const CollisionOptions& 
     m.sides.push_back({robot.bodies[static_cast<std::size_t>(i)].name, i, {}});
   auto addPart = [&](int side, const CollisionShape& s, const std::string& who,
                      const std::string& dir) {
+    check(s.pose.p.allFinite() && s.pose.p.cwiseAbs().maxCoeff() <= kMaxGeometryCoordinate_m,
+          fmt::format("{}: position ({:g}, {:g}, {:g}) m is beyond the bound of {:g} m on "
+                      "geometry coordinates",
+                      who, s.pose.p(0), s.pose.p(1), s.pose.p(2), kMaxGeometryCoordinate_m));
     Impl::Part p;
     p.body = s.body;
     p.pose = s.pose;
@@ -489,6 +510,13 @@ void CollisionModel::distances(const Eigen::VectorXd& qm, Eigen::VectorXd* d,
           nrm = c.n;
         }
       }
+    // A distance that is not finite, or beyond any geometry within the coordinates' bound, is
+    // an error, never a large margin ("feasible").
+    check(std::isfinite(best) && std::abs(best) <= kMaxDistance_m,
+          fmt::format("collision distances: pair '{}': distance {:g} m is not a finite distance "
+                      "within {:g} m (geometry beyond the bound of {:g} m on coordinates?)",
+                      m.names[static_cast<std::size_t>(k)], best, kMaxDistance_m,
+                      kMaxGeometryCoordinate_m));
     (*d)(k) = best;
     m.witness[static_cast<std::size_t>(k)] = {wa, wb};
     if (!ddq || nrm.squaredNorm() == 0.0) continue;  // no direction: derivative 0

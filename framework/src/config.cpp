@@ -802,10 +802,14 @@ static void parseReport(const YAML::Node& r, const fs::path& base_dir, Problems&
   }
 }
 
+// Models of one stack (`model:` as a list) at most.
+constexpr std::size_t kMaxStackedModels = 64;
+
 static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
                                        const fs::path& base_dir, const Registry& reg) {
   Problems pr;
   pr.source = source_name;
+  checkYamlAliases(text, source_name);  // before any node is built
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -857,7 +861,12 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
            "params: {file: ...}})");
 
   if (YAML::Node m = root["model"]) {
-    if (m.IsSequence()) {
+    if (m.IsSequence() && m.size() > kMaxStackedModels) {
+      pr.add(m, fmt::format("model: a stack of {} models; at most {} (every stacked model adds "
+                            "its rows for every sample: a stack is a few models, e.g. "
+                            "differential + load_wrench)",
+                            m.size(), kMaxStackedModels));
+    } else if (m.IsSequence()) {
       for (std::size_t i = 0; i < m.size(); ++i)
         if (auto s = parseSpec(m[i], PluginKind::Model, fmt::format("model[{}]", i), base_dir, reg,
                                pr, true))

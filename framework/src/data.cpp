@@ -94,11 +94,22 @@ Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who
   const Eigen::Index K = d.t.size();
   check(K >= 2, fmt::format("{}: resample_hz needs two samples", who));
   const double t0 = d.t[0], span_s = d.t[K - 1] - t0;
-  // (counted in double first: a huge rate must not overflow the integer count)
+  // (counted in double first: a huge rate must not overflow the integer count). The size is
+  // checked before anything is allocated: at most kMaxValues values per signal (samples x
+  // joints, as the simulate experiment), whatever the rate: each signal (q, qd, qdd, tau, the
+  // wrench) is then held at once, and the stages after it hold several more of its size.
+  constexpr double kMaxValues = 2e7;
   const double Md = std::floor(span_s * rate_hz + 1e-9) + 1.0;
-  check(Md >= 2.0 && Md <= 1e8,
-        fmt::format("{}: resample_hz = {} gives {:g} samples over {} s (2 to 1e8)", who, rate_hz,
-                    Md, span_s));
+  const double cols = static_cast<double>(std::max<Eigen::Index>(1, d.q.cols()));
+  check(Md >= 2.0, fmt::format("{}: resample_hz = {} gives {:g} samples over {} s (at least 2 "
+                               "are needed)",
+                               who, rate_hz, Md, span_s));
+  check(Md * cols <= kMaxValues,
+        fmt::format("{}: resample_hz = {} gives {:g} samples over {} s x {:g} joints = {:g} "
+                    "values per signal, more than the cap of {:g}; lower resample_hz (at most "
+                    "{:g} Hz here) or cut the segment (t_start_s, t_end_s)",
+                    who, rate_hz, Md, span_s, cols, Md * cols, kMaxValues,
+                    std::floor((kMaxValues / cols - 1.0) / std::max(span_s, 1e-300))));
   const auto M = static_cast<Eigen::Index>(Md);
   Dataset u;
   u.t.resize(M);

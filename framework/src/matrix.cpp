@@ -21,6 +21,7 @@
 #include <memory>
 #include <set>
 #include <sstream>
+#include <system_error>
 
 #include "exid/context.hpp"
 #include "exid/error.hpp"
@@ -86,6 +87,7 @@ constexpr double kMaxMatrixCells = 100000;
 // Parses a YAML file read with the input-file checks; duplicate keys are errors.
 YAML::Node loadStrictYaml(const fs::path& file, const std::string& what) {
   const std::string text = readInputFile(file, what, kMaxStudyFileBytes);
+  checkYamlAliases(text, file.string());  // before any node is built
   YAML::Node root;
   try {
     root = YAML::Load(text);
@@ -189,6 +191,11 @@ void checkMatrixKeys(const YAML::Node& root, const fs::path& file) {
     }
   }
 }
+
+// The smallest cell_memory_mb accepted (besides 0, none): below it a cell cannot start the
+// threads of a run (each reserves an 8 MB stack), and failed with "Resource temporarily
+// unavailable", naming nothing.
+constexpr double kMinCellMemoryMb = 32;
 
 // root[key]: a number in [0, max]; 0 means none (also when absent).
 double matrixLimit(const YAML::Node& root, const fs::path& file, const char* key, double max,
@@ -361,6 +368,12 @@ MatrixSpec loadMatrixUnchecked(const fs::path& file, const Registry& reg) {
                             spec.name, why));
   spec.cell_budget_s = matrixLimit(root, file, "cell_budget_s", 1e7, "s");
   spec.cell_memory_mb = matrixLimit(root, file, "cell_memory_mb", 1e8, "MB");
+  if (spec.cell_memory_mb > 0 && spec.cell_memory_mb < kMinCellMemoryMb)
+    throw Error(fmt::format(
+        "{}:{}: cell_memory_mb = {}: too small; a cell needs at least {:g} MB beyond what it "
+        "inherits (its threads' stacks, the plugins it loads, its data) to run at all (0: none)",
+        file.string(), root["cell_memory_mb"].Mark().line + 1, root["cell_memory_mb"].Scalar(),
+        kMinCellMemoryMb));
   const BaseStudy base = loadBaseStudy(root, file, spec.file);
   const std::vector<YAML::Node> overrides = cellOverrides(root, file, &spec.axes);
 
@@ -740,8 +753,10 @@ void cellOutcome(const MatrixSpec& spec, const Child& ch, int status, double wal
       }
       const Json* oom = summary->find("out_of_memory");
       if (*st != "ok" && oom && oom->asBool() && spec.cell_memory_mb > 0)
-        *msg +=
-            fmt::format(" (over the cell memory cap cell_memory_mb = {} MB)", spec.cell_memory_mb);
+        *msg += fmt::format(
+            " (over the cell memory cap cell_memory_mb = {} MB: too small for this cell; raise "
+            "it or make the cell smaller)",
+            spec.cell_memory_mb);
     } catch (const std::exception& e) {
       *st = "failed";
       *msg = fmt::format("the cell's process gave no summary (exit {}): {}",
@@ -767,6 +782,13 @@ void finishCell(Db& db, const MatrixSpec& spec, Child& ch, int status, MatrixRun
     ++sum->failed;
   logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall, ch.cell->label,
                       st == "ok" ? "" : "  (" + msg + ")"));
+}
+
+// A std::system_error saying that memory (or a thread's stack) could not be had.
+bool outOfMemory(const std::exception& e) {
+  const auto* se = dynamic_cast<const std::system_error*>(&e);
+  return se && (se->code() == std::errc::resource_unavailable_try_again ||
+                se->code() == std::errc::not_enough_memory);
 }
 
 // In the cell's process: caps what the cell adds to the address space it inherits (the
@@ -814,7 +836,8 @@ void capCellMemory(double cell_memory_mb) {
     Json j = Json::object();
     j["status"] = "failed";
     j["message"] = e.what();
-    if (dynamic_cast<const std::bad_alloc*>(&e)) j["out_of_memory"] = true;
+    // (a thread or a mapping the cap refused: std::system_error, EAGAIN or ENOMEM)
+    if (dynamic_cast<const std::bad_alloc*>(&e) || outOfMemory(e)) j["out_of_memory"] = true;
     text = j.dump(-1);
   }
   std::size_t off = 0;

@@ -17,6 +17,7 @@
 #include <map>
 #include <mutex>
 #include <optional>
+#include <system_error>
 #include <thread>
 
 #include "exid/delay.hpp"
@@ -1465,7 +1466,11 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     T.failed_stage = stage;
     T.message = res.message;
     if (io && io->outOfSpace()) S["out_of_space"] = true;  // the machine's, not the study's
-    if (nomem) S["out_of_memory"] = true;
+    // (a thread or mapping refused under a memory cap: std::system_error EAGAIN / ENOMEM)
+    const auto* se = dynamic_cast<const std::system_error*>(&e);
+    if (nomem || (se && (se->code() == std::errc::resource_unavailable_try_again ||
+                         se->code() == std::errc::not_enough_memory)))
+      S["out_of_memory"] = true;
     if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
   }
   T.wall_s = seconds(t_start);

@@ -3,6 +3,7 @@
 #include <fmt/format.h>
 #include <unistd.h>
 
+#include <cctype>
 #include <cmath>
 #include <sstream>
 #include <variant>
@@ -10,6 +11,7 @@
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
+#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 #include "plot.hpp"
@@ -329,11 +331,73 @@ TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
   return c;
 }
 
+namespace {
+
+// A trajectory file is checked at its own samples: its columns must be the robot's (a column of
+// a joint the robot does not have is refused, never ignored), its time must strictly increase
+// (swapped or repeated rows) at a uniform rate (a gap, or uneven stamps, would hide what
+// happens between samples), as the csv experiment reads a recording.
+void checkTrajectoryFile(const fs::path& csv, const CsvTable& T, const RobotModel& robot) {
+  const int n = robot.dof();
+  const std::string expected = fmt::format(
+      "robot '{}' has {} joints; expected t, q1..q{}, qd1..qd{}, qdd1..qdd{} [, "
+      "tau1..tau{}]",
+      robot.name, n, n, n, n, n);
+  check(T.has("t"), fmt::format("{}: no column 't' (the time [s]; {})", csv.string(), expected));
+  for (const std::string& c : T.columns) {
+    std::size_t i = 0;
+    while (i < c.size() && std::isalpha(static_cast<unsigned char>(c[i]))) ++i;
+    const std::string prefix = c.substr(0, i), digits = c.substr(i);
+    if (digits.empty() || digits.size() > 9 ||
+        digits.find_first_not_of("0123456789") != std::string::npos)
+      continue;
+    if (prefix != "q" && prefix != "qd" && prefix != "qdd" && prefix != "tau") continue;
+    const long j = std::stol(digits);
+    check(j >= 1 && j <= n,
+          fmt::format("{}: column '{}': joint {} is not a joint of the robot ({}); a file for "
+                      "another robot is refused, not read in part",
+                      csv.string(), c, j, expected));
+  }
+  const Eigen::VectorXd t = T.column("t");
+  const Eigen::Index K = t.size();
+  check(K >= 2,
+        fmt::format("{}: {} data row(s); the check needs at least 2 samples", csv.string(), K));
+  auto lineOf = [&](Eigen::Index k) {
+    return static_cast<std::size_t>(k) < T.line_of.size() ? T.line_of[static_cast<std::size_t>(k)]
+                                                          : static_cast<int>(k) + 2;
+  };
+  for (Eigen::Index k = 1; k < K; ++k)
+    check(t(k) > t(k - 1),
+          fmt::format("{}: line {} (data row {}): column 't': time must strictly increase; t = "
+                      "{} s after t = {} s at line {} (rows swapped or repeated?)",
+                      csv.string(), lineOf(k), k + 1, t(k), t(k - 1), lineOf(k - 1)));
+  // Uniform steps: within kMaxStepRatio of the median step (the csv experiment's default
+  // max_gap_ratio), as exid::samplingStats counts gaps.
+  constexpr double kMaxStepRatio = 1.5;
+  const auto steps = static_cast<std::size_t>(K - 1);
+  const double med = medianOfValues(steps, [&](std::size_t i) {
+    return t(static_cast<Eigen::Index>(i) + 1) - t(static_cast<Eigen::Index>(i));
+  });
+  for (Eigen::Index k = 1; k < K; ++k) {
+    const double step = t(k) - t(k - 1);
+    check(step <= kMaxStepRatio * med && step >= med / kMaxStepRatio,
+          fmt::format(
+              "{}: line {} (data row {}): time step {:.6g} s against a median step of {:.6g} s: "
+              "{} (the limits are checked at the file's samples, which must come at a "
+              "uniform rate; steps may differ from the median by a factor of {} at most)",
+              csv.string(), lineOf(k), k + 1, step, med,
+              step > med ? "a gap" : "uneven time stamps", kMaxStepRatio));
+  }
+}
+
+}  // namespace
+
 TrajectoryCheck checkTrajectoryCsv(const fs::path& csv, const RobotModel& robot,
                                    const std::vector<double>& torque_max,
                                    const CollisionOptions* collision,
                                    Eigen::VectorXd* min_distance_m) {
   const CsvTable T = readCsv(csv);
+  checkTrajectoryFile(csv, T, robot);
   const int n = robot.dof();
   Samples s;
   s.t = T.column("t");

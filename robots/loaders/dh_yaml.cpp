@@ -469,6 +469,7 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
 RobotModel loadDhYamlString(const std::string& text, const std::string& source,
                             const LoadOptions& options) {
   const Reader r(source);
+  checkYamlAliases(text, source);  // before any node is built
   YAML::Node root;
   try {
     root = YAML::Load(text);

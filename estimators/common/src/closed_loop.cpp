@@ -90,6 +90,16 @@ void ClosedLoop::checkParams(const ParamSet& p, const std::string& who) {
         who +
             ": kp_Nm_per_rad and kd_Nm_s_per_rad are required (the robot's PD gains: the "
             "simulated closed loop must be the robot's; exid does not guess them)");
+  // A negative gain pushes the joint away from the reference: the simulated loop diverges and
+  // its integration never ends (it ran until killed). Refused before anything is simulated.
+  for (const char* key : {"kp_Nm_per_rad", "kd_Nm_s_per_rad"}) {
+    const std::vector<double> g = p.getDoubles(key);
+    for (std::size_t i = 0; i < g.size(); ++i)
+      check(std::isfinite(g[i]) && g[i] >= 0,
+            fmt::format("{}: {}[{}] = {}: a PD gain must be a finite number >= 0 (a negative gain "
+                        "makes the simulated closed loop unstable)",
+                        who, key, i, g[i]));
+  }
 }
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,

@@ -299,7 +299,18 @@ void ClosedLoop::simulateFrom(
       }
     };
     emit(t0);  // (samples at the start)
+    // CV_ONE_STEP returns after each step, so CVodeSetMaxNumSteps bounds nothing here: the
+    // steps between two samples are counted (a diverging loop took ever smaller steps, for
+    // ever).
+    std::int64_t steps_since_sample = 0;
     while (k < times.size()) {
+      if (++steps_since_sample > tol.max_steps)
+        throw Error(fmt::format(
+            "{}: the simulation took more than max_steps = {} steps between the samples at t = "
+            "{} s and t = {} s (reached t = {} s): the simulated loop diverges or is too stiff "
+            "(check the gains kp_Nm_per_rad, kd_Nm_s_per_rad; or raise max_steps)",
+            who_, tol.max_steps, k > 0 ? times[k - 1] : t0, times[k], tn));
+      const Eigen::Index k_before = k;
       double tret = tn;
       // (tout, the next sample, sets the first step's size and the direction)
       const int flag = CVode(mem, times[k], y, &tret, CV_ONE_STEP);
@@ -318,6 +329,7 @@ void ClosedLoop::simulateFrom(
         rec->x.insert(rec->x.end(), NV_DATA_S(y), NV_DATA_S(y) + 2 * n);
       }
       emit(tret);
+      if (k != k_before) steps_since_sample = 0;
       tn = tret;
     }
   } catch (...) {

@@ -23,6 +23,13 @@
 
 namespace exid {
 
+/// Geometry coordinates (positions, lengths, sizes, mesh vertices after scaling) are refused
+/// beyond this [m]: a robot's cell is metres across, and coordinates near the double range make
+/// distances overflow (an obstacle 1e200 m away gave a minimum distance of 1.8e308, "feasible").
+inline constexpr double kMaxGeometryCoordinate_m = 1e4;
+/// A mesh's scale factors are refused beyond this.
+inline constexpr double kMaxMeshScale = 1e4;
+
 namespace detail {
 
 struct ShapeReader {
@@ -67,6 +74,24 @@ struct ShapeReader {
     if (v < 0 || (!zero_ok && v == 0))
       fail(n, path + "." + key,
            fmt::format("must be {} [m], found {}", zero_ok ? ">= 0" : "> 0", v));
+    bounded(n, path + "." + key, v);
+    return v;
+  }
+
+  // |v| <= kMaxGeometryCoordinate_m
+  void bounded(const YAML::Node& n, const std::string& path, double v) const {
+    if (std::abs(v) > kMaxGeometryCoordinate_m)
+      fail(n, path,
+           fmt::format("{:g} m is beyond the bound of {:g} m on geometry coordinates (positions, "
+                       "sizes, mesh vertices)",
+                       v, kMaxGeometryCoordinate_m));
+  }
+
+  // three coordinates [m], each within the bound
+  Eigen::Vector3d coords(const YAML::Node& n, const std::string& path) const {
+    const Eigen::Vector3d v = vec3(n, path);
+    for (std::size_t i = 0; i < 3; ++i)
+      bounded(n[i], fmt::format("{}[{}]", path, i), v(static_cast<Eigen::Index>(i)));
     return v;
   }
 
@@ -114,7 +139,7 @@ inline CollisionShape parseCollisionShape(const YAML::Node& node, const std::str
     r.keys(b, path + ".box", {"size_m"});
     s.kind = CollisionShape::Kind::Box;
     if (!b["size_m"]) r.fail(b, path + ".box", "missing size_m: [x, y, z]");
-    s.size = r.vec3(b["size_m"], path + ".box.size_m");
+    s.size = r.coords(b["size_m"], path + ".box.size_m");
     if (s.size.minCoeff() <= 0) r.fail(b["size_m"], path + ".box.size_m", "edges must be > 0");
   } else {
     const YAML::Node m = node["mesh"];
@@ -127,9 +152,13 @@ inline CollisionShape parseCollisionShape(const YAML::Node& node, const std::str
       s.mesh_scale = r.vec3(m["scale"], path + ".mesh.scale");
       if (s.mesh_scale.minCoeff() <= 0)
         r.fail(m["scale"], path + ".mesh.scale", "must be three positive numbers");
+      if (s.mesh_scale.maxCoeff() > kMaxMeshScale)
+        r.fail(m["scale"], path + ".mesh.scale",
+               fmt::format("{:g} is beyond the bound of {:g} on a mesh's scale factors",
+                           s.mesh_scale.maxCoeff(), kMaxMeshScale));
     }
   }
-  if (node["xyz_m"]) s.pose.p = r.vec3(node["xyz_m"], path + ".xyz_m");
+  if (node["xyz_m"]) s.pose.p = r.coords(node["xyz_m"], path + ".xyz_m");
   if (node["rpy_rad"]) {
     const Eigen::Vector3d a = r.vec3(node["rpy_rad"], path + ".rpy_rad");
     s.pose.R = (Eigen::AngleAxisd(a(2), Eigen::Vector3d::UnitZ()) *
