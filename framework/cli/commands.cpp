@@ -4,6 +4,7 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cmath>
 #include <fstream>
 #include <functional>
 #include <iostream>
@@ -363,7 +364,12 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   if (!fs::exists(dir / "summary.json"))
     throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
   const std::string text = readInputFile(dir / "summary.json", "summary", kMaxStudyFileBytes);
-  const Json S = Json::parse(text);
+  Json S;
+  try {
+    S = Json::parse(text);
+  } catch (const Error& e) {  // (the file named: JSON's own message says only where)
+    throw Error(fmt::format("{}/summary.json: {}", dir.string(), e.what()));
+  }
   const Json* I = S.find("identification");
   const Json* d = I ? I->find("details") : nullptr;
   const Json* sp = d ? d->find("standard_parameters") : nullptr;
@@ -402,6 +408,12 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   int set = 0;
   std::vector<std::string> ignored;
   for (std::size_t i = 0; i < names.size(); ++i) {
+    if (!names.at(i).isString() || !values.at(i).isNumber() ||
+        !std::isfinite(values.at(i).asDouble()))
+      throw Error(
+          fmt::format("{}/summary.json: identification.details.standard_parameters, "
+                      "element {}: expected a name and a finite number",
+                      dir.string(), i + 1));
     const std::string n = names.at(i).asString();
     const double v = values.at(i).asDouble();
     auto it = std::find(inertial.begin(), inertial.end(), n);

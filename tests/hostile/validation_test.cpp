@@ -387,5 +387,20 @@ TEST(Validation, ExportOfAParameterNameBeyondAnIntIsNoInternalError) {
   EXPECT_FALSE(contains(r.out, "unexpected error")) << r.out;
   EXPECT_TRUE(contains(r.out, "1 identified parameters written")) << r.out;
   EXPECT_TRUE(contains(r.out, "not part of the robot, ignored: Fc99999999999")) << r.out;
+  // A damaged summary.json is named (JSON's message gave only an offset; a value that is no
+  // number was "Json: not a number", a null one NaN written into the URDF).
+  for (const std::string& text :
+       {std::string("{\"identification\": [1,"),
+        std::string("{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": "
+                    "[\"Fv1\"], \"values\": [\"x\"]}}}}"),
+        std::string("{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": "
+                    "[\"Fv1\"], \"values\": [null]}}}}")}) {
+    SCOPED_TRACE(text);
+    std::ofstream(dir / "run" / "summary.json") << text << "\n";
+    const CmdResult b = runExid({"export", "planar2r", "--study", "run", "--out", "y.urdf"}, dir);
+    EXPECT_EQ(b.code, 2) << b.out;
+    EXPECT_TRUE(contains(b.out, "exid: run/summary.json: ")) << b.out;
+    EXPECT_FALSE(fs::exists(dir / "y.urdf"));
+  }
   fs::remove_all(dir);
 }
