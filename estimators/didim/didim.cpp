@@ -170,6 +170,10 @@ class Didim : public exid::Estimator {
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = open_ ? std::make_unique<exid::estimators::ClosedLoop>(model, data, kName)
                   : std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
+    // (copies: the loop outlives this call and its context)
+    loop_->setStop([stop = ctx.cancelled, deadline = ctx.deadline] {
+      return deadline.expired() || (stop && stop());
+    });
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
     setPrior(model);
     // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the

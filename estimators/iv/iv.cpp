@@ -77,6 +77,10 @@ class Iv : public exid::Estimator {
     exid::check(prior == nullptr, "iv: a prior is not supported");
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
+    // (copies: the loop outlives this call and its context)
+    loop_->setStop([stop = ctx.cancelled, deadline = ctx.deadline] {
+      return deadline.expired() || (stop && stop());
+    });
     exid::check(!loop_->hasDriveGains(),
                 "iv: the model has drive gains (dK): their scale needs a known payload part or a "
                 "prior, and the simulated closed loop has neither (use gains_ls, or didim with "

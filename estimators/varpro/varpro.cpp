@@ -503,12 +503,16 @@ class VarPro : public exid::Estimator {
     // samples within measurement_delay_max_s of an end (the shortest step: median (1 -
     // jitter)), plus the three the interpolation's stencil needs
     // (a hair below: a bound of exactly n samples is n, not n + 1 by a rounding)
-    margin_ = static_cast<int>(std::ceil(delay_max_ * fs / (1.0 - jitter) * (1 - 1e-12))) + 3;
+    // (counted in double first: a bound of 1e300 s is no int; refused before it is converted)
+    const double margin = std::ceil(delay_max_ * fs / (1.0 - jitter) * (1 - 1e-12)) + 3;
     exid::check(
-        data.size() - 2 * margin_ >= 8,
-        fmt::format("varpro: measurement_delay_max_s = {} s leaves {} of {} samples at "
-                    "{:g} Hz ({} without rows at each end)",
-                    delay_max_, std::max(0, data.size() - 2 * margin_), data.size(), fs, margin_));
+        margin <= 0.5 * (data.size() - 8),
+        fmt::format("varpro: measurement_delay_max_s = {:g} s leaves {} of {} samples at "
+                    "{:g} Hz ({:g} without rows at each end; at least 8 are needed)",
+                    delay_max_,
+                    static_cast<long>(std::max(0.0, data.size() - 2 * std::min(margin, 1e15))),
+                    data.size(), fs, margin));
+    margin_ = static_cast<int>(margin);
     exid::NonlinearParameter d;
     d.name = "measurement_delay_s";
     d.unit = "s";

@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
+#include <functional>
 #include <numeric>
 #include <set>
 #include <string>
@@ -37,7 +38,12 @@ constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
 class BagReading {
  public:
   BagReading(const exid::ParamSet& P, const exid::RobotModel& robot, const exid::RunContext& ctx)
-      : P_(P), robot_(robot), n_(robot.dof()) {
+      : P_(P),
+        robot_(robot),
+        n_(robot.dof()),
+        stop_([stop = ctx.cancelled, deadline = ctx.deadline] {
+          return deadline.expired() || (stop && stop());
+        }) {
     fs::path dir = P_.getString("path");
     if (dir.is_relative() && !ctx.study_dir.empty()) dir = ctx.study_dir / dir;
     dir_ = dir;
@@ -165,7 +171,10 @@ class BagReading {
     const std::set<std::string> wanted = with_wrench_ ? std::set<std::string>{js_topic_, w_topic_}
                                                       : std::set<std::string>{js_topic_};
     try {
+      unsigned long count = 0;
       rb::readMessages(bag_, wanted, [&](const rb::RawMessage& m) {
+        // (a long bag: a stop request is honoured while it is read)
+        if ((++count & 1023u) == 0 && stop_()) throw exid::Error("stopped while reading the bag");
         if (*m.topic == js_topic_)
           onJointState(m);
         else
@@ -567,6 +576,7 @@ class BagReading {
   const exid::ParamSet& P_;
   const exid::RobotModel& robot_;
   const int n_;
+  const std::function<bool()> stop_;  // the run's stop request (polled while reading)
   const std::string pre_ = "experiment 'rosbag2': ";
   fs::path dir_;
   std::string bagname_;

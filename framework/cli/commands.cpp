@@ -20,6 +20,7 @@
 #include "exid/io.hpp"
 #include "exid/matrix.hpp"
 #include "exid/runner.hpp"
+#include "exid/study_check.hpp"
 #include "exid/trajectory_export.hpp"
 #include "exid/urdf_writer.hpp"
 
@@ -29,17 +30,39 @@ namespace fs = std::filesystem;
 
 namespace {
 
-/// ROBOT is a robot plugin name or a path to a .urdf or DH .yaml file.
+/// ROBOT is a robot plugin name or a path to a .urdf or DH .yaml file (a .xacro file goes to
+/// the URDF loader, which says how to expand it; every command taking a robot comes here).
 std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::string& robot) {
   std::string type = robot, params = "{}";
   const fs::path p(robot);
   const std::string ext = p.extension().string();
-  if (ext == ".urdf" || ext == ".yaml" || ext == ".yml") {
+  if (ext == ".urdf" || ext == ".xacro" || ext == ".yaml" || ext == ".yml") {
     if (!fs::exists(p)) throw Error(fmt::format("{}: no such robot file", robot));
     checkInputFile(p, "robot", kMaxRobotFileBytes);  // a FIFO or a device: refused, not opened
-    type = ext == ".urdf" ? "urdf" : "dh";
-    params = fmt::format("{{file: '{}'}}", fs::absolute(p).string());
+    type = ext == ".yaml" || ext == ".yml" ? "dh" : "urdf";
+    std::string esc;  // (a quote in the path doubled: a YAML single-quoted scalar)
+    for (char ch : fs::absolute(p).string())
+      esc += ch == '\'' ? std::string("''") : std::string(1, ch);
+    params = fmt::format("{{file: '{}'}}", esc);
+    try {
+      const PluginInfo& info = reg.get(PluginKind::Robot, type);
+      ParamSet ps = resolveParams(info, params, "robot " + type, fs::current_path());
+      RunContext ctx;
+      return reg.create<Robot>(type, ps)->build(ctx);
+    } catch (const Error& e) {  // the loader names the absolute path: say it as given
+      std::string m = e.what();
+      const std::string abs = fs::absolute(p).string();
+      for (auto at = m.find(abs); at != std::string::npos; at = m.find(abs, at + robot.size()))
+        m.replace(at, abs.size(), robot);
+      throw Error(m);
+    }
   }
+  if (!reg.find(PluginKind::Robot, type) && fs::exists(p))
+    throw Error(
+        fmt::format("{}: a file, but not a robot description exid reads (expected a .urdf "
+                    "file, a DH .yaml table, or a .xacro file expanded by xacro first), "
+                    "nor a robot plugin's name",
+                    robot));
   const PluginInfo& info = reg.get(PluginKind::Robot, type);
   ParamSet ps = resolveParams(info, params, "robot " + type, fs::current_path());
   RunContext ctx;
@@ -261,9 +284,12 @@ struct ExportArgs {
 int stageCommand(const Registry& reg, const std::string& stage, const std::string& study,
                  const std::string& data_file, std::string out, const ExportArgs& ex = {}) {
   StudyConfig cfg = stageStudy(loadStudy(study, reg), stage, reg, data_file);
+  // What exid validate checks, before the stage runs (as exid run)
+  std::shared_ptr<const RobotModel> robot = checkStudy(cfg, reg, study);
   if (out.empty()) out = "out/" + cfg.name + "_" + stage;
   RunOptions opt;
   opt.out_dir = out;
+  opt.robot = std::move(robot);
   opt.cancelled = cancelled();
   opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
   opt.hard_stop_exit_code = signalExitCode;
@@ -357,7 +383,12 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   if (!fs::exists(dir / "summary.json"))
     throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
   const std::string text = readInputFile(dir / "summary.json", "summary", kMaxStudyFileBytes);
-  const Json S = Json::parse(text);
+  Json S;
+  try {
+    S = Json::parse(text);
+  } catch (const Error& e) {  // (the file named: JSON's own message says only where)
+    throw Error(fmt::format("{}/summary.json: {}", dir.string(), e.what()));
+  }
   const Json* I = S.find("identification");
   const Json* d = I ? I->find("details") : nullptr;
   const Json* sp = d ? d->find("standard_parameters") : nullptr;
@@ -396,6 +427,12 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
   int set = 0;
   std::vector<std::string> ignored;
   for (std::size_t i = 0; i < names.size(); ++i) {
+    if (!names.at(i).isString() || !values.at(i).isNumber() ||
+        !std::isfinite(values.at(i).asDouble()))
+      throw Error(
+          fmt::format("{}/summary.json: identification.details.standard_parameters, "
+                      "element {}: expected a name and a finite number",
+                      dir.string(), i + 1));
     const std::string n = names.at(i).asString();
     const double v = values.at(i).asDouble();
     auto it = std::find(inertial.begin(), inertial.end(), n);
@@ -410,7 +447,8 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
       const std::string p(pre);
       if (n.size() <= p.size() || n.compare(0, p.size(), p) != 0) continue;
       const std::string rest = n.substr(p.size());
-      if (rest.find_first_not_of("0123456789") != std::string::npos) continue;
+      // (digits beyond a joint count: not an int, not a joint; std::stoi would throw)
+      if (rest.size() > 6 || rest.find_first_not_of("0123456789") != std::string::npos) continue;
       const int j = std::stoi(rest) - 1;
       if (j < 0 || j >= static_cast<int>(m.drives.size())) continue;
       Drive& dr = m.drives[static_cast<std::size_t>(j)];

@@ -15,6 +15,7 @@
 #include "exid/error.hpp"
 #include "exid/registry.hpp"
 #include "exid/runner.hpp"
+#include "exid/study_check.hpp"
 #include "exid/version.hpp"
 
 namespace {
@@ -61,20 +62,10 @@ class ProgressPrinter {
 int runOrValidate(exid::Registry& registry, const std::string& file, bool validate_only,
                   std::string out_dir) {
   exid::StudyConfig cfg = exid::loadStudy(file, registry);
+  // The same checks for both, before anything runs: the robot loaded, every plugin made from
+  // its parameters (their constructors check them together), a prior's file read.
+  std::shared_ptr<const exid::RobotModel> robot = exid::checkStudy(cfg, registry, file);
   if (validate_only) {
-    // The models, experiments and estimator are made (not run): the checks their constructors
-    // make across parameters (stribeck without its velocities, say) are a validation error too.
-    auto make = [&](const exid::PluginSpec& spec) {
-      try {
-        const exid::PluginInfo& info = registry.get(spec.kind, spec.type);
-        registry.createObject(info, spec.params);
-      } catch (const exid::Error& e) {
-        throw exid::Error(fmt::format("{}:{}: {}: {}", file, spec.line, spec.key_path, e.what()));
-      }
-    };
-    for (const exid::PluginSpec& m : cfg.models) make(m);
-    for (const auto* s : {&cfg.experiment, &cfg.estimator, &cfg.validation})
-      if (*s) make(**s);
     std::cout << fmt::format("{}: valid (configuration hash {})\n", file, cfg.hash());
     std::cout << cfg.resolvedYaml();
     return 0;
@@ -82,6 +73,7 @@ int runOrValidate(exid::Registry& registry, const std::string& file, bool valida
   if (out_dir.empty()) out_dir = "out/" + cfg.name;  // a plain name (validated)
   exid::RunOptions opt;
   opt.out_dir = out_dir;
+  opt.robot = std::move(robot);
   ProgressPrinter printer;
   opt.progress = [&printer](const std::string& s, double f, const std::string& t) {
     printer(s, f, t);

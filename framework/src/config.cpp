@@ -13,6 +13,7 @@
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
 #include "exid/registry.hpp"
+#include "exid/study_check.hpp"
 #include "exid/yaml_strict.hpp"
 
 namespace exid {
@@ -437,6 +438,7 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
     }
   }
   // Reads n[key] into *out; false (and *out unchanged) when the key is absent or bad.
+  // (at most kMaxPriorStd: a std of 1e300 squares to infinity; no usable prior is that wide)
   auto number = [&](const char* key, double lo, bool lo_open, double* out) {
     YAML::Node v = n[key];
     if (!v) return false;
@@ -444,6 +446,13 @@ std::optional<PriorSpec> parsePrior(const YAML::Node& n, const fs::path& base_di
     if (!d || !std::isfinite(*d) || (lo_open ? !(*d > lo) : !(*d >= lo))) {
       pr.add(v, fmt::format("prior.{} = {}: must be a number in {}{}, inf)", key, scalarText(v),
                             lo_open ? "(" : "[", lo));
+      bad = true;
+      return false;
+    }
+    if (*d > kMaxPriorStd) {
+      pr.add(v, fmt::format("prior.{} = {}: too large to be used (at most {:g}; a std this large "
+                            "is no prior: its variance overflows)",
+                            key, scalarText(v), kMaxPriorStd));
       bad = true;
       return false;
     }

@@ -15,6 +15,7 @@
 #include "exid/input_file.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/runner.hpp"
+#include "exid/study_check.hpp"
 
 namespace exid {
 
@@ -32,7 +33,69 @@ std::vector<std::string> splitCsvLine(const std::string& line) {
   return out;
 }
 
+struct PriorRow {
+  double value = 0.0, std = 0.0;
+  int line = 0;
+};
+
+/// parameters.csv of an earlier study (PriorSpec::from == "study"): name -> value, std, line;
+/// every row checked (a finite value, a positive std whose variance is usable).
+std::map<std::string, PriorRow> readPriorRows(const PriorSpec& spec) {
+  const auto file = spec.study / "parameters.csv";
+  std::string text;
+  try {
+    text = readInputFile(file, "prior parameters", kMaxDataFileBytes);
+  } catch (const Error& e) {
+    throw Error(
+        fmt::format("prior (from: study): {} (the output folder of a study with an "
+                    "estimator)",
+                    e.what()));
+  }
+  std::istringstream in(text);
+  std::string line;
+  check(static_cast<bool>(std::getline(in, line)), fmt::format("{}: empty file", file.string()));
+  const auto head = splitCsvLine(line);
+  auto col = [&](const char* n) {
+    for (std::size_t i = 0; i < head.size(); ++i)
+      if (head[i] == n) return static_cast<int>(i);
+    throw Error(fmt::format("{}: no column '{}' (expected name, value, std)", file.string(), n));
+  };
+  const int cn = col("name"), cv = col("value"), cs = col("std");
+  std::map<std::string, PriorRow> rows;
+  int lineno = 1;
+  while (std::getline(in, line)) {
+    ++lineno;
+    if (line.empty() || line == "\r") continue;
+    const auto c = splitCsvLine(line);
+    check(static_cast<int>(c.size()) > std::max({cn, cv, cs}),
+          fmt::format("{}:{}: expected {} columns", file.string(), lineno, head.size()));
+    double v = NAN, s = NAN;
+    try {
+      v = std::stod(c[static_cast<std::size_t>(cv)]);
+      s = std::stod(c[static_cast<std::size_t>(cs)]);
+    } catch (const std::exception&) {
+      throw Error(fmt::format("{}:{}: value and std must be numbers", file.string(), lineno));
+    }
+    const std::string& name = c[static_cast<std::size_t>(cn)];
+    check(std::isfinite(v) && std::isfinite(s) && s > 0,
+          fmt::format("prior (from: study): {}:{}: '{}' needs a finite value and a positive "
+                      "finite std (found {} and {})",
+                      file.string(), lineno, name, v, s));
+    check(spec.scale * s <= kMaxPriorStd,
+          fmt::format("prior (from: study): {}:{}: '{}' has std {:g}{}, more than {:g}: too "
+                      "large to be used as a prior (its variance overflows or swamps every "
+                      "other); a std this large says nothing: give a smaller one",
+                      file.string(), lineno, name, s,
+                      spec.scale != 1.0 ? fmt::format(" (x scale {:g})", spec.scale) : "",
+                      kMaxPriorStd));
+    rows[name] = PriorRow{v, s, lineno};
+  }
+  return rows;
+}
+
 }  // namespace
+
+void checkPriorFile(const PriorSpec& spec) { readPriorRows(spec); }
 
 Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   const BaseParameters& b = model.base();
@@ -49,6 +112,15 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
       const double abs =
           drive ? spec.drive_absolute_std.value_or(spec.absolute_std) : spec.absolute_std;
       sd(i) = std::hypot(rel * pi0(i), abs);
+      // (a std of 1e300 squares to infinity: the covariance below would be NaN, not "zero")
+      check(sd(i) <= kMaxPriorStd,
+            fmt::format(
+                "prior (from: robot): the std of '{}' is {:g} (relative_std {:g} x |{:g}|, "
+                "absolute_std {:g}), more than {:g}: too large to be used as a prior "
+                "(its variance overflows); a std this large says nothing: give a "
+                "smaller {}",
+                names[static_cast<std::size_t>(i)], sd(i), rel, pi0(i), abs, kMaxPriorStd,
+                drive ? "drive_relative_std / drive_absolute_std" : "relative_std / absolute_std"));
     }
     prior.value = b.K * pi0;
     prior.covariance = b.K * sd.cwiseAbs2().asDiagonal() * b.K.transpose();
@@ -70,42 +142,7 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
   }
   // from: study -- parameters.csv of an earlier study (name, value, std by base parameter)
   const auto file = spec.study / "parameters.csv";
-  std::string text;
-  try {
-    text = readInputFile(file, "prior parameters", kMaxDataFileBytes);
-  } catch (const Error& e) {
-    throw Error(
-        fmt::format("prior (from: study): {} (the output folder of a study with an "
-                    "estimator)",
-                    e.what()));
-  }
-  std::istringstream in(text);
-  std::string line;
-  check(static_cast<bool>(std::getline(in, line)), fmt::format("{}: empty file", file.string()));
-  const auto head = splitCsvLine(line);
-  auto col = [&](const char* n) {
-    for (std::size_t i = 0; i < head.size(); ++i)
-      if (head[i] == n) return static_cast<int>(i);
-    throw Error(fmt::format("{}: no column '{}' (expected name, value, std)", file.string(), n));
-  };
-  const int cn = col("name"), cv = col("value"), cs = col("std");
-  std::map<std::string, std::pair<double, double>> rows;
-  int lineno = 1;
-  while (std::getline(in, line)) {
-    ++lineno;
-    if (line.empty() || line == "\r") continue;
-    const auto c = splitCsvLine(line);
-    check(static_cast<int>(c.size()) > std::max({cn, cv, cs}),
-          fmt::format("{}:{}: expected {} columns", file.string(), lineno, head.size()));
-    double v = NAN, s = NAN;
-    try {
-      v = std::stod(c[static_cast<std::size_t>(cv)]);
-      s = std::stod(c[static_cast<std::size_t>(cs)]);
-    } catch (const std::exception&) {
-      throw Error(fmt::format("{}:{}: value and std must be numbers", file.string(), lineno));
-    }
-    rows[c[static_cast<std::size_t>(cn)]] = {v, s};
-  }
+  const std::map<std::string, PriorRow> rows = readPriorRows(spec);
   prior.value.resize(p);
   Eigen::VectorXd sd(p);
   for (int i = 0; i < p; ++i) {
@@ -115,14 +152,8 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model) {
           fmt::format("prior (from: study): {} has no base parameter '{}' (the studies must "
                       "share the robot and the observation model)",
                       file.string(), n));
-    check(
-        std::isfinite(it->second.first) && std::isfinite(it->second.second) &&
-            it->second.second > 0,
-        fmt::format("prior (from: study): {}: '{}' needs a finite value and a positive finite std "
-                    "(found {} and {})",
-                    file.string(), n, it->second.first, it->second.second));
-    prior.value(i) = it->second.first;
-    sd(i) = spec.scale * it->second.second;
+    prior.value(i) = it->second.value;
+    sd(i) = spec.scale * it->second.std;
   }
   prior.covariance = sd.cwiseAbs2().asDiagonal();
   return prior;

@@ -329,6 +329,7 @@ void checkDatasetFinite(const Dataset& d, const std::string& what) {
 // one untouched and is published as NAME.failed; a successful run removes NAME.failed.
 struct RunFolder {
   fs::path final_dir, parent, staging, failed_dir;
+  fs::path named;  // final_dir as the user named it (a symbolic link to final_dir, or the same)
 };
 
 bool isRunFolder(const fs::path& dir) {
@@ -353,10 +354,23 @@ RunFolder prepareRunFolder(const fs::path& out, bool clean_stale) {
   const std::string name = d.filename().string();
   check(!name.empty() && name != "." && name != "..",
         fmt::format("--out {}: name an output folder (not '.', '..' or a root)", out.string()));
-  f.final_dir = d;
-  f.parent = d.has_parent_path() ? d.parent_path() : fs::path(".");
-  f.failed_dir = f.parent / (name + ".failed");
   std::error_code ec;
+  const fs::path named = d;
+  // A symbolic link to a folder: the run is published into the link's target (the staging
+  // folder beside the target, on its file system); the link stays. Renaming over the link
+  // itself would replace it by a folder.
+  if (fs::is_symlink(fs::symlink_status(d, ec))) {
+    const fs::path target = fs::read_symlink(d, ec);
+    const fs::path resolved = fs::canonical(d, ec);
+    check(!ec, fmt::format("--out {}: a symbolic link to {}, which does not exist (a dangling "
+                           "link); create the folder it names, or choose another output folder",
+                           out.string(), target.string()));
+    d = resolved;
+  }
+  f.final_dir = d;
+  f.named = named;
+  f.parent = d.has_parent_path() ? d.parent_path() : fs::path(".");
+  f.failed_dir = f.parent / (d.filename().string() + ".failed");
   if (fs::exists(d, ec)) {
     check(fs::is_directory(d, ec),
           fmt::format("{}: exists and is not a folder; choose another output folder", d.string()));
@@ -370,7 +384,7 @@ RunFolder prepareRunFolder(const fs::path& out, bool clean_stale) {
     cleanStaleTemporaries(f.parent);
     cleanStaleTemporaries(d);
   }
-  f.staging = f.parent / fmt::format(".{}.staging.{}", name, ::getpid());
+  f.staging = f.parent / fmt::format(".{}.staging.{}", d.filename().string(), ::getpid());
   fs::remove_all(f.staging, ec);
   fs::create_directory(f.staging);
   return f;
@@ -715,8 +729,8 @@ class StudyRun {
 void StudyRun::robotStage() {
   setStage("robot");
   const auto t0 = std::chrono::steady_clock::now();
-  auto robotPlugin = reg.create<Robot>(cfg.robot->type, cfg.robot->params);
-  robot = robotPlugin->build(ctx);
+  robot = opt.robot ? opt.robot  // loaded by checkStudy before the run
+                    : reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
   check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
   auto& R = T.robot.emplace();
   R.type = cfg.robot->type;
@@ -1495,7 +1509,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       std::error_code ec;
       if (res.ok || !beside) fs::remove_all(folder.failed_dir, ec);  // superseded
       publish(dir, target);
-      res.written_to = target;
+      res.written_to = target == folder.final_dir ? folder.named : target;
     } catch (const std::exception& e) {
       res.ok = false;
       const auto* io = dynamic_cast<const IoError*>(&e);
@@ -1515,7 +1529,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
         if (fs::exists(dir, ec)) {
           if (besides2) fs::remove_all(folder.failed_dir, ec);
           publish(dir, t2);
-          res.written_to = t2;
+          res.written_to = t2 == folder.final_dir ? folder.named : t2;
         }
       } catch (const std::exception&) {
         fs::remove_all(dir, ec);  // nothing half written is left behind

@@ -37,6 +37,7 @@
 #include "exid/matrix.hpp"
 #include "exid/registry.hpp"
 #include "exid/runner.hpp"
+#include "exid/study_check.hpp"
 #include "exid/version.hpp"
 
 namespace py = pybind11;
@@ -591,6 +592,8 @@ py::dict runStudy(const std::string& path, const std::string& text, const std::s
   else if (!data.empty())
     throw py::value_error("run_study: data applies to stage='identify' alone");
   exid::RunOptions opt;
+  // What exid validate checks, before anything runs (as exid run): exid.Error at once
+  opt.robot = exid::checkStudy(cfg, registry(), source.empty() ? path : source);
   opt.out_dir = out;
   InterruptScope interrupt;
   opt.cancelled = InterruptScope::flag();
@@ -612,7 +615,9 @@ py::dict runStudy(const std::string& path, const std::string& text, const std::s
 
 std::string resolvedStudy(const std::string& path, const std::string& text,
                           const std::string& source, const std::string& base_dir) {
-  return studyConfig(path, text, source, base_dir).resolvedYaml();
+  const exid::StudyConfig cfg = studyConfig(path, text, source, base_dir);
+  exid::checkStudy(cfg, registry(), source.empty() ? path : source);  // as exid validate
+  return cfg.resolvedYaml();
 }
 
 py::dict runMatrix(const std::string& file, const std::string& out, int jobs, bool retry_failed,

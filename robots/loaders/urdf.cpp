@@ -276,6 +276,16 @@ XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
   XRobot x;
   x.name = attr(robot, "name");
   std::map<std::string, int> link_line, joint_line;
+  // A xacro file (named *.xacro, or with xacro: elements beside the links: macros, includes,
+  // properties) is not a URDF: its macros would be ignored and its ${...} read as names.
+  const bool xacro_name = src.size() >= 6 && src.compare(src.size() - 6, 6, ".xacro") == 0;
+  const TiXmlElement* macro = nullptr;
+  for (const TiXmlElement* e = robot->FirstChildElement(); e && !macro; e = e->NextSiblingElement())
+    if (std::string(e->Value()).rfind("xacro:", 0) == 0) macro = e;
+  if (xacro_name || macro)
+    throw Error((macro ? at(src, macro) + ": <" + macro->Value() + ">" : src) +
+                ": this is a xacro file (macros, not a URDF); expand it first: xacro " + src +
+                " > robot.urdf");
   for (const TiXmlElement* e = robot->FirstChildElement(); e; e = e->NextSiblingElement()) {
     const std::string tag = e->Value();
     if (tag == "link") {
@@ -296,17 +306,6 @@ XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
     }
   }
   if (x.links.empty()) {
-    const TiXmlElement* root = doc.RootElement();
-    const bool xacro = src.size() >= 6 && src.compare(src.size() - 6, 6, ".xacro") == 0;
-    bool macros = false;
-    for (const TiXmlElement* e = root ? root->FirstChildElement() : nullptr; e && !macros;
-         e = e->NextSiblingElement())
-      macros = std::string(e->Value()).rfind("xacro:", 0) == 0;
-    if (xacro || macros)
-      throw Error(src +
-                  ": no <link> in the robot: this is a xacro file (macros, not a URDF); "
-                  "expand it first: xacro " +
-                  src + " > robot.urdf");
     throw Error(src + ": no <link> in the robot");
   }
 

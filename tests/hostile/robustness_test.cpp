@@ -631,7 +631,7 @@ TEST(Robustness, InputsThatAreNotRegularFilesAreRefusedBeforeOpening) {
   std::ofstream(dir / "study.yaml") << "robot: {type: urdf, params: {file: /dev/zero}}\n";
   r = runExid({"-q", "run", "study.yaml", "--out", "out"}, dir, 30);
   EXPECT_EQ(r.signal, 0) << r.out;
-  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_EQ(r.code, 2) << r.out;  // the robot is loaded before any stage (exid::checkStudy)
   EXPECT_TRUE(contains(r.out, "/dev/zero: the URDF file is a character device")) << r.out;
   mkfifo((dir / "data.csv").c_str(), 0644);
   std::ofstream(dir / "s2.yaml") << kPlanar

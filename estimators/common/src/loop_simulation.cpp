@@ -165,6 +165,10 @@ int rhs(double t, N_Vector y, N_Vector yd, void* user) {
 
 }  // namespace
 
+void ClosedLoop::pollStop(unsigned long* count) const {
+  if (stop_ && (++*count & 31u) == 0 && stop_()) throw Error(who_ + ": stopped");
+}
+
 void ClosedLoop::simulate(
     const VectorXd& theta, const VectorXd& times, const Tolerances& tol, bool sens,
     const std::function<void(int, const VectorXd&, const MatrixXd*)>& at_sample, Path* path) const {
@@ -303,7 +307,9 @@ void ClosedLoop::simulateFrom(
     // steps between two samples are counted (a diverging loop took ever smaller steps, for
     // ever).
     std::int64_t steps_since_sample = 0;
+    unsigned long steps = 0;
     while (k < times.size()) {
+      pollStop(&steps);
       if (++steps_since_sample > tol.max_steps)
         throw Error(fmt::format(
             "{}: the simulation took more than max_steps = {} steps between the samples at t = "
@@ -357,7 +363,9 @@ void ClosedLoop::sensitivitiesAlong(
   Eigen::Index k = 0;
   for (; k < times.size() && times[k] <= path.t0; ++k)
     at_sample(static_cast<int>(k), path.samples.col(k), &cur.S);
+  unsigned long steps = 0;
   for (std::size_t i = 0; i < path.t.size() && k < times.size(); ++i) {
+    pollStop(&steps);
     const double t1 = path.t[i], h = t1 - tn;
     const Eigen::Map<const VectorXd> xe(path.x.data() + 2 * n * i, 2 * n);
     linearize(theta, t1, xe.head(n), xe.tail(n), &next.A_q, &next.A_qd, &next.B);

@@ -6,6 +6,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <memory>
 #include <string>
 
 #include "exid/config.hpp"
@@ -19,6 +20,7 @@ namespace exid {
 class Registry;
 class ObservationModel;
 struct Prior;
+struct RobotModel;
 
 struct RunOptions {
   std::filesystem::path out_dir;  // "" = write nothing
@@ -40,6 +42,9 @@ struct RunOptions {
   /// Remove the `*.tmp.PID` files and staging folders of dead processes beside out_dir first
   /// (a matrix does it once for all its cells instead).
   bool clean_stale = true;
+  /// The study's robot when already loaded (checkStudy, exid/study_check.hpp, returns it): the
+  /// robot stage uses it instead of loading the robot again. Null: the stage loads it.
+  std::shared_ptr<const RobotModel> robot;
 };
 
 struct StudyResult {

@@ -55,6 +55,10 @@ class ClosedLoop {
   /// fifth-to-last sample (firstTime(), lastTime()).
   ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who);
   bool torqueDriven() const { return open_; }
+  /// A stop request (RunContext::shouldStop) polled along every simulation and sensitivity
+  /// pass, every few steps: when it turns true, the pass throws exid::Error("WHO: stopped").
+  /// (One simulation of a long recording runs for seconds; a stop must not wait for it.)
+  void setStop(std::function<bool()> stop) { stop_ = std::move(stop); }
   /// The span where the torque-driven loop's command is defined.
   double firstTime() const;
   double lastTime() const;
@@ -153,6 +157,9 @@ class ClosedLoop {
   std::shared_ptr<const RobotModel> robot_;
   int n_ = 0;
   std::string who_;
+  std::function<bool()> stop_;
+  // Throws when a stop was requested (polled every 32nd call).
+  void pollStop(unsigned long* count) const;
   Reference ref_;
   std::string file_;
   Eigen::VectorXd Kp_, Kd_;
