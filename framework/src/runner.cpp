@@ -50,6 +50,7 @@ void refuseExportInsideRun(const RunOptions& opt) {
                       "outside it",
                       opt.export_dir.string(), opt.out_dir.string()));
   }
+  if (!opt.export_dir.empty()) exportFolder(opt.export_dir);  // before any stage runs
 }
 
 // summary.json `inputs`: every file the run read through the opener, in path order.

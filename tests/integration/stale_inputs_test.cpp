@@ -304,3 +304,47 @@ axes:
   EXPECT_TRUE(contains(r.out, "1 skipped (finished before)")) << r.out;
   fs::remove_all(dir);
 }
+
+// An export left an earlier export's plots/ beside its new files: the folder now holds the new
+// export only. A folder holding something else than an export is refused and left as it was.
+TEST(StaleInputs, AnExportReplacesItsFolderWhole) {
+  const fs::path dir = tempDir("export");
+  std::ofstream(dir / "x.yaml") << R"(robot: {type: planar2r}
+model: {type: differential}
+excitation:
+  trajectory: {type: fourier, params: {harmonics: 2}}
+  criterion: {type: cond}
+  optimizer: {type: nlopt, params: {max_evaluations: 10}}
+report: {params: {plots: false}}
+)";
+  // an earlier export, with plots
+  fs::create_directories(dir / "exp" / "plots");
+  std::ofstream(dir / "exp" / "trajectory_check.json") << "{}\n";
+  std::ofstream(dir / "exp" / "trajectory.csv") << "t,q1\n0,0\n";
+  std::ofstream(dir / "exp" / "plots" / "trajectory_q.svg") << "<svg/>\n";
+  // (exit 1 or 0: a budget of 10 evaluations may leave a limit exceeded at the controller rate)
+  CmdResult r = runExid({"excite", "x.yaml", "--out", "run", "--export", "exp"}, dir);
+  ASSERT_TRUE(contains(r.out, "Trajectory for execution in exp/")) << r.out;
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir / "exp"))
+    names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"joint_trajectory.yaml", "trajectory.csv",
+                                             "trajectory.params.yaml", "trajectory_check.json"}));
+  EXPECT_NE(slurp(dir / "exp" / "trajectory.csv"), "t,q1\n0,0\n");
+  for (const auto& e : fs::directory_iterator(dir))  // no staging folder left beside it
+    EXPECT_FALSE(contains(e.path().filename().string(), "staging")) << e.path();
+  // exported again into the same folder: replaced
+  r = runExid({"excite", "x.yaml", "--out", "run", "--export", "exp"}, dir);
+  EXPECT_TRUE(contains(r.out, "Trajectory for execution in exp/")) << r.out;
+  EXPECT_TRUE(fs::exists(dir / "exp" / "trajectory_check.json"));
+  // a folder of something else: refused, untouched
+  fs::create_directories(dir / "mine");
+  std::ofstream(dir / "mine" / "notes.txt") << "keep me\n";
+  r = runExid({"-q", "excite", "x.yaml", "--out", "run2", "--export", "mine"}, dir);
+  EXPECT_NE(r.code, 0) << r.out;
+  EXPECT_TRUE(contains(r.out, "--export mine: the folder holds 'notes.txt'")) << r.out;
+  EXPECT_EQ(slurp(dir / "mine" / "notes.txt"), "keep me\n");
+  EXPECT_FALSE(fs::exists(dir / "mine" / "trajectory.csv"));
+  fs::remove_all(dir);
+}
