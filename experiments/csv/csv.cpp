@@ -1215,8 +1215,12 @@ class CsvExperiment : public exid::Experiment {
       const std::uint64_t begin = like.bytesRead();  // the data after the header's lines
       constexpr std::uint64_t kPiece = std::uint64_t{4} << 20;
       if (threads < 2 || err || size < begin + 2 * kPiece) return false;
-      const int fd = ::open(file.c_str(), O_RDONLY | O_CLOEXEC);
-      if (fd < 0) return false;
+      int fd = -1;
+      try {  // the input-file checks again (the file may have been replaced since the header)
+        fd = exid::openInputFile(file, "CSV", exid::kStreamedFileBytes);
+      } catch (const exid::Error&) {
+        return false;  // the serial scan reports it
+      }
       struct Closer {
         int fd;
         ~Closer() { ::close(fd); }

@@ -27,11 +27,11 @@
 #include <algorithm>
 #include <array>
 #include <cstring>
-#include <fstream>
 #include <map>
 #include <memory>
 
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 
 namespace exid::rosbag2 {
 
@@ -209,19 +209,6 @@ class Cdr {
 };
 
 // ------------------------------------------------------------------------------ files
-std::vector<std::uint8_t> readWhole(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  if (!in) throw Error(fmt::format("{}: cannot open", p.string()));
-  in.seekg(0, std::ios::end);
-  const std::streamoff size = in.tellg();
-  if (size < 0) throw Error(fmt::format("{}: cannot read its size", p.string()));
-  in.seekg(0, std::ios::beg);
-  std::vector<std::uint8_t> buf(static_cast<std::size_t>(size));
-  if (size > 0 && !in.read(reinterpret_cast<char*>(buf.data()), size))
-    throw Error(fmt::format("{}: read error", p.string()));
-  return buf;
-}
-
 std::string scalarText(const YAML::Node& n) {
   if (!n) return "(missing)";
   if (n.IsScalar()) return n.Scalar();
@@ -247,6 +234,8 @@ struct Stmt {
 void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::string>& wanted,
                 const std::function<void(const RawMessage&)>& fn) {
   const std::string name = file.string();
+  // SQLite opens the file by its path: the input-file checks (and the run's manifest) first.
+  admitInputFile(file, "SQLite storage", kStreamedFileBytes);
   Db db;
   if (sqlite3_open_v2(name.c_str(), &db.db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK)
     throw Error(fmt::format("{}: cannot open as SQLite: {}", name,
@@ -484,8 +473,11 @@ namespace {
 
 void readMcap(const BagInfo& bag, const fs::path& path, const std::set<std::string>& wanted,
               const std::function<void(const RawMessage&)>& fn) {
-  const std::vector<std::uint8_t> buf = readWhole(path);
-  readMcapBytes(bag, path.string(), buf.data(), buf.size(), wanted, fn);
+  // Read whole through the input-file checks: a FIFO or a device is refused before it is
+  // opened; at most kMaxMcapFileBytes.
+  const std::string buf = readInputFile(path, "MCAP storage", kMaxMcapFileBytes);
+  readMcapBytes(bag, path.string(), reinterpret_cast<const std::uint8_t*>(buf.data()), buf.size(),
+                wanted, fn);
 }
 
 }  // namespace
@@ -614,11 +606,15 @@ BagInfo readMetadata(const fs::path& dir) {
         fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
                     "its storage files)",
                     dir.string()));
-  if (!fs::exists(bag.metadata_file))
+  std::error_code ec;
+  if (!fs::exists(fs::symlink_status(bag.metadata_file, ec)))
     throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
+  // Through the input-file checks: a FIFO (it blocked forever) or a directory (exit 3,
+  // basic_filebuf::underflow) is refused before it is read; at most kMaxBagMetadataBytes.
+  const std::string text = readInputFile(bag.metadata_file, "bag metadata", kMaxBagMetadataBytes);
   YAML::Node root;
   try {
-    root = YAML::LoadFile(mf);
+    root = YAML::Load(text);
   } catch (const YAML::Exception& e) {
     throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
   }

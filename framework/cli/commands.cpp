@@ -403,10 +403,12 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     base = loadRobot(reg, robot);
   } else {
     // Only the robot section of the resolved study (its paths are absolute).
-    std::ifstream ry(dir / "study.resolved.yaml");
-    if (!ry)
+    std::error_code ec;
+    if (!fs::exists(fs::symlink_status(dir / "study.resolved.yaml", ec)))
       throw Error(fmt::format("{}: no study.resolved.yaml; name the robot (exid export ROBOT ...)",
                               dir.string()));
+    std::istringstream ry(
+        readInputFile(dir / "study.resolved.yaml", "resolved study", kMaxStudyFileBytes));
     std::string line, section;
     bool in_robot = false;
     while (std::getline(ry, line)) {

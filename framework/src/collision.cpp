@@ -9,13 +9,13 @@
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
-#include <fstream>
 #include <map>
 #include <set>
 #include <sstream>
 
 #include "exid/collision_yaml.hpp"  // kMaxGeometryCoordinate_m
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 
 namespace exid {
 
@@ -38,9 +38,15 @@ struct Mesh {
 // starts with "solid" but whose size is exactly that of a binary file of its count is binary
 // (some exporters write "solid" into the binary header).
 Mesh readStl(const fs::path& file, const Eigen::Vector3d& scale, const std::string& who) {
-  std::ifstream in(file, std::ios::binary);
-  check(static_cast<bool>(in), fmt::format("{}: cannot open mesh file {}", who, file.string()));
-  std::string bytes((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
+  // Through the input-file checks: a FIFO (it blocked forever), a directory (exit 3) or a device
+  // (/dev/zero read until memory ran out) is refused before it is read; at most
+  // kMaxMeshFileBytes.
+  std::string bytes;
+  try {
+    bytes = readInputFile(file, "mesh", kMaxMeshFileBytes);
+  } catch (const Error& e) {
+    throw Error(fmt::format("{}: {}", who, e.what()));
+  }
   Mesh m;
   auto add = [&](const std::array<Eigen::Vector3d, 3>& v) {
     const int base = static_cast<int>(m.vertices.size());

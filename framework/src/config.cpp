@@ -123,7 +123,19 @@ std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const
         if (def && def->empty()) return ParamValue(std::string());
         return expect("a file path");
       }
-      fs::path p(n.Scalar());
+      // A NUL would cut the path where the system reads it (`good.csv\0.ignored` read good.csv).
+      const std::string& text = n.Scalar();
+      for (std::size_t i = 0; i < text.size(); ++i) {
+        const auto u = static_cast<unsigned char>(text[i]);
+        if (u < 0x20 || u == 0x7F) {
+          *why = fmt::format(
+              "the path '{}' holds the control byte 0x{:02X} at byte {}; a file path must not "
+              "hold control bytes",
+              printablePath(text), u, i + 1);
+          return std::nullopt;
+        }
+      }
+      fs::path p(text);
       if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
       return ParamValue(p.lexically_normal().string());
     }
@@ -1167,13 +1179,7 @@ std::string StudyConfig::hash() const {
   // The name is not part of the configuration's identity.
   StudyConfig copy = *this;
   copy.name.clear();
-  const std::string text = copy.resolvedYaml();
-  std::uint64_t h = 1469598103934665603ull;
-  for (unsigned char c : text) {
-    h ^= c;
-    h *= 1099511628211ull;
-  }
-  return fmt::format("{:016x}", h);
+  return hashHex(fnv1a64(copy.resolvedYaml()));
 }
 
 }  // namespace exid

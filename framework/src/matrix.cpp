@@ -112,56 +112,29 @@ std::string keyText(const YAML::Node& key, const fs::path& file) {
   return key.Scalar();
 }
 
-// FNV-1a, 64 bits, as StudyConfig::hash.
-void fnv(std::uint64_t* h, const char* p, std::size_t n) {
-  for (std::size_t i = 0; i < n; ++i) {
-    *h ^= static_cast<unsigned char>(p[i]);
-    *h *= 1099511628211ull;
-  }
-}
-void fnv(std::uint64_t* h, const std::string& text) { fnv(h, text.data(), text.size()); }
-
-// The hash of a file's contents, read in blocks (a recording may be larger than memory should
-// hold: CSV data has no size limit).
-void fnvFile(std::uint64_t* h, const fs::path& f) {
-  const int fd = openInputFile(f, "input", UINTMAX_MAX);
-  std::vector<char> buf(std::size_t{1} << 20);
-  while (true) {
-    const ssize_t n = ::read(fd, buf.data(), buf.size());
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) {
-      const int err = errno;
-      ::close(fd);
-      throw Error(f.string() + ": cannot read the input file (" + std::strerror(err) + ")");
-    }
-    if (n == 0) break;
-    fnv(h, buf.data(), static_cast<std::size_t>(n));
-  }
-  ::close(fd);
-}
-
 // The cell's key: configuration hash, exid version, and the contents of every file it reads.
 // `contents` caches the hash of each file's contents (cells of a matrix share their files).
 std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, const Registry& reg,
                     std::map<std::string, std::string>* contents) {
-  std::uint64_t h = 1469598103934665603ull;
-  fnv(&h, config_hash);
-  fnv(&h, std::string("\nexid ") + EXID_VERSION_STRING);
+  std::uint64_t h = fnv1a64(config_hash);
+  h = fnv1a64(std::string("\nexid ") + EXID_VERSION_STRING, h);
   for (const auto& f : studyInputFiles(cfg, reg)) {
-    fnv(&h, "\n" + f.string() + "\n");
+    h = fnv1a64("\n" + f.string() + "\n", h);
     auto it = contents->find(f.string());
     if (it == contents->end()) {
-      std::uint64_t c = 1469598103934665603ull;
+      std::string c;
       try {
-        fnvFile(&c, f);
+        c = hashHex(fnv1a64File(f));
       } catch (const Error&) {
-        fnv(&c, "(unreadable)");  // the cell will fail and say why
+        // unreadable (the cell will fail and say why), or a folder (a bag: what the cell read
+        // in it is in its manifest, checked before the cell is skipped: cellsToRun)
+        c = "(not a readable file)";
       }
-      it = contents->emplace(f.string(), fmt::format("{:016x}", c)).first;
+      it = contents->emplace(f.string(), c).first;
     }
-    fnv(&h, it->second);
+    h = fnv1a64(it->second, h);
   }
-  return fmt::format("{:016x}", h);
+  return hashHex(h);
 }
 
 }  // namespace
@@ -704,24 +677,75 @@ void recordMatrixStart(Db& db, const MatrixSpec& spec) {
       .step();
 }
 
-// The cells of this shard not finished yet (sum: total and skipped counted).
+// Why a finished cell's inputs are no longer what it read: the first entry of its input
+// manifest (summary.json `inputs`, as the cell's run recorded it) whose file is gone or whose
+// size or content hash differs now; "" when every entry still holds. `now` caches the hashes
+// (cells share their files).
+std::string changedInput(const std::string& inputs_json, std::map<std::string, std::string>* now) {
+  if (inputs_json.empty()) return "";
+  Json inputs;
+  try {
+    inputs = Json::parse(inputs_json);
+  } catch (const std::exception&) {
+    return "its input manifest cannot be read";
+  }
+  if (!inputs.isArray()) return "its input manifest cannot be read";
+  for (std::size_t i = 0; i < inputs.size(); ++i) {
+    const Json& e = inputs.at(i);
+    const Json* path = e.find("path");
+    const Json* hash = e.find("fnv1a64");
+    const Json* size = e.find("size_bytes");
+    if (!path || !hash || !size) return "its input manifest cannot be read";
+    const std::string& p = path->asString();
+    auto it = now->find(p);
+    if (it == now->end()) {
+      std::string h;
+      try {
+        h = hashHex(fnv1a64File(p));
+      } catch (const Error&) {
+        h = "(not a readable file)";
+      }
+      it = now->emplace(p, h).first;
+    }
+    if (it->second != hash->asString())
+      return fmt::format("{} changed since the cell ran ({}: content hash {} then, {} now)", p,
+                         e.find("kind") ? e.find("kind")->asString() : "input", hash->asString(),
+                         it->second);
+  }
+  return "";
+}
+
+// The cells of this shard not finished yet (sum: total and skipped counted). A finished cell
+// whose inputs changed since it ran (a file of its manifest: inside a bag folder, a mesh, a
+// data file) runs again.
 std::vector<const MatrixCell*> cellsToRun(Db& db, const MatrixSpec& spec, const MatrixOptions& opt,
                                           MatrixRunSummary* sum) {
-  std::map<std::string, std::string> done;  // hash -> status
+  struct Done {
+    std::string status, inputs;
+  };
+  std::map<std::string, Done> done;  // hash -> status and input manifest
   {
-    Db::Stmt s(&db, "SELECT hash, status FROM runs");
-    while (s.step()) done[s.text(0)] = s.text(1);
+    Db::Stmt s(&db,
+               "SELECT hash, status, CASE WHEN json_valid(summary) THEN "
+               "json_extract(summary, '$.inputs') END FROM runs");
+    while (s.step()) done[s.text(0)] = Done{s.text(1), s.text(2)};
   }
+  std::map<std::string, std::string> hashes_now;
   std::vector<const MatrixCell*> todo;
   for (const auto& c : spec.cells) {
     if (c.index % opt.shard_count != opt.shard_index) continue;
     ++sum->total;
     auto it = done.find(c.hash);
     // "incomplete": stopped by the machine (disk full), never a result: always run again.
-    if (!opt.force && it != done.end() && it->second != "incomplete" &&
-        (it->second == "ok" || !opt.retry_failed)) {
-      ++sum->skipped;
-      continue;
+    if (!opt.force && it != done.end() && it->second.status != "incomplete" &&
+        (it->second.status == "ok" || !opt.retry_failed)) {
+      const std::string changed = changedInput(it->second.inputs, &hashes_now);
+      if (changed.empty()) {
+        ++sum->skipped;
+        continue;
+      }
+      logInfo(fmt::format("cell {} ({}): finished before, but {}: run again", c.index, c.label,
+                          changed));
     }
     todo.push_back(&c);
   }

@@ -51,6 +51,21 @@ void refuseExportInsideRun(const RunOptions& opt) {
                       "outside it",
                       opt.export_dir.string(), opt.out_dir.string()));
   }
+  if (!opt.export_dir.empty()) exportFolder(opt.export_dir);  // before any stage runs
+}
+
+// summary.json `inputs`: every file the run read through the opener, in path order.
+Json inputManifestJson(const InputManifest& m) {
+  Json out = Json::array();
+  for (const InputRecord& r : m.entries()) {
+    Json e = Json::object();
+    e["path"] = r.path;
+    e["kind"] = r.kind;
+    e["size_bytes"] = static_cast<long long>(r.size_bytes);
+    e["fnv1a64"] = hashHex(r.fnv1a64);
+    out.push_back(std::move(e));
+  }
+  return out;
 }
 
 // What a study says when the optimiser found no trajectory within every constraint.
@@ -700,6 +715,8 @@ class StudyRun {
   Report& report;
   std::function<void(const char*)> setStage;
   RunContext ctx;
+  /// Every file the run read through the opener (exid/input_file.hpp): summary.json `inputs`.
+  InputManifest manifest;
 
  private:
   std::function<void(const std::string&)> warnFn() {
@@ -1018,6 +1035,7 @@ void StudyRun::experimentStage() {
         // model) and is put into the summary when the estimator is done, at the same place
         // in the summary and among the warnings as if it had run here.
         experiment_inspection = std::async(std::launch::async, [this, ectx] {
+          const InputManifestScope inputs(&manifest);  // a file it reads is the run's input
           return inspectionOf(*robot, model.get(), *data, ectx);
         });
       } else {
@@ -1451,6 +1469,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   Watchdog watchdog(opt, write ? folder : RunFolder{}, cfg, stage_now, t_start);
   StudyRun run(cfg, reg, opt, S, T, dir, report, setStage);
   const RunContext& ctx = run.ctx;
+  std::optional<InputManifestScope> inputs;  // files the stages read: the run's manifest
+  inputs.emplace(&run.manifest);
   try {
     if (write) {
       writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
@@ -1487,6 +1507,8 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
       S["out_of_memory"] = true;
     if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
   }
+  inputs.reset();
+  S["inputs"] = inputManifestJson(run.manifest);
   T.wall_s = seconds(t_start);
   renderInto(T, &S);
   const std::lock_guard<std::mutex> finishing(watchdog.finishing());

@@ -1,6 +1,8 @@
 #include "exid/trajectory_export.hpp"
 
+#include <fcntl.h>
 #include <fmt/format.h>
+#include <stdio.h>
 #include <unistd.h>
 
 #include <cctype>
@@ -608,22 +610,61 @@ void drawExportPlots(const fs::path& stage, const Samples& s, const Eigen::Matri
   }
 }
 
-// Moves every entry of the staging folder into dir.
+// Publishes the staging folder as dir in one rename (renameat2 RENAME_EXCHANGE with an earlier
+// export, which is then removed).
 void publishStaging(const fs::path& stage, const fs::path& dir) {
-  for (const auto& e : fs::directory_iterator(stage)) {
-    const fs::path target = dir / e.path().filename();
-    if (e.is_directory()) {
-      fs::create_directories(target);
-      for (const auto& f : fs::directory_iterator(e.path()))
-        fs::rename(f.path(), target / f.path().filename());
-    } else {
-      fs::rename(e.path(), target);
-    }
+  std::error_code ec;
+  if (!fs::exists(dir, ec)) {
+    fs::rename(stage, dir);
+    return;
   }
-  fs::remove_all(stage);
+  if (::renameat2(AT_FDCWD, stage.c_str(), AT_FDCWD, dir.c_str(), RENAME_EXCHANGE) == 0) {
+    fs::remove_all(stage, ec);  // now the earlier export
+    return;
+  }
+  // No RENAME_EXCHANGE on this file system: the earlier export moves aside first.
+  const fs::path aside = dir.string() + fmt::format(".old.{}", static_cast<long>(::getpid()));
+  fs::remove_all(aside, ec);
+  fs::rename(dir, aside);
+  fs::rename(stage, dir);
+  fs::remove_all(aside, ec);
 }
 
 }  // namespace
+
+// An export replaces its folder whole (an earlier export's plots/ stayed beside the new files);
+// a folder holding anything else is refused, untouched.
+fs::path exportFolder(const fs::path& dir) {
+  std::error_code ec;
+  fs::path d = fs::absolute(dir).lexically_normal();
+  if (d.filename().empty()) d = d.parent_path();
+  if (fs::is_symlink(d, ec)) {
+    const fs::path t = fs::canonical(d, ec);
+    if (ec)
+      throw Error(fmt::format("--export {}: a symbolic link to nothing ({}); export to a folder",
+                              dir.string(), fs::read_symlink(d, ec).string()));
+    d = t;
+  }
+  if (!fs::exists(d, ec)) return d;
+  if (!fs::is_directory(d, ec))
+    throw Error(fmt::format("--export {}: not a folder; export to a new folder", dir.string()));
+  if (fs::equivalent(d, fs::current_path(), ec))
+    throw Error(fmt::format(
+        "--export {}: the current folder; an export replaces its folder whole: export to a "
+        "folder of its own",
+        dir.string()));
+  if (fs::exists(d / "trajectory_check.json", ec)) return d;  // an earlier export
+  for (const auto& e : fs::directory_iterator(d)) {
+    const std::string name = e.path().filename().string();
+    if (name.rfind(".export.staging.", 0) == 0) continue;  // a killed export's leftover
+    throw Error(fmt::format(
+        "--export {}: the folder holds '{}', and is not an earlier export (no "
+        "trajectory_check.json); an export replaces its folder whole: export to a new or empty "
+        "folder",
+        dir.string(), name));
+  }
+  return d;
+}
 
 Json exportTrajectory(const Trajectory& traj, const std::string& type, const ParamSet& params,
                       const Eigen::VectorXd& z, const RobotModel& robot,
@@ -634,8 +675,12 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
   const Eigen::Index K = s.size();
   const TrajectorySpecs sp = traj.specs();
 
-  fs::create_directories(dir);
-  const fs::path stage = dir / fmt::format(".export.staging.{}", static_cast<long>(::getpid()));
+  const fs::path target = exportFolder(dir);
+  fs::create_directories(target.parent_path());
+  // staged beside the target (the same file system), published in one rename
+  const fs::path stage =
+      target.parent_path() / fmt::format(".{}.export.staging.{}", target.filename().string(),
+                                         static_cast<long>(::getpid()));
   fs::remove_all(stage);
   fs::create_directories(stage);
   try {
@@ -659,7 +704,7 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
 
     if (o.plots) drawExportPlots(stage, s, tau, robot, o, dmin);
-    publishStaging(stage, dir);
+    publishStaging(stage, target);
     if (check_out) *check_out = c;
     return out;
   } catch (...) {

@@ -293,7 +293,9 @@ TEST(Collision, GeometryFromDhYamlUrdfAndStl) {
   // a mesh that cannot be read is named
   exid::RobotModel missing = u;
   missing.collision[static_cast<std::size_t>(mesh)].mesh_file = (dir / "none.stl").string();
-  EXPECT_NE(message([&] { exid::CollisionModel x(missing, o); }).find("cannot open mesh file"),
+  EXPECT_NE(message([&] {
+              exid::CollisionModel x(missing, o);
+            }).find("none.stl: cannot open the mesh file (no such file)"),
             std::string::npos);
   missing.collision[static_cast<std::size_t>(mesh)].mesh_file = "package://robot/link.stl";
   EXPECT_NE(message([&] { exid::CollisionModel x(missing, o); }).find("package:// URIs"),

@@ -19,6 +19,7 @@
 #include <string>
 
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
@@ -148,6 +149,14 @@ inline CollisionShape parseCollisionShape(const YAML::Node& node, const std::str
     if (!m["file"] || !m["file"].IsScalar() || m["file"].Scalar().empty())
       r.fail(m, path + ".mesh", "missing file (an STL mesh)");
     s.mesh_file = m["file"].Scalar();
+    for (std::size_t i = 0; i < s.mesh_file.size(); ++i)  // a NUL would cut the path short
+      if (static_cast<unsigned char>(s.mesh_file[i]) < 0x20 || s.mesh_file[i] == 0x7F)
+        r.fail(
+            m["file"], path + ".mesh.file",
+            fmt::format("the path '{}' holds the control byte 0x{:02X} at byte {}; a file "
+                        "path must not hold control bytes",
+                        printablePath(s.mesh_file),
+                        static_cast<unsigned>(static_cast<unsigned char>(s.mesh_file[i])), i + 1));
     if (m["scale"]) {
       s.mesh_scale = r.vec3(m["scale"], path + ".mesh.scale");
       if (s.mesh_scale.minCoeff() <= 0)

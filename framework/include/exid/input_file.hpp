@@ -1,118 +1,132 @@
-// exid — reading input files defensively: only regular files, only up to a size cap. Header-only
-// (the robot loaders, which do not link the core library, use it too).
+// exid — the one way in for every file exid reads (studies, robot descriptions, CSV data,
+// priors, references, meshes, a bag's metadata.yaml and storage files): only regular files,
+// checked before they are opened and again on the open descriptor; no control byte in the path;
+// a size cap per kind (docs/hostile_input.md, "Limits"); and, during a run, an entry in the
+// run's input manifest (path, size, FNV-1a 64 content hash), written in summary.json `inputs`.
+// Compiled into exid_dynamics (framework/src/input/input_file.cpp), the library every other
+// links: the robot loaders and the bag reader, which do not link the core, use it too.
 #pragma once
 
-#include <fcntl.h>
 #include <sys/stat.h>
-#include <unistd.h>
 
-#include <cerrno>
+#include <cstddef>
 #include <cstdint>
-#include <cstring>
 #include <filesystem>
+#include <map>
+#include <mutex>
 #include <string>
+#include <vector>
 
 #include "exid/error.hpp"
 
 namespace exid {
 
-/// Size caps on input files (docs/hostile_input.md): a bigger file is refused before it is read.
+/// Size caps on input files, one per kind: a bigger file is refused before it is read.
 // A YAML file costs about 250 bytes of memory per byte in the worst case (a list of one-digit
 // numbers: 1 MiB parsed into 250 MB), hence the small caps on YAML and robot files (the shipped
 // studies and robots are below 100 KB; a 100-link URDF is about 60 KB).
 inline constexpr std::uintmax_t kMaxStudyFileBytes = std::uintmax_t{1} << 20;  // study, matrix
 inline constexpr std::uintmax_t kMaxRobotFileBytes = std::uintmax_t{2} << 20;  // URDF, DH YAML
-// Data files read whole (a prior's parameters.csv). CSV data is read as a
+// A bag's metadata.yaml (YAML, as a study; a real one is a few KB).
+inline constexpr std::uintmax_t kMaxBagMetadataBytes = std::uintmax_t{1} << 20;
+// Data files read whole (a prior's parameters.csv, covariance.csv). CSV data is read as a
 // stream (exid::CsvReader) with no size limit.
 inline constexpr std::uintmax_t kMaxDataFileBytes = std::uintmax_t{256} << 20;
+// STL meshes (read whole; 64 MiB is a binary STL of 1.3 million triangles, about 110 MB once
+// read).
+inline constexpr std::uintmax_t kMaxMeshFileBytes = std::uintmax_t{64} << 20;
+// An MCAP storage file of a bag (read whole into memory).
+inline constexpr std::uintmax_t kMaxMcapFileBytes = std::uintmax_t{4} << 30;
+// Files read as a stream or by another library (CSV data, a bag's SQLite .db3): no size limit.
+inline constexpr std::uintmax_t kStreamedFileBytes = UINTMAX_MAX;
 
-namespace detail {
-inline std::string fileKind(mode_t m) {
-  if (S_ISDIR(m)) return "a directory";
-  if (S_ISFIFO(m)) return "a FIFO (named pipe)";
-  if (S_ISCHR(m)) return "a character device";
-  if (S_ISBLK(m)) return "a block device";
-  if (S_ISSOCK(m)) return "a socket";
-  return "not a regular file";
+/// FNV-1a, 64 bits: the content hash of the input manifest, of a matrix cell's key and of a
+/// study's configuration (StudyConfig::hash). h: the hash so far (kFnv1aOffset to start). The
+/// offset basis is FNV's 14695981039346656037 (0xcbf29ce484222325); the two copies before lacked
+/// its last digit (1469598103934665603), so their hashes were not FNV-1a's.
+inline constexpr std::uint64_t kFnv1aOffset = 14695981039346656037ull;
+std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t h = kFnv1aOffset);
+inline std::uint64_t fnv1a64(const std::string& text, std::uint64_t h = kFnv1aOffset) {
+  return fnv1a64(text.data(), text.size(), h);
 }
-inline void checkStat(const struct stat& st, const std::string& file, const std::string& what,
-                      std::uintmax_t max_bytes) {
-  if (!S_ISREG(st.st_mode))
-    throw Error(file + ": the " + what + " file is " + fileKind(st.st_mode) +
-                ", not a regular file; refused");
-  if (static_cast<std::uintmax_t>(st.st_size) > max_bytes)
-    throw Error(file + ": the " + what + " file has " + std::to_string(st.st_size) +
-                " bytes, more than the limit of " + std::to_string(max_bytes) + " bytes");
-}
-}  // namespace detail
+/// The FNV-1a 64 of a file's contents, read in blocks through openInputFile (no size limit).
+std::uint64_t fnv1a64File(const std::filesystem::path& path, const std::string& what = "input");
+/// 16 lower-case hex digits.
+std::string hashHex(std::uint64_t h);
 
-/// The checks of readInputFile without reading: the path (symbolic links followed) must name a
-/// regular file of at most max_bytes.
-inline void checkInputFile(const std::filesystem::path& path, const std::string& what,
-                           std::uintmax_t max_bytes) {
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0)
-    throw Error(path.string() + ": cannot open the " + what + " file (" +
-                (errno == ENOENT ? std::string("no such file") : std::strerror(errno)) + ")");
-  detail::checkStat(st, path.string(), what, max_bytes);
-}
+/// One file a run read.
+struct InputRecord {
+  std::string path;  // absolute
+  std::string kind;  // what the reader calls it ("CSV data", "bag metadata", "mesh", ...)
+  std::uintmax_t size_bytes = 0;
+  std::uint64_t fnv1a64 = 0;
+};
 
-/// Opens an input file for reading after the checks of readInputFile (the path must name a
-/// regular file of at most max_bytes, checked again on the open descriptor: it may have been
-/// replaced). Returns the descriptor; the caller closes it.
-inline int openInputFile(const std::filesystem::path& path, const std::string& what,
-                         std::uintmax_t max_bytes, struct stat* out = nullptr) {
-  checkInputFile(path, what, max_bytes);
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC | O_NOCTTY);
-  if (fd < 0)
-    throw Error(path.string() + ": cannot open the " + what + " file (" + std::strerror(errno) +
-                ")");
-  struct stat st {};
-  if (::fstat(fd, &st) != 0) {
-    const int err = errno;
-    ::close(fd);
-    throw Error(path.string() + ": cannot read the " + what + " file (" + std::strerror(err) + ")");
-  }
-  try {
-    detail::checkStat(st, path.string(), what, max_bytes);
-  } catch (...) {
-    ::close(fd);
-    throw;
-  }
-  if (out) *out = st;
-  return fd;
-}
+/// The files a run read, one entry per path (the first read; read again unchanged: the same
+/// entry). Thread-safe.
+class InputManifest {
+ public:
+  /// True when path was recorded with this identity (device, inode, size, modification
+  /// time): no need to hash it again.
+  bool knows(const std::string& path, const struct stat& st) const;
+  void add(const InputRecord& r, const struct stat& st);
+  /// The entries in path order.
+  std::vector<InputRecord> entries() const;
 
-/// Reads a whole input file. Anything that is not a regular file (a FIFO, a device such as
-/// /dev/zero, a directory) is refused BEFORE it is opened for reading; the file is then opened
-/// non-blocking and checked again on the open descriptor (it may have been replaced), and a
-/// file larger than max_bytes is refused (also one that grows while it is read).
-inline std::string readInputFile(const std::filesystem::path& path, const std::string& what,
-                                 std::uintmax_t max_bytes) {
-  struct stat st {};
-  const int fd = openInputFile(path, what, max_bytes, &st);
-  std::string text;
-  text.reserve(static_cast<std::size_t>(st.st_size));
-  char buf[1 << 16];
-  while (true) {
-    const ssize_t n = ::read(fd, buf, sizeof buf);
-    if (n < 0) {
-      if (errno == EINTR) continue;
-      const int err = errno;
-      ::close(fd);
-      throw Error(path.string() + ": cannot read the " + what + " file (" + std::strerror(err) +
-                  ")");
-    }
-    if (n == 0) break;
-    text.append(buf, static_cast<std::size_t>(n));
-    if (text.size() > max_bytes) {
-      ::close(fd);
-      throw Error(path.string() + ": the " + what + " file is larger than the limit of " +
-                  std::to_string(max_bytes) + " bytes");
-    }
-  }
-  ::close(fd);
-  return text;
-}
+ private:
+  struct Entry {
+    InputRecord record;
+    dev_t dev = 0;
+    ino_t ino = 0;
+    off_t size = 0;
+    std::int64_t mtime_ns = 0;
+  };
+  mutable std::mutex m_;
+  std::map<std::string, Entry> entries_;
+};
+
+/// The manifest files opened on this thread are recorded in (none: not recorded). A run sets
+/// it for its stages (runStudy); a thread the run starts sets it again (InputManifestScope).
+InputManifest* currentInputManifest();
+/// Sets the current manifest of this thread for the scope's life (nested scopes restore).
+class InputManifestScope {
+ public:
+  explicit InputManifestScope(InputManifest* m);
+  ~InputManifestScope();
+  InputManifestScope(const InputManifestScope&) = delete;
+  InputManifestScope& operator=(const InputManifestScope&) = delete;
+
+ private:
+  InputManifest* previous_;
+};
+
+/// The path with control bytes shown as \xNN (for messages).
+std::string printablePath(const std::string& path);
+/// Refuses a path holding a NUL or another control byte (0x01-0x1F, 0x7F): a NUL silently cut
+/// the path where the system reads it (`good.csv\0.ignored` opened good.csv).
+void checkInputPath(const std::filesystem::path& path, const std::string& what);
+
+/// The checks of readInputFile without reading: no control byte in the path, and the path
+/// (symbolic links followed) must name a regular file of at most max_bytes.
+void checkInputFile(const std::filesystem::path& path, const std::string& what,
+                    std::uintmax_t max_bytes);
+
+/// Opens an input file for reading after the checks of checkInputFile (checked again on the
+/// open descriptor: it may have been replaced; the open never blocks). During a run the file
+/// is recorded in the manifest (its contents hashed through the descriptor, which stays at
+/// offset 0). Returns the descriptor; the caller closes it.
+int openInputFile(const std::filesystem::path& path, const std::string& what,
+                  std::uintmax_t max_bytes, struct stat* out = nullptr);
+
+/// Reads a whole input file: anything that is not a regular file (a FIFO, a device such as
+/// /dev/zero, a directory) is refused BEFORE it is opened for reading; a file larger than
+/// max_bytes is refused (also one that grows while it is read). Recorded as openInputFile.
+std::string readInputFile(const std::filesystem::path& path, const std::string& what,
+                          std::uintmax_t max_bytes);
+
+/// For a file another library opens by its path (SQLite): the checks of openInputFile and the
+/// manifest entry, the file closed again.
+void admitInputFile(const std::filesystem::path& path, const std::string& what,
+                    std::uintmax_t max_bytes);
 
 }  // namespace exid

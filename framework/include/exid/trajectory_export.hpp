@@ -85,9 +85,15 @@ TrajectoryCheck checkTrajectoryCsv(const std::filesystem::path& csv, const Robot
                                    const CollisionOptions* collision = nullptr,
                                    Eigen::VectorXd* min_distance_m = nullptr);
 
+/// The folder an export is published as: dir made absolute (a symbolic link: its target). It
+/// must be absent, empty or an earlier export (it holds trajectory_check.json), which the
+/// export replaces whole; anything else throws exid::Error naming what the folder holds.
+std::filesystem::path exportFolder(const std::filesystem::path& dir);
+
 /// Writes dir/trajectory.csv, dir/trajectory.params.yaml, dir/joint_trajectory.yaml,
 /// dir/trajectory_check.json and the plots (dir/plots/trajectory_*): everything is written into
-/// a staging folder first and moved into dir at the end, so a failure leaves no partial set.
+/// a staging folder beside dir first, which then replaces dir whole in one rename (see
+/// exportFolder), so a failure leaves no partial set and dir holds this export only.
 /// The check re-reads the written CSV. Returns the check (and what was written) as JSON.
 Json exportTrajectory(const Trajectory& trajectory, const std::string& trajectory_type,
                       const ParamSet& trajectory_params, const Eigen::VectorXd& z,
