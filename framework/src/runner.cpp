@@ -995,8 +995,7 @@ void StudyRun::experimentStage() {
           cfg.estimator->type);
       data->stream->collectEvery(static_cast<int>(streamInspectStride(data->size())));
     }
-    if (const Json* w = data->meta.find("warnings"); w && w->isArray())
-      for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
+    for (const std::string& w : experimentWarnings(*data, "experiment")) warn(w);
     if (!data->streamed()) {
       if (cfg.estimator) {
         // The inspection runs beside the estimator (both only read the dataset and the
@@ -1335,8 +1334,7 @@ void StudyRun::validationStage() {
           "one part enters the other";
       S["split"] = sp;
     }
-    if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
-      for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
+    for (const std::string& w : experimentWarnings(vd, "validation")) warn(w);
     inspectInto(S, warnFn(), "validation", *robot, model.get(), vd, vctx);
     va.relative_error = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
     std::vector<double> rms(static_cast<std::size_t>(rows.numEquations), 0.0), cnt(rms.size(), 0.0),
