@@ -866,33 +866,15 @@ std::vector<std::uint8_t> decompressChunk(const std::string& compression, const 
   return out;
 }
 
-BagInfo readMetadata(const fs::path& dir) {
-  BagInfo bag;
-  bag.dir = dir;
-  bag.metadata_file = dir / "metadata.yaml";
+namespace {
+
+/// The contents of metadata.yaml (readMetadata); YAML exceptions are the caller's.
+void metadataOf(const YAML::Node& root, BagInfo* out) {
+  BagInfo& bag = *out;
+  const fs::path& dir = bag.dir;
   const std::string mf = bag.metadata_file.string();
-  if (!fs::is_directory(dir))
-    throw Error(
-        fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
-                    "its storage files)",
-                    dir.string()));
-  if (!fs::exists(bag.metadata_file))
-    throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
-  // A regular file of at most kMaxMetadataBytes (checked before it is read), strict YAML: a key
-  // repeated in a mapping is an error naming both lines.
-  const std::string text = readInputFile(bag.metadata_file, "bag metadata", kMaxMetadataBytes);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
-  }
-  {
-    std::vector<std::string> problems;
-    duplicateKeys(root, mf, "", &problems);
-    if (!problems.empty()) throw Error(problems.front());
-  }
-  const YAML::Node info = root["rosbag2_bagfile_information"];
+  const YAML::Node info =
+      root.IsMap() ? root["rosbag2_bagfile_information"] : YAML::Node(YAML::NodeType::Undefined);
   if (!info || !info.IsMap())
     throw Error(fmt::format("{}: expected a mapping rosbag2_bagfile_information at the top", mf));
   auto line = [](const YAML::Node& n) { return n.Mark().line + 1; };
@@ -950,7 +932,7 @@ BagInfo readMetadata(const fs::path& dir) {
   std::map<std::string, std::size_t> entries;  // topic -> its entry (1-based)
   if (topics)
     for (const YAML::Node& t : topics) {
-      const YAML::Node md = t["topic_metadata"];
+      const YAML::Node md = t.IsMap() ? t["topic_metadata"] : YAML::Node(YAML::NodeType::Undefined);
       if (!md || !md.IsMap() || !md["name"] || !md["type"])
         throw Error(
             fmt::format("{}:{}: topics_with_message_count: expected entries "
@@ -977,6 +959,41 @@ BagInfo readMetadata(const fs::path& dir) {
             mf, line(t), ti.name, at->second, bag.topics.size() + 1));
       bag.topics.push_back(ti);
     }
+}
+
+}  // namespace
+
+BagInfo readMetadata(const fs::path& dir) {
+  BagInfo bag;
+  bag.dir = dir;
+  bag.metadata_file = dir / "metadata.yaml";
+  const std::string mf = bag.metadata_file.string();
+  if (!fs::is_directory(dir))
+    throw Error(
+        fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
+                    "its storage files)",
+                    dir.string()));
+  if (!fs::exists(bag.metadata_file))
+    throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
+  // A regular file of at most kMaxMetadataBytes (checked before it is read), strict YAML: a key
+  // repeated in a mapping is an error naming both lines.
+  const std::string text = readInputFile(bag.metadata_file, "bag metadata", kMaxMetadataBytes);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
+  }
+  {
+    std::vector<std::string> problems;
+    duplicateKeys(root, mf, "", &problems);
+    if (!problems.empty()) throw Error(problems.front());
+  }
+  try {
+    metadataOf(root, &bag);
+  } catch (const YAML::Exception& x) {  // (a scalar where a mapping is expected, ...)
+    throw Error(fmt::format("{}:{}: unexpected structure: {}", mf, x.mark.line + 1, x.msg));
+  }
   return bag;
 }
 

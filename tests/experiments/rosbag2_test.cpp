@@ -1197,6 +1197,7 @@ TEST(Rosbag2, DecompressionIsBoundedPerChunkAndPerFile) {
   }
   EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 0.5);
   std::string e = readMcapOf(mcapFile({chunkRec("zstd", zeros)}));
+  std::printf("%s\n", e.c_str());
   EXPECT_NE(e.find("hand.mcap: record 2 (opcode 0x06) at byte "), std::string::npos) << e;
   EXPECT_NE(e.find(": chunk uncompressed_size 67108864 bytes from"), std::string::npos) << e;
   // Many chunks, each within its own cap (about 1 MiB of zeros, empty records of 9 bytes, from
@@ -1207,6 +1208,7 @@ TEST(Rosbag2, DecompressionIsBoundedPerChunkAndPerFile) {
   const Bytes bomb = mcapFile(many);
   ASSERT_LT(bomb.size(), 8000u);
   e = readMcapOf(bomb);
+  std::printf("%s\n", e.c_str());
   EXPECT_NE(e.find("record 18 (opcode 0x06)"), std::string::npos) << e;  // the 17th chunk
   EXPECT_NE(e.find(fmt::format("would bring the file's decompressed chunks to {} bytes, "
                                "above its limit of {} bytes",
@@ -1315,6 +1317,18 @@ TEST(Rosbag2, MetadataIsCappedStrictAndARegularFile) {
   std::ofstream(mf) << twice;
   e = errorOf(dir);
   EXPECT_NE(e.find("topic '/ft' is listed twice (entries 1 and 3)"), std::string::npos) << e;
+  // a document that is not a mapping, a topic entry that is not one (found by fuzz_rosbag2:
+  // yaml-cpp's BadSubscript escaped, exit 3)
+  std::ofstream(mf) << "just a scalar\n";
+  e = errorOf(dir);
+  EXPECT_NE(e.find("metadata.yaml: expected a mapping rosbag2_bagfile_information at the top"),
+            std::string::npos)
+      << e;
+  std::string scalar = good;
+  scalar.insert(scalar.find("    - topic_metadata:"), "    - just a scalar\n");
+  std::ofstream(mf) << scalar;
+  e = errorOf(dir);
+  EXPECT_NE(e.find("topics_with_message_count: expected entries"), std::string::npos) << e;
   // above 1 MiB (here a comment): refused before it is parsed
   std::ofstream(mf) << good << "# " << std::string(rb::kMaxMetadataBytes, 'x') << "\n";
   e = errorOf(dir);
