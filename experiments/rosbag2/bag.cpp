@@ -32,6 +32,7 @@
 #include <fstream>
 #include <map>
 #include <memory>
+#include <new>
 
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
@@ -237,7 +238,14 @@ class Cdr {
 std::vector<std::uint8_t> readWhole(const fs::path& p, const char* what, std::uint64_t max_bytes) {
   struct stat st {};
   const int fd = openInputFile(p, what, max_bytes, &st);
-  std::vector<std::uint8_t> buf(static_cast<std::size_t>(st.st_size));
+  std::vector<std::uint8_t> buf;
+  try {
+    buf.resize(static_cast<std::size_t>(st.st_size));
+  } catch (const std::bad_alloc&) {
+    ::close(fd);
+    throw Error(fmt::format("{}: the {} file has {} bytes: not enough memory to read it whole",
+                            p.string(), what, st.st_size));
+  }
   std::size_t got = 0;
   while (got < buf.size()) {
     const ssize_t n = ::read(fd, buf.data() + got, buf.size() - got);
@@ -378,6 +386,22 @@ void readSqliteFile(const BagInfo& bag, const fs::path& file, const std::set<std
                         "topics(id, name, type, serialization_format) and messages(id, "
                         "topic_id, timestamp, data), storage_identifier sqlite3 in {})",
                         name, t, bag.metadata_file.string()));
+    // Stored columns only: a generated column is computed when it is read (zeroblob(2e8) per row).
+    for (const char* t : {"topics", "messages"}) {
+      Stmt cols;
+      prepare(fmt::format("SELECT name, hidden FROM pragma_table_xinfo('{}')", t), &cols,
+              "the columns of the tables (pragma table_xinfo)");
+      int crc;
+      while ((crc = sqlite3_step(cols.s)) == SQLITE_ROW)
+        if (sqlite3_column_int(cols.s, 1) != 0) {
+          const unsigned char* c = sqlite3_column_text(cols.s, 0);
+          throw Error(fmt::format(
+              "{}: table '{}': column '{}' is a generated or hidden column: a rosbag2 file has "
+              "plain tables only, of stored columns",
+              name, t, c ? reinterpret_cast<const char*>(c) : ""));
+        }
+      if (crc != SQLITE_DONE) throw failure("reading the columns of the tables");
+    }
   }
   // Topics of this file: id -> name, with their types checked against metadata.yaml; one row
   // per id.

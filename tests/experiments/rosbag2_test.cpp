@@ -1276,6 +1276,15 @@ TEST(Rosbag2, SqliteIsReadThroughItsPlainTablesOnly) {
          "CREATE VIRTUAL TABLE messages USING fts4(id, topic_id, timestamp, data)"});
   e = errorOf(dir);
   EXPECT_NE(e.find("table 'messages' is a virtual table"), std::string::npos) << e;
+  // a generated column, computed when it is read
+  alter({"DROP TABLE messages",
+         "CREATE TABLE messages(id INTEGER PRIMARY KEY, topic_id INTEGER NOT NULL, timestamp "
+         "INTEGER NOT NULL, data BLOB GENERATED ALWAYS AS (zeroblob(100000000)) VIRTUAL)",
+         "INSERT INTO messages(topic_id, timestamp) VALUES (9, 1), (9, 2)"});
+  e = errorOf(dir);
+  EXPECT_NE(e.find("table 'messages': column 'data' is a generated or hidden column"),
+            std::string::npos)
+      << e;
   // a topic id defined twice (no primary key)
   alter({"DROP TABLE topics",
          "CREATE TABLE topics(id INTEGER, name TEXT, type TEXT, serialization_format TEXT)",
