@@ -26,22 +26,22 @@
 
 #include <algorithm>
 #include <array>
+#include <cctype>
+#include <cerrno>
 #include <cstring>
 #include <map>
 #include <memory>
+#include <new>
 
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
+#include "exid/yaml_strict.hpp"
 
 namespace exid::rosbag2 {
 
 namespace fs = std::filesystem;
 
 namespace {
-
-// A chunk larger than this (uncompressed) is refused rather than allocated: rosbag2 writes
-// chunks of about 1 MB; a corrupt size field must not allocate gigabytes.
-constexpr std::uint64_t kMaxChunkBytes = 1ULL << 30;
 
 /// A read-only byte range (C++17 has no std::span).
 struct Span {
@@ -161,11 +161,35 @@ class Cdr {
     const std::uint32_t len = u32(what);
     need(len, what);
     // The length counts the terminating NUL; an empty string may be written with length 0.
-    std::size_t k = len;
-    if (k > 0 && p_[pos_ + k - 1] == 0) --k;
+    if (len > 0 && p_[pos_ + len - 1] != 0)
+      throw Error(
+          fmt::format("{}: {}: the string of {} bytes at byte {} of the CDR data does not "
+                      "end with its terminating NUL byte (a corrupt message, or not of "
+                      "this type)",
+                      where_, what, len, pos_ + 4));
+    const std::size_t k = len > 0 ? len - 1 : 0;
+    const void* nul = std::memchr(p_ + pos_, 0, k);
+    if (nul)
+      throw Error(fmt::format(
+          "{}: {}: a NUL byte inside the string at byte {} of the CDR data (its {} bytes end at "
+          "byte {}); a name or frame holds no NUL",
+          where_, what, static_cast<const std::uint8_t*>(nul) - p_ + 4, len, pos_ + 4 + len));
     std::string s(reinterpret_cast<const char*>(p_ + pos_), k);
     pos_ += len;
     return s;
+  }
+  /// The message must end here: at most 3 zero bytes of padding may follow (a serializer may pad
+  /// the data to a multiple of 4); anything else is left over, the message is not of `type`.
+  void finish(const char* type) const {
+    const std::size_t left = n_ - pos_;
+    bool padding = left <= 3;
+    for (std::size_t i = pos_; padding && i < n_; ++i) padding = p_[i] == 0;
+    if (!padding)
+      throw Error(fmt::format(
+          "{}: {} bytes left after the {} message, which ends at byte {} of the {} bytes of "
+          "CDR data: not a {} (a message of another type on this topic, or a corrupt one); a "
+          "message must be consumed exactly",
+          where_, left, type, pos_ + 4, n_ + 4, type));
   }
   /// Length of a sequence whose elements take at least min_elem bytes each (never more elements
   /// than the bytes left can hold: a corrupt length allocates nothing).
@@ -209,6 +233,34 @@ class Cdr {
 };
 
 // ------------------------------------------------------------------------------ files
+/// A storage file read whole: a regular file (checked before it is opened) of at most max_bytes.
+std::vector<std::uint8_t> readWhole(const fs::path& p, const char* what, std::uint64_t max_bytes) {
+  struct stat st {};
+  const int fd = openInputFile(p, what, max_bytes, &st);
+  std::vector<std::uint8_t> buf;
+  try {
+    buf.resize(static_cast<std::size_t>(st.st_size));
+  } catch (const std::bad_alloc&) {
+    ::close(fd);
+    throw Error(fmt::format("{}: the {} file has {} bytes: not enough memory to read it whole",
+                            p.string(), what, st.st_size));
+  }
+  std::size_t got = 0;
+  while (got < buf.size()) {
+    const ssize_t n = ::read(fd, buf.data() + got, buf.size() - got);
+    if (n < 0 && errno == EINTR) continue;
+    if (n <= 0) {
+      const int err = errno;
+      ::close(fd);
+      throw Error(fmt::format("{}: cannot read the {} file ({})", p.string(), what,
+                              n < 0 ? std::strerror(err) : "it ended early: it shrank"));
+    }
+    got += static_cast<std::size_t>(n);
+  }
+  ::close(fd);
+  return buf;
+}
+
 std::string scalarText(const YAML::Node& n) {
   if (!n) return "(missing)";
   if (n.IsScalar()) return n.Scalar();
@@ -231,15 +283,61 @@ struct Stmt {
   }
 };
 
-void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::string>& wanted,
-                const std::function<void(const RawMessage&)>& fn) {
+/// The work budget of one .db3 file (sqlite3_progress_handler, called every kSqliteTick steps).
+constexpr int kSqliteTick = 10000;
+struct SqliteWork {
+  std::uint64_t ticks = 0, max_ticks = 0;
+};
+int sqliteProgress(void* p) {
+  auto* w = static_cast<SqliteWork*>(p);
+  return ++w->ticks > w->max_ticks ? 1 : 0;  // non-zero: interrupt the statement
+}
+
+std::string lower(std::string s) {
+  for (char& c : s) c = static_cast<char>(std::tolower(static_cast<unsigned char>(c)));
+  return s;
+}
+
+}  // namespace
+
+void readSqliteFile(const BagInfo& bag, const fs::path& file, const std::set<std::string>& wanted,
+                    const std::function<void(const RawMessage&)>& fn) {
   const std::string name = file.string();
-  // SQLite opens the file by its path: the input-file checks (and the run's manifest) first.
-  admitInputFile(file, "SQLite storage", kStreamedFileBytes);
+  // A regular file (a FIFO would block the open), checked before SQLite opens it.
+  struct stat fst {};
+  ::close(openInputFile(file, "bag storage (SQLite)", UINTMAX_MAX, &fst));
   Db db;
-  if (sqlite3_open_v2(name.c_str(), &db.db, SQLITE_OPEN_READONLY, nullptr) != SQLITE_OK)
+  if (sqlite3_open_v2(name.c_str(), &db.db, SQLITE_OPEN_READONLY | SQLITE_OPEN_NOMUTEX, nullptr) !=
+      SQLITE_OK)
     throw Error(fmt::format("{}: cannot open as SQLite: {}", name,
                             db.db ? sqlite3_errmsg(db.db) : "out of memory"));
+  // Defensive: no view or trigger can run, the schema is not trusted with functions that have
+  // side effects, sizes are bounded, temporary data stays in memory (no temporary files), and
+  // the work is bounded by the file's size.
+  sqlite3_db_config(db.db, SQLITE_DBCONFIG_DEFENSIVE, 1, nullptr);
+  sqlite3_db_config(db.db, SQLITE_DBCONFIG_TRUSTED_SCHEMA, 0, nullptr);
+  sqlite3_db_config(db.db, SQLITE_DBCONFIG_ENABLE_VIEW, 0, nullptr);
+  sqlite3_db_config(db.db, SQLITE_DBCONFIG_ENABLE_TRIGGER, 0, nullptr);
+  sqlite3_limit(db.db, SQLITE_LIMIT_LENGTH, static_cast<int>(kMaxChunkBytes));
+  sqlite3_limit(db.db, SQLITE_LIMIT_SQL_LENGTH, 1 << 20);
+  sqlite3_limit(db.db, SQLITE_LIMIT_EXPR_DEPTH, 100);
+  sqlite3_limit(db.db, SQLITE_LIMIT_COMPOUND_SELECT, 10);
+  sqlite3_limit(db.db, SQLITE_LIMIT_ATTACHED, 0);
+  sqlite3_limit(db.db, SQLITE_LIMIT_TRIGGER_DEPTH, 1);
+  SqliteWork work;
+  const std::uint64_t max_steps =
+      kSqliteBaseSteps + kSqliteStepsPerByte * static_cast<std::uint64_t>(fst.st_size);
+  work.max_ticks = max_steps / kSqliteTick;
+  sqlite3_progress_handler(db.db, kSqliteTick, &sqliteProgress, &work);
+  sqlite3_exec(db.db, "PRAGMA temp_store = MEMORY", nullptr, nullptr, nullptr);
+  auto failure = [&](const char* what) {
+    if (work.ticks > work.max_ticks)
+      return Error(fmt::format(
+          "{}: {}: stopped after {} steps of SQLite's work, the limit for a file of {} bytes "
+          "({} + {} per byte): a hostile or corrupt database",
+          name, what, max_steps, fst.st_size, kSqliteBaseSteps, kSqliteStepsPerByte));
+    return Error(fmt::format("{}: {}: {}", name, what, sqlite3_errmsg(db.db)));
+  };
   auto prepare = [&](const std::string& sql, Stmt* st, const char* what) {
     if (sqlite3_prepare_v2(db.db, sql.c_str(), -1, &st->s, nullptr) != SQLITE_OK)
       throw Error(
@@ -248,18 +346,81 @@ void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::st
                       "topic_id, timestamp, data), storage_identifier sqlite3 in {})",
                       name, what, sqlite3_errmsg(db.db), bag.metadata_file.string()));
   };
-  // Topics of this file: id -> name, with their types checked against metadata.yaml.
-  std::map<std::int64_t, const std::string*> ids;
+  // One snapshot for every query below.
+  if (sqlite3_exec(db.db, "BEGIN", nullptr, nullptr, nullptr) != SQLITE_OK) throw failure("BEGIN");
+  // The schema: topics and messages plain tables; no view, no trigger anywhere.
   {
     Stmt st;
-    prepare("SELECT id, name, type, serialization_format FROM topics", &st, "table topics");
+    prepare("SELECT type, name, sql FROM sqlite_master", &st, "the schema (sqlite_master)");
+    std::set<std::string> tables;
     int rc;
     while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
       auto text = [&](int c) {
         const unsigned char* t = sqlite3_column_text(st.s, c);
         return t ? std::string(reinterpret_cast<const char*>(t)) : std::string();
       };
+      const std::string type = text(0), obj = text(1), sql = lower(text(2));
+      if (type == "view" || type == "trigger")
+        throw Error(fmt::format(
+            "{}: the database holds a {} '{}': a rosbag2 file has plain tables only (topics, "
+            "messages, and their indexes); views and triggers are refused",
+            name, type, obj));
+      if (type == "table" && (obj == "topics" || obj == "messages")) {
+        if (sql.rfind("create virtual table", 0) == 0)
+          throw Error(
+              fmt::format("{}: table '{}' is a virtual table: a rosbag2 file has plain tables only",
+                          name, obj));
+        if (sql.find("without rowid") != std::string::npos)
+          throw Error(fmt::format(
+              "{}: table '{}' is a WITHOUT ROWID table: a rosbag2 file has plain tables only", name,
+              obj));
+        tables.insert(obj);
+      }
+    }
+    if (rc != SQLITE_DONE) throw failure("reading the schema (sqlite_master)");
+    for (const char* t : {"topics", "messages"})
+      if (!tables.count(t))
+        throw Error(
+            fmt::format("{}: not a rosbag2 SQLite file (no table '{}'; expected tables "
+                        "topics(id, name, type, serialization_format) and messages(id, "
+                        "topic_id, timestamp, data), storage_identifier sqlite3 in {})",
+                        name, t, bag.metadata_file.string()));
+    // Stored columns only: a generated column is computed when it is read (zeroblob(2e8) per row).
+    for (const char* t : {"topics", "messages"}) {
+      Stmt cols;
+      prepare(fmt::format("SELECT name, hidden FROM pragma_table_xinfo('{}')", t), &cols,
+              "the columns of the tables (pragma table_xinfo)");
+      int crc;
+      while ((crc = sqlite3_step(cols.s)) == SQLITE_ROW)
+        if (sqlite3_column_int(cols.s, 1) != 0) {
+          const unsigned char* c = sqlite3_column_text(cols.s, 0);
+          throw Error(fmt::format(
+              "{}: table '{}': column '{}' is a generated or hidden column: a rosbag2 file has "
+              "plain tables only, of stored columns",
+              name, t, c ? reinterpret_cast<const char*>(c) : ""));
+        }
+      if (crc != SQLITE_DONE) throw failure("reading the columns of the tables");
+    }
+  }
+  // Topics of this file: id -> name, with their types checked against metadata.yaml; one row
+  // per id.
+  std::map<std::int64_t, const std::string*> ids;
+  {
+    Stmt st;
+    prepare("SELECT id, name, type, serialization_format FROM topics", &st, "table topics");
+    std::map<std::int64_t, std::string> seen;
+    int rc;
+    while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+      auto text = [&](int c) {
+        const unsigned char* t = sqlite3_column_text(st.s, c);
+        return t ? std::string(reinterpret_cast<const char*>(t)) : std::string();
+      };
+      const std::int64_t id = sqlite3_column_int64(st.s, 0);
       const std::string topic = text(1), type = text(2), ser = text(3);
+      if (const auto [at, fresh] = seen.emplace(id, topic); !fresh)
+        throw Error(fmt::format(
+            "{}: table topics: id {} names topic '{}' and topic '{}': one definition per id", name,
+            id, at->second, topic));
       const auto it = wanted.find(topic);
       if (it == wanted.end()) continue;
       const TopicInfo* info = bag.topic(topic);
@@ -269,54 +430,134 @@ void readSqlite(const BagInfo& bag, const fs::path& file, const std::set<std::st
       if (ser != "cdr")
         throw Error(fmt::format("{}: topic '{}': serialization_format '{}', expected cdr", name,
                                 topic, ser));
-      ids[sqlite3_column_int64(st.s, 0)] = &*it;
+      ids[id] = &*it;
     }
-    if (rc != SQLITE_DONE)
-      throw Error(fmt::format("{}: reading table topics: {}", name, sqlite3_errmsg(db.db)));
+    if (rc != SQLITE_DONE) throw failure("reading table topics");
   }
   if (ids.empty()) return;
   std::string in;
   for (const auto& [id, t] : ids) in += (in.empty() ? "" : ", ") + std::to_string(id);
-  Stmt st;
-  prepare("SELECT id, topic_id, timestamp, data FROM messages WHERE topic_id IN (" + in +
-              ") ORDER BY timestamp, id",
-          &st, "table messages");
-  int rc;
-  while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
-    RawMessage m;
-    const std::int64_t row = sqlite3_column_int64(st.s, 0);
-    m.topic = ids.at(sqlite3_column_int64(st.s, 1));
-    m.receive_ns = sqlite3_column_int64(st.s, 2);
-    // Nanoseconds since the epoch; a negative one is corrupt (and differences of two arbitrary
-    // int64 stamps could overflow).
-    if (m.receive_ns < 0)
-      throw Error(
-          fmt::format("{}: messages row id {}: timestamp {}: expected nanoseconds since "
-                      "the epoch (>= 0)",
-                      name, row, m.receive_ns));
-    m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(st.s, 3));
-    const int bytes = sqlite3_column_bytes(st.s, 3);
-    m.size = bytes > 0 && m.data ? static_cast<std::size_t>(bytes) : 0;
-    m.where = fmt::format("{}: messages row id {}", name, row);
-    fn(m);
+  // The wanted messages' keys in the table's own order (a scan, no sort, no temporary data),
+  // then ordered here by time stamp and id; their data are read one by one in that order.
+  struct Key {
+    std::int64_t ts, id, rowid;
+    const std::string* topic;
+  };
+  std::vector<Key> keys;
+  {
+    Stmt st;
+    prepare("SELECT rowid, id, topic_id, timestamp FROM messages NOT INDEXED WHERE topic_id IN (" +
+                in + ") ORDER BY rowid",
+            &st, "table messages");
+    int rc;
+    while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+      Key k;
+      k.rowid = sqlite3_column_int64(st.s, 0);
+      k.id = sqlite3_column_int64(st.s, 1);
+      k.topic = ids.at(sqlite3_column_int64(st.s, 2));
+      k.ts = sqlite3_column_int64(st.s, 3);
+      // Nanoseconds since the epoch; a negative one is corrupt (and differences of two
+      // arbitrary int64 stamps could overflow).
+      if (k.ts < 0)
+        throw Error(
+            fmt::format("{}: messages row id {}: timestamp {}: expected nanoseconds since "
+                        "the epoch (>= 0)",
+                        name, k.id, k.ts));
+      keys.push_back(k);
+    }
+    if (rc != SQLITE_DONE) throw failure("reading table messages");
   }
-  if (rc != SQLITE_DONE)
-    throw Error(fmt::format("{}: reading table messages: {}", name, sqlite3_errmsg(db.db)));
+  auto before = [](const Key& a, const Key& b) { return a.ts != b.ts ? a.ts < b.ts : a.id < b.id; };
+  const bool in_order = std::is_sorted(keys.begin(), keys.end(), before);
+  if (!in_order) std::stable_sort(keys.begin(), keys.end(), before);
+  auto deliver = [&](const Key& k, sqlite3_stmt* s, int col) {
+    RawMessage m;
+    m.topic = k.topic;
+    m.receive_ns = k.ts;
+    m.data = static_cast<const std::uint8_t*>(sqlite3_column_blob(s, col));
+    const int bytes = sqlite3_column_bytes(s, col);
+    m.size = bytes > 0 && m.data ? static_cast<std::size_t>(bytes) : 0;
+    m.where = fmt::format("{}: messages row id {}", name, k.id);
+    fn(m);
+  };
+  Stmt st;
+  if (in_order) {  // recorded in time order (the usual case): one more scan
+    prepare("SELECT rowid, data FROM messages NOT INDEXED WHERE topic_id IN (" + in +
+                ") ORDER BY rowid",
+            &st, "table messages");
+    std::size_t i = 0;
+    int rc;
+    while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+      if (i >= keys.size() || sqlite3_column_int64(st.s, 0) != keys[i].rowid)
+        throw Error(fmt::format("{}: table messages changed while it was read", name));
+      deliver(keys[i++], st.s, 1);
+    }
+    if (rc != SQLITE_DONE) throw failure("reading table messages");
+    if (i != keys.size())
+      throw Error(fmt::format("{}: table messages changed while it was read", name));
+  } else {  // each row by its rowid
+    prepare("SELECT data FROM messages WHERE rowid = ?", &st, "table messages");
+    for (const Key& k : keys) {
+      sqlite3_reset(st.s);
+      sqlite3_bind_int64(st.s, 1, k.rowid);
+      const int rc = sqlite3_step(st.s);
+      if (rc == SQLITE_DONE)
+        throw Error(fmt::format("{}: table messages changed while it was read", name));
+      if (rc != SQLITE_ROW) throw failure("reading table messages");
+      deliver(k, st.s, 0);
+    }
+  }
 }
 
+namespace {
+
 // ------------------------------------------------------------------------------ MCAP
+/// A chunk's declared uncompressed size against the caps (before anything is decompressed).
+void checkChunkSize(const std::string& compression, std::size_t size,
+                    std::uint64_t uncompressed_size, const std::string& where) {
+  if (uncompressed_size > kMaxChunkBytes)
+    throw Error(
+        fmt::format("{}: chunk uncompressed_size {} bytes is above the limit of {} bytes "
+                    "(a corrupt size, or chunks far larger than rosbag2 writes)",
+                    where, uncompressed_size, kMaxChunkBytes));
+  if (uncompressed_size > kMaxChunkRatio * static_cast<std::uint64_t>(size) + kChunkAllowanceBytes)
+    throw Error(fmt::format(
+        "{}: chunk uncompressed_size {} bytes from {} compressed bytes ({}): above the limit "
+        "of {} times the compressed size plus {} bytes (a decompression bomb, or a corrupt "
+        "size)",
+        where, uncompressed_size, size, compression.empty() ? "none" : compression, kMaxChunkRatio,
+        kChunkAllowanceBytes));
+}
+
 struct McapState {
   struct Schema {
     std::string name, encoding;
+    std::uint32_t data_crc = 0;
+    std::size_t data_size = 0;
+    std::string where;  // the record that defined it first
+    bool operator==(const Schema& o) const {
+      return name == o.name && encoding == o.encoding && data_crc == o.data_crc &&
+             data_size == o.data_size;
+    }
   };
   struct Channel {
     std::string topic, encoding;
     std::uint16_t schema = 0;
     const std::string* wanted = nullptr;  // the wanted topic, or null
+    std::string where;                    // the record that defined it first
   };
   std::map<std::uint16_t, Schema> schemas;
   std::map<std::uint16_t, Channel> channels;
+  std::map<std::string, std::uint16_t> topic_channel;  // a topic's first channel
+  std::uint64_t decompressed = 0;                      // bytes of chunks so far (declared)
 };
+
+/// The name of a schema for messages ("0 (none)", "3 'sensor_msgs/msg/JointState'").
+std::string schemaText(const McapState& st, std::uint16_t id) {
+  if (id == 0) return "0 (none)";
+  const auto s = st.schemas.find(id);
+  return s == st.schemas.end() ? std::to_string(id) : fmt::format("{} '{}'", id, s->second.name);
+}
 
 /// Handles one Schema, Channel or Message record (top level or inside a chunk). Returns false
 /// for other opcodes (the caller decides).
@@ -328,8 +569,20 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
     McapState::Schema s;
     s.name = r.str("Schema.name");
     s.encoding = r.str("Schema.encoding");
-    r.block(4, "Schema.data");
-    st.schemas[id] = s;
+    const auto data = r.block(4, "Schema.data");
+    s.data_crc = crc32(data.first, data.second);
+    s.data_size = data.second;
+    s.where = where;
+    if (id == 0)
+      throw Error(fmt::format("{}: Schema.id 0: expected 1 or more (0 means no schema)", where));
+    // One definition per schema id: a channel's type was checked against the first.
+    const auto [it, fresh] = st.schemas.emplace(id, s);
+    if (!fresh && !(it->second == s))
+      throw Error(fmt::format(
+          "{}: schema {} redefined as '{}' (encoding '{}', {} bytes of definition); it was "
+          "defined as '{}' (encoding '{}', {} bytes) by {}: one definition per schema id",
+          where, id, s.name, s.encoding, s.data_size, it->second.name, it->second.encoding,
+          it->second.data_size, it->second.where));
     return true;
   }
   if (op == 0x04) {
@@ -339,6 +592,39 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
     c.topic = r.str("Channel.topic");
     c.encoding = r.str("Channel.message_encoding");
     r.block(4, "Channel.metadata");
+    c.where = where;
+    // One definition per channel id (the same record may repeat): a channel redefined to
+    // another topic, schema or encoding would send its later messages elsewhere.
+    if (const auto old = st.channels.find(id); old != st.channels.end()) {
+      const McapState::Channel& o = old->second;
+      if (o.topic != c.topic || o.schema != c.schema || o.encoding != c.encoding)
+        throw Error(fmt::format(
+            "{}: channel {} redefined as topic '{}' (schema {}, encoding '{}'); it was defined "
+            "as topic '{}' (schema {}, encoding '{}') by {}: one definition per channel id",
+            where, id, c.topic, schemaText(st, c.schema), c.encoding, o.topic,
+            schemaText(st, o.schema), o.encoding, o.where));
+      return true;
+    }
+    // One definition per topic: a second channel of a topic must say the same of it.
+    if (const auto t = st.topic_channel.find(c.topic); t != st.topic_channel.end()) {
+      const McapState::Channel& o = st.channels.at(t->second);
+      auto schemaName = [&](std::uint16_t sid) {
+        const auto f = st.schemas.find(sid);
+        return f == st.schemas.end() ? "#" + std::to_string(sid) : f->second.name;
+      };
+      const bool same_schema =
+          o.schema == c.schema ||
+          (o.schema != 0 && c.schema != 0 && schemaName(o.schema) == schemaName(c.schema));
+      if (!same_schema || o.encoding != c.encoding)
+        throw Error(fmt::format(
+            "{}: topic '{}' defined again by channel {} with schema {} and encoding '{}'; "
+            "channel {} defined it with schema {} and encoding '{}' ({}): one definition per "
+            "topic",
+            where, c.topic, id, schemaText(st, c.schema), c.encoding, t->second,
+            schemaText(st, o.schema), o.encoding, o.where));
+    } else {
+      st.topic_channel.emplace(c.topic, id);
+    }
     const auto it = wanted.find(c.topic);
     if (it != wanted.end()) {
       c.wanted = &*it;
@@ -432,6 +718,20 @@ void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8
       const std::uint32_t crc = r.u32("Chunk.uncompressed_crc");
       const std::string comp = r.str("Chunk.compression");
       const auto stored = r.block(8, "Chunk.records");
+      // The chunk's and the file's decompression budgets, from the sizes the chunks declare,
+      // before any work.
+      checkChunkSize(comp, stored.second, usize, where);
+      const std::uint64_t budget = std::min<std::uint64_t>(
+          kMaxFileDecompressedBytes,
+          kMaxChunkRatio * static_cast<std::uint64_t>(buf.size()) + kFileAllowanceBytes);
+      if (usize > budget - std::min(budget, st.decompressed))
+        throw Error(fmt::format(
+            "{}: chunk uncompressed_size {} bytes would bring the file's decompressed chunks to "
+            "{} bytes, above its limit of {} bytes ({} times the file's {} bytes plus {}, at most "
+            "{}): a decompression bomb, or a corrupt size",
+            where, usize, st.decompressed + usize, budget, kMaxChunkRatio, buf.size(),
+            kFileAllowanceBytes, kMaxFileDecompressedBytes));
+      st.decompressed += usize;
       const std::vector<std::uint8_t> recs =
           decompressChunk(comp, stored.first, stored.second, usize, where);
       if (crc != 0 && crc32(recs.data(), recs.size()) != crc)
@@ -473,11 +773,8 @@ namespace {
 
 void readMcap(const BagInfo& bag, const fs::path& path, const std::set<std::string>& wanted,
               const std::function<void(const RawMessage&)>& fn) {
-  // Read whole through the input-file checks: a FIFO or a device is refused before it is
-  // opened; at most kMaxMcapFileBytes.
-  const std::string buf = readInputFile(path, "MCAP storage", kMaxMcapFileBytes);
-  readMcapBytes(bag, path.string(), reinterpret_cast<const std::uint8_t*>(buf.data()), buf.size(),
-                wanted, fn);
+  const std::vector<std::uint8_t> buf = readWhole(path, "bag storage (MCAP)", kMaxMcapFileBytes);
+  readMcapBytes(bag, path.string(), buf.data(), buf.size(), wanted, fn);
 }
 
 }  // namespace
@@ -507,11 +804,7 @@ std::uint32_t crc32(const std::uint8_t* data, std::size_t size, std::uint32_t cr
 std::vector<std::uint8_t> decompressChunk(const std::string& compression, const std::uint8_t* src,
                                           std::size_t size, std::uint64_t uncompressed_size,
                                           const std::string& where) {
-  if (uncompressed_size > kMaxChunkBytes)
-    throw Error(
-        fmt::format("{}: chunk uncompressed_size {} bytes is above the limit of {} bytes "
-                    "(a corrupt size, or chunks far larger than rosbag2 writes)",
-                    where, uncompressed_size, kMaxChunkBytes));
+  checkChunkSize(compression, size, uncompressed_size, where);
   std::vector<std::uint8_t> out;
   if (compression.empty()) {
     if (size != uncompressed_size)
@@ -596,29 +889,15 @@ std::vector<std::uint8_t> decompressChunk(const std::string& compression, const 
   return out;
 }
 
-BagInfo readMetadata(const fs::path& dir) {
-  BagInfo bag;
-  bag.dir = dir;
-  bag.metadata_file = dir / "metadata.yaml";
+namespace {
+
+/// The contents of metadata.yaml (readMetadata); YAML exceptions are the caller's.
+void metadataOf(const YAML::Node& root, BagInfo* out) {
+  BagInfo& bag = *out;
+  const fs::path& dir = bag.dir;
   const std::string mf = bag.metadata_file.string();
-  if (!fs::is_directory(dir))
-    throw Error(
-        fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
-                    "its storage files)",
-                    dir.string()));
-  std::error_code ec;
-  if (!fs::exists(fs::symlink_status(bag.metadata_file, ec)))
-    throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
-  // Through the input-file checks: a FIFO (it blocked forever) or a directory (exit 3,
-  // basic_filebuf::underflow) is refused before it is read; at most kMaxBagMetadataBytes.
-  const std::string text = readInputFile(bag.metadata_file, "bag metadata", kMaxBagMetadataBytes);
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
-  }
-  const YAML::Node info = root["rosbag2_bagfile_information"];
+  const YAML::Node info =
+      root.IsMap() ? root["rosbag2_bagfile_information"] : YAML::Node(YAML::NodeType::Undefined);
   if (!info || !info.IsMap())
     throw Error(fmt::format("{}: expected a mapping rosbag2_bagfile_information at the top", mf));
   auto line = [](const YAML::Node& n) { return n.Mark().line + 1; };
@@ -673,9 +952,10 @@ BagInfo readMetadata(const fs::path& dir) {
   const YAML::Node topics = info["topics_with_message_count"];
   if (topics && !topics.IsSequence())
     throw Error(fmt::format("{}:{}: topics_with_message_count: expected a list", mf, line(topics)));
+  std::map<std::string, std::size_t> entries;  // topic -> its entry (1-based)
   if (topics)
     for (const YAML::Node& t : topics) {
-      const YAML::Node md = t["topic_metadata"];
+      const YAML::Node md = t.IsMap() ? t["topic_metadata"] : YAML::Node(YAML::NodeType::Undefined);
       if (!md || !md.IsMap() || !md["name"] || !md["type"])
         throw Error(
             fmt::format("{}:{}: topics_with_message_count: expected entries "
@@ -695,8 +975,48 @@ BagInfo readMetadata(const fs::path& dir) {
                                   line(c), scalarText(c)));
         }
       }
+      if (const auto [at, fresh] = entries.emplace(ti.name, bag.topics.size() + 1); !fresh)
+        throw Error(fmt::format(
+            "{}:{}: topics_with_message_count: topic '{}' is listed twice (entries {} and {}); "
+            "one entry per topic",
+            mf, line(t), ti.name, at->second, bag.topics.size() + 1));
       bag.topics.push_back(ti);
     }
+}
+
+}  // namespace
+
+BagInfo readMetadata(const fs::path& dir) {
+  BagInfo bag;
+  bag.dir = dir;
+  bag.metadata_file = dir / "metadata.yaml";
+  const std::string mf = bag.metadata_file.string();
+  if (!fs::is_directory(dir))
+    throw Error(
+        fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
+                    "its storage files)",
+                    dir.string()));
+  if (!fs::exists(bag.metadata_file))
+    throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
+  // A regular file of at most kMaxMetadataBytes (checked before it is read), strict YAML: a key
+  // repeated in a mapping is an error naming both lines.
+  const std::string text = readInputFile(bag.metadata_file, "bag metadata", kMaxMetadataBytes);
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", mf, e.mark.line + 1, e.msg));
+  }
+  {
+    std::vector<std::string> problems;
+    duplicateKeys(root, mf, "", &problems);
+    if (!problems.empty()) throw Error(problems.front());
+  }
+  try {
+    metadataOf(root, &bag);
+  } catch (const YAML::Exception& x) {  // (a scalar where a mapping is expected, ...)
+    throw Error(fmt::format("{}:{}: unexpected structure: {}", mf, x.mark.line + 1, x.msg));
+  }
   return bag;
 }
 
@@ -704,7 +1024,7 @@ void readMessages(const BagInfo& bag, const std::set<std::string>& wanted,
                   const std::function<void(const RawMessage&)>& fn) {
   for (const fs::path& f : bag.files) {
     if (bag.storage == "sqlite3")
-      readSqlite(bag, f, wanted, fn);
+      readSqliteFile(bag, f, wanted, fn);
     else
       readMcap(bag, f, wanted, fn);
   }
@@ -722,6 +1042,21 @@ JointStateMsg decodeJointState(const std::uint8_t* data, std::size_t size,
   m.position = c.doubles("position");
   m.velocity = c.doubles("velocity");
   m.effort = c.doubles("effort");
+  c.finish("sensor_msgs/msg/JointState");
+  // Names unique: a joint named twice has two values, and which one is meant is unknowable.
+  if (nn > 1) {
+    std::vector<std::size_t> order(nn);
+    for (std::size_t i = 0; i < nn; ++i) order[i] = i;
+    std::sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) {
+      return m.name[a] != m.name[b] ? m.name[a] < m.name[b] : a < b;
+    });
+    for (std::size_t i = 1; i < nn; ++i)
+      if (m.name[order[i]] == m.name[order[i - 1]])
+        throw Error(fmt::format(
+            "{}: name: joint '{}' is named twice (names {} and {} of {}); each joint may "
+            "appear once in a JointState message",
+            where, m.name[order[i]], order[i - 1] + 1, order[i] + 1, nn));
+  }
   return m;
 }
 
@@ -733,6 +1068,7 @@ WrenchStampedMsg decodeWrenchStamped(const std::uint8_t* data, std::size_t size,
   m.frame_id = c.str("header.frame_id");
   for (double& v : m.force) v = c.f64("wrench.force");
   for (double& v : m.torque) v = c.f64("wrench.torque");
+  c.finish("geometry_msgs/msg/WrenchStamped");
   return m;
 }
 

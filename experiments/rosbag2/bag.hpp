@@ -2,7 +2,12 @@
 // metadata.yaml, its storage files (SQLite .db3 or MCAP, MCAP chunks uncompressed, zstd or LZ4
 // frame), and the CDR encoding of sensor_msgs/msg/JointState and geometry_msgs/msg/WrenchStamped.
 // Every read is bounds-checked: a truncated or corrupt file, record or message is an exid::Error
-// naming the file, the record or message and what was expected.
+// naming the file, the record or message and what was expected. Everything decoded is validated:
+// each CDR message is consumed exactly, names are unique, an MCAP channel or schema id has one
+// definition, decompression is bounded per chunk and per file, a SQLite file is read through its
+// plain tables `topics` and `messages` only (views, triggers and virtual tables refused, the work
+// bounded), and metadata.yaml is capped in size and refuses duplicate keys (docs/hostile_input.md,
+// "rosbag2 bags").
 #pragma once
 
 #include <cstddef>
@@ -14,6 +19,29 @@
 #include <vector>
 
 namespace exid::rosbag2 {
+
+// ------------------------------------------------------------------------------ limits
+/// metadata.yaml: at most this many bytes (as a study file; a bag of 1000 topics writes ~1 MB).
+inline constexpr std::uint64_t kMaxMetadataBytes = std::uint64_t{1} << 20;
+/// An MCAP storage file is read whole into memory: at most this many bytes (rosbag2 splits a
+/// recording into files with --max-bag-size; `ros2 bag convert` keeps only the topics needed).
+inline constexpr std::uint64_t kMaxMcapFileBytes = std::uint64_t{4} << 30;
+/// One MCAP chunk, uncompressed: at most this many bytes (rosbag2 writes chunks of about 1 MB).
+inline constexpr std::uint64_t kMaxChunkBytes = std::uint64_t{256} << 20;
+/// Decompression ratio: a chunk's uncompressed size may be at most kMaxChunkRatio times its
+/// compressed size plus kChunkAllowanceBytes; all chunks of one file together at most
+/// kMaxChunkRatio times the file's size plus kFileAllowanceBytes, and never more than
+/// kMaxFileDecompressedBytes. Declared sizes are checked before anything is decompressed, and a
+/// stream is never decompressed beyond its declared size.
+inline constexpr std::uint64_t kMaxChunkRatio = 64;
+inline constexpr std::uint64_t kChunkAllowanceBytes = std::uint64_t{1} << 20;
+inline constexpr std::uint64_t kFileAllowanceBytes = std::uint64_t{16} << 20;
+inline constexpr std::uint64_t kMaxFileDecompressedBytes = std::uint64_t{16} << 30;
+/// SQLite: the work of all statements on one .db3 file, in SQLite's virtual machine steps, is at
+/// most kSqliteBaseSteps + kSqliteStepsPerByte times the file's size (a plain rosbag2 file
+/// needs a few steps per byte); beyond it the reading is interrupted, an error.
+inline constexpr std::uint64_t kSqliteBaseSteps = 20000000;
+inline constexpr std::uint64_t kSqliteStepsPerByte = 100;
 
 /// One topic as metadata.yaml lists it.
 struct TopicInfo {
@@ -50,6 +78,11 @@ struct RawMessage {
 void readMessages(const BagInfo& bag, const std::set<std::string>& wanted,
                   const std::function<void(const RawMessage&)>& fn);
 
+/// The SQLite part of readMessages (one .db3 file); exposed for the tests and fuzzers.
+void readSqliteFile(const BagInfo& bag, const std::filesystem::path& file,
+                    const std::set<std::string>& wanted,
+                    const std::function<void(const RawMessage&)>& fn);
+
 /// The MCAP part of readMessages on a file already in memory (`file` names it in messages);
 /// exposed for the tests and fuzzers.
 void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8_t* data,
@@ -57,6 +90,8 @@ void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8
                    const std::function<void(const RawMessage&)>& fn);
 
 /// Decompression of one MCAP chunk ("" / "zstd" / "lz4"); exposed for the tests and fuzzers.
+/// uncompressed_size is checked against kMaxChunkBytes and the ratio cap before anything is
+/// decompressed; the output never exceeds it.
 std::vector<std::uint8_t> decompressChunk(const std::string& compression, const std::uint8_t* src,
                                           std::size_t size, std::uint64_t uncompressed_size,
                                           const std::string& where);
@@ -84,7 +119,9 @@ struct WrenchStampedMsg {
 };
 
 /// CDR (XCDR1, little or big endian, 4-byte encapsulation header) decoding. Throw exid::Error
-/// with `where` and the byte offset and field that did not fit.
+/// with `where` and the byte offset and field that did not fit; bytes left after the message
+/// (beyond at most 3 zero bytes of padding) are an error, so is a JointState naming a joint twice
+/// and a string with a NUL byte inside or without its terminating NUL.
 JointStateMsg decodeJointState(const std::uint8_t* data, std::size_t size,
                                const std::string& where);
 WrenchStampedMsg decodeWrenchStamped(const std::uint8_t* data, std::size_t size,

@@ -538,7 +538,7 @@ int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
     const Dataset d = reg.create<Experiment>(dr.type, ps)->run(robot, nullptr, ctx);
     out = Json::object();
     out["robot"] = robot->name;
-    const Json result = inspectDataset(*robot, model.get(), d, ctx);
+    const Json result = inspectExperimentData(*robot, model.get(), d, ctx, "experiment");
     for (const auto& [k, v] : result.items()) out[k] = v;
     text = fmt::format("exid inspect: robot {} ({} joints), model {}\n", robot->name, robot->dof(),
                        model_name) +
@@ -570,7 +570,7 @@ int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
       if (std::string(what) == "validation") c.seed = ctx.seed + 1000003;  // as exid run
       const Dataset d =
           reg.create<Experiment>((*spec)->type, (*spec)->params)->run(robot, nullptr, c);
-      out[what] = inspectDataset(*robot, model.get(), d, c);
+      out[what] = inspectExperimentData(*robot, model.get(), d, c, what);
       text += fmt::format("\n== {} ({}) ==\n", what, (*spec)->type) + inspectionText(out[what]);
     }
   }

@@ -733,6 +733,24 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   return finish();
 }
 
+std::vector<std::string> experimentWarnings(const Dataset& data, const std::string& what) {
+  std::vector<std::string> out;
+  if (const Json* w = data.meta.find("warnings"); w && w->isArray())
+    for (std::size_t i = 0; i < w->size(); ++i) out.push_back(what + ": " + w->at(i).asString());
+  return out;
+}
+
+Json inspectExperimentData(const RobotModel& robot, const ObservationModel* model,
+                           const Dataset& data, const RunContext& ctx, const std::string& what) {
+  Json J = inspectDataset(robot, model, data, ctx);
+  if (const Json* a = data.meta.find("accounting")) J["accounting"] = *a;
+  std::vector<std::string> W = experimentWarnings(data, what);
+  if (const Json* w = J.find("warnings"))
+    for (std::size_t i = 0; i < w->size(); ++i) W.push_back(w->at(i).asString());
+  J["warnings"] = Json(W);
+  return J;
+}
+
 std::string inspectionText(const Json& J) {
   std::string out;
   auto num = [](const Json* j, const char* f = "{:.4g}") {
@@ -779,6 +797,12 @@ std::string inspectionText(const Json& J) {
       }
       out += "saturated torque samples: " + (s.empty() ? std::string("none") : s) + "\n";
     }
+  }
+  if (const Json* a = J.find("accounting"); a && a->isObject()) {
+    std::string s;
+    for (const auto& [k, v] : a->items())
+      if (v.isNumber()) s += fmt::format("{}{} {}", s.empty() ? "" : ", ", k, v.dump(0));
+    out += "samples: " + s + "\n";
   }
   if (const Json* t = J.find("timing"))
     out += fmt::format("data as used: {} Hz\n", num(t->find("rate_hz"), "{:.10g}"));

@@ -1027,8 +1027,7 @@ void StudyRun::experimentStage() {
           cfg.estimator->type);
       data->stream->collectEvery(static_cast<int>(streamInspectStride(data->size())));
     }
-    if (const Json* w = data->meta.find("warnings"); w && w->isArray())
-      for (std::size_t i = 0; i < w->size(); ++i) warn("experiment: " + w->at(i).asString());
+    for (const std::string& w : experimentWarnings(*data, "experiment")) warn(w);
     if (!data->streamed()) {
       if (cfg.estimator) {
         // The inspection runs beside the estimator (both only read the dataset and the
@@ -1368,8 +1367,7 @@ void StudyRun::validationStage() {
           "one part enters the other";
       S["split"] = sp;
     }
-    if (const Json* w = vd.meta.find("warnings"); w && w->isArray())
-      for (std::size_t i = 0; i < w->size(); ++i) warn("validation: " + w->at(i).asString());
+    for (const std::string& w : experimentWarnings(vd, "validation")) warn(w);
     inspectInto(S, warnFn(), "validation", *robot, model.get(), vd, vctx);
     va.relative_error = rows.y.norm() > 0 ? err.norm() / rows.y.norm() : NAN;
     va.residual_rms =

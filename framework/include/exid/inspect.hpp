@@ -94,6 +94,17 @@ inline constexpr int kRegressorBlockSamples = 2000;
 Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
                     const RunContext& ctx, long regressor_max_samples = 0);
 
+/// What an experiment said of its data (meta.warnings: messages dropped, samples cut, ...), each
+/// as "WHAT: warning": the words `exid run` puts among a study's warnings (what = "experiment"
+/// or "validation") and `exid inspect` prints.
+std::vector<std::string> experimentWarnings(const Dataset& data, const std::string& what);
+
+/// `exid inspect`'s look at an experiment's data: inspectDataset() plus what the experiment said
+/// of them, as `exid run` reports it: its sample accounting (meta.accounting, as `accounting`)
+/// and its warnings (experimentWarnings(data, what), first among `warnings`).
+Json inspectExperimentData(const RobotModel& robot, const ObservationModel* model,
+                           const Dataset& data, const RunContext& ctx, const std::string& what);
+
 /// A readable text summary of inspectDataset()'s result (several lines).
 std::string inspectionText(const Json& inspection);
 
