@@ -82,7 +82,7 @@ class TemplateSineSim final : public exid::Experiment {
       if (R.hasTransmission()) tau = R.transmission.transpose() * tau;    // tau_m = T^T tau
       for (int j = 0; drives && j < n && j < static_cast<int>(R.drives.size()); ++j) {
         const exid::Drive& D = R.drives[static_cast<std::size_t>(j)];
-        const double sg = qdm(j) > 0 ? 1.0 : (qdm(j) < 0 ? -1.0 : 0.0);  // as the models
+        const double sg = exid::coulombSign(qdm(j));  // as the models
         tau(j) += D.rotor_inertia * qddm(j) + D.coulomb * sg + D.viscous * qdm(j) + D.offset;
       }
       d.tau.row(k) = tau.transpose();

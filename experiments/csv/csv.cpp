@@ -286,7 +286,9 @@ class CsvExperiment : public exid::Experiment {
   /// Recording-level statistics of the rows the experiment uses (the segment's rows of the file,
   /// before any filtering), accumulated row by row in one pass. Held runs: consecutive rows whose
   /// every q repeats the previous row. A run is in motion when, for some joint, the position moved
-  /// by at least kFrozenQuanta times its column's resolution into the run and out of it, and the
+  /// by at least kFrozenQuanta times its column's resolution (the smallest step of the column, or
+  /// the printed value's own where it is coarser: 5 significant digits print 50 rad to 1e-3)
+  /// into the run and out of it, and the
   /// speed out of it (the step over the run's length + 1 rows) is at least kFrozenSpeedRatio
   /// times the speed into it (the step into the run over the rows it took): the robot went on
   /// moving while the positions were held. Otherwise it is a standstill (a stop and a start, or a
@@ -337,7 +339,7 @@ class CsvExperiment : public exid::Experiment {
             d[j] = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
             if (d[j] > 0) quantum_[j] = std::min(quantum_[j], d[j]);
           }
-          if (run_len_ > 0) endRun(d);  // the run ends here
+          if (run_len_ > 0) endRun(d, v);  // the run ends here
           step_ = std::move(d);
           step_rows_ = N_ - last_change_;
           last_change_ = N_;
@@ -363,7 +365,7 @@ class CsvExperiment : public exid::Experiment {
       for (const Run& r : runs_of) {
         bool moves = false;
         for (std::size_t j = 0; j < pq_.size() && !moves && r.before_rows > 0; ++j) {
-          const double q3 = kFrozenQuanta * quantum_[j];
+          const double q3 = kFrozenQuanta * std::max(quantum_[j], r.resolution[j]);
           moves = r.before[j] >= q3 && r.after[j] >= q3 &&
                   r.after[j] / static_cast<double>(r.length + 1) >=
                       kFrozenSpeedRatio * r.before[j] / static_cast<double>(r.before_rows);
@@ -423,6 +425,7 @@ class CsvExperiment : public exid::Experiment {
       int first_row = 0;
       long long length = 0;
       std::vector<double> before, after;  // per joint: the step into and out of the run
+      std::vector<double> resolution;     // per joint: the held or next value's resolution
       long long before_rows = 0;          // rows the step into the run took
       std::vector<int> dup_rows;          // the run's rows that repeat every compared column
     };
@@ -454,13 +457,29 @@ class CsvExperiment : public exid::Experiment {
       s.value = v;
       ++s.run;
     }
-    void endRun(const std::vector<double>& after) {
+    /// The finest power of ten (down to 1e-9) a printed value is a multiple of: its column's
+    /// resolution where it was written (5 significant digits: 1e-3 at 50, 1e-4 at 5); 0 for a
+    /// value with more digits.
+    static double localResolution(double x) {
+      for (int d = 0; d <= 9; ++d) {
+        const double y = x * std::pow(10.0, d);
+        if (std::abs(y - std::round(y)) <= 1e-6 + 16 * 2.220446049250313e-16 * std::abs(y))
+          return std::pow(10.0, -d);
+      }
+      return 0.0;
+    }
+    void endRun(const std::vector<double>& after, const double* v) {
       if (run_has_before_) {
         Run r;
         r.first_row = run_first_row_;
         r.length = run_len_;
         r.before = before_;
         r.after = after;
+        r.resolution.resize(pq_.size());
+        for (std::size_t j = 0; j < pq_.size(); ++j)
+          // (the finer of the two: one of them may be a round number)
+          r.resolution[j] = std::min(localResolution(prev_[static_cast<std::size_t>(pq_[j])]),
+                                     localResolution(v[pq_[j]]));
         r.before_rows = before_rows_;
         r.dup_rows = std::move(run_dup_rows_);
         runs_.push_back(std::move(r));

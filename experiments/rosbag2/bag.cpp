@@ -21,6 +21,8 @@
 #include <fmt/ranges.h>
 #include <lz4frame.h>
 #include <sqlite3.h>
+#include <sys/stat.h>
+#include <unistd.h>
 #include <yaml-cpp/yaml.h>
 #include <zstd.h>
 

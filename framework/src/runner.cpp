@@ -746,8 +746,9 @@ class StudyRun {
 void StudyRun::robotStage() {
   setStage("robot");
   const auto t0 = std::chrono::steady_clock::now();
-  robot = opt.robot ? opt.robot  // loaded by checkStudy before the run
-                    : reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
+  // Built here even when checkStudy loaded it before the run (opt.robot): the files it reads are
+  // the run's inputs (the manifest in summary.json, a matrix cell's key), read by the run.
+  robot = reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
   check(robot && robot->dof() > 0, fmt::format("robot '{}' has no joints", cfg.robot->type));
   auto& R = T.robot.emplace();
   R.type = cfg.robot->type;

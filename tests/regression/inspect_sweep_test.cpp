@@ -259,7 +259,7 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
   std::mt19937_64 rng(20261127);
   // delay: on recordings of 6 s and more / shorter (where the recording's parts may not hold
   // enough to confirm it: the estimate is still given, without a warning)
-  Tally clean, flip_one, flip_all, delay, delay_long, frozen, dups, rest;
+  Tally clean, flip_one, flip_all, delay, delay_long, frozen, dups, rest, stable;
   int other_warnings = 0, not_checkable = 0, joints_judged = 0;
   for (int i = 0; i < kCases; ++i) {
     const Case c = randomCase(rng, 1000 + static_cast<std::uint64_t>(i));
@@ -284,6 +284,20 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
       rest.add(R.find("frozen_rows")->find("rows")->asInt() != 0 ||
                    R.find("held_at_rest")->find("rows")->asInt() < c.rate_hz / 2,
                describe(c) + ": " + R.dump());
+    }
+    if (i % 5 == 0) {  // one sample fewer: the same verdicts (the sums change by one sample)
+      Recording shorter = rec;
+      const int K = shorter.data.size() - 1;
+      exid::Dataset& d = shorter.data;
+      d.t = d.t.head(K).eval();
+      d.q = d.q.topRows(K).eval();
+      d.qd = d.qd.topRows(K).eval();
+      d.qdd = d.qdd.topRows(K).eval();
+      d.tau = d.tau.topRows(K).eval();
+      const exid::Json S = inspectCsv(shorter, c, "shorter");
+      bool same = warnings(S).size() == warnings(J).size();
+      for (int j = 0; j < n; ++j) same = same && verdictOf(S, j) == verdictOf(J, j);
+      stable.add(!same, describe(c));
     }
     const int jb = bestJoint(J);
     std::mt19937_64 frng(c.seed * 7 + 3);
@@ -371,12 +385,14 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
       "  (other warnings on clean recordings: %d; joints not checkable: %d of %d)\n"
       "  planted faults found: one joint flipped %d of %d, every joint flipped %d of %d, delay "
       "%d of %d (recordings of 6 s or more) and %d of %d (shorter), frozen rows %d of %d, "
-      "duplicated rows %d of %d; standstill held rows not called frozen %d of %d\n",
+      "duplicated rows %d of %d; standstill held rows not called frozen %d of %d; the same "
+      "verdicts one sample shorter %d of %d\n",
       clean.alarms, clean.cases, other_warnings, not_checkable, joints_judged,
       flip_one.cases - flip_one.alarms, flip_one.cases, flip_all.cases - flip_all.alarms,
       flip_all.cases, delay_long.cases - delay_long.alarms, delay_long.cases,
       delay.cases - delay.alarms, delay.cases, frozen.cases - frozen.alarms, frozen.cases,
-      dups.cases - dups.alarms, dups.cases, rest.cases - rest.alarms, rest.cases);
+      dups.cases - dups.alarms, dups.cases, rest.cases - rest.alarms, rest.cases,
+      stable.cases - stable.alarms, stable.cases);
   EXPECT_EQ(clean.cases, kCases);
   EXPECT_EQ(clean.alarms, 0) << clean.text();
   EXPECT_GE(flip_one.cases, 30);
@@ -390,6 +406,8 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
   EXPECT_GE(frozen.cases, 30);
   EXPECT_EQ(frozen.alarms, 0) << frozen.text();
   EXPECT_EQ(dups.alarms, 0) << dups.text();
+  EXPECT_EQ(stable.cases, kCases / 5);
+  EXPECT_EQ(stable.alarms, 0) << stable.text();
   EXPECT_GE(rest.cases, 20);
   EXPECT_EQ(rest.alarms, 0) << rest.text();
   fs::remove_all(tmpDir());

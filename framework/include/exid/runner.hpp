@@ -42,8 +42,9 @@ struct RunOptions {
   /// Remove the `*.tmp.PID` files and staging folders of dead processes beside out_dir first
   /// (a matrix does it once for all its cells instead).
   bool clean_stale = true;
-  /// The study's robot when already loaded (checkStudy, exid/study_check.hpp, returns it): the
-  /// robot stage uses it instead of loading the robot again. Null: the stage loads it.
+  /// The study's robot when already loaded (checkStudy, exid/study_check.hpp, returns it). The
+  /// robot stage loads it again all the same, inside the run: the files it reads are the run's
+  /// inputs (summary.json `inputs`, a matrix cell's key). Kept for callers that hold it.
   std::shared_ptr<const RobotModel> robot;
 };
 
