@@ -253,6 +253,18 @@ TEST(Budgets, YamlAliasesBeyondTheirBudgetAreRefusedNamingTheKey) {
   EXPECT_EQ(r.code, 2) << r.out;
   EXPECT_TRUE(contains(r.out, "m.yaml:9: report.params.l4[7]: alias *l3")) << r.out;
   EXPECT_FALSE(fs::exists(dir / "o" / "results.sqlite"));
+  // an alias inside its own anchor's node (fuzz_study found it: 2 million nodes visited, a
+  // timeout): a cycle, refused at once
+  std::ofstream(dir / "cycle.yaml")
+      << "robot: {type: planar2r}\nreport:\n  params:\n    l0: &l0 [x, x, *l0, *l0]\n";
+  const auto t0 = std::chrono::steady_clock::now();
+  r = runExid({"validate", "cycle.yaml"}, dir);
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_TRUE(contains(r.out,
+                       "cycle.yaml:4: report.params.l0[2]: alias *l0 stands inside the "
+                       "node its anchor &l0 names: a cycle"))
+      << r.out;
+  EXPECT_LT(std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count(), 10.0);
   fs::remove_all(dir);
 }
 

@@ -29,7 +29,7 @@ namespace detail {
 class AliasCounter : public YAML::EventHandler {
  public:
   struct Stop {};
-  bool over = false;
+  bool over = false, cycle = false;
   double through_aliases = 0;  // nodes reached through aliases so far (double: may be huge)
   int line = 0;
   std::string path, alias;
@@ -47,6 +47,16 @@ class AliasCounter : public YAML::EventHandler {
     done(1, anchor);
   }
   void OnAlias(const YAML::Mark& mark, YAML::anchor_t anchor) override {
+    // an alias inside the node its anchor names: a cycle, whose expansion never ends
+    for (const Frame& f : stack_)
+      if (f.anchor != 0 && f.anchor == anchor) {
+        cycle = true;
+        line = mark.line + 1;
+        path = currentPath();
+        const auto nm = names_.find(anchor);
+        alias = nm == names_.end() ? std::string("?") : nm->second;
+        throw Stop{};
+      }
     const auto it = size_.find(anchor);
     const double n = it == size_.end() ? 1.0 : it->second;  // (an anchor still open: 1)
     keyOrValue("*");
@@ -145,6 +155,12 @@ inline void checkYamlAliases(const std::string& text, const std::string& source)
   } catch (const YAML::Exception&) {
     return;
   }
+  if (counter.cycle)
+    throw Error(fmt::format(
+        "{}:{}: {}: alias *{} stands inside the node its anchor &{} names: a cycle, which never "
+        "ends when expanded; refused",
+        source, counter.line, counter.path.empty() ? std::string("(top level)") : counter.path,
+        counter.alias, counter.alias));
   if (counter.over)
     throw Error(fmt::format(
         "{}:{}: {}: alias *{} takes the nodes reached through aliases beyond {} (each alias "
