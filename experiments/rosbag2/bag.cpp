@@ -938,11 +938,13 @@ void metadataOf(const YAML::Node& root, BagInfo* out) {
     const fs::path rel = f.Scalar();
     std::vector<fs::path> tries = {dir / rel, dir.parent_path() / rel, dir / rel.filename()};
     fs::path found;
-    for (const fs::path& p : tries)
-      if (fs::is_regular_file(p)) {
+    for (const fs::path& p : tries) {
+      std::error_code ec;  // (a name too long, say: not found, never an exception)
+      if (fs::is_regular_file(p, ec)) {
         found = p;
         break;
       }
+    }
     if (found.empty()) {
       std::vector<std::string> looked;
       for (const fs::path& p : tries) looked.push_back(p.string());
@@ -993,12 +995,13 @@ BagInfo readMetadata(const fs::path& dir) {
   bag.dir = dir;
   bag.metadata_file = dir / "metadata.yaml";
   const std::string mf = bag.metadata_file.string();
-  if (!fs::is_directory(dir))
+  std::error_code dir_ec;  // (an error of the path itself, a name too long: not a folder)
+  if (!fs::is_directory(dir, dir_ec))
     throw Error(
         fmt::format("{}: not a folder (a rosbag2 bag is a folder holding metadata.yaml and "
                     "its storage files)",
                     dir.string()));
-  if (!fs::exists(bag.metadata_file))
+  if (std::error_code ec; !fs::exists(bag.metadata_file, ec))
     throw Error(fmt::format("{}: no metadata.yaml in the bag folder {}", mf, dir.string()));
   // A regular file of at most kMaxMetadataBytes (checked before it is read), strict YAML: a key
   // repeated in a mapping is an error naming both lines.
