@@ -24,6 +24,7 @@
 #include "exid/input_file.hpp"
 #include "exid/io.hpp"
 #include "exid/json.hpp"
+#include "exid_cli.hpp"
 
 namespace fs = std::filesystem;
 
@@ -37,71 +38,15 @@ fs::path tempDir(const std::string& name) {
   return d;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using exid_cli::slurp;
 
-bool contains(const std::string& s, const std::string& what) {
-  return s.find(what) != std::string::npos;
-}
+using exid_cli::contains;
 
-struct CmdResult {
-  int code = -1;    // exit code; -1 when killed by a signal
-  int signal = 0;   // the signal that killed it
-  std::string out;  // stdout and stderr
-};
+using CmdResult = exid_cli::RunResult;
 
-// exid with args in dir; killed (SIGKILL) after timeout_s; address space capped at 3 GB (but
-// under AddressSanitizer).
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir,
                   double timeout_s = 60) {
-  const fs::path log = dir / "exid_log.txt";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (::chdir(dir.c_str()) != 0) ::_exit(126);
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, STDOUT_FILENO);
-    ::dup2(fd, STDERR_FILENO);
-    // (not under AddressSanitizer: its shadow memory exceeds any such cap; the timeout stays)
-#if defined(__SANITIZE_ADDRESS__)
-    constexpr bool kCapMemory = false;
-#elif defined(__has_feature)
-#if __has_feature(address_sanitizer)
-    constexpr bool kCapMemory = false;
-#else
-    constexpr bool kCapMemory = true;
-#endif
-#else
-    constexpr bool kCapMemory = true;
-#endif
-    if (kCapMemory) {
-      const rlim_t as = rlim_t{3} << 30;
-      rlimit rl{as, as};
-      ::setrlimit(RLIMIT_AS, &rl);
-    }
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(EXID_EXE));
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(EXID_EXE, argv.data());
-    ::_exit(127);
-  }
-  CmdResult r;
-  int status = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  while (::waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > timeout_s) {
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, &status, 0);
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.signal = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
-  r.out = slurp(log);
-  return r;
+  return exid_cli::runExidIn(args, dir, timeout_s, exid_cli::underAddressSanitizer() ? 0 : 3072);
 }
 
 exid::Json summaryOf(const fs::path& dir) { return exid::Json::parse(slurp(dir / "summary.json")); }

@@ -20,6 +20,8 @@
 #include <thread>
 #include <vector>
 
+#include "exid_cli.hpp"
+
 namespace fs = std::filesystem;
 
 namespace {
@@ -32,52 +34,15 @@ fs::path tempDir(const std::string& name) {
   return d;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using exid_cli::slurp;
 
-bool contains(const std::string& s, const std::string& what) {
-  return s.find(what) != std::string::npos;
-}
+using exid_cli::contains;
 
-struct CmdResult {
-  int code = -1;
-  int signal = 0;
-  std::string out;  // stdout and stderr
-};
+using CmdResult = exid_cli::RunResult;
 
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir,
                   double timeout_s = 180) {
-  const fs::path log = dir / "exid_log.txt";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (::chdir(dir.c_str()) != 0) ::_exit(126);
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, STDOUT_FILENO);
-    ::dup2(fd, STDERR_FILENO);
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(EXID_EXE));
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(EXID_EXE, argv.data());
-    ::_exit(127);
-  }
-  CmdResult r;
-  int status = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  while (::waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > timeout_s) {
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, &status, 0);
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.signal = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
-  r.out = slurp(log);
-  return r;
+  return exid_cli::runExidIn(args, dir, timeout_s);
 }
 
 // ------------------------------------------------------------------ a rosbag2 bag (SQLite)
