@@ -265,6 +265,8 @@ struct Signals {
   MatrixXd qd, qdd, tau;
   bool has_tau = false;
   int sg_half_width = 0;  // > 0: qd (and qdd) derived from q by Savitzky-Golay over +-this
+  // derived: alternativePositions and their derivatives, as the error estimate's second version
+  MatrixXd alt_q, alt_qd, alt_qdd;
   bool derived_qd = false, derived_qdd = false;
 };
 
@@ -315,8 +317,9 @@ Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& 
       m = std::max(2, static_cast<int>(std::lround((1.5 * rate / cutoff + 4.6) / 3.2)));
       MatrixXd smooth;
       savitzkyGolay(data.q, dt, m, &smooth, &v, &a);
-      MatrixXd va, aa;
-      savitzkyGolay(alternativePositions(data.q, smooth), dt, m, nullptr, &va, &aa);
+      s.alt_q = alternativePositions(data.q, smooth);
+      savitzkyGolay(s.alt_q, dt, m, nullptr, &s.alt_qd, &s.alt_qdd);
+      const MatrixXd& aa = s.alt_qdd;
       worst = 0;
       for (int j = 0; j < n; ++j) {
         const double ref = a.col(j).norm();
@@ -535,21 +538,18 @@ void predictTorque(const RobotModel& robot, const Dataset& data, const Signals& 
 /// alternativePositions, differentiated the same way, against the prediction; the change's RMS
 /// over the moving samples (for quantised positions an upper bound, by up to sqrt(2)).
 VectorXd predictionNoise(const RobotModel& robot, const Dataset& data, const Signals& sig,
-                         const std::vector<char>& moving, const MatrixXd& pred, double dt) {
+                         const std::vector<char>& moving, const MatrixXd& pred) {
   const int n = robot.dof();
   VectorXd out = VectorXd::Zero(n);
   if (!sig.derived_qd && !sig.derived_qdd) return out;
   const Index K = data.size();
-  MatrixXd smooth;
-  savitzkyGolay(data.q, dt, sig.sg_half_width, &smooth, nullptr, nullptr);
+  // (the second version deriveSignals made when it chose the band)
   Dataset alt;
   alt.t = data.t;
-  alt.q = alternativePositions(data.q, smooth);
+  alt.q = sig.alt_q;
   Signals as = sig;
-  MatrixXd v, a;
-  savitzkyGolay(alt.q, dt, sig.sg_half_width, nullptr, &v, &a);
-  if (sig.derived_qd) as.qd = v;
-  if (sig.derived_qdd) as.qdd = a;
+  if (sig.derived_qd) as.qd = sig.alt_qd;
+  if (sig.derived_qdd) as.qdd = sig.alt_qdd;
   MatrixXd p2, p2_rest;
   predictTorque(robot, alt, as, moving, &p2, &p2_rest);
   for (int j = 0; j < n; ++j) {
@@ -707,7 +707,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   } else {
     MatrixXd pred, pred_rest;
     predictTorque(robot, data, sig, moving, &pred, &pred_rest);
-    const VectorXd pred_noise = predictionNoise(robot, data, sig, moving, pred, dt);
+    const VectorXd pred_noise = predictionNoise(robot, data, sig, moving, pred);
     inspect_torque::Input in;
     in.pred_noise = &pred_noise;
     in.tau = &sig.tau;
