@@ -4,6 +4,11 @@
 //      odd extension and steady-state initial conditions (no edge step transient);
 //   2. qd and qdd by central differences of the filtered q when the data lack them or
 //      `differentiate: true`; measured qd / qdd otherwise pass through the same filter;
+//   2b. where the whole robot stands still (every joint's raw position held, within
+//      standstill_tolerance, for at least standstill_min_s), qd and qdd are zero (and, with
+//      standstill: drop, the rows are removed): the zero-phase filter would start the motion a
+//      few samples early there, and the Coulomb column would take the sign of a velocity the
+//      torque at rest does not have;
 //   3. a few samples at both ends are dropped (trim_edges), where filtering and differences
 //      are least accurate;
 //   4. rows W, y from the model, then parallel decimation: every column of W and y, per
@@ -22,6 +27,7 @@
 #include <chrono>
 #include <cmath>
 #include <exception>
+#include <deque>
 #include <map>
 #include <thread>
 
@@ -78,6 +84,25 @@ class FilteredLs : public exid::Estimator {
                            "coordinates of min_speed: measured (the data's, e.g. motors) or "
                            "joint (through the robot's transmission)",
                            {"measured", "joint"}),
+        exid::param_string(
+            "standstill", std::string("auto"),
+            "samples where the whole robot stands still (every joint's raw position stays within "
+            "standstill_tolerance for at least standstill_min_s): zero_velocity: their qd and qdd "
+            "are zero (the zero-phase filter starts the motion early there, and the Coulomb "
+            "column would take the sign of a velocity the torque at rest does not have); drop: "
+            "their rows are removed too (at rest, static friction holds an unknown torque, and "
+            "at a standstill's edges the robot may move below the encoders' resolution); filter: "
+            "as filtered, like every other sample; auto: drop where the model gives one row per "
+            "sample and equation, zero_velocity otherwise",
+            {"auto", "zero_velocity", "drop", "filter"}),
+        exid::param_double("standstill_min_s", 0.0, "s",
+                           "shortest standstill; 0: automatic (2 / cutoff_hz, the position "
+                           "filter's transient, and at least 3 samples)",
+                           0.0, 1e6),
+        exid::param_doubles("standstill_tolerance", std::vector<double>{}, "rad or m",
+                            "per joint, measured coordinates: the largest range of raw "
+                            "positions that still counts as standing (noisy encoders); empty: "
+                            "positions repeat exactly (the encoder did not tick)"),
         exid::param_int("chunk_samples", 8192,
                         "samples per chunk of the row pipeline (rows, decimation filter, "
                         "accumulation): memory is bounded by the chunk (plus the decimation "
@@ -103,6 +128,9 @@ class FilteredLs : public exid::Estimator {
         correct_(p.getBool("correct_correlation")),
         min_speed_(p.getDoubles("min_speed")),
         min_speed_joint_(p.getString("min_speed_frame") == "joint"),
+        standstill_(p.getString("standstill")),
+        standstill_min_s_(p.getDouble("standstill_min_s")),
+        standstill_tol_(p.getDoubles("standstill_tolerance")),
         chunk_samples_(p.getInt("chunk_samples")),
         threads_(static_cast<int>(p.getInt("threads"))) {
     opt_.rank_tolerance = p.getDouble("rank_tolerance");
@@ -131,6 +159,10 @@ class FilteredLs : public exid::Estimator {
     bool trim_default = false;
     int R = 1;
     long rows_before = 0, slow_removed = 0, samples_after_decimation = 0;
+    std::string standstill;                      // the mode in force (auto resolved)
+    long rest_min = 0;                           // standstill: shortest run [samples]; 0: off
+    long rest_samples = 0, rest_removed = 0;     // trimmed samples at rest; rows removed (drop)
+    long rest_edge_samples = 0;                  // trimmed samples at a standstill's edges (drop)
     std::string dec_note;
   };
 
@@ -155,6 +187,21 @@ class FilteredLs : public exid::Estimator {
     exid::check(min_speed_.empty() || static_cast<int>(min_speed_.size()) == n,
                 fmt::format("filtered_ls: min_speed: expected {} values (one per joint), found {}",
                             n, min_speed_.size()));
+    exid::check(standstill_tol_.empty() || static_cast<int>(standstill_tol_.size()) == n,
+                fmt::format("filtered_ls: standstill_tolerance: expected {} values (one per "
+                            "joint), found {}",
+                            n, standstill_tol_.size()));
+    for (double v : standstill_tol_)
+      exid::check(std::isfinite(v) && v >= 0.0,
+                  fmt::format("filtered_ls: standstill_tolerance: every value must be finite and "
+                              ">= 0, found {:g}",
+                              v));
+    if (standstill_ != "filter") {  // (decided before per_sample is known: the same for any mode)
+      const double min_s = standstill_min_s_ > 0.0     ? standstill_min_s_
+                           : cutoff_ > 0.0 ? 2.0 / cutoff_
+                                           : 0.0;
+      P->rest_min = std::max<long>(3, static_cast<long>(std::ceil(min_s * fs - 1e-9)));
+    }
     if (P->filter_q) *sos = estimators::butterworthLowpass(order_, cutoff_, fs);
     P->diff_qd = differentiate_ || !data.hasVelocity();
     P->diff_qdd = differentiate_ || !data.hasAcceleration();
@@ -189,6 +236,12 @@ class FilteredLs : public exid::Estimator {
                 fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
                             "equation (model '{}' is not)",
                             model.pluginName()));
+    P->standstill = standstill_ == "auto" ? (P->per_sample ? "drop" : "zero_velocity")
+                                          : standstill_;
+    exid::check(standstill_ != "drop" || P->per_sample,
+                fmt::format("filtered_ls: standstill: drop needs a model with one row per sample "
+                            "and equation (model '{}' is not); zero_velocity works with any",
+                            model.pluginName()));
     if (R > 1) {
       P->dec_cut = dec_ratio_ * 0.5 * fs / R;
       *dsos = estimators::butterworthLowpass(dec_order_, P->dec_cut, fs);
@@ -206,6 +259,8 @@ class FilteredLs : public exid::Estimator {
     P->margin_samples = R > 1 ? estimators::settlingSamples(*dsos, 1e-13) : 0;
     P->signal_margin =
         (P->filter_q ? estimators::settlingSamples(*sos, 1e-16) : 0) + (diff ? 4 : 0);
+    // (a sample's standstill is decided on the raw positions within rest_min of it)
+    P->signal_margin = std::max(P->signal_margin, 2 * P->rest_min + 1);
     // (at least 8 margins: the context computed twice costs at most a quarter more)
     long C = std::max<long>(chunk_samples_, 8 * P->margin_samples);
     // The same number of chunks, of equal sizes: the same work (each chunk's context is the
@@ -218,8 +273,63 @@ class FilteredLs : public exid::Estimator {
     P->streamed = P->per_sample;
   }
 
-  /// Steps 1-2 on raw samples: the filtered (and differentiated) signals.
-  exid::Dataset filtered(exid::Dataset raw, const Processed& P, const estimators::Sos& sos) const {
+  /// Per sample of raw: 1 where the whole robot stands still, i.e. the sample lies in a window
+  /// of P.rest_min samples of raw over which every joint's position range is within its
+  /// tolerance (0: the positions repeat exactly); with standstill: drop, 2 within rest_min
+  /// samples of a standstill (its edge); 0 elsewhere. A sample's answer depends only on the raw
+  /// positions within 2 rest_min of it, so a chunk with that much context decides as the whole
+  /// recording would.
+  std::vector<char> standstill(const exid::Dataset& raw, const Processed& P) const {
+    const long K = raw.size(), L = P.rest_min;
+    std::vector<char> rest(static_cast<std::size_t>(K), 0);
+    if (L <= 0 || K < L) return rest;
+    const long S = K - L + 1;  // window starts
+    std::vector<char> ok(static_cast<std::size_t>(S), 1);
+    for (Eigen::Index j = 0; j < raw.q.cols(); ++j) {
+      const double tol = standstill_tol_.empty() ? 0.0 : standstill_tol_[static_cast<std::size_t>(j)];
+      // sliding-window max and min (monotone deques of sample indices)
+      std::deque<long> hi, lo;
+      for (long k = 0; k < K; ++k) {
+        const double v = raw.q(k, j);
+        while (!hi.empty() && raw.q(hi.back(), j) <= v) hi.pop_back();
+        while (!lo.empty() && raw.q(lo.back(), j) >= v) lo.pop_back();
+        hi.push_back(k);
+        lo.push_back(k);
+        const long s = k - L + 1;
+        if (s < 0) continue;
+        while (hi.front() < s) hi.pop_front();
+        while (lo.front() < s) lo.pop_front();
+        if (!(raw.q(hi.front(), j) - raw.q(lo.front(), j) <= tol)) ok[static_cast<std::size_t>(s)] = 0;
+      }
+    }
+    // rest[k]: some window start in [k - L + 1, k] is ok
+    long open = 0;  // ok windows covering k
+    for (long k = 0; k < K; ++k) {
+      if (k < S && ok[static_cast<std::size_t>(k)]) ++open;
+      if (k - L >= 0 && k - L < S && ok[static_cast<std::size_t>(k - L)]) --open;
+      rest[static_cast<std::size_t>(k)] = open > 0;
+    }
+    // drop: the position filter's transient (L samples) beside a standstill is its edge (2):
+    // there the filtered velocity still carries the kink where the motion leaves or reaches rest
+    if (P.standstill == "drop") {
+      long last = -(L + 1);  // the last standstill sample seen going forward
+      for (long k = 0; k < K; ++k) {
+        if (rest[static_cast<std::size_t>(k)] == 1) last = k;
+        else if (k - last <= L) rest[static_cast<std::size_t>(k)] = 2;
+      }
+      last = K + L + 1;
+      for (long k = K - 1; k >= 0; --k) {
+        if (rest[static_cast<std::size_t>(k)] == 1) last = k;
+        else if (last - k <= L) rest[static_cast<std::size_t>(k)] = 2;
+      }
+    }
+    return rest;
+  }
+
+  /// Steps 1-2 on raw samples: the filtered (and differentiated) signals; 2b: zero qd, qdd where
+  /// rest (per sample of raw) is set.
+  exid::Dataset filtered(exid::Dataset raw, const Processed& P, const estimators::Sos& sos,
+                         const std::vector<char>& rest) const {
     exid::Dataset f = raw;
     if (P.filter_q) f.q = estimators::filtfiltColumns(sos, raw.q);
     if (P.diff_qd) {
@@ -233,13 +343,19 @@ class FilteredLs : public exid::Estimator {
     } else if (P.filter_q) {
       f.qdd = estimators::filtfiltColumns(sos, raw.qdd);
     }
+    for (std::size_t k = 0; k < rest.size(); ++k)
+      if (rest[k] == 1) {
+        const auto i = static_cast<Eigen::Index>(k);
+        if (f.qd.rows() > i) f.qd.row(i).setZero();
+        if (f.qdd.rows() > i) f.qdd.row(i).setZero();
+      }
     return f;
   }
 
   struct ChunkOut {
     exid::Rows rows;
     estimators::RowAccumulator acc;
-    long slow = 0, kept = 0, rows_before = 0;
+    long slow = 0, kept = 0, rows_before = 0, rest = 0, rest_edge = 0, rest_removed = 0;
   };
 
   /// Step 4 for chunk [ca, cb) of the trimmed samples: f holds the filtered samples [lo, hi)
@@ -248,12 +364,17 @@ class FilteredLs : public exid::Estimator {
   /// a time (the model's rows of the whole chunk are never held), every column filtered at once,
   /// one sample in R kept (4b: less the slow ones) and accumulated.
   void chunkRows(const exid::ObservationModel& model, const Processed& P,
-                 const estimators::Sos& dsos, const exid::Dataset& f, long lo, long ca, long cb,
-                 bool keep_rows, const exid::RunContext& ctx, ChunkOut* o) const {
+                 const estimators::Sos& dsos, const exid::Dataset& f,
+                 const std::vector<char>& rest, long lo, long ca, long cb, bool keep_rows,
+                 const exid::RunContext& ctx, ChunkOut* o) const {
+    for (long sidx = ca; sidx < cb; ++sidx) {
+      o->rest += rest[static_cast<std::size_t>(sidx - lo)] == 1;
+      o->rest_edge += rest[static_cast<std::size_t>(sidx - lo)] == 2;
+    }
     const int p = model.numBase();
     const long trim = P.trim, hi = lo + f.size();
     const int R = P.R;
-    if (!P.per_sample) {
+    if (!P.per_sample) {  // (standstill: drop needs one row per sample: checked in plan())
       exid::Rows rows = model.rows(f, ctx);
       estimators::checkRows(rows, p, kName, static_cast<int>(trim));
       o->rows_before = rows.y.size();
@@ -316,11 +437,22 @@ class FilteredLs : public exid::Estimator {
                                 model.pluginName(), next[g] - (a - lo), labels[g], b - a));
     }
     auto M = Mbuf.map();
+    const bool drop_rest = P.standstill == "drop";
+    // Rows to be dropped are zero before the decimation filter (0 = 0 theta holds exactly): the
+    // filter would otherwise spread them into the kept rows beside a standstill (at its edges
+    // the positions are held while the robot may already move).
+    if (drop_rest)
+      for (long k = 0; k < L; ++k)
+        if (rest[static_cast<std::size_t>(k)]) M.row(k).setZero();
     if (R > 1 && L >= 2) estimators::filtfiltRowsInPlace(dsos, M);
     const exid::RobotModel& robot = model.robot();
     const bool via_T = min_speed_joint_ && robot.hasTransmission();
     std::vector<long> kept_samples;
     for (long sidx = ((ca + R - 1) / R) * R; sidx < cb; sidx += R) {
+      if (drop_rest && rest[static_cast<std::size_t>(sidx - lo)]) {
+        ++o->rest_removed;
+        continue;
+      }
       if (!min_speed_.empty()) {
         const auto v_row = f.qd.row(sidx - lo).transpose();
         const Eigen::VectorXd v =
@@ -411,27 +543,38 @@ class FilteredLs : public exid::Estimator {
         [&](long c, const exid::Dataset& raw) {
           if (ctx.shouldStop()) throw exid::Error("filtered_ls: stopped");
           const Span s = spanOf(c);
-          const exid::Dataset f =
-              exid::sliceDataset(filtered(raw, P, sos), static_cast<int>(trim + s.lo - s.rlo),
-                                 static_cast<int>(trim + s.hi - s.rlo));
+          const std::vector<char> rest_raw = standstill(raw, P);
+          const auto from = static_cast<std::ptrdiff_t>(trim + s.lo - s.rlo),
+                     to = static_cast<std::ptrdiff_t>(trim + s.hi - s.rlo);
+          const exid::Dataset f = exid::sliceDataset(filtered(raw, P, sos, rest_raw),
+                                                     static_cast<int>(from), static_cast<int>(to));
+          const std::vector<char> rest(rest_raw.begin() + from, rest_raw.begin() + to);
           ChunkOut& o = out(c);
           o = ChunkOut();
-          chunkRows(model, P, dsos, f, s.lo, s.ca, s.cb, keep_rows, ctx, &o);
+          chunkRows(model, P, dsos, f, rest, s.lo, s.ca, s.cb, keep_rows, ctx, &o);
         },
         [&](long c) {  // in chunk order: deterministic
           ChunkOut& o = out(c);
           P.acc.merge(o.acc);
           P.rows_before += o.rows_before;
           P.slow_removed += o.slow;
-          P.samples_after_decimation += o.kept + o.slow;
+          P.rest_samples += o.rest;
+          P.rest_edge_samples += o.rest_edge;
+          P.rest_removed += o.rest_removed;
+          P.samples_after_decimation += o.kept + o.slow + o.rest_removed;
           if (keep_rows) appendRows(&all, o.rows, p);
           o = ChunkOut();
           ctx.report(0.1 + 0.8 * static_cast<double>(c + 1) / static_cast<double>(nchunks),
                      fmt::format("filtered_ls: {} / {} chunks", c + 1, nchunks));
         });
     exid::check(P.acc.rows() > 0,
-                fmt::format("filtered_ls: no rows left of '{}'{}", data.source,
-                            min_speed_.empty() ? "" : " (min_speed removed every sample)"));
+                fmt::format("filtered_ls: no rows left of '{}'{}{}", data.source,
+                            min_speed_.empty() ? "" : " (min_speed removed every sample)",
+                            P.standstill == "drop" && P.rest_removed > 0
+                                ? fmt::format(" ({} rows at a standstill removed: standstill: "
+                                              "drop; zero_velocity keeps them)",
+                                              P.rest_removed)
+                                : std::string()));
     if (keep_rows) P.rows = std::move(all);
     return P;
   }
@@ -535,6 +678,37 @@ class FilteredLs : public exid::Estimator {
           100.0 * static_cast<double>(P.slow_removed) /
           static_cast<double>(std::max<long>(1, P.samples_after_decimation));
     }
+    {
+      Json st = Json::object();
+      st["mode"] = P.standstill;
+      if (standstill_ == "auto")
+        st["mode_rule"] = P.per_sample ? "auto: drop (the model gives one row per sample)"
+                                       : "auto: zero_velocity (the model's rows span samples)";
+      if (P.rest_min > 0) {
+        const long Kt = K - 2 * trim;
+        st["min_samples"] = Json(static_cast<long long>(P.rest_min));
+        st["tolerance"] = standstill_tol_.empty() ? Json("exact repetition")
+                                                  : Json(standstill_tol_);
+        st["samples"] = Json(static_cast<long long>(P.rest_samples));
+        st["percent"] = 100.0 * static_cast<double>(P.rest_samples) /
+                        static_cast<double>(std::max<long>(1, Kt));
+        if (P.standstill == "drop") {
+          st["edge_samples"] = Json(static_cast<long long>(P.rest_edge_samples));
+          st["rows_removed"] = Json(static_cast<long long>(P.rest_removed));
+        }
+        st["rule"] = fmt::format(
+            "a sample stands still when it lies in {} samples over which every joint's raw "
+            "position {}; {}",
+            P.rest_min,
+            standstill_tol_.empty() ? "repeats exactly" : "stays within standstill_tolerance",
+            P.standstill == "drop"
+                ? fmt::format("its rows are removed, and those of the {} samples at each side "
+                              "of a standstill (the position filter's transient)",
+                              P.rest_min)
+                : std::string("there qd = qdd = 0"));
+      }
+      d["standstill"] = st;
+    }
     d["decimation"] = R;
     d["decimation_cutoff_hz"] = R > 1 ? exid::Json(dec_cut) : exid::Json(nullptr);
     d["decimation_order"] = dec_order_;
@@ -579,6 +753,9 @@ class FilteredLs : public exid::Estimator {
   bool correct_;
   std::vector<double> min_speed_;
   bool min_speed_joint_ = false;
+  std::string standstill_;
+  double standstill_min_s_ = 0.0;
+  std::vector<double> standstill_tol_;
   long chunk_samples_ = 8192;
   int threads_ = 0;
   estimators::SolveOptions opt_;
