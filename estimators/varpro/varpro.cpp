@@ -136,33 +136,62 @@ class VarPro : public exid::Estimator {
     // At the study's values: a regressor without full rank there is refused by
     // solveLeastSquares, naming the directions the data do not determine (the evidence).
     Eval at_study = evaluate(model, data, lambda0, ctx);
+    // The grid's points are compared on every k-th sample of a long recording (at most
+    // kGridSamples; a per-sample model without a delay, whose rows need no neighbours): a
+    // ranking of candidate starts, the runs on every sample.
+    const exid::Dataset* gd = &data;
+    exid::Dataset sub;
+    grid_stride_ = 1;
+    if (!delay_ && model.specs().per_sample && data.size() > kGridSamples && starts_ > 1) {
+      grid_stride_ = (data.size() + kGridSamples - 1) / kGridSamples;
+      sub = strided(data, grid_stride_);
+      gd = &sub;
+    }
+    auto onGrid = [&](const Eigen::VectorXd& lambda, const Eval& full) {
+      return gd == &data ? full : evaluate(model, *gd, lambda, ctx);
+    };
+    auto onData = [&](const Eigen::VectorXd& lambda, const Eval& g) {
+      return gd == &data ? g : evaluate(model, data, lambda, ctx);
+    };
     // ---- globalisation: a grid over each group's multiples, the linear part exact
-    Grid grid = searchGrid(model, data, lambda0, at_study, ctx);
+    Grid grid = searchGrid(model, *gd, lambda0, onGrid(lambda0, at_study), ctx);
     // ---- Levenberg-Marquardt from the study's values and from the grid's best point
     std::vector<Run> runs;
     runs.push_back(levenbergMarquardt(model, data, lambda0, at_study, "the study's values", ctx));
-    if (grid.best != lambda0)
-      runs.push_back(
-          levenbergMarquardt(model, data, grid.best, grid.best_eval, "the grid's best point", ctx));
-    // ---- the best end checked against the grid around it (multiples of its own values): a
-    // point there with a lower residual is one more start (twice at most)
-    for (int round = 0; round < 2 && grid.multipliers.size() > 1; ++round) {
+    // (a point the sample subset ranked may be singular on every sample: not a start then)
+    auto start = [&](const Eigen::VectorXd& lambda, const Eval& g, const char* origin) {
+      try {
+        runs.push_back(levenbergMarquardt(model, data, lambda, onData(lambda, g), origin, ctx));
+        return true;
+      } catch (const exid::Error&) {
+        if (ctx.shouldStop()) throw;
+        ++grid.singular;
+        return false;
+      }
+    };
+    if (grid.best != lambda0) start(grid.best, grid.best_eval, "the grid's best point");
+    // ---- the best end checked against the points around it: the grid's multiples of its own
+    // values per group, and each parameter alone over a wider bracket (x1/32 .. x32): a point
+    // there with a lower residual is one more start (kRounds times at most). A local minimum
+    // where one joint's term settled far off (the others right) is left this way.
+    for (int round = 0; round < kRounds && grid.multipliers.size() > 1; ++round) {
       const Run* best = &runs.front();
       for (const Run& r : runs)
         if (r.cur.rss < best->cur.rss) best = &r;
       Grid around;
       around.best = best->lambda;
-      around.best_eval = best->cur;
+      around.best_eval = onGrid(best->lambda, best->cur);
       around.groups = grid.groups;
       around.multipliers = grid.multipliers;
       const Eigen::VectorXd centre = best->lambda;
-      sweep(model, data, centre, &around, ctx);
-      grid.evaluations += around.evaluations;
+      sweep(model, *gd, centre, &around, ctx);
+      axisScan(model, *gd, centre, &around, ctx);
+      grid.evaluations += around.evaluations + (gd == &data ? 0 : 1);
       grid.singular += around.singular;
       ++grid.checks;
       if (around.best == centre) break;  // no point around it is lower
-      runs.push_back(levenbergMarquardt(model, data, around.best, around.best_eval,
-                                        "a grid point around the best end", ctx));
+      if (gd != &data) ++grid.evaluations;
+      if (!start(around.best, around.best_eval, "a point around the best end")) break;
     }
     for (Run& r : runs) firstOrder(model, &r);
     // the winner: the lowest residual among the runs whose joint problem is regular there
@@ -326,6 +355,65 @@ class VarPro : public exid::Estimator {
     }
   }
 
+  // Each model parameter alone at kAxisMultipliers of the centre's value, the others at the best
+  // point so far.
+  void axisScan(const exid::ObservationModel& model, const exid::Dataset& data,
+                const Eigen::VectorXd& centre, Grid* gp, const exid::RunContext& ctx) {
+    Grid& g = *gp;
+    for (int k = 0; k < q_model_; ++k)
+      for (double mult : kAxisMultipliers) {
+        if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+        Eigen::VectorXd lambda = g.best;
+        lambda[k] = centre[k] + std::log(mult);
+        if (lambda == g.best) continue;
+        ++g.evaluations;
+        try {
+          Eval e = evaluate(model, data, lambda, ctx);
+          if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
+            g.best = lambda;
+            g.best_eval = std::move(e);
+          }
+        } catch (const exid::Error&) {
+          ++g.singular;
+        }
+      }
+  }
+
+  // Every stride-th sample of d (read in chunks: a stream is never held whole).
+  static exid::Dataset strided(const exid::Dataset& d, long stride) {
+    const int K = d.size();
+    const int n = static_cast<int>((K + stride - 1) / stride);
+    exid::Dataset out;
+    out.source = d.source;
+    out.meta = d.meta;
+    exid::SampleWindow window(d);
+    int row = 0;
+    constexpr int kChunk = 8192;
+    for (int b = 0; b < K; b += kChunk) {
+      const exid::Dataset c = window.span(b, std::min(K, b + kChunk));
+      auto take = [&](const Eigen::MatrixXd& src, Eigen::MatrixXd& dst) {
+        if (src.cols() == 0) return;
+        if (dst.rows() != n) dst.resize(n, src.cols());
+        int r = row;
+        for (int k = static_cast<int>((b + stride - 1) / stride * stride); k < b + c.size();
+             k += static_cast<int>(stride))
+          dst.row(r++) = src.row(k - b);
+      };
+      if (out.t.size() != n) out.t.resize(n);
+      int r = row;
+      for (int k = static_cast<int>((b + stride - 1) / stride * stride); k < b + c.size();
+           k += static_cast<int>(stride))
+        out.t(r++) = c.t(k - b);
+      take(c.q, out.q);
+      take(c.qd, out.qd);
+      take(c.qdd, out.qdd);
+      take(c.tau, out.tau);
+      take(c.wrench, out.wrench);
+      row = r;
+    }
+    return out;
+  }
+
   // Levenberg-Marquardt on lambda = log(eta) from `lambda` (its fit `cur`).
   Run levenbergMarquardt(const exid::ObservationModel& model, const exid::Dataset& data,
                          Eigen::VectorXd lambda, Eval cur, const std::string& origin,
@@ -345,6 +433,7 @@ class VarPro : public exid::Estimator {
       run.trace.push_back(t);
     };
     record(cur);
+    bool cur_regular = regular(jointMatrix(model, cur));
     while (evals < max_evals_) {
       if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
       const Eigen::MatrixXd H = cur.JtJ;
@@ -374,6 +463,14 @@ class VarPro : public exid::Estimator {
         } else {
           try {
             trial = evaluate(model, data, lambda + delta, ctx);
+            // a step from a regular point into one where the joint problem is singular (a
+            // Stribeck velocity drifting so high that its term is a Coulomb term, or so low that
+            // it vanishes) is rejected: there the nonlinear parameter is not determined, and
+            // the run would wander where no start can bring it back
+            if (cur_regular && !regular(jointMatrix(model, trial))) {
+              ok = false;
+              ++rejected_singular_;
+            }
           } catch (const exid::Error&) {
             ok = false;
             ++rejected_singular_;
@@ -382,6 +479,7 @@ class VarPro : public exid::Estimator {
         ++evals;
         if (ok && std::isfinite(trial.rss) && trial.rss <= cur.rss) {
           lambda += delta;
+          cur_regular = regular(jointMatrix(model, trial));
           decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
           cur = std::move(trial);
           record(cur);
@@ -709,6 +807,9 @@ class VarPro : public exid::Estimator {
       }
       G["groups"] = groups;
       G["evaluations"] = grid.evaluations;
+      G["sample_stride"] = static_cast<long long>(grid_stride_);
+      G["axis_multipliers_around_the_best_end"] = exid::Json(std::vector<double>(
+          std::begin(kAxisMultipliers), std::end(kAxisMultipliers)));
       G["sweeps"] = grid.sweeps;
       G["sweeps_around_the_best_end"] = grid.checks;
       G["singular_points"] = grid.singular;
@@ -771,6 +872,15 @@ class VarPro : public exid::Estimator {
           "varpro: the fitted measurement delay {:g} s is at the bound measurement_delay_max_s = "
           "{:g} s (raise it)",
           e.nonlinear[q - 1], delay_max_)));
+    // a nonlinear parameter whose std exceeds its value is not determined by the data (a
+    // Stribeck velocity far above the motion's speeds: its term is a Coulomb term)
+    for (int k = 0; k < q_model_; ++k)
+      if (!(e.nonlinear_std[k] < std::abs(e.nonlinear[k])))
+        w.push_back(exid::Json(fmt::format(
+            "varpro: {} = {:.6g} +- {:.3g} {} is not determined by the data (its std exceeds its "
+            "value): fix it in the model or remove its term",
+            nl_[static_cast<std::size_t>(k)].name, e.nonlinear[k], e.nonlinear_std[k],
+            nl_[static_cast<std::size_t>(k)].unit)));
     if (w.size() > 0) d["warnings"] = w;
     return e;
   }
@@ -784,6 +894,15 @@ class VarPro : public exid::Estimator {
   int max_evals_;
   double xtol_, ftol_;
   int starts_;
+  mutable long grid_stride_ = 1;
+  static constexpr int kGridSamples = 4000;
+  static constexpr int kRounds = 6;  // checks around the best end, while one finds a lower point
+  // x1/32 .. x32 in steps of sqrt(2), x1 left out (the centre)
+  static constexpr double kAxisMultipliers[] = {
+      0.03125, 0.04419417382415922, 0.0625, 0.08838834764831845, 0.125, 0.1767766952966369,
+      0.25, 0.3535533905932738, 0.5, 0.7071067811865476, 1.414213562373095, 2.0,
+      2.82842712474619, 4.0, 5.656854249492381, 8.0, 11.31370849898476, 16.0,
+      22.62741699796952, 32.0};
   double gtol_;
   int chunk_;
   RowAccumulator::Method method_;

@@ -127,12 +127,14 @@ const Puma& puma() {
   return p;
 }
 
-// From starts on both sides of the truth, the default starts recover it and say converged;
-// the details tell every start's end, which won and the gradient there.
+// From starts on both sides of the truth, up to 4 times off, the default starts recover it and
+// say converged; the details tell every start's end, which won and the gradient there. (Before
+// the wide scan around the best end, x0.45 / x2.6, x0.25 / x4 and x4 / x0.25 ended in local
+// minima, one joint's Stribeck velocity 4-18 times off, and said converged.)
 TEST(VarproConvergence, RecoversTheTruthFromStartsOnBothSides) {
   const Puma& P = puma();
   for (const auto& [fe, fv] : std::vector<std::pair<double, double>>{
-           {2.0, 0.5}, {0.5, 2.0}, {2.0, 2.0}, {0.5, 0.5}, {1.7, 0.45}}) {
+           {2.0, 0.5}, {0.5, 2.0}, {0.45, 2.6}, {0.25, 4.0}, {4.0, 0.25}}) {
     auto m = mtest::model("differential", modelYaml(P.T, fe, fv), P.r);
     const Eigen::VectorXd eta = trueEta(*m, P.T);
     const exid::Estimate e = exid_test::create<exid::Estimator>("varpro", "{}")
@@ -157,7 +159,7 @@ TEST(VarproConvergence, RecoversTheTruthFromStartsOnBothSides) {
 }
 
 // From widths x2 and Stribeck velocities x0.5, one start (the study's values alone) ends in a
-// local minimum; the default starts escape it. From widths and velocities x2, one start ends
+// local minimum; the default starts escape it. From widths and velocities x2, one start may end
 // where the joint problem is singular: the failure says where it stopped and does not blame
 // the data (the regressor at the study's values has full rank); the default starts fit it.
 TEST(VarproConvergence, ALocalMinimumOfOneStartIsEscapedByTheStarts) {
@@ -180,10 +182,14 @@ TEST(VarproConvergence, ALocalMinimumOfOneStartIsEscapedByTheStarts) {
   EXPECT_EQ(all.details.find("grid")->find("multipliers")->size(), 3u);  // x1, x1/2, x2
   // a start that ends where the joint problem is singular
   auto m2 = mtest::model("differential", modelYaml(P.T, 2.0, 2.0), P.r);
+  // (steps into a singular joint problem are rejected: the single run may stay where the problem
+  // is regular; a single start's local minimum is no error, docs/estimators.md)
   try {
-    (void)exid_test::create<exid::Estimator>("varpro", "{starts: 1}")
-        ->estimate(*m2, P.d, nullptr, mtest::context());
-    ADD_FAILURE() << "no error";
+    const exid::Estimate one2 = exid_test::create<exid::Estimator>("varpro", "{starts: 1}")
+                                    ->estimate(*m2, P.d, nullptr, mtest::context());
+    const double off = etaError(one2, trueEta(*m2, P.T));
+    std::printf("[varpro] one start, x2 x2: eta off by %.3g, converged %d\n", off,
+                converged(one2));
   } catch (const exid::Error& e) {
     const std::string w = e.what();
     std::printf("[varpro] one start, x2 x2: %s\n", w.c_str());
@@ -196,6 +202,30 @@ TEST(VarproConvergence, ALocalMinimumOfOneStartIsEscapedByTheStarts) {
                                 ->estimate(*m2, P.d, nullptr, mtest::context());
   EXPECT_LT(etaError(e2, trueEta(*m2, P.T)), 1e-6);
   EXPECT_TRUE(converged(e2));
+}
+
+// From widths and Stribeck velocities x3, no start reaches the truth (the joint problem turns
+// singular on the way: a Stribeck velocity running off to where its term is a Coulomb term); the
+// result is not called converged and says where it stopped: never "converged" at a wrong point.
+TEST(VarproConvergence, AStartItCannotBringBackIsNotCalledConverged) {
+  const Puma& P = puma();
+  auto m = mtest::model("differential", modelYaml(P.T, 3.0, 3.0), P.r);
+  const Eigen::VectorXd eta = trueEta(*m, P.T);
+  try {
+    const exid::Estimate e = exid_test::create<exid::Estimator>("varpro", "{}")
+                                 ->estimate(*m, P.d, nullptr, mtest::context());
+    std::printf("[varpro] x3 x3: eta off by %.3g, converged %d: %s\n", etaError(e, eta),
+                converged(e), warnings(e).c_str());
+    if (etaError(e, eta) > 1e-6) {
+      EXPECT_FALSE(converged(e));
+      EXPECT_NE(warnings(e).find("not converged"), std::string::npos) << warnings(e);
+      EXPECT_NE(warnings(e).find("stopped at eps1 = "), std::string::npos) << warnings(e);
+    }
+  } catch (const exid::Error& x) {  // a refusal says where it stopped and blames no data
+    const std::string w = x.what();
+    EXPECT_NE(w.find("stopped at eps1 = "), std::string::npos) << w;
+    EXPECT_EQ(w.find("does not excite"), std::string::npos) << w;
+  }
 }
 
 // "converged" needs the first-order test: a run stopped by a loose step tolerance far from the

@@ -301,7 +301,10 @@ TEST(RealTx40, FigarohPipelineAsAStudyMatchesOrBeatsFigaroh) {
 // Friction beyond Coulomb + viscous on the real recording (examples/real/tx40_varpro.yaml:
 // asymmetric Coulomb levels, tanh widths and Stribeck terms, eps_j and vs_j fitted by varpro)
 // against wls with Coulomb + offset on the same split and processing. Measured: held-out relative
-// error 0.0608 against 0.0915, every joint lower; with sign() instead of tanh 0.0659.
+// error 0.0591 against 0.0915, every joint lower; with sign() instead of tanh 0.0659. The wide
+// scan around the best end finds a lower residual with joint 3's Stribeck velocity running off
+// (vs3 = 3.0e3 +- 3.3e4 rad/s: its term acts as a Coulomb term), which varpro says is not
+// determined; the earlier end (0.0608) was a local minimum.
 TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
   ASSERT_TRUE(fs::exists(dataDir() / "data/pos_read_data.csv"));
   const ::Run w = runStudy("tx40_wls");
@@ -320,10 +323,23 @@ TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
   EXPECT_TRUE(I.find("details")->find("converged")->asBool());
   const exid::Json& nl = *I.find("nonlinear_parameters");
   ASSERT_EQ(nl.size(), 12u);
+  const exid::Json* wv = I.find("details")->find("warnings");
+  const std::string warned = wv ? wv->dump() : std::string();
+  int determined = 0;
   for (std::size_t k = 0; k < nl.size(); ++k) {
     const double x = nl.at(k).find("value")->asDouble(), s = nl.at(k).find("std")->asDouble();
-    EXPECT_TRUE(x > 0 && s > 0 && s < x) << nl.at(k).dump();
+    EXPECT_TRUE(x > 0 && s > 0) << nl.at(k).dump();
+    const std::string name = nl.at(k).find("name")->asString();
+    const bool said = warned.find(name + " = ") != std::string::npos &&
+                      warned.find("is not determined") != std::string::npos;
+    if (s < x) {
+      ++determined;
+      EXPECT_FALSE(said) << name << ": " << warned;
+    } else {
+      EXPECT_TRUE(said) << name << " (std above its value) is not warned about: " << warned;
+    }
   }
+  EXPECT_GE(determined, 11);
   // sign() instead of tanh: the Stribeck terms alone still lower it
   const ::Run sg = runVariant("tx40_varpro", "coulomb_smoothing_rad_s: [1], ", "");
   ASSERT_EQ(sg.code, 0) << sg.out;
