@@ -15,6 +15,13 @@
 // exactly from the S, so Levenberg-Marquardt runs on them without another pass. Covariance
 // sigma^2 H^-1 at the optimum, sigma^2 = rss / (m - p).
 //
+// Starts (`starts`, default 3): LM runs from the first start (least squares on the rows, or the
+// gain prior's mean) and from starts on both sides of it, every torque column's parameter
+// shifted by -+ start_spread, -+ start_spread / 2, -+ 2 start_spread (theta by least squares at
+// each); the lowest objective is kept, and "converged" needs its first-order test. The shift is
+// common to the columns: the gains' common scale is the direction the data fix least (without a
+// payload part, not at all). The sums make a start cost no pass over the data.
+//
 // A prior on the gains (gain_prior_std, gain_prior_dK: a datasheet's torque constants and their
 // tolerance) adds the pseudo-observations sigma (dK_j - mu_j) / s_j, sigma the data's noise std
 // (from the fit, to a fixed point), so the objective is the negative log posterior times
@@ -59,6 +66,16 @@ class GainsLs : public exid::Estimator {
                            "would lower the objective by at most this fraction of it (or the "
                            "fit is exact to the sums' precision, rss <= 1e-12 sum tau^2)",
                            0.0, 1.0, true),
+        exid::param_int("starts", 3,
+                        "Levenberg-Marquardt starts, the best kept: the first (least squares on "
+                        "the rows, or the gain prior's mean), then every torque column's "
+                        "parameter shifted by -start_spread, +start_spread, -start_spread/2, "
+                        "+start_spread/2, -2 start_spread, +2 start_spread",
+                        1, 7),
+        exid::param_double("start_spread", 0.25, "",
+                           "the starts' shift of dK (a relative gain error) and FcL (a fraction "
+                           "of the recorded torque)",
+                           0.0, 0.45, true),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1, 1e9),
         exid::estimators::rankToleranceParam(),
         exid::param_doubles("gain_prior_std", std::vector<double>{}, "",
@@ -74,6 +91,8 @@ class GainsLs : public exid::Estimator {
       : max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         xtol_(p.getDouble("step_tolerance")),
         gtol_(p.getDouble("gradient_tolerance")),
+        starts_(static_cast<int>(p.getInt("starts"))),
+        spread_(p.getDouble("start_spread")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         rank_tol_(p.getDouble("rank_tolerance")),
         prior_std_(p.getDoubles("gain_prior_std")),
@@ -247,7 +266,8 @@ class GainsLs : public exid::Estimator {
     Eigen::VectorXd theta, phi;  // other base parameters; torque columns' (dK, FcL)
     double rss = 0.0;            // the data's residual sum of squares
     double objective = 0.0;      // rss + the prior's weighted pseudo-residuals
-    double noise = 0.0;          // the noise std the prior was weighed with (0: no prior)
+    Eigen::VectorXd noise;       // per torque column, the noise std the prior was weighed with
+                                 // (the same for every column; empty: no prior)
     int noise_rounds = 0;        // fits to the noise std's fixed point
     double noise_floor = 0.0;    // its floor; floored: the floor was used
     bool floored = false;
@@ -258,7 +278,92 @@ class GainsLs : public exid::Estimator {
     double gradient_norm = 0.0;  // ||d objective / d(theta, phi)|| at the end
     double gn_fraction = 0.0;    // the part of the objective a Gauss-Newton step would remove
     bool first_order = false;    // the first-order test holds there
+    // the starts (first: the one LM ran from in every later round of the prior's noise)
+    struct Start {
+      double shift = 0;           // of every torque column's parameter from the first start
+      Eigen::VectorXd phi0, phi;  // where it started and ended
+      double objective = 0, rss = 0, gn_fraction = 0;
+      int iterations = 0;
+      bool first_order = false, admissible = true;
+      bool degenerate = false;  // a load term at |FcL| >= 0.9 (refused unless every start is)
+    };
+    std::vector<Start> starts;
+    int best = 0;  // the kept start
   };
+
+  // The shift of start i from the first: 0, -s, +s, -s/2, +s/2, -2s, +2s.
+  double shiftOf(int i) const {
+    static const double kMul[] = {0.0, -1.0, 1.0, -0.5, 0.5, -2.0, 2.0};
+    return kMul[i] * spread_;
+  }
+
+  // theta by least squares at the given phi.
+  Eigen::VectorXd thetaAt(const Sums& S, const std::vector<Eigen::MatrixXd>& G,
+                          const Eigen::VectorXd& phi) const {
+    const int p0 = static_cast<int>(other_cols_.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
+    for (std::size_t e = 0; e < S.groups.size(); ++e) {
+      const Eigen::MatrixXd& M = G[e];
+      const Group& gr = S.groups[e];
+      const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
+      A += gk * gk * M.topLeftCorner(p0, p0);
+      b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
+    }
+    return A.ldlt().solve(b);
+  }
+
+  // LM from every start (f holds the first), the lowest objective kept in f.
+  void multiStart(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& noise,
+                  Fit* fp) const {
+    Fit& f = *fp;
+    const Fit first = f;
+    std::vector<Fit::Start> starts;
+    Fit best;
+    int bi = -1;
+    // a later start beats the kept one only by more than the objective's rounding (the sums'
+    // cancellation in tt - 2 g s + g^2 q), else the earlier is kept
+    const int p0 = static_cast<int>(other_cols_.size());
+    double tt = 0.0;
+    for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
+    for (int i = 0; i < starts_; ++i) {
+      Fit::Start st;
+      st.shift = shiftOf(i);
+      st.phi0 = first.phi.array() + st.shift;
+      Fit t = first;
+      t.phi = st.phi0;
+      if (i > 0) t.theta = thetaAt(S, G, t.phi);
+      st.admissible = admissible(S, t.phi) && t.theta.allFinite();
+      if (st.admissible) {
+        iterate(S, G, noise, &t);
+        st.phi = t.phi;
+        st.objective = t.objective;
+        st.rss = t.rss;
+        st.gn_fraction = t.gn_fraction;
+        st.iterations = t.iterations;
+        st.first_order = t.first_order;
+        for (std::size_t k = 0; k < is_gain_.size(); ++k)
+          st.degenerate = st.degenerate ||
+                          (!is_gain_[k] && std::abs(t.phi[static_cast<Eigen::Index>(k)]) >= 0.9);
+        // the lowest objective, a degenerate end only when every start is one
+        const bool best_degenerate = bi >= 0 && starts[static_cast<std::size_t>(bi)].degenerate;
+        const bool better =
+            bi < 0 || (st.degenerate == best_degenerate
+                           ? t.objective < best.objective - 1e-10 * best.objective - 1e-14 * tt
+                           : best_degenerate);
+        if (std::isfinite(t.objective) && better) {
+          best = t;
+          bi = i;
+        }
+      }
+      starts.push_back(st);
+    }
+    exid::check(bi >= 0, "gains_ls: no start could be fitted (every start leaves some 1 + a phi "
+                         "<= 0: lower start_spread)");
+    f = best;
+    f.starts = starts;
+    f.best = bi;
+  }
 
   // Whether every group's 1 + a phi_k is positive (the recorded torque keeps its sign).
   static bool admissible(const Sums& S, const Eigen::VectorXd& phi) {
@@ -272,7 +377,7 @@ class GainsLs : public exid::Estimator {
   // Per group r = tau - g (w theta + p), g = 1 / (1 + a phi): dr/dtheta = -g w, dr/dphi =
   // -(w theta + p) g', g' = -a g^2.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
-                  const Eigen::VectorXd& phi, double noise, Eigen::VectorXd* grad,
+                  const Eigen::VectorXd& phi, const Eigen::VectorXd& noise, Eigen::VectorXd* grad,
                   Eigen::MatrixXd* H, double* data_rss = nullptr) const {
     const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(phi.size());
     if (grad) grad->setZero(p0 + ng);
@@ -307,7 +412,8 @@ class GainsLs : public exid::Estimator {
     if (data_rss) *data_rss = rss;
     for (Eigen::Index k = 0; k < sd_.size(); ++k) {
       if (sd_[k] == 0.0) continue;  // (no prior on a load term)
-      const double rho = noise * (phi[k] - mu_[k]) / sd_[k], drho = noise / sd_[k];
+      const double nk = noise.size() > 0 ? noise[k] : 0.0;
+      const double rho = nk * (phi[k] - mu_[k]) / sd_[k], drho = nk / sd_[k];
       rss += rho * rho;
       if (grad) (*grad)[p0 + k] += rho * drho;
       if (H) (*H)(p0 + k, p0 + k) += drho * drho;
@@ -323,31 +429,21 @@ class GainsLs : public exid::Estimator {
     // start: the prior's gains (else 0: the recorded torque is the true one), theta by least
     // squares at them
     f.phi = mu_.size() > 0 ? mu_ : Eigen::VectorXd::Zero(ng);
-    {
-      Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
-      Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
-      for (std::size_t e = 0; e < S.groups.size(); ++e) {
-        const Eigen::MatrixXd& M = G[e];
-        const Group& gr = S.groups[e];
-        const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * f.phi[gr.k]) : 1.0;
-        A += gk * gk * M.topLeftCorner(p0, p0);
-        b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
-      }
-      f.theta = A.ldlt().solve(b);
-    }
+    f.theta = thetaAt(S, G, f.phi);
     if (!hasPrior()) {
       // Start from least squares on the rows themselves (tau - p = w theta - a phi tau: errors
       // in variables, but near): from phi = 0 LM can walk to a spurious fit with some
       // 1 + a phi -> 0 (a drive of small torques, its sign flipped by noise).
       linearStart(S, G, &f);
-      iterate(S, G, 0.0, &f);
+      multiStart(S, G, Eigen::VectorXd(), &f);
       return f;
     }
-    // The prior is weighed by the data's noise std: from the start's rss, then the fit's, to a
-    // fixed point (the gains' common scale, which the prior sets, does not change the rss).
+    // The prior is weighed by the data's noise std, one for every gain (pooled over the
+    // equations, as the data's rows are): from the start's rss, then the fit's, to a fixed point
+    // (the gains' common scale, which the prior sets, does not change the rss).
     const double dof = static_cast<double>(std::max<long>(1, S.m - p0 - ng));
     double rss0 = 0.0, tt = 0.0;
-    (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, nullptr, &rss0);
+    (void)evaluate(S, G, f.theta, f.phi, Eigen::VectorXd(), nullptr, nullptr, &rss0);
     for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
     // Near noise-free data the prior's weight (noise^2 / s^2) would vanish against the data's
     // and the scale it sets would drown in rounding: the noise std is floored at 1e-3 of the
@@ -355,13 +451,16 @@ class GainsLs : public exid::Estimator {
     f.noise_floor = 1e-3 * std::sqrt(tt / static_cast<double>(std::max<long>(1, S.m)));
     double noise = std::sqrt(std::max(rss0, 0.0) / dof);
     for (f.noise_rounds = 1; f.noise_rounds <= 20; ++f.noise_rounds) {
-      f.noise = std::max(noise, f.noise_floor);
-      iterate(S, G, f.noise, &f);
+      f.noise = Eigen::VectorXd::Constant(ng, std::max(noise, f.noise_floor));
+      if (f.noise_rounds == 1)
+        multiStart(S, G, f.noise, &f);  // the starts at the first weight, LM on from the best
+      else
+        iterate(S, G, f.noise, &f);
       const double next = std::max(std::sqrt(std::max(f.rss, 0.0) / dof), f.noise_floor);
-      if (std::abs(next - f.noise) <= 1e-6 * f.noise) break;
+      if (std::abs(next - f.noise[0]) <= 1e-6 * f.noise[0]) break;
       noise = next;
     }
-    f.floored = f.noise <= f.noise_floor;
+    f.floored = f.noise[0] <= f.noise_floor;
     return f;
   }
 
@@ -391,7 +490,8 @@ class GainsLs : public exid::Estimator {
   }
 
   // Levenberg-Marquardt from f's (theta, phi) with the prior weighed by `noise`.
-  void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise, Fit* fp) const {
+  void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& noise,
+               Fit* fp) const {
     Fit& f = *fp;
     const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
     Eigen::VectorXd grad;
@@ -492,7 +592,7 @@ class GainsLs : public exid::Estimator {
     s.m = S.m;
     s.rss = f.rss;
     // with a prior: the noise it was weighed with (the fixed point of rss / (m - p))
-    s.sigma2 = hasPrior() ? f.noise * f.noise : f.rss / static_cast<double>(S.m - p);
+    s.sigma2 = hasPrior() ? f.noise[0] * f.noise[0] : f.rss / static_cast<double>(S.m - p);
     const Eigen::MatrixXd Hinv =
         sc.asDiagonal() *
         (eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose()) *
@@ -563,7 +663,7 @@ class GainsLs : public exid::Estimator {
       pr["definition"] =
           "pseudo-observations noise_std (dK_j - prior_dK_j) / prior_std_j added to the rows; "
           "noise_std = sqrt(rss / (m - p)) at its fixed point";
-      pr["noise_std"] = f.noise;
+      pr["noise_std"] = f.noise[0];
       pr["noise_rounds"] = f.noise_rounds;
       pr["noise_std_floor"] = f.noise_floor;
       pr["noise_std_floored"] = f.floored;
@@ -573,15 +673,50 @@ class GainsLs : public exid::Estimator {
             "so the prior weighs more and the posterior is wider than the data alone would give";
       d["gain_prior"] = pr;
     }
+    // the starts: where each began and ended
+    std::vector<std::string> tnames;
+    for (int c : gain_cols_) tnames.push_back(model.base().names[static_cast<std::size_t>(c)]);
+    const std::string first_start =
+        hasPrior() ? "the gain prior's mean" : "least squares on the rows";
+    auto startName = [&](int i) {
+      const double sh = f.starts[static_cast<std::size_t>(i)].shift;
+      return i == 0 ? first_start
+                    : fmt::format("{} {:+g} in every torque column", first_start, sh);
+    };
+    exid::Json starts = exid::Json::array();
+    for (std::size_t i = 0; i < f.starts.size(); ++i) {
+      const Fit::Start& st = f.starts[i];
+      exid::Json o = exid::Json::object();
+      o["start"] = startName(static_cast<int>(i));
+      o["from"] = exid::estimators::describePoint(tnames, st.phi0);
+      o["admissible"] = st.admissible;
+      if (st.admissible) {
+        o["to"] = exid::estimators::describePoint(tnames, st.phi);
+        o["objective"] = st.objective;
+        o["rss"] = st.rss;
+        o["iterations"] = st.iterations;
+        o["gauss_newton_fraction"] = st.gn_fraction;
+        o["first_order"] = st.first_order;
+        if (st.degenerate) o["degenerate"] = "a load term at |FcL| >= 0.9: kept only when every start ends so";
+      }
+      starts.push_back(o);
+    }
+    d["starts"] = starts;
+    d["best_start"] = f.best + 1;
+    d["starts_definition"] = fmt::format(
+        "Levenberg-Marquardt from each start (theta by least squares at its phi; with a gain "
+        "prior, at the first weight of the noise std), the lowest objective kept; start_spread "
+        "= {:g}",
+        spread_);
     d["iterations"] = f.iterations;
     d["stop"] = f.stop;
     d["converged"] = f.converged;
     d["gradient_norm"] = f.gradient_norm;
     d["gauss_newton_fraction"] = f.gn_fraction;
     d["convergence_test"] = fmt::format(
-        "converged: a stop test held and a Gauss-Newton step would lower the objective by at "
-        "most gradient_tolerance = {:g} of it (or rss <= 1e-12 sum tau^2); gradient_norm = "
-        "||d objective / d(theta, phi)||",
+        "converged: at the start of lowest objective (details.starts), a stop test held and a "
+        "Gauss-Newton step would lower the objective by at most gradient_tolerance = {:g} of it "
+        "(or rss <= 1e-12 sum tau^2); gradient_norm = ||d objective / d(theta, phi)||",
         gtol_);
     d["memory"] =
         "per group of rows (equation, sign) a (p + 2)^2 factor, whatever the number of samples";
@@ -589,10 +724,12 @@ class GainsLs : public exid::Estimator {
     if (!f.converged) {
       exid::Json w = exid::Json::array();
       w.push_back(exid::Json(fmt::format(
-          "gains_ls: not converged: from least squares on the rows, stopped after {} iterations "
-          "at {} with rss {:.6g}, gradient norm {:.3g} (a Gauss-Newton step would remove {:.2g} "
-          "of the objective; gradient_tolerance = {:g}): {}",
-          f.iterations, exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm,
+          "gains_ls: not converged: from start {} of {} ({}), the lowest objective of the "
+          "starts, stopped after {} iterations at {} with rss {:.6g}, gradient norm {:.3g} (a "
+          "Gauss-Newton step would remove {:.2g} of the objective; gradient_tolerance = {:g}): "
+          "{}",
+          f.best + 1, f.starts.size(), startName(f.best), f.iterations,
+          exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm,
           f.gn_fraction, gtol_, f.stop)));
       d["warnings"] = w;
     }
@@ -601,6 +738,8 @@ class GainsLs : public exid::Estimator {
 
   int max_iter_;
   double xtol_, gtol_;
+  int starts_;
+  double spread_;
   int chunk_;
   double rank_tol_;
   std::vector<double> prior_std_, prior_mean_;  // as given
