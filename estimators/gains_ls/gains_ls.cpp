@@ -175,6 +175,7 @@ class GainsLs : public exid::Estimator {
     std::map<std::tuple<int, int, int>, std::size_t> index;  // (eq, k, a) -> group
     std::map<int, std::size_t> rows_of_col;                  // torque column -> its rows
     std::map<int, int> eq_of_col;                            // torque column -> its equation
+    std::map<int, long> rows_of_eq;                          // equation -> its rows
     long m = 0;
   };
 
@@ -250,6 +251,7 @@ class GainsLs : public exid::Estimator {
             }
             S.acc[gi].add(U, tau);
             S.m += n;
+            S.rows_of_eq[S.groups[gi].eq] += n;
             const int k = S.groups[gi].k;
             if (k >= 0) S.rows_of_col[k] += static_cast<std::size_t>(n);
           }
@@ -378,13 +380,14 @@ class GainsLs : public exid::Estimator {
   // -(w theta + p) g', g' = -a g^2.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
                   const Eigen::VectorXd& phi, const Eigen::VectorXd& noise, Eigen::VectorXd* grad,
-                  Eigen::MatrixXd* H, double* data_rss = nullptr) const {
+                  Eigen::MatrixXd* H, double* data_rss = nullptr, int only_eq = -1) const {
     const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(phi.size());
     if (grad) grad->setZero(p0 + ng);
     if (H) H->setZero(p0 + ng, p0 + ng);
     double rss = 0.0;
     for (std::size_t e = 0; e < S.groups.size(); ++e) {
       const Group& gr = S.groups[e];
+      if (only_eq >= 0 && gr.eq != only_eq) continue;  // (one equation's rows: no prior)
       const Eigen::MatrixXd& M = G[e];  // [w p tau]^T [w p tau]
       const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
       const double dg = -gr.a * gk * gk;
@@ -410,6 +413,7 @@ class GainsLs : public exid::Estimator {
       }
     }
     if (data_rss) *data_rss = rss;
+    if (only_eq >= 0) return rss;
     for (Eigen::Index k = 0; k < sd_.size(); ++k) {
       if (sd_[k] == 0.0) continue;  // (no prior on a load term)
       const double nk = noise.size() > 0 ? noise[k] : 0.0;
@@ -591,8 +595,7 @@ class GainsLs : public exid::Estimator {
     s.p = p;
     s.m = S.m;
     s.rss = f.rss;
-    // with a prior: the noise it was weighed with (the fixed point of rss / (m - p))
-    s.sigma2 = hasPrior() ? f.noise[0] * f.noise[0] : f.rss / static_cast<double>(S.m - p);
+    s.sigma2 = f.rss / static_cast<double>(S.m - p);  // (pooled; the covariance is below)
     const Eigen::MatrixXd Hinv =
         sc.asDiagonal() *
         (eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose()) *
@@ -608,7 +611,36 @@ class GainsLs : public exid::Estimator {
       s.theta[gain_cols_[static_cast<std::size_t>(k)]] = f.phi[k];
       T(gain_cols_[static_cast<std::size_t>(k)], p0 + k) = 1.0;
     }
-    s.covariance = s.sigma2 * T * Hinv * T.transpose();
+    // The noise std per equation (a joint's), sigma_e^2 = rss_e / m_e times m / (m - p), in the
+    // sandwich H^-1 (sum_e sigma_e^2 H_e + the prior's part) H^-1, H_e = J_e^T J_e its rows'
+    // part; with equal sigma_e it is sigma^2 H^-1 (with a prior, the posterior). One pooled
+    // sigma^2 H^-1 gave a wrist drive's parameters (a small torque, its small noise) a std up to
+    // 7 times their spread and a large joint's half of it (tests/models/sigma_montecarlo_test.cpp).
+    // The prior stays weighed by the pooled noise std, heavier than a quiet joint's own: there
+    // it narrows a gain less than a posterior weighed per joint would.
+    exid::Json per_eq = exid::Json::array();
+    {
+      std::vector<Eigen::MatrixXd> G;
+      for (const RowAccumulator& a : S.acc) G.push_back(a.factor().transpose() * a.factor());
+      Eigen::MatrixXd B = Eigen::MatrixXd::Zero(p0 + ng, p0 + ng), He;
+      const double small = static_cast<double>(S.m) / static_cast<double>(S.m - p);
+      for (const auto& [eq, rows] : S.rows_of_eq) {
+        double rss_e = 0.0;
+        (void)evaluate(S, G, f.theta, f.phi, Eigen::VectorXd(), nullptr, &He, &rss_e, eq);
+        const double s2 = std::max(rss_e, 0.0) / static_cast<double>(rows) * small;
+        B += s2 * He;
+        exid::Json o = exid::Json::object();
+        o["equation"] = eq;
+        o["rows"] = rows;
+        o["noise_std"] = std::sqrt(s2);
+        per_eq.push_back(o);
+      }
+      // the prior's pseudo-observations noise (dK - mu) / s, the prior mean's own error of
+      // std s: their noise std is `noise`
+      for (Eigen::Index k = 0; k < sd_.size(); ++k)
+        if (sd_[k] > 0.0) B(p0 + k, p0 + k) += std::pow(f.noise[k] * f.noise[k] / sd_[k], 2);
+      s.covariance = T * (Hinv * B * Hinv) * T.transpose();
+    }
     s.std = s.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     s.rel_std_percent = exid::estimators::relativeStdPercent(s.theta, s.std);
     // singular values of the Jacobian: square roots of H's eigenvalues
@@ -627,9 +659,15 @@ class GainsLs : public exid::Estimator {
         "-sign(tau qdm)), bilinear least squares with the recorded torque in the measurement only "
         "(no errors in variables), Levenberg-Marquardt on per-group sums of one pass";
     d["covariance_definition"] =
-        hasPrior() ? "the posterior sigma^2 H^-1 of (theta, phi), H = J^T J + sigma^2 / s^2 on "
-                     "the gains (their prior), sigma^2 = rss / (m - p) at its fixed point"
-                   : "sigma^2 H^-1 of (theta, phi), H = J^T J, sigma^2 = rss / (m - p)";
+        hasPrior() ? "H^-1 (sum_e sigma_e^2 J_e^T J_e + sigma^2 (sigma^2 / s^2) on the gains) "
+                     "H^-1 of (theta, phi), H = J^T J + sigma^2 / s^2 on the gains (their "
+                     "prior), sigma^2 = rss / (m - p) at its fixed point, per equation e (a "
+                     "joint) sigma_e^2 = rss_e / m_e * m / (m - p) (details.noise_per_equation); "
+                     "with equal sigma_e the posterior sigma^2 H^-1"
+                   : "H^-1 (sum_e sigma_e^2 J_e^T J_e) H^-1 of (theta, phi), H = J^T J, per "
+                     "equation e (a joint) sigma_e^2 = rss_e / m_e * m / (m - p) "
+                     "(details.noise_per_equation); with equal sigma_e it is sigma^2 H^-1";
+    if (per_eq.size() > 0) d["noise_per_equation"] = per_eq;
     exid::Json gains = exid::Json::array(), loads = exid::Json::array();
     for (int k = 0; k < ng; ++k) {
       exid::Json o = exid::Json::object();
