@@ -1,5 +1,5 @@
 // Monte-Carlo checks of the reported standard deviations of the estimators that iterate
-// (gains_ls): over seeded noise draws of a simulated recording the reported
+// (iv's outer loop, gains_ls): over seeded noise draws of a simulated recording the reported
 // std of each base parameter is compared with the empirical spread of its estimates, on a robot
 // of revolute joints (PUMA 560) and on one with a prismatic joint (the Stanford arm's joint 3).
 #include <fmt/format.h>
@@ -12,6 +12,7 @@
 #include <functional>
 #include <random>
 
+#include "closed_loop_test_util.hpp"
 #include "exid/json.hpp"
 #include "exid_cli.hpp"
 #include "model_test_util.hpp"
@@ -62,6 +63,39 @@ Spread spread(const char* label, const std::vector<std::string>& names,
               label, n, sorted.size(), out.median, sorted.front(), sorted.back(),
               out.mean_z2_spread);
   return out;
+}
+
+// iv on a closed loop (the iv test's set-up): PD + feed-forward, tanh Coulomb, noise on q, qd,
+// qdd and tau.
+Spread ivSpread(const std::string& robot, int n, double duration, double noise) {
+  auto r = mtest::robot(robot);
+  EXPECT_NE(r, nullptr);
+  const int dof = r->dof();
+  const exid::Samples ref = cltest::reference(dof, duration);
+  const exid::Dataset clean = mtest::simulate(
+      r,
+      "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
+      "coulomb_velocity_scale: 0.05}",
+      7, &ref);
+  const fs::path dir = exid_cli::freshTempDir("exid_mc_iv_", robot);
+  cltest::writeReference(ref, dir / "reference.csv");
+  auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", r);
+  const std::string params = fmt::format(
+      "{{reference_file: {}, {}}}", (dir / "reference.csv").string(), cltest::gains(clean.meta));
+  return spread(("iv " + robot).c_str(), m->base().names, m->baseNominal(), n, [&](int s) {
+    exid::Dataset d = clean;
+    std::mt19937_64 rng(static_cast<std::uint64_t>(100 + s));
+    std::normal_distribution<double> nd(0.0, 1.0);
+    for (int k = 0; k < d.size(); ++k)
+      for (int j = 0; j < dof; ++j) {
+        d.q(k, j) += noise * 2e-4 * nd(rng);
+        d.qd(k, j) += noise * 0.015 * nd(rng);
+        d.qdd(k, j) += noise * 0.3 * nd(rng);
+        d.tau(k, j) += noise * 0.1 * nd(rng);
+      }
+    return exid_test::create<exid::Estimator>("iv", params)
+        ->estimate(*m, d, nullptr, mtest::context());
+  });
 }
 
 // gains_ls on drive gains (the drive_gains test's set-up): a recording in two parts, the second
@@ -122,9 +156,12 @@ Spread gainsSpread(const std::string& robot, int n) {
   });
 }
 
-// Every parameter's reported / empirical std within [lo, hi], the median within 10 % of 1.
-void expectHonest(const Spread& s, const std::vector<std::string>& names, double lo, double hi) {
-  EXPECT_NEAR(s.median, 1.0, 0.1);
+// Every parameter's reported / empirical std within [lo, hi], the median within
+// [1 / (1 + tol), 1 + tol].
+void expectHonest(const Spread& s, const std::vector<std::string>& names, double lo, double hi,
+                  double tol = 0.1) {
+  EXPECT_GE(s.median, 1.0 / (1.0 + tol));
+  EXPECT_LE(s.median, 1.0 + tol);
   for (std::size_t i = 0; i < s.ratio.size(); ++i) {
     EXPECT_GE(s.ratio[i], lo) << names[i] << ": reported / empirical std " << s.ratio[i];
     EXPECT_LE(s.ratio[i], hi) << names[i] << ": reported / empirical std " << s.ratio[i];
@@ -143,6 +180,24 @@ TEST(SigmaMonteCarlo, GainsLsStdMatchesTheSpreadForRevoluteAndPrismaticJoints) {
                           mtest::robot(robot));
     expectHonest(gainsSpread(robot, draws(60)), m->base().names, 0.75, 1.33);
   }
+}
+
+// iv: the sandwich over each sample's rows (unchanged; these tests guard it). Over 40 draws on
+// the PUMA the median ratio is 0.935 (range [0.77, 1.21]): not 1.4 times too large. Noise on q, qd, qdd and tau; on the Stanford arm
+// 0.03 of the PUMA's (more makes some least-squares starts' mass matrix indefinite, which iv
+// cannot simulate). Its estimates of the Coulomb and viscous levels are biased by the velocity
+// noise inside tanh(qd / 0.05) (up to 17 standard errors of the mean over 40 draws): the mean
+// z^2 of iv_test is that bias, not the std.
+TEST(SigmaMonteCarlo, IvStdMatchesTheSpreadOnRevoluteJoints) {
+  auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}",
+                        mtest::robot("puma560"));
+  expectHonest(ivSpread("puma560", draws(24), 6.0, 1.0), m->base().names, 0.6, 1.6, 0.25);
+}
+
+TEST(SigmaMonteCarlo, IvStdMatchesTheSpreadWithAPrismaticJoint) {
+  auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}",
+                        mtest::robot("stanford"));
+  expectHonest(ivSpread("stanford", draws(40), 6.0, 0.03), m->base().names, 0.6, 1.6, 0.25);
 }
 
 }  // namespace
