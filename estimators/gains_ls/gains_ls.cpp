@@ -268,8 +268,7 @@ class GainsLs : public exid::Estimator {
     Eigen::VectorXd theta, phi;  // other base parameters; torque columns' (dK, FcL)
     double rss = 0.0;            // the data's residual sum of squares
     double objective = 0.0;      // rss + the prior's weighted pseudo-residuals
-    Eigen::VectorXd noise;       // per torque column, the noise std the prior was weighed with
-                                 // (the same for every column; empty: no prior)
+    double noise = 0.0;          // the noise std the prior was weighed with (0: no prior)
     int noise_rounds = 0;        // fits to the noise std's fixed point
     double noise_floor = 0.0;    // its floor; floored: the floor was used
     bool floored = false;
@@ -316,7 +315,7 @@ class GainsLs : public exid::Estimator {
   }
 
   // LM from every start (f holds the first), the lowest objective kept in f.
-  void multiStart(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& noise,
+  void multiStart(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise,
                   Fit* fp) const {
     Fit& f = *fp;
     const Fit first = f;
@@ -379,7 +378,7 @@ class GainsLs : public exid::Estimator {
   // Per group r = tau - g (w theta + p), g = 1 / (1 + a phi): dr/dtheta = -g w, dr/dphi =
   // -(w theta + p) g', g' = -a g^2.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
-                  const Eigen::VectorXd& phi, const Eigen::VectorXd& noise, Eigen::VectorXd* grad,
+                  const Eigen::VectorXd& phi, double noise, Eigen::VectorXd* grad,
                   Eigen::MatrixXd* H, double* data_rss = nullptr, int only_eq = -1) const {
     const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(phi.size());
     if (grad) grad->setZero(p0 + ng);
@@ -416,8 +415,7 @@ class GainsLs : public exid::Estimator {
     if (only_eq >= 0) return rss;
     for (Eigen::Index k = 0; k < sd_.size(); ++k) {
       if (sd_[k] == 0.0) continue;  // (no prior on a load term)
-      const double nk = noise.size() > 0 ? noise[k] : 0.0;
-      const double rho = nk * (phi[k] - mu_[k]) / sd_[k], drho = nk / sd_[k];
+      const double rho = noise * (phi[k] - mu_[k]) / sd_[k], drho = noise / sd_[k];
       rss += rho * rho;
       if (grad) (*grad)[p0 + k] += rho * drho;
       if (H) (*H)(p0 + k, p0 + k) += drho * drho;
@@ -439,15 +437,15 @@ class GainsLs : public exid::Estimator {
       // in variables, but near): from phi = 0 LM can walk to a spurious fit with some
       // 1 + a phi -> 0 (a drive of small torques, its sign flipped by noise).
       linearStart(S, G, &f);
-      multiStart(S, G, Eigen::VectorXd(), &f);
+      multiStart(S, G, 0.0, &f);
       return f;
     }
-    // The prior is weighed by the data's noise std, one for every gain (pooled over the
-    // equations, as the data's rows are): from the start's rss, then the fit's, to a fixed point
-    // (the gains' common scale, which the prior sets, does not change the rss).
+    // The prior is weighed by the data's noise std (pooled over the equations, as the data's rows
+    // are): from the start's rss, then the fit's, to a fixed point (the gains' common scale,
+    // which the prior sets, does not change the rss).
     const double dof = static_cast<double>(std::max<long>(1, S.m - p0 - ng));
     double rss0 = 0.0, tt = 0.0;
-    (void)evaluate(S, G, f.theta, f.phi, Eigen::VectorXd(), nullptr, nullptr, &rss0);
+    (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, nullptr, &rss0);
     for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
     // Near noise-free data the prior's weight (noise^2 / s^2) would vanish against the data's
     // and the scale it sets would drown in rounding: the noise std is floored at 1e-3 of the
@@ -455,16 +453,16 @@ class GainsLs : public exid::Estimator {
     f.noise_floor = 1e-3 * std::sqrt(tt / static_cast<double>(std::max<long>(1, S.m)));
     double noise = std::sqrt(std::max(rss0, 0.0) / dof);
     for (f.noise_rounds = 1; f.noise_rounds <= 20; ++f.noise_rounds) {
-      f.noise = Eigen::VectorXd::Constant(ng, std::max(noise, f.noise_floor));
+      f.noise = std::max(noise, f.noise_floor);
       if (f.noise_rounds == 1)
         multiStart(S, G, f.noise, &f);  // the starts at the first weight, LM on from the best
       else
         iterate(S, G, f.noise, &f);
       const double next = std::max(std::sqrt(std::max(f.rss, 0.0) / dof), f.noise_floor);
-      if (std::abs(next - f.noise[0]) <= 1e-6 * f.noise[0]) break;
+      if (std::abs(next - f.noise) <= 1e-6 * f.noise) break;
       noise = next;
     }
-    f.floored = f.noise[0] <= f.noise_floor;
+    f.floored = f.noise <= f.noise_floor;
     return f;
   }
 
@@ -494,8 +492,7 @@ class GainsLs : public exid::Estimator {
   }
 
   // Levenberg-Marquardt from f's (theta, phi) with the prior weighed by `noise`.
-  void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& noise,
-               Fit* fp) const {
+  void iterate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise, Fit* fp) const {
     Fit& f = *fp;
     const int p0 = static_cast<int>(other_cols_.size()), ng = static_cast<int>(gain_cols_.size());
     Eigen::VectorXd grad;
@@ -626,7 +623,7 @@ class GainsLs : public exid::Estimator {
       const double small = static_cast<double>(S.m) / static_cast<double>(S.m - p);
       for (const auto& [eq, rows] : S.rows_of_eq) {
         double rss_e = 0.0;
-        (void)evaluate(S, G, f.theta, f.phi, Eigen::VectorXd(), nullptr, &He, &rss_e, eq);
+        (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, &He, &rss_e, eq);
         const double s2 = std::max(rss_e, 0.0) / static_cast<double>(rows) * small;
         B += s2 * He;
         exid::Json o = exid::Json::object();
@@ -638,7 +635,7 @@ class GainsLs : public exid::Estimator {
       // the prior's pseudo-observations noise (dK - mu) / s, the prior mean's own error of
       // std s: their noise std is `noise`
       for (Eigen::Index k = 0; k < sd_.size(); ++k)
-        if (sd_[k] > 0.0) B(p0 + k, p0 + k) += std::pow(f.noise[k] * f.noise[k] / sd_[k], 2);
+        if (sd_[k] > 0.0) B(p0 + k, p0 + k) += std::pow(f.noise * f.noise / sd_[k], 2);
       s.covariance = T * (Hinv * B * Hinv) * T.transpose();
     }
     s.std = s.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
@@ -701,7 +698,7 @@ class GainsLs : public exid::Estimator {
       pr["definition"] =
           "pseudo-observations noise_std (dK_j - prior_dK_j) / prior_std_j added to the rows; "
           "noise_std = sqrt(rss / (m - p)) at its fixed point";
-      pr["noise_std"] = f.noise[0];
+      pr["noise_std"] = f.noise;
       pr["noise_rounds"] = f.noise_rounds;
       pr["noise_std_floor"] = f.noise_floor;
       pr["noise_std_floored"] = f.floored;
