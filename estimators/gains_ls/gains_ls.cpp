@@ -359,8 +359,9 @@ class GainsLs : public exid::Estimator {
       }
       starts.push_back(st);
     }
-    exid::check(bi >= 0, "gains_ls: no start could be fitted (every start leaves some 1 + a phi "
-                         "<= 0: lower start_spread)");
+    exid::check(bi >= 0,
+                "gains_ls: no start could be fitted (every start leaves some 1 + a phi "
+                "<= 0: lower start_spread)");
     f = best;
     f.starts = starts;
     f.best = bi;
@@ -387,7 +388,7 @@ class GainsLs : public exid::Estimator {
     for (std::size_t e = 0; e < S.groups.size(); ++e) {
       const Group& gr = S.groups[e];
       if (only_eq >= 0 && gr.eq != only_eq) continue;  // (one equation's rows: no prior)
-      const Eigen::MatrixXd& M = G[e];  // [w p tau]^T [w p tau]
+      const Eigen::MatrixXd& M = G[e];                 // [w p tau]^T [w p tau]
       const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
       const double dg = -gr.a * gk * gk;
       const auto A = M.topLeftCorner(p0, p0);
@@ -715,8 +716,7 @@ class GainsLs : public exid::Estimator {
         hasPrior() ? "the gain prior's mean" : "least squares on the rows";
     auto startName = [&](int i) {
       const double sh = f.starts[static_cast<std::size_t>(i)].shift;
-      return i == 0 ? first_start
-                    : fmt::format("{} {:+g} in every torque column", first_start, sh);
+      return i == 0 ? first_start : fmt::format("{} {:+g} in every torque column", first_start, sh);
     };
     exid::Json starts = exid::Json::array();
     for (std::size_t i = 0; i < f.starts.size(); ++i) {
@@ -732,7 +732,8 @@ class GainsLs : public exid::Estimator {
         o["iterations"] = st.iterations;
         o["gauss_newton_fraction"] = st.gn_fraction;
         o["first_order"] = st.first_order;
-        if (st.degenerate) o["degenerate"] = "a load term at |FcL| >= 0.9: kept only when every start ends so";
+        if (st.degenerate)
+          o["degenerate"] = "a load term at |FcL| >= 0.9: kept only when every start ends so";
       }
       starts.push_back(o);
     }
@@ -764,8 +765,8 @@ class GainsLs : public exid::Estimator {
           "Gauss-Newton step would remove {:.2g} of the objective; gradient_tolerance = {:g}): "
           "{}",
           f.best + 1, f.starts.size(), startName(f.best), f.iterations,
-          exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm,
-          f.gn_fraction, gtol_, f.stop)));
+          exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm, f.gn_fraction,
+          gtol_, f.stop)));
       d["warnings"] = w;
     }
     return e;

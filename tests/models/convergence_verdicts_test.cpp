@@ -65,8 +65,8 @@ TEST(ConvergenceVerdicts, GainsLsStoppedEarlySaysWhere) {
                                    ->estimate(*m, d, nullptr, mtest::context());
   expectSaysWhere(early,
                   {"gains_ls: not converged", "from start ", " of 3 (least squares on the rows",
-                   "the lowest objective of the starts", "stopped after ",
-                   " iterations at ", " = ", "rss", "gradient norm", "max_iterations = 1 reached"});
+                   "the lowest objective of the starts", "stopped after ", " iterations at ", " = ",
+                   "rss", "gradient norm", "max_iterations = 1 reached"});
   const exid::Estimate full = exid_test::create<exid::Estimator>("gains_ls", "{}")
                                   ->estimate(*m, d, nullptr, mtest::context());
   EXPECT_TRUE(converged(full)) << warnings(full);

@@ -50,18 +50,19 @@ Spread spread(const char* label, const std::vector<std::string>& names,
     const double r = rep.col(i).mean() / sd;
     out.ratio.push_back(r);
     out.mean_z2_spread += 1.0 / (r * r) / static_cast<double>(p);
-    std::printf("[%s] %-12s truth %+.4e bias %+.2e (%.1f se) empirical std %.3e reported %.3e "
-                "ratio %.3f\n",
-                label, names[static_cast<std::size_t>(i)].c_str(), truth[i], mean - truth[i],
-                (mean - truth[i]) / (sd / std::sqrt(n)), sd, rep.col(i).mean(), r);
+    std::printf(
+        "[%s] %-12s truth %+.4e bias %+.2e (%.1f se) empirical std %.3e reported %.3e "
+        "ratio %.3f\n",
+        label, names[static_cast<std::size_t>(i)].c_str(), truth[i], mean - truth[i],
+        (mean - truth[i]) / (sd / std::sqrt(n)), sd, rep.col(i).mean(), r);
   }
   std::vector<double> sorted = out.ratio;
   std::sort(sorted.begin(), sorted.end());
   out.median = sorted[sorted.size() / 2];
-  std::printf("[%s] %d draws, %zu parameters: reported / empirical std median %.3f, range "
-              "[%.3f, %.3f], mean (empirical/reported)^2 %.3f\n",
-              label, n, sorted.size(), out.median, sorted.front(), sorted.back(),
-              out.mean_z2_spread);
+  std::printf(
+      "[%s] %d draws, %zu parameters: reported / empirical std median %.3f, range "
+      "[%.3f, %.3f], mean (empirical/reported)^2 %.3f\n",
+      label, n, sorted.size(), out.median, sorted.front(), sorted.back(), out.mean_z2_spread);
   return out;
 }
 
@@ -81,23 +82,24 @@ Spread loopSpread(const std::string& robot, int n, double duration, double noise
   const fs::path dir = exid_cli::freshTempDir("exid_mc_iv_", robot);
   cltest::writeReference(ref, dir / "reference.csv");
   auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", r);
-  const std::string params = fmt::format(
-      "{{reference_file: {}, {}{}}}", (dir / "reference.csv").string(), cltest::gains(clean.meta),
-      extra);
-  return spread((std::string(estimator) + " " + robot).c_str(), m->base().names, m->baseNominal(), n, [&](int s) {
-    exid::Dataset d = clean;
-    std::mt19937_64 rng(static_cast<std::uint64_t>(100 + s));
-    std::normal_distribution<double> nd(0.0, 1.0);
-    for (int k = 0; k < d.size(); ++k)
-      for (int j = 0; j < dof; ++j) {
-        d.q(k, j) += noise * 2e-4 * nd(rng);
-        d.qd(k, j) += noise * 0.015 * nd(rng);
-        d.qdd(k, j) += noise * 0.3 * nd(rng);
-        d.tau(k, j) += noise * 0.1 * nd(rng);
-      }
-    return exid_test::create<exid::Estimator>(estimator, params)
-        ->estimate(*m, d, nullptr, mtest::context());
-  });
+  const std::string params =
+      fmt::format("{{reference_file: {}, {}{}}}", (dir / "reference.csv").string(),
+                  cltest::gains(clean.meta), extra);
+  return spread((std::string(estimator) + " " + robot).c_str(), m->base().names, m->baseNominal(),
+                n, [&](int s) {
+                  exid::Dataset d = clean;
+                  std::mt19937_64 rng(static_cast<std::uint64_t>(100 + s));
+                  std::normal_distribution<double> nd(0.0, 1.0);
+                  for (int k = 0; k < d.size(); ++k)
+                    for (int j = 0; j < dof; ++j) {
+                      d.q(k, j) += noise * 2e-4 * nd(rng);
+                      d.qd(k, j) += noise * 0.015 * nd(rng);
+                      d.qdd(k, j) += noise * 0.3 * nd(rng);
+                      d.tau(k, j) += noise * 0.1 * nd(rng);
+                    }
+                  return exid_test::create<exid::Estimator>(estimator, params)
+                      ->estimate(*m, d, nullptr, mtest::context());
+                });
 }
 
 // gains_ls on drive gains (the drive_gains test's set-up): a recording in two parts, the second
@@ -113,8 +115,7 @@ Spread gainsSpread(const std::string& robot, int n) {
       "payload_inertia_kg_m2: [0.02, 0.001, 0, 0.03, -0.002, 0.015]";
   auto m = mtest::model("differential",
                         fmt::format("{{offset: true, drive_gains: true, {}}}", payload), r);
-  const std::string gains =
-      fmt::format("[{}]", fmt::join(gain.begin(), gain.begin() + dof, ", "));
+  const std::string gains = fmt::format("[{}]", fmt::join(gain.begin(), gain.begin() + dof, ", "));
   exid::Dataset a = mtest::simulate(
       r, fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}}}", gains),
       3);
@@ -185,11 +186,11 @@ TEST(SigmaMonteCarlo, GainsLsStdMatchesTheSpreadForRevoluteAndPrismaticJoints) {
 }
 
 // iv: the sandwich over each sample's rows (unchanged; these tests guard it). Over 40 draws on
-// the PUMA the median ratio is 0.935 (range [0.77, 1.21]): not 1.4 times too large. Noise on q, qd, qdd and tau; on the Stanford arm
-// 0.03 of the PUMA's (more makes some least-squares starts' mass matrix indefinite, which iv
-// cannot simulate). Its estimates of the Coulomb and viscous levels are biased by the velocity
-// noise inside tanh(qd / 0.05) (up to 17 standard errors of the mean over 40 draws): the mean
-// z^2 of iv_test is that bias, not the std.
+// the PUMA the median ratio is 0.935 (range [0.77, 1.21]): not 1.4 times too large. Noise on q, qd,
+// qdd and tau; on the Stanford arm 0.03 of the PUMA's (more makes some least-squares starts' mass
+// matrix indefinite, which iv cannot simulate). Its estimates of the Coulomb and viscous levels are
+// biased by the velocity noise inside tanh(qd / 0.05) (up to 17 standard errors of the mean over 40
+// draws): the mean z^2 of iv_test is that bias, not the std.
 TEST(SigmaMonteCarlo, IvStdMatchesTheSpreadOnRevoluteJoints) {
   auto m = mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}",
                         mtest::robot("puma560"));
