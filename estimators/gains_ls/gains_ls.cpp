@@ -15,6 +15,13 @@
 // exactly from the S, so Levenberg-Marquardt runs on them without another pass. Covariance
 // sigma^2 H^-1 at the optimum, sigma^2 = rss / (m - p).
 //
+// Starts (`starts`, default 3): LM runs from the first start (least squares on the rows, or the
+// gain prior's mean) and from starts on both sides of it, every torque column's parameter
+// shifted by -+ start_spread, -+ start_spread / 2, -+ 2 start_spread (theta by least squares at
+// each); the lowest objective is kept, and "converged" needs its first-order test. The shift is
+// common to the columns: the gains' common scale is the direction the data fix least (without a
+// payload part, not at all). The sums make a start cost no pass over the data.
+//
 // A prior on the gains (gain_prior_std, gain_prior_dK: a datasheet's torque constants and their
 // tolerance) adds the pseudo-observations sigma (dK_j - mu_j) / s_j, sigma the data's noise std
 // (from the fit, to a fixed point), so the objective is the negative log posterior times
@@ -59,6 +66,16 @@ class GainsLs : public exid::Estimator {
                            "would lower the objective by at most this fraction of it (or the "
                            "fit is exact to the sums' precision, rss <= 1e-12 sum tau^2)",
                            0.0, 1.0, true),
+        exid::param_int("starts", 3,
+                        "Levenberg-Marquardt starts, the best kept: the first (least squares on "
+                        "the rows, or the gain prior's mean), then every torque column's "
+                        "parameter shifted by -start_spread, +start_spread, -start_spread/2, "
+                        "+start_spread/2, -2 start_spread, +2 start_spread",
+                        1, 7),
+        exid::param_double("start_spread", 0.25, "",
+                           "the starts' shift of dK (a relative gain error) and FcL (a fraction "
+                           "of the recorded torque)",
+                           0.0, 0.45, true),
         exid::param_int("chunk_samples", 4096, "samples per chunk passed to the model", 1, 1e9),
         exid::estimators::rankToleranceParam(),
         exid::param_doubles("gain_prior_std", std::vector<double>{}, "",
@@ -74,6 +91,8 @@ class GainsLs : public exid::Estimator {
       : max_iter_(static_cast<int>(p.getInt("max_iterations"))),
         xtol_(p.getDouble("step_tolerance")),
         gtol_(p.getDouble("gradient_tolerance")),
+        starts_(static_cast<int>(p.getInt("starts"))),
+        spread_(p.getDouble("start_spread")),
         chunk_(static_cast<int>(p.getInt("chunk_samples"))),
         rank_tol_(p.getDouble("rank_tolerance")),
         prior_std_(p.getDoubles("gain_prior_std")),
@@ -156,6 +175,7 @@ class GainsLs : public exid::Estimator {
     std::map<std::tuple<int, int, int>, std::size_t> index;  // (eq, k, a) -> group
     std::map<int, std::size_t> rows_of_col;                  // torque column -> its rows
     std::map<int, int> eq_of_col;                            // torque column -> its equation
+    std::map<int, long> rows_of_eq;                          // equation -> its rows
     long m = 0;
   };
 
@@ -231,6 +251,7 @@ class GainsLs : public exid::Estimator {
             }
             S.acc[gi].add(U, tau);
             S.m += n;
+            S.rows_of_eq[S.groups[gi].eq] += n;
             const int k = S.groups[gi].k;
             if (k >= 0) S.rows_of_col[k] += static_cast<std::size_t>(n);
           }
@@ -258,7 +279,93 @@ class GainsLs : public exid::Estimator {
     double gradient_norm = 0.0;  // ||d objective / d(theta, phi)|| at the end
     double gn_fraction = 0.0;    // the part of the objective a Gauss-Newton step would remove
     bool first_order = false;    // the first-order test holds there
+    // the starts (first: the one LM ran from in every later round of the prior's noise)
+    struct Start {
+      double shift = 0;           // of every torque column's parameter from the first start
+      Eigen::VectorXd phi0, phi;  // where it started and ended
+      double objective = 0, rss = 0, gn_fraction = 0;
+      int iterations = 0;
+      bool first_order = false, admissible = true;
+      bool degenerate = false;  // a load term at |FcL| >= 0.9 (refused unless every start is)
+    };
+    std::vector<Start> starts;
+    int best = 0;  // the kept start
   };
+
+  // The shift of start i from the first: 0, -s, +s, -s/2, +s/2, -2s, +2s.
+  double shiftOf(int i) const {
+    static const double kMul[] = {0.0, -1.0, 1.0, -0.5, 0.5, -2.0, 2.0};
+    return kMul[i] * spread_;
+  }
+
+  // theta by least squares at the given phi.
+  Eigen::VectorXd thetaAt(const Sums& S, const std::vector<Eigen::MatrixXd>& G,
+                          const Eigen::VectorXd& phi) const {
+    const int p0 = static_cast<int>(other_cols_.size());
+    Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
+    for (std::size_t e = 0; e < S.groups.size(); ++e) {
+      const Eigen::MatrixXd& M = G[e];
+      const Group& gr = S.groups[e];
+      const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
+      A += gk * gk * M.topLeftCorner(p0, p0);
+      b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
+    }
+    return A.ldlt().solve(b);
+  }
+
+  // LM from every start (f holds the first), the lowest objective kept in f.
+  void multiStart(const Sums& S, const std::vector<Eigen::MatrixXd>& G, double noise,
+                  Fit* fp) const {
+    Fit& f = *fp;
+    const Fit first = f;
+    std::vector<Fit::Start> starts;
+    Fit best;
+    int bi = -1;
+    // a later start beats the kept one only by more than the objective's rounding (the sums'
+    // cancellation in tt - 2 g s + g^2 q), else the earlier is kept
+    const int p0 = static_cast<int>(other_cols_.size());
+    double tt = 0.0;
+    for (const Eigen::MatrixXd& M : G) tt += M(p0 + 1, p0 + 1);
+    for (int i = 0; i < starts_; ++i) {
+      Fit::Start st;
+      st.shift = shiftOf(i);
+      st.phi0 = first.phi.array() + st.shift;
+      Fit t = first;
+      t.phi = st.phi0;
+      if (i > 0) t.theta = thetaAt(S, G, t.phi);
+      st.admissible = admissible(S, t.phi) && t.theta.allFinite();
+      if (st.admissible) {
+        iterate(S, G, noise, &t);
+        st.phi = t.phi;
+        st.objective = t.objective;
+        st.rss = t.rss;
+        st.gn_fraction = t.gn_fraction;
+        st.iterations = t.iterations;
+        st.first_order = t.first_order;
+        for (std::size_t k = 0; k < is_gain_.size(); ++k)
+          st.degenerate = st.degenerate ||
+                          (!is_gain_[k] && std::abs(t.phi[static_cast<Eigen::Index>(k)]) >= 0.9);
+        // the lowest objective, a degenerate end only when every start is one
+        const bool best_degenerate = bi >= 0 && starts[static_cast<std::size_t>(bi)].degenerate;
+        const bool better =
+            bi < 0 || (st.degenerate == best_degenerate
+                           ? t.objective < best.objective - 1e-10 * best.objective - 1e-14 * tt
+                           : best_degenerate);
+        if (std::isfinite(t.objective) && better) {
+          best = t;
+          bi = i;
+        }
+      }
+      starts.push_back(st);
+    }
+    exid::check(bi >= 0,
+                "gains_ls: no start could be fitted (every start leaves some 1 + a phi "
+                "<= 0: lower start_spread)");
+    f = best;
+    f.starts = starts;
+    f.best = bi;
+  }
 
   // Whether every group's 1 + a phi_k is positive (the recorded torque keeps its sign).
   static bool admissible(const Sums& S, const Eigen::VectorXd& phi) {
@@ -273,14 +380,15 @@ class GainsLs : public exid::Estimator {
   // -(w theta + p) g', g' = -a g^2.
   double evaluate(const Sums& S, const std::vector<Eigen::MatrixXd>& G, const Eigen::VectorXd& th,
                   const Eigen::VectorXd& phi, double noise, Eigen::VectorXd* grad,
-                  Eigen::MatrixXd* H, double* data_rss = nullptr) const {
+                  Eigen::MatrixXd* H, double* data_rss = nullptr, int only_eq = -1) const {
     const int p0 = static_cast<int>(th.size()), ng = static_cast<int>(phi.size());
     if (grad) grad->setZero(p0 + ng);
     if (H) H->setZero(p0 + ng, p0 + ng);
     double rss = 0.0;
     for (std::size_t e = 0; e < S.groups.size(); ++e) {
       const Group& gr = S.groups[e];
-      const Eigen::MatrixXd& M = G[e];  // [w p tau]^T [w p tau]
+      if (only_eq >= 0 && gr.eq != only_eq) continue;  // (one equation's rows: no prior)
+      const Eigen::MatrixXd& M = G[e];                 // [w p tau]^T [w p tau]
       const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * phi[gr.k]) : 1.0;
       const double dg = -gr.a * gk * gk;
       const auto A = M.topLeftCorner(p0, p0);
@@ -305,6 +413,7 @@ class GainsLs : public exid::Estimator {
       }
     }
     if (data_rss) *data_rss = rss;
+    if (only_eq >= 0) return rss;
     for (Eigen::Index k = 0; k < sd_.size(); ++k) {
       if (sd_[k] == 0.0) continue;  // (no prior on a load term)
       const double rho = noise * (phi[k] - mu_[k]) / sd_[k], drho = noise / sd_[k];
@@ -323,28 +432,18 @@ class GainsLs : public exid::Estimator {
     // start: the prior's gains (else 0: the recorded torque is the true one), theta by least
     // squares at them
     f.phi = mu_.size() > 0 ? mu_ : Eigen::VectorXd::Zero(ng);
-    {
-      Eigen::MatrixXd A = Eigen::MatrixXd::Zero(p0, p0);
-      Eigen::VectorXd b = Eigen::VectorXd::Zero(p0);
-      for (std::size_t e = 0; e < S.groups.size(); ++e) {
-        const Eigen::MatrixXd& M = G[e];
-        const Group& gr = S.groups[e];
-        const double gk = gr.k >= 0 ? 1.0 / (1.0 + gr.a * f.phi[gr.k]) : 1.0;
-        A += gk * gk * M.topLeftCorner(p0, p0);
-        b += gk * M.col(p0 + 1).head(p0) - gk * gk * M.col(p0).head(p0);
-      }
-      f.theta = A.ldlt().solve(b);
-    }
+    f.theta = thetaAt(S, G, f.phi);
     if (!hasPrior()) {
       // Start from least squares on the rows themselves (tau - p = w theta - a phi tau: errors
       // in variables, but near): from phi = 0 LM can walk to a spurious fit with some
       // 1 + a phi -> 0 (a drive of small torques, its sign flipped by noise).
       linearStart(S, G, &f);
-      iterate(S, G, 0.0, &f);
+      multiStart(S, G, 0.0, &f);
       return f;
     }
-    // The prior is weighed by the data's noise std: from the start's rss, then the fit's, to a
-    // fixed point (the gains' common scale, which the prior sets, does not change the rss).
+    // The prior is weighed by the data's noise std (pooled over the equations, as the data's rows
+    // are): from the start's rss, then the fit's, to a fixed point (the gains' common scale,
+    // which the prior sets, does not change the rss).
     const double dof = static_cast<double>(std::max<long>(1, S.m - p0 - ng));
     double rss0 = 0.0, tt = 0.0;
     (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, nullptr, &rss0);
@@ -356,7 +455,10 @@ class GainsLs : public exid::Estimator {
     double noise = std::sqrt(std::max(rss0, 0.0) / dof);
     for (f.noise_rounds = 1; f.noise_rounds <= 20; ++f.noise_rounds) {
       f.noise = std::max(noise, f.noise_floor);
-      iterate(S, G, f.noise, &f);
+      if (f.noise_rounds == 1)
+        multiStart(S, G, f.noise, &f);  // the starts at the first weight, LM on from the best
+      else
+        iterate(S, G, f.noise, &f);
       const double next = std::max(std::sqrt(std::max(f.rss, 0.0) / dof), f.noise_floor);
       if (std::abs(next - f.noise) <= 1e-6 * f.noise) break;
       noise = next;
@@ -491,8 +593,7 @@ class GainsLs : public exid::Estimator {
     s.p = p;
     s.m = S.m;
     s.rss = f.rss;
-    // with a prior: the noise it was weighed with (the fixed point of rss / (m - p))
-    s.sigma2 = hasPrior() ? f.noise * f.noise : f.rss / static_cast<double>(S.m - p);
+    s.sigma2 = f.rss / static_cast<double>(S.m - p);  // (pooled; the covariance is below)
     const Eigen::MatrixXd Hinv =
         sc.asDiagonal() *
         (eig.eigenvectors() * ev.cwiseInverse().asDiagonal() * eig.eigenvectors().transpose()) *
@@ -508,7 +609,36 @@ class GainsLs : public exid::Estimator {
       s.theta[gain_cols_[static_cast<std::size_t>(k)]] = f.phi[k];
       T(gain_cols_[static_cast<std::size_t>(k)], p0 + k) = 1.0;
     }
-    s.covariance = s.sigma2 * T * Hinv * T.transpose();
+    // The noise std per equation (a joint's), sigma_e^2 = rss_e / m_e times m / (m - p), in the
+    // sandwich H^-1 (sum_e sigma_e^2 H_e + the prior's part) H^-1, H_e = J_e^T J_e its rows'
+    // part; with equal sigma_e it is sigma^2 H^-1 (with a prior, the posterior). One pooled
+    // sigma^2 H^-1 gave a wrist drive's parameters (a small torque, its small noise) a std up to
+    // 7 times their spread and a large joint's half of it (tests/models/sigma_montecarlo_test.cpp).
+    // The prior stays weighed by the pooled noise std, heavier than a quiet joint's own: there
+    // it narrows a gain less than a posterior weighed per joint would.
+    exid::Json per_eq = exid::Json::array();
+    {
+      std::vector<Eigen::MatrixXd> G;
+      for (const RowAccumulator& a : S.acc) G.push_back(a.factor().transpose() * a.factor());
+      Eigen::MatrixXd B = Eigen::MatrixXd::Zero(p0 + ng, p0 + ng), He;
+      const double small = static_cast<double>(S.m) / static_cast<double>(S.m - p);
+      for (const auto& [eq, rows] : S.rows_of_eq) {
+        double rss_e = 0.0;
+        (void)evaluate(S, G, f.theta, f.phi, 0.0, nullptr, &He, &rss_e, eq);
+        const double s2 = std::max(rss_e, 0.0) / static_cast<double>(rows) * small;
+        B += s2 * He;
+        exid::Json o = exid::Json::object();
+        o["equation"] = eq;
+        o["rows"] = rows;
+        o["noise_std"] = std::sqrt(s2);
+        per_eq.push_back(o);
+      }
+      // the prior's pseudo-observations noise (dK - mu) / s, the prior mean's own error of
+      // std s: their noise std is `noise`
+      for (Eigen::Index k = 0; k < sd_.size(); ++k)
+        if (sd_[k] > 0.0) B(p0 + k, p0 + k) += std::pow(f.noise * f.noise / sd_[k], 2);
+      s.covariance = T * (Hinv * B * Hinv) * T.transpose();
+    }
     s.std = s.covariance.diagonal().cwiseMax(0.0).cwiseSqrt();
     s.rel_std_percent = exid::estimators::relativeStdPercent(s.theta, s.std);
     // singular values of the Jacobian: square roots of H's eigenvalues
@@ -527,9 +657,15 @@ class GainsLs : public exid::Estimator {
         "-sign(tau qdm)), bilinear least squares with the recorded torque in the measurement only "
         "(no errors in variables), Levenberg-Marquardt on per-group sums of one pass";
     d["covariance_definition"] =
-        hasPrior() ? "the posterior sigma^2 H^-1 of (theta, phi), H = J^T J + sigma^2 / s^2 on "
-                     "the gains (their prior), sigma^2 = rss / (m - p) at its fixed point"
-                   : "sigma^2 H^-1 of (theta, phi), H = J^T J, sigma^2 = rss / (m - p)";
+        hasPrior() ? "H^-1 (sum_e sigma_e^2 J_e^T J_e + sigma^2 (sigma^2 / s^2) on the gains) "
+                     "H^-1 of (theta, phi), H = J^T J + sigma^2 / s^2 on the gains (their "
+                     "prior), sigma^2 = rss / (m - p) at its fixed point, per equation e (a "
+                     "joint) sigma_e^2 = rss_e / m_e * m / (m - p) (details.noise_per_equation); "
+                     "with equal sigma_e the posterior sigma^2 H^-1"
+                   : "H^-1 (sum_e sigma_e^2 J_e^T J_e) H^-1 of (theta, phi), H = J^T J, per "
+                     "equation e (a joint) sigma_e^2 = rss_e / m_e * m / (m - p) "
+                     "(details.noise_per_equation); with equal sigma_e it is sigma^2 H^-1";
+    if (per_eq.size() > 0) d["noise_per_equation"] = per_eq;
     exid::Json gains = exid::Json::array(), loads = exid::Json::array();
     for (int k = 0; k < ng; ++k) {
       exid::Json o = exid::Json::object();
@@ -573,15 +709,50 @@ class GainsLs : public exid::Estimator {
             "so the prior weighs more and the posterior is wider than the data alone would give";
       d["gain_prior"] = pr;
     }
+    // the starts: where each began and ended
+    std::vector<std::string> tnames;
+    for (int c : gain_cols_) tnames.push_back(model.base().names[static_cast<std::size_t>(c)]);
+    const std::string first_start =
+        hasPrior() ? "the gain prior's mean" : "least squares on the rows";
+    auto startName = [&](int i) {
+      const double sh = f.starts[static_cast<std::size_t>(i)].shift;
+      return i == 0 ? first_start : fmt::format("{} {:+g} in every torque column", first_start, sh);
+    };
+    exid::Json starts = exid::Json::array();
+    for (std::size_t i = 0; i < f.starts.size(); ++i) {
+      const Fit::Start& st = f.starts[i];
+      exid::Json o = exid::Json::object();
+      o["start"] = startName(static_cast<int>(i));
+      o["from"] = exid::estimators::describePoint(tnames, st.phi0);
+      o["admissible"] = st.admissible;
+      if (st.admissible) {
+        o["to"] = exid::estimators::describePoint(tnames, st.phi);
+        o["objective"] = st.objective;
+        o["rss"] = st.rss;
+        o["iterations"] = st.iterations;
+        o["gauss_newton_fraction"] = st.gn_fraction;
+        o["first_order"] = st.first_order;
+        if (st.degenerate)
+          o["degenerate"] = "a load term at |FcL| >= 0.9: kept only when every start ends so";
+      }
+      starts.push_back(o);
+    }
+    d["starts"] = starts;
+    d["best_start"] = f.best + 1;
+    d["starts_definition"] = fmt::format(
+        "Levenberg-Marquardt from each start (theta by least squares at its phi; with a gain "
+        "prior, at the first weight of the noise std), the lowest objective kept; start_spread "
+        "= {:g}",
+        spread_);
     d["iterations"] = f.iterations;
     d["stop"] = f.stop;
     d["converged"] = f.converged;
     d["gradient_norm"] = f.gradient_norm;
     d["gauss_newton_fraction"] = f.gn_fraction;
     d["convergence_test"] = fmt::format(
-        "converged: a stop test held and a Gauss-Newton step would lower the objective by at "
-        "most gradient_tolerance = {:g} of it (or rss <= 1e-12 sum tau^2); gradient_norm = "
-        "||d objective / d(theta, phi)||",
+        "converged: at the start of lowest objective (details.starts), a stop test held and a "
+        "Gauss-Newton step would lower the objective by at most gradient_tolerance = {:g} of it "
+        "(or rss <= 1e-12 sum tau^2); gradient_norm = ||d objective / d(theta, phi)||",
         gtol_);
     d["memory"] =
         "per group of rows (equation, sign) a (p + 2)^2 factor, whatever the number of samples";
@@ -589,11 +760,13 @@ class GainsLs : public exid::Estimator {
     if (!f.converged) {
       exid::Json w = exid::Json::array();
       w.push_back(exid::Json(fmt::format(
-          "gains_ls: not converged: from least squares on the rows, stopped after {} iterations "
-          "at {} with rss {:.6g}, gradient norm {:.3g} (a Gauss-Newton step would remove {:.2g} "
-          "of the objective; gradient_tolerance = {:g}): {}",
-          f.iterations, exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm,
-          f.gn_fraction, gtol_, f.stop)));
+          "gains_ls: not converged: from start {} of {} ({}), the lowest objective of the "
+          "starts, stopped after {} iterations at {} with rss {:.6g}, gradient norm {:.3g} (a "
+          "Gauss-Newton step would remove {:.2g} of the objective; gradient_tolerance = {:g}): "
+          "{}",
+          f.best + 1, f.starts.size(), startName(f.best), f.iterations,
+          exid::estimators::describePoint(e.names, e.value), f.rss, f.gradient_norm, f.gn_fraction,
+          gtol_, f.stop)));
       d["warnings"] = w;
     }
     return e;
@@ -601,6 +774,8 @@ class GainsLs : public exid::Estimator {
 
   int max_iter_;
   double xtol_, gtol_;
+  int starts_;
+  double spread_;
   int chunk_;
   double rank_tol_;
   std::vector<double> prior_std_, prior_mean_;  // as given

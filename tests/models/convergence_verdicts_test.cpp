@@ -5,6 +5,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <random>
@@ -34,11 +35,9 @@ void expectSaysWhere(const exid::Estimate& e, const std::vector<const char*>& wh
   for (const char* s : what) EXPECT_NE(w.find(s), std::string::npos) << s << " in " << w;
 }
 
-// gains_ls on the load-dependent Coulomb friction of the PUMA (the recorded torque in a
-// column), 0.01 N m of noise.
-TEST(ConvergenceVerdicts, GainsLsStoppedEarlySaysWhere) {
-  auto r = mtest::robot("puma560");
-  auto m = mtest::model("differential", "{coulomb_load: true, joints: [1, 2, 3]}", r);
+// The PUMA's load-dependent Coulomb friction FcL_j = 0.04 + 0.01 j on joints 1-3 (the recorded
+// torque in a column), 0.01 N m of noise.
+exid::Dataset loadCoulombRecording(const std::shared_ptr<const exid::RobotModel>& r) {
   exid::Dataset d =
       mtest::simulate(r, "{duration_s: 6, sample_period_s: 0.002, drive_terms: false}", 7);
   exid::DriveColumns c;
@@ -55,16 +54,68 @@ TEST(ConvergenceVerdicts, GainsLsStoppedEarlySaysWhere) {
       d.tau(k, j) = t0[j] / (1.0 - (0.04 + 0.01 * j) * s * st) + nd(rng);
     }
   }
+  return d;
+}
+
+TEST(ConvergenceVerdicts, GainsLsStoppedEarlySaysWhere) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", "{coulomb_load: true, joints: [1, 2, 3]}", r);
+  const exid::Dataset d = loadCoulombRecording(r);
   const exid::Estimate early = exid_test::create<exid::Estimator>("gains_ls", "{max_iterations: 1}")
                                    ->estimate(*m, d, nullptr, mtest::context());
   expectSaysWhere(early,
-                  {"gains_ls: not converged", "from least squares on the rows", "stopped after ",
-                   " iterations at ", " = ", "rss", "gradient norm", "max_iterations = 1 reached"});
+                  {"gains_ls: not converged", "from start ", " of 3 (least squares on the rows",
+                   "the lowest objective of the starts", "stopped after ", " iterations at ", " = ",
+                   "rss", "gradient norm", "max_iterations = 1 reached"});
   const exid::Estimate full = exid_test::create<exid::Estimator>("gains_ls", "{}")
                                   ->estimate(*m, d, nullptr, mtest::context());
   EXPECT_TRUE(converged(full)) << warnings(full);
   EXPECT_EQ(warnings(full).find("not converged"), std::string::npos);
   EXPECT_LE(full.details.find("gauss_newton_fraction")->asDouble(), 1e-6);
+}
+
+// gains_ls's starts lie on both sides of the first in every torque column (FcL_j -+ 0.25,
+// -+ 0.125, -+ 0.5 for starts: 7); from each LM reaches the same point, the truth within its
+// standard deviations, which is kept and said to be converged; details.starts says where each
+// began and ended.
+TEST(ConvergenceVerdicts, GainsLsStartsOnBothSidesOfTheFirstAndKeepsTheBest) {
+  auto r = mtest::robot("puma560");
+  auto m = mtest::model("differential", "{coulomb_load: true, joints: [1, 2, 3]}", r);
+  const exid::Dataset d = loadCoulombRecording(r);
+  const exid::Estimate e = exid_test::create<exid::Estimator>("gains_ls", "{starts: 7}")
+                               ->estimate(*m, d, nullptr, mtest::context());
+  EXPECT_TRUE(converged(e)) << warnings(e);
+  const exid::Json& starts = *e.details.find("starts");
+  ASSERT_EQ(starts.size(), 7u);
+  std::printf("[gains_ls starts] %s\n", starts.dump().c_str());
+  const double best = starts.at(static_cast<std::size_t>(e.details.find("best_start")->asInt() - 1))
+                          .find("objective")
+                          ->asDouble();
+  for (std::size_t i = 0; i < starts.size(); ++i) {
+    const exid::Json& s = starts.at(i);
+    ASSERT_TRUE(s.find("admissible")->asBool()) << s.dump();
+    EXPECT_TRUE(s.find("first_order")->asBool()) << s.dump();
+    EXPECT_NEAR(s.find("objective")->asDouble(), best, 1e-7 * best) << s.dump();
+    // (the kept start is beaten by none beyond the objective's rounding)
+    EXPECT_GE(s.find("objective")->asDouble(), best - 1e-7 * best) << s.dump();
+  }
+  // the shifts: start 2 below the first, start 3 above, in every column
+  EXPECT_NE(starts.at(1).find("start")->asString().find("-0.25 in every torque column"),
+            std::string::npos);
+  EXPECT_NE(starts.at(2).find("start")->asString().find("+0.25 in every torque column"),
+            std::string::npos);
+  EXPECT_NE(starts.at(6).find("start")->asString().find("+0.5 in every torque column"),
+            std::string::npos);
+  for (int j = 0; j < 3; ++j) {
+    const std::string name = fmt::format("FcL{}", j + 1);
+    const auto it = std::find(e.names.begin(), e.names.end(), name);
+    ASSERT_NE(it, e.names.end()) << name;
+    const auto i = it - e.names.begin();
+    const double truth = 0.04 + 0.01 * j;
+    std::printf("[gains_ls starts] %s = %.5f +- %.5f (truth %.2f)\n", name.c_str(), e.value[i],
+                e.std[i], truth);
+    EXPECT_LT(std::abs(e.value[i] - truth), 4 * e.std[i]) << name << " = " << e.value[i];
+  }
 }
 
 // iv's outer loop and didim on the PUMA's closed loop (the iv test's set-up): one iteration is
