@@ -4,8 +4,12 @@
 #   exid_add_plugin(my_criterion SOURCES my_criterion.cpp)
 include(CMakePackageConfigHelpers)
 
-install(DIRECTORY ${PROJECT_SOURCE_DIR}/framework/include/exid DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}
-        FILES_MATCHING PATTERN "*.hpp")
+# The public headers: each layer's include/ (docs/architecture.md, "Layers"); a layer's
+# internal/ and the headers beside its sources are not installed.
+foreach(layer ${EXID_PUBLIC_LAYERS})
+  install(DIRECTORY ${PROJECT_SOURCE_DIR}/framework/${layer}/include/exid
+          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} FILES_MATCHING PATTERN "*.hpp")
+endforeach()
 install(FILES ${CMAKE_BINARY_DIR}/generated/include/exid/version.hpp
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid)
 set(EXID_EXPORTED_TARGETS exid_dynamics exid_core)

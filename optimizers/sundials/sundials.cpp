@@ -126,7 +126,7 @@ class ContinuousCriterion {
       : model_(p.model()), crit_(p.criterion()), par_(par), cs_(cs) {
     nb_ = model_.numBase();
     scale_ = Eigen::VectorXd::Ones(nb_);
-    if (crit_.specs().scale_columns) {  // as framework/src/excitation.cpp
+    if (crit_.specs().scale_columns) {  // as framework/excitation/src/excitation.cpp
       Eigen::VectorXd nom = model_.baseNominal().cwiseAbs();
       const double floor = std::max(1e-6, 1e-3 * nom.maxCoeff());
       for (int i = 0; i < nb_; ++i) scale_(i) = std::max(nom(i), floor);

@@ -41,7 +41,7 @@ Rig setup(const std::string& model_params = "{joints: [1, 2, 3], friction: subtr
 
 Eigen::MatrixXd information(const Rig& s, bool scaled) {
   Eigen::MatrixXd W = s.model->design(s.traj->evaluate(s.traj->initial()));
-  if (scaled) {  // as framework/src/excitation.cpp
+  if (scaled) {  // as framework/excitation/src/excitation.cpp
     const Eigen::VectorXd nom = s.model->baseNominal().cwiseAbs();
     const double floor = std::max(1e-6, 1e-3 * nom.maxCoeff());
     W = W * nom.cwiseMax(floor).asDiagonal();

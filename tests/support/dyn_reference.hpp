@@ -1,6 +1,6 @@
 // exid tests — an independent reference for the rigid-body algorithms: plain Newton-Euler in the
 // BASE frame with 3x3 rotations (Rodrigues), computed from the Body definitions only. It shares
-// no code with framework/src/dynamics (deliberately slow and simple).
+// no code with framework/dynamics/src (deliberately slow and simple).
 #pragma once
 
 #include <Eigen/Core>

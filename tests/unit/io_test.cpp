@@ -15,7 +15,7 @@
 #include "exid/error.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
-#include "plot.hpp"  // framework/src: the core's internal plotting
+#include "plot.hpp"  // framework/plot/src: the core's internal plotting
 
 namespace fs = std::filesystem;
 

@@ -13,9 +13,9 @@
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
-#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/signal.hpp"
 #include "plot.hpp"
 
 namespace exid {

@@ -23,6 +23,7 @@
 #include "exid/data.hpp"
 #include "exid/json.hpp"
 #include "exid/robot_model.hpp"
+#include "exid/signal.hpp"  // medianOfValues (formerly here)
 
 namespace exid {
 
@@ -108,41 +109,6 @@ Json inspectExperimentData(const RobotModel& robot, const ObservationModel* mode
 /// A readable text summary of inspectDataset()'s result (several lines).
 std::string inspectionText(const Json& inspection);
 
-/// Element n / 2 of the n values value(0 .. n-1) in ascending order (what std::nth_element
-/// puts there: the median of an odd count, the upper median of an even one), without holding
-/// the values: an exact radix selection on the bits of the doubles, four passes over the values
-/// of 16 bits each, 0.5 MB of counts. For the median step of a recording of any length. NaN
-/// values are not allowed; n = 0 gives NaN.
-template <class F>
-double medianOfValues(std::size_t n, F value) {
-  if (n == 0) return std::numeric_limits<double>::quiet_NaN();
-  // doubles to unsigned integers of the same order: negative ones flipped, positive ones with
-  // the sign bit set
-  auto key = [](double x) {
-    std::uint64_t u;
-    std::memcpy(&u, &x, sizeof u);
-    return (u >> 63) ? ~u : (u | (std::uint64_t{1} << 63));
-  };
-  std::vector<std::size_t> count(std::size_t{1} << 16);
-  std::size_t rank = n / 2;  // among the values whose key starts with `prefix`
-  std::uint64_t prefix = 0;
-  for (int pass = 0; pass < 4; ++pass) {
-    const int shift = 48 - 16 * pass;
-    std::fill(count.begin(), count.end(), std::size_t{0});
-    for (std::size_t i = 0; i < n; ++i) {
-      const std::uint64_t u = key(value(i));
-      if (pass > 0 && (u >> (shift + 16)) != prefix) continue;
-      ++count[static_cast<std::size_t>((u >> shift) & 0xffffu)];
-    }
-    std::size_t b = 0;
-    while (rank >= count[b]) rank -= count[b++];
-    prefix = (prefix << 16) | b;
-  }
-  const std::uint64_t u = (prefix >> 63) ? (prefix & ~(std::uint64_t{1} << 63)) : ~prefix;
-  double x;
-  std::memcpy(&x, &u, sizeof x);
-  return x;
-}
 
 /// Sampling statistics from time stamps as written in a file (raw values in the file's unit,
 /// unit_s seconds each; row[i] is the file's data row of stamp i, steps across skipped rows are

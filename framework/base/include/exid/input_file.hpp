@@ -3,7 +3,7 @@
 // checked before they are opened and again on the open descriptor; no control byte in the path;
 // a size cap per kind (docs/hostile_input.md, "Limits"); and, during a run, an entry in the
 // run's input manifest (path, size, FNV-1a 64 content hash), written in summary.json `inputs`.
-// Compiled into exid_dynamics (framework/src/input/input_file.cpp), the library every other
+// Compiled into exid_dynamics (framework/base/src/input_file.cpp), the library every other
 // links: the robot loaders and the bag reader, which do not link the core, use it too.
 #pragma once
 
