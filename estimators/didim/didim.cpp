@@ -198,85 +198,32 @@ class Didim : public exid::Estimator {
     });
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
     setPrior(model);
-    // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the
-    // reference; with loop: open, the windows' samples after their starts
-    keep_t_.clear();
-    windows_.clear();
-    std::vector<int> keep;
-    if (open_) {
-      exid::check(data.qd.rows() == K && data.qd.cols() == n,
-                  "didim: loop: open starts each window from the recorded q and qd: the data "
-                  "has no qd (the csv experiment's differentiate_cutoff_hz gives it)");
-      int a = 0;
-      while (a < K && data.t[a] < loop_->firstTime()) ++a;
-      int last = K - 1;
-      while (last > a && data.t[last] > loop_->lastTime()) --last;
-      while (a < last) {
-        int b = a + 1;
-        while (b < last && data.t[b + 1] - data.t[a] <= window_s_ * (1 + 1e-12)) ++b;
-        windows_.push_back({a, static_cast<int>(keep.size()), b - a});
-        for (int k = a + 1; k <= b; ++k) {
-          keep.push_back(k);
-          keep_t_.push_back(data.t[k]);
-        }
-        a = b;
-      }
-      exid::check(!windows_.empty(), "didim: loop: open: no window fits in the recording");
-    } else {
-      for (int k = 0; k < K; ++k)
-        if (!delay_ || (data.t[k] - delay_max_ >= loop_->reference().t0() &&
-                        data.t[k] + delay_max_ <= loop_->reference().t1())) {
-          keep.push_back(k);
-          keep_t_.push_back(data.t[k]);
-        }
-    }
-    dropped_ = K - static_cast<int>(keep.size());
-    // the measured output, sample-major
-    y_.resize(static_cast<Eigen::Index>(keep.size()) * n);
-    const MatrixXd& Y = position_ ? data.q : data.tau;
-    exid::check(
-        Y.rows() == K && Y.cols() == n,
-        fmt::format("didim: the data has no {} of {} joints", position_ ? "q" : "torque", n));
-    for (std::size_t i = 0; i < keep.size(); ++i)
-      y_.segment(static_cast<Eigen::Index>(i) * n, n) = Y.row(keep[i]);
+    chooseSamples(data, n, K);
     const long m = y_.size();
     exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
-    // start: the inverse model's least squares (drive gains at their prior mean; the rows
-    // compensated for the initial delay)
-    exid::Rows R = model.rows(data, ctx);
-    exid::estimators::checkRows(R, p, kName, 0);
-    if (delay_ && delay0_ != 0.0) {
-      exid::check(model.specs().per_sample,
-                  "didim: measurement_delay_initial_s needs a model whose rows are per sample");
-      int front = 0, back = 0;
-      R = exid::delayedRows(R, data.t, delay0_, kName, &front, &back);
-    }
-    // x = (theta, log eta, d): the model's nonlinear parameters fitted with theta
-    // (fit_nonlinear), the delay (measurement_delay)
     L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
     D_ = delay_ ? 1 : 0;
-    VectorXd theta(p + L_ + D_);
-    theta.head(p) = startFit(model, R, prior_col_, prior_mu_);
-    if (D_) theta[p + L_] = delay0_;
-    for (int k = 0; k < L_; ++k) {
-      const double v = loop_->nonlinear()[k];
-      exid::check(v > 0,
-                  fmt::format("didim: nonlinear parameter {} = {} is not positive (fitted "
-                              "on log scale)",
-                              model.nonlinearParameters()[static_cast<std::size_t>(k)].name, v));
-      theta[p + k] = std::log(v);
-    }
+    const VectorXd theta = firstStart(model, data, ctx);
     p_ = p;
     m_ = m;
     // the prior's weight sigma / s: sigma from the output's residual (floored at 1e-3 of its
     // rms: near noise-free data would give the prior no weight and the scale no anchor)
     floor_sigma_ = 1e-3 * std::sqrt(y_.squaredNorm() / static_cast<double>(m));
+    sp_ = startParams(model);
+    const bool several = starts_ > 1 && !sp_.empty();
     std::vector<Run> runs;
-    runs.push_back(startRun(theta, data, -1.0));
     exid::Json check_json;
-    if (check_ > 0) check_json = gradientCheck(theta, data, runs[0].cur);
-    iterate(&runs[0], max_iter_, data, ctx);
-    const int best = multiStart(model, R, data, ctx, &runs);
+    try {
+      runs.push_back(startRun(theta, data, -1.0));
+      if (check_ > 0) check_json = gradientCheck(theta, data, runs[0].cur);
+      iterate(&runs[0], max_iter_, data, ctx);
+    } catch (const exid::Error& err) {
+      // with other starts, a first start that cannot be simulated is left out (said in
+      // details.starts); alone, its error is the estimator's
+      if (!several || ctx.shouldStop()) throw;
+      runs.assign(1, failedRun(theta, err.what()));
+    }
+    const int best = multiStart(model, data, ctx, &runs);
     for (Run& r : runs)
       if (r.error.empty()) conclude(&r);
     const Run& r = runs[static_cast<std::size_t>(best)];
@@ -321,7 +268,7 @@ class Didim : public exid::Estimator {
     d["trace"] = r.trace;
     d["start"] = startName(best);
     d["start_change"] = (r.x.head(p) - r.x0.head(p)).norm() / std::max(r.x.head(p).norm(), 1e-300);
-    describeStarts(model, runs, best, &d);
+    describeStarts(runs, best, &d);
     if (!check_json.isNull()) {
       // and at the end, where the Jacobian was taken along an accepted trial's path
       if (r.jacobians > 1 || best > 0) {
@@ -361,6 +308,83 @@ class Didim : public exid::Estimator {
   }
 
  private:
+  // The samples fitted (keep_t_, windows_, dropped_) and the measured output y_.
+  void chooseSamples(const exid::Dataset& data, int n, int K) {
+    // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the
+    // reference; with loop: open, the windows' samples after their starts
+    keep_t_.clear();
+    windows_.clear();
+    std::vector<int> keep;
+    if (open_) {
+      exid::check(data.qd.rows() == K && data.qd.cols() == n,
+                  "didim: loop: open starts each window from the recorded q and qd: the data "
+                  "has no qd (the csv experiment's differentiate_cutoff_hz gives it)");
+      int a = 0;
+      while (a < K && data.t[a] < loop_->firstTime()) ++a;
+      int last = K - 1;
+      while (last > a && data.t[last] > loop_->lastTime()) --last;
+      while (a < last) {
+        int b = a + 1;
+        while (b < last && data.t[b + 1] - data.t[a] <= window_s_ * (1 + 1e-12)) ++b;
+        windows_.push_back({a, static_cast<int>(keep.size()), b - a});
+        for (int k = a + 1; k <= b; ++k) {
+          keep.push_back(k);
+          keep_t_.push_back(data.t[k]);
+        }
+        a = b;
+      }
+      exid::check(!windows_.empty(), "didim: loop: open: no window fits in the recording");
+    } else {
+      for (int k = 0; k < K; ++k)
+        if (!delay_ || (data.t[k] - delay_max_ >= loop_->reference().t0() &&
+                        data.t[k] + delay_max_ <= loop_->reference().t1())) {
+          keep.push_back(k);
+          keep_t_.push_back(data.t[k]);
+        }
+    }
+    dropped_ = K - static_cast<int>(keep.size());
+    // the measured output, sample-major
+    y_.resize(static_cast<Eigen::Index>(keep.size()) * n);
+    const MatrixXd& Y = position_ ? data.q : data.tau;
+    exid::check(
+        Y.rows() == K && Y.cols() == n,
+        fmt::format("didim: the data has no {} of {} joints", position_ ? "q" : "torque", n));
+    for (std::size_t i = 0; i < keep.size(); ++i)
+      y_.segment(static_cast<Eigen::Index>(i) * n, n) = Y.row(keep[i]);
+  }
+
+  // The first start x = (theta, log eta, d): the inverse model's least squares (drive gains at
+  // their prior mean; the rows compensated for the initial delay), the model's nonlinear
+  // parameters (fit_nonlinear), the initial delay (measurement_delay).
+  VectorXd firstStart(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const exid::RunContext& ctx) const {
+    const int p = model.numBase();
+    // start: the inverse model's least squares (drive gains at their prior mean; the rows
+    // compensated for the initial delay)
+    exid::Rows R = model.rows(data, ctx);
+    exid::estimators::checkRows(R, p, kName, 0);
+    if (delay_ && delay0_ != 0.0) {
+      exid::check(model.specs().per_sample,
+                  "didim: measurement_delay_initial_s needs a model whose rows are per sample");
+      int front = 0, back = 0;
+      R = exid::delayedRows(R, data.t, delay0_, kName, &front, &back);
+    }
+    // x = (theta, log eta, d): the model's nonlinear parameters fitted with theta
+    // (fit_nonlinear), the delay (measurement_delay)
+    VectorXd theta(p + L_ + D_);
+    theta.head(p) = startFit(model, R, prior_col_, prior_mu_);
+    if (D_) theta[p + L_] = delay0_;
+    for (int k = 0; k < L_; ++k) {
+      const double v = loop_->nonlinear()[k];
+      exid::check(v > 0,
+                  fmt::format("didim: nonlinear parameter {} = {} is not positive (fitted "
+                              "on log scale)",
+                              model.nonlinearParameters()[static_cast<std::size_t>(k)].name, v));
+      theta[p + k] = std::log(v);
+    }
+    return theta;
+  }
+
   struct Sim {
     VectorXd y;  // simulated output, sample-major
     MatrixXd J;  // d y / d theta (with sensitivities)
@@ -619,15 +643,16 @@ class Didim : public exid::Estimator {
                : 0.0;
   }
   // Start i > 0 from the first start x0: eta times 2^(+-m), dK and FcL shifted by
-  // +-m start_spread (theta's other entries by least squares with them held), the delay by
-  // +-2 m sample periods (within 0.9 of its bound); m = |startMultiple(i)|, the sign its.
-  VectorXd startPoint(const exid::ObservationModel& model, const exid::Rows& R, const VectorXd& x0,
-                      int i) const {
+  // +-m start_spread, the delay by +-2 m sample periods (within 0.9 of its bound),
+  // m = |startMultiple(i)|, the sign its; theta's other entries by least squares on the rows at
+  // that eta and delay, dK and FcL held.
+  VectorXd startPoint(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const exid::RunContext& ctx, const VectorXd& x0, int i) const {
     const double mul = startMultiple(i);
     VectorXd x = x0;
     std::vector<int> held;
     std::vector<double> held_at;
-    for (const StartParam& sp : startParams(model)) {
+    for (const StartParam& sp : sp_) {
       if (sp.kind == 1 || sp.kind == 2) {
         held.push_back(sp.index);
         held_at.push_back(x0[sp.index] + mul * spread_);
@@ -638,11 +663,27 @@ class Didim : public exid::Estimator {
                                  0.9 * delay_max_);
       }
     }
-    if (!held.empty())
-      x.head(p_) = startFit(
-          model, R, held,
-          Eigen::Map<const VectorXd>(held_at.data(), static_cast<Eigen::Index>(held_at.size())));
+    exid::Rows R = L_ > 0
+                       ? model.rowsAt(data, x.segment(p_, L_).array().exp().matrix(), nullptr, ctx)
+                       : model.rows(data, ctx);
+    exid::estimators::checkRows(R, p_, kName, 0);
+    if (D_ && x[p_ + L_] != 0.0) {
+      int front = 0, back = 0;
+      R = exid::delayedRows(R, data.t, x[p_ + L_], kName, &front, &back);
+    }
+    x.head(p_) = startFit(
+        model, R, held,
+        Eigen::Map<const VectorXd>(held_at.data(), static_cast<Eigen::Index>(held_at.size())));
     return x;
+  }
+  Run failedRun(const VectorXd& x, const std::string& error) const {
+    Run r;
+    r.x0 = x;
+    r.x = x;
+    r.error = error;
+    r.sims = 0;
+    r.jacobians = 0;
+    return r;
   }
   std::string startName(int i) const {
     const std::string first =
@@ -651,40 +692,53 @@ class Didim : public exid::Estimator {
                              "drive gains at their prior mean";
     if (i == 0) return first;
     const double mul = startMultiple(i);
-    return fmt::format(
-        "start 1 with eta x{:g}, dK and FcL {:+g}, the delay {:+g} samples (theta's other "
-        "entries by least squares with dK and FcL held)",
-        std::pow(2.0, mul), mul * spread_, 2.0 * mul);
+    bool eta = false, torque = false, delay = false;
+    for (const StartParam& sp : sp_) {
+      eta = eta || sp.kind == 0;
+      torque = torque || sp.kind == 1 || sp.kind == 2;
+      delay = delay || sp.kind == 3;
+    }
+    std::string moved;
+    auto add = [&](const std::string& what) { moved += (moved.empty() ? "" : ", ") + what; };
+    if (eta) add(fmt::format("the model's nonlinear parameters x{:g}", std::pow(2.0, mul)));
+    if (torque) add(fmt::format("dK and FcL {:+g}", mul * spread_));
+    if (delay) add(fmt::format("the delay {:+g} samples", 2.0 * mul));
+    return fmt::format("start 1 with {}, theta by least squares on the rows there", moved);
   }
 
   // The starts after the first (whose run is done): each run for start_iterations at most at
   // the first's final prior weight; the lowest of them continued to max_iterations when it is
   // below the first's end; the lowest objective kept (a later start only beyond the
   // simulation's rounding). Returns the kept run's index.
-  int multiStart(const exid::ObservationModel& model, const exid::Rows& R,
-                 const exid::Dataset& data, const exid::RunContext& ctx,
-                 std::vector<Run>* runs) const {
-    if (starts_ <= 1 || startParams(model).empty()) return 0;
+  int multiStart(const exid::ObservationModel& model, const exid::Dataset& data,
+                 const exid::RunContext& ctx, std::vector<Run>* runs) const {
+    if (starts_ <= 1 || sp_.empty()) return 0;
     const VectorXd x0 = (*runs)[0].x0;
-    const double sigma0 = (*runs)[0].sigma;
+    // (the first's final weight; its own where the first could not be simulated)
+    const double sigma0 = (*runs)[0].error.empty() ? (*runs)[0].sigma : -1.0;
     for (int i = 1; i < starts_; ++i) {
       Run r;
-      const VectorXd xs = startPoint(model, R, x0, i);
+      VectorXd xs = x0;
       try {
+        xs = startPoint(model, data, ctx, x0, i);
         r = startRun(xs, data, sigma0);
         iterate(&r, std::min(start_iter_, max_iter_), data, ctx);
         if (!r.stopped)
           r.stop = fmt::format("start_iterations = {} reached", std::min(start_iter_, max_iter_));
       } catch (const exid::Error& err) {
         if (ctx.shouldStop()) throw;
-        r = Run();
-        r.x0 = xs;
-        r.x = xs;
-        r.error = err.what();  // (a start that cannot be simulated is left out)
+        r = failedRun(xs, err.what());  // (a start that cannot be simulated is left out)
       }
       runs->push_back(std::move(r));
     }
-    int best = lowest(*runs, sigma0);
+    int best = lowest(*runs, sigma0 < 0 ? 0.0 : sigma0);
+    if (best < 0) {
+      std::string all;
+      for (std::size_t i = 0; i < runs->size(); ++i)
+        all += fmt::format("{}start {}: {}", i ? "; " : "", i + 1, (*runs)[i].error);
+      throw exid::Error(
+          fmt::format("didim: none of the {} starts could be simulated ({})", runs->size(), all));
+    }
     Run& b = (*runs)[static_cast<std::size_t>(best)];
     if (best > 0 && !b.stopped) {  // on to convergence, its own prior weight settled
       if (!prior_col_.empty()) b.round = 1;
@@ -698,21 +752,20 @@ class Didim : public exid::Estimator {
   // only below the earlier by more than the simulation's rounding.
   int lowest(const std::vector<Run>& runs, double sigma) const {
     const double floor = 1e-12 * y_.squaredNorm();
-    int best = 0;
+    int best = -1;  // (none: every start failed)
     auto objective = [&](const Run& r) { return r.cur.rss + priorRss(r.x, sigma); };
-    for (std::size_t i = 1; i < runs.size(); ++i) {
+    for (std::size_t i = 0; i < runs.size(); ++i) {
       if (!runs[i].error.empty()) continue;
-      const double ob = objective(runs[static_cast<std::size_t>(best)]);
-      if (objective(runs[i]) < ob - 1e-7 * ob - floor) best = static_cast<int>(i);
+      const double ob = best < 0 ? 0.0 : objective(runs[static_cast<std::size_t>(best)]);
+      if (best < 0 || objective(runs[i]) < ob - 1e-7 * ob - floor) best = static_cast<int>(i);
     }
     return best;
   }
 
   // details.starts: each start's nonlinear parameters where it began and ended, its objective,
   // iterations, stop and first-order test; details.best_start.
-  void describeStarts(const exid::ObservationModel& model, const std::vector<Run>& runs, int best,
-                      exid::Json* d) const {
-    const std::vector<StartParam> sp = startParams(model);
+  void describeStarts(const std::vector<Run>& runs, int best, exid::Json* d) const {
+    const std::vector<StartParam>& sp = sp_;
     std::vector<std::string> names;
     for (const StartParam& s : sp) names.push_back(s.name);
     auto values = [&](const VectorXd& x) {
@@ -1076,6 +1129,7 @@ class Didim : public exid::Estimator {
   int dropped_ = 0;  // samples left out (measurement_delay_max_s)
   mutable int rejected_bound_ = 0;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
+  std::vector<StartParam> sp_;  // the parameters the starts move (startParams)
   VectorXd y_;
 };
 
