@@ -18,6 +18,11 @@
 // sigma the output's noise std (two rounds: the fixed point of sqrt(rss / (m - q))), as gains_ls.
 // A measurement delay d (torque output): the torque recorded at t_k is the command at t_k - d,
 // d y_k / d d = -d tau_c / dt there (exact: the reference's jerk through the feed-forward).
+// Starts (`starts`, default 3): with nonlinear parameters beyond theta (dK, FcL, eta, d), LM runs
+// from the first start and from starts on both sides of it (eta x1/2, x2, ...; dK and FcL
+// -+ start_spread; d -+ 2 samples; theta by least squares on the rows there), the later ones for
+// start_iterations and the lowest of them on to max_iterations when below the first's end; the
+// lowest objective is kept and "converged" is its first-order test (docs/estimators.md).
 #include <fmt/format.h>
 
 #include <Eigen/QR>
