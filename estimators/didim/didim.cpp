@@ -18,15 +18,22 @@
 // sigma the output's noise std (two rounds: the fixed point of sqrt(rss / (m - q))), as gains_ls.
 // A measurement delay d (torque output): the torque recorded at t_k is the command at t_k - d,
 // d y_k / d d = -d tau_c / dt there (exact: the reference's jerk through the feed-forward).
+// Starts (`starts`, default 3): with nonlinear parameters beyond theta (dK, FcL, eta, d), LM runs
+// from the first start and from starts on both sides of it (eta x1/2, x2, ...; dK and FcL
+// -+ start_spread; d -+ 2 samples; theta by least squares on the rows there), the later ones for
+// start_iterations and the lowest of them on to max_iterations when below the first's end; the
+// lowest objective is kept and "converged" is its first-order test (docs/estimators.md).
 #include <fmt/format.h>
 
 #include <Eigen/QR>
 #include <Eigen/SVD>
+#include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <random>
 
 #include "exid/delay.hpp"
+#include "exid/drive.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 #include "exid/estimators/common.hpp"
@@ -102,6 +109,23 @@ class Didim : public exid::Estimator {
              exid::param_doubles("gain_prior_dK", std::vector<double>{}, "",
                                  "prior mean of each drive's dK (one value: every drive; empty: "
                                  "0); the start takes the gains there"),
+             exid::param_int("starts", 3,
+                             "Levenberg-Marquardt starts, the lowest objective kept, where the "
+                             "model has nonlinear parameters beyond theta (drive gains, load "
+                             "Coulomb, the model's nonlinear parameters, a delay): the first "
+                             "(least squares), then both sides of it: eta x1/2, x2, x1/sqrt2, "
+                             "xsqrt2, x1/4, x4; dK and FcL -+ start_spread, -+ start_spread/2, "
+                             "-+ 2 start_spread; the delay -+ 2, 1, 4 samples",
+                             1, 7),
+             exid::param_double("start_spread", 0.25, "",
+                                "the later starts' shift of dK (a relative gain error) and FcL "
+                                "(a fraction of the command)",
+                                0.0, 0.45, true),
+             exid::param_int("start_iterations", 5,
+                             "Levenberg-Marquardt steps at most from each later start; the "
+                             "lowest of them, when below the first start's end, goes on to "
+                             "max_iterations",
+                             1, 10000),
              exid::param_int("gradient_check", 0,
                              "> 0: compare the Jacobian along this many random directions with "
                              "central differences of the simulation at the start "
@@ -132,6 +156,9 @@ class Didim : public exid::Estimator {
         fit_nl_(p.getBool("fit_nonlinear")),
         prior_std_(p.getDoubles("gain_prior_std")),
         prior_mean_(p.getDoubles("gain_prior_dK")) {
+    starts_ = static_cast<int>(p.getInt("starts"));
+    start_iter_ = static_cast<int>(p.getInt("start_iterations"));
+    spread_ = p.getDouble("start_spread");
     open_ = p.getString("loop") == "open";
     window_s_ = p.getDouble("window_s");
     if (open_) {
@@ -176,6 +203,118 @@ class Didim : public exid::Estimator {
     });
     const int p = model.numBase(), n = loop_->dof(), K = data.size();
     setPrior(model);
+    chooseSamples(data, n, K);
+    const long m = y_.size();
+    exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
+    L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
+    D_ = delay_ ? 1 : 0;
+    const VectorXd theta = firstStart(model, data, ctx);
+    p_ = p;
+    m_ = m;
+    // the prior's weight sigma / s: sigma from the output's residual (floored at 1e-3 of its
+    // rms: near noise-free data would give the prior no weight and the scale no anchor)
+    floor_sigma_ = 1e-3 * std::sqrt(y_.squaredNorm() / static_cast<double>(m));
+    sp_ = startParams(model);
+    const bool several = starts_ > 1 && !sp_.empty();
+    std::vector<Run> runs;
+    exid::Json check_json;
+    try {
+      runs.push_back(startRun(theta, data, -1.0));
+      if (check_ > 0) check_json = gradientCheck(theta, data, runs[0].cur);
+      iterate(&runs[0], max_iter_, data, ctx);
+    } catch (const exid::Error& err) {
+      // with other starts, a first start that cannot be simulated is left out (said in
+      // details.starts); alone, its error is the estimator's
+      if (!several || ctx.shouldStop()) throw;
+      runs.assign(1, failedRun(theta, err.what()));
+    }
+    const int best = multiStart(model, data, ctx, &runs);
+    for (Run& r : runs)
+      if (r.error.empty()) conclude(&r);
+    const Run& r = runs[static_cast<std::size_t>(best)];
+    // "converged" only where the first-order test holds at the start of lowest objective (no
+    // other start ended lower: multiStart), whatever stopped its iterations
+    const bool converged = r.stopped && r.first_order;
+    sigma_ = r.sigma;
+    exid::Estimate e = finish(model, r.cur, r.x, m);
+    exid::Json& d = e.details;
+    {
+      // how far the estimate is from the minimum the undamped model predicts: the decrease
+      // it predicts, and that decrease over sigma^2 = rss / (m - q), whose square root is the
+      // distance in standard deviations along the covariance's metric
+      exid::Json rem = exid::Json::object();
+      if (std::isfinite(r.undamped)) {
+        rem["predicted_decrease"] = r.undamped;
+        rem["relative"] = r.undamped_relative;
+        rem["distance_std"] = r.distance_std;
+      } else {
+        rem["predicted_decrease"] = exid::Json();
+      }
+      rem["definition"] =
+          "at the estimate: g^T (J^T J + S)^-1 g, the decrease of the residual sum of squares "
+          "the undamped model predicts (S the secant term, or 0; null where that matrix is not "
+          "positive definite); relative: over the residual; distance_std: sqrt(it / sigma^2), "
+          "the estimate's distance from the predicted minimum in standard deviations along the "
+          "covariance's metric";
+      d["remaining"] = rem;
+    }
+    int sims = 0, jacobians = 0;
+    for (const Run& s : runs) {
+      sims += s.sims;
+      jacobians += s.jacobians;
+    }
+    d["iterations"] = r.iterations;
+    d["simulations"] = sims;
+    d["jacobians"] = jacobians;
+    d["hessian"] = secant_ ? "secant" : "gauss_newton";
+    if (!prior_col_.empty()) d["gain_prior"]["rounds"] = r.round;
+    d["stop"] = r.stop;
+    d["converged"] = converged;
+    d["trace"] = r.trace;
+    d["start"] = startName(best);
+    d["start_change"] = (r.x.head(p) - r.x0.head(p)).norm() / std::max(r.x.head(p).norm(), 1e-300);
+    describeStarts(runs, best, &d);
+    if (!check_json.isNull()) {
+      // and at the end, where the Jacobian was taken along an accepted trial's path
+      if (r.jacobians > 1 || best > 0) {
+        const exid::Json end = gradientCheck(r.x, data, r.cur);
+        const double worst = std::max(check_json.find("max_relative_difference")->asDouble(),
+                                      end.find("max_relative_difference")->asDouble());
+        check_json["at_start"] = *check_json.find("max_relative_difference");
+        check_json["at_end"] = *end.find("max_relative_difference");
+        check_json["max_relative_difference"] = worst;
+      }
+      d["gradient_check"] = check_json;
+    }
+    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    d["gradient_norm"] = 2.0 * r.g.norm();
+    d["convergence_test"] = fmt::format(
+        "converged: at the start of lowest objective (details.starts), a stop test held and the "
+        "minimum the undamped model predicts lies within first_order_std = {:g} standard "
+        "deviations (remaining.distance_std), or its decrease below rss_tolerance; "
+        "gradient_norm = ||d objective / d theta||",
+        first_order_std_);
+    if (!converged) {
+      exid::Json w = d.find("warnings") ? *d.find("warnings") : exid::Json::array();
+      std::vector<std::string> names = e.names;
+      Eigen::VectorXd values(e.value.size() + e.nonlinear.size());
+      values << e.value, e.nonlinear;
+      names.insert(names.end(), e.nonlinear_names.begin(), e.nonlinear_names.end());
+      w.push_back(exid::Json(fmt::format(
+          "didim: not converged: from {} (start {} of {}, the lowest objective of the starts), "
+          "stopped after {} iterations at {} with rss {:.6g}, gradient norm {:.3g}, the "
+          "predicted minimum {:.3g} standard deviations away (first_order_std = {:g}): {}",
+          startName(best), best + 1, runs.size(), r.iterations,
+          exid::estimators::describePoint(names, values), r.cur.rss, 2.0 * r.g.norm(),
+          r.distance_std, first_order_std_, r.stop)));
+      d["warnings"] = w;
+    }
+    return e;
+  }
+
+ private:
+  // The samples fitted (keep_t_, windows_, dropped_) and the measured output y_.
+  void chooseSamples(const exid::Dataset& data, int n, int K) {
     // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the
     // reference; with loop: open, the windows' samples after their starts
     keep_t_.clear();
@@ -217,8 +356,14 @@ class Didim : public exid::Estimator {
         fmt::format("didim: the data has no {} of {} joints", position_ ? "q" : "torque", n));
     for (std::size_t i = 0; i < keep.size(); ++i)
       y_.segment(static_cast<Eigen::Index>(i) * n, n) = Y.row(keep[i]);
-    const long m = y_.size();
-    exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
+  }
+
+  // The first start x = (theta, log eta, d): the inverse model's least squares (drive gains at
+  // their prior mean; the rows compensated for the initial delay), the model's nonlinear
+  // parameters (fit_nonlinear), the initial delay (measurement_delay).
+  VectorXd firstStart(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const exid::RunContext& ctx) const {
+    const int p = model.numBase();
     // start: the inverse model's least squares (drive gains at their prior mean; the rows
     // compensated for the initial delay)
     exid::Rows R = model.rows(data, ctx);
@@ -231,10 +376,8 @@ class Didim : public exid::Estimator {
     }
     // x = (theta, log eta, d): the model's nonlinear parameters fitted with theta
     // (fit_nonlinear), the delay (measurement_delay)
-    L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
-    D_ = delay_ ? 1 : 0;
     VectorXd theta(p + L_ + D_);
-    theta.head(p) = startFit(model, R);
+    theta.head(p) = startFit(model, R, prior_col_, prior_mu_);
     if (D_) theta[p + L_] = delay0_;
     for (int k = 0; k < L_; ++k) {
       const double v = loop_->nonlinear()[k];
@@ -244,279 +387,449 @@ class Didim : public exid::Estimator {
                               model.nonlinearParameters()[static_cast<std::size_t>(k)].name, v));
       theta[p + k] = std::log(v);
     }
-    p_ = p;
-    const VectorXd theta0 = theta;
-    Sim cur = simulate(theta, data, true);
-    exid::Json check_json;
-    if (check_ > 0) check_json = gradientCheck(theta, data, cur);
-    exid::Json trace = exid::Json::array();
-    auto record = [&](const Sim& s, double rho = 0.0, double damping = 0.0, int trials = 0) {
-      exid::Json t = exid::Json::object();
-      t["rss"] = s.rss;
-      if (!prior_col_.empty()) t["prior_rss"] = s.prior_rss;
-      if (trials > 0) {
-        t["gain_ratio"] = rho;  // actual / predicted decrease
-        t["damping"] = damping;
-        t["trials"] = trials;
-      }
-      trace.push_back(t);
-    };
-    // the prior's weight sigma / s: sigma from the output's residual (floored at 1e-3 of its
-    // rms: near noise-free data would give the prior no weight and the scale no anchor)
-    const double floor_sigma = 1e-3 * std::sqrt(y_.squaredNorm() / static_cast<double>(m));
-    const int q_all = p + L_ + D_;
-    auto noiseStd = [&](const Sim& s) {
-      return std::max(std::sqrt(s.rss / static_cast<double>(m - q_all)), floor_sigma);
-    };
-    if (!prior_col_.empty()) {
-      sigma_ = noiseStd(cur);
-      priorTerms(theta, &cur);
-    }
-    record(cur);
-    // Levenberg-Marquardt's damping (relative to diag(J^T J)) by Nielsen's rule: after an
-    // accepted step mu *= max(1/3, 1 - (2 rho - 1)^3), rho the actual over the predicted
-    // decrease; after a rejected one mu *= nu, nu doubling (a fixed up/down factor makes the
-    // damping oscillate: a rejected trial, a whole simulation, every other iteration)
+    return theta;
+  }
+
+  struct Sim {
+    VectorXd y;  // simulated output, sample-major
+    MatrixXd J;  // d y / d theta (with sensitivities)
+    double rss = 0.0;
+    double prior_rss = 0.0;  // the gain prior's pseudo-observations
+    double total() const { return rss + prior_rss; }
+    // the simulation's paths (one per window; without sensitivities): an accepted trial's
+    // sensitivities are taken along them (ClosedLoop::sensitivitiesAlong)
+    std::vector<exid::estimators::ClosedLoop::Path> paths;
+  };
+
+  // One Levenberg-Marquardt run (one start): where it started, where it is with its last
+  // simulation (with the sensitivities), and its state.
+  struct Run {
+    VectorXd x0, x;  // (theta, log eta, d): the start; the current point
+    Sim cur;
+    double sigma = 0.0;  // the noise std the gain prior's weight uses
+    int round = 1;       // the prior's noise rounds
+    // The second-order term sum r_i d2 y_i / dtheta2 of the residual's Hessian, by secant
+    // updates (Dennis, Gay and Welsch, NL2SOL), and the last accepted step's pair
+    MatrixXd Ssec;
+    VectorXd g_prev, s_prev, Jr_prev_at_new;
+    // At the current point: H = J^T J (+ the prior's), g = J^T r (+ the prior's), Hm = H + S
+    // (or H), and the decrease the undamped model predicts, g^T Hm^-1 g (infinite where Hm is
+    // not positive definite: no minimum claimed)
+    MatrixXd H, Hm;
+    VectorXd g;
+    double undamped = 0.0;
+    bool prepared = false;  // (H, Hm, g, undamped are those of x)
+    // Levenberg-Marquardt's damping (relative to diag(J^T J)) and its growth after rejections
     double mu = 1e-3, nu = 2.0;
     // simulations: integrations of the state; jacobians: sensitivity passes (the first with its
     // own simulation, the others along an accepted trial's)
-    int it = 0, sims = 1, jacobians = 1, round = 1;
-    std::string stop;
-    // The second-order term sum r_i d2 y_i / dtheta2 of the residual's Hessian, by secant
-    // updates (Dennis, Gay and Welsch, NL2SOL): Gauss-Newton's J^T J alone converges slowly
-    // where the residual stays large (a model that cannot reproduce the recording exactly).
-    MatrixXd Ssec = MatrixXd::Zero(q_all, q_all);
-    VectorXd g_prev, s_prev, Jr_prev_at_new;  // (the last accepted step's)
-    // At the current point: H = J^T J (+ the prior's), g = J^T r (+ the prior's), S updated
-    // with the last accepted step, and the decrease the undamped model predicts,
-    // g^T (J^T J + S)^-1 g: below rss_tolerance, theta is at the minimum to the simulation's
-    // precision (trials would only see its noise). The damped step's prediction is no test: a
-    // large damping shrinks it wherever the model is poor (Gauss-Newton on the TX40 stopped
-    // there 7.5 % above the minimum). Infinite where the undamped matrix is not positive
-    // definite (no minimum claimed).
-    MatrixXd H, Hm;  // J^T J (+ the prior's); the model's Hessian H + S (or H)
-    VectorXd g;
-    double undamped = 0.0;
-    bool prepared = false;  // (H, Hm, g, undamped are those of theta)
-    auto prepare = [&] {
-      H = cur.J.transpose() * cur.J;
-      g = cur.J.transpose() * (y_ - cur.y);
-      if (secant_ && s_prev.size() > 0) {
-        // secant pair: s, yv = grad f(new) - grad f(old) of f = rss / 2 (without the prior's
-        // pseudo-observations, linear in theta), y# = (J_new - J_old)^T r_new
-        exid::estimators::secantSecondOrderUpdate(&Ssec, s_prev, -(g - g_prev),
-                                                  -g + Jr_prev_at_new);
-        s_prev.resize(0);
-      }
-      g_prev = g;
-      for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations
-        const int c = prior_col_[i];
-        const double w = sigma_ / prior_sd_[i];
-        H(c, c) += w * w;
-        g[c] += w * w * (prior_mu_[i] - theta[c]);
-      }
-      undamped = std::numeric_limits<double>::infinity();
-      Hm = H;
-      if (secant_) Hm += Ssec;
-      const Eigen::LDLT<MatrixXd> ldlt(Hm);
-      if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
-        const double gd = g.dot(ldlt.solve(g));
-        if (std::isfinite(gd) && gd >= 0) undamped = gd;
-      }
-      prepared = true;
-    };
-    for (it = 1; it <= max_iter_; ++it) {
+    int iterations = 0, sims = 1, jacobians = 1;
+    std::string stop;      // why it stopped (empty: the iterations ran out)
+    bool stopped = false;  // a stop test held
+    exid::Json trace = exid::Json::array();
+    // at its end (conclude): the first-order test
+    bool first_order = false;
+    double distance_std = std::numeric_limits<double>::infinity();
+    double undamped_relative = std::numeric_limits<double>::infinity();
+    std::string error;  // a start that could not be simulated
+  };
+
+  // A run at x: its simulation with the sensitivities; the prior's weight from it (sigma < 0)
+  // or sigma, settled (no further round).
+  Run startRun(const VectorXd& x, const exid::Dataset& data, double sigma) const {
+    Run r;
+    r.x0 = x;
+    r.x = x;
+    r.cur = simulate(x, data, true);
+    r.Ssec = MatrixXd::Zero(x.size(), x.size());
+    if (!prior_col_.empty()) {
+      r.sigma = sigma < 0 ? noiseStd(r.cur) : sigma;
+      if (sigma >= 0) r.round = 2;
+      priorTerms(x, r.sigma, &r.cur);
+    }
+    record(&r, r.cur);
+    return r;
+  }
+
+  double noiseStd(const Sim& s) const {
+    return std::max(std::sqrt(s.rss / static_cast<double>(m_ - (p_ + L_ + D_))), floor_sigma_);
+  }
+
+  void record(Run* r, const Sim& s, double rho = 0.0, double damping = 0.0, int trials = 0) const {
+    exid::Json t = exid::Json::object();
+    t["rss"] = s.rss;
+    if (!prior_col_.empty()) t["prior_rss"] = s.prior_rss;
+    if (trials > 0) {
+      t["gain_ratio"] = rho;  // actual / predicted decrease
+      t["damping"] = damping;
+      t["trials"] = trials;
+    }
+    r->trace.push_back(t);
+  }
+
+  // H, Hm, g and the undamped model's predicted decrease at r's point (the secant term updated
+  // with the last accepted step). Below rss_tolerance, x is at the minimum to the simulation's
+  // precision (trials would only see its noise). The damped step's prediction is no test: a
+  // large damping shrinks it wherever the model is poor (Gauss-Newton on the TX40 stopped
+  // there 7.5 % above the minimum).
+  void prepare(Run* rp) const {
+    Run& r = *rp;
+    r.H = r.cur.J.transpose() * r.cur.J;
+    r.g = r.cur.J.transpose() * (y_ - r.cur.y);
+    if (secant_ && r.s_prev.size() > 0) {
+      // secant pair: s, yv = grad f(new) - grad f(old) of f = rss / 2 (without the prior's
+      // pseudo-observations, linear in theta), y# = (J_new - J_old)^T r_new
+      exid::estimators::secantSecondOrderUpdate(&r.Ssec, r.s_prev, -(r.g - r.g_prev),
+                                                -r.g + r.Jr_prev_at_new);
+      r.s_prev.resize(0);
+    }
+    r.g_prev = r.g;
+    for (std::size_t i = 0; i < prior_col_.size(); ++i) {  // pseudo-observations
+      const int c = prior_col_[i];
+      const double w = r.sigma / prior_sd_[static_cast<Eigen::Index>(i)];
+      r.H(c, c) += w * w;
+      r.g[c] += w * w * (prior_mu_[static_cast<Eigen::Index>(i)] - r.x[c]);
+    }
+    r.undamped = std::numeric_limits<double>::infinity();
+    r.Hm = r.H;
+    if (secant_) r.Hm += r.Ssec;
+    const Eigen::LDLT<MatrixXd> ldlt(r.Hm);
+    if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
+      const double gd = r.g.dot(ldlt.solve(r.g));
+      if (std::isfinite(gd) && gd >= 0) r.undamped = gd;
+    }
+    r.prepared = true;
+  }
+
+  // Levenberg-Marquardt from r's state until a stop test holds or r has run `limit` iterations
+  // (a run stopped by its limit can be continued with a larger one). The damping by Nielsen's
+  // rule: after an accepted step mu *= max(1/3, 1 - (2 rho - 1)^3), rho the actual over the
+  // predicted decrease; after a rejected one mu *= nu, nu doubling (a fixed up/down factor
+  // makes the damping oscillate: a rejected trial, a whole simulation, every other iteration).
+  void iterate(Run* rp, int limit, const exid::Dataset& data, const exid::RunContext& ctx) const {
+    Run& r = *rp;
+    const int p = p_;
+    while (!r.stopped && r.iterations < limit) {
+      ++r.iterations;
       if (ctx.shouldStop()) throw exid::Error("didim: stopped");
       // J = d y_sim / d theta; r = y - y_sim: the step solves (J^T J + S + mu D) d = J^T r,
       // D = diag(J^T J), S the secant term (hessian: secant) or 0 (a damped matrix that is not
       // positive definite is a rejected try)
-      if (!prepared) prepare();
-      const double undamped_relative = undamped / std::max(cur.total(), 1e-300);
+      if (!r.prepared) prepare(&r);
+      const double undamped_relative = r.undamped / std::max(r.cur.total(), 1e-300);
       bool accepted = false, flat = undamped_relative < ftol_;
       double moved = 0.0;
       for (int tries = 0; tries < 12 && !accepted && !flat; ++tries) {
-        MatrixXd A = Hm;
-        A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
+        MatrixXd A = r.Hm;
+        A.diagonal() += r.mu * r.H.diagonal().cwiseMax(1e-300);
         const Eigen::LDLT<MatrixXd> ldlt(A);
-        const VectorXd step = ldlt.solve(g);
+        const VectorXd step = ldlt.solve(r.g);
         if (!step.allFinite() || !ldlt.isPositive() || ldlt.info() != Eigen::Success) {
-          mu *= 10;
+          r.mu *= 10;
           continue;
         }
         // the decrease the damped model predicts for this step (the gain ratio's denominator)
-        const double predicted = 2 * g.dot(step) - step.dot(Hm * step);
+        const double predicted = 2 * r.g.dot(step) - step.dot(r.Hm * step);
         // trials without the sensitivities; the accepted point gets them
-        if (D_ && std::abs(theta[p + L_] + step[p + L_]) > delay_max_) {
+        if (D_ && std::abs(r.x[p + L_] + step[p + L_]) > delay_max_) {
           ++rejected_bound_;  // (a delay beyond measurement_delay_max_s is a rejected step)
-          mu *= nu;
-          nu *= 2;
+          r.mu *= r.nu;
+          r.nu *= 2;
           continue;
         }
         Sim trial;
         bool ok = true;
         try {
-          trial = simulate(theta + step, data, false);
-          priorTerms(theta + step, &trial);
+          trial = simulate(r.x + step, data, false);
+          priorTerms(r.x + step, r.sigma, &trial);
         } catch (const exid::Error&) {
           ok = false;  // (a trial that cannot be simulated is a rejected step)
         }
-        ++sims;
-        if (ok && trial.total() <= cur.total()) {
-          const double rho = (cur.total() - trial.total()) / std::max(predicted, 1e-300);
+        ++r.sims;
+        if (ok && trial.total() <= r.cur.total()) {
+          const double rho = (r.cur.total() - trial.total()) / std::max(predicted, 1e-300);
           // theta relative to its norm; log eta as it is (a relative change of eta); the
           // delay relative to its bound
-          moved = step.head(p).norm() / std::max(theta.head(p).norm(), 1e-300);
+          moved = step.head(p).norm() / std::max(r.x.head(p).norm(), 1e-300);
           if (L_ > 0) moved = std::max(moved, step.segment(p, L_).cwiseAbs().maxCoeff());
           if (D_) moved = std::max(moved, std::abs(step[p + L_]) / delay_max_);
           if (secant_) {
-            s_prev = step;
-            Jr_prev_at_new = cur.J.transpose() * (y_ - trial.y);
+            r.s_prev = step;
+            r.Jr_prev_at_new = r.cur.J.transpose() * (y_ - trial.y);
           }
-          theta += step;
-          prepared = false;
-          cur = simulate(theta, data, true, &trial);  // (along the trial's paths)
-          priorTerms(theta, &cur);
-          ++jacobians;
-          record(cur, rho, mu, tries + 1);
-          mu = std::max(mu * std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3)), 1e-12);
-          nu = 2.0;
+          r.x += step;
+          r.prepared = false;
+          r.cur = simulate(r.x, data, true, &trial);  // (along the trial's paths)
+          priorTerms(r.x, r.sigma, &r.cur);
+          ++r.jacobians;
+          record(&r, r.cur, rho, r.mu, tries + 1);
+          r.mu = std::max(r.mu * std::max(1.0 / 3.0, 1.0 - std::pow(2.0 * rho - 1.0, 3)), 1e-12);
+          r.nu = 2.0;
           accepted = true;
         } else {
-          mu *= nu;
-          nu *= 2;
+          r.mu *= r.nu;
+          r.nu *= 2;
         }
       }
       if (flat) {
-        stop = fmt::format(
+        r.stop = fmt::format(
             "the undamped model predicts a decrease of {:.2g} of the residual, below "
             "rss_tolerance = {:g}",
             undamped_relative, ftol_);
       } else if (!accepted) {
-        stop = "no step lowers the residual (a minimum to the simulation's precision)";
+        r.stop = "no step lowers the residual (a minimum to the simulation's precision)";
       } else if (moved < xtol_) {
-        stop = fmt::format("the step moved theta by {:.2g} of itself, below step_tolerance = {:g}",
-                           moved, xtol_);
+        r.stop = fmt::format(
+            "the step moved theta by {:.2g} of itself, below step_tolerance = {:g}", moved, xtol_);
       }
-      if (stop.empty()) continue;
+      if (r.stop.empty()) continue;
       // with a prior: its weight from the noise std at this minimum, once more (the fixed point
       // of sqrt(rss / (m - q)): a second round settles it)
-      if (!prior_col_.empty() && round == 1) {
-        const double s2 = noiseStd(cur);
-        ++round;
-        if (std::abs(s2 - sigma_) > 1e-3 * sigma_) {
-          sigma_ = s2;
-          priorTerms(theta, &cur);
-          prepared = false;
-          stop.clear();
-          mu = 1e-3;
-          nu = 2.0;
+      if (!prior_col_.empty() && r.round == 1) {
+        const double s2 = noiseStd(r.cur);
+        ++r.round;
+        if (std::abs(s2 - r.sigma) > 1e-3 * r.sigma) {
+          r.sigma = s2;
+          priorTerms(r.x, r.sigma, &r.cur);
+          r.prepared = false;
+          r.stop.clear();
+          r.mu = 1e-3;
+          r.nu = 2.0;
           continue;
         }
       }
-      break;
+      r.stopped = true;
     }
-    const bool stopped = !stop.empty();
-    if (!stopped) stop = fmt::format("max_iterations = {} reached", max_iter_);
-    if (!prepared) prepare();
-    // "converged" only where the first-order test holds: the minimum the undamped model
-    // predicts within first_order_std standard deviations (or its decrease below
-    // rss_tolerance), whatever stopped the iterations
-    const double s2_end = cur.rss / static_cast<double>(std::max(m - q_all, 1L));
-    const double distance_std = std::isfinite(undamped)
-                                    ? std::sqrt(undamped / std::max(s2_end, 1e-300))
-                                    : std::numeric_limits<double>::infinity();
-    const double undamped_rel = undamped / std::max(cur.total(), 1e-300);
-    const bool first_order =
-        std::isfinite(undamped) && (undamped_rel < ftol_ || distance_std <= first_order_std_);
-    const bool converged = stopped && first_order;
-    exid::Estimate e = finish(model, cur, theta, m);
-    exid::Json& d = e.details;
-    {
-      // how far the estimate is from the minimum the undamped model predicts: the decrease
-      // it predicts, and that decrease over sigma^2 = rss / (m - q), whose square root is the
-      // distance in standard deviations along the covariance's metric
-      exid::Json r = exid::Json::object();
-      if (std::isfinite(undamped)) {
-        const double s2 = cur.rss / static_cast<double>(std::max(m - q_all, 1L));
-        r["predicted_decrease"] = undamped;
-        r["relative"] = undamped / std::max(cur.total(), 1e-300);
-        r["distance_std"] = std::sqrt(undamped / std::max(s2, 1e-300));
-      } else {
-        r["predicted_decrease"] = exid::Json();
-      }
-      r["definition"] =
-          "at the estimate: g^T (J^T J + S)^-1 g, the decrease of the residual sum of squares "
-          "the undamped model predicts (S the secant term, or 0; null where that matrix is not "
-          "positive definite); relative: over the residual; distance_std: sqrt(it / sigma^2), "
-          "the estimate's distance from the predicted minimum in standard deviations along the "
-          "covariance's metric";
-      d["remaining"] = r;
-    }
-    d["iterations"] = std::min(it, max_iter_);
-    d["simulations"] = sims;
-    d["jacobians"] = jacobians;
-    d["hessian"] = secant_ ? "secant" : "gauss_newton";
-    if (!prior_col_.empty()) d["gain_prior"]["rounds"] = round;
-    d["stop"] = stop;
-    d["converged"] = converged;
-    d["trace"] = trace;
-    d["start"] = prior_col_.empty()
-                     ? "least squares on the recording's rows (the inverse model)"
-                     : "least squares on the recording's rows (the inverse model) with the drive "
-                       "gains at their prior mean";
-    d["start_change"] =
-        (theta.head(p) - theta0.head(p)).norm() / std::max(theta.head(p).norm(), 1e-300);
-    if (!check_json.isNull()) {
-      // and at the end, where the Jacobian was taken along an accepted trial's path
-      if (jacobians > 1) {
-        const exid::Json end = gradientCheck(theta, data, cur);
-        const double worst = std::max(check_json.find("max_relative_difference")->asDouble(),
-                                      end.find("max_relative_difference")->asDouble());
-        check_json["at_start"] = *check_json.find("max_relative_difference");
-        check_json["at_end"] = *end.find("max_relative_difference");
-        check_json["max_relative_difference"] = worst;
-      }
-      d["gradient_check"] = check_json;
-    }
-    d["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    d["gradient_norm"] = 2.0 * g.norm();
-    d["convergence_test"] = fmt::format(
-        "converged: a stop test held and the minimum the undamped model predicts lies within "
-        "first_order_std = {:g} standard deviations (remaining.distance_std), or its decrease "
-        "below rss_tolerance; gradient_norm = ||d objective / d theta||",
-        first_order_std_);
-    if (!converged) {
-      exid::Json w = d.find("warnings") ? *d.find("warnings") : exid::Json::array();
-      std::vector<std::string> names = e.names;
-      Eigen::VectorXd values(e.value.size() + e.nonlinear.size());
-      values << e.value, e.nonlinear;
-      names.insert(names.end(), e.nonlinear_names.begin(), e.nonlinear_names.end());
-      w.push_back(exid::Json(fmt::format(
-          "didim: not converged: from {}, stopped after {} iterations at {} with rss {:.6g}, "
-          "gradient norm {:.3g}, the predicted minimum {:.3g} standard deviations away "
-          "(first_order_std = {:g}): {}",
-          prior_col_.empty() ? "least squares on the recording's rows"
-                             : "least squares with the gains at their prior mean",
-          std::min(it, max_iter_), exid::estimators::describePoint(names, values), cur.rss,
-          2.0 * g.norm(), distance_std, first_order_std_, stop)));
-      d["warnings"] = w;
-    }
-    return e;
   }
 
- private:
+  // The first-order test at r's end: the minimum the undamped model predicts lies within
+  // first_order_std standard deviations (or its decrease is below rss_tolerance).
+  void conclude(Run* rp) const {
+    Run& r = *rp;
+    if (!r.prepared) prepare(&r);
+    if (!r.stopped && r.stop.empty())
+      r.stop = fmt::format("max_iterations = {} reached", max_iter_);
+    const double s2_end = r.cur.rss / static_cast<double>(std::max(m_ - (p_ + L_ + D_), 1L));
+    r.distance_std = std::isfinite(r.undamped) ? std::sqrt(r.undamped / std::max(s2_end, 1e-300))
+                                               : std::numeric_limits<double>::infinity();
+    r.undamped_relative = r.undamped / std::max(r.cur.total(), 1e-300);
+    r.first_order = std::isfinite(r.undamped) &&
+                    (r.undamped_relative < ftol_ || r.distance_std <= first_order_std_);
+  }
+
+  // The parameters the starts move, other than theta: the drive gains (dK) and load-dependent
+  // Coulomb (FcL) columns, the model's nonlinear parameters (log eta), the delay.
+  struct StartParam {
+    int index = 0;  // in x
+    int kind = 0;   // 0: log eta, 1: dK, 2: FcL, 3: delay
+    std::string name;
+  };
+  std::vector<StartParam> startParams(const exid::ObservationModel& model) const {
+    std::vector<StartParam> out;
+    for (int c = 0; c < p_; ++c) {
+      const std::string& nm = model.base().names[static_cast<std::size_t>(c)];
+      const int kind = exid::torqueColumnKind(nm);
+      if (kind == 1 || kind == 2) out.push_back({c, kind, nm});
+    }
+    const std::vector<exid::NonlinearParameter> nl = model.nonlinearParameters();
+    for (int k = 0; k < L_; ++k) out.push_back({p_ + k, 0, nl[static_cast<std::size_t>(k)].name});
+    if (D_) out.push_back({p_ + L_, 3, "measurement_delay_s"});
+    return out;
+  }
+  // Start i's side and size: 0, -1, +1, -1/2, +1/2, -2, +2 (as gains_ls).
+  static double startMultiple(int i) {
+    static const double kMul[] = {0.0, -1.0, 1.0, -0.5, 0.5, -2.0, 2.0};
+    return kMul[i];
+  }
+  // The sample period of the fitted samples (the delay's shift is counted in it).
+  double samplePeriod() const {
+    return keep_t_.size() > 1
+               ? (keep_t_.back() - keep_t_.front()) / static_cast<double>(keep_t_.size() - 1)
+               : 0.0;
+  }
+  // Start i > 0 from the first start x0: eta times 2^(+-m), dK and FcL shifted by
+  // +-m start_spread, the delay by +-2 m sample periods (within 0.9 of its bound),
+  // m = |startMultiple(i)|, the sign its; theta's other entries by least squares on the rows at
+  // that eta and delay, dK and FcL held.
+  VectorXd startPoint(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const exid::RunContext& ctx, const VectorXd& x0, int i) const {
+    const double mul = startMultiple(i);
+    VectorXd x = x0;
+    std::vector<int> held;
+    std::vector<double> held_at;
+    for (const StartParam& sp : sp_) {
+      if (sp.kind == 1 || sp.kind == 2) {
+        held.push_back(sp.index);
+        held_at.push_back(x0[sp.index] + mul * spread_);
+      } else if (sp.kind == 0) {
+        x[sp.index] = x0[sp.index] + mul * std::log(2.0);
+      } else {
+        x[sp.index] = std::clamp(x0[sp.index] + 2.0 * mul * samplePeriod(), -0.9 * delay_max_,
+                                 0.9 * delay_max_);
+      }
+    }
+    exid::Rows R = L_ > 0
+                       ? model.rowsAt(data, x.segment(p_, L_).array().exp().matrix(), nullptr, ctx)
+                       : model.rows(data, ctx);
+    exid::estimators::checkRows(R, p_, kName, 0);
+    if (D_ && x[p_ + L_] != 0.0) {
+      int front = 0, back = 0;
+      R = exid::delayedRows(R, data.t, x[p_ + L_], kName, &front, &back);
+    }
+    x.head(p_) = startFit(
+        model, R, held,
+        Eigen::Map<const VectorXd>(held_at.data(), static_cast<Eigen::Index>(held_at.size())));
+    return x;
+  }
+  Run failedRun(const VectorXd& x, const std::string& error) const {
+    Run r;
+    r.x0 = x;
+    r.x = x;
+    r.error = error;
+    r.sims = 0;
+    r.jacobians = 0;
+    return r;
+  }
+  std::string startName(int i) const {
+    const std::string first =
+        prior_col_.empty() ? "least squares on the recording's rows (the inverse model)"
+                           : "least squares on the recording's rows (the inverse model) with the "
+                             "drive gains at their prior mean";
+    if (i == 0) return first;
+    const double mul = startMultiple(i);
+    bool eta = false, torque = false, delay = false;
+    for (const StartParam& sp : sp_) {
+      eta = eta || sp.kind == 0;
+      torque = torque || sp.kind == 1 || sp.kind == 2;
+      delay = delay || sp.kind == 3;
+    }
+    std::string moved;
+    auto add = [&](const std::string& what) { moved += (moved.empty() ? "" : ", ") + what; };
+    if (eta) add(fmt::format("the model's nonlinear parameters x{:g}", std::pow(2.0, mul)));
+    if (torque) add(fmt::format("dK and FcL {:+g}", mul * spread_));
+    if (delay) add(fmt::format("the delay {:+g} samples", 2.0 * mul));
+    return fmt::format("start 1 with {}, theta by least squares on the rows there", moved);
+  }
+
+  // The starts after the first (whose run is done): each run for start_iterations at most at
+  // the first's final prior weight; the lowest of them continued to max_iterations when it is
+  // below the first's end; the lowest objective kept (a later start only beyond the
+  // simulation's rounding). Returns the kept run's index.
+  int multiStart(const exid::ObservationModel& model, const exid::Dataset& data,
+                 const exid::RunContext& ctx, std::vector<Run>* runs) const {
+    if (starts_ <= 1 || sp_.empty()) return 0;
+    const VectorXd x0 = (*runs)[0].x0;
+    // (the first's final weight; its own where the first could not be simulated)
+    const double sigma0 = (*runs)[0].error.empty() ? (*runs)[0].sigma : -1.0;
+    for (int i = 1; i < starts_; ++i) {
+      Run r;
+      VectorXd xs = x0;
+      try {
+        xs = startPoint(model, data, ctx, x0, i);
+        r = startRun(xs, data, sigma0);
+        iterate(&r, std::min(start_iter_, max_iter_), data, ctx);
+        if (!r.stopped)
+          r.stop = fmt::format("start_iterations = {} reached", std::min(start_iter_, max_iter_));
+      } catch (const exid::Error& err) {
+        if (ctx.shouldStop()) throw;
+        r = failedRun(xs, err.what());  // (a start that cannot be simulated is left out)
+      }
+      runs->push_back(std::move(r));
+    }
+    int best = lowest(*runs, sigma0 < 0 ? 0.0 : sigma0);
+    if (best < 0) {
+      std::string all;
+      for (std::size_t i = 0; i < runs->size(); ++i)
+        all += fmt::format("{}start {}: {}", i ? "; " : "", i + 1, (*runs)[i].error);
+      throw exid::Error(
+          fmt::format("didim: none of the {} starts could be simulated ({})", runs->size(), all));
+    }
+    Run& b = (*runs)[static_cast<std::size_t>(best)];
+    if (best > 0 && !b.stopped) {  // on to convergence, its own prior weight settled
+      if (!prior_col_.empty()) b.round = 1;
+      b.stop.clear();
+      iterate(&b, max_iter_, data, ctx);
+      best = lowest(*runs, b.sigma);
+    }
+    return best;
+  }
+  // The run of lowest objective (rss plus the prior's terms at the weight sigma); a later one
+  // only below the earlier by more than the simulation's rounding.
+  int lowest(const std::vector<Run>& runs, double sigma) const {
+    const double floor = 1e-12 * y_.squaredNorm();
+    int best = -1;  // (none: every start failed)
+    auto objective = [&](const Run& r) { return r.cur.rss + priorRss(r.x, sigma); };
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      if (!runs[i].error.empty()) continue;
+      const double ob = best < 0 ? 0.0 : objective(runs[static_cast<std::size_t>(best)]);
+      if (best < 0 || objective(runs[i]) < ob - 1e-7 * ob - floor) best = static_cast<int>(i);
+    }
+    return best;
+  }
+
+  // details.starts: each start's nonlinear parameters where it began and ended, its objective,
+  // iterations, stop and first-order test; details.best_start.
+  void describeStarts(const std::vector<Run>& runs, int best, exid::Json* d) const {
+    const std::vector<StartParam>& sp = sp_;
+    std::vector<std::string> names;
+    for (const StartParam& s : sp) names.push_back(s.name);
+    auto values = [&](const VectorXd& x) {
+      VectorXd v(static_cast<Eigen::Index>(sp.size()));
+      for (std::size_t k = 0; k < sp.size(); ++k)
+        v[static_cast<Eigen::Index>(k)] =
+            sp[k].kind == 0 ? std::exp(x[sp[k].index]) : x[sp[k].index];
+      return v;
+    };
+    const double sigma = runs[static_cast<std::size_t>(best)].sigma;
+    exid::Json starts = exid::Json::array();
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      const Run& r = runs[i];
+      exid::Json o = exid::Json::object();
+      o["start"] = startName(static_cast<int>(i));
+      if (!sp.empty()) o["from"] = exid::estimators::describePoint(names, values(r.x0));
+      if (!r.error.empty()) {
+        o["error"] = r.error;
+        starts.push_back(o);
+        continue;
+      }
+      if (!sp.empty()) o["to"] = exid::estimators::describePoint(names, values(r.x));
+      o["objective"] = r.cur.rss + priorRss(r.x, sigma);
+      o["rss"] = r.cur.rss;
+      o["iterations"] = r.iterations;
+      o["simulations"] = r.sims;
+      o["stop"] = r.stop;
+      o["stopped"] = r.stopped;
+      o["first_order"] = r.first_order;
+      o["distance_std"] = std::isfinite(r.distance_std) ? exid::Json(r.distance_std) : exid::Json();
+      starts.push_back(o);
+    }
+    (*d)["starts"] = starts;
+    (*d)["best_start"] = best + 1;
+    (*d)["starts_definition"] = fmt::format(
+        "{}; objective: rss plus the gain prior's terms at the kept start's weight",
+        sp.empty() ? std::string("one start: no nonlinear parameter beyond theta (drive gains, "
+                                 "load Coulomb, the model's nonlinear parameters, a delay)")
+                   : fmt::format("Levenberg-Marquardt from each of starts = {} (start_spread = "
+                                 "{:g}), the later ones for start_iterations = {} at most and "
+                                 "the lowest of them on to max_iterations when below the "
+                                 "first's end; the lowest objective kept (a later start only "
+                                 "beyond the simulation's rounding, 1e-7 of it)",
+                                 starts_, spread_, start_iter_));
+  }
   // The inverse model's least squares: batch_ls's rank-revealing solve (an unidentifiable
-  // direction is refused by name). With a gain prior the gains are held at its mean (their
-  // scale with theta is not in the rows).
-  VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R) const {
+  // direction is refused by name), the columns `cols` held at `at`. The first start holds the
+  // gains at the prior's mean (their scale with theta is not in the rows); the later starts
+  // hold the gains and FcL at their shifted values.
+  VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R,
+                    const std::vector<int>& cols, const VectorXd& at) const {
     const int p = model.numBase();
     std::vector<int> free;
     std::vector<std::string> names;
     VectorXd fixed = VectorXd::Zero(p);
     std::vector<bool> held(static_cast<std::size_t>(p), false);
-    for (std::size_t i = 0; i < prior_col_.size(); ++i) {
-      held[static_cast<std::size_t>(prior_col_[i])] = true;
-      fixed[prior_col_[i]] = prior_mu_[static_cast<Eigen::Index>(i)];
+    for (std::size_t i = 0; i < cols.size(); ++i) {
+      held[static_cast<std::size_t>(cols[i])] = true;
+      fixed[cols[i]] = at[static_cast<Eigen::Index>(i)];
     }
     for (int c = 0; c < p; ++c)
       if (!held[static_cast<std::size_t>(c)]) {
@@ -541,17 +854,6 @@ class Didim : public exid::Estimator {
     return t;
   }
 
-  struct Sim {
-    VectorXd y;  // simulated output, sample-major
-    MatrixXd J;  // d y / d theta (with sensitivities)
-    double rss = 0.0;
-    double prior_rss = 0.0;  // the gain prior's pseudo-observations
-    double total() const { return rss + prior_rss; }
-    // the simulation's paths (one per window; without sensitivities): an accepted trial's
-    // sensitivities are taken along them (ClosedLoop::sensitivitiesAlong)
-    std::vector<exid::estimators::ClosedLoop::Path> paths;
-  };
-
   // The gain prior's columns (the model's dK, base order) and its std and mean per column.
   void setPrior(const exid::ObservationModel& model) {
     prior_col_ = loop_->driveGainColumns();
@@ -573,14 +875,18 @@ class Didim : public exid::Estimator {
     prior_sd_ = exid::estimators::perGain(prior_std_, ng, "gain_prior_std", 0.0, kName);
     prior_mu_ = exid::estimators::perGain(prior_mean_, ng, "gain_prior_dK", 0.0, kName);
   }
-  // The prior's pseudo-observations' sum of squares at x (weight sigma_ / s).
-  void priorTerms(const VectorXd& x, Sim* s) const {
-    s->prior_rss = 0.0;
+  // The prior's pseudo-observations' sum of squares at x (weight sigma / s).
+  double priorRss(const VectorXd& x, double sigma) const {
+    double out = 0.0;
     for (std::size_t i = 0; i < prior_col_.size(); ++i) {
       const auto k = static_cast<Eigen::Index>(i);
-      const double r = sigma_ * (prior_mu_[k] - x[prior_col_[i]]) / prior_sd_[k];
-      s->prior_rss += r * r;
+      const double r = sigma * (prior_mu_[k] - x[prior_col_[i]]) / prior_sd_[k];
+      out += r * r;
     }
+    return out;
+  }
+  void priorTerms(const VectorXd& x, double sigma, Sim* s) const {
+    s->prior_rss = priorRss(x, sigma);
   }
 
   // The loop at x = (theta, log eta, d) at the kept samples' times less d; J = d y / d x (the
@@ -811,7 +1117,11 @@ class Didim : public exid::Estimator {
   int L_ = 0, p_ = 0, D_ = 0;   // nonlinear parameters fitted; base parameters; the delay (0, 1)
   std::vector<int> prior_col_;  // the drive gains' base columns
   VectorXd prior_sd_, prior_mu_;
-  double sigma_ = 0.0;          // the noise std the prior's weight uses
+  double sigma_ = 0.0;        // the noise std the prior's weight used at the kept start
+  long m_ = 0;                // outputs fitted
+  double floor_sigma_ = 0.0;  // the floor of the prior weight's noise std
+  int starts_ = 1, start_iter_ = 5;
+  double spread_ = 0.25;
   std::vector<double> keep_t_;  // the times of the samples fitted
   bool open_ = false;           // loop: open
   double window_s_ = 0.0;
@@ -824,6 +1134,7 @@ class Didim : public exid::Estimator {
   int dropped_ = 0;  // samples left out (measurement_delay_max_s)
   mutable int rejected_bound_ = 0;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
+  std::vector<StartParam> sp_;  // the parameters the starts move (startParams)
   VectorXd y_;
 };
 

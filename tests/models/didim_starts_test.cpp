@@ -1,0 +1,147 @@
+// `didim`'s starts: the model's nonlinear parameters (here the friction's tanh widths) started
+// on either side of the plant's. Where least squares at the model's widths gives a robot the loop
+// cannot simulate, the other starts (x1/2, x2) reach the plant's widths within their std and say
+// "converged"; a first start that converges is kept; details.starts and best_start say what each
+// start gave, and a warning names the start it kept.
+#include <fmt/format.h>
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <filesystem>
+#include <random>
+
+#include "closed_loop_test_util.hpp"
+#include "exid/error.hpp"
+#include "exid/json.hpp"
+#include "exid_cli.hpp"
+#include "model_test_util.hpp"
+
+namespace {
+
+namespace fs = std::filesystem;
+
+using cltest::Loop;
+
+Loop setup(double duration) {
+  Loop s;
+  s.robot = mtest::robot("puma560");
+  const exid::Samples ref = cltest::reference(s.robot->dof(), duration);
+  s.data = mtest::simulate(
+      s.robot,
+      "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
+      "coulomb_velocity_scale: 0.05}",
+      7, &ref);
+  const fs::path dir = exid_cli::freshTempDir("exid_didim_starts_", "ref");
+  cltest::writeReference(ref, dir / "reference.csv");
+  s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
+                         cltest::gains(s.data.meta));
+  return s;
+}
+
+exid::Dataset noisyTorques(const exid::Dataset& clean, double tau_noise, std::uint64_t seed) {
+  exid::Dataset d = clean;
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> nd(0.0, 1.0);
+  for (int k = 0; k < d.size(); ++k)
+    for (int j = 0; j < d.dof(); ++j) d.tau(k, j) += tau_noise * nd(rng);
+  return d;
+}
+
+std::shared_ptr<exid::ObservationModel> widthsAt(const Loop& s, double width) {
+  return mtest::model("differential",
+                      fmt::format("{{offset: true, coulomb_smoothing_rad_s: [{}]}}", width),
+                      s.robot);
+}
+
+std::string startsSummary(const exid::Estimate& e) {
+  std::string out;
+  const exid::Json& st = *e.details.find("starts");
+  for (std::size_t i = 0; i < st.size(); ++i) {
+    const exid::Json& o = st.at(i);
+    if (o.find("error"))
+      out += fmt::format("  start {}: from {}: not simulated\n", i + 1, o.find("from")->asString());
+    else
+      out += fmt::format("  start {}: from {} to {}: objective {:.8g}, {} iterations, {}\n", i + 1,
+                         o.find("from")->asString(), o.find("to")->asString(),
+                         o.find("objective")->asDouble(), o.find("iterations")->dump(),
+                         o.find("first_order")->asBool() ? "first order" : "not first order");
+  }
+  return out;
+}
+
+// The plant's tanh widths are 0.05 rad/s; the model's start at 0.025 (x1/2) or 0.15 (x3): least
+// squares on the rows there gives a robot the loop cannot simulate (its mass matrix is not
+// positive definite), so one start fails; the default starts go on from x2 (or x1/2) of the
+// first and reach the plant's widths within their std, "converged".
+TEST(DidimStarts, WidthsFromEitherSideOfThePlantAreRecoveredWhereOneStartCannotBeSimulated) {
+  const Loop s = setup(6.0);
+  const exid::Dataset d = noisyTorques(s.data, 0.1, 11);
+  for (double f : {0.5, 3.0}) {
+    auto model = widthsAt(s, 0.05 * f);
+    auto one = exid_test::create<exid::Estimator>("didim", "{" + s.params + ", starts: 1}");
+    EXPECT_THROW(one->estimate(*model, d, nullptr, mtest::context()), exid::Error) << f;
+    auto didim = exid_test::create<exid::Estimator>("didim", "{" + s.params + "}");
+    const exid::Estimate e = didim->estimate(*model, d, nullptr, mtest::context());
+    ASSERT_EQ(e.nonlinear.size(), 6);
+    double zmax = 0;
+    for (Eigen::Index k = 0; k < e.nonlinear.size(); ++k)
+      zmax = std::max(zmax, std::abs(e.nonlinear[k] - 0.05) / e.nonlinear_std[k]);
+    const int best = static_cast<int>(e.details.find("best_start")->asDouble());
+    std::printf(
+        "[didim starts] widths started x%g: best start %d, converged %s, widths within "
+        "%.2f std, %.1f s\n%s",
+        f, best, e.details.find("converged")->dump().c_str(), zmax,
+        e.details.find("wall_s")->asDouble(), startsSummary(e).c_str());
+    EXPECT_TRUE(e.details.find("converged")->asBool());
+    EXPECT_GT(best, 1);
+    EXPECT_LT(zmax, 2.5);
+    const exid::Json& first = e.details.find("starts")->at(0);
+    ASSERT_TRUE(first.find("error") != nullptr);
+    EXPECT_NE(first.find("error")->asString().find("mass matrix"), std::string::npos);
+  }
+}
+
+// From widths x2 of the plant's the first start converges: the other starts (x1/2 and x4 of
+// it) end no lower beyond rounding, so the estimate is the single start's.
+TEST(DidimStarts, AFirstStartThatConvergesIsKept) {
+  const Loop s = setup(6.0);
+  const exid::Dataset d = noisyTorques(s.data, 0.1, 12);
+  auto model = widthsAt(s, 0.1);
+  const exid::Estimate e1 =
+      exid_test::create<exid::Estimator>("didim", "{" + s.params + ", starts: 1}")
+          ->estimate(*model, d, nullptr, mtest::context());
+  const exid::Estimate e = exid_test::create<exid::Estimator>("didim", "{" + s.params + "}")
+                               ->estimate(*model, d, nullptr, mtest::context());
+  std::printf(
+      "[didim starts] widths started x2: best start %s, converged %s, %.1f s (one "
+      "start: %.1f s)\n%s",
+      e.details.find("best_start")->dump().c_str(), e.details.find("converged")->dump().c_str(),
+      e.details.find("wall_s")->asDouble(), e1.details.find("wall_s")->asDouble(),
+      startsSummary(e).c_str());
+  EXPECT_TRUE(e1.details.find("converged")->asBool());
+  EXPECT_TRUE(e.details.find("converged")->asBool());
+  EXPECT_EQ(e.details.find("best_start")->asDouble(), 1.0);
+  EXPECT_EQ(e.details.find("starts")->size(), 3u);
+  EXPECT_EQ((e.value - e1.value).norm(), 0.0);
+  EXPECT_EQ((e.nonlinear - e1.nonlinear).norm(), 0.0);
+}
+
+// Stopped early, the warning says which start it kept and where it stopped.
+TEST(DidimStarts, ANotConvergedWarningNamesTheStart) {
+  const Loop s = setup(6.0);
+  const exid::Dataset d = noisyTorques(s.data, 0.1, 11);
+  auto model = widthsAt(s, 0.15);
+  const exid::Estimate e =
+      exid_test::create<exid::Estimator>("didim", "{" + s.params + ", max_iterations: 1}")
+          ->estimate(*model, d, nullptr, mtest::context());
+  EXPECT_FALSE(e.details.find("converged")->asBool());
+  const std::string w = e.details.find("warnings")->at(0).asString();
+  std::printf("[didim starts] %s\n", w.c_str());
+  const int best = static_cast<int>(e.details.find("best_start")->asDouble());
+  EXPECT_NE(w.find(fmt::format("(start {} of 3,", best)), std::string::npos) << w;
+  EXPECT_NE(w.find("the model's nonlinear parameters x"), std::string::npos) << w;
+  EXPECT_NE(w.find("with rss "), std::string::npos) << w;
+  EXPECT_NE(w.find("gradient norm"), std::string::npos) << w;
+}
+
+}  // namespace
