@@ -528,8 +528,12 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
       Json e = Json::object();
       e["delay_samples"] = numOrNull(P.all.edge ? NAN : P.all.d);
       e["white_std_samples"] = numOrNull(P.all.std_white);
+      // (halves, the short recording's fallback: their own data hold half as much, so a half
+      // votes while its white std is within twice the agreement tolerance)
+      const double informative_below = count == 2 ? 2 * tol_d : tol_d;
       const bool informative = std::isfinite(P.all.d) && !P.all.edge &&
-                               std::isfinite(P.all.std_white) && P.all.std_white < tol_d;
+                               std::isfinite(P.all.std_white) &&
+                               P.all.std_white < informative_below;
       e["informative"] = informative;
       parts_json.push_back(e);
       if (informative) parts.push_back(P.all.d);
