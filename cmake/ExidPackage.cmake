@@ -20,41 +20,22 @@ if(TARGET exid_robots)
   set_target_properties(exid_robots PROPERTIES EXPORT_NAME robots)     # exid::robots
 endif()
 # The helpers each plugin kind shares, so that an out-of-tree plugin links them instead of
-# copying them: least-squares accumulation, signals and streaming (exid::estimators_common,
-# <exid/estimators/...>), model helpers ("model_common.hpp", exid::models_common), optimiser
-# limits, budgets, tracker, starts and L-BFGS ("optim_common.hpp", exid::optimizers_common),
-# trajectory helpers ("traj_common.hpp", exid::trajectories_common), the criteria's spectrum and
-# SpectralCriterion ("spectrum.hpp", exid::criteria_common).
-if(TARGET exid_estimators_common)
-  list(APPEND EXID_EXPORTED_TARGETS exid_estimators_common)
-  set_target_properties(exid_estimators_common PROPERTIES EXPORT_NAME estimators_common)
-  install(DIRECTORY ${PROJECT_SOURCE_DIR}/estimators/common/include/exid/estimators
-          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid FILES_MATCHING PATTERN "*.hpp")
-endif()
-if(TARGET exid_models_common)
-  list(APPEND EXID_EXPORTED_TARGETS exid_models_common)
-  set_target_properties(exid_models_common PROPERTIES EXPORT_NAME models_common)
-  install(FILES ${PROJECT_SOURCE_DIR}/models/common/model_common.hpp
-          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/models)
-endif()
-if(TARGET exid_optim_common)
-  list(APPEND EXID_EXPORTED_TARGETS exid_optim_common)
-  set_target_properties(exid_optim_common PROPERTIES EXPORT_NAME optimizers_common)
-  install(FILES ${PROJECT_SOURCE_DIR}/optimizers/common/optim_common.hpp
-          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/optimizers)
-endif()
-if(TARGET exid_trajectory_common)
-  list(APPEND EXID_EXPORTED_TARGETS exid_trajectory_common)
-  set_target_properties(exid_trajectory_common PROPERTIES EXPORT_NAME trajectories_common)
-  install(FILES ${PROJECT_SOURCE_DIR}/trajectories/common/traj_common.hpp
-          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/trajectories)
-endif()
-if(TARGET exid_criteria_common)
-  list(APPEND EXID_EXPORTED_TARGETS exid_criteria_common)
-  set_target_properties(exid_criteria_common PROPERTIES EXPORT_NAME criteria_common)
-  install(FILES ${PROJECT_SOURCE_DIR}/criteria/common/spectrum.hpp
-          DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid/criteria)
-endif()
+# copying them, one convention for every kind: <kind>/common/include/exid/<kind>/*.hpp installed
+# as <exid/<kind>/...>, the library exid_<kind>_common exported as exid::<kind>_common.
+# Least-squares accumulation, signals and streaming (exid::estimators_common,
+# "exid/estimators/..."), model helpers (exid::models_common, "exid/models/model_common.hpp"),
+# optimiser limits, budgets, tracker, starts and L-BFGS (exid::optimizers_common,
+# "exid/optimizers/optim_common.hpp"), trajectory helpers (exid::trajectories_common,
+# "exid/trajectories/traj_common.hpp"), the criteria's spectrum and SpectralCriterion
+# (exid::criteria_common, "exid/criteria/spectrum.hpp").
+foreach(kind estimators models optimizers trajectories criteria)
+  if(TARGET exid_${kind}_common)
+    list(APPEND EXID_EXPORTED_TARGETS exid_${kind}_common)
+    set_target_properties(exid_${kind}_common PROPERTIES EXPORT_NAME ${kind}_common)
+    install(DIRECTORY ${PROJECT_SOURCE_DIR}/${kind}/common/include/exid/${kind}
+            DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid FILES_MATCHING PATTERN "*.hpp")
+  endif()
+endforeach()
 install(TARGETS ${EXID_EXPORTED_TARGETS} EXPORT exidTargets
         LIBRARY DESTINATION ${CMAKE_INSTALL_LIBDIR}
         ARCHIVE DESTINATION ${CMAKE_INSTALL_LIBDIR}

@@ -3,8 +3,8 @@
 // v_min v_min^T / lambda_min) (simple extreme eigenvalues assumed).
 #include <cmath>
 
+#include "exid/criteria/spectrum.hpp"
 #include "exid/interfaces.hpp"
-#include "spectrum.hpp"
 
 namespace {
 

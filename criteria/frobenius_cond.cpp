@@ -2,8 +2,8 @@
 // dJ/dM = (J / 2) (I / tr M - M^-2 / tr M^-1).
 #include <cmath>
 
+#include "exid/criteria/spectrum.hpp"
 #include "exid/interfaces.hpp"
-#include "spectrum.hpp"
 
 namespace {
 

@@ -1,8 +1,8 @@
 // Criterion `log_det`: D-optimality, J = -log det M. dJ/dM = -M^-1.
 #include <cmath>
 
+#include "exid/criteria/spectrum.hpp"
 #include "exid/interfaces.hpp"
-#include "spectrum.hpp"
 
 namespace {
 

@@ -1,8 +1,8 @@
 // Criterion `min_sv`: 1 / sigma_min(W) = lambda_min(M)^(-1/2). dJ/dM = -J^3/2 v_min v_min^T.
 #include <cmath>
 
+#include "exid/criteria/spectrum.hpp"
 #include "exid/interfaces.hpp"
-#include "spectrum.hpp"
 
 namespace {
 

@@ -5,7 +5,7 @@
 // FULL columns (the 10 standard parameters of every body); the framework finds the base
 // parameters (ObservationModel::bind) and derives the base-column forms. Shows: fullNames /
 // fullNominal, fullRows, fullDesign, fullDesignVjp, ModelSpecs (per-sample rows, required
-// signals) and the installed model helpers (exid::models_common, "model_common.hpp").
+// signals) and the installed model helpers (exid::models_common, "exid/models/model_common.hpp").
 // To make it yours: change the rows and their columns (drive or friction columns:
 // exid::actuatorRegressor in exid/drive.hpp, as the model `differential` does), keep
 // fullDesignVjp exact (the excitation design's gradient is built from it) and declare in specs()
@@ -18,7 +18,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
-#include "model_common.hpp"
+#include "exid/models/model_common.hpp"
 
 namespace {
 

@@ -5,8 +5,8 @@
 // candidates are discarded before the criterion is evaluated, so only feasible points are kept
 // (from an infeasible start the least violation is sought first). No gradient is used.
 // Shows: the ExcitationProblem interface (initial, bounds, value, constraints) and the installed
-// optimiser helpers (exid::optimizers_common, "optim_common.hpp"): the standard budget
-// parameters, Limits (g(z)), Tracker (best feasible point, history, budgets, deadline,
+// optimiser helpers (exid::optimizers_common, "exid/optimizers/optim_common.hpp"): the standard
+// budget parameters, Limits (g(z)), Tracker (best feasible point, history, budgets, deadline,
 // cancellation) and a proper OptimizerResult with its StopReason.
 // To make it yours: change how a candidate is drawn and accepted in minimize().
 #include <fmt/format.h>
@@ -19,7 +19,7 @@
 
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
-#include "optim_common.hpp"
+#include "exid/optimizers/optim_common.hpp"
 
 namespace {
 

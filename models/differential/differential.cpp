@@ -37,8 +37,8 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/models/model_common.hpp"
 #include "exid/payload.hpp"
-#include "model_common.hpp"
 
 namespace {
 

@@ -20,7 +20,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
-#include "model_common.hpp"
+#include "exid/models/model_common.hpp"
 
 namespace {
 

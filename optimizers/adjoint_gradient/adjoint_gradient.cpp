@@ -33,7 +33,7 @@
 #include <cmath>
 
 #include "exid/error.hpp"
-#include "optim_common.hpp"
+#include "exid/optimizers/optim_common.hpp"
 
 namespace {
 

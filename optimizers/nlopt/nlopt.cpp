@@ -17,7 +17,7 @@
 #include <random>
 
 #include "exid/error.hpp"
-#include "optim_common.hpp"
+#include "exid/optimizers/optim_common.hpp"
 
 namespace {
 

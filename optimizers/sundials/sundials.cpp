@@ -46,7 +46,7 @@
 
 #include "exid/error.hpp"
 #include "exid/gradient_check.hpp"
-#include "optim_common.hpp"
+#include "exid/optimizers/optim_common.hpp"
 
 namespace {
 

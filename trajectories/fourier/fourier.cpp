@@ -15,7 +15,7 @@
 #include <random>
 
 #include "exid/error.hpp"
-#include "traj_common.hpp"
+#include "exid/trajectories/traj_common.hpp"
 
 namespace {
 

@@ -13,7 +13,7 @@
 
 #include "exid/error.hpp"
 #include "exid/io.hpp"
-#include "traj_common.hpp"
+#include "exid/trajectories/traj_common.hpp"
 
 namespace {
 

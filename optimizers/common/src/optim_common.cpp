@@ -1,4 +1,4 @@
-#include "optim_common.hpp"
+#include "exid/optimizers/optim_common.hpp"
 
 #include <fmt/format.h>
 #include <time.h>

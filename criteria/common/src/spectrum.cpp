@@ -1,4 +1,4 @@
-#include "spectrum.hpp"
+#include "exid/criteria/spectrum.hpp"
 
 #include <fmt/format.h>
 

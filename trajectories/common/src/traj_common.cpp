@@ -1,4 +1,4 @@
-#include "traj_common.hpp"
+#include "exid/trajectories/traj_common.hpp"
 
 #include <fmt/format.h>
 
