@@ -252,11 +252,11 @@ struct Tally {
   }
 };
 
-}  // namespace
-
-TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
+/// The sweep from one seed. strict: every figure asserted (the seed the docs' table is from);
+/// otherwise the false alarms and the verdicts' stability only, the found faults printed.
+void sweep(std::uint64_t seed, bool strict) {
   constexpr int kCases = 200;
-  std::mt19937_64 rng(20261127);
+  std::mt19937_64 rng(seed);
   // delay: on recordings of 6 s and more / shorter (where a short recording's halves vote while
   // their own white std is within twice the agreement tolerance)
   Tally clean, flip_one, flip_all, delay, delay_long, frozen, dups, rest, stable;
@@ -345,7 +345,7 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
           D.find("delay_samples")->isNumber() ? D.find("delay_samples")->asDouble() : NAN;
       const bool ok = all.find(" lags ") != std::string::npos && std::abs(est - s) < 1.0;
       // (the estimate is right whether or not the recording can confirm it)
-      EXPECT_LT(std::abs(est - s), 1.0) << describe(c);
+      if (strict) EXPECT_LT(std::abs(est - s), 1.0) << describe(c);
       (c.duration_s >= 6 ? delay_long : delay)
           .add(!ok, describe(c) +
                         fmt::format(" delay {} samples, estimate {:.2f}: {}", s, est, D.dump()));
@@ -395,6 +395,8 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
       stable.cases - stable.alarms, stable.cases);
   EXPECT_EQ(clean.cases, kCases);
   EXPECT_EQ(clean.alarms, 0) << clean.text();
+  EXPECT_EQ(stable.alarms, 0) << stable.text();
+  if (!strict) return;
   EXPECT_GE(flip_one.cases, 30);
   EXPECT_EQ(flip_one.alarms, 0) << flip_one.text();
   EXPECT_GE(flip_all.cases, 30);
@@ -408,8 +410,21 @@ TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
   EXPECT_EQ(frozen.alarms, 0) << frozen.text();
   EXPECT_EQ(dups.alarms, 0) << dups.text();
   EXPECT_EQ(stable.cases, kCases / 5);
-  EXPECT_EQ(stable.alarms, 0) << stable.text();
   EXPECT_GE(rest.cases, 20);
   EXPECT_EQ(rest.alarms, 0) << rest.text();
   fs::remove_all(tmpDir());
+}
+
+}  // namespace
+
+TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) { sweep(20261127, true); }
+
+// Two more seeds, 400 other clean recordings: no false alarm, and the same verdicts one sample
+// shorter (seed 99 held a false "the torque leads by 7.39 samples" on a short recording with
+// derived velocities after a standstill, before the delay left out the samples within the
+// Savitzky-Golay half-width of the motion's starts and stops). The planted faults they find are
+// printed (docs/real_data.md).
+TEST(InspectSweep, NoFalseAlarmOnOtherSeeds) {
+  sweep(7, false);
+  sweep(99, false);
 }

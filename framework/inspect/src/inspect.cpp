@@ -718,7 +718,26 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     in.moving = &moving;
     in.dt = dt;
     const std::vector<char> usable = inspect_torque::signCheck(in, &jrows, &W);
-    inspect_torque::delayCheck(in, usable, J["delay"], &W);
+    // The delay from the samples whose derived q-dot and q-ddot come from a centred fit: with
+    // Savitzky-Golay derivatives, not within its half-width of an end of the recording (an
+    // off-centre fit there) nor of a start or stop of the motion (a window across it smooths the
+    // onset on both sides, which a lag can mimic).
+    std::vector<char> moving_delay = moving;
+    if (sig.sg_half_width > 0) {
+      const Index K = static_cast<Index>(moving.size()), h = sig.sg_half_width;
+      auto clear = [&](Index a, Index b) {
+        for (Index k = std::max<Index>(0, a); k < std::min(K, b); ++k)
+          moving_delay[static_cast<std::size_t>(k)] = 0;
+      };
+      clear(0, h);
+      clear(K - h, K);
+      for (Index k = 1; k < K; ++k)
+        if (moving[static_cast<std::size_t>(k)] != moving[static_cast<std::size_t>(k - 1)])
+          clear(k - h, k + h);
+    }
+    inspect_torque::Input in_delay = in;
+    in_delay.moving = &moving_delay;
+    inspect_torque::delayCheck(in_delay, usable, J["delay"], &W);
   }
   {
     Json joints = Json::array();
