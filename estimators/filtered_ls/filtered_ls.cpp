@@ -26,8 +26,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
-#include <exception>
 #include <deque>
+#include <exception>
 #include <map>
 #include <thread>
 
@@ -159,10 +159,10 @@ class FilteredLs : public exid::Estimator {
     bool trim_default = false;
     int R = 1;
     long rows_before = 0, slow_removed = 0, samples_after_decimation = 0;
-    std::string standstill;                      // the mode in force (auto resolved)
-    long rest_min = 0;                           // standstill: shortest run [samples]; 0: off
-    long rest_samples = 0, rest_removed = 0;     // trimmed samples at rest; rows removed (drop)
-    long rest_edge_samples = 0;                  // trimmed samples at a standstill's edges (drop)
+    std::string standstill;                   // the mode in force (auto resolved)
+    long rest_min = 0;                        // standstill: shortest run [samples]; 0: off
+    long rest_samples = 0, rest_removed = 0;  // trimmed samples at rest; rows removed (drop)
+    long rest_edge_samples = 0;               // trimmed samples at a standstill's edges (drop)
     std::string dec_note;
   };
 
@@ -197,9 +197,9 @@ class FilteredLs : public exid::Estimator {
                               ">= 0, found {:g}",
                               v));
     if (standstill_ != "filter") {  // (decided before per_sample is known: the same for any mode)
-      const double min_s = standstill_min_s_ > 0.0     ? standstill_min_s_
-                           : cutoff_ > 0.0 ? 2.0 / cutoff_
-                                           : 0.0;
+      const double min_s = standstill_min_s_ > 0.0 ? standstill_min_s_
+                           : cutoff_ > 0.0         ? 2.0 / cutoff_
+                                                   : 0.0;
       P->rest_min = std::max<long>(3, static_cast<long>(std::ceil(min_s * fs - 1e-9)));
     }
     if (P->filter_q) *sos = estimators::butterworthLowpass(order_, cutoff_, fs);
@@ -236,8 +236,8 @@ class FilteredLs : public exid::Estimator {
                 fmt::format("filtered_ls: min_speed needs a model with one row per sample and "
                             "equation (model '{}' is not)",
                             model.pluginName()));
-    P->standstill = standstill_ == "auto" ? (P->per_sample ? "drop" : "zero_velocity")
-                                          : standstill_;
+    P->standstill =
+        standstill_ == "auto" ? (P->per_sample ? "drop" : "zero_velocity") : standstill_;
     exid::check(standstill_ != "drop" || P->per_sample,
                 fmt::format("filtered_ls: standstill: drop needs a model with one row per sample "
                             "and equation (model '{}' is not); zero_velocity works with any",
@@ -286,7 +286,8 @@ class FilteredLs : public exid::Estimator {
     const long S = K - L + 1;  // window starts
     std::vector<char> ok(static_cast<std::size_t>(S), 1);
     for (Eigen::Index j = 0; j < raw.q.cols(); ++j) {
-      const double tol = standstill_tol_.empty() ? 0.0 : standstill_tol_[static_cast<std::size_t>(j)];
+      const double tol =
+          standstill_tol_.empty() ? 0.0 : standstill_tol_[static_cast<std::size_t>(j)];
       // sliding-window max and min (monotone deques of sample indices)
       std::deque<long> hi, lo;
       for (long k = 0; k < K; ++k) {
@@ -299,7 +300,8 @@ class FilteredLs : public exid::Estimator {
         if (s < 0) continue;
         while (hi.front() < s) hi.pop_front();
         while (lo.front() < s) lo.pop_front();
-        if (!(raw.q(hi.front(), j) - raw.q(lo.front(), j) <= tol)) ok[static_cast<std::size_t>(s)] = 0;
+        if (!(raw.q(hi.front(), j) - raw.q(lo.front(), j) <= tol))
+          ok[static_cast<std::size_t>(s)] = 0;
       }
     }
     // rest[k]: some window start in [k - L + 1, k] is ok
@@ -314,13 +316,17 @@ class FilteredLs : public exid::Estimator {
     if (P.standstill == "drop") {
       long last = -(L + 1);  // the last standstill sample seen going forward
       for (long k = 0; k < K; ++k) {
-        if (rest[static_cast<std::size_t>(k)] == 1) last = k;
-        else if (k - last <= L) rest[static_cast<std::size_t>(k)] = 2;
+        if (rest[static_cast<std::size_t>(k)] == 1)
+          last = k;
+        else if (k - last <= L)
+          rest[static_cast<std::size_t>(k)] = 2;
       }
       last = K + L + 1;
       for (long k = K - 1; k >= 0; --k) {
-        if (rest[static_cast<std::size_t>(k)] == 1) last = k;
-        else if (last - k <= L) rest[static_cast<std::size_t>(k)] = 2;
+        if (rest[static_cast<std::size_t>(k)] == 1)
+          last = k;
+        else if (last - k <= L)
+          rest[static_cast<std::size_t>(k)] = 2;
       }
     }
     return rest;
@@ -364,9 +370,9 @@ class FilteredLs : public exid::Estimator {
   /// a time (the model's rows of the whole chunk are never held), every column filtered at once,
   /// one sample in R kept (4b: less the slow ones) and accumulated.
   void chunkRows(const exid::ObservationModel& model, const Processed& P,
-                 const estimators::Sos& dsos, const exid::Dataset& f,
-                 const std::vector<char>& rest, long lo, long ca, long cb, bool keep_rows,
-                 const exid::RunContext& ctx, ChunkOut* o) const {
+                 const estimators::Sos& dsos, const exid::Dataset& f, const std::vector<char>& rest,
+                 long lo, long ca, long cb, bool keep_rows, const exid::RunContext& ctx,
+                 ChunkOut* o) const {
     for (long sidx = ca; sidx < cb; ++sidx) {
       o->rest += rest[static_cast<std::size_t>(sidx - lo)] == 1;
       o->rest_edge += rest[static_cast<std::size_t>(sidx - lo)] == 2;
@@ -687,8 +693,8 @@ class FilteredLs : public exid::Estimator {
       if (P.rest_min > 0) {
         const long Kt = K - 2 * trim;
         st["min_samples"] = Json(static_cast<long long>(P.rest_min));
-        st["tolerance"] = standstill_tol_.empty() ? Json("exact repetition")
-                                                  : Json(standstill_tol_);
+        st["tolerance"] =
+            standstill_tol_.empty() ? Json("exact repetition") : Json(standstill_tol_);
         st["samples"] = Json(static_cast<long long>(P.rest_samples));
         st["percent"] = 100.0 * static_cast<double>(P.rest_samples) /
                         static_cast<double>(std::max<long>(1, Kt));

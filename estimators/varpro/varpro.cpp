@@ -808,8 +808,8 @@ class VarPro : public exid::Estimator {
       G["groups"] = groups;
       G["evaluations"] = grid.evaluations;
       G["sample_stride"] = static_cast<long long>(grid_stride_);
-      G["axis_multipliers_around_the_best_end"] = exid::Json(std::vector<double>(
-          std::begin(kAxisMultipliers), std::end(kAxisMultipliers)));
+      G["axis_multipliers_around_the_best_end"] =
+          exid::Json(std::vector<double>(std::begin(kAxisMultipliers), std::end(kAxisMultipliers)));
       G["sweeps"] = grid.sweeps;
       G["sweeps_around_the_best_end"] = grid.checks;
       G["singular_points"] = grid.singular;
@@ -898,11 +898,26 @@ class VarPro : public exid::Estimator {
   static constexpr int kGridSamples = 4000;
   static constexpr int kRounds = 6;  // checks around the best end, while one finds a lower point
   // x1/32 .. x32 in steps of sqrt(2), x1 left out (the centre)
-  static constexpr double kAxisMultipliers[] = {
-      0.03125, 0.04419417382415922, 0.0625, 0.08838834764831845, 0.125, 0.1767766952966369,
-      0.25, 0.3535533905932738, 0.5, 0.7071067811865476, 1.414213562373095, 2.0,
-      2.82842712474619, 4.0, 5.656854249492381, 8.0, 11.31370849898476, 16.0,
-      22.62741699796952, 32.0};
+  static constexpr double kAxisMultipliers[] = {0.03125,
+                                                0.04419417382415922,
+                                                0.0625,
+                                                0.08838834764831845,
+                                                0.125,
+                                                0.1767766952966369,
+                                                0.25,
+                                                0.3535533905932738,
+                                                0.5,
+                                                0.7071067811865476,
+                                                1.414213562373095,
+                                                2.0,
+                                                2.82842712474619,
+                                                4.0,
+                                                5.656854249492381,
+                                                8.0,
+                                                11.31370849898476,
+                                                16.0,
+                                                22.62741699796952,
+                                                32.0};
   double gtol_;
   int chunk_;
   RowAccumulator::Method method_;

@@ -98,14 +98,15 @@ TEST(FilteredLsStandstill, RowsAtAStandstillAreDroppedCountedAndTheFitIsTheTruth
   EXPECT_NEAR(static_cast<double>(removed), static_cast<double>(tick - trim + 200) / R, 1.0);
   EXPECT_EQ(e.rows, 2 * ((d.size() - 2 * trim + R - 1) / R - removed));
   // noise-free data: as close to the parameters as the motion alone gives them
-  const exid::Estimate only = make("{cutoff_hz: 10}")->estimate(
-      *m, exid::sliceDataset(d, 3000, d.size()), nullptr, ctx);
+  const exid::Estimate only =
+      make("{cutoff_hz: 10}")->estimate(*m, exid::sliceDataset(d, 3000, d.size()), nullptr, ctx);
   const double err = maxRelErr(e.value, m->baseNominal()),
                err_only = maxRelErr(only.value, m->baseNominal());
   EXPECT_LE(err, 1.5 * err_only);
   // As filtered, the standstill's last samples carry the filter's early start of the motion
   // with its Coulomb sign: the fit is off by far more.
-  const exid::Estimate f = make("{cutoff_hz: 10, standstill: filter}")->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate f =
+      make("{cutoff_hz: 10, standstill: filter}")->estimate(*m, d, nullptr, ctx);
   EXPECT_EQ(f.details.find("standstill")->find("samples"), nullptr);
   const double err_filter = maxRelErr(f.value, m->baseNominal());
   EXPECT_GT(err_filter, 10 * err) << err;
@@ -140,7 +141,8 @@ TEST(FilteredLsStandstill, NothingStandsStillWhereTheRobotMovesOrOnlySomeJointsS
   const exid::Dataset one = restThenMotion(*m, 2, 1.0, 5.0, 1e-3, 1e-6, 0.0, {1});
   const exid::Estimate c =
       make("{cutoff_hz: 10, standstill: zero_velocity}")->estimate(*m, one, nullptr, ctx);
-  EXPECT_EQ(standstillSamples(c), firstTick(one) - c.details.find("trimmed_samples_each_end")->asInt());
+  EXPECT_EQ(standstillSamples(c),
+            firstTick(one) - c.details.find("trimmed_samples_each_end")->asInt());
   EXPECT_LT(firstTick(one), 1400);
 }
 

@@ -1,8 +1,8 @@
 // Fuzz target: the STL mesh reader (binary and ASCII) of the collision model
-// (framework/collision/src/collision.cpp), through exid::CollisionModel: the input is written as an STL file
-// of this process's own temporary folder and becomes an obstacle beside a one-link robot whose
-// link is a sphere; then the distances and their derivatives at two configurations. Every input
-// must end in a result or an exid::Error: never a crash, a sanitizer report or a hang.
+// (framework/collision/src/collision.cpp), through exid::CollisionModel: the input is written as an
+// STL file of this process's own temporary folder and becomes an obstacle beside a one-link robot
+// whose link is a sphere; then the distances and their derivatives at two configurations. Every
+// input must end in a result or an exid::Error: never a crash, a sanitizer report or a hang.
 #include <unistd.h>
 
 #include <Eigen/Core>

@@ -188,8 +188,7 @@ TEST(VarproConvergence, ALocalMinimumOfOneStartIsEscapedByTheStarts) {
     const exid::Estimate one2 = exid_test::create<exid::Estimator>("varpro", "{starts: 1}")
                                     ->estimate(*m2, P.d, nullptr, mtest::context());
     const double off = etaError(one2, trueEta(*m2, P.T));
-    std::printf("[varpro] one start, x2 x2: eta off by %.3g, converged %d\n", off,
-                converged(one2));
+    std::printf("[varpro] one start, x2 x2: eta off by %.3g, converged %d\n", off, converged(one2));
   } catch (const exid::Error& e) {
     const std::string w = e.what();
     std::printf("[varpro] one start, x2 x2: %s\n", w.c_str());

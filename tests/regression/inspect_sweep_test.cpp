@@ -417,7 +417,9 @@ void sweep(std::uint64_t seed, bool strict) {
 
 }  // namespace
 
-TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) { sweep(20261127, true); }
+TEST(InspectSweep, NoFalseAlarmOnCleanRecordingsAndEveryPlantedFaultFound) {
+  sweep(20261127, true);
+}
 
 // Two more seeds, 400 other clean recordings: no false alarm, and the same verdicts one sample
 // shorter (seed 99 held a false "the torque leads by 7.39 samples" on a short recording with
