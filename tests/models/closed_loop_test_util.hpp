@@ -14,6 +14,8 @@
 #include "exid/data.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
+#include "exid_cli.hpp"
+#include "model_test_util.hpp"
 
 namespace cltest {
 
@@ -75,6 +77,26 @@ inline std::string gains(const exid::Json& meta) {
   };
   return fmt::format("kp_Nm_per_rad: {}, kd_Nm_s_per_rad: {}", list(*g.find("kp_Nm_per_rad")),
                      list(*g.find("kd_Nm_s_per_rad")));
+}
+
+/// The PUMA 560 tracking the reference of `duration` s under PD and feed-forward (kp 400, kd 40,
+/// 200 Hz, tanh Coulomb of 0.05 rad/s, seed 7), the reference written into a fresh folder named
+/// from `tmp_prefix`: robot, data and the estimator's loop parameters (params); the model and
+/// the truth are the test's.
+inline Loop pumaTracking(double duration, const std::string& tmp_prefix) {
+  Loop s;
+  s.robot = mtest::robot("puma560");
+  const exid::Samples ref = reference(s.robot->dof(), duration);
+  s.data = mtest::simulate(
+      s.robot,
+      "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
+      "coulomb_velocity_scale: 0.05}",
+      7, &ref);
+  const std::filesystem::path dir = exid_cli::freshTempDir(tmp_prefix, "ref");
+  writeReference(ref, dir / "reference.csv");
+  s.params =
+      fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(), gains(s.data.meta));
+  return s;
 }
 
 }  // namespace cltest

@@ -22,21 +22,7 @@ namespace fs = std::filesystem;
 
 using cltest::Loop;
 
-Loop setup(double duration) {
-  Loop s;
-  s.robot = mtest::robot("puma560");
-  const exid::Samples ref = cltest::reference(s.robot->dof(), duration);
-  s.data = mtest::simulate(
-      s.robot,
-      "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
-      "coulomb_velocity_scale: 0.05}",
-      7, &ref);
-  const fs::path dir = exid_cli::freshTempDir("exid_didim_starts_", "ref");
-  cltest::writeReference(ref, dir / "reference.csv");
-  s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
-                         cltest::gains(s.data.meta));
-  return s;
-}
+Loop setup(double duration) { return cltest::pumaTracking(duration, "exid_didim_starts_"); }
 
 exid::Dataset noisyTorques(const exid::Dataset& clean, double tau_noise, std::uint64_t seed) {
   exid::Dataset d = clean;

@@ -23,21 +23,10 @@ namespace fs = std::filesystem;
 using cltest::Loop;
 
 Loop setup(double duration) {
-  Loop s;
-  s.robot = mtest::robot("puma560");
-  const exid::Samples ref = cltest::reference(s.robot->dof(), duration);
-  s.data = mtest::simulate(
-      s.robot,
-      "{controller: pd_feedforward, kp: 400, kd: 40, sample_period_s: 0.005, coulomb: tanh, "
-      "coulomb_velocity_scale: 0.05}",
-      7, &ref);
-  const fs::path dir = exid_cli::freshTempDir("exid_didim_", "ref");
-  cltest::writeReference(ref, dir / "reference.csv");
+  Loop s = cltest::pumaTracking(duration, "exid_didim_");
   s.model =
       mtest::model("differential", "{offset: true, coulomb_smoothing_rad_s: [0.05]}", s.robot);
   s.truth = s.model->baseNominal();
-  s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
-                         cltest::gains(s.data.meta));
   return s;
 }
 

@@ -32,25 +32,7 @@ std::string model() { return fmt::format("{{offset: true, drive_gains: true, {}}
 exid::Dataset twoParts(const std::shared_ptr<const exid::RobotModel>& r, double noise_rel,
                        std::uint64_t seed) {
   const std::string gains = fmt::format("[{}]", fmt::join(kGain, ", "));
-  exid::Dataset a = mtest::simulate(
-      r, fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}}}", gains),
-      3);
-  const exid::Dataset b = mtest::simulate(
-      r,
-      fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}, {}}}", gains,
-                  kPayload),
-      4);
-  const int Ka = a.size(), Kb = b.size();
-  const double from = a.t[Ka - 1] + 0.005;
-  Eigen::VectorXd t(Ka + Kb);
-  t << a.t, b.t.array() - b.t[0] + from;
-  a.t = t;
-  for (auto [x, y] : {std::pair{&a.q, &b.q}, {&a.qd, &b.qd}, {&a.qdd, &b.qdd}, {&a.tau, &b.tau}}) {
-    Eigen::MatrixXd s(Ka + Kb, x->cols());
-    s << *x, *y;
-    *x = s;
-  }
-  a.meta["payload_part_from_t_s"] = from;
+  exid::Dataset a = mtest::gainedTwoParts(r, gains, kPayload);
   // noise: noise_rel times each joint's rms recorded torque
   std::mt19937_64 rng(seed);
   std::normal_distribution<double> nd(0.0, 1.0);

@@ -163,4 +163,32 @@ inline exid::Samples randomSamples(const exid::RobotModel& r, int K, double dt,
   return s;
 }
 
+/// Part one without the payload, part two with it, both simulated with the recorded torque
+/// through `gains` (recorded_torque_gain, a YAML list), 4 s each at 200 Hz (seeds 3 and 4); the
+/// second part's time follows the first's and meta.payload_part_from_t_s says where it starts
+/// (as the csv experiment's payload_file does).
+inline exid::Dataset gainedTwoParts(const std::shared_ptr<const exid::RobotModel>& r,
+                                    const std::string& gains, const std::string& payload) {
+  exid::Dataset a = simulate(
+      r, fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}}}", gains),
+      3);
+  const exid::Dataset b = simulate(
+      r,
+      fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}, {}}}", gains,
+                  payload),
+      4);
+  const int Ka = a.size(), Kb = b.size();
+  const double from = a.t[Ka - 1] + 0.005;
+  Eigen::VectorXd t(Ka + Kb);
+  t << a.t, b.t.array() - b.t[0] + from;
+  a.t = t;
+  for (auto [x, y] : {std::pair{&a.q, &b.q}, {&a.qd, &b.qd}, {&a.qdd, &b.qdd}, {&a.tau, &b.tau}}) {
+    Eigen::MatrixXd m(Ka + Kb, x->cols());
+    m << *x, *y;
+    *x = m;
+  }
+  a.meta["payload_part_from_t_s"] = from;
+  return a;
+}
+
 }  // namespace mtest

@@ -116,25 +116,7 @@ Spread gainsSpread(const std::string& robot, int n) {
   auto m = mtest::model("differential",
                         fmt::format("{{offset: true, drive_gains: true, {}}}", payload), r);
   const std::string gains = fmt::format("[{}]", fmt::join(gain.begin(), gain.begin() + dof, ", "));
-  exid::Dataset a = mtest::simulate(
-      r, fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}}}", gains),
-      3);
-  const exid::Dataset b = mtest::simulate(
-      r,
-      fmt::format("{{duration_s: 4, sample_period_s: 0.005, recorded_torque_gain: {}, {}}}", gains,
-                  payload),
-      4);
-  const int Ka = a.size(), Kb = b.size();
-  const double from = a.t[Ka - 1] + 0.005;
-  Eigen::VectorXd t(Ka + Kb);
-  t << a.t, b.t.array() - b.t[0] + from;
-  a.t = t;
-  for (auto [x, y] : {std::pair{&a.q, &b.q}, {&a.qd, &b.qd}, {&a.qdd, &b.qdd}, {&a.tau, &b.tau}}) {
-    Eigen::MatrixXd s(Ka + Kb, x->cols());
-    s << *x, *y;
-    *x = s;
-  }
-  a.meta["payload_part_from_t_s"] = from;
+  exid::Dataset a = mtest::gainedTwoParts(r, gains, payload);
   // the truth: dK_j = 1 / gain_j - 1, the rest the robot's nominal values
   Eigen::VectorXd full = m->fullNominal();
   const std::vector<std::string> fn = m->fullNames();
