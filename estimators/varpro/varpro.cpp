@@ -141,10 +141,10 @@ class VarPro : public exid::Estimator {
     // ranking of candidate starts, the runs on every sample.
     const exid::Dataset* gd = &data;
     exid::Dataset sub;
-    grid_stride_ = 1;
+    long stride = 1;
     if (!delay_ && model.specs().per_sample && data.size() > kGridSamples && starts_ > 1) {
-      grid_stride_ = (data.size() + kGridSamples - 1) / kGridSamples;
-      sub = strided(data, grid_stride_);
+      stride = (data.size() + kGridSamples - 1) / kGridSamples;
+      sub = strided(data, stride);
       gd = &sub;
     }
     auto onGrid = [&](const Eigen::VectorXd& lambda, const Eval& full) {
@@ -155,6 +155,7 @@ class VarPro : public exid::Estimator {
     };
     // ---- globalisation: a grid over each group's multiples, the linear part exact
     Grid grid = searchGrid(model, *gd, lambda0, onGrid(lambda0, at_study), ctx);
+    grid.sample_stride = stride;
     // ---- Levenberg-Marquardt from the study's values and from the grid's best point
     std::vector<Run> runs;
     runs.push_back(levenbergMarquardt(model, data, lambda0, at_study, "the study's values", ctx));
@@ -252,7 +253,8 @@ class VarPro : public exid::Estimator {
     std::vector<std::vector<int>> groups;
     std::vector<double> multipliers;
     int evaluations = 0, singular = 0, sweeps = 0;
-    int checks = 0;  // sweeps around the best end
+    int checks = 0;          // sweeps around the best end
+    long sample_stride = 1;  // points compared on every sample_stride-th sample
   };
 
   // "vs1 = 0.05 rad/s, eps1 = ..." (the delay in s)
@@ -807,7 +809,7 @@ class VarPro : public exid::Estimator {
       }
       G["groups"] = groups;
       G["evaluations"] = grid.evaluations;
-      G["sample_stride"] = static_cast<long long>(grid_stride_);
+      G["sample_stride"] = static_cast<long long>(grid.sample_stride);
       G["axis_multipliers_around_the_best_end"] =
           exid::Json(std::vector<double>(std::begin(kAxisMultipliers), std::end(kAxisMultipliers)));
       G["sweeps"] = grid.sweeps;
@@ -894,7 +896,6 @@ class VarPro : public exid::Estimator {
   int max_evals_;
   double xtol_, ftol_;
   int starts_;
-  mutable long grid_stride_ = 1;
   static constexpr int kGridSamples = 4000;
   static constexpr int kRounds = 6;  // checks around the best end, while one finds a lower point
   // x1/32 .. x32 in steps of sqrt(2), x1 left out (the centre)
