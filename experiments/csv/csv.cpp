@@ -306,14 +306,24 @@ class CsvExperiment : public exid::Experiment {
     static constexpr int kSaturationRun = 3;
 
     /// used: the used columns, the time column (when the file has one) the last of them.
+    /// qd_pos: the velocity columns (empty: none), qd_per_q: per joint the velocity column's
+    /// unit in position units per second (qd_scale / q_scale); seconds_per_time_unit: the time
+    /// column's unit, or period_s: the sample period without a time column.
     RecordingStats(std::vector<int> q_pos, std::vector<int> tau_pos, std::size_t used,
-                   bool has_time)
+                   bool has_time, std::vector<int> qd_pos = {}, std::vector<double> qd_per_q = {},
+                   double seconds_per_time_unit = 1.0, double period_s = 0.0)
         : pq_(std::move(q_pos)),
           ptau_(std::move(tau_pos)),
+          pqd_(std::move(qd_pos)),
+          qd_per_q_(std::move(qd_per_q)),
           prev_(used),
           compared_(has_time && used > 0 ? used - 1 : used),
+          has_time_(has_time),
+          time_unit_s_(seconds_per_time_unit),
+          period_s_(period_s),
           quantum_(pq_.size(), HUGE_VAL),
           step_(pq_.size(), 0.0),
+          run_travel_(pq_.size(), 0.0),
           sat_(ptau_.size()) {}
 
     /// The next row (values of the used columns) and its data row in the file (0-based).
@@ -330,9 +340,16 @@ class CsvExperiment : public exid::Experiment {
             before_ = step_;
             before_rows_ = step_rows_;
             run_dup_rows_.clear();
+            std::fill(run_travel_.begin(), run_travel_.end(), 0.0);
           }
           ++run_len_;
           if (dup) run_dup_rows_.push_back(row);
+          // the travel the recorded velocities give over the held rows (position units)
+          const double dt = has_time_ ? (v[compared_] - prev_[compared_]) * time_unit_s_
+                                      : period_s_;
+          if (pqd_.size() == pq_.size() && std::isfinite(dt) && dt > 0)
+            for (std::size_t j = 0; j < pq_.size(); ++j)
+              run_travel_[j] += v[pqd_[j]] * qd_per_q_[j] * dt;
         } else {
           std::vector<double> d(pq_.size());
           for (std::size_t j = 0; j < pq_.size(); ++j) {
@@ -369,6 +386,11 @@ class CsvExperiment : public exid::Experiment {
           moves = r.before[j] >= q3 && r.after[j] >= q3 &&
                   r.after[j] / static_cast<double>(r.length + 1) >=
                       kFrozenSpeedRatio * r.before[j] / static_cast<double>(r.before_rows);
+          // (at a turning point the step into the run is small: there the recorded velocity
+          // says whether the joint moves: a travel of kFrozenQuanta resolutions per held row,
+          // and a step of as much into or out of the run)
+          moves = moves || (!r.travel.empty() && std::max(r.before[j], r.after[j]) >= q3 &&
+                            std::abs(r.travel[j]) >= q3 * static_cast<double>(r.length));
         }
         const auto nd = static_cast<long long>(r.dup_rows.size());
         if (!moves) {
@@ -396,7 +418,8 @@ class CsvExperiment : public exid::Experiment {
       (*R)["frozen_rows"]["first_data_rows"] = frozen_at;
       (*R)["frozen_rows"]["definition"] =
           "rows that repeat every joint position (but not every other column) while the robot "
-          "moves: the speed out of the held run is at least half the speed into it";
+          "moves: the speed out of the held run is at least half the speed into it, or (at a "
+          "turning point) the recorded velocities travel 3 resolutions per held row";
       (*R)["held_at_rest"]["rows"] = rest_rows;
       (*R)["held_at_rest"]["runs"] = rest_runs;
       (*R)["held_at_rest"]["exact_repeats"] = rest_dups;
@@ -428,6 +451,7 @@ class CsvExperiment : public exid::Experiment {
       std::vector<double> resolution;     // per joint: the held or next value's resolution
       long long before_rows = 0;          // rows the step into the run took
       std::vector<int> dup_rows;          // the run's rows that repeat every compared column
+      std::vector<double> travel;  // per joint: the recorded velocities' travel over the run
     };
     struct Saturation {
       double lo = HUGE_VAL, hi = -HUGE_VAL;
@@ -482,6 +506,7 @@ class CsvExperiment : public exid::Experiment {
                                      localResolution(v[pq_[j]]));
         r.before_rows = before_rows_;
         r.dup_rows = std::move(run_dup_rows_);
+        if (pqd_.size() == pq_.size()) r.travel = run_travel_;
         runs_.push_back(std::move(r));
       } else {
         Run r;  // no step into it (the first rows): at rest
@@ -493,10 +518,13 @@ class CsvExperiment : public exid::Experiment {
       run_len_ = 0;
     }
 
-    std::vector<int> pq_, ptau_;
+    std::vector<int> pq_, ptau_, pqd_;
+    std::vector<double> qd_per_q_;
     std::vector<double> prev_;
     std::size_t compared_;  // the columns a duplicate repeats: every used one but the time
-    std::vector<double> quantum_, step_, before_;
+    bool has_time_;         // the time column is the last used one
+    double time_unit_s_, period_s_;
+    std::vector<double> quantum_, step_, before_, run_travel_;
     long long N_ = 0, last_change_ = 0, step_rows_ = 0, before_rows_ = 0;
     long long run_len_ = 0;
     int run_first_row_ = 0;
@@ -568,7 +596,11 @@ class CsvExperiment : public exid::Experiment {
           protos_.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
           protos_.back()->select(select_[f]);
         }
-      stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size(), ct_);
+      std::vector<double> qd_per_q(qscale_.size());
+      for (std::size_t j = 0; j < qscale_.size() && j < qdscale_.size(); ++j)
+        qd_per_q[j] = qdscale_[j] / qscale_[j];
+      stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size(), ct_, pqd_, qd_per_q,
+                                                tfactor_, dt_);
       collecting_ = !stats_done_;
       if (collecting_) collected_ = exid::Dataset();
       taken_ = 0;

@@ -333,6 +333,54 @@ TEST(Inspect, DuplicateAndFrozenRowsAndASaturatedTorqueColumnAreCounted) {
   EXPECT_NE(w.find("torque column 'tau3' sits at its minimum or maximum"), std::string::npos) << w;
 }
 
+// A row written twice just after a turning point, where every joint's step into it is below
+// three encoder resolutions: the recorded velocities say the robot moves there, so it is a
+// duplicate; without velocity columns the positions alone cannot tell it from a brief rest.
+TEST(Inspect, ADuplicateAtATurningPointIsToldFromRestByTheRecordedVelocity) {
+  auto r = puma();
+  constexpr double dt = 0.01, T = 2.0, res = 1e-4;
+  const int K = 400, turn = 100;  // every joint at its lowest point at row 100 (t = 1 s)
+  const double w = 2 * M_PI / T;
+  exid::CsvTable tab;
+  for (const char* g : {"q", "qd", "tau"})
+    for (int j = 1; j <= 6; ++j) tab.columns.push_back(g + std::to_string(j));
+  tab.data.resize(K, 18);
+  std::mt19937_64 rng(3);
+  std::normal_distribution<double> N(0.0, 0.1);
+  // (the first 20 rows creep by one resolution per row: the encoders' step is seen)
+  constexpr int creep = 20;
+  for (int k = 0; k < K; ++k)
+    for (int j = 0; j < 6; ++j) {
+      const double A = 0.4 + 0.05 * j, ph = w * (std::max(k, creep) - turn) * dt;
+      tab.data(k, j) = std::round(-A * std::cos(ph) / res) * res + (creep - std::min(k, creep)) * res;
+      tab.data(k, 6 + j) = k < creep ? -res / dt : A * w * std::sin(ph);
+      tab.data(k, 12 + j) = N(rng);
+    }
+  // (the step into row 102 is below three resolutions on every joint)
+  for (int j = 0; j < 6; ++j)
+    ASSERT_LT(std::abs(tab.data(turn + 1, j) - tab.data(turn, j)), 3 * res) << j;
+  tab.data.row(turn + 2) = tab.data.row(turn + 1);  // data row 103 repeats row 102
+  const fs::path f = tmpDir() / "turning_dup.csv";
+  exid::writeCsvAtomic(f, tab);
+  {
+    const exid::Dataset b = readCsv(f, "sample_period_s: 0.01", r);
+    const exid::Json& rec = *b.meta.find("recording");
+    EXPECT_EQ(rec.find("duplicate_rows")->find("count")->asInt(), 1) << rec.dump(2);
+    EXPECT_EQ(rec.find("duplicate_rows")->find("data_rows")->at(0).asInt(), 103);
+    EXPECT_EQ(rec.find("held_at_rest")->find("rows")->asInt(), 0) << rec.dump(2);
+  }
+  {  // the same held row at a standstill (velocities zero): at rest, not a duplicate
+    exid::CsvTable rest = tab;
+    for (int j = 0; j < 6; ++j) rest.data.col(6 + j).setZero();
+    exid::writeCsvAtomic(f, rest);
+    const exid::Dataset b = readCsv(f, "sample_period_s: 0.01", r);
+    const exid::Json& rec = *b.meta.find("recording");
+    EXPECT_EQ(rec.find("duplicate_rows")->find("count")->asInt(), 0) << rec.dump(2);
+    EXPECT_EQ(rec.find("held_at_rest")->find("exact_repeats")->asInt(), 1) << rec.dump(2);
+  }
+  fs::remove(f);
+}
+
 TEST(Inspect, RateIsExactToTheStampsResolutionAndJitterAndGapsAreMeasured) {
   // 250 Hz stamps in ms, one stamp 1 ms late, one sample lost
   std::vector<double> t;

@@ -260,6 +260,9 @@ void sweep(std::uint64_t seed, bool strict) {
   // delay: on recordings of 6 s and more / shorter (where a short recording's halves vote while
   // their own white std is within twice the agreement tolerance)
   Tally clean, flip_one, flip_all, delay, delay_long, frozen, dups, rest, stable;
+  // planted delays neither warned about nor called "not checkable here" (said "none found")
+  Tally delay_denied;
+  int delay_uncheckable = 0, clean_none_found = 0, clean_uncheckable = 0;
   int other_warnings = 0, not_checkable = 0, joints_judged = 0;
   for (int i = 0; i < kCases; ++i) {
     const Case c = randomCase(rng, 1000 + static_cast<std::uint64_t>(i));
@@ -274,6 +277,11 @@ void sweep(std::uint64_t seed, bool strict) {
     }
     clean.add(!alarms.empty(), describe(c) + ": " + alarms +
                                    (alarms.empty() ? std::string() : J.find("joints")->dump()));
+    {
+      const std::string v = J.find("delay")->find("verdict")->asString();
+      clean_none_found += v == "none found";
+      clean_uncheckable += v.rfind("not checkable here", 0) == 0;
+    }
     const int n = rec.data.dof();
     for (int j = 0; j < n; ++j) {
       ++joints_judged;
@@ -344,6 +352,11 @@ void sweep(std::uint64_t seed, bool strict) {
       const double est =
           D.find("delay_samples")->isNumber() ? D.find("delay_samples")->asDouble() : NAN;
       const bool ok = all.find(" lags ") != std::string::npos && std::abs(est - s) < 1.0;
+      const std::string verdict = D.find("verdict")->asString();
+      const bool uncheckable = verdict.rfind("not checkable here", 0) == 0;
+      EXPECT_EQ(ok, verdict == "delay") << describe(c) << ": " << verdict;
+      delay_uncheckable += !ok && uncheckable;
+      delay_denied.add(!ok && !uncheckable, describe(c) + ": " + verdict);
       // (the estimate is right whether or not the recording can confirm it)
       if (strict) {
         EXPECT_LT(std::abs(est - s), 1.0) << describe(c);
@@ -395,10 +408,25 @@ void sweep(std::uint64_t seed, bool strict) {
       delay.cases - delay.alarms, delay.cases, frozen.cases - frozen.alarms, frozen.cases,
       dups.cases - dups.alarms, dups.cases, rest.cases - rest.alarms, rest.cases,
       stable.cases - stable.alarms, stable.cases);
+  std::printf("  clean recordings' delay verdicts: 'none found' %d, 'not checkable here' %d\n",
+              clean_none_found, clean_uncheckable);
+  std::printf(
+      "  planted delays not warned about: %d, of which said 'not checkable here' %d, 'none "
+      "found' %d\n",
+      delay.alarms + delay_long.alarms, delay_uncheckable, delay_denied.alarms);
   EXPECT_EQ(clean.cases, kCases);
   EXPECT_EQ(clean.alarms, 0) << clean.text();
   EXPECT_EQ(stable.alarms, 0) << stable.text();
-  if (!strict) return;
+  // a delay the recording cannot confirm is said to be not checkable, never "none found"
+  EXPECT_EQ(delay_denied.alarms, 0) << delay_denied.text();
+  // and where it can, a clean recording's verdict is "none found"
+  EXPECT_GE(clean_none_found, 150);
+  if (!strict) {
+    std::printf("  faults not found:\n%s%s%s%s%s%s", flip_one.text().c_str(),
+                flip_all.text().c_str(), delay.text().c_str(), delay_long.text().c_str(),
+                frozen.text().c_str(), dups.text().c_str());
+    return;
+  }
   EXPECT_GE(flip_one.cases, 30);
   EXPECT_EQ(flip_one.alarms, 0) << flip_one.text();
   EXPECT_GE(flip_all.cases, 30);

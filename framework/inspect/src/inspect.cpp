@@ -704,6 +704,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     J["delay"]["delay_samples"] = Json();
     J["delay"]["delay_s"] = Json();
     J["delay"]["note"] = "the data has no torque";
+    J["delay"]["verdict"] = "not checkable here: the data has no torque";
   } else {
     MatrixXd pred, pred_rest;
     predictTorque(robot, data, sig, moving, &pred, &pred_rest);
@@ -724,14 +725,14 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     // onset on both sides, which a lag can mimic).
     std::vector<char> moving_delay = moving;
     if (sig.sg_half_width > 0) {
-      const Index K = static_cast<Index>(moving.size()), h = sig.sg_half_width;
+      const Index M = static_cast<Index>(moving.size()), h = sig.sg_half_width;
       auto clear = [&](Index a, Index b) {
-        for (Index k = std::max<Index>(0, a); k < std::min(K, b); ++k)
+        for (Index k = std::max<Index>(0, a); k < std::min(M, b); ++k)
           moving_delay[static_cast<std::size_t>(k)] = 0;
       };
       clear(0, h);
-      clear(K - h, K);
-      for (Index k = 1; k < K; ++k)
+      clear(M - h, M);
+      for (Index k = 1; k < M; ++k)
         if (moving[static_cast<std::size_t>(k)] != moving[static_cast<std::size_t>(k - 1)])
           clear(k - h, k + h);
     }
@@ -867,9 +868,10 @@ std::string inspectionText(const Json& J) {
           "joints spread {} s; {}){}\n",
           d->find("delay_samples")->asDouble(), num(d->find("std_samples"), "{:.2f}"),
           d->find("delay_s")->asDouble(), num(d->find("per_joint_spread_s"), "{:.2g}"),
-          d->find("reported") && d->find("reported")->asBool()
-              ? "reported"
-              : "not reported: not significant, not consistent, or no better fit",
+          d->find("reported") && d->find("reported")->asBool() ? std::string("reported")
+          : d->find("verdict") && d->find("verdict")->asString() != "none found"
+              ? d->find("verdict")->asString()
+              : std::string("not reported: not significant, not consistent, or no better fit"),
           d->find("at_window_edge") && d->find("at_window_edge")->asBool()
               ? " [at the edge of the window]"
               : "");

@@ -20,8 +20,8 @@
 // lag: RSS(d + x) ~ RSS(d) + g^2 ||dp_perp||^2 x^2 against s^2 f. The overall delay
 // minimises sum_j RSS_j(l) / (s_j^2 f_j). It is reported as a warning only when it is at least
 // kDelayMinSamples, more than kZ standard deviations from zero (the std from the spread of the
-// estimates of kDelayParts parts of the recording), the joints agree with it, every part gives
-// it, and shifting by it lowers the joints' residuals by kDelayMinImprovement on average.
+// estimates of kDelayParts parts of the recording that give it), the joints agree with it, two
+// thirds of the informative parts give it, and shifting by it lowers the joints' residuals by kDelayMinImprovement on average.
 #include "inspect_torque.hpp"
 
 #include <fmt/format.h>
@@ -503,10 +503,11 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
     D["note"] = js.empty() ? "no joint's torque can be checked against the model in motion: "
                              "nothing to align"
                            : "too few samples";
+    D["verdict"] = "not checkable here: " + D["note"].asString();
     return;
   }
   const Combined C = combine(in, js, L, L, K - L);
-  // The recording in kDelayParts contiguous parts, each with its own estimate: their spread gives
+  // The recording in kDelayParts parts, each with its own estimate: their spread gives
   // the delay's std (batch means: it holds whatever the residuals' correlation), and they must
   // agree for the delay to be reported.
   // A part whose own data hold little on the lag (its std, were the residuals white, above
@@ -518,13 +519,20 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
   // kDelayParts parts; where fewer than two of them are informative (a short recording), halves.
   std::vector<double> parts;
   Json parts_json = Json::array();
+  // The parts hold equal shares of the moving rows (a standstill would otherwise leave a part
+  // with nothing to say and its neighbour with the motion's slow start alone).
+  std::vector<Index> moving_rows;
+  for (Index k = L; k < K - L; ++k)
+    if ((*in.moving)[static_cast<std::size_t>(k)] != 0) moving_rows.push_back(k);
+  const auto M = static_cast<Index>(moving_rows.size());
   for (const int count : {kDelayParts, 2}) {
     parts.clear();
     parts_json = Json::array();
-    const Index width = (K - 2 * L) / count;
-    for (int b = 0; b < count && width > 0; ++b) {
-      const Combined P =
-          combine(in, js, L, L + b * width, b + 1 == count ? K - L : L + (b + 1) * width);
+    for (int b = 0; b < count && M >= count; ++b) {
+      const Index from = b == 0 ? L : moving_rows[static_cast<std::size_t>(M * b / count)];
+      const Index to =
+          b + 1 == count ? K - L : moving_rows[static_cast<std::size_t>(M * (b + 1) / count)];
+      const Combined P = combine(in, js, L, from, to);
       Json e = Json::object();
       e["delay_samples"] = numOrNull(P.all.edge ? NAN : P.all.d);
       e["white_std_samples"] = numOrNull(P.all.std_white);
@@ -540,23 +548,30 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
     }
     if (parts.size() >= 2) break;
   }
+  // The std from the spread of the parts that give the delay (within the agreement tolerance):
+  // a part the vote outweighs (a spurious minimum of its own) does not also inflate it.
+  std::vector<double> voting;
+  for (double x : parts)
+    if (std::isfinite(d) && std::abs(x - d) <= tol_d && x * d > 0) voting.push_back(x);
   double sd = NAN;
-  if (parts.size() >= 2) {
+  if (voting.size() >= 2) {
     double mean = 0;
-    for (double x : parts) mean += x;
-    mean /= static_cast<double>(parts.size());
+    for (double x : voting) mean += x;
+    mean /= static_cast<double>(voting.size());
     double v = 0;
-    for (double x : parts) v += (x - mean) * (x - mean);
-    sd = std::sqrt(v / static_cast<double>(parts.size() - 1) / static_cast<double>(parts.size()));
+    for (double x : voting) v += (x - mean) * (x - mean);
+    sd = std::sqrt(v / static_cast<double>(voting.size() - 1) /
+                   static_cast<double>(voting.size()));
   }
   D["delay_samples"] = numOrNull(d);
   D["delay_s"] = numOrNull(d * in.dt);
   D["std_samples"] = numOrNull(sd);
   D["std_s"] = numOrNull(sd * in.dt);
   D["std_method"] = fmt::format(
-      "the spread of the estimates of the informative ones of {} contiguous parts of the "
-      "recording (halves where fewer than two of {} are informative) over the square root of "
-      "their count",
+      "the spread of the estimates of the informative ones of {} parts of the recording that "
+      "give the delay (within the agreement tolerance) over the square root of their count; "
+      "each part holds an equal share of the moving rows (halves where fewer than two of {} "
+      "are informative)",
       kDelayParts, kDelayParts);
   D["model_std_samples"] = numOrNull(C.all.std);
   D["at_window_edge"] = C.all.edge;
@@ -601,6 +616,28 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
   const bool reported =
       significant && joints_agree && parts_agree && C.improvement >= kDelayMinImprovement;
   D["reported"] = reported;
+  // What the recording can say: a delay it confirms, none where it could have confirmed one, or
+  // not checkable here (too few joints or parts hold information on the lag: the estimate is
+  // listed, but the recording can neither confirm nor rule out a delay).
+  const bool edge_warned = C.all.edge && C.improvement >= kDelayMinImprovement && judged >= 2;
+  std::string verdict;
+  if (edge_warned) {
+    verdict = "delay at the edge of the searched window";
+  } else if (reported) {
+    verdict = "delay";
+  } else if (judged < 2 || parts.size() < 2) {
+    std::vector<std::string> why;
+    if (judged < 2)
+      why.push_back(fmt::format("{} joint{} judged on the lag, two are needed", judged,
+                                judged == 1 ? "" : "s"));
+    if (parts.size() < 2)
+      why.push_back(fmt::format("{} part{} of the recording informative, two are needed",
+                                parts.size(), parts.size() == 1 ? "" : "s"));
+    verdict = fmt::format("not checkable here: {}", fmt::join(why, "; "));
+  } else {
+    verdict = "none found";
+  }
+  D["verdict"] = verdict;
   D["rule"] = fmt::format(
       "warned when |delay| >= {:g} samples and > {:g} std, at least two joints are judged and "
       "two thirds of them agree with it, at least two parts of the recording are informative and "
@@ -614,7 +651,7 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
       t += fmt::format("{}{:.2f}", i ? ", " : "", parts[i]);
     return t;
   };
-  if (C.all.edge && C.improvement >= kDelayMinImprovement && judged >= 2)
+  if (edge_warned)
     W->push_back(fmt::format(
         "the torque's delay against the model lies at the edge of the searched window (+-{} "
         "samples, {:.3g} s) and shifting lowers the residuals by {:.1f} %: a large delay between "
