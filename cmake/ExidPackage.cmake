@@ -12,6 +12,10 @@ foreach(layer ${EXID_PUBLIC_LAYERS})
 endforeach()
 install(FILES ${CMAKE_BINARY_DIR}/generated/include/exid/version.hpp
         DESTINATION ${CMAKE_INSTALL_INCLUDEDIR}/exid)
+# Forwarding headers for one release (0.3): the 0.2 headers of the study, the matrix and the
+# inspection are no longer installed (framework/compat/exid says where their public parts went).
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/framework/compat/exid
+        DESTINATION ${CMAKE_INSTALL_INCLUDEDIR} FILES_MATCHING PATTERN "*.hpp")
 set(EXID_EXPORTED_TARGETS exid_dynamics exid_core)
 set_target_properties(exid_dynamics PROPERTIES EXPORT_NAME dynamics)   # exid::dynamics
 set_target_properties(exid_core PROPERTIES EXPORT_NAME core)           # exid::core

@@ -10,7 +10,7 @@
 #include <memory>
 #include <string>
 
-#include "exid/config.hpp"
+#include "exid/exid.hpp"
 #include "exid/gradient_check.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
@@ -20,7 +20,7 @@ namespace {
 template <class T>
 std::shared_ptr<T> create(exid::Registry& reg, const std::string& name, const std::string& params) {
   const exid::PluginInfo& info = reg.get(T::kKind, name);
-  return reg.create<T>(name, exid::resolveParams(info, params, name, "."));
+  return reg.create<T>(name, exid::pluginParams(info, params, name, "."));
 }
 
 bool report(const exid::DerivativeCheck& c) {

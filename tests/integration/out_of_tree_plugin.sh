@@ -55,6 +55,22 @@ test -n "$err"
 awk -v e="$err" 'BEGIN { exit !(e < 1e-8) }' || { echo "huber_ls: param_rel_err $err" >&2; exit 1; }
 echo "out-of-tree criterion and estimator: OK (huber_ls param_rel_err $err)"
 
+# ---------------------------------------------------------------- an embedding program
+# The same study run by a program through the facade (exid/exid.hpp), with the plugins of this
+# build: status ok, verdict ok; a study file that is not there: exit 1, the file named.
+emb=$(find "$work/plugin" -name embed_study -type f | head -n 1)
+test -n "$emb"
+out=$(LD_LIBRARY_PATH="$prefix/lib:$prefix/lib64:${LD_LIBRARY_PATH:-}" "$emb" "$work/study.yaml" "$work/embedded" "$dir")
+grep -q "^status: ok" <<<"$out" || { echo "FAIL: embed_study: $out" >&2; exit 1; }
+grep -q "^verdict: ok" <<<"$out" || { echo "FAIL: embed_study: $out" >&2; exit 1; }
+test -f "$work/embedded/summary.json"
+if emsg=$(LD_LIBRARY_PATH="$prefix/lib:$prefix/lib64:${LD_LIBRARY_PATH:-}" "$emb" "$work/none.yaml" "$work/none" "$dir" 2>&1); then
+  echo "FAIL: embed_study ran a study file that is not there" >&2; exit 1
+fi
+grep -q "none.yaml" <<<"$emsg" || { echo "FAIL: embed_study: the missing file is not named: $emsg" >&2; exit 1; }
+test ! -e "$work/none"
+echo "embedding program: OK"
+
 # ---------------------------------------------------------------- the templates
 # Each template is listed with its kind, version and a declared parameter.
 for entry in "robot template_robot tool_mass_kg" "model template_model joints" \

@@ -410,4 +410,71 @@ double decimationVarianceFactor(const Sos& sos, int factor) {
   return sum / g0;
 }
 
+void savitzkyGolay(const Eigen::MatrixXd& X, double dt, int m, Eigen::MatrixXd* value,
+                   Eigen::MatrixXd* d1, Eigen::MatrixXd* d2) {
+  using Eigen::Index;
+  using Eigen::MatrixXd;
+  const Index K = X.rows();
+  if (value) value->resize(K, X.cols());
+  if (d1) d1->resize(K, X.cols());
+  if (d2) d2->resize(K, X.cols());
+  // The fit over +-h samples is three fixed weightings of the window (value, slope, curvature):
+  // the weights are computed once per half-width h (h = m inside, smaller near the ends).
+  struct Weights {
+    std::vector<double> w0, w1, w2;
+  };
+  std::vector<Weights> by_h(static_cast<std::size_t>(std::max(0, m)) + 1);
+  auto weights = [&](Index h) -> const Weights& {
+    Weights& w = by_h[static_cast<std::size_t>(h)];
+    if (!w.w0.empty()) return w;
+    double S2 = 0, S4 = 0;
+    for (Index i = -h; i <= h; ++i) {
+      S2 += static_cast<double>(i * i);
+      S4 += static_cast<double>(i * i * i * i);
+    }
+    const double N = static_cast<double>(2 * h + 1);
+    const double den0 = N * S4 - S2 * S2;
+    double cc = 0;  // sum of (i^2 - S2/N)^2
+    for (Index i = -h; i <= h; ++i) {
+      const double c = static_cast<double>(i * i) - S2 / N;
+      cc += c * c;
+    }
+    for (Index i = -h; i <= h; ++i) {
+      const double ii = static_cast<double>(i * i);
+      w.w0.push_back((S4 - S2 * ii) / den0);
+      w.w1.push_back(static_cast<double>(i) / S2 / dt);
+      w.w2.push_back(2.0 * (ii - S2 / N) / cc / (dt * dt));
+    }
+    return w;
+  };
+  // Near the ends the window does not shrink (a fit to three samples differentiates their noise
+  // twice): the fit to the first (last) 2h + 1 samples, evaluated off its centre, u samples away.
+  const Index hw = std::min<Index>(static_cast<Index>(m), (K - 1) / 2);
+  if (hw < 1) {
+    for (MatrixXd* M : {d1, d2})
+      if (M) M->setZero();
+    if (value) *value = X;
+    return;
+  }
+  const Weights& w = weights(hw);
+  for (Index j = 0; j < X.cols(); ++j) {
+    const double* x = X.col(j).data();
+    for (Index k = 0; k < K; ++k) {
+      const Index c = std::clamp<Index>(k, hw, K - 1 - hw);  // the window's centre
+      const double u = static_cast<double>(k - c);
+      const double* xk = x + (c - hw);
+      double s0 = 0, s1 = 0, s2 = 0;
+      for (Index i = 0; i <= 2 * hw; ++i) {
+        s0 += w.w0[static_cast<std::size_t>(i)] * xk[i];
+        s1 += w.w1[static_cast<std::size_t>(i)] * xk[i];
+        s2 += w.w2[static_cast<std::size_t>(i)] * xk[i];
+      }
+      // s0, s1, s2: value, slope and curvature at the centre (a0, a1 / dt, 2 a2 / dt^2)
+      if (value) (*value)(k, j) = s0 + s1 * dt * u + 0.5 * s2 * dt * dt * u * u;
+      if (d1) (*d1)(k, j) = s1 + s2 * dt * u;
+      if (d2) (*d2)(k, j) = s2;
+    }
+  }
+}
+
 }  // namespace exid

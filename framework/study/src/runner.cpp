@@ -31,6 +31,8 @@
 #include "exid/trajectory_export.hpp"
 #include "exid/version.hpp"
 #include "report.hpp"
+#include "run_folder.hpp"
+#include "stacked_model.hpp"
 
 namespace exid {
 
@@ -125,159 +127,7 @@ double seconds(std::chrono::steady_clock::time_point since) {
   return std::chrono::duration<double>(std::chrono::steady_clock::now() - since).count();
 }
 
-/// Several observation models stacked into one (e.g. differential + load_wrench). Columns are
-/// the union of the models' full columns (matched by name); each block's rows (and
-/// measurements) are multiplied by its weight.
-class StackedModel final : public ObservationModel {
- public:
-  StackedModel(std::vector<std::shared_ptr<ObservationModel>> parts, std::vector<double> weights)
-      : parts_(std::move(parts)), weights_(std::move(weights)) {
-    setPluginName("stack");
-  }
-  std::vector<std::string> fullNames() const override { return names_; }
-  Eigen::VectorXd fullNominal() const override {
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
-    for (std::size_t m = 0; m < parts_.size(); ++m) {
-      Eigen::VectorXd nm = parts_[m]->fullNominal();
-      for (std::size_t c = 0; c < map_[m].size(); ++c)
-        v(map_[m][c]) = nm(static_cast<Eigen::Index>(c));
-    }
-    return v;
-  }
-  Eigen::VectorXd fullTruth(const Json& meta) const override {
-    Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
-    for (std::size_t m = 0; m < parts_.size(); ++m) {
-      Eigen::VectorXd tm = parts_[m]->fullTruth(meta);
-      for (std::size_t c = 0; c < map_[m].size(); ++c)
-        v(map_[m][c]) = tm(static_cast<Eigen::Index>(c));
-    }
-    return v;
-  }
-  Rows fullRows(const Dataset& data, const RunContext& ctx) const override {
-    std::vector<Rows> blocks;
-    Eigen::Index rows = 0;
-    for (const auto& p : parts_) {
-      blocks.push_back(p->fullRows(data, ctx));
-      rows += blocks.back().W.rows();
-    }
-    Rows out;
-    out.W = Eigen::MatrixXd::Zero(rows, static_cast<Eigen::Index>(names_.size()));
-    out.y.resize(rows);
-    Eigen::Index r0 = 0;
-    int eq0 = 0;
-    for (std::size_t m = 0; m < blocks.size(); ++m) {
-      const Rows& b = blocks[m];
-      for (std::size_t c = 0; c < map_[m].size(); ++c)
-        out.W.block(r0, map_[m][c], b.W.rows(), 1) =
-            weights_[m] * b.W.col(static_cast<Eigen::Index>(c));
-      out.y.segment(r0, b.y.size()) = weights_[m] * b.y;
-      for (int e : b.equation) out.equation.push_back(eq0 + e);
-      if (b.t.size() == static_cast<std::size_t>(b.y.size()))
-        out.t.insert(out.t.end(), b.t.begin(), b.t.end());
-      else
-        out.t.insert(out.t.end(), static_cast<std::size_t>(b.y.size()), NAN);
-      for (int e = 0; e < b.numEquations; ++e)
-        out.equation_names.push_back(parts_[m]->pluginName() + ": " +
-                                     (e < static_cast<int>(b.equation_names.size())
-                                          ? b.equation_names[static_cast<std::size_t>(e)]
-                                          : fmt::format("equation {}", e)));
-      eq0 += b.numEquations;
-      r0 += b.W.rows();
-    }
-    out.numEquations = eq0;
-    return out;
-  }
-  Eigen::MatrixXd fullDesign(const Samples& s) const override {
-    std::vector<Eigen::MatrixXd> blocks;
-    Eigen::Index rows = 0;
-    for (const auto& p : parts_) {
-      blocks.push_back(p->fullDesign(s));
-      rows += blocks.back().rows();
-    }
-    Eigen::MatrixXd W = Eigen::MatrixXd::Zero(rows, static_cast<Eigen::Index>(names_.size()));
-    Eigen::Index r0 = 0;
-    for (std::size_t m = 0; m < blocks.size(); ++m) {
-      for (std::size_t c = 0; c < map_[m].size(); ++c)
-        W.block(r0, map_[m][c], blocks[m].rows(), 1) =
-            weights_[m] * blocks[m].col(static_cast<Eigen::Index>(c));
-      r0 += blocks[m].rows();
-    }
-    return W;
-  }
-  void fullDesignVjp(const Samples& s, const Eigen::MatrixXd& dW, Samples* grad) const override {
-    grad->t = s.t;
-    grad->q = Eigen::MatrixXd::Zero(s.q.rows(), s.q.cols());
-    grad->qd = grad->q;
-    grad->qdd = grad->q;
-    Eigen::Index r0 = 0;
-    for (std::size_t m = 0; m < parts_.size(); ++m) {
-      const Eigen::Index rows = rowsPerDesign_[m] * s.size();
-      Eigen::MatrixXd sub(rows, static_cast<Eigen::Index>(map_[m].size()));
-      for (std::size_t c = 0; c < map_[m].size(); ++c)
-        sub.col(static_cast<Eigen::Index>(c)) = weights_[m] * dW.block(r0, map_[m][c], rows, 1);
-      Samples g;
-      parts_[m]->fullDesignVjp(s, sub, &g);
-      grad->q += g.q;
-      grad->qd += g.qd;
-      grad->qdd += g.qdd;
-      r0 += rows;
-    }
-  }
-  // Every part's signals. Not declared per sample: the stack's rows are computed on the whole
-  // dataset at once, as they always were.
-  ModelSpecs specs() const override {
-    ModelSpecs sp;
-    sp.required_signals.clear();
-    for (const auto& p : parts_)
-      for (const auto& s : p->specs().required_signals)
-        if (std::find(sp.required_signals.begin(), sp.required_signals.end(), s) ==
-            sp.required_signals.end())
-          sp.required_signals.push_back(s);
-    return sp;
-  }
-  Json describe() const override {
-    Json j = Json::array();
-    for (std::size_t m = 0; m < parts_.size(); ++m) {
-      Json p = Json::object();
-      p["type"] = parts_[m]->pluginName();
-      p["weight"] = weights_[m];
-      p["details"] = parts_[m]->describe();
-      j.push_back(p);
-    }
-    return j;
-  }
-
- protected:
-  void onBind(const RunContext& ctx) override {
-    names_.clear();
-    map_.clear();
-    rowsPerDesign_.clear();
-    Samples probe = randomSamples(1, ctx.seed);
-    for (const auto& p : parts_) {
-      if (!movingJoints().empty()) p->restrictMotion(movingJoints(), heldPositions());
-      p->bind(robotPtr(), ctx);
-      std::vector<int> idx;
-      for (const auto& n : p->fullNames()) {
-        auto it = std::find(names_.begin(), names_.end(), n);
-        if (it == names_.end()) {
-          names_.push_back(n);
-          idx.push_back(static_cast<int>(names_.size()) - 1);
-        } else {
-          idx.push_back(static_cast<int>(it - names_.begin()));
-        }
-      }
-      map_.push_back(idx);
-      rowsPerDesign_.push_back(static_cast<int>(p->fullDesign(probe).rows()));
-    }
-  }
-
- private:
-  std::vector<std::shared_ptr<ObservationModel>> parts_;
-  std::vector<double> weights_;
-  std::vector<std::string> names_;
-  std::vector<std::vector<int>> map_;
-  std::vector<int> rowsPerDesign_;
-};
+// (the stacked model: stacked_model.hpp; the run folder and the watchdog: run_folder.hpp)
 
 std::vector<std::string> signalNames(const std::string& prefix, int n) {
   std::vector<std::string> out;
@@ -336,197 +186,6 @@ void checkDatasetFinite(const Dataset& d, const std::string& what) {
   for (const auto& [name, M] : sig)
     if (M->size() > 0) checkFinite(*M, fmt::format("{} ({}): {}", what, d.source, name));
 }
-
-// ---------------------------------------------------------------- the run folder as a unit
-// A run writes into a fresh staging folder beside the output folder (.NAME.staging.PID, same
-// file system) and publishes it at the end in one rename (renameat2 RENAME_EXCHANGE when the
-// output folder exists). A failed or cancelled run beside an earlier successful one leaves that
-// one untouched and is published as NAME.failed; a successful run removes NAME.failed.
-struct RunFolder {
-  fs::path final_dir, parent, staging, failed_dir;
-  fs::path named;  // final_dir as the user named it (a symbolic link to final_dir, or the same)
-};
-
-bool isRunFolder(const fs::path& dir) {
-  std::error_code ec;
-  return fs::exists(dir / "summary.json", ec) || fs::exists(dir / "study.resolved.yaml", ec);
-}
-
-bool holdsOkRun(const fs::path& dir) {
-  try {
-    const std::string text = readInputFile(dir / "summary.json", "summary", 64u << 20);
-    const Json S = Json::parse(text);
-    return S.find("status") && S.find("status")->asString() == "ok";
-  } catch (const std::exception&) {
-    return false;
-  }
-}
-
-RunFolder prepareRunFolder(const fs::path& out, bool clean_stale) {
-  RunFolder f;
-  fs::path d = out.lexically_normal();
-  if (d.has_filename() == false && d.has_parent_path()) d = d.parent_path();  // "x/" -> "x"
-  const std::string name = d.filename().string();
-  check(!name.empty() && name != "." && name != "..",
-        fmt::format("--out {}: name an output folder (not '.', '..' or a root)", out.string()));
-  std::error_code ec;
-  const fs::path named = d;
-  // A symbolic link to a folder: the run is published into the link's target (the staging
-  // folder beside the target, on its file system); the link stays. Renaming over the link
-  // itself would replace it by a folder.
-  if (fs::is_symlink(fs::symlink_status(d, ec))) {
-    const fs::path target = fs::read_symlink(d, ec);
-    const fs::path resolved = fs::canonical(d, ec);
-    check(!ec, fmt::format("--out {}: a symbolic link to {}, which does not exist (a dangling "
-                           "link); create the folder it names, or choose another output folder",
-                           out.string(), target.string()));
-    d = resolved;
-  }
-  f.final_dir = d;
-  f.named = named;
-  f.parent = d.has_parent_path() ? d.parent_path() : fs::path(".");
-  f.failed_dir = f.parent / (d.filename().string() + ".failed");
-  if (fs::exists(d, ec)) {
-    check(fs::is_directory(d, ec),
-          fmt::format("{}: exists and is not a folder; choose another output folder", d.string()));
-    check(fs::is_empty(d, ec) || isRunFolder(d),
-          fmt::format("{}: exists and does not hold an exid run (no summary.json or "
-                      "study.resolved.yaml); refusing to replace it: choose another output folder",
-                      d.string()));
-  }
-  fs::create_directories(f.parent);
-  if (clean_stale) {
-    cleanStaleTemporaries(f.parent);
-    cleanStaleTemporaries(d);
-  }
-  f.staging = f.parent / fmt::format(".{}.staging.{}", d.filename().string(), ::getpid());
-  fs::remove_all(f.staging, ec);
-  fs::create_directory(f.staging);
-  return f;
-}
-
-// Moves the staging folder to `to` (which may exist: exchanged atomically, then the old one
-// removed).
-void publish(const fs::path& staging, const fs::path& to) {
-  std::error_code ec;
-  if (!fs::exists(to, ec)) {
-    fs::rename(staging, to);
-    return;
-  }
-  if (::renameat2(AT_FDCWD, staging.c_str(), AT_FDCWD, to.c_str(), RENAME_EXCHANGE) == 0) {
-    fs::remove_all(staging, ec);  // now the old folder
-    return;
-  }
-  // No RENAME_EXCHANGE on this file system: the old folder moves aside first.
-  const fs::path aside = to.string() + fmt::format(".old.{}", ::getpid());
-  fs::remove_all(aside, ec);
-  fs::rename(to, aside);
-  fs::rename(staging, to);
-  fs::remove_all(aside, ec);
-}
-
-// Ends the process when a cancelled run does not stop by itself in time (RunOptions::
-// hard_stop_s). The main thread holds finishing() while it writes the final summary and
-// publishes; the watchdog takes it before it acts, so only one of them publishes.
-class Watchdog {
- public:
-  Watchdog(const RunOptions& opt, RunFolder folder, const StudyConfig& cfg,
-           const std::atomic<const char*>& stage, std::chrono::steady_clock::time_point t0)
-      : opt_(opt), folder_(std::move(folder)), stage_(stage), t0_(t0) {
-    if (!(opt.hard_stop_s > 0) || !opt.cancelled) return;
-    study_ = cfg.name;
-    hash_ = cfg.hash();
-    thread_ = std::thread([this] { watch(); });
-  }
-  ~Watchdog() {
-    {
-      std::lock_guard<std::mutex> l(m_);
-      done_ = true;
-    }
-    cv_.notify_all();
-    if (thread_.joinable()) thread_.join();
-  }
-  Watchdog(const Watchdog&) = delete;
-  Watchdog& operator=(const Watchdog&) = delete;
-  std::mutex& finishing() { return finishing_; }
-  void finished() {
-    std::lock_guard<std::mutex> l(m_);
-    done_ = true;
-    cv_.notify_all();
-  }
-
- private:
-  void watch() {
-    std::unique_lock<std::mutex> l(m_);
-    std::optional<std::chrono::steady_clock::time_point> since;
-    while (!done_) {
-      cv_.wait_for(l, std::chrono::milliseconds(20));
-      if (done_) return;
-      if (!since && opt_.cancelled()) since = std::chrono::steady_clock::now();
-      if (since && seconds(*since) > opt_.hard_stop_s) break;
-    }
-    if (done_) return;
-    l.unlock();
-    std::unique_lock<std::mutex> fin(finishing_, std::try_to_lock);
-    if (!fin.owns_lock()) return;  // the main thread is already writing the final summary
-    hardStop();
-  }
-
-  void hardStop() {
-    const int code = opt_.hard_stop_exit_code ? opt_.hard_stop_exit_code() : 130;
-    const std::string stage = stage_.load();
-    if (!folder_.staging.empty()) {
-      // Move the staging folder away first: a file the stage is writing can no longer be
-      // renamed into place, and its temporary is removed below.
-      std::error_code ec;
-      const fs::path moved =
-          folder_.parent /
-          fmt::format(".{}.cancel.{}", folder_.final_dir.filename().string(), ::getpid());
-      fs::remove_all(moved, ec);
-      fs::rename(folder_.staging, moved, ec);
-      if (!ec) {
-        for (auto it = fs::directory_iterator(moved, ec); !ec && it != fs::directory_iterator();
-             it.increment(ec))
-          if (it->path().filename().string().find(".tmp.") != std::string::npos)
-            fs::remove(it->path(), ec);
-        Json S = Json::object();
-        S["status"] = "cancelled";
-        S["study"] = study_;
-        S["exid_version"] = EXID_VERSION_STRING;
-        S["config_hash"] = hash_;
-        S["failed_stage"] = stage;
-        S["message"] = fmt::format(
-            "stage '{}': stopped: interrupted (the stage had not reached a stop check {} s after "
-            "the request; ended by the watchdog, results of the stage discarded)",
-            stage, opt_.hard_stop_s);
-        S["wall_s"] = seconds(t0_);
-        try {
-          writeFileAtomic(moved / "summary.json", S.dump(2) + "\n");
-          const bool beside = holdsOkRun(folder_.final_dir);
-          publish(moved, beside ? folder_.failed_dir : folder_.final_dir);
-        } catch (const std::exception&) {
-          fs::remove_all(moved, ec);
-        }
-      }
-      std::fprintf(stderr,
-                   "exid: stage '%s' cancelled: stopped by the watchdog %.1f s after the "
-                   "stop request\n",
-                   stage.c_str(), opt_.hard_stop_s);
-    }
-    std::fflush(nullptr);
-    ::_exit(code);
-  }
-
-  const RunOptions& opt_;
-  RunFolder folder_;
-  const std::atomic<const char*>& stage_;
-  std::chrono::steady_clock::time_point t0_;
-  std::string study_, hash_;
-  std::thread thread_;
-  std::mutex m_, finishing_;
-  std::condition_variable cv_;
-  bool done_ = false;
-};
 
 // A long recording is inspected on every s-th sample (at most kRunInspectSamples): the checks
 // cost a fraction of the identification, never several times it. `exid inspect` looks at every
@@ -608,48 +267,7 @@ void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, c
 
 }  // namespace
 
-CsvTable samplesTable(const Samples& s) {
-  CsvTable t;
-  const int n = s.dof();
-  t.columns = {"t"};
-  for (const char* p : {"q", "qd", "qdd"})
-    for (auto& c : signalNames(p, n)) t.columns.push_back(c);
-  t.data.resize(s.size(), 1 + 3 * n);
-  t.data.col(0) = s.t;
-  t.data.middleCols(1, n) = s.q;
-  t.data.middleCols(1 + n, n) = s.qd;
-  t.data.middleCols(1 + 2 * n, n) = s.qdd;
-  return t;
-}
-
-CsvTable datasetTable(const Dataset& d) {
-  CsvTable t;
-  const int n = d.dof();
-  std::vector<const Eigen::MatrixXd*> blocks;
-  t.columns = {"t"};
-  auto add = [&](const char* prefix, const Eigen::MatrixXd& m) {
-    if (m.cols() == 0) return;
-    for (auto& c : signalNames(prefix, static_cast<int>(m.cols()))) t.columns.push_back(c);
-    blocks.push_back(&m);
-  };
-  add("q", d.q);
-  add("qd", d.qd);
-  add("qdd", d.qdd);
-  add("tau", d.tau);
-  if (d.hasWrench()) {
-    for (const char* c : {"fx", "fy", "fz", "mx", "my", "mz"}) t.columns.push_back(c);
-    blocks.push_back(&d.wrench);
-  }
-  (void)n;
-  t.data.resize(d.size(), static_cast<Eigen::Index>(t.columns.size()));
-  t.data.col(0) = d.t;
-  Eigen::Index c0 = 1;
-  for (const auto* b : blocks) {
-    t.data.middleCols(c0, b->cols()) = *b;
-    c0 += b->cols();
-  }
-  return t;
-}
+// (samplesTable, datasetTable: exid/tables.hpp, the data layer)
 
 namespace {
 
@@ -738,6 +356,13 @@ class StudyRun {
   Eigen::VectorXd dmin_;             // its smallest distance per design sample (collision)
   std::optional<Dataset> data;
   std::optional<Estimate> est;
+  /// The study's estimator, made once from its parameters (its specs steer the experiment, it
+  /// identifies, and it processes the validation rows as it processed its own).
+  Estimator& estimator() {
+    if (!estimator_) estimator_ = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+    return *estimator_;
+  }
+  std::shared_ptr<Estimator> estimator_;
   // The experiment's inspection when it runs beside the estimator (a recording in memory).
   std::future<Json> experiment_inspection;
 };
@@ -778,7 +403,7 @@ void StudyRun::modelStage() {
         parts.push_back(reg.create<ObservationModel>(m.type, m.params));
         weights.push_back(m.weight);
       }
-      model = std::make_shared<StackedModel>(std::move(parts), std::move(weights));
+      model = makeStackedModel(std::move(parts), std::move(weights));
     }
     // Joints the excitation trajectory holds still: the base parameters are those the motion
     // of the moving joints can identify (paper section 4, one joint at a time).
@@ -995,9 +620,7 @@ void StudyRun::experimentStage() {
     auto exp = reg.create<Experiment>(cfg.experiment->type, cfg.experiment->params);
     RunContext ectx = ctx;
     ectx.progress = progressFor("experiment");
-    const EstimatorSpecs especs =
-        cfg.estimator ? reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params)->specs()
-                      : EstimatorSpecs();
+    const EstimatorSpecs especs = cfg.estimator ? estimator().specs() : EstimatorSpecs();
     // Streamed (read in chunks, never held whole) when the estimator streams and nothing else
     // needs the whole dataset (experiment.csv: always).
     const bool may_stream =
@@ -1087,19 +710,19 @@ void StudyRun::identificationStage() {
   if (cfg.estimator) {
     setStage("identification");
     const auto t0 = std::chrono::steady_clock::now();
-    auto estimator = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+    Estimator& identifier = estimator();
     RunContext ictx = ctx;
     ictx.progress = progressFor("identification");
     std::optional<Prior> prior;
     if (cfg.prior) {
-      check(estimator->specs().accepts_prior,
+      check(identifier.specs().accepts_prior,
             fmt::format(
                 "prior: the estimator '{}' does not take a prior (batch_ls, wls, consistent_ls "
                 "and rls do)",
                 cfg.estimator->type));
       prior = buildPrior(*cfg.prior, *model);
     }
-    est = estimator->estimate(*model, *data, prior ? &*prior : nullptr, ictx);
+    est = identifier.estimate(*model, *data, prior ? &*prior : nullptr, ictx);
     collectExperimentInspection();
     if (data->streamed()) {
       // The recording's statistics (and the samples kept for the inspection) are complete
@@ -1291,9 +914,9 @@ void StudyRun::validationStage() {
     // processing makes the validation rows too (the held-out error is then measured on rows
     // processed like the identification rows). Otherwise the model's rows of the data as
     // the validation experiment gives them.
-    auto vest = reg.create<Estimator>(cfg.estimator->type, cfg.estimator->params);
+    const Estimator& vest = estimator();
     const bool by_estimator =
-        vest->specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
+        vest.specs().needs_raw_dataset && (!vd.hasVelocity() || !vd.hasAcceleration());
     checkDataset(vd, *robot, model.get(), "validation", by_estimator);
     checkDatasetFinite(vd, "validation");
     // (fitted nonlinear parameters: the held-out rows at the fitted values; the model's own
@@ -1308,7 +931,7 @@ void StudyRun::validationStage() {
     for (Eigen::Index k = 0; fitted && k < n_model; ++k)
       fitted = est->nonlinear_names[static_cast<std::size_t>(k)] ==
                model_nl[static_cast<std::size_t>(k)].name;
-    Rows rows = by_estimator ? vest->validationRows(*model, vd, vctx)
+    Rows rows = by_estimator ? vest.validationRows(*model, vd, vctx)
                 : fitted     ? model->rowsAt(vd, est->nonlinear.head(n_model), nullptr, vctx)
                              : model->rows(vd, vctx);
     // A fitted measurement delay (varpro): the held-out rows are compensated by it as the fit's

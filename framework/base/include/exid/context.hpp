@@ -8,25 +8,27 @@
 #include <functional>
 #include <string>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
 enum class LogLevel { Quiet = 0, Warn = 1, Info = 2, Debug = 3 };
 
 /// Logging to stderr with levels (-q, -v); one instance per process, thread-safe.
-void setLogLevel(LogLevel level);
-LogLevel logLevel();
-void logWarn(const std::string& msg);
-void logInfo(const std::string& msg);
-void logDebug(const std::string& msg);
+EXID_API void setLogLevel(LogLevel level);
+EXID_API LogLevel logLevel();
+EXID_API void logWarn(const std::string& msg);
+EXID_API void logInfo(const std::string& msg);
+EXID_API void logDebug(const std::string& msg);
 
 /// The CPUs this process may run on (its affinity mask, as `taskset` sets it; the machine's
 /// count where the mask cannot be read), at least 1.
-int usableCores();
+EXID_API int usableCores();
 /// Threads for a `threads` parameter: n > 0 as given (at most 256), 0 usableCores() (at most 8).
-int resolveThreads(long requested);
+EXID_API int resolveThreads(long requested);
 
 /// A wall-clock budget; zero or negative seconds means none.
-class Deadline {
+class EXID_API Deadline {
  public:
   Deadline() = default;
   explicit Deadline(double seconds);
@@ -39,7 +41,7 @@ class Deadline {
   std::chrono::steady_clock::time_point end_{};
 };
 
-struct RunContext {
+struct EXID_API RunContext {
   std::filesystem::path study_dir;  // relative paths in the study resolve here
   std::filesystem::path out_dir;    // where the stage may write files ("" = nowhere)
   std::uint64_t seed = 1;

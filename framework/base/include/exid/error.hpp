@@ -5,9 +5,11 @@
 #include <stdexcept>
 #include <string>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
-class Error : public std::runtime_error {
+class EXID_API Error : public std::runtime_error {
  public:
   explicit Error(const std::string& what) : std::runtime_error(what) {}
 };

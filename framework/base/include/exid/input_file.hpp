@@ -18,6 +18,7 @@
 #include <vector>
 
 #include "exid/error.hpp"
+#include "exid/export.hpp"
 
 namespace exid {
 
@@ -45,17 +46,18 @@ inline constexpr std::uintmax_t kStreamedFileBytes = UINTMAX_MAX;
 /// offset basis is FNV's 14695981039346656037 (0xcbf29ce484222325); the two copies before lacked
 /// its last digit (1469598103934665603), so their hashes were not FNV-1a's.
 inline constexpr std::uint64_t kFnv1aOffset = 14695981039346656037ull;
-std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t h = kFnv1aOffset);
+EXID_API std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t h = kFnv1aOffset);
 inline std::uint64_t fnv1a64(const std::string& text, std::uint64_t h = kFnv1aOffset) {
   return fnv1a64(text.data(), text.size(), h);
 }
 /// The FNV-1a 64 of a file's contents, read in blocks through openInputFile (no size limit).
-std::uint64_t fnv1a64File(const std::filesystem::path& path, const std::string& what = "input");
+EXID_API std::uint64_t fnv1a64File(const std::filesystem::path& path,
+                                   const std::string& what = "input");
 /// 16 lower-case hex digits.
-std::string hashHex(std::uint64_t h);
+EXID_API std::string hashHex(std::uint64_t h);
 
 /// One file a run read.
-struct InputRecord {
+struct EXID_API InputRecord {
   std::string path;  // absolute
   std::string kind;  // what the reader calls it ("CSV data", "bag metadata", "mesh", ...)
   std::uintmax_t size_bytes = 0;
@@ -64,7 +66,7 @@ struct InputRecord {
 
 /// The files a run read, one entry per path (the first read; read again unchanged: the same
 /// entry). Thread-safe.
-class InputManifest {
+class EXID_API InputManifest {
  public:
   /// True when path was recorded with this identity (device, inode, size, modification
   /// time): no need to hash it again.
@@ -87,9 +89,9 @@ class InputManifest {
 
 /// The manifest files opened on this thread are recorded in (none: not recorded). A run sets
 /// it for its stages (runStudy); a thread the run starts sets it again (InputManifestScope).
-InputManifest* currentInputManifest();
+EXID_API InputManifest* currentInputManifest();
 /// Sets the current manifest of this thread for the scope's life (nested scopes restore).
-class InputManifestScope {
+class EXID_API InputManifestScope {
  public:
   explicit InputManifestScope(InputManifest* m);
   ~InputManifestScope();
@@ -101,32 +103,32 @@ class InputManifestScope {
 };
 
 /// The path with control bytes shown as \xNN (for messages).
-std::string printablePath(const std::string& path);
+EXID_API std::string printablePath(const std::string& path);
 /// Refuses a path holding a NUL or another control byte (0x01-0x1F, 0x7F): a NUL silently cut
 /// the path where the system reads it (`good.csv\0.ignored` opened good.csv).
-void checkInputPath(const std::filesystem::path& path, const std::string& what);
+EXID_API void checkInputPath(const std::filesystem::path& path, const std::string& what);
 
 /// The checks of readInputFile without reading: no control byte in the path, and the path
 /// (symbolic links followed) must name a regular file of at most max_bytes.
-void checkInputFile(const std::filesystem::path& path, const std::string& what,
-                    std::uintmax_t max_bytes);
+EXID_API void checkInputFile(const std::filesystem::path& path, const std::string& what,
+                             std::uintmax_t max_bytes);
 
 /// Opens an input file for reading after the checks of checkInputFile (checked again on the
 /// open descriptor: it may have been replaced; the open never blocks). During a run the file
 /// is recorded in the manifest (its contents hashed through the descriptor, which stays at
 /// offset 0). Returns the descriptor; the caller closes it.
-int openInputFile(const std::filesystem::path& path, const std::string& what,
-                  std::uintmax_t max_bytes, struct stat* out = nullptr);
+EXID_API int openInputFile(const std::filesystem::path& path, const std::string& what,
+                           std::uintmax_t max_bytes, struct stat* out = nullptr);
 
 /// Reads a whole input file: anything that is not a regular file (a FIFO, a device such as
 /// /dev/zero, a directory) is refused BEFORE it is opened for reading; a file larger than
 /// max_bytes is refused (also one that grows while it is read). Recorded as openInputFile.
-std::string readInputFile(const std::filesystem::path& path, const std::string& what,
-                          std::uintmax_t max_bytes);
+EXID_API std::string readInputFile(const std::filesystem::path& path, const std::string& what,
+                                   std::uintmax_t max_bytes);
 
 /// For a file another library opens by its path (SQLite): the checks of openInputFile and the
 /// manifest entry, the file closed again.
-void admitInputFile(const std::filesystem::path& path, const std::string& what,
-                    std::uintmax_t max_bytes);
+EXID_API void admitInputFile(const std::filesystem::path& path, const std::string& what,
+                             std::uintmax_t max_bytes);
 
 }  // namespace exid

@@ -9,9 +9,11 @@
 #include <utility>
 #include <vector>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
-class Json {
+class EXID_API Json {
  public:
   enum class Type { Null, Bool, Int, Double, String, Array, Object };
 

@@ -10,18 +10,20 @@
 #include <variant>
 #include <vector>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
 enum class ParamType { Bool, Int, Double, String, Path, IntList, DoubleList, StringList };
-const char* toString(ParamType t);
+EXID_API const char* toString(ParamType t);
 
 using ParamValue = std::variant<bool, std::int64_t, double, std::string, std::vector<std::int64_t>,
                                 std::vector<double>, std::vector<std::string>>;
 
 /// Printable form of a value as it would appear in YAML ("0.5", "[1, 2]", "true", "name").
-std::string formatValue(const ParamValue& v);
+EXID_API std::string formatValue(const ParamValue& v);
 
-struct ParamDecl {
+struct EXID_API ParamDecl {
   std::string name;
   ParamType type = ParamType::Double;
   std::optional<ParamValue> default_value;  // none: the parameter is required
@@ -41,30 +43,31 @@ struct ParamDecl {
 };
 
 /// Builder helpers: ParamDecl entries read like a table in the plugin's source.
-ParamDecl param_double(std::string name, std::optional<double> def, std::string unit,
-                       std::string doc, std::optional<double> min = std::nullopt,
-                       std::optional<double> max = std::nullopt, bool min_open = false,
-                       bool max_open = false);
+EXID_API ParamDecl param_double(std::string name, std::optional<double> def, std::string unit,
+                                std::string doc, std::optional<double> min = std::nullopt,
+                                std::optional<double> max = std::nullopt, bool min_open = false,
+                                bool max_open = false);
 /// Integer parameters declared without a bound get [-kMaxIntParam, kMaxIntParam]: every integer
 /// has a range, and every accepted value fits an int (no narrowing conversion can wrap).
 inline constexpr double kMaxIntParam = 1e9;
-ParamDecl param_int(std::string name, std::optional<std::int64_t> def, std::string doc,
-                    std::optional<double> min = std::nullopt,
-                    std::optional<double> max = std::nullopt);
-ParamDecl param_bool(std::string name, bool def, std::string doc);
-ParamDecl param_string(std::string name, std::optional<std::string> def, std::string doc,
-                       std::vector<std::string> choices = {});
-ParamDecl param_path(std::string name, std::optional<std::string> def, std::string doc);
-ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def, std::string unit,
-                        std::string doc, int min_size = 0, int max_size = -1);
-ParamDecl param_ints(std::string name, std::optional<std::vector<std::int64_t>> def,
-                     std::string doc, std::optional<double> min = std::nullopt,
-                     std::optional<double> max = std::nullopt);
-ParamDecl param_strings(std::string name, std::optional<std::vector<std::string>> def,
-                        std::string doc, std::vector<std::string> choices = {});
+EXID_API ParamDecl param_int(std::string name, std::optional<std::int64_t> def, std::string doc,
+                             std::optional<double> min = std::nullopt,
+                             std::optional<double> max = std::nullopt);
+EXID_API ParamDecl param_bool(std::string name, bool def, std::string doc);
+EXID_API ParamDecl param_string(std::string name, std::optional<std::string> def, std::string doc,
+                                std::vector<std::string> choices = {});
+EXID_API ParamDecl param_path(std::string name, std::optional<std::string> def, std::string doc);
+EXID_API ParamDecl param_doubles(std::string name, std::optional<std::vector<double>> def,
+                                 std::string unit, std::string doc, int min_size = 0,
+                                 int max_size = -1);
+EXID_API ParamDecl param_ints(std::string name, std::optional<std::vector<std::int64_t>> def,
+                              std::string doc, std::optional<double> min = std::nullopt,
+                              std::optional<double> max = std::nullopt);
+EXID_API ParamDecl param_strings(std::string name, std::optional<std::vector<std::string>> def,
+                                 std::string doc, std::vector<std::string> choices = {});
 
 /// Resolved parameters of one plugin instance: every declared parameter has a value.
-class ParamSet {
+class EXID_API ParamSet {
  public:
   ParamSet() = default;
   void set(const std::string& name, ParamValue v) { values_[name] = std::move(v); }

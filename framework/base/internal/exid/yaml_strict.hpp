@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "exid/error.hpp"
+#include "exid/export.hpp"
 
 namespace exid {
 
@@ -26,7 +27,7 @@ namespace detail {
 
 // Counts, from the parser's events (no node tree is built), the nodes every alias stands for,
 // and stops at the alias that takes the total over kMaxYamlAliasNodes, with its place.
-class AliasCounter : public YAML::EventHandler {
+class EXID_API AliasCounter : public YAML::EventHandler {
  public:
   struct Stop {};
   bool over = false, cycle = false;

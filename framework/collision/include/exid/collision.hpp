@@ -20,17 +20,18 @@
 #include <utility>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
 
 /// An obstacle of the static environment: a shape fixed in the base frame, with a name.
-struct Obstacle {
+struct EXID_API Obstacle {
   std::string name;
   CollisionShape shape;  // body -1
 };
 
-struct CollisionOptions {
+struct EXID_API CollisionOptions {
   double margin_m = 0.0;  // required minimum distance [m]
   bool self = true;       // check body against body
   std::vector<Obstacle> obstacles;
@@ -42,7 +43,7 @@ struct CollisionOptions {
 
 /// The collision model of a robot in an environment. Thread-compatible: one instance per
 /// thread (distances() keeps scratch state).
-class CollisionModel {
+class EXID_API CollisionModel {
  public:
   /// Throws exid::Error naming the shape (and its origin) when geometry is invalid or a mesh
   /// cannot be read, and when nothing is left to check.

@@ -7,12 +7,13 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 
 namespace exid {
 
 /// q, qd, qdd at sample times (a trajectory), K x n each, measured coordinates.
-struct Samples {
+struct EXID_API Samples {
   Eigen::VectorXd t;  // [s]
   Eigen::MatrixXd q, qd, qdd;
   int size() const { return static_cast<int>(t.size()); }
@@ -24,7 +25,7 @@ struct Dataset;
 /// The samples of a dataset too long to hold, read in consecutive chunks (a recording streamed
 /// from its file). A pass reads every sample once, in order; rewind() starts another. Reading may
 /// throw exid::Error (a bad value found in the file), naming the file and the line.
-class DatasetStream {
+class EXID_API DatasetStream {
  public:
   virtual ~DatasetStream() = default;
   virtual int size() const = 0;  // samples in a pass
@@ -77,7 +78,7 @@ class DatasetStream {
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).
 /// A streamed dataset (`stream` set) holds no samples itself: its matrices are empty and its
 /// samples are read through the stream (materialize() reads them all into memory).
-struct Dataset {
+struct EXID_API Dataset {
   Eigen::VectorXd t;           // [s], strictly increasing
   Eigen::MatrixXd q, qd, qdd;  // K x n, measured coordinates [rad or m, /s, /s^2]
   Eigen::MatrixXd tau;         // K x n [N m or N]
@@ -101,20 +102,20 @@ struct Dataset {
 };
 
 /// Samples [begin, end) of a dataset in memory (meta and source kept).
-Dataset sliceDataset(const Dataset& d, int begin, int end);
+EXID_API Dataset sliceDataset(const Dataset& d, int begin, int end);
 /// Every signal of d (in memory, at least two samples) linearly interpolated onto the uniform
 /// grid t0 + m / rate_hz, m = 0 .. floor(span * rate_hz); source and meta kept. `who` starts the
 /// messages (e.g. "experiment 'csv': file.csv"): fewer than two samples, or a grid of fewer than
 /// 2 or more than 1e8 samples, is an exid::Error.
-Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who);
+EXID_API Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who);
 /// A dataset in memory: d itself, or every sample of its stream read in one pass (meta then
 /// the stream's, complete).
-Dataset materialize(const Dataset& d);
+EXID_API Dataset materialize(const Dataset& d);
 
 /// Consecutive spans of a dataset, in memory or streamed, asked for in order: span(b, e) with b
 /// and e never below the previous call's. A stream is read once, keeping only the samples
 /// between the lowest begin still to come and the highest end asked for.
-class SampleWindow {
+class EXID_API SampleWindow {
  public:
   explicit SampleWindow(const Dataset& d);
   /// Samples [begin, end) (meta and source of the dataset).
@@ -128,7 +129,7 @@ class SampleWindow {
 };
 
 /// Observation rows of a model: W * theta ~= y. Columns are BASE parameters of the model.
-struct Rows {
+struct EXID_API Rows {
   Eigen::MatrixXd W;
   Eigen::VectorXd y;
   std::vector<int> equation;  // per row: which equation it is (joint index, wrench component,

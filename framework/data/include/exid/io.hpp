@@ -10,13 +10,14 @@
 #include <vector>
 
 #include "exid/error.hpp"
+#include "exid/export.hpp"
 #include "exid/input_file.hpp"
 
 namespace exid {
 
 /// A failed write, with its errno: ENOSPC, EDQUOT and EFBIG (disk or quota full, file size
 /// limit) are conditions of the machine, not of the study (a matrix retries such a cell).
-class IoError : public Error {
+class EXID_API IoError : public Error {
  public:
   IoError(const std::string& what, int err) : Error(what), errno_value(err) {}
   int errno_value;
@@ -26,12 +27,12 @@ class IoError : public Error {
 /// Writes text to path atomically: path.tmp.<pid> is written and flushed, then renamed over
 /// path. On any failure nothing is left at path (an older file stays as it was) and
 /// exid::Error names the file and the reason (e.g. disk full).
-void writeFileAtomic(const std::filesystem::path& path, const std::string& text);
+EXID_API void writeFileAtomic(const std::filesystem::path& path, const std::string& text);
 
 /// The same written piece by piece (a large file is never held as one string): write() as
 /// often as needed, then commit() flushes, syncs and renames over path. Destroyed without a
 /// commit (an exception on the way), it removes its temporary file: nothing is left at path.
-class AtomicFileWriter {
+class EXID_API AtomicFileWriter {
  public:
   explicit AtomicFileWriter(std::filesystem::path path);
   ~AtomicFileWriter();
@@ -52,10 +53,10 @@ class AtomicFileWriter {
 
 /// Removes `*.tmp.PID` files and `.*.staging.PID` folders in dir whose process PID is gone (left
 /// by a process killed with SIGKILL). Returns how many were removed; never throws.
-int cleanStaleTemporaries(const std::filesystem::path& dir);
+EXID_API int cleanStaleTemporaries(const std::filesystem::path& dir);
 
 /// A numeric table with named columns.
-struct CsvTable {
+struct EXID_API CsvTable {
   std::vector<std::string> columns;
   Eigen::MatrixXd data;  // rows x columns (x the columns read: see slot)
   /// The 1-based line of the file of each data row (comments and blank lines counted).
@@ -76,7 +77,7 @@ struct CsvTable {
   const std::string& notNumeric(int c) const;
 };
 
-struct CsvReadOptions {
+struct EXID_API CsvReadOptions {
   bool allow_non_finite = false;      // NaN/Inf cells are an error naming row and column unless set
   bool drop_non_finite_rows = false;  // drop (and count) rows with NaN/Inf/empty cells instead
   char delimiter = 0;                 // 0: detect ',' ';' or tab from the header
@@ -87,7 +88,7 @@ struct CsvReadOptions {
 /// A cell [a, b), already trimmed and not empty, as CsvReader reads it: std::from_chars (a
 /// leading '+' allowed), else strtod (hex, NaN payloads, out of range). True when the whole cell
 /// is the number; *used: the bytes strtod read (for the error's column).
-bool parseCsvNumber(const char* a, const char* b, double* v, std::size_t* used);
+EXID_API bool parseCsvNumber(const char* a, const char* b, double* v, std::size_t* used);
 
 /// A CSV file with a header line read as a stream: in blocks of a fixed size (a line may straddle
 /// blocks), in constant memory whatever the file's size, each row's cells found by pointer
@@ -95,7 +96,7 @@ bool parseCsvNumber(const char* a, const char* b, double* v, std::size_t* used);
 /// hex, a NaN payload, out of range). Only the selected columns are converted: the others are
 /// counted, never read. Errors are those of parseCsv: they name the file, the line and the
 /// column. Input files: regular files only (input_file.hpp), with no size limit.
-class CsvReader {
+class EXID_API CsvReader {
  public:
   static constexpr std::size_t kDefaultBlockBytes = std::size_t{1} << 20;
   /// Opens path and reads its header; `what` names the file in errors ("cannot open the CSV
@@ -186,17 +187,17 @@ class CsvReader {
 };
 
 /// Reads a CSV with a header line. Errors name the file, the line and the column.
-CsvTable readCsv(const std::filesystem::path& path, const CsvReadOptions& opt = {},
-                 int* dropped_rows = nullptr);
-CsvTable parseCsv(const std::string& text, const std::string& source,
-                  const CsvReadOptions& opt = {}, int* dropped_rows = nullptr);
+EXID_API CsvTable readCsv(const std::filesystem::path& path, const CsvReadOptions& opt = {},
+                          int* dropped_rows = nullptr);
+EXID_API CsvTable parseCsv(const std::string& text, const std::string& source,
+                           const CsvReadOptions& opt = {}, int* dropped_rows = nullptr);
 /// A table from a reader (its header read): the columns wanted(name) selects (every column
 /// when wanted is empty), rows to the end. CsvTable::columns lists every column of the file,
 /// CsvTable::slot says where the selected ones are in data. Memory: the numbers read, plus one
 /// block of the file.
 template <class Wanted>
 CsvTable readCsvColumns(CsvReader& reader, const Wanted& wanted);
-CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool all);
+EXID_API CsvTable readCsvTable(CsvReader& reader, const std::vector<int>& columns, bool all);
 template <class Wanted>
 CsvTable readCsvColumns(CsvReader& reader, const Wanted& wanted) {
   std::vector<int> cols;
@@ -205,9 +206,9 @@ CsvTable readCsvColumns(CsvReader& reader, const Wanted& wanted) {
   return readCsvTable(reader, cols, false);
 }
 /// CSV text (full double precision).
-std::string toCsv(const CsvTable& table);
+EXID_API std::string toCsv(const CsvTable& table);
 /// The same text into a writer, a row at a time.
-void writeCsv(AtomicFileWriter& out, const CsvTable& table);
-void writeCsvAtomic(const std::filesystem::path& path, const CsvTable& table);
+EXID_API void writeCsv(AtomicFileWriter& out, const CsvTable& table);
+EXID_API void writeCsvAtomic(const std::filesystem::path& path, const CsvTable& table);
 
 }  // namespace exid

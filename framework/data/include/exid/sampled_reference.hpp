@@ -6,15 +6,16 @@
 #include <Eigen/Core>
 
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 
 namespace exid {
 
 /// q, qd, qdd of the samples' quintic Hermite interpolant at time t (the polynomial of the
 /// first or last interval outside the samples' span; one sample: its values).
-void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::VectorXd* qd,
-                    Eigen::VectorXd* qdd);
+EXID_API void quinticHermite(const Samples& s, double t, Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                             Eigen::VectorXd* qdd);
 /// The same interpolant's third derivative (jerk) at time t: piecewise quadratic, one-sided
 /// at the knots (the interval t falls in, as quinticHermite); zero for one sample.
-Eigen::VectorXd quinticHermiteJerk(const Samples& s, double t);
+EXID_API Eigen::VectorXd quinticHermiteJerk(const Samples& s, double t);
 
 }  // namespace exid

@@ -7,6 +7,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 
@@ -14,12 +15,12 @@ namespace exid {
 
 /// The five parameters; `first` names the time origin in their docs (e.g. "sample",
 /// "joint-state sample").
-std::vector<ParamDecl> segmentParams(const std::string& first = "sample");
+EXID_API std::vector<ParamDecl> segmentParams(const std::string& first = "sample");
 
 /// A resolved segment, times in seconds after the recording's first sample. The part is the
 /// half-open range [lo_s, hi_s) of the segment (closed at the segment's end): no sample belongs
 /// to both parts of a split.
-struct RecordingSegment {
+struct EXID_API RecordingSegment {
   double t_start_s = 0.0;
   double t_end_s = 0.0;       // as given (0: to the end)
   double end_s = 0.0;         // the segment's end
@@ -45,8 +46,8 @@ struct RecordingSegment {
 /// median step is about step_tol / 0.5 (t_end_s may exceed span_s by step_tol, never more: the
 /// segment is never clamped). Throws exid::Error starting with `pre` (e.g. "experiment 'csv': ")
 /// and naming `file`.
-RecordingSegment resolveSegment(const ParamSet& p, double span_s, double step_tol,
-                                const std::string& pre, const std::string& file,
-                                const std::string& first = "sample");
+EXID_API RecordingSegment resolveSegment(const ParamSet& p, double span_s, double step_tol,
+                                         const std::string& pre, const std::string& file,
+                                         const std::string& first = "sample");
 
 }  // namespace exid

@@ -14,9 +14,11 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
-struct BaseParameters {
+struct EXID_API BaseParameters {
   std::vector<std::string> full_names;   // columns of the full regressor
   std::vector<int> independent;          // base columns, indices into full_names, ascending
   std::vector<int> dependent;            // the others (regrouped or unidentifiable)
@@ -33,7 +35,7 @@ struct BaseParameters {
   Eigen::MatrixXd columns(const Eigen::MatrixXd& W_full) const;
 };
 
-struct BaseParameterOptions {
+struct EXID_API BaseParameterOptions {
   double tolerance = 1e-8;
   bool normalize_columns = true;  // scale each column to unit norm before the QR
   /// Full parameters to keep as base columns: visited first, in this order, before the others
@@ -45,15 +47,15 @@ struct BaseParameterOptions {
 };
 
 /// From a stacked full regressor and its column names.
-BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,
-                                     const std::vector<std::string>& names,
-                                     const BaseParameterOptions& opt = {});
+EXID_API BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,
+                                              const std::vector<std::string>& names,
+                                              const BaseParameterOptions& opt = {});
 
 /// Stack `samples` calls of `rows(k, W_k)` (each returning rows of the full regressor) and
 /// compute the base parameters.
-BaseParameters computeBaseParameters(
-    int samples, int rows_per_sample,
-    const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
-    const std::vector<std::string>& names, const BaseParameterOptions& opt = {});
+EXID_API BaseParameters
+computeBaseParameters(int samples, int rows_per_sample,
+                      const std::function<void(int, Eigen::Ref<Eigen::MatrixXd>)>& rows,
+                      const std::vector<std::string>& names, const BaseParameterOptions& opt = {});
 
 }  // namespace exid

@@ -19,28 +19,29 @@
 
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
 
 enum class DhConvention { Standard, Modified };
 
-struct DhRow {
+struct EXID_API DhRow {
   JointType type = JointType::Revolute;
   double a = 0, alpha = 0, d = 0, theta = 0;
 };
 
 /// One body from one DH row: fills pre, post, type, axis (= z), parent. Name and inertia empty.
-Body dhBody(const DhRow& row, DhConvention conv, int parent);
+EXID_API Body dhBody(const DhRow& row, DhConvention conv, int parent);
 
 /// A serial chain (body i's parent is i-1): bodies "link1".., joints "joint1"..; inertia zero;
 /// limits infinite; drives default; gravity (0, 0, -9.81).
-RobotModel serialDh(const std::vector<DhRow>& rows, DhConvention conv);
+EXID_API RobotModel serialDh(const std::vector<DhRow>& rows, DhConvention conv);
 
 /// Elementary transforms used above (exposed for loaders and tests).
-Pose rotX(double angle);
-Pose rotZ(double angle);
-Pose transX(double d);
-Pose transZ(double d);
+EXID_API Pose rotX(double angle);
+EXID_API Pose rotZ(double angle);
+EXID_API Pose transX(double d);
+EXID_API Pose transZ(double d);
 
 }  // namespace exid

@@ -13,6 +13,7 @@
 #include <vector>
 
 #include "exid/dynamics.hpp"
+#include "exid/export.hpp"
 
 namespace exid {
 
@@ -28,7 +29,7 @@ inline double coulombSign(double v) {
   return v > kCoulombDeadband ? 1.0 : (v < -kCoulombDeadband ? -1.0 : 0.0);
 }
 
-struct DriveColumns {
+struct EXID_API DriveColumns {
   bool rotor_inertia = false;
   bool coulomb = false;
   bool viscous = false;
@@ -36,48 +37,50 @@ struct DriveColumns {
   int count() const { return rotor_inertia + coulomb + viscous + offset; }
 };
 
-std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
-Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
-int numParameters(const RobotModel& model, const DriveColumns& cols);
+EXID_API std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
+EXID_API Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
+EXID_API int numParameters(const RobotModel& model, const DriveColumns& cols);
 /// True for a drive column's name as parameterNames writes it (Ia3, Fc3, Fv3, OFF3), or a
 /// nonlinear friction column of the `differential` model (FcP3, FcN3, Fs3).
-bool isDriveParameterName(const std::string& name);
+EXID_API bool isDriveParameterName(const std::string& name);
 /// Whether `name` is `prefix` followed by a joint number (1, 2, ...), e.g. "Fc3" for "Fc".
-bool isIndexedParameterName(const std::string& name, const char* prefix);
+EXID_API bool isIndexedParameterName(const std::string& name, const char* prefix);
 /// A column that holds the recorded torque itself: the `differential` model's drive gains
 /// dK<j> (1) and load-dependent Coulomb FcL<j> (2); else 0.
-int torqueColumnKind(const std::string& name);
+EXID_API int torqueColumnKind(const std::string& name);
 
 /// Joint coordinates from measured ones (identity when the model has no transmission).
-void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
-                     const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd,
-                     Eigen::VectorXd* qdd);
+EXID_API void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm,
+                              const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                              Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd);
 /// Measured coordinates from joint ones (the transmission must be invertible).
-void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                     const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm,
-                     Eigen::VectorXd* qddm);
+EXID_API void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q,
+                              const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                              Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm);
 
 /// Y (n x numParameters) in measured coordinates: tau_m = Y * parameterValues(model, cols).
-void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                       const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
-                       const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y);
+EXID_API void actuatorRegressor(const RobotModel& model, DynamicsData& data,
+                                const DriveColumns& cols, const Eigen::VectorXd& qm,
+                                const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                                Eigen::Ref<Eigen::MatrixXd> Y);
 /// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative).
-void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                          const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
-                          const Eigen::VectorXd& qddm, const Eigen::MatrixXd& G,
-                          Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm);
+EXID_API void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data,
+                                   const DriveColumns& cols, const Eigen::VectorXd& qm,
+                                   const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                                   const Eigen::MatrixXd& G, Eigen::VectorXd* d_qm,
+                                   Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm);
 /// Full actuator torque with the model's own parameters (rigid body + drives).
-Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
-                               const DriveColumns& cols, const Eigen::VectorXd& qm,
-                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
+EXID_API Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
+                                        const DriveColumns& cols, const Eigen::VectorXd& qm,
+                                        const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
 /// actuatorTorque and its partial derivatives with respect to qm, qdm, qddm (n x n each, row i
 /// the gradient of tau_m,i; sign(qd) has zero derivative). Exact (inverseDynamicsDerivatives
 /// mapped through the transmission). The derivative outputs may be null.
-void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
-                               const DriveColumns& cols, const Eigen::VectorXd& qm,
-                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
-                               Eigen::VectorXd* tau_m, Eigen::MatrixXd* dtau_dqm,
-                               Eigen::MatrixXd* dtau_dqdm, Eigen::MatrixXd* dtau_dqddm);
+EXID_API void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
+                                        const DriveColumns& cols, const Eigen::VectorXd& qm,
+                                        const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                                        Eigen::VectorXd* tau_m, Eigen::MatrixXd* dtau_dqm,
+                                        Eigen::MatrixXd* dtau_dqdm, Eigen::MatrixXd* dtau_dqddm);
 
 /// actuatorTorqueDerivatives with the full parameters `params` (numParameters(model, cols)
 /// values in parameterValues()'s order: the 10n standard inertial parameters, then each measured
@@ -86,9 +89,9 @@ void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
 /// derivative). With dq and dqd null, dqdd (the mass matrix) comes from the composite rigid
 /// body algorithm and tau_m from recursive Newton-Euler, without tangents. Outputs other than
 /// tau_m may be null.
-void actuatorTorqueWith(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
-                        const Eigen::VectorXd& params, const Eigen::VectorXd& qm,
-                        const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
-                        Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq, Eigen::MatrixXd* dqd,
-                        Eigen::MatrixXd* dqdd);
+EXID_API void actuatorTorqueWith(const RobotModel& model, DynamicsData& data,
+                                 const DriveColumns& cols, const Eigen::VectorXd& params,
+                                 const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                                 const Eigen::VectorXd& qddm, Eigen::VectorXd* tau_m,
+                                 Eigen::MatrixXd* dq, Eigen::MatrixXd* dqd, Eigen::MatrixXd* dqdd);
 }  // namespace exid

@@ -16,97 +16,105 @@
 #include <Eigen/Core>
 #include <memory>
 
+#include "exid/export.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
 
 /// Mutable workspace of the algorithms below. Create one per thread with makeDynamicsData().
 struct DynamicsData;
-struct DynamicsDataDeleter {
+struct EXID_API DynamicsDataDeleter {
   void operator()(DynamicsData* d) const;
 };
 using DynamicsDataPtr = std::unique_ptr<DynamicsData, DynamicsDataDeleter>;
-DynamicsDataPtr makeDynamicsData(const RobotModel& model);
+EXID_API DynamicsDataPtr makeDynamicsData(const RobotModel& model);
 
 /// Joint-torque regressor: Y is n x 10n, tau = Y * pi. O(n^2).
-void torqueRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                     Eigen::Ref<Eigen::MatrixXd> Y);
+EXID_API void torqueRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                              const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                              Eigen::Ref<Eigen::MatrixXd> Y);
 
 /// Energy regressors (1 x 10n each): kinetic energy T = kinetic * pi, potential energy
 /// U = potential * pi with U = -sum_j M_j g^T c_j (c_j the centre of mass in the base frame).
-void energyRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                     const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
-                     Eigen::Ref<Eigen::RowVectorXd> potential);
+EXID_API void energyRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                              const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
+                              Eigen::Ref<Eigen::RowVectorXd> potential);
 
 /// Wrench (6 x 10) that the sensor measures from a payload rigidly attached to the sensor frame:
 /// w = A(omega, alpha, a - g) * phi, all expressed in the sensor frame. w is the wrench the
 /// robot exerts on the payload (force, then moment about the sensor origin).
-void wrenchRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                     const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                     Eigen::Ref<Eigen::Matrix<double, 6, 10>> A);
+EXID_API void wrenchRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                              const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                              Eigen::Ref<Eigen::Matrix<double, 6, 10>> A);
 
 /// The payload's contribution to the joint torques: n x 10, tau_payload = Yp * phi.
-void payloadTorqueRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                            const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                            Eigen::Ref<Eigen::MatrixXd> Yp);
+EXID_API void payloadTorqueRegressor(const RobotModel& model, DynamicsData& data,
+                                     const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                     const Eigen::VectorXd& qdd, Eigen::Ref<Eigen::MatrixXd> Yp);
 
 /// Inverse dynamics by recursive Newton-Euler with the model's own parameters (or pi if given,
 /// 10n stacked standard parameters). Rigid body only, no drive terms.
-Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& data,
-                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi = nullptr);
+EXID_API Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& data,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                         const Eigen::VectorXd& qdd,
+                                         const Eigen::VectorXd* pi = nullptr);
 
 /// Partial derivatives of the inverse dynamics tau(q, qd, qdd) (as inverseDynamics: the model's
 /// own parameters, or pi): row i of each n x n matrix is the gradient of tau_i. Exact (forward
 /// tangents of the recursive Newton-Euler algorithm, all 3n directions at once), O(n^2); also
 /// returns tau. Outputs may be null except tau.
-void inverseDynamicsDerivatives(const RobotModel& model, DynamicsData& data,
-                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi,
-                                Eigen::VectorXd* tau, Eigen::MatrixXd* dtau_dq,
-                                Eigen::MatrixXd* dtau_dqd, Eigen::MatrixXd* dtau_dqdd);
+EXID_API void inverseDynamicsDerivatives(const RobotModel& model, DynamicsData& data,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                         const Eigen::VectorXd& qdd, const Eigen::VectorXd* pi,
+                                         Eigen::VectorXd* tau, Eigen::MatrixXd* dtau_dq,
+                                         Eigen::MatrixXd* dtau_dqd, Eigen::MatrixXd* dtau_dqdd);
 
 /// Joint-space mass matrix (composite rigid body algorithm), n x n.
-Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                           const Eigen::VectorXd* pi = nullptr);
+EXID_API Eigen::MatrixXd massMatrix(const RobotModel& model, DynamicsData& data,
+                                    const Eigen::VectorXd& q, const Eigen::VectorXd* pi = nullptr);
 
 /// Forward dynamics qdd = M(q)^-1 (tau - h(q, qd)), rigid body only.
-Eigen::VectorXd forwardDynamics(const RobotModel& model, DynamicsData& data,
-                                const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                                const Eigen::VectorXd& tau, const Eigen::VectorXd* pi = nullptr);
+EXID_API Eigen::VectorXd forwardDynamics(const RobotModel& model, DynamicsData& data,
+                                         const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                         const Eigen::VectorXd& tau,
+                                         const Eigen::VectorXd* pi = nullptr);
 
 /// Pose of body i's frame in the base frame.
-Pose bodyPose(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q, int body);
+EXID_API Pose bodyPose(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
+                       int body);
 
 /// Vector-Jacobian products (exact; what the adjoint optimiser needs at every sample).
 /// Given G with the shape of the regressor, these return the gradient of the scalar <G, Y>
 /// (sum of elementwise products) with respect to q, qd and qdd. Outputs may be null.
-void torqueRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                        const Eigen::MatrixXd& G, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
-                        Eigen::VectorXd* d_qdd);
+EXID_API void torqueRegressorVjp(const RobotModel& model, DynamicsData& data,
+                                 const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
+                                 Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                                 Eigen::VectorXd* d_qdd);
 /// Gradient of <Gk, kinetic> + <Gu, potential> with respect to q and qd.
-void energyRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                        const Eigen::VectorXd& qd, const Eigen::RowVectorXd& Gk,
-                        const Eigen::RowVectorXd& Gu, Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd);
+EXID_API void energyRegressorVjp(const RobotModel& model, DynamicsData& data,
+                                 const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 const Eigen::RowVectorXd& Gk, const Eigen::RowVectorXd& Gu,
+                                 Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd);
 /// Gradient of <G, A> (G 6 x 10) with respect to q, qd, qdd.
-void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,
-                        const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
-                        const Eigen::Matrix<double, 6, 10>& G, Eigen::VectorXd* d_q,
-                        Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd);
+EXID_API void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data,
+                                 const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                 const Eigen::VectorXd& qdd, const Eigen::Matrix<double, 6, 10>& G,
+                                 Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                                 Eigen::VectorXd* d_qdd);
 /// Gradient of <G, Yp> (G n x 10) with respect to q, qd, qdd.
-void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& data,
-                               const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
-                               const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
-                               Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd, Eigen::VectorXd* d_qdd);
+EXID_API void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& data,
+                                        const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                        const Eigen::VectorXd& qdd, const Eigen::MatrixXd& G,
+                                        Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
+                                        Eigen::VectorXd* d_qdd);
 
 /// Information-matrix accumulation M = sum_k W_k^T W_k over many small row blocks W_k (e.g. one
 /// regressor per sample), much faster than a rank update per block: rows are grouped by their
 /// first non-zero column (the torque regressor of a chain is block upper triangular), buffered,
 /// and added in batches by a cache-friendly kernel (AVX2/FMA when the CPU has it, chosen at run
 /// time). Not thread-safe; use one accumulator per thread and add the matrices.
-class GramAccumulator {
+class EXID_API GramAccumulator {
  public:
   explicit GramAccumulator(int cols = 0);
   ~GramAccumulator();

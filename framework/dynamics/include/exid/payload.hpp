@@ -1,4 +1,6 @@
 #pragma once
+
+#include "exid/export.hpp"
 // A payload rigidly attached to a robot's sensor frame (a wrist force/torque sensor's tool): its
 // 10 inertial parameters in the two orders exid uses, the study parameters that describe it, and
 // their JSON. Used by the load models and the `simulate` experiment. Header-only.
@@ -47,7 +49,7 @@ inline std::vector<ParamDecl> payloadParams(const std::string& role) {
   };
 }
 
-struct Payload {
+struct EXID_API Payload {
   double mass = 0.0;
   Eigen::Vector3d com = Eigen::Vector3d::Zero();
   Eigen::Matrix3d I_com = Eigen::Matrix3d::Zero();

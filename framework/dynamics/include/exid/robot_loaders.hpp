@@ -19,11 +19,12 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
 
-struct LoadOptions {
+struct EXID_API LoadOptions {
   /// Physically impossible inertial data (and other suspicious data, see above) is an error.
   bool strict = false;
   /// Where warnings go (one line each, "source: link 'x': rule"). Null: printed to stderr.
@@ -39,26 +40,27 @@ struct LoadOptions {
 };
 
 /// A DH (standard or modified) YAML table. See docs/robots.md for the keys.
-RobotModel loadDhYaml(const std::filesystem::path& file, const LoadOptions& options = {});
+EXID_API RobotModel loadDhYaml(const std::filesystem::path& file, const LoadOptions& options = {});
 /// The same from text; `source` names it in messages (e.g. "puma560.yaml (embedded)").
-RobotModel loadDhYamlString(const std::string& text, const std::string& source,
-                            const LoadOptions& options = {});
+EXID_API RobotModel loadDhYamlString(const std::string& text, const std::string& source,
+                                     const LoadOptions& options = {});
 
 /// A URDF file (urdfdom) with the optional <exid> extension element. See docs/robots.md.
-RobotModel loadUrdf(const std::filesystem::path& file, const LoadOptions& options = {});
+EXID_API RobotModel loadUrdf(const std::filesystem::path& file, const LoadOptions& options = {});
 /// The same from text; `source` names it in messages.
-RobotModel loadUrdfString(const std::string& xml, const std::string& source,
-                          const LoadOptions& options = {});
+EXID_API RobotModel loadUrdfString(const std::string& xml, const std::string& source,
+                                   const LoadOptions& options = {});
 
 /// Dispatches on the extension: .urdf / .xml -> loadUrdf, .yaml / .yml -> loadDhYaml.
-RobotModel loadRobotFile(const std::filesystem::path& file, const LoadOptions& options = {});
+EXID_API RobotModel loadRobotFile(const std::filesystem::path& file,
+                                  const LoadOptions& options = {});
 
 /// Checks every body with exid::checkPhysical (plus "zero mass with non-zero inertia"), and
 /// reports each problem as "source: link 'name' (body i): rule": a warning, or exid::Error when
 /// options.strict. Called by the loaders; exposed for code-built models.
-void checkModelPhysical(const RobotModel& model, const LoadOptions& options);
+EXID_API void checkModelPhysical(const RobotModel& model, const LoadOptions& options);
 
 /// Reports one warning according to options (appended to options.warnings, else stderr).
-void reportWarning(const LoadOptions& options, const std::string& message);
+EXID_API void reportWarning(const LoadOptions& options, const std::string& message);
 
 }  // namespace exid

@@ -6,13 +6,15 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
+
 namespace exid {
 
 enum class JointType { Revolute, Prismatic };
 
 /// Rigid transform of frame B relative to frame A: R = R_AB (columns are B's axes in A),
 /// p = p_AB (B's origin in A). A point x_B maps to x_A = R x_B + p.
-struct Pose {
+struct EXID_API Pose {
   Eigen::Matrix3d R = Eigen::Matrix3d::Identity();
   Eigen::Vector3d p = Eigen::Vector3d::Zero();
   Pose operator*(const Pose& o) const { return {R * o.R, R * o.p + p}; }
@@ -27,7 +29,7 @@ struct Pose {
 /// the loaders). Frames: parent body frame --pre--> joint frame --joint motion--> moved joint
 /// frame --post--> body frame. URDF and modified DH have post = identity; standard DH uses post
 /// to keep the published parameters in the published link frame.
-struct Body {
+struct EXID_API Body {
   std::string name;        // link name
   std::string joint_name;  // joint name
   int parent = -1;         // index of the parent body, -1 for the fixed base; parent < own index
@@ -41,14 +43,14 @@ struct Body {
 };
 
 /// Limits of one joint (joint coordinates), SI. Infinite where unknown.
-struct JointLimits {
+struct EXID_API JointLimits {
   double q_min = -1e300, q_max = 1e300;
   double qd_max = 1e300, qdd_max = 1e300, tau_max = 1e300;
 };
 
 /// Drive of one actuated coordinate (measured coordinates, see RobotModel::transmission).
 /// tau_drive = Ia*qdd + Fc*sign(qd) + Fv*qd + OFF, added to the rigid-body torque.
-struct Drive {
+struct EXID_API Drive {
   double gear_ratio = 1.0;     // motor angle / joint angle (informative)
   double rotor_inertia = 0.0;  // Ia, reflected to the coordinate [kg m^2 or kg]
   double coulomb = 0.0;        // Fc [N m or N]
@@ -62,7 +64,7 @@ struct Drive {
 /// centred; a box has edge lengths `size`, centred; a mesh is a triangle mesh read from
 /// `mesh_file` (STL, binary or ASCII; relative paths from the robot description's folder),
 /// scaled by `mesh_scale` in its own frame.
-struct CollisionShape {
+struct EXID_API CollisionShape {
   enum class Kind { Sphere, Capsule, Cylinder, Box, Mesh };
   Kind kind = Kind::Sphere;
   int body = -1;        // the body it moves with; -1: fixed to the base
@@ -75,7 +77,7 @@ struct CollisionShape {
   std::string where;  // where it was given (file:line, YAML key), for messages
 };
 
-struct RobotModel {
+struct EXID_API RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
   std::vector<Body> bodies;
@@ -120,21 +122,21 @@ inline constexpr const char* kInertialNames[10] = {"XX", "XY", "XZ", "YY", "YZ",
 
 /// Converts mass, centre of mass (in the body frame) and the inertia tensor about the centre of
 /// mass (axes of the body frame) into the 10 standard parameters about the body frame origin.
-Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,
-                                             const Eigen::Matrix3d& I_com);
+EXID_API Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,
+                                                      const Eigen::Matrix3d& I_com);
 /// The inverse map; mass must be positive for the centre of mass to exist.
-void comFromInertial(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen::Vector3d* com,
-                     Eigen::Matrix3d* I_com);
+EXID_API void comFromInertial(const Eigen::Matrix<double, 10, 1>& pi, double* mass,
+                              Eigen::Vector3d* com, Eigen::Matrix3d* I_com);
 /// The standard parameters of the same body expressed in frame A, given frame B (where pi is
 /// expressed) relative to A.
-Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1>& pi_B,
-                                               const Pose& X_AB);
+EXID_API Eigen::Matrix<double, 10, 1> transformInertial(const Eigen::Matrix<double, 10, 1>& pi_B,
+                                                        const Pose& X_AB);
 
 /// Physical consistency of one body's parameters.
-struct InertiaCheck {
+struct EXID_API InertiaCheck {
   bool ok = true;
   std::string rule;  // empty when ok: "negative mass", "inertia not positive semi-definite", ...
 };
-InertiaCheck checkPhysical(const Eigen::Matrix<double, 10, 1>& pi, double tol = 1e-12);
+EXID_API InertiaCheck checkPhysical(const Eigen::Matrix<double, 10, 1>& pi, double tol = 1e-12);
 
 }  // namespace exid

@@ -11,17 +11,18 @@
 
 #include <string>
 
+#include "exid/export.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid {
 
-struct UrdfWriteOptions {
+struct EXID_API UrdfWriteOptions {
   std::string comment;         // written as an XML comment at the top (no "--")
   std::string root_link = "";  // name of the massless root link ("" = "base_link" or a free name)
 };
 
 /// Throws exid::Error when a body cannot be written (mass <= 0 with non-zero parameters, or
 /// non-finite numbers).
-std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& options = {});
+EXID_API std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& options = {});
 
 }  // namespace exid

@@ -19,6 +19,7 @@
 #include <string>
 
 #include "exid/error.hpp"
+#include "exid/export.hpp"
 #include "exid/input_file.hpp"
 #include "exid/robot_model.hpp"
 
@@ -33,7 +34,7 @@ inline constexpr double kMaxMeshScale = 1e4;
 
 namespace detail {
 
-struct ShapeReader {
+struct EXID_API ShapeReader {
   const std::string& source;
 
   [[noreturn]] void fail(const YAML::Node& at, const std::string& path,

@@ -19,12 +19,13 @@
 #include <vector>
 
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
 
 namespace exid {
 
-struct DerivativeCheckOptions {
+struct EXID_API DerivativeCheckOptions {
   /// Central-difference step, relative to the scale each check states (0: the check's default).
   double relative_step = 0.0;
   /// The check passes when max_rel_error <= tolerance.
@@ -34,7 +35,7 @@ struct DerivativeCheckOptions {
   std::uint64_t seed = 1;
 };
 
-struct DerivativeCheck {
+struct EXID_API DerivativeCheck {
   std::string what;  // what was checked, e.g. "criterion 'cond': dJ/dM"
   bool ok = false;   // every value finite and max_rel_error <= tolerance
   double tolerance = 0.0;
@@ -59,19 +60,18 @@ struct DerivativeCheck {
 /// A scalar function's gradient: f(x) against `gradient` by central differences with steps
 /// h_i = relative_step * max(1, |x_i|) (default relative_step 1e-6). `names` (optional) names
 /// the components of x in the result ("x_i" otherwise).
-DerivativeCheck checkGradient(const std::function<double(const Eigen::VectorXd&)>& f,
-                              const Eigen::VectorXd& x, const Eigen::VectorXd& gradient,
-                              const DerivativeCheckOptions& options = {},
-                              const std::string& what = "gradient",
-                              const std::vector<std::string>& names = {});
+EXID_API DerivativeCheck checkGradient(const std::function<double(const Eigen::VectorXd&)>& f,
+                                       const Eigen::VectorXd& x, const Eigen::VectorXd& gradient,
+                                       const DerivativeCheckOptions& options = {},
+                                       const std::string& what = "gradient",
+                                       const std::vector<std::string>& names = {});
 
 /// A vector function's Jacobian (outputs x inputs), steps as checkGradient.
-DerivativeCheck checkJacobian(const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& f,
-                              const Eigen::VectorXd& x, const Eigen::MatrixXd& jacobian,
-                              const DerivativeCheckOptions& options = {},
-                              const std::string& what = "jacobian",
-                              const std::vector<std::string>& output_names = {},
-                              const std::vector<std::string>& input_names = {});
+EXID_API DerivativeCheck checkJacobian(
+    const std::function<Eigen::VectorXd(const Eigen::VectorXd&)>& f, const Eigen::VectorXd& x,
+    const Eigen::MatrixXd& jacobian, const DerivativeCheckOptions& options = {},
+    const std::string& what = "jacobian", const std::vector<std::string>& output_names = {},
+    const std::vector<std::string>& input_names = {});
 
 /// A criterion's dJ/dM at the information matrix M (symmetric positive definite): for every
 /// i <= j, the change of J when M(i, j) and M(j, i) move together by h (the derivative along
@@ -79,22 +79,22 @@ DerivativeCheck checkJacobian(const std::function<Eigen::VectorXd(const Eigen::V
 /// lambda_min(M) (default relative_step 1e-4: a criterion of the spectrum curves on the scale
 /// of the smallest eigenvalue). A criterion of the extreme eigenvalues (cond, min_sv) needs
 /// them simple: separated from the next by much more than h.
-DerivativeCheck checkCriterion(const Criterion& criterion, const Eigen::MatrixXd& M,
-                               const DerivativeCheckOptions& options = {});
+EXID_API DerivativeCheck checkCriterion(const Criterion& criterion, const Eigen::MatrixXd& M,
+                                        const DerivativeCheckOptions& options = {});
 
 /// A bound trajectory's derivatives at z: its jacobian(z) (d[vec q; vec qd; vec qdd]/dz,
 /// column-major vec) against central differences of evaluate(), its vjp() with random adjoints,
 /// and, when specs().continuous, vjpAt() against differences of evaluateAt() at the sample
 /// times. Steps as checkGradient (relative to max(1, |z_i|)).
-DerivativeCheck checkTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& z,
-                                const DerivativeCheckOptions& options = {});
+EXID_API DerivativeCheck checkTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& z,
+                                         const DerivativeCheckOptions& options = {});
 
 /// A bound observation model's derivatives at samples s (a few: every entry of q, qd and qdd is
 /// moved in turn): fullDesignVjp() with random dW against central differences of <dW,
 /// fullDesign(s)>; when the model has nonlinear parameters (at their values), fullDesignAt()'s
 /// dW and fullDesignVjpAt() likewise. Steps relative to max(1, |entry|) for the samples, to
 /// |eta_k| for a nonlinear parameter (a velocity of 0.01 rad/s is moved by 1e-8 rad/s).
-DerivativeCheck checkModel(const ObservationModel& model, const Samples& s,
-                           const DerivativeCheckOptions& options = {});
+EXID_API DerivativeCheck checkModel(const ObservationModel& model, const Samples& s,
+                                    const DerivativeCheckOptions& options = {});
 
 }  // namespace exid

@@ -12,6 +12,7 @@
 #include "exid/base_parameters.hpp"
 #include "exid/context.hpp"
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 #include "exid/plugin.hpp"
 #include "exid/robot_model.hpp"
@@ -20,7 +21,7 @@ namespace exid {
 
 // ---------------------------------------------------------------- robot
 /// Builds a RobotModel (from a file, or from data compiled into the plugin).
-class Robot : public PluginObject {
+class EXID_API Robot : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Robot;
   virtual std::shared_ptr<const RobotModel> build(const RunContext& ctx) = 0;
@@ -28,7 +29,7 @@ class Robot : public PluginObject {
 
 // ---------------------------------------------------------------- observation model
 /// What an observation model can do, declared by the model itself (ObservationModel::specs()).
-struct ModelSpecs {
+struct EXID_API ModelSpecs {
   /// The rows of sample k depend on sample k alone, so rows() may be computed on consecutive
   /// slices of a dataset and stacked (streamed in chunks). False: the rows need the whole
   /// dataset at once (e.g. windows of samples).
@@ -43,14 +44,14 @@ struct ModelSpecs {
 /// A parameter on which some of a model's columns depend nonlinearly (a Stribeck velocity, the
 /// width of a smoothed sign): rows() uses `value` (the study's); the `varpro` estimator fits it
 /// together with the linear parameters (docs/estimators.md, "Variable projection").
-struct NonlinearParameter {
+struct EXID_API NonlinearParameter {
   std::string name;          // e.g. "vs2"
   std::string unit;          // e.g. "rad/s"
   double value = 0.0;        // the study's value: rows() uses it; varpro starts from it
   std::vector<int> columns;  // the full columns it moves (indices into fullNames())
 };
 
-class ObservationModel : public PluginObject {
+class EXID_API ObservationModel : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Model;
 
@@ -170,7 +171,7 @@ class ObservationModel : public PluginObject {
 /// A scalar of the information matrix M = W^T W (base columns) and its exact gradient dJ/dM
 /// (symmetric). Smaller is better.
 /// What a criterion is, declared by the criterion itself (Criterion::specs()).
-struct CriterionSpecs {
+struct EXID_API CriterionSpecs {
   /// The base columns are scaled by the nominal parameter magnitudes before M is formed.
   bool scale_columns = false;
   /// The value is the condition number sqrt(lambda_max(M) / lambda_min(M)), so an optimiser may
@@ -178,7 +179,7 @@ struct CriterionSpecs {
   bool condition_number = false;
 };
 
-class Criterion : public PluginObject {
+class EXID_API Criterion : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Criterion;
   virtual double evaluate(const Eigen::MatrixXd& M, Eigen::MatrixXd* dJ_dM) const = 0;
@@ -188,7 +189,7 @@ class Criterion : public PluginObject {
 // ---------------------------------------------------------------- trajectory
 /// What a trajectory can do, declared by the trajectory itself (Trajectory::specs(), valid after
 /// bind()).
-struct TrajectorySpecs {
+struct EXID_API TrajectorySpecs {
   /// 0-based measured coordinates that move; the others stay at their rest position. Empty:
   /// not declared (every coordinate may move).
   std::vector<int> moving_joints;
@@ -209,7 +210,7 @@ struct TrajectorySpecs {
 };
 
 /// Decision variables z -> q, qd, qdd at the sample times (measured coordinates).
-class Trajectory : public PluginObject {
+class EXID_API Trajectory : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Trajectory;
   /// Binds the robot (dof, limits). Call once before anything else.
@@ -255,7 +256,7 @@ class Trajectory : public PluginObject {
 // ---------------------------------------------------------------- optimizer
 /// The problem an optimiser sees: minimise J(z) subject to g(z) <= 0 and bounds. Built by the
 /// framework from a Trajectory, an ObservationModel and a Criterion.
-class ExcitationProblem {
+class EXID_API ExcitationProblem {
  public:
   virtual ~ExcitationProblem() = default;
   virtual int numVariables() const = 0;
@@ -310,13 +311,13 @@ enum class StopReason {
   Deadline,        // "deadline": the study's time budget
   Cancelled,       // "cancelled"
 };
-std::string toString(StopReason r);
-std::ostream& operator<<(std::ostream& os, StopReason r);
+EXID_API std::string toString(StopReason r);
+EXID_API std::ostream& operator<<(std::ostream& os, StopReason r);
 /// Stopped by wall or CPU time (max_time_s, max_cpu_s, deadline): the result depends on the
 /// speed and load of the machine.
-bool stoppedByTime(StopReason r);
+EXID_API bool stoppedByTime(StopReason r);
 
-struct OptimizerResult {
+struct EXID_API OptimizerResult {
   Eigen::VectorXd z;
   double criterion_initial = 0.0, criterion_final = 0.0;
   double max_violation = 0.0;  // of g(z) <= 0 at the returned point
@@ -332,9 +333,9 @@ struct OptimizerResult {
 
 /// The stop reason as the summary and the report show it: toString(stop_reason), followed by
 /// " (no feasible point found; least violation returned)" when r.feasible is false.
-std::string stopReasonText(const OptimizerResult& r);
+EXID_API std::string stopReasonText(const OptimizerResult& r);
 
-class Optimizer : public PluginObject {
+class EXID_API Optimizer : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Optimizer;
   virtual OptimizerResult minimize(ExcitationProblem& problem, const RunContext& ctx) = 0;
@@ -342,7 +343,7 @@ class Optimizer : public PluginObject {
 
 // ---------------------------------------------------------------- experiment
 /// Produces a Dataset: simulated along a reference trajectory, or read from a recording.
-class Experiment : public PluginObject {
+class EXID_API Experiment : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Experiment;
   /// reference: the excitation stage's trajectory, or null when the study has none.
@@ -358,7 +359,7 @@ class Experiment : public PluginObject {
 };
 
 // ---------------------------------------------------------------- estimator
-struct Prior {
+struct EXID_API Prior {
   Eigen::VectorXd value;       // base parameters
   Eigen::MatrixXd covariance;  // base x base
   // A prior from the robot description also keeps the independent prior on the STANDARD
@@ -367,14 +368,14 @@ struct Prior {
   Eigen::VectorXd standard_value, standard_std;
 };
 
-struct EstimatorSpecs {
+struct EXID_API EstimatorSpecs {
   bool recursive = false;          // produces a history
   bool needs_raw_dataset = false;  // filters or differentiates the signals itself
   bool accepts_prior = false;
   bool streams = false;  // reads a streamed dataset in chunks (never holds it whole)
 };
 
-struct Estimate {
+struct EXID_API Estimate {
   std::vector<std::string> names;        // base parameter names
   std::vector<std::string> expressions;  // their expressions in standard parameters
   Eigen::VectorXd value, std;
@@ -394,7 +395,7 @@ struct Estimate {
   Json details = Json::object();
 };
 
-class Estimator : public PluginObject {
+class EXID_API Estimator : public PluginObject {
  public:
   static constexpr PluginKind kKind = PluginKind::Estimator;
   virtual EstimatorSpecs specs() const { return {}; }

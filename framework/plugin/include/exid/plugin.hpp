@@ -22,6 +22,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/params.hpp"
 #include "exid/version.hpp"
 
@@ -29,14 +30,14 @@ namespace exid {
 
 enum class PluginKind { Robot, Model, Criterion, Trajectory, Optimizer, Experiment, Estimator };
 inline constexpr int kNumPluginKinds = 7;
-const char* toString(PluginKind k);
+EXID_API const char* toString(PluginKind k);
 /// Throws exid::Error listing the valid kinds.
-PluginKind pluginKindFromString(const std::string& s);
-std::vector<PluginKind> allPluginKinds();
+EXID_API PluginKind pluginKindFromString(const std::string& s);
+EXID_API std::vector<PluginKind> allPluginKinds();
 
 /// Base of every object a plugin creates. Objects are created by the registry, which keeps the
 /// library loaded for as long as any object from it lives.
-class PluginObject {
+class EXID_API PluginObject {
  public:
   PluginObject() = default;
   PluginObject(const PluginObject&) = delete;
@@ -52,7 +53,7 @@ class PluginObject {
 
 using PluginFactory = std::function<std::unique_ptr<PluginObject>(const ParamSet&)>;
 
-struct PluginInfo {
+struct EXID_API PluginInfo {
   PluginKind kind = PluginKind::Robot;
   std::string name;
   std::string version;

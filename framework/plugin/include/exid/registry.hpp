@@ -16,17 +16,18 @@
 #include <vector>
 
 #include "exid/error.hpp"
+#include "exid/export.hpp"
 #include "exid/plugin.hpp"
 
 namespace exid {
 
 /// A library that was refused (wrong ABI, fingerprint, no entry point, listing threw).
-struct RefusedLibrary {
+struct EXID_API RefusedLibrary {
   std::string path;
   std::string reason;
 };
 
-class Registry {
+class EXID_API Registry {
  public:
   Registry();
   ~Registry();
@@ -72,15 +73,15 @@ class Registry {
 };
 
 /// Levenshtein distance, for "did you mean".
-int editDistance(const std::string& a, const std::string& b);
+EXID_API int editDistance(const std::string& a, const std::string& b);
 /// The closest of candidates to s (empty when none is reasonably close).
-std::string closestMatch(const std::string& s, const std::vector<std::string>& candidates);
+EXID_API std::string closestMatch(const std::string& s, const std::vector<std::string>& candidates);
 
 }  // namespace exid
 
 namespace exid {
 /// `exid plugins [KIND]`: every plugin with its parameters, grouped by kind; refused libraries.
-std::string pluginListText(const Registry& reg, std::optional<PluginKind> kind);
+EXID_API std::string pluginListText(const Registry& reg, std::optional<PluginKind> kind);
 /// `exid plugins info NAME`: one plugin in full (all kinds with that name).
-std::string pluginInfoText(const Registry& reg, const std::string& name);
+EXID_API std::string pluginInfoText(const Registry& reg, const std::string& name);
 }  // namespace exid

@@ -11,9 +11,11 @@
 
 #include "exid/config.hpp"
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 #include "exid/io.hpp"
 #include "exid/json.hpp"
 #include "exid/summary.hpp"
+#include "exid/tables.hpp"  // samplesTable, datasetTable (formerly here)
 
 namespace exid {
 
@@ -22,7 +24,7 @@ class ObservationModel;
 struct Prior;
 struct RobotModel;
 
-struct RunOptions {
+struct EXID_API RunOptions {
   std::filesystem::path out_dir;  // "" = write nothing
   std::function<void(const std::string& stage, double fraction, const std::string& text)> progress;
   std::function<bool()> cancelled;
@@ -48,7 +50,7 @@ struct RunOptions {
   std::shared_ptr<const RobotModel> robot;
 };
 
-struct StudyResult {
+struct EXID_API StudyResult {
   bool ok = false;
   std::string message;
   Json summary;
@@ -63,7 +65,8 @@ struct StudyResult {
 };
 
 /// Never throws for failures inside the study: they come back as ok = false.
-StudyResult runStudy(const StudyConfig& cfg, const Registry& registry, const RunOptions& options);
+EXID_API StudyResult runStudy(const StudyConfig& cfg, const Registry& registry,
+                              const RunOptions& options);
 
 /// The study trimmed to one of its stages, as `exid excite|simulate|identify` run it:
 ///   excite   -- robot, model and excitation (no experiment, estimator or validation);
@@ -72,12 +75,12 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& registry, const Run
 ///               `data` (a CSV file, or a ROS 2 bag folder: a folder holding metadata.yaml)
 ///               replaces the experiment by the `csv` (or `rosbag2`) experiment reading it.
 /// Throws exid::Error when the study lacks the stage's section or `stage` is none of these.
-StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry& registry,
-                       const std::filesystem::path& data = {});
+EXID_API StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry& registry,
+                                const std::filesystem::path& data = {});
 
 /// The prior a study asks for (StudyConfig::prior) on the model's (bound) base parameters.
 /// Throws exid::Error when it cannot be built (missing file or names, zero variances).
-Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
+EXID_API Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 
 /// What an excitation design adds as already known (excitation.information): the information of
 /// an earlier study's estimate and/or of a prior on the robot description's values, weighed
@@ -86,16 +89,13 @@ Prior buildPrior(const PriorSpec& spec, const ObservationModel& model);
 /// covariances), dt the design's sample period, so that W^T W + matrix is the total information
 /// up to a factor. Empty when the study adds none. Throws exid::Error naming the file, the key
 /// or the parameter when it cannot be built.
-struct KnownInformation {
+struct EXID_API KnownInformation {
   Eigen::MatrixXd matrix;
   double rows_per_design_sample = 0.0;
   std::vector<std::string> sources;
 };
-KnownInformation knownInformation(const StudyConfig& cfg, const ObservationModel& model,
-                                  const Samples& design);
+EXID_API KnownInformation knownInformation(const StudyConfig& cfg, const ObservationModel& model,
+                                           const Samples& design);
 
-/// Dataset <-> CSV table (docs/conventions.md §1 column names).
-CsvTable datasetTable(const Dataset& d);
-CsvTable samplesTable(const Samples& s);
 
 }  // namespace exid

@@ -15,11 +15,12 @@
 #include <vector>
 
 #include "exid/collision.hpp"
+#include "exid/export.hpp"
 #include "exid/interfaces.hpp"
 
 namespace exid {
 
-struct ExcitationOptions {
+struct EXID_API ExcitationOptions {
   double position_margin = 0.0;  // [rad or m] kept inside the position limits
   bool velocity_limits = true;
   bool acceleration_limits = true;
@@ -44,20 +45,19 @@ struct ExcitationOptions {
 /// model with its nominal parameters (rigid body + every drive term), in measured coordinates,
 /// and the limits it is held to. Throws exid::Error, saying what is missing, when the robot has
 /// no inertial parameters or a limit is unknown.
-struct TorqueLimits {
+struct EXID_API TorqueLimits {
   Eigen::VectorXd tau_max;  // per measured coordinate [N m or N]
 };
-TorqueLimits torqueLimits(const RobotModel& robot, const std::vector<double>& torque_max,
-                          const std::string& who);
+EXID_API TorqueLimits torqueLimits(const RobotModel& robot, const std::vector<double>& torque_max,
+                                   const std::string& who);
 /// Predicted actuator torques (K x n) along samples (measured coordinates).
-Eigen::MatrixXd predictedTorques(const RobotModel& robot, const Samples& s);
+EXID_API Eigen::MatrixXd predictedTorques(const RobotModel& robot, const Samples& s);
 
-std::unique_ptr<ExcitationProblem> makeExcitationProblem(std::shared_ptr<Trajectory> trajectory,
-                                                         std::shared_ptr<ObservationModel> model,
-                                                         std::shared_ptr<Criterion> criterion,
-                                                         const ExcitationOptions& options = {});
+EXID_API std::unique_ptr<ExcitationProblem> makeExcitationProblem(
+    std::shared_ptr<Trajectory> trajectory, std::shared_ptr<ObservationModel> model,
+    std::shared_ptr<Criterion> criterion, const ExcitationOptions& options = {});
 
 /// cond(W) = sigma_max / sigma_min of the base design rows of a trajectory (for reports).
-double conditionNumber(const Eigen::MatrixXd& W);
+EXID_API double conditionNumber(const Eigen::MatrixXd& W);
 
 }  // namespace exid

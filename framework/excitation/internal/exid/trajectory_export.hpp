@@ -12,6 +12,7 @@
 
 #include "exid/collision.hpp"
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 #include "exid/robot_model.hpp"
@@ -20,7 +21,7 @@ namespace exid {
 
 class Trajectory;
 
-struct TrajectoryExportOptions {
+struct EXID_API TrajectoryExportOptions {
   double rate_Hz = 1000.0;  // controller rate
   int periods = 1;          // repetitions (periodic, or rest to rest back to the start)
   /// tau_max per measured coordinate [N m or N]; empty: the robot's limits (URDF effort). The
@@ -38,11 +39,11 @@ struct TrajectoryExportOptions {
 /// t_i = i / rate_Hz. Throws exid::Error for a trajectory defined on its sample grid only, for
 /// periods > 1 of one that does not end in its start state, and for a rate that does not divide
 /// the duration.
-Samples resampleTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& z, double rate_Hz,
-                           int periods);
+EXID_API Samples resampleTrajectory(const Trajectory& trajectory, const Eigen::VectorXd& z,
+                                    double rate_Hz, int periods);
 
 /// The worst case of one limit over a trajectory.
-struct LimitWorst {
+struct EXID_API LimitWorst {
   std::string what;      // "position", "velocity", "acceleration", "torque", "distance"
   bool checked = false;  // false: the robot has no such limit
   int joint = 0;         // 1-based
@@ -53,7 +54,7 @@ struct LimitWorst {
   double ratio = 0.0;    // |x| / x_max (position: 0 at the centre, 1 at a limit)
 };
 
-struct TrajectoryCheck {
+struct EXID_API TrajectoryCheck {
   int samples = 0;
   double rate_Hz = 0.0;             // measured: (samples - 1) / duration
   double max_rate_deviation = 0.0;  // max |t_i+1 - t_i - 1/rate| / (1/rate)
@@ -74,30 +75,31 @@ struct TrajectoryCheck {
 /// model (rigid body + drives, nominal parameters), at every sample; with collision options, the
 /// signed distance of every checked pair >= margin_m at every sample (min_distance_m gets the
 /// per-sample minimum over the pairs).
-TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
-                                const std::vector<double>& torque_max,
-                                const Eigen::MatrixXd* tau_file = nullptr,
-                                const CollisionOptions* collision = nullptr,
-                                Eigen::VectorXd* min_distance_m = nullptr);
+EXID_API TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
+                                         const std::vector<double>& torque_max,
+                                         const Eigen::MatrixXd* tau_file = nullptr,
+                                         const CollisionOptions* collision = nullptr,
+                                         Eigen::VectorXd* min_distance_m = nullptr);
 /// Reads a trajectory CSV (t, q1..qn, qd1..qdn, qdd1..qddn, optional tau1..taun) and checks it.
-TrajectoryCheck checkTrajectoryCsv(const std::filesystem::path& csv, const RobotModel& robot,
-                                   const std::vector<double>& torque_max,
-                                   const CollisionOptions* collision = nullptr,
-                                   Eigen::VectorXd* min_distance_m = nullptr);
+EXID_API TrajectoryCheck checkTrajectoryCsv(const std::filesystem::path& csv,
+                                            const RobotModel& robot,
+                                            const std::vector<double>& torque_max,
+                                            const CollisionOptions* collision = nullptr,
+                                            Eigen::VectorXd* min_distance_m = nullptr);
 
 /// The folder an export is published as: dir made absolute (a symbolic link: its target). It
 /// must be absent, empty or an earlier export (it holds trajectory_check.json), which the
 /// export replaces whole; anything else throws exid::Error naming what the folder holds.
-std::filesystem::path exportFolder(const std::filesystem::path& dir);
+EXID_API std::filesystem::path exportFolder(const std::filesystem::path& dir);
 
 /// Writes dir/trajectory.csv, dir/trajectory.params.yaml, dir/joint_trajectory.yaml,
 /// dir/trajectory_check.json and the plots (dir/plots/trajectory_*): everything is written into
 /// a staging folder beside dir first, which then replaces dir whole in one rename (see
 /// exportFolder), so a failure leaves no partial set and dir holds this export only.
 /// The check re-reads the written CSV. Returns the check (and what was written) as JSON.
-Json exportTrajectory(const Trajectory& trajectory, const std::string& trajectory_type,
-                      const ParamSet& trajectory_params, const Eigen::VectorXd& z,
-                      const RobotModel& robot, const TrajectoryExportOptions& options,
-                      const std::filesystem::path& dir, TrajectoryCheck* check = nullptr);
+EXID_API Json exportTrajectory(const Trajectory& trajectory, const std::string& trajectory_type,
+                               const ParamSet& trajectory_params, const Eigen::VectorXd& z,
+                               const RobotModel& robot, const TrajectoryExportOptions& options,
+                               const std::filesystem::path& dir, TrajectoryCheck* check = nullptr);
 
 }  // namespace exid

@@ -21,7 +21,9 @@
 
 #include "exid/context.hpp"
 #include "exid/data.hpp"
+#include "exid/export.hpp"
 #include "exid/json.hpp"
+#include "exid/recording_stats.hpp"
 #include "exid/robot_model.hpp"
 #include "exid/signal.hpp"  // medianOfValues (formerly here)
 
@@ -92,32 +94,23 @@ inline constexpr int kRegressorBlockSamples = 2000;
 /// regressor_max_samples > 0: the regressor's condition number from every s-th sample, s the
 /// smallest stride that keeps at most that many (`regressor.stride`, `regressor.samples_used`);
 /// 0: every sample.
-Json inspectDataset(const RobotModel& robot, const ObservationModel* model, const Dataset& data,
-                    const RunContext& ctx, long regressor_max_samples = 0);
+EXID_API Json inspectDataset(const RobotModel& robot, const ObservationModel* model,
+                             const Dataset& data, const RunContext& ctx,
+                             long regressor_max_samples = 0);
 
 /// What an experiment said of its data (meta.warnings: messages dropped, samples cut, ...), each
 /// as "WHAT: warning": the words `exid run` puts among a study's warnings (what = "experiment"
 /// or "validation") and `exid inspect` prints.
-std::vector<std::string> experimentWarnings(const Dataset& data, const std::string& what);
+EXID_API std::vector<std::string> experimentWarnings(const Dataset& data, const std::string& what);
 
 /// `exid inspect`'s look at an experiment's data: inspectDataset() plus what the experiment said
 /// of them, as `exid run` reports it: its sample accounting (meta.accounting, as `accounting`)
 /// and its warnings (experimentWarnings(data, what), first among `warnings`).
-Json inspectExperimentData(const RobotModel& robot, const ObservationModel* model,
-                           const Dataset& data, const RunContext& ctx, const std::string& what);
+EXID_API Json inspectExperimentData(const RobotModel& robot, const ObservationModel* model,
+                                    const Dataset& data, const RunContext& ctx,
+                                    const std::string& what);
 
 /// A readable text summary of inspectDataset()'s result (several lines).
-std::string inspectionText(const Json& inspection);
-
-
-/// Sampling statistics from time stamps as written in a file (raw values in the file's unit,
-/// unit_s seconds each; row[i] is the file's data row of stamp i, steps across skipped rows are
-/// divided among them; row empty: consecutive rows). rate_hz is exact to the stamps' resolution
-/// (the finest power of ten that every stamp is a multiple of): a 100 Hz log is 100 Hz, not
-/// 100.0001. Gaps: steps longer than gap_factor times the median step.
-Json samplingStats(const std::vector<double>& raw, double unit_s, const std::vector<int>& row,
-                   double gap_factor);
-/// The rate of a given sample period, exact to the period's decimal resolution.
-double rateFromPeriod(double period_s);
+EXID_API std::string inspectionText(const Json& inspection);
 
 }  // namespace exid

@@ -25,13 +25,14 @@
 #include <vector>
 
 #include "exid/config.hpp"
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 
 namespace exid {
 
 class Registry;
 
-struct MatrixCell {
+struct EXID_API MatrixCell {
   int index = 0;
   std::vector<std::pair<std::string, std::string>> coords;  // axis -> short value label
   std::string label;                                        // "robot=puma560 estimator=rls"
@@ -44,7 +45,7 @@ struct MatrixCell {
   StudyConfig config;
 };
 
-struct MatrixSpec {
+struct EXID_API MatrixSpec {
   std::string name;
   std::filesystem::path file;
   double cell_budget_s = 0.0;
@@ -57,9 +58,9 @@ struct MatrixSpec {
 
 /// Parses a matrix file and validates EVERY cell's study before anything runs (errors name
 /// the matrix file, the cell and the study problem).
-MatrixSpec loadMatrix(const std::filesystem::path& file, const Registry& registry);
+EXID_API MatrixSpec loadMatrix(const std::filesystem::path& file, const Registry& registry);
 
-struct MatrixOptions {
+struct EXID_API MatrixOptions {
   std::filesystem::path out_dir;
   int jobs = 1;
   int shard_index = 0, shard_count = 1;  // run cells with index % count == index
@@ -70,28 +71,29 @@ struct MatrixOptions {
   std::string database = "results.sqlite";
 };
 
-struct MatrixRunSummary {
+struct EXID_API MatrixRunSummary {
   int total = 0, skipped = 0, ok = 0, failed = 0, timeout = 0, not_run = 0;
   int incomplete = 0;  // of the failed: stopped by the machine (disk full); run again on resume
   double wall_s = 0.0;
 };
 
-MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& registry,
-                           const MatrixOptions& opt);
+EXID_API MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& registry,
+                                    const MatrixOptions& opt);
 
 /// Markdown table of a metric (mean over the cells that share the row/column keys); also
 /// returns the CSV text. Rows/cols are axis names; metric is a metric name (exact, or the
 /// last component: "param_rel_err" matches "identification.param_rel_err").
-struct MatrixTable {
+struct EXID_API MatrixTable {
   std::string markdown, csv;
 };
-MatrixTable matrixTable(const std::filesystem::path& db, const std::vector<std::string>& rows,
-                        const std::vector<std::string>& cols, const std::string& metric);
+EXID_API MatrixTable matrixTable(const std::filesystem::path& db,
+                                 const std::vector<std::string>& rows,
+                                 const std::vector<std::string>& cols, const std::string& metric);
 /// Every metric name in the database.
-std::vector<std::string> matrixMetrics(const std::filesystem::path& db);
+EXID_API std::vector<std::string> matrixMetrics(const std::filesystem::path& db);
 /// Copies the runs of the source databases into dest (created if needed), skipping hashes
 /// already present. Returns the number of runs copied.
-int mergeMatrixDatabases(const std::filesystem::path& dest,
-                         const std::vector<std::filesystem::path>& sources);
+EXID_API int mergeMatrixDatabases(const std::filesystem::path& dest,
+                                  const std::vector<std::filesystem::path>& sources);
 
 }  // namespace exid

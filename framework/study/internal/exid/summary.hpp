@@ -9,13 +9,14 @@
 #include <string>
 #include <vector>
 
+#include "exid/export.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
 
 namespace exid {
 
 // The stages' parts of a study's results (StudySummary::Robot, ...).
-struct RobotSummary {
+struct EXID_API RobotSummary {
   std::string type, name;
   int dof = 0;
   int n_parameters = 0;
@@ -23,7 +24,7 @@ struct RobotSummary {
   std::vector<std::string> notes;        // known defects of shipped data, said once
   double wall_s = NAN;
 };
-struct ExcitationSummary {
+struct EXID_API ExcitationSummary {
   std::string trajectory, criterion, optimizer;
   double criterion_initial = NAN, criterion_final = NAN;
   double cond_W_initial = NAN, cond_W_final = NAN;
@@ -45,20 +46,20 @@ struct ExcitationSummary {
   std::string stop_reason_text;  // the reason with the optimiser's own words
   bool reproducible = true;      // false: stopped by a time budget
 };
-struct ExperimentSummary {
+struct EXID_API ExperimentSummary {
   std::string type;
   long long samples = 0;
   double duration_s = NAN;
   double wall_s = NAN;
 };
-struct IdentificationSummary {
+struct EXID_API IdentificationSummary {
   std::string estimator;
   double wall_s = NAN;
   long long rows = 0;
   double cond_W = NAN, residual_rms = NAN, sigma = NAN;
   std::optional<double> param_abs_err, param_rel_err;  // simulated data: against the truth
 };
-struct ValidationSummary {
+struct EXID_API ValidationSummary {
   std::string type;
   long long samples = 0, rows = 0;
   double relative_error = NAN;
@@ -67,7 +68,7 @@ struct ValidationSummary {
   double wall_s = NAN;
 };
 
-struct StudySummary {
+struct EXID_API StudySummary {
   std::string study;
   std::string status = "running";  // running, ok, failed, cancelled
   std::string failed_stage;        // the stage that failed ("" unless failed or cancelled)
@@ -92,15 +93,16 @@ struct StudySummary {
 };
 
 /// Writes the typed values into summary.json's objects (keys already there keep their place).
-void renderInto(const StudySummary& s, Json* summary);  // status, message, ..., warnings, wall_s
-void renderInto(const StudySummary::Robot& r, Json* robot);
-void renderInto(const StudySummary::Excitation& x, Json* excitation);
-void renderInto(const StudySummary::Experiment& e, Json* experiment);
-void renderInto(const StudySummary::Identification& i, Json* identification);
-void renderInto(const StudySummary::Validation& v, Json* validation);
+EXID_API void renderInto(const StudySummary& s,
+                         Json* summary);  // status, message, ..., warnings, wall_s
+EXID_API void renderInto(const StudySummary::Robot& r, Json* robot);
+EXID_API void renderInto(const StudySummary::Excitation& x, Json* excitation);
+EXID_API void renderInto(const StudySummary::Experiment& e, Json* experiment);
+EXID_API void renderInto(const StudySummary::Identification& i, Json* identification);
+EXID_API void renderInto(const StudySummary::Validation& v, Json* validation);
 
 /// The Markdown table printed at the end of `exid run` and at the top of report.md.
-std::string briefTable(const StudySummary& s);
+EXID_API std::string briefTable(const StudySummary& s);
 
 /// Thresholds of the verdict (docs/study.md, "The verdict").
 inline constexpr double kVerdictHeldOutNoBetterThanZero = 1.0;  // held-out relative error
@@ -112,9 +114,9 @@ inline constexpr double kVerdictPriorTailSigma = 6.0;    // chi-square tail, in 
 /// nothing found): a held-out error no better than zero torque, a held-out error far above the
 /// identification residual, an estimator's own doubts (identification.details.suspect, e.g. a
 /// scale chosen at the edge of its grid), a fit far outside its prior.
-std::vector<std::string> verdictReasons(const Json& summary);
+EXID_API std::vector<std::string> verdictReasons(const Json& summary);
 
 /// Sets s->verdict and s->verdict_reasons from the summary tree (verdictReasons).
-void judgeResults(const Json& summary, StudySummary* s);
+EXID_API void judgeResults(const Json& summary, StudySummary* s);
 
 }  // namespace exid

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "exid/collision.hpp"
+#include "exid/export.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 #include "exid/plugin.hpp"
@@ -37,7 +38,7 @@ namespace exid {
 
 class Registry;
 
-struct PluginSpec {
+struct EXID_API PluginSpec {
   PluginKind kind = PluginKind::Robot;
   std::string type;      // plugin name
   ParamSet params;       // resolved: defaults filled in, paths absolute
@@ -52,7 +53,7 @@ struct PluginSpec {
 ///                   base parameters: theta0 = K pi0, Sigma = K diag(std^2) K^T;
 ///   from: study  -- another study's identified base parameters (DIR/parameters.csv: value and
 ///                   std, matched by name), standard deviations multiplied by `scale`.
-struct PriorSpec {
+struct EXID_API PriorSpec {
   std::string from;  // "robot" | "study"
   double relative_std = 0.3;
   double absolute_std = 0.0;
@@ -66,14 +67,14 @@ struct PriorSpec {
 
 /// `split:` one recording, two parts: the experiment identifies on the part before the split
 /// point and a copy of it (with `validation` parameters laid over) validates on the rest.
-struct SplitSpec {
+struct EXID_API SplitSpec {
   double identification_fraction = 0.0;           // of the experiment's segment; 0: at_s
   double at_s = 0.0;                              // seconds after the segment's start; 0: fraction
   std::vector<std::string> validation_overrides;  // parameter names laid over the copy
   int line = 0;
 };
 
-struct ReportOptions {
+struct EXID_API ReportOptions {
   bool plots = true;
   std::string title;
   /// experiment.csv: "auto" (simulated data always; recorded data, a copy of the input, only up
@@ -82,7 +83,7 @@ struct ReportOptions {
 };
 inline constexpr long kExperimentCsvAutoSamples = 100000;
 
-struct StudyConfig {
+struct EXID_API StudyConfig {
   std::filesystem::path file;  // the study file ("" when parsed from text)
   std::filesystem::path dir;   // relative paths resolve here
   std::string name;
@@ -124,31 +125,32 @@ struct StudyConfig {
 /// The keys of `excitation.constraints`: torque_margin (fraction of the torque limits the
 /// predicted torques may reach; 0: no torque limits) and torque_max_Nm (the limits, when the
 /// robot description has none).
-std::vector<ParamDecl> excitationConstraintParams();
+EXID_API std::vector<ParamDecl> excitationConstraintParams();
 
 /// The keys of `excitation.information`: earlier_study (a run folder whose identification's
 /// covariance.csv is added), prior_relative_std / prior_absolute_std (the robot description's
 /// values with that uncertainty), noise_std and recording_rate_hz (the new experiment's noise
 /// and rate, which weigh its information against what is known).
-std::vector<ParamDecl> excitationInformationParams();
+EXID_API std::vector<ParamDecl> excitationInformationParams();
 
 /// Why a study (or matrix) name cannot be used, "" when it can. The name becomes a folder
 /// (out/<name>, a matrix's cells): a plain file name, so that no output can leave the output
 /// root (no '/', '\\', control bytes, leading '.').
-std::string studyNameProblem(const std::string& name);
+EXID_API std::string studyNameProblem(const std::string& name);
 
 /// The files a study reads (path parameters of every section, a prior's parameters.csv), in a
 /// fixed order; the matrix keys its cells by their contents.
-std::vector<std::filesystem::path> studyInputFiles(const StudyConfig& cfg, const Registry& reg);
+EXID_API std::vector<std::filesystem::path> studyInputFiles(const StudyConfig& cfg,
+                                                            const Registry& reg);
 
 /// Parses and validates. Throws exid::Error with every problem found, one per line.
-StudyConfig loadStudy(const std::filesystem::path& file, const Registry& registry);
-StudyConfig parseStudy(const std::string& yaml_text, const std::string& source_name,
-                       const std::filesystem::path& base_dir, const Registry& registry);
+EXID_API StudyConfig loadStudy(const std::filesystem::path& file, const Registry& registry);
+EXID_API StudyConfig parseStudy(const std::string& yaml_text, const std::string& source_name,
+                                const std::filesystem::path& base_dir, const Registry& registry);
 
 /// Resolves a params mapping given as YAML text for one plugin (used by single-stage commands
 /// and matrices): "{max_iterations: 10}" -> ParamSet with defaults. Throws like parseStudy.
-ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
-                       const std::string& context, const std::filesystem::path& base_dir);
+EXID_API ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
+                                const std::string& context, const std::filesystem::path& base_dir);
 
 }  // namespace exid

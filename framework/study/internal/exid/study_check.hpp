@@ -6,6 +6,7 @@
 #include <memory>
 
 #include "exid/config.hpp"
+#include "exid/export.hpp"
 
 namespace exid {
 
@@ -22,13 +23,14 @@ struct RobotModel;
 ///   - a prior from an earlier study: its parameters.csv is read and every row checked.
 /// Throws exid::Error "FILE:LINE: SECTION: what is wrong", FILE `source` (as the user named the
 /// study; empty: cfg.file). Returns the robot it loaded (a run reuses it: RunOptions::robot).
-std::shared_ptr<const RobotModel> checkStudy(const StudyConfig& cfg, const Registry& registry,
-                                             const std::string& source = "");
+EXID_API std::shared_ptr<const RobotModel> checkStudy(const StudyConfig& cfg,
+                                                      const Registry& registry,
+                                                      const std::string& source = "");
 
 /// The rows of a prior's parameters.csv (PriorSpec::from == "study") checked without a model:
 /// every value a finite number, every std a positive number whose variance (times the prior's
 /// scale) is usable (std <= kMaxPriorStd). Throws exid::Error naming the file and the line.
-void checkPriorFile(const PriorSpec& spec);
+EXID_API void checkPriorFile(const PriorSpec& spec);
 
 /// The largest standard deviation a prior may have (a prior std of 1e300 squares to infinity;
 /// a std this large is no prior at all: leave the prior out).
