@@ -15,14 +15,9 @@
 //   pd_feedforward:  tau_m = tau_ff(qr, qdr, qddr) + D0 (kp (qr - qm) + kd (qdr - qdm)),
 //                    tau_ff from the robot description WITHOUT payload (all drive terms),
 //                    D0 = diag(Mm) at the start of the reference.
-#include <arkode/arkode_erkstep.h>
-#include <cvode/cvode.h>
+// The SUNDIALS integrator is integrator.hpp.
 #include <fmt/format.h>
-#include <nvector/nvector_serial.h>
 #include <sundials/sundials_config.h>
-#include <sundials/sundials_context.h>
-#include <sunlinsol/sunlinsol_dense.h>
-#include <sunmatrix/sunmatrix_dense.h>
 
 #include <Eigen/Cholesky>
 #include <Eigen/Core>
@@ -39,6 +34,7 @@
 #include "exid/interfaces.hpp"
 #include "exid/payload.hpp"
 #include "exid/sampled_reference.hpp"
+#include "integrator.hpp"
 
 namespace {
 
@@ -235,7 +231,7 @@ class SimulateExperiment : public exid::Experiment {
     VectorXd x(2 * n), qr, qdr, qddr;
     ref_->eval(t0, &qr, &qdr, &qddr);
     x << qr, qdr;
-    Integrator integ(this, x, t0, P_.getString("integrator"), P_.getDouble("rtol"),
+    Integrator integ(loop(), x, t0, P_.getString("integrator"), P_.getDouble("rtol"),
                      P_.getDouble("atol"), P_.getInt("max_steps"));
     const Tracking tr = record(integ, x, t0, dt, N, duration, want_wrench, ctx, &d, &qd, &qdd);
     if (tr.recorded < N) {
@@ -359,105 +355,11 @@ class SimulateExperiment : public exid::Experiment {
   }
 
  private:
-  // ---------------------------------------------------------------- SUNDIALS wrapper
-  class Integrator {
-   public:
-    Integrator(SimulateExperiment* self, const VectorXd& x0, double t0, const std::string& kind,
-               double rtol, double atol, std::int64_t max_steps)
-        : self_(self), cvode_(kind == "cvode"), n2_(static_cast<int>(x0.size())), t_(t0) {
-      check(SUNContext_Create(nullptr, &sctx_), "SUNContext_Create");
-      y_ = N_VNew_Serial(n2_, sctx_);
-      for (int i = 0; i < n2_; ++i) NV_Ith_S(y_, i) = x0[i];
-      if (cvode_) {
-        mem_ = CVodeCreate(CV_BDF, sctx_);
-        exid::check(mem_ != nullptr, "experiment 'simulate': CVodeCreate failed");
-        check(CVodeInit(mem_, &Integrator::f, t0, y_), "CVodeInit");
-        check(CVodeSStolerances(mem_, rtol, atol), "CVodeSStolerances");
-        check(CVodeSetUserData(mem_, this), "CVodeSetUserData");
-        A_ = SUNDenseMatrix(n2_, n2_, sctx_);
-        LS_ = SUNLinSol_Dense(y_, A_, sctx_);
-        check(CVodeSetLinearSolver(mem_, LS_, A_), "CVodeSetLinearSolver");
-        check(CVodeSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "CVodeSetMaxNumSteps");
-      } else {
-        mem_ = ERKStepCreate(&Integrator::f, t0, y_, sctx_);
-        exid::check(mem_ != nullptr, "experiment 'simulate': ERKStepCreate failed");
-        check(ERKStepSStolerances(mem_, rtol, atol), "ERKStepSStolerances");
-        check(ERKStepSetUserData(mem_, this), "ERKStepSetUserData");
-        check(ERKStepSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "ERKStepSetMaxNumSteps");
-      }
-    }
-    ~Integrator() {
-      if (cvode_) {
-        CVodeFree(&mem_);
-      } else {
-        ERKStepFree(&mem_);
-      }
-      if (LS_) SUNLinSolFree(LS_);
-      if (A_) SUNMatDestroy(A_);
-      N_VDestroy(y_);
-      SUNContext_Free(&sctx_);
-    }
-    Integrator(const Integrator&) = delete;
-    Integrator& operator=(const Integrator&) = delete;
-
-    void advance(double tout, VectorXd* x) {
-      double tret = t_;
-      const int flag = cvode_ ? CVode(mem_, tout, y_, &tret, CV_NORMAL)
-                              : ERKStepEvolve(mem_, tout, y_, &tret, ARK_NORMAL);
-      if (!error_.empty()) throw exid::Error(error_);
-      exid::check(flag >= 0, fmt::format("experiment 'simulate': the integrator ({}) failed at "
-                                         "t = {} s with flag {} (try larger tolerances, max_steps, "
-                                         "or the other integrator)",
-                                         cvode_ ? "CVODE" : "ARKODE", tret, flag));
-      t_ = tret;
-      for (int i = 0; i < n2_; ++i) (*x)[i] = NV_Ith_S(y_, i);
-    }
-    long steps() const {
-      long s = 0;
-      if (cvode_)
-        CVodeGetNumSteps(mem_, &s);
-      else
-        ERKStepGetNumSteps(mem_, &s);
-      return s;
-    }
-    long rhsEvals() const {
-      long s = 0;
-      if (cvode_)
-        CVodeGetNumRhsEvals(mem_, &s);
-      else
-        ERKStepGetNumRhsEvals(mem_, &s);
-      return s;
-    }
-    std::string description() const {
-      return cvode_ ? "CVODE BDF (variable order 1-5), dense Newton, difference-quotient Jacobian"
-                    : "ARKODE ERKStep explicit Runge-Kutta (default order-4 table), adaptive step";
-    }
-
-   private:
-    static int f(realtype t, N_Vector y, N_Vector ydot, void* user) {
-      auto* self = static_cast<Integrator*>(user);
-      try {
-        self->self_->rhs(t, N_VGetArrayPointer(y), N_VGetArrayPointer(ydot));
-        return 0;
-      } catch (const std::exception& e) {
-        self->error_ = e.what();
-        return -1;
-      }
-    }
-    static void check(int flag, const char* what) {
-      exid::check(flag >= 0, fmt::format("experiment 'simulate': {} failed (flag {})", what, flag));
-    }
-    SimulateExperiment* self_;
-    bool cvode_;
-    int n2_;
-    double t_;
-    SUNContext sctx_ = nullptr;
-    N_Vector y_ = nullptr;
-    void* mem_ = nullptr;
-    SUNMatrix A_ = nullptr;
-    SUNLinearSolver LS_ = nullptr;
-    std::string error_;
-  };
+  using Integrator = exid::simulate_experiment::Integrator;
+  /// The right-hand side of the closed loop for the integrator (rhs()).
+  exid::simulate_experiment::Rhs loop() {
+    return [this](double t, const double* x, double* xd) { rhs(t, x, xd); };
+  }
 
   std::unique_ptr<FourierReference> buildFourier(const exid::RobotModel& R,
                                                  std::uint64_t seed) const {
@@ -620,7 +522,7 @@ class SimulateExperiment : public exid::Experiment {
     exid::check(b - a >= 2, fmt::format("experiment 'simulate': torque_delay_s = {} s leaves {} "
                                         "of {} samples",
                                         delay, b - a, K));
-    Integrator integ(this, x0, t0, P_.getString("integrator"), P_.getDouble("rtol"),
+    Integrator integ(loop(), x0, t0, P_.getString("integrator"), P_.getDouble("rtol"),
                      P_.getDouble("atol"), P_.getInt("max_steps"));
     VectorXd x = x0, tau, acc;
     double at = t0;
