@@ -212,6 +212,52 @@ MatrixXd solveShifted(const SensStep& e, double g, const MatrixXd& R) {
   return X;
 }
 
+// CVODES set up for the state from t0 (BDF, dense Newton with the exact Jacobian, silent: the
+// errors are thrown with their context); torque_driven: no step past t_end, the last time.
+void setUpCvodes(void* mem, N_Vector y, SUNMatrix A, SUNLinearSolver LS, User* U, double t0,
+                 double t_end, bool no_times, const ClosedLoop::Tolerances& tol, bool torque_driven,
+                 const std::string& who) {
+  check(mem != nullptr && CVodeInit(mem, &rhs, t0, y) == 0 &&
+            CVodeSStolerances(mem, tol.rtol, tol.atol) == 0 && CVodeSetUserData(mem, U) == 0 &&
+            CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
+            CVodeSetLinearSolver(mem, LS, A) == 0 && CVodeSetJacFn(mem, &jacobian) == 0 &&
+            CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
+            // (the torque-driven loop: no step past the last time, where its input may end;
+            // the closed loop keeps its free steps, which the stop time changes)
+            (!torque_driven || no_times || CVodeSetStopTime(mem, t_end) == 0),
+        who + ": setting up CVODES failed");
+}
+
+// CVODES's own forward sensitivities of p parameters (staggered), zero at the start; *yS: their
+// vectors (the caller frees them).
+void setUpSensitivities(void* mem, N_Vector y, int p, const ClosedLoop::Tolerances& tol,
+                        const std::string& who, N_Vector** yS_out) {
+  N_Vector*& yS = *yS_out;
+  N_VEnableFusedOps_Serial(y, SUNTRUE);
+  yS = N_VCloneVectorArray(p, y);
+  for (int j = 0; j < p; ++j) N_VConst(0.0, yS[j]);  // the start does not depend on theta
+  std::vector<double> abstol(static_cast<std::size_t>(p), tol.atol);
+  check(CVodeSensInit(mem, p, CV_STAGGERED, &sensRhs, yS) == 0 &&
+            CVodeSensSStolerances(mem, std::sqrt(tol.rtol), abstol.data()) == 0 &&
+            CVodeSetSensErrCon(mem, SUNFALSE) == 0,
+        who + ": setting up the CVODES sensitivities failed");
+}
+
+// One CVODES step from tn to tret checked: the right-hand side's error, a failed step, a step
+// that made no progress.
+void checkStep(const User& U, int flag, double tret, double tn, const std::string& who) {
+  if (!U.error.empty()) throw Error(U.error);
+  if (flag < 0)
+    throw Error(
+        fmt::format("{}: the simulation failed at t = {} s (CVODES flag {}; a Coulomb "
+                    "friction through sign(qd) can make the closed loop chatter where a "
+                    "joint sticks: differential's coulomb_smoothing_rad_s smooths it; else "
+                    "try other rtol, atol, max_steps)",
+                    who, tret, flag));
+  if (!(tret > tn))
+    throw Error(fmt::format("{}: the simulation made no progress at t = {} s", who, tret));
+}
+
 }  // namespace
 
 void ClosedLoop::simulateFrom(
@@ -256,25 +302,10 @@ void ClosedLoop::simulateFrom(
   };
   try {
     const double t_end = times.size() > 0 ? times[times.size() - 1] : t0;
-    check(mem != nullptr && CVodeInit(mem, &rhs, t0, y) == 0 &&
-              CVodeSStolerances(mem, tol.rtol, tol.atol) == 0 && CVodeSetUserData(mem, &U) == 0 &&
-              CVodeSetErrHandlerFn(mem, &silent, nullptr) == 0 &&
-              CVodeSetLinearSolver(mem, LS, A) == 0 && CVodeSetJacFn(mem, &jacobian) == 0 &&
-              CVodeSetMaxNumSteps(mem, static_cast<long>(tol.max_steps)) == 0 &&
-              // (the torque-driven loop: no step past the last time, where its input may end;
-              // the closed loop keeps its free steps, which the stop time changes)
-              (!open_ || times.size() == 0 || CVodeSetStopTime(mem, t_end) == 0),
-          who_ + ": setting up CVODES failed");
+    setUpCvodes(mem, y, A, LS, &U, t0, t_end, times.size() == 0, tol, open_, who_);
     MatrixXd S;
     if (cv) {
-      N_VEnableFusedOps_Serial(y, SUNTRUE);
-      yS = N_VCloneVectorArray(p, y);
-      for (int j = 0; j < p; ++j) N_VConst(0.0, yS[j]);  // the start does not depend on theta
-      std::vector<double> abstol(static_cast<std::size_t>(p), tol.atol);
-      check(CVodeSensInit(mem, p, CV_STAGGERED, &sensRhs, yS) == 0 &&
-                CVodeSensSStolerances(mem, std::sqrt(tol.rtol), abstol.data()) == 0 &&
-                CVodeSetSensErrCon(mem, SUNFALSE) == 0,
-            who_ + ": setting up the CVODES sensitivities failed");
+      setUpSensitivities(mem, y, p, tol, who_, &yS);
       S = MatrixXd::Zero(2 * n, p);
     }
     double tn = t0;
@@ -320,16 +351,7 @@ void ClosedLoop::simulateFrom(
       double tret = tn;
       // (tout, the next sample, sets the first step's size and the direction)
       const int flag = CVode(mem, times[k], y, &tret, CV_ONE_STEP);
-      if (!U.error.empty()) throw Error(U.error);
-      if (flag < 0)
-        throw Error(
-            fmt::format("{}: the simulation failed at t = {} s (CVODES flag {}; a Coulomb "
-                        "friction through sign(qd) can make the closed loop chatter where a "
-                        "joint sticks: differential's coulomb_smoothing_rad_s smooths it; else "
-                        "try other rtol, atol, max_steps)",
-                        who_, tret, flag));
-      if (!(tret > tn))
-        throw Error(fmt::format("{}: the simulation made no progress at t = {} s", who_, tret));
+      checkStep(U, flag, tret, tn, who_);
       if (rec) {
         rec->t.push_back(tret);
         rec->x.insert(rec->x.end(), NV_DATA_S(y), NV_DATA_S(y) + 2 * n);

@@ -1,0 +1,161 @@
+// exid — estimator `varpro` (varpro.cpp): the plugin class, shared by its sources (not
+// installed). varpro.cpp: the plugin, its parameters and the estimate's details;
+// varpro_search.cpp: the grid of the globalisation and Levenberg-Marquardt on log(eta);
+// varpro_evaluate.cpp: one fit at given nonlinear parameters (one streamed pass over the data).
+#pragma once
+
+#include <Eigen/Core>
+#include <chrono>
+#include <string>
+#include <vector>
+
+#include "exid/estimators/common.hpp"
+#include "exid/interfaces.hpp"
+#include "exid/signal.hpp"
+
+namespace exid::varpro {
+
+using exid::estimators::RowAccumulator;
+
+class VarPro : public exid::Estimator {
+ public:
+  static constexpr const char* kName = "varpro";
+  static constexpr const char* kVersion = "1.0";
+  static constexpr const char* kDoc =
+      "variable projection: the linear parameters by least squares for given nonlinear ones "
+      "(Stribeck velocities, smoothing widths), those by Levenberg-Marquardt with exact "
+      "derivatives; standard deviations of all parameters";
+
+  static std::vector<exid::ParamDecl> params();
+
+  explicit VarPro(const exid::ParamSet& p);
+
+  exid::EstimatorSpecs specs() const override {
+    exid::EstimatorSpecs s;
+    s.streams = true;  // one pass per evaluation, in chunks
+    return s;
+  }
+
+  exid::Estimate estimate(const exid::ObservationModel& model, const exid::Dataset& data,
+                          const exid::Prior* prior, const exid::RunContext& ctx) override;
+
+ private:
+  // The fit at one set of nonlinear parameters.
+  struct Eval {
+    Eigen::VectorXd eta, theta;
+    double rss = 0.0;
+    double yy = 0.0;        // ||y||^2
+    Eigen::MatrixXd R;      // (p + L + 1)^2 triangular factor of [W D y]
+    Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
+    Eigen::VectorXd Jtr;    // q
+    Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
+    exid::estimators::LsSolution ls;
+    long m = 0;
+  };
+
+  // One Levenberg-Marquardt run and where it ended.
+  struct Run {
+    std::string origin;
+    Eigen::VectorXd eta0, lambda;
+    Eval cur;
+    int evals = 0, iterations = 0;
+    std::string stop;
+    exid::Json trace = exid::Json::array();
+    double gradient_norm = 0.0;  // ||d rss / d log(eta)||
+    double gn_fraction = 0.0;    // the part of rss a Gauss-Newton step would remove
+    bool exact = false;          // the fit is exact to rounding
+    bool stationary = false;     // the first-order test holds
+    bool singular = false;       // the joint problem [W V] is singular there
+    // the column-scaled SVD of the joint problem (the covariance's)
+    Eigen::MatrixXd M;
+  };
+
+  // The grid of the globalisation.
+  struct Grid {
+    Eigen::VectorXd best;  // lambda
+    Eval best_eval;
+    std::vector<std::vector<int>> groups;
+    std::vector<double> multipliers;
+    int evaluations = 0, singular = 0, sweeps = 0;
+    int checks = 0;          // sweeps around the best end
+    long sample_stride = 1;  // points compared on every sample_stride-th sample
+  };
+
+  // varpro.cpp: the estimate's details
+  exid::Estimate finish(const exid::ObservationModel& model, const std::vector<Run>& runs, int won,
+                        const Grid& grid, std::chrono::steady_clock::time_point t0) const;
+  void describeSearch(const std::vector<Run>& runs, int won, const Grid& grid, exid::Json* d) const;
+  void describeConvergence(const std::vector<Run>& runs, const Run& run, const exid::Estimate& e,
+                           std::chrono::steady_clock::time_point t0, exid::Json* d) const;
+
+  // varpro_search.cpp: the globalisation and Levenberg-Marquardt
+  std::string where(const Eigen::VectorXd& eta) const;
+  std::vector<std::vector<int>> groups() const;
+  Grid searchGrid(const exid::ObservationModel& model, const exid::Dataset& data,
+                  const Eigen::VectorXd& lambda0, const Eval& at_study,
+                  const exid::RunContext& ctx);
+  void sweep(const exid::ObservationModel& model, const exid::Dataset& data,
+             const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx);
+  void axisScan(const exid::ObservationModel& model, const exid::Dataset& data,
+                const Eigen::VectorXd& centre, Grid* gp, const exid::RunContext& ctx);
+  static exid::Dataset strided(const exid::Dataset& d, long stride);
+  Run levenbergMarquardt(const exid::ObservationModel& model, const exid::Dataset& data,
+                         Eigen::VectorXd lambda, Eval cur, const std::string& origin,
+                         const exid::RunContext& ctx);
+  void firstOrder(const exid::ObservationModel& model, Run* r) const;
+
+  // varpro_evaluate.cpp: one fit at eta, the joint problem
+  Eigen::MatrixXd jointMatrix(const exid::ObservationModel& model, const Eval& cur) const;
+  static Eigen::VectorXd columnScale(const Eigen::MatrixXd& M);
+  bool regular(const Eigen::MatrixXd& M) const;
+  void setUp(const exid::ObservationModel& model, const exid::Dataset& data);
+  Eigen::VectorXd etaOf(const Eigen::VectorXd& lambda) const;
+  exid::Rows chunkRows(const exid::ObservationModel& model, exid::SampleWindow& window, int b,
+                       int end, const Eigen::VectorXd& eta, Eigen::MatrixXd* D,
+                       const exid::RunContext& ctx) const;
+  Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
+                const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const;
+  std::vector<std::string> names() const;
+
+  int max_evals_;
+  double xtol_, ftol_;
+  int starts_;
+  static constexpr int kGridSamples = 4000;
+  static constexpr int kRounds = 6;  // checks around the best end, while one finds a lower point
+  // x1/32 .. x32 in steps of sqrt(2), x1 left out (the centre)
+  static constexpr double kAxisMultipliers[] = {0.03125,
+                                                0.04419417382415922,
+                                                0.0625,
+                                                0.08838834764831845,
+                                                0.125,
+                                                0.1767766952966369,
+                                                0.25,
+                                                0.3535533905932738,
+                                                0.5,
+                                                0.7071067811865476,
+                                                1.414213562373095,
+                                                2.0,
+                                                2.82842712474619,
+                                                4.0,
+                                                5.656854249492381,
+                                                8.0,
+                                                11.31370849898476,
+                                                16.0,
+                                                22.62741699796952,
+                                                32.0};
+  double gtol_;
+  int chunk_;
+  RowAccumulator::Method method_;
+  exid::estimators::SolveOptions opt_;
+  std::vector<exid::NonlinearParameter> nl_;
+  std::vector<int> keep_, owner_, base_col_;  // per derivative column (the delay's: keep -1)
+  int rejected_singular_ = 0;                 // trial steps where the fit was singular
+  int rejected_bound_ = 0;                    // trial delays beyond measurement_delay_max_s
+  int q_model_ = 0;                           // the model's nonlinear parameters (first in nl_)
+  bool delay_ = false;
+  double delay0_ = 0.0, delay_max_ = 0.0;
+  double ts_ = 1.0;  // [s] the median sample period (the delay's lambda unit)
+  int margin_ = 0;   // samples at each end without rows (measurement_delay)
+};
+
+}  // namespace exid::varpro

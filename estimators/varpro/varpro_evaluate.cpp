@@ -1,0 +1,218 @@
+// exid — estimator `varpro`: one fit at given nonlinear parameters, streamed in chunks (the
+// rows [W D y] folded into the triangular factor R; theta, rss, J^T J and J^T r from R), and
+// the joint problem [W V] of the covariance (see varpro.cpp).
+#include <fmt/format.h>
+
+#include <Eigen/QR>
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+
+#include "exid/delay.hpp"
+#include "exid/error.hpp"
+#include "varpro.hpp"
+
+namespace exid::varpro {
+
+// The whole problem's Gauss-Newton matrix [W V]^T [W V] = M^T M,
+// M = [R11, R12 Theta; 0, R22 Theta] (the rows of [W D] in the QR basis).
+Eigen::MatrixXd VarPro::jointMatrix(const exid::ObservationModel& model, const Eval& cur) const {
+  const int p = model.numBase(), L = static_cast<int>(keep_.size()),
+            q = static_cast<int>(nl_.size());
+  Eigen::MatrixXd M = Eigen::MatrixXd::Zero(p + L, p + q);
+  M.topLeftCorner(p, p) = cur.R.topLeftCorner(p, p);
+  M.topRightCorner(p, q) = cur.R.block(0, p, p, L) * cur.Theta;
+  M.bottomRightCorner(L, q) = cur.R.block(p, p, L, L) * cur.Theta;
+  return M;
+}
+
+Eigen::VectorXd VarPro::columnScale(const Eigen::MatrixXd& M) {
+  Eigen::VectorXd sc = M.colwise().norm().transpose();
+  for (Eigen::Index i = 0; i < sc.size(); ++i) sc[i] = sc[i] > 0 ? 1.0 / sc[i] : 0.0;
+  return sc;
+}
+
+bool VarPro::regular(const Eigen::MatrixXd& M) const {
+  Eigen::JacobiSVD<Eigen::MatrixXd> svd(M * columnScale(M).asDiagonal());
+  const Eigen::VectorXd sv = svd.singularValues();
+  return sv.size() > 0 && sv[sv.size() - 1] > opt_.rank_tolerance * sv[0];
+}
+
+void VarPro::setUp(const exid::ObservationModel& model, const exid::Dataset& data) {
+  nl_ = model.nonlinearParameters();
+  q_model_ = static_cast<int>(nl_.size());
+  exid::check(!nl_.empty() || delay_,
+              fmt::format("varpro: model '{}' has no nonlinear parameter (e.g. differential "
+                          "with stribeck or coulomb_smoothing_rad_s) and measurement_delay is "
+                          "false; batch_ls gives its fit",
+                          model.pluginName()));
+  // the moved columns that are base columns (the others do not enter the rows)
+  const std::vector<int> in_base = model.nonlinearColumnsInBase();
+  keep_.clear();
+  owner_.clear();
+  base_col_.clear();
+  std::size_t l = 0;
+  for (std::size_t k = 0; k < nl_.size(); ++k) {
+    bool any = false;
+    for (std::size_t i = 0; i < nl_[k].columns.size(); ++i, ++l)
+      if (in_base[l] >= 0) {
+        keep_.push_back(static_cast<int>(l));
+        owner_.push_back(static_cast<int>(k));
+        base_col_.push_back(in_base[l]);
+        any = true;
+      }
+    exid::check(any, fmt::format("varpro: nonlinear parameter '{}' moves no base column of "
+                                 "model '{}' (its columns are not identifiable from this "
+                                 "motion): it cannot be fitted",
+                                 nl_[k].name, model.pluginName()));
+  }
+  margin_ = 0;
+  ts_ = 1.0;
+  if (!delay_) return;
+  // The delay: one more parameter; its columns in D are dW/dd (every base column).
+  exid::check(model.specs().per_sample,
+              fmt::format("varpro: measurement_delay needs a model whose rows are per sample "
+                          "(model '{}' builds rows from several samples)",
+                          model.pluginName()));
+  double jitter = 0.0;
+  const double fs = exid::samplingRate(data, &jitter);
+  exid::check(std::isfinite(fs) && fs > 0 && jitter < 0.5,
+              fmt::format("varpro: measurement_delay needs time stamps of a steady rate "
+                          "(found {:g} Hz with steps {:.0f} % off the median)",
+                          fs, 100 * jitter));
+  ts_ = 1.0 / fs;
+  // samples within measurement_delay_max_s of an end (the shortest step: median (1 -
+  // jitter)), plus the three the interpolation's stencil needs
+  // (a hair below: a bound of exactly n samples is n, not n + 1 by a rounding)
+  // (counted in double first: a bound of 1e300 s is no int; refused before it is converted)
+  const double margin = std::ceil(delay_max_ * fs / (1.0 - jitter) * (1 - 1e-12)) + 3;
+  exid::check(
+      margin <= 0.5 * (data.size() - 8),
+      fmt::format("varpro: measurement_delay_max_s = {:g} s leaves {} of {} samples at "
+                  "{:g} Hz ({:g} without rows at each end; at least 8 are needed)",
+                  delay_max_,
+                  static_cast<long>(std::max(0.0, data.size() - 2 * std::min(margin, 1e15))),
+                  data.size(), fs, margin));
+  margin_ = static_cast<int>(margin);
+  exid::NonlinearParameter d;
+  d.name = "measurement_delay_s";
+  d.unit = "s";
+  d.value = delay0_;
+  nl_.push_back(d);
+  for (int c = 0; c < model.numBase(); ++c) {
+    keep_.push_back(-1);
+    owner_.push_back(static_cast<int>(nl_.size()) - 1);
+    base_col_.push_back(c);
+  }
+}
+
+// eta from lambda: exp for the model's parameters, d = ts lambda for the delay.
+Eigen::VectorXd VarPro::etaOf(const Eigen::VectorXd& lambda) const {
+  Eigen::VectorXd eta = lambda;
+  for (int k = 0; k < q_model_; ++k) eta[k] = std::exp(lambda[k]);
+  if (delay_) eta[eta.size() - 1] = ts_ * lambda[lambda.size() - 1];
+  return eta;
+}
+
+// The rows of samples [b, end) at eta (model parameters and the delay): W, y and the
+// derivative columns [dW_kept, dW/dd] into *D.
+exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWindow& window, int b,
+                             int end, const Eigen::VectorXd& eta, Eigen::MatrixXd* D,
+                             const exid::RunContext& ctx) const {
+  const int L = static_cast<int>(keep_.size()), Lm = L - (delay_ ? model.numBase() : 0);
+  const Eigen::VectorXd eta_m = eta.head(q_model_);
+  Eigen::MatrixXd dW;
+  if (!delay_) {
+    exid::Rows r = model.rowsAt(window.span(b, end), eta_m, &dW, ctx);
+    D->resize(r.W.rows(), L);
+    for (int l = 0; l < L; ++l) D->col(l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+    return r;
+  }
+  // the rows of the chunk and its margins, W (and dW) read at t_k - d
+  const double d = eta[eta.size() - 1];
+  const exid::Dataset span = window.span(b - margin_, end + margin_);
+  const int S = span.size(), first = margin_, last = margin_ + end - b;
+  const exid::Rows rs = model.rowsAt(span, eta_m, q_model_ > 0 ? &dW : nullptr, ctx);
+  const auto R = static_cast<int>(rs.y.size());
+  exid::check(R % S == 0 && rs.W.rows() == R,
+              fmt::format("varpro: measurement_delay: model '{}' gave {} rows for {} samples "
+                          "(not the same number per sample)",
+                          model.pluginName(), R, S));
+  const int P = R / S;
+  exid::Rows r;
+  Eigen::MatrixXd dWd;
+  exid::shiftedRows(span.t, rs.W, P, -d, first, last, &r.W, &dWd);  // dWd: d/d(-d)
+  r.y = rs.y.segment(static_cast<Eigen::Index>(first) * P,
+                     static_cast<Eigen::Index>(last - first) * P);
+  if (rs.equation.size() == static_cast<std::size_t>(R))
+    r.equation.assign(rs.equation.begin() + first * P, rs.equation.begin() + last * P);
+  r.numEquations = rs.numEquations;
+  D->resize(r.W.rows(), L);
+  if (Lm > 0) {
+    Eigen::MatrixXd kept(R, Lm), kept_d;
+    for (int l = 0; l < Lm; ++l) kept.col(l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+    exid::shiftedRows(span.t, kept, P, -d, first, last, &kept_d, nullptr);
+    D->leftCols(Lm) = kept_d;
+  }
+  D->rightCols(L - Lm) = -dWd;
+  return r;
+}
+
+VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
+                              const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const {
+  const int p = model.numBase(), L = static_cast<int>(keep_.size()),
+            q = static_cast<int>(nl_.size());
+  Eval e;
+  e.eta = etaOf(lambda);
+  RowAccumulator acc(p + L, method_);
+  const int first = margin_, last = data.size() - margin_;
+  exid::SampleWindow window(data);
+  Eigen::MatrixXd D, A;
+  for (int b = first; b < last; b += chunk_) {
+    const int end = std::min(last, b + chunk_);
+    const exid::Rows r = chunkRows(model, window, b, end, e.eta, &D, ctx);
+    exid::estimators::checkRows(r, p, kName, b);
+    A.resize(r.W.rows(), p + L);
+    A.leftCols(p) = r.W;
+    A.rightCols(L) = D;
+    if (!A.allFinite() || !r.y.allFinite())
+      throw exid::Error(
+          fmt::format("varpro: a row from samples {}..{} is not finite at eta = "
+                      "[{}]",
+                      b, end, fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
+    acc.add(A, r.y);
+  }
+  e.m = acc.rows();
+  // R of [W D y] (any factor F with F^T F = [W D y]^T [W D y] gives the same R)
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr(acc.factor());
+  e.R = qr.matrixQR().triangularView<Eigen::Upper>();
+  // theta: the rank-revealing solve of [W y] (its Gram matrix from R's columns)
+  RowAccumulator aw(p);
+  Eigen::MatrixXd Rw(e.R.rows(), p);
+  Rw = e.R.leftCols(p);
+  aw.add(Rw, e.R.col(p + L));
+  aw.setRowCount(e.m);
+  e.ls = exid::estimators::solveLeastSquares(aw, model.base().names, opt_, kName);
+  e.theta = e.ls.theta;
+  e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
+  e.yy = e.R.col(p + L).head(p + L + 1).squaredNorm();
+  // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k; the delay: d = ts lambda
+  e.Theta = Eigen::MatrixXd::Zero(L, q);
+  for (int l = 0; l < L; ++l) {
+    const int k = owner_[static_cast<std::size_t>(l)];
+    e.Theta(l, k) =
+        e.theta[base_col_[static_cast<std::size_t>(l)]] * (k < q_model_ ? e.eta[k] : ts_);
+  }
+  const Eigen::MatrixXd R22T = e.R.block(p, p, L, L).triangularView<Eigen::Upper>() * e.Theta;
+  e.JtJ = R22T.transpose() * R22T;
+  e.Jtr = -R22T.transpose() * e.R.col(p + L).segment(p, L);
+  return e;
+}
+
+std::vector<std::string> VarPro::names() const {
+  std::vector<std::string> out;
+  for (const auto& p : nl_) out.push_back(p.name);
+  return out;
+}
+
+}  // namespace exid::varpro

@@ -1,0 +1,292 @@
+// exid — estimator `varpro`: the globalisation (a grid over each group's multiples, the
+// linear part exact at each point; the checks around the best end) and Levenberg-Marquardt on
+// lambda = log(eta) from each start (see varpro.cpp).
+#include <fmt/format.h>
+
+#include <Eigen/SVD>
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "exid/error.hpp"
+#include "varpro.hpp"
+
+namespace exid::varpro {
+
+// "vs1 = 0.05 rad/s, eps1 = ..." (the delay in s)
+std::string VarPro::where(const Eigen::VectorXd& eta) const {
+  std::string out;
+  for (std::size_t k = 0; k < nl_.size(); ++k)
+    out += fmt::format("{}{} = {:.6g} {}", k ? ", " : "", nl_[k].name,
+                       eta[static_cast<Eigen::Index>(k)], nl_[k].unit);
+  return out;
+}
+
+// The model's nonlinear parameters in groups that move common columns (union-find; for
+// `differential`: one joint's eps and vs); the delay is in none (it is not a scale).
+std::vector<std::vector<int>> VarPro::groups() const {
+  std::vector<int> parent(static_cast<std::size_t>(q_model_));
+  for (int k = 0; k < q_model_; ++k) parent[static_cast<std::size_t>(k)] = k;
+  auto find = [&](int k) {
+    while (parent[static_cast<std::size_t>(k)] != k) k = parent[static_cast<std::size_t>(k)];
+    return k;
+  };
+  for (int a = 0; a < q_model_; ++a)
+    for (int b = a + 1; b < q_model_; ++b) {
+      const auto& ca = nl_[static_cast<std::size_t>(a)].columns;
+      const auto& cb = nl_[static_cast<std::size_t>(b)].columns;
+      const bool shared = std::any_of(ca.begin(), ca.end(), [&](int c) {
+        return std::find(cb.begin(), cb.end(), c) != cb.end();
+      });
+      if (shared) parent[static_cast<std::size_t>(find(b))] = find(a);
+    }
+  std::vector<std::vector<int>> out;
+  std::vector<int> slot(static_cast<std::size_t>(q_model_), -1);
+  for (int k = 0; k < q_model_; ++k) {
+    const int r = find(k);
+    if (slot[static_cast<std::size_t>(r)] < 0) {
+      slot[static_cast<std::size_t>(r)] = static_cast<int>(out.size());
+      out.emplace_back();
+    }
+    out[static_cast<std::size_t>(slot[static_cast<std::size_t>(r)])].push_back(k);
+  }
+  return out;
+}
+
+// Block-coordinate search over the grid: for each group in turn, every combination of the
+// multipliers on its parameters (one common multiplier when the combinations would exceed
+// 125), the other groups at the best point so far; the linear part solved exactly at each.
+VarPro::Grid VarPro::searchGrid(const exid::ObservationModel& model, const exid::Dataset& data,
+                                const Eigen::VectorXd& lambda0, const Eval& at_study,
+                                const exid::RunContext& ctx) {
+  Grid g;
+  g.best = lambda0;
+  g.best_eval = at_study;
+  g.groups = groups();
+  for (int i = 0; i < starts_; ++i)
+    g.multipliers.push_back(i == 0 ? 1.0 : std::pow(2.0, (i % 2 ? -1.0 : 1.0) * ((i + 1) / 2)));
+  const int S = static_cast<int>(g.multipliers.size());
+  if (S < 2) return g;
+  // sweeps over the groups until one improves nothing (at most 3): a group scanned while the
+  // others were far off can prefer a wrong point, which the next sweep corrects
+  for (g.sweeps = 1; g.sweeps <= 3; ++g.sweeps) {
+    const double before = g.best_eval.rss;
+    sweep(model, data, lambda0, &g, ctx);
+    if (!(g.best_eval.rss < before)) break;
+  }
+  g.sweeps = std::min(g.sweeps, 3);
+  return g;
+}
+
+void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& data,
+                   const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx) {
+  Grid& g = *gp;
+  const int S = static_cast<int>(g.multipliers.size());
+  for (const auto& grp : g.groups) {
+    const int n = static_cast<int>(grp.size());
+    const bool common = std::pow(S, n) > 125;
+    const long combos = common ? S : static_cast<long>(std::lround(std::pow(S, n)));
+    const Eigen::VectorXd base = g.best;
+    for (long c = 0; c < combos; ++c) {
+      if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+      Eigen::VectorXd lambda = base;
+      long rest = c;
+      for (int i = 0; i < n; ++i) {
+        const int digit = common ? static_cast<int>(c) : static_cast<int>(rest % S);
+        rest /= S;
+        lambda[grp[static_cast<std::size_t>(i)]] =
+            lambda0[grp[static_cast<std::size_t>(i)]] +
+            std::log(g.multipliers[static_cast<std::size_t>(digit)]);
+      }
+      if (lambda == base) continue;  // (the point itself: known)
+      ++g.evaluations;
+      try {
+        Eval e = evaluate(model, data, lambda, ctx);
+        if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
+          g.best = lambda;
+          g.best_eval = std::move(e);
+        }
+      } catch (const exid::Error&) {
+        ++g.singular;
+      }
+    }
+  }
+}
+
+// Each model parameter alone at kAxisMultipliers of the centre's value, the others at the best
+// point so far.
+void VarPro::axisScan(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const Eigen::VectorXd& centre, Grid* gp, const exid::RunContext& ctx) {
+  Grid& g = *gp;
+  for (int k = 0; k < q_model_; ++k)
+    for (double mult : kAxisMultipliers) {
+      if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+      Eigen::VectorXd lambda = g.best;
+      lambda[k] = centre[k] + std::log(mult);
+      if (lambda == g.best) continue;
+      ++g.evaluations;
+      try {
+        Eval e = evaluate(model, data, lambda, ctx);
+        if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
+          g.best = lambda;
+          g.best_eval = std::move(e);
+        }
+      } catch (const exid::Error&) {
+        ++g.singular;
+      }
+    }
+}
+
+// Every stride-th sample of d (read in chunks: a stream is never held whole).
+exid::Dataset VarPro::strided(const exid::Dataset& d, long stride) {
+  const int K = d.size();
+  const int n = static_cast<int>((K + stride - 1) / stride);
+  exid::Dataset out;
+  out.source = d.source;
+  out.meta = d.meta;
+  exid::SampleWindow window(d);
+  int row = 0;
+  constexpr int kChunk = 8192;
+  for (int b = 0; b < K; b += kChunk) {
+    const exid::Dataset c = window.span(b, std::min(K, b + kChunk));
+    auto take = [&](const Eigen::MatrixXd& src, Eigen::MatrixXd& dst) {
+      if (src.cols() == 0) return;
+      if (dst.rows() != n) dst.resize(n, src.cols());
+      int r = row;
+      for (int k = static_cast<int>((b + stride - 1) / stride * stride); k < b + c.size();
+           k += static_cast<int>(stride))
+        dst.row(r++) = src.row(k - b);
+    };
+    if (out.t.size() != n) out.t.resize(n);
+    int r = row;
+    for (int k = static_cast<int>((b + stride - 1) / stride * stride); k < b + c.size();
+         k += static_cast<int>(stride))
+      out.t(r++) = c.t(k - b);
+    take(c.q, out.q);
+    take(c.qd, out.qd);
+    take(c.qdd, out.qdd);
+    take(c.tau, out.tau);
+    take(c.wrench, out.wrench);
+    row = r;
+  }
+  return out;
+}
+
+// Levenberg-Marquardt on lambda = log(eta) from `lambda` (its fit `cur`).
+VarPro::Run VarPro::levenbergMarquardt(const exid::ObservationModel& model,
+                                       const exid::Dataset& data, Eigen::VectorXd lambda, Eval cur,
+                                       const std::string& origin, const exid::RunContext& ctx) {
+  const int q = static_cast<int>(nl_.size());
+  Run run;
+  run.origin = origin;
+  run.eta0 = cur.eta;
+  int evals = 1, iterations = 0;
+  double mu = 1e-3;
+  std::string stop;
+  auto record = [&](const Eval& e) {
+    exid::Json t = exid::Json::object();
+    t["rss"] = e.rss;
+    // (eta: the nonlinear parameters in their units, the delay in s)
+    t["eta"] = exid::Json(std::vector<double>(e.eta.data(), e.eta.data() + e.eta.size()));
+    run.trace.push_back(t);
+  };
+  record(cur);
+  bool cur_regular = regular(jointMatrix(model, cur));
+  while (evals < max_evals_) {
+    if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
+    const Eigen::MatrixXd H = cur.JtJ;
+    if (cur.Jtr.norm() == 0.0) {
+      stop = "zero gradient";
+      break;
+    }
+    bool accepted = false;
+    double decrease = 0.0;
+    Eigen::VectorXd delta;
+    while (evals < max_evals_) {
+      Eigen::MatrixXd A = H;
+      A.diagonal() += mu * H.diagonal().cwiseMax(1e-300);
+      delta = A.ldlt().solve(-cur.Jtr);
+      if (!delta.allFinite() && mu < 1e30) {
+        mu *= 10;
+        continue;
+      }
+      if (!delta.allFinite()) break;
+      // A trial where the fit is singular (a width so large that s is constant, say) or not
+      // finite is a rejected step, as one that raises the residual.
+      Eval trial;
+      bool ok = true;
+      if (delay_ && std::abs(ts_ * (lambda[q - 1] + delta[q - 1])) > delay_max_) {
+        ok = false;  // outside the delays the kept rows allow
+        ++rejected_bound_;
+      } else {
+        try {
+          trial = evaluate(model, data, lambda + delta, ctx);
+          // a step from a regular point into one where the joint problem is singular (a
+          // Stribeck velocity drifting so high that its term is a Coulomb term, or so low that
+          // it vanishes) is rejected: there the nonlinear parameter is not determined, and
+          // the run would wander where no start can bring it back
+          if (cur_regular && !regular(jointMatrix(model, trial))) {
+            ok = false;
+            ++rejected_singular_;
+          }
+        } catch (const exid::Error&) {
+          ok = false;
+          ++rejected_singular_;
+        }
+      }
+      ++evals;
+      if (ok && std::isfinite(trial.rss) && trial.rss <= cur.rss) {
+        lambda += delta;
+        cur_regular = regular(jointMatrix(model, trial));
+        decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
+        cur = std::move(trial);
+        record(cur);
+        mu = std::max(mu / 3.0, 1e-12);
+        accepted = true;
+        break;
+      }
+      mu *= 4.0;
+      if (delta.cwiseAbs().maxCoeff() < xtol_) break;
+    }
+    ++iterations;
+    if (!accepted && evals >= max_evals_) break;  // (not converged)
+    if (!accepted) {
+      stop = "no step decreases the residual";
+      break;
+    }
+    if (delta.cwiseAbs().maxCoeff() < xtol_) {
+      stop = fmt::format("step in log(eta) below step_tolerance = {:g}", xtol_);
+      break;
+    }
+    if (decrease < ftol_) {
+      stop = fmt::format("the residual fell by {:.2g} of itself, below rss_tolerance = {:g}",
+                         decrease, ftol_);
+      break;
+    }
+  }
+  if (stop.empty()) stop = fmt::format("max_evaluations = {} reached", max_evals_);
+  run.lambda = lambda;
+  run.cur = std::move(cur);
+  run.evals = evals;
+  run.iterations = iterations;
+  run.stop = stop;
+  return run;
+}
+
+// The first-order test at a run's end, and whether the joint problem is regular there.
+void VarPro::firstOrder(const exid::ObservationModel& model, Run* r) const {
+  const Eval& e = r->cur;
+  r->gradient_norm = 2.0 * e.Jtr.norm();  // ||d rss / d lambda|| = 2 ||J^T r||
+  // g^T (J^T J)^+ g: the decrease of rss the Gauss-Newton step predicts
+  Eigen::JacobiSVD<Eigen::MatrixXd> s(e.JtJ, Eigen::ComputeThinU | Eigen::ComputeThinV);
+  s.setThreshold(1e-14);
+  const double pred = e.Jtr.dot(s.solve(e.Jtr));
+  r->gn_fraction = e.rss > 0 ? pred / e.rss : 0.0;
+  // exact to rounding: the residual below 1e-12 of the measurement, relatively
+  r->exact = e.rss <= 1e-24 * e.yy;
+  r->stationary = r->exact || (std::isfinite(r->gn_fraction) && r->gn_fraction <= gtol_);
+  r->M = jointMatrix(model, e);
+  r->singular = !regular(r->M);
+}
+
+}  // namespace exid::varpro
