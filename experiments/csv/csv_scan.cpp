@@ -25,7 +25,7 @@
 #include "exid/context.hpp"
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
-#include "exid/inspect.hpp"
+#include "exid/recording_stats.hpp"
 #include "exid/signal.hpp"
 
 namespace exid::csv_experiment {

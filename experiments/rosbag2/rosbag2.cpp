@@ -20,8 +20,8 @@
 
 #include "bag.hpp"
 #include "exid/error.hpp"
-#include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/recording_stats.hpp"
 #include "exid/segment.hpp"
 
 namespace {
