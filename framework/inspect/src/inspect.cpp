@@ -612,53 +612,86 @@ Json inspectExperimentData(const RobotModel& robot, const ObservationModel* mode
   return J;
 }
 
+namespace {
+
+// A number of the inspection's JSON as text ("-" when absent), and a fraction as a percentage.
+std::string num(const Json* j, const char* f = "{:.4g}") {
+  return j && j->isNumber() ? fmt::format(fmt::runtime(f), j->asDouble()) : std::string("-");
+}
+std::string pct(const Json* j) {
+  return j && j->isNumber() ? fmt::format("{:.0f} %", 100.0 * j->asDouble()) : std::string("-");
+}
+
+// The recording's lines: rate, jitter and gaps; duplicate, frozen and held rows; saturation.
+std::string recordingText(const Json& rec) {
+  std::string out;
+  const Json* t = rec.find("timing");
+  if (t && t->find("source") && t->find("source")->asString() == "sample_period_s") {
+    out += fmt::format(
+        "recording: {} Hz (sample_period_s: no time stamps, so no jitter or gaps to measure)\n",
+        num(t->find("rate_hz"), "{:.10g}"));
+  } else if (t) {
+    const Json* jit = t->find("jitter");
+    const Json* g = t->find("gaps");
+    out += fmt::format("recording: {} Hz ({}), jitter {} std / {} max (relative), gaps {}\n",
+                       num(t->find("rate_hz"), "{:.10g}"),
+                       t->find("source") ? t->find("source")->asString() : "time stamps",
+                       jit ? num(jit->find("std_rel"), "{:.2e}") : "-",
+                       jit ? num(jit->find("max_rel"), "{:.2e}") : "-",
+                       g ? num(g->find("count"), "{:.0f}") : "-");
+  }
+  const Json* dup = rec.find("duplicate_rows");
+  const Json* fr = rec.find("frozen_rows");
+  const Json* rest = rec.find("held_at_rest");
+  out += fmt::format(
+      "rows while moving: {} duplicate, {} frozen (sample-and-hold); held at rest: {}\n",
+      dup ? num(dup->find("count"), "{:.0f}") : "-", fr ? num(fr->find("rows"), "{:.0f}") : "-",
+      rest ? num(rest->find("rows"), "{:.0f}") : "-");
+  if (const Json* sat = rec.find("saturation"); sat && sat->isArray()) {
+    std::string s;
+    for (std::size_t i = 0; i < sat->size(); ++i) {
+      const Json& c = sat->at(i);
+      const Json* f = c.find("fraction");
+      if (!f || !f->isNumber() || f->asDouble() <= 0) continue;
+      s +=
+          fmt::format("{}{} {:.2f} %", s.empty() ? "" : ", ",
+                      c.find("column") ? c.find("column")->asString() : "?", 100.0 * f->asDouble());
+    }
+    out += "saturated torque samples: " + (s.empty() ? std::string("none") : s) + "\n";
+  }
+  return out;
+}
+
+// The motion's line: the moving fraction, the moving and standstill segments (the first six).
+std::string motionText(const Json& m) {
+  std::string out;
+  auto segs = [&](const Json* s) {
+    std::string r;
+    if (!s) return r;
+    for (std::size_t i = 0; i < s->size(); ++i) {
+      if (i == 6) {
+        r += fmt::format(" ... ({} in all)", s->size());
+        break;
+      }
+      r += fmt::format("{}[{:.3f}, {:.3f}]", i ? " " : "", s->at(i).at(0).asDouble(),
+                       s->at(i).at(1).asDouble());
+    }
+    return r.empty() ? std::string("none") : r;
+  };
+  out += fmt::format("motion: moving {} of the time\n  moving s: {}\n  standstill s: {}\n",
+                     pct(m.find("moving_fraction")), segs(m.find("moving_s")),
+                     segs(m.find("standstill_s")));
+  return out;
+}
+
+}  // namespace
+
 std::string inspectionText(const Json& J) {
   std::string out;
-  auto num = [](const Json* j, const char* f = "{:.4g}") {
-    return j && j->isNumber() ? fmt::format(fmt::runtime(f), j->asDouble()) : std::string("-");
-  };
-  auto pct = [](const Json* j) {
-    return j && j->isNumber() ? fmt::format("{:.0f} %", 100.0 * j->asDouble()) : std::string("-");
-  };
   out += fmt::format("data: {} ({} samples, {} s)\n",
                      J.find("source") ? J.find("source")->asString() : "?",
                      num(J.find("samples"), "{:.0f}"), num(J.find("duration_s")));
-  if (const Json* rec = J.find("recording")) {
-    const Json* t = rec->find("timing");
-    if (t && t->find("source") && t->find("source")->asString() == "sample_period_s") {
-      out += fmt::format(
-          "recording: {} Hz (sample_period_s: no time stamps, so no jitter or gaps to measure)\n",
-          num(t->find("rate_hz"), "{:.10g}"));
-    } else if (t) {
-      const Json* jit = t->find("jitter");
-      const Json* g = t->find("gaps");
-      out += fmt::format("recording: {} Hz ({}), jitter {} std / {} max (relative), gaps {}\n",
-                         num(t->find("rate_hz"), "{:.10g}"),
-                         t->find("source") ? t->find("source")->asString() : "time stamps",
-                         jit ? num(jit->find("std_rel"), "{:.2e}") : "-",
-                         jit ? num(jit->find("max_rel"), "{:.2e}") : "-",
-                         g ? num(g->find("count"), "{:.0f}") : "-");
-    }
-    const Json* dup = rec->find("duplicate_rows");
-    const Json* fr = rec->find("frozen_rows");
-    const Json* rest = rec->find("held_at_rest");
-    out += fmt::format(
-        "rows while moving: {} duplicate, {} frozen (sample-and-hold); held at rest: {}\n",
-        dup ? num(dup->find("count"), "{:.0f}") : "-", fr ? num(fr->find("rows"), "{:.0f}") : "-",
-        rest ? num(rest->find("rows"), "{:.0f}") : "-");
-    if (const Json* sat = rec->find("saturation"); sat && sat->isArray()) {
-      std::string s;
-      for (std::size_t i = 0; i < sat->size(); ++i) {
-        const Json& c = sat->at(i);
-        const Json* f = c.find("fraction");
-        if (!f || !f->isNumber() || f->asDouble() <= 0) continue;
-        s += fmt::format("{}{} {:.2f} %", s.empty() ? "" : ", ",
-                         c.find("column") ? c.find("column")->asString() : "?",
-                         100.0 * f->asDouble());
-      }
-      out += "saturated torque samples: " + (s.empty() ? std::string("none") : s) + "\n";
-    }
-  }
+  if (const Json* rec = J.find("recording")) out += recordingText(*rec);
   if (const Json* a = J.find("accounting"); a && a->isObject()) {
     std::string s;
     for (const auto& [k, v] : a->items())
@@ -668,24 +701,7 @@ std::string inspectionText(const Json& J) {
   if (const Json* t = J.find("timing"))
     out += fmt::format("data as used: {} Hz\n", num(t->find("rate_hz"), "{:.10g}"));
   if (const Json* d = J.find("derivatives")) out += "derivatives: " + d->asString() + "\n";
-  if (const Json* m = J.find("motion")) {
-    auto segs = [&](const Json* s) {
-      std::string r;
-      if (!s) return r;
-      for (std::size_t i = 0; i < s->size(); ++i) {
-        if (i == 6) {
-          r += fmt::format(" ... ({} in all)", s->size());
-          break;
-        }
-        r += fmt::format("{}[{:.3f}, {:.3f}]", i ? " " : "", s->at(i).at(0).asDouble(),
-                         s->at(i).at(1).asDouble());
-      }
-      return r.empty() ? std::string("none") : r;
-    };
-    out += fmt::format("motion: moving {} of the time\n  moving s: {}\n  standstill s: {}\n",
-                       pct(m->find("moving_fraction")), segs(m->find("moving_s")),
-                       segs(m->find("standstill_s")));
-  }
+  if (const Json* m = J.find("motion")) out += motionText(*m);
   if (const Json* js = J.find("joints")) {
     out += "joint  range covered  |qd| covered  gain +- std      noise  model signal  verdict\n";
     for (std::size_t i = 0; i < js->size(); ++i) {

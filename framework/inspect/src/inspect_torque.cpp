@@ -21,7 +21,8 @@
 // minimises sum_j RSS_j(l) / (s_j^2 f_j). It is reported as a warning only when it is at least
 // kDelayMinSamples, more than kZ standard deviations from zero (the std from the spread of the
 // estimates of kDelayParts parts of the recording that give it), the joints agree with it, two
-// thirds of the informative parts give it, and shifting by it lowers the joints' residuals by kDelayMinImprovement on average.
+// thirds of the informative parts give it, and shifting by it lowers the joints' residuals by
+// kDelayMinImprovement on average.
 #include "inspect_torque.hpp"
 
 #include <fmt/format.h>
@@ -481,6 +482,71 @@ Combined combine(const Input& in, const std::vector<int>& js, int L, Index from,
   return C;
 }
 
+/// The delay of each of kDelayParts parts of the recording, each holding an equal share of its
+/// moving rows (halves where fewer than two of them are informative: a short recording): the
+/// informative parts' estimates; every part listed in *parts_out with its white std and whether
+/// it is informative (its std, were the residuals white, below the agreement tolerance tol_d).
+std::vector<double> partEstimates(const Input& in, const std::vector<int>& js, int L, double tol_d,
+                                  Json* parts_out) {
+  const Index K = in.tau->rows();
+  std::vector<double> parts;
+  Json& parts_json = *parts_out;
+  // The parts hold equal shares of the moving rows (a standstill would otherwise leave a part
+  // with nothing to say and its neighbour with the motion's slow start alone).
+  std::vector<Index> moving_rows;
+  for (Index k = L; k < K - L; ++k)
+    if ((*in.moving)[static_cast<std::size_t>(k)] != 0) moving_rows.push_back(k);
+  const auto M = static_cast<Index>(moving_rows.size());
+  for (const int count : {kDelayParts, 2}) {
+    parts.clear();
+    parts_json = Json::array();
+    for (int b = 0; b < count && M >= count; ++b) {
+      const Index from = b == 0 ? L : moving_rows[static_cast<std::size_t>(M * b / count)];
+      const Index to =
+          b + 1 == count ? K - L : moving_rows[static_cast<std::size_t>(M * (b + 1) / count)];
+      const Combined P = combine(in, js, L, from, to);
+      Json e = Json::object();
+      e["delay_samples"] = numOrNull(P.all.edge ? NAN : P.all.d);
+      e["white_std_samples"] = numOrNull(P.all.std_white);
+      // (halves, the short recording's fallback: their own data hold half as much, so a half
+      // votes while its white std is within twice the agreement tolerance)
+      const double informative_below = count == 2 ? 2 * tol_d : tol_d;
+      const bool informative = std::isfinite(P.all.d) && !P.all.edge &&
+                               std::isfinite(P.all.std_white) &&
+                               P.all.std_white < informative_below;
+      e["informative"] = informative;
+      parts_json.push_back(e);
+      if (informative) parts.push_back(P.all.d);
+    }
+    if (parts.size() >= 2) break;
+  }
+  return parts;
+}
+
+/// What the recording can say of the delay: a delay it confirms (warned), none where it could
+/// have confirmed one, or not checkable here (too few joints or parts hold information on the
+/// lag: the estimate is listed, but the recording can neither confirm nor rule out a delay).
+std::string delayVerdict(bool edge_warned, bool reported, int judged, std::size_t parts) {
+  std::string verdict;
+  if (edge_warned) {
+    verdict = "delay at the edge of the searched window";
+  } else if (reported) {
+    verdict = "delay";
+  } else if (judged < 2 || parts < 2) {
+    std::vector<std::string> why;
+    if (judged < 2)
+      why.push_back(fmt::format("{} joint{} judged on the lag, two are needed", judged,
+                                judged == 1 ? "" : "s"));
+    if (parts < 2)
+      why.push_back(fmt::format("{} part{} of the recording informative, two are needed", parts,
+                                parts == 1 ? "" : "s"));
+    verdict = fmt::format("not checkable here: {}", fmt::join(why, "; "));
+  } else {
+    verdict = "none found";
+  }
+  return verdict;
+}
+
 }  // namespace
 
 void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
@@ -516,38 +582,8 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
   const double d = C.all.d;
   const double tol_d =
       std::max(kDelayAgreeSamples, kDelayAgreeFraction * (std::isfinite(d) ? std::abs(d) : 0.0));
-  // kDelayParts parts; where fewer than two of them are informative (a short recording), halves.
-  std::vector<double> parts;
-  Json parts_json = Json::array();
-  // The parts hold equal shares of the moving rows (a standstill would otherwise leave a part
-  // with nothing to say and its neighbour with the motion's slow start alone).
-  std::vector<Index> moving_rows;
-  for (Index k = L; k < K - L; ++k)
-    if ((*in.moving)[static_cast<std::size_t>(k)] != 0) moving_rows.push_back(k);
-  const auto M = static_cast<Index>(moving_rows.size());
-  for (const int count : {kDelayParts, 2}) {
-    parts.clear();
-    parts_json = Json::array();
-    for (int b = 0; b < count && M >= count; ++b) {
-      const Index from = b == 0 ? L : moving_rows[static_cast<std::size_t>(M * b / count)];
-      const Index to =
-          b + 1 == count ? K - L : moving_rows[static_cast<std::size_t>(M * (b + 1) / count)];
-      const Combined P = combine(in, js, L, from, to);
-      Json e = Json::object();
-      e["delay_samples"] = numOrNull(P.all.edge ? NAN : P.all.d);
-      e["white_std_samples"] = numOrNull(P.all.std_white);
-      // (halves, the short recording's fallback: their own data hold half as much, so a half
-      // votes while its white std is within twice the agreement tolerance)
-      const double informative_below = count == 2 ? 2 * tol_d : tol_d;
-      const bool informative = std::isfinite(P.all.d) && !P.all.edge &&
-                               std::isfinite(P.all.std_white) &&
-                               P.all.std_white < informative_below;
-      e["informative"] = informative;
-      parts_json.push_back(e);
-      if (informative) parts.push_back(P.all.d);
-    }
-    if (parts.size() >= 2) break;
-  }
+  Json parts_json;
+  const std::vector<double> parts = partEstimates(in, js, L, tol_d, &parts_json);
   // The std from the spread of the parts that give the delay (within the agreement tolerance):
   // a part the vote outweighs (a spurious minimum of its own) does not also inflate it.
   std::vector<double> voting;
@@ -560,8 +596,7 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
     mean /= static_cast<double>(voting.size());
     double v = 0;
     for (double x : voting) v += (x - mean) * (x - mean);
-    sd = std::sqrt(v / static_cast<double>(voting.size() - 1) /
-                   static_cast<double>(voting.size()));
+    sd = std::sqrt(v / static_cast<double>(voting.size() - 1) / static_cast<double>(voting.size()));
   }
   D["delay_samples"] = numOrNull(d);
   D["delay_s"] = numOrNull(d * in.dt);
@@ -616,28 +651,8 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
   const bool reported =
       significant && joints_agree && parts_agree && C.improvement >= kDelayMinImprovement;
   D["reported"] = reported;
-  // What the recording can say: a delay it confirms, none where it could have confirmed one, or
-  // not checkable here (too few joints or parts hold information on the lag: the estimate is
-  // listed, but the recording can neither confirm nor rule out a delay).
   const bool edge_warned = C.all.edge && C.improvement >= kDelayMinImprovement && judged >= 2;
-  std::string verdict;
-  if (edge_warned) {
-    verdict = "delay at the edge of the searched window";
-  } else if (reported) {
-    verdict = "delay";
-  } else if (judged < 2 || parts.size() < 2) {
-    std::vector<std::string> why;
-    if (judged < 2)
-      why.push_back(fmt::format("{} joint{} judged on the lag, two are needed", judged,
-                                judged == 1 ? "" : "s"));
-    if (parts.size() < 2)
-      why.push_back(fmt::format("{} part{} of the recording informative, two are needed",
-                                parts.size(), parts.size() == 1 ? "" : "s"));
-    verdict = fmt::format("not checkable here: {}", fmt::join(why, "; "));
-  } else {
-    verdict = "none found";
-  }
-  D["verdict"] = verdict;
+  D["verdict"] = delayVerdict(edge_warned, reported, judged, parts.size());
   D["rule"] = fmt::format(
       "warned when |delay| >= {:g} samples and > {:g} std, at least two joints are judged and "
       "two thirds of them agree with it, at least two parts of the recording are informative and "

@@ -57,6 +57,84 @@ StudyResult startedResult(const StudyConfig& cfg) {
   S["seed"] = Json(static_cast<long long>(cfg.seed));
   return res;
 }
+// A stage that threw: the failure in the result and the summary, with what the machine (not the
+// study) caused marked: out of space, out of memory, over the study's budget.
+void recordFailure(const std::exception& e, const std::string& stage, const RunOptions& opt,
+                   const RunContext& ctx, StudyResult* result) {
+  StudyResult& res = *result;
+  Json& S = res.summary;
+  StudySummary& T = res.headline;
+  res.ok = false;
+  const auto* io = dynamic_cast<const IoError*>(&e);
+  const bool nomem = dynamic_cast<const std::bad_alloc*>(&e) != nullptr;
+  res.message = fmt::format("stage '{}': {}", stage,
+                            nomem ? std::string("out of memory (std::bad_alloc)") : e.what());
+  res.cancelled = opt.cancelled && opt.cancelled();
+  T.status = res.cancelled ? "cancelled" : "failed";
+  T.failed_stage = stage;
+  T.message = res.message;
+  if (io && io->outOfSpace()) S["out_of_space"] = true;  // the machine's, not the study's
+  // (a thread or mapping refused under a memory cap: std::system_error EAGAIN / ENOMEM)
+  const auto* se = dynamic_cast<const std::system_error*>(&e);
+  if (nomem || (se && (se->code() == std::errc::resource_unavailable_try_again ||
+                       se->code() == std::errc::not_enough_memory)))
+    S["out_of_memory"] = true;
+  if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
+}
+
+// The run folder published: the report (a run that succeeded) and summary.json written into the
+// staging folder, which replaces the output folder in one rename, or goes to NAME.failed beside
+// an earlier successful run. A failure to write leaves the failure visible where it can and
+// nothing half written.
+void publishRun(const RunFolder& folder, Report& report, StudyResult* result) {
+  StudyResult& res = *result;
+  Json& S = res.summary;
+  StudySummary& T = res.headline;
+  const fs::path& dir = folder.staging;
+  // Published where: a failure beside an earlier successful run goes to NAME.failed.
+  const bool beside = !res.ok && holdsOkRun(folder.final_dir);
+  const fs::path target = beside ? folder.failed_dir : folder.final_dir;
+  try {
+    if (res.ok) {
+      const std::string missing = report.write(T);
+      S["report"] = (folder.final_dir / "report.md").string();
+      if (!missing.empty()) S["report_missing_plots"] = missing;
+    }
+    if (beside)
+      S["note"] = fmt::format(
+          "this run failed; the results of the earlier successful run in {} are untouched",
+          folder.final_dir.string());
+    writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
+    std::error_code ec;
+    if (res.ok || !beside) fs::remove_all(folder.failed_dir, ec);  // superseded
+    publish(dir, target);
+    res.written_to = target == folder.final_dir ? folder.named : target;
+  } catch (const std::exception& e) {
+    res.ok = false;
+    const auto* io = dynamic_cast<const IoError*>(&e);
+    if (io && io->outOfSpace()) S["out_of_space"] = true;
+    res.message += (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
+    T.status = "failed";
+    T.message = res.message;
+    renderInto(T, &S);
+    // Whatever was written stays in the staging folder's place only if publishing it
+    // worked; the earlier results are never touched. Try to leave the failure visible.
+    std::error_code ec;
+    try {
+      writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
+      const bool besides2 = holdsOkRun(folder.final_dir);
+      const fs::path t2 = besides2 ? folder.failed_dir : folder.final_dir;
+      if (fs::exists(dir, ec)) {
+        if (besides2) fs::remove_all(folder.failed_dir, ec);
+        publish(dir, t2);
+        res.written_to = t2 == folder.final_dir ? folder.named : t2;
+      }
+    } catch (const std::exception&) {
+      fs::remove_all(dir, ec);  // nothing half written is left behind
+    }
+  }
+}
+
 }  // namespace
 
 StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptions& opt) {
@@ -112,22 +190,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     res.ok = true;
   } catch (const std::exception& e) {
     run.collectExperimentInspection();  // (a failed identification keeps the data's inspection)
-    res.ok = false;
-    const auto* io = dynamic_cast<const IoError*>(&e);
-    const bool nomem = dynamic_cast<const std::bad_alloc*>(&e) != nullptr;
-    res.message = fmt::format("stage '{}': {}", stage,
-                              nomem ? std::string("out of memory (std::bad_alloc)") : e.what());
-    res.cancelled = opt.cancelled && opt.cancelled();
-    T.status = res.cancelled ? "cancelled" : "failed";
-    T.failed_stage = stage;
-    T.message = res.message;
-    if (io && io->outOfSpace()) S["out_of_space"] = true;  // the machine's, not the study's
-    // (a thread or mapping refused under a memory cap: std::system_error EAGAIN / ENOMEM)
-    const auto* se = dynamic_cast<const std::system_error*>(&e);
-    if (nomem || (se && (se->code() == std::errc::resource_unavailable_try_again ||
-                         se->code() == std::errc::not_enough_memory)))
-      S["out_of_memory"] = true;
-    if (ctx.deadline.expired()) S["timed_out"] = true;  // over budget_s: a timeout, not a bug
+    recordFailure(e, stage, opt, ctx, &res);
   }
   inputs.reset();
   S["inputs"] = inputManifestJson(run.manifest);
@@ -135,51 +198,7 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
   renderInto(T, &S);
   const std::lock_guard<std::mutex> finishing(watchdog.finishing());
   watchdog.finished();
-  if (write) {
-    // Published where: a failure beside an earlier successful run goes to NAME.failed.
-    const bool beside = !res.ok && holdsOkRun(folder.final_dir);
-    const fs::path target = beside ? folder.failed_dir : folder.final_dir;
-    try {
-      if (res.ok) {
-        const std::string missing = report.write(T);
-        S["report"] = (folder.final_dir / "report.md").string();
-        if (!missing.empty()) S["report_missing_plots"] = missing;
-      }
-      if (beside)
-        S["note"] = fmt::format(
-            "this run failed; the results of the earlier successful run in {} are untouched",
-            folder.final_dir.string());
-      writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
-      std::error_code ec;
-      if (res.ok || !beside) fs::remove_all(folder.failed_dir, ec);  // superseded
-      publish(dir, target);
-      res.written_to = target == folder.final_dir ? folder.named : target;
-    } catch (const std::exception& e) {
-      res.ok = false;
-      const auto* io = dynamic_cast<const IoError*>(&e);
-      if (io && io->outOfSpace()) S["out_of_space"] = true;
-      res.message +=
-          (res.message.empty() ? "" : "; ") + std::string("writing results: ") + e.what();
-      T.status = "failed";
-      T.message = res.message;
-      renderInto(T, &S);
-      // Whatever was written stays in the staging folder's place only if publishing it
-      // worked; the earlier results are never touched. Try to leave the failure visible.
-      std::error_code ec;
-      try {
-        writeFileAtomic(dir / "summary.json", S.dump(2) + "\n");
-        const bool besides2 = holdsOkRun(folder.final_dir);
-        const fs::path t2 = besides2 ? folder.failed_dir : folder.final_dir;
-        if (fs::exists(dir, ec)) {
-          if (besides2) fs::remove_all(folder.failed_dir, ec);
-          publish(dir, t2);
-          res.written_to = t2 == folder.final_dir ? folder.named : t2;
-        }
-      } catch (const std::exception&) {
-        fs::remove_all(dir, ec);  // nothing half written is left behind
-      }
-    }
-  }
+  if (write) publishRun(folder, report, &res);
   return res;
 }
 

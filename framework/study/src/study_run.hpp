@@ -157,6 +157,17 @@ class StudyRun {
   std::function<void(const std::string&)> warnFn() {
     return [this](const std::string& text) { warn(text); };
   }
+  void completeStreamedPass(const RunContext& ictx);
+  void checkEstimateFinite() const;
+  Json parametersJson(const Eigen::VectorXd& nominal, const Eigen::VectorXd& truth, bool simulated,
+                      double* err2_out, double* tru2_out) const;
+  Json nonlinearJson() const;
+  void warnIdentificationColumns();
+  Rows heldOutRows(const Dataset& vd, const RunContext& vctx, bool by_estimator);
+  Json splitJson(const Dataset& vd) const;
+  static void errorsPerEquation(const Rows& rows, const Eigen::VectorXd& err,
+                                StudySummary::Validation* va);
+  void writeValidationCsv(const Rows& rows, const Eigen::VectorXd& pred) const;
   void excitationOutputs(const Samples& initial, const Samples& best, const OptimizerResult& r,
                          const ExcitationOptions& xo, Json& X);
   std::function<void(double, const std::string&)> progressFor(const std::string& st) const {
