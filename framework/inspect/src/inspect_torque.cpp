@@ -523,6 +523,41 @@ std::vector<double> partEstimates(const Input& in, const std::vector<int>& js, i
   return parts;
 }
 
+/// Each judged joint's own delay and std into D["per_joint"] (and their spread in seconds);
+/// *judged: the joints with a finite delay and std, *agreeing: those within kZ std (or the
+/// agreement tolerance tol_d) of the overall delay d.
+void perJointDelays(const Input& in, const std::vector<int>& js, const Combined& C, double d,
+                    double tol_d, Json& D, int* agreeing_out, int* judged_out) {
+  Json per = Json::array();
+  std::vector<double> djs;
+  int& agreeing = *agreeing_out;
+  int& judged = *judged_out;
+  agreeing = judged = 0;
+  for (std::size_t i = 0; i < js.size(); ++i) {
+    const LagMinimum& m = C.per_joint[i];
+    Json e = Json::object();
+    e["joint"] = js[i] + 1;
+    e["delay_samples"] = numOrNull(m.d);
+    e["delay_s"] = numOrNull(m.d * in.dt);
+    e["std_samples"] = numOrNull(m.std);
+    e["at_window_edge"] = m.edge;
+    per.push_back(e);
+    if (std::isfinite(m.d)) djs.push_back(m.d * in.dt);
+    if (!std::isfinite(m.d) || !std::isfinite(m.std)) continue;
+    ++judged;
+    if (std::abs(m.d - d) <= std::max(kZ * m.std, tol_d)) ++agreeing;
+  }
+  D["per_joint"] = per;
+  {
+    double mean = 0;
+    for (double x : djs) mean += x;
+    mean /= std::max<std::size_t>(1, djs.size());
+    double v = 0;
+    for (double x : djs) v += (x - mean) * (x - mean);
+    D["per_joint_spread_s"] = djs.size() > 1 ? Json(std::sqrt(v / (djs.size() - 1))) : Json();
+  }
+}
+
 /// What the recording can say of the delay: a delay it confirms (warned), none where it could
 /// have confirmed one, or not checkable here (too few joints or parts hold information on the
 /// lag: the estimate is listed, but the recording can neither confirm nor rule out a delay).
@@ -611,33 +646,9 @@ void delayCheck(const Input& in, const std::vector<char>& usable, Json& D,
   D["model_std_samples"] = numOrNull(C.all.std);
   D["at_window_edge"] = C.all.edge;
   D["fit_improvement"] = C.improvement;
-  Json per = Json::array();
-  std::vector<double> djs;
   int agreeing = 0, judged = 0;
-  for (std::size_t i = 0; i < js.size(); ++i) {
-    const LagMinimum& m = C.per_joint[i];
-    Json e = Json::object();
-    e["joint"] = js[i] + 1;
-    e["delay_samples"] = numOrNull(m.d);
-    e["delay_s"] = numOrNull(m.d * in.dt);
-    e["std_samples"] = numOrNull(m.std);
-    e["at_window_edge"] = m.edge;
-    per.push_back(e);
-    if (std::isfinite(m.d)) djs.push_back(m.d * in.dt);
-    if (!std::isfinite(m.d) || !std::isfinite(m.std)) continue;
-    ++judged;
-    if (std::abs(m.d - d) <= std::max(kZ * m.std, tol_d)) ++agreeing;
-  }
+  perJointDelays(in, js, C, d, tol_d, D, &agreeing, &judged);
   const bool joints_agree = judged >= 2 && 3 * agreeing >= 2 * judged;
-  D["per_joint"] = per;
-  {
-    double mean = 0;
-    for (double x : djs) mean += x;
-    mean /= std::max<std::size_t>(1, djs.size());
-    double v = 0;
-    for (double x : djs) v += (x - mean) * (x - mean);
-    D["per_joint_spread_s"] = djs.size() > 1 ? Json(std::sqrt(v / (djs.size() - 1))) : Json();
-  }
   D["joints_agree"] = joints_agree;
   D["parts_delay_samples"] = parts_json;
   std::size_t parts_agreeing = 0;
