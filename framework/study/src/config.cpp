@@ -1,15 +1,16 @@
+// exid — the study file (parseStudy, loadStudy): its keys, each section read and checked (a
+// plugin's parameters: config_params.cpp; the excitation section: config_excitation.cpp), the
+// sections the stages need, and the files a study reads.
 #include "exid/config.hpp"
 
 #include <fmt/format.h>
 #include <yaml-cpp/yaml.h>
 
-#include <cctype>
 #include <cmath>
-#include <cstdlib>
 #include <fstream>
 #include <sstream>
 
-#include "exid/collision_yaml.hpp"
+#include "config_internal.hpp"
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
 #include "exid/registry.hpp"
@@ -20,385 +21,7 @@ namespace exid {
 
 namespace fs = std::filesystem;
 
-namespace {
-
-struct Problems {
-  std::string source;
-  std::vector<std::string> items;
-  void add(const YAML::Node& at, const std::string& msg) {
-    int line = (at && at.Mark().line >= 0) ? at.Mark().line + 1 : 0;
-    add(line, msg);
-  }
-  void add(int line, const std::string& msg) {
-    items.push_back(line > 0 ? fmt::format("{}:{}: {}", source, line, msg)
-                             : fmt::format("{}: {}", source, msg));
-  }
-};
-
-std::string scalarText(const YAML::Node& n) {
-  if (n.IsScalar()) return n.Scalar();
-  if (n.IsSequence()) return "[...]";
-  if (n.IsMap()) return "{...}";
-  return "null";
-}
-
-std::optional<std::int64_t> toInt(const std::string& s) {
-  if (s.empty()) return std::nullopt;
-  std::size_t pos = 0;
-  try {
-    long long v = std::stoll(s, &pos, 10);
-    if (pos != s.size()) return std::nullopt;
-    return v;
-  } catch (...) {
-    return std::nullopt;
-  }
-}
-
-std::optional<double> toDouble(const std::string& s) {
-  if (s == ".inf" || s == "inf" || s == "+.inf") return HUGE_VAL;
-  if (s == "-.inf" || s == "-inf") return -HUGE_VAL;
-  if (s == ".nan" || s == "nan" || s == "NaN") return std::nan("");
-  if (s.empty() || std::isspace(static_cast<unsigned char>(s[0]))) return std::nullopt;
-  // strtod, not stod: a subnormal (5e-324) is a number (stod threw on the underflow); an
-  // overflow is inf, which the range check refuses.
-  char* end = nullptr;
-  const double v = std::strtod(s.c_str(), &end);
-  if (end != s.c_str() + s.size()) return std::nullopt;
-  return v;
-}
-
-std::optional<bool> toBool(const std::string& s) {
-  if (s == "true" || s == "True" || s == "TRUE" || s == "yes" || s == "on") return true;
-  if (s == "false" || s == "False" || s == "FALSE" || s == "no" || s == "off") return false;
-  return std::nullopt;
-}
-
-// Elements of one list parameter at most (a longer list is refused before it is converted).
-constexpr std::size_t kMaxListElements = 100000;
-
-// Converts a YAML node into the declared type; returns nullopt and sets why on failure.
-std::optional<ParamValue> convert(const ParamDecl& d, const YAML::Node& n, const fs::path& base_dir,
-                                  std::string* why) {
-  auto expect = [&](const char* what) {
-    std::string found = scalarText(n);
-    if (found.size() > 80)
-      found = found.substr(0, 60) + fmt::format("... ({} bytes)", found.size());
-    *why = fmt::format("expected {}, found '{}'", what, found);
-    return std::nullopt;
-  };
-  if (n.IsSequence() && n.size() > kMaxListElements) {
-    *why =
-        fmt::format("a list of {} elements; at most {} are accepted", n.size(), kMaxListElements);
-    return std::nullopt;
-  }
-  switch (d.type) {
-    case ParamType::Bool: {
-      if (!n.IsScalar()) return expect("true or false");
-      auto b = toBool(n.Scalar());
-      if (!b) return expect("true or false");
-      return ParamValue(*b);
-    }
-    case ParamType::Int: {
-      if (!n.IsScalar()) return expect("an integer");
-      auto i = toInt(n.Scalar());
-      if (!i) return expect("an integer");
-      return ParamValue(*i);
-    }
-    case ParamType::Double: {
-      if (!n.IsScalar()) return expect("a number");
-      auto v = toDouble(n.Scalar());
-      if (!v) return expect("a number");
-      return ParamValue(*v);
-    }
-    case ParamType::String: {
-      if (!n.IsScalar()) return expect("a string");
-      return ParamValue(n.Scalar());
-    }
-    case ParamType::Path: {
-      if (!n.IsScalar()) return expect("a file path");
-      // An empty path means "none" where the plugin's default is empty (optional files); it must
-      // survive a round trip through the resolved study.
-      if (n.Scalar().empty()) {
-        const auto* def = d.default_value ? std::get_if<std::string>(&*d.default_value) : nullptr;
-        if (def && def->empty()) return ParamValue(std::string());
-        return expect("a file path");
-      }
-      // A NUL would cut the path where the system reads it (`good.csv\0.ignored` read good.csv).
-      const std::string& text = n.Scalar();
-      for (std::size_t i = 0; i < text.size(); ++i) {
-        const auto u = static_cast<unsigned char>(text[i]);
-        if (u < 0x20 || u == 0x7F) {
-          *why = fmt::format(
-              "the path '{}' holds the control byte 0x{:02X} at byte {}; a file path must not "
-              "hold control bytes",
-              printablePath(text), u, i + 1);
-          return std::nullopt;
-        }
-      }
-      fs::path p(text);
-      if (p.is_relative() && !base_dir.empty()) p = base_dir / p;
-      return ParamValue(p.lexically_normal().string());
-    }
-    case ParamType::IntList: {
-      if (!n.IsSequence()) return expect("a list of integers");
-      std::vector<std::int64_t> out;
-      for (const auto& e : n) {
-        auto i = e.IsScalar() ? toInt(e.Scalar()) : std::nullopt;
-        if (!i) return expect("a list of integers");
-        out.push_back(*i);
-      }
-      return ParamValue(out);
-    }
-    case ParamType::DoubleList: {
-      if (!n.IsSequence()) return expect("a list of numbers");
-      std::vector<double> out;
-      for (const auto& e : n) {
-        auto v = e.IsScalar() ? toDouble(e.Scalar()) : std::nullopt;
-        if (!v) return expect("a list of numbers");
-        out.push_back(*v);
-      }
-      return ParamValue(out);
-    }
-    case ParamType::StringList: {
-      if (!n.IsSequence()) return expect("a list of strings");
-      std::vector<std::string> out;
-      for (const auto& e : n) {
-        if (!e.IsScalar()) return expect("a list of strings");
-        out.push_back(e.Scalar());
-      }
-      return ParamValue(out);
-    }
-  }
-  return std::nullopt;
-}
-
-std::vector<std::string> keysOf(const std::vector<ParamDecl>& decls) {
-  std::vector<std::string> k;
-  for (const auto& d : decls) k.push_back(d.name);
-  return k;
-}
-
-void unknownKey(Problems& pr, const YAML::Node& at, const std::string& path, const std::string& key,
-                const std::vector<std::string>& allowed) {
-  std::string msg =
-      fmt::format("{}: unknown key '{}'; allowed: {}", path.empty() ? key : path + "." + key, key,
-                  allowed.empty() ? "(none)" : fmt::format("{}", fmt::join(allowed, ", ")));
-  std::string close = closestMatch(key, allowed);
-  if (!close.empty()) msg += fmt::format("; did you mean '{}'?", close);
-  pr.add(at, msg);
-}
-
-// The text of a mapping key; a key that is not a plain scalar (`{a: 1}: x`, `[a]: x`, `? ...`) is
-// a problem at its line (found by tests/fuzz/fuzz_study: converting it to a string threw
-// YAML::TypedBadConversion out of parseStudy).
-std::optional<std::string> keyName(Problems& pr, const YAML::Node& key, const std::string& path) {
-  if (key.IsScalar()) return key.Scalar();
-  pr.add(key, fmt::format("{}a key must be a plain name, found '{}'",
-                          path.empty() ? "" : path + ": ", scalarText(key)));
-  return std::nullopt;
-}
-
-// Fills `out` from a params mapping node (may be null) and the declarations.
-void resolveInto(const PluginInfo& info, const YAML::Node& params, const std::string& path,
-                 const fs::path& base_dir, Problems& pr, ParamSet& out) {
-  out.context = path;
-  if (params && !params.IsNull() && !params.IsMap()) {
-    pr.add(params, fmt::format("{}: expected a mapping of parameters, found '{}'", path,
-                               scalarText(params)));
-    return;
-  }
-  if (params && params.IsMap()) {
-    for (const auto& kv : params) {
-      const std::optional<std::string> name = keyName(pr, kv.first, path);
-      if (!name) continue;
-      const std::string& key = *name;
-      bool known = false;
-      for (const auto& d : info.params) known = known || d.name == key;
-      if (!known) unknownKey(pr, kv.first, path, key, keysOf(info.params));
-    }
-  }
-  for (const auto& d : info.params) {
-    YAML::Node v = (params && params.IsMap()) ? params[d.name] : YAML::Node();
-    if (v && !v.IsNull()) {
-      std::string why;
-      auto val = convert(d, v, base_dir, &why);
-      if (!val) {
-        pr.add(v, fmt::format("{}.{}: {}", path, d.name, why));
-        continue;
-      }
-      std::string rule = d.violation(*val);
-      if (!rule.empty()) {
-        pr.add(v, fmt::format("{}.{} = {}: {}", path, d.name, formatValue(*val), rule));
-        continue;
-      }
-      out.set(d.name, *val);
-    } else if (d.default_value) {
-      ParamValue def = *d.default_value;
-      if (d.type == ParamType::Path) {
-        fs::path p(std::get<std::string>(def));
-        if (!p.empty() && p.is_relative() && !base_dir.empty())
-          def = (base_dir / p).lexically_normal().string();
-      }
-      out.set(d.name, def);
-    } else {
-      pr.add(params ? params : YAML::Node(),
-             fmt::format("{}.{}: required parameter is missing ({}{}{})", path, d.name,
-                         toString(d.type), d.unit.empty() ? "" : ", " + d.unit,
-                         d.doc.empty() ? "" : ": " + d.doc));
-    }
-  }
-}
-
-std::optional<PluginSpec> parseSpec(const YAML::Node& node, PluginKind kind,
-                                    const std::string& path, const fs::path& base_dir,
-                                    const Registry& reg, Problems& pr, bool allow_weight) {
-  if (!node.IsMap()) {
-    pr.add(node, fmt::format("{}: expected a mapping {{type: NAME, params: {{...}}}}, found '{}'",
-                             path, scalarText(node)));
-    return std::nullopt;
-  }
-  std::vector<std::string> allowed = {"type", "params"};
-  if (allow_weight) allowed.push_back("weight");
-  for (const auto& kv : node) {
-    const std::optional<std::string> key = keyName(pr, kv.first, path);
-    if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
-      unknownKey(pr, kv.first, path, *key, allowed);
-  }
-  YAML::Node type = node["type"];
-  if (!type || !type.IsScalar()) {
-    pr.add(node, fmt::format("{}.type: missing; name a {} plugin", path, toString(kind)));
-    return std::nullopt;
-  }
-  PluginSpec spec;
-  spec.kind = kind;
-  spec.type = type.Scalar();
-  spec.key_path = path;
-  spec.line = node.Mark().line + 1;
-  if (allow_weight && node["weight"]) {
-    auto w = node["weight"].IsScalar() ? toDouble(node["weight"].Scalar()) : std::nullopt;
-    if (!w || !(*w > 0) || !std::isfinite(*w))
-      pr.add(node["weight"], fmt::format("{}.weight = {}: must be a number in (0, inf)", path,
-                                         scalarText(node["weight"])));
-    else
-      spec.weight = *w;
-  }
-  const PluginInfo* info = reg.find(kind, spec.type);
-  if (!info) {
-    pr.add(type, fmt::format("{}.type: {}", path, reg.unknownMessage(kind, spec.type)));
-    return std::nullopt;
-  }
-  resolveInto(*info, node["params"], path + ".params", base_dir, pr, spec.params);
-  return spec;
-}
-
-void emitValue(YAML::Emitter& e, const ParamValue& v) {
-  std::visit(
-      [&](const auto& x) {
-        using T = std::decay_t<decltype(x)>;
-        if constexpr (std::is_same_v<T, bool>)
-          e << x;
-        else if constexpr (std::is_same_v<T, std::int64_t>)
-          e << static_cast<long long>(x);
-        else if constexpr (std::is_same_v<T, double>)
-          e << formatValue(ParamValue(x));
-        else if constexpr (std::is_same_v<T, std::string>)
-          e << x;
-        else {
-          e << YAML::Flow << YAML::BeginSeq;
-          for (const auto& el : x) {
-            if constexpr (std::is_same_v<std::decay_t<decltype(el)>, double>)
-              e << formatValue(ParamValue(el));
-            else if constexpr (std::is_same_v<std::decay_t<decltype(el)>, std::int64_t>)
-              e << static_cast<long long>(el);
-            else
-              e << el;
-          }
-          e << YAML::EndSeq;
-        }
-      },
-      v);
-}
-
-void emitSpec(YAML::Emitter& e, const PluginSpec& s, bool with_weight) {
-  e << YAML::BeginMap << YAML::Key << "type" << YAML::Value << s.type;
-  if (with_weight) e << YAML::Key << "weight" << YAML::Value << formatValue(ParamValue(s.weight));
-  e << YAML::Key << "params" << YAML::Value << YAML::BeginMap;
-  for (const auto& [k, v] : s.params.values()) {
-    e << YAML::Key << k << YAML::Value;
-    emitValue(e, v);
-  }
-  e << YAML::EndMap << YAML::EndMap;
-}
-
-Json specJson(const PluginSpec& s) {
-  Json j = Json::object();
-  j["type"] = s.type;
-  Json p = Json::object();
-  for (const auto& [name, v] : s.params.values()) {
-    const std::string& k = name;  // a structured binding cannot be captured before C++20 (clang)
-    std::visit(
-        [&](const auto& x) {
-          using T = std::decay_t<decltype(x)>;
-          if constexpr (std::is_same_v<T, std::vector<std::int64_t>>) {
-            Json a = Json::array();
-            for (auto i : x) a.push_back(Json(static_cast<long long>(i)));
-            p[k] = a;
-          } else if constexpr (std::is_same_v<T, std::int64_t>) {
-            p[k] = Json(static_cast<long long>(x));
-          } else {
-            p[k] = Json(x);
-          }
-        },
-        v);
-  }
-  j["params"] = p;
-  return j;
-}
-
-}  // namespace
-
-std::vector<ParamDecl> excitationConstraintParams() {
-  return {
-      param_double("torque_margin", 0.0, "",
-                   "torque limits: |tau_j(t)| <= torque_margin * tau_max,j at every sample, tau "
-                   "the torque the robot's full model (rigid body + drives, nominal parameters) "
-                   "predicts; 0: no torque limits",
-                   0.0, 1.0),
-      param_doubles("torque_max_Nm", std::vector<double>{}, "N m or N",
-                    "tau_max per joint (measured coordinates); empty: the robot's own limits (URDF "
-                    "effort), required when it has none"),
-  };
-}
-
-std::vector<ParamDecl> excitationInformationParams() {
-  return {
-      param_path("earlier_study", std::string(),
-                 "an earlier run folder of the same robot, model and base columns: the "
-                 "information of its identification (covariance.csv: the inverse of the "
-                 "estimate's covariance) is added to the new trajectory's; empty: none"),
-      param_double("prior_relative_std", 0.0, "",
-                   "the robot description's parameters as a prior: std = relative_std * |value| "
-                   "(+ absolute_std) per standard parameter, its information added; 0 and "
-                   "prior_absolute_std 0: none",
-                   0.0),
-      param_double("prior_absolute_std", 0.0, "", "see prior_relative_std", 0.0),
-      param_double("noise_std", 0.0, "N m (the model's row units)",
-                   "std of the new experiment's measurement noise per row; required with an "
-                   "earlier study or a prior (it weighs the new rows against what is known)",
-                   0.0),
-      param_double("recording_rate_hz", 0.0, "Hz",
-                   "the rate the new experiment will be recorded at (rows per second of each "
-                   "equation); required with an earlier study or a prior",
-                   0.0),
-  };
-}
-
-bool StudyConfig::hasExcitationInformation() const {
-  return excitation_information.has("earlier_study") &&
-         (!excitation_information.getString("earlier_study").empty() ||
-          excitation_information.getDouble("prior_relative_std") > 0 ||
-          excitation_information.getDouble("prior_absolute_std") > 0);
-}
+using namespace config_detail;
 
 std::string studyNameProblem(const std::string& name) {
   if (name.empty()) return "";  // unnamed: loadStudy names it after the file
@@ -614,183 +237,6 @@ void parseBaseColumns(const YAML::Node& root, Problems& pr, StudyConfig& cfg) {
   }
 }
 
-// `excitation:` trajectory, criterion, optimizer, constraints and information.
-// A YAML value as JSON: mappings, lists, numbers (what toDouble reads), true/false, text.
-Json yamlJson(const YAML::Node& n) {
-  if (n.IsMap()) {
-    Json j = Json::object();
-    for (const auto& kv : n) j[kv.first.Scalar()] = yamlJson(kv.second);
-    return j;
-  }
-  if (n.IsSequence()) {
-    Json j = Json::array();
-    for (const auto& e : n) j.push_back(yamlJson(e));
-    return j;
-  }
-  if (!n.IsScalar()) return Json();
-  const std::string& t = n.Scalar();
-  if (t == "true" || t == "false") return Json(t == "true");
-  if (const std::optional<double> d = toDouble(t); d && std::isfinite(*d)) return Json(*d);
-  return Json(t);
-}
-
-// JSON into a YAML emitter (flow style for lists of numbers and of texts).
-void emitJson(YAML::Emitter& e, const Json& j) {
-  switch (j.type()) {
-    case Json::Type::Object:
-      e << YAML::BeginMap;
-      for (const auto& [k, v] : j.items()) {
-        e << YAML::Key << k << YAML::Value;
-        emitJson(e, v);
-      }
-      e << YAML::EndMap;
-      break;
-    case Json::Type::Array: {
-      bool flat = true;
-      for (std::size_t i = 0; i < j.size(); ++i)
-        flat = flat && !j.at(i).isObject() && !j.at(i).isArray();
-      if (flat) e << YAML::Flow;
-      e << YAML::BeginSeq;
-      for (std::size_t i = 0; i < j.size(); ++i) emitJson(e, j.at(i));
-      e << YAML::EndSeq;
-      break;
-    }
-    case Json::Type::Bool:
-      e << j.asBool();
-      break;
-    case Json::Type::Int:
-    case Json::Type::Double:
-      e << formatValue(ParamValue(j.asDouble()));
-      break;
-    case Json::Type::String:
-      e << j.asString();
-      break;
-    default:
-      e << YAML::Null;
-  }
-}
-
-// excitation.collision: {margin_m, self, allowed_pairs, obstacles} (docs/excitation.md §12).
-void parseCollision(const YAML::Node& c, const fs::path& base_dir, Problems& pr, StudyConfig& cfg) {
-  const std::string path = "excitation.collision";
-  if (!c.IsMap()) {
-    pr.add(c, path + ": expected a mapping {margin_m, self, allowed_pairs, obstacles}");
-    return;
-  }
-  const std::vector<std::string> allowed = {"margin_m", "self", "allowed_pairs", "obstacles"};
-  for (const auto& kv : c) {
-    const std::optional<std::string> key = keyName(pr, kv.first, path);
-    if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
-      unknownKey(pr, kv.first, path, *key, allowed);
-  }
-  auto o = std::make_shared<CollisionOptions>();
-  o->mesh_dir = base_dir.string();
-  Json j = Json::object();
-  const YAML::Node m = c["margin_m"];
-  double margin = NAN;
-  if (m && m.IsScalar())
-    if (const std::optional<double> v = toDouble(m.Scalar())) margin = *v;
-  if (!m)
-    pr.add(c, path +
-                  ".margin_m: missing; the smallest distance [m] allowed between checked "
-                  "bodies and obstacles (exid cannot choose it for your robot)");
-  else if (!std::isfinite(margin) || margin < 0)
-    pr.add(m, path + ".margin_m: expected a finite distance >= 0 [m], found " + scalarText(m));
-  else
-    o->margin_m = margin;
-  if (const YAML::Node s = c["self"]) {
-    if (!s.IsScalar() || (s.Scalar() != "true" && s.Scalar() != "false"))
-      pr.add(s, path + ".self: expected true or false, found " + scalarText(s));
-    else
-      o->self = s.Scalar() == "true";
-  }
-  j["margin_m"] = o->margin_m;
-  j["self"] = o->self;
-  Json pairs = Json::array();
-  if (const YAML::Node a = c["allowed_pairs"]) {
-    if (!a.IsSequence()) pr.add(a, path + ".allowed_pairs: expected a list of [name, name]");
-    for (std::size_t i = 0; a.IsSequence() && i < a.size(); ++i) {
-      const YAML::Node e = a[i];
-      if (!e.IsSequence() || e.size() != 2 || !e[0].IsScalar() || !e[1].IsScalar()) {
-        pr.add(e, fmt::format("{}.allowed_pairs[{}]: expected [name, name] (bodies or obstacles)",
-                              path, i));
-        continue;
-      }
-      o->allowed_pairs.emplace_back(e[0].Scalar(), e[1].Scalar());
-      pairs.push_back(Json(std::vector<std::string>{e[0].Scalar(), e[1].Scalar()}));
-    }
-  }
-  j["allowed_pairs"] = pairs;
-  Json obs = Json::array();
-  if (const YAML::Node ob = c["obstacles"]) {
-    if (!ob.IsSequence()) pr.add(ob, path + ".obstacles: expected a list of shapes");
-    for (std::size_t i = 0; ob.IsSequence() && i < ob.size(); ++i) {
-      Obstacle x;
-      try {
-        x.shape = parseCollisionShape(ob[i], pr.source, fmt::format("{}.obstacles[{}]", path, i),
-                                      &x.name);
-      } catch (const Error& e) {
-        pr.items.push_back(e.what());
-        continue;
-      }
-      o->obstacles.push_back(x);
-      obs.push_back(yamlJson(ob[i]));
-    }
-  }
-  j["obstacles"] = obs;
-  cfg.excitation_collision = o;
-  cfg.excitation_collision_json = j;
-}
-
-void parseExcitation(const YAML::Node& root, const fs::path& base_dir, const Registry& reg,
-                     Problems& pr, StudyConfig& cfg) {
-  if (const YAML::Node x = root["excitation"]) {
-    if (!x.IsMap()) {
-      pr.add(x, "excitation: expected a mapping with trajectory, criterion, optimizer");
-    } else {
-      const std::vector<std::string> allowed = {"trajectory",  "criterion",   "optimizer",
-                                                "constraints", "information", "collision"};
-      for (const auto& kv : x) {
-        const std::optional<std::string> key = keyName(pr, kv.first, "excitation");
-        if (key && std::find(allowed.begin(), allowed.end(), *key) == allowed.end())
-          unknownKey(pr, kv.first, "excitation", *key, allowed);
-      }
-      if (x["trajectory"])
-        cfg.trajectory = parseSpec(x["trajectory"], PluginKind::Trajectory, "excitation.trajectory",
-                                   base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.trajectory: missing; name a trajectory plugin");
-      if (x["criterion"])
-        cfg.criterion = parseSpec(x["criterion"], PluginKind::Criterion, "excitation.criterion",
-                                  base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.criterion: missing; name a criterion plugin");
-      if (x["optimizer"])
-        cfg.optimizer = parseSpec(x["optimizer"], PluginKind::Optimizer, "excitation.optimizer",
-                                  base_dir, reg, pr, false);
-      else
-        pr.add(x, "excitation.optimizer: missing; name an optimizer plugin");
-      PluginInfo cinfo;
-      cinfo.params = excitationConstraintParams();
-      resolveInto(cinfo, x["constraints"], "excitation.constraints", base_dir, pr,
-                  cfg.excitation_constraints);
-      if (x["collision"]) parseCollision(x["collision"], base_dir, pr, cfg);
-      PluginInfo iinfo;
-      iinfo.params = excitationInformationParams();
-      resolveInto(iinfo, x["information"], "excitation.information", base_dir, pr,
-                  cfg.excitation_information);
-      if (cfg.hasExcitationInformation() &&
-          (!(cfg.excitation_information.getDouble("noise_std") > 0) ||
-           !(cfg.excitation_information.getDouble("recording_rate_hz") > 0)))
-        pr.add(x["information"],
-               "excitation.information: noise_std and recording_rate_hz are required with an "
-               "earlier study or a prior (the new experiment's noise std per row and its "
-               "recording rate weigh its information against what is known; exid cannot know "
-               "them)");
-    }
-  }
-}
-
 }  // namespace
 
 // report: {type: standard, params: {plots, experiment_csv, title}}
@@ -826,29 +272,10 @@ static void parseReport(const YAML::Node& r, const fs::path& base_dir, Problems&
 // Models of one stack (`model:` as a list) at most.
 constexpr std::size_t kMaxStackedModels = 64;
 
-static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
-                                       const fs::path& base_dir, const Registry& reg) {
-  Problems pr;
-  pr.source = source_name;
-  checkYamlAliases(text, source_name);  // before any node is built
-  YAML::Node root;
-  try {
-    root = YAML::Load(text);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}:{}: malformed YAML: {}", source_name, e.mark.line + 1, e.msg));
-  }
-  StudyConfig cfg;
-  cfg.dir = base_dir;
-  duplicateKeys(root, source_name, "", &pr.items);
-  if (!root.IsMap()) {
-    throw Error(fmt::format("{}: expected a mapping with sections ({}), found '{}'", source_name,
-                            fmt::join(kTopKeys, ", "), scalarText(root)));
-  }
-  for (const auto& kv : root) {
-    const std::optional<std::string> key = keyName(pr, kv.first, "");
-    if (key && std::find(kTopKeys.begin(), kTopKeys.end(), *key) == kTopKeys.end())
-      unknownKey(pr, kv.first, "", *key, kTopKeys);
-  }
+namespace {
+
+// name, seed and budget_s.
+void parseScalars(const YAML::Node& root, Problems& pr, StudyConfig& cfg) {
   if (root["name"]) {
     if (root["name"].IsScalar()) {
       cfg.name = root["name"].Scalar();
@@ -874,13 +301,11 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
     else
       cfg.budget_s = *b;
   }
-  if (root["robot"])
-    cfg.robot = parseSpec(root["robot"], PluginKind::Robot, "robot", base_dir, reg, pr, false);
-  else
-    pr.add(0,
-           "robot: missing section; name a robot plugin ({type: puma560}) or a file ({type: urdf, "
-           "params: {file: ...}})");
+}
 
+// `model:` one model, or a stack of them (a list).
+void parseModels(const YAML::Node& root, const fs::path& base_dir, const Registry& reg,
+                 Problems& pr, StudyConfig& cfg) {
   if (YAML::Node m = root["model"]) {
     if (m.IsSequence() && m.size() > kMaxStackedModels) {
       pr.add(m, fmt::format("model: a stack of {} models; at most {} (every stacked model adds "
@@ -897,6 +322,61 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
       cfg.models.push_back(*s);
     }
   }
+}
+
+// Which stages need which.
+void checkStageNeeds(const YAML::Node& root, Problems& pr, const StudyConfig& cfg) {
+  if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() &&
+      !root["model"])
+    pr.add(0,
+           "model: missing section; the estimator, excitation and validation stages need an "
+           "observation model");
+  if (cfg.estimator && !cfg.experiment && !root["experiment"])
+    pr.add(0,
+           "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: "
+           "csv, params: {file: ...}})");
+  if (root["prior"] && !cfg.estimator && !root["estimator"])
+    pr.add(root["prior"], "prior: needs an estimator section (the prior is the estimator's)");
+  if (cfg.split && !cfg.estimator && !root["estimator"])
+    pr.add(root["split"], "split: needs an estimator section (the identified model is validated)");
+  else if (cfg.validation && !cfg.estimator && !root["estimator"])
+    pr.add(0, "validation: needs an estimator section (the identified model is what is validated)");
+}
+
+}  // namespace
+
+static StudyConfig parseStudyUnchecked(const std::string& text, const std::string& source_name,
+                                       const fs::path& base_dir, const Registry& reg) {
+  Problems pr;
+  pr.source = source_name;
+  checkYamlAliases(text, source_name);  // before any node is built
+  YAML::Node root;
+  try {
+    root = YAML::Load(text);
+  } catch (const YAML::Exception& e) {
+    throw Error(fmt::format("{}:{}: malformed YAML: {}", source_name, e.mark.line + 1, e.msg));
+  }
+  StudyConfig cfg;
+  cfg.dir = base_dir;
+  duplicateKeys(root, source_name, "", &pr.items);
+  if (!root.IsMap()) {
+    throw Error(fmt::format("{}: expected a mapping with sections ({}), found '{}'", source_name,
+                            fmt::join(kTopKeys, ", "), scalarText(root)));
+  }
+  for (const auto& kv : root) {
+    const std::optional<std::string> key = keyName(pr, kv.first, "");
+    if (key && std::find(kTopKeys.begin(), kTopKeys.end(), *key) == kTopKeys.end())
+      unknownKey(pr, kv.first, "", *key, kTopKeys);
+  }
+  parseScalars(root, pr, cfg);
+  if (root["robot"])
+    cfg.robot = parseSpec(root["robot"], PluginKind::Robot, "robot", base_dir, reg, pr, false);
+  else
+    pr.add(0,
+           "robot: missing section; name a robot plugin ({type: puma560}) or a file ({type: urdf, "
+           "params: {file: ...}})");
+
+  parseModels(root, base_dir, reg, pr, cfg);
   parseBaseColumns(root, pr, cfg);
   parseExcitation(root, base_dir, reg, pr, cfg);
   bool split_done = false;
@@ -915,22 +395,7 @@ static StudyConfig parseStudyUnchecked(const std::string& text, const std::strin
                                reg, pr, false);
   if (YAML::Node r = root["report"]) parseReport(r, base_dir, pr, cfg);
   if (root["prior"]) cfg.prior = parsePrior(root["prior"], base_dir, pr);
-  // Which stages need which.
-  if ((cfg.estimator || cfg.hasExcitation() || cfg.validation) && cfg.models.empty() &&
-      !root["model"])
-    pr.add(0,
-           "model: missing section; the estimator, excitation and validation stages need an "
-           "observation model");
-  if (cfg.estimator && !cfg.experiment && !root["experiment"])
-    pr.add(0,
-           "experiment: missing section; the estimator needs data (e.g. {type: simulate} or {type: "
-           "csv, params: {file: ...}})");
-  if (root["prior"] && !cfg.estimator && !root["estimator"])
-    pr.add(root["prior"], "prior: needs an estimator section (the prior is the estimator's)");
-  if (cfg.split && !cfg.estimator && !root["estimator"])
-    pr.add(root["split"], "split: needs an estimator section (the identified model is validated)");
-  else if (cfg.validation && !cfg.estimator && !root["estimator"])
-    pr.add(0, "validation: needs an estimator section (the identified model is what is validated)");
+  checkStageNeeds(root, pr, cfg);
 
   if (!pr.items.empty()) {
     std::string msg = fmt::format("{}: {} problem{} in the study:\n", source_name, pr.items.size(),
@@ -994,192 +459,6 @@ std::vector<fs::path> studyInputFiles(const StudyConfig& cfg, const Registry& re
     out.push_back(fs::path(cfg.excitation_information.getString("earlier_study")) /
                   "covariance.csv");
   return out;
-}
-
-ParamSet resolveParams(const PluginInfo& info, const std::string& yaml_params,
-                       const std::string& context, const fs::path& base_dir) {
-  Problems pr;
-  pr.source = context;
-  YAML::Node node;
-  try {
-    node = YAML::Load(yaml_params.empty() ? "{}" : yaml_params);
-  } catch (const YAML::Exception& e) {
-    throw Error(fmt::format("{}: malformed YAML: {}", context, e.msg));
-  }
-  ParamSet ps;
-  resolveInto(info, node, context, base_dir, pr, ps);
-  if (!pr.items.empty()) {
-    std::string msg;
-    for (const auto& it : pr.items) msg += (msg.empty() ? "" : "\n") + it;
-    throw Error(msg);
-  }
-  return ps;
-}
-
-namespace {
-bool hasTorqueLimits(const StudyConfig& c) {
-  return c.excitation_constraints.has("torque_margin") &&
-         (c.excitation_constraints.getDouble("torque_margin") > 0 ||
-          !c.excitation_constraints.getDoubles("torque_max_Nm").empty());
-}
-}  // namespace
-
-std::string StudyConfig::resolvedYaml() const {
-  YAML::Emitter e;
-  e << YAML::BeginMap;
-  e << YAML::Key << "name" << YAML::Value << name;
-  e << YAML::Key << "seed" << YAML::Value << static_cast<unsigned long long>(seed);
-  if (budget_s > 0)
-    e << YAML::Key << "budget_s" << YAML::Value << formatValue(ParamValue(budget_s));
-  if (robot) {
-    e << YAML::Key << "robot" << YAML::Value;
-    emitSpec(e, *robot, false);
-  }
-  if (!models.empty()) {
-    e << YAML::Key << "model" << YAML::Value;
-    if (models.size() == 1)
-      emitSpec(e, models[0], false);
-    else {
-      e << YAML::BeginSeq;
-      for (const auto& m : models) emitSpec(e, m, true);
-      e << YAML::EndSeq;
-    }
-  }
-  if (!base_columns.empty()) {
-    e << YAML::Key << "base_columns" << YAML::Value << YAML::Flow << base_columns;
-  }
-
-  if (hasExcitation()) {
-    e << YAML::Key << "excitation" << YAML::Value << YAML::BeginMap;
-    e << YAML::Key << "trajectory" << YAML::Value;
-    emitSpec(e, *trajectory, false);
-    e << YAML::Key << "criterion" << YAML::Value;
-    emitSpec(e, *criterion, false);
-    e << YAML::Key << "optimizer" << YAML::Value;
-    emitSpec(e, *optimizer, false);
-    // Only when set, so that studies without them keep their resolved text and hash.
-    if (hasTorqueLimits(*this)) {
-      e << YAML::Key << "constraints" << YAML::Value << YAML::BeginMap;
-      for (const auto& d : excitationConstraintParams()) {
-        e << YAML::Key << d.name << YAML::Value;
-        emitValue(e, excitation_constraints.at(d.name));
-      }
-      e << YAML::EndMap;
-    }
-    if (excitation_collision) {
-      e << YAML::Key << "collision" << YAML::Value;
-      emitJson(e, excitation_collision_json);
-    }
-    if (hasExcitationInformation()) {
-      e << YAML::Key << "information" << YAML::Value << YAML::BeginMap;
-      for (const auto& d : excitationInformationParams()) {
-        e << YAML::Key << d.name << YAML::Value;
-        emitValue(e, excitation_information.at(d.name));
-      }
-      e << YAML::EndMap;
-    }
-    e << YAML::EndMap;
-  }
-  if (experiment) {
-    e << YAML::Key << "experiment" << YAML::Value;
-    emitSpec(e, *experiment, false);
-  }
-  if (estimator) {
-    e << YAML::Key << "estimator" << YAML::Value;
-    emitSpec(e, *estimator, false);
-  }
-  if (validation) {
-    e << YAML::Key << "validation" << YAML::Value;
-    emitSpec(e, *validation, false);
-  }
-  if (prior) {
-    e << YAML::Key << "prior" << YAML::Value << YAML::BeginMap << YAML::Key << "from" << YAML::Value
-      << prior->from;
-    if (prior->from == "robot") {
-      e << YAML::Key << "relative_std" << YAML::Value
-        << formatValue(ParamValue(prior->relative_std));
-      e << YAML::Key << "absolute_std" << YAML::Value
-        << formatValue(ParamValue(prior->absolute_std));
-      if (prior->drive_relative_std)
-        e << YAML::Key << "drive_relative_std" << YAML::Value
-          << formatValue(ParamValue(*prior->drive_relative_std));
-      if (prior->drive_absolute_std)
-        e << YAML::Key << "drive_absolute_std" << YAML::Value
-          << formatValue(ParamValue(*prior->drive_absolute_std));
-    } else {
-      e << YAML::Key << "study" << YAML::Value << prior->study.string();
-      e << YAML::Key << "scale" << YAML::Value << formatValue(ParamValue(prior->scale));
-    }
-    e << YAML::EndMap;
-  }
-  e << YAML::Key << "report" << YAML::Value << YAML::BeginMap << YAML::Key << "type" << YAML::Value
-    << "standard" << YAML::Key << "params" << YAML::Value << YAML::BeginMap << YAML::Key << "plots"
-    << YAML::Value << report.plots << YAML::Key << "title" << YAML::Value << report.title
-    << YAML::Key << "experiment_csv" << YAML::Value << report.experiment_csv << YAML::EndMap
-    << YAML::EndMap;
-  e << YAML::EndMap;
-  return std::string(e.c_str()) + "\n";
-}
-
-Json StudyConfig::resolvedJson() const {
-  Json j = Json::object();
-  j["name"] = name;
-  j["seed"] = Json(static_cast<long long>(seed));
-  if (robot) j["robot"] = specJson(*robot);
-  if (!models.empty()) {
-    Json m = Json::array();
-    for (const auto& s : models) {
-      Json x = specJson(s);
-      x["weight"] = s.weight;
-      m.push_back(x);
-    }
-    j["model"] = m;
-  }
-  if (!base_columns.empty()) j["base_columns"] = Json(base_columns);
-  if (hasExcitation()) {
-    j["excitation"]["trajectory"] = specJson(*trajectory);
-    j["excitation"]["criterion"] = specJson(*criterion);
-    j["excitation"]["optimizer"] = specJson(*optimizer);
-    if (hasTorqueLimits(*this)) {
-      j["excitation"]["constraints"]["torque_margin"] =
-          excitation_constraints.getDouble("torque_margin");
-      j["excitation"]["constraints"]["torque_max_Nm"] =
-          Json(excitation_constraints.getDoubles("torque_max_Nm"));
-    }
-    if (excitation_collision) j["excitation"]["collision"] = excitation_collision_json;
-    if (hasExcitationInformation()) {
-      Json& I = j["excitation"]["information"];
-      I["earlier_study"] = excitation_information.getString("earlier_study");
-      for (const char* k :
-           {"prior_relative_std", "prior_absolute_std", "noise_std", "recording_rate_hz"})
-        I[k] = excitation_information.getDouble(k);
-    }
-  }
-  if (experiment) j["experiment"] = specJson(*experiment);
-  if (estimator) j["estimator"] = specJson(*estimator);
-  if (validation) j["validation"] = specJson(*validation);
-  if (prior) {
-    Json p = Json::object();
-    p["from"] = prior->from;
-    if (prior->from == "robot") {
-      p["relative_std"] = prior->relative_std;
-      p["absolute_std"] = prior->absolute_std;
-      if (prior->drive_relative_std) p["drive_relative_std"] = *prior->drive_relative_std;
-      if (prior->drive_absolute_std) p["drive_absolute_std"] = *prior->drive_absolute_std;
-    } else {
-      p["study"] = prior->study.string();
-      p["scale"] = prior->scale;
-    }
-    j["prior"] = p;
-  }
-  return j;
-}
-
-std::string StudyConfig::hash() const {
-  // The name is not part of the configuration's identity.
-  StudyConfig copy = *this;
-  copy.name.clear();
-  return hashHex(fnv1a64(copy.resolvedYaml()));
 }
 
 }  // namespace exid
