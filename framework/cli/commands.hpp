@@ -3,9 +3,14 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <filesystem>
 #include <functional>
+#include <memory>
+#include <string>
+#include <vector>
 
 #include "exid/registry.hpp"
+#include "exid/robot_model.hpp"
 
 namespace exid::cli {
 
@@ -14,6 +19,37 @@ struct Commands {
 };
 
 Commands addCommands(CLI::App& app, Registry& registry);
+
+// The commands addCommands runs, each returning the exit code.
+// commands_robot.cpp: robot info, eval, check-trajectory, export.
+std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::string& robot);
+int robotInfo(const Registry& reg, const std::string& robot, const std::string& model_name,
+              const std::string& model_params, bool json);
+int evalCommand(const Registry& reg, const std::string& robot, const std::string& samples,
+                const std::string& what, const std::string& out, bool rigid_body_only);
+int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const std::string& file,
+                           const std::vector<double>& torque_max, const std::string& json_out,
+                           const std::string& collision_study);
+int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
+                  const std::string& out);
+// commands_study.cpp: excite, simulate, identify, inspect.
+/// Single stages run through the study runner on a trimmed copy of the study.
+struct ExportArgs {
+  std::string dir;
+  double rate_Hz = 1000.0;
+  int periods = 1;
+};
+int stageCommand(const Registry& reg, const std::string& stage, const std::string& study,
+                 const std::string& data_file, std::string out, const ExportArgs& ex = {});
+int inspectCommand(const Registry& reg, const std::vector<std::string>& args,
+                   const std::vector<std::string>& sets, const std::string& params,
+                   const std::string& model_name, const std::string& model_params,
+                   const std::string& json_out);
+// commands_matrix.cpp: matrix (run, table, merge).
+int matrixCommand(const Registry& reg, const std::vector<std::string>& args,
+                  const std::string& out_arg, int jobs, const std::string& shard, bool retry,
+                  bool force, const std::string& rows, const std::string& cols,
+                  const std::string& metric, const std::function<bool()>& cancelled);
 
 /// MPI (optional at build time): a session is active when the program was started by an MPI
 /// launcher and exid was built with MPI.
