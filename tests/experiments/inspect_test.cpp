@@ -352,7 +352,8 @@ TEST(Inspect, ADuplicateAtATurningPointIsToldFromRestByTheRecordedVelocity) {
   for (int k = 0; k < K; ++k)
     for (int j = 0; j < 6; ++j) {
       const double A = 0.4 + 0.05 * j, ph = w * (std::max(k, creep) - turn) * dt;
-      tab.data(k, j) = std::round(-A * std::cos(ph) / res) * res + (creep - std::min(k, creep)) * res;
+      tab.data(k, j) =
+          std::round(-A * std::cos(ph) / res) * res + (creep - std::min(k, creep)) * res;
       tab.data(k, 6 + j) = k < creep ? -res / dt : A * w * std::sin(ph);
       tab.data(k, 12 + j) = N(rng);
     }

@@ -3,7 +3,8 @@
 // exid/exid.hpp, and resolves a plugin's parameters from YAML text with exid::pluginParams
 // (docs/architecture.md, "Public and internal"). Removed in 0.4.
 #pragma once
-#pragma message("exid/config.hpp is no longer part of exid's installed API: include exid/exid.hpp (runStudyFile; pluginParams for what resolveParams did); this forwarding header goes in exid 0.4")
+#pragma message( \
+    "exid/config.hpp is no longer part of exid's installed API: include exid/exid.hpp (runStudyFile; pluginParams for what resolveParams did); this forwarding header goes in exid 0.4")
 
 #include <filesystem>
 #include <string>

@@ -97,5 +97,4 @@ struct EXID_API KnownInformation {
 EXID_API KnownInformation knownInformation(const StudyConfig& cfg, const ObservationModel& model,
                                            const Samples& design);
 
-
 }  // namespace exid
