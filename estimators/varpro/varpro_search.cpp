@@ -144,6 +144,7 @@ exid::Dataset VarPro::strided(const exid::Dataset& d, long stride) {
   exid::Dataset out;
   out.source = d.source;
   out.meta = d.meta;
+  out.facts = d.facts;
   exid::SampleWindow window(d);
   int row = 0;
   constexpr int kChunk = 8192;

@@ -4,10 +4,11 @@
 // about the centre c_j of the joint's range, A_j a fraction of what its limits allow. The torques
 // are the robot's inverse dynamics (exid::inverseDynamics, recursive Newton-Euler with its own
 // parameters), mapped to measured coordinates, plus (drive_terms) the drives' Ia qdd + Fc sign(qd)
-// + Fv qd + OFF, plus seeded Gaussian noise. meta.simulated = true tells the runner to judge the
-// estimate against the true parameters (the model's fullTruth(meta): here the nominal ones; no
-// payload, said by meta.payload); the rest of meta says what was done.
-// Shows: Experiment::run, a Dataset (t, q, qd, qdd, tau, source, meta), the core dynamics API.
+// + Fv qd + OFF, plus seeded Gaussian noise. facts.simulated (the plant's truth: drive terms or
+// none, no payload) tells the runner to judge the estimate against the true parameters (the
+// model's fullTruth(plant): here the nominal ones); meta says, for people, what was done.
+// Shows: Experiment::run, a Dataset (t, q, qd, qdd, tau, source, meta, facts), the core dynamics
+// API.
 // To make it yours: change the motion, the plant (friction law, payload) or add sensor effects.
 #include <fmt/format.h>
 
@@ -20,7 +21,6 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
-#include "exid/payload.hpp"
 
 namespace {
 
@@ -97,13 +97,13 @@ class TemplateSineSim final : public exid::Experiment {
         for (int j = 0; j < n; ++j) d.tau(k, j) += sigma * N(rng);
 
     d.source = fmt::format("{} ({}, seed {})", kName, R.name, seed);
-    d.meta["simulated"] = true;  // the runner compares the estimate with the truth
+    exid::PlantTruth plant;      // the runner compares the estimate with the truth
+    plant.drive_terms = drives;  // (no payload: a load model's truth is zero)
+    d.facts.simulated = plant;
     d.meta["generator"] = kName;
     d.meta["motion"] = motion;
     d.meta["torques"] = std::string("inverse dynamics (RNEA), the robot's own parameters") +
                         (drives ? " + drive terms Ia qdd + Fc sign(qd) + Fv qd + OFF" : "");
-    d.meta["drive_terms"] = drives;
-    d.meta["payload"] = exid::Payload().json();  // none: a load model's truth is zero
     d.meta["noise"]["tau_Nm"] = sigma;
     d.meta["seed"] = exid::Json(static_cast<long long>(seed));
     d.meta["recorded"] = "t q qd qdd tau (exact q, qd, qdd)";

@@ -6,10 +6,11 @@
 // Extensions for recordings as published (docs/experiments.md): other column names
 // (q_columns, tau_columns), torques from a second row-aligned file (torque_file), and optional
 // zero-phase low-pass + central differences (+ decimation) of the segment.
-// Here: the plugin (parameters, the payload part, resampling and delay). The reading of the
-// file(s) is CsvStream (csv_stream.hpp; csv_columns.cpp, csv_scan.cpp, csv_stream.cpp), the
-// recording statistics RecordingStats (recording_stats.hpp), the optional filter, trim and
-// decimation preprocess() (preprocess.hpp).
+// Here: the plugin (parameters, the payload part). The recording's pipeline: columns -> signals
+// -> segment/split is CsvStream (csv_stream.hpp; csv_columns.cpp, csv_scan.cpp, csv_stream.cpp)
+// with the recording statistics RecordingStats (recording_stats.hpp); the filter steps
+// (resampling, a known delay, the differentiating filter, trim, decimation) are the data layer's
+// RecordingPipeline (exid/recording.hpp), shared with the rosbag2 experiment.
 #include <fmt/format.h>
 
 #include <Eigen/Core>
@@ -20,17 +21,15 @@
 
 #include "csv_stream.hpp"
 #include "exid/context.hpp"
-#include "exid/delay.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/recording.hpp"
 #include "exid/segment.hpp"
 #include "exid/signal.hpp"
-#include "preprocess.hpp"
 
 namespace {
 
 using exid::csv_experiment::CsvStream;
-using exid::csv_experiment::Preprocessed;
 
 class CsvExperiment : public exid::Experiment {
  public:
@@ -65,19 +64,6 @@ class CsvExperiment : public exid::Experiment {
                       "per joint, multiplies the torque column alone (after torque constants), "
                       "e.g. -1 for a torque recorded with the opposite sign to the joint; "
                       "empty: 1"),
-        param_double("resample_hz", 0.0, "Hz",
-                     "> 0: the segment is linearly interpolated onto a uniform grid at this rate "
-                     "(uneven time stamps, e.g. a logger's jitter, are then accepted; a gap "
-                     "longer than max_gap_ratio times the median step is still an error: nothing "
-                     "is invented across it); 0: the stamps must be uniform",
-                     0.0),
-        param_double("measurement_delay_s", 0.0, "s",
-                     "a known delay of the torque (and wrench) behind the positions: q, qd, qdd "
-                     "of sample k are read at t_k - measurement_delay_s (cubic Hermite "
-                     "interpolation, before any filter), the torque stays as recorded; the "
-                     "samples at the ends without positions then are dropped and counted "
-                     "(meta.measurement_delay); the dataset is then held in memory; 0: none "
-                     "(varpro can fit an unknown delay)"),
         param_doubles("wrench_scale", std::vector<double>{}, "",
                       "6 values multiplying fx fy fz mx my mz (a unit, a sign); empty: 1"),
         param_double("max_gap_ratio", 1.5, "",
@@ -116,33 +102,18 @@ class CsvExperiment : public exid::Experiment {
         param_strings("tau_columns", std::vector<std::string>{},
                       "names of the n torque columns (or currents with torque_from: current), "
                       "instead of tau1..taun / <current_prefix>1..n"),
-        param_double("differentiate_cutoff_hz", 0.0, "Hz",
-                     "> 0: q of the segment is low-passed (zero-phase Butterworth, filter_order) "
-                     "and qd, qdd are its central differences (replacing qd/qdd columns); 0: off",
-                     0.0),
-        param_int("filter_order", 4, "order of that Butterworth filter (per pass)", 1, 12),
-        param_bool("filter_torque", false,
-                   "with differentiate_cutoff_hz: tau (and the wrench) pass through the same "
-                   "zero-phase filter"),
-        param_int("decimation", 1,
-                  "keep one sample in this many after filtering (> 1 needs "
-                  "differentiate_cutoff_hz and filter_torque, and the cut-off below the new "
-                  "Nyquist frequency)",
-                  1, 1e6),
         param_int("threads", 0,
                   "threads for the scan of the time stamps before the first pass (the file in "
                   "pieces read at once; the result does not depend on the count); 0: the cores "
                   "this process may run on, at most 8",
                   0, 256),
-        param_int("trim_edges", -1,
-                  "samples dropped at each end of the segment after filtering; -1: "
-                  "ceil(2 fs / cutoff) when filtering, else 0",
-                  -1, 1e9),
     };
     const auto segment = segmentParams("sample");
     const auto at = std::find_if(p.begin(), p.end(),
                                  [](const ParamDecl& d) { return d.name == "torque_from"; });
     p.insert(at, segment.begin(), segment.end());
+    const auto steps = recordingStepParams();  // the filter steps (exid/recording.hpp)
+    p.insert(p.end(), steps.begin(), steps.end());
     return p;
   }
 
@@ -167,7 +138,7 @@ class CsvExperiment : public exid::Experiment {
 
   /// The recording with a known payload (payload_file) after the first: its time stamps moved
   /// to follow the first part's by one median step (the signals are not joined: each part was
-  /// filtered alone), meta.payload_part describes it and meta.payload_part_from_t_s marks its
+  /// filtered alone), meta.payload_part describes it and facts.payload_part_from_t_s marks its
   /// first sample for the models (differential's drive_gains).
   static exid::Dataset appendPayloadPart(exid::Dataset a, const exid::Dataset& b) {
     const int Ka = a.size(), Kb = b.size();
@@ -203,7 +174,7 @@ class CsvExperiment : public exid::Experiment {
     part["time_offset_s"] = offset;
     part["meta"] = b.meta;
     a.meta["payload_part"] = part;
-    a.meta["payload_part_from_t_s"] = a.t[Ka];
+    a.facts.payload_part_from_t_s = a.t[Ka];
     a.source += " + " + b.source;
     return a;
   }
@@ -215,44 +186,24 @@ class CsvExperiment : public exid::Experiment {
     d.stream = src;
     d.source = src->file();
     d = exid::materialize(d);  // one pass: the recording's statistics are complete
-    // Resampling on request: linear interpolation of every signal onto a uniform grid.
-    const int K = d.size();
-    const double rs_hz = P_.getDouble("resample_hz");
-    int resampled_from = 0;
-    if (rs_hz > 0.0) {
-      resampled_from = K;
-      d = exid::resampleUniform(d, rs_hz, "experiment 'csv': " + src->file());
-    }
-    // A known measurement delay: the positions read at t - delay, the ends without them
-    // dropped (counted).
-    const double delay = P_.getDouble("measurement_delay_s");
-    int delay_front = 0, delay_back = 0;
-    if (delay != 0.0)
-      d = exid::compensateDelay(d, delay, "experiment 'csv': measurement_delay_s", &delay_front,
-                                &delay_back);
-    const int K_grid = d.size();  // samples entering the filter (after resampling, delay)
-    const Preprocessed pp = exid::csv_experiment::preprocess(P_, &d, src->file());
-    d.meta = src->metaAfter(K_grid, resampled_from, rs_hz, pp, d.size());
-    if (delay != 0.0) {
-      exid::Json& td = d.meta["measurement_delay"];
-      td["delay_s"] = delay;
-      td["dropped_samples_front"] = delay_front;
-      td["dropped_samples_back"] = delay_back;
-    }
+    // The filter steps: resampling, a known delay, the differentiating filter (recording.hpp).
+    exid::RecordingPipeline steps(exid::RecordingSteps::fromParams(P_),
+                                  "experiment 'csv': " + src->file());
+    d = steps.run(std::move(d));
+    d.meta = src->metaAfter(steps);
     ctx.report(1.0, fmt::format("{} samples from {}", d.size(), src->file()));
     return d;
   }
 
   /// The recording streamed from its file (one scan of its time stamps now; the samples are
-  /// read in chunks by whoever consumes them, in one or more passes). Resampling and the
-  /// differentiating filter need the whole segment at once: then the dataset is in memory.
+  /// read in chunks by whoever consumes them, in one or more passes). The filter steps and a
+  /// payload part need the whole segment at once: then the dataset is in memory.
   exid::Dataset stream(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* ref,
                        const exid::RunContext& ctx) override {
-    if (P_.getDouble("resample_hz") > 0.0 || P_.getDouble("differentiate_cutoff_hz") > 0.0 ||
-        P_.getDouble("measurement_delay_s") != 0.0 || !P_.getString("payload_file").empty())
+    const exid::RecordingSteps steps = exid::RecordingSteps::fromParams(P_);
+    if (steps.needWholeSegment() || !P_.getString("payload_file").empty())
       return run(robot, ref, ctx);
-    exid::check(P_.getInt("decimation") == 1 && !P_.getBool("filter_torque"),
-                "experiment 'csv': decimation and filter_torque need differentiate_cutoff_hz > 0");
+    steps.check("experiment 'csv'");
     auto src = CsvStream::open(P_, robot, ctx);
     exid::Dataset d;
     d.stream = src;

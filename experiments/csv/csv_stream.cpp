@@ -164,11 +164,9 @@ void CsvStream::settle(const Piece& piece, const exid::Dataset& chunk) {
   if (settled_ >= size()) finishPass();
 }
 
-exid::Json CsvStream::metaAfter(int K_grid, int resampled_from, double rs_hz,
-                                const Preprocessed& pp, int samples_used) const {
+exid::Json CsvStream::metaAfter(const exid::RecordingPipeline& steps) const {
   const int K = size();
   exid::Json m = exid::Json::object();
-  m["simulated"] = false;
   m["file"] = files_[0];
   m["rows_in_file"] = rows_;
   m["dropped_rows"] = dropped_;
@@ -189,33 +187,13 @@ exid::Json CsvStream::metaAfter(int K_grid, int resampled_from, double rs_hz,
     a["outside_segment"] = kept_rows_ - in_segment_;
     if (part_ != "none") a["other_part_of_split"] = in_segment_ - K;
     a["segment_samples"] = K;
-    if (resampled_from > 0) {
-      a["resampled_from"] = resampled_from;
-      a["resampled_to"] = K_grid;
-      a["resample_hz"] = rs_hz;
-    }
-    const int trimmed = pp.cutoff_hz > 0 ? 2 * pp.trim : 0;
-    a["trimmed_edges"] = trimmed;
-    a["trimmed_percent_of_segment"] = 100.0 * trimmed / std::max(1, K_grid);
-    a["decimated_away"] = K_grid - trimmed - samples_used;
-    a["samples_used"] = samples_used;
     exid::Json w = exid::Json::array();
     if (dropped_ > 0)
       w.push_back(exid::Json(fmt::format(
           "experiment 'csv': {}: {} of {} rows ({:.1f} %) dropped for missing or non-finite "
           "values (drop_bad_rows)",
           files_[0], dropped_, rows_, 100.0 * dropped_ / std::max(1, rows_))));
-    if (trimmed > 0.1 * K_grid)
-      w.push_back(exid::Json(fmt::format(
-          "experiment 'csv': {}: trim_edges = {} discards {} of the segment's {} samples "
-          "({:.1f} %, more than 10 %)",
-          files_[0], pp.trim, trimmed, K_grid, 100.0 * trimmed / K_grid)));
-    if (pp.trim_default && pp.trim < pp.trim_transient)
-      a["trim_rule"] =
-          fmt::format("ceil(2 fs / fc) = {} samples capped at 5 % of the segment: {} at each end",
-                      pp.trim_transient, pp.trim);
-    else if (pp.trim_default)
-      a["trim_rule"] = fmt::format("ceil(2 fs / fc) = {} samples at each end", pp.trim);
+    steps.account(&a, &w);
     if (w.size() > 0) m["warnings"] = w;
   }
   m["torque_from"] = tfrom_;
@@ -226,16 +204,8 @@ exid::Json CsvStream::metaAfter(int K_grid, int resampled_from, double rs_hz,
   if (!pw_.empty()) sig.push_back("wrench");
   m["signals"] = exid::Json(sig);
   if (files_.size() > 1) m["torque_file"] = files_[1];
-  if (pp.cutoff_hz > 0) {
-    m["differentiated"] = exid::Json::object();
-    m["differentiated"]["cutoff_hz"] = pp.cutoff_hz;
-    m["differentiated"]["filter_order"] = pp.order;
-    m["differentiated"]["filter_torque"] = pp.filter_torque;
-    m["differentiated"]["trimmed_samples_each_end"] = pp.trim;
-    m["differentiated"]["decimation"] = pp.decimation;
-    m["differentiated"]["sample_rate_hz"] = pp.fs;
-  }
-  m["samples"] = samples_used;
+  steps.describe(&m);
+  m["samples"] = steps.done().samples_used;
   return m;
 }
 

@@ -17,9 +17,9 @@
 #include "exid/io.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
+#include "exid/recording.hpp"
 #include "exid/robot_model.hpp"
 #include "exid/segment.hpp"
-#include "preprocess.hpp"
 #include "recording_stats.hpp"
 
 namespace exid::csv_experiment {
@@ -57,7 +57,11 @@ class CsvStream : public exid::DatasetStream {
     *jitter = jitter_;
     return true;
   }
-  exid::Json meta() const override { return metaAfter(size(), 0, 0.0, Preprocessed(), size()); }
+  exid::Json meta() const override {
+    exid::RecordingPipeline none({}, "experiment 'csv': " + file());
+    none.unchanged(size());
+    return metaAfter(none);
+  }
 
   void rewind() override;
   int read(int count, exid::Dataset* chunk) override;
@@ -76,10 +80,8 @@ class CsvStream : public exid::DatasetStream {
   void decode(Piece& piece, exid::Dataset* chunk) const override;
   void settle(const Piece& piece, const exid::Dataset& chunk) override;
 
-  /// The meta of the dataset after resampling (resampled_from > 0), filtering (pp) and
-  /// decimation: `samples_used` samples from the `K_grid` that entered the filter.
-  exid::Json metaAfter(int K_grid, int resampled_from, double rs_hz, const Preprocessed& pp,
-                       int samples_used) const;
+  /// The meta of the dataset after the filter steps (exid/recording.hpp) ran on the segment.
+  exid::Json metaAfter(const exid::RecordingPipeline& steps) const;
 
  private:
   CsvStream(const exid::ParamSet& P, std::shared_ptr<const exid::RobotModel> robot)

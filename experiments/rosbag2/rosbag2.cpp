@@ -4,7 +4,9 @@
 // geometry_msgs/msg/WrenchStamped topic gives the wrench, linearly interpolated at the joint-state
 // times. Time: the messages' header stamps (or the bag's receive stamps), in seconds after the
 // first joint-state sample. Segment, split, signs, gaps and the accounting of every message
-// dropped or cut follow the csv experiment (docs/experiments.md).
+// dropped or cut follow the csv experiment (docs/experiments.md); the filter steps (resampling,
+// a known delay, the differentiating filter, trim, decimation) are the data layer's
+// RecordingPipeline (exid/recording.hpp), the csv experiment's too.
 #include <fmt/format.h>
 #include <fmt/ranges.h>
 
@@ -21,6 +23,7 @@
 #include "bag.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
+#include "exid/recording.hpp"
 #include "exid/recording_stats.hpp"
 #include "exid/segment.hpp"
 
@@ -63,8 +66,12 @@ class BagReading {
     selectSegment();
     matchWrenchRange();
     exid::Dataset d = fillDataset();
+    // The filter steps (exid/recording.hpp), the wrench matched at the resampled times.
+    exid::RecordingPipeline steps(exid::RecordingSteps::fromParams(P_), pre_ + bagname_);
+    d = steps.resample(std::move(d));
     interpolateWrench(&d);
-    describe(&d);
+    d = steps.filter(steps.compensateDelay(std::move(d)));
+    describe(steps, &d);
     return d;
   }
 
@@ -422,8 +429,7 @@ class BagReading {
                             pre_, bagname_, w_topic_, tw_.front(), tw_.back()));
   }
 
-  // The selected samples, signed; resampled on request (linear interpolation of every signal
-  // onto a uniform grid).
+  // The selected samples, signed.
   exid::Dataset fillDataset() {
     const int n = n_;
     K_ = static_cast<int>(sel_.size());
@@ -443,11 +449,6 @@ class BagReading {
         d.tau(k, j) = sg * tauv_[at];
         if (use_vel_) d.qd(k, j) = sg * qdv_[at];
       }
-    }
-    rs_hz_ = P_.getDouble("resample_hz");
-    if (rs_hz_ > 0.0) {
-      resampled_from_ = K_;
-      d = exid::resampleUniform(d, rs_hz_, fmt::format("{}{}", pre_, bagname_));
     }
     return d;
   }
@@ -496,7 +497,7 @@ class BagReading {
   }
 
   // Where the messages went: every one dropped or cut is counted (a = meta.accounting).
-  void accounting(int samples, exid::Json& a, exid::Json& m) const {
+  void accounting(const exid::RecordingPipeline& steps, exid::Json& a, exid::Json& m) const {
     a["joint_state_messages"] = js_msgs_;
     a["other_joints_messages"] = js_other_;
     a["dropped_bad_messages"] = js_bad_;
@@ -511,12 +512,6 @@ class BagReading {
       a["wrench_dropped_repeated_stamps"] = wr_dup_;
     }
     a["segment_samples"] = K_;
-    if (resampled_from_ > 0) {
-      a["resampled_from"] = resampled_from_;
-      a["resampled_to"] = samples;
-      a["resample_hz"] = rs_hz_;
-    }
-    a["samples_used"] = samples;
     exid::Json w = exid::Json::array();
     if (js_bad_ + js_dup_ > 0)
       w.push_back(exid::Json(
@@ -533,15 +528,15 @@ class BagReading {
           fmt::format("{}{}: {} joint-state samples of the segment lie outside the time range of "
                       "wrench_topic '{}' and were cut",
                       pre_, bagname_, outside_wrench_, w_topic_)));
+    steps.account(&a, &w);
     if (bad_examples_.size() > 0) a["dropped_examples"] = bad_examples_;
     if (w.size() > 0) m["warnings"] = w;
   }
 
-  void describe(exid::Dataset* dp) const {
+  void describe(const exid::RecordingPipeline& steps, exid::Dataset* dp) const {
     exid::Dataset& d = *dp;
     d.source = bagname_;
     exid::Json& m = d.meta;
-    m["simulated"] = false;
     m["file"] = bagname_;
     m["storage"] = bag_.storage;
     {
@@ -565,7 +560,8 @@ class BagReading {
     if (seg_.part != "none") m["split"] = seg_.splitMeta(in_segment_, in_part_);
     m["recording_span_s"] = span_;
     m["recording"] = recordingMeta();
-    accounting(d.size(), m["accounting"], m);
+    accounting(steps, m["accounting"], m);
+    steps.describe(&m);
     std::vector<std::string> sig = {"q"};
     if (use_vel_) sig.push_back("qd");
     sig.push_back("tau");
@@ -611,8 +607,7 @@ class BagReading {
   int outside_wrench_ = 0;
   double wr_med_ = 0.0;
   // the dataset
-  int K_ = 0, resampled_from_ = 0;
-  double rs_hz_ = 0;
+  int K_ = 0;
 };
 
 class Rosbag2Experiment : public exid::Experiment {
@@ -650,11 +645,6 @@ class Rosbag2Experiment : public exid::Experiment {
                    "meta); false: such a message is an error naming it"),
         param_doubles("sign", std::vector<double>{}, "",
                       "per joint +1 or -1, applied to q, qd and tau of that joint; empty: all +1"),
-        param_double("resample_hz", 0.0, "Hz",
-                     "> 0: the segment is linearly interpolated onto a uniform grid at this rate "
-                     "(uneven stamps are then accepted; a gap longer than max_gap_ratio times "
-                     "the median step is still an error); 0: the stamps must be uniform",
-                     0.0),
         param_double("max_gap_ratio", 1.5, "",
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the messages",
@@ -662,6 +652,8 @@ class Rosbag2Experiment : public exid::Experiment {
     };
     const auto segment = exid::segmentParams("joint-state sample");
     p.insert(p.end(), segment.begin(), segment.end());
+    const auto steps = exid::recordingStepParams();  // the filter steps, as csv's
+    p.insert(p.end(), steps.begin(), steps.end());
     return p;
   }
 

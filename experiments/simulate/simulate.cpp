@@ -269,8 +269,7 @@ class SimulateExperiment : public exid::Experiment {
     d.source = fmt::format("simulate ({}, seed {})", robot->name, ctx.seed);
     describe(*robot, ctx.seed, integ, refmeta, dt, tr, &d.meta);
     if (!delay_meta.isNull()) d.meta["torque_delay"] = delay_meta;
-    if (const std::vector<double> g = P_.getDoubles("recorded_torque_gain"); !g.empty())
-      d.meta["recorded_torque_gain"] = exid::Json(g);
+    d.facts.simulated = plantTruth();
     d.meta["wall_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
@@ -625,11 +624,24 @@ class SimulateExperiment : public exid::Experiment {
     }
   }
 
-  // The dataset's meta (without wall_s).
+  // What the plant held beyond the robot's parameters (the truth the study is judged against).
+  exid::PlantTruth plantTruth() const {
+    exid::PlantTruth p;
+    p.drive_terms = drive_terms_;
+    p.payload = exid::LoadMass{payload_.mass, payload_.com, payload_.I_com};
+    p.coulomb_negative_Nm = fcn_;
+    p.stribeck_Nm = fs_;
+    p.coulomb_load_Nm_per_Nm = fcl_;
+    p.recorded_torque_gain = P_.getDoubles("recorded_torque_gain");
+    p.drive_torque_gain = gain_;
+    return p;
+  }
+
+  // The dataset's meta (without wall_s and the plant's truth: Dataset::facts).
+
   void describe(const exid::RobotModel& robot, std::uint64_t seed, const Integrator& integ,
                 const exid::Json& refmeta, double dt, const Tracking& tr, exid::Json* meta) const {
     exid::Json& m = *meta;
-    m["simulated"] = true;
     m["robot"] = robot.name;
     m["seed"] = exid::Json(static_cast<long long>(seed));
     m["integrator"] = integ.description();
@@ -648,13 +660,8 @@ class SimulateExperiment : public exid::Experiment {
       g["kd_Nm_s_per_rad"] = exid::Json(std::vector<double>(kd.data(), kd.data() + kd.size()));
       m["pd_gains"] = g;
     }
-    m["drive_terms"] = drive_terms_;
     m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
-    if (!fcn_.empty()) m["coulomb_negative_Nm"] = exid::Json(fcn_);
-    if (!gain_.empty()) m["drive_torque_gain"] = exid::Json(gain_);
-    if (!fcl_.empty()) m["coulomb_load_Nm_per_Nm"] = exid::Json(fcl_);
     if (!fs_.empty()) {
-      m["stribeck_Nm"] = exid::Json(fs_);
       m["stribeck_velocity_rad_s"] = exid::Json(svs_);
       m["stribeck_exponent"] = sdelta_;
     }
@@ -663,7 +670,6 @@ class SimulateExperiment : public exid::Experiment {
     m["samples"] = tr.recorded;
     m["stopped_early"] = tr.stopped;
     m["max_tracking_error_rad"] = tr.max_err;
-    m["payload"] = payload_.json();
     exid::Json& nz = m["noise"];
     nz = exid::Json::object();
     nz["q_rad"] = P_.getDouble("noise_q_rad");

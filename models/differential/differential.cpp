@@ -19,7 +19,7 @@
 //
 // Drive gains (drive_gains, docs/models.md "Drive gains"): the true torque of drive j is
 // (1 + dK_j) times the recorded one, dK_j identified with the rest from a recording whose
-// second part carries a known payload phi (meta.payload_part_from_t_s, csv payload_file):
+// second part carries a known payload phi (facts.payload_part_from_t_s, csv payload_file):
 //   tau_m,j - [T^T Yp phi]_j (payload part only) = Y_j pi - dK_j tau_m,j.
 // Without the payload part the scale of pi and the gains is not identifiable: refused, unless
 // drive_gains_scale: prior says that a prior on the gains (gains_ls's gain_prior_std) sets it.
@@ -201,46 +201,44 @@ Eigen::VectorXd DifferentialModel::fullNominal() const {
   return out;
 }
 
-// The parameters of the `simulate` experiment's plant, from the dataset's meta: its payload
+// The parameters of the `simulate` experiment's plant (Dataset::facts.simulated): its payload
 // (merged into the sensor body), its drive terms (none with drive_terms: false), its
 // friction beyond Coulomb + viscous (coulomb_negative_Nm, stribeck_Nm,
 // coulomb_load_Nm_per_Nm) and its gain errors (recorded_torque_gain: dK = 1/g - 1;
 // drive_torque_gain: dK = g - 1). What the model has no column for is left out.
-Eigen::VectorXd DifferentialModel::fullTruth(const exid::Json& meta) const {
+Eigen::VectorXd DifferentialModel::fullTruth(const exid::PlantTruth& plant) const {
   Eigen::VectorXd out = fullNominal();
   const exid::RobotModel& R = robot();
   const int n = R.dof(), P0 = exid::numParameters(R, cols_), E = extraPerJoint();
-  if (const exid::Json* p = meta.find("payload"); p && p->isObject()) {
-    const exid::Payload load = exid::Payload::fromJson(*p);
-    if (!load.empty())
-      out.segment<10>(10 * R.sensorBody()) += exid::transformInertial(load.pi(), R.sensor_pose);
+  if (!plant.payload.empty()) {
+    const exid::LoadMass& m = plant.payload;
+    const exid::Payload load{m.mass_kg, m.com_m, m.inertia_com_kg_m2};
+    out.segment<10>(10 * R.sensorBody()) += exid::transformInertial(load.pi(), R.sensor_pose);
   }
-  auto perDrive = [&](const char* key, std::vector<double>* v) {
-    const exid::Json* j = meta.find(key);
-    if (!j || !j->isArray() || j->size() == 0) return false;
+  // one value (every drive) or one per drive
+  auto perDrive = [&](const std::vector<double>& j, std::vector<double>* v) {
+    if (j.empty()) return false;
     v->assign(static_cast<std::size_t>(n), 0.0);
     for (int d = 0; d < n; ++d)
-      (*v)[static_cast<std::size_t>(d)] =
-          j->at(j->size() == 1 ? 0 : static_cast<std::size_t>(d)).asDouble();
-    return j->size() == 1 || static_cast<int>(j->size()) == n;
+      (*v)[static_cast<std::size_t>(d)] = j.at(j.size() == 1 ? 0 : static_cast<std::size_t>(d));
+    return j.size() == 1 || static_cast<int>(j.size()) == n;
   };
-  if (const exid::Json* dt = meta.find("drive_terms");
-      dt && dt->type() == exid::Json::Type::Bool && !dt->asBool()) {
+  if (!plant.drive_terms) {
     out.segment(10 * n, P0 - 10 * n).setZero();
     out.segment(P0, E * n).setZero();
   }
   std::vector<double> v;
   const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
-  if (asym_ && coulomb_extra_ && perDrive("coulomb_negative_Nm", &v))
+  if (asym_ && coulomb_extra_ && perDrive(plant.coulomb_negative_Nm, &v))
     for (int j = 0; j < n; ++j) out[P0 + E * j + 1] = v[static_cast<std::size_t>(j)];
-  if (stribeck_ && perDrive("stribeck_Nm", &v))
+  if (stribeck_ && perDrive(plant.stribeck_Nm, &v))
     for (int j = 0; j < n; ++j) out[P0 + E * j + nc] = v[static_cast<std::size_t>(j)];
   const int Pl = P0 + E * n, Pg = Pl + loadCount();
-  if (load_ && perDrive("coulomb_load_Nm_per_Nm", &v))
+  if (load_ && perDrive(plant.coulomb_load_Nm_per_Nm, &v))
     for (int j = 0; j < n; ++j) out[Pl + j] = v[static_cast<std::size_t>(j)];
-  if (gains_ && perDrive("recorded_torque_gain", &v))
+  if (gains_ && perDrive(plant.recorded_torque_gain, &v))
     for (int j = 0; j < n; ++j) out[Pg + j] = 1.0 / v[static_cast<std::size_t>(j)] - 1.0;
-  if (gains_ && perDrive("drive_torque_gain", &v))
+  if (gains_ && perDrive(plant.drive_torque_gain, &v))
     for (int j = 0; j < n; ++j) out[Pg + j] = v[static_cast<std::size_t>(j)] - 1.0;
   return out;
 }

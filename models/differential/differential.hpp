@@ -39,7 +39,7 @@ class DifferentialModel : public exid::ObservationModel {
   std::vector<std::string> fullNames() const override;
   Eigen::VectorXd fullNominal() const override;
 
-  Eigen::VectorXd fullTruth(const exid::Json& meta) const override;
+  Eigen::VectorXd fullTruth(const exid::PlantTruth& plant) const override;
 
   std::vector<exid::NonlinearParameter> nonlinearParameters() const override;
 

@@ -27,20 +27,19 @@ exid::Rows DifferentialModel::fullRowsAt(const exid::Dataset& d, const Eigen::Ve
   // drive gains: the payload part's samples (t >= its first) carry the known payload
   double loaded_from = HUGE_VAL;
   if (gains_ && gains_prior_) {
-    exid::check(d.meta.find("payload_part_from_t_s") == nullptr,
-                fmt::format("{}: the data have a payload part (meta.payload_part_from_t_s) "
+    exid::check(!d.facts.payload_part_from_t_s,
+                fmt::format("{}: the data have a payload part (facts.payload_part_from_t_s) "
                             "but drive_gains_scale is prior: give the payload "
                             "(payload_mass_kg, ...) and drive_gains_scale: payload ({})",
                             who, d.source));
   } else if (gains_) {
-    const exid::Json* from = d.meta.find("payload_part_from_t_s");
-    if (!from || !from->isNumber())
+    if (!d.facts.payload_part_from_t_s)
       throw exid::Error(
           fmt::format("{}: drive_gains needs a part of the recording with the known payload (csv "
-                      "payload_file; meta.payload_part_from_t_s): without it the gains and the "
+                      "payload_file; facts.payload_part_from_t_s): without it the gains and the "
                       "parameters' scale are not identifiable ({})",
                       who, d.source));
-    loaded_from = from->asDouble();
+    loaded_from = *d.facts.payload_part_from_t_s;
   }
   const int Pg = static_cast<int>(r.W.cols()) - gainCount(), Pl = Pg - loadCount();
   auto data = gains_ ? exid::makeDynamicsData(robot()) : nullptr;  // (once per call)

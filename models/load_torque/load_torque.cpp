@@ -42,10 +42,9 @@ class LoadTorqueModel : public exid::ObservationModel {
 
   std::vector<std::string> fullNames() const override { return exid::models::payloadNames(); }
   Eigen::VectorXd fullNominal() const override { return payload_.phi(); }
-  Eigen::VectorXd fullTruth(const exid::Json& meta) const override {
-    if (const exid::Json* p = meta.find("payload"))
-      return exid::models::Payload::fromJson(*p).phi();
-    return fullNominal();
+  Eigen::VectorXd fullTruth(const exid::PlantTruth& plant) const override {
+    const exid::LoadMass& m = plant.payload;  // (none: zero)
+    return exid::models::Payload{m.mass_kg, m.com_m, m.inertia_com_kg_m2}.phi();
   }
   exid::ModelSpecs specs() const override {
     exid::ModelSpecs sp;

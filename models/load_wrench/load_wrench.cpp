@@ -52,10 +52,10 @@ class LoadWrenchModel : public exid::ObservationModel {
     v.head(10) = payload_.phi();
     return v;
   }
-  Eigen::VectorXd fullTruth(const exid::Json& meta) const override {
-    Eigen::VectorXd v = fullNominal();  // the simulation adds no sensor offset
-    if (const exid::Json* p = meta.find("payload"))
-      v.head(10) = exid::models::Payload::fromJson(*p).phi();
+  Eigen::VectorXd fullTruth(const exid::PlantTruth& plant) const override {
+    Eigen::VectorXd v = fullNominal();        // the simulation adds no sensor offset
+    const exid::LoadMass& m = plant.payload;  // (none: zero)
+    v.head(10) = exid::models::Payload{m.mass_kg, m.com_m, m.inertia_com_kg_m2}.phi();
     return v;
   }
   exid::ModelSpecs specs() const override {

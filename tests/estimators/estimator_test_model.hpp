@@ -204,7 +204,7 @@ inline exid::Dataset makeData(const PendulumModel& model, int n, const DataOptio
     d.qdd.resize(0, 0);
   }
   d.source = "est_test::makeData";
-  d.meta["simulated"] = true;
+  d.facts.simulated = exid::PlantTruth();
   return d;
 }
 

@@ -219,6 +219,50 @@ TEST(Rosbag2, SplitAndSegmentAsTheCsvExperiment) {
   EXPECT_NE(errorOf(dir, "split_fraction: 0.5").find("need split_part"), std::string::npos);
 }
 
+// The filter steps (exid/recording.hpp) are one pipeline for both experiments: a bag and the
+// CSV of the same recording, with the same resampling, delay, low-pass, trim and decimation,
+// give the same samples to the bit and the same accounting.
+TEST(Rosbag2, TheFilterStepsAreTheCsvExperiments) {
+  const fs::path dir = bagOf(kVariants[3]);
+  for (const std::string extra :
+       {std::string("differentiate_cutoff_hz: 20, filter_torque: true, decimation: 2"),
+        std::string("measurement_delay_s: 0.012, differentiate_cutoff_hz: 15, trim_edges: 7"),
+        std::string("resample_hz: 150, t_start_s: 1, t_end_s: 8")}) {
+    SCOPED_TRACE(extra);
+    auto csv = exid_test::create<exid::Experiment>(
+        "csv", "{file: " + csvOfRecording().string() + ", " + extra + "}");
+    const exid::Dataset c = csv->run(mtest::robot("puma560"), nullptr, mtest::context());
+    const exid::Dataset b = readBag(dir, extra);
+    ASSERT_EQ(b.size(), c.size());
+    EXPECT_LT(b.size(), recording().d.size());  // the steps did drop samples
+    EXPECT_EQ(b.t, c.t);
+    EXPECT_EQ(b.q, c.q);
+    EXPECT_EQ(b.qd, c.qd);
+    EXPECT_EQ(b.qdd, c.qdd);
+    EXPECT_EQ(b.tau, c.tau);
+    for (const char* key : {"segment_samples", "trimmed_edges", "decimated_away", "samples_used"})
+      EXPECT_EQ(acc(b, key), acc(c, key)) << key;
+    const exid::Json* fb = b.meta.find("differentiated");
+    const exid::Json* fc = c.meta.find("differentiated");
+    ASSERT_EQ(fb == nullptr, fc == nullptr);
+    if (fb) EXPECT_EQ(fb->dump(), fc->dump());
+    const exid::Json* db = b.meta.find("measurement_delay");
+    const exid::Json* dc = c.meta.find("measurement_delay");
+    ASSERT_EQ(db == nullptr, dc == nullptr);
+    if (db) {
+      EXPECT_EQ(db->dump(), dc->dump());
+      EXPECT_GT(
+          db->find("dropped_samples_front")->asInt() + db->find("dropped_samples_back")->asInt(),
+          0);
+    }
+  }
+  // the same refusals, naming the bag
+  const std::string e = errorOf(dir, "decimation: 2");
+  EXPECT_NE(e.find("decimation and filter_torque need differentiate_cutoff_hz > 0"),
+            std::string::npos)
+      << e;
+}
+
 TEST(Rosbag2, InspectAndIdentifyTakeABagFolderOnTheCommandLine) {
   const fs::path dir = bagOf(kVariants[2]);
   const exid_cli::CmdResult r =

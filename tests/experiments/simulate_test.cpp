@@ -13,8 +13,9 @@ TEST(Simulate, OwnFourierReferenceWithinLimitsAndMeta) {
   const exid::Dataset d = mtest::simulate(r, "{}");
   EXPECT_EQ(d.size(), 1001);  // one period of 10 s at 100 Hz, both ends
   EXPECT_NEAR(d.t[d.size() - 1], 10.0, 1e-12);
-  ASSERT_TRUE(d.meta.find("simulated"));
-  EXPECT_TRUE(d.meta.find("simulated")->asBool());
+  ASSERT_TRUE(d.facts.simulated);  // the plant's truth: the robot's own, no payload
+  EXPECT_TRUE(d.facts.simulated->drive_terms);
+  EXPECT_TRUE(d.facts.simulated->payload.empty());
   for (const char* key :
        {"integrator", "rtol", "atol", "steps", "seed", "noise", "controller", "reference"})
     EXPECT_TRUE(d.meta.contains(key)) << key;

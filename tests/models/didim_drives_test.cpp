@@ -326,7 +326,7 @@ TEST(DidimDrives, RefusesWhatTheClosedLoopCannotSimulate) {
   expectError("didim", "", s.data, "gain_prior_std");
   expectError("iv", "", s.data, "drive gains");
   exid::Dataset loaded = s.data;
-  loaded.meta["payload_part_from_t_s"] = 0.5;
+  loaded.facts.payload_part_from_t_s = 0.5;
   expectError("didim", ", gain_prior_std: [0.1]", loaded, "payload_part_from_t_s");
   EXPECT_THROW(exid_test::create<exid::Estimator>(
                    "didim", "{" + s.params +

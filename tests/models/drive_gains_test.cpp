@@ -280,7 +280,7 @@ TEST(DriveGains, APriorScaleRefusesAPayloadAndAPayloadPart) {
   }
   auto m = mtest::model("differential", "{drive_gains: true, drive_gains_scale: prior}", r);
   exid::Dataset d = mtest::simulate(r, "{duration_s: 1, sample_period_s: 0.01}");
-  d.meta["payload_part_from_t_s"] = 0.5;
+  d.facts.payload_part_from_t_s = 0.5;
   try {
     (void)m->rows(d, mtest::context());
     ADD_FAILURE() << "a payload part with drive_gains_scale: prior was accepted";
@@ -313,7 +313,7 @@ TEST(DriveGains, TheDesignsDerivativeEqualsCentralDifferences) {
 TEST(DriveGains, AStudyReadsThePayloadPartFromItsOwnFile) {
   auto r = mtest::robot("puma560");
   const exid::Dataset d = twoParts(r, 0.0, 1);
-  const double from = d.meta.find("payload_part_from_t_s")->asDouble();
+  const double from = d.facts.payload_part_from_t_s.value();
   const fs::path dir = exid_cli::freshTempDir("exid_gains_", "study");
   int split = 0;  // the first sample of the payload part
   while (d.t[split] < from) ++split;

@@ -165,7 +165,7 @@ inline exid::Samples randomSamples(const exid::RobotModel& r, int K, double dt,
 
 /// Part one without the payload, part two with it, both simulated with the recorded torque
 /// through `gains` (recorded_torque_gain, a YAML list), 4 s each at 200 Hz (seeds 3 and 4); the
-/// second part's time follows the first's and meta.payload_part_from_t_s says where it starts
+/// second part's time follows the first's and facts.payload_part_from_t_s says where it starts
 /// (as the csv experiment's payload_file does).
 inline exid::Dataset gainedTwoParts(const std::shared_ptr<const exid::RobotModel>& r,
                                     const std::string& gains, const std::string& payload) {
@@ -187,7 +187,7 @@ inline exid::Dataset gainedTwoParts(const std::shared_ptr<const exid::RobotModel
     m << *x, *y;
     *x = m;
   }
-  a.meta["payload_part_from_t_s"] = from;
+  a.facts.payload_part_from_t_s = from;
   return a;
 }
 

@@ -403,7 +403,8 @@ TEST(Varpro, RecoversTheSimulatedPlantsFriction) {
       r,
       "{duration_s: 6, sample_period_s: 0.002, coulomb: tanh, coulomb_velocity_scale: 0.01, "
       "coulomb_negative_Nm: [0.3], stribeck_Nm: [0.4], stribeck_velocity_rad_s: [0.05]}");
-  EXPECT_NE(d.meta.find("stribeck_Nm"), nullptr);
+  ASSERT_TRUE(d.facts.simulated);
+  EXPECT_EQ(d.facts.simulated->stribeck_Nm.size(), 6u);
   auto m = mtest::model("differential", kModel, r);
   auto v = exid_test::create<exid::Estimator>("varpro", "{}");
   const exid::Estimate e = v->estimate(*m, d, nullptr, mtest::context());

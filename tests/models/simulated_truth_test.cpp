@@ -1,7 +1,7 @@
 // What a simulated study is judged against: the `differential` model's fullTruth reads the
-// `simulate` experiment's plant from the dataset's meta (payload, drive terms, friction beyond
-// Coulomb + viscous, gain errors). Noise-free data and a consistent estimator reproduce that
-// truth exactly; the robot description's nominal values are off.
+// `simulate` experiment's plant from the dataset's facts (Dataset::facts.simulated: payload,
+// drive terms, friction beyond Coulomb + viscous, gain errors). Noise-free data and a consistent
+// estimator reproduce that truth exactly; the robot description's nominal values are off.
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
@@ -19,7 +19,7 @@ double relErr(const Eigen::VectorXd& a, const Eigen::VectorXd& b) {
 }
 
 // A plant with a 2 kg payload, asymmetric Coulomb and a Stribeck term: batch_ls on its exact
-// data equals the base truth read from the meta, and differs from the nominal.
+// data equals the base truth read from the plant's, and differs from the nominal.
 TEST(SimulatedTruth, ThePlantsPayloadAndFrictionAreTheTruth) {
   auto r = mtest::robot("puma560");
   const exid::Dataset d = mtest::simulate(
@@ -32,7 +32,7 @@ TEST(SimulatedTruth, ThePlantsPayloadAndFrictionAreTheTruth) {
                             "{offset: true, coulomb_asymmetric: true, coulomb_smoothing_rad_s: "
                             "[0.05], stribeck: true, stribeck_velocity_rad_s: [0.2]}",
                             r);
-  const Eigen::VectorXd truth = model->base().reduce(model->fullTruth(d.meta));
+  const Eigen::VectorXd truth = model->base().reduce(model->fullTruth(*d.facts.simulated));
   const Eigen::VectorXd nominal = model->baseNominal();
   auto ls = exid_test::create<exid::Estimator>("batch_ls", "{}");
   const exid::Estimate e = ls->estimate(*model, d, nullptr, mtest::context());
@@ -44,7 +44,7 @@ TEST(SimulatedTruth, ThePlantsPayloadAndFrictionAreTheTruth) {
   EXPECT_GT(relErr(e.value, nominal), 1e-2);
   // the full values by name
   const std::vector<std::string> names = model->fullNames();
-  const Eigen::VectorXd full = model->fullTruth(d.meta);
+  const Eigen::VectorXd full = model->fullTruth(*d.facts.simulated);
   for (std::size_t i = 0; i < names.size(); ++i) {
     if (names[i] == "FcN2") EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 4.0);
     if (names[i] == "Fs5") EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 1.0);
@@ -57,7 +57,7 @@ TEST(SimulatedTruth, APlantWithoutDriveTermsHasNone) {
   const exid::Dataset d =
       mtest::simulate(r, "{duration_s: 8, sample_period_s: 0.01, drive_terms: false}");
   auto model = mtest::model("differential", "{offset: true}", r);
-  const Eigen::VectorXd full = model->fullTruth(d.meta);
+  const Eigen::VectorXd full = model->fullTruth(*d.facts.simulated);
   const std::vector<std::string> names = model->fullNames();
   for (std::size_t i = 0; i < names.size(); ++i)
     if (exid::isDriveParameterName(names[i])) EXPECT_EQ(full[static_cast<Eigen::Index>(i)], 0.0);
@@ -69,12 +69,12 @@ TEST(SimulatedTruth, APlantWithoutDriveTermsHasNone) {
 
 // Gain errors and the load term: dK = 1/g - 1 for a recorded gain, g - 1 for a drive gain;
 // FcL as given.
-TEST(SimulatedTruth, GainsAndLoadTermsComeFromTheMeta) {
+TEST(SimulatedTruth, GainsAndLoadTermsComeFromThePlantsTruth) {
   auto r = mtest::robot("puma560");
   auto gains = mtest::model("differential", "{drive_gains: true, drive_gains_scale: prior}", r);
-  exid::Json meta = exid::Json::object();
-  meta["recorded_torque_gain"] = exid::Json(std::vector<double>{0.8});
-  Eigen::VectorXd full = gains->fullTruth(meta);
+  exid::PlantTruth plant;
+  plant.recorded_torque_gain = {0.8};
+  Eigen::VectorXd full = gains->fullTruth(plant);
   std::vector<std::string> names = gains->fullNames();
   int found = 0;
   for (std::size_t i = 0; i < names.size(); ++i)
@@ -83,17 +83,17 @@ TEST(SimulatedTruth, GainsAndLoadTermsComeFromTheMeta) {
       ++found;
     }
   EXPECT_EQ(found, 6);
-  meta = exid::Json::object();
-  meta["drive_torque_gain"] = exid::Json(std::vector<double>{1, 1.1, 1, 1, 1, 0.9});
-  full = gains->fullTruth(meta);
+  plant = exid::PlantTruth();
+  plant.drive_torque_gain = {1, 1.1, 1, 1, 1, 0.9};
+  full = gains->fullTruth(plant);
   for (std::size_t i = 0; i < names.size(); ++i) {
     if (names[i] == "dK2") EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], 0.1, 1e-15);
     if (names[i] == "dK6") EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], -0.1, 1e-15);
   }
   auto load = mtest::model("differential", "{coulomb_load: true}", r);
-  meta = exid::Json::object();
-  meta["coulomb_load_Nm_per_Nm"] = exid::Json(std::vector<double>{0.02});
-  full = load->fullTruth(meta);
+  plant = exid::PlantTruth();
+  plant.coulomb_load_Nm_per_Nm = {0.02};
+  full = load->fullTruth(plant);
   names = load->fullNames();
   found = 0;
   for (std::size_t i = 0; i < names.size(); ++i)

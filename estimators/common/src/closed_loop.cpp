@@ -200,8 +200,8 @@ void ClosedLoop::setUpColumns(const ObservationModel& model, const Dataset& data
       tcol_.push_back({static_cast<int>(b), j, kind});
     }
   check(
-      data.meta.find("payload_part_from_t_s") == nullptr,
-      fmt::format("{}: the recording has a part with a known payload (meta.payload_part_from_t_s, "
+      !data.facts.payload_part_from_t_s,
+      fmt::format("{}: the recording has a part with a known payload (facts.payload_part_from_t_s, "
                   "{}): the closed loop does not simulate that payload; give the part without "
                   "it, and for drive gains a prior (didim's gain_prior_std) or gains_ls",
                   who, data.source));

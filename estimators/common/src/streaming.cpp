@@ -205,6 +205,7 @@ RowAccumulator accumulateRows(const ObservationModel& model, const Dataset& data
           Dataset& d = decoded[ring(c)];
           stream.decode(*piece[ring(c)], &d);
           d.meta = data.meta;
+          d.facts = data.facts;
           accumulateTask(c, d, static_cast<int>(c * task));
         },
         [&](long c) {

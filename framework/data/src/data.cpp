@@ -16,9 +16,9 @@ Eigen::MatrixXd rowsOf(const Eigen::MatrixXd& M, int begin, int end) {
   return M.middleRows(begin, end - begin);
 }
 
-// Samples [begin, end) of d's matrices, named source with meta.
-Dataset samplesOf(const Dataset& d, int begin, int end, const std::string& source,
-                  const Json& meta) {
+// Samples [begin, end) of d's matrices, named source with meta and facts.
+Dataset samplesOf(const Dataset& d, int begin, int end, const std::string& source, const Json& meta,
+                  const DatasetFacts& facts) {
   Dataset s;
   s.t = d.t.segment(begin, end - begin);
   s.q = rowsOf(d.q, begin, end);
@@ -28,6 +28,7 @@ Dataset samplesOf(const Dataset& d, int begin, int end, const std::string& sourc
   s.wrench = rowsOf(d.wrench, begin, end);
   s.source = source;
   s.meta = meta;
+  s.facts = facts;
   return s;
 }
 
@@ -56,7 +57,7 @@ Dataset sliceDataset(const Dataset& d, int begin, int end) {
   check(!d.streamed(), "sliceDataset: a streamed dataset has no samples in memory");
   check(0 <= begin && begin <= end && end <= d.size(),
         fmt::format("sliceDataset: rows [{}, {}) outside a dataset of {}", begin, end, d.size()));
-  return samplesOf(d, begin, end, d.source, d.meta);
+  return samplesOf(d, begin, end, d.source, d.meta, d.facts);
 }
 
 Dataset materialize(const Dataset& d) {
@@ -86,6 +87,7 @@ Dataset materialize(const Dataset& d) {
   check(at == K, fmt::format("{}: the stream gave {} of its {} samples", d.source, at, K));
   out.source = d.source;
   out.meta = s.meta();
+  out.facts = d.facts;
   return out;
 }
 
@@ -132,7 +134,34 @@ Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who
   u.wrench = interp(d.wrench);
   u.source = d.source;
   u.meta = d.meta;
+  u.facts = d.facts;
   return u;
+}
+
+void describeFacts(const DatasetFacts& f, Json* meta) {
+  Json& m = *meta;
+  m["simulated"] = f.simulated.has_value();
+  if (f.simulated) {
+    const PlantTruth& p = *f.simulated;
+    m["drive_terms"] = p.drive_terms;
+    const LoadMass& L = p.payload;
+    Json pl = Json::object();
+    pl["mass_kg"] = L.mass_kg;
+    pl["com_m"] = Json(std::vector<double>{L.com_m[0], L.com_m[1], L.com_m[2]});
+    const Eigen::Matrix3d& I = L.inertia_com_kg_m2;
+    pl["inertia_com_kg_m2"] =
+        Json(std::vector<double>{I(0, 0), I(0, 1), I(0, 2), I(1, 1), I(1, 2), I(2, 2)});
+    m["payload"] = pl;
+    auto perDrive = [&](const char* key, const std::vector<double>& v) {
+      if (!v.empty()) m[key] = Json(v);
+    };
+    perDrive("coulomb_negative_Nm", p.coulomb_negative_Nm);
+    perDrive("stribeck_Nm", p.stribeck_Nm);
+    perDrive("coulomb_load_Nm_per_Nm", p.coulomb_load_Nm_per_Nm);
+    perDrive("recorded_torque_gain", p.recorded_torque_gain);
+    perDrive("drive_torque_gain", p.drive_torque_gain);
+  }
+  if (f.payload_part_from_t_s) m["payload_part_from_t_s"] = *f.payload_part_from_t_s;
 }
 
 SampleWindow::SampleWindow(const Dataset& d) : d_(d) {}
@@ -197,7 +226,7 @@ Dataset SampleWindow::span(int begin, int end) {
       append(&buf_.wrench, chunk.wrench);
     }
   }
-  return samplesOf(buf_, begin - buf_begin_, end - buf_begin_, d_.source, d_.meta);
+  return samplesOf(buf_, begin - buf_begin_, end - buf_begin_, d_.source, d_.meta, d_.facts);
 }
 
 }  // namespace exid

@@ -501,7 +501,7 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   J["source"] = data.source;
   J["samples"] = static_cast<long long>(K);
   J["duration_s"] = K > 0 ? data.t(K - 1) - data.t(0) : 0.0;
-  if (const Json* s = data.meta.find("simulated")) J["simulated"] = *s;
+  J["simulated"] = data.facts.simulated.has_value();
   if (const Json* rec = data.meta.find("recording")) {
     J["recording"] = *rec;
     recordingWarnings(*rec, &W);

@@ -138,6 +138,7 @@ Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const 
       check(d.stream->passed(), "inspection: the stream has not been read");
       Dataset sub = d.stream->collected();
       sub.meta = d.meta;
+      sub.facts = d.facts;
       I = inspectDataset(robot, model, sub, ctx, kRunRegressorSamples);
       if (stride > 1)
         I["subsampled"] = fmt::format(
@@ -162,6 +163,7 @@ Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const 
       sub.wrench = take(d.wrench);
       sub.source = d.source;
       sub.meta = d.meta;
+      sub.facts = d.facts;
       I = inspectDataset(robot, model, sub, ctx, kRunRegressorSamples);
       I["subsampled"] = fmt::format(
           "every {}th of the {} samples ({} inspected; `exid inspect` looks at every sample)",

@@ -29,10 +29,10 @@ class StackedModel final : public ObservationModel {
     }
     return v;
   }
-  Eigen::VectorXd fullTruth(const Json& meta) const override {
+  Eigen::VectorXd fullTruth(const PlantTruth& plant) const override {
     Eigen::VectorXd v = Eigen::VectorXd::Zero(static_cast<Eigen::Index>(names_.size()));
     for (std::size_t m = 0; m < parts_.size(); ++m) {
-      Eigen::VectorXd tm = parts_[m]->fullTruth(meta);
+      Eigen::VectorXd tm = parts_[m]->fullTruth(plant);
       for (std::size_t c = 0; c < map_[m].size(); ++c)
         v(map_[m][c]) = tm(static_cast<Eigen::Index>(c));
     }

@@ -35,6 +35,7 @@ void StudyRun::experimentStage() {
     Json& E = S["experiment"];
     renderInto(ex, &E);
     E["meta"] = data->meta;
+    describeFacts(data->facts, &E["meta"]);
     if (data->streamed()) {
       E["streamed"] = fmt::format(
           "read from the file in chunks by the estimator '{}' (never held whole); the "
@@ -58,8 +59,7 @@ void StudyRun::experimentStage() {
     }
     // experiment.csv: simulated data always; recorded data are a copy of the input, written
     // (by default) only while small. What was written, or why not, is in the summary.
-    const bool simulated_data =
-        data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+    const bool simulated_data = data->facts.simulated.has_value();
     const std::string& policy = cfg.report.experiment_csv;
     const bool write_csv =
         policy == "always" ||
@@ -106,6 +106,7 @@ void StudyRun::completeStreamedPass(const RunContext& ictx) {
   }
   data->meta = data->stream->meta();
   S["experiment"]["meta"] = data->meta;
+  describeFacts(data->facts, &S["experiment"]["meta"]);
   inspectInto(S, warnFn(), "experiment", *robot, model.get(), *data, ictx);
 }
 
@@ -252,12 +253,13 @@ void StudyRun::identificationStage() {
     Json& I = S["identification"];
     I["estimator"] = id.estimator;
     if (cfg.prior) I["prior"] = cfg.resolvedJson()["prior"];
-    const bool simulated = data->meta.find("simulated") && data->meta.find("simulated")->asBool();
+    const bool simulated = data->facts.simulated.has_value();
     const Eigen::VectorXd nominal = model->baseNominal();
     // A simulated study is judged against what the simulation used (its payload), never
     // against a nominal value it did not use.
     const Eigen::VectorXd truth =
-        simulated ? Eigen::VectorXd(model->base().reduce(model->fullTruth(data->meta))) : nominal;
+        simulated ? Eigen::VectorXd(model->base().reduce(model->fullTruth(*data->facts.simulated)))
+                  : nominal;
     double err2 = 0, tru2 = 0;
     Json params = parametersJson(nominal, truth, simulated, &err2, &tru2);
     if (simulated) {
@@ -451,6 +453,7 @@ void StudyRun::validationStage() {
     V["type"] = va.type;
     V["samples"] = Json(va.samples);
     V["meta"] = vd.meta;
+    describeFacts(vd.facts, &V["meta"]);
     if (!delay_meta.isNull()) V["measurement_delay_compensation"] = delay_meta;
     if (!torque_prediction.empty()) V["torque_columns_prediction"] = torque_prediction;
     V["rows_processing"] = by_estimator

@@ -4,6 +4,7 @@
 
 #include <Eigen/Core>
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -75,6 +76,41 @@ class EXID_API DatasetStream {
   virtual void settle(const Piece& /*piece*/, const Dataset& /*chunk*/) {}
 };
 
+/// A rigid load's mass properties in the sensor frame (a simulation's payload).
+struct EXID_API LoadMass {
+  double mass_kg = 0.0;
+  Eigen::Vector3d com_m = Eigen::Vector3d::Zero();              // centre of mass
+  Eigen::Matrix3d inertia_com_kg_m2 = Eigen::Matrix3d::Zero();  // about the centre of mass
+  bool empty() const { return mass_kg == 0.0 && inertia_com_kg_m2.isZero(0.0); }
+};
+
+/// What a simulation's plant held beyond the robot's own parameters: the truth a simulated
+/// study is judged against (ObservationModel::fullTruth). Per-drive values hold one value (every
+/// drive) or one per drive; empty: none.
+struct EXID_API PlantTruth {
+  bool drive_terms = true;                     // false: the plant had no drive inertia or friction
+  LoadMass payload;                            // carried at the sensor (empty: none)
+  std::vector<double> coulomb_negative_Nm;     // Coulomb level for qd < 0 (asymmetric)
+  std::vector<double> stribeck_Nm;             // Stribeck amplitude
+  std::vector<double> coulomb_load_Nm_per_Nm;  // load-dependent Coulomb friction
+  std::vector<double> recorded_torque_gain;    // recorded torque = gain x the drive's torque
+  std::vector<double> drive_torque_gain;       // the drive's torque = gain x commanded
+};
+
+/// What an experiment tells the models and estimators about its dataset, typed (Dataset::meta
+/// describes it for people: files, counts, warnings; code reads these).
+struct EXID_API DatasetFacts {
+  /// Set: simulated data, with the plant's truth (the runner compares the estimate with it).
+  std::optional<PlantTruth> simulated;
+  /// Set: the samples from this time on carry a known payload (experiment csv, payload_file):
+  /// the reference of drive gains (model differential, drive_gains).
+  std::optional<double> payload_part_from_t_s;
+};
+
+/// The facts as summary.json's experiment.meta shows them (keys simulated, payload,
+/// drive_terms, the per-drive values, payload_part_from_t_s), written into *meta.
+EXID_API void describeFacts(const DatasetFacts& f, Json* meta);
+
 /// A recorded or simulated experiment. Absent signals are empty matrices (0 columns).
 /// A streamed dataset (`stream` set) holds no samples itself: its matrices are empty and its
 /// samples are read through the stream (materialize() reads them all into memory).
@@ -84,7 +120,8 @@ struct EXID_API Dataset {
   Eigen::MatrixXd tau;         // K x n [N m or N]
   Eigen::MatrixXd wrench;      // K x 6 fx fy fz mx my mz, sensor frame [N, N m]
   std::string source;          // file or generator, for messages
-  Json meta = Json::object();  // what produced it (noise, seed, dropped rows, ...)
+  Json meta = Json::object();  // what produced it (noise, seed, dropped rows, ...), for people
+  DatasetFacts facts;          // what the models and estimators are told, typed
 
   std::shared_ptr<DatasetStream> stream;  // set: the samples are read through it
 
@@ -101,15 +138,15 @@ struct EXID_API Dataset {
   Samples samples() const { return {t, q, qd, qdd}; }
 };
 
-/// Samples [begin, end) of a dataset in memory (meta and source kept).
+/// Samples [begin, end) of a dataset in memory (source, meta and facts kept).
 EXID_API Dataset sliceDataset(const Dataset& d, int begin, int end);
 /// Every signal of d (in memory, at least two samples) linearly interpolated onto the uniform
-/// grid t0 + m / rate_hz, m = 0 .. floor(span * rate_hz); source and meta kept. `who` starts the
-/// messages (e.g. "experiment 'csv': file.csv"): fewer than two samples, or a grid of fewer than
-/// 2 or more than 1e8 samples, is an exid::Error.
+/// grid t0 + m / rate_hz, m = 0 .. floor(span * rate_hz); source, meta and facts kept. `who` starts
+/// the messages (e.g. "experiment 'csv': file.csv"): fewer than two samples, or a grid of fewer
+/// than 2 or more than 1e8 samples, is an exid::Error.
 EXID_API Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who);
 /// A dataset in memory: d itself, or every sample of its stream read in one pass (meta then
-/// the stream's, complete).
+/// the stream's, complete; facts kept).
 EXID_API Dataset materialize(const Dataset& d);
 
 /// Consecutive spans of a dataset, in memory or streamed, asked for in order: span(b, e) with b
@@ -118,7 +155,7 @@ EXID_API Dataset materialize(const Dataset& d);
 class EXID_API SampleWindow {
  public:
   explicit SampleWindow(const Dataset& d);
-  /// Samples [begin, end) (meta and source of the dataset).
+  /// Samples [begin, end) (source, meta and facts of the dataset).
   Dataset span(int begin, int end);
 
  private:

@@ -78,11 +78,12 @@ class EXID_API ObservationModel : public PluginObject {
   /// Names and nominal values (from the robot description) of the full parameter vector.
   virtual std::vector<std::string> fullNames() const = 0;
   virtual Eigen::VectorXd fullNominal() const = 0;
-  /// The full parameters of the system that produced a dataset, when its meta says so (a
-  /// simulated payload: `meta.payload`); by default the nominal ones. The runner compares a
-  /// simulated study's estimate with this, never with a nominal value the simulation did not use.
-  virtual Eigen::VectorXd fullTruth(const Json& data_meta) const {
-    (void)data_meta;
+  /// The full parameters of the simulated plant that produced a dataset
+  /// (Dataset::facts.simulated: its payload, drive terms, gains, friction); by default the
+  /// nominal ones. The runner compares a simulated study's estimate with this, never with a
+  /// nominal value the simulation did not use.
+  virtual Eigen::VectorXd fullTruth(const PlantTruth& plant) const {
+    (void)plant;
     return fullNominal();
   }
   /// Full-column rows from a dataset (W_full * pi_full ~= y).
