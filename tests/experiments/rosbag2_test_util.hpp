@@ -33,9 +33,9 @@ namespace rbtest {
 namespace fs = std::filesystem;
 using Bytes = std::vector<std::uint8_t>;
 
+/// The test's folder $TMPDIR/exid_rosbag2_test_<pid>, emptied on first use.
 inline fs::path tmpDir() {
-  fs::path p = fs::temp_directory_path() / ("exid_rosbag2_test_" + std::to_string(::getpid()));
-  fs::create_directories(p);
+  static const fs::path p = exid_cli::freshTempDir("exid_rosbag2_test", "");
   return p;
 }
 

@@ -44,7 +44,7 @@ using CmdResult = exid_cli::RunResult;
 
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir, double timeout_s = 120,
                   long address_space_mb = 0) {
-  return exid_cli::runExidIn(args, dir, timeout_s, address_space_mb);
+  return exid_cli::runExidIn(args, dir, timeout_s, exid_cli::Limits{address_space_mb});
 }
 
 using exid_cli::contains;

@@ -46,7 +46,8 @@ using CmdResult = exid_cli::RunResult;
 
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir,
                   double timeout_s = 60) {
-  return exid_cli::runExidIn(args, dir, timeout_s, exid_cli::underAddressSanitizer() ? 0 : 3072);
+  return exid_cli::runExidIn(args, dir, timeout_s,
+                             exid_cli::Limits{exid_cli::underAddressSanitizer() ? 0 : 3072});
 }
 
 exid::Json summaryOf(const fs::path& dir) { return exid::Json::parse(slurp(dir / "summary.json")); }

@@ -2,87 +2,32 @@
 // exid program run as a child process, and what it leaves in its output folders.
 #pragma once
 
-#include <fcntl.h>
-#include <signal.h>
-#include <sys/resource.h>
-#include <sys/wait.h>
-#include <unistd.h>
-
-#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <string>
-#include <thread>
 #include <vector>
 
 #include "exid/json.hpp"
+#include "exid_cli.hpp"
 
 namespace fs = std::filesystem;
 
 namespace robustness {
 
 inline fs::path tempDir(const std::string& name) {
-  fs::path d =
-      fs::temp_directory_path() / ("exid_robust_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
+  return exid_cli::freshTempDir("exid_robust_", name);
 }
 
-inline std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string((std::istreambuf_iterator<char>(in)), std::istreambuf_iterator<char>());
-}
+using exid_cli::contains;
+using exid_cli::slurp;
+using CmdResult = exid_cli::RunResult;
 
-struct CmdResult {
-  int code = -1;    // exit code; -1 when killed by a signal
-  int signal = 0;   // the signal that killed it
-  std::string out;  // stdout and stderr
-};
-
-/// Runs exid with args (no shell) in dir, stdout+stderr captured; killed after timeout_s
-/// (reported as signal 9) so that a hang is a failure, not a stuck test.
+/// Runs exid with args in dir (exid_cli::runExidIn): killed after timeout_s; file_size_bytes > 0
+/// caps the size of any file it writes (as on a full disk).
 inline CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir,
-                         double timeout_s = 120, long fsize_limit = 0) {
-  const fs::path log = dir / "exid_log.txt";
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    if (::chdir(dir.c_str()) != 0) ::_exit(126);
-    const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(fd, STDOUT_FILENO);
-    ::dup2(fd, STDERR_FILENO);
-    if (fsize_limit > 0) {
-      ::signal(SIGXFSZ, SIG_IGN);
-      rlimit rl{static_cast<rlim_t>(fsize_limit), static_cast<rlim_t>(fsize_limit)};
-      ::setrlimit(RLIMIT_FSIZE, &rl);
-    }
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(EXID_EXE));
-    for (const auto& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(EXID_EXE, argv.data());
-    ::_exit(127);
-  }
-  CmdResult r;
-  int status = 0;
-  const auto t0 = std::chrono::steady_clock::now();
-  while (::waitpid(pid, &status, WNOHANG) == 0) {
-    if (std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count() > timeout_s) {
-      ::kill(pid, SIGKILL);
-      ::waitpid(pid, &status, 0);
-      break;
-    }
-    std::this_thread::sleep_for(std::chrono::milliseconds(20));
-  }
-  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  r.signal = WIFSIGNALED(status) ? WTERMSIG(status) : 0;
-  r.out = slurp(log);
-  return r;
-}
-
-inline bool contains(const std::string& s, const std::string& what) {
-  return s.find(what) != std::string::npos;
+                         double timeout_s = 120, long file_size_bytes = 0) {
+  return exid_cli::runExidIn(args, dir, timeout_s, exid_cli::Limits{0, file_size_bytes});
 }
 
 inline exid::Json summaryOf(const fs::path& dir) {

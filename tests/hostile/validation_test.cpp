@@ -37,7 +37,7 @@ using CmdResult = exid_cli::RunResult;
 
 CmdResult runExid(const std::vector<std::string>& args, const fs::path& dir,
                   double timeout_s = 120) {
-  return exid_cli::runExidIn(args, dir, timeout_s, 0);
+  return exid_cli::runExidIn(args, dir, timeout_s);
 }
 
 using exid_cli::contains;

@@ -26,13 +26,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-fs::path tempDir(const std::string& name) {
-  fs::path d =
-      fs::temp_directory_path() / ("exid_stale_" + name + "_" + std::to_string(::getpid()));
-  fs::remove_all(d);
-  fs::create_directories(d);
-  return d;
-}
+fs::path tempDir(const std::string& name) { return exid_cli::freshTempDir("exid_stale_", name); }
 
 using exid_cli::slurp;
 

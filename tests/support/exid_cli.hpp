@@ -1,6 +1,6 @@
 // Helpers for tests that run the exid program (the test target defines EXID_EXE): run it with
-// arguments and capture its output (in a folder, with a timeout and an address-space cap:
-// runExidIn), read a file whole, make a fresh temporary folder.
+// arguments and capture its output (in a folder, with a timeout, an address-space cap and a
+// file-size cap: runExidIn), read a file whole, make a fresh temporary folder.
 #pragma once
 
 #include <fcntl.h>
@@ -77,24 +77,37 @@ struct RunResult {
   std::string out;  // stdout and stderr
 };
 
+/// Caps on the exid child of runExidIn (0: none).
+struct Limits {
+  /// RLIMIT_AS, in MiB (never under AddressSanitizer): an unbounded allocation fails there
+  /// instead of taking the machine's memory.
+  long address_space_mb = 0;
+  /// RLIMIT_FSIZE, in bytes, SIGXFSZ ignored: a write past it fails with EFBIG, as on a full disk.
+  long file_size_bytes = 0;
+};
+
 /// Runs `EXID_EXE args` (no shell) in dir, stdout and stderr captured through dir/exid_log.txt;
-/// killed after timeout_s, so that a hang is a failure, not a stuck test. address_space_mb > 0
-/// caps the child's address space (RLIMIT_AS; never under AddressSanitizer): an unbounded
-/// allocation fails there instead of taking the machine's memory.
+/// killed after timeout_s (reported as signal 9), so that a hang is a failure, not a stuck test.
 inline RunResult runExidIn(const std::vector<std::string>& args, const std::filesystem::path& dir,
-                           double timeout_s, long address_space_mb = 0) {
+                           double timeout_s, const Limits& limits = {}) {
   const std::filesystem::path log = dir / "exid_log.txt";
-  const bool cap = address_space_mb > 0 && !underAddressSanitizer();
+  const bool cap_as = limits.address_space_mb > 0 && !underAddressSanitizer();
   const pid_t pid = ::fork();
   if (pid == 0) {
     if (::chdir(dir.c_str()) != 0) ::_exit(126);
     const int fd = ::open(log.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
     ::dup2(fd, STDOUT_FILENO);
     ::dup2(fd, STDERR_FILENO);
-    if (cap) {
-      const auto bytes = static_cast<rlim_t>(address_space_mb) * 1048576u;
+    if (cap_as) {
+      const auto bytes = static_cast<rlim_t>(limits.address_space_mb) * 1048576u;
       rlimit rl{bytes, bytes};
       ::setrlimit(RLIMIT_AS, &rl);
+    }
+    if (limits.file_size_bytes > 0) {
+      ::signal(SIGXFSZ, SIG_IGN);
+      const auto bytes = static_cast<rlim_t>(limits.file_size_bytes);
+      rlimit rl{bytes, bytes};
+      ::setrlimit(RLIMIT_FSIZE, &rl);
     }
     std::vector<char*> argv;
     argv.push_back(const_cast<char*>(EXID_EXE));

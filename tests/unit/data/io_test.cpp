@@ -1,4 +1,5 @@
-// Files and values: atomic writes, CSV with errors that name file/line/column, JSON.
+// The data layer's files (exid/io.hpp): atomic writes, CSV with errors that name
+// file/line/column, input files that are not regular files.
 #include "exid/io.hpp"
 
 #include <gtest/gtest.h>
@@ -12,8 +13,6 @@
 #include <functional>
 
 #include "exid/error.hpp"
-#include "exid/json.hpp"
-#include "exid/params.hpp"
 
 namespace fs = std::filesystem;
 
@@ -156,45 +155,6 @@ TEST(Csv, DropsBadRowsWhenAskedAndCountsThem) {
   EXPECT_EQ(t.data(1, 1), 3.0);
 }
 
-TEST(Json, DumpParseRoundTrip) {
-  exid::Json j = exid::Json::object();
-  j["status"] = "ok";
-  j["n"] = 3;
-  j["x"] = 0.25;
-  j["nan"] = std::nan("");
-  j["list"] = std::vector<double>{1, 2.5};
-  j["nested"]["s"] = "a \"quoted\"\nline";
-  exid::Json back = exid::Json::parse(j.dump());
-  EXPECT_EQ(back.find("status")->asString(), "ok");
-  EXPECT_EQ(back.find("n")->asInt(), 3);
-  EXPECT_DOUBLE_EQ(back.find("x")->asDouble(), 0.25);
-  EXPECT_TRUE(back.find("nan")->isNull());
-  EXPECT_DOUBLE_EQ(back.find("list")->at(1).asDouble(), 2.5);
-  EXPECT_EQ(back.find("nested")->find("s")->asString(), "a \"quoted\"\nline");
-  EXPECT_EQ(j.items().front().first, "status");  // insertion order kept
-  std::string msg = errorOf([] { exid::Json::parse("{\"a\": }"); });
-  EXPECT_NE(msg.find("offset"), std::string::npos);
-}
-
-TEST(Params, RangeTextAndViolations) {
-  auto d = exid::param_double("ff", 1.0, "", "forgetting factor", 0.0, 1.0, true, false);
-  EXPECT_EQ(d.rangeText(), "(0, 1]");
-  EXPECT_EQ(d.violation(exid::ParamValue(0.0)), "must be in (0, 1]");
-  EXPECT_EQ(d.violation(exid::ParamValue(1.0)), "");
-  EXPECT_EQ(d.violation(exid::ParamValue(std::nan(""))), "must be in (0, 1]");
-  auto l = exid::param_doubles("w", std::nullopt, "N m", "weights", 2, 3);
-  EXPECT_NE(l.violation(exid::ParamValue(std::vector<double>{1.0})).find("at least 2"),
-            std::string::npos);
-  exid::ParamSet ps;
-  ps.context = "estimator.params";
-  ps.set("n", exid::ParamValue(std::int64_t{3}));
-  EXPECT_DOUBLE_EQ(ps.getDouble("n"), 3.0);
-  std::string msg = errorOf([&] { ps.getString("n"); });
-  EXPECT_NE(msg.find("estimator.params.n: expected a string"), std::string::npos) << msg;
-  msg = errorOf([&] { ps.getDouble("absent"); });
-  EXPECT_NE(msg.find("'absent' is not set"), std::string::npos) << msg;
-}
-
 // A NUL (or any other byte) inside a number: strtod stopped at the NUL, which looked like the
 // end of the text, and the number was silently truncated (issue 16). Now file:line:column.
 TEST(Csv, NulOrStrayByteInsideANumberIsAnErrorWithItsColumn) {
@@ -211,22 +171,6 @@ TEST(Csv, NulOrStrayByteInsideANumberIsAnErrorWithItsColumn) {
   m = errorOf([&] { exid::parseCsv("t,q1\n0,\x01\n", "d.csv"); });
   EXPECT_NE(m.find("d.csv:2:3: column 'q1'"), std::string::npos) << m;
   EXPECT_NE(m.find("unexpected byte 0x01"), std::string::npos) << m;
-}
-
-// Integer parameters declared without bounds still have a range that fits an int (samples:
-// 2^63 - 1 was accepted and narrowed to 40, issue 16).
-TEST(Params, IntegersAlwaysHaveARangeThatFitsAnInt) {
-  const auto d = exid::param_int("n", 1, "count", 0.0);
-  EXPECT_EQ(d.rangeText(), "[0, 1000000000]");
-  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{1000000000})), "");
-  EXPECT_EQ(d.violation(exid::ParamValue(std::int64_t{9223372036854775807})),
-            "must be in [0, 1000000000]");
-  const auto u = exid::param_int("m", 1, "count");
-  EXPECT_EQ(u.violation(exid::ParamValue(std::int64_t{-2147483648})),
-            "must be in [-1000000000, 1000000000]");
-  const auto l = exid::param_ints("j", std::nullopt, "joints", 1.0);
-  EXPECT_EQ(l.violation(exid::ParamValue(std::vector<std::int64_t>{1, 4294967297})),
-            "element 1 must be in [1, 1000000000]");
 }
 
 // Input files: only regular files, only up to a cap; a FIFO is refused without blocking.

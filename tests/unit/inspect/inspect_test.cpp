@@ -12,7 +12,7 @@
 #include <fstream>
 #include <random>
 
-#include "../models/model_test_util.hpp"
+#include "../../models/model_test_util.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/io.hpp"
