@@ -1,7 +1,36 @@
-// exid — the helpers a study's stages share (study_run.hpp).
-#include "study_run.hpp"
+// exid — what a study's stages share (stages.hpp): their environment, where their records go,
+// the inspection of a dataset, the checks of what they read and make.
+#include "stages.hpp"
 
 namespace exid {
+
+StageEnv::StageEnv(const StudyConfig& study, const Registry& registry, const RunOptions& options,
+                   fs::path staging, std::function<void(const char*)> stage)
+    : cfg(study),
+      reg(registry),
+      opt(options),
+      dir(std::move(staging)),
+      set_stage(std::move(stage)) {
+  ctx.study_dir = cfg.dir;
+  ctx.out_dir = dir;
+  ctx.seed = cfg.seed;
+  ctx.deadline = Deadline(cfg.budget_s);
+  ctx.cancelled = opt.cancelled;
+}
+
+std::function<void(double, const std::string&)> StageEnv::progressFor(
+    const std::string& stage) const {
+  const RunOptions* o = &opt;
+  return [o, stage](double f, const std::string& text) {
+    if (o->progress) o->progress(stage, f, text);
+  };
+}
+
+void StudyRecord::warn(const std::string& text, bool log) {
+  if (log) logWarn(text);
+  typed->warnings.push_back(text);
+  (*summary)["warnings"].push_back(Json(text));
+}
 
 // What a study says when the optimiser found no trajectory within every constraint.
 std::string infeasibleText(const OptimizerResult& r, const StudySummary::Excitation& x) {
@@ -180,18 +209,16 @@ Json inspectionOf(const RobotModel& robot, const ObservationModel* model, const 
 }
 
 // An inspection's result under summary.json `inspection.<what>`, its warnings among the study's.
-void applyInspection(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
-                     const Json& I) {
+void applyInspection(StudyRecord& rec, const char* what, const Json& I) {
   if (const Json* w = I.find("warnings"))
     for (std::size_t i = 0; i < w->size(); ++i)
-      warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));
-  S["inspection"][what] = I;
+      rec.warn(fmt::format("inspection ({}): {}", what, w->at(i).asString()));
+  (*rec.summary)["inspection"][what] = I;
 }
 
-void inspectInto(Json& S, const std::function<void(const std::string&)>& warn, const char* what,
-                 const RobotModel& robot, const ObservationModel* model, const Dataset& d,
-                 const RunContext& ctx) {
-  applyInspection(S, warn, what, inspectionOf(robot, model, d, ctx));
+void record(const ExperimentFollowUp& f, StudyRecord& rec) {
+  if (f.meta) (*rec.summary)["experiment"]["meta"] = *f.meta;
+  if (f.inspection) applyInspection(rec, "experiment", *f.inspection);
 }
 
 }  // namespace exid

@@ -1,8 +1,9 @@
-// exid — running a study (runner.hpp): the run folder prepared, the stages run in order
-// (study_run.hpp), the results published.
+// exid — running a study (runner.hpp): the run folder prepared, the stages run in order, each
+// stage's output recorded (stages.hpp: summary.json, the typed summary, the report), the results
+// published.
 #include "exid/runner.hpp"
 
-#include "study_run.hpp"
+#include "stages.hpp"
 
 namespace exid {
 
@@ -167,33 +168,54 @@ StudyResult runStudy(const StudyConfig& cfg, const Registry& reg, const RunOptio
     stage_now = name;
   };
   Watchdog watchdog(opt, write ? folder : RunFolder{}, cfg, stage_now, t_start);
-  StudyRun run(cfg, reg, opt, S, T, dir, report, setStage);
-  const RunContext& ctx = run.ctx;
-  std::optional<InputManifestScope> inputs;  // files the stages read: the run's manifest
-  inputs.emplace(&run.manifest);
-  try {
-    if (write) {
-      writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
+  StageEnv env(cfg, reg, opt, dir, setStage);
+  const RunContext& ctx = env.ctx;
+  InputManifest manifest;  // every file the stages read: summary.json `inputs`
+  env.manifest = &manifest;
+  std::optional<InputManifestScope> inputs;
+  inputs.emplace(&manifest);
+  StudyRecord rec{&S, &T, &report};
+  {
+    // (the estimator waits for the inspection beside it before the stages' outputs go)
+    std::optional<RobotStageOut> robot;
+    std::optional<ModelStageOut> model;
+    std::optional<ExcitationStageOut> excitation;
+    std::optional<ExperimentStageOut> experiment;
+    std::optional<IdentificationStageOut> identification;
+    std::optional<ValidationStageOut> validation;
+    StudyEstimator estimator(cfg, reg);
+    try {
+      if (write) {
+        writeFileAtomic(dir / "study.resolved.yaml", cfg.resolvedYaml());
+      }
+      record(env, robot.emplace(robotStage(env)), rec);
+      record(env, model.emplace(modelStage(env, *robot)), rec);
+      record(env, excitation.emplace(excitationStage(env, *robot, *model)), rec);
+      record(env, experiment.emplace(experimentStage(env, *robot, *model, *excitation, estimator)),
+             rec);
+      record(
+          env,
+          identification.emplace(identificationStage(env, *robot, *model, *experiment, estimator)),
+          rec);
+      record(env,
+             validation.emplace(
+                 validationStage(env, *robot, *model, *experiment, *identification, estimator)),
+             rec);
+      if (ctx.shouldStop())
+        throw Error(fmt::format(
+            "stopped: {}", ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
+      T.status = "ok";
+      renderInto(T, &S);
+      judgeResults(S, &T);  // the results' own verdict, from what the stages recorded
+      res.ok = true;
+    } catch (const std::exception& e) {
+      // (a failed identification keeps the data's inspection)
+      record(estimator.takeFollowUp(), rec);
+      recordFailure(e, stage, opt, ctx, &res);
     }
-    run.robotStage();
-    run.modelStage();
-    run.excitationStage();
-    run.experimentStage();
-    run.identificationStage();
-    run.validationStage();
-    if (ctx.shouldStop())
-      throw Error(fmt::format("stopped: {}",
-                              ctx.deadline.expired() ? "study budget_s exhausted" : "interrupted"));
-    T.status = "ok";
-    renderInto(T, &S);
-    judgeResults(S, &T);  // the results' own verdict, from what the stages wrote
-    res.ok = true;
-  } catch (const std::exception& e) {
-    run.collectExperimentInspection();  // (a failed identification keeps the data's inspection)
-    recordFailure(e, stage, opt, ctx, &res);
   }
   inputs.reset();
-  S["inputs"] = inputManifestJson(run.manifest);
+  S["inputs"] = inputManifestJson(manifest);
   T.wall_s = seconds(t_start);
   renderInto(T, &S);
   const std::lock_guard<std::mutex> finishing(watchdog.finishing());
