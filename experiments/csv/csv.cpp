@@ -55,38 +55,11 @@ class CsvExperiment : public exid::Experiment {
                      "name of the time column; absent from the file: sample_period_s is needed"),
         param_string("time_unit", std::string("s"), "unit of the time column",
                      {"s", "ms", "us", "ns"}),
-        param_doubles("q_scale", std::vector<double>{}, "",
-                      "per joint, multiplies the q column (after which sign and offset_rad "
-                      "apply), e.g. 0.0174533 for degrees; empty: 1"),
-        param_doubles("qd_scale", std::vector<double>{}, "",
-                      "per joint, multiplies the qd and qdd columns; empty: as q_scale"),
-        param_doubles("tau_scale", std::vector<double>{}, "",
-                      "per joint, multiplies the torque column alone (after torque constants), "
-                      "e.g. -1 for a torque recorded with the opposite sign to the joint; "
-                      "empty: 1"),
-        param_doubles("wrench_scale", std::vector<double>{}, "",
-                      "6 values multiplying fx fy fz mx my mz (a unit, a sign); empty: 1"),
         param_double("max_gap_ratio", 1.5, "",
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the rows",
                      1.0, std::nullopt, true),
-        param_string("torque_from", std::string("tau"),
-                     "tau: columns tau1..taun; current: columns <current_prefix>1..n times "
-                     "torque_constants_Nm_per_A",
-                     {"tau", "current"}),
         param_string("current_prefix", std::string("i"), "prefix of the motor current columns"),
-        param_doubles("torque_constants_Nm_per_A", std::vector<double>{}, "N m/A",
-                      "per joint: torque per ampere of current j, referred to the coordinate "
-                      "named by current_frame (gear ratio included)"),
-        param_string("current_frame", std::string("measured"),
-                     "measured: tau_m = Kt .* i directly; joint: the products act on the joint "
-                     "coordinates and tau_m = T^T (Kt .* i) with the robot's transmission T",
-                     {"measured", "joint"}),
-        param_doubles("sign", std::vector<double>{}, "",
-                      "per joint +1 or -1, applied to q, qd, qdd and tau of that joint; empty: "
-                      "all +1"),
-        param_doubles("offset_rad", std::vector<double>{}, "rad",
-                      "per joint, added to q after the sign; empty: zeros"),
         param_strings("q_columns", std::vector<std::string>{},
                       "names of the n position columns (in file), instead of q1..qn"),
         param_path("torque_file", std::string(),
@@ -108,10 +81,10 @@ class CsvExperiment : public exid::Experiment {
                   "this process may run on, at most 8",
                   0, 256),
     };
+    const auto conv = signalConversionParams("the torque columns");  // exid/recording.hpp
+    p.insert(p.end(), conv.begin(), conv.end());
     const auto segment = segmentParams("sample");
-    const auto at = std::find_if(p.begin(), p.end(),
-                                 [](const ParamDecl& d) { return d.name == "torque_from"; });
-    p.insert(at, segment.begin(), segment.end());
+    p.insert(p.end(), segment.begin(), segment.end());
     const auto steps = recordingStepParams();  // the filter steps (exid/recording.hpp)
     p.insert(p.end(), steps.begin(), steps.end());
     return p;

@@ -12,6 +12,8 @@
 
 #include "csv_stream.hpp"
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
+#include "exid/recording.hpp"
 
 namespace exid::csv_experiment {
 
@@ -40,6 +42,11 @@ void CsvStream::openFiles(const exid::RunContext& ctx) {
   files_.push_back(path(P_.getString("file")));
   if (!P_.getString("torque_file").empty()) files_.push_back(path(P_.getString("torque_file")));
   for (const std::string& f : files_) {
+    if (exid::isBagPath(f))  // (a bag read as a CSV file says "found columns: \x89MCAP0")
+      throw exid::Error(fmt::format(
+          "experiment 'csv': {}: a ROS 2 bag ({}), not a CSV file: read it with experiment "
+          "rosbag2 (path: {})",
+          f, fs::is_directory(f) ? "a folder" : exid::bagStorageOf(f) + " storage file", f));
     exid::CsvReadOptions opt;
     opt.text_columns = true;
     exid::CsvReader r(f, opt, "CSV data");
@@ -117,11 +124,6 @@ std::vector<CsvStream::Ref> CsvStream::torqueColumns(int ftau) {
     const std::string pre = P_.getString("current_prefix");
     if (ctau.empty())
       ctau = columnGroup(pre, true, "torque_from: current needs the motor currents", ftau);
-    Kt_ = P_.getDoubles("torque_constants_Nm_per_A");
-    exid::check(static_cast<int>(Kt_.size()) == n_,
-                fmt::format("experiment 'csv': torque_constants_Nm_per_A: expected {} values "
-                            "(one per joint of robot '{}'), found {}",
-                            n_, robot_->name, Kt_.size()));
   }
   return ctau;
 }
@@ -161,55 +163,11 @@ int CsvStream::timeColumn() {
   return ct;
 }
 
-// A per-joint scale: n finite non-zero values (empty: dflt for every joint).
-std::vector<double> CsvStream::perJoint(const char* key, std::vector<double> v, double dflt) const {
-  const int n = n_;
-  if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
-  exid::check(static_cast<int>(v.size()) == n,
-              fmt::format("experiment 'csv': {}: expected {} values (one per joint of "
-                          "robot '{}'), found {}",
-                          key, n, robot_->name, v.size()));
-  for (double x : v)
-    exid::check(std::isfinite(x) && x != 0.0,
-                fmt::format("experiment 'csv': {}: {} is not a usable scale", key, x));
-  return v;
-}
-
-// Scales, signs, offsets and the remaining options.
+// Scales, signs, offsets, torque constants (exid/recording.hpp) and the remaining options.
 void CsvStream::readScales() {
-  const int n = n_;
-  qscale_ = perJoint("q_scale", P_.getDoubles("q_scale"), 1.0);
-  qdscale_ = P_.getDoubles("qd_scale").empty()
-                 ? qscale_
-                 : perJoint("qd_scale", P_.getDoubles("qd_scale"), 1.0);
-  tauscale_ = perJoint("tau_scale", P_.getDoubles("tau_scale"), 1.0);
-  wscale_ = P_.getDoubles("wrench_scale");
-  if (wscale_.empty()) wscale_.assign(6, 1.0);
-  exid::check(wscale_.size() == 6,
-              fmt::format("experiment 'csv': wrench_scale: expected 6 values (fx fy fz mx my "
-                          "mz), found {}",
-                          wscale_.size()));
-  for (double x : wscale_)
-    exid::check(std::isfinite(x) && x != 0.0,
-                fmt::format("experiment 'csv': wrench_scale: {} is not a usable scale", x));
-  sign_ = P_.getDoubles("sign");
-  off_ = P_.getDoubles("offset_rad");
-  if (sign_.empty()) sign_.assign(static_cast<std::size_t>(n), 1.0);
-  if (off_.empty()) off_.assign(static_cast<std::size_t>(n), 0.0);
-  exid::check(static_cast<int>(sign_.size()) == n,
-              fmt::format("experiment 'csv': sign: expected {} values (one per joint), found "
-                          "{}",
-                          n, sign_.size()));
-  exid::check(static_cast<int>(off_.size()) == n,
-              fmt::format("experiment 'csv': offset_rad: expected {} values (one per joint), "
-                          "found {}",
-                          n, off_.size()));
-  for (int j = 0; j < n; ++j)
-    exid::check(
-        sign_[static_cast<std::size_t>(j)] == 1.0 || sign_[static_cast<std::size_t>(j)] == -1.0,
-        fmt::format("experiment 'csv': sign: joint {}: expected +1 or -1, found {}", j + 1,
-                    sign_[static_cast<std::size_t>(j)]));
-  joint_frame_ = P_.getString("current_frame") == "joint";
+  conv_ = exid::SignalConversion::fromParams(
+      P_, n_, robot_->hasTransmission() ? robot_->transmission : Eigen::MatrixXd(),
+      "experiment 'csv'");
   drop_ = P_.getBool("drop_bad_rows");
 }
 

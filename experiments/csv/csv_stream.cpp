@@ -47,9 +47,9 @@ void CsvStream::rewind() {
       protos_.push_back(std::make_unique<exid::CsvReader>(files_[f], opt, "CSV data"));
       protos_.back()->select(select_[f]);
     }
-  std::vector<double> qd_per_q(qscale_.size());
-  for (std::size_t j = 0; j < qscale_.size() && j < qdscale_.size(); ++j)
-    qd_per_q[j] = qdscale_[j] / qscale_[j];
+  std::vector<double> qd_per_q(conv_.q_scale.size());
+  for (std::size_t j = 0; j < conv_.q_scale.size() && j < conv_.qd_scale.size(); ++j)
+    qd_per_q[j] = conv_.qd_scale[j] / conv_.q_scale[j];
   stats_ = std::make_unique<RecordingStats>(pq_, ptau_, used_.size(), ct_, pqd_, qd_per_q, tfactor_,
                                             dt_);
   collecting_ = !stats_done_;
@@ -272,27 +272,17 @@ void CsvStream::convert(int k, const double* uv, int row, exid::Dataset* d,
   d->t[k] = ct_ ? tfactor_ * uv[static_cast<std::size_t>(pt_)] : row * dt_;
   for (int j = 0; j < n; ++j) {
     const auto u = static_cast<std::size_t>(j);
-    const double s = sign_[u];
-    d->q(k, j) = s * qscale_[u] * uv[static_cast<std::size_t>(pq_[u])] + off_[u];
-    if (!pqd_.empty()) d->qd(k, j) = s * qdscale_[u] * uv[static_cast<std::size_t>(pqd_[u])];
-    if (!pqdd_.empty()) d->qdd(k, j) = s * qdscale_[u] * uv[static_cast<std::size_t>(pqdd_[u])];
+    d->q(k, j) = conv_.q(j, uv[static_cast<std::size_t>(pq_[u])]);
+    if (!pqd_.empty()) d->qd(k, j) = conv_.qd(j, uv[static_cast<std::size_t>(pqd_[u])]);
+    if (!pqdd_.empty()) d->qdd(k, j) = conv_.qd(j, uv[static_cast<std::size_t>(pqdd_[u])]);
   }
   if (!ptau_.empty()) {
-    tau->resize(n);
-    for (int j = 0; j < n; ++j) {
-      const auto u = static_cast<std::size_t>(j);
-      double v = uv[static_cast<std::size_t>(ptau_[u])];
-      if (!Kt_.empty()) v *= Kt_[u];
-      (*tau)[j] = v;
-    }
-    if (!Kt_.empty() && joint_frame_ && robot_->hasTransmission())
-      *tau = robot_->transmission.transpose() * *tau;
-    for (int j = 0; j < n; ++j)
-      d->tau(k, j) =
-          sign_[static_cast<std::size_t>(j)] * tauscale_[static_cast<std::size_t>(j)] * (*tau)[j];
+    conv_.torque(uv, ptau_.data(), tau);
+    d->tau.row(k) = tau->transpose();
   }
   for (std::size_t e = 0; e < pw_.size(); ++e)
-    d->wrench(k, static_cast<Eigen::Index>(e)) = wscale_[e] * uv[static_cast<std::size_t>(pw_[e])];
+    d->wrench(k, static_cast<Eigen::Index>(e)) =
+        conv_.wrench(static_cast<int>(e), uv[static_cast<std::size_t>(pw_[e])]);
 }
 
 void CsvStream::collect(const exid::Dataset& chunk, int k) {

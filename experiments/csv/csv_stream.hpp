@@ -97,7 +97,6 @@ class CsvStream : public exid::DatasetStream {
   std::vector<Ref> torqueColumns(int ftau);
   std::vector<Ref> wrenchColumns() const;
   int timeColumn();
-  std::vector<double> perJoint(const char* key, std::vector<double> v, double dflt) const;
   void readScales();
   void layoutColumns(const std::vector<Ref>& cq, const std::vector<Ref>& cqd,
                      const std::vector<Ref>& cqdd, const std::vector<Ref>& ctau,
@@ -156,9 +155,9 @@ class CsvStream : public exid::DatasetStream {
   std::vector<std::vector<double>> vals_;  // per source: one row's values
   std::vector<double> uv_;                 // one row's used values
   std::vector<std::string> tau_names_;
-  std::vector<double> qscale_, qdscale_, tauscale_, wscale_, sign_, off_, Kt_;
+  exid::SignalConversion conv_;  // scales, signs, offsets, torque constants
   Eigen::VectorXd tau_;
-  bool joint_frame_ = false, drop_ = false;
+  bool drop_ = false;
   double tfactor_ = 1.0, dt_ = 0.0;
   std::string tname_, tunit_, tfrom_, part_;
   // the scan

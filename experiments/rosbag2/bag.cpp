@@ -12,6 +12,8 @@
 #include <fmt/ranges.h>
 #include <yaml-cpp/yaml.h>
 
+#include <algorithm>
+#include <fstream>
 #include <map>
 #include <string>
 #include <vector>
@@ -121,6 +123,14 @@ void metadataOf(const YAML::Node& root, BagInfo* out) {
                                   line(c), scalarText(c)));
         }
       }
+      // offered_qos_profiles: one entry per publisher (a YAML list, or a string holding one)
+      if (const YAML::Node q = md["offered_qos_profiles"]) {
+        try {
+          const YAML::Node list = q.IsScalar() && !q.Scalar().empty() ? YAML::Load(q.Scalar()) : q;
+          if (list.IsSequence()) ti.publishers = static_cast<int>(list.size());
+        } catch (const YAML::Exception&) {  // (not read: the count stays unknown)
+        }
+      }
       if (const auto [at, fresh] = entries.emplace(ti.name, bag.topics.size() + 1); !fresh)
         throw Error(fmt::format(
             "{}:{}: topics_with_message_count: topic '{}' is listed twice (entries {} and {}); "
@@ -174,13 +184,105 @@ const TopicInfo* BagInfo::topic(const std::string& name) const {
 }
 
 void readMessages(const BagInfo& bag, const std::set<std::string>& wanted,
-                  const std::function<void(const RawMessage&)>& fn) {
+                  const std::function<void(const RawMessage&)>& fn, Census* census) {
   for (const fs::path& f : bag.files) {
     if (bag.storage == "sqlite3")
-      readSqliteFile(bag, f, wanted, fn);
+      readSqliteFile(bag, f, wanted, fn, census);
     else
-      detail::readMcap(bag, f, wanted, fn);
+      detail::readMcap(bag, f, wanted, fn, census);
   }
+}
+
+Census censusOf(const BagInfo& bag) {
+  Census c;
+  readMessages(
+      bag, {}, [](const RawMessage&) {}, &c);
+  return c;
+}
+
+namespace {
+std::string storageOf(const fs::path& p) { return exid::bagStorageOf(p); }
+
+// A bag without metadata.yaml: its storage files, their topics from a census.
+BagInfo bareBag(const fs::path& dir, std::vector<fs::path> files, const std::string& storage) {
+  BagInfo bag;
+  bag.dir = dir;
+  bag.metadata_file = files.front();  // (names the storage in messages)
+  bag.storage = storage;
+  bag.files = std::move(files);
+  for (const auto& [name, tc] : censusOf(bag)) {
+    TopicInfo t;
+    t.name = name;
+    t.type = tc.type;
+    t.serialization_format = tc.serialization_format;
+    t.message_count = tc.messages;
+    bag.topics.push_back(t);
+  }
+  return bag;
+}
+}  // namespace
+
+bool isBagStorageFile(const fs::path& path) {
+  std::error_code ec;
+  return fs::is_regular_file(path, ec) && !storageOf(path).empty();
+}
+
+BagInfo openBag(const fs::path& path, std::string* how) {
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    if (fs::exists(path / "metadata.yaml", ec)) {
+      *how = "bag folder with metadata.yaml";
+      return readMetadata(path);
+    }
+    std::vector<fs::path> mcap, db3;
+    for (const auto& e : fs::directory_iterator(path, ec)) {
+      const std::string ext = e.path().extension().string();
+      if (ext == ".mcap") mcap.push_back(fs::absolute(e.path()));
+      if (ext == ".db3") db3.push_back(fs::absolute(e.path()));
+    }
+    if (mcap.empty() == db3.empty())
+      throw Error(fmt::format(
+          "{}: a folder without metadata.yaml holding {} .mcap and {} .db3 files: expected a "
+          "rosbag2 bag folder (metadata.yaml and its storage files), or storage files of one "
+          "kind",
+          path.string(), mcap.size(), db3.size()));
+    std::vector<fs::path>& files = mcap.empty() ? db3 : mcap;
+    std::sort(files.begin(), files.end());
+    const std::string storage = mcap.empty() ? "sqlite3" : "mcap";
+    for (const fs::path& f : files)
+      if (storageOf(f) != storage)
+        throw Error(fmt::format("{}: not a{} file (its first bytes)", f.string(),
+                                storage == "mcap" ? "n MCAP" : " SQLite"));
+    *how = fmt::format(
+        "folder without metadata.yaml: {} {} file(s) in name order, topics from "
+        "the storage",
+        files.size(), storage);
+    return bareBag(path, files, storage);
+  }
+  if (!fs::exists(path, ec))
+    throw Error(
+        fmt::format("{}: not found (expected a rosbag2 bag folder, an .mcap file or a "
+                    ".db3 file)",
+                    path.string()));
+  const std::string storage = storageOf(path);
+  if (storage.empty())
+    throw Error(
+        fmt::format("{}: not a rosbag2 bag: expected a bag folder (metadata.yaml and its "
+                    "storage files), an .mcap file or a .db3 file",
+                    path.string()));
+  const fs::path file = fs::absolute(path);
+  const fs::path dir = file.parent_path();
+  if (fs::exists(dir / "metadata.yaml", ec)) {
+    BagInfo bag = readMetadata(dir);
+    for (const fs::path& f : bag.files)
+      if (fs::equivalent(f, file, ec)) {
+        *how = fmt::format("storage file {} of the bag in {} (the whole bag is read: {} file(s))",
+                           file.filename().string(), dir.string(), bag.files.size());
+        return bag;
+      }
+  }
+  *how = fmt::format("{} file alone, topics from the storage", storage);
+  return bareBag(dir, {file}, storage);
 }
 
 }  // namespace exid::rosbag2

@@ -14,6 +14,7 @@
 #include <cstdint>
 #include <filesystem>
 #include <functional>
+#include <map>
 #include <set>
 #include <string>
 #include <vector>
@@ -47,6 +48,7 @@ inline constexpr std::uint64_t kSqliteStepsPerByte = 100;
 struct TopicInfo {
   std::string name, type, serialization_format;
   long long message_count = -1;  // -1: not given
+  int publishers = -1;           // offered_qos_profiles' entries (one per publisher); -1: not given
 };
 
 /// The bag folder's metadata.yaml (rosbag2_bagfile_information).
@@ -63,6 +65,25 @@ struct BagInfo {
 /// Reads and checks dir/metadata.yaml. Throws exid::Error naming the file and the key.
 BagInfo readMetadata(const std::filesystem::path& dir);
 
+/// What a bag holds per topic, from its storage: type, serialization, message count and the
+/// span of the storage's time stamps (a scan of the records; no message is decoded).
+struct TopicCensus {
+  std::string type, serialization_format;
+  long long messages = 0;
+  std::int64_t first_ns = 0, last_ns = 0;
+};
+using Census = std::map<std::string, TopicCensus>;
+Census censusOf(const BagInfo& bag);
+
+/// A bag named by `path`, as a user names it: a bag folder with metadata.yaml; a folder of
+/// storage files without it (every *.mcap, or every *.db3, in name order); a storage file itself
+/// (the bag of its folder when that folder's metadata.yaml lists it, else the file alone: an
+/// MCAP or SQLite file recognised by its first bytes). Without metadata.yaml the topics come from
+/// the storage (censusOf). *how says which it was, for the dataset's meta.
+BagInfo openBag(const std::filesystem::path& path, std::string* how);
+/// Whether a path is a storage file of a bag by its first bytes (MCAP magic, SQLite header).
+bool isBagStorageFile(const std::filesystem::path& path);
+
 /// One serialized message of a wanted topic.
 struct RawMessage {
   const std::string* topic = nullptr;
@@ -76,18 +97,19 @@ struct RawMessage {
 /// order of each file (SQLite: by time stamp then row id; MCAP: the order of the records).
 /// Checks that each wanted topic's type in the storage matches metadata.yaml.
 void readMessages(const BagInfo& bag, const std::set<std::string>& wanted,
-                  const std::function<void(const RawMessage&)>& fn);
+                  const std::function<void(const RawMessage&)>& fn, Census* census = nullptr);
 
 /// The SQLite part of readMessages (one .db3 file); exposed for the tests and fuzzers.
 void readSqliteFile(const BagInfo& bag, const std::filesystem::path& file,
                     const std::set<std::string>& wanted,
-                    const std::function<void(const RawMessage&)>& fn);
+                    const std::function<void(const RawMessage&)>& fn, Census* census = nullptr);
 
 /// The MCAP part of readMessages on a file already in memory (`file` names it in messages);
 /// exposed for the tests and fuzzers.
+/// census: when set, every topic's census of the file is added to it.
 void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8_t* data,
                    std::size_t size, const std::set<std::string>& wanted,
-                   const std::function<void(const RawMessage&)>& fn);
+                   const std::function<void(const RawMessage&)>& fn, Census* census = nullptr);
 
 /// Decompression of one MCAP chunk ("" / "zstd" / "lz4"); exposed for the tests and fuzzers.
 /// uncompressed_size is checked against kMaxChunkBytes and the ratio cap before anything is

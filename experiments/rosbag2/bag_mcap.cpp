@@ -168,6 +168,7 @@ struct McapState {
   std::map<std::uint16_t, Channel> channels;
   std::map<std::string, std::uint16_t> topic_channel;  // a topic's first channel
   std::uint64_t decompressed = 0;                      // bytes of chunks so far (declared)
+  Census* census = nullptr;                            // set: every topic counted
 };
 
 /// The name of a schema for messages ("0 (none)", "3 'sensor_msgs/msg/JointState'").
@@ -264,6 +265,12 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
       }
     }
     st.channels[id] = c;
+    if (st.census) {
+      TopicCensus& tc = (*st.census)[c.topic];
+      if (const auto sc = st.schemas.find(c.schema); tc.type.empty() && sc != st.schemas.end())
+        tc.type = sc->second.name;
+      if (tc.serialization_format.empty()) tc.serialization_format = c.encoding;
+    }
     return true;
   }
   if (op == 0x05) {
@@ -275,6 +282,13 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
     if (c == st.channels.end())
       throw Error(fmt::format(
           "{}: message on channel {}, which no Channel record defined before it", where, ch));
+    if (st.census) {
+      TopicCensus& tc = (*st.census)[c->second.topic];
+      const auto t = static_cast<std::int64_t>(std::min<std::uint64_t>(log_time, INT64_MAX));
+      if (tc.messages == 0 || t < tc.first_ns) tc.first_ns = t;
+      if (tc.messages == 0 || t > tc.last_ns) tc.last_ns = t;
+      ++tc.messages;
+    }
     if (!c->second.wanted) return true;
     RawMessage m;
     m.topic = c->second.wanted;
@@ -295,7 +309,7 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
 
 void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8_t* data,
                    std::size_t size, const std::set<std::string>& wanted,
-                   const std::function<void(const RawMessage&)>& fn) {
+                   const std::function<void(const RawMessage&)>& fn, Census* census) {
   const Span buf{data, size};
   if (buf.size() < kMcapMagic.size() ||
       !std::equal(kMcapMagic.begin(), kMcapMagic.end(), buf.begin()))
@@ -304,6 +318,7 @@ void readMcapBytes(const BagInfo& bag, const std::string& file, const std::uint8
                     "0a at its start (storage_identifier mcap in {})",
                     file, bag.metadata_file.string()));
   McapState st;
+  st.census = census;
   std::size_t pos = kMcapMagic.size();
   long long index = 0;
   bool ended = false;
@@ -494,9 +509,9 @@ namespace detail {
 
 /// The MCAP part of readMessages: the storage file read whole, at most kMaxMcapFileBytes.
 void readMcap(const BagInfo& bag, const fs::path& path, const std::set<std::string>& wanted,
-              const std::function<void(const RawMessage&)>& fn) {
+              const std::function<void(const RawMessage&)>& fn, Census* census) {
   const std::vector<std::uint8_t> buf = readWhole(path, "bag storage (MCAP)", kMaxMcapFileBytes);
-  readMcapBytes(bag, path.string(), buf.data(), buf.size(), wanted, fn);
+  readMcapBytes(bag, path.string(), buf.data(), buf.size(), wanted, fn, census);
 }
 
 }  // namespace detail

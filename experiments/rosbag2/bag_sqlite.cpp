@@ -96,6 +96,7 @@ class SqliteFile {
       throw failure("BEGIN");
   }
   void checkSchema() const;
+  void census(Census* out) const;
   std::map<std::int64_t, const std::string*> topicIds(const std::set<std::string>& wanted) const;
   std::vector<Key> messageKeys(const std::map<std::int64_t, const std::string*>& ids,
                                const std::string& in) const;
@@ -192,6 +193,28 @@ void SqliteFile::checkSchema() const {
       }
     if (crc != SQLITE_DONE) throw failure("reading the columns of the tables");
   }
+}
+
+/// Every topic of this file with its type, serialization, message count and time span.
+void SqliteFile::census(Census* out) const {
+  Stmt st;
+  prepare(
+      "SELECT t.name, t.type, t.serialization_format, COUNT(m.topic_id), MIN(m.timestamp), "
+      "MAX(m.timestamp) FROM topics t LEFT JOIN messages m ON m.topic_id = t.id GROUP BY t.id",
+      &st, "tables topics and messages");
+  int rc;
+  while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
+    TopicCensus& tc = (*out)[columnText(st.s, 0)];
+    if (tc.type.empty()) tc.type = columnText(st.s, 1);
+    if (tc.serialization_format.empty()) tc.serialization_format = columnText(st.s, 2);
+    const long long count = sqlite3_column_int64(st.s, 3);
+    if (count == 0) continue;
+    const std::int64_t first = sqlite3_column_int64(st.s, 4), last = sqlite3_column_int64(st.s, 5);
+    if (tc.messages == 0 || first < tc.first_ns) tc.first_ns = first;
+    if (tc.messages == 0 || last > tc.last_ns) tc.last_ns = last;
+    tc.messages += count;
+  }
+  if (rc != SQLITE_DONE) throw failure("counting the messages per topic");
 }
 
 /// Topics of this file: id -> name, with their types checked against metadata.yaml; one row
@@ -310,11 +333,12 @@ void SqliteFile::deliverByRowid(const std::vector<Key>& keys,
 }  // namespace
 
 void readSqliteFile(const BagInfo& bag, const fs::path& file, const std::set<std::string>& wanted,
-                    const std::function<void(const RawMessage&)>& fn) {
+                    const std::function<void(const RawMessage&)>& fn, Census* census) {
   SqliteFile db(bag, file);
   // One snapshot for every query below.
   db.begin();
   db.checkSchema();
+  if (census) db.census(census);
   const std::map<std::int64_t, const std::string*> ids = db.topicIds(wanted);
   if (ids.empty()) return;
   std::string in;

@@ -86,7 +86,8 @@ class BagReading {
     double v[6];
   };
 
-  // The robot's joints and their names in the messages; the joints' signs.
+  // The robot's joints and their names in the messages; the conversion of their values (signs,
+  // scales, offsets, currents: exid/recording.hpp).
   void resolveJoints() {
     const int n = n_;
     names_ = P_.getStrings("joint_names");
@@ -108,16 +109,9 @@ class BagReading {
                                 "needs its own name",
                                 pre_, names_[a], b + 1, a + 1));
     }
-    sign_ = P_.getDoubles("sign");
-    if (sign_.empty()) sign_.assign(static_cast<std::size_t>(n), 1.0);
-    exid::check(
-        static_cast<int>(sign_.size()) == n,
-        fmt::format("{}sign: expected {} values (one per joint), found {}", pre_, n, sign_.size()));
-    for (int j = 0; j < n; ++j)
-      exid::check(
-          sign_[static_cast<std::size_t>(j)] == 1.0 || sign_[static_cast<std::size_t>(j)] == -1.0,
-          fmt::format("{}sign: joint {}: expected +1 or -1, found {}", pre_, j + 1,
-                      sign_[static_cast<std::size_t>(j)]));
+    conv_ = exid::SignalConversion::fromParams(
+        P_, n, robot_.hasTransmission() ? robot_.transmission : Eigen::MatrixXd(),
+        "experiment 'rosbag2'");
   }
 
   // A topic named by parameter `key` must be in the bag, of `type`, serialized as CDR.
@@ -144,7 +138,7 @@ class BagReading {
   // The bag and its topics.
   void openBag() {
     try {
-      bag_ = rb::readMetadata(dir_);
+      bag_ = rb::openBag(dir_, &opened_as_);
     } catch (const exid::Error& e) {
       throw exid::Error(pre_ + e.what());
     }
@@ -179,14 +173,18 @@ class BagReading {
                                                       : std::set<std::string>{js_topic_};
     try {
       unsigned long count = 0;
-      rb::readMessages(bag_, wanted, [&](const rb::RawMessage& m) {
-        // (a long bag: a stop request is honoured while it is read)
-        if ((++count & 1023u) == 0 && stop_()) throw exid::Error("stopped while reading the bag");
-        if (*m.topic == js_topic_)
-          onJointState(m);
-        else
-          onWrench(m);
-      });
+      rb::readMessages(
+          bag_, wanted,
+          [&](const rb::RawMessage& m) {
+            // (a long bag: a stop request is honoured while it is read)
+            if ((++count & 1023u) == 0 && stop_())
+              throw exid::Error("stopped while reading the bag");
+            if (*m.topic == js_topic_)
+              onJointState(m);
+            else
+              onWrench(m);
+          },
+          &census_);
     } catch (const exid::Error& e) {
       const std::string w = e.what();
       if (w.rfind(pre_, 0) == 0) throw;
@@ -370,12 +368,25 @@ class BagReading {
           steps[i] <= ratio_ * med && (resample || steps[i] >= med / ratio_),
           fmt::format("{}{}: topic '{}', message {} (t = {} s): time step {} s against "
                       "a median step of {} s after message {}: {} (a filter, "
-                      "derivatives and energy integrals need a uniform rate); resample the "
-                      "recording onto a uniform grid (resample_hz{}), or cut it there with "
-                      "t_start_s/t_end_s (max_gap_ratio = {})",
+                      "derivatives and energy integrals need a uniform rate); {}",
                       pre_, bagname_, js_topic_, js_[keep_[i + 1]].msg, tk_[i + 1], steps[i], med,
                       js_[keep_[i]].msg, steps[i] > med ? "a gap" : "uneven time stamps",
-                      steps[i] > med ? "; a gap is then bridged by interpolation" : "", ratio_));
+                      stepAdvice(steps[i], med, resample)));
+  }
+
+  // What makes a step outside max_gap_ratio acceptable, naming the keys that do it.
+  std::string stepAdvice(double step, double med, bool resample) const {
+    const std::string cut = "or cut the recording there with t_start_s/t_end_s";
+    if (step < med)  // uneven stamps: resampling accepts them
+      return fmt::format(
+          "resample_hz > 0 puts the samples on a uniform grid and accepts uneven "
+          "stamps, {}",
+          cut);
+    const double need = std::ceil(100.0 * step / med) / 100.0;
+    return fmt::format(
+        "{}max_gap_ratio: {:g} (now {:g}) bridges this gap by linear "
+        "interpolation, {}",
+        resample ? "" : "resample_hz > 0 with ", need, ratio_, cut);
   }
 
   // Segment and split, as the csv experiment.
@@ -429,7 +440,7 @@ class BagReading {
                             pre_, bagname_, w_topic_, tw_.front(), tw_.back()));
   }
 
-  // The selected samples, signed.
+  // The selected samples, converted (signs, scales, offsets, currents).
   exid::Dataset fillDataset() {
     const int n = n_;
     K_ = static_cast<int>(sel_.size());
@@ -438,17 +449,19 @@ class BagReading {
     d.q.resize(K_, n);
     d.tau.resize(K_, n);
     if (use_vel_) d.qd.resize(K_, n);
+    Eigen::VectorXd tau;
     for (int k = 0; k < K_; ++k) {
       const std::size_t i = sel_[static_cast<std::size_t>(k)];
       const std::size_t s = keep_[i];
       d.t[k] = tk_[i];
+      const std::size_t row = s * static_cast<std::size_t>(n);
       for (int j = 0; j < n; ++j) {
-        const double sg = sign_[static_cast<std::size_t>(j)];
-        const std::size_t at = s * static_cast<std::size_t>(n) + static_cast<std::size_t>(j);
-        d.q(k, j) = sg * qv_[at];
-        d.tau(k, j) = sg * tauv_[at];
-        if (use_vel_) d.qd(k, j) = sg * qdv_[at];
+        const std::size_t at = row + static_cast<std::size_t>(j);
+        d.q(k, j) = conv_.q(j, qv_[at]);
+        if (use_vel_) d.qd(k, j) = conv_.qd(j, qdv_[at]);
       }
+      conv_.torque(&tauv_[row], nullptr, &tau);
+      d.tau.row(k) = tau.transpose();
     }
     return d;
   }
@@ -462,7 +475,7 @@ class BagReading {
       const double t = d.t[k];
       while (w + 2 < tw_.size() && tw_[w + 1] <= t) ++w;
       if (tw_.size() == 1) {  // a single wrench message: only a sample at its very time
-        for (int c = 0; c < 6; ++c) d.wrench(k, c) = wr_[0].v[c];
+        for (int c = 0; c < 6; ++c) d.wrench(k, c) = conv_.wrench(c, wr_[0].v[c]);
         continue;
       }
       const double len = tw_[w + 1] - tw_[w];
@@ -474,8 +487,31 @@ class BagReading {
                               pre_, bagname_, w_topic_, len, wr_[w].msg, wr_[w + 1].msg, wr_med_, t,
                               ratio_));
       const double a = (t - tw_[w]) / len;
-      for (int c = 0; c < 6; ++c) d.wrench(k, c) = (1.0 - a) * wr_[w].v[c] + a * wr_[w + 1].v[c];
+      for (int c = 0; c < 6; ++c)
+        d.wrench(k, c) = conv_.wrench(c, (1.0 - a) * wr_[w].v[c] + a * wr_[w + 1].v[c]);
     }
+  }
+
+  // Every topic of the bag: type, messages, span, rate, publishers (when metadata.yaml lists
+  // their QoS profiles) and what exid made of it (meta.topics; exid inspect lists them).
+  exid::Json topicsMeta() const {
+    exid::Json out = exid::Json::array();
+    for (const auto& [name, tc] : census_) {
+      exid::Json t = exid::Json::object();
+      t["topic"] = name;
+      t["type"] = tc.type;
+      t["messages"] = tc.messages;
+      const double span = static_cast<double>(tc.last_ns - tc.first_ns) / 1e9;
+      t["span_s"] = span;
+      if (tc.messages >= 2 && span > 0) t["rate_hz"] = static_cast<double>(tc.messages - 1) / span;
+      const rb::TopicInfo* info = bag_.topic(name);
+      if (info && info->publishers >= 0) t["publishers"] = info->publishers;
+      t["used_as"] = name == js_topic_                  ? "joint states"
+                     : with_wrench_ && name == w_topic_ ? "wrench"
+                                                        : "not used";
+      out.push_back(std::move(t));
+    }
+    return out;
   }
 
   // Timing of the segment's samples (as the csv experiment's meta.recording).
@@ -531,6 +567,14 @@ class BagReading {
     steps.account(&a, &w);
     if (bad_examples_.size() > 0) a["dropped_examples"] = bad_examples_;
     if (w.size() > 0) m["warnings"] = w;
+    // what was skipped without being wrong: said, not warned about
+    exid::Json notes = exid::Json::array();
+    if (js_other_ > 0)
+      notes.push_back(exid::Json(fmt::format(
+          "{} of {} messages of topic '{}' name none of the robot's joints (another publisher, "
+          "e.g. a gripper's): skipped",
+          js_other_, js_msgs_, js_topic_)));
+    if (notes.size() > 0) m["notes"] = notes;
   }
 
   void describe(const exid::RecordingPipeline& steps, exid::Dataset* dp) const {
@@ -539,6 +583,7 @@ class BagReading {
     exid::Json& m = d.meta;
     m["file"] = bagname_;
     m["storage"] = bag_.storage;
+    m["opened_as"] = opened_as_;
     {
       std::vector<std::string> files;
       for (const fs::path& f : bag_.files) files.push_back(f.filename().string());
@@ -553,6 +598,7 @@ class BagReading {
           "(accounting.outside_wrench_range)";
     }
     m["time"] = header_time_ ? "header stamps" : "receive stamps";
+    m["torque_from"] = P_.getString("torque_from");
     m["time_origin_ns"] = static_cast<long long>(t0_);
     m["joint_names"] = exid::Json(names_);
     m["samples"] = d.size();
@@ -560,6 +606,7 @@ class BagReading {
     if (seg_.part != "none") m["split"] = seg_.splitMeta(in_segment_, in_part_);
     m["recording_span_s"] = span_;
     m["recording"] = recordingMeta();
+    m["topics"] = topicsMeta();
     accounting(steps, m["accounting"], m);
     steps.describe(&m);
     std::vector<std::string> sig = {"q"};
@@ -575,9 +622,11 @@ class BagReading {
   const std::function<bool()> stop_;  // the run's stop request (polled while reading)
   const std::string pre_ = "experiment 'rosbag2': ";
   fs::path dir_;
+  std::string opened_as_;  // what the path named (rb::openBag)
+  rb::Census census_;      // every topic of the bag, counted while it is read
   std::string bagname_;
   std::vector<std::string> names_;
-  std::vector<double> sign_;
+  exid::SignalConversion conv_;
   rb::BagInfo bag_;
   std::string js_topic_, w_topic_;
   bool with_wrench_ = false, header_time_ = false, use_vel_ = false, drop_ = false;
@@ -643,13 +692,13 @@ class Rosbag2Experiment : public exid::Experiment {
                    "drop joint-state or wrench messages with an empty or wrong-length effort / "
                    "position / velocity, non-finite values or a repeated time stamp (counted in "
                    "meta); false: such a message is an error naming it"),
-        param_doubles("sign", std::vector<double>{}, "",
-                      "per joint +1 or -1, applied to q, qd and tau of that joint; empty: all +1"),
         param_double("max_gap_ratio", 1.5, "",
                      "a time step longer than this times the median step (a gap), or shorter "
                      "than its inverse (uneven stamps), is an error naming the messages",
                      1.0, std::nullopt, true),
     };
+    const auto conv = exid::signalConversionParams("JointState.effort values");
+    p.insert(p.end(), conv.begin(), conv.end());
     const auto segment = exid::segmentParams("joint-state sample");
     p.insert(p.end(), segment.begin(), segment.end());
     const auto steps = exid::recordingStepParams();  // the filter steps, as csv's

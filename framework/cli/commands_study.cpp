@@ -10,6 +10,7 @@
 #include "exid/inspect.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/recording.hpp"
 #include "exid/runner.hpp"
 #include "exid/study_check.hpp"
 
@@ -36,14 +37,15 @@ std::string withFile(const std::string& yaml, const std::string& file,
   return f + "\n" + yaml + "\n";
 }
 
-/// The experiment that reads a recording named on the command line: a ROS 2 bag folder (a folder
-/// holding metadata.yaml) by `rosbag2` (its parameter `path`), anything else by `csv` (`file`).
+/// The experiment that reads a recording named on the command line: a ROS 2 bag (a folder, an
+/// .mcap or .db3 storage file: exid::isBagPath) by `rosbag2` (its parameter `path`), anything
+/// else by `csv` (`file`).
 struct DataReader {
   const char* type;
   const char* key;
 };
 DataReader dataReader(const fs::path& p) {
-  if (fs::is_directory(p) && fs::exists(p / "metadata.yaml")) return {"rosbag2", "path"};
+  if (isBagPath(p)) return {"rosbag2", "path"};
   return {"csv", "file"};
 }
 
@@ -64,6 +66,8 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
   opt.export_dir = ex.dir;
   opt.export_rate_Hz = ex.rate_Hz;
   opt.export_periods = ex.periods;
+  ProgressPrinter printer;  // the optimiser's and the export check's progress
+  opt.progress = printer.callback();
   StudyResult r = runStudy(cfg, reg, opt);
   if (r.ok && r.headline.verdict == "suspect") {
     std::cout << "VERDICT: SUSPECT: the stage ran to the end, but its results fail checks of their "

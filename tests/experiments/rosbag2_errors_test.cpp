@@ -32,7 +32,12 @@ TEST(Rosbag2, UnknownTopicWrongTypeAndWrongStorageAreErrors) {
   e = errorOf(writeBag(tmpDir() / "bad_storage_id", s));
   EXPECT_NE(e.find("storage_identifier 'rosbag_v2': expected sqlite3 or mcap"), std::string::npos)
       << e;
-  EXPECT_NE(errorOf(tmpDir() / "no_such_bag").find("not a folder"), std::string::npos);
+  e = errorOf(tmpDir() / "no_such_bag");
+  EXPECT_NE(e.find("no_such_bag: not found"), std::string::npos) << e;
+  // a file that is neither a bag's storage nor anything exid reads as a bag
+  std::ofstream(tmpDir() / "notes.txt") << "not a bag\n";
+  e = errorOf(tmpDir() / "notes.txt");
+  EXPECT_NE(e.find("not a rosbag2 bag: expected a bag folder"), std::string::npos) << e;
 }
 
 TEST(Rosbag2, ATruncatedMessageIsAnErrorNamingItsIndexAndTopic) {
@@ -168,6 +173,14 @@ TEST(Rosbag2, BadMessagesAreErrorsOrDroppedAndEveryMessageIsCounted) {
   const exid::Dataset d = readBag(dir, "drop_bad_messages: true, t_start_s: 0.5, t_end_s: 2.5");
   EXPECT_EQ(acc(d, "dropped_bad_messages"), 3);
   EXPECT_EQ(acc(d, "other_joints_messages"), 6);
+  // said as a note (skipped without being wrong), never a warning
+  const exid::Json* notes = d.meta.find("notes");
+  ASSERT_NE(notes, nullptr);
+  ASSERT_EQ(notes->size(), 1u);
+  EXPECT_NE(notes->at(0).asString().find("6 of "), std::string::npos) << notes->at(0).asString();
+  EXPECT_NE(notes->at(0).asString().find("name none of the robot's joints"), std::string::npos);
+  for (const std::string& w : exid::experimentWarnings(d, "experiment"))
+    EXPECT_EQ(w.find("name none of the robot's joints"), std::string::npos) << w;
   const std::int64_t total = acc(d, "joint_state_messages");
   EXPECT_EQ(total, js + 6);
   EXPECT_EQ(acc(d, "other_joints_messages") + acc(d, "dropped_bad_messages") +
@@ -188,6 +201,20 @@ TEST(Rosbag2, BadMessagesAreErrorsOrDroppedAndEveryMessageIsCounted) {
   e = errorOf(writeBag(tmpDir() / "js_gap", s), "drop_bad_messages: true");
   EXPECT_NE(e.find("message 99"), std::string::npos) << e;
   EXPECT_NE(e.find("a gap"), std::string::npos) << e;
+  // the advice names the keys that bridge it, with the value that does, and it does
+  const std::string key = "resample_hz > 0 with max_gap_ratio: ";
+  const std::size_t at = e.find(key);
+  ASSERT_NE(at, std::string::npos) << e;
+  const double need = std::stod(e.substr(at + key.size()));
+  EXPECT_NEAR(need, 12.0, 0.011);  // 11 messages missing: a step of 12 median steps
+  const fs::path gap_bag = tmpDir() / "js_gap";
+  e = errorOf(gap_bag, "drop_bad_messages: true, resample_hz: 200");
+  EXPECT_NE(e.find("bridges this gap"), std::string::npos) << e;
+  EXPECT_EQ(e.find("resample_hz > 0 with"), std::string::npos) << e;  // already given
+  EXPECT_EQ(errorOf(gap_bag, fmt::format("drop_bad_messages: true, resample_hz: 200, "
+                                         "max_gap_ratio: {}",
+                                         need)),
+            "(no error)");
 }
 
 TEST(Rosbag2, ANegativeStorageTimestampIsAnError) {

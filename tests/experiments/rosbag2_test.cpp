@@ -6,6 +6,7 @@
 // rosbag2_errors_test.cpp; decoders that validate everything: rosbag2_hostile_test.cpp; the
 // bag writer and the recording: rosbag2_test_util.hpp.
 
+#include "exid/recording.hpp"
 #include "rosbag2_test_util.hpp"
 
 using namespace rbtest;
@@ -261,6 +262,146 @@ TEST(Rosbag2, TheFilterStepsAreTheCsvExperiments) {
   EXPECT_NE(e.find("decimation and filter_torque need differentiate_cutoff_hz > 0"),
             std::string::npos)
       << e;
+}
+
+// A real arm's bag: the effort fields hold motor currents and there are no velocities. With
+// the csv experiment's signal options (one implementation, exid/recording.hpp) and its filter,
+// it identifies with batch_ls, wls and consistent_ls exactly as the CSV of the same currents
+// does, in both storages.
+TEST(Rosbag2, CurrentsWithoutVelocitiesIdentifyAsTheirCsvWithEveryEstimator) {
+  const Recording& r = recording();
+  const std::vector<double> Kt = {0.5, 0.8, 0.3, 0.2, 0.25, 0.1};  // N m / A
+  const int n = 6;
+  std::vector<Msg> msgs;
+  exid::CsvTable table;
+  table.columns = {"t"};
+  for (int j = 1; j <= n; ++j) table.columns.push_back(fmt::format("q{}", j));
+  for (int j = 1; j <= n; ++j) table.columns.push_back(fmt::format("i{}", j));
+  table.data.resize(r.d.size(), 1 + 2 * n);
+  for (int k = 0; k < r.d.size(); ++k) {
+    std::vector<double> pos, cur;
+    table.data(k, 0) = r.d.t[k];
+    for (int j = 0; j < n; ++j) {
+      pos.push_back(r.d.q(k, j));
+      cur.push_back(r.d.tau(k, j) / Kt[static_cast<std::size_t>(j)]);
+      table.data(k, 1 + j) = pos.back();
+      table.data(k, 1 + n + j) = cur.back();
+    }
+    msgs.push_back({"/joint_states", r.ns[static_cast<std::size_t>(k)] + 1000,
+                    jointState(r.ns[static_cast<std::size_t>(k)], r.names, pos, {}, cur)});
+  }
+  const fs::path csv = tmpDir() / "currents.csv";
+  exid::writeCsvAtomic(csv, table);
+  const std::string signal =
+      "torque_from: current, torque_constants_Nm_per_A: [0.5, 0.8, 0.3, 0.2, 0.25, 0.1], "
+      "offset_rad: [0.01, 0, 0, -0.02, 0, 0], differentiate_cutoff_hz: 10, filter_torque: true";
+  auto study = [&](const std::string& experiment, const std::string& estimator) {
+    const std::string text =
+        "robot: {type: puma560}\n"
+        "model: {type: differential, params: {rotor_inertia: true, viscous: "
+        "true, coulomb: true, offset: true}}\n"
+        "experiment: " +
+        experiment + "\nestimator: {type: " + estimator + "}\n";
+    exid::StudyConfig cfg =
+        exid::parseStudy(text, "currents_study.yaml", tmpDir(), exid_test::registry());
+    return exid::runStudy(cfg, exid_test::registry(), exid::RunOptions());
+  };
+  for (const char* storage : {"sqlite3", "mcap"}) {
+    BagSpec spec;
+    spec.storage = storage;
+    spec.compression = std::string(storage) == "mcap" ? "zstd" : "";
+    spec.types = {{"/joint_states", "sensor_msgs/msg/JointState"}};
+    spec.msgs = msgs;
+    const fs::path bag = writeBag(tmpDir() / fmt::format("currents_{}", storage), spec);
+    for (const char* estimator : {"batch_ls", "wls", "consistent_ls"}) {
+      SCOPED_TRACE(fmt::format("{} {}", storage, estimator));
+      const exid::StudyResult c = study(
+          fmt::format("{{type: csv, params: {{file: {}, {}}}}}", csv.string(), signal), estimator);
+      const exid::StudyResult b =
+          study(fmt::format("{{type: rosbag2, params: {{path: {}, {}}}}}", bag.string(), signal),
+                estimator);
+      ASSERT_TRUE(c.ok) << c.message;
+      ASSERT_TRUE(b.ok) << b.message;
+      const exid::Json& pc = *c.summary.find("identification")->find("parameters");
+      const exid::Json& pb = *b.summary.find("identification")->find("parameters");
+      ASSERT_EQ(pb.size(), pc.size());
+      ASSERT_GT(pc.size(), 20u);
+      for (std::size_t i = 0; i < pc.size(); ++i)
+        EXPECT_EQ(pb.at(i).find("value")->asDouble(), pc.at(i).find("value")->asDouble())
+            << pc.at(i).find("name")->asString();
+      EXPECT_EQ(b.summary.find("experiment")->find("meta")->find("torque_from")->asString(),
+                "current");
+    }
+  }
+}
+
+// A bag as a user names it: the storage file itself, a folder of storage files without
+// metadata.yaml, a bare MCAP or SQLite file: the same samples as the bag folder, and the meta
+// says how it was opened. The csv experiment given a bag says to read it with rosbag2.
+TEST(Rosbag2, TheStorageFileItselfOrAFolderWithoutMetadataIsTheSameBag) {
+  for (const Variant& v : {kVariants[0], kVariants[2]}) {
+    SCOPED_TRACE(v.tag);
+    const fs::path dir = bagOf(v);
+    const exid::Dataset ref = readBag(dir);
+    const std::string ext = std::string(v.storage) == "mcap" ? "mcap" : "db3";
+    const fs::path file = dir / fmt::format("{}_0.{}", v.tag, ext);
+    const exid::Dataset own = readBag(file);
+    EXPECT_EQ(own.q, ref.q);
+    EXPECT_EQ(own.tau, ref.tau);
+    EXPECT_NE(own.meta.find("opened_as")->asString().find("storage file"), std::string::npos);
+    // without metadata.yaml: the folder, and the file alone (topics from the storage)
+    const fs::path bare = tmpDir() / fmt::format("bare_{}", v.tag);
+    fs::remove_all(bare);
+    fs::create_directories(bare);
+    fs::copy_file(file, bare / file.filename());
+    for (const fs::path& p : {bare, bare / file.filename()}) {
+      SCOPED_TRACE(p.string());
+      const exid::Dataset b = readBag(p);
+      EXPECT_EQ(b.t, ref.t);
+      EXPECT_EQ(b.q, ref.q);
+      EXPECT_EQ(b.tau, ref.tau);
+      EXPECT_NE(b.meta.find("opened_as")->asString().find("topics from the storage"),
+                std::string::npos)
+          << b.meta.find("opened_as")->asString();
+    }
+    EXPECT_TRUE(exid::isBagPath(bare));
+    EXPECT_TRUE(exid::isBagPath(bare / file.filename()));
+    EXPECT_FALSE(exid::isBagPath(csvOfRecording()));
+    EXPECT_FALSE(exid::isBagPath(tmpDir() / "no_such_thing"));
+    auto csv = exid_test::create<exid::Experiment>(
+        "csv", "{file: " + (bare / file.filename()).string() + "}");
+    try {
+      (void)csv->run(mtest::robot("puma560"), nullptr, mtest::context());
+      ADD_FAILURE() << "a bag was read as a CSV file";
+    } catch (const exid::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("read it with experiment rosbag2"), std::string::npos)
+          << e.what();
+    }
+  }
+}
+
+// exid inspect lists a bag's topics: type, messages, rate, and what exid made of each.
+TEST(Rosbag2, InspectListsTheTopicsOfTheBag) {
+  const fs::path dir = bagOf(kVariants[3]);
+  const exid::Dataset d = readBag(dir, "wrench_topic: /ft");
+  const exid::Json* topics = d.meta.find("topics");
+  ASSERT_NE(topics, nullptr);
+  ASSERT_EQ(topics->size(), 3u);  // /cmd, /ft, /joint_states
+  std::map<std::string, const exid::Json*> by;
+  for (std::size_t i = 0; i < topics->size(); ++i)
+    by[topics->at(i).find("topic")->asString()] = &topics->at(i);
+  EXPECT_EQ(by.at("/joint_states")->find("messages")->asInt(), recording().d.size());
+  EXPECT_NEAR(by.at("/joint_states")->find("rate_hz")->asDouble(), 200.0, 0.5);
+  EXPECT_EQ(by.at("/joint_states")->find("used_as")->asString(), "joint states");
+  EXPECT_EQ(by.at("/ft")->find("used_as")->asString(), "wrench");
+  EXPECT_EQ(by.at("/cmd")->find("used_as")->asString(), "not used");
+  EXPECT_EQ(by.at("/cmd")->find("type")->asString(), "std_msgs/msg/String");
+  const exid_cli::CmdResult r =
+      exid_cli::runExid("inspect puma560 " + dir.string() + " --set wrench_topic=/ft");
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("topics of the bag:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("/cmd  std_msgs/msg/String"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("note: "), std::string::npos) << r.out;  // nothing skipped here
 }
 
 TEST(Rosbag2, InspectAndIdentifyTakeABagFolderOnTheCommandLine) {

@@ -7,6 +7,8 @@
 #include <cerrno>
 #include <cstdio>
 #include <cstring>
+#include <fstream>
+#include <string>
 #include <vector>
 
 namespace exid {
@@ -260,6 +262,16 @@ std::uint64_t fnv1a64File(const fs::path& path, const std::string& what) {
   }
   ::close(fd);
   return h;
+}
+
+std::string bagStorageOf(const std::filesystem::path& file) {
+  std::ifstream in(file, std::ios::binary);
+  char b[16] = {};
+  in.read(b, sizeof b);
+  const std::string head(b, static_cast<std::size_t>(in.gcount()));
+  if (head.compare(0, 8, std::string("\x89MCAP0\r\n", 8)) == 0) return "mcap";
+  if (head == std::string("SQLite format 3\0", 16)) return "sqlite3";
+  return "";
 }
 
 }  // namespace exid

@@ -11,9 +11,139 @@
 
 #include "exid/delay.hpp"
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/signal.hpp"
 
 namespace exid {
+
+bool isBagPath(const std::filesystem::path& path) {
+  namespace fs = std::filesystem;
+  std::error_code ec;
+  if (fs::is_directory(path, ec)) {
+    if (fs::exists(path / "metadata.yaml", ec)) return true;
+    for (const auto& e : fs::directory_iterator(path, ec)) {
+      const std::string ext = e.path().extension().string();
+      if (ext == ".mcap" || ext == ".db3") return true;
+    }
+    return false;
+  }
+  return fs::is_regular_file(path, ec) && !bagStorageOf(path).empty();
+}
+
+std::vector<ParamDecl> signalConversionParams(const std::string& torque_source) {
+  return {
+      param_doubles("q_scale", std::vector<double>{}, "",
+                    "per joint, multiplies the recorded position (after which sign and "
+                    "offset_rad apply), e.g. 0.0174533 for degrees; empty: 1"),
+      param_doubles("qd_scale", std::vector<double>{}, "",
+                    "per joint, multiplies the recorded velocity and acceleration; empty: as "
+                    "q_scale"),
+      param_doubles("tau_scale", std::vector<double>{}, "",
+                    "per joint, multiplies the torque alone (after torque constants), e.g. -1 "
+                    "for a torque recorded with the opposite sign to the joint; empty: 1"),
+      param_doubles("wrench_scale", std::vector<double>{}, "",
+                    "6 values multiplying fx fy fz mx my mz (a unit, a sign); empty: 1"),
+      param_doubles("sign", std::vector<double>{}, "",
+                    "per joint +1 or -1, applied to q, qd, qdd and tau of that joint; empty: "
+                    "all +1"),
+      param_doubles("offset_rad", std::vector<double>{}, "rad",
+                    "per joint, added to q after the sign; empty: zeros"),
+      param_string("torque_from", std::string("tau"),
+                   "tau: " + torque_source +
+                       " hold torques; current: they hold motor currents, "
+                       "times torque_constants_Nm_per_A",
+                   {"tau", "current"}),
+      param_doubles("torque_constants_Nm_per_A", std::vector<double>{}, "N m/A",
+                    "per joint: torque per ampere of current j, referred to the coordinate "
+                    "named by current_frame (gear ratio included)"),
+      param_string("current_frame", std::string("measured"),
+                   "measured: tau_m = Kt .* i directly; joint: the products act on the joint "
+                   "coordinates and tau_m = T^T (Kt .* i) with the robot's transmission T",
+                   {"measured", "joint"}),
+  };
+}
+
+namespace {
+// A per-joint scale: n finite non-zero values (empty: dflt for every joint).
+std::vector<double> perJoint(const std::string& who, const char* key, std::vector<double> v,
+                             double dflt, int n) {
+  if (v.empty()) v.assign(static_cast<std::size_t>(n), dflt);
+  check(static_cast<int>(v.size()) == n,
+        fmt::format("{}: {}: expected {} values (one per joint), found {}", who, key, n, v.size()));
+  for (double x : v)
+    check(std::isfinite(x) && x != 0.0,
+          fmt::format("{}: {}: {} is not a usable scale", who, key, x));
+  return v;
+}
+}  // namespace
+
+SignalConversion SignalConversion::fromParams(const ParamSet& p, int n,
+                                              const Eigen::MatrixXd& transmission,
+                                              const std::string& who) {
+  SignalConversion c;
+  c.q_scale = perJoint(who, "q_scale", p.getDoubles("q_scale"), 1.0, n);
+  c.qd_scale = p.getDoubles("qd_scale").empty()
+                   ? c.q_scale
+                   : perJoint(who, "qd_scale", p.getDoubles("qd_scale"), 1.0, n);
+  c.tau_scale = perJoint(who, "tau_scale", p.getDoubles("tau_scale"), 1.0, n);
+  c.wrench_scale = p.getDoubles("wrench_scale");
+  if (c.wrench_scale.empty()) c.wrench_scale.assign(6, 1.0);
+  check(c.wrench_scale.size() == 6,
+        fmt::format("{}: wrench_scale: expected 6 values (fx fy fz mx my mz), found {}", who,
+                    c.wrench_scale.size()));
+  for (double x : c.wrench_scale)
+    check(std::isfinite(x) && x != 0.0,
+          fmt::format("{}: wrench_scale: {} is not a usable scale", who, x));
+  c.sign = p.getDoubles("sign");
+  c.offset_rad = p.getDoubles("offset_rad");
+  if (c.sign.empty()) c.sign.assign(static_cast<std::size_t>(n), 1.0);
+  if (c.offset_rad.empty()) c.offset_rad.assign(static_cast<std::size_t>(n), 0.0);
+  check(
+      static_cast<int>(c.sign.size()) == n,
+      fmt::format("{}: sign: expected {} values (one per joint), found {}", who, n, c.sign.size()));
+  check(static_cast<int>(c.offset_rad.size()) == n,
+        fmt::format("{}: offset_rad: expected {} values (one per joint), found {}", who, n,
+                    c.offset_rad.size()));
+  for (int j = 0; j < n; ++j)
+    check(c.sign[static_cast<std::size_t>(j)] == 1.0 || c.sign[static_cast<std::size_t>(j)] == -1.0,
+          fmt::format("{}: sign: joint {}: expected +1 or -1, found {}", who, j + 1,
+                      c.sign[static_cast<std::size_t>(j)]));
+  for (double x : c.offset_rad)
+    check(std::isfinite(x), fmt::format("{}: offset_rad: {} is not finite", who, x));
+  if (p.getString("torque_from") == "current") {
+    c.torque_constants = p.getDoubles("torque_constants_Nm_per_A");
+    check(static_cast<int>(c.torque_constants.size()) == n,
+          fmt::format("{}: torque_constants_Nm_per_A: expected {} values (one per joint), "
+                      "found {}",
+                      who, n, c.torque_constants.size()));
+    for (double x : c.torque_constants)
+      check(std::isfinite(x) && x != 0.0,
+            fmt::format("{}: torque_constants_Nm_per_A: {} is not a usable constant", who, x));
+    if (p.getString("current_frame") == "joint") c.transmission = transmission;
+  } else {
+    check(p.getDoubles("torque_constants_Nm_per_A").empty(),
+          fmt::format("{}: torque_constants_Nm_per_A is given but torque_from is tau: the "
+                      "constants would be ignored; give torque_from: current",
+                      who));
+  }
+  return c;
+}
+
+void SignalConversion::torque(const double* raw, const int* index, Eigen::VectorXd* tau_out) const {
+  Eigen::VectorXd& tau = *tau_out;
+  const auto n = static_cast<Eigen::Index>(sign.size());
+  tau.resize(n);
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    const double v = raw[index ? static_cast<std::size_t>(index[u]) : u];
+    tau[j] = currents() ? v * torque_constants[u] : v;
+  }
+  if (currents() && transmission.size() > 0) tau = transmission.transpose() * tau;
+  for (Eigen::Index j = 0; j < n; ++j) {
+    const auto u = static_cast<std::size_t>(j);
+    tau[j] *= sign[u] * tau_scale[u];
+  }
+}
 
 std::vector<ParamDecl> recordingStepParams() {
   return {

@@ -605,6 +605,8 @@ Json inspectExperimentData(const RobotModel& robot, const ObservationModel* mode
                            const Dataset& data, const RunContext& ctx, const std::string& what) {
   Json J = inspectDataset(robot, model, data, ctx);
   if (const Json* a = data.meta.find("accounting")) J["accounting"] = *a;
+  if (const Json* t = data.meta.find("topics")) J["topics"] = *t;  // a bag's topics
+  if (const Json* n = data.meta.find("notes")) J["notes"] = *n;
   std::vector<std::string> W = experimentWarnings(data, what);
   if (const Json* w = J.find("warnings"))
     for (std::size_t i = 0; i < w->size(); ++i) W.push_back(w->at(i).asString());
@@ -697,6 +699,18 @@ std::string inspectionText(const Json& J) {
     for (const auto& [k, v] : a->items())
       if (v.isNumber()) s += fmt::format("{}{} {}", s.empty() ? "" : ", ", k, v.dump(0));
     out += "samples: " + s + "\n";
+  }
+  if (const Json* n = J.find("notes"); n && n->isArray())
+    for (std::size_t i = 0; i < n->size(); ++i) out += "note: " + n->at(i).asString() + "\n";
+  if (const Json* ts = J.find("topics"); ts && ts->isArray()) {
+    out += "topics of the bag:\n";
+    for (std::size_t i = 0; i < ts->size(); ++i) {
+      const Json& t = ts->at(i);
+      out += fmt::format("  {}  {}  {} messages  {} Hz  {} publisher(s)  {}\n",
+                         t.find("topic")->asString(), t.find("type")->asString(),
+                         num(t.find("messages"), "{:.0f}"), num(t.find("rate_hz"), "{:.4g}"),
+                         num(t.find("publishers"), "{:.0f}"), t.find("used_as")->asString());
+    }
   }
   if (const Json* t = J.find("timing"))
     out += fmt::format("data as used: {} Hz\n", num(t->find("rate_hz"), "{:.10g}"));

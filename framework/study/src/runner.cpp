@@ -3,6 +3,7 @@
 // published.
 #include "exid/runner.hpp"
 
+#include "exid/recording.hpp"
 #include "stages.hpp"
 
 namespace exid {
@@ -248,9 +249,9 @@ StudyConfig stageStudy(StudyConfig cfg, const std::string& stage, const Registry
     cfg.optimizer.reset();
     cfg.validation.reset();
     if (!data.empty()) {
-      // A ROS 2 bag is a folder holding metadata.yaml (experiment rosbag2, parameter `path`);
-      // anything else is a CSV file (experiment csv, parameter `file`).
-      const bool bag = fs::is_directory(data) && fs::exists(data / "metadata.yaml");
+      // A ROS 2 bag (a folder, an MCAP or SQLite storage file: experiment rosbag2, parameter
+      // `path`); anything else is a CSV file (experiment csv, parameter `file`).
+      const bool bag = isBagPath(data);
       const char* type = bag ? "rosbag2" : "csv";
       std::string esc;
       for (char ch : fs::absolute(data).string())

@@ -104,6 +104,10 @@ class EXID_API InputManifestScope {
 
 /// The path with control bytes shown as \xNN (for messages).
 EXID_API std::string printablePath(const std::string& path);
+
+/// The storage of a ROS 2 bag a file is, by its first bytes: "mcap" (the MCAP magic), "sqlite3"
+/// (the SQLite header), "" (neither, or unreadable).
+EXID_API std::string bagStorageOf(const std::filesystem::path& file);
 /// Refuses a path holding a NUL or another control byte (0x01-0x1F, 0x7F): a NUL silently cut
 /// the path where the system reads it (`good.csv\0.ignored` opened good.csv).
 EXID_API void checkInputPath(const std::filesystem::path& path, const std::string& what);

@@ -1,7 +1,8 @@
 // exid — a recording's way to the samples a study uses, shared by the experiments that read
 // recordings (csv, rosbag2). One pipeline of small steps:
-//   columns -> signals  the experiment's own reader: a file's columns or a bag's messages, with
-//                       scales, signs and offsets; bad rows or messages dropped and counted
+//   columns -> signals  the experiment's own reader (a file's columns, a bag's messages; bad
+//                       rows or messages dropped and counted) with SignalConversion here:
+//                       scales, signs, offsets, currents to torques
 //   segment / split     exid/segment.hpp: the part of the recording the study uses
 //   filters             RecordingPipeline here: resampling onto a uniform grid, a known
 //                       measurement delay, a zero-phase low-pass with central differences,
@@ -9,10 +10,12 @@
 //   samples             the Dataset, with every sample a step dropped counted
 //                       (meta.accounting) and what the steps did (meta.differentiated,
 //                       meta.measurement_delay)
-// The steps' parameters have one declaration (recordingStepParams), so an experiment that
-// reads recordings offers them all, with the same names, defaults and checks.
+// The parameters have one declaration (signalConversionParams, recordingStepParams), so an
+// experiment that reads recordings offers them all, with the same names, defaults and checks.
 #pragma once
 
+#include <Eigen/Core>
+#include <filesystem>
 #include <string>
 #include <vector>
 
@@ -22,6 +25,48 @@
 #include "exid/params.hpp"
 
 namespace exid {
+
+/// Whether a recording named by a user is a ROS 2 bag (read by experiment rosbag2, parameter
+/// path): a folder holding metadata.yaml or .mcap / .db3 files, or an MCAP or SQLite storage
+/// file. Anything else is a CSV file (experiment csv, parameter file).
+EXID_API bool isBagPath(const std::filesystem::path& path);
+
+/// The step columns -> signals of a recording, shared by the experiments that read one: the
+/// raw values of a joint (a file's column, a message's field) become the robot's measured
+/// coordinates. Per joint: q = sign * q_scale * raw + offset_rad; qd, qdd = sign * qd_scale * raw;
+/// the torque: raw (torque_from: tau) or a motor current times its torque constant
+/// (torque_from: current; current_frame: joint maps the products through the robot's
+/// transmission, tau_m = T^T (Kt .* i)), then sign * tau_scale; the wrench: wrench_scale * raw.
+struct EXID_API SignalConversion {
+  std::vector<double> q_scale, qd_scale, tau_scale, sign, offset_rad;  // one per joint
+  std::vector<double> wrench_scale;                                    // fx fy fz mx my mz
+  std::vector<double> torque_constants;  // empty: the torque is recorded (torque_from: tau)
+  Eigen::MatrixXd transmission;          // set: current_frame joint on a coupled robot
+
+  /// From the parameters of signalConversionParams(), for n joints; `transmission` the robot's
+  /// (empty: none). A count or value that does not fit is an exid::Error starting with `who`.
+  static SignalConversion fromParams(const ParamSet& p, int n, const Eigen::MatrixXd& transmission,
+                                     const std::string& who);
+  bool currents() const { return !torque_constants.empty(); }
+  double q(int j, double raw) const {
+    const auto u = static_cast<std::size_t>(j);
+    return sign[u] * q_scale[u] * raw + offset_rad[u];
+  }
+  /// (qd and qdd alike)
+  double qd(int j, double raw) const {
+    const auto u = static_cast<std::size_t>(j);
+    return sign[u] * qd_scale[u] * raw;
+  }
+  /// The n raw torque values (torques or currents) into *tau_out (n values): raw[index[j]] for
+  /// joint j (index null: raw[j]).
+  void torque(const double* raw, const int* index, Eigen::VectorXd* tau_out) const;
+  double wrench(int e, double raw) const { return wrench_scale[static_cast<std::size_t>(e)] * raw; }
+};
+
+/// The parameters of the signal conversion: q_scale, qd_scale, tau_scale, wrench_scale, sign,
+/// offset_rad, torque_from, torque_constants_Nm_per_A, current_frame. `torque_source` says where
+/// the torque (or current) values come from, for the documentation of torque_from.
+EXID_API std::vector<ParamDecl> signalConversionParams(const std::string& torque_source);
 
 /// The parameters of the filter steps: resample_hz, measurement_delay_s,
 /// differentiate_cutoff_hz, filter_order, filter_torque, decimation, trim_edges.
