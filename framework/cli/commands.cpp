@@ -4,9 +4,13 @@
 #include "commands.hpp"
 
 #include <fmt/format.h>
+#include <unistd.h>
 
+#include <algorithm>
 #include <iostream>
 #include <memory>
+
+#include "exid/context.hpp"
 
 namespace exid::cli {
 
@@ -187,6 +191,42 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     return 2;
   };
   return c;
+}
+
+ProgressPrinter::ProgressPrinter() : tty_(::isatty(STDERR_FILENO) != 0) {}
+
+std::function<void(const std::string&, double, const std::string&)> ProgressPrinter::callback() {
+  return [this](const std::string& s, double f, const std::string& t) { (*this)(s, f, t); };
+}
+
+void ProgressPrinter::operator()(const std::string& stage, double f, const std::string& text) {
+  if (logLevel() < LogLevel::Info) return;
+  std::lock_guard<std::mutex> lock(m_);
+  const auto now = std::chrono::steady_clock::now();
+  const bool started = stage != stage_;
+  if (started) {
+    stage_ = stage;
+    stage_start_ = now;
+  }
+  f = std::clamp(f, 0.0, 1.0);
+  // the time left, once a little of the stage is done: elapsed (1 - f) / f
+  const double elapsed = std::chrono::duration<double>(now - stage_start_).count();
+  const std::string left = f >= 0.02 && f < 1.0 && elapsed >= 1.0
+                               ? fmt::format(" ~{:.0f} s left", elapsed * (1.0 - f) / f)
+                               : std::string();
+  if (tty_) {
+    const int width = 30;
+    const int filled = std::clamp(static_cast<int>(f * width + 0.5), 0, width);
+    std::cerr << fmt::format("\r[exid] {:<12} [{}{}] {:3.0f}%{:<14} {:<40}", stage,
+                             std::string(static_cast<std::size_t>(filled), '#'),
+                             std::string(static_cast<std::size_t>(width - filled), '.'), 100.0 * f,
+                             left, text.substr(0, 40));
+    if (f >= 1.0) std::cerr << '\n';
+    std::cerr.flush();
+  } else if (started || f >= 1.0 || now - last_ > std::chrono::seconds(2)) {
+    std::cerr << fmt::format("[exid] {} {:3.0f}%{} {}\n", stage, 100.0 * f, left, text);
+    last_ = now;
+  }
 }
 
 }  // namespace exid::cli

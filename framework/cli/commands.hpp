@@ -3,9 +3,11 @@
 #pragma once
 
 #include <CLI/CLI.hpp>
+#include <chrono>
 #include <filesystem>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <vector>
 
@@ -64,6 +66,23 @@ struct MpiSession {
   int sumInt(int v);
   int rank = 0, size = 1;
   bool active = false;
+};
+
+/// The progress of a run's stages on stderr (RunOptions::progress): on a terminal a bar with the
+/// percentage and an estimate of the time left; otherwise a line when a stage starts, when it
+/// ends, and at most every 2 s between. Silent below log level info (-q).
+class ProgressPrinter {
+ public:
+  ProgressPrinter();
+  void operator()(const std::string& stage, double fraction, const std::string& text);
+  /// As a RunOptions::progress callback (the printer must outlive the run).
+  std::function<void(const std::string&, double, const std::string&)> callback();
+
+ private:
+  bool tty_;
+  std::mutex m_;
+  std::string stage_;
+  std::chrono::steady_clock::time_point stage_start_{}, last_{};
 };
 
 /// True once SIGINT or SIGTERM was received (set up by main).

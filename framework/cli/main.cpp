@@ -29,35 +29,6 @@ extern "C" void onSignal(int sig) {
   g_stop = true;
 }
 
-/// A progress bar on a terminal; a line every few seconds otherwise.
-class ProgressPrinter {
- public:
-  ProgressPrinter() : tty_(::isatty(STDERR_FILENO) != 0) {}
-  void operator()(const std::string& stage, double f, const std::string& text) {
-    if (exid::logLevel() < exid::LogLevel::Info) return;
-    std::lock_guard<std::mutex> lock(m_);
-    auto now = std::chrono::steady_clock::now();
-    if (tty_) {
-      const int width = 30;
-      int filled = static_cast<int>(f * width + 0.5);
-      filled = std::max(0, std::min(width, filled));
-      std::cerr << fmt::format("\r[exid] {:<14} [{}{}] {:3.0f}% {:<40}", stage,
-                               std::string(filled, '#'), std::string(width - filled, '.'),
-                               100.0 * f, text.substr(0, 40));
-      if (f >= 1.0) std::cerr << '\n';
-      std::cerr.flush();
-    } else if (f >= 1.0 || now - last_ > std::chrono::seconds(2)) {
-      std::cerr << fmt::format("[exid] {} {:3.0f}% {}\n", stage, 100.0 * f, text);
-      last_ = now;
-    }
-  }
-
- private:
-  bool tty_;
-  std::mutex m_;
-  std::chrono::steady_clock::time_point last_{};
-};
-
 // exid run STUDY [--out DIR] / exid validate STUDY.
 int runOrValidate(exid::Registry& registry, const std::string& file, bool validate_only,
                   std::string out_dir) {
@@ -74,10 +45,8 @@ int runOrValidate(exid::Registry& registry, const std::string& file, bool valida
   exid::RunOptions opt;
   opt.out_dir = out_dir;
   opt.robot = std::move(robot);
-  ProgressPrinter printer;
-  opt.progress = [&printer](const std::string& s, double f, const std::string& t) {
-    printer(s, f, t);
-  };
+  exid::cli::ProgressPrinter printer;
+  opt.progress = printer.callback();
   opt.cancelled = [] { return g_stop.load(); };
   opt.hard_stop_s = 0.5;  // SIGINT/SIGTERM end any stage within about 1 s
   opt.hard_stop_exit_code = exid::cli::signalExitCode;
@@ -106,8 +75,13 @@ int runOrValidate(exid::Registry& registry, const std::string& file, bool valida
   return 0;
 }
 
-// exid plugins [KIND] | exid plugins info NAME
+// exid plugins [KIND] | exid plugins info NAME | exid plugins paths
 int pluginsCommand(const exid::Registry& registry, const std::vector<std::string>& plugins_args) {
+  if (!plugins_args.empty() && plugins_args[0] == "paths") {  // where plugins are searched
+    if (plugins_args.size() != 1) throw exid::Error("usage: exid plugins paths");
+    for (const auto& p : registry.searchPaths()) std::cout << p.string() << "\n";
+    return 0;
+  }
   if (!plugins_args.empty() && plugins_args[0] == "info") {
     if (plugins_args.size() != 2) throw exid::Error("usage: exid plugins info NAME");
     std::cout << exid::pluginInfoText(registry, plugins_args[1]);
@@ -165,11 +139,12 @@ int main(int argc, char** argv) {
   auto* validate = app.add_subcommand("validate", "check a study file without running it");
   validate->add_option("study", validate_file, "study YAML file")->required();
 
-  // exid plugins [KIND] | exid plugins info NAME
+  // exid plugins [KIND] | exid plugins info NAME | exid plugins paths
   std::vector<std::string> plugins_args;
-  auto* plugins =
-      app.add_subcommand("plugins", "list plugins: exid plugins [KIND] | exid plugins info NAME");
-  plugins->add_option("args", plugins_args, "KIND, or 'info NAME'");
+  auto* plugins = app.add_subcommand(
+      "plugins", "list plugins: exid plugins [KIND] | exid plugins info NAME | exid plugins paths");
+  plugins->add_option("args", plugins_args,
+                      "KIND, 'info NAME', or 'paths' (where plugins are searched)");
 
   exid::cli::Commands extra = exid::cli::addCommands(app, registry);
 

@@ -38,8 +38,18 @@ grep -q "criterion 'a_optimal' version 1.0" <<<"$out"
 grep -q "weight" <<<"$out"
 # global options also after the subcommand
 "$exid" plugins info huber_ls --plugin-path "$dir" | grep -q "estimator 'huber_ls' version 1.0"
-# The installed exid finds its own installed plugins without any path.
+# The installed exid finds its own installed plugins without any path, and never searches the
+# build tree it came from (no path of the building machine is compiled in).
 "$exid" plugins criterion | grep -q "cond"
+paths=$(env -u EXID_PLUGIN_PATH "$exid" plugins paths)
+test -n "$paths"
+if [ -d "$build" ]; then
+  b=$(cd "$build" && pwd -P)
+  while IFS= read -r p; do
+    rp=$(realpath -m "$p")
+    case "$rp" in "$b"/*|"$b") echo "FAIL: the installed exid searches $p in the build tree $b" >&2; exit 1 ;; esac
+  done <<<"$paths"
+fi
 # The out-of-tree estimator in a study: noise-free simulated data, exact recovery.
 cat >"$work/study.yaml" <<'YAML'
 name: huber_out_of_tree

@@ -131,10 +131,11 @@ struct Registry::Impl {
       out.push_back(exe.parent_path() / "plugins");                   // build tree: build/bin/exid
       out.push_back(exe.parent_path() / "lib" / "exid" / "plugins");  // install: prefix/bin/exid
     }
+    // install: prefix/<libdir>/libexid_core.so; the build tree: build/lib/libexid_core.so with
+    // build/lib/exid/plugins a link to build/plugins (made by CMake). Only places relative to
+    // the running program or the core library: no path of the machine that built exid.
     if (const fs::path lib = coreLibraryDir(); !lib.empty())
-      out.push_back(lib / "exid" / "plugins");  // install: prefix/<libdir>/libexid_core.so
-    out.emplace_back(EXID_PLUGIN_BUILD_DIR);
-    out.emplace_back(EXID_PLUGIN_INSTALL_DIR);
+      out.push_back(lib / "exid" / "plugins");
     // Drop duplicates (same canonical directory), keep the first.
     std::vector<fs::path> unique;
     std::vector<fs::path> seen;

@@ -272,8 +272,11 @@ Json exportExcitation(const StageEnv& env, const ExcitationStageOut& x, StudyRec
   eo.collision = x.options.collision;
   eo.plots = env.cfg.report.plots;
   TrajectoryCheck chk;
+  const auto progress = env.progressFor("export");
+  progress(0.0, fmt::format("sampling at {} Hz and checking every limit", eo.rate_Hz));
   Json E = exportTrajectory(*x.traj, env.cfg.trajectory->type, env.cfg.trajectory->params,
                             x.result.z, x.model->robot(), eo, opt.export_dir, &chk);
+  progress(1.0, chk.ok ? "every limit holds" : "a limit is exceeded");
   E["dir"] = fs::absolute(opt.export_dir).string();
   if (!chk.ok)
     rec.warn(
