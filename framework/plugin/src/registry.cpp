@@ -111,6 +111,7 @@ bool isPluginFile(const fs::path& p) {
 
 struct Registry::Impl {
   std::vector<fs::path> user_paths;
+  bool default_paths = true;
   // Libraries first: members are destroyed in reverse order, so plugin infos (whose
   // std::function factories live in the libraries) go before the libraries are released.
   std::vector<std::shared_ptr<boost::dll::shared_library>> libraries;
@@ -126,15 +127,17 @@ struct Registry::Impl {
       while (std::getline(ss, item, ':'))
         if (!item.empty()) out.emplace_back(item);
     }
-    fs::path exe = executableDir();
+    fs::path exe = default_paths ? executableDir() : fs::path();
     if (!exe.empty()) {
       out.push_back(exe.parent_path() / "plugins");                   // build tree: build/bin/exid
       out.push_back(exe.parent_path() / "lib" / "exid" / "plugins");  // install: prefix/bin/exid
     }
-    if (const fs::path lib = coreLibraryDir(); !lib.empty())
+    if (const fs::path lib = default_paths ? coreLibraryDir() : fs::path(); !lib.empty())
       out.push_back(lib / "exid" / "plugins");  // install: prefix/<libdir>/libexid_core.so
-    out.emplace_back(EXID_PLUGIN_BUILD_DIR);
-    out.emplace_back(EXID_PLUGIN_INSTALL_DIR);
+    if (default_paths) {
+      out.emplace_back(EXID_PLUGIN_BUILD_DIR);
+      out.emplace_back(EXID_PLUGIN_INSTALL_DIR);
+    }
     // Drop duplicates (same canonical directory), keep the first.
     std::vector<fs::path> unique;
     std::vector<fs::path> seen;
@@ -234,6 +237,7 @@ Registry::Registry() : impl_(std::make_unique<Impl>()) {}
 Registry::~Registry() = default;
 
 void Registry::addSearchPath(const fs::path& dir) { impl_->user_paths.push_back(dir); }
+void Registry::searchDefaultPaths(bool on) { impl_->default_paths = on; }
 std::vector<fs::path> Registry::searchPaths() const { return impl_->allPaths(); }
 
 void Registry::scan() {
