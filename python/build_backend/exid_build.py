@@ -13,9 +13,10 @@ Its system libraries (yaml-cpp, fmt, Boost, ...) are Debian's: the wheel is for 
 was built on (platform tag linux_<arch>), for the Python that runs the backend.
 
 Environment:
-    EXID_BUILD_DIR   an existing, configured build tree to build and install from (CI reuses
-                     its Release tree). Default: <source>/build-wheel, configured here (Release,
-                     no tests, no benchmarks, Python on, for this interpreter).
+    EXID_BUILD_DIR   an existing, configured build tree to build (the installed targets alone:
+                     the program, the module, the plugins) and install from (CI reuses its
+                     Release tree). Default: <source>/build-wheel, configured here (Release, no
+                     tests, no benchmarks, Python on, for this interpreter).
     EXID_JOBS        parallel build jobs (default 2).
 """
 
@@ -74,8 +75,20 @@ def _build_tree() -> Path:
                     "-DEXID_BUILD_PYTHON=ON", f"-DPython3_EXECUTABLE={_interpreter()}",
                 ]
             )
-    _run(["cmake", "--build", str(build), "-j", os.environ.get("EXID_JOBS", "2")])
+    _run(["cmake", "--build", str(build), "-j", os.environ.get("EXID_JOBS", "2"), "--target"]
+         + _installed_targets(build))
     return build
+
+
+def _installed_targets(build: Path) -> List[str]:
+    """What `cmake --install` installs: the program, the Python module and every plugin (the
+    libraries they link come with them), not the tests and benchmarks of a full build tree."""
+    text = subprocess.run(
+        ["cmake", "--build", str(build), "--target", "help"], check=True, capture_output=True,
+        text=True,
+    ).stdout
+    plugins = sorted(set(re.findall(r"\b(exid_plugin_[A-Za-z0-9_]+)\b", text)))
+    return ["exid", "exid_python"] + plugins
 
 
 def _soname(lib: Path) -> Optional[str]:
@@ -124,7 +137,7 @@ def _layout(build: Path, stage: Path, root: Path) -> str:
             continue
         shutil.copy2(f, pkg / "lib" / (_soname(f) or f.name))
     shutil.copytree(libdir / "exid" / "plugins", pkg / "lib" / "exid" / "plugins")
-    shutil.copytree(stage / cache.get("CMAKE_INSTALL_DATADIR", "share") / "exid", pkg / "share")
+    shutil.copytree(stage / (cache.get("CMAKE_INSTALL_DATADIR") or "share") / "exid", pkg / "share")
     return cache.get("CMAKE_PROJECT_VERSION", "0")
 
 
@@ -193,6 +206,21 @@ def _write_wheel(root: Path, version: str, wheel_directory: str) -> str:
 # ---------------------------------------------------------------- PEP 517 hooks
 def get_requires_for_build_wheel(config_settings=None):  # noqa: ANN001
     return []
+
+
+def _source_version() -> str:
+    m = re.search(r"project\(exid\s+VERSION\s+([0-9.]+)", (SOURCE / "CMakeLists.txt").read_text())
+    if not m:
+        raise RuntimeError("exid_build: no project(exid VERSION x.y.z) in CMakeLists.txt")
+    return m.group(1)
+
+
+def prepare_metadata_for_build_wheel(metadata_directory, config_settings=None):  # noqa: ANN001
+    """The metadata without building (pip asks for it first)."""
+    info = Path(metadata_directory) / f"exid-{_source_version()}.dist-info"
+    info.mkdir(parents=True, exist_ok=True)
+    (info / "METADATA").write_text(_metadata(_source_version()))
+    return info.name
 
 
 def build_wheel(wheel_directory, config_settings=None, metadata_directory=None):  # noqa: ANN001
