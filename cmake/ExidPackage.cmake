@@ -83,4 +83,12 @@ set(CPACK_DEBIAN_PACKAGE_DESCRIPTION
     "Experimental identification of robot and payload dynamics, and excitation design.\n exid identifies robot and payload dynamic parameters from recordings or simulations and\n designs the exciting trajectories that make the identification well conditioned. Studies\n are YAML files; robots, models, criteria, optimisers, experiments and estimators are\n plugins.")
 install(FILES ${PROJECT_SOURCE_DIR}/LICENSE ${PROJECT_SOURCE_DIR}/README.md
         DESTINATION ${CMAKE_INSTALL_DOCDIR})
+# The examples (studies, matrices, the notebook) and the data sets they read, laid out as in the
+# source tree under <prefix>/share/exid beside robots/ (whose description files robots/ installs;
+# the extra files such as robots/tx40/tx40_exid.xml here): a study's relative paths keep working,
+# and the Python package finds them (exid.data_path).
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/examples ${PROJECT_SOURCE_DIR}/data
+        DESTINATION ${CMAKE_INSTALL_DATADIR}/exid)
+install(DIRECTORY ${PROJECT_SOURCE_DIR}/robots/ DESTINATION ${CMAKE_INSTALL_DATADIR}/exid/robots
+        FILES_MATCHING PATTERN "*.xml")
 include(CPack)

@@ -9,13 +9,15 @@ The same robots, plugins and studies as the ``exid`` program, on numpy arrays::
     tau = r.rnea(q, qd, qdd)                   # (N, dof) rigid-body torques
     Y = r.regressor(q, qd, qdd)                # (N, dof, p): tau = Y @ r.standard_values
 
-    res = exid.run_study("examples/default.yaml")   # or a dict; res.parameters, res.validation
+    res = exid.run_study(exid.data_path("examples/default.yaml"))  # or a dict
+    res.parameters, res.covariance, res.correlation, res.validation, res.tables
     df = exid.read_matrix("out/ci_matrix")          # a matrix's results as a pandas DataFrame
 
 Errors of exid (a bad study key, an unknown robot, a singular problem) raise :class:`exid.Error`
 (a RuntimeError) with exid's message; a wrong array shape raises ValueError. See docs/python.md.
 """
 
+from ._data import data_path
 from ._exid import Error, __version__, git_commit, set_log_level
 from ._exid import add_plugin_path as _add_plugin_path
 from ._exid import plugin_search_paths, refused_libraries
@@ -30,6 +32,7 @@ from ._study import (
     Trajectory,
     Validation,
     read_csv,
+    read_dataset,
     run_study,
     validate_study,
 )
@@ -51,10 +54,12 @@ __all__ = [
     "Validation",
     "__version__",
     "add_plugin_path",
+    "data_path",
     "git_commit",
     "plugin_search_paths",
     "plugins",
     "read_csv",
+    "read_dataset",
     "read_matrix",
     "refused_libraries",
     "run_matrix",

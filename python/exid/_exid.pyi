@@ -1,6 +1,6 @@
 """Type stubs of exid's compiled module (exid._exid); the package exid wraps it."""
 
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -15,7 +15,8 @@ class Error(RuntimeError):
 
 def git_commit() -> str: ...
 def set_log_level(level: str) -> None:
-    """exid's messages on stderr: 'quiet', 'warn' (the default in Python), 'info' or 'debug'."""
+    """exid's messages on stderr: 'quiet', 'warn' (the default in Python), 'info' or 'debug'.
+    A study's progress goes to Python's logging (logger "exid"), whatever this level."""
 
 def add_plugin_path(directory: str) -> None: ...
 def plugin_search_paths() -> List[str]: ...
@@ -95,8 +96,17 @@ class Robot:
     def body_pose(self, q: ArrayLike, body: int) -> Array: ...
 
 def run_study(
-    path: str, text: str, source: str, base_dir: str, out: str, stage: str, data: str
-) -> Dict[str, Any]: ...
+    path: str,
+    text: str,
+    source: str,
+    base_dir: str,
+    out: str,
+    stage: str,
+    data: str,
+    progress: Optional[Callable[[str, float, str], None]] = None,
+) -> Dict[str, Any]:
+    """Runs a study; ``progress(stage, fraction, text)`` is called with the GIL, a few times a
+    second at most, from whichever thread the stage runs in."""
 def resolved_study(path: str, text: str, source: str, base_dir: str) -> str: ...
 def run_matrix(
     file: str, out: str, jobs: int, retry_failed: bool, force: bool

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import csv
 import json
+import logging
 import os
+import time
 import shutil
 import tempfile
 from dataclasses import dataclass, field
@@ -19,6 +22,9 @@ PathLike = Union[str, "os.PathLike[str]"]
 Study = Union[PathLike, Mapping[str, Any]]
 
 _STAGES = ("excite", "simulate", "identify")
+
+#: The study's progress, one INFO record per step (stage, percent, text); see run_study.
+logger = logging.getLogger("exid")
 
 
 class StudyError(_exid.Error):
@@ -91,10 +97,24 @@ class StudyResult:
     ``summary`` is its summary.json as a dict (every figure the report shows); ``out`` the
     folder it wrote (None when :func:`run_study` ran it in a temporary folder, since removed).
     ``parameters`` are the identified base parameters with their sigma (``values``, ``std``
-    and ``nominal`` as arrays, ``names`` in the same order); ``validation``, ``experiment``,
-    ``trajectory`` (the optimal excitation) and ``initial_trajectory`` are None when the study
-    has no such stage. ``tables`` holds every numeric CSV the study wrote, by file name, as
-    dicts of column arrays.
+    and ``nominal`` as arrays, ``names`` in the same order); ``covariance`` is the estimate's
+    covariance (base x base, in the order of ``names``; ``std = sqrt(diag(covariance))``) and
+    ``correlation`` the same normalised (unit diagonal); both None without an identification.
+    ``validation``, ``experiment``, ``trajectory`` (the optimal excitation) and
+    ``initial_trajectory`` are None when the study has no such stage.
+
+    ``experiment`` is read from experiment.csv, which a study writes for simulated data always
+    but for RECORDED data only up to 100,000 samples (report.params.experiment_csv ``auto``: the
+    file would be a copy of the input); above, ``experiment`` is None and
+    ``summary["experiment"]["csv_not_written"]`` says why. To have the samples, run the study
+    with ``report: {params: {experiment_csv: always}}`` (then ``experiment`` holds them), or
+    read a kept experiment.csv (``out=``) with :func:`read_dataset`.
+
+    ``tables`` holds every CSV table the study wrote (parameters.csv, covariance.csv,
+    experiment.csv, validation.csv, the trajectories and histories), by file name, as dicts of
+    column arrays (float, or str for a text column such as ``name``): ``pandas.DataFrame(
+    res.tables["parameters.csv"])`` is the CSV file. In Jupyter the result shows itself as a
+    table of its key figures, its parameters and the validation figure.
     """
 
     name: str
@@ -108,10 +128,33 @@ class StudyResult:
     trajectory: Optional[Trajectory] = None
     initial_trajectory: Optional[Trajectory] = None
     tables: Dict[str, Dict[str, np.ndarray]] = field(default_factory=dict)
+    covariance: Optional[np.ndarray] = None
 
     @property
     def ok(self) -> bool:
         return self.status == "ok"
+
+    @property
+    def correlation(self) -> Optional[np.ndarray]:
+        """The estimate's correlation matrix: covariance[i, j] / (std_i std_j), unit diagonal
+        (NaN on the row and column of a parameter of zero variance); None without covariance."""
+        if self.covariance is None:
+            return None
+        d = np.sqrt(np.diag(self.covariance))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c = self.covariance / np.outer(d, d)
+        np.fill_diagonal(c, np.where(d > 0, 1.0, np.nan))
+        return c
+
+    def _repr_html_(self) -> str:
+        from ._display import result_html
+
+        return result_html(self)
+
+    def _repr_markdown_(self) -> str:
+        from ._display import result_markdown
+
+        return result_markdown(self)
 
     @property
     def names(self) -> List[str]:
@@ -146,6 +189,52 @@ def read_csv(path: PathLike) -> Dict[str, np.ndarray]:
     a dict of column arrays."""
     columns, data = _exid.read_csv(os.fspath(path))
     return {c: data[:, i] for i, c in enumerate(columns)}
+
+
+def _read_table(path: Path) -> Dict[str, np.ndarray]:
+    """A CSV table a study wrote: numeric by exid's reader; one with a text column (the
+    parameters' ``name``) by Python's csv module, each column float when every cell is a number,
+    else str."""
+    try:
+        return read_csv(path)
+    except _exid.Error:
+        pass
+    with open(path, newline="") as f:
+        rows = [r for r in csv.reader(f) if r and not r[0].startswith("#")]
+    if not rows:
+        return {}
+    header, body = rows[0], rows[1:]
+    out: Dict[str, np.ndarray] = {}
+    for i, name in enumerate(header):
+        cells = [r[i] if i < len(r) else "" for r in body]
+        try:
+            out[name] = np.array([float(c) for c in cells], dtype=float)
+        except ValueError:
+            out[name] = np.array(cells, dtype=str)
+    return out
+
+
+def read_dataset(path: PathLike) -> Dataset:
+    """An experiment.csv (a study's data: ``t``, ``q1..``, ``qd1..``, ``qdd1..``, ``tau1..``,
+    optionally ``fx fy fz mx my mz``; SI units, t in s) as a :class:`Dataset`."""
+    table = read_csv(path)
+    if "t" not in table:
+        raise ValueError(f"read_dataset: {os.fspath(path)} has no column 't'; expected t, q1.., qd1.., qdd1..")
+    d = _dataset(table)
+    assert d is not None
+    return d
+
+
+def _covariance(table: Optional[Dict[str, np.ndarray]], names: List[str]) -> Optional[np.ndarray]:
+    """covariance.csv (a ``name`` column, then one column per parameter) as a matrix in the order
+    of ``names``; None when the file is absent or names other parameters."""
+    if not table or "name" not in table or not names:
+        return None
+    rows = [str(n) for n in table["name"]]
+    if sorted(rows) != sorted(names) or any(n not in table for n in names):
+        return None
+    order = [rows.index(n) for n in names]
+    return np.column_stack([np.asarray(table[n], dtype=float)[order] for n in names])
 
 
 def _study_args(study: Study, base_dir: Optional[PathLike]) -> Tuple[str, str, str, str]:
@@ -195,16 +284,6 @@ def _dataset(table: Optional[Dict[str, np.ndarray]]) -> Optional[Dataset]:
     )
 
 
-_TABLES = (
-    "experiment.csv",
-    "validation.csv",
-    "trajectory_initial.csv",
-    "trajectory_optimal.csv",
-    "criterion_history.csv",
-    "estimate_history.csv",
-)
-
-
 def _load(info: Dict[str, Any], folder: Optional[Path]) -> StudyResult:
     summary = json.loads(info["summary"]) if info["summary"] else {}
     status = summary.get("status", "ok" if info["ok"] else "failed")
@@ -228,10 +307,9 @@ def _load(info: Dict[str, Any], folder: Optional[Path]) -> StudyResult:
             )
         )
     if folder is not None:
-        for name in _TABLES:
-            f = folder / name
-            if f.is_file():
-                result.tables[name] = read_csv(f)
+        for f in sorted(folder.glob("*.csv")):
+            result.tables[f.name] = _read_table(f)
+    result.covariance = _covariance(result.tables.get("covariance.csv"), result.names)
     result.experiment = _dataset(result.tables.get("experiment.csv"))
     result.trajectory = _trajectory(result.tables.get("trajectory_optimal.csv"))
     result.initial_trajectory = _trajectory(result.tables.get("trajectory_initial.csv"))
@@ -271,6 +349,11 @@ def run_study(
     ``"identify"`` (the experiment and the estimator; ``data``, a CSV file or a ROS 2 bag
     folder, replaces the experiment).
 
+    Progress goes to Python's logging: the logger ``"exid"`` gets an INFO record per step of
+    each stage (``excitation 40%: ...``; a few a second at most) and one at the start and the
+    end (``logging.basicConfig(level=logging.INFO)`` shows them). The result's ``experiment``
+    is None for recorded data above 100,000 samples (see :class:`StudyResult`).
+
     A bad study raises :class:`exid.Error` before anything runs. A study that fails while
     running raises :class:`exid.StudyError` (with ``.result``) unless ``check`` is False, when
     the result comes back with ``status`` "failed". Ctrl-C stops the run (KeyboardInterrupt).
@@ -284,9 +367,13 @@ def run_study(
         folder = os.path.join(tmp, "out")
     else:
         folder = os.path.abspath(os.fspath(out))
+    progress = _log_progress if logger.isEnabledFor(logging.INFO) else None
+    label = str(study.get("name", "study")) if isinstance(study, Mapping) else path
+    logger.info("study %s: running%s", label, f" (stage {stage})" if stage else "")
+    t0 = time.monotonic()
     try:
         info = _exid.run_study(
-            path, text, source, base, folder, stage or "", os.fspath(data) if data else ""
+            path, text, source, base, folder, stage or "", os.fspath(data) if data else "", progress
         )
         written = Path(info["written_to"]) if info["written_to"] else None
         result = _load(info, written)
@@ -295,6 +382,12 @@ def run_study(
     finally:
         if tmp is not None:
             shutil.rmtree(tmp, ignore_errors=True)
+    logger.info("study %s: %s in %.1f s", result.name, result.status, time.monotonic() - t0)
     if check and not result.ok:
         raise StudyError(f"study '{result.name}' {result.status}: {result.message}", result)
     return result
+
+
+def _log_progress(stage: str, fraction: float, text: str) -> None:
+    """RunOptions::progress, called with the GIL by the compiled module (throttled there)."""
+    logger.info("%s %.0f%%%s", stage, 100.0 * fraction, f": {text}" if text else "")

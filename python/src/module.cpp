@@ -38,12 +38,13 @@ std::mutex g_registry_mutex;
 exid::Registry* g_registry = nullptr;
 std::vector<std::string> g_extra_paths;
 
-/// The plugin folders of the libexid_core this module runs with. The registry's defaults after
-/// EXID_PLUGIN_PATH start with folders relative to the EXECUTABLE, the exid program's layout;
-/// here the executable is python3 (/usr/bin/python3: /usr/lib/exid/plugins, an installed exid's,
-/// whichever build this module is), so the folders of this module's own core come first: an
-/// installed core keeps its plugins in <libdir>/exid/plugins, the build tree in build/plugins
-/// beside build/lib.
+/// The plugin folders of the libexid_core this module runs with: an installed core (the .deb,
+/// `cmake --install`, the wheel's exid/lib) keeps its plugins in <libdir>/exid/plugins, the build
+/// tree in build/plugins beside build/lib. The registry's other defaults are the exid program's
+/// layout, relative to the EXECUTABLE, here python3 (/usr/bin/python3: /usr/lib/exid/plugins, a
+/// .deb's, whichever build this module is): when this
+/// core's folders are found, they alone are searched (after add_plugin_path and
+/// EXID_PLUGIN_PATH), so that no plugin of another exid (and its own libexid_core) is loaded.
 std::vector<fs::path> corePluginDirs() {
   Dl_info info{};
   if (dladdr(reinterpret_cast<const void*>(&exid::gitCommit), &info) == 0 || !info.dli_fname)
@@ -75,7 +76,9 @@ exid::Registry& registry() {
         }
       }
     }
-    for (const auto& d : corePluginDirs()) g_registry->addSearchPath(d);
+    const std::vector<fs::path> own = corePluginDirs();
+    for (const auto& d : own) g_registry->addSearchPath(d);
+    if (!own.empty()) g_registry->searchDefaultPaths(false);
     g_registry->scan();
   }
   return *g_registry;

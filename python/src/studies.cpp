@@ -1,5 +1,6 @@
-// exid — studies, matrices and CSV files from Python (module exid._exid): run_study,
-// resolved_study, run_matrix (stopped by Ctrl-C as the exid program is), read_csv.
+// exid — studies, matrices and CSV files from Python (module exid._exid): run_study (its progress
+// forwarded to a Python callable), resolved_study, run_matrix (stopped by Ctrl-C as the exid
+// program is), read_csv.
 #include <Python.h>
 #include <fmt/format.h>
 #include <pybind11/stl.h>
@@ -7,8 +8,11 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
 #include <filesystem>
 #include <functional>
+#include <memory>
+#include <mutex>
 #include <string>
 
 #include "exid/config.hpp"
@@ -66,6 +70,44 @@ class InterruptScope {
   bool installed_ = false;
 };
 
+// ---------------------------------------------------------------- progress
+// RunOptions::progress is called by the stages, with the GIL released and possibly from another
+// thread than the one that started the run. Each call that passes the throttle takes the GIL and
+// calls the Python callable (stage, fraction, text); an exception it raises is reported as
+// unraisable (sys.unraisablehook) and never reaches the C++ stage. The throttle passes a stage's
+// first call, its end (fraction >= 1) and otherwise one call every kProgressInterval_s at most,
+// so a stage that reports per iteration costs a few GIL round trips a second, not one per
+// iteration.
+constexpr double kProgressInterval_s = 0.25;
+
+class ProgressForwarder {
+ public:
+  explicit ProgressForwarder(py::object callback) : callback_(std::move(callback)) {}
+  void operator()(const std::string& stage, double fraction, const std::string& text) {
+    {
+      std::lock_guard<std::mutex> lock(mutex_);
+      const auto now = std::chrono::steady_clock::now();
+      const bool due = stage != last_stage_ || fraction >= 1.0 ||
+                       std::chrono::duration<double>(now - last_).count() >= kProgressInterval_s;
+      if (!due) return;
+      last_stage_ = stage;
+      last_ = now;
+    }
+    py::gil_scoped_acquire gil;
+    try {
+      callback_(stage, fraction, text);
+    } catch (py::error_already_set& e) {
+      e.discard_as_unraisable("exid.run_study progress callback");
+    }
+  }
+
+ private:
+  py::object callback_;
+  std::mutex mutex_;
+  std::string last_stage_;
+  std::chrono::steady_clock::time_point last_{};
+};
+
 // ---------------------------------------------------------------- studies
 exid::StudyConfig studyConfig(const std::string& path, const std::string& text,
                               const std::string& source, const std::string& base_dir) {
@@ -77,7 +119,7 @@ exid::StudyConfig studyConfig(const std::string& path, const std::string& text,
 
 py::dict runStudy(const std::string& path, const std::string& text, const std::string& source,
                   const std::string& base_dir, const std::string& out, const std::string& stage,
-                  const std::string& data) {
+                  const std::string& data, const py::object& progress) {
   exid::StudyConfig cfg = studyConfig(path, text, source, base_dir);
   if (!stage.empty())
     cfg = exid::stageStudy(std::move(cfg), stage, registry(), data);
@@ -89,11 +131,19 @@ py::dict runStudy(const std::string& path, const std::string& text, const std::s
   opt.out_dir = out;
   InterruptScope interrupt;
   opt.cancelled = InterruptScope::flag();
+  std::shared_ptr<ProgressForwarder> forward;
+  if (!progress.is_none()) {
+    forward = std::make_shared<ProgressForwarder>(progress);
+    opt.progress = [forward](const std::string& stage, double f, const std::string& text) {
+      (*forward)(stage, f, text);
+    };
+  }
   exid::StudyResult r;
   {
     py::gil_scoped_release nogil;
     r = exid::runStudy(cfg, registry(), opt);
   }
+  opt.progress = nullptr;
   interrupt.rethrow();
   py::dict d;
   d["ok"] = r.ok;
@@ -158,7 +208,8 @@ py::tuple readCsv(const std::string& path) {
 
 void bindStudies(py::module_& m) {
   m.def("run_study", &runStudy, py::arg("path"), py::arg("text"), py::arg("source"),
-        py::arg("base_dir"), py::arg("out"), py::arg("stage"), py::arg("data"));
+        py::arg("base_dir"), py::arg("out"), py::arg("stage"), py::arg("data"),
+        py::arg("progress") = py::none());
   m.def("resolved_study", &resolvedStudy, py::arg("path"), py::arg("text"), py::arg("source"),
         py::arg("base_dir"));
   m.def("run_matrix", &runMatrix, py::arg("file"), py::arg("out"), py::arg("jobs"),

@@ -2,7 +2,8 @@
 # The installed Python package: `cmake --install` of the build into a temporary prefix, then
 # `import exid` from outside both trees with only PYTHONPATH set. The module must load the
 # installed libexid_core (its RPATH) and the installed plugins (beside that core), none of the
-# build tree's. Usage: installed.sh BUILD_DIR PYTHON
+# build tree's, and find the examples and data installed under <prefix>/share/exid (data_path).
+# Usage: installed.sh BUILD_DIR PYTHON
 set -euo pipefail
 build=$1
 python=$2
@@ -28,5 +29,9 @@ assert libs and not outside, f"plugins loaded from outside the prefix: {outside}
 maps = open("/proc/self/maps").read()
 cores = {line.split()[-1] for line in maps.splitlines() if "libexid_core" in line}
 assert cores and all(os.path.realpath(c).startswith(prefix) for c in cores), cores
+study = os.path.realpath(exid.data_path("examples/real/tx40_wls.yaml"))
+assert study.startswith(prefix + "/share/exid/"), study
+assert os.path.isfile(exid.data_path("data/staubli_tx40/urdf/tx40_mdh_modified.urdf"))
+assert os.path.isfile(exid.data_path("robots/tx40/tx40_exid.xml"))
 print(f"installed package: {len(libs)} plugin libraries and libexid_core from {prefix}")
 PY

@@ -111,6 +111,7 @@ bool isPluginFile(const fs::path& p) {
 
 struct Registry::Impl {
   std::vector<fs::path> user_paths;
+  bool default_paths = true;
   // Libraries first: members are destroyed in reverse order, so plugin infos (whose
   // std::function factories live in the libraries) go before the libraries are released.
   std::vector<std::shared_ptr<boost::dll::shared_library>> libraries;
@@ -126,7 +127,7 @@ struct Registry::Impl {
       while (std::getline(ss, item, ':'))
         if (!item.empty()) out.emplace_back(item);
     }
-    fs::path exe = executableDir();
+    fs::path exe = default_paths ? executableDir() : fs::path();
     if (!exe.empty()) {
       out.push_back(exe.parent_path() / "plugins");                   // build tree: build/bin/exid
       out.push_back(exe.parent_path() / "lib" / "exid" / "plugins");  // install: prefix/bin/exid
@@ -134,7 +135,7 @@ struct Registry::Impl {
     // install: prefix/<libdir>/libexid_core.so; the build tree: build/lib/libexid_core.so with
     // build/lib/exid/plugins a link to build/plugins (made by CMake). Only places relative to
     // the running program or the core library: no path of the machine that built exid.
-    if (const fs::path lib = coreLibraryDir(); !lib.empty())
+    if (const fs::path lib = default_paths ? coreLibraryDir() : fs::path(); !lib.empty())
       out.push_back(lib / "exid" / "plugins");
     // Drop duplicates (same canonical directory), keep the first.
     std::vector<fs::path> unique;
@@ -235,6 +236,7 @@ Registry::Registry() : impl_(std::make_unique<Impl>()) {}
 Registry::~Registry() = default;
 
 void Registry::addSearchPath(const fs::path& dir) { impl_->user_paths.push_back(dir); }
+void Registry::searchDefaultPaths(bool on) { impl_->default_paths = on; }
 std::vector<fs::path> Registry::searchPaths() const { return impl_->allPaths(); }
 
 void Registry::scan() {

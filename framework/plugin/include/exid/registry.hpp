@@ -4,8 +4,11 @@
 // Search order for plugin libraries (files named libexid_plugin_*.so):
 //   1. directories given with --plugin-path (addSearchPath, in order),
 //   2. EXID_PLUGIN_PATH (colon-separated),
-//   3. the build tree's plugin directory,
-//   4. the install prefix's plugin directory.
+//   3. the defaults: beside the executable (build/bin/exid -> build/plugins, prefix/bin/exid ->
+//      prefix/lib/exid/plugins) and beside libexid_core (<libdir>/exid/plugins; in the build
+//      tree a link to build/plugins). No path of the building machine is compiled in. A host
+//      that knows where its plugins are (the Python module, whose executable is python3) turns
+//      them off (searchDefaultPaths(false)).
 // A plugin name found in an earlier directory hides the same name found later.
 #pragma once
 
@@ -35,6 +38,8 @@ class EXID_API Registry {
   Registry& operator=(const Registry&) = delete;
 
   void addSearchPath(const std::filesystem::path& dir);
+  /// Whether scan() also searches the default folders after EXID_PLUGIN_PATH (default: yes).
+  void searchDefaultPaths(bool on);
   /// The directories searched, in order (after defaults are added by scan()).
   std::vector<std::filesystem::path> searchPaths() const;
   /// Loads every plugin library found on the search paths. Refused libraries are recorded, not
