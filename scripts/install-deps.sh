@@ -8,7 +8,9 @@ pkgs=(build-essential cmake pkg-config
       libbenchmark-dev libsqlite3-dev libzstd-dev liblz4-dev libfcl-dev gnuplot-nox libopenmpi-dev openmpi-bin
       # the Python package (docs/python.md), its tests and the notebooks they execute
       pybind11-dev python3-dev python3-numpy python3-pandas python3-pytest python3-matplotlib
-      python3-nbconvert python3-nbclient python3-ipykernel python3-jupyter-client)
+      python3-nbconvert python3-nbclient python3-ipykernel python3-jupyter-client
+      # the report as a person sees it: rendered headless (tests/integration/report_html_test)
+      chromium)
 for arg in "$@"; do
   case "$arg" in
     --fuzz) pkgs+=(clang-14 libclang-rt-14-dev) ;;
