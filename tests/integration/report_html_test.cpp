@@ -70,9 +70,8 @@ validation:
 TEST(ReportHtml, VerdictFirstEveryLinkedFilePresentAndItRenders) {
   const fs::path dir = exid_cli::freshTempDir("exid_report_html_", "study");
   std::ofstream(dir / "study.yaml") << kStudy;
-  const exid_cli::CmdResult r =
-      exid_cli::runExid("-q run " + (dir / "study.yaml").string() + " --out " +
-                        (dir / "out").string());
+  const exid_cli::CmdResult r = exid_cli::runExid("-q run " + (dir / "study.yaml").string() +
+                                                  " --out " + (dir / "out").string());
   ASSERT_EQ(r.code, 0) << r.out;
   const fs::path html_file = dir / "out" / "report.html";
   const std::string html = exid_cli::slurp(html_file);
@@ -109,10 +108,9 @@ TEST(ReportHtml, VerdictFirstEveryLinkedFilePresentAndItRenders) {
   const std::string cmd = "timeout 180 " + chrome +
                           " --headless --disable-gpu --no-sandbox --hide-scrollbars"
                           " --user-data-dir=" +
-                          (dir / "chromium-profile").string() +
-                          " --screenshot=" + shot.string() +
-                          " --window-size=1200,2000 file://" + html_file.string() +
-                          " >" + (dir / "chromium.log").string() + " 2>&1";
+                          (dir / "chromium-profile").string() + " --screenshot=" + shot.string() +
+                          " --window-size=1200,2000 file://" + html_file.string() + " >" +
+                          (dir / "chromium.log").string() + " 2>&1";
   const int rc = std::system(cmd.c_str());
   ASSERT_EQ(rc, 0) << cmd << "\n" << exid_cli::slurp(dir / "chromium.log");
   ASSERT_TRUE(fs::exists(shot)) << exid_cli::slurp(dir / "chromium.log");

@@ -327,6 +327,13 @@ TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
     c.worst.push_back(*w);
     if (w->checked && w->margin < 0) c.ok = false;
   }
+  c.start = endMotion(qd, qdd, 0, robot);
+  c.end = endMotion(qd, qdd, K - 1, robot);
+  for (const Body& b : robot.bodies) {
+    c.joint_names.push_back(b.joint_name);
+    c.prismatic.push_back(b.type == JointType::Prismatic);
+  }
+  if (static_cast<int>(c.joint_names.size()) != n) c.joint_names.clear();
   if (collision) {
     c.worst.push_back(distanceWorst(s, robot, *collision, min_distance_m, &c.distance_pair));
     if (c.worst.back().margin < 0) c.ok = false;
@@ -453,6 +460,8 @@ Json TrajectoryCheck::toJson() const {
   }
   j["worst"] = w;
   if (std::isfinite(tau_file_deviation)) j["tau_file_deviation"] = tau_file_deviation;
+  j["start"] = start.toJson();
+  j["end"] = end.toJson();
   return j;
 }
 
@@ -472,7 +481,7 @@ std::string TrajectoryCheck::text() const {
   if (std::isfinite(tau_file_deviation))
     s += fmt::format("torque in the file vs the robot's model: max difference {:.3g}\n",
                      tau_file_deviation);
-  return s;
+  return s + restText();
 }
 
 namespace {
@@ -703,6 +712,9 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     if (o.torque_margin > 0) out["torque_margin"] = o.torque_margin;
     if (o.collision) out["distance_margin_m"] = o.collision->margin_m;
     out["check"] = c.toJson();
+    out["starts_at_rest"] = c.start.at_rest;
+    out["ends_at_rest"] = c.end.at_rest;
+    if (const std::string rest = c.restText(); !rest.empty()) out["rest_note"] = rest;
     writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
 
     if (o.plots) drawExportPlots(stage, s, tau, robot, o, dmin);

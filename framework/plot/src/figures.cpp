@@ -2,12 +2,16 @@
 
 #include <fmt/format.h>
 
+#include <algorithm>
+
 namespace exid {
 
 std::string jointLabel(const std::string& prefix, int j, const std::vector<std::string>& names) {
   const auto i = static_cast<std::size_t>(j);
   const std::string base = fmt::format("{}{}", prefix, j + 1);
-  return i < names.size() && !names[i].empty() && names[i] != base
+  std::string compact = base;  // "joint 2" is not named by "joint2"
+  compact.erase(std::remove(compact.begin(), compact.end(), ' '), compact.end());
+  return i < names.size() && !names[i].empty() && names[i] != base && names[i] != compact
              ? fmt::format("{} ({})", base, names[i])
              : base;
 }

@@ -149,6 +149,12 @@ void Report::excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau
                          w.find("limit")->asDouble(), m, m < 0 ? " **violated**" : "",
                          w.find("ratio")->asDouble());
       }
+    if (const Json* rest = exported->find("rest_note"); rest && rest->isString()) {
+      s += "\n### The exported trajectory is not at rest at its ends\n\n";
+      std::istringstream lines(rest->asString());
+      for (std::string l; std::getline(lines, l);)
+        if (!l.empty()) s += "- " + l + "\n";
+    }
   }
 }
 
