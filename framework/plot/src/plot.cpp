@@ -217,6 +217,7 @@ std::string plotScript(const PlotSpec& spec, const std::string& csv, const std::
   const bool lower = hasLowerPanel(spec);
   std::string g = "set datafile separator ','\nset key autotitle columnhead\n";
   g += "set terminal " + terminal + "\n";
+  g += "set termoption noenhanced\n";  // names as written: joint_1 is not joint with a subscript
   g += "set output " + quote(output) + "\n";
   g += "set title " + quote(spec.title) + " noenhanced\n";
   g += "set ylabel " + quote(spec.ylabel) + " noenhanced\n";
