@@ -10,7 +10,9 @@ pkgs=(build-essential cmake pkg-config
       pybind11-dev python3-dev python3-numpy python3-pandas python3-pytest python3-matplotlib
       python3-nbconvert python3-nbclient python3-ipykernel python3-jupyter-client
       # the wheel (pyproject.toml): built by pip, installed into a venv (tests/python/wheel.sh)
-      python3-pip python3-venv)
+      python3-pip python3-venv
+      # the report as a person sees it: rendered headless (tests/integration/report_html_test)
+      chromium)
 for arg in "$@"; do
   case "$arg" in
     --fuzz) pkgs+=(clang-14 libclang-rt-14-dev) ;;

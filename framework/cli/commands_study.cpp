@@ -93,6 +93,8 @@ int stageCommand(const Registry& reg, const std::string& stage, const std::strin
         "Trajectory for execution in {}/ (trajectory.csv, trajectory.params.yaml, "
         "joint_trajectory.yaml, trajectory_check.json)\n",
         ex.dir);
+    if (const Json* rest = E ? E->find("rest_note") : nullptr; rest && rest->isString())
+      std::cout << rest->asString();
     if (!ok || !ok->asBool()) {
       std::cerr << fmt::format(
           "exid excite: the exported trajectory exceeds a limit of the robot at {} Hz (see {}/"

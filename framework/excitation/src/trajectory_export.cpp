@@ -16,6 +16,7 @@
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 #include "exid/signal.hpp"
+#include "figures.hpp"
 #include "plot.hpp"
 
 namespace exid {
@@ -326,6 +327,13 @@ TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
     c.worst.push_back(*w);
     if (w->checked && w->margin < 0) c.ok = false;
   }
+  c.start = endMotion(qd, qdd, 0, robot);
+  c.end = endMotion(qd, qdd, K - 1, robot);
+  for (const Body& b : robot.bodies) {
+    c.joint_names.push_back(b.joint_name);
+    c.prismatic.push_back(b.type == JointType::Prismatic);
+  }
+  if (static_cast<int>(c.joint_names.size()) != n) c.joint_names.clear();
   if (collision) {
     c.worst.push_back(distanceWorst(s, robot, *collision, min_distance_m, &c.distance_pair));
     if (c.worst.back().margin < 0) c.ok = false;
@@ -452,6 +460,8 @@ Json TrajectoryCheck::toJson() const {
   }
   j["worst"] = w;
   if (std::isfinite(tau_file_deviation)) j["tau_file_deviation"] = tau_file_deviation;
+  j["start"] = start.toJson();
+  j["end"] = end.toJson();
   return j;
 }
 
@@ -471,7 +481,7 @@ std::string TrajectoryCheck::text() const {
   if (std::isfinite(tau_file_deviation))
     s += fmt::format("torque in the file vs the robot's model: max difference {:.3g}\n",
                      tau_file_deviation);
-  return s;
+  return s + restText();
 }
 
 namespace {
@@ -556,40 +566,45 @@ void drawExportPlots(const fs::path& stage, const Samples& s, const Eigen::Matri
                      const Eigen::VectorXd& dmin) {
   const int n = s.dof();
   const Eigen::Index K = s.size();
-  auto series = [&](const Eigen::MatrixXd& m, const char* prefix, const Eigen::VectorXd* scale) {
+  std::vector<std::string> jn;
+  for (const Body& b : robot.bodies) jn.push_back(b.joint_name);
+  if (static_cast<int>(jn.size()) != n) jn.clear();
+  auto series = [&](const Eigen::MatrixXd& m, const char* prefix) {
     std::vector<PlotSeries> v;
     for (int j = 0; j < n; ++j) {
       PlotSeries ps;
-      ps.title = fmt::format("{}{}", prefix, j + 1);
+      ps.title = jointLabel(prefix, j, jn);
       ps.x.assign(s.t.data(), s.t.data() + K);
-      ps.y.resize(static_cast<std::size_t>(K));
-      for (Eigen::Index k = 0; k < K; ++k)
-        ps.y[static_cast<std::size_t>(k)] = m(k, j) / (scale ? (*scale)(j) : 1.0);
+      ps.y.assign(m.col(j).data(), m.col(j).data() + K);
       v.push_back(std::move(ps));
     }
     return v;
   };
-  drawPlot({"trajectory_q", "positions at the controller rate", "t [s]", "q [rad or m]",
-            series(s.q, "q", nullptr)},
-           stage);
-  drawPlot({"trajectory_qd", "velocities at the controller rate", "t [s]", "qd [rad/s or m/s]",
-            series(s.qd, "qd", nullptr)},
+  auto spec = [&](const char* name, const char* title, const char* ylabel,
+                  std::vector<PlotSeries> v) {
+    PlotSpec p;
+    p.name = name;
+    p.title = title;
+    p.xlabel = "t [s]";
+    p.ylabel = ylabel;
+    p.series = std::move(v);
+    p.x_column = "t_s";
+    return p;
+  };
+  drawPlot(
+      spec("trajectory_q", "positions at the controller rate", "q [rad or m]", series(s.q, "q")),
+      stage);
+  drawPlot(spec("trajectory_qd", "velocities at the controller rate", "qd [rad/s or m/s]",
+                series(s.qd, "qd")),
            stage);
   const Eigen::VectorXd tmax = knownTorqueLimits(robot, o.torque_max);
   if (tmax.size() == n) {
-    PlotSpec ts{"trajectory_tau_ratio", "predicted torque / torque limit", "t [s]", "tau / tau_max",
-                series(tau, "tau", &tmax)};
-    for (double lvl : {-1.0, 1.0}) {
-      PlotSeries b;
-      b.title = lvl > 0 ? "limit" : "";
-      b.x = {s.t(0), s.t(K - 1)};
-      b.y = {lvl, lvl};
-      ts.series.push_back(b);
-    }
-    drawPlot(ts, stage);
+    drawPlot(torqueRatioPlot("trajectory_tau_ratio", "predicted torque / torque limit", s.t, tau,
+                             tmax, o.torque_margin, jn),
+             stage);
   } else {
-    drawPlot({"trajectory_tau", "predicted torque (no torque limits known)", "t [s]",
-              "tau [N m or N]", series(tau, "tau", nullptr)},
+    drawPlot(spec("trajectory_tau", "predicted torque (no torque limits known)", "tau [N m or N]",
+                  series(tau, "tau")),
              stage);
   }
   if (o.collision && dmin.size() == K) {
@@ -597,16 +612,12 @@ void drawExportPlots(const fs::path& stage, const Samples& s, const Eigen::Matri
     d.title = "minimum distance";
     d.x.assign(s.t.data(), s.t.data() + K);
     d.y.assign(dmin.data(), dmin.data() + K);
-    PlotSeries m;
-    m.title = "margin";
-    m.x = {s.t(0), s.t(K - 1)};
-    m.y = {o.collision->margin_m, o.collision->margin_m};
-    drawPlot({"trajectory_distance",
-              "minimum distance over the checked pairs",
-              "t [s]",
-              "distance [m]",
-              {d, m}},
-             stage);
+    PlotSpec p =
+        spec("trajectory_distance", "minimum distance over the checked pairs", "distance [m]", {d});
+    p.limits.push_back({o.collision->margin_m,
+                        fmt::format("design margin {:g} m", o.collision->margin_m), "#e67e22"});
+    p.limits.push_back({0.0, "contact", "#c0392b"});
+    drawPlot(p, stage);
   }
 }
 
@@ -701,6 +712,9 @@ Json exportTrajectory(const Trajectory& traj, const std::string& type, const Par
     if (o.torque_margin > 0) out["torque_margin"] = o.torque_margin;
     if (o.collision) out["distance_margin_m"] = o.collision->margin_m;
     out["check"] = c.toJson();
+    out["starts_at_rest"] = c.start.at_rest;
+    out["ends_at_rest"] = c.end.at_rest;
+    if (const std::string rest = c.restText(); !rest.empty()) out["rest_note"] = rest;
     writeFileAtomic(stage / "trajectory_check.json", out.dump(2) + "\n");
 
     if (o.plots) drawExportPlots(stage, s, tau, robot, o, dmin);

@@ -10,6 +10,7 @@
 
 #include "exid/io.hpp"
 #include "exid/runner.hpp"
+#include "figures.hpp"
 
 namespace exid {
 
@@ -33,6 +34,14 @@ namespace {
 std::vector<double> vec(const Eigen::VectorXd& v) {
   return std::vector<double>(v.data(), v.data() + v.size());
 }
+
+// The robot's joint names, one per measured coordinate (empty when they do not match).
+std::vector<std::string> jointNames(const RobotModel& robot, int dof) {
+  std::vector<std::string> n;
+  for (const Body& b : robot.bodies) n.push_back(b.joint_name);
+  if (static_cast<int>(n.size()) != dof) n.clear();
+  return n;
+}
 }  // namespace
 
 void Report::excitation(const Samples& initial, const Samples& optimal, const OptimizerResult& r,
@@ -40,14 +49,17 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
   Eigen::JacobiSVD<Eigen::MatrixXd> svd(m.design(optimal));
   Eigen::JacobiSVD<Eigen::MatrixXd> svd0(m.design(initial));
   const std::size_t sec = sections_.size();
+  joint_names_ = jointNames(m.robot(), optimal.dof());
   for (int j = 0; j < optimal.dof(); ++j) {
     PlotSpec p;
     p.name = fmt::format("trajectory_joint{}", j + 1);
-    p.title = fmt::format("Starting and optimal trajectories, joint {}", j + 1);
+    p.title =
+        fmt::format("Starting and optimal trajectories, {}", jointLabel("joint ", j, joint_names_));
     p.xlabel = "t [s]";
     p.ylabel = fmt::format("q{} [rad or m]", j + 1);
-    p.series.push_back({"starting", vec(initial.t), vec(initial.q.col(j)), "lines", {}, {}});
-    p.series.push_back({"optimal", vec(optimal.t), vec(optimal.q.col(j)), "lines", {}, {}});
+    p.x_column = "t_s";
+    p.series.push_back(plotLine("starting", vec(initial.t), vec(initial.q.col(j)), "lines"));
+    p.series.push_back(plotLine("optimal", vec(optimal.t), vec(optimal.q.col(j)), "lines"));
     plots_.emplace_back(sec, p);
   }
   if (!r.history_value.empty()) {
@@ -57,7 +69,7 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
     p.xlabel = "wall time [s]";
     p.ylabel = "criterion";
     p.log_y = true;
-    p.series.push_back({"criterion", r.history_t_s, r.history_value, "linespoints", {}, {}});
+    p.series.push_back(plotLine("criterion", r.history_t_s, r.history_value, "linespoints"));
     plots_.emplace_back(sec, p);
   }
   {
@@ -70,8 +82,8 @@ void Report::excitation(const Samples& initial, const Samples& optimal, const Op
     std::vector<double> idx;
     for (Eigen::Index i = 0; i < svd.singularValues().size(); ++i)
       idx.push_back(static_cast<double>(i + 1));
-    p.series.push_back({"starting", idx, vec(svd0.singularValues()), "linespoints", {}, {}});
-    p.series.push_back({"optimal", idx, vec(svd.singularValues()), "linespoints", {}, {}});
+    p.series.push_back(plotLine("starting", idx, vec(svd0.singularValues()), "linespoints"));
+    p.series.push_back(plotLine("optimal", idx, vec(svd.singularValues()), "linespoints"));
     plots_.emplace_back(sec, p);
   }
   std::string s = fmt::format(
@@ -96,24 +108,12 @@ void Report::excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau
   const std::size_t sec = sections_.size() - 1;
   std::string& s = sections_.back();
   if (tau_max.size() == tau.cols() && tau.rows() == optimal.size()) {
-    PlotSpec p;
-    p.name = "torque_ratio";
-    p.title = "Predicted torque over its limit, optimal trajectory (design samples)";
-    p.xlabel = "t [s]";
-    p.ylabel = "tau / tau_max";
+    PlotSpec p = torqueRatioPlot(
+        "torque_ratio", "Predicted torque over its limit, optimal trajectory (design samples)",
+        optimal.t, tau, tau_max, margin, joint_names_);
     double worst = 0.0;
-    for (Eigen::Index j = 0; j < tau.cols(); ++j) {
-      const Eigen::VectorXd r = tau.col(j) / tau_max(j);
-      worst = std::max(worst, r.cwiseAbs().maxCoeff());
-      p.series.push_back({fmt::format("tau{}", j + 1), vec(optimal.t), vec(r), "lines", {}, {}});
-    }
-    for (double lvl : {-margin, margin})
-      p.series.push_back({lvl > 0 ? "margin" : "",
-                          {optimal.t(0), optimal.t(optimal.size() - 1)},
-                          {lvl, lvl},
-                          "lines",
-                          {},
-                          {}});
+    for (Eigen::Index j = 0; j < tau.cols(); ++j)
+      worst = std::max(worst, (tau.col(j) / tau_max(j)).cwiseAbs().maxCoeff());
     plots_.emplace_back(sec, p);
     s += fmt::format(
         "\nTorque limits: |tau_j| <= {:.3g} tau_max,j at every design sample (the robot's full "
@@ -149,6 +149,12 @@ void Report::excitationLimits(const Samples& optimal, const Eigen::MatrixXd& tau
                          w.find("limit")->asDouble(), m, m < 0 ? " **violated**" : "",
                          w.find("ratio")->asDouble());
       }
+    if (const Json* rest = exported->find("rest_note"); rest && rest->isString()) {
+      s += "\n### The exported trajectory is not at rest at its ends\n\n";
+      std::istringstream lines(rest->asString());
+      for (std::string l; std::getline(lines, l);)
+        if (!l.empty()) s += "- " + l + "\n";
+    }
   }
 }
 
@@ -163,13 +169,9 @@ void Report::excitationCollision(const Samples& optimal, const Eigen::VectorXd& 
     p.title = "Smallest distance over the checked pairs, optimal trajectory (design samples)";
     p.xlabel = "t [s]";
     p.ylabel = "distance [m]";
-    p.series.push_back({"minimum distance", vec(optimal.t), vec(dmin), "lines", {}, {}});
-    p.series.push_back({"margin",
-                        {optimal.t(0), optimal.t(optimal.size() - 1)},
-                        {margin, margin},
-                        "lines",
-                        {},
-                        {}});
+    p.series.push_back(plotLine("minimum distance", vec(optimal.t), vec(dmin), "lines"));
+    p.limits.push_back({margin, fmt::format("design margin {:g} m", margin), "#e67e22"});
+    p.limits.push_back({0.0, "contact", "#c0392b"});
     plots_.emplace_back(sec, p);
   }
   sections_.back() += fmt::format(
@@ -256,15 +258,12 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
         lo.push_back(e.history_value(k, i) - 2 * sd);
         hi.push_back(e.history_value(k, i) + 2 * sd);
       }
-      p.series.push_back({"+-2 sigma", vec(e.history_t), {}, "band", lo, hi});
+      p.series.push_back(plotBand("+-2 sigma", vec(e.history_t), lo, hi));
       p.series.push_back(
-          {"estimate", vec(e.history_t), vec(e.history_value.col(i)), "lines", {}, {}});
-      p.series.push_back({simulated ? "true" : "nominal",
-                          {e.history_t(0), e.history_t(e.history_t.size() - 1)},
-                          {nominal(i), nominal(i)},
-                          "lines",
-                          {},
-                          {}});
+          plotLine("estimate", vec(e.history_t), vec(e.history_value.col(i)), "lines"));
+      p.series.push_back(plotLine(simulated ? "true" : "nominal",
+                                  {e.history_t(0), e.history_t(e.history_t.size() - 1)},
+                                  {nominal(i), nominal(i)}, "lines"));
       plots_.emplace_back(sections_.size(), p);
     }
     if (e.value.size() > shown)
@@ -277,24 +276,8 @@ void Report::identification(const Estimate& e, const Eigen::VectorXd& nominal, b
 void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted,
                         const StudySummary::Validation& v) {
   const std::size_t sec = sections_.size();
-  for (int eq = 0; eq < rows.numEquations; ++eq) {
-    PlotSpec p;
-    p.name = fmt::format("validation_equation{}", eq + 1);
-    p.title = fmt::format("Validation: measured and predicted, equation {}", eq + 1);
-    p.xlabel = "sample";
-    p.ylabel = "y (torque [N m], wrench or energy)";
-    std::vector<double> x, ym, yp;
-    for (Eigen::Index r = 0; r < rows.y.size(); ++r) {
-      const int e = rows.equation.empty() ? 0 : rows.equation[static_cast<std::size_t>(r)];
-      if (e != eq) continue;
-      x.push_back(static_cast<double>(x.size()));
-      ym.push_back(rows.y(r));
-      yp.push_back(predicted(r));
-    }
-    p.series.push_back({"measured", x, ym, "lines", {}, {}});
-    p.series.push_back({"predicted", x, yp, "lines", {}, {}});
-    plots_.emplace_back(sec, p);
-  }
+  for (int eq = 0; eq < rows.numEquations; ++eq)
+    plots_.emplace_back(sec, validationPlot(rows, predicted, eq));
   {
     Eigen::VectorXd res = rows.y - predicted;
     const double lo = res.minCoeff(), hi = res.maxCoeff();
@@ -311,7 +294,7 @@ void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted,
     p.title = "Validation residuals y - y_hat";
     p.xlabel = "residual";
     p.ylabel = "count";
-    p.series.push_back({"residuals", centers, counts, "boxes", {}, {}});
+    p.series.push_back(plotLine("residuals", centers, counts, "boxes"));
     plots_.emplace_back(sec, p);
   }
   std::string s = fmt::format(
@@ -319,8 +302,9 @@ void Report::validation(const Rows& rows, const Eigen::VectorXd& predicted,
       "| equation | RMS error | relative |\n|---|---|---|\n",
       rows.y.size(), v.relative_error);
   for (std::size_t i = 0; i < v.rms_per_joint.size(); ++i)
-    s += fmt::format("| {} | {:.4g} | {:.4g} |\n", i + 1, v.rms_per_joint[i],
-                     v.relative_error_per_joint[i]);
+    s += fmt::format("| {}{} | {:.4g} | {:.4g} |\n", i + 1,
+                     i < rows.equation_names.size() ? ": " + rows.equation_names[i] : "",
+                     v.rms_per_joint[i], v.relative_error_per_joint[i]);
   s += "\nMeasured vs predicted: `validation.csv`.\n";
   sections_.push_back(s);
 }
@@ -357,6 +341,20 @@ std::string inlineCode(const std::string& s) {
   return o;
 }
 
+// Under an inline figure: its title and links to the files beside it (PNG, the data as CSV).
+std::string figureCaption(const std::string& title, const std::string& svg,
+                          const std::filesystem::path& dir) {
+  std::string c = "<figcaption>" + htmlEscape(title);
+  const std::string stem = svg.substr(0, svg.size() - 4);  // "plots/x" of "plots/x.svg"
+  for (const char* ext : {".png", ".csv"})
+    if (svg.size() > 4 && std::filesystem::exists(dir / (stem + ext)))
+      c += fmt::format(" &middot; <a href=\"{0}{1}\">{2}</a>", htmlEscape(stem), ext,
+                       std::string(ext) == ".png" ? "PNG" : "data (CSV)");
+  return c + "</figcaption>";
+}
+
+constexpr int kFoldedTableRows = 24;
+
 // Markdown (the subset the report uses) to self-contained HTML; images become inline SVG.
 std::string toHtml(const std::string& md, const std::filesystem::path& dir,
                    const std::string& title) {
@@ -364,11 +362,28 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
       "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>" + htmlEscape(title) +
       "</title>\n<style>body{font-family:sans-serif;max-width:60em;margin:2em auto;padding:0 1em}"
       "table{border-collapse:collapse}td,th{border:1px solid #bbb;padding:2px 6px;font-size:90%}"
-      "pre{background:#f4f4f4;padding:.5em;overflow:auto}svg{max-width:100%;height:auto}</style>"
+      "pre{background:#f4f4f4;padding:.5em;overflow:auto}svg{max-width:100%;height:auto}"
+      "figure{margin:1em 0}figcaption{font-size:85%;color:#555}"
+      ".verdict{padding:.3em .5em;border-radius:4px}.verdict-ok{background:#e3f4e6}"
+      ".verdict-suspect{background:#fde2df}.verdict-none{background:#eee}</style>"
       "</head><body>\n";
   std::istringstream in(md);
   std::string line;
   bool table = false, pre = false, header_row = false;
+  std::string tbl, tbl_head;  // the table being read, its header's cells and its rows
+  int tbl_rows = 0;
+  // A long table (the base parameters' expressions, the estimates of a large model) folded
+  // under its size, so that the figures after it are not pages away.
+  auto closeTable = [&] {
+    tbl += "</table>\n";
+    h += tbl_rows > kFoldedTableRows
+             ? fmt::format(
+                   "<details><summary>table of {} rows: {} (click to open)</summary>\n{}"
+                   "</details>\n",
+                   tbl_rows, tbl_head, tbl)
+             : tbl;
+    table = false;
+  };
   while (std::getline(in, line)) {
     if (line.rfind("```", 0) == 0) {
       h += pre ? "</pre>\n" : "<pre>";
@@ -381,7 +396,8 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
     }
     if (!line.empty() && line[0] == '|') {
       if (!table) {
-        h += "<table>\n";
+        tbl = "<table>\n";
+        tbl_rows = 0;
         table = true;
         header_row = true;
       }
@@ -396,17 +412,22 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
           cur += line[i];
         }
       }
-      h += "<tr>";
-      for (auto& c : cells)
-        h += (header_row ? "<th>" : "<td>") + inlineCode(c) + (header_row ? "</th>" : "</td>");
-      h += "</tr>\n";
+      tbl += "<tr>";
+      if (header_row) tbl_head.clear();
+      for (auto& c : cells) {
+        if (header_row) {
+          const auto b = c.find_first_not_of(' '), e = c.find_last_not_of(' ');
+          tbl_head += (tbl_head.empty() ? "" : ", ") +
+                      inlineCode(b == std::string::npos ? "" : c.substr(b, e - b + 1));
+        }
+        tbl += (header_row ? "<th>" : "<td>") + inlineCode(c) + (header_row ? "</th>" : "</td>");
+      }
+      tbl += "</tr>\n";
+      if (!header_row) ++tbl_rows;
       header_row = false;
       continue;
     }
-    if (table) {
-      h += "</table>\n";
-      table = false;
-    }
+    if (table) closeTable();
     if (line.rfind("![", 0) == 0) {
       auto a = line.find("](");
       auto b = line.rfind(')');
@@ -414,11 +435,19 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
       std::ifstream svg(dir / path);
       std::string content((std::istreambuf_iterator<char>(svg)), std::istreambuf_iterator<char>());
       auto start = content.find("<svg");
-      h += start == std::string::npos ? "<p>(missing picture " + htmlEscape(path) + ")</p>\n"
-                                      : "<figure>" + content.substr(start) + "</figure>\n";
+      h += start == std::string::npos
+               ? "<p>(missing picture " + htmlEscape(path) + ")</p>\n"
+               : "<figure>" + content.substr(start) +
+                     figureCaption(line.substr(2, a - 2), path, dir) + "</figure>\n";
       continue;
     }
-    if (line.rfind("### ", 0) == 0)
+    if (line.rfind("## Verdict: ", 0) == 0)
+      h += fmt::format("<h2 class=\"verdict verdict-{}\">{}</h2>\n",
+                       line.find("suspect") != std::string::npos ? "suspect"
+                       : line.find(": ok") != std::string::npos  ? "ok"
+                                                                 : "none",
+                       inlineCode(line.substr(3)));
+    else if (line.rfind("### ", 0) == 0)
       h += "<h3>" + inlineCode(line.substr(4)) + "</h3>\n";
     else if (line.rfind("## ", 0) == 0)
       h += "<h2>" + inlineCode(line.substr(3)) + "</h2>\n";
@@ -429,9 +458,25 @@ std::string toHtml(const std::string& md, const std::filesystem::path& dir,
     else if (!line.empty())
       h += "<p>" + inlineCode(line) + "</p>\n";
   }
-  if (table) h += "</table>\n";
+  if (table) closeTable();
   if (pre) h += "</pre>\n";
   return h + "</body></html>\n";
+}
+
+// The verdict first: what the results say of themselves (summary.json `verdict`).
+std::string verdictSection(const StudySummary& summary) {
+  if (summary.verdict == "suspect") {
+    std::string md =
+        "## Verdict: suspect\n\nThe study ran to the end, but its results fail checks of their own "
+        "(summary.json `verdict`):\n\n";
+    for (const auto& r : summary.verdict_reasons) md += "- " + r + "\n";
+    return md + "\n";
+  }
+  if (summary.verdict == "ok")
+    return "## Verdict: ok\n\nThe study ran to the end and its results pass their own checks "
+           "(summary.json `verdict`; docs/study.md, \"The verdict\").\n\n";
+  return fmt::format("## Verdict: not judged\n\nStatus `{}`: the results were not judged.\n\n",
+                     summary.status);
 }
 
 }  // namespace
@@ -456,18 +501,12 @@ std::string Report::write(const StudySummary& summary) {
   const std::string title =
       cfg_.report.title.empty() ? "exid study: " + cfg_.name : cfg_.report.title;
   std::string md = fmt::format("# {}\n\n", title);
+  md += verdictSection(summary);
+  md += "## Key figures\n\n" + briefTable(summary) + "\n";
   md += fmt::format(
       "Configuration hash `{}`; resolved study in `study.resolved.yaml`; machine-readable "
       "results in `summary.json`.\n\n",
       cfg_.hash());
-  if (summary.verdict == "suspect") {
-    md +=
-        "## Verdict: suspect\n\nThe study ran to the end, but its results fail checks of their own "
-        "(summary.json `verdict`):\n\n";
-    for (const auto& r : summary.verdict_reasons) md += "- " + r + "\n";
-    md += "\n";
-  }
-  md += briefTable(summary) + "\n";
   if (!summary.warnings.empty()) {
     md += "## Warnings\n\n";
     for (const auto& w : summary.warnings) md += "- " + w + "\n";

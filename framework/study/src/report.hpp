@@ -42,6 +42,7 @@ class Report {
   std::vector<std::string> sections_;  // markdown; "@@PLOTS:<section index>@@" placeholders
   std::vector<std::pair<std::size_t, PlotSpec>> plots_;     // section index, plot
   std::vector<std::pair<std::string, std::string>> files_;  // name, content
+  std::vector<std::string> joint_names_;  // the robot's, per measured coordinate (excitation)
 };
 
 }  // namespace exid

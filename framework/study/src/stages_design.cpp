@@ -283,6 +283,13 @@ Json exportExcitation(const StageEnv& env, const ExcitationStageOut& x, StudyRec
         fmt::format("excitation: the exported trajectory ({}) exceeds a limit of the robot "
                     "at {} Hz:\n{}",
                     opt.export_dir.string(), eo.rate_Hz, chk.text()));
+  if (!chk.start.at_rest || !chk.end.at_rest)
+    rec.warn(fmt::format("excitation: the exported trajectory ({}) does not {}:\n{}",
+                         opt.export_dir.string(),
+                         !chk.start.at_rest && !chk.end.at_rest ? "start or end at rest"
+                         : !chk.start.at_rest                   ? "start at rest"
+                                                                : "end at rest",
+                         chk.restText()));
   return E;
 }
 

@@ -54,6 +54,22 @@ struct EXID_API LimitWorst {
   double ratio = 0.0;    // |x| / x_max (position: 0 at the centre, 1 at a limit)
 };
 
+/// The motion at one end of a trajectory (its first or last sample), in joint coordinates. At
+/// rest when |qd_j| <= kRestTolerance qd_max,j and |qdd_j| <= kRestTolerance qdd_max,j for every
+/// joint (kRestTolerance rad/s or m/s, rad/s^2 or m/s^2 where the robot has no such limit): a
+/// trajectory that does not start at rest needs the robot brought to its first state first.
+struct EXID_API EndMotion {
+  bool at_rest = true;
+  std::vector<double> qd, qdd;  // per joint
+  std::vector<int> moving;      // 1-based joints not at rest
+  Json toJson() const;          // {at_rest, qd, qdd, moving_joints}
+};
+inline constexpr double kRestTolerance = 1e-3;
+
+/// The motion at sample k of joint-coordinate velocities and accelerations (K x n).
+EXID_API EndMotion endMotion(const Eigen::MatrixXd& qd, const Eigen::MatrixXd& qdd, int k,
+                             const RobotModel& robot);
+
 struct EXID_API TrajectoryCheck {
   int samples = 0;
   double rate_Hz = 0.0;             // measured: (samples - 1) / duration
@@ -66,8 +82,15 @@ struct EXID_API TrajectoryCheck {
   /// max |tau in the file - tau the robot's model predicts| (NaN when the file has no tau).
   double tau_file_deviation = 0.0;
   bool ok = true;  // every checked limit holds
+  /// The first and the last sample: at rest or not (not a limit: `ok` does not depend on it).
+  EndMotion start, end;
+  std::vector<std::string> joint_names;  // the robot's, per joint ("" unknown)
+  std::vector<bool> prismatic;           // per joint: m/s instead of rad/s
   Json toJson() const;
-  std::string text() const;  // a small table for the terminal
+  std::string text() const;  // a small table for the terminal, then restText()
+  /// "" when the trajectory starts and ends at rest; otherwise which joints start (end) at what
+  /// velocity and acceleration, and what that asks of whoever runs it.
+  std::string restText() const;
 };
 
 /// Checks samples (measured coordinates) against the robot's limits: q within [q_min, q_max],
