@@ -178,6 +178,23 @@ std::string schemaText(const McapState& st, std::uint16_t id) {
   return s == st.schemas.end() ? std::to_string(id) : fmt::format("{} '{}'", id, s->second.name);
 }
 
+/// A channel's topic in the census: its type (the schema's name) and serialization.
+void censusChannel(McapState& st, const McapState::Channel& c) {
+  TopicCensus& tc = (*st.census)[c.topic];
+  if (const auto sc = st.schemas.find(c.schema); tc.type.empty() && sc != st.schemas.end())
+    tc.type = sc->second.name;
+  if (tc.serialization_format.empty()) tc.serialization_format = c.encoding;
+}
+
+/// A message in the census: counted, its log time in the topic's span.
+void censusMessage(McapState& st, const std::string& topic, std::uint64_t log_time) {
+  TopicCensus& tc = (*st.census)[topic];
+  const auto t = static_cast<std::int64_t>(std::min<std::uint64_t>(log_time, INT64_MAX));
+  if (tc.messages == 0 || t < tc.first_ns) tc.first_ns = t;
+  if (tc.messages == 0 || t > tc.last_ns) tc.last_ns = t;
+  ++tc.messages;
+}
+
 /// Handles one Schema, Channel or Message record (top level or inside a chunk). Returns false
 /// for other opcodes (the caller decides).
 bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, Bytes& r,
@@ -265,12 +282,7 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
       }
     }
     st.channels[id] = c;
-    if (st.census) {
-      TopicCensus& tc = (*st.census)[c.topic];
-      if (const auto sc = st.schemas.find(c.schema); tc.type.empty() && sc != st.schemas.end())
-        tc.type = sc->second.name;
-      if (tc.serialization_format.empty()) tc.serialization_format = c.encoding;
-    }
+    if (st.census) censusChannel(st, c);
     return true;
   }
   if (op == 0x05) {
@@ -282,13 +294,7 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
     if (c == st.channels.end())
       throw Error(fmt::format(
           "{}: message on channel {}, which no Channel record defined before it", where, ch));
-    if (st.census) {
-      TopicCensus& tc = (*st.census)[c->second.topic];
-      const auto t = static_cast<std::int64_t>(std::min<std::uint64_t>(log_time, INT64_MAX));
-      if (tc.messages == 0 || t < tc.first_ns) tc.first_ns = t;
-      if (tc.messages == 0 || t > tc.last_ns) tc.last_ns = t;
-      ++tc.messages;
-    }
+    if (st.census) censusMessage(st, c->second.topic, log_time);
     if (!c->second.wanted) return true;
     RawMessage m;
     m.topic = c->second.wanted;
