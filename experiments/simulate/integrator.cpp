@@ -5,6 +5,7 @@
 #include <cvode/cvode.h>
 #include <fmt/format.h>
 
+#include <cstdlib>
 #include <exception>
 #include <utility>
 
@@ -28,13 +29,52 @@ Integrator::Integrator(Rhs rhs, const Eigen::VectorXd& x0, double t0, const std:
     LS_ = SUNLinSol_Dense(y_, A_, sctx_);
     check(CVodeSetLinearSolver(mem_, LS_, A_), "CVodeSetLinearSolver");
     check(CVodeSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "CVodeSetMaxNumSteps");
+    check(CVodeSetErrHandlerFn(mem_, &Integrator::onSolverMessage, this), "CVodeSetErrHandlerFn");
   } else {
     mem_ = ERKStepCreate(&Integrator::f, t0, y_, sctx_);
     exid::check(mem_ != nullptr, "experiment 'simulate': ERKStepCreate failed");
     check(ERKStepSStolerances(mem_, rtol, atol), "ERKStepSStolerances");
     check(ERKStepSetUserData(mem_, this), "ERKStepSetUserData");
     check(ERKStepSetMaxNumSteps(mem_, static_cast<long>(max_steps)), "ERKStepSetMaxNumSteps");
+    check(ERKStepSetErrHandlerFn(mem_, &Integrator::onSolverMessage, this),
+          "ERKStepSetErrHandlerFn");
   }
+}
+
+void Integrator::onSolverMessage(int, const char*, const char*, char* msg, void* self) {
+  static_cast<Integrator*>(self)->solver_msg_ = msg ? msg : "";
+}
+
+// A failed step in exid's words: what happened, what to change; SUNDIALS' own text in quotes.
+std::string Integrator::failureText(int flag, double t) const {
+  const char* solver = cvode_ ? "CVODE" : "ARKODE";
+  std::string what;
+  switch (flag) {
+    case -1:  // CV_TOO_MUCH_WORK, ARK_TOO_MUCH_WORK
+      what =
+          "max_steps internal steps did not reach the next sample: raise max_steps, loosen "
+          "rtol/atol, or use a smoother Coulomb law (coulomb: tanh)";
+      break;
+    case -2:  // CV_TOO_MUCH_ACC, ARK_TOO_MUCH_ACC
+      what = "rtol/atol ask for more accuracy than double precision gives: loosen them";
+      break;
+    case -3:  // CV_ERR_FAILURE, ARK_ERR_FAILURE
+    case -4:  // CV_CONV_FAILURE, ARK_CONV_FAILURE
+      what =
+          "the step's error or convergence test failed repeatedly (stiff or discontinuous "
+          "dynamics, e.g. Coulomb friction's sign): try integrator cvode, coulomb: tanh, or "
+          "larger tolerances";
+      break;
+    default:
+      what = "try larger tolerances, max_steps, or the other integrator";
+  }
+  // (the name is allocated by SUNDIALS: freed here)
+  char* name = cvode_ ? CVodeGetReturnFlagName(flag) : ERKStepGetReturnFlagName(flag);
+  const std::string flag_name = name ? name : std::to_string(flag);
+  std::free(name);
+  return fmt::format("experiment 'simulate': the integrator ({}) failed at t = {} s: {} ({}{})",
+                     solver, t, what, flag_name,
+                     solver_msg_.empty() ? std::string() : fmt::format(": \"{}\"", solver_msg_));
 }
 
 Integrator::~Integrator() {
@@ -54,10 +94,7 @@ void Integrator::advance(double tout, Eigen::VectorXd* x) {
   const int flag = cvode_ ? CVode(mem_, tout, y_, &tret, CV_NORMAL)
                           : ERKStepEvolve(mem_, tout, y_, &tret, ARK_NORMAL);
   if (!error_.empty()) throw exid::Error(error_);
-  exid::check(flag >= 0, fmt::format("experiment 'simulate': the integrator ({}) failed at "
-                                     "t = {} s with flag {} (try larger tolerances, max_steps, "
-                                     "or the other integrator)",
-                                     cvode_ ? "CVODE" : "ARKODE", tret, flag));
+  exid::check(flag >= 0, failureText(flag, tret));
   t_ = tret;
   for (int i = 0; i < n2_; ++i) (*x)[i] = NV_Ith_S(y_, i);
 }

@@ -39,6 +39,10 @@ class Integrator {
  private:
   static int f(realtype t, N_Vector y, N_Vector ydot, void* user);
   static void check(int flag, const char* what);
+  // SUNDIALS' messages kept (never printed): the last one goes into exid's error, in its words.
+  static void onSolverMessage(int code, const char* module, const char* function, char* msg,
+                              void* self);
+  std::string failureText(int flag, double t) const;
   Rhs rhs_;
   bool cvode_;
   int n2_;
@@ -49,6 +53,7 @@ class Integrator {
   SUNMatrix A_ = nullptr;
   SUNLinearSolver LS_ = nullptr;
   std::string error_;
+  std::string solver_msg_;  // SUNDIALS' last message
 };
 
 }  // namespace exid::simulate_experiment

@@ -153,3 +153,31 @@ TEST(Simulate, IntegralRowsOnArkodeData) {
 }
 
 }  // namespace
+
+namespace {
+// An integrator that cannot reach the next sample fails in exid's words (what happened, which
+// key to change) with SUNDIALS' own text quoted, and prints nothing of its own on stderr.
+TEST(Simulate, AnIntegratorFailureIsSaidInExidsWordsAndPrintsNothingOfItsOwn) {
+  auto r = mtest::robot("puma560");
+  for (const char* integrator : {"cvode", "arkode"}) {
+    SCOPED_TRACE(integrator);
+    testing::internal::CaptureStderr();
+    std::string msg;
+    try {
+      (void)mtest::simulate(
+          r, fmt::format("{{duration_s: 1, max_steps: 1, integrator: {}}}", integrator));
+    } catch (const exid::Error& e) {
+      msg = e.what();
+    }
+    const std::string err = testing::internal::GetCapturedStderr();
+    ASSERT_FALSE(msg.empty()) << "one internal step per sample was enough";
+    EXPECT_NE(msg.find("max_steps internal steps did not reach the next sample: raise max_steps"),
+              std::string::npos)
+        << msg;
+    EXPECT_NE(msg.find("TOO_MUCH_WORK"), std::string::npos) << msg;
+    EXPECT_EQ(err.find("ERROR]"), std::string::npos) << err;  // no "[CVODE ERROR]" of its own
+  }
+  // a reachable sample: no failure
+  EXPECT_NO_THROW((void)mtest::simulate(r, "{duration_s: 0.2}"));
+}
+}  // namespace
