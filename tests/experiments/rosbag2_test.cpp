@@ -266,7 +266,7 @@ TEST(Rosbag2, TheFilterStepsAreTheCsvExperiments) {
 
 // A real arm's bag: the effort fields hold motor currents and there are no velocities. With
 // the csv experiment's signal options (one implementation, exid/recording.hpp) and its filter,
-// it identifies with batch_ls, wls and consistent_ls exactly as the CSV of the same currents
+// it identifies with batch_ls, wls, rls and consistent_ls exactly as the CSV of the same currents
 // does, in both storages.
 TEST(Rosbag2, CurrentsWithoutVelocitiesIdentifyAsTheirCsvWithEveryEstimator) {
   const Recording& r = recording();
@@ -313,7 +313,7 @@ TEST(Rosbag2, CurrentsWithoutVelocitiesIdentifyAsTheirCsvWithEveryEstimator) {
     spec.types = {{"/joint_states", "sensor_msgs/msg/JointState"}};
     spec.msgs = msgs;
     const fs::path bag = writeBag(tmpDir() / fmt::format("currents_{}", storage), spec);
-    for (const char* estimator : {"batch_ls", "wls", "consistent_ls"}) {
+    for (const char* estimator : {"batch_ls", "wls", "rls", "consistent_ls"}) {
       SCOPED_TRACE(fmt::format("{} {}", storage, estimator));
       const exid::StudyResult c = study(
           fmt::format("{{type: csv, params: {{file: {}, {}}}}}", csv.string(), signal), estimator);
