@@ -634,26 +634,11 @@ class NloptOptimizer final : public exid::Optimizer {
     } catch (const nlopt::roundoff_limited&) {
       r = "roundoff_limited";
     } catch (const std::runtime_error& e) {
-      r = failureText(e.what());
+      r = exid::optimizers::nloptFailureText(e.what());
     }
     *iterations += static_cast<int>(c.evals);
     if (xout) *xout = Eigen::Map<const Eigen::VectorXd>(x.data(), n);  // z without a, b
     return r;
-  }
-
-  // NLopt's own words for a failure (std::runtime_error from its C++ interface) in exid's: what
-  // stopped, and that the best point found so far is kept; NLopt's text in quotes.
-  static std::string failureText(const std::string& what) {
-    if (what.rfind("bug: more than iter SQP iterations", 0) == 0)
-      return fmt::format(
-          "stopped: SLSQP's quadratic subproblem did not converge within its "
-          "iterations (NLopt: \"{}\"); the best point found so far is kept",
-          what);
-    if (what == "nlopt failure")
-      return "stopped: NLopt could not continue from the point reached (its generic failure, "
-             "often a criterion or constraint that is not smooth there); the best point found so "
-             "far is kept";
-    return fmt::format("stopped: NLopt failed (\"{}\"); the best point found so far is kept", what);
   }
 
   // The budget a run's result text names: runOnce reports a run ended by a budget by the

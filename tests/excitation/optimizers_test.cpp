@@ -13,6 +13,7 @@
 #include "exid/excitation.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/optimizers/optim_common.hpp"
 #include "exid_test.hpp"
 
 namespace {
@@ -420,3 +421,19 @@ TEST(Optimizers, StopReasonTexts) {
 }
 
 }  // namespace
+
+// NLopt's failure texts are said in exid's words, NLopt's own quoted, never as a bare
+// "failure: bug: ..." (what `exid run` printed before).
+TEST(NloptWords, AFailureIsSaidInExidsWords) {
+  const std::string sqp = exid::optimizers::nloptFailureText("bug: more than iter SQP iterations");
+  EXPECT_EQ(sqp.rfind("stopped: SLSQP's quadratic subproblem did not converge", 0), 0u) << sqp;
+  EXPECT_NE(sqp.find("\"bug: more than iter SQP iterations\""), std::string::npos) << sqp;
+  EXPECT_NE(sqp.find("the best point found so far is kept"), std::string::npos) << sqp;
+  const std::string generic = exid::optimizers::nloptFailureText("nlopt failure");
+  EXPECT_EQ(generic.find("nlopt failure"), std::string::npos) << generic;  // said, not quoted
+  EXPECT_NE(generic.find("could not continue"), std::string::npos) << generic;
+  const std::string other = exid::optimizers::nloptFailureText("nlopt invalid argument");
+  EXPECT_EQ(other.rfind("stopped: NLopt failed (\"nlopt invalid argument\")", 0), 0u) << other;
+  for (const std::string& t : {sqp, generic, other})
+    EXPECT_EQ(t.find("failure: "), std::string::npos) << t;
+}

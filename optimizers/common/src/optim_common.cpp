@@ -295,4 +295,17 @@ bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& 
   return rel < 1e-12;
 }
 
+std::string nloptFailureText(const std::string& what) {
+  if (what.rfind("bug: more than iter SQP iterations", 0) == 0)
+    return fmt::format(
+        "stopped: SLSQP's quadratic subproblem did not converge within its "
+        "iterations (NLopt: \"{}\"); the best point found so far is kept",
+        what);
+  if (what == "nlopt failure")
+    return "stopped: NLopt could not continue from the point reached (its generic failure, often "
+           "a criterion or constraint that is not smooth there); the best point found so far is "
+           "kept";
+  return fmt::format("stopped: NLopt failed (\"{}\"); the best point found so far is kept", what);
+}
+
 }  // namespace exid::optimizers

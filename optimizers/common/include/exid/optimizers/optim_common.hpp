@@ -129,6 +129,10 @@ bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& 
 Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
                                double perturbation, std::mt19937_64& rng);
 
+/// An NLopt failure (the text of the std::runtime_error its C++ interface throws) in exid's
+/// words: what stopped, and that the best point found so far is kept; NLopt's text quoted.
+std::string nloptFailureText(const std::string& what);
+
 /// A random start: from the centre c of the bound box (z0 where a bound is infinite) along a
 /// random direction d (U(-1, 1) times half the bound range), c + scale * s_max * d, with s_max
 /// <= 1 the largest feasible step (bisection; feasible set convex along the ray for linear
