@@ -312,6 +312,36 @@ report: {type: standard, params: {plots: false}}
   EXPECT_EQ(X->find("export")->find("rest_note"), nullptr);
   EXPECT_EQ(report.find("not at rest"), std::string::npos) << report;
   EXPECT_EQ(r.out.find("NOT AT REST"), std::string::npos) << r.out;
+  // the export check's progress says what the check found
+  EXPECT_NE(r.out.find("[exid] export 100% every limit holds"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("a limit is exceeded"), std::string::npos) << r.out;
+}
+
+// A design that cannot hold its torque limits (1 N m on a Panda, which gravity alone exceeds):
+// the export check's progress says a limit is exceeded, never that every limit holds, and the
+// command fails.
+TEST(TrajectoryExport, TheExportsProgressSaysALimitIsExceededWhenOneIs) {
+  const fs::path dir = exid_cli::freshTempDir("exid_excite_exceeded_", "study");
+  std::ofstream(dir / "study.yaml") << R"(name: excite_exceeded
+seed: 2
+robot: {type: panda}
+model: {type: differential}
+excitation:
+  trajectory:
+    type: fourier
+    params: {period_s: 4, harmonics: 2, sample_period_s: 0.2, rest_to_rest: true}
+  criterion: {type: cond}
+  optimizer: {type: nlopt, params: {algorithm: LD_SLSQP, starts: 1, max_evaluations: 5}}
+  constraints: {torque_margin: 1.0, torque_max_Nm: [1, 1, 1, 1, 1, 1, 1]}
+report: {type: standard, params: {plots: false}}
+)";
+  const exid_cli::CmdResult r = exid_cli::runExid(
+      "excite " + (dir / "study.yaml").string() + " --out " + (dir / "out").string() +
+      " --export " + (dir / "exec").string() + " --rate-hz 100 --periods 1");
+  EXPECT_EQ(r.code, 1) << r.out;
+  EXPECT_NE(r.out.find("[exid] export 100% a limit is exceeded"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("every limit holds"), std::string::npos) << r.out;
+  fs::remove_all(dir);
 }
 
 // A trajectory that does not start at rest asks whoever runs it to bring the robot to its first

@@ -301,7 +301,9 @@ IdentificationStageOut identificationStage(const StageEnv& env, const RobotStage
   const Eigen::VectorXd nominal = model.baseNominal();
   // A simulated study is judged against what the simulation used (its payload), never
   // against a nominal value it did not use.
-  out.truth = out.simulated ? Eigen::VectorXd(model.base().reduce(model.fullTruth(*data.facts.simulated))) : nominal;
+  out.truth = out.simulated
+                  ? Eigen::VectorXd(model.base().reduce(model.fullTruth(*data.facts.simulated)))
+                  : nominal;
   double err2 = 0, tru2 = 0;
   out.parameters = parametersJson(est, nominal, out.truth, out.simulated, &err2, &tru2);
   if (out.simulated) {
