@@ -176,6 +176,11 @@ exid::Estimate Didim::estimate(const exid::ObservationModel& model, const exid::
                                const exid::Prior* prior, const exid::RunContext& ctx) {
   const auto t0 = std::chrono::steady_clock::now();
   exid::check(prior == nullptr, "didim: a prior is not supported");
+  exid::requireOnePart(data_in, kName,
+                       "didim simulates the robot along one continuous recording; identify from "
+                       "each recording in its own study, or use an estimator that takes the "
+                       "rows sample by sample (batch_ls, wls, consistent_ls, rls, filtered_ls, "
+                       "gains_ls)");
   const exid::Dataset data = exid::materialize(data_in);
   loop_ = open_ ? std::make_unique<exid::estimators::ClosedLoop>(model, data, kName)
                 : std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);

@@ -230,7 +230,14 @@ void FilteredLs::describeFilters(const Processed& P, const exid::Dataset& data,
                                         : "central differences of filtered qd")
                              : (filter_q ? "measured, filtered" : "measured");
   d["trimmed_samples_each_end"] = Json(static_cast<long long>(trim));
-  d["trimmed_percent"] = 100.0 * 2.0 * static_cast<double>(trim) / std::max(1, K);
+  d["trimmed_percent"] = 100.0 * static_cast<double>(P.trimmed_total) / std::max(1, K);
+  if (P.parts > 1) {
+    d["recordings"] = Json(static_cast<long long>(P.parts));
+    d["recordings_rule"] =
+        "each recording filtered, differentiated, trimmed (trimmed_samples_each_end at both of "
+        "its ends, the first's) and decimated on its own; the rows merged in order";
+    d["trimmed_samples"] = Json(static_cast<long long>(P.trimmed_total));
+  }
   if (P.trim_default)
     d["trim_rule"] =
         trim < P.trim_transient
@@ -245,11 +252,11 @@ void FilteredLs::describeFilters(const Processed& P, const exid::Dataset& data,
         "the data on a uniform grid)",
         data.source, 100 * jitter, fs)));
   }
-  if (2 * trim > K / 10) {
+  if (P.trimmed_total > K / 10) {
     if (!d.find("warnings")) d["warnings"] = Json::array();
     d["warnings"].push_back(Json(fmt::format(
         "filtered_ls: trim_edges = {} discards {} of the {} samples ({:.1f} %, more than 10 %)",
-        trim, 2 * trim, K, 200.0 * static_cast<double>(trim) / K)));
+        trim, P.trimmed_total, K, 100.0 * static_cast<double>(P.trimmed_total) / K)));
   }
   if (!min_speed_.empty()) {
     d["min_speed"] = Json(min_speed_);
@@ -271,7 +278,7 @@ void FilteredLs::describeStandstill(const Processed& P, int K, exid::Json* dp) c
       st["mode_rule"] = P.per_sample ? "auto: drop (the model gives one row per sample)"
                                      : "auto: zero_velocity (the model's rows span samples)";
     if (P.rest_min > 0) {
-      const long Kt = K - 2 * trim;
+      const long Kt = K - P.trimmed_total;
       st["min_samples"] = Json(static_cast<long long>(P.rest_min));
       st["tolerance"] = standstill_tol_.empty() ? Json("exact repetition") : Json(standstill_tol_);
       st["samples"] = Json(static_cast<long long>(P.rest_samples));

@@ -54,6 +54,8 @@ class FilteredLs : public exid::Estimator {
     long rest_samples = 0, rest_removed = 0;  // trimmed samples at rest; rows removed (drop)
     long rest_edge_samples = 0;               // trimmed samples at a standstill's edges (drop)
     std::string dec_note;
+    long parts = 1;          // recordings processed on their own (DatasetFacts::parts)
+    long trimmed_total = 0;  // samples trimmed, every part's ends
   };
 
   void plan(const exid::ObservationModel& model, const exid::Dataset& data, Processed* P,
@@ -93,8 +95,12 @@ class FilteredLs : public exid::Estimator {
                                 const exid::Dataset& f, const std::vector<char>& rest, long lo,
                                 long ca, long cb, ChunkOut* o) const;
 
+  /// Steps 1-4 on the data; a dataset of several recordings (DatasetFacts::parts) part by part,
+  /// each filtered, differentiated, trimmed and decimated on its own, the rows merged in order.
   Processed process(const exid::ObservationModel& model, const exid::Dataset& data,
                     const exid::RunContext& ctx, bool keep_rows) const;
+  Processed processPart(const exid::ObservationModel& model, const exid::Dataset& data,
+                        const exid::RunContext& ctx, bool keep_rows) const;
 
   static void appendRows(exid::Rows* all, const exid::Rows& r, int p);
 

@@ -72,6 +72,7 @@ void FilteredLs::plan(const exid::ObservationModel& model, const exid::Dataset& 
                           "lower trim_edges or raise cutoff_hz",
                           trim, K));
   P->trim = trim;
+  P->trimmed_total = 2 * trim;
   int R = decimation_;
   if (R == 0)
     R = P->filter_q ? std::max(1, static_cast<int>(std::floor(0.2 * fs / cutoff_ + 1e-6))) : 1;
@@ -376,6 +377,46 @@ std::vector<long> FilteredLs::keptSamples(const exid::ObservationModel& model, c
 FilteredLs::Processed FilteredLs::process(const exid::ObservationModel& model,
                                           const exid::Dataset& data, const exid::RunContext& ctx,
                                           bool keep_rows) const {
+  if (data.facts.parts.size() < 2) return processPart(model, data, ctx, keep_rows);
+  exid::check(!data.streamed(), "filtered_ls: a dataset of several recordings must be in memory");
+  Processed all;
+  bool first = true;
+  const int p = model.numBase();
+  for (const exid::PartRange& pr : exid::partRanges(data.t, data.facts)) {
+    exid::Dataset part = exid::sliceDataset(data, pr.begin, pr.end);
+    part.facts.parts.clear();
+    part.source = data.facts.parts[static_cast<std::size_t>(pr.part)].source;
+    Processed P = processPart(model, part, ctx, keep_rows);
+    if (first) {  // the first part: its plan
+      all = std::move(P);
+      first = false;
+      continue;
+    }
+    exid::check(std::abs(P.fs - all.fs) <= 1e-6 * all.fs && P.R == all.R,
+                fmt::format("filtered_ls: the recordings are sampled at different rates ({} at "
+                            "{:g} Hz, the first at {:g} Hz): one filter and decimation needs one "
+                            "rate (resample_hz puts each recording on the same grid)",
+                            part.source, P.fs, all.fs));
+    all.acc.merge(P.acc);
+    if (keep_rows) appendRows(&all.rows, P.rows, p);
+    all.chunks += P.chunks;
+    all.threads = std::max(all.threads, P.threads);
+    all.jitter = std::max(all.jitter, P.jitter);
+    all.rows_before += P.rows_before;
+    all.slow_removed += P.slow_removed;
+    all.samples_after_decimation += P.samples_after_decimation;
+    all.rest_samples += P.rest_samples;
+    all.rest_removed += P.rest_removed;
+    all.rest_edge_samples += P.rest_edge_samples;
+    all.trimmed_total += P.trimmed_total;
+    ++all.parts;
+  }
+  return all;
+}
+
+FilteredLs::Processed FilteredLs::processPart(const exid::ObservationModel& model,
+                                              const exid::Dataset& data,
+                                              const exid::RunContext& ctx, bool keep_rows) const {
   Processed P;
   estimators::Sos sos, dsos;
   ctx.report(0.0, "filtered_ls: planning");

@@ -75,6 +75,11 @@ class Iv : public exid::Estimator {
                           const exid::Prior* prior, const exid::RunContext& ctx) override {
     const auto t0 = std::chrono::steady_clock::now();
     exid::check(prior == nullptr, "iv: a prior is not supported");
+    exid::requireOnePart(data_in, kName,
+                         "iv simulates the closed loop along one continuous recording for its "
+                         "instrument; identify from each recording in its own study, or use an "
+                         "estimator that takes the rows sample by sample (batch_ls, wls, "
+                         "consistent_ls, rls, filtered_ls, gains_ls)");
     const exid::Dataset data = exid::materialize(data_in);
     loop_ = std::make_unique<exid::estimators::ClosedLoop>(model, P_, data, ctx, kName);
     // (copies: the loop outlives this call and its context)

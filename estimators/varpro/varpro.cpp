@@ -105,6 +105,12 @@ exid::Estimate VarPro::estimate(const exid::ObservationModel& model, const exid:
                                 const exid::Prior* prior, const exid::RunContext& ctx) {
   const auto t0 = std::chrono::steady_clock::now();
   exid::check(prior == nullptr, "varpro: a prior is not supported (use batch_ls)");
+  if (delay_)
+    exid::requireOnePart(
+        data, kName,
+        "varpro's measurement delay shifts the rows in time between neighbouring "
+        "samples; estimate the delay on one recording, or fix it (the experiment's "
+        "measurement_delay_s) and use batch_ls");
   rejected_singular_ = rejected_bound_ = 0;
   setUp(model, data);
   const int q = static_cast<int>(nl_.size());

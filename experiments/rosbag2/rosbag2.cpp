@@ -40,14 +40,15 @@ constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
 /// the wrench's time range, the dataset and its meta.
 class BagReading {
  public:
-  BagReading(const exid::ParamSet& P, const exid::RobotModel& robot, const exid::RunContext& ctx)
+  BagReading(const exid::ParamSet& P, const std::string& path, const exid::RobotModel& robot,
+             const exid::RunContext& ctx)
       : P_(P),
         robot_(robot),
         n_(robot.dof()),
         stop_([stop = ctx.cancelled, deadline = ctx.deadline] {
           return deadline.expired() || (stop && stop());
         }) {
-    fs::path dir = P_.getString("path");
+    fs::path dir = path;
     if (dir.is_relative() && !ctx.study_dir.empty()) dir = ctx.study_dir / dir;
     dir_ = dir;
     bagname_ = dir.string();
@@ -505,7 +506,11 @@ class BagReading {
       t["span_s"] = span;
       if (tc.messages >= 2 && span > 0) t["rate_hz"] = static_cast<double>(tc.messages - 1) / span;
       const rb::TopicInfo* info = bag_.topic(name);
-      if (info && info->publishers >= 0) t["publishers"] = info->publishers;
+      // (metadata.yaml's count, else the storage's: an MCAP channel's or a SQLite topic's)
+      if (info && info->publishers >= 0)
+        t["publishers"] = info->publishers;
+      else if (tc.publishers >= 0)
+        t["publishers"] = tc.publishers;
       t["used_as"] = name == js_topic_                  ? "joint states"
                      : with_wrench_ && name == w_topic_ ? "wrench"
                                                         : "not used";
@@ -670,9 +675,15 @@ class Rosbag2Experiment : public exid::Experiment {
   static std::vector<exid::ParamDecl> params() {
     using namespace exid;
     std::vector<ParamDecl> p = {
-        param_path("path", std::nullopt,
-                   "the bag folder (metadata.yaml and its .db3 or .mcap files; relative paths: to "
-                   "the study file)"),
+        param_path("path", std::string(),
+                   "the bag: its folder (metadata.yaml and its .db3 or .mcap files), one of its "
+                   "storage files, or a bare .mcap / .db3 file (relative paths: to the study "
+                   "file); give path or paths"),
+        param_strings("paths", std::vector<std::string>{},
+                      "several bags of one study (each as path), in order: each is read, "
+                      "segmented, split and filtered on its own and becomes one part of the data "
+                      "(no model or estimator filters, integrates or simulates across two); give "
+                      "path or paths"),
         param_string("joint_states_topic", std::string("/joint_states"),
                      "topic of sensor_msgs/msg/JointState messages"),
         param_string("wrench_topic", std::string(),
@@ -711,10 +722,22 @@ class Rosbag2Experiment : public exid::Experiment {
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples*,
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'rosbag2': no robot");
-    BagReading reading(P_, *robot, ctx);
-    exid::Dataset d = reading.read();
-    ctx.report(1.0, fmt::format("{} samples from {}", d.size(), reading.bagname()));
-    return d;
+    std::vector<std::string> paths = P_.getStrings("paths");
+    const std::string path = P_.getString("path");
+    exid::check(path.empty() != paths.empty(),
+                path.empty()
+                    ? "experiment 'rosbag2': no bag: give path (one bag) or paths (several)"
+                    : "experiment 'rosbag2': both path and paths are given: give path "
+                      "(one bag) or paths (several), not both");
+    if (paths.empty()) paths.push_back(path);
+    std::vector<exid::Dataset> parts;
+    for (std::size_t i = 0; i < paths.size(); ++i) {
+      BagReading reading(P_, paths[i], *robot, ctx);
+      parts.push_back(reading.read());
+      ctx.report(static_cast<double>(i + 1) / static_cast<double>(paths.size()),
+                 fmt::format("{} samples from {}", parts.back().size(), reading.bagname()));
+    }
+    return exid::joinParts(std::move(parts), "experiment 'rosbag2'");
   }
 
  private:

@@ -108,7 +108,21 @@ class IntegralModel : public exid::ObservationModel {
     s.t = d.t;
     s.q = d.q;
     s.qd = d.qd;
-    const std::vector<Window> win = windows(s.t, who + " (dataset " + d.source + ")");
+    // (each part of a dataset made of several recordings has its own windows: none spans two)
+    std::vector<Window> win;
+    for (const exid::PartRange& pr : exid::partRanges(d.t, d.facts)) {
+      const int lo = pr.begin, hi = pr.end;
+      const std::string part =
+          d.facts.parts.size() < 2
+              ? who + " (dataset " + d.source + ")"
+              : fmt::format("{} (part {}: {})", who, pr.part + 1,
+                            d.facts.parts[static_cast<std::size_t>(pr.part)].source);
+      for (Window w : windows(d.t.segment(lo, hi - lo), part)) {
+        w.a += lo;
+        w.b += lo;
+        win.push_back(std::move(w));
+      }
+    }
     exid::Rows r;
     r.W = designFromWindows(s, win);
     // Power per sample.

@@ -53,6 +53,131 @@ void dropFront(Eigen::MatrixXd* a, Eigen::Index m) {
 }
 }  // namespace
 
+std::vector<PartRange> partRanges(const Eigen::VectorXd& t, const DatasetFacts& facts) {
+  const int K = static_cast<int>(t.size());
+  std::vector<PartRange> out;
+  if (facts.parts.size() < 2) {
+    out.push_back({0, K, 0});
+    return out;
+  }
+  const double* b = t.data();
+  int from = 0;
+  for (std::size_t i = 0; i < facts.parts.size(); ++i) {
+    const int to =
+        i + 1 < facts.parts.size()
+            ? static_cast<int>(std::lower_bound(b + from, b + K, facts.parts[i + 1].t_from_s) - b)
+            : K;
+    if (to > from) out.push_back({from, to, static_cast<int>(i)});
+    from = to;
+  }
+  return out;
+}
+
+void requireOnePart(const Dataset& d, const std::string& who, const std::string& why) {
+  const std::size_t n = d.facts.parts.size();
+  if (n < 2) return;
+  std::string names;
+  for (const DatasetPart& p : d.facts.parts) names += (names.empty() ? "" : ", ") + p.source;
+  throw Error(
+      fmt::format("{}: the data is {} separate recordings ({}), and {}", who, n, names, why));
+}
+
+namespace {
+double medianStep(const Eigen::VectorXd& t) {
+  std::vector<double> dt(static_cast<std::size_t>(t.size() - 1));
+  for (Eigen::Index k = 1; k < t.size(); ++k) dt[static_cast<std::size_t>(k - 1)] = t[k] - t[k - 1];
+  std::nth_element(dt.begin(), dt.begin() + static_cast<std::ptrdiff_t>(dt.size() / 2), dt.end());
+  return dt[dt.size() / 2];
+}
+
+void appendRows(Eigen::MatrixXd* all, const Eigen::MatrixXd& part, Eigen::Index at) {
+  if (part.size() > 0) all->middleRows(at, part.rows()) = part;
+}
+}  // namespace
+
+Dataset joinParts(std::vector<Dataset> parts, const std::string& who) {
+  check(!parts.empty(), fmt::format("{}: no recording to join", who));
+  if (parts.size() == 1) return std::move(parts.front());
+  const Dataset& a = parts.front();
+  Eigen::Index K = 0;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    const Dataset& p = parts[i];
+    const std::string name = fmt::format("{}: part {} ({})", who, i + 1, p.source);
+    check(!p.streamed(), name + ": a streamed recording cannot be a part (it is read in memory)");
+    check(p.size() >= 2,
+          fmt::format("{}: {} sample(s); a part needs at least two", name, p.size()));
+    check(p.facts.parts.size() < 2 && !p.facts.simulated && !p.facts.payload_part_from_t_s,
+          name + ": simulated data, a payload part or several parts cannot be joined to others");
+    check(p.dof() == a.dof(), fmt::format("{}: {} joints, part 1 has {}", name, p.dof(), a.dof()));
+    auto sig = [](const Dataset& d) {
+      return fmt::format("q{}{}{}{}", d.hasVelocity() ? ", qd" : "",
+                         d.hasAcceleration() ? ", qdd" : "", d.hasTorque() ? ", tau" : "",
+                         d.hasWrench() ? ", wrench" : "");
+    };
+    check(sig(p) == sig(a), fmt::format("{}: signals {}, part 1 has {} (every part needs the same)",
+                                        name, sig(p), sig(a)));
+    K += p.size();
+  }
+  Dataset out;
+  out.t.resize(K);
+  auto sized = [&](const Eigen::MatrixXd& M) {
+    return M.size() > 0 ? Eigen::MatrixXd(K, M.cols()) : Eigen::MatrixXd();
+  };
+  out.q = sized(a.q);
+  out.qd = sized(a.qd);
+  out.qdd = sized(a.qdd);
+  out.tau = sized(a.tau);
+  out.wrench = sized(a.wrench);
+  Json meta = Json::object(), files = Json::array(), pm = Json::array(), warnings = Json::array(),
+       notes = Json::array();
+  Eigen::Index at = 0;
+  double shift = 0.0, prev_end = 0.0, prev_step = 0.0;
+  for (std::size_t i = 0; i < parts.size(); ++i) {
+    Dataset& p = parts[i];
+    const Eigen::Index Kp = p.size();
+    if (i > 0) shift = prev_end + prev_step - p.t[0];
+    out.t.segment(at, Kp) = p.t.array() + shift;
+    appendRows(&out.q, p.q, at);
+    appendRows(&out.qd, p.qd, at);
+    appendRows(&out.qdd, p.qdd, at);
+    appendRows(&out.tau, p.tau, at);
+    appendRows(&out.wrench, p.wrench, at);
+    out.facts.parts.push_back({out.t[at], p.source});
+    const std::string tag = fmt::format("part {} ({})", i + 1, p.source);
+    for (const char* key : {"warnings", "notes"})
+      if (const Json* w = p.meta.find(key); w && w->isArray())
+        for (std::size_t j = 0; j < w->size(); ++j)
+          (std::string(key) == "warnings" ? warnings : notes)
+              .push_back(Json(tag + ": " + w->at(j).asString()));
+    Json e = Json::object();
+    e["source"] = p.source;
+    e["samples"] = static_cast<long long>(Kp);
+    e["t_s"] = Json(std::vector<double>{out.t[at], out.t[at + Kp - 1]});
+    e["time_shift_s"] = shift;
+    e["meta"] = std::move(p.meta);
+    pm.push_back(std::move(e));
+    files.push_back(Json(p.source));
+    prev_end = out.t[at + Kp - 1];
+    prev_step = medianStep(p.t);
+    at += Kp;
+  }
+  std::string source;
+  for (const DatasetPart& p : out.facts.parts) source += (source.empty() ? "" : " + ") + p.source;
+  out.source = source;
+  meta["file"] = files;
+  meta["samples"] = static_cast<long long>(K);
+  if (const Json* s = parts.front().meta.find("signals")) meta["signals"] = *s;
+  meta["parts_rule"] =
+      "each part is read, segmented, split, resampled, filtered and trimmed on its own; part i "
+      "starts one median time step of part i - 1 after it ends (time_shift_s); no model or "
+      "estimator filters, differentiates, integrates or simulates across a boundary";
+  meta["parts"] = std::move(pm);
+  if (warnings.size() > 0) meta["warnings"] = std::move(warnings);
+  if (notes.size() > 0) meta["notes"] = std::move(notes);
+  out.meta = std::move(meta);
+  return out;
+}
+
 Dataset sliceDataset(const Dataset& d, int begin, int end) {
   check(!d.streamed(), "sliceDataset: a streamed dataset has no samples in memory");
   check(0 <= begin && begin <= end && end <= d.size(),
@@ -93,6 +218,9 @@ Dataset materialize(const Dataset& d) {
 
 Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who) {
   check(!d.streamed(), "resampleUniform: a streamed dataset has no samples in memory");
+  requireOnePart(d, who,
+                 "resampling interpolates between neighbouring samples: resample each recording "
+                 "on its own before they are joined");
   const Eigen::Index K = d.t.size();
   check(K >= 2, fmt::format("{}: resample_hz needs two samples", who));
   const double t0 = d.t[0], span_s = d.t[K - 1] - t0;

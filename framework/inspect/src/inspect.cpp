@@ -142,6 +142,24 @@ MatrixXd alternativePositions(const MatrixXd& q, const MatrixXd& smooth) {
 /// that (down to kMinDifferentiateCutoffHz) while the accelerations' own error (estimated from
 /// alternativePositions) is above kMaxDerivedAccelError of their RMS for some joint: coarse or
 /// noisy positions get a narrower band, where their derivatives still mean something.
+/// savitzkyGolay over each part of the data on its own (DatasetFacts::parts: no fit spans two
+/// recordings), the results stacked.
+void savitzkyGolayParts(const MatrixXd& X, const std::vector<PartRange>& parts, double dt, int m,
+                        MatrixXd* value, MatrixXd* d1, MatrixXd* d2) {
+  if (parts.size() < 2) return savitzkyGolay(X, dt, m, value, d1, d2);
+  for (MatrixXd* M : {value, d1, d2})
+    if (M) M->resize(X.rows(), X.cols());
+  MatrixXd v, a, b;
+  for (const PartRange& pr : parts) {
+    const Index len = pr.end - pr.begin;
+    savitzkyGolay(X.middleRows(pr.begin, len), dt, m, value ? &v : nullptr, d1 ? &a : nullptr,
+                  d2 ? &b : nullptr);
+    if (value) value->middleRows(pr.begin, len) = v;
+    if (d1) d1->middleRows(pr.begin, len) = a;
+    if (d2) d2->middleRows(pr.begin, len) = b;
+  }
+}
+
 Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& J) {
   Signals s;
   s.qd = data.qd;
@@ -150,16 +168,18 @@ Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& 
   s.has_tau = data.hasTorque() && data.tau.cols() == n;
   if (!data.hasVelocity() || !data.hasAcceleration()) {
     double cutoff = kDifferentiateCutoffHz;
-    const Index K = data.size();
+    const std::vector<PartRange> parts = partRanges(data.t, data.facts);
+    Index K = data.size();  // (the shortest part's samples bound the fit's width)
+    for (const PartRange& pr : parts) K = std::min<Index>(K, pr.end - pr.begin);
     int m = 0;
     MatrixXd v, a;
     double worst = 0;
     for (;;) {
       m = std::max(2, static_cast<int>(std::lround((1.5 * rate / cutoff + 4.6) / 3.2)));
       MatrixXd smooth;
-      savitzkyGolay(data.q, dt, m, &smooth, &v, &a);
+      savitzkyGolayParts(data.q, parts, dt, m, &smooth, &v, &a);
       s.alt_q = alternativePositions(data.q, smooth);
-      savitzkyGolay(s.alt_q, dt, m, nullptr, &s.alt_qd, &s.alt_qdd);
+      savitzkyGolayParts(s.alt_q, parts, dt, m, nullptr, &s.alt_qd, &s.alt_qdd);
       const MatrixXd& aa = s.alt_qdd;
       worst = 0;
       for (int j = 0; j < n; ++j) {
@@ -176,16 +196,17 @@ Signals deriveSignals(const Dataset& data, int n, double rate, double dt, Json& 
     s.sg_half_width = m;
     s.derived_qd = !data.hasVelocity();
     s.derived_qdd = !data.hasAcceleration();
-    if (s.has_tau) savitzkyGolay(data.tau, dt, m, &s.tau, nullptr, nullptr);
+    if (s.has_tau) savitzkyGolayParts(data.tau, parts, dt, m, &s.tau, nullptr, nullptr);
     J["derivatives"] = fmt::format(
         "the data has no {}: derived from q by a quadratic Savitzky-Golay fit over +-{} samples "
-        "(about {:g} Hz{}); the torque is smoothed by the same fit (zero phase)",
+        "(about {:g} Hz{}); the torque is smoothed by the same fit (zero phase){}",
         data.hasVelocity() ? "qdd" : "qd and qdd", m, cutoff,
         cutoff < kDifferentiateCutoffHz
             ? fmt::format(", lowered from {:g} Hz: the positions' resolution or noise left the "
                           "accelerations {:.0f} % error there",
                           kDifferentiateCutoffHz, 100 * kMaxDerivedAccelError)
-            : std::string());
+            : std::string(),
+        parts.size() > 1 ? "; each recording on its own" : "");
     J["derivatives_accel_error"] = worst;
   } else {
     J["derivatives"] = "qd and qdd from the data";
@@ -418,23 +439,26 @@ double conditionOfGram(const MatrixXd& A) {
 /// W^T W of the model's base regressor over the recording, built block by block.
 MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const Signals& sig,
                        const RunContext& ctx, Index stride, long long* rows) {
-  const Index K = (data.size() + stride - 1) / stride;  // samples used: 0, stride, ...
   const int p = model.numBase();
   MatrixXd G = MatrixXd::Zero(p, p);
   *rows = 0;
-  for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
-    if (ctx.shouldStop()) throw std::runtime_error("stopped");
-    const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
-    // the block's samples: (k0, k0 + 1, ..., k0 + m - 1) * stride
-    const auto used = Eigen::seqN(k0 * stride, m, stride);
-    Samples s;
-    s.t = data.t(used);
-    s.q = data.q(used, Eigen::all);
-    s.qd = sig.qd(used, Eigen::all);
-    s.qdd = sig.qdd(used, Eigen::all);
-    const MatrixXd Wb = model.design(s);
-    G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
-    *rows += Wb.rows();
+  // (each part of the data on its own: no block spans two recordings)
+  for (const PartRange& pr : partRanges(data.t, data.facts)) {
+    const Index K = (pr.end - pr.begin + stride - 1) / stride;  // samples used: 0, stride, ...
+    for (Index k0 = 0; k0 < K; k0 += kRegressorBlockSamples) {
+      if (ctx.shouldStop()) throw std::runtime_error("stopped");
+      const Index m = std::min<Index>(kRegressorBlockSamples, K - k0);
+      // the block's samples: pr.begin + (k0, k0 + 1, ..., k0 + m - 1) * stride
+      const auto used = Eigen::seqN(pr.begin + k0 * stride, m, stride);
+      Samples s;
+      s.t = data.t(used);
+      s.q = data.q(used, Eigen::all);
+      s.qd = sig.qd(used, Eigen::all);
+      s.qdd = sig.qdd(used, Eigen::all);
+      const MatrixXd Wb = model.design(s);
+      G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
+      *rows += Wb.rows();
+    }
   }
   G = G.selfadjointView<Eigen::Lower>();
   return G;
@@ -506,6 +530,27 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
     J["recording"] = *rec;
     recordingWarnings(*rec, &W);
   }
+  if (data.facts.parts.size() > 1) {  // several recordings: each one's timing, and where it is
+    Json parts = Json::array();
+    const Json* pm = data.meta.find("parts");
+    for (const PartRange& pr : partRanges(data.t, data.facts)) {
+      const DatasetPart& dp = data.facts.parts[static_cast<std::size_t>(pr.part)];
+      Json e = Json::object();
+      e["part"] = pr.part + 1;
+      e["source"] = dp.source;
+      e["samples_inspected"] = pr.end - pr.begin;
+      e["t_s"] = pair(data.t(pr.begin), data.t(pr.end - 1));
+      const Json* m = pm && pm->isArray() && static_cast<std::size_t>(pr.part) < pm->size()
+                          ? pm->at(static_cast<std::size_t>(pr.part)).find("meta")
+                          : nullptr;
+      if (const Json* rec = m ? m->find("recording") : nullptr) {
+        e["recording"] = *rec;
+        recordingWarnings(*rec, &W);
+      }
+      parts.push_back(std::move(e));
+    }
+    J["parts"] = std::move(parts);
+  }
   auto finish = [&]() {
     J["warnings"] = Json(W);
     return J;
@@ -573,6 +618,8 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
       };
       clear(0, h);
       clear(M - h, M);
+      for (const PartRange& pr : partRanges(data.t, data.facts))
+        if (pr.begin > 0) clear(pr.begin - h, pr.begin + h);  // the ends of each recording
       for (Index k = 1; k < M; ++k)
         if (moving[static_cast<std::size_t>(k)] != moving[static_cast<std::size_t>(k - 1)])
           clear(k - h, k + h);
@@ -607,6 +654,20 @@ Json inspectExperimentData(const RobotModel& robot, const ObservationModel* mode
   if (const Json* a = data.meta.find("accounting")) J["accounting"] = *a;
   if (const Json* t = data.meta.find("topics")) J["topics"] = *t;  // a bag's topics
   if (const Json* n = data.meta.find("notes")) J["notes"] = *n;
+  // several recordings: each one's accounting and topics with its part
+  const Json* pm = data.meta.find("parts");
+  if (const Json* parts = J.find("parts"); parts && pm && pm->isArray()) {
+    Json with = Json::array();
+    for (std::size_t i = 0; i < parts->size(); ++i) {
+      Json e = parts->at(i);
+      const auto k = static_cast<std::size_t>(e.find("part")->asInt() - 1);
+      const Json* m = k < pm->size() ? pm->at(k).find("meta") : nullptr;
+      for (const char* key : {"accounting", "topics"})  // (notes: the data's, with their part)
+        if (const Json* x = m ? m->find(key) : nullptr) e[key] = *x;
+      with.push_back(std::move(e));
+    }
+    J["parts"] = std::move(with);
+  }
   std::vector<std::string> W = experimentWarnings(data, what);
   if (const Json* w = J.find("warnings"))
     for (std::size_t i = 0; i < w->size(); ++i) W.push_back(w->at(i).asString());
@@ -686,23 +747,20 @@ std::string motionText(const Json& m) {
   return out;
 }
 
-}  // namespace
-
-std::string inspectionText(const Json& J) {
+// What the experiment said of one recording (the data's, or a part's of several): its timing,
+// where its samples went, notes, and a bag's topics.
+std::string recordingFileText(const Json& F) {
   std::string out;
-  out += fmt::format("data: {} ({} samples, {} s)\n",
-                     J.find("source") ? J.find("source")->asString() : "?",
-                     num(J.find("samples"), "{:.0f}"), num(J.find("duration_s")));
-  if (const Json* rec = J.find("recording")) out += recordingText(*rec);
-  if (const Json* a = J.find("accounting"); a && a->isObject()) {
+  if (const Json* rec = F.find("recording")) out += recordingText(*rec);
+  if (const Json* a = F.find("accounting"); a && a->isObject()) {
     std::string s;
     for (const auto& [k, v] : a->items())
       if (v.isNumber()) s += fmt::format("{}{} {}", s.empty() ? "" : ", ", k, v.dump(0));
     out += "samples: " + s + "\n";
   }
-  if (const Json* n = J.find("notes"); n && n->isArray())
+  if (const Json* n = F.find("notes"); n && n->isArray())
     for (std::size_t i = 0; i < n->size(); ++i) out += "note: " + n->at(i).asString() + "\n";
-  if (const Json* ts = J.find("topics"); ts && ts->isArray()) {
+  if (const Json* ts = F.find("topics"); ts && ts->isArray()) {
     out += "topics of the bag:\n";
     for (std::size_t i = 0; i < ts->size(); ++i) {
       const Json& t = ts->at(i);
@@ -712,6 +770,27 @@ std::string inspectionText(const Json& J) {
                          num(t.find("publishers"), "{:.0f}"), t.find("used_as")->asString());
     }
   }
+  return out;
+}
+
+}  // namespace
+
+std::string inspectionText(const Json& J) {
+  std::string out;
+  out += fmt::format("data: {} ({} samples, {} s)\n",
+                     J.find("source") ? J.find("source")->asString() : "?",
+                     num(J.find("samples"), "{:.0f}"), num(J.find("duration_s")));
+  if (const Json* parts = J.find("parts"); parts && parts->isArray())
+    for (std::size_t i = 0; i < parts->size(); ++i) {
+      const Json& e = parts->at(i);
+      out += fmt::format("part {}: {} ({} samples, t {} .. {} s)\n", num(e.find("part"), "{:.0f}"),
+                         e.find("source") ? e.find("source")->asString() : "?",
+                         num(e.find("samples_inspected"), "{:.0f}"),
+                         e.find("t_s") ? num(&e.find("t_s")->at(0)) : "-",
+                         e.find("t_s") ? num(&e.find("t_s")->at(1)) : "-");
+      out += recordingFileText(e);
+    }
+  out += recordingFileText(J);
   if (const Json* t = J.find("timing"))
     out += fmt::format("data as used: {} Hz\n", num(t->find("rate_hz"), "{:.10g}"));
   if (const Json* d = J.find("derivatives")) out += "derivatives: " + d->asString() + "\n";

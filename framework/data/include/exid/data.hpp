@@ -6,6 +6,7 @@
 #include <memory>
 #include <optional>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "exid/export.hpp"
@@ -97,9 +98,22 @@ struct EXID_API PlantTruth {
   std::vector<double> drive_torque_gain;       // the drive's torque = gain x commanded
 };
 
+/// One recording among the several a dataset is made of (DatasetFacts::parts).
+struct EXID_API DatasetPart {
+  double t_from_s = 0.0;  // [s] the time of its first sample on the dataset's time axis
+  std::string source;     // the file or folder it was read from
+};
+
 /// What an experiment tells the models and estimators about its dataset, typed (Dataset::meta
 /// describes it for people: files, counts, warnings; code reads these).
 struct EXID_API DatasetFacts {
+  /// Two or more: the dataset is several recordings one after the other, part i holding the
+  /// samples from parts[i].t_from_s up to the next part's (times survive slices, windows and
+  /// subsampling, indices would not). Nothing may be filtered, differentiated, integrated,
+  /// interpolated or simulated across a boundary: the step from one part's last sample to the
+  /// next one's first is not a time step of the robot (partRanges gives each part's samples).
+  /// Empty: one recording.
+  std::vector<DatasetPart> parts;
   /// Set: simulated data, with the plant's truth (the runner compares the estimate with it).
   std::optional<PlantTruth> simulated;
   /// Set: the samples from this time on carry a known payload (experiment csv, payload_file):
@@ -137,6 +151,29 @@ struct EXID_API Dataset {
   /// Samples view (copies q, qd, qdd; a dataset in memory).
   Samples samples() const { return {t, q, qd, qdd}; }
 };
+
+/// The samples [begin, end) of one part among a dataset's times, and which part it is (an index
+/// into DatasetFacts::parts; 0 for a dataset of one recording).
+struct EXID_API PartRange {
+  int begin = 0, end = 0;
+  int part = 0;
+};
+/// The samples of each part (DatasetFacts::parts) among the times t (a dataset's, or a slice's
+/// or a subsample's of it), in order; parts without a sample in t are left out. One range
+/// [0, t.size()) when facts has fewer than two parts.
+EXID_API std::vector<PartRange> partRanges(const Eigen::VectorXd& t, const DatasetFacts& facts);
+/// An exid::Error starting with `who` when d holds several recordings (DatasetFacts::parts),
+/// naming them and saying `why` (the caller needs one continuous recording; what to do instead).
+EXID_API void requireOnePart(const Dataset& d, const std::string& who, const std::string& why);
+/// Several recordings in memory as the parts of one dataset, in the order given: the same joints
+/// and signals in each (else an exid::Error starting with `who`, naming the part). Part i's
+/// times are shifted so that it starts one median time step (of part i - 1) after part i - 1
+/// ends: t stays strictly increasing and the shift of each part is in meta.parts. Its meta:
+/// `file` and `source` list the parts' sources; `samples` and `signals`; `warnings` and `notes`
+/// are the parts' own, each naming its part; `parts` holds each part's source, samples, time
+/// range, shift and own meta. A part must not be simulated, carry a payload part or be made of
+/// parts itself. A single dataset is returned as it is.
+EXID_API Dataset joinParts(std::vector<Dataset> parts, const std::string& who);
 
 /// Samples [begin, end) of a dataset in memory (source, meta and facts kept).
 EXID_API Dataset sliceDataset(const Dataset& d, int begin, int end);
