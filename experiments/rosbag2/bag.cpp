@@ -125,11 +125,10 @@ void metadataOf(const YAML::Node& root, BagInfo* out) {
       }
       // offered_qos_profiles: one entry per publisher (a YAML list, or a string holding one)
       if (const YAML::Node q = md["offered_qos_profiles"]) {
-        try {
-          const YAML::Node list = q.IsScalar() && !q.Scalar().empty() ? YAML::Load(q.Scalar()) : q;
-          if (list.IsSequence()) ti.publishers = static_cast<int>(list.size());
-        } catch (const YAML::Exception&) {  // (not read: the count stays unknown)
-        }
+        if (q.IsScalar())
+          ti.publishers = qosProfileCount(q.Scalar());
+        else if (q.IsSequence())
+          ti.publishers = static_cast<int>(q.size());
       }
       if (const auto [at, fresh] = entries.emplace(ti.name, bag.topics.size() + 1); !fresh)
         throw Error(fmt::format(
@@ -141,6 +140,16 @@ void metadataOf(const YAML::Node& root, BagInfo* out) {
 }
 
 }  // namespace
+
+int qosProfileCount(const std::string& yaml) {
+  if (yaml.empty()) return -1;
+  try {
+    const YAML::Node list = YAML::Load(yaml);
+    return list.IsSequence() ? static_cast<int>(list.size()) : -1;
+  } catch (const YAML::Exception&) {  // (not read: the count stays unknown)
+    return -1;
+  }
+}
 
 BagInfo readMetadata(const fs::path& dir) {
   BagInfo bag;

@@ -71,7 +71,12 @@ struct TopicCensus {
   std::string type, serialization_format;
   long long messages = 0;
   std::int64_t first_ns = 0, last_ns = 0;
+  int publishers = -1;  // the storage's offered_qos_profiles entries; -1: not stored
 };
+/// The entries of an offered_qos_profiles text (a YAML list, one entry per publisher, as
+/// metadata.yaml, an MCAP channel's metadata and a SQLite topics row hold it); -1 when it is
+/// empty or not a list.
+int qosProfileCount(const std::string& yaml);
 using Census = std::map<std::string, TopicCensus>;
 Census censusOf(const BagInfo& bag);
 

@@ -161,6 +161,7 @@ struct McapState {
   struct Channel {
     std::string topic, encoding;
     std::uint16_t schema = 0;
+    int publishers = -1;                  // its metadata's offered_qos_profiles entries
     const std::string* wanted = nullptr;  // the wanted topic, or null
     std::string where;                    // the record that defined it first
   };
@@ -178,9 +179,25 @@ std::string schemaText(const McapState& st, std::uint16_t id) {
   return s == st.schemas.end() ? std::to_string(id) : fmt::format("{} '{}'", id, s->second.name);
 }
 
-/// A channel's topic in the census: its type (the schema's name) and serialization.
+/// The publishers a channel's metadata (a map of strings) names: the entries of its
+/// offered_qos_profiles, as rosbag2's MCAP storage writes them; -1 when it has none. A
+/// malformed map is an error, as any truncated record.
+int channelPublishers(std::pair<const std::uint8_t*, std::size_t> metadata,
+                      const std::string& where) {
+  Bytes m(metadata.first, metadata.second, where + " (Channel.metadata)");
+  int n = -1;
+  while (m.left() > 0) {
+    const std::string key = m.str("Channel.metadata key");
+    const std::string value = m.str("Channel.metadata value");
+    if (key == "offered_qos_profiles") n = qosProfileCount(value);
+  }
+  return n;
+}
+
+/// A channel's topic in the census: its type (the schema's name), serialization and publishers.
 void censusChannel(McapState& st, const McapState::Channel& c) {
   TopicCensus& tc = (*st.census)[c.topic];
+  tc.publishers = std::max(tc.publishers, c.publishers);
   if (const auto sc = st.schemas.find(c.schema); tc.type.empty() && sc != st.schemas.end())
     tc.type = sc->second.name;
   if (tc.serialization_format.empty()) tc.serialization_format = c.encoding;
@@ -227,7 +244,7 @@ bool mcapRecord(const BagInfo& bag, const std::string& file, std::uint8_t op, By
     c.schema = r.u16("Channel.schema_id");
     c.topic = r.str("Channel.topic");
     c.encoding = r.str("Channel.message_encoding");
-    r.block(4, "Channel.metadata");
+    c.publishers = channelPublishers(r.block(4, "Channel.metadata"), where);
     c.where = where;
     // One definition per channel id (the same record may repeat): a channel redefined to
     // another topic, schema or encoding would send its later messages elsewhere.

@@ -197,14 +197,24 @@ void SqliteFile::checkSchema() const {
 
 /// Every topic of this file with its type, serialization, message count and time span.
 void SqliteFile::census(Census* out) const {
+  // (offered_qos_profiles: a column of table topics since Foxy; older files lack it)
+  bool qos = false;
+  {
+    Stmt cols;
+    prepare("SELECT name FROM pragma_table_xinfo('topics')", &cols, "the columns of table topics");
+    while (sqlite3_step(cols.s) == SQLITE_ROW)
+      qos = qos || columnText(cols.s, 0) == "offered_qos_profiles";
+  }
   Stmt st;
-  prepare(
-      "SELECT t.name, t.type, t.serialization_format, COUNT(m.topic_id), MIN(m.timestamp), "
-      "MAX(m.timestamp) FROM topics t LEFT JOIN messages m ON m.topic_id = t.id GROUP BY t.id",
-      &st, "tables topics and messages");
+  prepare(fmt::format("SELECT t.name, t.type, t.serialization_format, COUNT(m.topic_id), "
+                      "MIN(m.timestamp), MAX(m.timestamp), {} FROM topics t LEFT JOIN messages "
+                      "m ON m.topic_id = t.id GROUP BY t.id",
+                      qos ? "t.offered_qos_profiles" : "''"),
+          &st, "tables topics and messages");
   int rc;
   while ((rc = sqlite3_step(st.s)) == SQLITE_ROW) {
     TopicCensus& tc = (*out)[columnText(st.s, 0)];
+    tc.publishers = std::max(tc.publishers, qosProfileCount(columnText(st.s, 6)));
     if (tc.type.empty()) tc.type = columnText(st.s, 1);
     if (tc.serialization_format.empty()) tc.serialization_format = columnText(st.s, 2);
     const long long count = sqlite3_column_int64(st.s, 3);

@@ -404,6 +404,33 @@ TEST(Rosbag2, InspectListsTheTopicsOfTheBag) {
   EXPECT_EQ(r.out.find("note: "), std::string::npos) << r.out;  // nothing skipped here
 }
 
+// Publishers: metadata.yaml's offered_qos_profiles when it lists them, else the storage's own
+// (an MCAP channel's metadata, a SQLite topics row), one entry per publisher; unknown (absent)
+// when neither holds a list.
+TEST(Rosbag2, PublishersFromTheStorageWhenMetadataDoesNotListThem) {
+  const std::string two =
+      "- history: 1\n  depth: 10\n  reliability: 1\n- history: 1\n  depth: 1\n  "
+      "reliability: 2";
+  for (const char* storage : {"sqlite3", "mcap"}) {
+    SCOPED_TRACE(storage);
+    BagSpec spec;
+    spec.storage = storage;
+    spec.msgs = messages();
+    spec.qos = {{"/joint_states", two}, {"/ft", "- history: 1\n  depth: 5"}};
+    const fs::path dir = writeBag(tmpDir() / fmt::format("qos_{}", storage), spec);
+    const exid::Dataset d = readBag(dir);
+    const exid::Json* topics = d.meta.find("topics");
+    ASSERT_NE(topics, nullptr);
+    std::map<std::string, const exid::Json*> by;
+    for (std::size_t i = 0; i < topics->size(); ++i)
+      by[topics->at(i).find("topic")->asString()] = &topics->at(i);
+    ASSERT_NE(by.at("/joint_states")->find("publishers"), nullptr);
+    EXPECT_EQ(by.at("/joint_states")->find("publishers")->asInt(), 2);
+    EXPECT_EQ(by.at("/ft")->find("publishers")->asInt(), 1);
+    EXPECT_EQ(by.at("/cmd")->find("publishers"), nullptr);  // "" in the storage: not known
+  }
+}
+
 TEST(Rosbag2, InspectAndIdentifyTakeABagFolderOnTheCommandLine) {
   const fs::path dir = bagOf(kVariants[2]);
   const exid_cli::CmdResult r =

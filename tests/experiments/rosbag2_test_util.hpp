@@ -115,6 +115,9 @@ struct BagSpec {
                                               {"/ft", "geometry_msgs/msg/WrenchStamped"},
                                               {"/cmd", "std_msgs/msg/String"}};
   std::vector<Msg> msgs;
+  // per topic: its offered_qos_profiles text in the storage (MCAP channel metadata, SQLite
+  // topics row); metadata.yaml always holds "" (rosbag2 writes the list there too)
+  std::map<std::string, std::string> qos;
   int files = 1;
   std::size_t chunk_msgs = 250;
   int corrupt_chunk = -1;           // MCAP: xor bytes of this chunk's stored records
@@ -175,7 +178,7 @@ inline void writeMcap(const fs::path& file, const BagSpec& spec,
     putStr(c, "cdr");
     Bytes meta;
     putStr(meta, "offered_qos_profiles");
-    putStr(meta, "");
+    putStr(meta, spec.qos.count(topic) ? spec.qos.at(topic) : "");
     putStr(c, std::string(meta.begin(), meta.end()));  // a map: u32 byte length + entries
     record(defs, 0x04, c);
   }
@@ -253,8 +256,8 @@ inline void writeSqlite(const fs::path& file, const BagSpec& spec,
   std::map<std::string, int> ids;
   for (const auto& [topic, type] : spec.types) {
     ids[topic] = static_cast<int>(ids.size()) + 7;  // ids need not start at 1
-    sql(db, fmt::format("INSERT INTO topics VALUES ({}, '{}', '{}', 'cdr', '')", ids[topic], topic,
-                        type));
+    sql(db, fmt::format("INSERT INTO topics VALUES ({}, '{}', '{}', 'cdr', '{}')", ids[topic],
+                        topic, type, spec.qos.count(topic) ? spec.qos.at(topic) : ""));
   }
   sql(db, "BEGIN");
   sqlite3_stmt* st = nullptr;

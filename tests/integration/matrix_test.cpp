@@ -206,3 +206,37 @@ axes:
   EXPECT_EQ(s.skipped + s.ok, 12);
   fs::remove_all(d);
 }
+
+// Each cell's line says how many of the run's cells are done and, while some are left, about
+// how long they take at the pace so far; the last line has no estimate.
+TEST(Matrix, EachCellsLineSaysHowFarTheRunIs) {
+  fs::path d = tempDir("pace");
+  std::ofstream(d / "m.yaml") << R"(name: pace
+study:
+  robot: {type: planar2r}
+  model: {type: differential, params: {rotor_inertia: false, coulomb: false, viscous: false}}
+  experiment: {type: simulate, params: {duration_s: 1, drive_terms: false}}
+  estimator: {type: batch_ls}
+axes:
+  seed: [1, 2, 3]
+)";
+  exid::MatrixSpec spec = exid::loadMatrix(d / "m.yaml", exid_test::registry());
+  exid::MatrixOptions opt;
+  opt.out_dir = d / "out";
+  opt.jobs = 1;
+  testing::internal::CaptureStderr();
+  exid::MatrixRunSummary s = exid::runMatrix(spec, exid_test::registry(), opt);
+  const std::string err = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(s.ok, 3);
+  EXPECT_NE(err.find("[1/3, about "), std::string::npos) << err;
+  EXPECT_NE(err.find("[2/3, about "), std::string::npos) << err;
+  EXPECT_NE(err.find("[3/3]\n"), std::string::npos) << err;
+  EXPECT_EQ(err.find("[3/3, about"), std::string::npos) << err;
+  // a second run has nothing to do: no cell line
+  testing::internal::CaptureStderr();
+  s = exid::runMatrix(spec, exid_test::registry(), opt);
+  const std::string again = testing::internal::GetCapturedStderr();
+  EXPECT_EQ(s.skipped, 3);
+  EXPECT_EQ(again.find("[1/"), std::string::npos) << again;
+  fs::remove_all(d);
+}

@@ -202,8 +202,27 @@ void cellOutcome(const MatrixSpec& spec, const Child& ch, int status, double wal
   }
 }
 
+// How far a run is: the cells it runs and when it started (each cell's line says how many are
+// done and about how long the rest takes at the pace so far).
+struct Pace {
+  std::size_t to_run = 0;
+  std::chrono::steady_clock::time_point t0;
+  std::string after(const MatrixRunSummary& sum) const {
+    const auto done = static_cast<std::size_t>(sum.ok + sum.failed + sum.timeout);
+    const std::size_t left = to_run > done ? to_run - done : 0;
+    const double spent =
+        std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    if (left == 0 || done == 0) return fmt::format("  [{}/{}]", done, to_run);
+    const double eta = spent / static_cast<double>(done) * static_cast<double>(left);
+    return fmt::format(
+        "  [{}/{}, about {} left]", done, to_run,
+        eta < 90 ? fmt::format("{:.0f} s", eta) : fmt::format("{:.0f} min", eta / 60));
+  }
+};
+
 // A cell's process has ended: its outcome recorded, counted and logged.
-void finishCell(Db& db, const MatrixSpec& spec, Child& ch, int status, MatrixRunSummary* sum) {
+void finishCell(Db& db, const MatrixSpec& spec, Child& ch, int status, const Pace& pace,
+                MatrixRunSummary* sum) {
   const double wall =
       std::chrono::duration<double>(std::chrono::steady_clock::now() - ch.start).count();
   std::string st, msg;
@@ -217,8 +236,8 @@ void finishCell(Db& db, const MatrixSpec& spec, Child& ch, int status, MatrixRun
     ++sum->timeout;
   else
     ++sum->failed;
-  logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}", ch.cell->index, st, wall, ch.cell->label,
-                      st == "ok" ? "" : "  (" + msg + ")"));
+  logInfo(fmt::format("cell {:>3} {:<8} {:6.2f} s  {}{}{}", ch.cell->index, st, wall,
+                      ch.cell->label, st == "ok" ? "" : "  (" + msg + ")", pace.after(*sum)));
 }
 
 // A std::system_error saying that memory (or a thread's stack) could not be had.
@@ -336,7 +355,7 @@ void stopRunningCells(const MatrixSpec& spec, std::size_t not_started, std::vect
 // One round over the running cells: their output read, those over budget killed, those ended
 // recorded and removed. A cell that cannot be recorded stops every other one, then throws.
 void serviceRunningCells(Db& db, const MatrixSpec& spec, std::vector<Child>* running,
-                         MatrixRunSummary* sum) {
+                         const Pace& pace, MatrixRunSummary* sum) {
   for (std::size_t i = 0; i < running->size();) {
     Child& ch = (*running)[i];
     readCellOutput(ch);
@@ -352,7 +371,7 @@ void serviceRunningCells(Db& db, const MatrixSpec& spec, std::vector<Child>* run
       readCellOutput(ch);
       ::close(ch.fd);
       try {
-        finishCell(db, spec, ch, status, sum);
+        finishCell(db, spec, ch, status, pace, sum);
       } catch (...) {  // e.g. the database cannot be written: stop, leave no cell running
         for (auto& other : *running)
           if (other.pid != ch.pid) {
@@ -394,6 +413,7 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
 
   std::vector<Child> running;
   std::size_t next = 0;
+  const Pace pace{todo.size(), std::chrono::steady_clock::now()};
   while ((next < todo.size() || !running.empty())) {
     const bool stop = opt.cancelled && opt.cancelled();
     while (!stop && next < todo.size() && static_cast<int>(running.size()) < std::max(1, opt.jobs))
@@ -405,7 +425,7 @@ MatrixRunSummary runMatrix(const MatrixSpec& spec, const Registry& reg, const Ma
     std::vector<pollfd> pfds;
     for (auto& ch : running) pfds.push_back({ch.fd, POLLIN, 0});
     ::poll(pfds.data(), pfds.size(), 50);
-    serviceRunningCells(db, spec, &running, &sum);
+    serviceRunningCells(db, spec, &running, pace, &sum);
   }
   sum.wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   return sum;
