@@ -24,6 +24,7 @@
 #include "exid/robot_loaders.hpp"
 #include "exid/sdf_writer.hpp"
 #include "exid/urdf_writer.hpp"
+#include "exid_cli.hpp"
 
 #ifdef EXID_HAVE_MUJOCO
 #include <mujoco/mujoco.h>
@@ -601,6 +602,118 @@ TEST(ExportFormats, EveryFormatCarriesTheSameInertials) {
     std::printf("%s: inertials of the exported formats, largest relative difference %.3g\n",
                 s.name.c_str(), worst);
   }
+}
+
+// exid export end to end: a study's identified parameters (summary.json) written by the exid
+// program in the three formats and read by MuJoCo, libsdformat and exid's URDF loader.
+TEST(ExportFormats, ExidExportWritesWhatTheConsumersRead) {
+  const fs::path dir = exid_cli::freshTempDir("exid_export_formats_", "cli");
+  RobotModel want = shippedRobots()[0].model;  // the panda, as the `panda` plugin has it
+  std::string names, values;
+  auto add = [&](const std::string& n, double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.17g", v);
+    names += (names.empty() ? "\"" : ", \"") + n + "\"";
+    values += (values.empty() ? "" : ", ") + std::string(buf);
+  };
+  for (int j = 0; j < want.dof(); ++j) {
+    auto& b = want.bodies[static_cast<std::size_t>(j)];
+    b.inertia *= 1.0 + 0.05 * (j + 1);  // (a scaled body stays consistent)
+    for (int k = 0; k < 10; ++k) add(exid::kInertialNames[k] + std::to_string(j + 1), b.inertia(k));
+    auto& d = want.drives[static_cast<std::size_t>(j)];
+    d.rotor_inertia = 0.01 * (j + 1);
+    d.viscous = 0.1 * (j + 1);
+    d.coulomb = 0.2;
+    add("Ia" + std::to_string(j + 1), d.rotor_inertia);
+    add("Fv" + std::to_string(j + 1), d.viscous);
+    add("Fc" + std::to_string(j + 1), d.coulomb);
+  }
+  fs::create_directories(dir / "run");
+  std::ofstream(dir / "run" / "summary.json")
+      << "{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": [" << names
+      << "], \"values\": [" << values << "]}}}}\n";
+  for (const std::string format : {"urdf", "mjcf", "sdf"}) {
+    const exid_cli::CmdResult r =
+        exid_cli::runExid("export panda --study " + (dir / "run").string() + " --out " +
+                          (dir / ("identified." + format)).string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_TRUE(exid_cli::contains(r.out, "91 identified parameters written")) << r.out;
+  }
+  // URDF: exid's loader gives back the identified model (the Panda is modified DH: post = 1)
+  exid::LoadOptions o;
+  std::vector<std::string> sink;
+  o.warnings = &sink;
+  o.strict = true;
+  const RobotModel u = exid::loadUrdf(dir / "identified.urdf", o);
+  ASSERT_EQ(u.dof(), want.dof());
+  for (int j = 0; j < want.dof(); ++j) {
+    const auto k = static_cast<std::size_t>(j);
+    const Vec10 w = exid::transformInertial(want.bodies[k].inertia, want.bodies[k].post);
+    EXPECT_LE((u.bodies[k].inertia - w).cwiseAbs().maxCoeff(), 1e-12 * w.cwiseAbs().maxCoeff());
+    EXPECT_EQ(u.drives[k].rotor_inertia, want.drives[k].rotor_inertia);
+    EXPECT_EQ(u.drives[k].viscous, want.drives[k].viscous);
+    EXPECT_EQ(u.drives[k].coulomb, want.drives[k].coulomb);
+  }
+#ifdef EXID_HAVE_SDFORMAT
+  {
+    sdf::Root root;
+    const sdf::Errors errors = root.Load((dir / "identified.sdf").string());
+    ASSERT_TRUE(errors.empty()) << errors[0].Message();
+    for (const auto& b : want.bodies) {
+      double mass = 0;
+      Eigen::Vector3d c;
+      Eigen::Matrix3d Ic;
+      comOf(b.inertia, &mass, &c, &Ic);
+      const sdf::Link* link = root.Model()->LinkByName(b.name);
+      ASSERT_NE(link, nullptr);
+      EXPECT_NEAR(link->Inertial().MassMatrix().Mass(), mass, 1e-12 * mass);
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k)
+          EXPECT_NEAR(link->Inertial().MassMatrix().Moi()(r, k), Ic(r, k),
+                      1e-12 * Ic.cwiseAbs().maxCoeff());
+      EXPECT_EQ(root.Model()->JointByName(b.joint_name)->Axis(0)->Damping(),
+                want.drives[static_cast<std::size_t>(&b - &want.bodies[0])].viscous);
+    }
+  }
+#endif
+#ifdef EXID_HAVE_MUJOCO
+  {
+    char err[1000] = "";
+    MjModelPtr mm;
+    mm.m = mj_loadXML((dir / "identified.mjcf").string().c_str(), nullptr, err, sizeof err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    const Shipped s{"panda", want, {}};
+    auto data = exid::makeDynamicsData(want);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> uni(-1.0, 1.0);
+    const int n = want.dof();
+    double worst = 0;
+    for (int k = 0; k < 20; ++k) {
+      Eigen::VectorXd q(n), qd(n), qdd(n);
+      for (int j = 0; j < n; ++j) {
+        q(j) = uni(rng);
+        qd(j) = 2 * uni(rng);
+        qdd(j) = 4 * uni(rng);
+        md.d->qpos[j] = q(j);  // (a chain: MuJoCo's order is exid's)
+        md.d->qvel[j] = qd(j);
+        md.d->qacc[j] = qdd(j);
+      }
+      mj_inverse(mm.m, md.d);
+      const Eigen::VectorXd tau = expectedJointTorque(s, *data, q, qd, qdd);
+      const Eigen::VectorXd tau_mj = Eigen::Map<const Eigen::VectorXd>(md.d->qfrc_inverse, n);
+      worst = std::max(
+          worst, (tau_mj - tau).cwiseAbs().maxCoeff() / std::max(1.0, tau.cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LE(worst, 1e-9);
+    for (int j = 0; j < n; ++j) EXPECT_EQ(mm.m->dof_frictionloss[j], 0.2);
+    std::printf("exid export panda --out identified.mjcf: mj_inverse vs exid, largest error %.3g\n",
+                worst);
+  }
+#endif
+  fs::remove_all(dir);
 }
 
 }  // namespace
