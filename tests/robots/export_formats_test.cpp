@@ -10,6 +10,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <cmath>
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
@@ -602,6 +603,51 @@ TEST(ExportFormats, EveryFormatCarriesTheSameInertials) {
     std::printf("%s: inertials of the exported formats, largest relative difference %.3g\n",
                 s.name.c_str(), worst);
   }
+}
+
+// A joint without position limits: SDF `continuous` (revolute) or a prismatic joint without
+// lower/upper, MJCF `limited="false"`; both files still load.
+TEST(ExportFormats, UnboundedJointsLoad) {
+  RobotModel m = shippedRobots()[2].model;  // the Stanford arm: joint 3 prismatic
+  ASSERT_EQ(m.bodies[2].type, exid::JointType::Prismatic);
+  for (int j : {0, 2}) {
+    m.limits[static_cast<std::size_t>(j)].q_min = -1e300;
+    m.limits[static_cast<std::size_t>(j)].q_max = 1e300;
+    m.limits[static_cast<std::size_t>(j)].tau_max = 1e300;
+    m.limits[static_cast<std::size_t>(j)].qd_max = 1e300;
+  }
+#ifdef EXID_HAVE_SDFORMAT
+  {
+    sdf::Root root;
+    const sdf::Errors errors = root.LoadSdfString(exid::writeSdf(m));
+    for (const auto& e : errors) ADD_FAILURE() << e.Message();
+    ASSERT_NE(root.Model(), nullptr);
+    const sdf::Joint* j1 = root.Model()->JointByName(m.bodies[0].joint_name);
+    const sdf::Joint* j3 = root.Model()->JointByName(m.bodies[2].joint_name);
+    ASSERT_TRUE(j1 && j3);
+    EXPECT_EQ(j1->Type(), sdf::JointType::CONTINUOUS);
+    EXPECT_EQ(j3->Type(), sdf::JointType::PRISMATIC);
+    EXPECT_LE(j3->Axis(0)->Lower(), -1e16);  // (SDFormat's "no limit")
+    EXPECT_GE(j3->Axis(0)->Upper(), 1e16);
+    EXPECT_TRUE(std::isinf(j3->Axis(0)->Effort()));  // (libsdformat 12's "no limit")
+    EXPECT_TRUE(std::isinf(j3->Axis(0)->MaxVelocity()));
+  }
+#endif
+#ifdef EXID_HAVE_MUJOCO
+  {
+    std::string err;
+    const MjModelPtr mm = loadMjcf("unbounded", exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    for (int j = 0; j < m.dof(); ++j) {
+      const int id =
+          mj_name2id(mm.m, mjOBJ_JOINT, m.bodies[static_cast<std::size_t>(j)].joint_name.c_str());
+      EXPECT_EQ(mm.m->jnt_limited[id] != 0, j != 0 && j != 2) << j;
+    }
+    const int a = mj_name2id(mm.m, mjOBJ_ACTUATOR, m.bodies[0].joint_name.c_str());
+    ASSERT_GE(a, 0);
+    EXPECT_EQ(mm.m->actuator_ctrllimited[a], 0);
+  }
+#endif
 }
 
 // exid export end to end: a study's identified parameters (summary.json) written by the exid
