@@ -235,7 +235,12 @@ struct MjDataPtr {
   }
 };
 
+/// MuJoCo's warnings on stdout (by default it appends them to MUJOCO_LOG.TXT in the working
+/// folder).
+void sayMujocoWarning(const char* text) { std::printf("MuJoCo warning: %s\n", text); }
+
 MjModelPtr loadMjcf(const std::string& name, const std::string& text, std::string* error) {
+  mju_user_warning = sayMujocoWarning;
   const fs::path f = tempFile(name + ".xml");
   writeText(f, text);
   char err[1000] = "";
@@ -726,6 +731,7 @@ TEST(ExportFormats, ExidExportWritesWhatTheConsumersRead) {
   {
     char err[1000] = "";
     MjModelPtr mm;
+    mju_user_warning = sayMujocoWarning;
     mm.m = mj_loadXML((dir / "identified.mjcf").string().c_str(), nullptr, err, sizeof err);
     ASSERT_NE(mm.m, nullptr) << err;
     mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;
