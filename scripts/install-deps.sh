@@ -12,7 +12,9 @@ pkgs=(build-essential cmake pkg-config
       # the wheel (pyproject.toml): built by pip, installed into a venv (tests/python/wheel.sh)
       python3-pip python3-venv
       # the report as a person sees it: rendered headless (tests/integration/report_html_test)
-      chromium)
+      chromium
+      # exid export's MJCF and SDF read by MuJoCo and libsdformat (tests/robots/export_formats_test)
+      libmujoco-dev libsdformat-dev)
 for arg in "$@"; do
   case "$arg" in
     --fuzz) pkgs+=(clang-14 libclang-rt-14-dev) ;;

@@ -30,6 +30,7 @@ struct CommandArgs {
   int periods = 1;
   std::vector<double> torque_max;
   std::string collision_study;  // check-trajectory --collision
+  std::string format;           // export --format
 };
 
 // exid robot info ROBOT; returns the info subcommand.
@@ -85,14 +86,18 @@ std::vector<CLI::App*> addStageCommands(CLI::App& app, CommandArgs* st) {
 }
 
 CLI::App* addExportCommand(CLI::App& app, CommandArgs* st) {
-  auto* exp = app.add_subcommand("export",
-                                 "write identified consistent parameters into a URDF: "
-                                 "exid export [ROBOT] --study DIR --out robot_identified.urdf");
+  auto* exp = app.add_subcommand(
+      "export",
+      "write identified consistent parameters as a robot description (URDF, MJCF or SDF): "
+      "exid export [ROBOT] --study DIR --out robot_identified.urdf|.mjcf|.sdf [--format F]");
   exp->add_option("robot", st->robot,
                   "robot plugin name or .urdf / DH .yaml file (default: the study's robot)");
   exp->add_option("--study", st->study, "output folder of a study identified with consistent_ls")
       ->required();
-  exp->add_option("--out", st->out, "URDF file to write")->required();
+  exp->add_option("--out", st->out, "file to write")->required();
+  exp->add_option("--format", st->format,
+                  "urdf (default), mjcf (MuJoCo) or sdf (SDFormat 1.9); without it the "
+                  "extension of --out chooses (.urdf, .mjcf, .sdf)");
   return exp;
 }
 
@@ -182,7 +187,7 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
     if (*eval)
       return evalCommand(registry, st->robot, st->samples, st->what, st->out, st->rigid_body_only);
-    if (*exp) return exportCommand(registry, st->robot, st->study, st->out);
+    if (*exp) return exportCommand(registry, st->robot, st->study, st->out, st->format);
     for (auto* s : stages)
       if (*s)
         return stageCommand(registry, s->get_name(), st->study, st->data, st->out,

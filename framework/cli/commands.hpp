@@ -32,8 +32,9 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
 int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const std::string& file,
                            const std::vector<double>& torque_max, const std::string& json_out,
                            const std::string& collision_study);
+/// `format`: urdf, mjcf, sdf or "" (the extension of `out` chooses; URDF when it does not).
 int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
-                  const std::string& out);
+                  const std::string& out, const std::string& format);
 // commands_study.cpp: excite, simulate, identify, inspect.
 /// Single stages run through the study runner on a trimmed copy of the study.
 struct ExportArgs {

@@ -15,6 +15,8 @@
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
+#include "exid/mjcf_writer.hpp"
+#include "exid/sdf_writer.hpp"
 #include "exid/study_check.hpp"
 #include "exid/trajectory_export.hpp"
 #include "exid/urdf_writer.hpp"
@@ -281,11 +283,45 @@ int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const 
   return 0;
 }
 
+namespace {
+
+/// The description format of `exid export`: --format, else the extension of --out, else URDF;
+/// both given and contradicting: refused.
+std::string exportFormat(const std::string& format, const std::string& out) {
+  static const char* const kFormats[] = {"urdf", "mjcf", "sdf"};
+  if (!format.empty() &&
+      std::find(std::begin(kFormats), std::end(kFormats), format) == std::end(kFormats))
+    throw Error(fmt::format("--format {}: expected urdf, mjcf (MuJoCo) or sdf (SDFormat)", format));
+  std::string ext = fs::path(out).extension().string();
+  std::transform(ext.begin(), ext.end(), ext.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::tolower(c)); });
+  const std::string by_ext = ext == ".urdf"   ? "urdf"
+                             : ext == ".mjcf" ? "mjcf"
+                             : ext == ".sdf"  ? "sdf"
+                                              : "";
+  if (!format.empty() && !by_ext.empty() && format != by_ext)
+    throw Error(
+        fmt::format("--out {}: the extension {} says {}, but --format says {}; give a matching "
+                    "extension or leave --format out",
+                    out, ext, by_ext, format));
+  return !format.empty() ? format : !by_ext.empty() ? by_ext : "urdf";
+}
+
+std::string upper(std::string s) {
+  std::transform(s.begin(), s.end(), s.begin(),
+                 [](unsigned char c) { return static_cast<char>(std::toupper(c)); });
+  return s;
+}
+
+}  // namespace
+
 /// exid export: the identified consistent standard parameters (consistent_ls writes them into
-/// summary.json identification.details.standard_parameters) written into a URDF with the
-/// robot's kinematics, limits and drives (docs/consistent.md).
+/// summary.json identification.details.standard_parameters) written as URDF, MJCF or SDF with
+/// the robot's kinematics, limits and drives (docs/consistent.md).
 int exportCommand(const Registry& reg, const std::string& robot, const std::string& study_dir,
-                  const std::string& out) {
+                  const std::string& out, const std::string& format_arg) {
+  const std::string format = exportFormat(format_arg, out);
+  const std::string format_name = upper(format);
   const fs::path dir(study_dir);
   if (!fs::exists(dir / "summary.json"))
     throw Error(fmt::format("{}: no summary.json (the output folder of `exid run`)", dir.string()));
@@ -375,23 +411,39 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     if (!c.ok)
       throw Error(
           fmt::format("body {} ('{}'): {}; the identified parameters are not physically consistent "
-                      "and cannot be written as URDF",
-                      j + 1, m.bodies[static_cast<std::size_t>(j)].name, c.rule));
+                      "and cannot be written as {}",
+                      j + 1, m.bodies[static_cast<std::size_t>(j)].name, c.rule, format_name));
   }
-  UrdfWriteOptions wo;
-  wo.comment = fmt::format(
+  const std::string comment = fmt::format(
       "  {}: identified by exid {} ({}), study {} ({}).\n  Inertial parameters and drives "
       "from identification.details.standard_parameters; kinematics, limits and transmission "
       "from {}.",
       m.name, EXID_VERSION_STRING, I->find("estimator") ? I->find("estimator")->asString() : "?",
       S.find("study") ? S.find("study")->asString() : "?", dir.string(), base->source);
   m.name = m.name + "_identified";
-  writeFileAtomic(out, writeUrdf(m, wo));
-  std::cout << fmt::format(
-      "{}: {} ({} joints), {} identified parameters written{}\n", out, m.name, m.dof(), set,
-      ignored.empty()
-          ? std::string()
-          : fmt::format("; not part of the robot, ignored: {}", fmt::join(ignored, ", ")));
+  std::vector<std::string> left_out;
+  std::string written;
+  if (format == "mjcf") {
+    MjcfWriteOptions wo;
+    wo.comment = comment;
+    written = writeMjcf(m, wo, &left_out);
+  } else if (format == "sdf") {
+    SdfWriteOptions wo;
+    wo.comment = comment;
+    written = writeSdf(m, wo, &left_out);
+  } else {
+    UrdfWriteOptions wo;
+    wo.comment = comment;
+    written = writeUrdf(m, wo);
+  }
+  writeFileAtomic(out, written);
+  std::cout << fmt::format("{}: {} ({}, {} joints), {} identified parameters written{}\n", out,
+                           m.name, format_name, m.dof(), set,
+                           ignored.empty() ? std::string()
+                                           : fmt::format("; not part of the robot, ignored: {}",
+                                                         fmt::join(ignored, ", ")));
+  for (const std::string& s : left_out)
+    std::cout << fmt::format("note: not carried by {}: {}\n", format_name, s);
   return 0;
 }
 

@@ -6,59 +6,21 @@
 #include <sstream>
 
 #include "exid/error.hpp"
+#include "model_text.hpp"
 
 namespace exid {
 
 namespace {
 
-std::string num(double v) {
-  char buf[64];
-  std::snprintf(buf, sizeof buf, "%.17g", v);
-  return buf;
-}
-
-std::string vec3(const Eigen::Vector3d& v) {
-  return num(v.x()) + " " + num(v.y()) + " " + num(v.z());
-}
-
-/// URDF roll-pitch-yaw (R = Rz(yaw) Ry(pitch) Rx(roll)).
-Eigen::Vector3d rpy(const Eigen::Matrix3d& R) {
-  const double cp = std::hypot(R(2, 1), R(2, 2));
-  if (cp < 1e-10) {
-    const double pitch = R(2, 0) < 0 ? M_PI / 2 : -M_PI / 2;
-    return {std::atan2(-R(1, 2), R(1, 1)), pitch, 0.0};
-  }
-  return {std::atan2(R(2, 1), R(2, 2)), std::atan2(-R(2, 0), cp), std::atan2(R(1, 0), R(0, 0))};
-}
-
-std::string xmlEscape(const std::string& s) {
-  std::string o;
-  for (char c : s) {
-    switch (c) {
-      case '&':
-        o += "&amp;";
-        break;
-      case '<':
-        o += "&lt;";
-        break;
-      case '>':
-        o += "&gt;";
-        break;
-      case '"':
-        o += "&quot;";
-        break;
-      default:
-        o += c;
-    }
-  }
-  return o;
-}
+using detail::finiteLimit;
+using detail::num;
+using detail::rpy;
+using detail::vec3;
+using detail::xmlEscape;
 
 std::string origin(const Pose& X) {
   return "<origin xyz=\"" + vec3(X.p) + "\" rpy=\"" + vec3(rpy(X.R)) + "\"/>";
 }
-
-bool finiteLimit(double v) { return std::isfinite(v) && std::abs(v) < 1e299; }
 
 }  // namespace
 
@@ -66,15 +28,10 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
   m.validateStructure();
   std::set<std::string> names;
   for (const auto& b : m.bodies) names.insert(b.name);
-  std::string root = opt.root_link.empty() ? "base_link" : opt.root_link;
-  while (names.count(root)) root += "_";
+  const std::string root =
+      detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
   std::ostringstream x;
-  x << "<?xml version=\"1.0\"?>\n";
-  if (!opt.comment.empty()) {
-    std::string c = opt.comment;
-    for (std::size_t k; (k = c.find("--")) != std::string::npos;) c.replace(k, 2, "- -");
-    x << "<!--\n" << c << "\n-->\n";
-  }
+  x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);
   x << "<robot name=\"" << xmlEscape(m.name) << "\">\n";
   x << "  <link name=\"" << xmlEscape(root) << "\"/>\n";
   for (int j = 0; j < m.dof(); ++j) {

@@ -1,0 +1,121 @@
+// exid — RobotModel -> SDFormat 1.9 text (see sdf_writer.hpp).
+#include "exid/sdf_writer.hpp"
+
+#include <cmath>
+#include <set>
+#include <sstream>
+
+#include "exid/error.hpp"
+#include "model_text.hpp"
+
+namespace exid {
+
+namespace {
+
+using detail::finiteLimit;
+using detail::num;
+using detail::rpy;
+using detail::vec3;
+using detail::xmlEscape;
+
+std::string pose(const Pose& X, const std::string& relative_to = "") {
+  return "<pose" + (relative_to.empty() ? "" : " relative_to=\"" + xmlEscape(relative_to) + "\"") +
+         ">" + vec3(X.p) + " " + vec3(rpy(X.R)) + "</pose>";
+}
+
+std::string element(const char* name, double v) {
+  return std::string("<") + name + ">" + num(v) + "</" + name + ">";
+}
+
+}  // namespace
+
+std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
+                     std::vector<std::string>* left_out) {
+  m.validateStructure();
+  detail::requirePhysical(m, "SDF");
+  const int n = m.dof();
+  std::set<std::string> names;
+  for (const auto& b : m.bodies) names.insert(b.name);
+  for (const auto& b : m.bodies)
+    check(!names.count(b.joint_name),
+          "writeSdf: '" + b.joint_name +
+              "' names both a link and a joint; SDFormat frames share one namespace (rename one)");
+  for (const auto& b : m.bodies) names.insert(b.joint_name);
+  const std::string root =
+      detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
+  names.insert(root);
+  const std::string weld = detail::freeName(root + "_to_world", names);
+  names.insert(weld);
+  const std::string sensor = detail::freeName("exid_sensor", names);
+
+  std::vector<int> coupled;
+  const std::vector<detail::JointDriveTerms> drive = detail::jointDriveTerms(m, &coupled);
+  std::vector<std::string> notes;
+  std::vector<int> rotor;
+  for (int j = 0; j < n; ++j)
+    if (drive[static_cast<std::size_t>(j)].rotor_inertia != 0.0) rotor.push_back(j);
+  if (!rotor.empty())
+    notes.push_back("rotor inertias (joints " + detail::joinNumbers(rotor) +
+                    "): SDF has no joint armature");
+  detail::leftOutOfEveryFormat(m, coupled, "SDF", &notes);
+
+  std::ostringstream x;
+  x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);
+  if (!notes.empty()) {
+    std::string c = "  Not carried by SDF (exid's own description has them):";
+    for (const auto& s : notes) c += "\n  - " + s;
+    x << detail::xmlComment(c);
+  }
+  x << "<sdf version=\"1.9\">\n  <model name=\"" << xmlEscape(m.name) << "\">\n"
+    << "    <link name=\"" << xmlEscape(root) << "\">\n"
+    << "      <inertial><mass>0</mass><inertia><ixx>0</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0</iyy>"
+       "<iyz>0</iyz><izz>0</izz></inertia></inertial>\n    </link>\n"
+    << "    <joint name=\"" << xmlEscape(weld) << "\" type=\"fixed\">\n"
+    << "      <parent>world</parent>\n      <child>" << xmlEscape(root) << "</child>\n"
+    << "    </joint>\n";
+  for (int j = 0; j < n; ++j) {
+    const Body& b = m.bodies[static_cast<std::size_t>(j)];
+    const std::string parent =
+        b.parent < 0 ? root : m.bodies[static_cast<std::size_t>(b.parent)].name;
+    double mass = b.inertia(9);
+    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    Eigen::Matrix3d Ic;
+    if (mass > 0.0) {
+      comFromInertial(b.inertia, &mass, &c, &Ic);
+    } else {  // no mass (and, being consistent, no first moment): the tensor is about the origin
+      const auto& p = b.inertia;
+      Ic << p(0), p(1), p(2), p(1), p(3), p(4), p(2), p(4), p(5);
+      mass = 0.0;
+    }
+    x << "    <link name=\"" << xmlEscape(b.name) << "\">\n"
+      << "      " << pose(b.pre * b.post, parent) << "\n"
+      << "      <inertial>\n        " << pose(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
+      << "        " << element("mass", mass) << "\n        <inertia>" << element("ixx", Ic(0, 0))
+      << element("ixy", 0.5 * (Ic(0, 1) + Ic(1, 0))) << element("ixz", 0.5 * (Ic(0, 2) + Ic(2, 0)))
+      << element("iyy", Ic(1, 1)) << element("iyz", 0.5 * (Ic(1, 2) + Ic(2, 1)))
+      << element("izz", Ic(2, 2)) << "</inertia>\n      </inertial>\n";
+    x << "    </link>\n";
+    const JointLimits& L = m.limits[static_cast<std::size_t>(j)];
+    const bool bounded = finiteLimit(L.q_min) && finiteLimit(L.q_max);
+    const char* type =
+        b.type == JointType::Prismatic ? "prismatic" : (bounded ? "revolute" : "continuous");
+    const detail::JointDriveTerms& d = drive[static_cast<std::size_t>(j)];
+    x << "    <joint name=\"" << xmlEscape(b.joint_name) << "\" type=\"" << type << "\">\n"
+      << "      <parent>" << xmlEscape(parent) << "</parent>\n      <child>" << xmlEscape(b.name)
+      << "</child>\n      " << pose(b.post.inverse()) << "\n"
+      << "      <axis>\n        <xyz>" << vec3(b.axis) << "</xyz>\n        <limit>";
+    if (bounded) x << element("lower", L.q_min) << element("upper", L.q_max);
+    if (finiteLimit(L.tau_max)) x << element("effort", L.tau_max);
+    if (finiteLimit(L.qd_max)) x << element("velocity", L.qd_max);
+    x << "</limit>\n        <dynamics>" << element("damping", d.viscous)
+      << element("friction", d.coulomb) << "</dynamics>\n      </axis>\n    </joint>\n";
+  }
+  const Body& sb = m.bodies[static_cast<std::size_t>(m.sensorBody())];
+  x << "    <frame name=\"" << xmlEscape(sensor) << "\" attached_to=\"" << xmlEscape(sb.name)
+    << "\">\n      " << pose(m.sensor_pose, sb.name) << "\n    </frame>\n";
+  x << "  </model>\n</sdf>\n";
+  if (left_out) left_out->insert(left_out->end(), notes.begin(), notes.end());
+  return x.str();
+}
+
+}  // namespace exid

@@ -1,0 +1,771 @@
+// The robot description writers read back by their consumers: MJCF by MuJoCo 2.2 (mj_loadXML,
+// then mj_inverse at random states equals exid's inverse dynamics with the drive terms that MJCF
+// carries), SDF by libsdformat 12 (sdf::Root::Load without errors; every link's mass, inertia
+// and pose, every joint's pose, axis, limits and dynamics equal to exid's), and URDF by exid's
+// own loader — for every shipped robot with drive terms, the inertials of all three formats
+// compared with exid's. MuJoCo (libmujoco-dev) and libsdformat (libsdformat-dev) are test-only
+// dependencies (scripts/install-deps.sh); without one its tests skip, naming the package.
+#include <gtest/gtest.h>
+
+#include <Eigen/Eigenvalues>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "exid/drive.hpp"
+#include "exid/dynamics.hpp"
+#include "exid/error.hpp"
+#include "exid/mjcf_writer.hpp"
+#include "exid/robot_loaders.hpp"
+#include "exid/sdf_writer.hpp"
+#include "exid/urdf_writer.hpp"
+#include "exid_cli.hpp"
+
+#ifdef EXID_HAVE_MUJOCO
+#include <mujoco/mujoco.h>
+#endif
+#ifdef EXID_HAVE_SDFORMAT
+#include <sdf/Frame.hh>
+#include <sdf/Joint.hh>
+#include <sdf/JointAxis.hh>
+#include <sdf/Link.hh>
+#include <sdf/Model.hh>
+#include <sdf/Root.hh>
+#endif
+
+namespace {
+
+namespace fs = std::filesystem;
+using exid::Pose;
+using exid::RobotModel;
+using Vec10 = Eigen::Matrix<double, 10, 1>;
+
+struct Shipped {
+  std::string name;
+  RobotModel model;
+  std::vector<int> coupled;  // measured coordinates (1-based) whose drives move several joints
+};
+
+/// Principal moments raised to satisfy the triangle inequality and positivity, keeping the mass,
+/// the centre of mass and the principal axes: for published data that violate them (the PUMA
+/// 560's links 1 and 3, the Stanford arm's link 5), which no exported model carries.
+Vec10 madeConsistent(const Vec10& pi) {
+  if (exid::checkPhysical(pi).ok) return pi;
+  double mass = pi(9);
+  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  Eigen::Matrix3d Ic;
+  if (mass > 0) {
+    exid::comFromInertial(pi, &mass, &c, &Ic);
+  } else {
+    mass = 0;
+    Ic << pi(0), pi(1), pi(2), pi(1), pi(3), pi(4), pi(2), pi(4), pi(5);
+  }
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> es(Ic);
+  Eigen::Vector3d l = es.eigenvalues().cwiseMax(0.0);  // ascending
+  if (l(0) + l(1) < l(2)) {
+    const double half = 0.5 * (l(2) - l(0) - l(1)) * (1 + 1e-9);
+    l(0) += half;
+    l(1) += half;
+  }
+  Ic = es.eigenvectors() * l.asDiagonal() * es.eigenvectors().transpose();
+  if (mass > 0) return exid::inertialFromCom(mass, c, Ic);
+  Vec10 out = Vec10::Zero();
+  out << Ic(0, 0), Ic(0, 1), Ic(0, 2), Ic(1, 1), Ic(1, 2), Ic(2, 2), 0, 0, 0, 0;
+  return out;
+}
+
+std::vector<Shipped> shippedRobots() {
+  const std::string dir = std::string(EXID_SOURCE_DIR);
+  exid::LoadOptions o;
+  std::vector<std::string> sink;
+  o.warnings = &sink;
+  std::vector<Shipped> out;
+  for (const auto& [name, file] : std::vector<std::pair<std::string, std::string>>{
+           {"panda", "robots/panda/panda.yaml"},
+           {"puma560", "robots/puma560/puma560.yaml"},
+           {"stanford", "robots/stanford/stanford.yaml"},
+           {"irp6", "robots/irp6/irp6.yaml"},
+           {"planar2r", "robots/planar2r/planar2r.yaml"}})
+    out.push_back({name, exid::loadRobotFile(dir + "/" + file, o), {}});
+  o.urdf_extension = dir + "/robots/tx40/tx40_exid.xml";
+  out.push_back(
+      {"tx40", exid::loadUrdf(dir + "/data/staubli_tx40/urdf/tx40_mdh_modified.urdf", o), {6}});
+  out[3].coupled = {3, 4};  // irp6: absolute angles of joints 3 and 4 move joints 2-4 / 3-4
+  for (auto& s : out)
+    for (auto& b : s.model.bodies) b.inertia = madeConsistent(b.inertia);
+  return out;
+}
+
+/// Body frames at q = 0 in the base frame.
+std::vector<Pose> restPoses(const RobotModel& m) {
+  std::vector<Pose> X(static_cast<std::size_t>(m.dof()));
+  for (int i = 0; i < m.dof(); ++i) {
+    const auto& b = m.bodies[static_cast<std::size_t>(i)];
+    X[static_cast<std::size_t>(i)] =
+        (b.parent < 0 ? Pose{} : X[static_cast<std::size_t>(b.parent)]) * b.pre * b.post;
+  }
+  return X;
+}
+
+/// Mass, centre of mass (body frame) and inertia about it (body axes) of exid's parameters.
+void comOf(const Vec10& pi, double* mass, Eigen::Vector3d* c, Eigen::Matrix3d* Ic) {
+  if (pi(9) > 0) {
+    exid::comFromInertial(pi, mass, c, Ic);
+  } else {
+    *mass = 0;
+    c->setZero();
+    *Ic << pi(0), pi(1), pi(2), pi(1), pi(3), pi(4), pi(2), pi(4), pi(5);
+  }
+}
+
+fs::path tempFile(const std::string& name) {
+  return fs::temp_directory_path() /
+         ("exid_export_formats_" + std::to_string(::getpid()) + "_" + name);
+}
+
+void writeText(const fs::path& p, const std::string& text) { std::ofstream(p) << text; }
+
+bool mentions(const std::vector<std::string>& notes, const std::string& what) {
+  for (const auto& n : notes)
+    if (n.find(what) != std::string::npos) return true;
+  return false;
+}
+
+/// Joint-side torque that the MJCF carries: exid's actuator torque with rotor inertia and viscous
+/// friction of the coordinates that move one joint (the others' drive terms zeroed), mapped to
+/// the joint coordinates (tau = T^-T tau_m).
+Eigen::VectorXd expectedJointTorque(const Shipped& s, exid::DynamicsData& data,
+                                    const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
+                                    const Eigen::VectorXd& qdd) {
+  RobotModel e = s.model;
+  for (int j : s.coupled) {
+    e.drives[static_cast<std::size_t>(j - 1)].rotor_inertia = 0;
+    e.drives[static_cast<std::size_t>(j - 1)].viscous = 0;
+  }
+  Eigen::VectorXd qm, qdm, qddm;
+  exid::jointToMeasured(e, q, qd, qdd, &qm, &qdm, &qddm);
+  const exid::DriveColumns cols{true, false, true, false};
+  const Eigen::VectorXd tau_m = exid::actuatorTorque(e, data, cols, qm, qdm, qddm);
+  if (!e.hasTransmission()) return tau_m;
+  return e.transmission.transpose().fullPivLu().solve(tau_m);
+}
+
+TEST(ExportFormats, NotesNameWhatEachFormatLeavesOut) {
+  for (const Shipped& s : shippedRobots()) {
+    SCOPED_TRACE(s.name);
+    std::vector<std::string> mj, sd;
+    exid::writeMjcf(s.model, {}, &mj);
+    exid::writeSdf(s.model, {}, &sd);
+    for (const auto& n : mj) std::printf("%s MJCF: %s\n", s.name.c_str(), n.c_str());
+    for (const auto& n : sd) std::printf("%s SDF: %s\n", s.name.c_str(), n.c_str());
+    bool offset = false, rotor = false;
+    for (const auto& d : s.model.drives) {
+      offset = offset || d.offset != 0;
+      rotor = rotor || d.rotor_inertia != 0;
+    }
+    EXPECT_EQ(mentions(mj, "drive torque offsets"), offset);
+    EXPECT_EQ(mentions(sd, "drive torque offsets"), offset);
+    EXPECT_EQ(mentions(sd, "rotor inertias"), rotor);
+    EXPECT_FALSE(mentions(mj, "rotor inertias"));
+    EXPECT_EQ(mentions(mj, "the transmission"), s.model.hasTransmission());
+    if (!s.coupled.empty()) {
+      std::string list;
+      for (std::size_t k = 0; k < s.coupled.size(); ++k)
+        list += (k ? ", " : "") + std::to_string(s.coupled[k]);
+      EXPECT_TRUE(mentions(mj, "drives of coordinates " + list + ", which move several joints"));
+      EXPECT_TRUE(mentions(sd, "drives of coordinates " + list + ", which move several joints"));
+    }
+  }
+  // The Panda's published viscous friction of joint 6 is negative: MJCF's damping carries it,
+  // its frictionloss would not carry a negative Coulomb friction.
+  RobotModel p = shippedRobots()[0].model;
+  p.drives[2].coulomb = -0.5;
+  std::vector<std::string> mj;
+  const std::string text = exid::writeMjcf(p, {}, &mj);
+  EXPECT_TRUE(mentions(mj, "negative Coulomb friction (joints 3)"));
+  EXPECT_NE(text.find("Not carried by MJCF"), std::string::npos);
+  EXPECT_NE(text.find("negative Coulomb friction (joints 3)"), std::string::npos);
+}
+
+TEST(ExportFormats, PhysicallyInconsistentBodiesAreRefused) {
+  RobotModel m = shippedRobots()[0].model;
+  auto message = [&](auto write) {
+    try {
+      write();
+    } catch (const exid::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("(nothing thrown)");
+  };
+  m.bodies[1].inertia(9) = -1.0;
+  EXPECT_NE(message([&] {
+              exid::writeMjcf(m);
+            }).find("body 2 ('" + m.bodies[1].name + "'): negative mass"),
+            std::string::npos);
+  EXPECT_NE(message([&] { exid::writeSdf(m); }).find("cannot be written as SDF"),
+            std::string::npos);
+  m = shippedRobots()[0].model;
+  m.bodies[3].inertia(5) += 100.0;  // ZZ about the origin: I1 + I2 < I3 about the centre of mass
+  const std::string mj = message([&] { exid::writeMjcf(m); });
+  EXPECT_NE(mj.find("body 4 ('" + m.bodies[3].name + "'): triangle inequality violated"),
+            std::string::npos)
+      << mj;
+  EXPECT_NE(mj.find("cannot be written as MJCF"), std::string::npos) << mj;
+  EXPECT_NE(message([&] { exid::writeSdf(m); }).find("triangle inequality violated"),
+            std::string::npos);
+}
+
+#ifdef EXID_HAVE_MUJOCO
+struct MjModelPtr {
+  mjModel* m = nullptr;
+  ~MjModelPtr() {
+    if (m) mj_deleteModel(m);
+  }
+};
+struct MjDataPtr {
+  mjData* d = nullptr;
+  ~MjDataPtr() {
+    if (d) mj_deleteData(d);
+  }
+};
+
+/// MuJoCo's warnings on stdout (by default it appends them to MUJOCO_LOG.TXT in the working
+/// folder).
+void sayMujocoWarning(const char* text) { std::printf("MuJoCo warning: %s\n", text); }
+
+MjModelPtr loadMjcf(const std::string& name, const std::string& text, std::string* error) {
+  mju_user_warning = sayMujocoWarning;
+  const fs::path f = tempFile(name + ".xml");
+  writeText(f, text);
+  char err[1000] = "";
+  MjModelPtr p;
+  p.m = mj_loadXML(f.string().c_str(), nullptr, err, sizeof err);
+  fs::remove(f);
+  *error = err;
+  return p;
+}
+#endif
+
+TEST(ExportFormats, MujocoInverseDynamicsEqualsExidWithDriveTerms) {
+#ifndef EXID_HAVE_MUJOCO
+  GTEST_SKIP() << "MuJoCo is not installed (libmujoco-dev; scripts/install-deps.sh installs it)";
+#else
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (const Shipped& s : shippedRobots()) {
+    SCOPED_TRACE(s.name);
+    const RobotModel& m = s.model;
+    const int n = m.dof();
+    std::string err;
+    const MjModelPtr mm = loadMjcf(s.name, exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    EXPECT_EQ(err, "");
+    ASSERT_EQ(mm.m->nv, n);
+    // The smooth forces only: frictionloss is a constraint force of MuJoCo's solver (see below),
+    // limits and contacts are constraints too.
+    mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    std::vector<int> adr(static_cast<std::size_t>(n));
+    for (int j = 0; j < n; ++j) {
+      const int id =
+          mj_name2id(mm.m, mjOBJ_JOINT, m.bodies[static_cast<std::size_t>(j)].joint_name.c_str());
+      ASSERT_GE(id, 0);
+      adr[static_cast<std::size_t>(j)] = mm.m->jnt_dofadr[id];
+      ASSERT_EQ(mm.m->jnt_qposadr[id], mm.m->jnt_dofadr[id]);  // hinge and slide joints
+    }
+    auto data = exid::makeDynamicsData(m);
+    double worst = 0.0, worst_drive_share = 0.0;
+    for (int k = 0; k < 50; ++k) {
+      Eigen::VectorXd q(n), qd(n), qdd(n);
+      for (int j = 0; j < n; ++j) {
+        const auto& L = m.limits[static_cast<std::size_t>(j)];
+        const bool bounded = L.q_min > -1e100 && L.q_max < 1e100;
+        q(j) =
+            bounded ? 0.5 * (L.q_min + L.q_max) + 0.5 * (L.q_max - L.q_min) * u(rng) : 3.0 * u(rng);
+        qd(j) = 2.0 * u(rng);
+        qdd(j) = 4.0 * u(rng);
+      }
+      for (int j = 0; j < n; ++j) {
+        const auto a = static_cast<std::size_t>(adr[static_cast<std::size_t>(j)]);
+        md.d->qpos[a] = q(j);
+        md.d->qvel[a] = qd(j);
+        md.d->qacc[a] = qdd(j);
+      }
+      mj_inverse(mm.m, md.d);
+      Eigen::VectorXd tau_mj(n);
+      for (int j = 0; j < n; ++j) tau_mj(j) = md.d->qfrc_inverse[adr[static_cast<std::size_t>(j)]];
+      const Eigen::VectorXd tau = expectedJointTorque(s, *data, q, qd, qdd);
+      const Eigen::VectorXd rigid = exid::inverseDynamics(m, *data, q, qd, qdd);
+      const double scale = std::max(1.0, tau.cwiseAbs().maxCoeff());
+      worst = std::max(worst, (tau_mj - tau).cwiseAbs().maxCoeff() / scale);
+      worst_drive_share = std::max(worst_drive_share, (tau - rigid).cwiseAbs().maxCoeff() / scale);
+    }
+    std::printf(
+        "%s: MuJoCo mj_inverse vs exid (rigid body + rotor inertia + viscous friction), largest "
+        "error %.3g of the largest torque; the drive terms are up to %.3g of it\n",
+        s.name.c_str(), worst, worst_drive_share);
+    EXPECT_LE(worst, 1e-9);
+    // (planar2r has no drive terms; every other shipped robot's drives are in the comparison)
+    if (s.name != "planar2r") {
+      EXPECT_GT(worst_drive_share, 1e-4);
+    }
+  }
+#endif
+}
+
+TEST(ExportFormats, MujocoReadsTheDriveTermsLimitsAndFrictionloss) {
+#ifndef EXID_HAVE_MUJOCO
+  GTEST_SKIP() << "MuJoCo is not installed (libmujoco-dev; scripts/install-deps.sh installs it)";
+#else
+  for (const Shipped& s : shippedRobots()) {
+    SCOPED_TRACE(s.name);
+    const RobotModel& m = s.model;
+    std::string err;
+    const MjModelPtr mm = loadMjcf(s.name, exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    EXPECT_EQ(mm.m->opt.gravity[0], m.gravity.x());
+    EXPECT_EQ(mm.m->opt.gravity[1], m.gravity.y());
+    EXPECT_EQ(mm.m->opt.gravity[2], m.gravity.z());
+    Eigen::MatrixXd Tinv = Eigen::MatrixXd::Identity(m.dof(), m.dof());
+    if (m.hasTransmission()) Tinv = m.transmission.inverse();
+    for (int j = 0; j < m.dof(); ++j) {
+      const auto& b = m.bodies[static_cast<std::size_t>(j)];
+      const int id = mj_name2id(mm.m, mjOBJ_JOINT, b.joint_name.c_str());
+      ASSERT_GE(id, 0);
+      const int dof = mm.m->jnt_dofadr[id];
+      // the drive of coordinate j acts on joint j alone (diagonal T^-1) unless it is coupled
+      const bool coupled = std::find(s.coupled.begin(), s.coupled.end(), j + 1) != s.coupled.end();
+      const double r = Tinv(j, j);
+      const auto& d = m.drives[static_cast<std::size_t>(j)];
+      const double tol = 1e-12 * std::max(1.0, std::abs(d.rotor_inertia * r * r));
+      if (!coupled) {
+        EXPECT_NEAR(mm.m->dof_armature[dof], d.rotor_inertia * r * r, tol) << j;
+        EXPECT_NEAR(mm.m->dof_damping[dof], d.viscous * r * r, 1e-12 * std::abs(d.viscous * r * r))
+            << j;
+        EXPECT_NEAR(mm.m->dof_frictionloss[dof], std::max(0.0, d.coulomb * std::abs(r)),
+                    1e-12 * std::abs(d.coulomb * r))
+            << j;
+      }
+      const auto& L = m.limits[static_cast<std::size_t>(j)];
+      const bool bounded = L.q_min > -1e100 && L.q_max < 1e100;
+      EXPECT_EQ(mm.m->jnt_limited[id] != 0, bounded);
+      if (bounded) {
+        EXPECT_EQ(mm.m->jnt_range[2 * id], L.q_min);
+        EXPECT_EQ(mm.m->jnt_range[2 * id + 1], L.q_max);
+      }
+      EXPECT_EQ(mm.m->jnt_type[id],
+                b.type == exid::JointType::Prismatic ? mjJNT_SLIDE : mjJNT_HINGE);
+    }
+    // Coulomb friction as MuJoCo has it: frictionloss is a dry-friction CONSTRAINT, its force
+    // found by the (soft) constraint solver: bounded by frictionloss, opposing the motion, and a
+    // smooth ramp through zero velocity where exid has Fc sign(qd). So mj_inverse with it adds
+    // at most frictionloss per joint; away from rest (|qd| >= 0.1 here, MuJoCo's default
+    // solref/solimp) exactly frictionloss in the direction of the velocity, as exid's.
+    mm.m->opt.disableflags |= mjDSBL_LIMIT | mjDSBL_CONTACT;
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    std::mt19937 rng(3);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    double moving = 0, slow = 1;
+    bool any = false;
+    for (int k = 0; k < 40; ++k) {
+      for (int i = 0; i < mm.m->nv; ++i) {
+        md.d->qpos[i] = 0.3 * u(rng);
+        md.d->qvel[i] = k < 20 ? u(rng) : 1e-3 * u(rng);
+        md.d->qacc[i] = u(rng);
+      }
+      mm.m->opt.disableflags &= ~mjDSBL_FRICTIONLOSS;
+      mj_inverse(mm.m, md.d);
+      const std::vector<double> with(md.d->qfrc_inverse, md.d->qfrc_inverse + mm.m->nv);
+      mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS;
+      mj_inverse(mm.m, md.d);
+      for (int i = 0; i < mm.m->nv; ++i) {
+        const double f = with[static_cast<std::size_t>(i)] - md.d->qfrc_inverse[i];
+        const double fl = mm.m->dof_frictionloss[i];
+        const double v = md.d->qvel[i];
+        EXPECT_LE(std::abs(f), fl * (1 + 1e-12) + 1e-12) << i;
+        if (fl <= 0) continue;
+        any = true;
+        if (std::abs(v) >= 0.1)  // the inverse force overcomes the friction, all of it
+          moving = std::max(moving, std::abs(f - fl * (v > 0 ? 1 : -1)) / fl);
+        if (std::abs(v) < 1e-3) slow = std::min(slow, std::abs(f) / fl);
+      }
+    }
+    if (any) {
+      EXPECT_LE(moving, 1e-12);
+      EXPECT_LT(slow, 0.5);  // (near rest the force is a ramp, not Fc sign(qd))
+      std::printf(
+          "%s: MuJoCo frictionloss in mj_inverse: |qd| >= 0.1 differs from Fc sign(qd) by %.3g "
+          "of Fc; |qd| < 1e-3 gives as little as %.3g of Fc\n",
+          s.name.c_str(), moving, slow);
+    }
+  }
+#endif
+}
+
+TEST(ExportFormats, SdformatReadsLinksJointsAndLimits) {
+#ifndef EXID_HAVE_SDFORMAT
+  GTEST_SKIP() << "libsdformat is not installed (libsdformat-dev; scripts/install-deps.sh "
+                  "installs it)";
+#else
+  for (const Shipped& s : shippedRobots()) {
+    SCOPED_TRACE(s.name);
+    const RobotModel& m = s.model;
+    const fs::path f = tempFile(s.name + ".sdf");
+    writeText(f, exid::writeSdf(m));
+    sdf::Root root;
+    const sdf::Errors errors = root.Load(f.string());
+    fs::remove(f);
+    for (const auto& e : errors) ADD_FAILURE() << e.Message();
+    ASSERT_TRUE(errors.empty());
+    const sdf::Model* model = root.Model();
+    ASSERT_NE(model, nullptr);
+    EXPECT_EQ(model->LinkCount(), static_cast<uint64_t>(m.dof() + 1));
+    EXPECT_EQ(model->JointCount(), static_cast<uint64_t>(m.dof() + 1));
+    const std::vector<Pose> X = restPoses(m);
+    auto near = [](double a, double b) {
+      return std::abs(a - b) <= 1e-12 * std::max(1.0, std::abs(b));
+    };
+    for (int j = 0; j < m.dof(); ++j) {
+      const auto& b = m.bodies[static_cast<std::size_t>(j)];
+      SCOPED_TRACE(b.name);
+      const sdf::Link* link = model->LinkByName(b.name);
+      ASSERT_NE(link, nullptr);
+      double mass = 0;
+      Eigen::Vector3d c;
+      Eigen::Matrix3d Ic;
+      comOf(b.inertia, &mass, &c, &Ic);
+      const auto& in = link->Inertial();
+      EXPECT_TRUE(near(in.MassMatrix().Mass(), mass)) << in.MassMatrix().Mass() << " " << mass;
+      const auto moi = in.MassMatrix().Moi();
+      const double iscale = std::max(1e-300, Ic.cwiseAbs().maxCoeff());
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k)
+          EXPECT_LE(std::abs(moi(r, k) - Ic(r, k)), 1e-12 * iscale) << r << k;
+      for (int r = 0; r < 3; ++r) EXPECT_TRUE(near(in.Pose().Pos()[r], c(r))) << r;
+      EXPECT_EQ(in.Pose().Rot(), ignition::math::Quaterniond::Identity);
+      ignition::math::Pose3d P;
+      const sdf::Errors pe = link->SemanticPose().Resolve(P, "__model__");
+      ASSERT_TRUE(pe.empty()) << pe[0].Message();
+      const Pose& Xj = X[static_cast<std::size_t>(j)];
+      const Eigen::Quaterniond qe(Xj.R);
+      const ignition::math::Quaterniond qs = P.Rot();
+      EXPECT_LE(std::min((Eigen::Vector4d(qs.W(), qs.X(), qs.Y(), qs.Z()) -
+                          Eigen::Vector4d(qe.w(), qe.x(), qe.y(), qe.z()))
+                             .cwiseAbs()
+                             .maxCoeff(),
+                         (Eigen::Vector4d(qs.W(), qs.X(), qs.Y(), qs.Z()) +
+                          Eigen::Vector4d(qe.w(), qe.x(), qe.y(), qe.z()))
+                             .cwiseAbs()
+                             .maxCoeff()),
+                1e-12);
+      for (int r = 0; r < 3; ++r) EXPECT_TRUE(near(P.Pos()[r], Xj.p(r))) << r;
+
+      const sdf::Joint* joint = model->JointByName(b.joint_name);
+      ASSERT_NE(joint, nullptr);
+      EXPECT_EQ(joint->ChildLinkName(), b.name);
+      EXPECT_EQ(joint->ParentLinkName(),
+                b.parent < 0 ? "base_link" : m.bodies[static_cast<std::size_t>(b.parent)].name);
+      const auto& L = m.limits[static_cast<std::size_t>(j)];
+      const bool bounded = L.q_min > -1e100 && L.q_max < 1e100;
+      EXPECT_EQ(joint->Type(), b.type == exid::JointType::Prismatic ? sdf::JointType::PRISMATIC
+                               : bounded                            ? sdf::JointType::REVOLUTE
+                                                                    : sdf::JointType::CONTINUOUS);
+      const sdf::JointAxis* axis = joint->Axis(0);
+      ASSERT_NE(axis, nullptr);
+      // the axis in the model frame, and the joint frame's origin there (at q = 0)
+      ignition::math::Vector3d a;
+      const sdf::Errors ae = axis->ResolveXyz(a, "__model__");
+      ASSERT_TRUE(ae.empty()) << ae[0].Message();
+      const Pose Jf = (b.parent < 0 ? Pose{} : X[static_cast<std::size_t>(b.parent)]) * b.pre;
+      const Eigen::Vector3d ae_model = Jf.R * b.axis;
+      for (int r = 0; r < 3; ++r) EXPECT_TRUE(near(a[r], ae_model(r))) << r;
+      ignition::math::Pose3d PJ;
+      ASSERT_TRUE(joint->SemanticPose().Resolve(PJ, "__model__").empty());
+      for (int r = 0; r < 3; ++r) EXPECT_TRUE(near(PJ.Pos()[r], Jf.p(r))) << r;
+      if (bounded) {
+        EXPECT_EQ(axis->Lower(), L.q_min);
+        EXPECT_EQ(axis->Upper(), L.q_max);
+      }
+      if (L.tau_max < 1e100) {
+        EXPECT_EQ(axis->Effort(), L.tau_max);
+      }
+      if (L.qd_max < 1e100) {
+        EXPECT_EQ(axis->MaxVelocity(), L.qd_max);
+      }
+      const bool coupled = std::find(s.coupled.begin(), s.coupled.end(), j + 1) != s.coupled.end();
+      const double r = m.hasTransmission() ? m.transmission.inverse()(j, j) : 1.0;
+      const auto& d = m.drives[static_cast<std::size_t>(j)];
+      if (!coupled) {
+        EXPECT_TRUE(near(axis->Damping(), d.viscous * r * r)) << axis->Damping();
+        EXPECT_TRUE(near(axis->Friction(), d.coulomb * std::abs(r))) << axis->Friction();
+      }
+    }
+    const sdf::Frame* sensor = model->FrameByName("exid_sensor");
+    ASSERT_NE(sensor, nullptr);
+    EXPECT_EQ(sensor->AttachedTo(), m.bodies[static_cast<std::size_t>(m.sensorBody())].name);
+  }
+#endif
+}
+
+// URDF (read by exid's loader), MJCF (by MuJoCo) and SDF (by libsdformat) written from the
+// same model carry the same inertials: mass, centre of mass and inertia about it, in the body
+// frame, to 1e-12 — MuJoCo's through its principal axes, URDF's in the moved joint frame.
+TEST(ExportFormats, EveryFormatCarriesTheSameInertials) {
+  for (const Shipped& s : shippedRobots()) {
+    SCOPED_TRACE(s.name);
+    const RobotModel& m = s.model;
+    std::vector<std::string> sink;
+    exid::LoadOptions o;
+    o.warnings = &sink;
+    o.strict = true;
+    RobotModel u;
+    bool urdf_ok = true;
+    try {
+      u = exid::loadUrdfString(exid::writeUrdf(m), s.name + ".urdf", o);
+    } catch (const exid::Error& e) {
+      // (a massless body with rotational inertia: URDF has no way to say it, and refuses)
+      urdf_ok = false;
+      std::printf("%s: URDF refused: %s\n", s.name.c_str(), e.what());
+    }
+#ifdef EXID_HAVE_MUJOCO
+    std::string err;
+    const MjModelPtr mm = loadMjcf(s.name, exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    mj_kinematics(mm.m, md.d);
+    const std::vector<Pose> X = restPoses(m);
+#endif
+#ifdef EXID_HAVE_SDFORMAT
+    sdf::Root sroot;
+    ASSERT_TRUE(sroot.LoadSdfString(exid::writeSdf(m)).empty());
+    ASSERT_NE(sroot.Model(), nullptr);
+#endif
+    double worst = 0;
+    for (int j = 0; j < m.dof(); ++j) {
+      const auto& b = m.bodies[static_cast<std::size_t>(j)];
+      SCOPED_TRACE(b.name);
+      double mass = 0;
+      Eigen::Vector3d c;
+      Eigen::Matrix3d Ic;
+      comOf(b.inertia, &mass, &c, &Ic);
+      const double iscale = Ic.cwiseAbs().maxCoeff();
+      if (urdf_ok) {
+        // URDF's link frame is the moved joint frame: exid's parameters moved by `post`.
+        const Vec10 want = exid::transformInertial(b.inertia, b.post);
+        const Vec10 got = u.bodies[static_cast<std::size_t>(j)].inertia;
+        const double e =
+            (got - want).cwiseAbs().maxCoeff() / std::max(1.0, want.cwiseAbs().maxCoeff());
+        EXPECT_LE(e, 1e-12);
+        worst = std::max(worst, e);
+      }
+#ifdef EXID_HAVE_MUJOCO
+      const int id = mj_name2id(mm.m, mjOBJ_BODY, b.name.c_str());
+      ASSERT_GE(id, 0);
+      // (MuJoCo's minimum mass 1e-15 for a massless body)
+      EXPECT_NEAR(mm.m->body_mass[id], mass, 1e-12 * std::max(1.0, mass));
+      for (int r = 0; r < 3; ++r)
+        EXPECT_NEAR(mm.m->body_ipos[3 * id + r], c(r), 1e-12 * std::max(1.0, c.norm())) << r;
+      const mjtNum* iq = mm.m->body_iquat + 4 * id;
+      const Eigen::Matrix3d R = Eigen::Quaterniond(iq[0], iq[1], iq[2], iq[3]).toRotationMatrix();
+      const Eigen::Vector3d l(mm.m->body_inertia[3 * id], mm.m->body_inertia[3 * id + 1],
+                              mm.m->body_inertia[3 * id + 2]);
+      const Eigen::Matrix3d Imj = R * l.asDiagonal() * R.transpose();
+      // (MuJoCo's minimum principal moment 1e-15 where exid has none)
+      const double diff = (Imj - Ic).cwiseAbs().maxCoeff();
+      EXPECT_LE(diff, 1e-12 * iscale + 2e-15) << Imj << "\n" << Ic;
+      if (iscale > 0) worst = std::max(worst, diff / iscale);
+      // MuJoCo's body frame at q = 0 is exid's body frame
+      const Pose& Xj = X[static_cast<std::size_t>(j)];
+      for (int r = 0; r < 3; ++r) {
+        EXPECT_NEAR(md.d->xpos[3 * id + r], Xj.p(r), 1e-12 * std::max(1.0, Xj.p.norm()));
+        for (int k = 0; k < 3; ++k) EXPECT_NEAR(md.d->xmat[9 * id + 3 * r + k], Xj.R(r, k), 1e-12);
+      }
+#endif
+#ifdef EXID_HAVE_SDFORMAT
+      const sdf::Link* link = sroot.Model()->LinkByName(b.name);
+      ASSERT_NE(link, nullptr);
+      const auto& in = link->Inertial();
+      EXPECT_NEAR(in.MassMatrix().Mass(), mass, 1e-12 * std::max(1.0, mass));
+      for (int r = 0; r < 3; ++r) {
+        EXPECT_NEAR(in.Pose().Pos()[r], c(r), 1e-12 * std::max(1.0, c.norm())) << r;
+        for (int k = 0; k < 3; ++k) {
+          const double d = std::abs(in.MassMatrix().Moi()(r, k) - Ic(r, k));
+          EXPECT_LE(d, 1e-12 * iscale) << r << k;
+          if (iscale > 0) worst = std::max(worst, d / iscale);
+        }
+      }
+#endif
+    }
+    std::printf("%s: inertials of the exported formats, largest relative difference %.3g\n",
+                s.name.c_str(), worst);
+  }
+}
+
+// A joint without position limits: SDF `continuous` (revolute) or a prismatic joint without
+// lower/upper, MJCF `limited="false"`; both files still load.
+TEST(ExportFormats, UnboundedJointsLoad) {
+  RobotModel m = shippedRobots()[2].model;  // the Stanford arm: joint 3 prismatic
+  ASSERT_EQ(m.bodies[2].type, exid::JointType::Prismatic);
+  for (int j : {0, 2}) {
+    m.limits[static_cast<std::size_t>(j)].q_min = -1e300;
+    m.limits[static_cast<std::size_t>(j)].q_max = 1e300;
+    m.limits[static_cast<std::size_t>(j)].tau_max = 1e300;
+    m.limits[static_cast<std::size_t>(j)].qd_max = 1e300;
+  }
+#ifdef EXID_HAVE_SDFORMAT
+  {
+    sdf::Root root;
+    const sdf::Errors errors = root.LoadSdfString(exid::writeSdf(m));
+    for (const auto& e : errors) ADD_FAILURE() << e.Message();
+    ASSERT_NE(root.Model(), nullptr);
+    const sdf::Joint* j1 = root.Model()->JointByName(m.bodies[0].joint_name);
+    const sdf::Joint* j3 = root.Model()->JointByName(m.bodies[2].joint_name);
+    ASSERT_TRUE(j1 && j3);
+    EXPECT_EQ(j1->Type(), sdf::JointType::CONTINUOUS);
+    EXPECT_EQ(j3->Type(), sdf::JointType::PRISMATIC);
+    EXPECT_LE(j3->Axis(0)->Lower(), -1e16);  // (SDFormat's "no limit")
+    EXPECT_GE(j3->Axis(0)->Upper(), 1e16);
+    EXPECT_TRUE(std::isinf(j3->Axis(0)->Effort()));  // (libsdformat 12's "no limit")
+    EXPECT_TRUE(std::isinf(j3->Axis(0)->MaxVelocity()));
+  }
+#endif
+#ifdef EXID_HAVE_MUJOCO
+  {
+    std::string err;
+    const MjModelPtr mm = loadMjcf("unbounded", exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    for (int j = 0; j < m.dof(); ++j) {
+      const int id =
+          mj_name2id(mm.m, mjOBJ_JOINT, m.bodies[static_cast<std::size_t>(j)].joint_name.c_str());
+      EXPECT_EQ(mm.m->jnt_limited[id] != 0, j != 0 && j != 2) << j;
+    }
+    const int a = mj_name2id(mm.m, mjOBJ_ACTUATOR, m.bodies[0].joint_name.c_str());
+    ASSERT_GE(a, 0);
+    EXPECT_EQ(mm.m->actuator_ctrllimited[a], 0);
+  }
+#endif
+}
+
+// exid export end to end: a study's identified parameters (summary.json) written by the exid
+// program in the three formats and read by MuJoCo, libsdformat and exid's URDF loader.
+TEST(ExportFormats, ExidExportWritesWhatTheConsumersRead) {
+  const fs::path dir = exid_cli::freshTempDir("exid_export_formats_", "cli");
+  RobotModel want = shippedRobots()[0].model;  // the panda, as the `panda` plugin has it
+  std::string names, values;
+  auto add = [&](const std::string& n, double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.17g", v);
+    names += (names.empty() ? "\"" : ", \"") + n + "\"";
+    values += (values.empty() ? "" : ", ") + std::string(buf);
+  };
+  for (int j = 0; j < want.dof(); ++j) {
+    auto& b = want.bodies[static_cast<std::size_t>(j)];
+    b.inertia *= 1.0 + 0.05 * (j + 1);  // (a scaled body stays consistent)
+    for (int k = 0; k < 10; ++k) add(exid::kInertialNames[k] + std::to_string(j + 1), b.inertia(k));
+    auto& d = want.drives[static_cast<std::size_t>(j)];
+    d.rotor_inertia = 0.01 * (j + 1);
+    d.viscous = 0.1 * (j + 1);
+    d.coulomb = 0.2;
+    add("Ia" + std::to_string(j + 1), d.rotor_inertia);
+    add("Fv" + std::to_string(j + 1), d.viscous);
+    add("Fc" + std::to_string(j + 1), d.coulomb);
+  }
+  fs::create_directories(dir / "run");
+  std::ofstream(dir / "run" / "summary.json")
+      << "{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": [" << names
+      << "], \"values\": [" << values << "]}}}}\n";
+  for (const std::string format : {"urdf", "mjcf", "sdf"}) {
+    const exid_cli::CmdResult r =
+        exid_cli::runExid("export panda --study " + (dir / "run").string() + " --out " +
+                          (dir / ("identified." + format)).string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_TRUE(exid_cli::contains(r.out, "91 identified parameters written")) << r.out;
+  }
+  // URDF: exid's loader gives back the identified model (the Panda is modified DH: post = 1)
+  exid::LoadOptions o;
+  std::vector<std::string> sink;
+  o.warnings = &sink;
+  o.strict = true;
+  const RobotModel u = exid::loadUrdf(dir / "identified.urdf", o);
+  ASSERT_EQ(u.dof(), want.dof());
+  for (int j = 0; j < want.dof(); ++j) {
+    const auto k = static_cast<std::size_t>(j);
+    const Vec10 w = exid::transformInertial(want.bodies[k].inertia, want.bodies[k].post);
+    EXPECT_LE((u.bodies[k].inertia - w).cwiseAbs().maxCoeff(), 1e-12 * w.cwiseAbs().maxCoeff());
+    EXPECT_EQ(u.drives[k].rotor_inertia, want.drives[k].rotor_inertia);
+    EXPECT_EQ(u.drives[k].viscous, want.drives[k].viscous);
+    EXPECT_EQ(u.drives[k].coulomb, want.drives[k].coulomb);
+  }
+#ifdef EXID_HAVE_SDFORMAT
+  {
+    sdf::Root root;
+    const sdf::Errors errors = root.Load((dir / "identified.sdf").string());
+    ASSERT_TRUE(errors.empty()) << errors[0].Message();
+    for (const auto& b : want.bodies) {
+      double mass = 0;
+      Eigen::Vector3d c;
+      Eigen::Matrix3d Ic;
+      comOf(b.inertia, &mass, &c, &Ic);
+      const sdf::Link* link = root.Model()->LinkByName(b.name);
+      ASSERT_NE(link, nullptr);
+      EXPECT_NEAR(link->Inertial().MassMatrix().Mass(), mass, 1e-12 * mass);
+      for (int r = 0; r < 3; ++r)
+        for (int k = 0; k < 3; ++k)
+          EXPECT_NEAR(link->Inertial().MassMatrix().Moi()(r, k), Ic(r, k),
+                      1e-12 * Ic.cwiseAbs().maxCoeff());
+      EXPECT_EQ(root.Model()->JointByName(b.joint_name)->Axis(0)->Damping(),
+                want.drives[static_cast<std::size_t>(&b - &want.bodies[0])].viscous);
+    }
+  }
+#endif
+#ifdef EXID_HAVE_MUJOCO
+  {
+    char err[1000] = "";
+    MjModelPtr mm;
+    mju_user_warning = sayMujocoWarning;
+    mm.m = mj_loadXML((dir / "identified.mjcf").string().c_str(), nullptr, err, sizeof err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    const Shipped s{"panda", want, {}};
+    auto data = exid::makeDynamicsData(want);
+    std::mt19937 rng(11);
+    std::uniform_real_distribution<double> uni(-1.0, 1.0);
+    const int n = want.dof();
+    double worst = 0;
+    for (int k = 0; k < 20; ++k) {
+      Eigen::VectorXd q(n), qd(n), qdd(n);
+      for (int j = 0; j < n; ++j) {
+        q(j) = uni(rng);
+        qd(j) = 2 * uni(rng);
+        qdd(j) = 4 * uni(rng);
+        md.d->qpos[j] = q(j);  // (a chain: MuJoCo's order is exid's)
+        md.d->qvel[j] = qd(j);
+        md.d->qacc[j] = qdd(j);
+      }
+      mj_inverse(mm.m, md.d);
+      const Eigen::VectorXd tau = expectedJointTorque(s, *data, q, qd, qdd);
+      const Eigen::VectorXd tau_mj = Eigen::Map<const Eigen::VectorXd>(md.d->qfrc_inverse, n);
+      worst = std::max(
+          worst, (tau_mj - tau).cwiseAbs().maxCoeff() / std::max(1.0, tau.cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LE(worst, 1e-9);
+    for (int j = 0; j < n; ++j) EXPECT_EQ(mm.m->dof_frictionloss[j], 0.2);
+    std::printf("exid export panda --out identified.mjcf: mj_inverse vs exid, largest error %.3g\n",
+                worst);
+  }
+#endif
+  fs::remove_all(dir);
+}
+
+}  // namespace
