@@ -211,6 +211,17 @@ void sensorKinematics(const RobotModel& model, DynamicsData& d, bool subspaces);
 // parameters pi (10 per body, pi order) or, when null, the model's.
 void rneaBackward(const RobotModel& model, DynamicsData& d, const double* pi, double* tau);
 
+// Zeroes the adjoints (vb, ab, wb, wdb, aob; sb too if `subspaces`).
+void clearAdjoints(DynamicsData& d, bool subspaces);
+
+// Reverse pass: from adjoints of the body kinematics (wb, wdb, aob), of v / a (vb, ab) and of the
+// ancestor subspaces (sb) to gradients in q, qd, qdd. Outputs are overwritten (may be null).
+void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces, double* gq,
+                 double* gqd, double* gqdd);
+
+// (forwardPass, ancestorSubspaces, rneaBackward, clearAdjoints and reversePass are defined in
+// kernels.hpp, compiled once per instruction set; these are the portable copies.)
+
 }  // namespace detail
 
 }  // namespace exid
