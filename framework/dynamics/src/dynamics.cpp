@@ -122,6 +122,8 @@ void setup(const RobotModel& model, DynamicsData& d) {
   d.ssb.assign(N, SV());
   d.zero_n = Eigen::VectorXd::Zero(n);
   d.tmp_n = Eigen::VectorXd::Zero(n);
+  d.cq.assign(N, 1.0);
+  d.sq.assign(N, 0.0);
   for (int j = 0; j < n; ++j)
     d.s[static_cast<size_t>(d.anc_off[static_cast<size_t>(j)])] = d.J[static_cast<size_t>(j)].S;
 }

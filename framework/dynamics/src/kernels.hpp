@@ -5,8 +5,10 @@
 // sets").
 //
 // Each including source defines EXID_KERNEL_NS (the namespace of its copy) and EXID_KERNEL (the
-// attributes of the entry points) first. Everything here has internal linkage (an anonymous
-// namespace inside EXID_KERNEL_NS): no two sources share a symbol of it. The AVX2 copy is
+// attributes of the entry points) first, and in that namespace
+//   void sinCos(int n, const double* q, double* s, double* c)   // s_j = sin q_j, c_j = cos q_j
+// (every joint's, before the forward pass's recursion). Everything here has internal linkage (an
+// anonymous namespace inside EXID_KERNEL_NS): no two sources share a symbol of it. The AVX2 copy is
 // compiled with EXID_KERNEL = flatten, so that the inline helpers it calls (rigid_body.hpp,
 // Eigen) are inlined into it instead of being emitted as weak symbols that the linker could merge
 // with the baseline copies of the other sources (tests/dynamics/isa_test.cpp checks the object
@@ -34,12 +36,13 @@ inline void forwardPassImpl(const RobotModel& model, DynamicsData& d, const doub
                             const double* qd, const double* qdd, Level level, bool gravity) {
   const int n = d.n;
   const SV a0(V3::Zero(), gravity ? V3(-model.gravity) : V3::Zero());
+  sinCos(n, q, d.sq.data(), d.cq.data());
   for (int j = 0; j < n; ++j) {
     const JointC& c = d.J[static_cast<size_t>(j)];
     M3& R = d.R[static_cast<size_t>(j)];
     V3& p = d.p[static_cast<size_t>(j)];
     if (c.revolute) {
-      const double cq = std::cos(q[j]), sq = std::sin(q[j]);
+      const double cq = d.cq[static_cast<size_t>(j)], sq = d.sq[static_cast<size_t>(j)];
       M3 M;
       M.col(0) = c.Rpre.col(0) * cq + c.Rpre.col(1) * sq;
       M.col(1) = c.Rpre.col(1) * cq - c.Rpre.col(0) * sq;

@@ -1,6 +1,21 @@
 // exid — the portable copy of the hot kernels (kernels.hpp), compiled for the build's baseline
 // instruction set like the rest of the library; also the shared recursions of rigid_body.hpp
 // that the other algorithms (wrench and payload regressors, derivatives, mass matrix) call.
+#include <cmath>
+
+namespace exid::detail::portable {
+namespace {
+// sin and cos of every joint angle (std::sin, std::cos; the compiler makes one sincos of them)
+inline void sinCos(int n, const double* q, double* s, double* c) {
+  for (int j = 0; j < n; ++j) {
+    const double x = q[j];  // one load: s may alias q, and one sincos needs one argument
+    s[j] = std::sin(x);
+    c[j] = std::cos(x);
+  }
+}
+}  // namespace
+}  // namespace exid::detail::portable
+
 #define EXID_KERNEL_NS portable
 #define EXID_KERNEL
 #include "kernels.hpp"
