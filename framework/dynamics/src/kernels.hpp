@@ -1,8 +1,7 @@
 // exid — the hot kernels of the rigid-body algorithms (forward pass, RNEA, torque and energy
 // regressors and their vector-Jacobian products), written once and compiled once per instruction
 // set: kernels_portable.cpp (the build's baseline, x86-64: SSE2) and kernels_avx2.cpp (AVX2 +
-// FMA). isa.cpp chooses one table of entry points at run time (docs/dynamics.md, "Instruction
-// sets").
+// FMA). isa.cpp chooses one table of entry points at run time (docs/dynamics.md §6).
 //
 // Each including source defines EXID_KERNEL_NS (the namespace of its copy) and EXID_KERNEL (the
 // attributes of the entry points) first, and in that namespace
@@ -11,7 +10,7 @@
 // anonymous namespace inside EXID_KERNEL_NS): no two sources share a symbol of it. The AVX2 copy is
 // compiled with EXID_KERNEL = flatten, so that the inline helpers it calls (rigid_body.hpp,
 // Eigen) are inlined into it instead of being emitted as weak symbols that the linker could merge
-// with the baseline copies of the other sources (tests/dynamics/isa_test.cpp checks the object
+// with the baseline copies of the other sources (ctest dynamics.isa_symbols checks the object
 // with nm).
 //
 // Not a public header; included by the kernels_*.cpp alone.

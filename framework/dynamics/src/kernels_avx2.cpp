@@ -3,7 +3,8 @@
 // only where the CPU has both. Every entry point is flattened (all it calls, Eigen included, is
 // inlined into it) and has internal linkage: the only symbol this object defines is
 // exid::detail::avx2Kernels(), so no inline function compiled for AVX2 can replace the baseline
-// copy of another source at link time (checked by tests/dynamics/isa_test.cpp with nm).
+// copy of another source at link time (ctest dynamics.isa_symbols checks it with nm). Built where
+// EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without sanitizers, on x86-64.
 #if defined(__AVX2__) && defined(__FMA__)
 
 #include <immintrin.h>

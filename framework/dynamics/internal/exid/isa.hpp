@@ -1,8 +1,8 @@
 // exid — the instruction sets the hot dynamics kernels are compiled for, and which one runs
-// (docs/dynamics.md, "Instruction sets"). The torque and energy regressors, the RNEA inverse
-// dynamics, the regressors' vector-Jacobian products and GramAccumulator run one copy of their
-// kernels, chosen once per process from the CPU: AVX2 + FMA where the CPU has both (x86-64
-// builds), the portable copy (the build's baseline instruction set) otherwise. The environment
+// (docs/dynamics.md §6). The torque and energy regressors, the RNEA inverse dynamics, the
+// regressors' vector-Jacobian products and GramAccumulator run one copy of their kernels, chosen
+// once per process from the CPU: AVX2 + FMA where the CPU has both (optimised x86-64 builds),
+// the portable copy (the build's baseline instruction set) otherwise. The environment
 // variable EXID_ISA=portable|avx2 (read at the first call) forces one; the functions here let
 // tests and benchmarks compare them in one process. Not installed.
 #pragma once
