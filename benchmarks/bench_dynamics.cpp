@@ -1,16 +1,31 @@
 // exid — benchmarks of the rigid-body algorithms on the PUMA 560 (one core).
 // Baseline measured in the same run: the plain RNEA inverseDynamics (BM_Baseline_InverseDynamics).
 //
+// The hot kernels (exid/isa.hpp) run once per instruction set this CPU has (BM_<kernel>/portable,
+// BM_<kernel>/avx2, one after the other), each with its operations per call (kernelFlops: counted
+// from the source), the machine's peak for that instruction set, the resulting lower bound and
+// the ratio of the measured time to it; the table at the end gives them per kernel (medians when
+// run with --benchmark_repetitions). Peak: clock x flops per cycle, SSE2 (portable) 2 doubles x 2
+// (one add, one multiply) = 4, AVX2 + FMA 4 doubles x 2 FMA units x 2 = 16; the clock is the
+// highest "cpu MHz" of /proc/cpuinfo, or EXID_BENCH_GHZ.
+//
 // PUMA 560: standard DH and inertial data as in Corke's Robotics Toolbox (mdl_puma560.m):
 // I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
 #include <benchmark/benchmark.h>
 
 #include <Eigen/Core>
+#include <algorithm>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <map>
 #include <random>
+#include <string>
 #include <vector>
 
 #include "exid/dh.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/isa.hpp"
 
 using namespace exid;
 
@@ -78,19 +93,6 @@ void BM_Baseline_InverseDynamics(benchmark::State& st) {
 }
 BENCHMARK(BM_Baseline_InverseDynamics);
 
-void BM_TorqueRegressor(benchmark::State& st) {
-  Fixture& f = fx();
-  Eigen::MatrixXd Y(6, 60);
-  int k = 0;
-  for (auto _ : st) {
-    torqueRegressor(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], Y);
-    benchmark::DoNotOptimize(Y.data());
-    k = (k + 1) & (Fixture::kSamples - 1);
-  }
-}
-BENCHMARK(BM_TorqueRegressor);
-
-// Regressor + information matrix W^T W over 10,000 samples; time reported per sample.
 void BM_RegressorPlusGram_Eigen(benchmark::State& st) {
   Fixture& f = fx();
   Eigen::MatrixXd Y(6, 60), M = Eigen::MatrixXd::Zero(60, 60);
@@ -106,62 +108,6 @@ void BM_RegressorPlusGram_Eigen(benchmark::State& st) {
   st.SetItemsProcessed(st.iterations() * 10000);
 }
 BENCHMARK(BM_RegressorPlusGram_Eigen)->Unit(benchmark::kMillisecond);
-
-void BM_RegressorPlusGram(benchmark::State& st) {
-  Fixture& f = fx();
-  Eigen::MatrixXd Y(6, 60);
-  GramAccumulator acc(60);
-  for (auto _ : st) {
-    acc.reset();
-    for (int s = 0; s < 10000; ++s) {
-      const int k = s & (Fixture::kSamples - 1);
-      torqueRegressor(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], Y);
-      acc.add(Y);
-    }
-    benchmark::DoNotOptimize(acc.matrix().data());
-  }
-  st.SetItemsProcessed(st.iterations() * 10000);
-}
-BENCHMARK(BM_RegressorPlusGram)->Unit(benchmark::kMillisecond);
-
-void BM_EnergyRegressor(benchmark::State& st) {
-  Fixture& f = fx();
-  Eigen::RowVectorXd K(60), U(60);
-  int k = 0;
-  for (auto _ : st) {
-    energyRegressor(f.model, *f.data, f.q[k], f.qd[k], K, U);
-    benchmark::DoNotOptimize(K.data());
-    benchmark::DoNotOptimize(U.data());
-    k = (k + 1) & (Fixture::kSamples - 1);
-  }
-}
-BENCHMARK(BM_EnergyRegressor);
-
-void BM_TorqueRegressorVjp(benchmark::State& st) {
-  Fixture& f = fx();
-  const Eigen::MatrixXd G = Eigen::MatrixXd::Random(6, 60);
-  Eigen::VectorXd a(6), b(6), c(6);
-  int k = 0;
-  for (auto _ : st) {
-    torqueRegressorVjp(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], G, &a, &b, &c);
-    benchmark::DoNotOptimize(a.data());
-    k = (k + 1) & (Fixture::kSamples - 1);
-  }
-}
-BENCHMARK(BM_TorqueRegressorVjp);
-
-void BM_EnergyRegressorVjp(benchmark::State& st) {
-  Fixture& f = fx();
-  const Eigen::RowVectorXd Gk = Eigen::RowVectorXd::Random(60), Gu = Eigen::RowVectorXd::Random(60);
-  Eigen::VectorXd a(6), b(6);
-  int k = 0;
-  for (auto _ : st) {
-    energyRegressorVjp(f.model, *f.data, f.q[k], f.qd[k], Gk, Gu, &a, &b);
-    benchmark::DoNotOptimize(a.data());
-    k = (k + 1) & (Fixture::kSamples - 1);
-  }
-}
-BENCHMARK(BM_EnergyRegressorVjp);
 
 void BM_WrenchRegressor(benchmark::State& st) {
   Fixture& f = fx();
@@ -221,6 +167,207 @@ void BM_ForwardDynamics(benchmark::State& st) {
 }
 BENCHMARK(BM_ForwardDynamics);
 
+// ---- the hot kernels, once per instruction set ----
+
+constexpr int kGramSamples = 10000;  // samples per iteration of the regressor + Gram benchmark
+
+// Operations of GramAccumulator::add(Y) for one sample: per row, its first non-zero column s
+// leaves m = 60 - s entries: m products for the weight, m(m + 1) / 2 multiply-adds for the lower
+// triangle (the padding of the AVX2 copy is not counted).
+double gramFlops(const Eigen::MatrixXd& Y) {
+  double f = 0;
+  for (Eigen::Index r = 0; r < Y.rows(); ++r) {
+    Eigen::Index s = 0;
+    while (s < Y.cols() && Y(r, s) == 0.0) ++s;
+    const double m = static_cast<double>(Y.cols() - s);
+    f += m + m * (m + 1);
+  }
+  return f;
+}
+
+double clockGHz() {
+  if (const char* e = std::getenv("EXID_BENCH_GHZ")) return std::atof(e);
+  std::ifstream in("/proc/cpuinfo");
+  std::string line;
+  double mhz = 0;
+  while (std::getline(in, line))
+    if (line.rfind("cpu MHz", 0) == 0) {
+      const auto colon = line.find(':');
+      if (colon != std::string::npos) mhz = std::max(mhz, std::atof(line.c_str() + colon + 1));
+    }
+  return mhz / 1000.0;
+}
+
+double flopsPerCycle(Isa isa) { return isa == Isa::Avx2 ? 16.0 : 4.0; }
+
+struct KernelInfo {
+  std::string kernel;
+  Isa isa;
+  double flops;  // per sample
+  int sincos;
+  double samples_per_iteration;
+};
+std::map<std::string, KernelInfo>& kernelInfo() {
+  static std::map<std::string, KernelInfo> m;
+  return m;
+}
+
+template <class Body>
+void registerKernel(const std::string& kernel, double flops, int sincos, Body body,
+                    double samples = 1, benchmark::TimeUnit unit = benchmark::kNanosecond) {
+  for (Isa isa : availableIsas()) {
+    const std::string name = "BM_" + kernel + "/" + isaName(isa);
+    kernelInfo()[name] = {kernel, isa, flops, sincos, samples};
+    benchmark::RegisterBenchmark(name.c_str(), [isa, body, flops, samples](benchmark::State& st) {
+      setActiveIsa(isa);
+      body(st);
+      st.counters["flop/s"] =
+          benchmark::Counter(flops * samples, benchmark::Counter::kIsIterationInvariantRate);
+    })->Unit(unit);
+  }
+}
+
+void registerKernels() {
+  const RobotModel& m = fx().model;
+  const auto flops = [&](Kernel k) { return kernelFlops(m, k); };
+  FlopCount c = flops(Kernel::InverseDynamics);
+  registerKernel("InverseDynamics", c.flops, c.sincos, [](benchmark::State& st) {
+    Fixture& f = fx();
+    int k = 0;
+    for (auto _ : st) {
+      benchmark::DoNotOptimize(inverseDynamics(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k]));
+      k = (k + 1) & (Fixture::kSamples - 1);
+    }
+  });
+  c = flops(Kernel::TorqueRegressor);
+  registerKernel("TorqueRegressor", c.flops, c.sincos, [](benchmark::State& st) {
+    Fixture& f = fx();
+    Eigen::MatrixXd Y(6, 60);
+    int k = 0;
+    for (auto _ : st) {
+      torqueRegressor(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], Y);
+      benchmark::DoNotOptimize(Y.data());
+      k = (k + 1) & (Fixture::kSamples - 1);
+    }
+  });
+  // Regressor + information matrix W^T W over 10,000 samples; the table gives the time per sample.
+  {
+    Eigen::MatrixXd Y(6, 60);
+    torqueRegressor(m, *fx().data, fx().q[0], fx().qd[0], fx().qdd[0], Y);
+    registerKernel(
+        "RegressorPlusGram", c.flops + gramFlops(Y), c.sincos,
+        [](benchmark::State& st) {
+          Fixture& f = fx();
+          Eigen::MatrixXd Y(6, 60);
+          GramAccumulator acc(60);
+          for (auto _ : st) {
+            acc.reset();
+            for (int s = 0; s < kGramSamples; ++s) {
+              const int k = s & (Fixture::kSamples - 1);
+              torqueRegressor(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], Y);
+              acc.add(Y);
+            }
+            benchmark::DoNotOptimize(acc.matrix().data());
+          }
+          st.SetItemsProcessed(st.iterations() * kGramSamples);
+        },
+        kGramSamples, benchmark::kMillisecond);
+  }
+  c = flops(Kernel::EnergyRegressor);
+  registerKernel("EnergyRegressor", c.flops, c.sincos, [](benchmark::State& st) {
+    Fixture& f = fx();
+    Eigen::RowVectorXd K(60), U(60);
+    int k = 0;
+    for (auto _ : st) {
+      energyRegressor(f.model, *f.data, f.q[k], f.qd[k], K, U);
+      benchmark::DoNotOptimize(K.data());
+      benchmark::DoNotOptimize(U.data());
+      k = (k + 1) & (Fixture::kSamples - 1);
+    }
+  });
+  c = flops(Kernel::TorqueRegressorVjp);
+  registerKernel("TorqueRegressorVjp", c.flops, c.sincos, [](benchmark::State& st) {
+    Fixture& f = fx();
+    const Eigen::MatrixXd G = Eigen::MatrixXd::Random(6, 60);
+    Eigen::VectorXd a(6), b(6), cc(6);
+    int k = 0;
+    for (auto _ : st) {
+      torqueRegressorVjp(f.model, *f.data, f.q[k], f.qd[k], f.qdd[k], G, &a, &b, &cc);
+      benchmark::DoNotOptimize(a.data());
+      k = (k + 1) & (Fixture::kSamples - 1);
+    }
+  });
+  c = flops(Kernel::EnergyRegressorVjp);
+  registerKernel("EnergyRegressorVjp", c.flops, c.sincos, [](benchmark::State& st) {
+    Fixture& f = fx();
+    const Eigen::RowVectorXd Gk = Eigen::RowVectorXd::Random(60),
+                             Gu = Eigen::RowVectorXd::Random(60);
+    Eigen::VectorXd a(6), b(6);
+    int k = 0;
+    for (auto _ : st) {
+      energyRegressorVjp(f.model, *f.data, f.q[k], f.qd[k], Gk, Gu, &a, &b);
+      benchmark::DoNotOptimize(a.data());
+      k = (k + 1) & (Fixture::kSamples - 1);
+    }
+  });
+}
+
+// The console output, then the table of the hot kernels: operations, bound, time (the median of
+// the repetitions, else the one run; CPU time), ratio to the bound, speed-up over portable.
+class KernelTableReporter : public benchmark::ConsoleReporter {
+ public:
+  void ReportRuns(const std::vector<Run>& runs) override {
+    for (const Run& r : runs) {
+      const bool median = r.run_type == Run::RT_Aggregate && r.aggregate_name == "median";
+      if (r.run_type != Run::RT_Iteration && !median) continue;
+      const std::string& name = r.run_name.function_name;
+      if (!kernelInfo().count(name)) continue;
+      const KernelInfo& k = kernelInfo()[name];
+      const double to_ns = r.time_unit == benchmark::kMillisecond   ? 1e6
+                           : r.time_unit == benchmark::kMicrosecond ? 1e3
+                                                                    : 1.0;
+      if (median || !ns_.count(name))
+        ns_[name] = r.GetAdjustedCPUTime() * to_ns / k.samples_per_iteration;
+    }
+    ConsoleReporter::ReportRuns(runs);
+  }
+  void Finalize() override {
+    ConsoleReporter::Finalize();
+    const double ghz = clockGHz();
+    std::printf(
+        "\nHot kernels, PUMA 560, per sample (clock %.2f GHz; peak %.1f GFlop/s portable "
+        "(SSE2), %.1f GFlop/s avx2 (AVX2 + FMA))\n",
+        ghz, ghz * flopsPerCycle(Isa::Portable), ghz * flopsPerCycle(Isa::Avx2));
+    std::printf("%-20s %-9s %8s %7s %10s %10s %8s %9s\n", "kernel", "isa", "flops", "sin/cos",
+                "bound ns", "time ns", "ratio", "speed-up");
+    std::map<std::string, double> portable_ns;
+    for (const auto& [name, k] : kernelInfo())
+      if (k.isa == Isa::Portable && ns_.count(name)) portable_ns[k.kernel] = ns_[name];
+    for (const auto& [name, k] : kernelInfo()) {
+      if (!ns_.count(name)) continue;
+      const double bound = k.flops / (ghz * flopsPerCycle(k.isa));
+      const double t = ns_[name];
+      std::printf("%-20s %-9s %8.0f %7d %10.1f %10.1f %8.2f", k.kernel.c_str(), isaName(k.isa),
+                  k.flops, k.sincos, bound, t, t / bound);
+      if (portable_ns.count(k.kernel))
+        std::printf(" %9.2f\n", portable_ns[k.kernel] / t);
+      else
+        std::printf(" %9s\n", "-");
+    }
+  }
+
+ private:
+  std::map<std::string, double> ns_;
+};
+
 }  // namespace
 
-BENCHMARK_MAIN();
+int main(int argc, char** argv) {
+  benchmark::Initialize(&argc, argv);
+  if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;
+  registerKernels();
+  KernelTableReporter reporter;
+  benchmark::RunSpecifiedBenchmarks(&reporter);
+  benchmark::Shutdown();
+  return 0;
+}

@@ -1,5 +1,6 @@
 // exid — rigid-body algorithms: torque / energy / wrench / payload-torque regressors, RNEA, CRBA,
-// forward dynamics. Their exact vector-Jacobian products (hand-written reverse mode) are in
+// forward dynamics; the hot kernels (compiled once per instruction set) are in kernels.hpp. Their
+// exact vector-Jacobian products (hand-written reverse mode) are in
 // dynamics_vjp.cpp, the derivatives of inverse dynamics in dynamics_derivatives.cpp; the spatial
 // algebra, the workspace and the recursions they share (with the internal conventions) in
 // rigid_body.hpp.
@@ -13,6 +14,7 @@
 
 #include "exid/error.hpp"
 #include "internal.hpp"
+#include "kernel_table.hpp"
 #include "rigid_body.hpp"
 
 namespace exid {
@@ -120,6 +122,8 @@ void setup(const RobotModel& model, DynamicsData& d) {
   d.ssb.assign(N, SV());
   d.zero_n = Eigen::VectorXd::Zero(n);
   d.tmp_n = Eigen::VectorXd::Zero(n);
+  d.cq.assign(N, 1.0);
+  d.sq.assign(N, 0.0);
   for (int j = 0; j < n; ++j)
     d.s[static_cast<size_t>(d.anc_off[static_cast<size_t>(j)])] = d.J[static_cast<size_t>(j)].S;
 }
@@ -131,70 +135,6 @@ void checkSize(const Eigen::VectorXd& x, int n, const char* what, const char* fn
   if (x.size() != n)
     throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
                 " entries (expected " + std::to_string(n) + ")");
-}
-
-// Forward pass: poses (R, p), velocities, accelerations (with gravity if `gravity`), body
-// kinematics.
-void forwardPass(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
-                 const double* qdd, Level level, bool gravity) {
-  const int n = d.n;
-  const SV a0(V3::Zero(), gravity ? V3(-model.gravity) : V3::Zero());
-  for (int j = 0; j < n; ++j) {
-    const JointC& c = d.J[static_cast<size_t>(j)];
-    M3& R = d.R[static_cast<size_t>(j)];
-    V3& p = d.p[static_cast<size_t>(j)];
-    if (c.revolute) {
-      const double cq = std::cos(q[j]), sq = std::sin(q[j]);
-      M3 M;
-      M.col(0) = c.Rpre.col(0) * cq + c.Rpre.col(1) * sq;
-      M.col(1) = c.Rpre.col(1) * cq - c.Rpre.col(0) * sq;
-      M.col(2) = c.Rpre.col(2);
-      if (c.post_R_id)
-        R = M;
-      else
-        R.noalias() = M * c.Rpost;
-      if (c.post_p_zero)
-        p = c.ppre;
-      else
-        p = c.ppre + M * c.ppost;
-    } else {
-      R = c.Rfix;
-      p = c.pfix + c.Rpre.col(2) * q[j];
-    }
-    if (level == Level::Position) continue;
-    const int par = c.parent;
-    SV& v = d.v[static_cast<size_t>(j)];
-    SV& xv = d.xv[static_cast<size_t>(j)];
-    if (par >= 0)
-      xv = xMotion(R, p, d.v[static_cast<size_t>(par)]);
-    else
-      xv.setZero();
-    const SV u = c.S * qd[j];
-    v = xv + u;
-    Kin& k = d.kin[static_cast<size_t>(j)];
-    k.w = v.w;
-    if (level == Level::Velocity) continue;
-    SV& xa = d.xa[static_cast<size_t>(j)];
-    xa = xMotion(R, p, par >= 0 ? d.a[static_cast<size_t>(par)] : a0);
-    SV& a = d.a[static_cast<size_t>(j)];
-    a = xa + c.S * qdd[j] + crm(v, u);
-    k.wd = a.w;
-    k.ao = a.v + v.w.cross(v.v);
-  }
-}
-
-// Subspaces of all ancestors expressed in every body frame: s[anc_off[j] + k].
-void ancestorSubspaces(DynamicsData& d) {
-  for (int j = 0; j < d.n; ++j) {
-    const int par = d.J[static_cast<size_t>(j)].parent;
-    if (par < 0) continue;
-    const int oj = d.anc_off[static_cast<size_t>(j)], op = d.anc_off[static_cast<size_t>(par)];
-    const int cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
-    const M3& R = d.R[static_cast<size_t>(j)];
-    const V3& p = d.p[static_cast<size_t>(j)];
-    for (int k = 1; k < cnt; ++k)
-      d.s[static_cast<size_t>(oj + k)] = xMotion(R, p, d.s[static_cast<size_t>(op + k - 1)]);
-  }
 }
 
 // Sensor frame kinematics from the sensor body's (after forwardPass at Acceleration level).
@@ -215,22 +155,6 @@ void sensorKinematics(const RobotModel& model, DynamicsData& d, bool subspaces) 
   }
 }
 
-void rneaBackward(const RobotModel& model, DynamicsData& d, const double* pi, double* tau) {
-  for (int j = 0; j < d.n; ++j) {
-    const size_t J = static_cast<size_t>(j);
-    if (pi)
-      d.f[J] = newtonEuler(pi + 10 * j, d.kin[J]);
-    else
-      d.f[J] = newtonEuler(model.bodies[J].inertia.data(), d.kin[J]);
-  }
-  for (int j = d.n - 1; j >= 0; --j) {
-    const size_t J = static_cast<size_t>(j);
-    tau[j] = dot(d.J[J].S, d.f[J]);
-    const int par = d.J[J].parent;
-    if (par >= 0) d.f[static_cast<size_t>(par)] += xForceT(d.R[J], d.p[J], d.f[J]);
-  }
-}
-
 }  // namespace detail
 
 DynamicsDataPtr makeDynamicsData(const RobotModel& model) {
@@ -246,21 +170,7 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   const int n = d.n;
   checkState(model, q, &qd, &qdd, "torqueRegressor");
   check(Y.rows() == n && Y.cols() == 10 * n, "torqueRegressor: Y must be n x 10n");
-  forwardPass(model, d, q.data(), qd.data(), qdd.data(), Level::Acceleration, true);
-  ancestorSubspaces(d);
-  for (int j = 0; j < n; ++j) {
-    const int oj = d.anc_off[static_cast<size_t>(j)],
-              cnt = d.anc_off[static_cast<size_t>(j) + 1] - oj;
-    const Kin& k = d.kin[static_cast<size_t>(j)];
-    // the rows of the bodies that are not ancestors of j are zero; the ancestors' are written
-    for (int t = d.off_off[static_cast<size_t>(j)]; t < d.off_off[static_cast<size_t>(j) + 1]; ++t)
-      for (int col = 0; col < 10; ++col) Y(d.off_idx[static_cast<size_t>(t)], 10 * j + col) = 0.0;
-    for (int t = 0; t < cnt; ++t) {
-      const int i = d.anc_idx[static_cast<size_t>(oj + t)];
-      pairRow(d.s[static_cast<size_t>(oj + t)], k,
-              [&](int col) -> double& { return Y(i, 10 * j + col); });
-    }
-  }
+  kernels().torqueRegressor(model, d, q.data(), qd.data(), qdd.data(), Y.data(), Y.outerStride());
 }
 
 void energyRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
@@ -271,43 +181,7 @@ void energyRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   checkState(model, q, &qd, nullptr, "energyRegressor");
   check(kinetic.size() == 10 * n && potential.size() == 10 * n,
         "energyRegressor: outputs must have 10n entries");
-  forwardPass(model, d, q.data(), qd.data(), nullptr, Level::Velocity, false);
-  const V3& g = model.gravity;
-  for (int j = 0; j < n; ++j) {
-    const size_t J = static_cast<size_t>(j);
-    const V3& w = d.v[J].w;
-    const V3& vl = d.v[J].v;
-    double* K = kinetic.data() + 10 * j;
-    K[0] = 0.5 * w[0] * w[0];
-    K[1] = w[0] * w[1];
-    K[2] = w[0] * w[2];
-    K[3] = 0.5 * w[1] * w[1];
-    K[4] = w[1] * w[2];
-    K[5] = 0.5 * w[2] * w[2];
-    const V3 hc = vl.cross(w);
-    K[6] = hc[0];
-    K[7] = hc[1];
-    K[8] = hc[2];
-    K[9] = 0.5 * vl.squaredNorm();
-    // base pose of body j
-    const int par = d.J[J].parent;
-    Pose& X = d.X0[J];
-    if (par >= 0) {
-      const Pose& Xp = d.X0[static_cast<size_t>(par)];
-      X.R.noalias() = Xp.R * d.R[J];
-      X.p = Xp.p + Xp.R * d.p[J];
-    } else {
-      X.R = d.R[J];
-      X.p = d.p[J];
-    }
-    double* U = potential.data() + 10 * j;
-    for (int c = 0; c < 6; ++c) U[c] = 0.0;
-    const V3 gb = -(X.R.transpose() * g);
-    U[6] = gb[0];
-    U[7] = gb[1];
-    U[8] = gb[2];
-    U[9] = -g.dot(X.p);
-  }
+  kernels().energyRegressor(model, d, q.data(), qd.data(), kinetic.data(), potential.data());
 }
 
 void wrenchRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
@@ -360,9 +234,9 @@ Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& d, const 
   prepare(model, d);
   checkState(model, q, &qd, &qdd, "inverseDynamics");
   if (pi) checkSize(*pi, 10 * d.n, "pi", "inverseDynamics");
-  forwardPass(model, d, q.data(), qd.data(), qdd.data(), Level::Acceleration, true);
   Eigen::VectorXd tau(d.n);
-  rneaBackward(model, d, pi ? pi->data() : nullptr, tau.data());
+  kernels().inverseDynamics(model, d, q.data(), qd.data(), qdd.data(), pi ? pi->data() : nullptr,
+                            tau.data());
   return tau;
 }
 

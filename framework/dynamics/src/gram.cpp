@@ -2,8 +2,8 @@
 //
 // Rows are grouped by their first non-zero column s; a group's buffered rows B (k x m, m = cols-s,
 // row-major, zero-padded to a multiple of 4) are added to the lower triangle of the trailing
-// block: Acc[s+i][s+j] += sum_r B[r][i] B[r][j], j <= i. The kernel is written once and compiled
-// twice (generic and AVX2+FMA), the variant chosen at run time with __builtin_cpu_supports.
+// block: Acc[s+i][s+j] += sum_r B[r][i] B[r][j], j <= i. The block update is one of the hot
+// kernels (kernel_table.hpp): portable in kernels_portable.cpp, AVX2 + FMA in kernels_avx2.cpp.
 #include <algorithm>
 #include <cmath>
 #include <string>
@@ -11,11 +11,7 @@
 
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
-
-#if defined(__x86_64__) && defined(__GNUC__)
-#include <immintrin.h>
-#define EXID_HAVE_AVX2_DISPATCH 1
-#endif
+#include "kernel_table.hpp"
 
 namespace exid {
 
@@ -24,73 +20,6 @@ namespace {
 constexpr int kBatch = 64;
 
 inline int roundUp4(int x) { return (x + 3) & ~3; }
-
-// Generic kernel (the compiler vectorises the inner loop with the baseline ISA).
-void kernelGeneric(double* acc, int ld, const double* B, int ldb, int k, int m) {
-  for (int i = 0; i < m; ++i) {
-    double* A = acc + static_cast<long>(i) * ld;
-    const int len = i + 1;
-    int r = 0;
-    for (; r + 4 <= k; r += 4) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const double* B1 = B0 + ldb;
-      const double* B2 = B1 + ldb;
-      const double* B3 = B2 + ldb;
-      const double b0 = B0[i], b1 = B1[i], b2 = B2[i], b3 = B3[i];
-      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j] + b1 * B1[j] + b2 * B2[j] + b3 * B3[j];
-    }
-    for (; r < k; ++r) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const double b0 = B0[i];
-      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j];
-    }
-  }
-}
-
-#ifdef EXID_HAVE_AVX2_DISPATCH
-// AVX2 + FMA kernel. Rows of acc have room for roundUp4(m) entries past the diagonal block
-// start and B rows are zero-padded to roundUp4(m), so full vectors can be used (the extra
-// entries land in the unused upper triangle).
-__attribute__((target("avx2,fma"))) void kernelAvx2(double* acc, int ld, const double* B, int ldb,
-                                                    int k, int m) {
-  for (int i = 0; i < m; ++i) {
-    double* A = acc + static_cast<long>(i) * ld;
-    const int len4 = roundUp4(i + 1);
-    int r = 0;
-    for (; r + 4 <= k; r += 4) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const double* B1 = B0 + ldb;
-      const double* B2 = B1 + ldb;
-      const double* B3 = B2 + ldb;
-      const __m256d b0 = _mm256_set1_pd(B0[i]), b1 = _mm256_set1_pd(B1[i]);
-      const __m256d b2 = _mm256_set1_pd(B2[i]), b3 = _mm256_set1_pd(B3[i]);
-      for (int j = 0; j < len4; j += 4) {
-        __m256d a = _mm256_loadu_pd(A + j);
-        a = _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), a);
-        a = _mm256_fmadd_pd(b1, _mm256_loadu_pd(B1 + j), a);
-        a = _mm256_fmadd_pd(b2, _mm256_loadu_pd(B2 + j), a);
-        a = _mm256_fmadd_pd(b3, _mm256_loadu_pd(B3 + j), a);
-        _mm256_storeu_pd(A + j, a);
-      }
-    }
-    for (; r < k; ++r) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const __m256d b0 = _mm256_set1_pd(B0[i]);
-      for (int j = 0; j < len4; j += 4)
-        _mm256_storeu_pd(A + j,
-                         _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), _mm256_loadu_pd(A + j)));
-    }
-  }
-}
-
-bool haveAvx2() {
-  static const bool ok = [] {
-    __builtin_cpu_init();
-    return __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
-  }();
-  return ok;
-}
-#endif
 
 }  // namespace
 
@@ -119,12 +48,7 @@ struct GramAccumulator::Impl {
     const int m = c - s;
     double* A = acc.data() + static_cast<long>(s) * ld + s;
     const double* B = buf[static_cast<size_t>(s)].data();
-#ifdef EXID_HAVE_AVX2_DISPATCH
-    if (haveAvx2())
-      kernelAvx2(A, ld, B, roundUp4(m), k, m);
-    else
-#endif
-      kernelGeneric(A, ld, B, roundUp4(m), k, m);
+    detail::kernels().gram(A, ld, B, roundUp4(m), k, m);
     count[static_cast<size_t>(s)] = 0;
   }
   void addRow(const double* x, long stride, double w) {

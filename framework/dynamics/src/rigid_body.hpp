@@ -167,6 +167,7 @@ struct DynamicsData {
   detail::Kin ks;
   std::vector<detail::SV> ss, ssb;
   Eigen::VectorXd zero_n, tmp_n;
+  std::vector<double> cq, sq;  // cos q_j, sin q_j (revolute joints; forward pass)
   // forward tangents of v, a and the body forces (3 x 3n each, columns dq_i dqd_i dqdd_i)
   std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> tvw, tvv, taw, tav, tfw, tfv;
   Eigen::Matrix<double, 3, Eigen::Dynamic> tao;  // tangent of the origin's acceleration
@@ -210,6 +211,17 @@ void sensorKinematics(const RobotModel& model, DynamicsData& d, bool subspaces);
 // Backward RNEA after forwardPass: the body forces d.f (each joint's transmitted force) and tau;
 // parameters pi (10 per body, pi order) or, when null, the model's.
 void rneaBackward(const RobotModel& model, DynamicsData& d, const double* pi, double* tau);
+
+// Zeroes the adjoints (vb, ab, wb, wdb, aob; sb too if `subspaces`).
+void clearAdjoints(DynamicsData& d, bool subspaces);
+
+// Reverse pass: from adjoints of the body kinematics (wb, wdb, aob), of v / a (vb, ab) and of the
+// ancestor subspaces (sb) to gradients in q, qd, qdd. Outputs are overwritten (may be null).
+void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces, double* gq,
+                 double* gqd, double* gqdd);
+
+// (forwardPass, ancestorSubspaces, rneaBackward, clearAdjoints and reversePass are defined in
+// kernels.hpp, compiled once per instruction set; these are the portable copies.)
 
 }  // namespace detail
 

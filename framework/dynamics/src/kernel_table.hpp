@@ -1,0 +1,39 @@
+// exid — the table of the hot kernels' entry points, one per instruction set (kernels.hpp,
+// kernels_portable.cpp, kernels_avx2.cpp), and the one in use (isa.cpp). Not installed.
+#pragma once
+
+#include "exid/dynamics.hpp"
+#include "exid/isa.hpp"
+
+namespace exid::detail {
+
+/// Entry points of one copy of the kernels; the arguments are checked by the callers
+/// (dynamics.cpp, dynamics_vjp.cpp, gram.cpp). Matrices are column-major with leading dimension
+/// ld; null gradient outputs are skipped.
+struct Kernels {
+  Isa isa;
+  void (*torqueRegressor)(const RobotModel&, DynamicsData&, const double* q, const double* qd,
+                          const double* qdd, double* Y, long ld);
+  void (*inverseDynamics)(const RobotModel&, DynamicsData&, const double* q, const double* qd,
+                          const double* qdd, const double* pi, double* tau);
+  void (*energyRegressor)(const RobotModel&, DynamicsData&, const double* q, const double* qd,
+                          double* kinetic, double* potential);
+  void (*torqueRegressorVjp)(const RobotModel&, DynamicsData&, const double* q, const double* qd,
+                             const double* qdd, const double* G, long ld, double* gq, double* gqd,
+                             double* gqdd);
+  void (*energyRegressorVjp)(const RobotModel&, DynamicsData&, const double* q, const double* qd,
+                             const double* Gk, const double* Gu, double* gq, double* gqd);
+  /// GramAccumulator's block update (gram.cpp): acc[i][j] += sum_r B[r][i] B[r][j], j <= i < m,
+  /// r < k; B row-major with ldb = m rounded up to a multiple of 4, zero-padded, and acc rows
+  /// with room for ldb entries past the diagonal block's start.
+  void (*gram)(double* acc, int ld, const double* B, int ldb, int k, int m);
+};
+
+const Kernels& portableKernels();
+/// Null when the build has no AVX2 copy (not x86-64, or not GCC/Clang).
+const Kernels* avx2Kernels();
+
+/// The copy in use (EXID_ISA, else the best the CPU runs; setActiveIsa).
+const Kernels& kernels();
+
+}  // namespace exid::detail

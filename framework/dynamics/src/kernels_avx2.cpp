@@ -1,0 +1,121 @@
+// exid — the AVX2 + FMA copy of the hot kernels (kernels.hpp). framework/CMakeLists.txt compiles
+// this source alone with -mavx2 -mfma -ffp-contract=fast on x86-64 (GCC, Clang); isa.cpp runs it
+// only where the CPU has both. Every entry point is flattened (all it calls, Eigen included, is
+// inlined into it) and has internal linkage: the only symbol this object defines is
+// exid::detail::avx2Kernels(), so no inline function compiled for AVX2 can replace the baseline
+// copy of another source at link time (ctest dynamics.isa_symbols checks it with nm). Built where
+// EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without sanitizers, on x86-64.
+#if defined(__AVX2__) && defined(__FMA__)
+
+#include <immintrin.h>
+
+#include <cmath>
+
+#ifdef EXID_HAVE_LIBMVEC
+// glibc's vector math library (libmvec, glibc >= 2.22): sin and cos of 4 doubles, within 4 ulp.
+extern "C" __m256d _ZGVdN4v_sin(__m256d x);
+extern "C" __m256d _ZGVdN4v_cos(__m256d x);
+#endif
+
+namespace exid::detail::avx2 {
+namespace {
+// sin and cos of every joint angle, 4 at a time with libmvec where the build has it
+inline void sinCos(int n, const double* q, double* s, double* c) {
+  int j = 0;
+#ifdef EXID_HAVE_LIBMVEC
+  for (; j + 4 <= n; j += 4) {
+    const __m256d x = _mm256_loadu_pd(q + j);
+    _mm256_storeu_pd(s + j, _ZGVdN4v_sin(x));
+    _mm256_storeu_pd(c + j, _ZGVdN4v_cos(x));
+  }
+  if (j < n) {
+    alignas(32) double x[4] = {0, 0, 0, 0}, xs[4], xc[4];
+    for (int k = j; k < n; ++k) x[k - j] = q[k];
+    const __m256d v = _mm256_load_pd(x);
+    _mm256_store_pd(xs, _ZGVdN4v_sin(v));
+    _mm256_store_pd(xc, _ZGVdN4v_cos(v));
+    for (int k = j; k < n; ++k) {
+      s[k] = xs[k - j];
+      c[k] = xc[k - j];
+    }
+    j = n;
+  }
+#endif
+  for (; j < n; ++j) {
+    const double x = q[j];  // one load: s may alias q, and one sincos needs one argument
+    s[j] = std::sin(x);
+    c[j] = std::cos(x);
+  }
+}
+}  // namespace
+}  // namespace exid::detail::avx2
+
+#define EXID_KERNEL_NS avx2
+#define EXID_KERNEL __attribute__((flatten))
+#include "kernels.hpp"
+
+namespace exid::detail {
+
+namespace avx2 {
+namespace {
+
+// GramAccumulator's block update with full vectors: the rows of acc have room for ldb entries
+// past the diagonal block's start and B's rows are zero-padded to ldb, so the extra entries land
+// in the unused upper triangle.
+inline int roundUp4(int x) { return (x + 3) & ~3; }
+
+void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
+  for (int i = 0; i < m; ++i) {
+    double* A = acc + static_cast<long>(i) * ld;
+    const int len4 = roundUp4(i + 1);
+    int r = 0;
+    for (; r + 4 <= k; r += 4) {
+      const double* B0 = B + static_cast<long>(r) * ldb;
+      const double* B1 = B0 + ldb;
+      const double* B2 = B1 + ldb;
+      const double* B3 = B2 + ldb;
+      const __m256d b0 = _mm256_set1_pd(B0[i]), b1 = _mm256_set1_pd(B1[i]);
+      const __m256d b2 = _mm256_set1_pd(B2[i]), b3 = _mm256_set1_pd(B3[i]);
+      for (int j = 0; j < len4; j += 4) {
+        __m256d a = _mm256_loadu_pd(A + j);
+        a = _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), a);
+        a = _mm256_fmadd_pd(b1, _mm256_loadu_pd(B1 + j), a);
+        a = _mm256_fmadd_pd(b2, _mm256_loadu_pd(B2 + j), a);
+        a = _mm256_fmadd_pd(b3, _mm256_loadu_pd(B3 + j), a);
+        _mm256_storeu_pd(A + j, a);
+      }
+    }
+    for (; r < k; ++r) {
+      const double* B0 = B + static_cast<long>(r) * ldb;
+      const __m256d b0 = _mm256_set1_pd(B0[i]);
+      for (int j = 0; j < len4; j += 4)
+        _mm256_storeu_pd(A + j,
+                         _mm256_fmadd_pd(b0, _mm256_loadu_pd(B0 + j), _mm256_loadu_pd(A + j)));
+    }
+  }
+}
+
+const Kernels kTable = {Isa::Avx2,
+                        &torqueRegressor,
+                        &inverseDynamics,
+                        &energyRegressor,
+                        &torqueRegressorVjp,
+                        &energyRegressorVjp,
+                        &gram};
+
+}  // namespace
+}  // namespace avx2
+
+const Kernels* avx2Kernels() { return &avx2::kTable; }
+
+}  // namespace exid::detail
+
+#else
+
+#include "kernel_table.hpp"
+
+namespace exid::detail {
+const Kernels* avx2Kernels() { return nullptr; }
+}  // namespace exid::detail
+
+#endif

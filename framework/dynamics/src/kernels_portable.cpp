@@ -1,0 +1,81 @@
+// exid — the portable copy of the hot kernels (kernels.hpp), compiled for the build's baseline
+// instruction set like the rest of the library; also the shared recursions of rigid_body.hpp
+// that the other algorithms (wrench and payload regressors, derivatives, mass matrix) call.
+#include <cmath>
+
+namespace exid::detail::portable {
+namespace {
+// sin and cos of every joint angle (std::sin, std::cos; the compiler makes one sincos of them)
+inline void sinCos(int n, const double* q, double* s, double* c) {
+  for (int j = 0; j < n; ++j) {
+    const double x = q[j];  // one load: s may alias q, and one sincos needs one argument
+    s[j] = std::sin(x);
+    c[j] = std::cos(x);
+  }
+}
+}  // namespace
+}  // namespace exid::detail::portable
+
+#define EXID_KERNEL_NS portable
+#define EXID_KERNEL
+#include "kernels.hpp"
+
+namespace exid::detail {
+
+namespace portable {
+namespace {
+
+// GramAccumulator's block update (the compiler vectorises the inner loop with the baseline ISA).
+void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
+  for (int i = 0; i < m; ++i) {
+    double* A = acc + static_cast<long>(i) * ld;
+    const int len = i + 1;
+    int r = 0;
+    for (; r + 4 <= k; r += 4) {
+      const double* B0 = B + static_cast<long>(r) * ldb;
+      const double* B1 = B0 + ldb;
+      const double* B2 = B1 + ldb;
+      const double* B3 = B2 + ldb;
+      const double b0 = B0[i], b1 = B1[i], b2 = B2[i], b3 = B3[i];
+      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j] + b1 * B1[j] + b2 * B2[j] + b3 * B3[j];
+    }
+    for (; r < k; ++r) {
+      const double* B0 = B + static_cast<long>(r) * ldb;
+      const double b0 = B0[i];
+      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j];
+    }
+  }
+}
+
+const Kernels kTable = {Isa::Portable,
+                        &torqueRegressor,
+                        &inverseDynamics,
+                        &energyRegressor,
+                        &torqueRegressorVjp,
+                        &energyRegressorVjp,
+                        &gram};
+
+}  // namespace
+}  // namespace portable
+
+const Kernels& portableKernels() { return portable::kTable; }
+
+void forwardPass(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
+                 const double* qdd, Level level, bool gravity) {
+  portable::forwardPassImpl(model, d, q, qd, qdd, level, gravity);
+}
+
+void ancestorSubspaces(DynamicsData& d) { portable::ancestorSubspacesImpl(d); }
+
+void rneaBackward(const RobotModel& model, DynamicsData& d, const double* pi, double* tau) {
+  portable::rneaBackwardImpl(model, d, pi, tau);
+}
+
+void clearAdjoints(DynamicsData& d, bool subspaces) { portable::clearAdjointsImpl(d, subspaces); }
+
+void reversePass(DynamicsData& d, const double* qd, Level level, bool subspaces, double* gq,
+                 double* gqd, double* gqdd) {
+  portable::reversePassImpl(d, qd, level, subspaces, gq, gqd, gqdd);
+}
+
+}  // namespace exid::detail
