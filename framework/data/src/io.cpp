@@ -610,6 +610,13 @@ bool CsvReader::next(double* values) {
 
 int CsvReader::takeRows(int count, std::string* out, int* line_before) {
   *line_before = lineno_;
+  // room for the lines at the mean length of those read so far (and a tenth more): the text is
+  // copied once, not again each time the string's capacity doubles
+  if (count > 0 && lineno_ > 0) {
+    const std::uint64_t mean = bytes_ / static_cast<std::uint64_t>(lineno_);
+    out->reserve(out->size() +
+                 static_cast<std::size_t>(mean + mean / 10 + 1) * static_cast<std::size_t>(count));
+  }
   int taken = 0;
   const char *b = nullptr, *e = nullptr;
   while (taken < count && nextLine(&b, &e)) {
