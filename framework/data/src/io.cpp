@@ -245,8 +245,10 @@ inline bool eightDigits(const char* p, std::uint64_t* v) {
 // Clinger's exact case: a decimal [+-]digits[.digits][(e|E)[+-]digits] whose digits make an
 // integer m <= 2^53 and whose power of ten e is within [-22, 22]: m and 10^|e| are exact
 // doubles, so the one IEEE multiplication or division is the correctly rounded value, the
-// same bits as std::from_chars and strtod. False (nothing decided) for anything else.
-bool parseShortDecimal(const char* p, const char* b, double* v) {
+// same bits as std::from_chars and strtod. Here the one that starts at p and ends at b or at the
+// byte `until` (a cell's delimiter): the byte where it ends, or nullptr (nothing decided) for
+// anything else.
+const char* shortDecimalPrefix(const char* p, const char* b, char until, double* v) {
   static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,
                                       1e8,  1e9,  1e10, 1e11, 1e12, 1e13, 1e14, 1e15,
                                       1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
@@ -264,7 +266,7 @@ bool parseShortDecimal(const char* p, const char* b, double* v) {
     digits += 8;
   }
   for (; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p, ++digits) {
-    if (m > (kMaxExact - 9) / 10) return false;
+    if (m > (kMaxExact - 9) / 10) return nullptr;
     m = 10 * m + static_cast<unsigned>(*p - '0');
   }
   if (p < b && *p == '.') {
@@ -276,30 +278,36 @@ bool parseShortDecimal(const char* p, const char* b, double* v) {
       frac += 8;
     }
     for (; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p, ++digits, ++frac) {
-      if (m > (kMaxExact - 9) / 10) return false;
+      if (m > (kMaxExact - 9) / 10) return nullptr;
       m = 10 * m + static_cast<unsigned>(*p - '0');
     }
   }
-  if (digits == 0) return false;
+  if (digits == 0) return nullptr;
   int e = 0;
   if (p < b && (*p == 'e' || *p == 'E')) {
     ++p;
     bool eneg = false;
     if (p < b && (*p == '-' || *p == '+')) eneg = *p++ == '-';
-    if (p == b) return false;
+    const char* first = p;
     for (; p < b && static_cast<unsigned>(*p - '0') < 10u; ++p) {
-      if (e > 1000) return false;
+      if (e > 1000) return nullptr;
       e = 10 * e + (*p - '0');
     }
+    if (p == first) return nullptr;  // (an exponent without digits)
     if (eneg) e = -e;
   }
-  if (p != b) return false;
+  if (p != b && *p != until) return nullptr;
   e -= frac;
-  if (e < -22 || e > 22) return false;
+  if (e < -22 || e > 22) return nullptr;
   double x = static_cast<double>(m);
   x = e < 0 ? x / kPow10[-e] : x * kPow10[e];
   *v = neg ? -x : x;
-  return true;
+  return p;
+}
+
+// The same for the whole of [p, b).
+bool parseShortDecimal(const char* p, const char* b, double* v) {
+  return shortDecimalPrefix(p, b, '\0', v) == b;
 }
 }  // namespace
 
@@ -540,6 +548,9 @@ void CsvReader::countValues(std::size_t c, const char* ce, const char* e) const 
 
 bool CsvReader::next(double* values) {
   const std::size_t nc = columns_.size();
+  // (a delimiter that no number holds ends one: the fast path of the cells below)
+  const bool number_delim = (static_cast<unsigned>(delim_ - '0') >= 10u) && delim_ != '.' &&
+                            delim_ != '+' && delim_ != '-' && delim_ != 'e' && delim_ != 'E';
   const char *b = nullptr, *e = nullptr;
   while (nextLine(&b, &e)) {
     if (skipLine(b, e)) continue;
@@ -552,6 +563,19 @@ bool CsvReader::next(double* values) {
       if (c >= cells_read_) {  // the rest: counted, not read
         c += 1 + countByte(cell, e, delim_);
         break;
+      }
+      if (number_delim && c < nc && slot_[c] >= 0) {
+        // A selected cell that is a short decimal up to the delimiter or the line's end: its
+        // value and its end at once (what the general path below gives it, without finding
+        // the delimiter first); anything else takes that path.
+        double v = 0;
+        if (const char* end = shortDecimalPrefix(cell, e, delim_, &v)) {
+          values[slot_[c]] = v;
+          ++c;
+          if (end == e) break;
+          cell = end + 1;
+          continue;
+        }
       }
       const char* stop =
           static_cast<const char*>(std::memchr(cell, delim_, static_cast<std::size_t>(e - cell)));
