@@ -29,13 +29,16 @@ namespace {
 constexpr std::size_t kTargetBytes = std::size_t{100} << 20;
 
 // The file, written once: t with 6 decimals, 12 signals with 8 significant digits, ~140 bytes a
-// row (the shape of the 137 MB, 1 M-sample recording of the issue "Long recordings").
-const fs::path& csvFile() {
-  static const fs::path p = [] {
-    const fs::path d = fs::temp_directory_path() / ("exid_bench_csv_" + std::to_string(::getpid()));
-    fs::create_directories(d);
-    const fs::path f = d / "recording.csv";
-    std::ofstream o(f, std::ios::binary | std::ios::trunc);
+// row (the shape of the 137 MB, 1 M-sample recording of the issue "Long recordings"). Its
+// directory is removed by the owner's destructor, which runs at exit while the path it holds
+// still lives (a function-local static, destroyed after main returns).
+class TempCsv {
+ public:
+  TempCsv()
+      : dir_(fs::temp_directory_path() / ("exid_bench_csv_" + std::to_string(::getpid()))),
+        file_(dir_ / "recording.csv") {
+    fs::create_directories(dir_);
+    std::ofstream o(file_, std::ios::binary | std::ios::trunc);
     o << "t,q1,q2,q3,q4,q5,q6,tau1,tau2,tau3,tau4,tau5,tau6\n";
     std::mt19937 rng(1);
     std::uniform_real_distribution<double> u(-2.0, 2.0);
@@ -49,10 +52,23 @@ const fs::path& csvFile() {
       o.write(b.data(), static_cast<std::streamsize>(b.size()));
       bytes += b.size();
     }
-    std::atexit([] { fs::remove_all(csvFile().parent_path()); });
-    return f;
-  }();
-  return p;
+  }
+  ~TempCsv() {
+    std::error_code ec;  // (a destructor does not throw: a failure leaves the file behind)
+    fs::remove_all(dir_, ec);
+  }
+  TempCsv(const TempCsv&) = delete;
+  TempCsv& operator=(const TempCsv&) = delete;
+  const fs::path& file() const { return file_; }
+
+ private:
+  fs::path dir_;
+  fs::path file_;
+};
+
+const fs::path& csvFile() {
+  static const TempCsv csv;
+  return csv.file();
 }
 
 std::int64_t fileBytes() { return static_cast<std::int64_t>(fs::file_size(csvFile())); }

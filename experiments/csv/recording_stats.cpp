@@ -29,13 +29,14 @@ void RecordingStats::add(const double* v, int row) {
         for (std::size_t j = 0; j < pq_.size(); ++j)
           run_travel_[j] += v[pqd_[j]] * qd_per_q_[j] * dt;
     } else {
-      std::vector<double> d(pq_.size());
+      std::vector<double>& d = next_step_;
+      d.resize(pq_.size());
       for (std::size_t j = 0; j < pq_.size(); ++j) {
         d[j] = std::abs(v[pq_[j]] - prev_[static_cast<std::size_t>(pq_[j])]);
         if (d[j] > 0) quantum_[j] = std::min(quantum_[j], d[j]);
       }
       if (run_len_ > 0) endRun(d, v);  // the run ends here
-      step_ = std::move(d);
+      step_.swap(d);
       step_rows_ = N_ - last_change_;
       last_change_ = N_;
     }

@@ -92,6 +92,7 @@ class RecordingStats {
   bool has_time_;         // the time column is the last used one
   double time_unit_s_, period_s_;
   std::vector<double> quantum_, step_, before_, run_travel_;
+  std::vector<double> next_step_;  // (the step of the row being added: no allocation per row)
   long long N_ = 0, last_change_ = 0, step_rows_ = 0, before_rows_ = 0;
   long long run_len_ = 0;
   int run_first_row_ = 0;

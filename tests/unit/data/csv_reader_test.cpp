@@ -314,24 +314,12 @@ TEST(CsvReader, SameTablesAndErrorsAsTheWholeTextParserForEveryBlockSize) {
 // Random lines built from tricky pieces: the streaming reader and the reference agree.
 TEST(CsvReader, RandomInputsAgreeWithTheReference) {
   std::mt19937 rng(12345);
-  const std::vector<std::string> cells = {"0",
-                                          "1.5",
-                                          " 2 ",
-                                          "\"3\"",
-                                          "+4",
-                                          "-5e-3",
-                                          "",
-                                          "nan",
-                                          "inf",
-                                          "x",
-                                          "1x",
-                                          "\t7\t",
-                                          "0x10",
-                                          "1e400",
-                                          "1e-400",
-                                          "-0",
-                                          "9.999999999999999e22",
-                                          "\"\""};
+  const std::vector<std::string> cells = {
+      "0", "1.5", " 2 ", "\"3\"", "+4", "-5e-3", "", "nan", "inf", "x", "1x", "\t7\t", "0x10",
+      "1e400", "1e-400", "-0", "9.999999999999999e22", "\"\"",
+      // (cells that end or do not end a short decimal at the delimiter)
+      "1e", "1e+", "1.", ".", "-", "-.5", "+.5e+2", "12345678.87654321", "-0.674940672", "1e5",
+      "1.5 ", "1.5\""};
   const std::vector<std::string> ends = {"\n", "\r\n", "\n\n", "\n# note\n", "\n \n"};
   for (int trial = 0; trial < 300; ++trial) {
     const int nc = 1 + static_cast<int>(rng() % 4);
@@ -383,7 +371,12 @@ TEST(CsvReader, FromCharsReadsTheSameDoublesAsStrtod) {
       // around the exact short-decimal path's bounds
       "9007199254740992", "9007199254740991.5", "900719925474099.3", "1e22", "1e23", "1e-22",
       "1e-23", "123456789012345e-22", "4.5e22", "-0.000", "-0e5", "0.0000000000000000000001",
-      "1.e3", ".e3", "1e-", "-.5", "+.5e+2", "1e0000000000000000000000000000000000001"};
+      "1.e3", ".e3", "1e-", "-.5", "+.5e+2", "1e0000000000000000000000000000000000001",
+      // eight digits at a time: whole groups, a non-digit inside a group, past the exact range
+      "12345678", "12345678.87654321", "1234567.12345678", "0.12345678", "-0.674940672", "1234567a",
+      "1234567.8", "123456789012345678", "90071992547409.92", "9007199.254740993",
+      "00000000000000001", "0.000000001234567890123", "12345678e-3", "1234567890123456e5",
+      "99999999.99999999", "1234567\x80", "12345678/", "12345678:"};
   std::mt19937_64 rng(7);
   for (int i = 0; i < 20000; ++i) {
     std::uint64_t u = rng();
