@@ -31,12 +31,14 @@ const detail::Kernels* table(Isa isa) {
   return avx2;
 }
 
-// EXID_ISA (portable, avx2; unset, empty or auto: the best this CPU runs). A copy that is unknown
-// or not available here is said once on stderr and replaced by the best available.
+// EXID_ISA (portable, avx2; auto: the best this CPU runs; unset or empty: portable, so that a
+// study's numbers do not depend on the CPU it runs on). A copy that is unknown or not available
+// here is said once on stderr and replaced by the best available.
 const detail::Kernels* fromEnvironment() {
   const detail::Kernels* best = table(Isa::Avx2) ? table(Isa::Avx2) : table(Isa::Portable);
   const char* e = std::getenv("EXID_ISA");
-  if (!e || !*e || std::strcmp(e, "auto") == 0) return best;
+  if (!e || !*e) return table(Isa::Portable);
+  if (std::strcmp(e, "auto") == 0) return best;
   for (Isa isa : {Isa::Portable, Isa::Avx2})
     if (std::strcmp(e, isaName(isa)) == 0) {
       if (const detail::Kernels* k = table(isa)) return k;
