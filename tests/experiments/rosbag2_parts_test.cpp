@@ -189,6 +189,16 @@ TEST(Rosbag2Parts, NoRowSpansTwoBags) {
     EXPECT_EQ(e.details.find("recordings")->asInt(), 2);
     EXPECT_EQ(e.details.find("trimmed_samples")->asInt(),
               4 * e.details.find("trimmed_samples_each_end")->asInt());
+    // the trim warning counts every bag's ends: not below 10 % of the samples, above it said
+    EXPECT_LT(e.details.find("trimmed_percent")->asDouble(), 10.0);
+    EXPECT_EQ(e.details.find("warnings"), nullptr);
+    auto wide =
+        exid_test::create<exid::Estimator>("filtered_ls", "{cutoff_hz: 8, trim_edges: 150}");
+    const exid::Estimate w = wide->estimate(*m, rd, nullptr, ctx);
+    ASSERT_NE(w.details.find("warnings"), nullptr);
+    const std::string text = w.details.find("warnings")->at(0).asString();
+    EXPECT_NE(text.find("discards 600 of the " + std::to_string(rd.size())), std::string::npos)
+        << text;
   }
 }
 
@@ -250,6 +260,9 @@ TEST(Rosbag2Parts, InspectionLooksAtEachBagOnItsOwn) {
   const double va = ia.find("joints")->at(0).find("velocity_max")->asDouble();
   const double vd = id.find("joints")->at(0).find("velocity_max")->asDouble();
   EXPECT_NEAR(vd, va, 1e-6 * va);  // a derivative across the boundary: 0.8 rad in 5 ms
+  // clean data: no warning for one bag, none for two (the boundary is no gap, jump or jitter)
+  EXPECT_EQ(ia.find("warnings")->size(), 0u) << ia.find("warnings")->dump();
+  EXPECT_EQ(id.find("warnings")->size(), 0u) << id.find("warnings")->dump();
   const exid::Json& parts = *id.find("parts");
   ASSERT_EQ(parts.size(), 2u);
   EXPECT_EQ(parts.at(1).find("source")->asString(), d.facts.parts[1].source);

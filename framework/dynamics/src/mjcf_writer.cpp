@@ -15,6 +15,7 @@ namespace exid {
 namespace {
 
 using detail::finiteLimit;
+using detail::massCentreInertia;
 using detail::num;
 using detail::vec3;
 using detail::xmlEscape;
@@ -31,16 +32,10 @@ std::string quat(const Eigen::Matrix3d& R) {
 
 /// `<inertial>` of one body (its parameters about the body frame origin, in body axes).
 std::string inertial(const Body& b, std::vector<std::string>* raised) {
-  double mass = b.inertia(9);
-  Eigen::Vector3d c = Eigen::Vector3d::Zero();
+  double mass = 0.0;
+  Eigen::Vector3d c;
   Eigen::Matrix3d Ic;
-  if (mass > 0.0) {
-    comFromInertial(b.inertia, &mass, &c, &Ic);
-  } else {  // no mass (and, being consistent, no first moment): the tensor is about the origin
-    const auto& p = b.inertia;
-    Ic << p(0), p(1), p(2), p(1), p(3), p(4), p(2), p(4), p(5);
-  }
-  Ic = 0.5 * (Ic + Ic.transpose()).eval();
+  massCentreInertia(b.inertia, &mass, &c, &Ic);
   Eigen::Vector3d l(Ic(0, 0), Ic(1, 1), Ic(2, 2));
   Eigen::Matrix3d V = Eigen::Matrix3d::Identity();
   const bool diagonal = Ic(0, 1) == 0.0 && Ic(0, 2) == 0.0 && Ic(1, 2) == 0.0;

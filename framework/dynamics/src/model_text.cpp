@@ -144,6 +144,19 @@ void leftOutOfEveryFormat(const RobotModel& m, const std::vector<int>& coupled,
                    (m.collision.size() == 1 ? "" : "s") + " (exid's collision geometry)");
 }
 
+void massCentreInertia(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen::Vector3d* c,
+                       Eigen::Matrix3d* Ic) {
+  *mass = pi(9);
+  *c = Eigen::Vector3d::Zero();
+  if (*mass > 0.0) {
+    comFromInertial(pi, mass, c, Ic);
+  } else {
+    *mass = 0.0;
+    *Ic << pi(0), pi(1), pi(2), pi(1), pi(3), pi(4), pi(2), pi(4), pi(5);
+  }
+  *Ic = 0.5 * (*Ic + Ic->transpose()).eval();
+}
+
 void requirePhysical(const RobotModel& m, const std::string& format) {
   for (int j = 0; j < m.dof(); ++j) {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];

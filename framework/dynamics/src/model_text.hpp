@@ -56,4 +56,10 @@ std::string joinNumbers(const std::vector<int>& zero_based);
 /// (exid::checkPhysical), naming the body and the rule, and `format`.
 void requirePhysical(const RobotModel& m, const std::string& format);
 
+/// A body's mass, centre of mass and (symmetric) inertia about it, from its inertial parameters;
+/// a body without mass (and so, consistent, without first moment) gets c = 0 and the tensor
+/// about its frame's origin.
+void massCentreInertia(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen::Vector3d* c,
+                       Eigen::Matrix3d* Ic);
+
 }  // namespace exid::detail

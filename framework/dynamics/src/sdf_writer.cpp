@@ -13,6 +13,7 @@ namespace exid {
 namespace {
 
 using detail::finiteLimit;
+using detail::massCentreInertia;
 using detail::num;
 using detail::rpy;
 using detail::vec3;
@@ -77,16 +78,10 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     const std::string parent =
         b.parent < 0 ? root : m.bodies[static_cast<std::size_t>(b.parent)].name;
-    double mass = b.inertia(9);
-    Eigen::Vector3d c = Eigen::Vector3d::Zero();
+    double mass = 0.0;
+    Eigen::Vector3d c;
     Eigen::Matrix3d Ic;
-    if (mass > 0.0) {
-      comFromInertial(b.inertia, &mass, &c, &Ic);
-    } else {  // no mass (and, being consistent, no first moment): the tensor is about the origin
-      const auto& p = b.inertia;
-      Ic << p(0), p(1), p(2), p(1), p(3), p(4), p(2), p(4), p(5);
-      mass = 0.0;
-    }
+    massCentreInertia(b.inertia, &mass, &c, &Ic);
     x << "    <link name=\"" << xmlEscape(b.name) << "\">\n"
       << "      " << pose(b.pre * b.post, parent) << "\n"
       << "      <inertial>\n        " << pose(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
