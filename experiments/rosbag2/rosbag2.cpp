@@ -730,6 +730,12 @@ class Rosbag2Experiment : public exid::Experiment {
                     : "experiment 'rosbag2': both path and paths are given: give path "
                       "(one bag) or paths (several), not both");
     if (paths.empty()) paths.push_back(path);
+    for (std::size_t i = 0; i < paths.size(); ++i)
+      for (std::size_t j = 0; j < i; ++j)
+        exid::check(paths[i] != paths[j],
+                    fmt::format("experiment 'rosbag2': paths: '{}' is given twice (entries {} and "
+                                "{}): each bag once, or its samples would count twice",
+                                paths[i], j + 1, i + 1));
     std::vector<exid::Dataset> parts;
     for (std::size_t i = 0; i < paths.size(); ++i) {
       BagReading reading(P_, paths[i], *robot, ctx);

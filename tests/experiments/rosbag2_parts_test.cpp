@@ -132,6 +132,8 @@ TEST(Rosbag2Parts, PathOrPathsAndTheirMistakes) {
   EXPECT_NE(e.find("no bag: give path (one bag) or paths (several)"), std::string::npos) << e;
   e = errorWith("path: " + twoBags().first.string() + ", " + bothPaths());
   EXPECT_NE(e.find("both path and paths are given"), std::string::npos) << e;
+  e = errorWith("paths: [" + twoBags().first.string() + ", " + twoBags().first.string() + "]");
+  EXPECT_NE(e.find("is given twice (entries 1 and 2)"), std::string::npos) << e;
   // the same signals in every part: a bag with velocities beside one without cannot be joined
   e = errorWith(bothPaths() + ", resample_hz: 100");
   EXPECT_EQ(e, "(no error)");  // each bag resampled on its own is fine
