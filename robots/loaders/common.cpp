@@ -6,6 +6,8 @@
 
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
+#include "read_text.hpp"
+#include "xml_text.hpp"
 
 namespace exid {
 
@@ -42,10 +44,19 @@ RobotModel loadRobotFile(const std::filesystem::path& file, const LoadOptions& o
   std::string ext = file.extension().string();
   std::transform(ext.begin(), ext.end(), ext.begin(),
                  [](unsigned char ch) { return static_cast<char>(std::tolower(ch)); });
-  if (ext == ".urdf" || ext == ".xml") return loadUrdf(file, options);
+  if (ext == ".urdf") return loadUrdf(file, options);
+  if (ext == ".sdf") return loadSdf(file, options);
+  if (ext == ".mjcf") return loadMjcf(file, options);
+  if (ext == ".xml") {
+    const std::string text = detail::readTextFile(file, "robot description (XML)");
+    const std::string root = detail::xmlRootName(text);
+    if (root == "mujoco") return loadMjcfString(text, file.string(), options);
+    if (root == "sdf") return loadSdfString(text, file.string(), options);
+    return loadUrdfString(text, file.string(), options);
+  }
   if (ext == ".yaml" || ext == ".yml") return loadDhYaml(file, options);
   throw Error(file.string() + ": unknown robot description type '" + ext +
-              "' (expected .urdf, .xml, .yaml or .yml)");
+              "' (expected .urdf, .sdf, .mjcf, .xml, .yaml or .yml)");
 }
 
 }  // namespace exid

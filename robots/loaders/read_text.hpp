@@ -9,6 +9,7 @@
 
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
+#include "exid/robot_loaders.hpp"
 #include "exid/robot_model.hpp"
 
 namespace exid::detail {
@@ -17,6 +18,17 @@ namespace exid::detail {
 /// refused before it is opened for reading).
 inline std::string readTextFile(const std::filesystem::path& file, const char* what) {
   return readInputFile(file, what, kMaxRobotFileBytes);
+}
+
+/// The last checks of every loader: the structure (an exid::Error naming `src`) and the
+/// physical consistency of the inertial parameters (checkModelPhysical, with `options`).
+inline void checkLoaded(const RobotModel& m, const std::string& src, const LoadOptions& options) {
+  try {
+    m.validateStructure();
+  } catch (const Error& e) {
+    throw Error(src + ": " + e.what());
+  }
+  checkModelPhysical(m, options);
 }
 
 /// URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).

@@ -20,65 +20,17 @@
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
 #include "read_text.hpp"
+#include "xml_text.hpp"
 
 namespace exid {
 namespace {
 
 std::string at(const std::string& source, const TiXmlNode* node) {
-  return node && node->Row() > 0 ? source + ":" + std::to_string(node->Row()) : source;
+  return detail::xmlAt(source, node);
 }
 
-/// Throws unless `text` is well-formed UTF-8 with no NUL byte, naming the line, the column and
-/// the byte. XML is UTF-8 text; TinyXML steps over a multi-byte sequence by the length its lead
-/// byte announces, so a truncated sequence at the end of the text would make it read past the
-/// terminating NUL (found by fuzz_urdf).
 void checkUtf8(const std::string& text, const std::string& src) {
-  const auto* b = reinterpret_cast<const unsigned char*>(text.data());
-  const std::size_t n = text.size();
-  int line = 1;
-  std::size_t line_start = 0;
-  for (std::size_t i = 0; i < n;) {
-    const unsigned c = b[i];
-    int len = 0;
-    unsigned min = 0;
-    if (c == 0) {
-      len = -1;
-    } else if (c < 0x80) {
-      len = 1;
-    } else if (c >= 0xC2 && c <= 0xDF) {
-      len = 2;
-      min = 0x80;
-    } else if (c >= 0xE0 && c <= 0xEF) {
-      len = 3;
-      min = 0x800;
-    } else if (c >= 0xF0 && c <= 0xF4) {
-      len = 4;
-      min = 0x10000;
-    } else {
-      len = -1;
-    }
-    unsigned cp = len > 1 ? (c & (0xFFu >> (len + 1))) : c;
-    for (int k = 1; k < len && len > 0; ++k) {
-      if (i + static_cast<std::size_t>(k) >= n || (b[i + k] & 0xC0) != 0x80) {
-        len = -1;
-        break;
-      }
-      cp = (cp << 6) | (b[i + k] & 0x3F);
-    }
-    if (len > 1 && (cp < min || cp > 0x10FFFF || (cp >= 0xD800 && cp <= 0xDFFF))) len = -1;
-    if (len < 0) {
-      char byte[8];
-      std::snprintf(byte, sizeof byte, "0x%02X", c);
-      throw Error(src + ":" + std::to_string(line) + ": column " +
-                  std::to_string(i - line_start + 1) + ": byte " + byte + (c == 0 ? " (NUL)" : "") +
-                  " is not valid UTF-8 here; a URDF (XML) file must be UTF-8 text");
-    }
-    if (c == '\n') {
-      ++line;
-      line_start = i + 1;
-    }
-    i += static_cast<std::size_t>(len);
-  }
+  detail::checkXmlUtf8(text, src, "a URDF (XML) file");
 }
 
 // ------------------------------------------------------------------ structure (TinyXML pass)

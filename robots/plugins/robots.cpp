@@ -1,6 +1,7 @@
-// exid — the robot plugins, in one library: `dh` and `urdf` (a robot from the user's file) and
-// every robot of robots/catalogue.yaml (a shipped robot is data only: its description files and
-// its catalogue entry, embedded at build time so that the library works when installed).
+// exid — the robot plugins, in one library: `dh`, `urdf`, `mjcf` and `sdf` (a robot from the
+// user's file) and every robot of robots/catalogue.yaml (a shipped robot is data only: its
+// description files and its catalogue entry, embedded at build time so that the library works
+// when installed).
 #include <yaml-cpp/yaml.h>
 
 #include <cstring>
@@ -150,6 +151,69 @@ class UrdfRobot : public exid::Robot {
   CommonOptions opt_;
 };
 
+// ------------------------------------------------------------------ mjcf, sdf
+/// A robot from a simulator's description (MJCF or SDF): `Format` names the plugin and the loader.
+template <class Format>
+class SimulatorFileRobot : public exid::Robot {
+ public:
+  static constexpr const char* kName = Format::kName;
+  static constexpr const char* kVersion = "1.0.0";
+  static constexpr const char* kDoc = Format::kDoc;
+  static std::vector<exid::ParamDecl> params() {
+    auto p = commonParams();
+    p.insert(p.begin(), exid::param_path("file", std::nullopt,
+                                         std::string("the ") + Format::kWhat +
+                                             " file (relative paths: to the study file)"));
+    p.push_back(exid::param_bool("dynamics_as_friction", false, Format::kDynamics));
+    return p;
+  }
+  explicit SimulatorFileRobot(const exid::ParamSet& p)
+      : file_(p.getString("file")), dynamics_(p.getBool("dynamics_as_friction")), opt_(p) {}
+
+  std::shared_ptr<const exid::RobotModel> build(const exid::RunContext& ctx) override {
+    const auto f = fromStudy(file_, ctx);
+    return opt_.build([&](const exid::LoadOptions& o) {
+      exid::LoadOptions oe = o;
+      oe.urdf_dynamics_as_friction = dynamics_;
+      return Format::load(f, oe);
+    });
+  }
+
+ private:
+  std::string file_;
+  bool dynamics_;
+  CommonOptions opt_;
+};
+
+struct MjcfFormat {
+  static constexpr const char* kName = "mjcf";
+  static constexpr const char* kWhat = "MJCF (MuJoCo XML)";
+  static constexpr const char* kDoc =
+      "robot from a MuJoCo MJCF file (hinge and slide joints, <inertial> elements, joint "
+      "defaults; the exid_sensor site as the sensor frame)";
+  static constexpr const char* kDynamics =
+      "use the joints' armature, damping and frictionloss as nominal rotor inertia, viscous and "
+      "Coulomb friction (usually a simulator's values; off: ignored, and the robot's notes say "
+      "so)";
+  static exid::RobotModel load(const std::filesystem::path& f, const exid::LoadOptions& o) {
+    return exid::loadMjcf(f, o);
+  }
+};
+
+struct SdfFormat {
+  static constexpr const char* kName = "sdf";
+  static constexpr const char* kWhat = "SDFormat";
+  static constexpr const char* kDoc =
+      "robot from an SDFormat 1.5-1.9 file (one model fixed to the world; revolute, continuous, "
+      "prismatic and fixed joints; the exid_sensor frame as the sensor frame)";
+  static constexpr const char* kDynamics =
+      "use the joints' <dynamics> damping and friction as nominal viscous and Coulomb friction "
+      "(usually a simulator's values; off: ignored, and the robot's notes say so)";
+  static exid::RobotModel load(const std::filesystem::path& f, const exid::LoadOptions& o) {
+    return exid::loadSdf(f, o);
+  }
+};
+
 // ------------------------------------------------------------------ the shipped robots
 /// One description of a shipped robot (a catalogue variant).
 struct ShippedVariant {
@@ -292,6 +356,8 @@ class ShippedRobot : public exid::Robot {
 void listRobots(exid::PluginList& out) {
   out.push_back(exid::describePlugin<DhRobot>());
   out.push_back(exid::describePlugin<UrdfRobot>());
+  out.push_back(exid::describePlugin<SimulatorFileRobot<MjcfFormat>>());
+  out.push_back(exid::describePlugin<SimulatorFileRobot<SdfFormat>>());
   for (const auto& e : catalogue()) out.push_back(ShippedRobot::describe(e));
 }
 

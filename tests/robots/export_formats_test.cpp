@@ -15,6 +15,7 @@
 #include <filesystem>
 #include <fstream>
 #include <random>
+#include <regex>
 #include <string>
 #include <vector>
 
@@ -766,6 +767,241 @@ TEST(ExportFormats, ExidExportWritesWhatTheConsumersRead) {
   }
 #endif
   fs::remove_all(dir);
+}
+
+// ---------------------------------------------------------------- back into exid
+/// exid -> URDF / MJCF / SDF -> exid: the model read back from each exported file gives the same
+/// joint torques as the model written (rigid body; with the drive terms each format carries).
+struct Format {
+  const char* name;
+  std::string (*write)(const RobotModel&);
+  RobotModel (*load)(const std::string&, const std::string&, const exid::LoadOptions&);
+  bool rotor, transmission;  // carries rotor inertias / the transmission and every drive term
+};
+
+const std::vector<Format>& formats() {
+  static const std::vector<Format> f = {
+      {"urdf", [](const RobotModel& m) { return exid::writeUrdf(m); }, &exid::loadUrdfString, true,
+       true},
+      {"mjcf", [](const RobotModel& m) { return exid::writeMjcf(m); }, &exid::loadMjcfString, true,
+       false},
+      {"sdf", [](const RobotModel& m) { return exid::writeSdf(m); }, &exid::loadSdfString, false,
+       false}};
+  return f;
+}
+
+Eigen::VectorXd randomState(const RobotModel& m, std::mt19937* rng, double scale) {
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Eigen::VectorXd x(m.dof());
+  for (int j = 0; j < m.dof(); ++j) {
+    const auto& L = m.limits[static_cast<std::size_t>(j)];
+    const bool bounded = L.q_min > -1e100 && L.q_max < 1e100 && scale == 0.0;
+    x(j) = bounded ? 0.5 * (L.q_min + L.q_max) + 0.5 * (L.q_max - L.q_min) * u(*rng)
+                   : (scale == 0.0 ? 3.0 : scale) * u(*rng);
+  }
+  return x;
+}
+
+TEST(ExportFormats, EveryFormatReadBackGivesTheSameTorques) {
+  std::mt19937 rng(19);
+  for (const Shipped& s : shippedRobots()) {
+    const RobotModel& m = s.model;
+    const int n = m.dof();
+    auto d0 = exid::makeDynamicsData(m);
+    for (const Format& f : formats()) {
+      SCOPED_TRACE(s.name + " " + f.name);
+      std::vector<std::string> sink, own;
+      exid::LoadOptions o;
+      o.warnings = &sink;
+      o.urdf_dynamics_as_friction = true;
+      RobotModel r;
+      try {
+        r = f.load(f.write(m), s.name + "." + f.name, o);
+      } catch (const exid::Error& e) {
+        // a massless body with rotational inertia (the PUMA 560's first link): URDF cannot say it
+        ASSERT_STREQ(f.name, "urdf") << e.what();
+        EXPECT_NE(std::string(e.what()).find("has mass 0 and non-zero inertial parameters"),
+                  std::string::npos)
+            << e.what();
+        continue;
+      }
+      // what the loader finds is what the model written has (the PUMA 560's massless first
+      // link with rotational inertia; MJCF writes MuJoCo's minimum mass 1e-15 instead)
+      exid::LoadOptions mine;
+      mine.warnings = &own;
+      exid::checkModelPhysical(m, mine);
+      EXPECT_EQ(sink.size(), std::string(f.name) == "mjcf" ? 0u : own.size());
+      ASSERT_EQ(r.dof(), n);
+      EXPECT_EQ(r.name, m.name);
+      if (std::string(f.name) == "sdf") {
+        EXPECT_TRUE(mentions(r.notes, "carries no gravity"));
+        r.gravity = m.gravity;  // (the writer's notes say that SDF leaves it out)
+      }
+      EXPECT_EQ(r.sensorBody(), m.sensorBody());
+      auto d1 = exid::makeDynamicsData(r);
+      double worst = 0.0;
+      for (int k = 0; k < 40; ++k) {
+        const Eigen::VectorXd q = randomState(m, &rng, 0.0), qd = randomState(m, &rng, 2.0),
+                              qdd = randomState(m, &rng, 4.0);
+        for (int j = 0; j < n; ++j) {
+          EXPECT_EQ(r.bodies[static_cast<std::size_t>(j)].joint_name,
+                    m.bodies[static_cast<std::size_t>(j)].joint_name);
+          EXPECT_EQ(r.bodies[static_cast<std::size_t>(j)].parent,
+                    m.bodies[static_cast<std::size_t>(j)].parent);
+        }
+        // rigid body, joint coordinates
+        const Eigen::VectorXd t0 = exid::inverseDynamics(m, *d0, q, qd, qdd);
+        const Eigen::VectorXd t1 = exid::inverseDynamics(r, *d1, q, qd, qdd);
+        const double scale = std::max(1.0, t0.cwiseAbs().maxCoeff());
+        worst = std::max(worst, (t1 - t0).cwiseAbs().maxCoeff() / scale);
+        // the sensor frame goes along: its pose in the base frame
+        const Pose S0 = exid::bodyPose(m, *d0, q, m.sensorBody()) * m.sensor_pose;
+        const Pose S1 = exid::bodyPose(r, *d1, q, r.sensorBody()) * r.sensor_pose;
+        EXPECT_LE((S0.R - S1.R).cwiseAbs().maxCoeff(), 1e-12);
+        EXPECT_LE((S0.p - S1.p).cwiseAbs().maxCoeff(), 1e-12);
+        // with the drive terms the format carries: exid's own format (URDF) all of them, in
+        // measured coordinates; MJCF and SDF the terms of the coordinates that move one joint
+        if (f.transmission) {
+          const exid::DriveColumns all{true, true, true, true};
+          Eigen::VectorXd qm, qdm, qddm;
+          exid::jointToMeasured(m, q, qd, qdd, &qm, &qdm, &qddm);
+          const Eigen::VectorXd a0 = exid::actuatorTorque(m, *d0, all, qm, qdm, qddm);
+          const Eigen::VectorXd a1 = exid::actuatorTorque(r, *d1, all, qm, qdm, qddm);
+          worst = std::max(worst, (a1 - a0).cwiseAbs().maxCoeff() / scale);
+        } else {
+          Shipped e = s;
+          if (!f.rotor)
+            for (auto& d : e.model.drives) d.rotor_inertia = 0;
+          const Eigen::VectorXd a0 = expectedJointTorque(e, *d0, q, qd, qdd);
+          const exid::DriveColumns cols{true, false, true, false};
+          const Eigen::VectorXd a1 = exid::actuatorTorque(r, *d1, cols, q, qd, qdd);
+          worst = std::max(worst, (a1 - a0).cwiseAbs().maxCoeff() / scale);
+        }
+      }
+      EXPECT_LE(worst, 1e-12);
+      std::printf("%s via %s: largest torque difference %.3g (relative)\n", s.name.c_str(), f.name,
+                  worst);
+      // Coulomb friction and the limits of the joints that one coordinate moves
+      for (int j = 0; j < n && !m.hasTransmission(); ++j) {
+        const auto J = static_cast<std::size_t>(j);
+        const double c = m.drives[J].coulomb;
+        EXPECT_EQ(r.drives[J].coulomb, std::string(f.name) == "mjcf" ? std::max(c, 0.0) : c);
+        EXPECT_EQ(r.limits[J].q_min, m.limits[J].q_min);
+        EXPECT_EQ(r.limits[J].q_max, m.limits[J].q_max);
+        EXPECT_EQ(r.limits[J].tau_max, m.limits[J].tau_max);
+      }
+    }
+  }
+}
+
+TEST(ExportFormats, DriveTermsOfASimulatorFileAreUsedOnlyWhenAskedFor) {
+  const RobotModel m = shippedRobots()[0].model;  // the Panda: friction on every joint
+  for (const Format& f : formats()) {
+    if (std::string(f.name) == "urdf") continue;  // (exid's own <exid> drives: always used)
+    SCOPED_TRACE(f.name);
+    exid::LoadOptions o;
+    std::vector<std::string> sink;
+    o.warnings = &sink;
+    const RobotModel r = f.load(f.write(m), std::string("panda.") + f.name, o);
+    for (const auto& d : r.drives) {
+      EXPECT_EQ(d.viscous, 0.0);
+      EXPECT_EQ(d.coulomb, 0.0);
+      EXPECT_EQ(d.rotor_inertia, 0.0);
+    }
+    EXPECT_TRUE(mentions(r.notes, "dynamics_as_friction: true uses them"));
+    o.urdf_dynamics_as_friction = true;
+    const RobotModel u = f.load(f.write(m), std::string("panda.") + f.name, o);
+    EXPECT_FALSE(mentions(u.notes, "dynamics_as_friction: true uses them"));
+    EXPECT_EQ(u.drives[0].viscous, m.drives[0].viscous);
+  }
+}
+
+// A hand-written MJCF using what exid's writer does not (degrees, euler sequences, default
+// classes, fullinertia, joint positions off the body origin, welded bodies, axisangle, xyaxes):
+// exid's model of it and MuJoCo's give the same inverse dynamics.
+TEST(ExportFormats, MujocoAndExidReadTheSameHandWrittenMjcf) {
+#ifndef EXID_HAVE_MUJOCO
+  FAIL() << "built without MuJoCo (libmujoco-dev; scripts/install-deps.sh installs it)";
+#else
+  const std::string text = R"(<mujoco model="hand">
+  <compiler angle="degree" eulerseq="zyx" inertiafromgeom="false" autolimits="true"/>
+  <option gravity="0.5 -1 -9.7"/>
+  <default>
+    <joint damping="0.2" armature="0.05"/>
+    <default class="wrist"><joint axis="1 0 0" range="-120 120"/></default>
+  </default>
+  <worldbody>
+    <body name="l1" pos="0 0 0.3" euler="30 0 0">
+      <joint name="j1" axis="0 0 1" range="-170 170"/>
+      <inertial pos="0.02 0.01 0.1" mass="4" fullinertia="0.05 0.06 0.03 0.002 -0.001 0.003"/>
+      <body name="l2" pos="0.1 0 0.2" axisangle="1 0 0 -90">
+        <joint name="j2" pos="0 0 0.05" axis="0 0 1"/>
+        <inertial pos="0.2 0 0" quat="0.9 0.1 0.2 0.3" mass="3" diaginertia="0.02 0.08 0.09"/>
+        <body name="bracket" pos="0.4 0 0" xyaxes="0 1 0 -1 0 0">
+          <inertial pos="0 0 0.02" mass="0.5" diaginertia="0.001 0.001 0.001"/>
+          <body name="l3" pos="0 0 0.05" childclass="wrist">
+            <joint name="j3" pos="0.01 0 0"/>
+            <inertial pos="0 0 0.05" mass="1" diaginertia="0.004 0.005 0.002"/>
+            <body name="l4" pos="0 0 0.1" zaxis="0 1 1">
+              <joint name="j4" type="slide" axis="0 0 1" range="-0.1 0.1" class="wrist"/>
+              <inertial pos="0 0.01 0.02" mass="0.7" diaginertia="0.002 0.002 0.001"/>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+)";
+  // (MuJoCo diagonalises a fullinertia with its own iterative eigensolver, mju_eig3, whose
+  // principal axes carry errors of about 1e-11 of the torques; with diaginertia the comparison
+  // is to rounding)
+  const std::string diag =
+      std::regex_replace(text, std::regex("fullinertia=\"0.05 0.06 0.03 0.002 -0.001 0.003\""),
+                         "diaginertia=\"0.05 0.06 0.03\"");
+  ASSERT_NE(diag, text);
+  for (const auto& [file, tolerance] :
+       std::vector<std::pair<std::string, double>>{{diag, 1e-12}, {text, 1e-10}}) {
+    std::string err;
+    const MjModelPtr mm = loadMjcf("hand", file, &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;
+    exid::LoadOptions o;
+    o.urdf_dynamics_as_friction = true;
+    const RobotModel m = exid::loadMjcfString(file, "hand.xml", o);
+    ASSERT_EQ(m.dof(), 4);
+    ASSERT_EQ(mm.m->nv, 4);
+    EXPECT_EQ(m.gravity, Eigen::Vector3d(0.5, -1, -9.7));
+    EXPECT_NEAR(m.limits[2].q_max, 120.0 * M_PI / 180.0, 1e-15);
+    EXPECT_EQ(m.limits[3].q_max, 0.1);
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    auto data = exid::makeDynamicsData(m);
+    std::mt19937 rng(23);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    double worst = 0.0;
+    for (int k = 0; k < 50; ++k) {
+      Eigen::VectorXd q(4), qd(4), qdd(4);
+      for (int j = 0; j < 4; ++j) {
+        q(j) = (j == 3 ? 0.1 : 2.0) * u(rng);
+        qd(j) = 2.0 * u(rng);
+        qdd(j) = 4.0 * u(rng);
+        md.d->qpos[j] = q(j);
+        md.d->qvel[j] = qd(j);
+        md.d->qacc[j] = qdd(j);
+      }
+      mj_inverse(mm.m, md.d);
+      const exid::DriveColumns cols{true, false, true, false};
+      const Eigen::VectorXd tau = exid::actuatorTorque(m, *data, cols, q, qd, qdd);
+      const Eigen::Map<const Eigen::VectorXd> mj(md.d->qfrc_inverse, 4);
+      worst = std::max(worst,
+                       (tau - mj).cwiseAbs().maxCoeff() / std::max(1.0, mj.cwiseAbs().maxCoeff()));
+    }
+    EXPECT_LE(worst, tolerance);
+    std::printf("hand-written MJCF: exid vs MuJoCo, largest torque difference %.3g (relative)\n",
+                worst);
+  }
+#endif
 }
 
 }  // namespace

@@ -59,6 +59,9 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     notes.push_back("rotor inertias (joints " + detail::joinNumbers(rotor) +
                     "): SDF has no joint armature");
   detail::leftOutOfEveryFormat(m, coupled, "SDF", &notes);
+  notes.push_back("gravity (" + vec3(m.gravity) +
+                  " m/s^2 in the base frame): an SDF model carries none, its world's <gravity> "
+                  "does");
 
   std::ostringstream x;
   x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);

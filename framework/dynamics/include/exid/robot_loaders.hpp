@@ -1,4 +1,5 @@
-// exid — robot description loaders: DH / modified-DH YAML tables and URDF (urdfdom).
+// exid — robot description loaders: DH / modified-DH YAML tables, URDF (urdfdom), MJCF (MuJoCo)
+// and SDFormat.
 //
 // Library exid_robots (robots/loaders). The file formats are documented in docs/robots.md.
 //
@@ -33,9 +34,10 @@ struct EXID_API LoadOptions {
   /// extension element, docs/robots.md), for a URDF that must stay as published. Empty: none.
   /// A URDF that has its own <exid> element and a companion is an error.
   std::filesystem::path urdf_extension;
-  /// URDF only: use <dynamics damping friction> as the nominal viscous and Coulomb friction.
-  /// Off by default: those are usually a simulator's (Gazebo's) values, not identified ones;
-  /// the model's notes then say that they were ignored.
+  /// URDF, SDF and MJCF: use the joints' damping and friction (URDF and SDF <dynamics>; MJCF
+  /// damping, frictionloss and armature) as the nominal viscous and Coulomb friction (and rotor
+  /// inertia). Off by default: those are usually a simulator's values, not identified ones; the
+  /// model's notes then say that they were ignored.
   bool urdf_dynamics_as_friction = false;
 };
 
@@ -51,7 +53,26 @@ EXID_API RobotModel loadUrdf(const std::filesystem::path& file, const LoadOption
 EXID_API RobotModel loadUrdfString(const std::string& xml, const std::string& source,
                                    const LoadOptions& options = {});
 
-/// Dispatches on the extension: .urdf / .xml -> loadUrdf, .yaml / .yml -> loadDhYaml.
+/// An MJCF file (MuJoCo's XML): one body tree in <worldbody> with <inertial> elements, hinge and
+/// slide joints (one per body), <default> classes for joints and motors, gravity from <option>,
+/// a motor's ctrlrange times its gear as the torque limit, the site "exid_sensor" as the sensor
+/// frame. Refused with a message: free and ball joints, several joints in one body, <include>,
+/// equality constraints and tendons, joint springs, inertia computed from geoms. See
+/// docs/robots.md.
+EXID_API RobotModel loadMjcf(const std::filesystem::path& file, const LoadOptions& options = {});
+EXID_API RobotModel loadMjcfString(const std::string& xml, const std::string& source,
+                                   const LoadOptions& options = {});
+
+/// An SDFormat 1.5-1.9 file: one <model> fixed to the world by one fixed joint, revolute,
+/// continuous, prismatic and fixed joints, poses through the frame graph (relative_to, <frame>,
+/// expressed_in), the frame "exid_sensor" as the sensor frame. SDF carries no gravity (the
+/// default is used; the model's notes say so). See docs/robots.md.
+EXID_API RobotModel loadSdf(const std::filesystem::path& file, const LoadOptions& options = {});
+EXID_API RobotModel loadSdfString(const std::string& xml, const std::string& source,
+                                  const LoadOptions& options = {});
+
+/// Dispatches on the extension: .urdf -> loadUrdf, .sdf -> loadSdf, .mjcf -> loadMjcf, .xml ->
+/// by its root element (<mujoco>: MJCF, <sdf>: SDF, else URDF), .yaml / .yml -> loadDhYaml.
 EXID_API RobotModel loadRobotFile(const std::filesystem::path& file,
                                   const LoadOptions& options = {});
 

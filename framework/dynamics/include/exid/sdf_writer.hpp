@@ -10,8 +10,8 @@
 // (lower, upper, effort, velocity when given), <dynamics> (damping = viscous friction, friction
 // = Coulomb friction: the drive terms that a single joint carries). A <frame> "exid_sensor" at
 // the sensor frame. What SDF cannot carry (rotor inertias, drive offsets, coupled drives,
-// acceleration limits, the transmission, collision geometry) is listed in `left_out` and in a
-// comment of the file.
+// acceleration limits, the transmission, collision geometry, gravity) is listed in `left_out` and
+// in a comment of the file.
 #pragma once
 
 #include <string>
