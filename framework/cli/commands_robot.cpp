@@ -3,9 +3,11 @@
 #include <fmt/format.h>
 
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <iostream>
 #include <memory>
+#include <set>
 #include <sstream>
 
 #include "commands.hpp"
@@ -13,6 +15,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/input_file.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/io.hpp"
 #include "exid/mjcf_writer.hpp"
@@ -25,16 +28,58 @@ namespace exid::cli {
 
 namespace fs = std::filesystem;
 
-/// ROBOT is a robot plugin name or a path to a .urdf or DH .yaml file (a .xacro file goes to
-/// the URDF loader, which says how to expand it; every command taking a robot comes here).
+namespace {
+
+/// The name of the first element of XML text (after the declaration, comments and a DOCTYPE),
+/// "" when there is none: which loader an .xml robot file goes to.
+std::string xmlRootElement(const std::string& text) {
+  std::size_t i = 0;
+  while ((i = text.find('<', i)) != std::string::npos) {
+    if (text.compare(i, 4, "<!--") == 0) {
+      i = text.find("-->", i);
+    } else if (text.compare(i, 2, "<?") == 0 || text.compare(i, 2, "<!") == 0) {
+      i = text.find('>', i);
+    } else {
+      std::size_t e = i + 1;
+      while (e < text.size() &&
+             (std::isalnum(static_cast<unsigned char>(text[e])) || text[e] == '_' ||
+              text[e] == ':' || text[e] == '-' || text[e] == '.'))
+        ++e;
+      return text.substr(i + 1, e - i - 1);
+    }
+    if (i == std::string::npos) break;
+  }
+  return "";
+}
+
+/// The robot plugin that reads a description file, by its extension (an .xml file by its root
+/// element: <mujoco> MJCF, <sdf> SDF, else URDF); "" for none.
+std::string robotPluginOfFile(const fs::path& p) {
+  const std::string ext = p.extension().string();
+  if (ext == ".urdf" || ext == ".xacro") return "urdf";
+  if (ext == ".yaml" || ext == ".yml") return "dh";
+  if (ext == ".sdf") return "sdf";
+  if (ext == ".mjcf") return "mjcf";
+  if (ext != ".xml") return "";
+  const std::string root = xmlRootElement(readInputFile(p, "robot", kMaxRobotFileBytes));
+  return root == "mujoco" ? "mjcf" : root == "sdf" ? "sdf" : "urdf";
+}
+
+}  // namespace
+
+/// ROBOT is a robot plugin name or a path to a robot description file (.urdf, .sdf, .mjcf, .xml,
+/// DH .yaml; a .xacro file goes to the URDF loader, which says how to expand it; every command
+/// taking a robot comes here).
 std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::string& robot) {
   std::string type = robot, params = "{}";
   const fs::path p(robot);
   const std::string ext = p.extension().string();
-  if (ext == ".urdf" || ext == ".xacro" || ext == ".yaml" || ext == ".yml") {
+  static const std::set<std::string> kFiles = {".urdf", ".xacro", ".yaml", ".yml",
+                                               ".sdf",  ".mjcf",  ".xml"};
+  if (kFiles.count(ext)) {
     if (!fs::exists(p)) throw Error(fmt::format("{}: no such robot file", robot));
     checkInputFile(p, "robot", kMaxRobotFileBytes);  // a FIFO or a device: refused, not opened
-    type = ext == ".yaml" || ext == ".yml" ? "dh" : "urdf";
+    type = robotPluginOfFile(p);
     std::string esc;  // (a quote in the path doubled: a YAML single-quoted scalar)
     for (char ch : fs::absolute(p).string())
       esc += ch == '\'' ? std::string("''") : std::string(1, ch);
@@ -54,9 +99,9 @@ std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::stri
   }
   if (!reg.find(PluginKind::Robot, type) && fs::exists(p))
     throw Error(
-        fmt::format("{}: a file, but not a robot description exid reads (expected a .urdf "
-                    "file, a DH .yaml table, or a .xacro file expanded by xacro first), "
-                    "nor a robot plugin's name",
+        fmt::format("{}: a file, but not a robot description exid reads (expected a .urdf, "
+                    ".sdf, .mjcf or .xml file, a DH .yaml table, or a .xacro file expanded by "
+                    "xacro first), nor a robot plugin's name",
                     robot));
   const PluginInfo& info = reg.get(PluginKind::Robot, type);
   ParamSet ps = resolveParams(info, params, "robot " + type, fs::current_path());
