@@ -199,10 +199,15 @@ TEST(Validation, EveryCommandTakingARobotGivesTheXacroHint) {
   EXPECT_EQ(r.code, 0) << r.out;
   EXPECT_FALSE(contains(r.out, "xacro")) << r.out;
   // A file that is no robot description at all is not an "unknown robot" plugin either.
-  std::ofstream(dir / "arm.sdf") << "<sdf/>\n";
-  const CmdResult s = runExid({"robot", "info", "arm.sdf"}, dir);
+  std::ofstream(dir / "arm.stl") << "solid arm\n";
+  const CmdResult s = runExid({"robot", "info", "arm.stl"}, dir);
   EXPECT_EQ(s.code, 2) << s.out;
-  EXPECT_TRUE(contains(s.out, "arm.sdf: a file, but not a robot description")) << s.out;
+  EXPECT_TRUE(contains(s.out, "arm.stl: a file, but not a robot description")) << s.out;
+  // An SDF file goes to the SDF loader, which says what is wrong with it.
+  std::ofstream(dir / "arm.sdf") << "<sdf/>\n";
+  const CmdResult f = runExid({"robot", "info", "arm.sdf"}, dir);
+  EXPECT_EQ(f.code, 2) << f.out;
+  EXPECT_TRUE(contains(f.out, "arm.sdf:1: <sdf> attribute 'version'")) << f.out;
   fs::remove_all(dir);
 }
 
