@@ -47,12 +47,32 @@ def _params_text(params: Optional[Mapping[str, Any]]) -> str:
     return json.dumps(dict(params), default=default)
 
 
-_FILE_TYPES = {".urdf": "urdf", ".yaml": "dh", ".yml": "dh"}
+_FILE_TYPES = {
+    ".urdf": "urdf",
+    ".yaml": "dh",
+    ".yml": "dh",
+    ".sdf": "sdf",
+    ".mjcf": "mjcf",
+    ".xml": None,  # by its root element
+}
+
+
+def _xml_root(path: str) -> str:
+    """The root element's name of an XML file ("" when it is not XML)."""
+    import xml.etree.ElementTree as ET
+
+    try:
+        for _, elem in ET.iterparse(path, events=("start",)):
+            return elem.tag
+    except ET.ParseError:
+        pass
+    return ""
 
 
 class Robot:
-    """A robot: a robot plugin by name (``"panda"``, ``"puma560"``, ...), a ``.urdf`` file or a
-    DH ``.yaml`` file, or a study's robot section (``{"type": "urdf", "params": {...}}``).
+    """A robot: a robot plugin by name (``"panda"``, ``"puma560"``, ...), a robot file (``.urdf``,
+    ``.sdf``, ``.mjcf``, ``.xml`` by its root element: ``<mujoco>`` MJCF, ``<sdf>`` SDF, else
+    URDF; DH ``.yaml``), or a study's robot section (``{"type": "urdf", "params": {...}}``).
 
     ``params`` are the robot plugin's parameters (``exid plugins info urdf``); for a file they
     are added to ``file``. ``model`` and ``model_params`` choose the observation model whose
@@ -91,6 +111,9 @@ class Robot:
                 if not os.path.exists(path):
                     raise _exid.Error(f"{text}: no such robot file")
                 kind = _FILE_TYPES[ext]
+                if kind is None:
+                    root = _xml_root(path)
+                    kind = "mjcf" if root == "mujoco" else "sdf" if root == "sdf" else "urdf"
                 params = {"file": os.path.abspath(path), **params}
             else:
                 kind = text
@@ -112,7 +135,7 @@ class Robot:
 
     @property
     def type(self) -> str:
-        """The robot plugin that built it (``urdf`` and ``dh`` for files)."""
+        """The robot plugin that built it (``urdf``, ``sdf``, ``mjcf`` and ``dh`` for files)."""
         return self._r.type
 
     @property

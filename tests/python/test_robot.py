@@ -191,3 +191,37 @@ def test_plugins_listed():
     assert {"panda", "puma560", "urdf", "dh"} <= names
     with pytest.raises(exid.Error, match="unknown plugin kind"):
         exid.plugins("robots")
+
+
+_MJCF = """<mujoco model="two"><compiler angle="radian"/><worldbody>
+<body name="a" pos="0 0 0.3"><joint name="j1" axis="0 0 1"/>
+<inertial pos="0.1 0 0" mass="2" diaginertia="0.01 0.02 0.02"/>
+<body name="b" pos="0.4 0 0"><joint name="j2" axis="0 1 0"/>
+<inertial pos="0.15 0 0" mass="1" diaginertia="0.005 0.01 0.01"/></body></body>
+</worldbody></mujoco>"""
+
+_SDF = """<sdf version="1.9"><model name="two">
+<link name="base"/><joint name="fix" type="fixed"><parent>world</parent><child>base</child></joint>
+<link name="a"><pose>0 0 0.3 0 0 0</pose><inertial><pose>0.1 0 0 0 0 0</pose><mass>2</mass>
+<inertia><ixx>0.01</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0.02</iyy><iyz>0</iyz><izz>0.02</izz></inertia></inertial></link>
+<link name="b"><pose relative_to="a">0.4 0 0 0 0 0</pose><inertial><pose>0.15 0 0 0 0 0</pose><mass>1</mass>
+<inertia><ixx>0.005</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0.01</iyy><iyz>0</iyz><izz>0.01</izz></inertia></inertial></link>
+<joint name="j1" type="continuous"><parent>base</parent><child>a</child><axis><xyz>0 0 1</xyz></axis></joint>
+<joint name="j2" type="continuous"><parent>a</parent><child>b</child><axis><xyz>0 1 0</xyz></axis></joint>
+</model></sdf>"""
+
+
+def test_mjcf_and_sdf_files_give_the_same_dynamics(tmp_path):
+    (tmp_path / "two.mjcf").write_text(_MJCF)
+    (tmp_path / "two.sdf").write_text(_SDF)
+    (tmp_path / "mj.xml").write_text(_MJCF)
+    (tmp_path / "sd.xml").write_text(_SDF)
+    robots = {f: exid.Robot(f, base_dir=tmp_path) for f in ["two.mjcf", "two.sdf", "mj.xml", "sd.xml"]}
+    assert robots["two.mjcf"].type == "mjcf" and robots["mj.xml"].type == "mjcf"
+    assert robots["two.sdf"].type == "sdf" and robots["sd.xml"].type == "sdf"
+    rng = np.random.default_rng(3)
+    q, qd, qdd = (rng.uniform(-1, 1, (20, 2)) for _ in range(3))
+    ref = robots["two.mjcf"].rnea(q, qd, qdd)
+    assert np.max(np.abs(ref)) > 1.0
+    for r in robots.values():
+        close(r.rnea(q, qd, qdd), ref, rtol=1e-12, atol=1e-12)
