@@ -28,6 +28,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
@@ -280,6 +281,14 @@ class SimulateExperiment : public exid::Experiment {
   void plantTerms(const VectorXd& qm, const VectorXd& qdm, MatrixXd* Mm, VectorXd* hm) {
     const exid::RobotModel& R = truth_;
     VectorXd q, qd;
+    if (R.hasLoops()) {
+      // M_a = G^T M G, h_a = G^T tau_tree(q, qd, g) (g = the acceleration bias G'qd_a)
+      MatrixXd G;
+      VectorXd g;
+      exid::closedChainState(R, qm, &qdm, nullptr, &q, &qd, nullptr, &G, &g);
+      *Mm = G.transpose() * exid::massMatrix(R, *data_, q) * G;
+      *hm = G.transpose() * exid::inverseDynamics(R, *data_, q, qd, g);
+    } else {
     exid::measuredToJoint(R, qm, qdm, qdm, &q, &qd, nullptr);
     const MatrixXd M = exid::massMatrix(R, *data_, q);
     const VectorXd h = exid::inverseDynamics(R, *data_, q, qd, VectorXd::Zero(n_));
@@ -289,6 +298,7 @@ class SimulateExperiment : public exid::Experiment {
     } else {
       *Mm = M;
       *hm = h;
+    }
     }
     if (!drive_terms_) return;
     for (int j = 0; j < n_; ++j) {

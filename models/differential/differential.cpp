@@ -224,7 +224,7 @@ Eigen::VectorXd DifferentialModel::fullTruth(const exid::PlantTruth& plant) cons
     return j.size() == 1 || static_cast<int>(j.size()) == n;
   };
   if (!plant.drive_terms) {
-    out.segment(10 * n, P0 - 10 * n).setZero();
+    out.segment(R.numInertialParameters(), P0 - R.numInertialParameters()).setZero();
     out.segment(P0, E * n).setZero();
   }
   std::vector<double> v;
@@ -250,7 +250,7 @@ std::vector<exid::NonlinearParameter> DifferentialModel::nonlinearParameters() c
   for (const Slot& sl : slots()) {
     const int j = sl.joint, c0 = P0 + E * j;
     // a velocity of the measured coordinate: m/s for a prismatic joint measured directly
-    const auto u = static_cast<std::size_t>(j);
+    const auto u = static_cast<std::size_t>(j < robot().dof() ? robot().actuatedJoint(j) : j);
     const char* unit = !robot().hasTransmission() && u < robot().bodies.size() &&
                                robot().bodies[u].type == exid::JointType::Prismatic
                            ? "m/s"

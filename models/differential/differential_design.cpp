@@ -8,6 +8,7 @@
 #include <cmath>
 
 #include "differential.hpp"
+#include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
@@ -209,8 +210,15 @@ Eigen::VectorXd DifferentialModel::payloadTorque(
     const Eigen::Ref<const Eigen::RowVectorXd>& qddm) const {
   const exid::RobotModel& R = robot();
   Eigen::VectorXd q, qd, qdd;
+  Eigen::MatrixXd Yp(R.numJoints(), 10);
+  if (R.hasLoops()) {  // tau_a = G^T tau_tree
+    Eigen::MatrixXd G;
+    const Eigen::VectorXd a = qm.transpose(), ad = qdm.transpose(), add = qddm.transpose();
+    exid::closedChainState(R, a, &ad, &add, &q, &qd, &qdd, &G, nullptr);
+    exid::payloadTorqueRegressor(R, data, q, qd, qdd, Yp);
+    return G.transpose() * (Yp * phi);
+  }
   exid::measuredToJoint(R, qm.transpose(), qdm.transpose(), qddm.transpose(), &q, &qd, &qdd);
-  Eigen::MatrixXd Yp(R.dof(), 10);
   exid::payloadTorqueRegressor(R, data, q, qd, qdd, Yp);
   const Eigen::VectorXd t = Yp * phi;
   if (R.hasTransmission()) return R.transmission.transpose() * t;

@@ -160,6 +160,7 @@ class IntegralModel : public exid::ObservationModel {
                      exid::Samples* grad) const override {
     const exid::RobotModel& Rb = robot();
     const int n = Rb.dof(), K = s.size(), P = exid::numParameters(Rb, cols_), nd = cols_.count();
+    const int ni = Rb.numInertialParameters();  // (the tree's bodies; a closed chain's too)
     const std::vector<Window> win = windows(s.t, "model 'integral' (trajectory samples)");
     const int R = static_cast<int>(win.size());
     exid::check(dW.rows() == R && dW.cols() == P,
@@ -182,12 +183,12 @@ class IntegralModel : public exid::ObservationModel {
       qm = s.q.row(k).transpose();
       qdm = s.qd.row(k).transpose();
       exid::measuredToJoint(Rb, qm, qdm, qdm, &q, &qd, nullptr);
-      const Eigen::RowVectorXd G = dE.row(k).head(10 * n);
+      const Eigen::RowVectorXd G = dE.row(k).head(ni);
       exid::energyRegressorVjp(Rb, *data, q, qd, G, G, &gq, &gqd);
       exid::models::jointGradToMeasured(Rb, &gq);
       exid::models::jointGradToMeasured(Rb, &gqd);
       for (int j = 0; j < n; ++j) {
-        int c = 10 * n + nd * j;
+        int c = ni + nd * j;
         const double v = qdm[j];
         if (cols_.rotor_inertia) gqd[j] += dE(k, c++) * v;
         if (cols_.coulomb) gqd[j] += dF(k, c++) * exid::coulombSign(v);
@@ -317,19 +318,20 @@ class IntegralModel : public exid::ObservationModel {
   Eigen::MatrixXd designFromWindows(const exid::Samples& s, const std::vector<Window>& win) const {
     const exid::RobotModel& Rb = robot();
     const int n = Rb.dof(), K = s.size(), P = exid::numParameters(Rb, cols_), nd = cols_.count();
+    const int ni = Rb.numInertialParameters();  // (the tree's bodies; a closed chain's too)
     // Per sample: energy part E (inertial, Ia, OFF columns) and friction integrands F.
     Eigen::MatrixXd E = Eigen::MatrixXd::Zero(K, P), F = Eigen::MatrixXd::Zero(K, P);
     auto data = exid::makeDynamicsData(Rb);
     Eigen::VectorXd qm, qdm, q, qd;
-    Eigen::RowVectorXd kin(10 * n), pot(10 * n);
+    Eigen::RowVectorXd kin(ni), pot(ni);
     for (int k = 0; k < K; ++k) {
       qm = s.q.row(k).transpose();
       qdm = s.qd.row(k).transpose();
       exid::measuredToJoint(Rb, qm, qdm, qdm, &q, &qd, nullptr);
       exid::energyRegressor(Rb, *data, q, qd, kin, pot);
-      E.row(k).head(10 * n) = kin + pot;
+      E.row(k).head(ni) = kin + pot;
       for (int j = 0; j < n; ++j) {
-        int c = 10 * n + nd * j;
+        int c = ni + nd * j;
         const double v = qdm[j];
         if (cols_.rotor_inertia) E(k, c++) = 0.5 * v * v;
         if (cols_.coulomb) F(k, c++) = std::abs(v);

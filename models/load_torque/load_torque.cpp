@@ -82,6 +82,10 @@ class LoadTorqueModel : public exid::ObservationModel {
   Eigen::MatrixXd fullDesign(const exid::Samples& s) const override {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
+    exid::check(!R.hasLoops(), fmt::format("model 'load_torque': robot '{}' is a closed chain; "
+                                           "this model is not implemented for loop-closure "
+                                           "joints (use 'differential')",
+                                           R.name));
     exid::models::requireSamples(s, n, true, "model 'load_torque'");
     Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, 10);
     Eigen::MatrixXd Yp(n, 10), Ym(n, 10);

@@ -20,7 +20,7 @@ void reportWarning(const LoadOptions& options, const std::string& message) {
 }
 
 void checkModelPhysical(const RobotModel& model, const LoadOptions& options) {
-  for (int i = 0; i < model.dof(); ++i) {
+  for (int i = 0; i < model.numJoints(); ++i) {
     const Body& b = model.bodies[static_cast<size_t>(i)];
     std::vector<std::string> rules;
     const InertiaCheck c = checkPhysical(b.inertia);

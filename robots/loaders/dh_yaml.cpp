@@ -2,6 +2,7 @@
 #include <yaml-cpp/yaml.h>
 
 #include <cmath>
+#include <algorithm>
 #include <map>
 #include <set>
 #include <sstream>
@@ -368,11 +369,106 @@ int readParent(const Reader& r, const YAML::Node& L, const std::string& lw, int 
   return parent;
 }
 
+// Closed kinematic chains (docs/robots.md, "Closed chains"): the loop-closure (cut) joints, the
+// actuated joints and the reference configuration. Limits and drives become per actuated joint
+// (the passive joints' limits are kept as the tree's).
+void readClosedChain(const Reader& r, const YAML::Node& C, const YAML::Node& links,
+                     const std::map<std::string, int>& link_index, RobotModel* model) {
+  const std::string w = "closed_chain";
+  r.requireMap(C, w, {"loops", "actuated", "reference", "reference_deg", "notes"});
+  if (!C["loops"] || !C["loops"].IsSequence() || C["loops"].size() == 0)
+    r.fail(C, w, "missing or empty 'loops' (the list of loop-closure joints)");
+  if (!C["actuated"] || !C["actuated"].IsSequence() || C["actuated"].size() == 0)
+    r.fail(C, w, "missing or empty 'actuated' (the names of the actuated joints)");
+  const int n = model->numJoints();
+  auto linkOf = [&](const YAML::Node& v, const std::string& where) {
+    const std::string l = r.text(v, where);
+    if (l == "base") return -1;
+    auto it = link_index.find(l);
+    if (it == link_index.end())
+      r.fail(v, where, "unknown link '" + l + "' (expected a link of 'links' or 'base')");
+    return it->second;
+  };
+  const YAML::Node L = C["loops"];
+  for (std::size_t k = 0; k < L.size(); ++k) {
+    const YAML::Node J = L[k];
+    const std::string lw = w + ".loops[" + std::to_string(k) + "]";
+    r.requireMap(J, lw, {"name", "type", "link_a", "link_b", "pose_a", "pose_b", "axis", "notes"});
+    LoopJoint lj;
+    lj.name = J["name"] ? r.text(J["name"], lw + ".name") : "loop" + std::to_string(k + 1);
+    lj.where = r.source() + ":" + std::to_string(J.Mark().line + 1) + " (" + lw + ")";
+    const std::string type = J["type"] ? r.text(J["type"], lw + ".type") : "revolute";
+    if (type == "revolute")
+      lj.kind = LoopJoint::Kind::Revolute;
+    else if (type == "spherical")
+      lj.kind = LoopJoint::Kind::Spherical;
+    else
+      r.fail(J["type"], lw + ".type", "expected 'revolute' or 'spherical', found '" + type + "'");
+    if (!J["link_a"] || !J["link_b"])
+      r.fail(J, lw, "missing 'link_a' or 'link_b' (the two links the loop-closure joint joins)");
+    lj.body_a = linkOf(J["link_a"], lw + ".link_a");
+    lj.body_b = linkOf(J["link_b"], lw + ".link_b");
+    if (lj.body_a == lj.body_b) r.fail(J, lw, "link_a and link_b are the same link");
+    for (const char* side : {"pose_a", "pose_b"})
+      if (const YAML::Node P = J[side]) {
+        r.requireMap(P, lw + "." + side, {"xyz", "rpy", "rpy_deg"});
+        (std::string(side) == "pose_a" ? lj.pose_a : lj.pose_b) =
+            readPose(r, P, lw + "." + side);
+      }
+    if (J["axis"]) {
+      const Eigen::Vector3d a = r.vector(J["axis"], lw + ".axis", 3);
+      if (!(a.norm() > 1e-12)) r.fail(J["axis"], lw + ".axis", "axis must not be zero");
+      lj.axis = a.normalized();
+    }
+    model->closed.loops.push_back(lj);
+  }
+  std::map<std::string, int> joint_index;
+  for (int i = 0; i < n; ++i) joint_index[model->bodies[static_cast<std::size_t>(i)].joint_name] = i;
+  const YAML::Node A = C["actuated"];
+  for (std::size_t k = 0; k < A.size(); ++k) {
+    const std::string aw = w + ".actuated[" + std::to_string(k) + "]";
+    const std::string j = r.text(A[k], aw);
+    auto it = joint_index.find(j);
+    if (it == joint_index.end()) r.fail(A[k], aw, "unknown joint '" + j + "'");
+    for (int a : model->closed.actuated)
+      if (a == it->second) r.fail(A[k], aw, "joint '" + j + "' named twice");
+    model->closed.actuated.push_back(it->second);
+  }
+  if (C["reference"] && C["reference_deg"])
+    r.fail(C, w, "give either 'reference' or 'reference_deg', not both");
+  if (C["reference"]) model->closed.reference = r.vector(C["reference"], w + ".reference", n);
+  if (C["reference_deg"]) {
+    model->closed.reference = r.vector(C["reference_deg"], w + ".reference_deg", n);
+    for (int i = 0; i < n; ++i)  // degrees for revolute joints, metres for prismatic ones
+      if (model->bodies[static_cast<std::size_t>(i)].type == JointType::Revolute)
+        model->closed.reference[i] *= kDeg;
+  }
+  // limits and drives per actuated joint; a drive on a passive joint is refused
+  model->closed.tree_limits = model->limits;
+  std::vector<JointLimits> lim;
+  std::vector<Drive> drv;
+  for (int a : model->closed.actuated) {
+    lim.push_back(model->limits[static_cast<std::size_t>(a)]);
+    drv.push_back(model->drives[static_cast<std::size_t>(a)]);
+  }
+  for (int i = 0; i < n; ++i) {
+    const YAML::Node Li = links[static_cast<std::size_t>(i)];
+    if (Li["drive"] && std::find(model->closed.actuated.begin(), model->closed.actuated.end(),
+                                 i) == model->closed.actuated.end())
+      r.fail(Li["drive"], "links[" + std::to_string(i) + "].drive",
+             "joint '" + model->bodies[static_cast<std::size_t>(i)].joint_name +
+                 "' is passive (not in closed_chain.actuated): a drive belongs to an actuated "
+                 "joint");
+  }
+  model->limits = lim;
+  model->drives = drv;
+}
+
 RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& options) {
   if (!root.IsDefined() || root.IsNull()) r.fail(root, "", "empty document");
   r.requireMap(root, "top level",
                {"name", "description", "source", "sources", "notes", "convention", "gravity",
-                "links", "transmission", "sensor", "base_collision"});
+                "links", "transmission", "sensor", "base_collision", "closed_chain"});
 
   RobotModel model;
   model.source = r.source();
@@ -451,6 +547,12 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
   }
 
   if (const YAML::Node T = root["transmission"]) readTransmission(r, T, &model);
+  if (const YAML::Node C = root["closed_chain"]) {
+    if (root["transmission"])
+      r.fail(C, "closed_chain",
+             "a closed chain with a 'transmission' is not supported (give one or the other)");
+    readClosedChain(r, C, links, link_index, &model);
+  }
 
   if (const YAML::Node S = root["sensor"]) readSensor(r, S, link_index, &model);
   readCollision(r, root["base_collision"], "base_collision", -1, &model);

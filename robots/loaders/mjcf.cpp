@@ -309,7 +309,7 @@ struct Reader {
     } else if (armature != 0.0 || damping != 0.0 || friction != 0.0) {
       ignored_dynamics.push_back(jname);
     }
-    const int index = m.dof();
+    const int index = m.numJoints();
     m.bodies.push_back(b);
     m.limits.push_back(lim);
     m.drives.push_back(drv);

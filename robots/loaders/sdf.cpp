@@ -253,7 +253,7 @@ struct Reader {
         l = parent_joint[l]->parent;
       if (!parent_joint.count(l) || parent_joint[l]->parent == "world")
         fail(f.e, "the exid_sensor frame must be on a moving link");
-      for (int b = 0; b < m.dof(); ++b)
+      for (int b = 0; b < m.numJoints(); ++b)
         if (m.bodies[static_cast<std::size_t>(b)].name == l) {
           m.sensor_body = b;
           m.sensor_pose = inModel(l).inverse() * inModel("exid_sensor");
@@ -319,7 +319,7 @@ struct Reader {
         ignored_dynamics.push_back(j.name);
       }
     }
-    const int index = m.dof();
+    const int index = m.numJoints();
     m.bodies.push_back(b);
     m.limits.push_back(lim);
     m.drives.push_back(drv);

@@ -369,6 +369,10 @@ CollisionModel::CollisionModel(const RobotModel& robot, const CollisionOptions& 
       std::isfinite(o.margin_m) && o.margin_m >= 0,
       fmt::format("collision: margin_m must be a finite distance >= 0 [m], found {}", o.margin_m));
   m.margin = o.margin_m;
+  check(!robot.hasLoops(),
+        fmt::format("collision: robot '{}' is a closed chain; collision avoidance is not "
+                    "implemented for loop-closure joints (expected a kinematic tree)",
+                    robot.name));
   const int n = robot.dof();
   if (robot.hasTransmission()) {
     m.T = robot.transmission;

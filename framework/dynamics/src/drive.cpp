@@ -4,6 +4,7 @@
 #include <Eigen/LU>
 #include <string>
 
+#include "exid/closed_chain.hpp"
 #include "exid/error.hpp"
 #include "internal.hpp"
 
@@ -18,6 +19,27 @@ void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* wh
   if (x.size() != m.dof())  // the message is built only on failure (hot path)
     throw Error(std::string(fn) + ": " + what + " has " + std::to_string(x.size()) +
                 " entries (expected " + std::to_string(m.dof()) + ")");
+}
+
+// A closed chain's actuated torque (G^T tau_tree) and mass matrix (G^T M G) with parameters pi
+// (null: the model's); derivatives in qm and qdm are not available (they need dG/dqa).
+void closedTorque(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd* pi,
+                  const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                  const Eigen::VectorXd& qddm, Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq,
+                  Eigen::MatrixXd* dqd, Eigen::MatrixXd* dqdd, const char* fn) {
+  if (dq || dqd)
+    throw Error(std::string(fn) + ": robot '" + model.name +
+                "' is a closed chain; the torque's derivatives with respect to the measured "
+                "positions and velocities are not implemented for closed chains (only the mass "
+                "matrix, with respect to the accelerations)");
+  checkMeasured(model, qm, "qm", fn);
+  checkMeasured(model, qdm, "qdm", fn);
+  checkMeasured(model, qddm, "qddm", fn);
+  Eigen::VectorXd q, qd, qdd;
+  Eigen::MatrixXd Gm;
+  closedChainState(model, qm, &qdm, &qddm, &q, &qd, &qdd, &Gm, nullptr);
+  *tau_m = Gm.transpose() * inverseDynamics(model, data, q, qd, qdd, pi);
+  if (dqdd) *dqdd = Gm.transpose() * massMatrix(model, data, q, pi) * Gm;
 }
 
 }  // namespace
@@ -59,8 +81,8 @@ int numParameters(const RobotModel& model, const DriveColumns& cols) {
 Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols) {
   const int n = model.dof();
   Eigen::VectorXd v(numParameters(model, cols));
-  v.head(10 * n) = model.inertialParameters();
-  int c = 10 * n;
+  v.head(model.numInertialParameters()) = model.inertialParameters();
+  int c = model.numInertialParameters();
   for (int j = 0; j < n; ++j) {
     const Drive dr =
         j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
@@ -75,6 +97,14 @@ Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& col
 void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
                      const Eigen::VectorXd& qddm, Eigen::VectorXd* q, Eigen::VectorXd* qd,
                      Eigen::VectorXd* qdd) {
+  if (model.hasLoops()) {
+    checkMeasured(model, qm, "qm", "measuredToJoint");
+    if (qd) checkMeasured(model, qdm, "qdm", "measuredToJoint");
+    if (qdd) checkMeasured(model, qddm, "qddm", "measuredToJoint");
+    closedChainState(model, qm, qd || qdd ? &qdm : nullptr, qdd ? &qddm : nullptr, q, qd, qdd,
+                     nullptr, nullptr);
+    return;
+  }
   const bool T = model.hasTransmission();
   if (q) {
     checkMeasured(model, qm, "qm", "measuredToJoint");
@@ -103,6 +133,19 @@ void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm, const E
 void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                      const Eigen::VectorXd& qdd, Eigen::VectorXd* qm, Eigen::VectorXd* qdm,
                      Eigen::VectorXd* qddm) {
+  if (model.hasLoops()) {
+    const int nt = model.numJoints(), n = model.dof();
+    const Eigen::VectorXd* in[3] = {&q, &qd, &qdd};
+    Eigen::VectorXd* out[3] = {qm, qdm, qddm};
+    for (int w = 0; w < 3; ++w) {
+      if (!out[w]) continue;
+      check(in[w]->size() == nt, "jointToMeasured: tree coordinates of robot '" + model.name +
+                                     "' must have " + std::to_string(nt) + " entries");
+      out[w]->resize(n);
+      for (int k = 0; k < n; ++k) (*out[w])[k] = (*in[w])[model.actuatedJoint(k)];
+    }
+    return;
+  }
   if (!model.hasTransmission()) {
     if (qm)
       *qm = model.transmission_offset.size() == q.size()
@@ -140,7 +183,18 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
   checkMeasured(model, qm, "qm", "actuatorRegressor");
   checkMeasured(model, qdm, "qdm", "actuatorRegressor");
   checkMeasured(model, qddm, "qddm", "actuatorRegressor");
-  if (model.hasTransmission() || model.transmission_offset.size() == n) {
+  const int nt = model.numJoints();
+  if (model.hasLoops()) {
+    Eigen::VectorXd& q = detail::scratchVector(data, 0);
+    Eigen::VectorXd& qd = detail::scratchVector(data, 1);
+    Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
+    Eigen::MatrixXd& Gm = detail::scratchMatrix(data, 1);
+    closedChainState(model, qm, &qdm, &qddm, &q, &qd, &qdd, &Gm, nullptr);
+    Eigen::MatrixXd& Yj = detail::scratchMatrix(data, 0);
+    Yj.resize(nt, 10 * nt);
+    torqueRegressor(model, data, q, qd, qdd, Yj);
+    Y.leftCols(10 * nt).noalias() = Gm.transpose() * Yj;  // tau_a = G^T tau_tree
+  } else if (model.hasTransmission() || model.transmission_offset.size() == n) {
     Eigen::VectorXd& q = detail::scratchVector(data, 0);
     Eigen::VectorXd& qd = detail::scratchVector(data, 1);
     Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
@@ -162,7 +216,7 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
   if (k == 0) return;
   Y.rightCols(k * n).setZero();
   for (int j = 0; j < n; ++j) {
-    int c = 10 * n + k * j;
+    int c = 10 * nt + k * j;
     if (cols.rotor_inertia) Y(j, c++) = qddm[j];
     if (cols.coulomb) Y(j, c++) = sgn(qdm[j]);
     if (cols.viscous) Y(j, c++) = qdm[j];
@@ -175,6 +229,11 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
                           const Eigen::VectorXd& qddm, const Eigen::MatrixXd& G,
                           Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm) {
   const int n = model.dof();
+  if (model.hasLoops())
+    throw Error("actuatorRegressorVjp: robot '" + model.name +
+                "' is a closed chain; the regressor's gradient through the loop constraints is "
+                "not implemented (excitation design by gradient is not available for closed "
+                "chains)");
   check(G.rows() == n && G.cols() == numParameters(model, cols),
         "actuatorRegressorVjp: G must be n x numParameters(model, cols)");
   Eigen::VectorXd& q = detail::scratchVector(data, 0);
@@ -213,10 +272,19 @@ Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
                                const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm) {
   const int n = model.dof();
   Eigen::VectorXd q, qd, qdd;
-  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
-  const Eigen::VectorXd tau = inverseDynamics(model, data, q, qd, qdd);
-  Eigen::VectorXd tm =
-      model.hasTransmission() ? Eigen::VectorXd(model.transmission.transpose() * tau) : tau;
+  Eigen::VectorXd tm;
+  if (model.hasLoops()) {
+    checkMeasured(model, qm, "qm", "actuatorTorque");
+    checkMeasured(model, qdm, "qdm", "actuatorTorque");
+    checkMeasured(model, qddm, "qddm", "actuatorTorque");
+    Eigen::MatrixXd Gm;
+    closedChainState(model, qm, &qdm, &qddm, &q, &qd, &qdd, &Gm, nullptr);
+    tm = Gm.transpose() * inverseDynamics(model, data, q, qd, qdd);
+  } else {
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+    const Eigen::VectorXd tau = inverseDynamics(model, data, q, qd, qdd);
+    tm = model.hasTransmission() ? Eigen::VectorXd(model.transmission.transpose() * tau) : tau;
+  }
   for (int j = 0; j < n; ++j) {
     const Drive dr =
         j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<size_t>(j)] : Drive{};
@@ -238,10 +306,16 @@ void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
   Eigen::VectorXd& q = detail::scratchVector(data, 0);
   Eigen::VectorXd& qd = detail::scratchVector(data, 1);
   Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
-  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
   Eigen::VectorXd& tau = detail::scratchVector(data, 3);
+  if (model.hasLoops()) {
+    closedTorque(model, data, nullptr, qm, qdm, qddm, tau_m, dq, dqd, dqdd,
+                 "actuatorTorqueDerivatives");
+  } else {
+  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
   inverseDynamicsDerivatives(model, data, q, qd, qdd, nullptr, &tau, dq, dqd, dqdd);
-  if (model.hasTransmission()) {
+  }
+  if (model.hasLoops()) {
+  } else if (model.hasTransmission()) {
     const Eigen::MatrixXd& T = model.transmission;
     *tau_m = T.transpose() * tau;
     for (Eigen::MatrixXd* x : {dq, dqd, dqdd})
@@ -278,16 +352,21 @@ void actuatorTorqueWith(const RobotModel& model, DynamicsData& data, const Drive
   Eigen::VectorXd& q = detail::scratchVector(data, 0);
   Eigen::VectorXd& qd = detail::scratchVector(data, 1);
   Eigen::VectorXd& qdd = detail::scratchVector(data, 2);
-  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
   Eigen::VectorXd& tau = detail::scratchVector(data, 3);
-  const Eigen::VectorXd pi = params.head(10 * n);
-  if (dq || dqd) {
+  const int nt = model.numJoints();
+  const Eigen::VectorXd pi = params.head(10 * nt);
+  if (model.hasLoops()) {
+    closedTorque(model, data, &pi, qm, qdm, qddm, tau_m, dq, dqd, dqdd, "actuatorTorqueWith");
+  } else if (dq || dqd) {
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
     inverseDynamicsDerivatives(model, data, q, qd, qdd, &pi, &tau, dq, dqd, dqdd);
   } else {
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
     tau = inverseDynamics(model, data, q, qd, qdd, &pi);
     if (dqdd) *dqdd = massMatrix(model, data, q, &pi);
   }
-  if (model.hasTransmission()) {
+  if (model.hasLoops()) {
+  } else if (model.hasTransmission()) {
     const Eigen::MatrixXd& T = model.transmission;
     *tau_m = T.transpose() * tau;
     for (Eigen::MatrixXd* x : {dq, dqd, dqdd})
@@ -297,7 +376,7 @@ void actuatorTorqueWith(const RobotModel& model, DynamicsData& data, const Drive
   }
   const int k = cols.count();
   for (int j = 0; j < n && k > 0; ++j) {
-    int c = 10 * n + k * j;
+    int c = 10 * nt + k * j;
     if (cols.rotor_inertia) {
       (*tau_m)[j] += params[c] * qddm[j];
       if (dqdd) (*dqdd)(j, j) += params[c];

@@ -59,7 +59,7 @@ namespace detail {
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 void setup(const RobotModel& model, DynamicsData& d) {
-  const int n = model.dof();
+  const int n = model.numJoints();
   d.key = &model;
   d.n = n;
   d.J.assign(static_cast<size_t>(n), JointC{});

@@ -79,6 +79,11 @@ std::string inertial(const Body& b, std::vector<std::string>* raised) {
 
 std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
                       std::vector<std::string>* left_out) {
+  if (m.hasLoops())
+    throw Error("writing robot '" + m.name + "' as MJCF: it is a closed chain (" +
+                std::to_string(m.closed.loops.size()) +
+                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
+                "(expected a kinematic tree)");
   m.validateStructure();
   detail::requirePhysical(m, "MJCF");
   check(std::isfinite(opt.timestep_s) && opt.timestep_s > 0.0,

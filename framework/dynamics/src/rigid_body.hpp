@@ -182,14 +182,14 @@ namespace detail {
 void setup(const RobotModel& model, DynamicsData& d);
 
 inline void prepare(const RobotModel& model, DynamicsData& d) {
-  if (d.key != &model || d.n != model.dof()) setup(model, d);
+  if (d.key != &model || d.n != model.numJoints()) setup(model, d);
 }
 
 void checkSize(const Eigen::VectorXd& x, int n, const char* what, const char* fn);
 
 inline void checkState(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd* qd,
                        const Eigen::VectorXd* qdd, const char* fn) {
-  const int n = m.dof();
+  const int n = m.numJoints();
   checkSize(q, n, "q", fn);
   if (qd) checkSize(*qd, n, "qd", fn);
   if (qdd) checkSize(*qdd, n, "qdd", fn);

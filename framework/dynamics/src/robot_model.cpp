@@ -7,6 +7,7 @@
 #include <set>
 #include <sstream>
 
+#include "exid/closed_chain.hpp"
 #include "exid/error.hpp"
 
 namespace exid {
@@ -58,7 +59,7 @@ void checkRotation(const RobotModel& m, int i, const Eigen::Matrix3d& R, const c
 std::vector<std::string> RobotModel::inertialParameterNames() const {
   std::vector<std::string> names;
   names.reserve(static_cast<size_t>(numInertialParameters()));
-  for (int j = 0; j < dof(); ++j)
+  for (int j = 0; j < numJoints(); ++j)
     for (int k = 0; k < 10; ++k)
       names.push_back(std::string(kInertialNames[k]) + std::to_string(j + 1));
   return names;
@@ -66,12 +67,12 @@ std::vector<std::string> RobotModel::inertialParameterNames() const {
 
 Eigen::VectorXd RobotModel::inertialParameters() const {
   Eigen::VectorXd pi(numInertialParameters());
-  for (int j = 0; j < dof(); ++j) pi.segment<10>(10 * j) = bodies[static_cast<size_t>(j)].inertia;
+  for (int j = 0; j < numJoints(); ++j) pi.segment<10>(10 * j) = bodies[static_cast<size_t>(j)].inertia;
   return pi;
 }
 
 void RobotModel::validateStructure() const {
-  const int n = dof();
+  const int n = numJoints();
   if (n == 0)
     throw Error(where(*this) + ": the model has no moving body (expected at least one joint)");
   std::set<std::string> body_names, joint_names;
@@ -102,39 +103,45 @@ void RobotModel::validateStructure() const {
     checkRotation(*this, i, b.pre.R, "pre");
     checkRotation(*this, i, b.post.R, "post");
   }
-  if (static_cast<int>(limits.size()) != n) {
+  {
+  const int nm = dof();  // limits, drives, transmission: per measured coordinate
+  if (static_cast<int>(limits.size()) != nm) {
     std::ostringstream os;
     os << where(*this) << ": " << limits.size() << " joint limit entries (expected one per joint, "
-       << n << ")";
+       << nm << ")";
     throw Error(os.str());
   }
-  for (int i = 0; i < n; ++i) {
+  for (int i = 0; i < nm; ++i) {
     const JointLimits& L = limits[static_cast<size_t>(i)];
     if (std::isnan(L.q_min) || std::isnan(L.q_max) || std::isnan(L.qd_max) ||
         std::isnan(L.qdd_max) || std::isnan(L.tau_max) || L.q_min > L.q_max || L.qd_max < 0 ||
         L.qdd_max < 0 || L.tau_max < 0)
-      throw Error(where(*this) + ": " + bodyLabel(*this, i) +
+      throw Error(where(*this) + ": " + (hasLoops() ? "measured coordinate " + std::to_string(i + 1) : bodyLabel(*this, i)) +
                   ": invalid limits (expected q_min <= q_max and non-negative qd/qdd/tau limits)");
   }
-  if (static_cast<int>(drives.size()) != n) {
+  if (static_cast<int>(drives.size()) != nm) {
     std::ostringstream os;
     os << where(*this) << ": " << drives.size()
-       << " drive entries (expected one per measured coordinate, " << n << ")";
+       << " drive entries (expected one per measured coordinate, " << nm << ")";
     throw Error(os.str());
   }
   if (hasTransmission()) {
-    if (transmission.rows() != n || transmission.cols() != n || !transmission.allFinite()) {
+    if (transmission.rows() != nm || transmission.cols() != nm || !transmission.allFinite()) {
       std::ostringstream os;
       os << where(*this) << ": transmission is " << transmission.rows() << "x"
-         << transmission.cols() << " (expected a finite " << n << "x" << n << " matrix)";
+         << transmission.cols() << " (expected a finite " << nm << "x" << nm << " matrix)";
       throw Error(os.str());
     }
   }
-  if (transmission_offset.size() != 0 && transmission_offset.size() != n) {
+  if (transmission_offset.size() != 0 && transmission_offset.size() != nm) {
     std::ostringstream os;
     os << where(*this) << ": transmission_offset has " << transmission_offset.size()
-       << " entries (expected 0 or " << n << ")";
+       << " entries (expected 0 or " << nm << ")";
     throw Error(os.str());
+  }
+  if (hasLoops() && (hasTransmission() || transmission_offset.size() != 0))
+    throw Error(where(*this) + ": a closed chain with a transmission is not supported (expected "
+                               "no `transmission` on a robot with loop-closure joints)");
   }
   if (sensor_body < -1 || sensor_body >= n) {
     std::ostringstream os;
@@ -145,6 +152,7 @@ void RobotModel::validateStructure() const {
   if (!finite(sensor_pose)) throw Error(where(*this) + ": non-finite sensor_pose");
   checkRotation(*this, sensorBody(), sensor_pose.R, "sensor_pose");
   if (!gravity.allFinite()) throw Error(where(*this) + ": non-finite gravity");
+  if (hasLoops()) validateClosedChain(*this);
 }
 
 Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,

@@ -32,6 +32,11 @@ std::string element(const char* name, double v) {
 
 std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
                      std::vector<std::string>* left_out) {
+  if (m.hasLoops())
+    throw Error("writing robot '" + m.name + "' as SDF: it is a closed chain (" +
+                std::to_string(m.closed.loops.size()) +
+                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
+                "(expected a kinematic tree)");
   m.validateStructure();
   detail::requirePhysical(m, "SDF");
   const int n = m.dof();

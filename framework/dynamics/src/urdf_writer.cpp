@@ -25,6 +25,11 @@ std::string origin(const Pose& X) {
 }  // namespace
 
 std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
+  if (m.hasLoops())
+    throw Error("writing robot '" + m.name + "' as URDF: it is a closed chain (" +
+                std::to_string(m.closed.loops.size()) +
+                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
+                "(expected a kinematic tree)");
   m.validateStructure();
   std::set<std::string> names;
   for (const auto& b : m.bodies) names.insert(b.name);

@@ -372,7 +372,8 @@ TorqueLimits torqueLimits(const RobotModel& robot, const std::vector<double>& to
                          : HUGE_VAL;
     if (!(t > 0) || !(t < 1e299))
       missing.push_back(
-          fmt::format("{} ({})", j + 1, robot.bodies[static_cast<std::size_t>(j)].joint_name));
+          fmt::format("{} ({})", j + 1,
+                      robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name));
     else
       tl.tau_max(j) = t;
   }

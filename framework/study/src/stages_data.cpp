@@ -27,7 +27,7 @@ void writeExperimentCsv(const StageEnv& env, const RobotModel& robot, const Data
   for (int j = 0; j < robot.dof(); ++j) {
     const std::string& jn = robot.hasTransmission()
                                 ? std::string()
-                                : robot.bodies[static_cast<std::size_t>(j)].joint_name;
+                                : robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name;
     joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
                           jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
   }

@@ -77,11 +77,37 @@ struct EXID_API CollisionShape {
   std::string where;  // where it was given (file:line, YAML key), for messages
 };
 
+/// A loop-closure (cut) joint of a closed kinematic chain: a joint between two bodies of the
+/// spanning tree that the tree leaves out. Its frame is fixed in body `body_a` at `pose_a` and in
+/// body `body_b` at `pose_b` (-1: the fixed base); the mechanism is assembled when the two frames
+/// coincide up to the joint's own motion: a revolute cut joint lets them turn about `axis` (unit,
+/// in the cut frame) and keeps the origins together and the axes aligned (5 constraints); a
+/// spherical one keeps only the origins together (3 constraints). See exid/closed_chain.hpp.
+struct EXID_API LoopJoint {
+  enum class Kind { Revolute, Spherical };
+  std::string name;
+  Kind kind = Kind::Revolute;
+  int body_a = -1, body_b = -1;
+  Pose pose_a, pose_b;
+  Eigen::Vector3d axis = Eigen::Vector3d::UnitZ();
+  std::string where;  // where it was given (file:line, YAML key), for messages
+};
+
+/// The loop description of a closed-chain robot: the cut joints that close its loops, the
+/// actuated (measured) tree joints, and a reference configuration of the whole tree near which
+/// the mechanism assembles (the first guess of the position solve).
+struct EXID_API ClosedChain {
+  std::vector<LoopJoint> loops;
+  std::vector<int> actuated;        // tree joint (body) indices of measured coordinates 1..dof
+  Eigen::VectorXd reference;        // tree coordinates (numJoints); empty: zeros
+  std::vector<JointLimits> tree_limits;  // one per tree joint (passive ones checked by the solve)
+};
+
 struct EXID_API RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
   std::vector<Body> bodies;
-  std::vector<JointLimits> limits;           // one per body/joint, joint coordinates
+  std::vector<JointLimits> limits;           // one per measured coordinate (tree: per joint)
   std::vector<Drive> drives;                 // one per measured coordinate
   Eigen::Vector3d gravity{0.0, 0.0, -9.81};  // in the base frame [m/s^2]
   /// Measured (motor or absolute) coordinates qm relate to joint coordinates by
@@ -101,15 +127,32 @@ struct EXID_API RobotModel {
   /// Facts about a shipped description worth stating once in a report (known defects of
   /// published data, kept as published): summary.json `robot.notes` and the report, not logged.
   std::vector<std::string> notes;
+  /// Closed kinematic chains: empty `closed.loops` for a tree (the usual case). With loops,
+  /// `bodies` is the spanning tree, the measured coordinates are the actuated tree joints
+  /// `closed.actuated` (dof() of them), `limits` and `drives` are per measured coordinate and
+  /// the passive joints follow from the loop constraints (exid/closed_chain.hpp).
+  ClosedChain closed;
 
-  int dof() const { return static_cast<int>(bodies.size()); }
-  int numInertialParameters() const { return 10 * dof(); }
+  /// Number of measured (actuated) coordinates: what data, trajectories, drives and limits
+  /// count. For a tree it equals numJoints().
+  int dof() const {
+    return closed.loops.empty() ? static_cast<int>(bodies.size())
+                                : static_cast<int>(closed.actuated.size());
+  }
+  /// Number of joints (bodies) of the kinematic tree (the spanning tree of a closed chain).
+  int numJoints() const { return static_cast<int>(bodies.size()); }
+  bool hasLoops() const { return !closed.loops.empty(); }
+  /// Tree joint index of measured coordinate k (k itself for a tree).
+  int actuatedJoint(int k) const {
+    return closed.loops.empty() ? k : closed.actuated[static_cast<size_t>(k)];
+  }
+  int numInertialParameters() const { return 10 * numJoints(); }
   bool hasTransmission() const { return transmission.size() > 0; }
-  int sensorBody() const { return sensor_body < 0 ? dof() - 1 : sensor_body; }
+  int sensorBody() const { return sensor_body < 0 ? numJoints() - 1 : sensor_body; }
 
   /// Names of the standard inertial parameters, e.g. "XX1" ... "M1" (1-based body index).
   std::vector<std::string> inertialParameterNames() const;
-  /// All standard inertial parameters, stacked body by body (10 * dof).
+  /// All standard inertial parameters, stacked body by body (10 * numJoints).
   Eigen::VectorXd inertialParameters() const;
   /// Throws exid::Error naming the body and rule if the structure is invalid
   /// (parent order, unit axes, orthonormal rotations, finite numbers, sizes).

@@ -34,8 +34,8 @@ inline std::vector<std::string> torqueEquationNames(const RobotModel& R,
                                                     const std::vector<int>& sel) {
   std::vector<std::string> out;
   for (int j : sel) {
-    const std::string& jn = !R.hasTransmission() && j < static_cast<int>(R.bodies.size())
-                                ? R.bodies[static_cast<std::size_t>(j)].joint_name
+    const std::string& jn = !R.hasTransmission() && j < R.dof()
+                                ? R.bodies[static_cast<std::size_t>(R.actuatedJoint(j))].joint_name
                                 : std::string();
     out.push_back(jn.empty() ? fmt::format("tau{} [N m or N]", j + 1)
                              : fmt::format("tau{} {} [N m or N]", j + 1, jn));
@@ -64,6 +64,10 @@ inline std::vector<int> selectJoints(const std::vector<std::int64_t>& joints, in
 
 /// A gradient with respect to joint coordinates mapped to measured coordinates (q = T qm + q0).
 inline void jointGradToMeasured(const RobotModel& r, Eigen::VectorXd* g) {
+  if (r.hasLoops())
+    throw Error("robot '" + r.name +
+                "' is a closed chain: gradients through its loop constraints are not implemented "
+                "(gradient-based excitation design is not available for closed chains)");
   if (g && r.hasTransmission()) *g = (r.transmission.transpose() * *g).eval();
 }
 
