@@ -59,4 +59,35 @@ RobotModel loadRobotFile(const std::filesystem::path& file, const LoadOptions& o
               "' (expected .urdf, .sdf, .mjcf, .xml, .yaml or .yml)");
 }
 
+namespace detail {
+
+void makeClosedChain(RobotModel* m, std::vector<LoopJoint> loops, std::vector<int> actuated,
+                     Eigen::VectorXd reference, const std::string& src) {
+  const int n = m->numJoints();
+  check(!actuated.empty(), src +
+                               ": loop-closure joints but no actuated joint (the joints that "
+                               "drive the mechanism must be declared)");
+  for (int i = 0; i < n; ++i) {
+    const Drive& d = m->drives[static_cast<std::size_t>(i)];
+    const bool driven =
+        d.rotor_inertia != 0.0 || d.coulomb != 0.0 || d.viscous != 0.0 || d.offset != 0.0;
+    if (driven && std::find(actuated.begin(), actuated.end(), i) == actuated.end())
+      throw Error(src + ": joint '" + m->bodies[static_cast<std::size_t>(i)].joint_name +
+                  "' is passive (not actuated) but has drive terms");
+  }
+  m->closed.loops = std::move(loops);
+  m->closed.reference = std::move(reference);
+  m->closed.tree_limits = m->limits;
+  std::vector<JointLimits> lim;
+  std::vector<Drive> drv;
+  for (int a : actuated) {
+    lim.push_back(m->limits[static_cast<std::size_t>(a)]);
+    drv.push_back(m->drives[static_cast<std::size_t>(a)]);
+  }
+  m->closed.actuated = std::move(actuated);
+  m->limits = std::move(lim);
+  m->drives = std::move(drv);
+}
+
+}  // namespace detail
 }  // namespace exid

@@ -7,6 +7,7 @@
 #include <map>
 #include <set>
 
+#include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
 #include "read_text.hpp"
@@ -44,7 +45,11 @@ struct Reader {
   std::map<std::string, DefaultClass> classes;
   LoadOptions options;
   RobotModel m;
-  std::map<std::string, int> joint_body;  // joint name -> body index
+  std::map<std::string, int> joint_body;                   // joint name -> body index
+  std::map<std::string, std::pair<int, Pose>> body_place;  // MJCF body -> exid body, frame in it
+  std::vector<double> refs;                                // each joint's `ref`
+  std::vector<std::string> motor_joints;                   // joints with a motor, in order
+  std::vector<const TiXmlElement*> connects;               // <equality><connect>
   std::vector<std::string> ignored_dynamics, geoms;
 
   [[noreturn]] void fail(const TiXmlElement* e, const std::string& rule) const {
@@ -246,6 +251,10 @@ struct Reader {
       index = addJoint(e, j, child_cls, owner, X, pi);
       X_here = Pose{};
     }
+    if (!name.empty()) {
+      if (body_place.count(name)) fail(e, "duplicate body name '" + name + "'");
+      body_place[name] = {index, X_here};
+    }
     for (const TiXmlElement* s = e->FirstChildElement("site"); s; s = s->NextSiblingElement("site"))
       if (xmlAttr(s, "name") == "exid_sensor") {
         if (index < 0) fail(s, "the exid_sensor site must be on a moving body");
@@ -262,11 +271,10 @@ struct Reader {
     const std::string jname = xmlAttr(j, "name");
     if (jname.empty()) fail(j, "a joint needs a name (measured coordinates are named by it)");
     if (joint_body.count(jname)) fail(j, "duplicate joint name '" + jname + "'");
-    for (const char* k : {"stiffness", "ref"})
-      if (numbersOf(j, k, cls, 1).front() != 0.0)
-        fail(j, std::string(k) +
-                    " is not zero: exid models no joint springs or reference "
-                    "offsets (remove it, or set it to 0)");
+    if (numbersOf(j, "stiffness", cls, 1).front() != 0.0)
+      fail(j, "stiffness is not zero: exid models no joint springs (remove it, or set it to 0)");
+    // the body is written at the joint value `ref` (MuJoCo's qpos0)
+    const double ref = numbersOf(j, "ref", cls, 1).front();
     const auto pos = numbersOf(j, "pos", cls, 3);
     const auto axis = numbersOf(j, "axis", cls, 3);
     Eigen::Vector3d a(axis[0], axis[1], axis[2]);
@@ -277,9 +285,17 @@ struct Reader {
     if (b.name.empty()) fail(e, "a moving body needs a name");
     b.joint_name = jname;
     b.parent = owner;
-    b.pre = X * J;
-    if (!J.isIdentity()) b.post = J.inverse();
     const bool slide = attrOf(j, "type", cls, true) == "slide";
+    b.pre = X * J;
+    if (ref != 0.0) {  // the joint frame at q = 0: moved back by ref
+      Pose back;
+      if (slide)
+        back.p = -ref * a.normalized();
+      else
+        back.R = Eigen::AngleAxisd(-angle(ref), a.normalized()).toRotationMatrix();
+      b.pre = b.pre * back;
+    }
+    if (!J.isIdentity()) b.post = J.inverse();
     b.type = slide ? JointType::Prismatic : JointType::Revolute;
     b.axis = a.normalized();
     b.inertia = pi;
@@ -313,6 +329,7 @@ struct Reader {
     m.bodies.push_back(b);
     m.limits.push_back(lim);
     m.drives.push_back(drv);
+    refs.push_back(slide ? ref : angle(ref));
     joint_body[jname] = index;
     return index;
   }
@@ -345,6 +362,9 @@ struct Reader {
     if (jn.empty()) fail(a, "only actuators on a joint are read (joint=\"...\")");
     auto it = joint_body.find(jn);
     if (it == joint_body.end()) fail(a, "unknown joint '" + jn + "'");
+    for (const auto& o : motor_joints)
+      if (o == jn) fail(a, "a second actuator on joint '" + jn + "'");
+    motor_joints.push_back(jn);
     const std::string cls = xmlAttr(a, "class").empty() ? "main" : xmlAttr(a, "class");
     auto number = [&](const char* k) -> std::vector<double> {
       const std::string v = attrOf(a, k, classes.count(cls) ? cls : "", false);
@@ -389,11 +409,17 @@ struct Reader {
         fail(e,
              "<include> is not supported: give exid one file (MuJoCo can save it: "
              "mj_saveLastXML)");
-      } else if (tag == "equality" || tag == "tendon") {
+      } else if (tag == "equality") {
+        for (const TiXmlElement* c = e->FirstChildElement(); c; c = c->NextSiblingElement()) {
+          if (std::string(c->Value()) != "connect")
+            fail(c,
+                 "only `connect` equality constraints (loop-closure ball joints) are read; "
+                 "weld, joint and tendon constraints couple what exid cannot represent");
+          connects.push_back(c);
+        }
+      } else if (tag == "tendon") {
         if (e->FirstChildElement())
-          fail(e,
-               "equality constraints and tendons (closed loops, coupled joints) are not "
-               "supported by the MJCF loader");
+          fail(e, "tendons (coupled joints, springs) are not supported by the MJCF loader");
       } else if (tag != "worldbody" && tag != "actuator" && !kIgnored.count(tag)) {
         fail(e, "unknown element (expected compiler, option, default, worldbody, actuator, ...)");
       }
@@ -416,6 +442,69 @@ struct Reader {
         const std::string tag = a->Value();
         if (tag == "motor" || tag == "general") readMotor(a);
       }
+    if (!connects.empty()) closeLoops();
+  }
+
+  /// The `connect` constraints as spherical loop-closure joints: the anchor in body1's frame;
+  /// body2's point is where the anchor is in the written configuration (MuJoCo's rule), which
+  /// is the reference configuration of the closed chain. The actuated joints are the motors'.
+  void closeLoops() {
+    const Eigen::VectorXd ref = Eigen::Map<const Eigen::VectorXd>(refs.data(), m.numJoints());
+    DynamicsDataPtr data = makeDynamicsData(m);
+    auto place = [&](const TiXmlElement* c, const char* key) -> std::pair<int, Pose> {
+      const std::string name = xmlAttr(c, key);
+      if (name == "world") return {-1, Pose{}};
+      auto it = body_place.find(name);
+      if (it == body_place.end()) fail(c, std::string(key) + ": unknown body '" + name + "'");
+      return it->second;
+    };
+    auto world = [&](const std::pair<int, Pose>& p) {
+      return (p.first < 0 ? Pose{} : bodyPose(m, *data, ref, p.first)) * p.second;
+    };
+    std::vector<LoopJoint> loops;
+    for (const TiXmlElement* c : connects) {
+      if (!c->Attribute("body1") || !c->Attribute("anchor"))
+        fail(c, "a connect needs body1 and anchor (body2 defaults to the world)");
+      const auto a = place(c, "body1");
+      const auto b = c->Attribute("body2") ? place(c, "body2") : std::pair<int, Pose>{-1, Pose{}};
+      if (a.first == b.first) fail(c, "body1 and body2 move together (the same body)");
+      const auto anchor = xmlNumbers(c, "anchor", src, 3);
+      LoopJoint l;
+      l.name = xmlAttr(c, "name").empty() ? "connect" + std::to_string(loops.size() + 1)
+                                          : xmlAttr(c, "name");
+      l.kind = LoopJoint::Kind::Spherical;
+      l.where = xmlAt(src, c);
+      l.body_a = a.first;
+      l.body_b = b.first;
+      l.pose_a.p = a.second.R * Eigen::Vector3d(anchor[0], anchor[1], anchor[2]) + a.second.p;
+      const Pose Wa = world({a.first, Pose{}}), Wb = world({b.first, Pose{}});
+      const Eigen::Vector3d in_world = Wa.R * l.pose_a.p + Wa.p;
+      l.pose_b.p = Wb.R.transpose() * (in_world - Wb.p);
+      l.pose_b.R = Wb.R.transpose() * Wa.R;  // the cut frame: body1's axes where it is written
+      // A second connect between the same two bodies makes the pair a revolute joint about the
+      // line through both anchors (exactly: two ball joints leave only that rotation).
+      bool merged = false;
+      for (LoopJoint& o : loops)
+        if (o.body_a == l.body_a && o.body_b == l.body_b) {
+          if (o.kind == LoopJoint::Kind::Revolute)
+            fail(c, "a third connect between bodies '" + xmlAttr(c, "body1") + "' and '" +
+                        xmlAttr(c, "body2") + "' (a weld), which exid does not model");
+          const Eigen::Vector3d axis = l.pose_a.p - o.pose_a.p;
+          if (axis.norm() < 1e-9)
+            fail(c, "two connects between the same bodies at the same anchor");
+          o.kind = LoopJoint::Kind::Revolute;
+          o.axis = o.pose_a.R.transpose() * axis.normalized();
+          merged = true;
+        }
+      if (!merged) loops.push_back(l);
+    }
+    if (motor_joints.empty())
+      throw Error(src +
+                  ": loop-closure `connect` constraints but no motor: the actuated joints "
+                  "of a closed chain are the joints with a motor (<actuator><motor joint>)");
+    std::vector<int> actuated;
+    for (const auto& j : motor_joints) actuated.push_back(joint_body.at(j));
+    detail::makeClosedChain(&m, std::move(loops), std::move(actuated), ref, src);
   }
 };
 

@@ -31,6 +31,14 @@ inline void checkLoaded(const RobotModel& m, const std::string& src, const LoadO
   checkModelPhysical(m, options);
 }
 
+/// Makes the tree *m a closed chain: its loop-closure joints, the actuated tree joints (in the
+/// order of the measured coordinates) and the reference configuration (an assembled one; the
+/// first guess of the position solve). Limits and drives become per actuated joint (the tree's
+/// limits kept in closed.tree_limits); a drive term on a passive joint is an exid::Error naming
+/// `src` (a passive joint has no motor).
+void makeClosedChain(RobotModel* m, std::vector<LoopJoint> loops, std::vector<int> actuated,
+                     Eigen::VectorXd reference, const std::string& src);
+
 /// URDF convention: R = Rz(yaw) Ry(pitch) Rx(roll).
 inline Eigen::Matrix3d rpyToMatrix(double roll, double pitch, double yaw) {
   return (Eigen::AngleAxisd(yaw, Eigen::Vector3d::UnitZ()) *

@@ -6,6 +6,8 @@
 #include <cmath>
 #include <map>
 #include <set>
+#include <sstream>
+#include <tuple>
 
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
@@ -41,6 +43,11 @@ struct Reader {
   std::vector<SJoint> joints;
   std::map<std::string, Pose> resolved;
   std::vector<std::string> ignored_dynamics, defaulted_inertials;
+  const TiXmlElement* closed = nullptr;     // <exid:closed_chain>
+  std::set<std::string> cut;                // its loop-closure joints
+  std::vector<double> refs;                 // each tree joint's position in the written pose
+  std::map<std::string, double> reference;  // <exid:closed_chain reference>
+  std::map<std::string, std::pair<int, Pose>> link_place;  // link -> exid body, frame in it
 
   [[noreturn]] void fail(const TiXmlElement* e, const std::string& rule) const {
     std::string owner = "<" + std::string(e->Value()) + ">";
@@ -167,6 +174,12 @@ struct Reader {
       } else if (tag == "frame") {
         const std::string attached = xmlAttr(e, "attached_to");
         addFrame(xmlAttr(e, "name"), poseOf(e, attached));
+      } else if (tag == "exid:closed_chain") {
+        if (closed) fail(e, "a second <exid:closed_chain>");
+        closed = e;
+        std::istringstream names(xmlAttr(e, "cut"));
+        for (std::string c; names >> c;) cut.insert(c);
+        if (cut.empty()) fail(e, "cut: expected the names of the loop-closure joints");
       } else if (tag == "model" || tag == "include") {
         fail(e, "nested models and includes are not supported: give exid one flat <model>");
       } else if (tag == "static") {
@@ -178,18 +191,26 @@ struct Reader {
   }
 
   void build(const TiXmlElement* model) {
+    if (closed) readReference();
     // the tree: parent joint of every link, the link fixed to the world
     std::map<std::string, std::vector<const SJoint*>> children;
     std::map<std::string, const SJoint*> parent_joint;
     std::string root;
+    std::vector<const SJoint*> loops;
     for (const SJoint& j : joints) {
       if (!links.count(j.child)) fail(j.e, "<child> '" + j.child + "' is not a link of the model");
+      if (cut.count(j.name)) {
+        if (j.parent == "world") fail(j.e, "a loop-closure joint to the world");
+        loops.push_back(&j);
+        continue;
+      }
       if (j.parent != "world" && !links.count(j.parent))
         fail(j.e, "<parent> '" + j.parent + "' is not a link of the model (nor world)");
       if (parent_joint.count(j.child))
         fail(j.e, "link '" + j.child + "' already is the child of joint '" +
                       parent_joint[j.child]->name +
-                      "': a closed kinematic chain, which the SDF loader does not support");
+                      "': a closed kinematic chain; name its loop-closure joint (and the "
+                      "actuated joints) in <exid:closed_chain cut=\"...\" actuated=\"...\">");
       parent_joint[j.child] = &j;
       if (j.parent == "world") {
         if (j.type != "fixed")
@@ -225,6 +246,7 @@ struct Reader {
       const Item it = stack.back();
       stack.pop_back();
       if (!seen.insert(it.link).second) fail(links[it.link], "a kinematic loop");
+      link_place[it.link] = {it.body, it.X};
       std::vector<Item> next;
       const Pose W_parent = inModel(it.link);
       for (const SJoint* j : children[it.link]) {
@@ -241,6 +263,7 @@ struct Reader {
       }
       for (auto r = next.rbegin(); r != next.rend(); ++r) stack.push_back(*r);
     }
+    if (closed) closeLoops(loops);
     // the sensor frame
     if (frames.count("exid_sensor")) {
       const SFrame& f = frames["exid_sensor"];
@@ -261,17 +284,10 @@ struct Reader {
     }
   }
 
-  int addJoint(const SJoint& j, int owner, const Pose& X, const Pose& W_child,
-               const Eigen::Matrix<double, 10, 1>& pi) {
-    static const std::set<std::string> kMoving = {"revolute", "continuous", "prismatic"};
-    if (!kMoving.count(j.type))
-      fail(j.e, "type '" + j.type +
-                    "' is not supported (only revolute, continuous, prismatic "
-                    "and fixed)");
-    const Pose J = W_child.inverse() * inModel(j.name);  // joint frame in the child link
+  /// The axis of a joint in its own frame (<xyz>, or in its expressed_in frame).
+  Eigen::Vector3d jointAxis(const SJoint& j) {
     const TiXmlElement* axis = j.e->FirstChildElement("axis");
     if (!axis) fail(j.e, "no <axis>");
-    if (axis->NextSiblingElement("axis2")) fail(j.e, "<axis2> (two degrees of freedom)");
     const TiXmlElement* xyz = axis->FirstChildElement("xyz");
     if (!xyz) fail(axis, "no <xyz>");
     const auto a = detail::xmlTextNumbers(xyz, src, 3);
@@ -285,14 +301,98 @@ struct Reader {
       const std::string in = xmlAttr(xyz, "expressed_in");
       ax = inModel(j.name).R.transpose() * (inModel(in).R * ax);
     }
+    return ax.normalized();
+  }
+
+  /// <exid:closed_chain>: its reference configuration (read before the tree is built).
+  void readReference() {
+    std::istringstream pairs(xmlAttr(closed, "reference"));
+    for (std::string pr; pairs >> pr;) {
+      const auto eq = pr.find('=');
+      if (eq == std::string::npos)
+        fail(closed, "reference: expected joint=value pairs, found '" + pr + "'");
+      reference[pr.substr(0, eq)] = detail::parseNumbers(
+          pr.substr(eq + 1), xmlAt(src, closed) + ": reference of '" + pr.substr(0, eq) + "'",
+          1)[0];
+    }
+  }
+
+  /// The cut joints as loop-closure joints (their frame in both links, where the file puts it:
+  /// an assembled configuration) and the actuated joints of <exid:closed_chain>.
+  void closeLoops(const std::vector<const SJoint*>& cuts) {
+    std::vector<LoopJoint> loops;
+    for (const SJoint* j : cuts) {
+      if (j->type != "revolute" && j->type != "ball")
+        fail(j->e, "a loop-closure joint must be revolute or ball, found '" + j->type + "'");
+      const Pose W = inModel(j->name);
+      LoopJoint l;
+      l.name = j->name;
+      l.where = xmlAt(src, j->e);
+      l.kind = j->type == "ball" ? LoopJoint::Kind::Spherical : LoopJoint::Kind::Revolute;
+      if (j->type == "revolute") l.axis = jointAxis(*j);
+      for (const auto& [link, body, pose] :
+           {std::tuple<std::string, int*, Pose*>{j->parent, &l.body_a, &l.pose_a},
+            std::tuple<std::string, int*, Pose*>{j->child, &l.body_b, &l.pose_b}}) {
+        const auto& [owner, X] = link_place.at(link);
+        *body = owner;
+        *pose = X * (inModel(link).inverse() * W);
+      }
+      loops.push_back(l);
+    }
+    for (const auto& c : cut) {
+      bool found = false;
+      for (const SJoint* j : cuts) found = found || j->name == c;
+      if (!found) fail(closed, "cut: '" + c + "' is not a joint of the model");
+    }
+    std::vector<int> actuated;
+    std::istringstream names(xmlAttr(closed, "actuated"));
+    for (std::string a; names >> a;) {
+      int found = -1;
+      for (int b = 0; b < m.numJoints(); ++b)
+        if (m.bodies[static_cast<std::size_t>(b)].joint_name == a) found = b;
+      if (found < 0) fail(closed, "actuated: '" + a + "' is not a moving joint of the tree");
+      actuated.push_back(found);
+    }
+    for (const auto& [name, value] : reference) {
+      (void)value;
+      bool found = false;
+      for (const auto& b : m.bodies) found = found || b.joint_name == name;
+      if (!found) fail(closed, "reference: '" + name + "' is not a moving joint of the tree");
+    }
+    detail::makeClosedChain(&m, std::move(loops), std::move(actuated),
+                            Eigen::Map<const Eigen::VectorXd>(refs.data(), m.numJoints()), src);
+  }
+
+  int addJoint(const SJoint& j, int owner, const Pose& X, const Pose& W_child,
+               const Eigen::Matrix<double, 10, 1>& pi) {
+    static const std::set<std::string> kMoving = {"revolute", "continuous", "prismatic"};
+    if (!kMoving.count(j.type))
+      fail(j.e, "type '" + j.type +
+                    "' is not supported (only revolute, continuous, prismatic "
+                    "and fixed)");
+    const Pose J = W_child.inverse() * inModel(j.name);  // joint frame in the child link
+    const Eigen::Vector3d ax = jointAxis(j);
+    const TiXmlElement* axis = j.e->FirstChildElement("axis");
+    if (axis->NextSiblingElement("axis2")) fail(j.e, "<axis2> (two degrees of freedom)");
     Body b;
     b.name = j.child;
     b.joint_name = j.name;
     b.parent = owner;
-    b.pre = X * J;
-    if (!J.isIdentity()) b.post = J.inverse();
     b.type = j.type == "prismatic" ? JointType::Prismatic : JointType::Revolute;
-    b.axis = ax.normalized();
+    b.axis = ax;
+    b.pre = X * J;
+    // written at exid's q = reference (SDF's zero): the joint frame at q = 0 is moved back
+    const double ref = reference.count(j.name) ? reference.at(j.name) : 0.0;
+    if (ref != 0.0) {
+      Pose back;
+      if (b.type == JointType::Prismatic)
+        back.p = -ref * b.axis;
+      else
+        back.R = Eigen::AngleAxisd(-ref, b.axis).toRotationMatrix();
+      b.pre = b.pre * back;
+    }
+    refs.push_back(ref);
+    if (!J.isIdentity()) b.post = J.inverse();
     b.inertia = pi;
     JointLimits lim;
     if (const TiXmlElement* l = axis->FirstChildElement("limit")) {

@@ -110,8 +110,13 @@ TEST(MjcfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
       {"<body name=\"b\"><joint name=\"j\"/>" + kLink + "</body>\n",
        "<include file=\"other.xml\"/>\n", "<include> is not supported"},
       {"<body name=\"b\"><joint name=\"j\"/>" + kLink + "</body>\n",
+       "<equality><weld body1=\"b\"/></equality>\n", "only `connect` equality constraints"},
+      {"<body name=\"b\"><joint name=\"j\"/>" + kLink + "</body>\n",
        "<equality><connect body1=\"b\" body2=\"world\" anchor=\"0 0 0\"/></equality>\n",
-       "equality constraints and tendons"},
+       "loop-closure `connect` constraints but no motor"},
+      {"<body name=\"b\"><joint name=\"j\"/>" + kLink + "</body>\n",
+       "<equality><connect body1=\"nope\" anchor=\"0 0 0\"/></equality>\n",
+       "body1: unknown body 'nope'"},
       {"<body name=\"b\">" + kLink + "</body>\n", "", "no moving joint"},
   };
   for (const Case& c : cases) {

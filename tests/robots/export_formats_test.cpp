@@ -10,6 +10,7 @@
 #include <Eigen/Eigenvalues>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -19,6 +20,7 @@
 #include <string>
 #include <vector>
 
+#include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
@@ -1000,6 +1002,139 @@ TEST(ExportFormats, MujocoAndExidReadTheSameHandWrittenMjcf) {
     EXPECT_LE(worst, tolerance);
     std::printf("hand-written MJCF: exid vs MuJoCo, largest torque difference %.3g (relative)\n",
                 worst);
+  }
+#endif
+}
+
+// ---------------------------------------------------------------- closed chains
+std::vector<std::pair<std::string, RobotModel>> closedChains() {
+  const std::string dir = std::string(EXID_SOURCE_DIR);
+  std::vector<std::pair<std::string, RobotModel>> out;
+  for (const char* name : {"fourbar", "palletizer"})
+    out.emplace_back(name, exid::loadRobotFile(dir + "/robots/" + name + "/" + name + ".yaml"));
+  return out;
+}
+
+/// Measured states within the limits (positions), with velocities and accelerations.
+void closedState(const RobotModel& m, std::mt19937* rng, Eigen::VectorXd* qa, Eigen::VectorXd* qda,
+                 Eigen::VectorXd* qdda) {
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  const int n = m.dof();
+  qa->resize(n), qda->resize(n), qdda->resize(n);
+  for (int k = 0; k < n; ++k) {
+    const exid::JointLimits& L = m.limits[static_cast<std::size_t>(k)];
+    const double lo = std::max(L.q_min, -M_PI), hi = std::min(L.q_max, M_PI);
+    (*qa)[k] = lo + (hi - lo) * u(*rng);
+    (*qda)[k] = 2.0 * (2 * u(*rng) - 1);
+    (*qdda)[k] = 5.0 * (2 * u(*rng) - 1);
+  }
+}
+
+// A closed chain exported as MJCF (connect constraints, joint `ref` at the reference
+// configuration, motors on the actuated joints) and as SDF (cut joints, <exid:closed_chain>)
+// comes back with the same loops, actuated joints and torques.
+TEST(ExportFormats, ClosedChainsComeBackWithTheSameTorques) {
+  std::mt19937 rng(29);
+  for (const auto& [name, m] : closedChains()) {
+    ASSERT_TRUE(m.hasLoops());
+    auto d0 = exid::makeDynamicsData(m);
+    for (const Format& f : formats()) {
+      if (std::string(f.name) == "urdf") continue;
+      SCOPED_TRACE(name + " " + f.name);
+      std::vector<std::string> left_out;
+      const std::string text = std::string(f.name) == "mjcf" ? exid::writeMjcf(m, {}, &left_out)
+                                                             : exid::writeSdf(m, {}, &left_out);
+      exid::LoadOptions o;
+      o.urdf_dynamics_as_friction = true;
+      RobotModel r = f.load(text, name + "." + f.name, o);
+      ASSERT_TRUE(r.hasLoops());
+      ASSERT_EQ(r.dof(), m.dof());
+      ASSERT_EQ(r.numJoints(), m.numJoints());
+      for (int k = 0; k < m.dof(); ++k)  // (the same joints; the tree's order may differ)
+        EXPECT_EQ(r.bodies[static_cast<std::size_t>(r.actuatedJoint(k))].joint_name,
+                  m.bodies[static_cast<std::size_t>(m.actuatedJoint(k))].joint_name);
+      EXPECT_EQ(r.closed.loops.size(), m.closed.loops.size());
+      for (std::size_t l = 0; l < m.closed.loops.size(); ++l)
+        EXPECT_EQ(r.closed.loops[l].kind, m.closed.loops[l].kind);
+      if (std::string(f.name) == "sdf") r.gravity = m.gravity;
+      auto d1 = exid::makeDynamicsData(r);
+      const exid::DriveColumns cols{f.rotor, false, true, false};
+      double worst = 0.0;
+      for (int k = 0; k < 30; ++k) {
+        Eigen::VectorXd qa, qda, qdda;
+        closedState(m, &rng, &qa, &qda, &qdda);
+        const Eigen::VectorXd t0 = exid::actuatorTorque(m, *d0, cols, qa, qda, qdda);
+        const Eigen::VectorXd t1 = exid::actuatorTorque(r, *d1, cols, qa, qda, qdda);
+        worst = std::max(worst,
+                         (t1 - t0).cwiseAbs().maxCoeff() / std::max(1.0, t0.cwiseAbs().maxCoeff()));
+      }
+      EXPECT_LE(worst, 1e-12);
+      std::printf("%s via %s: largest actuated torque difference %.3g (relative)\n", name.c_str(),
+                  f.name, worst);
+    }
+  }
+}
+
+// MuJoCo and libsdformat read the closed chains: MuJoCo's connect constraints hold (to rounding)
+// at configurations exid assembles, in exid's own joint coordinates (MuJoCo's qpos, thanks to the
+// joints' `ref`); libsdformat loads the SDF with its cut joints and exid's element.
+TEST(ExportFormats, ConsumersReadTheClosedChains) {
+#if !defined(EXID_HAVE_MUJOCO) || !defined(EXID_HAVE_SDFORMAT)
+  FAIL() << "built without MuJoCo or libsdformat (scripts/install-deps.sh installs them)";
+#else
+  std::mt19937 rng(31);
+  for (const auto& [name, m] : closedChains()) {
+    SCOPED_TRACE(name);
+    std::string err;
+    const MjModelPtr mm = loadMjcf(name, exid::writeMjcf(m), &err);
+    ASSERT_NE(mm.m, nullptr) << err;
+    ASSERT_EQ(mm.m->nq, m.numJoints());
+    ASSERT_EQ(mm.m->nu, m.dof());
+    MjDataPtr md;
+    md.d = mj_makeData(mm.m);
+    double worst = 0.0;
+    for (int k = 0; k < 20; ++k) {
+      Eigen::VectorXd qa, qda, qdda, q;
+      closedState(m, &rng, &qa, &qda, &qdda);
+      exid::closedChainState(m, qa, nullptr, nullptr, &q, nullptr, nullptr, nullptr, nullptr);
+      for (int j = 0; j < m.numJoints(); ++j) {
+        const int id =
+            mj_name2id(mm.m, mjOBJ_JOINT, m.bodies[static_cast<std::size_t>(j)].joint_name.c_str());
+        ASSERT_GE(id, 0);
+        md.d->qpos[mm.m->jnt_qposadr[id]] = q(j);
+      }
+      mj_forward(mm.m, md.d);
+      int rows = 0;
+      for (int e = 0; e < md.d->nefc; ++e)
+        if (md.d->efc_type[e] == mjCNSTR_EQUALITY) {
+          worst = std::max(worst, std::abs(md.d->efc_pos[e]));
+          ++rows;
+        }
+      EXPECT_EQ(rows, 3 * static_cast<int>(2 * m.closed.loops.size()));  // two connects each
+      // and away from the mechanism's configurations the constraints do not hold
+      if (k == 0) {
+        int passive = 0;
+        while (std::count(m.closed.actuated.begin(), m.closed.actuated.end(), passive)) ++passive;
+        const int id = mj_name2id(mm.m, mjOBJ_JOINT,
+                                  m.bodies[static_cast<std::size_t>(passive)].joint_name.c_str());
+        md.d->qpos[mm.m->jnt_qposadr[id]] += 0.3;
+        mj_forward(mm.m, md.d);
+        double off = 0.0;
+        for (int e = 0; e < md.d->nefc; ++e)
+          if (md.d->efc_type[e] == mjCNSTR_EQUALITY)
+            off = std::max(off, std::abs(md.d->efc_pos[e]));
+        EXPECT_GT(off, 1e-3);
+      }
+    }
+    EXPECT_LE(worst, 1e-12);
+    std::printf("%s: MuJoCo's loop constraints at exid's assembled configurations: %.3g m\n",
+                name.c_str(), worst);
+    sdf::Root root;
+    const auto errors = root.LoadSdfString(exid::writeSdf(m));
+    for (const auto& e : errors) ADD_FAILURE() << e.Message();
+    ASSERT_NE(root.Model(), nullptr);
+    EXPECT_EQ(root.Model()->JointCount(),
+              static_cast<uint64_t>(m.numJoints() + m.closed.loops.size() + 1));
   }
 #endif
 }

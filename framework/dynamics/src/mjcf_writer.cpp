@@ -77,18 +77,16 @@ std::string inertial(const Body& b, std::vector<std::string>* raised) {
 
 }  // namespace
 
-std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
+std::string writeMjcf(const RobotModel& model, const MjcfWriteOptions& opt,
                       std::vector<std::string>* left_out) {
-  if (m.hasLoops())
-    throw Error("writing robot '" + m.name + "' as MJCF: it is a closed chain (" +
-                std::to_string(m.closed.loops.size()) +
-                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
-                "(expected a kinematic tree)");
-  m.validateStructure();
-  detail::requirePhysical(m, "MJCF");
+  model.validateStructure();
+  detail::requirePhysical(model, "MJCF");
+  // (a closed chain: its spanning tree at the loops' reference configuration, see below)
+  Eigen::VectorXd ref;
+  const RobotModel m = detail::writtenTree(model, &ref);
   check(std::isfinite(opt.timestep_s) && opt.timestep_s > 0.0,
         "writeMjcf: timestep_s must be a positive number of seconds");
-  const int n = m.dof();
+  const int n = m.numJoints();
   std::vector<int> coupled;
   const std::vector<detail::JointDriveTerms> drive = detail::jointDriveTerms(m, &coupled);
   std::vector<std::string> notes;
@@ -117,7 +115,8 @@ std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
   auto body = [&](auto&& self, int j, int depth) -> void {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     const std::string in(static_cast<std::size_t>(2 * depth), ' ');
-    const Pose X = b.pre * b.post;  // body frame in the parent body frame at q = 0
+    // body frame in the parent body frame at q = ref (a tree: 0); MuJoCo's joint `ref` says so
+    const Pose X = detail::bodyFrameAt(b, ref(j));
     w << in << "<body name=\"" << xmlEscape(b.name) << "\" pos=\"" << vec3(X.p) << "\" quat=\""
       << quat(X.R) << "\">\n";
     w << in << "  " << inertial(b, &raised) << "\n";
@@ -130,6 +129,7 @@ std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
       << "\" axis=\"" << vec3(J.R * b.axis) << "\" limited=\"" << (bounded ? "true" : "false")
       << "\"";
     if (bounded) w << " range=\"" << num(L.q_min) << " " << num(L.q_max) << "\"";
+    if (ref(j) != 0.0) w << " ref=\"" << num(ref(j)) << "\"";
     w << " armature=\"" << num(d.rotor_inertia) << "\" damping=\"" << num(d.viscous)
       << "\" frictionloss=\"" << num(std::max(d.coulomb, 0.0)) << "\"/>\n";
     if (j == sb)
@@ -153,8 +153,29 @@ std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
     << "  <option timestep=\"" << num(opt.timestep_s) << "\" gravity=\"" << vec3(m.gravity)
     << "\" integrator=\"Euler\"/>\n"
     << "  <worldbody>\n"
-    << w.str() << "  </worldbody>\n  <actuator>\n";
-  for (int j = 0; j < n; ++j) {
+    << w.str() << "  </worldbody>\n";
+  // Loop-closure joints: MuJoCo's `connect` (a ball joint between two bodies: the anchor in
+  // body1's frame, body2's point where it is in the written configuration, an assembled one);
+  // a revolute cut joint is two of them, the second one metre along its axis. The actuated
+  // joints are the ones with a motor, in the order of the measured coordinates.
+  if (model.hasLoops()) {
+    x << "  <equality>\n";
+    auto bodyName = [&](int b) {
+      return b < 0 ? std::string("world") : xmlEscape(m.bodies[static_cast<std::size_t>(b)].name);
+    };
+    for (const LoopJoint& l : model.closed.loops) {
+      std::vector<Eigen::Vector3d> anchors{l.pose_a.p};
+      if (l.kind == LoopJoint::Kind::Revolute) anchors.push_back(l.pose_a.p + l.pose_a.R * l.axis);
+      for (std::size_t k = 0; k < anchors.size(); ++k)
+        x << "    <connect name=\"" << xmlEscape(l.name) << (k ? "_axis" : "") << "\" body1=\""
+          << bodyName(l.body_a) << "\" body2=\"" << bodyName(l.body_b) << "\" anchor=\""
+          << vec3(anchors[k]) << "\"/>\n";
+    }
+    x << "  </equality>\n";
+  }
+  x << "  <actuator>\n";
+  for (int k = 0; k < model.dof(); ++k) {
+    const int j = model.actuatedJoint(k);
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     const double t = m.limits[static_cast<std::size_t>(j)].tau_max;
     x << "    <motor name=\"" << xmlEscape(b.joint_name) << "\" joint=\"" << xmlEscape(b.joint_name)

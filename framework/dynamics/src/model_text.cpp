@@ -1,10 +1,12 @@
 // exid — what the robot description writers share (see model_text.hpp).
 #include "model_text.hpp"
 
+#include <Eigen/Geometry>
 #include <Eigen/LU>
 #include <cmath>
 #include <cstdio>
 
+#include "exid/closed_chain.hpp"
 #include "exid/error.hpp"
 
 namespace exid::detail {
@@ -166,6 +168,41 @@ void requirePhysical(const RobotModel& m, const std::string& format) {
                   "; the parameters are not physically consistent and cannot be written as " +
                   format);
   }
+}
+
+Pose bodyFrameAt(const Body& b, double q) {
+  if (q == 0.0) return b.pre * b.post;
+  Pose motion;
+  if (b.type == JointType::Revolute)
+    motion.R = Eigen::AngleAxisd(q, b.axis).toRotationMatrix();
+  else
+    motion.p = q * b.axis;
+  return b.pre * motion * b.post;
+}
+
+RobotModel writtenTree(const RobotModel& m, Eigen::VectorXd* reference) {
+  const int n = m.numJoints();
+  *reference = Eigen::VectorXd::Zero(n);
+  if (!m.hasLoops()) return m;
+  RobotModel t = m;
+  t.closed = ClosedChain{};
+  // an exactly assembled configuration: the one the position solve reaches at the actuated
+  // joints' reference values (a description's reference is a first guess, often rounded)
+  Eigen::VectorXd qa(m.dof());
+  for (int k = 0; k < m.dof(); ++k)
+    qa(k) = m.closed.reference.size() == n ? m.closed.reference(m.actuatedJoint(k)) : 0.0;
+  closedChainState(m, qa, nullptr, nullptr, reference, nullptr, nullptr, nullptr, nullptr);
+  t.limits = m.closed.tree_limits.size() == static_cast<std::size_t>(n)
+                 ? m.closed.tree_limits
+                 : std::vector<JointLimits>(static_cast<std::size_t>(n));
+  t.drives.assign(static_cast<std::size_t>(n), Drive{});
+  for (int k = 0; k < m.dof(); ++k) {
+    const auto a = static_cast<std::size_t>(m.actuatedJoint(k));
+    t.limits[a] = m.limits[static_cast<std::size_t>(k)];
+    if (static_cast<std::size_t>(k) < m.drives.size())
+      t.drives[a] = m.drives[static_cast<std::size_t>(k)];
+  }
+  return t;
 }
 
 }  // namespace exid::detail

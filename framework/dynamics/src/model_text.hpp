@@ -62,4 +62,15 @@ void requirePhysical(const RobotModel& m, const std::string& format);
 void massCentreInertia(const Eigen::Matrix<double, 10, 1>& pi, double* mass, Eigen::Vector3d* c,
                        Eigen::Matrix3d* Ic);
 
+/// Body b's frame in its parent body's frame with its joint at q: pre · motion(q) · post (at
+/// q = 0 exactly pre · post).
+Pose bodyFrameAt(const Body& b, double q);
+
+/// The kinematic tree a writer writes, and the configuration it writes it at. A tree: the model
+/// itself at q = 0. A closed chain: its spanning tree with limits per tree joint (the actuated
+/// joints' own, the passive ones' closed.tree_limits) and drives on the actuated joints, written
+/// at the loops' reference configuration (an assembled one: the formats close their loops in the
+/// configuration the file is written at). `reference` gets that configuration (numJoints).
+RobotModel writtenTree(const RobotModel& m, Eigen::VectorXd* reference);
+
 }  // namespace exid::detail

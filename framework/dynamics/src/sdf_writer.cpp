@@ -30,16 +30,14 @@ std::string element(const char* name, double v) {
 
 }  // namespace
 
-std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
+std::string writeSdf(const RobotModel& model, const SdfWriteOptions& opt,
                      std::vector<std::string>* left_out) {
-  if (m.hasLoops())
-    throw Error("writing robot '" + m.name + "' as SDF: it is a closed chain (" +
-                std::to_string(m.closed.loops.size()) +
-                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
-                "(expected a kinematic tree)");
-  m.validateStructure();
-  detail::requirePhysical(m, "SDF");
-  const int n = m.dof();
+  model.validateStructure();
+  detail::requirePhysical(model, "SDF");
+  // (a closed chain: its spanning tree at the loops' reference configuration)
+  Eigen::VectorXd ref;
+  const RobotModel m = detail::writtenTree(model, &ref);
+  const int n = m.numJoints();
   std::set<std::string> names;
   for (const auto& b : m.bodies) names.insert(b.name);
   for (const auto& b : m.bodies)
@@ -47,6 +45,12 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
           "writeSdf: '" + b.joint_name +
               "' names both a link and a joint; SDFormat frames share one namespace (rename one)");
   for (const auto& b : m.bodies) names.insert(b.joint_name);
+  for (const LoopJoint& l : model.closed.loops) {
+    check(!names.count(l.name), "writeSdf: loop-closure joint '" + l.name +
+                                    "' has the name of a link or joint (SDFormat frames share one "
+                                    "namespace; rename one)");
+    names.insert(l.name);
+  }
   const std::string root =
       detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
   names.insert(root);
@@ -64,6 +68,11 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     notes.push_back("rotor inertias (joints " + detail::joinNumbers(rotor) +
                     "): SDF has no joint armature");
   detail::leftOutOfEveryFormat(m, coupled, "SDF", &notes);
+  if (ref.cwiseAbs().maxCoeff() > 0.0)
+    notes.push_back(
+        "the joint positions' zero: the file is written at the loops' reference "
+        "configuration (<exid:closed_chain reference>, joint=value), which SDF takes as "
+        "every joint's zero; exid's q is the SDF joint position plus the reference");
   notes.push_back("gravity (" + vec3(m.gravity) +
                   " m/s^2 in the base frame): an SDF model carries none, its world's <gravity> "
                   "does");
@@ -75,7 +84,8 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     for (const auto& s : notes) c += "\n  - " + s;
     x << detail::xmlComment(c);
   }
-  x << "<sdf version=\"1.9\">\n  <model name=\"" << xmlEscape(m.name) << "\">\n"
+  x << "<sdf version=\"1.9\"" << (model.hasLoops() ? " xmlns:exid=\"urn:exid\"" : "")
+    << ">\n  <model name=\"" << xmlEscape(m.name) << "\">\n"
     << "    <link name=\"" << xmlEscape(root) << "\">\n"
     << "      <inertial><mass>0</mass><inertia><ixx>0</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0</iyy>"
        "<iyz>0</iyz><izz>0</izz></inertia></inertial>\n    </link>\n"
@@ -91,7 +101,7 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     Eigen::Matrix3d Ic;
     massCentreInertia(b.inertia, &mass, &c, &Ic);
     x << "    <link name=\"" << xmlEscape(b.name) << "\">\n"
-      << "      " << pose(b.pre * b.post, parent) << "\n"
+      << "      " << pose(detail::bodyFrameAt(b, ref(j)), parent) << "\n"
       << "      <inertial>\n        " << pose(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
       << "        " << element("mass", mass) << "\n        <inertia>" << element("ixx", Ic(0, 0))
       << element("ixy", 0.5 * (Ic(0, 1) + Ic(1, 0))) << element("ixz", 0.5 * (Ic(0, 2) + Ic(2, 0)))
@@ -112,6 +122,36 @@ std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
     if (finiteLimit(L.qd_max)) x << element("velocity", L.qd_max);
     x << "</limit>\n        <dynamics>" << element("damping", d.viscous)
       << element("friction", d.coulomb) << "</dynamics>\n      </axis>\n    </joint>\n";
+  }
+  // Loop-closure joints: SDF joints whose child already has its tree joint (the file is written
+  // at an assembled configuration, where the cut joint's frame is the same in both links); which
+  // joints are cut and which are actuated is exid's own element, <exid:closed_chain>.
+  if (model.hasLoops()) {
+    std::string cut, actuated, reference;
+    for (const LoopJoint& l : model.closed.loops) {
+      const std::string pa =
+          l.body_a < 0 ? root : m.bodies[static_cast<std::size_t>(l.body_a)].name;
+      const std::string cb =
+          l.body_b < 0 ? root : m.bodies[static_cast<std::size_t>(l.body_b)].name;
+      const bool revolute = l.kind == LoopJoint::Kind::Revolute;
+      x << "    <joint name=\"" << xmlEscape(l.name) << "\" type=\""
+        << (revolute ? "revolute" : "ball") << "\">\n      <parent>" << xmlEscape(pa)
+        << "</parent>\n      <child>" << xmlEscape(cb) << "</child>\n      " << pose(l.pose_b)
+        << "\n";
+      if (revolute) x << "      <axis><xyz>" << vec3(l.axis) << "</xyz></axis>\n";
+      x << "    </joint>\n";
+      cut += (cut.empty() ? "" : " ") + xmlEscape(l.name);
+    }
+    for (int k = 0; k < model.dof(); ++k)
+      actuated += (k ? " " : "") +
+                  xmlEscape(m.bodies[static_cast<std::size_t>(model.actuatedJoint(k))].joint_name);
+    for (int j = 0; j < n; ++j)
+      if (ref(j) != 0.0)
+        reference += (reference.empty() ? "" : " ") +
+                     xmlEscape(m.bodies[static_cast<std::size_t>(j)].joint_name) + "=" +
+                     num(ref(j));
+    x << "    <exid:closed_chain cut=\"" << cut << "\" actuated=\"" << actuated << "\" reference=\""
+      << reference << "\"/>\n";
   }
   const Body& sb = m.bodies[static_cast<std::size_t>(m.sensorBody())];
   x << "    <frame name=\"" << xmlEscape(sensor) << "\" attached_to=\"" << xmlEscape(sb.name)
