@@ -9,6 +9,7 @@
 
 #include <cmath>
 #include <random>
+#include <sstream>
 
 #include "dyn_reference.hpp"
 #include "exid/drive.hpp"
@@ -217,7 +218,11 @@ TEST(ClosedChain, FourBarTorqueAgainstLagrange) {
     EXPECT_NEAR(Mq(0, 0), ref.mass, 1e-10 * std::max(1.0, ref.mass));
     EXPECT_NEAR(tm[0], tau[0], 1e-12 * scale);
   }
-  RecordProperty("worst_relative", std::to_string(worst));
+  {
+    std::ostringstream os;
+    os << std::scientific << worst;
+    RecordProperty("worst_relative", os.str());
+  }
 }
 
 TEST(ClosedChain, ConstraintJacobianAndBiasAgainstFiniteDifferences) {

@@ -4,6 +4,7 @@
 // example study runs; excitation design by gradient is refused with the reason.
 #include <gtest/gtest.h>
 
+#include <sstream>
 #include <string>
 
 #include "exid/config.hpp"
@@ -14,13 +15,15 @@
 namespace {
 
 exid::StudyResult run(const std::string& robot, const std::string& estimator,
-                      const std::string& extra = "") {
+                      const std::string& extra = "",
+                      const std::string& experiment = "{period_s: 10, harmonics: 5, "
+                                                      "duration_s: 10, sample_period_s: 0.005}") {
+  // noise-free: the simulated torques are the model's
   const std::string study =
       "robot: {type: " + robot + "}\n"
       "model: {type: differential, params: {rotor_inertia: true, viscous: true, coulomb: true, "
       "offset: true}}\n"
-      "experiment: {type: simulate, params: {period_s: 10, harmonics: 5, duration_s: 10, "
-      "sample_period_s: 0.005}}\n"
+      "experiment: {type: simulate, params: " + experiment + "}\n"
       "estimator: " + estimator + "\n" + extra;
   exid::StudyConfig cfg =
       exid::parseStudy(study, "closed_chain.yaml", exid_test::sourceDir(), exid_test::registry());
@@ -36,13 +39,18 @@ double relErr(const exid::StudyResult& r) {
 }  // namespace
 
 TEST(ClosedChainStudy, PalletizerIdentifiesWithEveryEstimator) {
+  // (rls with a wide prior: its default p0 = 1e6 leaves a prior bias of 3e-6 here, 1e-7 on the
+  // irp6 tree. filtered_ls differentiates a Butterworth-filtered q: its noise-free floor is the
+  // filter's, 5.5e-7 here and 1.2e-7 on the irp6 tree, so it is held to 1e-5.)
   for (const std::string est :
-       {"{type: batch_ls}", "{type: wls}", "{type: rls}", "{type: consistent_ls}",
-        "{type: filtered_ls}"}) {
+       {"{type: batch_ls}", "{type: wls}", "{type: rls, params: {p0: 1e14}}",
+        "{type: consistent_ls}", "{type: filtered_ls}"}) {
     const exid::StudyResult r = run("palletizer", est);
     ASSERT_TRUE(r.ok) << est << ": " << r.message;
-    EXPECT_LT(relErr(r), 1e-9) << est;
-    RecordProperty(est, std::to_string(relErr(r)));
+    EXPECT_LT(relErr(r), est == "{type: filtered_ls}" ? 1e-5 : 1e-9) << est;
+    std::ostringstream os;
+    os << std::scientific << relErr(r);
+    RecordProperty(est, os.str());
   }
 }
 
@@ -53,6 +61,24 @@ TEST(ClosedChainStudy, FourbarIdentifies) {
   // 8 inertial base parameters (tests/robots/closed_chain_robots_test.cpp) + Fc1, Fv1, OFF1
   // (Ia1's column is ZZ1's: the crank turns about a fixed axis)
   EXPECT_EQ(r.summary.find("robot")->find("n_base_parameters")->asDouble(), 8 + 3);
+}
+
+TEST(ClosedChainStudy, GradientsThroughTheLoopsAreRefused) {
+  // Excitation design by gradient needs dG/dqa: refused with the reason, not a design that
+  // "converged" at its first point
+  const std::string exc =
+      "excitation:\n"
+      "  trajectory: {type: fourier, params: {harmonics: 2, period_s: 4}}\n"
+      "  criterion: {type: cond}\n"
+      "  optimizer: {type: nlopt, params: {max_evaluations: 20}}\n";
+  const exid::StudyResult r = run("palletizer", "{type: batch_ls}", exc, "{duration_s: 3.9}");
+  ASSERT_FALSE(r.ok);
+  EXPECT_NE(r.message.find("excitation design is not available for closed chains"),
+            std::string::npos)
+      << r.message;
+  // the same study on a tree designs
+  const exid::StudyResult tree = run("irp6", "{type: batch_ls}", exc, "{duration_s: 3.9}");
+  EXPECT_TRUE(tree.ok) << tree.message;
 }
 
 TEST(ClosedChainStudy, ExampleStudyRuns) {

@@ -172,7 +172,11 @@ TEST(ClosedChainRobots, ParallelogramAgainstHandProjection) {
     exid::jointToMeasured(m, q, qd, qdd, &back, nullptr, nullptr);
     EXPECT_LT((back - qa).cwiseAbs().maxCoeff(), 1e-15);
   }
-  RecordProperty("worst_relative", std::to_string(worst));
+  {
+    std::ostringstream os;
+    os << std::scientific << worst;
+    RecordProperty("worst_relative", os.str());
+  }
 }
 
 // Base parameters of the four-bar (one actuated coordinate, motion in a vertical plane). Only
