@@ -5,6 +5,7 @@
 
 #include <Eigen/SVD>
 #include <cmath>
+#include <cstdio>
 #include <fstream>
 #include <random>
 #include <sstream>
@@ -244,4 +245,75 @@ TEST(ClosedChainRobots, LoaderErrors) {
   e = loadError(pal);
   EXPECT_NE(e.find("do not determine the passive ones"), std::string::npos) << e;
   EXPECT_NE(e.find("mobility is 4"), std::string::npos) << e;
+}
+
+// The same four-bar as a URDF with the <exid> loop elements: the same torques as the DH file.
+TEST(ClosedChainRobots, UrdfFourbarEqualsDh) {
+  const char* link =
+      "  <link name=\"%s\"><inertial><origin xyz=\"%s 0 0\"/><mass value=\"%s\"/>"
+      "<inertia ixx=\"%s\" iyy=\"%s\" izz=\"%s\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/>"
+      "</inertial></link>\n";
+  auto L = [&](const char* n, const char* c, const char* m, const char* xx, const char* yy,
+               const char* zz) {
+    char buf[512];
+    std::snprintf(buf, sizeof buf, link, n, c, m, xx, yy, zz);
+    return std::string(buf);
+  };
+  const std::string urdf =
+      "<robot name=\"fourbar\">\n  <link name=\"base\"/>\n" +
+      L("crank", "0.05", "0.157", "6.5417e-6", "1.32142e-4", "1.36067e-4") +
+      L("coupler", "0.175", "0.5495", "2.2896e-5", "5.6141e-3", "5.6278e-3") +
+      L("rocker", "0.15", "0.471", "1.9625e-5", "3.5364e-3", "3.5482e-3") +
+      "  <joint name=\"joint1\" type=\"continuous\"><parent link=\"base\"/><child "
+      "link=\"crank\"/><axis xyz=\"0 0 1\"/></joint>\n"
+      "  <joint name=\"joint2\" type=\"continuous\"><parent link=\"crank\"/><child "
+      "link=\"coupler\"/><origin xyz=\"0.1 0 0\"/><axis xyz=\"0 0 1\"/></joint>\n"
+      "  <joint name=\"joint3\" type=\"continuous\"><parent link=\"base\"/><child "
+      "link=\"rocker\"/><origin xyz=\"0.4 0 0\"/><axis xyz=\"0 0 1\"/></joint>\n"
+      "  <exid>\n    <gravity xyz=\"0 -9.81 0\"/>\n"
+      "    <loop name=\"C\" link_a=\"coupler\" link_b=\"rocker\" xyz_a=\"0.35 0 0\" "
+      "xyz_b=\"0.3 0 0\" axis=\"0 0 1\"/>\n"
+      "    <actuated joints=\"joint1\"/>\n"
+      "    <reference joint=\"joint2\" value=\"0.9486\"/>\n"
+      "    <reference joint=\"joint3\" value=\"1.8963\"/>\n"
+      "    <drive joint=\"joint1\" viscous=\"0.002\" coulomb=\"0.01\"/>\n"
+      "  </exid>\n</robot>\n";
+  exid::LoadOptions o;
+  std::vector<std::string> sink;
+  o.warnings = &sink;
+  const RobotModel u = exid::loadUrdfString(urdf, "fourbar.urdf (test)", o);
+  const RobotModel d = load("fourbar/fourbar.yaml");
+  ASSERT_EQ(u.dof(), 1);
+  ASSERT_EQ(u.numJoints(), 3);
+  auto du = exid::makeDynamicsData(u);
+  auto dd = exid::makeDynamicsData(d);
+  const exid::DriveColumns all{true, true, true, true};
+  std::mt19937 rng(605);
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  for (int t = 0; t < 30; ++t) {
+    const Eigen::VectorXd qa = Eigen::VectorXd::Constant(1, M_PI * U(rng)),
+                          qda = Eigen::VectorXd::Constant(1, 3 * U(rng)),
+                          qdda = Eigen::VectorXd::Constant(1, 10 * U(rng));
+    const Eigen::VectorXd a = exid::actuatorTorque(u, *du, all, qa, qda, qdda),
+                          b = exid::actuatorTorque(d, *dd, all, qa, qda, qdda);
+    EXPECT_NEAR(a[0], b[0], 1e-12 * std::max(1.0, std::abs(b[0])));
+  }
+  // errors: an unknown link, a drive on a passive joint, actuated joints without a loop
+  auto err = [&](const std::string& from, const std::string& to) {
+    std::string x = urdf;
+    x.replace(x.find(from), from.size(), to);
+    try {
+      exid::loadUrdfString(x, "bad.urdf (test)", o);
+    } catch (const exid::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  std::string e = err("link_b=\"rocker\"", "link_b=\"rockr\"");
+  EXPECT_NE(e.find("link_b 'rockr': no such link"), std::string::npos) << e;
+  EXPECT_NE(e.find("bad.urdf (test):"), std::string::npos) << e;
+  e = err("<drive joint=\"joint1\"", "<drive joint=\"joint2\"");
+  EXPECT_NE(e.find("passive"), std::string::npos) << e;
+  e = err("<actuated joints=\"joint1\"/>", "");
+  EXPECT_NE(e.find("must name its actuated joints"), std::string::npos) << e;
 }
