@@ -317,3 +317,28 @@ TEST(ClosedChainRobots, UrdfFourbarEqualsDh) {
   e = err("<actuated joints=\"joint1\"/>", "");
   EXPECT_NE(e.find("must name its actuated joints"), std::string::npos) << e;
 }
+
+// The energy model's rows on a closed chain: the tree's kinetic energy at q = phi(qa),
+// qd = G qd_a equals 1/2 qd_a^T (G^T M G) qd_a, the mechanism's (with G^T M G from
+// actuatorTorqueDerivatives); the regressor's rows times the parameters give it.
+TEST(ClosedChainRobots, EnergyOfTheMechanism) {
+  for (const char* file : {"palletizer/palletizer.yaml", "fourbar/fourbar.yaml"}) {
+    const RobotModel m = load(file);
+    auto data = exid::makeDynamicsData(m);
+    std::mt19937 rng(606);
+    const exid::DriveColumns none;
+    const Eigen::VectorXd pi = m.inertialParameters();
+    for (int t = 0; t < 20; ++t) {
+      Eigen::VectorXd qa, qda, qdda, q, qd;
+      randomState(m, rng, &qa, &qda, &qdda);
+      exid::measuredToJoint(m, qa, qda, qdda, &q, &qd, nullptr);
+      Eigen::RowVectorXd kin(m.numInertialParameters()), pot(m.numInertialParameters());
+      exid::energyRegressor(m, *data, q, qd, kin, pot);
+      Eigen::VectorXd tau;
+      Eigen::MatrixXd Ma;
+      exid::actuatorTorqueDerivatives(m, *data, none, qa, qda, qdda, &tau, nullptr, nullptr, &Ma);
+      const double T = 0.5 * qda.dot(Ma * qda);
+      EXPECT_NEAR(kin.dot(pi), T, 1e-12 * std::max(1.0, std::abs(T))) << file;
+    }
+  }
+}
