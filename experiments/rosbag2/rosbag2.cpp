@@ -93,7 +93,8 @@ class BagReading {
     const int n = n_;
     names_ = P_.getStrings("joint_names");
     if (names_.empty()) {
-      for (const exid::Body& b : robot_.bodies) names_.push_back(b.joint_name);
+      for (int j = 0; j < robot_.dof(); ++j)  // measured coordinates (a closed chain's actuated)
+        names_.push_back(robot_.bodies[static_cast<std::size_t>(robot_.actuatedJoint(j))].joint_name);
     } else {
       exid::check(static_cast<int>(names_.size()) == n,
                   fmt::format("{}joint_names: expected {} names (one per joint of robot '{}', in "

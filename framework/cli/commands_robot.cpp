@@ -144,9 +144,13 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
     return 0;
   }
   std::cout << fmt::format("robot {} ({} joints) from {}\n", r->name, r->dof(), r->source);
+  if (r->hasLoops())
+    std::cout << fmt::format("  closed chain: {} tree joints, {} loop-closure joint(s); the "
+                             "joints below are the actuated ones\n",
+                             r->numJoints(), r->closed.loops.size());
   for (const auto& note : r->notes) std::cout << "  note: " << note << "\n";
   for (int i = 0; i < r->dof(); ++i) {
-    const Body& body = r->bodies[static_cast<std::size_t>(i)];
+    const Body& body = r->bodies[static_cast<std::size_t>(r->actuatedJoint(i))];
     const JointLimits& L = r->limits[static_cast<std::size_t>(i)];
     std::cout << fmt::format(
         "  {} {:<12} {:<9} parent {:>2}  q in [{:.4g}, {:.4g}]  |qd| <= {:.4g}\n", i + 1,
@@ -239,7 +243,9 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
     measuredToJoint(*r, qm, qdm, qddm, &q, &qd, &qdd);
     if (what == "torque") {
       Eigen::VectorXd tau;
-      if (rigid_body_only) {
+      if (rigid_body_only && r->hasLoops()) {
+        tau = actuatorTorque(*r, *data, DriveColumns{}, qm, qdm, qddm);
+      } else if (rigid_body_only) {
         tau = inverseDynamics(*r, *data, q, qd, qdd);
         if (r->hasTransmission()) tau = r->transmission.transpose() * tau;
       } else {
@@ -247,7 +253,10 @@ int evalCommand(const Registry& reg, const std::string& robot, const std::string
       }
       t.data.row(k) = tau.transpose();
     } else if (what == "regressor") {
-      torqueRegressor(*r, *data, q, qd, qdd, Y);
+      if (r->hasLoops())
+        actuatorRegressor(*r, *data, DriveColumns{}, qm, qdm, qddm, Y);
+      else
+        torqueRegressor(*r, *data, q, qd, qdd, Y);
       if (r->hasTransmission()) Y = r->transmission.transpose() * Y;
       t.data.middleRows(k * n, n) = Y;
     } else if (what == "energy" || what == "energy_regressor") {
@@ -451,7 +460,7 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     }
     if (!done) ignored.push_back(n);
   }
-  for (int j = 0; j < m.dof(); ++j) {
+  for (int j = 0; j < m.numJoints(); ++j) {
     const InertiaCheck c = checkPhysical(m.bodies[static_cast<std::size_t>(j)].inertia);
     if (!c.ok)
       throw Error(

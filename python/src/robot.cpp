@@ -177,12 +177,22 @@ class PyRobot {
     return py::make_tuple(mat(s.q), mat(s.qd), mat(s.qdd));
   }
 
+  // A closed chain (loop-closure joints) is not handled by the per-sample methods yet.
+  void refuseLoops(const char* method) const {
+    if (r().hasLoops())
+      throw py::value_error(fmt::format(
+          "{}: robot '{}' is a closed chain ({} actuated of {} tree joints); the Python "
+          "per-sample dynamics do not handle loop-closure joints yet (use a study)",
+          method, name(), r().dof(), r().numJoints()));
+  }
+
   // ------------------------------------------------ dynamics, vectorised over samples
   enum class What { Rnea, Torque, Inertial, Payload, Wrench, Mass };
 
   /// One loop for the per-sample quantities: q, qd, qdd (measured) -> joint coordinates -> out.
   OutArray perSample(What what, const py::handle& q_in, const py::handle& qd_in,
                      const py::handle& qdd_in, const py::object& pi_in, const char* method) const {
+    refuseLoops(method);
     const int n = dof();
     const SampleArg q = sampleArg(q_in, "q", n, method, name());
     const bool needs_rates = what != What::Mass;
@@ -297,6 +307,7 @@ class PyRobot {
 
   py::tuple energyRegressor(const py::handle& q_in, const py::handle& qd_in) const {
     const char* method = "energy_regressor";
+    refuseLoops(method);
     const int n = dof(), p = 10 * n;
     const SampleArg q = sampleArg(q_in, "q", n, method, name());
     const SampleArg qd = sampleArg(qd_in, "qd", n, method, name());

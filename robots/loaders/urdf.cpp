@@ -12,6 +12,7 @@
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
+#include <algorithm>
 #include <map>
 #include <mutex>
 #include <set>
@@ -185,7 +186,7 @@ void linkTree(const std::string& src, const std::map<std::string, int>& link_lin
       throw Error(src + ":" + std::to_string(j.line) + ": joint '" + j.name +
                   "': kinematic loop: link '" + j.child + "' already is the child of joint '" +
                   o.name + "' (line " + std::to_string(o.line) +
-                  "); a URDF must be a tree (closed chains are not supported)");
+                  "); a URDF must be a tree (close a loop with an <exid><loop> element)");
     }
     parent_joint[j.child] = static_cast<int>(k);
     x.children[j.parent].push_back(static_cast<int>(k));
@@ -395,9 +396,77 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
     return it->second;
   };
   bool had_transmission = false;
+  // closed chains: loop-closure joints, actuated joints, reference values (tree joints)
+  std::vector<LoopJoint> loops;
+  std::vector<int> actuated;
+  const TiXmlElement* actuated_el = nullptr;
+  std::map<int, double> reference;
+  std::map<int, const TiXmlElement*> drive_el;
+  auto pose = [&](const TiXmlElement* e, const char* xyz_key, const char* rpy_key) {
+    Pose P;
+    auto xyz = r.numbers(e, xyz_key, e->Attribute(xyz_key) ? 3 : -1);
+    auto rpy = r.numbers(e, rpy_key, e->Attribute(rpy_key) ? 3 : -1);
+    if (!xyz.empty()) P.p = Eigen::Vector3d(xyz[0], xyz[1], xyz[2]);
+    if (!rpy.empty()) P.R = detail::rpyToMatrix(rpy[0], rpy[1], rpy[2]);
+    return P;
+  };
   for (const TiXmlElement* e = ext->FirstChildElement(); e; e = e->NextSiblingElement()) {
     const std::string tag = e->Value();
-    if (tag == "drive") {
+    if (tag == "loop") {
+      r.allow(e, {"name", "type", "link_a", "link_b", "xyz_a", "rpy_a", "xyz_b", "rpy_b", "axis"});
+      LoopJoint lj;
+      lj.name = attr(e, "name");
+      lj.where = at(src, e);
+      const std::string type = e->Attribute("type") ? attr(e, "type") : "revolute";
+      if (type == "revolute")
+        lj.kind = LoopJoint::Kind::Revolute;
+      else if (type == "spherical")
+        lj.kind = LoopJoint::Kind::Spherical;
+      else
+        r.fail(e, "type '" + type + "': expected revolute or spherical");
+      LinkPlace side[2];
+      const char* keys[2] = {"link_a", "link_b"};
+      for (int k = 0; k < 2; ++k) {
+        const std::string l = attr(e, keys[k]);
+        if (l.empty()) r.fail(e, std::string("missing attribute '") + keys[k] + "'");
+        auto it = link_place.find(l);
+        if (it == link_place.end()) r.fail(e, std::string(keys[k]) + " '" + l + "': no such link");
+        side[k] = it->second;
+      }
+      lj.body_a = side[0].body;
+      lj.body_b = side[1].body;
+      if (lj.body_a == lj.body_b)
+        r.fail(e, "link_a and link_b move together (the same body): nothing to close");
+      lj.pose_a = side[0].X * pose(e, "xyz_a", "rpy_a");
+      lj.pose_b = side[1].X * pose(e, "xyz_b", "rpy_b");
+      auto ax = r.numbers(e, "axis", e->Attribute("axis") ? 3 : -1);
+      if (!ax.empty()) {
+        const Eigen::Vector3d a(ax[0], ax[1], ax[2]);
+        if (!(a.norm() > 1e-12)) r.fail(e, "axis must not be zero");
+        lj.axis = a.normalized();
+      }
+      loops.push_back(lj);
+    } else if (tag == "actuated") {
+      r.allow(e, {"joints"});
+      if (actuated_el) r.fail(e, "a second <actuated>");
+      actuated_el = e;
+      std::istringstream ss(attr(e, "joints"));
+      std::string j;
+      while (ss >> j) {
+        auto it = joint_body.find(j);
+        if (it == joint_body.end()) r.fail(e, "joint '" + j + "': no such movable joint");
+        if (std::find(actuated.begin(), actuated.end(), it->second) != actuated.end())
+          r.fail(e, "joint '" + j + "' named twice");
+        actuated.push_back(it->second);
+      }
+      if (actuated.empty()) r.fail(e, "attribute 'joints' names no joint");
+    } else if (tag == "reference") {
+      r.allow(e, {"joint", "value"});
+      double v = 0;
+      if (!r.number(e, "value", &v)) r.fail(e, "missing attribute 'value' (rad or m)");
+      reference[bodyOfJoint(e)] = v;
+    } else if (tag == "drive") {
+      drive_el[bodyOfJoint(e)] = e;
       r.allow(e, {"joint", "gear_ratio", "motor_inertia", "rotor_inertia", "coulomb", "viscous",
                   "offset"});
       Drive& d = m->drives[static_cast<size_t>(bodyOfJoint(e))];
@@ -462,8 +531,40 @@ void applyExtension(const TiXmlElement* ext, const std::string& src, RobotModel*
       m->sensor_body = it->second.body;
       m->sensor_pose = it->second.X * P;
     } else {
-      r.fail(e, "unknown element (allowed: drive, limit, gravity, transmission, sensor)");
+      r.fail(e,
+             "unknown element (allowed: drive, limit, gravity, transmission, sensor, loop, "
+             "actuated, reference)");
     }
+  }
+  if (!loops.empty() || actuated_el || !reference.empty()) {
+    if (loops.empty())
+      r.fail(actuated_el ? actuated_el : ext->FirstChildElement("reference"),
+             "no <loop> (loop-closure joint): <actuated> and <reference> describe closed chains");
+    if (!actuated_el)
+      r.fail(ext->FirstChildElement("loop"),
+             "a closed chain must name its actuated joints (<actuated joints=\"...\"/>)");
+    if (had_transmission)
+      r.fail(ext->FirstChildElement("transmission"),
+             "a closed chain with a <transmission> is not supported");
+    for (const auto& [body, el] : drive_el)
+      if (std::find(actuated.begin(), actuated.end(), body) == actuated.end())
+        r.fail(el, "joint '" + m->bodies[static_cast<size_t>(body)].joint_name +
+                       "' is passive (not in <actuated>): a drive belongs to an actuated joint");
+    m->closed.loops = loops;
+    m->closed.actuated = actuated;
+    if (!reference.empty()) {
+      m->closed.reference = Eigen::VectorXd::Zero(n);
+      for (const auto& [body, v] : reference) m->closed.reference[body] = v;
+    }
+    m->closed.tree_limits = m->limits;
+    std::vector<JointLimits> lim;
+    std::vector<Drive> drv;
+    for (int a : actuated) {
+      lim.push_back(m->limits[static_cast<size_t>(a)]);
+      drv.push_back(m->drives[static_cast<size_t>(a)]);
+    }
+    m->limits = lim;
+    m->drives = drv;
   }
   (void)options;
 }

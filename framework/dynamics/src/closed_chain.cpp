@@ -222,7 +222,9 @@ double newton(const RobotModel& m, const std::vector<int>& passive, Eigen::Vecto
   kinematics(m, q, nullptr, nullptr, k);
   constraintFromKin(m, k, &c, &J);
   double norm = c.lpNorm<Eigen::Infinity>();
-  for (int it = 0; it < 60 && norm > tol; ++it) {
+  // iterate past `tol` to rounding (quadratic convergence: a step or two), stop without progress
+  const double tight = 1e-3 * tol;
+  for (int it = 0; it < 60 && norm > tight; ++it) {
     PassiveSolver S(columns(J, passive));
     const Eigen::VectorXd dx = S.cod.solve(-c);
     double step = 1.0;
@@ -236,11 +238,43 @@ double newton(const RobotModel& m, const std::vector<int>& passive, Eigen::Vecto
       Eigen::VectorXd ct;
       constraintFromKin(m, k, &ct, nullptr);
       const double nt = ct.lpNorm<Eigen::Infinity>();
-      if (nt < norm || nt <= tol) {
+      if (nt < norm) {
         better = true;
         q = trial;
         norm = nt;
         break;
+      }
+    }
+    if (!better) break;
+    kinematics(m, q, nullptr, nullptr, k);
+    constraintFromKin(m, k, &c, &J);
+  }
+  return norm;
+}
+
+// Newton over every tree joint (minimum-norm steps): the assembled configuration nearest the
+// given one, whatever the actuated joints. Returns the final residual norm.
+double assembleAll(const RobotModel& m, Eigen::VectorXd& q, double tol) {
+  Kin k;
+  Eigen::VectorXd c;
+  Eigen::MatrixXd J;
+  kinematics(m, q, nullptr, nullptr, k);
+  constraintFromKin(m, k, &c, &J);
+  double norm = c.lpNorm<Eigen::Infinity>();
+  for (int it = 0; it < 60 && norm > 1e-3 * tol; ++it) {
+    PassiveSolver S(J);
+    const Eigen::VectorXd dx = S.cod.solve(-c);
+    double step = 1.0;
+    bool better = false;
+    for (int h = 0; h < 30 && !better; ++h, step *= 0.5) {
+      const Eigen::VectorXd trial = q + step * dx;
+      kinematics(m, trial, nullptr, nullptr, k);
+      Eigen::VectorXd ct;
+      constraintFromKin(m, k, &ct, nullptr);
+      if (ct.lpNorm<Eigen::Infinity>() < norm) {
+        q = trial;
+        norm = ct.lpNorm<Eigen::Infinity>();
+        better = true;
       }
     }
     if (!better) break;
@@ -340,7 +374,18 @@ void closedChainState(const RobotModel& m, const Eigen::VectorXd& qa, const Eige
   Eigen::VectorXd q = m.closed.reference.size() == n ? m.closed.reference : Eigen::VectorXd::Zero(n);
   Eigen::VectorXd qa0(na);
   for (int i = 0; i < na; ++i) qa0[i] = q[m.closed.actuated[static_cast<size_t>(i)]];
+  // A revolute actuated joint moves the mechanism 2 pi-periodically: the path starts from the
+  // reference's angle nearest qa (the passive joints come out modulo 2 pi, as the dynamics read
+  // them), so a crank that has turned many times costs no longer path.
+  for (int i = 0; i < na; ++i) {
+    const int j = m.closed.actuated[static_cast<size_t>(i)];
+    if (m.bodies[static_cast<size_t>(j)].type == JointType::Revolute)
+      qa0[i] = qa[i] - std::remainder(qa[i] - qa0[i], 2.0 * M_PI);
+  }
   const double span = (qa - qa0).lpNorm<Eigen::Infinity>();
+  if (!(span <= 1e4))
+    throw Error(robotLabel(m) + ": actuated coordinates " + vecText(qa) +
+                " are more than 1e4 m from the closed chain's reference configuration");
   const int steps = std::max(1, static_cast<int>(std::ceil(span / 0.25)));
   Kin k;
   double norm = 0.0;
@@ -434,10 +479,19 @@ void validateClosedChain(const RobotModel& m) {
   // assembly at the reference, and the rank test there
   const Eigen::VectorXd q0 =
       m.closed.reference.size() == n ? m.closed.reference : Eigen::VectorXd::Zero(n);
-  Eigen::VectorXd qa0(na);
-  for (int i = 0; i < na; ++i) qa0[i] = q0[m.closed.actuated[static_cast<size_t>(i)]];
-  Eigen::VectorXd q;
-  closedChainState(m, qa0, nullptr, nullptr, &q, nullptr, nullptr, nullptr, nullptr);
+  // the assembled configuration nearest the reference (every joint free), the rank tests there,
+  // then the position solve from the reference at its actuated values
+  Eigen::VectorXd q = q0;
+  const double tol = kTol * lengthScale(m);
+  if (!(assembleAll(m, q, tol) <= tol)) {
+    Kin k;
+    kinematics(m, q, nullptr, nullptr, k);
+    Eigen::VectorXd qa0(na);
+    for (int i = 0; i < na; ++i) qa0[i] = q0[m.closed.actuated[static_cast<size_t>(i)]];
+    Eigen::VectorXd c;
+    constraintFromKin(m, k, &c, nullptr);
+    noAssembly(m, qa0, k, c.lpNorm<Eigen::Infinity>());
+  }
   Eigen::MatrixXd J;
   loopConstraint(m, q, nullptr, &J);
   const std::vector<int> passive = passiveJoints(m);
@@ -461,6 +515,9 @@ void validateClosedChain(const RobotModel& m) {
        << "is " << mobility << "; expected that many actuated joints, free to move together)";
     throw Error(os.str());
   }
+  Eigen::VectorXd qa0(na);
+  for (int i = 0; i < na; ++i) qa0[i] = q0[m.closed.actuated[static_cast<size_t>(i)]];
+  closedChainState(m, qa0, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr, nullptr);
 }
 
 }  // namespace exid

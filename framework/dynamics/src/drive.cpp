@@ -137,10 +137,18 @@ void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Ei
     const int nt = model.numJoints(), n = model.dof();
     const Eigen::VectorXd* in[3] = {&q, &qd, &qdd};
     Eigen::VectorXd* out[3] = {qm, qdm, qddm};
+    // tree coordinates (numJoints) -> the actuated ones; the actuated joints' own coordinates
+    // (dof: what `limits` bound, e.g. a trajectory drawn inside them) are the measured ones
     for (int w = 0; w < 3; ++w) {
       if (!out[w]) continue;
-      check(in[w]->size() == nt, "jointToMeasured: tree coordinates of robot '" + model.name +
-                                     "' must have " + std::to_string(nt) + " entries");
+      const Eigen::Index sz = in[w]->size();
+      if (sz == n) {
+        *out[w] = *in[w];
+        continue;
+      }
+      check(sz == nt, "jointToMeasured: robot '" + model.name + "' (a closed chain) takes " +
+                          std::to_string(nt) + " tree coordinates or " + std::to_string(n) +
+                          " actuated ones (found " + std::to_string(sz) + ")");
       out[w]->resize(n);
       for (int k = 0; k < n; ++k) (*out[w])[k] = (*in[w])[model.actuatedJoint(k)];
     }

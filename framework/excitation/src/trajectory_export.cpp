@@ -329,7 +329,8 @@ TrajectoryCheck checkTrajectory(const Samples& s, const RobotModel& robot,
   }
   c.start = endMotion(qd, qdd, 0, robot);
   c.end = endMotion(qd, qdd, K - 1, robot);
-  for (const Body& b : robot.bodies) {
+  for (int j = 0; j < robot.dof(); ++j) {  // measured coordinates (a closed chain's actuated)
+    const Body& b = robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))];
     c.joint_names.push_back(b.joint_name);
     c.prismatic.push_back(b.type == JointType::Prismatic);
   }
@@ -505,7 +506,8 @@ void writeTrajectoryCsv(const fs::path& file, const Samples& s, const Eigen::Mat
 
 std::vector<std::string> quotedJointNames(const RobotModel& robot) {
   std::vector<std::string> jn;
-  for (const Body& b : robot.bodies) jn.push_back(quoted(b.joint_name));
+  for (int j = 0; j < robot.dof(); ++j)
+    jn.push_back(quoted(robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name));
   return jn;
 }
 
@@ -567,7 +569,8 @@ void drawExportPlots(const fs::path& stage, const Samples& s, const Eigen::Matri
   const int n = s.dof();
   const Eigen::Index K = s.size();
   std::vector<std::string> jn;
-  for (const Body& b : robot.bodies) jn.push_back(b.joint_name);
+  for (int j = 0; j < robot.dof(); ++j)
+    jn.push_back(robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name);
   if (static_cast<int>(jn.size()) != n) jn.clear();
   auto series = [&](const Eigen::MatrixXd& m, const char* prefix) {
     std::vector<PlotSeries> v;

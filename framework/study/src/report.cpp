@@ -37,8 +37,9 @@ std::vector<double> vec(const Eigen::VectorXd& v) {
 
 // The robot's joint names, one per measured coordinate (empty when they do not match).
 std::vector<std::string> jointNames(const RobotModel& robot, int dof) {
-  std::vector<std::string> n;
-  for (const Body& b : robot.bodies) n.push_back(b.joint_name);
+  std::vector<std::string> n;  // the measured coordinates' (a closed chain's actuated joints)
+  for (int j = 0; j < robot.dof(); ++j)
+    n.push_back(robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name);
   if (static_cast<int>(n.size()) != dof) n.clear();
   return n;
 }

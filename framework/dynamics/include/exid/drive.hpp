@@ -53,7 +53,9 @@ EXID_API int torqueColumnKind(const std::string& name);
 EXID_API void measuredToJoint(const RobotModel& model, const Eigen::VectorXd& qm,
                               const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
                               Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd);
-/// Measured coordinates from joint ones (the transmission must be invertible).
+/// Measured coordinates from joint ones (the transmission must be invertible). For a closed
+/// chain: from the tree's coordinates (numJoints entries: the actuated joints' values) or from
+/// the actuated joints' own (dof entries: returned as they are).
 EXID_API void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q,
                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                               Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm);
