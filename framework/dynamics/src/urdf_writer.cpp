@@ -24,13 +24,12 @@ std::string origin(const Pose& X) {
 
 }  // namespace
 
-std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
-  if (m.hasLoops())
-    throw Error("writing robot '" + m.name + "' as URDF: it is a closed chain (" +
-                std::to_string(m.closed.loops.size()) +
-                " loop-closure joint(s)); exporting loop-closure joints is not implemented "
-                "(expected a kinematic tree)");
-  m.validateStructure();
+std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
+  model.validateStructure();
+  // (a closed chain: its spanning tree, limits per tree joint, drives on the actuated joints;
+  // the loops in <exid> below)
+  Eigen::VectorXd ref;
+  const RobotModel m = detail::writtenTree(model, &ref);
   std::set<std::string> names;
   for (const auto& b : m.bodies) names.insert(b.name);
   const std::string root =
@@ -39,7 +38,7 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
   x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);
   x << "<robot name=\"" << xmlEscape(m.name) << "\">\n";
   x << "  <link name=\"" << xmlEscape(root) << "\"/>\n";
-  for (int j = 0; j < m.dof(); ++j) {
+  for (int j = 0; j < m.numJoints(); ++j) {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     // Link frame = moved joint frame: parameters moved from the body frame by `post`.
     const Eigen::Matrix<double, 10, 1> pi = transformInertial(b.inertia, b.post);
@@ -85,9 +84,12 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
     x << "  </joint>\n";
   }
   x << "  <exid>\n    <gravity xyz=\"" << vec3(m.gravity) << "\"/>\n";
-  for (int j = 0; j < m.dof(); ++j) {
+  std::vector<bool> actuated(static_cast<std::size_t>(m.numJoints()), !model.hasLoops());
+  for (int k = 0; k < model.dof() && model.hasLoops(); ++k)
+    actuated[static_cast<std::size_t>(model.actuatedJoint(k))] = true;
+  for (int j = 0; j < m.numJoints(); ++j) {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
-    if (j < static_cast<int>(m.drives.size())) {
+    if (j < static_cast<int>(m.drives.size()) && actuated[static_cast<std::size_t>(j)]) {
       const Drive& d = m.drives[static_cast<std::size_t>(j)];
       x << "    <drive joint=\"" << xmlEscape(b.joint_name) << "\" gear_ratio=\""
         << num(d.gear_ratio) << "\" rotor_inertia=\"" << num(d.rotor_inertia) << "\" coulomb=\""
@@ -112,6 +114,30 @@ std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
       x << "\"";
     }
     x << "/>\n";
+  }
+  if (model.hasLoops()) {
+    // the cut frames in the URDF link frames (a link frame is its body's moved joint frame:
+    // the body frame is at `post` in it)
+    auto link = [&](int b, const Pose& X, const char* side) {
+      const Pose L = b < 0 ? X : m.bodies[static_cast<std::size_t>(b)].post * X;
+      return std::string(" link_") + side + "=\"" +
+             xmlEscape(b < 0 ? root : m.bodies[static_cast<std::size_t>(b)].name) + "\" xyz_" +
+             side + "=\"" + vec3(L.p) + "\" rpy_" + side + "=\"" + vec3(rpy(L.R)) + "\"";
+    };
+    for (const LoopJoint& l : model.closed.loops)
+      x << "    <loop name=\"" << xmlEscape(l.name) << "\" type=\""
+        << (l.kind == LoopJoint::Kind::Revolute ? "revolute" : "spherical") << "\""
+        << link(l.body_a, l.pose_a, "a") << link(l.body_b, l.pose_b, "b") << " axis=\""
+        << vec3(l.axis) << "\"/>\n";
+    x << "    <actuated joints=\"";
+    for (int k = 0; k < model.dof(); ++k)
+      x << (k ? " " : "")
+        << xmlEscape(m.bodies[static_cast<std::size_t>(model.actuatedJoint(k))].joint_name);
+    x << "\"/>\n";
+    for (int j = 0; j < m.numJoints(); ++j)
+      if (ref(j) != 0.0)
+        x << "    <reference joint=\"" << xmlEscape(m.bodies[static_cast<std::size_t>(j)].joint_name)
+          << "\" value=\"" << num(ref(j)) << "\"/>\n";
   }
   const int sb = m.sensorBody();
   const Pose S = m.bodies[static_cast<std::size_t>(sb)].post * m.sensor_pose;
