@@ -77,6 +77,17 @@ struct EXID_API CollisionShape {
   std::string where;  // where it was given (file:line, YAML key), for messages
 };
 
+/// The free-floating base link of a floating-base robot (docs/robots.md, "Floating base"): its
+/// frame is the base frame, its 10 standard parameters (about the base frame origin, in the base
+/// frame, order XX XY XZ YY YZ ZZ MX MY MZ M) come first in the floating parameter vector, named
+/// XX0 ... M0 (exid/floating_base.hpp). The link itself is not one of `bodies`: the bodies with
+/// parent = -1 are attached to it.
+struct EXID_API FloatingBase {
+  std::string link;        // the base link's name
+  std::string joint_name;  // the floating joint's name (URDF), empty when the description gives none
+  Eigen::Matrix<double, 10, 1> inertia = Eigen::Matrix<double, 10, 1>::Zero();
+};
+
 struct EXID_API RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
@@ -101,6 +112,11 @@ struct EXID_API RobotModel {
   /// Facts about a shipped description worth stating once in a report (known defects of
   /// published data, kept as published): summary.json `robot.notes` and the report, not logged.
   std::vector<std::string> notes;
+  /// A floating-base robot: the base link moves freely (its motion is a signal, see
+  /// exid/floating_base.hpp) and `base` describes it. false: the base is fixed to the world
+  /// (every fixed-base algorithm refuses a floating robot: requireFixedBase).
+  bool floating_base = false;
+  FloatingBase base;
 
   int dof() const { return static_cast<int>(bodies.size()); }
   int numInertialParameters() const { return 10 * dof(); }
@@ -114,6 +130,10 @@ struct EXID_API RobotModel {
   /// Throws exid::Error naming the body and rule if the structure is invalid
   /// (parent order, unit axes, orthonormal rotations, finite numbers, sizes).
   void validateStructure() const;
+  /// Throws exid::Error naming `what` (the consumer) when the robot has a floating base: the
+  /// fixed-base algorithms (differential/integral/load models, excitation design, collision,
+  /// export writers, ...) would compute something wrong for it.
+  void requireFixedBase(const std::string& what) const;
 };
 
 /// Parameter order of one body: XX XY XZ YY YZ ZZ MX MY MZ M.
