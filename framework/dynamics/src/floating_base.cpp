@@ -234,6 +234,27 @@ Eigen::MatrixXd contactMap(const RobotModel& model, const Eigen::VectorXd& q, in
   return C;
 }
 
+int floatingBodyIndex(const RobotModel& model, const std::string& link, const std::string& who) {
+  if (model.floating_base && link == model.base.link) return -1;
+  std::string names = model.floating_base ? "'" + model.base.link + "' (the base link)" : "";
+  for (int i = 0; i < model.dof(); ++i) {
+    const std::string& b = model.bodies[static_cast<size_t>(i)].name;
+    if (b == link) return i;
+    names += (names.empty() ? "'" : ", '") + b + "'";
+  }
+  throw Error(who + ": unknown link '" + link + "' of " + label(model) + " (expected one of " +
+              names + "; a link fixed to another is merged into it: name that one)");
+}
+
+Pose poseFromXyzRpy(const double* v) {
+  Pose P;
+  P.p = V3(v[0], v[1], v[2]);
+  P.R = (Eigen::AngleAxisd(v[5], V3::UnitZ()) * Eigen::AngleAxisd(v[4], V3::UnitY()) *
+         Eigen::AngleAxisd(v[3], V3::UnitX()))
+            .toRotationMatrix();
+  return P;
+}
+
 Pose floatingBodyPose(const RobotModel& model, const Eigen::VectorXd& q, int body) {
   const int n = model.dof();
   checkVec(model, q, n, "q", "floatingBodyPose");

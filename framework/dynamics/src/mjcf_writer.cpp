@@ -79,6 +79,7 @@ std::string inertial(const Body& b, std::vector<std::string>* raised) {
 
 std::string writeMjcf(const RobotModel& m, const MjcfWriteOptions& opt,
                       std::vector<std::string>* left_out) {
+  m.requireFixedBase("the MJCF writer (fixed-base export; floating-base export is not written yet)");
   m.validateStructure();
   detail::requirePhysical(m, "MJCF");
   check(std::isfinite(opt.timestep_s) && opt.timestep_s > 0.0,

@@ -32,6 +32,7 @@ std::string element(const char* name, double v) {
 
 std::string writeSdf(const RobotModel& m, const SdfWriteOptions& opt,
                      std::vector<std::string>* left_out) {
+  m.requireFixedBase("the SDF writer (fixed-base export; floating-base export is not written yet)");
   m.validateStructure();
   detail::requirePhysical(m, "SDF");
   const int n = m.dof();

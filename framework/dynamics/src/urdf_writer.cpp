@@ -25,6 +25,7 @@ std::string origin(const Pose& X) {
 }  // namespace
 
 std::string writeUrdf(const RobotModel& m, const UrdfWriteOptions& opt) {
+  m.requireFixedBase("the URDF writer (fixed-base export; floating-base export is not written yet)");
   m.validateStructure();
   std::set<std::string> names;
   for (const auto& b : m.bodies) names.insert(b.name);

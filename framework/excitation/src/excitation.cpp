@@ -40,6 +40,7 @@ class Problem final : public ExcitationProblem {
     K_ = s.size();
     n_ = s.dof();
     const RobotModel& r = model_->robot();
+    r.requireFixedBase("excitation design (the fixed-contact floating-base case is not designed)");
     // Limits in measured coordinates equal joint limits when there is no transmission; with a
     // transmission, the joint-space limits are applied to q = T qm + q0 below.
     std::vector<JointLimits> limits = r.limits;

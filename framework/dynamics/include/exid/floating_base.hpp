@@ -69,6 +69,13 @@ EXID_API Eigen::VectorXd floatingInverseDynamics(const RobotModel& model, const 
 EXID_API Eigen::MatrixXd contactMap(const RobotModel& model, const Eigen::VectorXd& q, int body,
                                     const Pose& sensor);
 
+/// The body index of a link of a floating robot: -1 for the base link, else the body named
+/// `link`; an exid::Error starting with `who` lists the names otherwise.
+EXID_API int floatingBodyIndex(const RobotModel& model, const std::string& link,
+                               const std::string& who);
+/// A pose from x y z [m] and roll pitch yaw [rad] (URDF: R = Rz(yaw) Ry(pitch) Rx(roll)).
+EXID_API Pose poseFromXyzRpy(const double* xyz_rpy);
+
 /// Pose of body i's frame (i = -1: the base link, identity) in the base frame.
 EXID_API Pose floatingBodyPose(const RobotModel& model, const Eigen::VectorXd& q, int body);
 
