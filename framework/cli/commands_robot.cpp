@@ -99,6 +99,10 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
     return 0;
   }
   std::cout << fmt::format("robot {} ({} joints) from {}\n", r->name, r->dof(), r->source);
+  if (r->floating_base)
+    std::cout << fmt::format(
+        "  floating base: link '{}' (parameters XX0 ... M0; parent 0 below means this link)\n",
+        r->base.link);
   for (const auto& note : r->notes) std::cout << "  note: " << note << "\n";
   for (int i = 0; i < r->dof(); ++i) {
     const Body& body = r->bodies[static_cast<std::size_t>(i)];
