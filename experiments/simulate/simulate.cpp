@@ -427,6 +427,8 @@ class SimulateExperiment : public exid::Experiment {
     std::normal_distribution<double> nd(0.0, 1.0);
     const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
                  res = P_.getDouble("encoder_resolution_rad");
+    const std::vector<double> nb = {noise3("noise_base", 0), noise3("noise_base", 1),
+                                    noise3("noise_base", 2)};
     for (int k = 0; k < d.size(); ++k) {
       for (int j = 0; j < n; ++j) {
         if (sq > 0) d.q(k, j) += sq * nd(nrng);
@@ -434,7 +436,8 @@ class SimulateExperiment : public exid::Experiment {
         if (st > 0) d.tau(k, j) += st * nd(nrng);
       }
       for (int c = 0; c < 9; ++c)
-        if (const double sb = noise3("noise_base", c / 3); sb > 0) d.base(k, c) += sb * nd(nrng);
+        if (const double sb = nb[static_cast<std::size_t>(c / 3)]; sb > 0)
+          d.base(k, c) += sb * nd(nrng);
       for (int e = 0; e < 6; ++e) {
         const double sc = nc.size() == 1 ? nc[0]
                                          : nc.size() == 2 ? nc[e < 3 ? 0 : 1]
@@ -462,8 +465,7 @@ class SimulateExperiment : public exid::Experiment {
     nz = exid::Json::object();
     nz["q_rad"] = sq;
     nz["tau_Nm"] = st;
-    nz["base"] = exid::Json(std::vector<double>{noise3("noise_base", 0), noise3("noise_base", 1),
-                                                noise3("noise_base", 2)});
+    nz["base"] = exid::Json(nb);
     nz["contact"] = exid::Json(nc);
     nz["encoder_resolution_rad"] = res;
     m["recorded"] = P_.getBool("output_qd_qdd")

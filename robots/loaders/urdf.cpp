@@ -97,6 +97,7 @@ struct XRobot {
   const TiXmlElement* exid = nullptr;
   std::string root;
   std::string floating_joint;  // the 'floating' joint from the world link to the base link
+  std::string world;           // its parent (the root of the document) when there is one
   std::map<std::string, std::vector<int>> children;  // link -> joint indices (document order)
 };
 
@@ -285,6 +286,7 @@ void linkTree(const std::string& src, const std::map<std::string, int>& link_lin
     x.floating_joint = j.name;
   }
   if (!x.floating_joint.empty()) {
+    x.world = x.root;
     for (const XJoint& j : x.joints)
       if (j.name == x.floating_joint) x.root = j.child;
   }
@@ -739,11 +741,7 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
   std::vector<std::string> ignored_dynamics;  // joints whose <dynamics> were not used
 
   if (!x.floating_joint.empty()) {
-    const urdf::LinkConstSharedPtr world = u->getLink(x.floating_joint.empty() ? "" : [&] {
-      for (const XJoint& j : x.joints)
-        if (j.name == x.floating_joint) return j.parent;
-      return std::string();
-    }());
+    const urdf::LinkConstSharedPtr world = u->getLink(x.world);
     if (world && world->inertial && world->inertial->mass != 0.0)
       throw Error(src + ": link '" + world->name +
                   "': the world link of floating joint '" + x.floating_joint +
