@@ -216,6 +216,14 @@ Dataset materialize(const Dataset& d) {
     if (s.hasAcceleration()) out.qdd.middleRows(at, got) = chunk.qdd;
     if (s.hasTorque()) out.tau.middleRows(at, got) = chunk.tau;
     if (s.hasWrench()) out.wrench.middleRows(at, got) = chunk.wrench;
+    // a floating base's signals (a stream that gives them: the csv experiment's)
+    for (auto [dst, src] : {std::pair{&out.base, &chunk.base}, {&out.contact, &chunk.contact}}) {
+      if (src->cols() == 0) continue;
+      if (dst->cols() == 0) *dst = Eigen::MatrixXd::Zero(K, src->cols());
+      check(dst->cols() == src->cols(),
+            fmt::format("{}: the stream's chunks differ in their floating-base columns", d.source));
+      dst->middleRows(at, got) = *src;
+    }
   }
   check(at == K, fmt::format("{}: the stream gave {} of its {} samples", d.source, at, K));
   out.source = d.source;
