@@ -36,7 +36,9 @@ StandardMap::StandardMap(const std::vector<std::string>& names, const Eigen::Vec
         if (static_cast<int>(pre.size()) != 2 - pass) continue;
         if (names[i].size() > pre.size() && names[i].compare(0, pre.size(), pre) == 0) {
           const std::string rest = names[i].substr(pre.size());
-          if (rest.find_first_not_of("0123456789") == std::string::npos && rest[0] != '0') {
+          // (body 0: the base link of a floating-base robot, XX0 ... M0)
+          if (rest.find_first_not_of("0123456789") == std::string::npos &&
+              (rest[0] != '0' || rest == "0")) {
             k = c;
             body = std::stoi(rest);
             break;

@@ -140,6 +140,8 @@ class CsvExperiment : public exid::Experiment {
     stack(&a.qdd, b.qdd, "qdd");
     stack(&a.tau, b.tau, "torque");
     stack(&a.wrench, b.wrench, "wrench");
+    stack(&a.base, b.base, "base motion");
+    stack(&a.contact, b.contact, "contact wrench");
     exid::Json part = exid::Json::object();
     part["source"] = b.source;
     part["samples"] = Kb;
@@ -178,6 +180,7 @@ class CsvExperiment : public exid::Experiment {
       return run(robot, ref, ctx);
     steps.check("experiment 'csv'");
     auto src = CsvStream::open(P_, robot, ctx);
+    if (src->hasFloating()) return run(robot, ref, ctx);  // (base, contact: in memory)
     exid::Dataset d;
     d.stream = src;
     d.source = src->file();

@@ -28,9 +28,11 @@ void CsvStream::resolveColumns(const exid::RunContext& ctx) {
   const std::vector<Ref> cqdd = columnGroup("qdd", false, "");
   const std::vector<Ref> ctau = torqueColumns(ftau);
   const std::vector<Ref> cw = wrenchColumns();
+  std::vector<Ref> cb, cc;
+  floatingColumns(&cb, &cc);
   const int ct = timeColumn();
   readScales();
-  layoutColumns(cq, cqd, cqdd, ctau, cw, ct);
+  layoutColumns(cq, cqd, cqdd, ctau, cw, cb, cc, ct);
 }
 
 // The file (and torque_file), relative to the study, and their columns.
@@ -147,6 +149,45 @@ std::vector<CsvStream::Ref> CsvStream::wrenchColumns() const {
   return cw;
 }
 
+// A floating base's signals (docs/conventions.md, "Floating base"): base_omega_x .. base_f_z
+// (all nine, or none) and contact<c>_fx .. contact<c>_mz for c = 1, 2, ... (each complete),
+// read as they are (SI, base or sensor frame; no scale, sign or offset).
+void CsvStream::floatingColumns(std::vector<Ref>* cb, std::vector<Ref>* cc) const {
+  const char* bn[9] = {"base_omega_x", "base_omega_y", "base_omega_z", "base_alpha_x", "base_alpha_y",
+                       "base_alpha_z", "base_f_x",     "base_f_y",     "base_f_z"};
+  auto group = [&](const std::vector<std::string>& names, const std::string& what,
+                   std::vector<Ref>* out) {
+    int present = 0;
+    for (const auto& c : names) present += col(0, c) >= 0;
+    if (present == 0) return false;
+    std::vector<std::string> missing;
+    for (const auto& c : names)
+      if (col(0, c) < 0) missing.push_back(c);
+    exid::check(missing.empty(),
+                fmt::format("experiment 'csv': {}: incomplete {}: missing column(s) {} (expected "
+                            "all of {}, or none)",
+                            files_[0], what, fmt::join(missing, ", "), fmt::join(names, " ")));
+    for (const auto& c : names) out->push_back({0, col(0, c)});
+    return true;
+  };
+  group(std::vector<std::string>(bn, bn + 9), "base motion", cb);
+  for (int c = 1;; ++c) {
+    std::vector<std::string> names;
+    for (const char* k : {"fx", "fy", "fz", "mx", "my", "mz"})
+      names.push_back(fmt::format("contact{}_{}", c, k));
+    if (!group(names, fmt::format("contact {} wrench", c), cc)) break;
+  }
+  for (const auto& name : columns_[0])
+    if (name.rfind("contact", 0) == 0 && name.find('_') != std::string::npos) {
+      const std::string num = name.substr(7, name.find('_') - 7);
+      exid::check(!num.empty() && num.find_first_not_of("0123456789") == std::string::npos &&
+                      std::stoul(num) >= 1 && std::stoul(num) <= cc->size() / 6,
+                  fmt::format("experiment 'csv': {}: column '{}': contact wrenches are numbered "
+                              "1, 2, ... without a gap (found contact{} after {} contact(s))",
+                              files_[0], name, num, cc->size() / 6));
+    }
+}
+
 // The time column of file (-1: none; sample_period_s is then needed) and its unit.
 int CsvStream::timeColumn() {
   tname_ = P_.getString("time_column");
@@ -175,7 +216,8 @@ void CsvStream::readScales() {
 // reads and where each value goes.
 void CsvStream::layoutColumns(const std::vector<Ref>& cq, const std::vector<Ref>& cqd,
                               const std::vector<Ref>& cqdd, const std::vector<Ref>& ctau,
-                              const std::vector<Ref>& cw, int ct) {
+                              const std::vector<Ref>& cw, const std::vector<Ref>& cb,
+                              const std::vector<Ref>& cc, int ct) {
   auto add = [&](const std::vector<Ref>& g, std::vector<int>* pos) {
     for (const Ref& r : g) {
       pos->push_back(static_cast<int>(used_.size()));
@@ -187,6 +229,8 @@ void CsvStream::layoutColumns(const std::vector<Ref>& cq, const std::vector<Ref>
   add(cqdd, &pqdd_);
   add(ctau, &ptau_);
   add(cw, &pw_);
+  add(cb, &pb_);
+  add(cc, &pc_);
   ct_ = ct >= 0;
   if (ct_) {
     pt_ = static_cast<int>(used_.size());

@@ -202,6 +202,8 @@ exid::Json CsvStream::metaAfter(const exid::RecordingPipeline& steps) const {
   if (!pqdd_.empty()) sig.push_back("qdd");
   if (!ptau_.empty()) sig.push_back("tau");
   if (!pw_.empty()) sig.push_back("wrench");
+  if (!pb_.empty()) sig.push_back("base");
+  if (!pc_.empty()) sig.push_back(fmt::format("contact ({})", pc_.size() / 6));
   m["signals"] = exid::Json(sig);
   if (files_.size() > 1) m["torque_file"] = files_[1];
   steps.describe(&m);
@@ -217,6 +219,9 @@ void CsvStream::sizeChunk(int want, exid::Dataset* chunk) const {
   chunk->qdd.resize(pqdd_.empty() ? 0 : want, pqdd_.empty() ? 0 : n_);
   chunk->tau.resize(ptau_.empty() ? 0 : want, ptau_.empty() ? 0 : n_);
   chunk->wrench.resize(pw_.empty() ? 0 : want, pw_.empty() ? 0 : 6);
+  const auto nb = static_cast<Eigen::Index>(pb_.size()), nc = static_cast<Eigen::Index>(pc_.size());
+  chunk->base.resize(nb == 0 ? 0 : want, nb);
+  chunk->contact.resize(nc == 0 ? 0 : want, nc);
   chunk->source = files_[0];
 }
 
@@ -283,6 +288,10 @@ void CsvStream::convert(int k, const double* uv, int row, exid::Dataset* d,
   for (std::size_t e = 0; e < pw_.size(); ++e)
     d->wrench(k, static_cast<Eigen::Index>(e)) =
         conv_.wrench(static_cast<int>(e), uv[static_cast<std::size_t>(pw_[e])]);
+  for (std::size_t e = 0; e < pb_.size(); ++e)
+    d->base(k, static_cast<Eigen::Index>(e)) = uv[static_cast<std::size_t>(pb_[e])];
+  for (std::size_t e = 0; e < pc_.size(); ++e)
+    d->contact(k, static_cast<Eigen::Index>(e)) = uv[static_cast<std::size_t>(pc_[e])];
 }
 
 void CsvStream::collect(const exid::Dataset& chunk, int k) {
@@ -295,6 +304,8 @@ void CsvStream::collect(const exid::Dataset& chunk, int k) {
     collected_.qdd.resize(pqdd_.empty() ? 0 : M, pqdd_.empty() ? 0 : n_);
     collected_.tau.resize(ptau_.empty() ? 0 : M, ptau_.empty() ? 0 : n_);
     collected_.wrench.resize(pw_.empty() ? 0 : M, pw_.empty() ? 0 : 6);
+    collected_.base.resize(pb_.empty() ? 0 : M, static_cast<Eigen::Index>(pb_.size()));
+    collected_.contact.resize(pc_.empty() ? 0 : M, static_cast<Eigen::Index>(pc_.size()));
   }
   auto row = [&](Eigen::MatrixXd* dst, const Eigen::MatrixXd& src) {
     if (src.cols() > 0) dst->row(i) = src.row(k);
@@ -305,6 +316,8 @@ void CsvStream::collect(const exid::Dataset& chunk, int k) {
   row(&collected_.qdd, chunk.qdd);
   row(&collected_.tau, chunk.tau);
   row(&collected_.wrench, chunk.wrench);
+  row(&collected_.base, chunk.base);
+  row(&collected_.contact, chunk.contact);
 }
 
 void CsvStream::finishPass() {

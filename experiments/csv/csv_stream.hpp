@@ -46,6 +46,9 @@ class CsvStream : public exid::DatasetStream {
   bool hasAcceleration() const override { return !pqdd_.empty(); }
   bool hasTorque() const override { return !ptau_.empty(); }
   bool hasWrench() const override { return !pw_.empty(); }
+  /// The file holds a floating base's signals (base_omega_x .. base_f_z, contact<c>_fx ..): read
+  /// in memory (Dataset::base and ::contact are not streamed).
+  bool hasFloating() const { return !pb_.empty() || !pc_.empty(); }
   double tFirst() const override { return t_first_; }
   double tLast() const override { return t_last_; }
   bool passed() const override { return stats_done_; }
@@ -96,11 +99,13 @@ class CsvStream : public exid::DatasetStream {
                                int f = 0) const;
   std::vector<Ref> torqueColumns(int ftau);
   std::vector<Ref> wrenchColumns() const;
+  void floatingColumns(std::vector<Ref>* cb, std::vector<Ref>* cc) const;
   int timeColumn();
   void readScales();
   void layoutColumns(const std::vector<Ref>& cq, const std::vector<Ref>& cqd,
                      const std::vector<Ref>& cqdd, const std::vector<Ref>& ctau,
-                     const std::vector<Ref>& cw, int ct);
+                     const std::vector<Ref>& cw, const std::vector<Ref>& cb,
+                     const std::vector<Ref>& cc, int ct);
   std::string colName(const Ref& r, bool with_file = true) const;
   bool readRow(std::vector<std::unique_ptr<exid::CsvReader>>& rd);
   bool readRow(std::vector<std::unique_ptr<exid::CsvReader>>& rd,
@@ -148,6 +153,7 @@ class CsvStream : public exid::DatasetStream {
   std::vector<std::vector<std::string>> columns_;
   std::vector<Ref> used_;                         // q, qd, qdd, tau, wrench, t
   std::vector<int> pq_, pqd_, pqdd_, ptau_, pw_;  // positions in used_
+  std::vector<int> pb_, pc_;  // the floating base's: base motion (9), contact wrenches (6 each)
   int pt_ = -1;
   bool ct_ = false;                        // a time column
   std::vector<std::vector<int>> select_;   // per source: the columns it reads

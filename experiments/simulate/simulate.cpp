@@ -20,6 +20,8 @@
 #include <sundials/sundials_config.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Geometry>
+#include <Eigen/LU>
 #include <Eigen/Core>
 #include <chrono>
 #include <cmath>
@@ -32,6 +34,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/payload.hpp"
 #include "exid/sampled_reference.hpp"
@@ -189,6 +192,27 @@ class SimulateExperiment : public exid::Experiment {
         param_bool("output_qd_qdd", true,
                    "record the true qd and qdd; false: only t, q, tau (and wrench), as on a real "
                    "robot"),
+        // a floating-base robot (docs/experiments.md, "Floating base")
+        param_double("base_omega_rad_s", 0.5, "rad/s",
+                     "floating base: amplitude of each harmonic of each base angular velocity "
+                     "component (three harmonics of 1/period_s, seeded phases)",
+                     0.0),
+        param_double("base_acceleration_m_s2", 2.0, "m/s^2",
+                     "floating base: amplitude of each harmonic of each world-frame linear "
+                     "acceleration component of the base origin",
+                     0.0),
+        param_string("contact_link", std::string(""),
+                     "floating base: the link whose contact (F/T sensor) wrench balances the base "
+                     "rows (the base link or a body's link)"),
+        param_doubles("contact_pose", std::vector<double>{}, "m, rad",
+                      "floating base: the contact sensor frame in its link's frame, x y z roll "
+                      "pitch yaw (empty: identity)"),
+        param_doubles("noise_base", std::vector<double>{0.0}, "rad/s, rad/s^2, m/s^2",
+                      "floating base: std of Gaussian noise on the recorded base motion: [all] "
+                      "or [omega, alpha, f]"),
+        param_doubles("noise_contact", std::vector<double>{0.0}, "N, N m",
+                      "floating base: std of Gaussian noise on the contact wrench: [all], "
+                      "[force, moment] or six values"),
     };
     for (auto& d : exid::payloadParams("payload attached to the sensor frame")) p.push_back(d);
     return p;
@@ -209,6 +233,7 @@ class SimulateExperiment : public exid::Experiment {
   exid::Dataset run(std::shared_ptr<const exid::RobotModel> robot, const exid::Samples* reference,
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'simulate': no robot");
+    if (robot->floating_base) return runFloating(robot, reference, ctx);
     const auto wall0 = std::chrono::steady_clock::now();
     setUpPlant(robot);
     const int n = n_;
@@ -273,6 +298,184 @@ class SimulateExperiment : public exid::Experiment {
     d.facts.simulated = plantTruth();
     d.meta["wall_s"] =
         std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
+    return d;
+  }
+
+  // ---------------------------------------------------------------- floating base
+  // A floating-base robot: the joints follow the reference exactly and the base moves along
+  // prescribed smooth motions (an inverse-dynamics simulation): omega_b(t) three harmonics per
+  // component, alpha_b its exact derivative, the orientation R(t) integrated from omega_b
+  // (midpoint exponential steps), f_b = R^T (a_w(t) - g) with a_w three harmonics per world
+  // component and g = the robot's gravity (world frame). The wrench of ONE contact balances the
+  // base rows: w = (X*_c)^-1 Y_base pi; the joint torques are tau = Y_joint pi - J_c^T w.
+  static void fourier3(const Eigen::Matrix<double, 3, 3>& A, const Eigen::Matrix<double, 3, 3>& P,
+                       double w, double t, Eigen::Vector3d* x, Eigen::Vector3d* xd) {
+    x->setZero();
+    xd->setZero();
+    for (int c = 0; c < 3; ++c)
+      for (int l = 1; l <= 3; ++l) {
+        (*x)[c] += A(c, l - 1) / l * std::sin(l * w * t + P(c, l - 1));
+        (*xd)[c] += A(c, l - 1) * w * std::cos(l * w * t + P(c, l - 1));
+      }
+  }
+
+  exid::Dataset runFloating(std::shared_ptr<const exid::RobotModel> robot,
+                            const exid::Samples* reference, const exid::RunContext& ctx) {
+    const auto wall0 = std::chrono::steady_clock::now();
+    const exid::RobotModel& R = *robot;
+    const std::string who = "experiment 'simulate' (floating base)";
+    exid::check(payload_.empty(), who + ": a payload is not simulated on a floating-base robot");
+    exid::check(!P_.getBool("wrench"),
+                who + ": the wrist wrench is not simulated on a floating-base robot (the "
+                      "contact wrench is recorded: contact_link)");
+    exid::check(!R.hasTransmission(), who + ": robot '" + R.name +
+                                          "' has a transmission (not modelled for a floating "
+                                          "base)");
+    exid::check(P_.getDouble("torque_delay_s") == 0.0 &&
+                    P_.getDoubles("recorded_torque_gain").empty() &&
+                    P_.getDoubles("drive_torque_gain").empty(),
+                who + ": torque_delay_s, recorded_torque_gain and drive_torque_gain are for "
+                      "fixed-base robots");
+    const std::string link = P_.getString("contact_link");
+    exid::check(!link.empty(),
+                who + ": contact_link is needed: the wrench of one contact balances the base "
+                      "rows (e.g. a foot's link)");
+    const int body = exid::floatingBodyIndex(R, link, who + ": contact_link");
+    const std::vector<double> cp = P_.getDoubles("contact_pose");
+    exid::check(cp.empty() || cp.size() == 6,
+                fmt::format("{}: contact_pose: expected 6 numbers (x y z roll pitch yaw), found "
+                            "{}",
+                            who, cp.size()));
+    const exid::Pose sensor = cp.empty() ? exid::Pose{} : exid::poseFromXyzRpy(cp.data());
+    auto noise3 = [&](const char* key, int k) {
+      const std::vector<double> v = P_.getDoubles(key);
+      exid::check(v.size() == 1 || v.size() == 3,
+                  fmt::format("{}: {}: expected 1 or 3 numbers, found {}", who, key, v.size()));
+      return v.size() == 1 ? v[0] : v[static_cast<std::size_t>(k)];
+    };
+    const std::vector<double> nc = P_.getDoubles("noise_contact");
+    exid::check(nc.size() == 1 || nc.size() == 2 || nc.size() == 6,
+                fmt::format("{}: noise_contact: expected 1, 2 or 6 numbers, found {}", who,
+                            nc.size()));
+    n_ = R.dof();
+    const int n = n_;
+    double duration = P_.getDouble("duration_s");
+    const exid::Json refmeta = setUpReference(R, reference, ctx, &duration);
+    const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
+    const int N = sampleCount(duration, dt);
+    // the base's harmonics (seeded)
+    std::mt19937_64 rng(ctx.seed ^ 0x243f6a8885a308d3ull);
+    std::uniform_real_distribution<double> u(-1.0, 1.0);
+    Eigen::Matrix3d Aw, Pw, Aa, Pa;
+    for (int c = 0; c < 3; ++c)
+      for (int l = 0; l < 3; ++l) {
+        Aw(c, l) = P_.getDouble("base_omega_rad_s") * u(rng);
+        Pw(c, l) = M_PI * u(rng);
+        Aa(c, l) = P_.getDouble("base_acceleration_m_s2") * u(rng);
+        Pa(c, l) = M_PI * u(rng);
+      }
+    const double period = reference ? std::max(duration, 1e-9) : P_.getDouble("period_s");
+    const double wb = 2.0 * M_PI / period;
+    exid::Dataset d;
+    d.t.resize(N);
+    d.q.resize(N, n);
+    MatrixXd qd(N, n), qdd(N, n);
+    d.tau.resize(N, n);
+    d.base.resize(N, 9);
+    d.contact.resize(N, 6);
+    Eigen::Matrix3d Rwb = Eigen::Matrix3d::Identity();
+    double t_prev = t0;
+    VectorXd q, qdv, qddv;
+    Eigen::Vector3d w, al, a, ad;
+    for (int k = 0; k < N; ++k) {
+      const double tk = t0 + k * dt;
+      // orientation: midpoint exponential steps from the previous sample
+      constexpr int kSub = 20;
+      const double h = (tk - t_prev) / kSub;
+      for (int s = 0; s < kSub && h > 0; ++s) {
+        fourier3(Aw, Pw, wb, t_prev + (s + 0.5) * h - t0, &w, &al);
+        const double ang = w.norm() * h;
+        if (ang > 0)
+          Rwb = Rwb * Eigen::AngleAxisd(ang, w.normalized()).toRotationMatrix();
+      }
+      t_prev = tk;
+      fourier3(Aw, Pw, wb, tk - t0, &w, &al);
+      fourier3(Aa, Pa, wb, tk - t0, &a, &ad);
+      exid::BaseMotion b;
+      b << w, al, Rwb.transpose() * (a - R.gravity);
+      ref_->eval(tk, &q, &qdv, &qddv);
+      const VectorXd id = exid::floatingInverseDynamics(R, q, qdv, qddv, b);
+      const MatrixXd C = exid::contactMap(R, q, body, sensor);
+      const Eigen::Matrix<double, 6, 1> wc = C.topRows(6).partialPivLu().solve(id.head(6));
+      d.t[k] = tk;
+      d.q.row(k) = q.transpose();
+      qd.row(k) = qdv.transpose();
+      qdd.row(k) = qddv.transpose();
+      d.tau.row(k) = (id.tail(n) - C.bottomRows(n) * wc).transpose();
+      d.base.row(k) = b.transpose();
+      d.contact.row(k) = wc.transpose();
+      if (ctx.shouldStop() && k + 1 < N) {
+        exid::logWarn(fmt::format("{}: stopped (cancelled or out of time) after {} of {} samples",
+                                  who, k + 1, N));
+        d = exid::sliceDataset(d, 0, k + 1);
+        qd.conservativeResize(k + 1, n);
+        qdd.conservativeResize(k + 1, n);
+        break;
+      }
+    }
+    // measurement noise
+    std::mt19937_64 nrng(ctx.seed ^ 0x5DEECE66Dull);
+    std::normal_distribution<double> nd(0.0, 1.0);
+    const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
+                 res = P_.getDouble("encoder_resolution_rad");
+    const std::vector<double> nb = {noise3("noise_base", 0), noise3("noise_base", 1),
+                                    noise3("noise_base", 2)};
+    for (int k = 0; k < d.size(); ++k) {
+      for (int j = 0; j < n; ++j) {
+        if (sq > 0) d.q(k, j) += sq * nd(nrng);
+        if (res > 0) d.q(k, j) = res * std::round(d.q(k, j) / res);
+        if (st > 0) d.tau(k, j) += st * nd(nrng);
+      }
+      for (int c = 0; c < 9; ++c)
+        if (const double sb = nb[static_cast<std::size_t>(c / 3)]; sb > 0)
+          d.base(k, c) += sb * nd(nrng);
+      for (int e = 0; e < 6; ++e) {
+        const double sc = nc.size() == 1 ? nc[0]
+                                         : nc.size() == 2 ? nc[e < 3 ? 0 : 1]
+                                                          : nc[static_cast<std::size_t>(e)];
+        if (sc > 0) d.contact(k, e) += sc * nd(nrng);
+      }
+    }
+    if (P_.getBool("output_qd_qdd")) {
+      d.qd = std::move(qd);
+      d.qdd = std::move(qdd);
+    }
+    d.source = fmt::format("simulate ({}, floating base, seed {})", R.name, ctx.seed);
+    exid::Json& m = d.meta;
+    m["robot"] = R.name;
+    m["seed"] = exid::Json(static_cast<long long>(ctx.seed));
+    m["floating_base"] =
+        "inverse-dynamics simulation: the joints follow the reference exactly; base motion "
+        "prescribed (three harmonics of omega and of the world acceleration), orientation "
+        "integrated; the contact wrench balances the base rows; no drive terms";
+    m["contact_link"] = link;
+    m["reference"] = refmeta;
+    m["sample_period_s"] = dt;
+    m["samples"] = d.size();
+    exid::Json& nz = m["noise"];
+    nz = exid::Json::object();
+    nz["q_rad"] = sq;
+    nz["tau_Nm"] = st;
+    nz["base"] = exid::Json(nb);
+    nz["contact"] = exid::Json(nc);
+    nz["encoder_resolution_rad"] = res;
+    m["recorded"] = P_.getBool("output_qd_qdd")
+                        ? "t q qd qdd tau base contact (true states, noisy q)"
+                        : "t q tau base contact (noisy q)";
+    exid::PlantTruth truth;
+    truth.drive_terms = false;
+    d.facts.simulated = truth;
+    m["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
   }
 

@@ -148,6 +148,10 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
     std::cout << fmt::format("  closed chain: {} tree joints, {} loop-closure joint(s); the "
                              "joints below are the actuated ones\n",
                              r->numJoints(), r->closed.loops.size());
+  if (r->floating_base)
+    std::cout << fmt::format(
+        "  floating base: link '{}' (parameters XX0 ... M0; parent 0 below means this link)\n",
+        r->base.link);
   for (const auto& note : r->notes) std::cout << "  note: " << note << "\n";
   for (int i = 0; i < r->dof(); ++i) {
     const Body& body = r->bodies[static_cast<std::size_t>(r->actuatedJoint(i))];
@@ -174,6 +178,7 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
 int evalCommand(const Registry& reg, const std::string& robot, const std::string& samples,
                 const std::string& what, const std::string& out, bool rigid_body_only) {
   auto r = loadRobot(reg, robot);
+  r->requireFixedBase("exid robot eval");
   const int n = r->dof();
   CsvTable in = readCsv(samples);
   // A joint column beyond the robot's joints means the file is not for this robot.
@@ -303,6 +308,7 @@ int checkTrajectoryCommand(const Registry& reg, const std::string& robot, const 
                            const std::vector<double>& torque_max, const std::string& json_out,
                            const std::string& collision_study) {
   const auto model = loadRobot(reg, robot);
+  model->requireFixedBase("exid robot check-trajectory");
   // A limit that is not a finite positive torque would switch its check off (NaN compares
   // false): refused, naming the flag.
   if (!torque_max.empty() && static_cast<int>(torque_max.size()) != model->dof())
@@ -418,6 +424,7 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     ctx.study_dir = cfg.dir;
     base = reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
   }
+  base->requireFixedBase("exid export");
   RobotModel m = *base;
   const Json& names = *sp->find("names");
   const Json& values = *sp->find("values");

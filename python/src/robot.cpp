@@ -94,6 +94,7 @@ class PyRobot {
     ctx.seed = seed;
     plugin_ = reg.create<exid::Robot>(type, ps);
     robot_ = plugin_->build(ctx);
+    robot_->requireFixedBase("the Python binding (exid.Robot)");
     type_ = type;
     const exid::PluginInfo& mi = reg.get(exid::PluginKind::Model, model);
     model_ = reg.create<exid::ObservationModel>(

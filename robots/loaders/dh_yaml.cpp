@@ -468,7 +468,8 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
   if (!root.IsDefined() || root.IsNull()) r.fail(root, "", "empty document");
   r.requireMap(root, "top level",
                {"name", "description", "source", "sources", "notes", "convention", "gravity",
-                "links", "transmission", "sensor", "base_collision", "closed_chain"});
+                "links", "transmission", "sensor", "base_collision", "closed_chain",
+                 "floating_base"});
 
   RobotModel model;
   model.source = r.source();
@@ -556,6 +557,19 @@ RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& o
 
   if (const YAML::Node S = root["sensor"]) readSensor(r, S, link_index, &model);
   readCollision(r, root["base_collision"], "base_collision", -1, &model);
+  if (const YAML::Node F = root["floating_base"]) {
+    // the base link moves freely: its name and inertial parameters (as a link's)
+    r.requireMap(F, "floating_base", {"link", "mass", "com", "inertia_com", "inertia_origin"});
+    Body base;
+    readInertial(r, F, "floating_base", &base);
+    model.floating_base = true;
+    model.base.link = F["link"] ? r.text(F["link"], "floating_base.link") : "base";
+    model.base.inertia = base.inertia;
+    if (!model.collision.empty())
+      r.fail(F, "floating_base",
+             "collision geometry is for fixed-base robots (collision-free excitation design); "
+             "a floating-base robot gives none");
+  }
 
   try {
     model.validateStructure();

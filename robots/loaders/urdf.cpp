@@ -49,6 +49,8 @@ struct XRobot {
   std::vector<XJoint> joints;  // document order
   const TiXmlElement* exid = nullptr;
   std::string root;
+  std::string floating_joint;  // the 'floating' joint from the world link to the base link
+  std::string world;           // its parent (the root of the document) when there is one
   std::map<std::string, std::vector<int>> children;  // link -> joint indices (document order)
 };
 
@@ -137,12 +139,13 @@ XJoint readJointElement(const TiXmlElement* e, const std::string& src,
                 std::to_string(lines->at(j.name)) + ")");
   }
   (*lines)[j.name] = j.line;
-  static const std::set<std::string> kSupported = {"revolute", "continuous", "prismatic", "fixed"};
+  static const std::set<std::string> kSupported = {"revolute", "continuous", "prismatic", "fixed",
+                                                   "floating"};
   if (!kSupported.count(j.type)) {
     throw Error(at(src, e) + ": joint '" + j.name +
                 "': " + (j.type.empty() ? std::string("missing type") : j.type + " joints are") +
-                " not supported (only revolute, continuous, prismatic and fixed; a "
-                "floating base is not modelled, fix the base link to the world instead)");
+                " not supported (only revolute, continuous, prismatic, fixed, and one floating "
+                "joint from the world link to the base link)");
   }
   if (e->FirstChildElement("mimic")) {
     throw Error(at(src, e) + ": joint '" + j.name +
@@ -218,6 +221,28 @@ void linkTree(const std::string& src, const std::map<std::string, int>& link_lin
                 "): every link but one must be the child of a joint");
   }
   x.root = roots.front();
+  // A floating base: one 'floating' joint, from the root (the world link, massless, nothing else
+  // attached) to the base link, which becomes the root of the bodies.
+  for (const XJoint& j : x.joints) {
+    if (j.type != "floating") continue;
+    const std::string w = src + ":" + std::to_string(j.line) + ": joint '" + j.name + "': ";
+    if (!x.floating_joint.empty())
+      throw Error(w + "a second floating joint (one floating base is modelled, joint '" +
+                  x.floating_joint + "' is the first)");
+    if (j.parent != x.root)
+      throw Error(w + "a floating joint must connect the world (root) link '" + x.root +
+                  "' to the base link; its parent is '" + j.parent + "'");
+    if (x.children[x.root].size() != 1)
+      throw Error(w + "the world link '" + x.root +
+                  "' has other joints besides the floating one (expected only the floating "
+                  "joint to the base link)");
+    x.floating_joint = j.name;
+  }
+  if (!x.floating_joint.empty()) {
+    x.world = x.root;
+    for (const XJoint& j : x.joints)
+      if (j.name == x.floating_joint) x.root = j.child;
+  }
 }
 
 XRobot readStructure(const TiXmlDocument& doc, const std::string& src) {
@@ -605,6 +630,8 @@ void buildBodies(const XRobot& x, const urdf::ModelInterface& u0, const std::str
         // Merged into the owning body (nothing moves between them).
         if (it.place.body >= 0) {
           m.bodies[static_cast<size_t>(it.place.body)].inertia += transformInertial(pi, X);
+        } else if (m.floating_base) {
+          m.base.inertia += transformInertial(pi, X);  // fixed to the floating base link
         }
         next.push_back({xj.child, LinkPlace{it.place.body, X}});
         continue;
@@ -766,6 +793,19 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
   std::map<std::string, LinkPlace> link_place;
   std::vector<std::string> ignored_dynamics;  // joints whose <dynamics> were not used
 
+  if (!x.floating_joint.empty()) {
+    const urdf::LinkConstSharedPtr world = u->getLink(x.world);
+    if (world && world->inertial && world->inertial->mass != 0.0)
+      throw Error(src + ": link '" + world->name +
+                  "': the world link of floating joint '" + x.floating_joint +
+                  "' has a mass (expected none: the world does not move with the robot)");
+    const urdf::LinkConstSharedPtr base = u->getLink(x.root);
+    if (!base) throw Error(src + ": base link '" + x.root + "' not found by urdfdom");
+    m.floating_base = true;
+    m.base.link = x.root;
+    m.base.joint_name = x.floating_joint;
+    m.base.inertia = linkInertial(*base, src);
+  }
   buildBodies(x, *u, src, options, &m, &joint_body, &link_place, &ignored_dynamics);
   if (m.dof() == 0) {
     throw Error(src + ": no movable joint (revolute, continuous or prismatic) in the robot");

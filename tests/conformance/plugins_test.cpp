@@ -8,6 +8,7 @@
 #include <sstream>
 
 #include "exid/config.hpp"
+#include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"
 #include "exid_test.hpp"
@@ -50,9 +51,9 @@ TEST(Conformance, EveryShippedPluginLibraryLoads) {
 TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
   auto& reg = exid_test::registry();
   const std::vector<std::pair<exid::PluginKind, std::vector<std::string>>> expected = {
-      {exid::PluginKind::Robot, {"urdf", "dh", "planar2r", "puma560", "irp6", "stanford", "panda"}},
+      {exid::PluginKind::Robot, {"urdf", "dh", "planar2r", "puma560", "irp6", "stanford", "panda", "humanoid", "quadruped"}},
       {exid::PluginKind::Criterion, {"cond", "min_sv", "frobenius_cond", "log_det"}},
-      {exid::PluginKind::Model, {"differential", "integral", "load_wrench", "load_torque"}},
+      {exid::PluginKind::Model, {"differential", "integral", "load_wrench", "load_torque", "floating_base"}},
       {exid::PluginKind::Trajectory, {"pointwise", "fourier", "spline"}},
       {exid::PluginKind::Optimizer, {"adjoint_gradient", "nlopt"}},
       {exid::PluginKind::Experiment, {"simulate", "csv", "rosbag2"}},
@@ -139,6 +140,19 @@ TEST(Conformance, ObservationModelsBindAndTheirGradientsMatchFiniteDifferences) 
     SCOPED_TRACE(p->name);
     auto model = reg.create<exid::ObservationModel>(p->name, defaults(*p));
     exid::RunContext ctx;
+    if (model->specs().floating_base) {
+      // a floating-base model: binds a floating robot, refuses a fixed one; no VJP (excitation
+      // design refuses a floating robot)
+      EXPECT_THROW(model->bind(robot, ctx), exid::Error);
+      model = reg.create<exid::ObservationModel>(p->name, defaults(*p));
+      model->bind(exid_test::robot("humanoid"), ctx);
+      EXPECT_GT(model->numBase(), 0);
+      exid::Samples s = model->randomSamples(5, 5), g;
+      const Eigen::MatrixXd W = model->design(s);
+      EXPECT_EQ(W.rows(), 5 * 16);
+      EXPECT_THROW(model->designVjp(s, W, &g), exid::Error);
+      continue;
+    }
     model->bind(robot, ctx);
     EXPECT_GT(model->numBase(), 0);
     EXPECT_EQ(static_cast<int>(model->fullNames().size()), model->base().numFull());
@@ -186,6 +200,12 @@ TEST(Conformance, EveryShippedRobotsRegressorMatchesIndependentNewtonEuler) {
     exid::RunContext ctx;
     auto model = reg.create<exid::Robot>(p->name, defaults(*p))->build(ctx);
     const int n = model->numJoints();  // (the tree of a closed chain)
+    // (a floating base: tests/robots/floating_robots_test.cpp checks it against the fixed-base
+    // chain with six virtual joints; the fixed-base algorithms refuse it)
+    if (model->floating_base) {
+      EXPECT_THROW(exid::makeDynamicsData(*model), exid::Error);
+      continue;
+    }
     auto data = exid::makeDynamicsData(*model);
     const Eigen::VectorXd pi = model->inertialParameters();
     Eigen::MatrixXd Y(n, 10 * n);

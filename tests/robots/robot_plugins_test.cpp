@@ -10,6 +10,7 @@
 #include <set>
 
 #include "exid/dynamics.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/robot_loaders.hpp"
@@ -154,6 +155,21 @@ TEST(RobotPlugins, EveryCatalogueRobotAndVariantGivesNewtonEulerTorques) {
       const auto model = build(info, p);
       const int n = model->numJoints();  // the tree (a closed chain's spanning tree)
       ASSERT_GT(n, 0);
+      if (model->floating_base) {  // the floating regressor against its Newton-Euler pass
+        for (int k = 0; k < 3; ++k) {
+          Eigen::VectorXd q(n), qd(n), qdd(n);
+          exid::BaseMotion b;
+          for (int i = 0; i < n; ++i) q(i) = u(rng), qd(i) = u(rng), qdd(i) = u(rng);
+          for (int i = 0; i < 9; ++i) b(i) = 5.0 * u(rng);
+          Eigen::MatrixXd Y;
+          exid::floatingRegressor(*model, q, qd, qdd, b, Y);
+          const Eigen::VectorXd id = exid::floatingInverseDynamics(*model, q, qd, qdd, b);
+          EXPECT_LT((Y * exid::floatingParameters(*model) - id).cwiseAbs().maxCoeff(),
+                    1e-12 * (1.0 + id.cwiseAbs().maxCoeff()));
+        }
+        ++tested;
+        continue;
+      }
       auto data = exid::makeDynamicsData(*model);
       for (int k = 0; k < 3; ++k) {
         Eigen::VectorXd q(n), qd(n), qdd(n);
@@ -167,7 +183,7 @@ TEST(RobotPlugins, EveryCatalogueRobotAndVariantGivesNewtonEulerTorques) {
       ++tested;
     }
   }
-  EXPECT_GE(tested, 6);  // five robots, the PUMA 560 twice
+  EXPECT_GE(tested, 8);  // seven robots, the PUMA 560 twice
 }
 
 TEST(RobotPlugins, Puma560VariantsStrictAndGravity) {

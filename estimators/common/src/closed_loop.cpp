@@ -105,6 +105,8 @@ void ClosedLoop::checkParams(const ParamSet& p, const std::string& who) {
 ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
                        const RunContext& ctx, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who) {
+  robot_->requireFixedBase(who + " (its closed-loop simulation integrates the fixed-base forward "
+                                 "dynamics)");
   checkParams(p, who);
   const std::string file = p.getString("reference_file");
   const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),
@@ -134,6 +136,7 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who), open_(true) {
+  robot_->requireFixedBase(who + " (its simulation integrates the fixed-base forward dynamics)");
   setUpRows(model);
   check(data.size() >= 10 && data.tau.rows() == data.size() && data.tau.cols() == n_,
         fmt::format("{}: the torque-driven loop needs the recorded torque of all {} joints and "

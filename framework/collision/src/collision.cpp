@@ -363,6 +363,7 @@ struct CollisionModel::Impl {
 
 CollisionModel::CollisionModel(const RobotModel& robot, const CollisionOptions& o)
     : impl_(std::make_unique<Impl>()) {
+  robot.requireFixedBase("collision avoidance (the shapes are placed relative to a fixed base)");
   Impl& m = *impl_;
   m.robot = &robot;
   check(

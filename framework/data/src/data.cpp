@@ -26,6 +26,8 @@ Dataset samplesOf(const Dataset& d, int begin, int end, const std::string& sourc
   s.qdd = rowsOf(d.qdd, begin, end);
   s.tau = rowsOf(d.tau, begin, end);
   s.wrench = rowsOf(d.wrench, begin, end);
+  s.base = rowsOf(d.base, begin, end);
+  s.contact = rowsOf(d.contact, begin, end);
   s.source = source;
   s.meta = meta;
   s.facts = facts;
@@ -112,7 +114,9 @@ Dataset joinParts(std::vector<Dataset> parts, const std::string& who) {
     auto sig = [](const Dataset& d) {
       return fmt::format("q{}{}{}{}", d.hasVelocity() ? ", qd" : "",
                          d.hasAcceleration() ? ", qdd" : "", d.hasTorque() ? ", tau" : "",
-                         d.hasWrench() ? ", wrench" : "");
+                         d.hasWrench() ? ", wrench" : "") +
+             (d.hasBase() ? fmt::format(", base ({})", d.base.cols()) : std::string()) +
+             (d.hasContact() ? fmt::format(", contact ({})", d.contact.cols()) : std::string());
     };
     check(sig(p) == sig(a), fmt::format("{}: signals {}, part 1 has {} (every part needs the same)",
                                         name, sig(p), sig(a)));
@@ -128,6 +132,8 @@ Dataset joinParts(std::vector<Dataset> parts, const std::string& who) {
   out.qdd = sized(a.qdd);
   out.tau = sized(a.tau);
   out.wrench = sized(a.wrench);
+  out.base = sized(a.base);
+  out.contact = sized(a.contact);
   Json meta = Json::object(), files = Json::array(), pm = Json::array(), warnings = Json::array(),
        notes = Json::array();
   Eigen::Index at = 0;
@@ -142,6 +148,8 @@ Dataset joinParts(std::vector<Dataset> parts, const std::string& who) {
     appendRows(&out.qdd, p.qdd, at);
     appendRows(&out.tau, p.tau, at);
     appendRows(&out.wrench, p.wrench, at);
+    appendRows(&out.base, p.base, at);
+    appendRows(&out.contact, p.contact, at);
     out.facts.parts.push_back({out.t[at], p.source});
     const std::string tag = fmt::format("part {} ({})", i + 1, p.source);
     for (const char* key : {"warnings", "notes"})
@@ -208,6 +216,14 @@ Dataset materialize(const Dataset& d) {
     if (s.hasAcceleration()) out.qdd.middleRows(at, got) = chunk.qdd;
     if (s.hasTorque()) out.tau.middleRows(at, got) = chunk.tau;
     if (s.hasWrench()) out.wrench.middleRows(at, got) = chunk.wrench;
+    // a floating base's signals (a stream that gives them: the csv experiment's)
+    for (auto [dst, src] : {std::pair{&out.base, &chunk.base}, {&out.contact, &chunk.contact}}) {
+      if (src->cols() == 0) continue;
+      if (dst->cols() == 0) *dst = Eigen::MatrixXd::Zero(K, src->cols());
+      check(dst->cols() == src->cols(),
+            fmt::format("{}: the stream's chunks differ in their floating-base columns", d.source));
+      dst->middleRows(at, got) = *src;
+    }
   }
   check(at == K, fmt::format("{}: the stream gave {} of its {} samples", d.source, at, K));
   out.source = d.source;
@@ -260,6 +276,8 @@ Dataset resampleUniform(const Dataset& d, double rate_hz, const std::string& who
   u.qdd = interp(d.qdd);
   u.tau = interp(d.tau);
   u.wrench = interp(d.wrench);
+  u.base = interp(d.base);
+  u.contact = interp(d.contact);
   u.source = d.source;
   u.meta = d.meta;
   u.facts = d.facts;

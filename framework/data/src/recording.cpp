@@ -262,6 +262,8 @@ void keepRows(const std::vector<Eigen::Index>& keep, Dataset* d) {
   d->qdd = pick(d->qdd);
   if (d->tau.rows() > 0) d->tau = pick(d->tau);
   if (d->wrench.rows() > 0) d->wrench = pick(d->wrench);
+  if (d->base.rows() > 0) d->base = pick(d->base);
+  if (d->contact.rows() > 0) d->contact = pick(d->contact);
 }
 }  // namespace
 
@@ -294,7 +296,10 @@ Dataset RecordingPipeline::filter(Dataset d) {
   if (pp.filter_torque) {
     if (d.hasTorque()) d.tau = filtfiltColumns(sos, d.tau);
     if (d.hasWrench()) d.wrench = filtfiltColumns(sos, d.wrench);
+    if (d.hasContact()) d.contact = filtfiltColumns(sos, d.contact);
   }
+  // the base motion is a measured motion (like q): filtered always, not differentiated
+  if (d.hasBase()) d.base = filtfiltColumns(sos, d.base);
   // Default trim: the filter's edge transient, 2 fs / fc samples (two periods of the cut-off)
   // at each end, but at most 5 % of the segment at each end, so that a default never discards
   // more than 10 % of a short recording (the zero-phase filter pads its ends by reflection:

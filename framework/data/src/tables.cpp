@@ -48,6 +48,18 @@ CsvTable datasetTable(const Dataset& d) {
     for (const char* c : {"fx", "fy", "fz", "mx", "my", "mz"}) t.columns.push_back(c);
     blocks.push_back(&d.wrench);
   }
+  if (d.hasBase()) {
+    for (const char* c : {"base_omega_x", "base_omega_y", "base_omega_z", "base_alpha_x",
+                          "base_alpha_y", "base_alpha_z", "base_f_x", "base_f_y", "base_f_z"})
+      t.columns.push_back(c);
+    blocks.push_back(&d.base);
+  }
+  if (d.hasContact()) {
+    for (Eigen::Index c = 0; c < d.contact.cols() / 6; ++c)
+      for (const char* k : {"fx", "fy", "fz", "mx", "my", "mz"})
+        t.columns.push_back("contact" + std::to_string(c + 1) + "_" + k);
+    blocks.push_back(&d.contact);
+  }
   (void)n;
   t.data.resize(d.size(), static_cast<Eigen::Index>(t.columns.size()));
   t.data.col(0) = d.t;

@@ -59,6 +59,7 @@ namespace detail {
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
 #endif
 void setup(const RobotModel& model, DynamicsData& d) {
+  model.requireFixedBase("the fixed-base rigid-body algorithms (exid/dynamics.hpp)");
   const int n = model.numJoints();
   d.key = &model;
   d.n = n;

@@ -152,7 +152,27 @@ void RobotModel::validateStructure() const {
   if (!finite(sensor_pose)) throw Error(where(*this) + ": non-finite sensor_pose");
   checkRotation(*this, sensorBody(), sensor_pose.R, "sensor_pose");
   if (!gravity.allFinite()) throw Error(where(*this) + ": non-finite gravity");
+  if (hasLoops() && floating_base)
+    throw Error(where(*this) + ": a floating base with loop-closure joints is not supported "
+                               "(a closed chain is fixed to the world)");
   if (hasLoops()) validateClosedChain(*this);
+  if (floating_base) {
+    if (!base.inertia.allFinite())
+      throw Error(where(*this) + ": floating base link '" + base.link +
+                  "': non-finite inertial parameters");
+    for (int i = 0; i < n; ++i)
+      if (bodies[static_cast<size_t>(i)].name == base.link && !base.link.empty())
+        throw Error(where(*this) + ": floating base link '" + base.link + "' is also " +
+                    bodyLabel(*this, i) + " (the base link is not a body)");
+  }
+}
+
+void RobotModel::requireFixedBase(const std::string& what) const {
+  if (!floating_base) return;
+  throw Error(where(*this) + " has a floating base (link '" + base.link + "'): " + what +
+              " needs a robot fixed to the world; for a floating-base robot use the "
+              "floating_base observation model (docs/models.md) or the floating-base dynamics "
+              "(exid/floating_base.hpp)");
 }
 
 Eigen::Matrix<double, 10, 1> inertialFromCom(double mass, const Eigen::Vector3d& com,

@@ -25,6 +25,7 @@ std::string origin(const Pose& X) {
 }  // namespace
 
 std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
+  model.requireFixedBase("the URDF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   // (a closed chain: its spanning tree, limits per tree joint, drives on the actuated joints;
   // the loops in <exid> below)

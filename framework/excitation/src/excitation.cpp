@@ -49,6 +49,7 @@ class Problem final : public ExcitationProblem {
                       "constraints is not implemented): leave out `excitation` (the simulate "
                       "experiment draws its own reference) or give a trajectory file",
                       r.name));
+    r.requireFixedBase("excitation design (the fixed-contact floating-base case is not designed)");
     // Limits in measured coordinates equal joint limits when there is no transmission; with a
     // transmission, the joint-space limits are applied to q = T qm + q0 below.
     std::vector<JointLimits> limits = r.limits;

@@ -455,6 +455,7 @@ MatrixXd regressorGram(const ObservationModel& model, const Dataset& data, const
       s.q = data.q(used, Eigen::all);
       s.qd = sig.qd(used, Eigen::all);
       s.qdd = sig.qdd(used, Eigen::all);
+      if (data.base.size() > 0) s.base = data.base(used, Eigen::all);  // a floating base
       const MatrixXd Wb = model.design(s);
       G.selfadjointView<Eigen::Lower>().rankUpdate(Wb.transpose());
       *rows += Wb.rows();
@@ -584,13 +585,17 @@ Json inspectDataset(const RobotModel& robot, const ObservationModel* model, cons
   std::vector<Json> jrows = coverageRows(robot, data, sig.qd, &W);
 
   (void)moving_samples;
-  if (!sig.has_tau) {
+  if (!sig.has_tau || robot.floating_base) {
+    // (a floating base: the torque checks predict fixed-base torques; not done)
+    const char* why = robot.floating_base
+                          ? "a floating-base robot (the torque checks predict fixed-base torques)"
+                          : "the data has no torque";
     J["sign_check"] = Json();
-    J["sign_check_note"] = "the data has no torque";
+    J["sign_check_note"] = why;
     J["delay"]["delay_samples"] = Json();
     J["delay"]["delay_s"] = Json();
-    J["delay"]["note"] = "the data has no torque";
-    J["delay"]["verdict"] = "not checkable here: the data has no torque";
+    J["delay"]["note"] = why;
+    J["delay"]["verdict"] = std::string("not checkable here: ") + why;
   } else {
     MatrixXd pred, pred_rest;
     predictTorque(robot, data, sig, moving, &pred, &pred_rest);

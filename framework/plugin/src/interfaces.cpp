@@ -15,6 +15,8 @@ namespace exid {
 
 void ObservationModel::bind(std::shared_ptr<const RobotModel> robot, const RunContext& ctx) {
   check(robot != nullptr, "ObservationModel::bind: no robot");
+  if (robot->floating_base && !specs().floating_base)
+    robot->requireFixedBase("the observation model '" + pluginName() + "'");
   robot_ = std::move(robot);
   onBind(ctx);
   int samples = baseSamples();
@@ -252,6 +254,7 @@ Eigen::MatrixXd ObservationModel::design(const Samples& s) const {
     sub.q = s.q.middleRows(b, e - b);
     sub.qd = s.qd.middleRows(b, e - b);
     sub.qdd = s.qdd.middleRows(b, e - b);
+    if (s.base.size() > 0) sub.base = s.base.middleRows(b, e - b);  // a floating base
     const Eigen::MatrixXd full = fullDesign(sub);
     if (b == 0) {
       m = full.rows() / (e - b);

@@ -18,6 +18,9 @@ namespace exid {
 struct EXID_API Samples {
   Eigen::VectorXd t;  // [s]
   Eigen::MatrixXd q, qd, qdd;
+  /// Floating-base robots only (else empty): K x 9 base motion per sample, omega alpha f in the
+  /// base frame (exid/floating_base.hpp; docs/conventions.md, "Floating base").
+  Eigen::MatrixXd base;
   int size() const { return static_cast<int>(t.size()); }
   int dof() const { return static_cast<int>(q.cols()); }
 };
@@ -133,6 +136,14 @@ struct EXID_API Dataset {
   Eigen::MatrixXd q, qd, qdd;  // K x n, measured coordinates [rad or m, /s, /s^2]
   Eigen::MatrixXd tau;         // K x n [N m or N]
   Eigen::MatrixXd wrench;      // K x 6 fx fy fz mx my mz, sensor frame [N, N m]
+  /// Floating-base robots only (else empty; docs/conventions.md, "Floating base"):
+  /// base     K x 9: omega_x..z [rad/s], alpha_x..z [rad/s^2], f_x..z [m/s^2] (the base
+  ///          origin's specific force a - g), all in the base frame;
+  /// contact  K x 6C: the wrenches of the C declared contacts, each fx fy fz [N] mx my mz [N m]
+  ///          in its sensor frame, exerted by the environment on the robot (the model's
+  ///          `contacts` say which body and frame; contact c is columns 6c .. 6c+5).
+  Eigen::MatrixXd base;
+  Eigen::MatrixXd contact;
   std::string source;          // file or generator, for messages
   Json meta = Json::object();  // what produced it (noise, seed, dropped rows, ...), for people
   DatasetFacts facts;          // what the models and estimators are told, typed
@@ -146,10 +157,16 @@ struct EXID_API Dataset {
   bool hasAcceleration() const { return stream ? stream->hasAcceleration() : qdd.cols() > 0; }
   bool hasTorque() const { return stream ? stream->hasTorque() : tau.cols() > 0; }
   bool hasWrench() const { return stream ? stream->hasWrench() : wrench.cols() > 0; }
+  /// Floating-base signals (never streamed: a stream carries none).
+  bool hasBase() const { return !stream && base.cols() > 0; }
+  bool hasContact() const { return !stream && contact.cols() > 0; }
   double tFirst() const { return stream ? stream->tFirst() : t(0); }
   double tLast() const { return stream ? stream->tLast() : t(t.size() - 1); }
   /// Samples view (copies q, qd, qdd; a dataset in memory).
-  Samples samples() const { return {t, q, qd, qdd}; }
+  Samples samples() const {
+    Samples s{t, q, qd, qdd, base};
+    return s;
+  }
 };
 
 /// The samples [begin, end) of one part among a dataset's times, and which part it is (an index

@@ -103,6 +103,17 @@ struct EXID_API ClosedChain {
   std::vector<JointLimits> tree_limits;  // one per tree joint (passive ones checked by the solve)
 };
 
+/// The free-floating base link of a floating-base robot (docs/robots.md, "Floating base"): its
+/// frame is the base frame, its 10 standard parameters (about the base frame origin, in the base
+/// frame, order XX XY XZ YY YZ ZZ MX MY MZ M) come first in the floating parameter vector, named
+/// XX0 ... M0 (exid/floating_base.hpp). The link itself is not one of `bodies`: the bodies with
+/// parent = -1 are attached to it.
+struct EXID_API FloatingBase {
+  std::string link;        // the base link's name
+  std::string joint_name;  // the floating joint's name (URDF), empty when the description gives none
+  Eigen::Matrix<double, 10, 1> inertia = Eigen::Matrix<double, 10, 1>::Zero();
+};
+
 struct EXID_API RobotModel {
   std::string name;
   std::string source;  // file it came from (for messages), or the plugin that built it
@@ -132,6 +143,11 @@ struct EXID_API RobotModel {
   /// `closed.actuated` (dof() of them), `limits` and `drives` are per measured coordinate and
   /// the passive joints follow from the loop constraints (exid/closed_chain.hpp).
   ClosedChain closed;
+  /// A floating-base robot: the base link moves freely (its motion is a signal, see
+  /// exid/floating_base.hpp) and `base` describes it. false: the base is fixed to the world
+  /// (every fixed-base algorithm refuses a floating robot: requireFixedBase).
+  bool floating_base = false;
+  FloatingBase base;
 
   /// Number of measured (actuated) coordinates: what data, trajectories, drives and limits
   /// count. For a tree it equals numJoints().
@@ -157,6 +173,10 @@ struct EXID_API RobotModel {
   /// Throws exid::Error naming the body and rule if the structure is invalid
   /// (parent order, unit axes, orthonormal rotations, finite numbers, sizes).
   void validateStructure() const;
+  /// Throws exid::Error naming `what` (the consumer) when the robot has a floating base: the
+  /// fixed-base algorithms (differential/integral/load models, excitation design, collision,
+  /// export writers, ...) would compute something wrong for it.
+  void requireFixedBase(const std::string& what) const;
 };
 
 /// Parameter order of one body: XX XY XZ YY YZ ZZ MX MY MZ M.

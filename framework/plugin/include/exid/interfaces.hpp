@@ -36,6 +36,10 @@ struct EXID_API ModelSpecs {
   bool per_sample = false;
   /// Signals a dataset must carry: any of "q", "qd", "qdd", "tau", "wrench".
   std::vector<std::string> required_signals{"q", "qd", "qdd", "tau"};
+  /// The model handles a floating-base robot (RobotModel::floating_base): its rows are the
+  /// floating-base ones (exid/floating_base.hpp). False: bind() refuses a floating robot (the
+  /// fixed-base rows would be wrong for it).
+  bool floating_base = false;
 };
 
 /// Turns a Dataset (or, for excitation design, bare trajectory samples) into observation rows.
