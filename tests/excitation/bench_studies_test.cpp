@@ -175,7 +175,7 @@ TEST(BenchStudies, Puma560FourierIsReproducibleBitForBit) {
 
 TEST(BenchStudies, PandaFourierTableWithSelfCollision) {
   // the torque-limited study with self-collision and a table 2 cm away at every design sample
-  // (two starts, 1000 evaluations): cond <= 40, feasible; reached 38.68 in 564 evaluations.
+  // (two starts, 1000 evaluations): cond <= 40, feasible; reached 31.57 in 686 evaluations.
   // Every design sample's distances, recomputed from the written trajectory, hold the margin.
   Outcome o = runBench("panda_fourier_table.yaml", 0.0);
   EXPECT_LE(o.cond, 40.0);
