@@ -4,8 +4,9 @@
 // switched off (GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX,-FMA4), must write the same
 // trajectory byte for byte and report the same criterion value. Before exid evaluated its own
 // sin/cos/exp/log (exid/fmath.hpp) the two runs parted at the last bits and ended in other basins.
-// On a CPU without FMA the two runs take the same libm paths and the test shows nothing (it says
-// so).
+// The same for the Panda beside a table (torque limits, self-collision, a table: the collision
+// layer's joint rotations, FCL's distances), as shipped. On a CPU without FMA the two runs take
+// the same libm paths and the tests show nothing (they say so).
 #include <gtest/gtest.h>
 
 #include <filesystem>
@@ -76,6 +77,26 @@ TEST(LibmPaths, PandaDesignIsBitIdenticalWithGlibcFmaPathsOnAndOff) {
   ASSERT_FALSE(on.trajectory.empty());
   ASSERT_FALSE(on.criterion.empty());
   std::cout << "[libm paths] cond(W) " << on.criterion << " in " << on.evaluations
+            << " evaluations (glibc as the CPU allows); " << off.criterion << " in "
+            << off.evaluations << " (FMA/AVX2 paths off)\n";
+  EXPECT_EQ(on.criterion, off.criterion);
+  EXPECT_EQ(on.evaluations, off.evaluations);
+  EXPECT_TRUE(on.trajectory == off.trajectory)
+      << "the designed trajectories differ between glibc's libm paths";
+}
+
+TEST(LibmPaths, PandaTableDesignIsBitIdenticalWithGlibcFmaPathsOnAndOff) {
+  const fs::path dir = exid_cli::freshTempDir("exid_libm_paths_", "table");
+  const fs::path study = exid_test::sourceDir() / "examples/bench/panda_fourier_table.yaml";
+  if (!cpuHasFma())
+    std::cout << "[libm paths] this CPU has no FMA: both runs take glibc's baseline paths\n";
+  const StudyRun on = runStudy(study, dir / "on", "-u GLIBC_TUNABLES");
+  const StudyRun off =
+      runStudy(study, dir / "off", "GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX,-FMA4");
+  ASSERT_EQ(on.code, 0) << on.log;
+  ASSERT_EQ(off.code, 0) << off.log;
+  ASSERT_FALSE(on.trajectory.empty());
+  std::cout << "[libm paths] table: cond(W) " << on.criterion << " in " << on.evaluations
             << " evaluations (glibc as the CPU allows); " << off.criterion << " in "
             << off.evaluations << " (FMA/AVX2 paths off)\n";
   EXPECT_EQ(on.criterion, off.criterion);
