@@ -224,6 +224,16 @@ void Didim::conclude(Run* rp) const {
   Run& r = *rp;
   if (!r.prepared) prepare(&r);
   if (!r.stopped && r.stop.empty()) r.stop = fmt::format("max_iterations = {} reached", max_iter_);
+  if (!std::isfinite(r.undamped) && secant_) {
+    // The secant term can leave H + S indefinite where the last steps were at the simulation's
+    // precision (a change of the last bits of sin and cos decides it): the test then uses the
+    // Gauss-Newton model H alone, positive semidefinite, instead of finding no prediction.
+    const Eigen::LDLT<MatrixXd> ldlt(r.H);
+    if (ldlt.info() == Eigen::Success && ldlt.isPositive()) {
+      const double gd = r.g.dot(ldlt.solve(r.g));
+      if (std::isfinite(gd) && gd >= 0) r.undamped = gd;
+    }
+  }
   const double s2_end = r.cur.rss / static_cast<double>(std::max(m_ - (p_ + L_ + D_), 1L));
   r.distance_std = std::isfinite(r.undamped) ? std::sqrt(r.undamped / std::max(s2_end, 1e-300))
                                              : std::numeric_limits<double>::infinity();

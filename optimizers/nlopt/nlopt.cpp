@@ -17,6 +17,7 @@
 #include <random>
 
 #include "exid/error.hpp"
+#include "exid/fmath.hpp"
 #include "exid/optimizers/optim_common.hpp"
 
 namespace {
@@ -95,7 +96,7 @@ double objective(unsigned n, const double* x, double* grad, void* data) {
   if (c->log_objective && J > 0 && J < 1e30) {
     // log J: the same minimisers, better scaled (cond spans decades between starts and optima)
     if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g / J;
-    return std::log(J);
+    return exid::fmath::log(J);
   }
   if (grad) Eigen::Map<Eigen::VectorXd>(grad, n) = g;
   return J;
@@ -129,9 +130,9 @@ void mconstraint(unsigned m, double* result, unsigned n, const double* x, double
     for (int grp = 0; grp < c->lim->groups(); ++grp) {
       auto gg = g.segment(static_cast<Eigen::Index>(grp) * K, K);
       const double gmax = gg.maxCoeff();
-      w = ((gg.array() - gmax) * rho).exp();
+      for (int k = 0; k < K; ++k) w(k) = exid::fmath::exp((gg(k) - gmax) * rho);
       const double S = w.sum();
-      result[grp] = gmax + std::log(S) / rho + c->tighten;
+      result[grp] = gmax + exid::fmath::log(S) / rho + c->tighten;
       if (grad)
         Eigen::Map<Eigen::RowVectorXd>(grad + static_cast<std::ptrdiff_t>(grp) * n, n) =
             (w / S).transpose() * J->middleRows(static_cast<Eigen::Index>(grp) * K, K);
@@ -201,8 +202,8 @@ void epiEigen(unsigned m, double* result, unsigned n2, const double* x, double* 
   std::vector<Eigen::MatrixXd> dM;
   for (int i = 0; i < k; ++i) {
     const int top = p - 1 - i;
-    result[i] = std::log(std::max(lam(top), floor)) - x[n] + c->tighten;
-    result[k + i] = x[n + 1] - std::log(std::max(lam(i), floor)) + c->tighten;
+    result[i] = exid::fmath::log(std::max(lam(top), floor)) - x[n] + c->tighten;
+    result[k + i] = x[n + 1] - exid::fmath::log(std::max(lam(i), floor)) + c->tighten;
     if (grad) {
       dM.push_back(es.eigenvectors().col(top) * es.eigenvectors().col(top).transpose());
     }
@@ -620,8 +621,8 @@ class NloptOptimizer final : public exid::Optimizer {
           problem.information(Eigen::Map<const Eigen::VectorXd>(x.data(), n)),
           Eigen::EigenvaluesOnly);
       const Eigen::VectorXd& lam = es.eigenvalues();
-      x.push_back(std::log(std::max(lam(lam.size() - 1), 1e-300)));
-      x.push_back(std::log(std::max(lam(0), 1e-300)));
+      x.push_back(exid::fmath::log(std::max(lam(lam.size() - 1), 1e-300)));
+      x.push_back(exid::fmath::log(std::max(lam(0), 1e-300)));
     }
     double f = 0;
     std::string r;

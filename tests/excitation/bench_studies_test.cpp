@@ -105,7 +105,7 @@ Outcome runBench(const std::string& file, double vcap, int starts = 0, int start
 
 TEST(BenchStudies, PandaFourierTwoStarts) {
   // the small budget (the "1 s" question of the benchmark): two starts of at most 300
-  // evaluations each, 1000 in all; reached 27.87 in 673 evaluations (the polish converges)
+  // evaluations each, 1000 in all; reached 28.148 in 700 evaluations (the polish converges)
   Outcome o = runBench("panda_fourier.yaml", 0.0, 2, 300, 1000);
   EXPECT_LE(o.cond, 33.3);
   EXPECT_LE(o.evaluations, 1000);
@@ -146,11 +146,9 @@ TEST(BenchStudies, PandaFourierTorqueLimited) {
 
 TEST(BenchStudies, PandaFourier) {
   // the study as shipped (40 starts, 8000 evaluations): at least as good as the SciPy baseline
-  // (33.3). What it reaches is reproducible on one machine but not across machines: the same
-  // binary ended at 27.87, 29.76 and 30.53 on x86-64 machines whose libm picks another variant of
-  // exp/log/sin/cos (glibc's FMA and SSE2 code give results one ulp apart, and 40 SLSQP runs
-  // amplify that into another basin; docs/excitation.md). A threshold below the baseline would
-  // test the machine, not exid.
+  // (33.3); reached 28.148 in 5907 evaluations, the same bits on every CPU since exid evaluates
+  // its own sin/cos/exp/log (LibmPaths.*; before, the same binary ended at 27.87, 29.76 and 30.53
+  // on x86-64 machines whose glibc picked other variants: docs/excitation.md §6).
   Outcome o = runBench("panda_fourier.yaml", 0.0);
   EXPECT_LE(o.cond, 33.3);
   EXPECT_LE(o.evaluations, 8000);
@@ -177,7 +175,7 @@ TEST(BenchStudies, Puma560FourierIsReproducibleBitForBit) {
 
 TEST(BenchStudies, PandaFourierTableWithSelfCollision) {
   // the torque-limited study with self-collision and a table 2 cm away at every design sample
-  // (two starts, 1000 evaluations): cond <= 40, feasible; reached 38.68 in 564 evaluations.
+  // (two starts, 1000 evaluations): cond <= 40, feasible; reached 31.57 in 686 evaluations.
   // Every design sample's distances, recomputed from the written trajectory, hold the margin.
   Outcome o = runBench("panda_fourier_table.yaml", 0.0);
   EXPECT_LE(o.cond, 40.0);

@@ -224,7 +224,10 @@ TEST(DidimDrives, FitsAMeasurementDelay) {
       derr, e.nonlinear_std[0], err, err_plain, grad,
       static_cast<long long>(
           e.details.find("measurement_delay")->find("samples_left_out")->asDouble()));
-  EXPECT_LT(grad, 1e-3);
+  // central differences of an adaptive simulation (steps of 1e-4 of each parameter): their own
+  // error is of this order, and moves with the last bits of the joints' sin and cos (4.9e-4
+  // with glibc's, 1.2e-3 with exid's; a wrong column is off by far more)
+  EXPECT_LT(grad, 3e-3);
   EXPECT_LT(derr, 1e-7);
   EXPECT_LT(err, 1e-6);
   EXPECT_GT(err_plain, 1e-3);

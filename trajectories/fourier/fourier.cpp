@@ -15,6 +15,7 @@
 #include <random>
 
 #include "exid/error.hpp"
+#include "exid/fmath.hpp"
 #include "exid/trajectories/traj_common.hpp"
 
 namespace {
@@ -224,7 +225,9 @@ class Fourier final : public exid::trajectories::BasisTrajectory {
     bqdd->setZero(m);
     (*bq)(0) = 1.0;
     for (int l = 1; l <= L_; ++l) {
-      const double wl = w_ * l, s = std::sin(wl * t), c = std::cos(wl * t);
+      const double wl = w_ * l;
+      double s, c;
+      exid::fmath::sincos(wl * t, &s, &c);  // exid's: the same bits on every CPU
       (*bq)(l) = s / wl;
       (*bq)(L_ + l) = -c / wl;
       (*bqd)(l) = c;

@@ -12,6 +12,7 @@
 #include <cmath>
 
 #include "exid/error.hpp"
+#include "exid/fmath.hpp"
 #include "exid/io.hpp"
 #include "exid/trajectories/traj_common.hpp"
 
@@ -90,8 +91,8 @@ class Pointwise final : public exid::Trajectory {
         A = std::max(A, 0.0);
         // u_k = (qd(t_{k+1}) - qd(t_k)) / dt reproduces qd exactly at the samples (no drift)
         for (int k = 0; k < K_; ++k) {
-          const double qd1 = -A * w * std::sin(w * (k + 1) * dt_),
-                       qd0 = -A * w * std::sin(w * k * dt_);
+          const double qd1 = -A * w * exid::fmath::sin(w * (k + 1) * dt_),
+                       qd0 = -A * w * exid::fmath::sin(w * k * dt_);
           z0_(i * K_ + k) = (qd1 - qd0) / dt_;
         }
       }
@@ -238,8 +239,8 @@ class Pointwise final : public exid::Trajectory {
       for (int m = 0; m <= M; ++m) {
         double sa = 0, sb = 0;
         for (int r = 0; r < N; ++r) {
-          sa += x(r) * std::cos(2.0 * M_PI * m * r / N);
-          sb += x(r) * std::sin(2.0 * M_PI * m * r / N);
+          sa += x(r) * exid::fmath::cos(2.0 * M_PI * m * r / N);
+          sb += x(r) * exid::fmath::sin(2.0 * M_PI * m * r / N);
         }
         const bool edge = m == 0 || (N % 2 == 0 && m == M);
         a(m) = (edge ? 1.0 : 2.0) * sa / N;
@@ -248,7 +249,7 @@ class Pointwise final : public exid::Trajectory {
       auto qd_at = [&](double tt) {
         double v = 0;
         for (int m = 1; m <= M; ++m)
-          v += w * m * (-a(m) * std::sin(w * m * tt) + b(m) * std::cos(w * m * tt));
+          v += w * m * (-a(m) * exid::fmath::sin(w * m * tt) + b(m) * exid::fmath::cos(w * m * tt));
         return v;
       };
       double q0 = 0;

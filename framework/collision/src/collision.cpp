@@ -15,6 +15,7 @@
 
 #include "exid/collision_yaml.hpp"  // kMaxGeometryCoordinate_m
 #include "exid/error.hpp"
+#include "exid/fmath.hpp"
 #include "exid/input_file.hpp"
 
 namespace exid {
@@ -329,6 +330,26 @@ struct CollisionModel::Impl {
     return c;
   }
 
+  // Eigen::AngleAxisd(angle, axis).toRotationMatrix(), term for term, with exid's sin and cos
+  // (the same bits on every CPU: docs/excitation.md §6)
+  static Eigen::Matrix3d axisAngle(const Eigen::Vector3d& axis, double angle) {
+    double s, c;
+    fmath::sincos(angle, &s, &c);
+    const Eigen::Vector3d sin_axis = s * axis, cos1_axis = (1.0 - c) * axis;
+    Eigen::Matrix3d R;
+    double t = cos1_axis.x() * axis.y();
+    R(0, 1) = t - sin_axis.z();
+    R(1, 0) = t + sin_axis.z();
+    t = cos1_axis.x() * axis.z();
+    R(0, 2) = t + sin_axis.y();
+    R(2, 0) = t - sin_axis.y();
+    t = cos1_axis.y() * axis.z();
+    R(1, 2) = t - sin_axis.x();
+    R(2, 1) = t + sin_axis.x();
+    R.diagonal() = (cos1_axis.cwiseProduct(axis)).array() + c;
+    return R;
+  }
+
   void kinematics(const Eigen::VectorXd& q) {
     const int n = robot->dof();
     X.resize(static_cast<std::size_t>(n));
@@ -339,7 +360,7 @@ struct CollisionModel::Impl {
       const Pose F = (b.parent < 0 ? Pose{} : X[static_cast<std::size_t>(b.parent)]) * b.pre;
       Pose M;
       if (b.type == JointType::Revolute)
-        M.R = Eigen::AngleAxisd(q(i), b.axis).toRotationMatrix();
+        M.R = axisAngle(b.axis, q(i));
       else
         M.p = b.axis * q(i);
       X[static_cast<std::size_t>(i)] = F * M * b.post;

@@ -4,17 +4,19 @@
 #include <cmath>
 #include <string>
 
+#include "exid/fmath.hpp"
+
 namespace exid {
 
 Pose rotX(double a) {
   Pose P;
-  const double c = std::cos(a), s = std::sin(a);
+  const double c = exid::fmath::cos(a), s = exid::fmath::sin(a);
   P.R << 1, 0, 0, 0, c, -s, 0, s, c;
   return P;
 }
 Pose rotZ(double a) {
   Pose P;
-  const double c = std::cos(a), s = std::sin(a);
+  const double c = exid::fmath::cos(a), s = exid::fmath::sin(a);
   P.R << c, -s, 0, s, c, 0, 0, 0, 1;
   return P;
 }

@@ -11,40 +11,20 @@
 
 #include <cmath>
 
-#ifdef EXID_HAVE_LIBMVEC
-// glibc's vector math library (libmvec, glibc >= 2.22): sin and cos of 4 doubles, within 4 ulp.
-extern "C" __m256d _ZGVdN4v_sin(__m256d x);
-extern "C" __m256d _ZGVdN4v_cos(__m256d x);
-#endif
+#include "exid/fmath.hpp"
 
 namespace exid::detail::avx2 {
 namespace {
-// sin and cos of every joint angle, 4 at a time with libmvec where the build has it
+// sin and cos of every joint angle: exid's (exid/fmath.hpp, compiled without contraction), the
+// same bits as the portable copy's; the rest of this copy contracts into FMAs and may differ in
+// the last bits (docs/dynamics.md §6)
 inline void sinCos(int n, const double* q, double* s, double* c) {
-  int j = 0;
-#ifdef EXID_HAVE_LIBMVEC
-  for (; j + 4 <= n; j += 4) {
-    const __m256d x = _mm256_loadu_pd(q + j);
-    _mm256_storeu_pd(s + j, _ZGVdN4v_sin(x));
-    _mm256_storeu_pd(c + j, _ZGVdN4v_cos(x));
-  }
-  if (j < n) {
-    alignas(32) double x[4] = {0, 0, 0, 0}, xs[4], xc[4];
-    for (int k = j; k < n; ++k) x[k - j] = q[k];
-    const __m256d v = _mm256_load_pd(x);
-    _mm256_store_pd(xs, _ZGVdN4v_sin(v));
-    _mm256_store_pd(xc, _ZGVdN4v_cos(v));
-    for (int k = j; k < n; ++k) {
-      s[k] = xs[k - j];
-      c[k] = xc[k - j];
-    }
-    j = n;
-  }
-#endif
-  for (; j < n; ++j) {
-    const double x = q[j];  // one load: s may alias q, and one sincos needs one argument
-    s[j] = std::sin(x);
-    c[j] = std::cos(x);
+  for (int j = 0; j < n; ++j) {
+    const double x = q[j];  // one load: s may alias q
+    double sj, cj;
+    exid::fmath::sincos(x, &sj, &cj);
+    s[j] = sj;
+    c[j] = cj;
   }
 }
 }  // namespace

@@ -3,14 +3,18 @@
 // that the other algorithms (wrench and payload regressors, derivatives, mass matrix) call.
 #include <cmath>
 
+#include "exid/fmath.hpp"
+
 namespace exid::detail::portable {
 namespace {
-// sin and cos of every joint angle (std::sin, std::cos; the compiler makes one sincos of them)
+// sin and cos of every joint angle: exid's (exid/fmath.hpp), the same bits on every CPU
 inline void sinCos(int n, const double* q, double* s, double* c) {
   for (int j = 0; j < n; ++j) {
-    const double x = q[j];  // one load: s may alias q, and one sincos needs one argument
-    s[j] = std::sin(x);
-    c[j] = std::cos(x);
+    const double x = q[j];  // one load: s may alias q
+    double sj, cj;
+    exid::fmath::sincos(x, &sj, &cj);
+    s[j] = sj;
+    c[j] = cj;
   }
 }
 }  // namespace
