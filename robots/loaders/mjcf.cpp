@@ -515,7 +515,9 @@ RobotModel loadMjcfString(const std::string& xml, const std::string& src,
   Reader r;
   r.src = src;
   r.options = options;
-  r.read(detail::readXml(xml, src, "an MJCF (XML) file"));
+  TiXmlDocument doc;
+  detail::readXml(xml, src, "an MJCF (XML) file", &doc);
+  r.read(doc);
   RobotModel& m = r.m;
   detail::checkLoaded(m, src, options);
   if (!r.ignored_dynamics.empty()) {

@@ -458,7 +458,9 @@ RobotModel loadSdfString(const std::string& xml, const std::string& src,
   Reader r;
   r.src = src;
   r.options = options;
-  r.read(detail::readXml(xml, src, "an SDF (XML) file"));
+  TiXmlDocument doc;
+  detail::readXml(xml, src, "an SDF (XML) file", &doc);
+  r.read(doc);
   RobotModel& m = r.m;
   detail::checkLoaded(m, src, options);
   auto list = [](const std::vector<std::string>& v) {

@@ -64,13 +64,12 @@ void checkXmlUtf8(const std::string& text, const std::string& src, const char* w
   }
 }
 
-TiXmlDocument readXml(const std::string& text, const std::string& src, const char* what) {
+void readXml(const std::string& text, const std::string& src, const char* what,
+             TiXmlDocument* doc) {
   checkXmlUtf8(text, src, what);
-  TiXmlDocument doc;
-  doc.Parse(text.c_str());
-  if (doc.Error())
-    throw Error(src + ":" + std::to_string(doc.ErrorRow()) + ": invalid XML: " + doc.ErrorDesc());
-  return doc;
+  doc->Parse(text.c_str());
+  if (doc->Error())
+    throw Error(src + ":" + std::to_string(doc->ErrorRow()) + ": invalid XML: " + doc->ErrorDesc());
 }
 
 std::string xmlRootName(const std::string& text) {

@@ -18,8 +18,9 @@ std::string xmlAt(const std::string& source, const TiXmlNode* node);
 /// of the text would make it read past the terminating NUL (found by fuzz_urdf).
 void checkXmlUtf8(const std::string& text, const std::string& src, const char* what);
 
-/// Parses `text` (checked with checkXmlUtf8); a syntax error is an exid::Error naming the line.
-TiXmlDocument readXml(const std::string& text, const std::string& src, const char* what);
+/// Parses `text` (checked with checkXmlUtf8) into *doc (the caller's: a TinyXML document is not
+/// returned by value); a syntax error is an exid::Error naming the line.
+void readXml(const std::string& text, const std::string& src, const char* what, TiXmlDocument* doc);
 
 /// The name of the root element of XML text ("" when there is none or the text is not XML).
 std::string xmlRootName(const std::string& text);

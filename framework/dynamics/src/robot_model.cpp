@@ -67,7 +67,8 @@ std::vector<std::string> RobotModel::inertialParameterNames() const {
 
 Eigen::VectorXd RobotModel::inertialParameters() const {
   Eigen::VectorXd pi(numInertialParameters());
-  for (int j = 0; j < numJoints(); ++j) pi.segment<10>(10 * j) = bodies[static_cast<size_t>(j)].inertia;
+  for (int j = 0; j < numJoints(); ++j)
+    pi.segment<10>(10 * j) = bodies[static_cast<size_t>(j)].inertia;
   return pi;
 }
 
@@ -104,44 +105,47 @@ void RobotModel::validateStructure() const {
     checkRotation(*this, i, b.post.R, "post");
   }
   {
-  const int nm = dof();  // limits, drives, transmission: per measured coordinate
-  if (static_cast<int>(limits.size()) != nm) {
-    std::ostringstream os;
-    os << where(*this) << ": " << limits.size() << " joint limit entries (expected one per joint, "
-       << nm << ")";
-    throw Error(os.str());
-  }
-  for (int i = 0; i < nm; ++i) {
-    const JointLimits& L = limits[static_cast<size_t>(i)];
-    if (std::isnan(L.q_min) || std::isnan(L.q_max) || std::isnan(L.qd_max) ||
-        std::isnan(L.qdd_max) || std::isnan(L.tau_max) || L.q_min > L.q_max || L.qd_max < 0 ||
-        L.qdd_max < 0 || L.tau_max < 0)
-      throw Error(where(*this) + ": " + (hasLoops() ? "measured coordinate " + std::to_string(i + 1) : bodyLabel(*this, i)) +
-                  ": invalid limits (expected q_min <= q_max and non-negative qd/qdd/tau limits)");
-  }
-  if (static_cast<int>(drives.size()) != nm) {
-    std::ostringstream os;
-    os << where(*this) << ": " << drives.size()
-       << " drive entries (expected one per measured coordinate, " << nm << ")";
-    throw Error(os.str());
-  }
-  if (hasTransmission()) {
-    if (transmission.rows() != nm || transmission.cols() != nm || !transmission.allFinite()) {
+    const int nm = dof();  // limits, drives, transmission: per measured coordinate
+    if (static_cast<int>(limits.size()) != nm) {
       std::ostringstream os;
-      os << where(*this) << ": transmission is " << transmission.rows() << "x"
-         << transmission.cols() << " (expected a finite " << nm << "x" << nm << " matrix)";
+      os << where(*this) << ": " << limits.size()
+         << " joint limit entries (expected one per joint, " << nm << ")";
       throw Error(os.str());
     }
-  }
-  if (transmission_offset.size() != 0 && transmission_offset.size() != nm) {
-    std::ostringstream os;
-    os << where(*this) << ": transmission_offset has " << transmission_offset.size()
-       << " entries (expected 0 or " << nm << ")";
-    throw Error(os.str());
-  }
-  if (hasLoops() && (hasTransmission() || transmission_offset.size() != 0))
-    throw Error(where(*this) + ": a closed chain with a transmission is not supported (expected "
-                               "no `transmission` on a robot with loop-closure joints)");
+    for (int i = 0; i < nm; ++i) {
+      const JointLimits& L = limits[static_cast<size_t>(i)];
+      if (std::isnan(L.q_min) || std::isnan(L.q_max) || std::isnan(L.qd_max) ||
+          std::isnan(L.qdd_max) || std::isnan(L.tau_max) || L.q_min > L.q_max || L.qd_max < 0 ||
+          L.qdd_max < 0 || L.tau_max < 0)
+        throw Error(
+            where(*this) + ": " +
+            (hasLoops() ? "measured coordinate " + std::to_string(i + 1) : bodyLabel(*this, i)) +
+            ": invalid limits (expected q_min <= q_max and non-negative qd/qdd/tau limits)");
+    }
+    if (static_cast<int>(drives.size()) != nm) {
+      std::ostringstream os;
+      os << where(*this) << ": " << drives.size()
+         << " drive entries (expected one per measured coordinate, " << nm << ")";
+      throw Error(os.str());
+    }
+    if (hasTransmission()) {
+      if (transmission.rows() != nm || transmission.cols() != nm || !transmission.allFinite()) {
+        std::ostringstream os;
+        os << where(*this) << ": transmission is " << transmission.rows() << "x"
+           << transmission.cols() << " (expected a finite " << nm << "x" << nm << " matrix)";
+        throw Error(os.str());
+      }
+    }
+    if (transmission_offset.size() != 0 && transmission_offset.size() != nm) {
+      std::ostringstream os;
+      os << where(*this) << ": transmission_offset has " << transmission_offset.size()
+         << " entries (expected 0 or " << nm << ")";
+      throw Error(os.str());
+    }
+    if (hasLoops() && (hasTransmission() || transmission_offset.size() != 0))
+      throw Error(where(*this) +
+                  ": a closed chain with a transmission is not supported (expected "
+                  "no `transmission` on a robot with loop-closure joints)");
   }
   if (sensor_body < -1 || sensor_body >= n) {
     std::ostringstream os;
@@ -153,8 +157,9 @@ void RobotModel::validateStructure() const {
   checkRotation(*this, sensorBody(), sensor_pose.R, "sensor_pose");
   if (!gravity.allFinite()) throw Error(where(*this) + ": non-finite gravity");
   if (hasLoops() && floating_base)
-    throw Error(where(*this) + ": a floating base with loop-closure joints is not supported "
-                               "(a closed chain is fixed to the world)");
+    throw Error(where(*this) +
+                ": a floating base with loop-closure joints is not supported "
+                "(a closed chain is fixed to the world)");
   if (hasLoops()) validateClosedChain(*this);
   if (floating_base) {
     if (!base.inertia.allFinite())

@@ -25,7 +25,8 @@ std::string origin(const Pose& X) {
 }  // namespace
 
 std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
-  model.requireFixedBase("the URDF writer (fixed-base export; floating-base export is not written yet)");
+  model.requireFixedBase(
+      "the URDF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   // (a closed chain: its spanning tree, limits per tree joint, drives on the actuated joints;
   // the loops in <exid> below)
@@ -137,8 +138,9 @@ std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
     x << "\"/>\n";
     for (int j = 0; j < m.numJoints(); ++j)
       if (ref(j) != 0.0)
-        x << "    <reference joint=\"" << xmlEscape(m.bodies[static_cast<std::size_t>(j)].joint_name)
-          << "\" value=\"" << num(ref(j)) << "\"/>\n";
+        x << "    <reference joint=\""
+          << xmlEscape(m.bodies[static_cast<std::size_t>(j)].joint_name) << "\" value=\""
+          << num(ref(j)) << "\"/>\n";
   }
   const int sb = m.sensorBody();
   const Pose S = m.bodies[static_cast<std::size_t>(sb)].post * m.sensor_pose;
