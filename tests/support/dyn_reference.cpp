@@ -23,7 +23,7 @@ Eigen::Matrix3d refRot(const Eigen::Vector3d& k, double t) {
 std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::VectorXd& q,
                                         const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                                         bool with_gravity) {
-  const int n = m.dof();
+  const int n = m.numJoints();  // the tree (a closed chain's spanning tree)
   std::vector<RefBodyState> st(static_cast<size_t>(n));
   for (int j = 0; j < n; ++j) {
     const Body& b = m.bodies[static_cast<size_t>(j)];
@@ -76,7 +76,7 @@ std::vector<RefBodyState> refKinematics(const RobotModel& m, const Eigen::Vector
 
 Eigen::VectorXd refTorques(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                            const Eigen::VectorXd& qdd, const Eigen::VectorXd& pi) {
-  const int n = m.dof();
+  const int n = m.numJoints();  // the tree (a closed chain's spanning tree)
   const auto st = refKinematics(m, q, qd, qdd, true);
   std::vector<Eigen::Vector3d> F(static_cast<size_t>(n)),
       N(static_cast<size_t>(n));  // N about base origin
@@ -134,7 +134,7 @@ Eigen::VectorXd refTorques(const RobotModel& m, const Eigen::VectorXd& q, const 
 
 void refEnergy(const RobotModel& m, const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                const Eigen::VectorXd& pi, double* T, double* U) {
-  const int n = m.dof();
+  const int n = m.numJoints();  // the tree (a closed chain's spanning tree)
   const Eigen::VectorXd z = Eigen::VectorXd::Zero(n);
   const auto st = refKinematics(m, q, qd, z, false);
   double t = 0, u = 0;
