@@ -129,6 +129,14 @@ TEST(MjcfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
               exid::loadMjcfString("<robot name=\"r\"/>", "arm.xml");
             }).find("the root element of an MJCF file must be <mujoco>, found <robot>"),
             std::string::npos);
+  // (empty and unparsable files: the message, and the document freed once; CI's second stage
+  // runs this folder under AddressSanitizer)
+  EXPECT_NE(errorOf([] { exid::loadMjcfString("", "arm.xml"); }).find("invalid XML"),
+            std::string::npos);
+  EXPECT_NE(errorOf([] { exid::loadSdfString("", "arm.sdf"); }).find("invalid XML"),
+            std::string::npos);
+  EXPECT_NE(errorOf([] { exid::loadSdfString("<", "arm.sdf"); }).find("arm.sdf"),
+            std::string::npos);
   EXPECT_NE(
       errorOf([] { exid::loadMjcfString("<mujoco><worldbody>", "arm.xml"); }).find("invalid XML"),
       std::string::npos);
