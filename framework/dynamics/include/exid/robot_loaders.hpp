@@ -56,9 +56,10 @@ EXID_API RobotModel loadUrdfString(const std::string& xml, const std::string& so
 /// An MJCF file (MuJoCo's XML): one body tree in <worldbody> with <inertial> elements, hinge and
 /// slide joints (one per body), <default> classes for joints and motors, gravity from <option>,
 /// a motor's ctrlrange times its gear as the torque limit, the site "exid_sensor" as the sensor
-/// frame. Refused with a message: free and ball joints, several joints in one body, <include>,
-/// equality constraints and tendons, joint springs, inertia computed from geoms. See
-/// docs/robots.md.
+/// frame, joint `ref`s, `connect` constraints as the loop-closure joints of a closed chain (the
+/// motors' joints actuated). Refused with a message: free and ball joints, several joints in one
+/// body, <include>, other equality constraints and tendons, joint springs, inertia computed from
+/// geoms. See docs/robots.md.
 EXID_API RobotModel loadMjcf(const std::filesystem::path& file, const LoadOptions& options = {});
 EXID_API RobotModel loadMjcfString(const std::string& xml, const std::string& source,
                                    const LoadOptions& options = {});
@@ -66,7 +67,8 @@ EXID_API RobotModel loadMjcfString(const std::string& xml, const std::string& so
 /// An SDFormat 1.5-1.9 file: one <model> fixed to the world by one fixed joint, revolute,
 /// continuous, prismatic and fixed joints, poses through the frame graph (relative_to, <frame>,
 /// expressed_in), the frame "exid_sensor" as the sensor frame. SDF carries no gravity (the
-/// default is used; the model's notes say so). See docs/robots.md.
+/// default is used; the model's notes say so); loops closed by the joints <exid:closed_chain>
+/// names as cut. See docs/robots.md.
 EXID_API RobotModel loadSdf(const std::filesystem::path& file, const LoadOptions& options = {});
 EXID_API RobotModel loadSdfString(const std::string& xml, const std::string& source,
                                   const LoadOptions& options = {});
