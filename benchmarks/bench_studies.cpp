@@ -232,15 +232,14 @@ void registerAll() {
       {"paper/exp4_load_wrench.yaml", 0.0, no, 90830.0 / 3000.0, "ratio >= 30.3"},
   };
   for (const B& b : all) {
-    const std::string name =
-        fmt::format("{}{}/{}", fs::path(b.file).stem().string(),
-                    b.columns.empty() ? "" : "_published_columns",
-                    b.cpu_s > 0 ? fmt::format("cpu_{:g}s", b.cpu_s) : std::string("shipped"));
-    benchmark::RegisterBenchmark(
-        name.c_str(),
-        [b](benchmark::State& st) {
-          runStudy(st, b.file, b.cpu_s, b.cond, b.ratio, b.goal, b.columns);
-        })
+    const std::string name = fmt::format(
+        "{}{}/{}", fs::path(b.file).stem().string(), b.columns.empty() ? "" : "_published_columns",
+        b.cpu_s > 0 ? fmt::format("cpu_{:g}s", b.cpu_s) : std::string("shipped"));
+    benchmark::RegisterBenchmark(name.c_str(),
+                                 [b](benchmark::State& st) {
+                                   runStudy(st, b.file, b.cpu_s, b.cond, b.ratio, b.goal,
+                                            b.columns);
+                                 })
         ->Iterations(1)
         ->UseManualTime()
         ->Unit(benchmark::kSecond);

@@ -153,8 +153,9 @@ std::vector<CsvStream::Ref> CsvStream::wrenchColumns() const {
 // (all nine, or none) and contact<c>_fx .. contact<c>_mz for c = 1, 2, ... (each complete),
 // read as they are (SI, base or sensor frame; no scale, sign or offset).
 void CsvStream::floatingColumns(std::vector<Ref>* cb, std::vector<Ref>* cc) const {
-  const char* bn[9] = {"base_omega_x", "base_omega_y", "base_omega_z", "base_alpha_x", "base_alpha_y",
-                       "base_alpha_z", "base_f_x",     "base_f_y",     "base_f_z"};
+  const char* bn[9] = {"base_omega_x", "base_omega_y", "base_omega_z",
+                       "base_alpha_x", "base_alpha_y", "base_alpha_z",
+                       "base_f_x",     "base_f_y",     "base_f_z"};
   auto group = [&](const std::vector<std::string>& names, const std::string& what,
                    std::vector<Ref>* out) {
     int present = 0;

@@ -94,7 +94,8 @@ class BagReading {
     names_ = P_.getStrings("joint_names");
     if (names_.empty()) {
       for (int j = 0; j < robot_.dof(); ++j)  // measured coordinates (a closed chain's actuated)
-        names_.push_back(robot_.bodies[static_cast<std::size_t>(robot_.actuatedJoint(j))].joint_name);
+        names_.push_back(
+            robot_.bodies[static_cast<std::size_t>(robot_.actuatedJoint(j))].joint_name);
     } else {
       exid::check(static_cast<int>(names_.size()) == n,
                   fmt::format("{}joint_names: expected {} names (one per joint of robot '{}', in "

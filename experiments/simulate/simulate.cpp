@@ -20,9 +20,9 @@
 #include <sundials/sundials_config.h>
 
 #include <Eigen/Cholesky>
+#include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <Eigen/LU>
-#include <Eigen/Core>
 #include <chrono>
 #include <cmath>
 #include <memory>
@@ -326,20 +326,23 @@ class SimulateExperiment : public exid::Experiment {
     const std::string who = "experiment 'simulate' (floating base)";
     exid::check(payload_.empty(), who + ": a payload is not simulated on a floating-base robot");
     exid::check(!P_.getBool("wrench"),
-                who + ": the wrist wrench is not simulated on a floating-base robot (the "
-                      "contact wrench is recorded: contact_link)");
+                who +
+                    ": the wrist wrench is not simulated on a floating-base robot (the "
+                    "contact wrench is recorded: contact_link)");
     exid::check(!R.hasTransmission(), who + ": robot '" + R.name +
                                           "' has a transmission (not modelled for a floating "
                                           "base)");
     exid::check(P_.getDouble("torque_delay_s") == 0.0 &&
                     P_.getDoubles("recorded_torque_gain").empty() &&
                     P_.getDoubles("drive_torque_gain").empty(),
-                who + ": torque_delay_s, recorded_torque_gain and drive_torque_gain are for "
-                      "fixed-base robots");
+                who +
+                    ": torque_delay_s, recorded_torque_gain and drive_torque_gain are for "
+                    "fixed-base robots");
     const std::string link = P_.getString("contact_link");
     exid::check(!link.empty(),
-                who + ": contact_link is needed: the wrench of one contact balances the base "
-                      "rows (e.g. a foot's link)");
+                who +
+                    ": contact_link is needed: the wrench of one contact balances the base "
+                    "rows (e.g. a foot's link)");
     const int body = exid::floatingBodyIndex(R, link, who + ": contact_link");
     const std::vector<double> cp = P_.getDoubles("contact_pose");
     exid::check(cp.empty() || cp.size() == 6,
@@ -354,9 +357,9 @@ class SimulateExperiment : public exid::Experiment {
       return v.size() == 1 ? v[0] : v[static_cast<std::size_t>(k)];
     };
     const std::vector<double> nc = P_.getDoubles("noise_contact");
-    exid::check(nc.size() == 1 || nc.size() == 2 || nc.size() == 6,
-                fmt::format("{}: noise_contact: expected 1, 2 or 6 numbers, found {}", who,
-                            nc.size()));
+    exid::check(
+        nc.size() == 1 || nc.size() == 2 || nc.size() == 6,
+        fmt::format("{}: noise_contact: expected 1, 2 or 6 numbers, found {}", who, nc.size()));
     n_ = R.dof();
     const int n = n_;
     double duration = P_.getDouble("duration_s");
@@ -395,8 +398,7 @@ class SimulateExperiment : public exid::Experiment {
       for (int s = 0; s < kSub && h > 0; ++s) {
         fourier3(Aw, Pw, wb, t_prev + (s + 0.5) * h - t0, &w, &al);
         const double ang = w.norm() * h;
-        if (ang > 0)
-          Rwb = Rwb * Eigen::AngleAxisd(ang, w.normalized()).toRotationMatrix();
+        if (ang > 0) Rwb = Rwb * Eigen::AngleAxisd(ang, w.normalized()).toRotationMatrix();
       }
       t_prev = tk;
       fourier3(Aw, Pw, wb, tk - t0, &w, &al);
@@ -440,9 +442,9 @@ class SimulateExperiment : public exid::Experiment {
         if (const double sb = nb[static_cast<std::size_t>(c / 3)]; sb > 0)
           d.base(k, c) += sb * nd(nrng);
       for (int e = 0; e < 6; ++e) {
-        const double sc = nc.size() == 1 ? nc[0]
-                                         : nc.size() == 2 ? nc[e < 3 ? 0 : 1]
-                                                          : nc[static_cast<std::size_t>(e)];
+        const double sc = nc.size() == 1   ? nc[0]
+                          : nc.size() == 2 ? nc[e < 3 ? 0 : 1]
+                                           : nc[static_cast<std::size_t>(e)];
         if (sc > 0) d.contact(k, e) += sc * nd(nrng);
       }
     }
@@ -492,16 +494,16 @@ class SimulateExperiment : public exid::Experiment {
       *Mm = G.transpose() * exid::massMatrix(R, *data_, q) * G;
       *hm = G.transpose() * exid::inverseDynamics(R, *data_, q, qd, g);
     } else {
-    exid::measuredToJoint(R, qm, qdm, qdm, &q, &qd, nullptr);
-    const MatrixXd M = exid::massMatrix(R, *data_, q);
-    const VectorXd h = exid::inverseDynamics(R, *data_, q, qd, VectorXd::Zero(n_));
-    if (R.hasTransmission()) {
-      *Mm = R.transmission.transpose() * M * R.transmission;
-      *hm = R.transmission.transpose() * h;
-    } else {
-      *Mm = M;
-      *hm = h;
-    }
+      exid::measuredToJoint(R, qm, qdm, qdm, &q, &qd, nullptr);
+      const MatrixXd M = exid::massMatrix(R, *data_, q);
+      const VectorXd h = exid::inverseDynamics(R, *data_, q, qd, VectorXd::Zero(n_));
+      if (R.hasTransmission()) {
+        *Mm = R.transmission.transpose() * M * R.transmission;
+        *hm = R.transmission.transpose() * h;
+      } else {
+        *Mm = M;
+        *hm = h;
+      }
     }
     if (!drive_terms_) return;
     for (int j = 0; j < n_; ++j) {

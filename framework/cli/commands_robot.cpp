@@ -145,9 +145,10 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
   }
   std::cout << fmt::format("robot {} ({} joints) from {}\n", r->name, r->dof(), r->source);
   if (r->hasLoops())
-    std::cout << fmt::format("  closed chain: {} tree joints, {} loop-closure joint(s); the "
-                             "joints below are the actuated ones\n",
-                             r->numJoints(), r->closed.loops.size());
+    std::cout << fmt::format(
+        "  closed chain: {} tree joints, {} loop-closure joint(s); the "
+        "joints below are the actuated ones\n",
+        r->numJoints(), r->closed.loops.size());
   if (r->floating_base)
     std::cout << fmt::format(
         "  floating base: link '{}' (parameters XX0 ... M0; parent 0 below means this link)\n",

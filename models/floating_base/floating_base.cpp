@@ -5,6 +5,8 @@
 //   joint rows (n)  Y_joint(q, qd, qdd, b) pi_f = tau + sum_c J_c^T w_c  (rows: all | joints)
 // pi_f = [XX0 .. M0 (the base link); XX1 .. M1; ...]. The base rows need no joint torque
 // (torque-free identification, Ayusawa, Venture and Nakamura 2014).
+#include "exid/floating_base.hpp"
+
 #include <fmt/format.h>
 
 #include <Eigen/Core>
@@ -13,7 +15,6 @@
 #include <vector>
 
 #include "exid/error.hpp"
-#include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/models/model_common.hpp"
 
@@ -51,12 +52,12 @@ class FloatingBaseModel : public exid::ObservationModel {
         contact_links_(p.getStrings("contact_links")),
         contact_pose_values_(p.getDoubles("contact_poses")),
         context_(p.context) {
-    exid::check(contact_pose_values_.empty() ||
-                    contact_pose_values_.size() == 6 * contact_links_.size(),
-                fmt::format("{}: contact_poses: {} numbers for {} contact link(s) (expected six "
-                            "per contact: x y z roll pitch yaw, or none)",
-                            context_.empty() ? "model 'floating_base'" : context_,
-                            contact_pose_values_.size(), contact_links_.size()));
+    exid::check(
+        contact_pose_values_.empty() || contact_pose_values_.size() == 6 * contact_links_.size(),
+        fmt::format("{}: contact_poses: {} numbers for {} contact link(s) (expected six "
+                    "per contact: x y z roll pitch yaw, or none)",
+                    context_.empty() ? "model 'floating_base'" : context_,
+                    contact_pose_values_.size(), contact_links_.size()));
   }
 
   std::vector<std::string> fullNames() const override {
@@ -96,11 +97,11 @@ class FloatingBaseModel : public exid::ObservationModel {
                             "in the base frame; found {} x {})",
                             who, d.source, d.base.rows(), d.base.cols()));
     const int C = static_cast<int>(contact_links_.size());
-    exid::check((C == 0 && d.contact.size() == 0) ||
-                    (d.contact.rows() == K && d.contact.cols() == 6 * C),
-                fmt::format("{}: the dataset ({}) has {} contact column(s); the model declares {} "
-                            "contact(s) (contact_links), six columns each",
-                            who, d.source, d.contact.cols(), C));
+    exid::check(
+        (C == 0 && d.contact.size() == 0) || (d.contact.rows() == K && d.contact.cols() == 6 * C),
+        fmt::format("{}: the dataset ({}) has {} contact column(s); the model declares {} "
+                    "contact(s) (contact_links), six columns each",
+                    who, d.source, d.contact.cols(), C));
     exid::check(C > 0 || rows_ == "joints",
                 fmt::format("{}: no contact declared (contact_links): the base rows equal the "
                             "contact wrenches, so rows '{}' needs at least one (rows: joints "
@@ -119,8 +120,8 @@ class FloatingBaseModel : public exid::ObservationModel {
       if (rows_ != "base") rhs.tail(n) = d.tau.row(k).transpose();
       const Eigen::VectorXd q = d.q.row(k).transpose();
       for (int c = 0; c < C; ++c) {
-        const Eigen::MatrixXd Cm = exid::contactMap(robot(), q, bodies[static_cast<size_t>(c)],
-                                                    contactPose(c));
+        const Eigen::MatrixXd Cm =
+            exid::contactMap(robot(), q, bodies[static_cast<size_t>(c)], contactPose(c));
         rhs += Cm * d.contact.block(k, 6 * c, 1, 6).transpose();
       }
       const int first = rows_ == "joints" ? 6 : 0;

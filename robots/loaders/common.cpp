@@ -23,10 +23,10 @@ void checkModelPhysical(const RobotModel& model, const LoadOptions& options) {
   if (model.floating_base) {
     const InertiaCheck c = checkPhysical(model.base.inertia);
     if (!c.ok || !(model.base.inertia(9) > 0.0)) {
-      const std::string msg = model.source + ": floating base link '" + model.base.link +
-                              "': physically impossible inertia: " +
-                              (c.ok ? std::string("no mass (a floating base link needs one)")
-                                    : c.rule);
+      const std::string msg =
+          model.source + ": floating base link '" + model.base.link +
+          "': physically impossible inertia: " +
+          (c.ok ? std::string("no mass (a floating base link needs one)") : c.rule);
       if (options.strict)
         throw Error(msg + " (strict mode; load without strict to accept it with a warning)");
       reportWarning(options, msg);

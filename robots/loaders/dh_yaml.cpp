@@ -1,8 +1,8 @@
 // exid — DH / modified DH YAML robot descriptions. Format: docs/robots.md.
 #include <yaml-cpp/yaml.h>
 
-#include <cmath>
 #include <algorithm>
+#include <cmath>
 #include <map>
 #include <set>
 #include <sstream>
@@ -412,8 +412,7 @@ void readClosedChain(const Reader& r, const YAML::Node& C, const YAML::Node& lin
     for (const char* side : {"pose_a", "pose_b"})
       if (const YAML::Node P = J[side]) {
         r.requireMap(P, lw + "." + side, {"xyz", "rpy", "rpy_deg"});
-        (std::string(side) == "pose_a" ? lj.pose_a : lj.pose_b) =
-            readPose(r, P, lw + "." + side);
+        (std::string(side) == "pose_a" ? lj.pose_a : lj.pose_b) = readPose(r, P, lw + "." + side);
       }
     if (J["axis"]) {
       const Eigen::Vector3d a = r.vector(J["axis"], lw + ".axis", 3);
@@ -423,7 +422,8 @@ void readClosedChain(const Reader& r, const YAML::Node& C, const YAML::Node& lin
     model->closed.loops.push_back(lj);
   }
   std::map<std::string, int> joint_index;
-  for (int i = 0; i < n; ++i) joint_index[model->bodies[static_cast<std::size_t>(i)].joint_name] = i;
+  for (int i = 0; i < n; ++i)
+    joint_index[model->bodies[static_cast<std::size_t>(i)].joint_name] = i;
   const YAML::Node A = C["actuated"];
   for (std::size_t k = 0; k < A.size(); ++k) {
     const std::string aw = w + ".actuated[" + std::to_string(k) + "]";
@@ -453,8 +453,8 @@ void readClosedChain(const Reader& r, const YAML::Node& C, const YAML::Node& lin
   }
   for (int i = 0; i < n; ++i) {
     const YAML::Node Li = links[static_cast<std::size_t>(i)];
-    if (Li["drive"] && std::find(model->closed.actuated.begin(), model->closed.actuated.end(),
-                                 i) == model->closed.actuated.end())
+    if (Li["drive"] && std::find(model->closed.actuated.begin(), model->closed.actuated.end(), i) ==
+                           model->closed.actuated.end())
       r.fail(Li["drive"], "links[" + std::to_string(i) + "].drive",
              "joint '" + model->bodies[static_cast<std::size_t>(i)].joint_name +
                  "' is passive (not in closed_chain.actuated): a drive belongs to an actuated "
@@ -466,10 +466,10 @@ void readClosedChain(const Reader& r, const YAML::Node& C, const YAML::Node& lin
 
 RobotModel parseDh(const YAML::Node& root, const Reader& r, const LoadOptions& options) {
   if (!root.IsDefined() || root.IsNull()) r.fail(root, "", "empty document");
-  r.requireMap(root, "top level",
-               {"name", "description", "source", "sources", "notes", "convention", "gravity",
-                "links", "transmission", "sensor", "base_collision", "closed_chain",
-                 "floating_base"});
+  r.requireMap(
+      root, "top level",
+      {"name", "description", "source", "sources", "notes", "convention", "gravity", "links",
+       "transmission", "sensor", "base_collision", "closed_chain", "floating_base"});
 
   RobotModel model;
   model.source = r.source();

@@ -7,12 +7,12 @@
 #include <urdf_parser/urdf_parser.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
-#include <algorithm>
 #include <map>
 #include <mutex>
 #include <set>
@@ -796,8 +796,8 @@ RobotModel loadUrdfString(const std::string& xml, const std::string& src,
   if (!x.floating_joint.empty()) {
     const urdf::LinkConstSharedPtr world = u->getLink(x.world);
     if (world && world->inertial && world->inertial->mass != 0.0)
-      throw Error(src + ": link '" + world->name +
-                  "': the world link of floating joint '" + x.floating_joint +
+      throw Error(src + ": link '" + world->name + "': the world link of floating joint '" +
+                  x.floating_joint +
                   "' has a mass (expected none: the world does not move with the robot)");
     const urdf::LinkConstSharedPtr base = u->getLink(x.root);
     if (!base) throw Error(src + ": base link '" + x.root + "' not found by urdfdom");

@@ -51,9 +51,11 @@ TEST(Conformance, EveryShippedPluginLibraryLoads) {
 TEST(Conformance, ThePluginsTheDesignNamesAreShipped) {
   auto& reg = exid_test::registry();
   const std::vector<std::pair<exid::PluginKind, std::vector<std::string>>> expected = {
-      {exid::PluginKind::Robot, {"urdf", "dh", "planar2r", "puma560", "irp6", "stanford", "panda", "humanoid", "quadruped"}},
+      {exid::PluginKind::Robot,
+       {"urdf", "dh", "planar2r", "puma560", "irp6", "stanford", "panda", "humanoid", "quadruped"}},
       {exid::PluginKind::Criterion, {"cond", "min_sv", "frobenius_cond", "log_det"}},
-      {exid::PluginKind::Model, {"differential", "integral", "load_wrench", "load_torque", "floating_base"}},
+      {exid::PluginKind::Model,
+       {"differential", "integral", "load_wrench", "load_torque", "floating_base"}},
       {exid::PluginKind::Trajectory, {"pointwise", "fourier", "spline"}},
       {exid::PluginKind::Optimizer, {"adjoint_gradient", "nlopt"}},
       {exid::PluginKind::Experiment, {"simulate", "csv", "rosbag2"}},

@@ -6,7 +6,6 @@
 
 #include <Eigen/Geometry>
 #include <Eigen/LU>
-
 #include <cmath>
 #include <random>
 #include <sstream>
@@ -96,9 +95,9 @@ Planar solve(const FourBar& f, double th, double thd, double thdd) {
   // differentiated once more: a e'1 al1 - a e1 w1^2 + b e'2 al2 - b e2 w2^2 - c e'3 al3
   // + c e3 w3^2 = 0
   p.al[0] = thdd;
-  const Eigen::Vector2d rhs = -(f.a * ep(th) * thdd - f.a * e(th) * thd * thd -
-                                f.b * e(p.phi[1]) * p.w[1] * p.w[1] +
-                                f.c * e(p.phi[2]) * p.w[2] * p.w[2]);
+  const Eigen::Vector2d rhs =
+      -(f.a * ep(th) * thdd - f.a * e(th) * thd * thd - f.b * e(p.phi[1]) * p.w[1] * p.w[1] +
+        f.c * e(p.phi[2]) * p.w[2] * p.w[2]);
   const Eigen::Vector2d a23 = A.lu().solve(rhs);
   p.al[1] = a23[0], p.al[2] = a23[1];
   return p;
@@ -343,9 +342,9 @@ TEST(ClosedChain, Errors) {
     const DriveColumns none;
     const Eigen::VectorXd z = Eigen::VectorXd::Zero(1);
     Eigen::VectorXd g1, g2, g3;
-    EXPECT_THROW(actuatorRegressorVjp(good, *d, none, z, z, z,
-                                      Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1,
-                                      &g2, &g3),
-                 Error);
+    EXPECT_THROW(
+        actuatorRegressorVjp(good, *d, none, z, z, z,
+                             Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1, &g2, &g3),
+        Error);
   }
 }

@@ -1,6 +1,8 @@
 // Floating-base dynamics (exid/floating_base.hpp) against the independent reference: the same
 // robot as a fixed-base chain with six massless virtual joints (tests/support/floating_reference),
 // computed by the fixed-base regressor and by the plain Newton-Euler of dyn_reference.
+#include "exid/floating_base.hpp"
+
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -9,7 +11,6 @@
 #include "dyn_reference.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
-#include "exid/floating_base.hpp"
 #include "floating_reference.hpp"
 
 using namespace exid;

@@ -45,8 +45,8 @@ struct StudyRun {
 
 StudyRun runStudy(const fs::path& study, const fs::path& out, const std::string& env) {
   StudyRun r;
-  const std::string cmd = "env " + env + " " + std::string(EXID_EXE) + " excite " +
-                          study.string() + " --out " + out.string() + " -q 2>&1";
+  const std::string cmd = "env " + env + " " + std::string(EXID_EXE) + " excite " + study.string() +
+                          " --out " + out.string() + " -q 2>&1";
   FILE* p = ::popen(cmd.c_str(), "r");
   char buf[4096];
   while (p && std::fgets(buf, sizeof buf, p)) r.log += buf;
@@ -71,7 +71,7 @@ TEST(LibmPaths, PandaDesignIsBitIdenticalWithGlibcFmaPathsOnAndOff) {
     std::cout << "[libm paths] this CPU has no FMA: both runs take glibc's baseline paths\n";
   const StudyRun on = runStudy(dir / "panda.yaml", dir / "on", "-u GLIBC_TUNABLES");
   const StudyRun off = runStudy(dir / "panda.yaml", dir / "off",
-                           "GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX,-FMA4");
+                                "GLIBC_TUNABLES=glibc.cpu.hwcaps=-AVX2,-FMA,-AVX,-FMA4");
   ASSERT_EQ(on.code, 0) << on.log;
   ASSERT_EQ(off.code, 0) << off.log;
   ASSERT_FALSE(on.trajectory.empty());

@@ -16,15 +16,20 @@ namespace {
 
 exid::StudyResult run(const std::string& robot, const std::string& estimator,
                       const std::string& extra = "",
-                      const std::string& experiment = "{period_s: 10, harmonics: 5, "
-                                                      "duration_s: 10, sample_period_s: 0.005}") {
+                      const std::string& experiment =
+                          "{period_s: 10, harmonics: 5, "
+                          "duration_s: 10, sample_period_s: 0.005}") {
   // noise-free: the simulated torques are the model's
   const std::string study =
-      "robot: {type: " + robot + "}\n"
+      "robot: {type: " + robot +
+      "}\n"
       "model: {type: differential, params: {rotor_inertia: true, viscous: true, coulomb: true, "
       "offset: true}}\n"
-      "experiment: {type: simulate, params: " + experiment + "}\n"
-      "estimator: " + estimator + "\n" + extra;
+      "experiment: {type: simulate, params: " +
+      experiment +
+      "}\n"
+      "estimator: " +
+      estimator + "\n" + extra;
   exid::StudyConfig cfg =
       exid::parseStudy(study, "closed_chain.yaml", exid_test::sourceDir(), exid_test::registry());
   return exid::runStudy(cfg, exid_test::registry(), exid::RunOptions{});
@@ -63,8 +68,8 @@ TEST(ClosedChainStudy, PalletizerIdentifiesWithTheEnergyModel) {
       "experiment: {type: simulate, params: {period_s: 10, harmonics: 5, duration_s: 10, "
       "sample_period_s: 0.002, output_qd_qdd: true}}\n"
       "estimator: {type: batch_ls}\n";
-  exid::StudyConfig cfg =
-      exid::parseStudy(study, "closed_integral.yaml", exid_test::sourceDir(), exid_test::registry());
+  exid::StudyConfig cfg = exid::parseStudy(study, "closed_integral.yaml", exid_test::sourceDir(),
+                                           exid_test::registry());
   const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), exid::RunOptions{});
   ASSERT_TRUE(r.ok) << r.message;
   std::ostringstream os;

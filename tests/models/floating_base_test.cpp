@@ -3,11 +3,12 @@
 // noisy within the estimator's own standard deviations, the base rows alone (no joint torque),
 // and the refusals of what needs a fixed base. The dataset functions carry the floating-base
 // signals.
+#include "exid/floating_base.hpp"
+
 #include <cmath>
 #include <tuple>
 
 #include "exid/exid.hpp"
-#include "exid/floating_base.hpp"
 #include "exid/io.hpp"
 #include "exid/registry.hpp"
 #include "exid/tables.hpp"
@@ -68,8 +69,8 @@ TEST(FloatingBaseModel, NoiseFreeIdentificationEveryEstimator) {
            {"rls", "{p0: 1e12}"},
            {"consistent_ls", "{}"},
            {"filtered_ls", "{cutoff_hz: 0, decimation: 5}"}}) {
-    const exid::Estimate e = exid_test::create<exid::Estimator>(est, params)->estimate(
-        *m, d, nullptr, mtest::context());
+    const exid::Estimate e =
+        exid_test::create<exid::Estimator>(est, params)->estimate(*m, d, nullptr, mtest::context());
     const double w = scaledErr(e.value, truth);
     std::printf("  %s: largest error / largest parameter %.2e, relative norm %.2e\n", est.c_str(),
                 w, (e.value - truth).norm() / truth.norm());
@@ -84,15 +85,15 @@ TEST(FloatingBaseModel, BaseRowsAloneNeedNoTorque) {
   d.tau.resize(0, 0);
   auto mb = mtest::model("floating_base", std::string("{rows: base, ") + kModel + "}", humanoid());
   auto ma = mtest::model("floating_base", std::string("{") + kModel + "}", humanoid());
-  auto mj = mtest::model("floating_base", std::string("{rows: joints, ") + kModel + "}",
-                         humanoid());
+  auto mj =
+      mtest::model("floating_base", std::string("{rows: joints, ") + kModel + "}", humanoid());
   EXPECT_EQ(mb->numBase(), ma->numBase());
   EXPECT_LT(mj->numBase(), ma->numBase());
   const mtest::Recovery r = mtest::recover(*mb, d);
   mtest::print("base rows", r);
   EXPECT_LT(r.est_rel, 1e-9);
-  const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")->estimate(
-      *mb, d, nullptr, mtest::context());
+  const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")
+                               ->estimate(*mb, d, nullptr, mtest::context());
   EXPECT_LT(scaledErr(e.value, mb->baseNominal()), 1e-9);
   // the joint rows need the torque: refused without it
   EXPECT_THROW(mj->fullRows(d, mtest::context()), exid::Error);
@@ -107,8 +108,8 @@ TEST(FloatingBaseModel, NoisyWithinSigma) {
   auto m = mtest::model("floating_base", std::string("{") + kModel + "}", humanoid());
   const Eigen::VectorXd truth = m->baseNominal();
   for (const char* est : {"batch_ls", "wls"}) {
-    const exid::Estimate e = exid_test::create<exid::Estimator>(est, "{}")->estimate(
-        *m, d, nullptr, mtest::context());
+    const exid::Estimate e =
+        exid_test::create<exid::Estimator>(est, "{}")->estimate(*m, d, nullptr, mtest::context());
     int outside = 0;
     double worst_z = 0;
     for (Eigen::Index i = 0; i < truth.size(); ++i) {
@@ -154,7 +155,8 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   auto fm = mtest::model("floating_base", std::string("{") + kModel + "}", r);
   for (const char* est : {"didim", "iv"}) {
     m = msg([&] {
-      exid_test::create<exid::Estimator>(est, "{reference_file: reference.csv, kp_Nm_per_rad: [100], kd_Nm_s_per_rad: [10]}")
+      exid_test::create<exid::Estimator>(
+          est, "{reference_file: reference.csv, kp_Nm_per_rad: [100], kd_Nm_s_per_rad: [10]}")
           ->estimate(*fm, d, nullptr, mtest::context());
     });
     EXPECT_NE(m.find("floating base"), std::string::npos) << est << ": " << m;
@@ -245,8 +247,8 @@ TEST(FloatingBaseModel, CsvColumnsReadBackAndIdentify) {
     EXPECT_LT((r.base - d.base).cwiseAbs().maxCoeff(), 1e-12);
     EXPECT_LT((r.contact - d.contact).cwiseAbs().maxCoeff(), 1e-9);
     auto m = mtest::model("floating_base", std::string("{") + kModel + "}", humanoid());
-    const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")->estimate(
-        *m, r, nullptr, mtest::context());
+    const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")
+                                 ->estimate(*m, r, nullptr, mtest::context());
     EXPECT_LT(scaledErr(e.value, m->baseNominal()), 1e-9);
   }
   // an incomplete base group

@@ -215,7 +215,8 @@ TEST(ClosedChainRobots, LoaderErrors) {
   e = loadError(replaced("actuated: [joint1]", "actuated: [joint1, joint3]"));
   EXPECT_NE(e.find("not independent"), std::string::npos) << e;
   // a drive on a passive joint
-  e = loadError(replaced("    com: [0.175, 0.0, 0.0]\n", "    com: [0.175, 0.0, 0.0]\n    drive: {viscous: 0.1}\n"));
+  e = loadError(replaced("    com: [0.175, 0.0, 0.0]\n",
+                         "    com: [0.175, 0.0, 0.0]\n    drive: {viscous: 0.1}\n"));
   EXPECT_NE(e.find("passive"), std::string::npos) << e;
   // a coupler too short to close anywhere near the reference
   // (|b - c| = 0.6 m exceeds every distance |BD| <= 0.5 m: it never closes)

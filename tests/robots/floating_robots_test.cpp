@@ -155,10 +155,11 @@ TEST(FloatingRobots, BaseParameterCountsAgreeWithTheVirtualChain) {
     const RobotModel m = shipped(name);
     Counts f, v;
     counts(m, 120, &f, &v);
-    std::printf("%s: %d standard parameters; base parameters: all rows %d, base rows %d, joint "
-                "rows %d (virtual chain: %d, %d, %d)\n",
-                name, 10 * (m.dof() + 1), f.all, f.base_rows, f.joint_rows, v.all, v.base_rows,
-                v.joint_rows);
+    std::printf(
+        "%s: %d standard parameters; base parameters: all rows %d, base rows %d, joint "
+        "rows %d (virtual chain: %d, %d, %d)\n",
+        name, 10 * (m.dof() + 1), f.all, f.base_rows, f.joint_rows, v.all, v.base_rows,
+        v.joint_rows);
     EXPECT_EQ(f.all, v.all) << name;
     EXPECT_EQ(f.base_rows, v.base_rows) << name;
     EXPECT_EQ(f.joint_rows, v.joint_rows) << name;

@@ -288,9 +288,9 @@ TEST(UrdfErrors, SeveralRoots) {
 TEST(UrdfErrors, FloatingJointRules) {
   const std::string world = "  <link name=\"world\"/>\n";  // massless
   // not from the root
-  std::string m = urdfError(urdf(world + link("a") + link("b") +
-                                 joint("j", "revolute", "world", "a") +
-                                 joint("free", "floating", "a", "b")));
+  std::string m =
+      urdfError(urdf(world + link("a") + link("b") + joint("j", "revolute", "world", "a") +
+                     joint("free", "floating", "a", "b")));
   EXPECT_HAS(m, "joint 'free'");
   EXPECT_HAS(m, "must connect the world (root) link 'world'");
   // the world link holds more than the floating joint
@@ -305,11 +305,11 @@ TEST(UrdfErrors, FloatingJointRules) {
   m = urdfError(urdf(world + link("a") + joint("p", "planar", "world", "a")));
   EXPECT_HAS(m, "planar joints are not supported");
   // the world link of a floating base has no mass
-  m = urdfError(urdf(
-      "  <link name=\"world\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" "
-      "ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>\n" +
-      link("a") + link("b") + joint("free", "floating", "world", "a") +
-      joint("j", "revolute", "a", "b")));
+  m = urdfError(
+      urdf("  <link name=\"world\"><inertial><mass value=\"1\"/><inertia ixx=\"1\" ixy=\"0\" "
+           "ixz=\"0\" iyy=\"1\" iyz=\"0\" izz=\"1\"/></inertial></link>\n" +
+           link("a") + link("b") + joint("free", "floating", "world", "a") +
+           joint("j", "revolute", "a", "b")));
   EXPECT_HAS(m, "the world link of floating joint 'free' has a mass");
   // a floating base alone moves nothing the joints could measure
   m = urdfError(urdf(world + link("a") + joint("free", "floating", "world", "a")));

@@ -10,8 +10,8 @@
 #include <set>
 
 #include "exid/dynamics.hpp"
-#include "exid/floating_base.hpp"
 #include "exid/error.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/robot_loaders.hpp"
 

@@ -105,8 +105,9 @@ void ClosedLoop::checkParams(const ParamSet& p, const std::string& who) {
 ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
                        const RunContext& ctx, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who) {
-  robot_->requireFixedBase(who + " (its closed-loop simulation integrates the fixed-base forward "
-                                 "dynamics)");
+  robot_->requireFixedBase(who +
+                           " (its closed-loop simulation integrates the fixed-base forward "
+                           "dynamics)");
   checkParams(p, who);
   const std::string file = p.getString("reference_file");
   const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),

@@ -220,9 +220,9 @@ double exp(double x) {
   const double c = x - t * (P1 + t * (P2 + t * (P3 + t * (P4 + t * P5))));
   if (k == 0) return 1.0 - ((x * c) / (c - 2.0) - x);
   const double y = 1.0 - ((lo - (x * c) / (2.0 - c)) - hi);
-  if (k > 1023) return y * 2.0 * pow2(1023);    // y < 1 here: finite up to kExpOverflow
-  if (k >= -1021) return y * pow2(k);           // exact
-  return y * pow2(k + 1000) * pow2(-1000);      // a subnormal result: one rounding, the last
+  if (k > 1023) return y * 2.0 * pow2(1023);  // y < 1 here: finite up to kExpOverflow
+  if (k >= -1021) return y * pow2(k);         // exact
+  return y * pow2(k + 1000) * pow2(-1000);    // a subnormal result: one rounding, the last
 }
 
 double log(double x) {
@@ -230,10 +230,10 @@ double log(double x) {
   std::uint32_t hx = static_cast<std::uint32_t>(u >> 32);
   int k = 0;
   if (hx < 0x00100000u || (hx >> 31)) {
-    if ((u << 1) == 0) return -HUGE_VAL;                          // +-0
+    if ((u << 1) == 0) return -HUGE_VAL;                            // +-0
     if (hx >> 31) return std::numeric_limits<double>::quiet_NaN();  // below 0 (or -NaN)
-    k -= 54;                                                       // subnormal: scale up
-    x *= 18014398509481984.0;                                      // 2^54
+    k -= 54;                                                        // subnormal: scale up
+    x *= 18014398509481984.0;                                       // 2^54
     u = bits(x);
     hx = static_cast<std::uint32_t>(u >> 32);
   } else if (hx >= 0x7ff00000u) {

@@ -48,8 +48,8 @@ std::string vecText(const Eigen::VectorXd& v) {
 struct Kin {
   std::vector<M3> R;
   std::vector<V3> p;
-  std::vector<V3> sw, sv;          // joint screws
-  std::vector<V3> w, v, al, a;     // spatial velocity and acceleration
+  std::vector<V3> sw, sv;              // joint screws
+  std::vector<V3> w, v, al, a;         // spatial velocity and acceleration
   std::vector<std::vector<char>> anc;  // anc[i][j]: joint j moves body i
 };
 
@@ -192,7 +192,8 @@ std::vector<int> passiveJoints(const RobotModel& m) {
 
 Eigen::MatrixXd columns(const Eigen::MatrixXd& J, const std::vector<int>& idx) {
   Eigen::MatrixXd out(J.rows(), static_cast<Eigen::Index>(idx.size()));
-  for (std::size_t i = 0; i < idx.size(); ++i) out.col(static_cast<Eigen::Index>(i)) = J.col(idx[i]);
+  for (std::size_t i = 0; i < idx.size(); ++i)
+    out.col(static_cast<Eigen::Index>(i)) = J.col(idx[i]);
   return out;
 }
 
@@ -371,7 +372,8 @@ void closedChainState(const RobotModel& m, const Eigen::VectorXd& qa, const Eige
   const std::vector<int> passive = passiveJoints(m);
   const double tol = kTol * lengthScale(m);
   // continuation from the reference configuration along a straight path in qa
-  Eigen::VectorXd q = m.closed.reference.size() == n ? m.closed.reference : Eigen::VectorXd::Zero(n);
+  Eigen::VectorXd q =
+      m.closed.reference.size() == n ? m.closed.reference : Eigen::VectorXd::Zero(n);
   Eigen::VectorXd qa0(na);
   for (int i = 0; i < na; ++i) qa0[i] = q[m.closed.actuated[static_cast<size_t>(i)]];
   // A revolute actuated joint moves the mechanism 2 pi-periodically: the path starts from the
@@ -392,7 +394,8 @@ void closedChainState(const RobotModel& m, const Eigen::VectorXd& qa, const Eige
   for (int s = 1; s <= steps; ++s) {
     const double t = static_cast<double>(s) / steps;
     for (int i = 0; i < na; ++i)
-      q[m.closed.actuated[static_cast<size_t>(i)]] = s == steps ? qa[i] : qa0[i] + t * (qa[i] - qa0[i]);
+      q[m.closed.actuated[static_cast<size_t>(i)]] =
+          s == steps ? qa[i] : qa0[i] + t * (qa[i] - qa0[i]);
     norm = newton(m, passive, q, k, s == steps ? tol : 1e-6);
     if (!(norm <= (s == steps ? tol : 1e-6))) noAssembly(m, qa, k, norm);
   }
@@ -426,7 +429,8 @@ void closedChainState(const RobotModel& m, const Eigen::VectorXd& qa, const Eige
     const Eigen::VectorXd bias = loopConstraintBias(m, q, qd);
     const Eigen::VectorXd gp = -S.cod.solve(bias);
     Eigen::VectorXd g = Eigen::VectorXd::Zero(n);
-    for (std::size_t r = 0; r < passive.size(); ++r) g[passive[r]] = gp[static_cast<Eigen::Index>(r)];
+    for (std::size_t r = 0; r < passive.size(); ++r)
+      g[passive[r]] = gp[static_cast<Eigen::Index>(r)];
     if (qdd_out) {
       const Eigen::VectorXd z = Eigen::VectorXd::Zero(na);
       *qdd_out = G * (qdda ? *qdda : z) + g;
@@ -448,22 +452,20 @@ void validateClosedChain(const RobotModel& m) {
     if (L.body_a == L.body_b)
       throw Error(lab + ": joins a body to itself (expected two different bodies)");
     for (const Pose* P : {&L.pose_a, &L.pose_b}) {
-      if (!P->R.allFinite() || !P->p.allFinite())
-        throw Error(lab + ": non-finite pose");
+      if (!P->R.allFinite() || !P->p.allFinite()) throw Error(lab + ": non-finite pose");
       const double orth = (P->R.transpose() * P->R - M3::Identity()).cwiseAbs().maxCoeff();
       if (!(orth <= 1e-9) || !(P->R.determinant() > 0.0))
         throw Error(lab + ": pose rotation is not a proper orthonormal matrix");
     }
-    if (!(std::abs(L.axis.norm() - 1.0) <= 1e-9))
-      throw Error(lab + ": axis is not a unit vector");
+    if (!(std::abs(L.axis.norm() - 1.0) <= 1e-9)) throw Error(lab + ": axis is not a unit vector");
   }
   const int na = static_cast<int>(m.closed.actuated.size());
   if (na == 0) throw Error(who + ": a closed chain must name its actuated joints (found none)");
   std::vector<char> seen(static_cast<size_t>(n), 0);
   for (int a : m.closed.actuated) {
     if (a < 0 || a >= n)
-      throw Error(who + ": actuated joint index " + std::to_string(a) + " out of range (expected 0.." +
-                  std::to_string(n - 1) + ")");
+      throw Error(who + ": actuated joint index " + std::to_string(a) +
+                  " out of range (expected 0.." + std::to_string(n - 1) + ")");
     if (seen[static_cast<size_t>(a)]++)
       throw Error(who + ": actuated joint '" + m.bodies[static_cast<size_t>(a)].joint_name +
                   "' named twice");

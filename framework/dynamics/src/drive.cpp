@@ -319,8 +319,8 @@ void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
     closedTorque(model, data, nullptr, qm, qdm, qddm, tau_m, dq, dqd, dqdd,
                  "actuatorTorqueDerivatives");
   } else {
-  measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
-  inverseDynamicsDerivatives(model, data, q, qd, qdd, nullptr, &tau, dq, dqd, dqdd);
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+    inverseDynamicsDerivatives(model, data, q, qd, qdd, nullptr, &tau, dq, dqd, dqdd);
   }
   if (model.hasLoops()) {
   } else if (model.hasTransmission()) {

@@ -37,14 +37,14 @@ void checkVec(const RobotModel& m, const Eigen::VectorXd& x, int n, const char* 
 // link's v0 = {omega, 0}, a0 = {alpha, f}: the base origin's linear velocity is taken as zero,
 // which is exact for the forces at one instant, Galilean invariance).
 struct FloatState {
-  std::vector<M3> R0;   // body frame in the base frame
-  std::vector<V3> p0;   // body origin in the base frame
-  std::vector<SV> S0;   // joint subspace in the base frame (motion, about the base origin)
-  std::vector<Kin> kin; // body kinematics in the body frame
-  std::vector<SV> S;    // joint subspace in the body frame
-  std::vector<M3> R;    // body frame in the parent frame
+  std::vector<M3> R0;    // body frame in the base frame
+  std::vector<V3> p0;    // body origin in the base frame
+  std::vector<SV> S0;    // joint subspace in the base frame (motion, about the base origin)
+  std::vector<Kin> kin;  // body kinematics in the body frame
+  std::vector<SV> S;     // joint subspace in the body frame
+  std::vector<M3> R;     // body frame in the parent frame
   std::vector<V3> p;
-  Kin kin0;             // the base link's
+  Kin kin0;  // the base link's
 };
 
 Pose jointPose(const Body& b, double q) {
@@ -173,7 +173,8 @@ void floatingRegressor(const RobotModel& model, const Eigen::VectorXd& q, const 
     // every joint between the base and body j (j included) carries its wrench
     for (int i = j; i >= 0; i = model.bodies[static_cast<size_t>(i)].parent) {
       const SV& s = st.S0[i];
-      Y.block<1, 10>(6 + i, c) = s.w.transpose() * Kb.topRows<3>() + s.v.transpose() * Kb.bottomRows<3>();
+      Y.block<1, 10>(6 + i, c) =
+          s.w.transpose() * Kb.topRows<3>() + s.v.transpose() * Kb.bottomRows<3>();
     }
   }
 }

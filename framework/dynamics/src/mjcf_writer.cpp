@@ -79,7 +79,8 @@ std::string inertial(const Body& b, std::vector<std::string>* raised) {
 
 std::string writeMjcf(const RobotModel& model, const MjcfWriteOptions& opt,
                       std::vector<std::string>* left_out) {
-  model.requireFixedBase("the MJCF writer (fixed-base export; floating-base export is not written yet)");
+  model.requireFixedBase(
+      "the MJCF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   detail::requirePhysical(model, "MJCF");
   // (a closed chain: its spanning tree at the loops' reference configuration, see below)

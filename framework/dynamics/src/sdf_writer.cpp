@@ -32,7 +32,8 @@ std::string element(const char* name, double v) {
 
 std::string writeSdf(const RobotModel& model, const SdfWriteOptions& opt,
                      std::vector<std::string>* left_out) {
-  model.requireFixedBase("the SDF writer (fixed-base export; floating-base export is not written yet)");
+  model.requireFixedBase(
+      "the SDF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   detail::requirePhysical(model, "SDF");
   // (a closed chain: its spanning tree at the loops' reference configuration)

@@ -313,8 +313,8 @@ bool positionCoverage(const RobotModel& robot, const MatrixXd& qj, int j, Json& 
           "joint {} ({}): {:.1f} % of the samples lie outside its position limits [{:.4g}, "
           "{:.4g}] (the data spans [{:.4g}, {:.4g}]): a wrong offset (offset_rad), sign or unit "
           "(q_scale) of q, or motor angles read without the robot's transmission?",
-          j + 1, robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name, 100.0 * frac, L.q_min,
-          L.q_max, lo, hi));
+          j + 1, robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name,
+          100.0 * frac, L.q_min, L.q_max, lo, hi));
   } else {
     e["position_limits"] = Json();
     e["position_coverage"] = Json();
@@ -357,7 +357,8 @@ std::vector<Json> coverageRows(const RobotModel& robot, const Dataset& data, con
           "joint {} ({}): moves at up to {:.2f} times its velocity limit {:.4g}: a wrong unit of "
           "q (q_scale), motor angles read without the robot's transmission, or a wrong sample "
           "period?",
-          j + 1, robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name, vmax / L.qd_max, L.qd_max));
+          j + 1, robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name,
+          vmax / L.qd_max, L.qd_max));
     jrows.push_back(e);
   }
   return jrows;

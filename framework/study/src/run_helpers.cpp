@@ -137,8 +137,8 @@ void checkFinite(const Eigen::MatrixXd& M, const std::string& what,
 void checkDatasetFinite(const Dataset& d, const std::string& what) {
   if (d.streamed()) return;
   const std::pair<const char*, const Eigen::MatrixXd*> sig[] = {
-      {"q", &d.q}, {"qd", &d.qd}, {"qdd", &d.qdd}, {"tau", &d.tau}, {"wrench", &d.wrench},
-      {"base", &d.base},  {"contact", &d.contact}};
+      {"q", &d.q},           {"qd", &d.qd},     {"qdd", &d.qdd},        {"tau", &d.tau},
+      {"wrench", &d.wrench}, {"base", &d.base}, {"contact", &d.contact}};
   checkFinite(d.t, fmt::format("{} ({}): t", what, d.source));
   for (const auto& [name, M] : sig)
     if (M->size() > 0) checkFinite(*M, fmt::format("{} ({}): {}", what, d.source, name));

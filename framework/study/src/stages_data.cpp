@@ -25,9 +25,10 @@ std::string experimentCsvNotWritten(const StudyConfig& cfg, const Dataset& data,
 void writeExperimentCsv(const StageEnv& env, const RobotModel& robot, const Dataset& data) {
   std::string joints;
   for (int j = 0; j < robot.dof(); ++j) {
-    const std::string& jn = robot.hasTransmission()
-                                ? std::string()
-                                : robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name;
+    const std::string& jn =
+        robot.hasTransmission()
+            ? std::string()
+            : robot.bodies[static_cast<std::size_t>(robot.actuatedJoint(j))].joint_name;
     joints += fmt::format("{}{} = {}", j ? ", " : "", j + 1,
                           jn.empty() ? fmt::format("measured coordinate {}", j + 1) : jn);
   }

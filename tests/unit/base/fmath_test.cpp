@@ -2,6 +2,8 @@
 // an independent computation 11 bits finer than the result) over millions of arguments: within
 // one unit in the last place of the double result everywhere, and within one of glibc's double
 // functions; the special values as C99 Annex F says.
+#include "exid/fmath.hpp"
+
 #include <gtest/gtest.h>
 
 #include <cfloat>
@@ -11,8 +13,6 @@
 #include <limits>
 #include <random>
 #include <vector>
-
-#include "exid/fmath.hpp"
 
 namespace {
 

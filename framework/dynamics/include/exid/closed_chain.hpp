@@ -27,8 +27,8 @@ EXID_API int numLoopConstraints(const RobotModel& model);
 /// The loop-closure residual c(q) (zero when assembled) and its exact Jacobian dc/dq
 /// (rows: per cut joint, the origin gap x_b - x_a in the base frame [m], then for a revolute
 /// one the two components of b's axis across a's axis [1]). Either output may be null.
-EXID_API void loopConstraint(const RobotModel& model, const Eigen::VectorXd& q,
-                             Eigen::VectorXd* c, Eigen::MatrixXd* J);
+EXID_API void loopConstraint(const RobotModel& model, const Eigen::VectorXd& q, Eigen::VectorXd* c,
+                             Eigen::MatrixXd* J);
 
 /// The constraint's acceleration bias Jdot(q, qd) qd (c's second time derivative at qdd = 0).
 EXID_API Eigen::VectorXd loopConstraintBias(const RobotModel& model, const Eigen::VectorXd& q,

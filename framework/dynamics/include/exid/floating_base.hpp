@@ -56,8 +56,7 @@ EXID_API void floatingRegressor(const RobotModel& model, const Eigen::VectorXd& 
 /// assembly) with the model's parameters, or pi_f (10(n+1)) when given.
 EXID_API Eigen::VectorXd floatingInverseDynamics(const RobotModel& model, const Eigen::VectorXd& q,
                                                  const Eigen::VectorXd& qd,
-                                                 const Eigen::VectorXd& qdd,
-                                                 const BaseMotion& base,
+                                                 const Eigen::VectorXd& qdd, const BaseMotion& base,
                                                  const Eigen::VectorXd* pi_f = nullptr);
 
 /// Contact map C (6+n x 6) of a wrench measured in a sensor frame at `sensor` (pose in the frame
@@ -84,8 +83,8 @@ EXID_API Pose floatingBodyPose(const RobotModel& model, const Eigen::VectorXd& q
 /// velocity and acceleration in the WORLD frame, a_w the classical acceleration of the base
 /// origin in the world frame, g_w gravity in the world frame (e.g. (0, 0, -9.81)).
 EXID_API BaseMotion baseMotionFromWorld(const Eigen::Matrix3d& R_wb, const Eigen::Vector3d& omega_w,
-                                        const Eigen::Vector3d& alpha_w,
-                                        const Eigen::Vector3d& a_w, const Eigen::Vector3d& g_w);
+                                        const Eigen::Vector3d& alpha_w, const Eigen::Vector3d& a_w,
+                                        const Eigen::Vector3d& g_w);
 
 /// Base motion from an IMU rigidly mounted on the base link at pose `imu` (in the base frame):
 /// gyro (angular velocity) and accelerometer (specific force) readings in the IMU frame, and the

@@ -98,8 +98,8 @@ struct EXID_API LoopJoint {
 /// the mechanism assembles (the first guess of the position solve).
 struct EXID_API ClosedChain {
   std::vector<LoopJoint> loops;
-  std::vector<int> actuated;        // tree joint (body) indices of measured coordinates 1..dof
-  Eigen::VectorXd reference;        // tree coordinates (numJoints); empty: zeros
+  std::vector<int> actuated;             // tree joint (body) indices of measured coordinates 1..dof
+  Eigen::VectorXd reference;             // tree coordinates (numJoints); empty: zeros
   std::vector<JointLimits> tree_limits;  // one per tree joint (passive ones checked by the solve)
 };
 
@@ -109,8 +109,9 @@ struct EXID_API ClosedChain {
 /// XX0 ... M0 (exid/floating_base.hpp). The link itself is not one of `bodies`: the bodies with
 /// parent = -1 are attached to it.
 struct EXID_API FloatingBase {
-  std::string link;        // the base link's name
-  std::string joint_name;  // the floating joint's name (URDF), empty when the description gives none
+  std::string link;  // the base link's name
+  std::string
+      joint_name;  // the floating joint's name (URDF), empty when the description gives none
   Eigen::Matrix<double, 10, 1> inertia = Eigen::Matrix<double, 10, 1>::Zero();
 };
 
