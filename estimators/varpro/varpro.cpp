@@ -67,6 +67,12 @@ std::vector<exid::ParamDecl> VarPro::params() {
                       "the best point and from the study's values, the better kept; 1: the "
                       "study's values only",
                       1, 9),
+      exid::param_string("grid_points", std::string("projected"),
+                         "projected: a point of the grid or a scan moves a few columns, the "
+                         "others' QR is kept and only the moved columns are projected (the "
+                         "same residual; a point taken is confirmed by a whole evaluation); "
+                         "whole: every point a whole evaluation (slower; the reference)",
+                         {"projected", "whole"}),
       exid::param_double("gradient_tolerance", 1e-6, "",
                          "first-order test of convergence: a Gauss-Newton step from the result "
                          "would remove at most this fraction of the residual sum of squares "
@@ -90,6 +96,7 @@ VarPro::VarPro(const exid::ParamSet& p)
       ftol_(p.getDouble("rss_tolerance")),
       starts_(static_cast<int>(p.getInt("starts"))),
       gtol_(p.getDouble("gradient_tolerance")),
+      project_(p.getString("grid_points") == "projected"),
       chunk_(static_cast<int>(p.getInt("chunk_samples"))),
       method_(p.getString("accumulate") == "normal" ? RowAccumulator::Method::Normal
                                                     : RowAccumulator::Method::Qr) {

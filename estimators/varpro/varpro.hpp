@@ -98,6 +98,18 @@ class VarPro : public exid::Estimator {
              const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx);
   void axisScan(const exid::ObservationModel& model, const exid::Dataset& data,
                 const Eigen::VectorXd& centre, Grid* gp, const exid::RunContext& ctx);
+  // The residual at points that move the columns of a few nonlinear parameters, the others
+  // held (varpro_search.cpp): a point of the grid or a scan costs the model's rows and the
+  // projection of the moved columns, not a whole evaluation.
+  struct Held;
+  // the eta the rows are built at: the model's parameters, and the delay if fitted
+  Eigen::VectorXd heldEta(const Eigen::VectorXd& lambda) const {
+    return delay_ ? etaOf(lambda) : Eigen::VectorXd(etaOf(lambda).head(q_model_));
+  }
+  // A point of the grid or a scan: taken (into *gp) when its residual is below the best so far,
+  // the fit confirmed by a whole evaluation there (which also refuses a singular fit).
+  void tryPoint(const exid::ObservationModel& model, const exid::Dataset& data, const Held& held,
+                const Eigen::VectorXd& lambda, Grid* gp, const exid::RunContext& ctx) const;
   static exid::Dataset strided(const exid::Dataset& d, long stride);
   Run levenbergMarquardt(const exid::ObservationModel& model, const exid::Dataset& data,
                          Eigen::VectorXd lambda, Eval cur, const std::string& origin,
@@ -121,6 +133,8 @@ class VarPro : public exid::Estimator {
   double xtol_, ftol_;
   int starts_;
   static constexpr int kGridSamples = 4000;
+  // the held columns' rows kept for the grid's points at most (else whole evaluations)
+  static constexpr double kHeldBytes = 128e6;
   static constexpr int kRounds = 6;  // checks around the best end, while one finds a lower point
   // x1/32 .. x32 in steps of sqrt(2), x1 left out (the centre)
   static constexpr double kAxisMultipliers[] = {0.03125,
@@ -144,6 +158,7 @@ class VarPro : public exid::Estimator {
                                                 22.62741699796952,
                                                 32.0};
   double gtol_;
+  bool project_;  // grid_points: projected
   int chunk_;
   RowAccumulator::Method method_;
   exid::estimators::SolveOptions opt_;

@@ -3,6 +3,7 @@
 // lambda = log(eta) from each start (see varpro.cpp).
 #include <fmt/format.h>
 
+#include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
 #include <cmath>
@@ -78,6 +79,134 @@ VarPro::Grid VarPro::searchGrid(const exid::ObservationModel& model, const exid:
   return g;
 }
 
+// The residual at points that move only the base columns of some nonlinear parameters (one
+// group of the grid, one parameter of a scan), the others held at `lambda`: the Householder QR
+// of the held columns' rows [W_h] is computed once, and at each point only the moved columns'
+// rows W_m are projected onto its complement, rss = ||(I - P_[W_h W_m]) y||^2 from the small QR
+// of [Q_h^T W_m, Q_h^T y] below the held rows. The same residual as a whole evaluation's, at the
+// cost of the model's rows and (p - c) reflections of c + 1 columns instead of the QR of all
+// p + L + 1 columns, and without the SVD of the solve. A delay is held too (the grid does not
+// move it; the rows are read at t_k - d as evaluate reads them). Unused (every point a whole
+// evaluation) when the held rows would exceed kHeldBytes, or when the held columns are not of
+// full rank (their complement is not defined).
+struct VarPro::Held {
+  bool ok = false;
+  std::vector<int> moved;  // base columns recomputed at each point (ascending)
+  Eigen::HouseholderQR<Eigen::MatrixXd> qr;
+  Eigen::VectorXd qty;  // Q_h^T y
+  Eigen::Index m = 0;
+
+  Held(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
+       const Eigen::VectorXd& lambda, const std::vector<int>& params, const exid::RunContext& ctx) {
+    if (!vp.project_) return;
+    const int p = model.numBase();
+    for (std::size_t l = 0; l < vp.keep_.size(); ++l)
+      if (std::find(params.begin(), params.end(), vp.owner_[l]) != params.end())
+        moved.push_back(vp.base_col_[l]);
+    std::sort(moved.begin(), moved.end());
+    moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
+    const int c = static_cast<int>(moved.size()), f = p - c;
+    if (c == 0 || f == 0) return;
+    std::vector<int> held;
+    for (int j = 0, k = 0; j < p; ++j) {
+      if (k < c && moved[static_cast<std::size_t>(k)] == j)
+        ++k;
+      else
+        held.push_back(j);
+    }
+    Eigen::MatrixXd A;
+    Eigen::VectorXd y;
+    const Eigen::VectorXd eta = vp.heldEta(lambda);
+    bool fits = true;
+    m = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
+      if (!fits) return;
+      const Eigen::Index need = at + r.W.rows();
+      if (static_cast<double>(need) * (f + 1) * sizeof(double) > kHeldBytes) {
+        fits = false;
+        return;
+      }
+      if (need > A.rows()) {  // (grown geometrically: the row count is known at the end)
+        const Eigen::Index cap = std::max<Eigen::Index>(need, 2 * A.rows());
+        A.conservativeResize(cap, f);
+        y.conservativeResize(cap);
+      }
+      for (int j = 0; j < f; ++j)
+        A.col(j).segment(at, r.W.rows()) = r.W.col(held[static_cast<std::size_t>(j)]);
+      y.segment(at, r.W.rows()) = r.y;
+    });
+    if (!fits || m <= p) return;
+    A.conservativeResize(m, f);
+    y.conservativeResize(m);
+    qr.compute(A);
+    const Eigen::VectorXd d = qr.matrixQR().diagonal().cwiseAbs();
+    if (!(d.minCoeff() > 1e-12 * d.maxCoeff())) return;  // held columns of deficient rank
+    qty = qr.householderQ().adjoint() * y;
+    ok = true;
+  }
+
+  // The model's rows at eta, chunk by chunk as VarPro::evaluate reads them; their count.
+  template <class F>
+  static Eigen::Index rows(const VarPro& vp, const exid::ObservationModel& model,
+                           const exid::Dataset& data, const Eigen::VectorXd& eta,
+                           const exid::RunContext& ctx, F&& take) {
+    exid::SampleWindow window(data);
+    Eigen::Index m = 0;
+    Eigen::MatrixXd D;
+    const int first = vp.margin_, last = data.size() - vp.margin_;
+    for (int b = first; b < last; b += vp.chunk_) {
+      const int end = std::min(last, b + vp.chunk_);
+      // (with a delay the rows are read at t_k - d, as evaluate reads them)
+      const exid::Rows r = vp.delay_ ? vp.chunkRows(model, window, b, end, eta, &D, ctx)
+                                     : model.rowsAt(window.span(b, end), eta, nullptr, ctx);
+      exid::estimators::checkRows(r, model.numBase(), kName, b);
+      if (!r.W.allFinite() || !r.y.allFinite())
+        throw exid::Error(fmt::format("varpro: a row from samples {}..{} is not finite", b, end));
+      take(r, m);
+      m += r.W.rows();
+    }
+    return m;
+  }
+
+  double rss(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
+             const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const {
+    const int c = static_cast<int>(moved.size());
+    const Eigen::Index f = qr.matrixQR().cols();
+    Eigen::MatrixXd B(m, c + 1);
+    const Eigen::VectorXd eta = vp.heldEta(lambda);
+    const Eigen::Index got = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
+      exid::check(at + r.W.rows() <= m, "varpro: the model's row count changed with eta");
+      for (int j = 0; j < c; ++j)
+        B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
+    });
+    exid::check(got == m, "varpro: the model's row count changed with eta");
+    B.leftCols(c).applyOnTheLeft(qr.householderQ().adjoint());
+    B.col(c) = qty;
+    const Eigen::HouseholderQR<Eigen::MatrixXd> small(B.bottomRows(m - f));
+    const double r = small.matrixQR()(c, c);
+    return r * r;
+  }
+};
+
+void VarPro::tryPoint(const exid::ObservationModel& model, const exid::Dataset& data,
+                      const Held& held, const Eigen::VectorXd& lambda, Grid* gp,
+                      const exid::RunContext& ctx) const {
+  Grid& g = *gp;
+  ++g.evaluations;
+  try {
+    if (held.ok) {
+      const double r = held.rss(*this, model, data, lambda, ctx);
+      if (!(std::isfinite(r) && r < g.best_eval.rss)) return;  // (not taken: no check needed)
+    }
+    Eval e = evaluate(model, data, lambda, ctx);
+    if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
+      g.best = lambda;
+      g.best_eval = std::move(e);
+    }
+  } catch (const exid::Error&) {
+    ++g.singular;
+  }
+}
+
 void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& data,
                    const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx) {
   Grid& g = *gp;
@@ -87,6 +216,7 @@ void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& dat
     const bool common = std::pow(S, n) > 125;
     const long combos = common ? S : static_cast<long>(std::lround(std::pow(S, n)));
     const Eigen::VectorXd base = g.best;
+    const Held held(*this, model, data, base, grp, ctx);
     for (long c = 0; c < combos; ++c) {
       if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
       Eigen::VectorXd lambda = base;
@@ -99,16 +229,7 @@ void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& dat
             std::log(g.multipliers[static_cast<std::size_t>(digit)]);
       }
       if (lambda == base) continue;  // (the point itself: known)
-      ++g.evaluations;
-      try {
-        Eval e = evaluate(model, data, lambda, ctx);
-        if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
-          g.best = lambda;
-          g.best_eval = std::move(e);
-        }
-      } catch (const exid::Error&) {
-        ++g.singular;
-      }
+      tryPoint(model, data, held, lambda, &g, ctx);
     }
   }
 }
@@ -118,23 +239,18 @@ void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& dat
 void VarPro::axisScan(const exid::ObservationModel& model, const exid::Dataset& data,
                       const Eigen::VectorXd& centre, Grid* gp, const exid::RunContext& ctx) {
   Grid& g = *gp;
-  for (int k = 0; k < q_model_; ++k)
+  for (int k = 0; k < q_model_; ++k) {
+    // (the other parameters stay at g.best's values while k is scanned: a point taken moves
+    // only k)
+    const Held held(*this, model, data, g.best, {k}, ctx);
     for (double mult : kAxisMultipliers) {
       if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
       Eigen::VectorXd lambda = g.best;
       lambda[k] = centre[k] + std::log(mult);
       if (lambda == g.best) continue;
-      ++g.evaluations;
-      try {
-        Eval e = evaluate(model, data, lambda, ctx);
-        if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
-          g.best = lambda;
-          g.best_eval = std::move(e);
-        }
-      } catch (const exid::Error&) {
-        ++g.singular;
-      }
+      tryPoint(model, data, held, lambda, &g, ctx);
     }
+  }
 }
 
 // Every stride-th sample of d (read in chunks: a stream is never held whole).

@@ -165,10 +165,10 @@ TEST(Matrix, KilledPartWayLosesOnlyTheCellsInFlight) {
 study:
   robot: {type: puma560}
   model: {type: differential}
-  experiment: {type: simulate, params: {duration_s: 8, sample_period_s: 0.002}}
+  experiment: {type: simulate, params: {duration_s: 4, sample_period_s: 0.002}}
   estimator: {type: rls}
 axes:
-  seed: [1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]
+  seed: [1, 2, 3, 4, 5, 6]
 )";
   pid_t pid = ::fork();
   if (pid == 0) {
@@ -202,8 +202,8 @@ axes:
   opt.write_cell_files = false;
   exid::MatrixRunSummary s = exid::runMatrix(spec, exid_test::registry(), opt);
   EXPECT_GE(s.skipped, 1);
-  EXPECT_LT(s.skipped, 12);
-  EXPECT_EQ(s.skipped + s.ok, 12);
+  EXPECT_LT(s.skipped, 6);
+  EXPECT_EQ(s.skipped + s.ok, 6);
   fs::remove_all(d);
 }
 

@@ -296,3 +296,26 @@ TEST(VarproConvergence, StandardDeviationsMatchTheSpreadForRevoluteAndPrismaticJ
 }
 
 }  // namespace
+
+// The grid's and the scans' points are compared by projecting only the columns a point moves
+// (grid_points: projected, the default); every point a whole evaluation (grid_points: whole)
+// is the reference. Both take the same points: the same grid end, the same number of points
+// and the same estimate, on the local-minimum problem above, where the grid and the scans
+// must find lower points for the estimate to be right.
+TEST(VarproConvergence, ProjectedGridPointsTakeTheSamePointsAsWholeEvaluations) {
+  const Puma& P = puma();
+  auto m = mtest::model("differential", modelYaml(P.T, 2.0, 0.5), P.r);
+  const exid::Estimate projected = exid_test::create<exid::Estimator>("varpro", "{}")
+                                       ->estimate(*m, P.d, nullptr, mtest::context());
+  const exid::Estimate whole = exid_test::create<exid::Estimator>("varpro", "{grid_points: whole}")
+                                   ->estimate(*m, P.d, nullptr, mtest::context());
+  const exid::Json& gp = *projected.details.find("grid");
+  const exid::Json& gw = *whole.details.find("grid");
+  EXPECT_EQ(gp.find("best_eta")->dump(), gw.find("best_eta")->dump());
+  EXPECT_EQ(gp.find("best_rss")->asDouble(), gw.find("best_rss")->asDouble());
+  EXPECT_EQ(gp.find("evaluations")->dump(), gw.find("evaluations")->dump());
+  EXPECT_EQ(detail(projected, "start_won"), detail(whole, "start_won"));
+  EXPECT_EQ(projected.nonlinear, whole.nonlinear);
+  EXPECT_EQ(projected.value, whole.value);
+  EXPECT_LT(etaError(projected, trueEta(*m, P.T)), 1e-6);
+}
