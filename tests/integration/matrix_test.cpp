@@ -165,7 +165,7 @@ TEST(Matrix, KilledPartWayLosesOnlyTheCellsInFlight) {
 study:
   robot: {type: puma560}
   model: {type: differential}
-  experiment: {type: simulate, params: {duration_s: 4, sample_period_s: 0.002}}
+  experiment: {type: simulate, params: {duration_s: 8, sample_period_s: 0.002}}
   estimator: {type: rls}
 axes:
   seed: [1, 2, 3, 4, 5, 6]
