@@ -145,6 +145,14 @@ struct WrenchStampedMsg {
   double force[3] = {0, 0, 0}, torque[3] = {0, 0, 0};
 };
 
+/// sensor_msgs/msg/Imu: what exid reads of it (the orientation and the covariances are decoded
+/// and checked for their length, not kept).
+struct ImuMsg {
+  Stamp stamp;
+  std::string frame_id;
+  double angular_velocity[3] = {0, 0, 0}, linear_acceleration[3] = {0, 0, 0};
+};
+
 /// CDR (XCDR1, little or big endian, 4-byte encapsulation header) decoding. Throw exid::Error
 /// with `where` and the byte offset and field that did not fit; bytes left after the message
 /// (beyond at most 3 zero bytes of padding) are an error, so is a JointState naming a joint twice
@@ -153,5 +161,6 @@ JointStateMsg decodeJointState(const std::uint8_t* data, std::size_t size,
                                const std::string& where);
 WrenchStampedMsg decodeWrenchStamped(const std::uint8_t* data, std::size_t size,
                                      const std::string& where);
+ImuMsg decodeImu(const std::uint8_t* data, std::size_t size, const std::string& where);
 
 }  // namespace exid::rosbag2

@@ -186,4 +186,19 @@ WrenchStampedMsg decodeWrenchStamped(const std::uint8_t* data, std::size_t size,
   return m;
 }
 
+ImuMsg decodeImu(const std::uint8_t* data, std::size_t size, const std::string& where) {
+  Cdr c(data, size, where);
+  ImuMsg m;
+  m.stamp = c.stamp();
+  m.frame_id = c.str("header.frame_id");
+  for (int i = 0; i < 4; ++i) (void)c.f64("orientation");
+  for (int i = 0; i < 9; ++i) (void)c.f64("orientation_covariance");
+  for (double& v : m.angular_velocity) v = c.f64("angular_velocity");
+  for (int i = 0; i < 9; ++i) (void)c.f64("angular_velocity_covariance");
+  for (double& v : m.linear_acceleration) v = c.f64("linear_acceleration");
+  for (int i = 0; i < 9; ++i) (void)c.f64("linear_acceleration_covariance");
+  c.finish("sensor_msgs/msg/Imu");
+  return m;
+}
+
 }  // namespace exid::rosbag2

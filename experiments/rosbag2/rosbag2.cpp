@@ -22,9 +22,11 @@
 
 #include "bag.hpp"
 #include "exid/error.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/recording.hpp"
 #include "exid/recording_stats.hpp"
+#include "exid/signal.hpp"
 #include "exid/segment.hpp"
 
 namespace {
@@ -34,6 +36,7 @@ namespace rb = exid::rosbag2;
 
 constexpr const char* kJointStateType = "sensor_msgs/msg/JointState";
 constexpr const char* kWrenchType = "geometry_msgs/msg/WrenchStamped";
+constexpr const char* kImuType = "sensor_msgs/msg/Imu";
 
 /// One reading of a bag by the rosbag2 experiment, stage by stage (Rosbag2Experiment::run):
 /// the robot's joints, the bag's topics, the messages, their order in time, gaps, the segment,
@@ -66,11 +69,15 @@ class BagReading {
     checkSteps();
     selectSegment();
     matchWrenchRange();
+    for (Aux& a : aux_) matchAuxRange(&a);
     exid::Dataset d = fillDataset();
-    // The filter steps (exid/recording.hpp), the wrench matched at the resampled times.
+    // The filter steps (exid/recording.hpp), the wrench, the IMU and the contacts matched at the
+    // resampled times (the base motion and the contacts then go through the filter as the
+    // pipeline takes them).
     exid::RecordingPipeline steps(exid::RecordingSteps::fromParams(P_), pre_ + bagname_);
     d = steps.resample(std::move(d));
     interpolateWrench(&d);
+    floatingSignals(&d);
     d = steps.filter(steps.compensateDelay(std::move(d)));
     describe(steps, &d);
     return d;
@@ -85,6 +92,17 @@ class BagReading {
     std::int64_t ns;
     long long msg;
     double v[6];
+  };
+  // A topic of stamped six-vectors matched at the joint-state times as the wrench is: the
+  // base's IMU (gyro xyz, accelerometer xyz, in the IMU frame) or a contact's wrench.
+  struct Aux {
+    std::string topic, key, label;  // key: the parameter naming it; label: "imu", "contact1"
+    bool imu = false;
+    std::vector<Wr> msgs;
+    std::vector<double> t;  // s after t0_
+    double med = 0.0;
+    long long count = 0, bad = 0, dup = 0;
+    int outside = 0;
   };
 
   // The robot's joints and their names in the messages; the conversion of their values (signs,
@@ -155,6 +173,60 @@ class BagReading {
                                                      "both '{}'",
                                                      pre_, w_topic_));
     }
+    // a floating base's signals: the IMU on its base link, the contacts' wrenches
+    const std::string imu = P_.getString("imu_topic");
+    const std::vector<std::string> contacts = P_.getStrings("contact_topics");
+    if (!imu.empty() || !contacts.empty())
+      exid::check(robot_.floating_base,
+                  fmt::format("{}imu_topic and contact_topics give a floating base's signals; "
+                              "robot '{}' has a fixed base",
+                              pre_, robot_.name));
+    if (!imu.empty()) {
+      checkTopic(imu, "imu_topic", kImuType);
+      const std::vector<double> pose = P_.getDoubles("imu_pose_xyz_rpy");
+      exid::check(pose.size() == 6,
+                  fmt::format("{}imu_pose_xyz_rpy: the IMU's frame in the base link's frame "
+                              "(x y z [m] roll pitch yaw [rad]) is required with imu_topic: "
+                              "expected 6 values, found {} (exid does not assume the IMU sits at "
+                              "the base origin)",
+                              pre_, pose.size()));
+      for (double v : pose)
+        exid::check(std::isfinite(v),
+                    fmt::format("{}imu_pose_xyz_rpy: {} is not a finite number", pre_, v));
+      imu_pose_ = exid::poseFromXyzRpy(pose.data());
+      Aux a;
+      a.topic = imu;
+      a.key = "imu_topic";
+      a.label = "imu";
+      a.imu = true;
+      aux_.push_back(a);
+    } else {
+      exid::check(P_.getDoubles("imu_pose_xyz_rpy").empty(),
+                  fmt::format("{}imu_pose_xyz_rpy is given without imu_topic", pre_));
+    }
+    for (std::size_t c = 0; c < contacts.size(); ++c) {
+      const std::string key = fmt::format("contact_topics[{}]", c);
+      checkTopic(contacts[c], key.c_str(), kWrenchType);
+      Aux a;
+      a.topic = contacts[c];
+      a.key = key;
+      a.label = fmt::format("contact{}", c + 1);
+      aux_.push_back(a);
+    }
+    std::set<std::string> used = {js_topic_};
+    if (with_wrench_) used.insert(w_topic_);
+    for (const Aux& a : aux_)
+      exid::check(used.insert(a.topic).second,
+                  fmt::format("{}{} = '{}' is a topic already used by this experiment (each of "
+                              "joint_states_topic, wrench_topic, imu_topic and contact_topics "
+                              "names its own)",
+                              pre_, a.key, a.topic));
+  }
+
+  Aux* auxOf(const std::string& topic) {
+    for (Aux& a : aux_)
+      if (a.topic == topic) return &a;
+    return nullptr;
   }
 
   // A bad message: an error, or (drop_bad_messages) counted and kept as an example.
@@ -172,8 +244,9 @@ class BagReading {
     header_time_ = P_.getString("time") == "header";
     use_vel_ = P_.getBool("use_velocity");
     drop_ = P_.getBool("drop_bad_messages");
-    const std::set<std::string> wanted = with_wrench_ ? std::set<std::string>{js_topic_, w_topic_}
-                                                      : std::set<std::string>{js_topic_};
+    std::set<std::string> wanted = with_wrench_ ? std::set<std::string>{js_topic_, w_topic_}
+                                                : std::set<std::string>{js_topic_};
+    for (const Aux& a : aux_) wanted.insert(a.topic);
     try {
       unsigned long count = 0;
       rb::readMessages(
@@ -184,8 +257,10 @@ class BagReading {
               throw exid::Error("stopped while reading the bag");
             if (*m.topic == js_topic_)
               onJointState(m);
-            else
+            else if (with_wrench_ && *m.topic == w_topic_)
               onWrench(m);
+            else
+              onAux(auxOf(*m.topic), m);
           },
           &census_);
     } catch (const exid::Error& e) {
@@ -281,6 +356,32 @@ class BagReading {
     wr_.push_back(r);
   }
 
+  void onAux(Aux* a, const rb::RawMessage& m) {
+    const long long k = ++a->count;
+    const std::string where = fmt::format("topic '{}', message {}, {}", a->topic, k, m.where);
+    Wr r{0, k, {0, 0, 0, 0, 0, 0}};
+    std::int64_t stamp = 0;
+    if (a->imu) {
+      const rb::ImuMsg u = rb::decodeImu(m.data, m.size, where);
+      stamp = u.stamp.ns();
+      for (int c = 0; c < 3; ++c) {
+        r.v[c] = u.angular_velocity[c];
+        r.v[3 + c] = u.linear_acceleration[c];
+      }
+    } else {
+      const rb::WrenchStampedMsg w = rb::decodeWrenchStamped(m.data, m.size, where);
+      stamp = w.stamp.ns();
+      for (int c = 0; c < 3; ++c) {
+        r.v[c] = w.force[c];
+        r.v[3 + c] = w.torque[c];
+      }
+    }
+    r.ns = header_time_ ? stamp : m.receive_ns;
+    for (double x : r.v)
+      if (!std::isfinite(x)) return bad(a->topic, k, m.where, "non-finite value", &a->bad);
+    a->msgs.push_back(r);
+  }
+
   void checkMessages() const {
     exid::check(js_msgs_ > 0,
                 fmt::format("{}{}: no message on topic '{}' (metadata.yaml lists {} "
@@ -298,6 +399,9 @@ class BagReading {
     if (with_wrench_)
       exid::check(wr_msgs_ > 0,
                   fmt::format("{}{}: no message on wrench_topic '{}'", pre_, bagname_, w_topic_));
+    for (const Aux& a : aux_)
+      exid::check(a.count > 0,
+                  fmt::format("{}{}: no message on {} '{}'", pre_, bagname_, a.key, a.topic));
   }
 
   // Order by time; a repeated stamp is a bad message (the later one).
@@ -331,6 +435,21 @@ class BagReading {
         u.push_back(w);
       }
       wr_ = std::move(u);
+    }
+    for (Aux& a : aux_) {
+      std::stable_sort(a.msgs.begin(), a.msgs.end(),
+                       [](const Wr& x, const Wr& y) { return x.ns < y.ns; });
+      std::vector<Wr> u;
+      for (const Wr& w : a.msgs) {
+        if (!u.empty() && w.ns == u.back().ns) {
+          bad(a.topic, w.msg, "",
+              fmt::format("its time stamp {} ns repeats that of message {}", w.ns, u.back().msg),
+              &a.dup);
+          continue;
+        }
+        u.push_back(w);
+      }
+      a.msgs = std::move(u);
     }
   }
 
@@ -443,6 +562,87 @@ class BagReading {
                             pre_, bagname_, w_topic_, tw_.front(), tw_.back()));
   }
 
+  // An IMU's or a contact's topic, as the wrench's: samples outside its time range are cut
+  // (counted); none left is an error.
+  void matchAuxRange(Aux* ap) {
+    Aux& a = *ap;
+    exid::check(!a.msgs.empty(), fmt::format("{}{}: topic '{}': every one of its {} messages was "
+                                             "dropped",
+                                             pre_, bagname_, a.topic, a.count));
+    for (const Wr& w : a.msgs) a.t.push_back(static_cast<double>(w.ns - t0_) / 1e9);
+    if (a.t.size() >= 2) {
+      std::vector<double> st(a.t.size() - 1);
+      for (std::size_t i = 1; i < a.t.size(); ++i) st[i - 1] = a.t[i] - a.t[i - 1];
+      a.med = median(st);
+    }
+    std::vector<std::size_t> inside;
+    for (std::size_t i : sel_)
+      if (tk_[i] >= a.t.front() && tk_[i] <= a.t.back()) inside.push_back(i);
+    a.outside = static_cast<int>(sel_.size() - inside.size());
+    sel_ = std::move(inside);
+    exid::check(!sel_.empty(),
+                fmt::format("{}{}: no joint-state sample of the segment lies within the time "
+                            "range of {} '{}' ([{}, {}] s after the first joint-state sample)",
+                            pre_, bagname_, a.key, a.topic, a.t.front(), a.t.back()));
+  }
+
+  // An IMU's or a contact's six values at each sample's time (linear interpolation between the
+  // two messages around it; a gap around a sample is an error, as for the wrench).
+  Eigen::MatrixXd interpolateAux(const Aux& a, const Eigen::VectorXd& tt) const {
+    Eigen::MatrixXd out(tt.size(), 6);
+    std::size_t w = 0;
+    for (Eigen::Index k = 0; k < tt.size(); ++k) {
+      const double t = tt[k];
+      if (a.t.size() == 1) {
+        for (int c = 0; c < 6; ++c) out(k, c) = a.msgs[0].v[c];
+        continue;
+      }
+      while (w + 2 < a.t.size() && a.t[w + 1] <= t) ++w;
+      const double len = a.t[w + 1] - a.t[w];
+      exid::check(len <= ratio_ * a.med,
+                  fmt::format("{}{}: {} '{}': a gap of {} s between messages {} and {} (median "
+                              "step {} s) around the joint-state sample at t = {} s: it is not "
+                              "interpolated across it; cut the segment there (t_start_s/t_end_s; "
+                              "max_gap_ratio = {})",
+                              pre_, bagname_, a.key, a.topic, len, a.msgs[w].msg,
+                              a.msgs[w + 1].msg, a.med, t, ratio_));
+      const double f = (t - a.t[w]) / len;
+      for (int c = 0; c < 6; ++c)
+        out(k, c) = (1.0 - f) * a.msgs[w].v[c] + f * a.msgs[w + 1].v[c];
+    }
+    return out;
+  }
+
+  // The base motion from the IMU (gyro and accelerometer in its frame; the angular acceleration
+  // the gyro's central difference; exid::baseMotionFromImu removes the accelerometer's lever
+  // arm) and the contacts' wrenches, at the samples' times.
+  void floatingSignals(exid::Dataset* dp) const {
+    exid::Dataset& d = *dp;
+    int contacts = 0;
+    for (const Aux& a : aux_) contacts += a.imu ? 0 : 1;
+    if (contacts > 0) d.contact.resize(d.size(), 6 * contacts);
+    int c = 0;
+    for (const Aux& a : aux_) {
+      const Eigen::MatrixXd v = interpolateAux(a, d.t);
+      if (!a.imu) {
+        d.contact.middleCols(6 * c++, 6) = v;
+        continue;
+      }
+      exid::check(d.size() >= 3,
+                  fmt::format("{}{}: {} samples are too few to differentiate the gyro of "
+                              "imu_topic '{}' (at least 3)",
+                              pre_, bagname_, d.size(), a.topic));
+      const Eigen::MatrixXd gyro = v.leftCols(3);
+      const Eigen::MatrixXd alpha = exid::centralFirstDerivative(d.t, gyro);
+      d.base.resize(d.size(), 9);
+      for (Eigen::Index k = 0; k < d.size(); ++k)
+        d.base.row(k) = exid::baseMotionFromImu(imu_pose_, gyro.row(k).transpose(),
+                                                alpha.row(k).transpose(),
+                                                v.row(k).tail(3).transpose())
+                            .transpose();
+    }
+  }
+
   // The selected samples, converted (signs, scales, offsets, currents).
   exid::Dataset fillDataset() {
     const int n = n_;
@@ -513,9 +713,12 @@ class BagReading {
         t["publishers"] = info->publishers;
       else if (tc.publishers >= 0)
         t["publishers"] = tc.publishers;
-      t["used_as"] = name == js_topic_                  ? "joint states"
-                     : with_wrench_ && name == w_topic_ ? "wrench"
-                                                        : "not used";
+      std::string used = name == js_topic_                  ? "joint states"
+                         : with_wrench_ && name == w_topic_ ? "wrench"
+                                                            : "not used";
+      for (const Aux& a : aux_)
+        if (a.topic == name) used = a.imu ? "imu (base motion)" : a.label + " (contact wrench)";
+      t["used_as"] = used;
       out.push_back(std::move(t));
     }
     return out;
@@ -554,8 +757,25 @@ class BagReading {
       a["wrench_dropped_bad_messages"] = wr_bad_;
       a["wrench_dropped_repeated_stamps"] = wr_dup_;
     }
+    for (const Aux& x : aux_) {
+      a[x.label + "_messages"] = x.count;
+      a[x.label + "_dropped_bad_messages"] = x.bad;
+      a[x.label + "_dropped_repeated_stamps"] = x.dup;
+      a["outside_" + x.label + "_range"] = x.outside;
+    }
     a["segment_samples"] = K_;
     exid::Json w = exid::Json::array();
+    for (const Aux& x : aux_) {
+      if (x.bad + x.dup > 0)
+        w.push_back(exid::Json(fmt::format(
+            "{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
+            "drop_bad_messages)",
+            pre_, bagname_, x.bad + x.dup, x.count, x.topic, x.bad, x.dup)));
+      if (x.outside > 0)
+        w.push_back(exid::Json(fmt::format("{}{}: {} joint-state samples of the segment lie "
+                                           "outside the time range of {} '{}' and were cut",
+                                           pre_, bagname_, x.outside, x.key, x.topic)));
+    }
     if (js_bad_ + js_dup_ > 0)
       w.push_back(exid::Json(
           fmt::format("{}{}: {} of {} messages of topic '{}' dropped ({} bad, {} repeated stamps; "
@@ -604,6 +824,18 @@ class BagReading {
           "each; joint-state samples outside the wrench's time range are cut "
           "(accounting.outside_wrench_range)";
     }
+    for (const Aux& a : aux_) {
+      if (a.imu) {
+        m["imu_topic"] = a.topic;
+        m["base_motion"] =
+            "from imu_topic: angular_velocity and linear_acceleration interpolated linearly at "
+            "the joint-state times, the angular acceleration their central difference in time, "
+            "the accelerometer's lever arm removed (exid::baseMotionFromImu, imu_pose_xyz_rpy); "
+            "samples outside the IMU's time range are cut (accounting.outside_imu_range)";
+      }
+    }
+    if (!P_.getStrings("contact_topics").empty())
+      m["contact_topics"] = exid::Json(P_.getStrings("contact_topics"));
     m["time"] = header_time_ ? "header stamps" : "receive stamps";
     m["torque_from"] = P_.getString("torque_from");
     m["time_origin_ns"] = static_cast<long long>(t0_);
@@ -620,6 +852,8 @@ class BagReading {
     if (use_vel_) sig.push_back("qd");
     sig.push_back("tau");
     if (with_wrench_) sig.push_back("wrench");
+    if (d.hasBase()) sig.push_back("base");
+    if (d.hasContact()) sig.push_back("contact");
     m["signals"] = exid::Json(sig);
   }
 
@@ -662,6 +896,8 @@ class BagReading {
   std::vector<double> tw_;  // wrench times, s after t0_
   int outside_wrench_ = 0;
   double wr_med_ = 0.0;
+  std::vector<Aux> aux_;  // the IMU first (if any), then the contacts in order
+  exid::Pose imu_pose_;
   // the dataset
   int K_ = 0;
 };
@@ -691,6 +927,20 @@ class Rosbag2Experiment : public exid::Experiment {
         param_string("wrench_topic", std::string(),
                      "topic of geometry_msgs/msg/WrenchStamped messages (fx fy fz mx my mz, "
                      "interpolated linearly at the joint-state times); empty: no wrench"),
+        param_string("imu_topic", std::string(),
+                     "a floating base: topic of sensor_msgs/msg/Imu messages from an IMU rigidly "
+                     "mounted on the base link; angular_velocity and linear_acceleration "
+                     "(interpolated at the joint-state times) give the base motion (omega, alpha "
+                     "= the gyro's central difference, f = a - g with the lever arm removed); the "
+                     "orientation is not used; empty: none"),
+        param_doubles("imu_pose_xyz_rpy", std::vector<double>{}, "m, rad",
+                      "the IMU's frame in the base link's frame (x y z roll pitch yaw); required "
+                      "with imu_topic"),
+        param_strings("contact_topics", std::vector<std::string>{},
+                      "a floating base: topics of geometry_msgs/msg/WrenchStamped, one per "
+                      "contact of the model's contact_links, in that order: the wrench exerted "
+                      "by the environment on the robot in the contact's sensor frame "
+                      "(interpolated at the joint-state times)"),
         param_strings("joint_names", std::vector<std::string>{},
                       "per joint of the robot, in the robot's order: its name in the JointState "
                       "messages; empty: the robot's own joint names"),
