@@ -3,7 +3,7 @@
 //   0: an MCAP file (every message of /joint_states decoded as JointState, of /ft as
 //      WrenchStamped), 1: a CDR JointState, 2: a CDR WrenchStamped, 3 / 4: a zstd / LZ4 chunk
 //      whose uncompressed size is the input's next 4 bytes, 5: a SQLite .db3 file (its messages
-//      decoded as in 0), 6: a bag's metadata.yaml.
+//      decoded as in 0), 6: a bag's metadata.yaml, 7: a CDR Imu.
 // Modes 5 and 6 write the input to a file of this process's own temporary folder (SQLite and the
 // metadata reader read files). Every input must end in a result or an exid::Error: never a
 // crash, a sanitizer report, a read past a buffer or an allocation the input does not justify.
@@ -66,7 +66,7 @@ void decode(const rb::RawMessage& m) {
 
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   if (size < 1) return 0;
-  const std::uint8_t mode = data[0] % 7;
+  const std::uint8_t mode = data[0] % 8;
   const std::uint8_t* p = data + 1;
   const std::size_t n = size - 1;
   try {
@@ -76,6 +76,8 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
       rb::decodeJointState(p, n, "fuzz");
     } else if (mode == 2) {
       rb::decodeWrenchStamped(p, n, "fuzz");
+    } else if (mode == 7) {
+      rb::decodeImu(p, n, "fuzz");
     } else if (mode == 5) {
       const fs::path f = writeScratch("fuzz.db3", p, n);
       rb::readSqliteFile(bagOf("sqlite3"), f, {"/joint_states", "/ft"}, decode);
