@@ -88,10 +88,37 @@ class Robot:
     def mass_matrix(self, q: ArrayLike, parameters: Optional[ArrayLike] = None) -> Array: ...
     def energy_regressor(self, q: ArrayLike, qd: ArrayLike) -> Tuple[Array, Array]: ...
     def regressor(
-        self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, t: Optional[ArrayLike] = None
+        self,
+        q: ArrayLike,
+        qd: ArrayLike,
+        qdd: ArrayLike,
+        t: Optional[ArrayLike] = None,
+        base: Optional[ArrayLike] = None,
     ) -> Array: ...
     def base_regressor(
-        self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, t: Optional[ArrayLike] = None
+        self,
+        q: ArrayLike,
+        qd: ArrayLike,
+        qdd: ArrayLike,
+        t: Optional[ArrayLike] = None,
+        base: Optional[ArrayLike] = None,
+    ) -> Array: ...
+    @property
+    def floating_base(self) -> bool: ...
+    @property
+    def floating_parameter_names(self) -> List[str]: ...
+    @property
+    def floating_parameter_values(self) -> Optional[Array]: ...
+    def floating_regressor(
+        self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike, base: ArrayLike
+    ) -> Array: ...
+    def floating_inverse_dynamics(
+        self,
+        q: ArrayLike,
+        qd: ArrayLike,
+        qdd: ArrayLike,
+        base: ArrayLike,
+        parameters: Optional[ArrayLike] = None,
     ) -> Array: ...
     def body_pose(self, q: ArrayLike, body: int) -> Array: ...
 

@@ -280,17 +280,53 @@ class Robot:
         """Y (N, dof, 10 dof) with rnea(q, qd, qdd) = Y @ inertial_parameters."""
         return self._r.inertial_regressor(q, qd, qdd)
 
-    def regressor(self, q, qd, qdd, t: Optional[np.ndarray] = None) -> np.ndarray:
+    def regressor(
+        self, q, qd, qdd, t: Optional[np.ndarray] = None, base: Optional[np.ndarray] = None
+    ) -> np.ndarray:
         """The model's rows in standard columns (:attr:`standard_names`): (N, rows per sample, p)
         for a per-sample model (differential: one row per joint, Y @ standard_values is the
         torque the model predicts); stacked (rows, p) for a model over windows (integral),
-        which needs the sample times ``t``."""
-        return self._r.regressor(q, qd, qdd, t)
+        which needs the sample times ``t``. A floating base (model ``floating_base``) needs its
+        motion ``base`` (N, 9): omega, alpha, f = a - g in the base frame."""
+        return self._r.regressor(q, qd, qdd, t, base)
 
-    def base_regressor(self, q, qd, qdd, t: Optional[np.ndarray] = None) -> np.ndarray:
+    def base_regressor(
+        self, q, qd, qdd, t: Optional[np.ndarray] = None, base: Optional[np.ndarray] = None
+    ) -> np.ndarray:
         """The same rows in base columns (:attr:`base_names`): W @ base_values = Y @
         standard_values."""
-        return self._r.base_regressor(q, qd, qdd, t)
+        return self._r.base_regressor(q, qd, qdd, t, base)
+
+    # ------------------------------------------------------------------ floating base
+    @property
+    def floating_base(self) -> bool:
+        """Whether the robot's root body moves freely (docs/robots.md, "Floating base")."""
+        return self._r.floating_base
+
+    @property
+    def floating_parameter_names(self) -> List[str]:
+        """A floating base's parameters: the base link's ten (XX0 ... M0), then each body's;
+        empty for a fixed base."""
+        return self._r.floating_parameter_names
+
+    @property
+    def floating_parameter_values(self) -> Optional[np.ndarray]:
+        """Their values in the description (None for a fixed base)."""
+        return self._r.floating_parameter_values
+
+    def floating_regressor(self, q, qd, qdd, base) -> np.ndarray:
+        """Y (N, 6 + dof, 10 (dof + 1)) of a floating base: the six base rows (the total wrench
+        on the robot about the base origin, base frame) and the joint rows, given the base
+        motion ``base`` (N, 9): omega, alpha, f = a - g in the base frame. Y @
+        floating_parameter_values = [0; tau] + the contact wrenches' contributions."""
+        return self._r.floating_regressor(q, qd, qdd, base)
+
+    def floating_inverse_dynamics(
+        self, q, qd, qdd, base, parameters: Optional[np.ndarray] = None
+    ) -> np.ndarray:
+        """[w_base; tau] (N, 6 + dof) by a Newton-Euler pass, with the description's floating
+        parameters or ``parameters`` (10 (dof + 1))."""
+        return self._r.floating_inverse_dynamics(q, qd, qdd, base, parameters)
 
     def energy_regressor(self, q, qd) -> Tuple[np.ndarray, np.ndarray]:
         """(kinetic, potential), each (N, 10 dof): T = kinetic @ pi, U = potential @ pi with pi

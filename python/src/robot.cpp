@@ -18,6 +18,7 @@
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"
 #include "module.hpp"
 
@@ -56,8 +57,13 @@ SampleArg sampleArg(const py::handle& obj, const char* name, int n, const char* 
       shape += (i ? ", " : "") + std::to_string(s.a.shape(i));
     shape += s.a.ndim() == 1 ? ",)" : ")";
     throw py::value_error(
-        fmt::format("{}: {} has shape {}; expected (N, {}) or ({},) for robot '{}' ({} joints)",
-                    method, name, shape, n, n, robot, n));
+        std::string(name) == "base"
+            ? fmt::format("{}: base has shape {}; expected (N, 9) or (9,): omega, alpha, f = "
+                          "a - g of the base, base frame",
+                          method, shape)
+            : fmt::format("{}: {} has shape {}; expected (N, {}) or ({},) for robot '{}' ({} "
+                          "joints)",
+                          method, name, shape, n, n, robot, n));
   }
   return s;
 }
@@ -94,7 +100,13 @@ class PyRobot {
     ctx.seed = seed;
     plugin_ = reg.create<exid::Robot>(type, ps);
     robot_ = plugin_->build(ctx);
-    robot_->requireFixedBase("the Python binding (exid.Robot)");
+    // A floating base: only the floating_base model's rows apply (they take the base motion).
+    if (robot_->floating_base && model != "floating_base")
+      throw py::value_error(fmt::format(
+          "Robot: robot '{}' has a floating base: give model='floating_base' (model '{}' needs "
+          "a fixed base); its per-sample dynamics are floating_regressor and "
+          "floating_inverse_dynamics, which take the base motion",
+          robot_->name, model));
     type_ = type;
     const exid::PluginInfo& mi = reg.get(exid::PluginKind::Model, model);
     model_ = reg.create<exid::ObservationModel>(
@@ -180,6 +192,12 @@ class PyRobot {
 
   // A closed chain (loop-closure joints) is not handled by the per-sample methods yet.
   void refuseLoops(const char* method) const {
+    if (r().floating_base)
+      throw py::value_error(fmt::format(
+          "{}: robot '{}' has a floating base: the fixed-base per-sample dynamics do not apply; "
+          "use floating_regressor and floating_inverse_dynamics (they take the base motion: "
+          "omega, alpha, f = a - g in the base frame)",
+          method, name()));
     if (r().hasLoops())
       throw py::value_error(fmt::format(
           "{}: robot '{}' is a closed chain ({} actuated of {} tree joints); the Python "
@@ -341,13 +359,28 @@ class PyRobot {
   /// gives (N, rows per sample, columns), computed in chunks of samples; another model (rows
   /// over windows of samples) gives its stacked rows (rows, columns).
   OutArray modelRows(bool base, const py::handle& q_in, const py::handle& qd_in,
-                     const py::handle& qdd_in, const py::object& t_in) const {
+                     const py::handle& qdd_in, const py::object& t_in,
+                     const py::object& base_in) const {
     const char* method = base ? "base_regressor" : "regressor";
     const int n = dof();
     const SampleArg q = sampleArg(q_in, "q", n, method, name());
     const SampleArg qd = sampleArg(qd_in, "qd", n, method, name());
     const SampleArg qdd = sampleArg(qdd_in, "qdd", n, method, name());
     sameRows({&q, &qd, &qdd}, {"q", "qd", "qdd"}, method);
+    SampleArg bm;
+    if (r().floating_base) {
+      if (base_in.is_none())
+        throw py::value_error(fmt::format(
+            "{}: robot '{}' has a floating base: give its motion base (N, 9): omega, alpha, "
+            "f = a - g in the base frame",
+            method, name()));
+      bm = sampleArg(base_in, "base", 9, method, name());
+      sameRows({&q, &bm}, {"q", "base"}, method);
+    } else if (!base_in.is_none()) {
+      throw py::value_error(fmt::format(
+          "{}: base (the motion of a floating base) is given, but robot '{}' has a fixed base",
+          method, name()));
+    }
     const Eigen::Index K = q.rows;
     Eigen::VectorXd t;
     if (!t_in.is_none()) {
@@ -369,6 +402,7 @@ class PyRobot {
       s.q = Eigen::Map<const RowMajor>(q.a.data() + b * n, e - b, n);
       s.qd = Eigen::Map<const RowMajor>(qd.a.data() + b * n, e - b, n);
       s.qdd = Eigen::Map<const RowMajor>(qdd.a.data() + b * n, e - b, n);
+      if (r().floating_base) s.base = Eigen::Map<const RowMajor>(bm.a.data() + b * 9, e - b, 9);
       return s;
     };
     auto rowsOf = [&](const exid::Samples& s) {
@@ -406,6 +440,71 @@ class PyRobot {
       }
     }
     return out;
+  }
+
+  /// A floating base's per-sample dynamics: the floating regressor (N, 6 + n, 10 (n + 1)) or
+  /// the inverse dynamics [w_base; tau] (N, 6 + n) by Newton-Euler, with the description's
+  /// floating parameters or `parameters` (10 (n + 1): the base link's, then the bodies').
+  OutArray floatingDynamics(bool regressor, const py::handle& q_in, const py::handle& qd_in,
+                            const py::handle& qdd_in, const py::handle& base_in,
+                            const py::object& pi_in) const {
+    const char* method = regressor ? "floating_regressor" : "floating_inverse_dynamics";
+    if (!r().floating_base)
+      throw py::value_error(
+          fmt::format("{}: robot '{}' has a fixed base (use rnea, inertial_regressor)", method,
+                      name()));
+    if (r().hasTransmission())
+      throw py::value_error(fmt::format(
+          "{}: robot '{}' has a transmission; the floating-base functions take joint "
+          "coordinates",
+          method, name()));
+    const int n = dof(), m = 6 + n, p = 10 * (n + 1);
+    const SampleArg q = sampleArg(q_in, "q", n, method, name());
+    const SampleArg qd = sampleArg(qd_in, "qd", n, method, name());
+    const SampleArg qdd = sampleArg(qdd_in, "qdd", n, method, name());
+    const SampleArg bm = sampleArg(base_in, "base", 9, method, name());
+    sameRows({&q, &qd, &qdd, &bm}, {"q", "qd", "qdd", "base"}, method);
+    Eigen::VectorXd pi;
+    if (!pi_in.is_none()) {
+      InArray a = InArray::ensure(pi_in);
+      if (!a || a.ndim() != 1 || a.shape(0) != p)
+        throw py::value_error(fmt::format(
+            "{}: parameters must be a vector of {} floating parameters (10 for the base link, "
+            "then 10 per body: floating_parameter_names)",
+            method, p));
+      pi = Eigen::Map<const Eigen::VectorXd>(a.data(), p);
+    }
+    const Eigen::Index K = q.rows;
+    OutArray out =
+        regressor ? newArray(K, q.single, {m, p}) : newArray(K, q.single, {m});
+    double* o = out.mutable_data();
+    {
+      py::gil_scoped_release nogil;
+      Eigen::MatrixXd Y;
+      for (Eigen::Index k = 0; k < K; ++k) {
+        const Eigen::VectorXd qk = Eigen::Map<const Eigen::VectorXd>(q.a.data() + k * n, n);
+        const Eigen::VectorXd qdk = Eigen::Map<const Eigen::VectorXd>(qd.a.data() + k * n, n);
+        const Eigen::VectorXd qddk = Eigen::Map<const Eigen::VectorXd>(qdd.a.data() + k * n, n);
+        const exid::BaseMotion b = Eigen::Map<const exid::BaseMotion>(bm.a.data() + k * 9);
+        if (regressor) {
+          exid::floatingRegressor(r(), qk, qdk, qddk, b, Y);
+          Eigen::Map<RowMajor>(o + k * m * p, m, p) = Y;
+        } else {
+          Eigen::Map<Eigen::VectorXd>(o + k * m, m) =
+              exid::floatingInverseDynamics(r(), qk, qdk, qddk, b, pi.size() ? &pi : nullptr);
+        }
+      }
+    }
+    return out;
+  }
+  bool floatingBase() const { return r().floating_base; }
+  std::vector<std::string> floatingNames() const {
+    if (!r().floating_base) return {};
+    return exid::floatingParameterNames(r());
+  }
+  py::object floatingValues() const {
+    if (!r().floating_base) return py::none();
+    return vec(exid::floatingParameters(r()));
   }
 
   py::array_t<double> bodyPose(const py::handle& q_in, int body) const {
@@ -497,6 +596,9 @@ void bindRobot(py::module_& m) {
       .def_property_readonly("base_matrix", &R::baseMatrix)
       .def_property_readonly("base_independent", &R::baseIndependent)
       .def_property_readonly("base_tolerance", &R::baseTolerance)
+      .def_property_readonly("floating_base", &R::floatingBase)
+      .def_property_readonly("floating_parameter_names", &R::floatingNames)
+      .def_property_readonly("floating_parameter_values", &R::floatingValues)
       .def("random_samples", &R::randomSamples, py::arg("count"), py::arg("seed") = 1)
       .def(
           "rnea",
@@ -538,16 +640,28 @@ void bindRobot(py::module_& m) {
       .def("energy_regressor", &R::energyRegressor, py::arg("q"), py::arg("qd"))
       .def(
           "regressor",
-          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::object t) {
-            return r.modelRows(false, q, qd, qdd, t);
-          },
-          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("t") = py::none())
+          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::object t,
+             py::object base) { return r.modelRows(false, q, qd, qdd, t, base); },
+          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("t") = py::none(),
+          py::arg("base") = py::none())
       .def(
           "base_regressor",
-          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::object t) {
-            return r.modelRows(true, q, qd, qdd, t);
+          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::object t,
+             py::object base) { return r.modelRows(true, q, qd, qdd, t, base); },
+          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("t") = py::none(),
+          py::arg("base") = py::none())
+      .def(
+          "floating_regressor",
+          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::handle base) {
+            return r.floatingDynamics(true, q, qd, qdd, base, py::none());
           },
-          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("t") = py::none())
+          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("base"))
+      .def(
+          "floating_inverse_dynamics",
+          [](const R& r, py::handle q, py::handle qd, py::handle qdd, py::handle base,
+             py::object pi) { return r.floatingDynamics(false, q, qd, qdd, base, pi); },
+          py::arg("q"), py::arg("qd"), py::arg("qdd"), py::arg("base"),
+          py::arg("parameters") = py::none())
       .def("body_pose", &R::bodyPose, py::arg("q"), py::arg("body"));
 }
 

@@ -225,3 +225,50 @@ def test_mjcf_and_sdf_files_give_the_same_dynamics(tmp_path):
     assert np.max(np.abs(ref)) > 1.0
     for r in robots.values():
         close(r.rnea(q, qd, qdd), ref, rtol=1e-12, atol=1e-12)
+
+
+def test_floating_base_dynamics():
+    """A floating base from Python: the regressor times the description's parameters is the
+    Newton-Euler pass, the model's rows are the regressor's, and at rest upright the base rows
+    carry the whole weight."""
+    r = exid.Robot("humanoid", model="floating_base")
+    n = r.dof
+    assert r.floating_base
+    names = r.floating_parameter_names
+    assert len(names) == 10 * (n + 1) and names[9] == "M0"
+    rng = np.random.default_rng(3)
+    N = 7
+    q, qd, qdd = (rng.uniform(-1, 1, (N, n)) for _ in range(3))
+    base = np.hstack([rng.uniform(-2, 2, (N, 3)), rng.uniform(-6, 6, (N, 3)),
+                      rng.uniform(-15, 15, (N, 3))])
+    Y = r.floating_regressor(q, qd, qdd, base)
+    assert Y.shape == (N, 6 + n, 10 * (n + 1))
+    w = r.floating_inverse_dynamics(q, qd, qdd, base)
+    assert w.shape == (N, 6 + n)
+    close(Y @ r.floating_parameter_values, w, rtol=1e-11, atol=1e-9)
+    pi = r.floating_parameter_values * 1.5
+    close(r.floating_inverse_dynamics(q, qd, qdd, base, pi), 1.5 * w, rtol=1e-11, atol=1e-9)
+    rows = r.regressor(q, qd, qdd, base=base)
+    close(rows, Y, rtol=1e-12, atol=1e-12)
+    # at rest, upright in gravity: f = a - g = (0, 0, 9.81); the base rows hold m_total f
+    rest = np.zeros(n)
+    up = np.array([0, 0, 0, 0, 0, 0, 0, 0, 9.81])
+    w0 = r.floating_inverse_dynamics(rest, rest, rest, up)
+    m_total = sum(r.floating_parameter_values[10 * b + 9] for b in range(n + 1))
+    close(w0[:3], np.array([0, 0, m_total * 9.81]), rtol=1e-12, atol=1e-9)
+
+
+def test_floating_base_refusals():
+    with pytest.raises(ValueError, match="model='floating_base'"):
+        exid.Robot("humanoid")
+    r = exid.Robot("humanoid", model="floating_base")
+    q = np.zeros(r.dof)
+    with pytest.raises(ValueError, match="floating_regressor"):
+        r.rnea(q, q, q)
+    with pytest.raises(ValueError, match="give its motion base"):
+        r.regressor(q, q, q)
+    with pytest.raises(ValueError, match=r"expected \(N, 9\)"):
+        r.floating_regressor(q, q, q, np.zeros(6))
+    with pytest.raises(ValueError, match="fixed base"):
+        exid.Robot("panda").floating_regressor(np.zeros(7), np.zeros(7), np.zeros(7), np.zeros(9))
+    assert not exid.Robot("panda").floating_base
