@@ -257,8 +257,7 @@ struct Reader {
       fail(body, "a mocap body (moved by the user, not by dynamics) is not supported");
     for (const TiXmlElement* e = body->FirstChildElement(); e; e = e->NextSiblingElement()) {
       const std::string tag = e->Value();
-      if (tag == "freejoint")
-        fail(e, kDeepFree);
+      if (tag == "freejoint") fail(e, kDeepFree);
     }
   }
 

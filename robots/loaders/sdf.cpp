@@ -247,9 +247,10 @@ struct Reader {
       m.floating_base = true;
       m.base.link = root;
       m.base.inertia = inertial(links[root]);
-      m.notes.push_back(src + ": no joint to the world: a free model in SDFormat, read as a "
-                              "floating base (base link '" + root +
-                              "', its frame the base frame)");
+      m.notes.push_back(src +
+                        ": no joint to the world: a free model in SDFormat, read as a "
+                        "floating base (base link '" +
+                        root + "', its frame the base frame)");
     }
     // depth first from the root; fixed joints merge the child into its owner
     struct Item {

@@ -5,6 +5,7 @@
 // model with no joint to the world: free) with every link where exid has it. The shipped
 // floating robots: humanoid and quadruped.
 #include <gtest/gtest.h>
+#include <unistd.h>
 
 #include <Eigen/Geometry>
 #include <algorithm>
@@ -15,8 +16,6 @@
 #include <random>
 #include <string>
 #include <vector>
-
-#include <unistd.h>
 
 #include "exid/error.hpp"
 #include "exid/floating_base.hpp"
@@ -44,8 +43,7 @@ using exid::RobotModel;
 RobotModel shipped(const std::string& name) {
   exid::LoadOptions o;
   o.strict = true;
-  return exid::loadUrdf(std::string(EXID_SOURCE_DIR) + "/robots/" + name + "/" + name + ".urdf",
-                        o);
+  return exid::loadUrdf(std::string(EXID_SOURCE_DIR) + "/robots/" + name + "/" + name + ".urdf", o);
 }
 
 const std::vector<std::string> kRobots = {"humanoid", "quadruped"};
@@ -122,7 +120,8 @@ TEST(FloatingExport, EveryFormatReadBackGivesTheSameFloatingDynamics) {
       std::vector<int> perm(static_cast<std::size_t>(n), -1);
       for (int j = 0; j < n; ++j)
         for (int i = 0; i < n; ++i)
-          if (r.bodies[static_cast<std::size_t>(i)].name == m.bodies[static_cast<std::size_t>(j)].name)
+          if (r.bodies[static_cast<std::size_t>(i)].name ==
+              m.bodies[static_cast<std::size_t>(j)].name)
             perm[static_cast<std::size_t>(j)] = i;
       auto P = [&](int j) { return j < 0 ? -1 : perm[static_cast<std::size_t>(j)]; };
       for (int j = 0; j < n; ++j) {
@@ -145,7 +144,8 @@ TEST(FloatingExport, EveryFormatReadBackGivesTheSameFloatingDynamics) {
         pr_m(c) = pr(column(c));
         // XX0 ... M0, then XX<k> ... M<k> of the k-th body in each model's own order
         EXPECT_EQ(nr[static_cast<std::size_t>(column(c))],
-                  nm[static_cast<std::size_t>(c)].substr(0, nm[static_cast<std::size_t>(c)].find_first_of("0123456789")) +
+                  nm[static_cast<std::size_t>(c)].substr(
+                      0, nm[static_cast<std::size_t>(c)].find_first_of("0123456789")) +
                       std::to_string(column(c) / 10));
       }
       EXPECT_LE((pr_m - pm).cwiseAbs().maxCoeff(), 1e-12 * pm.cwiseAbs().maxCoeff());
@@ -181,8 +181,8 @@ TEST(FloatingExport, EveryFormatReadBackGivesTheSameFloatingDynamics) {
         Eigen::VectorXd wr_m(6 + n);
         wr_m.head<6>() = wr.head<6>();
         for (int j = 0; j < n; ++j) wr_m(6 + j) = wr(6 + P(j));
-        worst_id = std::max(worst_id, (wr_m - wm).cwiseAbs().maxCoeff() /
-                                          std::max(1.0, wm.cwiseAbs().maxCoeff()));
+        worst_id = std::max(
+            worst_id, (wr_m - wm).cwiseAbs().maxCoeff() / std::max(1.0, wm.cwiseAbs().maxCoeff()));
       }
       std::printf(
           "%s as %s read back: floating regressor rows differ by %.3g (relative, row by row), "
@@ -348,7 +348,8 @@ TEST(FloatingExport, MujocoInverseDynamicsEqualsFloatingInverseDynamics) {
                                 md.d->qfrc_inverse[fv + 2]);
       w_mj.head<3>() = R.transpose() * F_w;
       for (int i = 0; i < 3; ++i) w_mj(3 + i) = md.d->qfrc_inverse[fv + 3 + i];
-      for (int j = 0; j < n; ++j) w_mj(6 + j) = md.d->qfrc_inverse[vadr[static_cast<std::size_t>(j)]];
+      for (int j = 0; j < n; ++j)
+        w_mj(6 + j) = md.d->qfrc_inverse[vadr[static_cast<std::size_t>(j)]];
       s.base << omega_b, alpha_b, R.transpose() * (a_w - g_w);
       const Eigen::VectorXd rigid = exid::floatingInverseDynamics(m, s.q, s.qd, s.qdd, s.base);
       Eigen::VectorXd w = rigid;
@@ -442,9 +443,9 @@ TEST(FloatingExport, SdformatLoadsAFreeModel) {
       for (int r = 0; r < 3; ++r) {
         worst = std::max(worst, std::abs(P.Pos()[static_cast<std::size_t>(r)] - X.p(r)));
         for (int c = 0; c < 3; ++c)
-          worst = std::max(worst, std::abs(Rs(static_cast<std::size_t>(r),
-                                              static_cast<std::size_t>(c)) -
-                                           X.R(r, c)));
+          worst = std::max(
+              worst,
+              std::abs(Rs(static_cast<std::size_t>(r), static_cast<std::size_t>(c)) - X.R(r, c)));
       }
       if (j < 0) {
         EXPECT_NEAR(l->Inertial().MassMatrix().Mass(), m.base.inertia(9),

@@ -194,4 +194,3 @@ links:
     EXPECT_NE(std::string(e.what()).find("unknown key 'lnk'"), std::string::npos) << e.what();
   }
 }
-

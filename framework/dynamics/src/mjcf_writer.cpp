@@ -154,8 +154,8 @@ std::string writeMjcf(const RobotModel& model, const MjcfWriteOptions& opt,
     const std::string joint = m.base.joint_name.empty()
                                   ? detail::freeName("floating_base", joint_names)
                                   : m.base.joint_name;
-    check(!joint_names.count(joint), "writeMjcf: the free joint '" + joint +
-                                         "' has the name of a body's joint (rename one)");
+    check(!joint_names.count(joint),
+          "writeMjcf: the free joint '" + joint + "' has the name of a body's joint (rename one)");
     w << "    <body name=\"" << xmlEscape(base.name) << "\" pos=\"0 0 0\" quat=\"1 0 0 0\">\n"
       << "      " << inertial(base, &raised) << "\n"
       << "      <freejoint name=\"" << xmlEscape(joint) << "\"/>\n";
