@@ -23,6 +23,7 @@
 #include "exid/robot_loaders.hpp"
 #include "exid/sdf_writer.hpp"
 #include "exid/urdf_writer.hpp"
+#include "exid_cli.hpp"
 
 #ifdef EXID_HAVE_MUJOCO
 #include <mujoco/mujoco.h>
@@ -455,4 +456,82 @@ TEST(FloatingExport, SdformatLoadsAFreeModel) {
     EXPECT_LE(worst, 1e-12);
   }
 #endif
+}
+
+// `exid export` of a floating-base robot: the identified XX0 ... M0 go to the base link, XX1 ...
+// to the bodies, Ia/Fv/Fc to the drives; every format is written and read back floating.
+TEST(FloatingExport, ExidExportWritesAFloatingRobot) {
+  const fs::path dir = exid_cli::freshTempDir("exid_floating_export_", "cli");
+  RobotModel want = shipped("humanoid");
+  const int n = want.dof();
+  std::string names, values;
+  auto add = [&](const std::string& name, double v) {
+    char buf[64];
+    std::snprintf(buf, sizeof buf, "%.17g", v);
+    names += (names.empty() ? "\"" : ", \"") + name + "\"";
+    values += (values.empty() ? "" : ", ") + std::string(buf);
+  };
+  want.base.inertia *= 1.07;  // (a scaled body stays consistent)
+  for (int j = 0; j < n; ++j) want.bodies[static_cast<std::size_t>(j)].inertia *= 1.0 + 0.03 * j;
+  const std::vector<std::string> pn = exid::floatingParameterNames(want);
+  const Eigen::VectorXd pv = exid::floatingParameters(want);
+  for (std::size_t i = 0; i < pn.size(); ++i) add(pn[i], pv(static_cast<Eigen::Index>(i)));
+  for (int j = 0; j < n; ++j) {
+    auto& d = want.drives[static_cast<std::size_t>(j)];
+    d.rotor_inertia = 0.01 * (j + 1);
+    d.viscous = 0.1 * (j + 1);
+    add("Ia" + std::to_string(j + 1), d.rotor_inertia);
+    add("Fv" + std::to_string(j + 1), d.viscous);
+  }
+  fs::create_directories(dir / "run");
+  std::ofstream(dir / "run" / "summary.json")
+      << "{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": [" << names
+      << "], \"values\": [" << values << "]}}}}\n";
+  exid::LoadOptions o;
+  std::vector<std::string> sink;
+  o.warnings = &sink;
+  for (const std::string format : {"urdf", "mjcf", "sdf"}) {
+    SCOPED_TRACE(format);
+    const fs::path out = dir / ("identified." + format);
+    const exid_cli::CmdResult r = exid_cli::runExid(
+        "export humanoid --study " + (dir / "run").string() + " --out " + out.string());
+    ASSERT_EQ(r.code, 0) << r.out;
+    EXPECT_TRUE(exid_cli::contains(
+        r.out, std::to_string(10 * (n + 1) + 2 * n) + " identified parameters written"))
+        << r.out;
+    const RobotModel got = format == "urdf"   ? exid::loadUrdf(out, o)
+                           : format == "mjcf" ? exid::loadMjcf(out, o)
+                                              : exid::loadSdf(out, o);
+    ASSERT_TRUE(got.floating_base);
+    EXPECT_EQ(got.base.link, want.base.link);
+    EXPECT_LE((got.base.inertia - want.base.inertia).cwiseAbs().maxCoeff(),
+              1e-12 * want.base.inertia.cwiseAbs().maxCoeff());
+    ASSERT_EQ(got.dof(), n);
+    for (int j = 0; j < n; ++j) {
+      const auto& b = want.bodies[static_cast<std::size_t>(j)];
+      for (const auto& g : got.bodies)
+        if (g.name == b.name) {
+          EXPECT_LE((g.inertia - b.inertia).cwiseAbs().maxCoeff(),
+                    1e-12 * b.inertia.cwiseAbs().maxCoeff())
+              << b.name;
+        }
+    }
+    if (format == "urdf") {  // the drives travel in <exid>
+      for (int j = 0; j < n; ++j) {
+        EXPECT_EQ(got.drives[static_cast<std::size_t>(j)].rotor_inertia,
+                  want.drives[static_cast<std::size_t>(j)].rotor_inertia);
+        EXPECT_EQ(got.drives[static_cast<std::size_t>(j)].viscous,
+                  want.drives[static_cast<std::size_t>(j)].viscous);
+      }
+    }
+  }
+  // an inconsistent identified base is refused, naming it
+  std::ofstream(dir / "run" / "summary.json")
+      << "{\"identification\": {\"details\": {\"standard_parameters\": {\"names\": [\"M0\"], "
+         "\"values\": [-1]}}}}\n";
+  const exid_cli::CmdResult bad = exid_cli::runExid(
+      "export humanoid --study " + (dir / "run").string() + " --out " + (dir / "x.urdf").string());
+  EXPECT_NE(bad.code, 0);
+  EXPECT_TRUE(exid_cli::contains(bad.out, "floating base link 'torso': negative mass")) << bad.out;
+  fs::remove_all(dir);
 }
