@@ -132,7 +132,21 @@ TEST(FloatingExport, EveryFormatReadBackGivesTheSameFloatingDynamics) {
         EXPECT_EQ(b.joint_name, a.joint_name);
         EXPECT_EQ(b.parent, P(a.parent));
         EXPECT_EQ(b.type, a.type);
+        // limits as for a fixed base (velocity limits: not in MJCF)
+        const auto& la = m.limits[static_cast<std::size_t>(j)];
+        const auto& lb = r.limits[static_cast<std::size_t>(P(j))];
+        EXPECT_EQ(lb.q_min, la.q_min);
+        EXPECT_EQ(lb.q_max, la.q_max);
+        EXPECT_EQ(lb.tau_max, la.tau_max);
+        if (format != "MJCF") {
+          EXPECT_EQ(lb.qd_max, la.qd_max);
+        }
       }
+      // the sensor frame as for a fixed base
+      EXPECT_EQ(r.bodies[static_cast<std::size_t>(r.sensorBody())].name,
+                m.bodies[static_cast<std::size_t>(m.sensorBody())].name);
+      EXPECT_LE((r.sensor_pose.p - m.sensor_pose.p).cwiseAbs().maxCoeff(), 1e-15);
+      EXPECT_LE((r.sensor_pose.R - m.sensor_pose.R).cwiseAbs().maxCoeff(), 1e-15);
       // the parameters and their names body by body: block 0 the base, block 1 + j body j
       const std::vector<std::string> nm = exid::floatingParameterNames(m),
                                      nr = exid::floatingParameterNames(r);
