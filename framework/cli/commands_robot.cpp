@@ -425,7 +425,8 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     ctx.study_dir = cfg.dir;
     base = reg.create<Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
   }
-  base->requireFixedBase("exid export");
+  // (a floating-base robot: its base link's parameters are XX0 ... M0, the bodies' XX1 ...; the
+  // writers put a floating joint, a free joint, a free model)
   RobotModel m = *base;
   const Json& names = *sp->find("names");
   const Json& values = *sp->find("values");
@@ -443,6 +444,18 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
     const std::string n = names.at(i).asString();
     const double v = values.at(i).asDouble();
     auto it = std::find(inertial.begin(), inertial.end(), n);
+    if (m.floating_base && n.size() > 1 && n.back() == '0' &&
+        n.find_first_of("0123456789") == n.size() - 1) {
+      const std::string pre = n.substr(0, n.size() - 1);
+      int k = -1;
+      for (int c = 0; c < 10; ++c)
+        if (pre == kInertialNames[c]) k = c;
+      if (k >= 0) {
+        m.base.inertia(k) = v;
+        ++set;
+        continue;
+      }
+    }
     if (it != inertial.end()) {
       const auto k = static_cast<std::size_t>(it - inertial.begin());
       m.bodies[k / 10].inertia(static_cast<Eigen::Index>(k % 10)) = v;
@@ -467,6 +480,14 @@ int exportCommand(const Registry& reg, const std::string& robot, const std::stri
       ++set;
     }
     if (!done) ignored.push_back(n);
+  }
+  if (m.floating_base) {
+    const InertiaCheck c = checkPhysical(m.base.inertia);
+    if (!c.ok)
+      throw Error(fmt::format(
+          "floating base link '{}': {}; the identified parameters are not physically consistent "
+          "and cannot be written as {}",
+          m.base.link, c.rule, format_name));
   }
   for (int j = 0; j < m.numJoints(); ++j) {
     const InertiaCheck c = checkPhysical(m.bodies[static_cast<std::size_t>(j)].inertia);

@@ -202,15 +202,62 @@ struct Reader {
   }
 
   // ---------------------------------------------------------------- bodies
+  static constexpr const char* kDeepFree =
+      "a free joint below another body: only a body of the worldbody can float (the floating "
+      "base); a free joint deeper in the tree is not supported";
+
+  /// The free joint of a body of the worldbody (<freejoint/> or <joint type="free">), null when
+  /// it has none; it must be the body's only joint.
+  const TiXmlElement* freeJoint(const TiXmlElement* body) const {
+    const TiXmlElement* free = nullptr;
+    int joints = 0;
+    for (const TiXmlElement* e = body->FirstChildElement(); e; e = e->NextSiblingElement()) {
+      const std::string tag = e->Value();
+      if (tag != "freejoint" && tag != "joint") continue;
+      ++joints;
+      const std::string cls =
+          xmlAttr(body, "childclass").empty() ? "main" : xmlAttr(body, "childclass");
+      if (tag == "freejoint" || attrOf(e, "type", cls, true) == "free") free = e;
+    }
+    if (free && joints > 1)
+      fail(free, "a free joint and another joint in body '" + xmlAttr(body, "name") +
+                     "': the floating base's body has the free joint only (put the other joint "
+                     "in a child body)");
+    return free;
+  }
+
+  /// A body of the worldbody with a free joint: the floating base link (its frame the base
+  /// frame; its pos/quat, the reference pose in the world, do not enter the dynamics). Bodies
+  /// welded to it join its inertia; its child bodies are attached to the base.
+  void addFloatingBase(const TiXmlElement* e, const TiXmlElement* free) {
+    if (xmlAttr(e, "mocap") == "true")
+      fail(e, "a mocap body (moved by the user, not by dynamics) is not supported");
+    if (m.floating_base)
+      fail(e, "a second body with a free joint (one floating base is modelled, body '" +
+                  m.base.link + "' is the first)");
+    m.floating_base = true;
+    m.base.link = xmlAttr(e, "name");
+    if (m.base.link.empty()) fail(e, "the floating base's body needs a name");
+    m.base.joint_name = xmlAttr(free, "name");
+    m.base.inertia = inertial(e);
+    std::string cls = xmlAttr(e, "childclass");
+    if (cls.empty()) cls = "main";
+    if (body_place.count(m.base.link)) fail(e, "duplicate body name '" + m.base.link + "'");
+    body_place[m.base.link] = {-1, Pose{}};
+    for (const TiXmlElement* s = e->FirstChildElement("site"); s; s = s->NextSiblingElement("site"))
+      if (xmlAttr(s, "name") == "exid_sensor")
+        fail(s, "the exid_sensor site must be on a moving body (not the floating base)");
+    if (e->FirstChildElement("geom")) geoms.push_back(m.base.link);
+    for (const TiXmlElement* c = e->FirstChildElement("body"); c; c = c->NextSiblingElement("body"))
+      addBody(c, -1, Pose{}, cls);
+  }
+
   void refuseUnsupported(const TiXmlElement* body) const {
     if (xmlAttr(body, "mocap") == "true")
       fail(body, "a mocap body (moved by the user, not by dynamics) is not supported");
     for (const TiXmlElement* e = body->FirstChildElement(); e; e = e->NextSiblingElement()) {
       const std::string tag = e->Value();
-      if (tag == "freejoint")
-        fail(e,
-             "a free joint (floating base) is not supported by the MJCF loader; fix the "
-             "body to the world (remove the free joint)");
+      if (tag == "freejoint") fail(e, kDeepFree);
     }
   }
 
@@ -226,10 +273,7 @@ struct Reader {
     }
     if (!joint) return nullptr;
     const std::string type = attrOf(joint, "type", cls, true);
-    if (type == "free")
-      fail(joint,
-           "a free joint (floating base) is not supported by the MJCF loader; fix the "
-           "body to the world (remove the free joint)");
+    if (type == "free") fail(joint, kDeepFree);
     if (type != "hinge" && type != "slide")
       fail(joint, "type '" + type + "' is not supported (only hinge and slide)");
     return joint;
@@ -246,7 +290,10 @@ struct Reader {
     int index = owner;
     Pose X_here = X;  // this body's frame in the frame of the exid body it belongs to
     if (!j) {
-      if (owner >= 0) m.bodies[static_cast<std::size_t>(owner)].inertia += transformInertial(pi, X);
+      if (owner >= 0)
+        m.bodies[static_cast<std::size_t>(owner)].inertia += transformInertial(pi, X);
+      else if (m.floating_base)
+        m.base.inertia += transformInertial(pi, X);  // welded to the floating base
     } else {
       index = addJoint(e, j, child_cls, owner, X, pi);
       X_here = Pose{};
@@ -433,9 +480,27 @@ struct Reader {
                   ": <compiler inertiafromgeom=\"true\">: MuJoCo computes every inertia "
                   "from the geoms, which exid does not do; give <inertial> elements and "
                   "inertiafromgeom=\"false\" or \"auto\"");
+    // A body of the worldbody with a free joint is the floating base; then it is the only
+    // body there (the other bodies would be fixed to the world, which does not move with it).
+    int top = 0;
+    const TiXmlElement* base = nullptr;
     for (const TiXmlElement* b = world->FirstChildElement("body"); b;
-         b = b->NextSiblingElement("body"))
-      addBody(b, -1, Pose{}, "main");
+         b = b->NextSiblingElement("body")) {
+      ++top;
+      if (freeJoint(b) && !base) base = b;
+    }
+    if (base && top > 1)
+      fail(base,
+           "a floating base (free joint) and other bodies in the worldbody: exid models one "
+           "robot, all of whose bodies hang from the floating base (remove the other bodies, or "
+           "the free joint)");
+    if (base) {
+      addFloatingBase(base, freeJoint(base));
+    } else {
+      for (const TiXmlElement* b = world->FirstChildElement("body"); b;
+           b = b->NextSiblingElement("body"))
+        addBody(b, -1, Pose{}, "main");
+    }
     if (m.dof() == 0) throw Error(src + ": no moving joint (hinge or slide) in the model");
     if (const TiXmlElement* act = root->FirstChildElement("actuator"))
       for (const TiXmlElement* a = act->FirstChildElement(); a; a = a->NextSiblingElement()) {

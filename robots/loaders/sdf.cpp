@@ -223,17 +223,35 @@ struct Reader {
         children[j.parent].push_back(&j);
       }
     }
+    // No joint to the world: the model is free (SDFormat's meaning), a floating base whose
+    // base link is the one link that is no joint's child.
+    std::vector<std::string> unattached;
     for (const auto& l : link_order)
-      if (!parent_joint.count(l))
-        fail(links[l],
-             "link '" + l +
-                 "' is not attached to the world nor to another link: it "
-                 "would float freely; exid needs the model fixed to the world by one fixed "
-                 "joint (<parent>world</parent>)");
-    if (root.empty())
-      fail(model,
-           "no link is fixed to the world (<joint type=\"fixed\"> with "
-           "<parent>world</parent>)");
+      if (!parent_joint.count(l)) unattached.push_back(l);
+    if (!root.empty() && !unattached.empty())
+      fail(links[unattached.front()],
+           "link '" + unattached.front() +
+               "' is not attached to the world nor to another link: it would float freely while "
+               "the rest is fixed to the world (link '" +
+               root + "'); attach it by a joint");
+    if (root.empty()) {
+      if (unattached.size() != 1) {
+        std::string list;
+        for (const auto& l : unattached) list += (list.empty() ? "'" : ", '") + l + "'";
+        fail(model, "no joint to the world and " + std::to_string(unattached.size()) +
+                        " links that are no joint's child (" + list +
+                        "): a free (floating-base) model has exactly one, its base link; a "
+                        "model fixed to the world has a fixed joint with <parent>world</parent>");
+      }
+      root = unattached.front();
+      m.floating_base = true;
+      m.base.link = root;
+      m.base.inertia = inertial(links[root]);
+      m.notes.push_back(src +
+                        ": no joint to the world: a free model in SDFormat, read as a "
+                        "floating base (base link '" +
+                        root + "', its frame the base frame)");
+    }
     // depth first from the root; fixed joints merge the child into its owner
     struct Item {
       std::string link;
@@ -256,6 +274,8 @@ struct Reader {
         if (j->type == "fixed") {
           if (it.body >= 0)
             m.bodies[static_cast<std::size_t>(it.body)].inertia += transformInertial(pi, X);
+          else if (m.floating_base)
+            m.base.inertia += transformInertial(pi, X);  // welded to the floating base
           next.push_back({j->child, it.body, X});
           continue;
         }

@@ -86,7 +86,28 @@ TEST(MjcfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
     std::string body, head, expected;
   };
   const std::vector<Case> cases = {
-      {"<body name=\"b\"><freejoint/>" + kLink + "</body>\n", "", "arm.xml:3: <freejoint>"},
+      // a free joint only on a body of the worldbody (the floating base), alone in it
+      {"<body name=\"b\"><joint name=\"j\"/>" + kLink + "<body name=\"c\"><freejoint/>" + kLink +
+           "</body></body>\n",
+       "",
+       "arm.xml:3: <freejoint>: a free joint below another body: only a body of the "
+       "worldbody can float"},
+      {"<body name=\"b\"><joint name=\"j\"/>" + kLink +
+           "<body name=\"c\"><joint name=\"f\" type=\"free\"/>" + kLink + "</body></body>\n",
+       "", "only a body of the worldbody can float"},
+      {"<body name=\"b\"><freejoint/><joint name=\"j\"/>" + kLink + "</body>\n", "",
+       "a free joint and another joint in body 'b'"},
+      {"<body name=\"b\"><freejoint/>" + kLink + "<body name=\"c\"><joint name=\"j\"/>" + kLink +
+           "</body></body>\n<body name=\"d\"><joint name=\"k\"/>" + kLink + "</body>\n",
+       "", "a floating base (free joint) and other bodies in the worldbody"},
+      {"<body><freejoint/>" + kLink + "<body name=\"c\"><joint name=\"j\"/>" + kLink +
+           "</body></body>\n",
+       "", "the floating base's body needs a name"},
+      {"<body name=\"b\"><freejoint/>" + kLink +
+           "<site name=\"exid_sensor\"/><body name=\"c\"><joint name=\"j\"/>" + kLink +
+           "</body></body>\n",
+       "", "the exid_sensor site must be on a moving body (not the floating base)"},
+      {"<body name=\"b\"><freejoint/>" + kLink + "</body>\n", "", "no moving joint"},
       {"<body name=\"b\"><joint name=\"j\" type=\"ball\"/>" + kLink + "</body>\n", "",
        "type 'ball' is not supported"},
       {"<body name=\"b\"><joint name=\"j1\"/><joint name=\"j2\"/>" + kLink + "</body>\n", "",
@@ -144,6 +165,66 @@ TEST(MjcfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
               exid::loadMjcfString(std::string("<mujoco>\xff</mujoco>"), "arm.xml");
             }).find("is not valid UTF-8 here; an MJCF (XML) file must be UTF-8 text"),
             std::string::npos);
+}
+
+// ---------------------------------------------------------------- floating bases
+// A free joint on a body of the worldbody (<freejoint/> or <joint type="free">): that body is
+// the floating base link, its frame the base frame (its pos/quat, the reference pose, do not
+// enter), a body welded to it joins its inertia, the bodies with joints hang from it.
+TEST(Mjcf, AFreeJointInABodyOfTheWorldbodyIsTheFloatingBase) {
+  for (const std::string free :
+       {"<freejoint name=\"root\"/>", "<joint name=\"root\" type=\"free\"/>"}) {
+    SCOPED_TRACE(free);
+    const RobotModel m = mjcf("<body name=\"torso\" pos=\"1 2 3\" quat=\"0 1 0 0\">" + free +
+                                  kLink + "<body name=\"w\" pos=\"0 0 0.1\">" + kLink +
+                                  "</body><body name=\"a\" pos=\"0.2 0 0\"><joint name=\"j\" "
+                                  "axis=\"0 1 0\"/>" +
+                                  kLink + "</body></body>\n",
+                              "<compiler angle=\"radian\"/>\n");
+    ASSERT_TRUE(m.floating_base);
+    EXPECT_EQ(m.base.link, "torso");
+    EXPECT_EQ(m.base.joint_name, "root");
+    ASSERT_EQ(m.dof(), 1);
+    EXPECT_EQ(m.bodies[0].parent, -1);
+    EXPECT_LE((m.bodies[0].pre.p - Eigen::Vector3d(0.2, 0, 0)).norm(), 1e-15);
+    EXPECT_LE((m.bodies[0].pre.R - Eigen::Matrix3d::Identity()).norm(), 1e-15);
+    // kLink: 2 kg at (0.1, 0, 0), diag(0.1, 0.2, 0.25) about the centre; twice, the second
+    // 0.1 m up: 4 kg, first moments (0.4, 0, 0.2), XX = 0.1 + 0.1 + 2 * 0.1^2, ...
+    Eigen::Matrix<double, 10, 1> expected;
+    expected << 0.1 + 0.1 + 2 * 0.01, 0.0, -2 * 0.1 * 0.1, 0.2 + 0.02 + 0.2 + 2 * 0.02, 0.0,
+        0.25 + 0.02 + 0.25 + 2 * 0.01, 0.4, 0.0, 0.2, 4.0;
+    EXPECT_LE((m.base.inertia - expected).cwiseAbs().maxCoeff(), 1e-14)
+        << m.base.inertia.transpose();
+  }
+  // (a robot fixed to the world is not floating)
+  EXPECT_FALSE(mjcf("<body name=\"b\"><joint name=\"j\"/>" + kLink + "</body>\n").floating_base);
+}
+
+// An SDF model with no joint to the world is free (SDFormat's meaning): its one link that is no
+// joint's child is the floating base link, and a note says so; a model welded to the world is not.
+TEST(Sdf, AModelWithNoJointToTheWorldIsAFloatingBase) {
+  const RobotModel m =
+      sdf(sdfLink("torso", "<pose>1 2 3 0 0 0.5</pose>") +
+          sdfLink("w", "<pose>1 2 3.1 0 0 0.5</pose>") + sdfJoint("weld", "torso", "w", "fixed") +
+          sdfLink("a", "<pose>1 2 3 0 0 0.5</pose>") + sdfJoint("j", "torso", "a"));
+  ASSERT_TRUE(m.floating_base);
+  EXPECT_EQ(m.base.link, "torso");
+  EXPECT_EQ(m.base.joint_name, "");
+  ASSERT_EQ(m.dof(), 1);
+  EXPECT_EQ(m.bodies[0].parent, -1);
+  // kInertial: 2 kg at the link origin, diag(0.1, 0.2, 0.25); twice, the second 0.1 m up
+  Eigen::Matrix<double, 10, 1> expected;
+  expected << 0.2 + 2 * 0.01, 0.0, 0.0, 0.4 + 2 * 0.01, 0.0, 0.5, 0.0, 0.0, 0.2, 4.0;
+  EXPECT_LE((m.base.inertia - expected).cwiseAbs().maxCoeff(), 1e-14) << m.base.inertia.transpose();
+  bool noted = false;
+  for (const auto& n : m.notes)
+    noted |= n.find(
+                 "arm.sdf: no joint to the world: a free model in SDFormat, read as a floating "
+                 "base (base link 'torso'") != std::string::npos;
+  EXPECT_TRUE(noted);
+  const RobotModel fixed = sdf(kBase + sdfLink("a") + sdfJoint("j", "base", "a"));
+  EXPECT_FALSE(fixed.floating_base);
+  for (const auto& n : fixed.notes) EXPECT_EQ(n.find("floating"), std::string::npos) << n;
 }
 
 // ---------------------------------------------------------------- MJCF conventions
@@ -252,7 +333,18 @@ TEST(SdfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
     std::string model, version, expected;
   };
   const std::vector<Case> cases = {
-      {sdfLink("a"), "1.9", "would float freely"},
+      {sdfLink("a") + sdfLink("b"), "1.9",
+       "no joint to the world and 2 links that are no joint's child ('a', 'b'): a free "
+       "(floating-base) model has exactly one"},
+      {kBase + sdfLink("a") + sdfLink("b") + sdfJoint("j", "base", "a"), "1.9",
+       "link 'b' is not attached to the world nor to another link: it would float freely while "
+       "the rest is fixed to the world (link 'base')"},
+      {sdfLink("t") + sdfLink("a") + sdfJoint("j", "t", "a") + "<static>true</static>", "1.9",
+       "a static model does not move"},
+      {sdfLink("t") + sdfLink("a") + sdfJoint("j", "t", "a") +
+           "<frame name=\"exid_sensor\" attached_to=\"t\"/>",
+       "1.9", "the exid_sensor frame must be on a moving link"},
+      {sdfLink("a"), "1.9", "no moving joint"},
       {sdfLink("a") + sdfJoint("j", "world", "a"), "1.9", "a revolute joint to the world"},
       {kBase + sdfLink("a") + sdfLink("b") + sdfJoint("j1", "base", "a") +
            sdfJoint("j2", "a", "b") + sdfJoint("j3", "base", "b"),

@@ -12,10 +12,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/floating_base.hpp"
-#include "exid/mjcf_writer.hpp"
 #include "exid/robot_loaders.hpp"
-#include "exid/sdf_writer.hpp"
-#include "exid/urdf_writer.hpp"
 #include "floating_reference.hpp"
 
 using namespace exid;
@@ -195,26 +192,5 @@ links:
   } catch (const Error& e) {
     EXPECT_NE(std::string(e.what()).find("hopper.yaml:3"), std::string::npos) << e.what();
     EXPECT_NE(std::string(e.what()).find("unknown key 'lnk'"), std::string::npos) << e.what();
-  }
-}
-
-// The fixed-base writers refuse a floating robot, naming themselves (floating-base export is not
-// written yet).
-TEST(FloatingRobots, WritersRefuseAFloatingBase) {
-  const RobotModel h = shipped("humanoid");
-  auto msg = [](auto&& f) {
-    try {
-      f();
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
-  for (const auto& [what, m] : std::vector<std::pair<std::string, std::string>>{
-           {"MJCF", msg([&] { writeMjcf(h, {}, nullptr); })},
-           {"SDF", msg([&] { writeSdf(h, {}, nullptr); })},
-           {"URDF", msg([&] { writeUrdf(h, {}); })}}) {
-    EXPECT_NE(m.find("the " + what + " writer"), std::string::npos) << m;
-    EXPECT_NE(m.find("floating base (link 'torso')"), std::string::npos) << m;
   }
 }

@@ -5,6 +5,7 @@
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
+#include <set>
 #include <sstream>
 
 #include "exid/error.hpp"
@@ -79,8 +80,6 @@ std::string inertial(const Body& b, std::vector<std::string>* raised) {
 
 std::string writeMjcf(const RobotModel& model, const MjcfWriteOptions& opt,
                       std::vector<std::string>* left_out) {
-  model.requireFixedBase(
-      "the MJCF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   detail::requirePhysical(model, "MJCF");
   // (a closed chain: its spanning tree at the loops' reference configuration, see below)
@@ -140,7 +139,31 @@ std::string writeMjcf(const RobotModel& model, const MjcfWriteOptions& opt,
     for (int c : children[static_cast<std::size_t>(j)]) self(self, c, depth + 1);
     w << in << "</body>\n";
   };
-  for (int r : roots) body(body, r, 2);
+  if (m.floating_base) {
+    // The base link: the root body, with a free joint (MuJoCo's qpos: the base frame's position
+    // and orientation in the world), at the base's reference pose (the identity: the world
+    // frame); the bodies attached to the base are its children. No motor on the free joint.
+    std::set<std::string> body_names, joint_names;
+    for (const Body& b : m.bodies) {
+      body_names.insert(b.name);
+      joint_names.insert(b.joint_name);
+    }
+    Body base;
+    base.name = m.base.link.empty() ? detail::freeName("base", body_names) : m.base.link;
+    base.inertia = m.base.inertia;
+    const std::string joint = m.base.joint_name.empty()
+                                  ? detail::freeName("floating_base", joint_names)
+                                  : m.base.joint_name;
+    check(!joint_names.count(joint),
+          "writeMjcf: the free joint '" + joint + "' has the name of a body's joint (rename one)");
+    w << "    <body name=\"" << xmlEscape(base.name) << "\" pos=\"0 0 0\" quat=\"1 0 0 0\">\n"
+      << "      " << inertial(base, &raised) << "\n"
+      << "      <freejoint name=\"" << xmlEscape(joint) << "\"/>\n";
+    for (int r : roots) body(body, r, 3);
+    w << "    </body>\n";
+  } else {
+    for (int r : roots) body(body, r, 2);
+  }
   notes.insert(notes.end(), raised.begin(), raised.end());
 
   std::ostringstream x;

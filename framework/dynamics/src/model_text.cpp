@@ -168,6 +168,13 @@ void requirePhysical(const RobotModel& m, const std::string& format) {
                   "; the parameters are not physically consistent and cannot be written as " +
                   format);
   }
+  if (m.floating_base) {
+    const InertiaCheck c = checkPhysical(m.base.inertia);
+    if (!c.ok)
+      throw Error("floating base link '" + m.base.link + "': " + c.rule +
+                  "; the parameters are not physically consistent and cannot be written as " +
+                  format);
+  }
 }
 
 Pose bodyFrameAt(const Body& b, double q) {

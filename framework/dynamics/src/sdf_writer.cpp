@@ -28,12 +28,25 @@ std::string element(const char* name, double v) {
   return std::string("<") + name + ">" + num(v) + "</" + name + ">";
 }
 
+/// `<inertial>` of a link from its parameters about the link frame origin (link axes).
+std::string inertialOf(const Eigen::Matrix<double, 10, 1>& pi) {
+  double mass = 0.0;
+  Eigen::Vector3d c;
+  Eigen::Matrix3d Ic;
+  massCentreInertia(pi, &mass, &c, &Ic);
+  std::ostringstream x;
+  x << "      <inertial>\n        " << pose(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
+    << "        " << element("mass", mass) << "\n        <inertia>" << element("ixx", Ic(0, 0))
+    << element("ixy", 0.5 * (Ic(0, 1) + Ic(1, 0))) << element("ixz", 0.5 * (Ic(0, 2) + Ic(2, 0)))
+    << element("iyy", Ic(1, 1)) << element("iyz", 0.5 * (Ic(1, 2) + Ic(2, 1)))
+    << element("izz", Ic(2, 2)) << "</inertia>\n      </inertial>\n";
+  return x.str();
+}
+
 }  // namespace
 
 std::string writeSdf(const RobotModel& model, const SdfWriteOptions& opt,
                      std::vector<std::string>* left_out) {
-  model.requireFixedBase(
-      "the SDF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   detail::requirePhysical(model, "SDF");
   // (a closed chain: its spanning tree at the loops' reference configuration)
@@ -53,8 +66,15 @@ std::string writeSdf(const RobotModel& model, const SdfWriteOptions& opt,
                                     "namespace; rename one)");
     names.insert(l.name);
   }
+  // A floating base: the base link is the root link, with its inertial and no joint to the
+  // world (SDFormat: a model without one is free). Fixed: a massless root link welded to it.
+  const bool floating = m.floating_base;
   const std::string root =
-      detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
+      floating ? (m.base.link.empty() ? detail::freeName("base", names) : m.base.link)
+               : detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
+  check(!floating || !names.count(root),
+        "writeSdf: the base link '" + root +
+            "' has the name of a link or joint (SDFormat frames share one namespace; rename one)");
   names.insert(root);
   const std::string weld = detail::freeName(root + "_to_world", names);
   names.insert(weld);
@@ -88,27 +108,25 @@ std::string writeSdf(const RobotModel& model, const SdfWriteOptions& opt,
   }
   x << "<sdf version=\"1.9\"" << (model.hasLoops() ? " xmlns:exid=\"urn:exid\"" : "")
     << ">\n  <model name=\"" << xmlEscape(m.name) << "\">\n"
-    << "    <link name=\"" << xmlEscape(root) << "\">\n"
-    << "      <inertial><mass>0</mass><inertia><ixx>0</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0</iyy>"
-       "<iyz>0</iyz><izz>0</izz></inertia></inertial>\n    </link>\n"
-    << "    <joint name=\"" << xmlEscape(weld) << "\" type=\"fixed\">\n"
-    << "      <parent>world</parent>\n      <child>" << xmlEscape(root) << "</child>\n"
-    << "    </joint>\n";
+    << "    <link name=\"" << xmlEscape(root) << "\">\n";
+  if (floating) {
+    x << inertialOf(m.base.inertia);
+  } else {
+    x << "      <inertial><mass>0</mass><inertia><ixx>0</ixx><ixy>0</ixy><ixz>0</ixz><iyy>0</iyy>"
+         "<iyz>0</iyz><izz>0</izz></inertia></inertial>\n";
+  }
+  x << "    </link>\n";
+  if (!floating)
+    x << "    <joint name=\"" << xmlEscape(weld) << "\" type=\"fixed\">\n"
+      << "      <parent>world</parent>\n      <child>" << xmlEscape(root) << "</child>\n"
+      << "    </joint>\n";
   for (int j = 0; j < n; ++j) {
     const Body& b = m.bodies[static_cast<std::size_t>(j)];
     const std::string parent =
         b.parent < 0 ? root : m.bodies[static_cast<std::size_t>(b.parent)].name;
-    double mass = 0.0;
-    Eigen::Vector3d c;
-    Eigen::Matrix3d Ic;
-    massCentreInertia(b.inertia, &mass, &c, &Ic);
     x << "    <link name=\"" << xmlEscape(b.name) << "\">\n"
       << "      " << pose(detail::bodyFrameAt(b, ref(j)), parent) << "\n"
-      << "      <inertial>\n        " << pose(Pose{Eigen::Matrix3d::Identity(), c}) << "\n"
-      << "        " << element("mass", mass) << "\n        <inertia>" << element("ixx", Ic(0, 0))
-      << element("ixy", 0.5 * (Ic(0, 1) + Ic(1, 0))) << element("ixz", 0.5 * (Ic(0, 2) + Ic(2, 0)))
-      << element("iyy", Ic(1, 1)) << element("iyz", 0.5 * (Ic(1, 2) + Ic(2, 1)))
-      << element("izz", Ic(2, 2)) << "</inertia>\n      </inertial>\n";
+      << inertialOf(b.inertia);
     x << "    </link>\n";
     const JointLimits& L = m.limits[static_cast<std::size_t>(j)];
     const bool bounded = finiteLimit(L.q_min) && finiteLimit(L.q_max);

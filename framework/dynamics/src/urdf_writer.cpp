@@ -25,27 +25,21 @@ std::string origin(const Pose& X) {
 }  // namespace
 
 std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
-  model.requireFixedBase(
-      "the URDF writer (fixed-base export; floating-base export is not written yet)");
   model.validateStructure();
   // (a closed chain: its spanning tree, limits per tree joint, drives on the actuated joints;
   // the loops in <exid> below)
   Eigen::VectorXd ref;
   const RobotModel m = detail::writtenTree(model, &ref);
-  std::set<std::string> names;
-  for (const auto& b : m.bodies) names.insert(b.name);
-  const std::string root =
-      detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
+  std::set<std::string> names, joint_names;
+  for (const auto& b : m.bodies) {
+    names.insert(b.name);
+    joint_names.insert(b.joint_name);
+  }
+  // <inertial> of a link from its parameters about the link frame origin (link axes)
   std::ostringstream x;
-  x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);
-  x << "<robot name=\"" << xmlEscape(m.name) << "\">\n";
-  x << "  <link name=\"" << xmlEscape(root) << "\"/>\n";
-  for (int j = 0; j < m.numJoints(); ++j) {
-    const Body& b = m.bodies[static_cast<std::size_t>(j)];
-    // Link frame = moved joint frame: parameters moved from the body frame by `post`.
-    const Eigen::Matrix<double, 10, 1> pi = transformInertial(b.inertia, b.post);
-    check(pi.allFinite(), "writeUrdf: body '" + b.name + "': non-finite inertial parameters");
-    x << "  <link name=\"" << xmlEscape(b.name) << "\">\n";
+  auto linkElement = [&](const std::string& name, const Eigen::Matrix<double, 10, 1>& pi) {
+    check(pi.allFinite(), "writeUrdf: body '" + name + "': non-finite inertial parameters");
+    x << "  <link name=\"" << xmlEscape(name) << "\">\n";
     if (pi(9) > 0.0) {
       double mass = 0;
       Eigen::Vector3d c;
@@ -58,12 +52,44 @@ std::string writeUrdf(const RobotModel& model, const UrdfWriteOptions& opt) {
         << "\" iyy=\"" << num(Ic(1, 1)) << "\" iyz=\"" << num(0.5 * (Ic(1, 2) + Ic(2, 1)))
         << "\" izz=\"" << num(Ic(2, 2)) << "\"/>\n    </inertial>\n";
     } else {
-      check(pi.cwiseAbs().maxCoeff() == 0.0, "writeUrdf: body '" + b.name + "' has mass " +
+      check(pi.cwiseAbs().maxCoeff() == 0.0, "writeUrdf: body '" + name + "' has mass " +
                                                  num(pi(9)) +
                                                  " and non-zero inertial parameters: URDF cannot "
                                                  "describe it (identify with consistent_ls)");
     }
     x << "  </link>\n";
+  };
+  x << "<?xml version=\"1.0\"?>\n" << detail::xmlComment(opt.comment);
+  x << "<robot name=\"" << xmlEscape(m.name) << "\">\n";
+  std::string root;  // the link the bodies with parent -1 hang from
+  if (m.floating_base) {
+    // A floating base: a massless world link, a `floating` joint from it to the base link
+    // (exid's URDF loader reads the base frame as the base link's frame; the joint's origin is
+    // the base's reference pose, here the identity).
+    root = m.base.link.empty() ? detail::freeName("base", names) : m.base.link;
+    check(!names.count(root), "writeUrdf: the base link '" + root +
+                                  "' has the name of a body (URDF links share one namespace)");
+    names.insert(root);
+    const std::string world =
+        detail::freeName(opt.root_link.empty() ? "world" : opt.root_link, names);
+    const std::string joint = m.base.joint_name.empty()
+                                  ? detail::freeName("floating_base", joint_names)
+                                  : m.base.joint_name;
+    check(!joint_names.count(joint), "writeUrdf: the floating joint '" + joint +
+                                         "' has the name of a body's joint (rename one)");
+    x << "  <link name=\"" << xmlEscape(world) << "\"/>\n";
+    linkElement(root, m.base.inertia);
+    x << "  <joint name=\"" << xmlEscape(joint) << "\" type=\"floating\">\n"
+      << "    <parent link=\"" << xmlEscape(world) << "\"/>\n    <child link=\"" << xmlEscape(root)
+      << "\"/>\n  </joint>\n";
+  } else {
+    root = detail::freeName(opt.root_link.empty() ? "base_link" : opt.root_link, names);
+    x << "  <link name=\"" << xmlEscape(root) << "\"/>\n";
+  }
+  for (int j = 0; j < m.numJoints(); ++j) {
+    const Body& b = m.bodies[static_cast<std::size_t>(j)];
+    // Link frame = moved joint frame: parameters moved from the body frame by `post`.
+    linkElement(b.name, transformInertial(b.inertia, b.post));
     const JointLimits& L = m.limits[static_cast<std::size_t>(j)];
     const bool bounded = finiteLimit(L.q_min) && finiteLimit(L.q_max);
     std::string type =
