@@ -1,0 +1,166 @@
+// Gradients through closed loops: the closed-chain state's analytic derivatives with respect to
+// the actuated coordinates (closedChainStateDerivatives, loopConstraintJerk) against central
+// differences of closedChainState, the actuated torque's derivatives and the actuated
+// regressor's VJP against differences of their values, on the shipped four-bar (a nonlinear G)
+// and palletiser (a parallelogram: G constant, the tree's dynamics nonlinear); then gradient-based
+// excitation design on the palletiser: its gradient against differences, and a short design that
+// lowers the criterion.
+#include <gtest/gtest.h>
+
+#include <cmath>
+#include <iostream>
+#include <random>
+#include <vector>
+
+#include "exid/closed_chain.hpp"
+#include "exid/drive.hpp"
+#include "exid/dynamics.hpp"
+#include "exid/error.hpp"
+#include "exid/excitation.hpp"
+#include "exid/gradient_check.hpp"
+#include "exid_test.hpp"
+
+namespace {
+
+struct State {
+  Eigen::VectorXd qa, qda, qdda;
+};
+
+// A random state inside the actuated joints' limits (well inside: the mechanism assembles).
+State randomState(const exid::RobotModel& m, std::mt19937& rng) {
+  std::uniform_real_distribution<double> U(-1.0, 1.0);
+  const int n = m.dof();
+  State s{Eigen::VectorXd(n), Eigen::VectorXd(n), Eigen::VectorXd(n)};
+  Eigen::VectorXd q0 = Eigen::VectorXd::Zero(m.numJoints());
+  if (m.closed.reference.size() == m.numJoints()) q0 = m.closed.reference;
+  for (int i = 0; i < n; ++i) {
+    s.qa[i] = q0[m.actuatedJoint(i)] + 0.3 * U(rng);
+    s.qda[i] = 1.5 * U(rng);
+    s.qdda[i] = 3.0 * U(rng);
+  }
+  return s;
+}
+
+double relDiff(const Eigen::MatrixXd& a, const Eigen::MatrixXd& b) {
+  return (a - b).lpNorm<Eigen::Infinity>() / std::max(1.0, b.lpNorm<Eigen::Infinity>());
+}
+
+class ClosedChainGradient : public ::testing::TestWithParam<const char*> {};
+
+TEST_P(ClosedChainGradient, StateDerivativesAgainstCentralDifferences) {
+  const auto robot = exid_test::robot(GetParam());
+  const exid::RobotModel& m = *robot;
+  ASSERT_TRUE(m.hasLoops());
+  const int n = m.dof(), nt = m.numJoints();
+  std::mt19937 rng(2024);
+  const double h = 1e-5;  // central differences: truncation ~h^2, rounding ~1e-16/h
+  double worst = 0.0, largest_dG = 0.0;
+  for (int t = 0; t < 5; ++t) {
+    const State s = randomState(m, rng);
+    Eigen::VectorXd q, qd, qdd;
+    Eigen::MatrixXd G, Dqd, Dqdd, Dqdd_d;
+    std::vector<Eigen::MatrixXd> dG;
+    exid::closedChainStateDerivatives(m, s.qa, s.qda, s.qdda, &q, &qd, &qdd, &G, &dG, &Dqd,
+                                      &Dqdd, &Dqdd_d);
+    ASSERT_EQ(static_cast<int>(dG.size()), n);
+    // the values are closedChainState's
+    Eigen::VectorXd q2, qd2, qdd2;
+    Eigen::MatrixXd G2;
+    exid::closedChainState(m, s.qa, &s.qda, &s.qdda, &q2, &qd2, &qdd2, &G2, nullptr);
+    EXPECT_EQ(q, q2);
+    EXPECT_EQ(qdd, qdd2);
+    for (int k = 0; k < n; ++k) {
+      // in qa_k
+      State p = s, mi = s;
+      p.qa[k] += h, mi.qa[k] -= h;
+      Eigen::VectorXd qdp, qddp, qdm, qddm;
+      Eigen::MatrixXd Gp, Gmi;
+      exid::closedChainState(m, p.qa, &p.qda, &p.qdda, nullptr, &qdp, &qddp, &Gp, nullptr);
+      exid::closedChainState(m, mi.qa, &mi.qda, &mi.qdda, nullptr, &qdm, &qddm, &Gmi, nullptr);
+      const Eigen::MatrixXd fdG = (Gp - Gmi) / (2 * h);
+      largest_dG = std::max(largest_dG, fdG.lpNorm<Eigen::Infinity>());
+      worst = std::max(worst, relDiff(dG[static_cast<std::size_t>(k)], fdG));
+      EXPECT_LT(relDiff(dG[static_cast<std::size_t>(k)], fdG), 1e-7) << GetParam() << " dG/dqa" << k;
+      EXPECT_LT(relDiff(Dqd.col(k), (qdp - qdm) / (2 * h)), 1e-7) << GetParam() << " dqd/dqa" << k;
+      EXPECT_LT(relDiff(Dqdd.col(k), (qddp - qddm) / (2 * h)), 1e-7)
+          << GetParam() << " dqdd/dqa" << k;
+      worst = std::max(worst, relDiff(Dqdd.col(k), (qddp - qddm) / (2 * h)));
+      // in qda_k (qdd is quadratic in qda: the difference is exact but for rounding)
+      p = s, mi = s;
+      p.qda[k] += h, mi.qda[k] -= h;
+      exid::closedChainState(m, p.qa, &p.qda, &p.qdda, nullptr, &qdp, &qddp, nullptr, nullptr);
+      exid::closedChainState(m, mi.qa, &mi.qda, &mi.qdda, nullptr, &qdm, &qddm, nullptr, nullptr);
+      EXPECT_LT(relDiff(Dqdd_d.col(k), (qddp - qddm) / (2 * h)), 1e-7)
+          << GetParam() << " dqdd/dqda" << k;
+      EXPECT_LT(relDiff(G.col(k), (qdp - qdm) / (2 * h)), 1e-7) << GetParam() << " dqd/dqda" << k;
+    }
+    // the jerk (cubic in w) is the bias's derivative along q + t w at constant w
+    const Eigen::VectorXd w = Eigen::VectorXd::Random(nt);
+    const Eigen::VectorXd fdj =
+        (exid::loopConstraintBias(m, q + h * w, w) - exid::loopConstraintBias(m, q - h * w, w)) /
+        (2 * h);
+    EXPECT_LT(relDiff(exid::loopConstraintJerk(m, q, w), fdj), 1e-7) << GetParam() << " jerk";
+  }
+  std::cout << "  " << GetParam() << ": largest |dG/dqa| " << largest_dG
+            << ", worst relative difference " << worst << " (step " << h << ")\n";
+  RecordProperty("worst_rel_diff", std::to_string(worst));
+}
+
+TEST_P(ClosedChainGradient, TorqueDerivativesAndRegressorVjpAgainstCentralDifferences) {
+  const auto robot = exid_test::robot(GetParam());
+  const exid::RobotModel& m = *robot;
+  const int n = m.dof();
+  exid::DriveColumns cols;
+  cols.rotor_inertia = cols.viscous = cols.coulomb = cols.offset = true;
+  auto data = exid::makeDynamicsData(m);
+  std::mt19937 rng(77);
+  // (a step of 1e-4: the position solve's 1e-12 residual over the step stays below 1e-8)
+  const double h = 1e-4;
+  const int P = exid::numParameters(m, cols);
+  const Eigen::VectorXd params = exid::parameterValues(m, cols) + 0.1 * Eigen::VectorXd::Random(P);
+  for (int t = 0; t < 4; ++t) {
+    const State s = randomState(m, rng);
+    Eigen::VectorXd tau;
+    Eigen::MatrixXd Dq, Dqd, Dqdd;
+    exid::actuatorTorqueWith(m, *data, cols, params, s.qa, s.qda, s.qdda, &tau, &Dq, &Dqd, &Dqdd);
+    Eigen::VectorXd tau0;
+    exid::actuatorTorqueWith(m, *data, cols, params, s.qa, s.qda, s.qdda, &tau0, nullptr, nullptr,
+                             nullptr);
+    EXPECT_LT(relDiff(tau, tau0), 1e-13);
+    auto torque = [&](const State& x) {
+      Eigen::VectorXd v;
+      exid::actuatorTorqueWith(m, *data, cols, params, x.qa, x.qda, x.qdda, &v, nullptr, nullptr,
+                               nullptr);
+      return v;
+    };
+    // the regressor's VJP: <W, Y(qa, qda, qdda)>
+    const Eigen::MatrixXd W = Eigen::MatrixXd::Random(n, P);
+    Eigen::VectorXd gq, gqd, gqdd;
+    exid::actuatorRegressorVjp(m, *data, cols, s.qa, s.qda, s.qdda, W, &gq, &gqd, &gqdd);
+    auto inner = [&](const State& x) {
+      Eigen::MatrixXd Y(n, P);
+      exid::actuatorRegressor(m, *data, cols, x.qa, x.qda, x.qdda, Y);
+      return W.cwiseProduct(Y).sum();
+    };
+    for (int k = 0; k < n; ++k)
+      for (int which = 0; which < 3; ++which) {
+        State p = s, mi = s;
+        Eigen::VectorXd& xp = which == 0 ? p.qa : which == 1 ? p.qda : p.qdda;
+        Eigen::VectorXd& xm = which == 0 ? mi.qa : which == 1 ? mi.qda : mi.qdda;
+        if (which == 1 && std::abs(s.qda[k]) < 10 * h) continue;  // sign(qd) jumps at 0
+        xp[k] += h, xm[k] -= h;
+        const Eigen::VectorXd fd = (torque(p) - torque(mi)) / (2 * h);
+        const Eigen::MatrixXd& D = which == 0 ? Dq : which == 1 ? Dqd : Dqdd;
+        EXPECT_LT(relDiff(D.col(k), fd), 1e-7) << GetParam() << " dtau/d" << which << " " << k;
+        const double fdv = (inner(p) - inner(mi)) / (2 * h);
+        const Eigen::VectorXd& g = which == 0 ? gq : which == 1 ? gqd : gqdd;
+        EXPECT_LT(std::abs(g[k] - fdv) / std::max(1.0, std::abs(fdv)), 1e-7)
+            << GetParam() << " vjp d" << which << " " << k << ": " << g[k] << " vs " << fdv;
+      }
+  }
+}
+
+INSTANTIATE_TEST_SUITE_P(ShippedClosedChains, ClosedChainGradient,
+                         ::testing::Values("fourbar", "palletizer"));
+
+}  // namespace
