@@ -163,4 +163,83 @@ TEST_P(ClosedChainGradient, TorqueDerivativesAndRegressorVjpAgainstCentralDiffer
 INSTANTIATE_TEST_SUITE_P(ShippedClosedChains, ClosedChainGradient,
                          ::testing::Values("fourbar", "palletizer"));
 
+// The palletiser's excitation problem: a Fourier trajectory of its four measured coordinates,
+// the differential model with drive columns, the torque limits as constraints (through the
+// loops: the actuated torques' derivatives).
+struct Design {
+  std::shared_ptr<const exid::RobotModel> robot;
+  std::shared_ptr<exid::Trajectory> traj;
+  std::shared_ptr<exid::ObservationModel> model;
+  std::unique_ptr<exid::ExcitationProblem> problem;
+};
+
+Design palletizerDesign(const std::string& criterion, double torque_margin) {
+  Design d;
+  exid::RunContext ctx;
+  ctx.seed = 11;
+  d.robot = exid_test::robot("palletizer");
+  d.model = exid_test::create<exid::ObservationModel>(
+      "differential", "{rotor_inertia: true, coulomb: true, viscous: true, offset: true}");
+  d.model->bind(d.robot, ctx);
+  d.traj = exid_test::create<exid::Trajectory>(
+      "fourier",
+      "{period_s: 6, harmonics: 3, sample_period_s: 0.1, position_margin_rad: 0.05, init: random, "
+      "init_scale: 0.3}");
+  d.traj->bind(d.robot, ctx);
+  exid::ExcitationOptions xo;
+  xo.position_margin = d.traj->positionMargin();
+  xo.velocity_limits = d.traj->velocityLimits();
+  xo.acceleration_limits = d.traj->accelerationLimits();
+  xo.torque_margin = torque_margin;
+  d.problem = exid::makeExcitationProblem(
+      d.traj, d.model, exid_test::create<exid::Criterion>(criterion, "{}"), xo);
+  return d;
+}
+
+TEST(ClosedChainExcitation, PalletizerDesignGradientAgainstCentralDifferences) {
+  for (const char* crit : {"cond", "log_det"}) {
+    Design d = palletizerDesign(crit, 0.9);
+    exid::ExcitationProblem& p = *d.problem;
+    const Eigen::VectorXd z = p.initial();
+    Eigen::VectorXd grad;
+    const double J = p.value(z, &grad);
+    ASSERT_TRUE(std::isfinite(J));
+    exid::DerivativeCheckOptions o;
+    o.tolerance = 1e-5;
+    // (a relative step of 1e-4: the differences of a closed chain's design carry the position
+    // solve's residual over the step, 4e-5 of the gradient at the default 1e-6, 3.6e-6 at 1e-5,
+    // 4.6e-7 at 1e-4 -- shrinking as 1/h, noise and not a wrong derivative)
+    o.relative_step = 1e-4;
+    const exid::DerivativeCheck c =
+        exid::checkGradient([&](const Eigen::VectorXd& v) { return p.value(v, nullptr); }, z, grad,
+                            o, std::string("palletizer excitation problem, ") + crit);
+    std::cout << "  " << c.message() << "\n";
+    EXPECT_TRUE(c.ok) << c.message();
+    // the torque-limit rows' Jacobian (the actuated torques' derivatives through the loops)
+    ASSERT_GT(p.numNonlinearConstraints(), 0);
+    Eigen::VectorXd g;
+    Eigen::MatrixXd Jg;
+    p.nonlinearConstraints(z, &g, &Jg);
+    const Eigen::MatrixXd D = exid_test::nonlinearConstraintDifferences(p, z, 1e-5);
+    const double scale = std::max(1.0, D.lpNorm<Eigen::Infinity>());
+    EXPECT_LT((Eigen::MatrixXd(Jg) - D).lpNorm<Eigen::Infinity>() / scale, 1e-6) << crit;
+  }
+}
+
+TEST(ClosedChainExcitation, PalletizerShortDesignLowersTheCriterion) {
+  Design d = palletizerDesign("cond", 0.9);
+  exid::RunContext ctx;
+  ctx.seed = 3;
+  const exid::OptimizerResult r =
+      exid_test::create<exid::Optimizer>(
+          "nlopt", "{algorithm: LD_SLSQP, objective: log, starts: 1, max_evaluations: 60}")
+          ->minimize(*d.problem, ctx);
+  std::cout << "  palletizer cond: " << r.criterion_initial << " -> " << r.criterion_final
+            << " (" << exid::stopReasonText(r) << ")\n";
+  RecordProperty("cond_initial", std::to_string(r.criterion_initial));
+  RecordProperty("cond_final", std::to_string(r.criterion_final));
+  EXPECT_TRUE(r.feasible) << exid::stopReasonText(r);
+  EXPECT_LT(r.criterion_final, 0.5 * r.criterion_initial);
+}
+
 }  // namespace
