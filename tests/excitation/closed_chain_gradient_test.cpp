@@ -242,4 +242,26 @@ TEST(ClosedChainExcitation, PalletizerShortDesignLowersTheCriterion) {
   EXPECT_LT(r.criterion_final, 0.5 * r.criterion_initial);
 }
 
+TEST(ClosedChainExcitation, EnergyModelDesignVjpThroughTheLoops) {
+  // the `integral` (energy) model's design VJP: the tree's energy gradient mapped to the
+  // actuated coordinates by the chain rule (jointGradientToMeasured)
+  for (const char* robot : {"fourbar", "palletizer"}) {
+    exid::RunContext ctx;
+    auto r = exid_test::robot(robot);
+    auto model = exid_test::create<exid::ObservationModel>(
+        "integral", "{rotor_inertia: true, friction: true, offset: true, window_s: 0.2}");
+    model->bind(r, ctx);
+    auto traj = exid_test::create<exid::Trajectory>(
+        "fourier", "{period_s: 2, harmonics: 2, sample_period_s: 0.1, init: random, "
+                   "init_scale: 0.3}");
+    traj->bind(r, ctx);
+    const exid::Samples s = traj->evaluate(traj->initial());
+    exid::DerivativeCheckOptions o;
+    o.relative_step = 1e-4;  // (the position solve's residual over the step, as above)
+    const exid::DerivativeCheck c = exid::checkModel(*model, s, o);
+    std::cout << "  " << robot << ": " << c.message() << "\n";
+    EXPECT_TRUE(c.ok) << robot << ": " << c.message();
+  }
+}
+
 }  // namespace

@@ -243,6 +243,43 @@ void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Ei
   }
 }
 
+void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
+                             const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                             Eigen::VectorXd* gq, Eigen::VectorXd* gqd, Eigen::VectorXd* gqdd) {
+  check(gq != nullptr, "jointGradientToMeasured: gq must be given");
+  if (!model.hasLoops()) {
+    if (!model.hasTransmission()) return;
+    for (Eigen::VectorXd* g : {gq, gqd, gqdd})
+      if (g) *g = (model.transmission.transpose() * *g).eval();
+    return;
+  }
+  const int nt = model.numJoints();
+  for (Eigen::VectorXd* g : {gq, gqd, gqdd})
+    check(!g || g->size() == nt, "jointGradientToMeasured: robot '" + model.name +
+                                     "' (a closed chain): a gradient has " +
+                                     std::to_string(g ? g->size() : 0) + " entries (expected " +
+                                     std::to_string(nt) + ", the tree's joints)");
+  checkMeasured(model, qm, "qm", "jointGradientToMeasured");
+  checkMeasured(model, qdm, "qdm", "jointGradientToMeasured");
+  checkMeasured(model, qddm, "qddm", "jointGradientToMeasured");
+  Eigen::MatrixXd Gm, Dqd, Dqdd_a, Dqdd_ad;
+  closedChainStateDerivatives(model, qm, qdm, qddm, nullptr, nullptr, nullptr, &Gm, nullptr,
+                              gqd ? &Dqd : nullptr, gqdd ? &Dqdd_a : nullptr,
+                              gqdd ? &Dqdd_ad : nullptr);
+  // d/dqa = G^T gq + (dqd/dqa)^T gqd + (dqdd/dqa)^T gqdd, d/dqda = G^T gqd + (dqdd/dqda)^T gqdd,
+  // d/dqdda = G^T gqdd
+  Eigen::VectorXd a = Gm.transpose() * *gq;
+  if (gqd) a += Dqd.transpose() * *gqd;
+  if (gqdd) a += Dqdd_a.transpose() * *gqdd;
+  if (gqd) {
+    Eigen::VectorXd ad = Gm.transpose() * *gqd;
+    if (gqdd) ad += Dqdd_ad.transpose() * *gqdd;
+    *gqd = ad;
+  }
+  if (gqdd) *gqdd = (Gm.transpose() * *gqdd).eval();
+  *gq = a;
+}
+
 void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
                        const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
                        const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y) {

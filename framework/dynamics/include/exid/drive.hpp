@@ -60,6 +60,16 @@ EXID_API void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q,
                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                               Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm);
 
+/// A scalar's gradient with respect to the joint coordinates (gq, gqd, gqdd: numJoints entries,
+/// of a function of q, qd, qdd) mapped in place to the measured coordinates at the sample (qm,
+/// qdm, qddm): through the transmission (T^T g), or for a closed chain by the chain rule through
+/// q = phi(qa), qd = G qda, qdd = G qdda + g(qa, qda) (closedChainStateDerivatives). gqdd null:
+/// the function does not depend on qdd; gqd null: nor on qd.
+EXID_API void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
+                                      const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                                      Eigen::VectorXd* gq, Eigen::VectorXd* gqd,
+                                      Eigen::VectorXd* gqdd);
+
 /// Y (n x numParameters) in measured coordinates: tau_m = Y * parameterValues(model, cols).
 EXID_API void actuatorRegressor(const RobotModel& model, DynamicsData& data,
                                 const DriveColumns& cols, const Eigen::VectorXd& qm,
