@@ -4,7 +4,10 @@
 // example study runs; excitation design by gradient runs through the loops.
 #include <gtest/gtest.h>
 
+#include <iostream>
 #include <sstream>
+#include <utility>
+#include <vector>
 #include <string>
 
 #include "exid/config.hpp"
@@ -108,6 +111,37 @@ TEST(ClosedChainStudy, ExcitationDesignByGradientRunsThroughTheLoops) {
   RecordProperty("cond_final", std::to_string(x->find("criterion_final")->asDouble()));
   const exid::StudyResult tree = run("irp6", "{type: batch_ls}", exc, "{duration_s: 3.9}");
   EXPECT_TRUE(tree.ok) << tree.message;
+}
+
+TEST(ClosedChainStudy, PalletizerVarproAndGainsLs) {
+  // varpro: the friction's tanh width (the model's nonlinear parameter) fitted with the base
+  // parameters, from a start twice the plant's; gains_ls: the load-dependent Coulomb columns
+  // (the plant has none: FcL = 0) fitted by Levenberg-Marquardt with the recorded torque in them
+  const std::string sim =
+      "experiment: {type: simulate, params: {period_s: 10, harmonics: 5, duration_s: 10, "
+      "sample_period_s: 0.005";
+  for (const auto& [model, est] : std::vector<std::pair<std::string, std::string>>{
+           {"{rotor_inertia: true, viscous: true, coulomb: true, offset: true, "
+            "coulomb_smoothing_rad_s: [0.1]}",
+            "{type: varpro}"},
+           {"{rotor_inertia: true, viscous: true, coulomb: true, offset: true, "
+            "coulomb_load: true}",
+            "{type: gains_ls}"}}) {
+    const std::string exp =
+        sim + (est == "{type: varpro}" ? ", coulomb: tanh, coulomb_velocity_scale: 0.05" : "") +
+        "}}\n";
+    const std::string study = "robot: {type: palletizer}\nmodel: {type: differential, params: " +
+                              model + "}\n" + exp + "estimator: " + est + "\n";
+    exid::StudyConfig cfg = exid::parseStudy(study, "closed_nonlinear.yaml",
+                                             exid_test::sourceDir(), exid_test::registry());
+    const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), exid::RunOptions{});
+    ASSERT_TRUE(r.ok) << est << ": " << r.message;
+    std::ostringstream os;
+    os << std::scientific << relErr(r);
+    std::cout << "  " << est << ": param_rel_err " << os.str() << "\n";
+    RecordProperty(est, os.str());
+    EXPECT_LT(relErr(r), 1e-9) << est;
+  }
 }
 
 TEST(ClosedChainStudy, ExampleStudyRuns) {

@@ -69,11 +69,12 @@ TEST(ClosedChainLoop, DidimAndIvIdentifyThePalletizer) {
     RecordProperty(est, fmt::format("{:.3e}", err));
     if (est == "didim") {
       // its sensitivities (through the actuated torque's derivatives in qa, qda) against central
-      // differences of the simulation
+      // differences of the simulation: 2.7e-6 (at rtol 1e-12); with the tree's dtau/dq G term
+      // of the actuated torque's derivative 10 % off, 2.4e-5
       const double grad =
           r.details.find("gradient_check")->find("max_relative_difference")->asDouble();
       std::printf("[didim] sensitivities against central differences %.2e\n", grad);
-      EXPECT_LT(grad, 1e-3);
+      EXPECT_LT(grad, 1e-5);
       EXPECT_LT(err, 1e-8);
     } else {
       EXPECT_LT(err, 1e-9);
