@@ -351,10 +351,10 @@ TEST(ClosedChain, Errors) {
                                       Eigen::MatrixXd::Zero(1, numParameters(good, none) + 1), &g1,
                                       &g2, &g3),
                  Error);
-    EXPECT_THROW(actuatorRegressorVjp(good, *d, none, z3, z, z,
-                                      Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1,
-                                      &g2, &g3),
-                 Error);
+    EXPECT_THROW(
+        actuatorRegressorVjp(good, *d, none, z3, z, z,
+                             Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1, &g2, &g3),
+        Error);
     Eigen::VectorXd gq = z;  // a tree gradient has numJoints entries
     EXPECT_THROW(jointGradientToMeasured(good, z, z, z, &gq, nullptr, nullptr), Error);
   }

@@ -60,8 +60,8 @@ TEST_P(ClosedChainGradient, StateDerivativesAgainstCentralDifferences) {
     Eigen::VectorXd q, qd, qdd;
     Eigen::MatrixXd G, Dqd, Dqdd, Dqdd_d;
     std::vector<Eigen::MatrixXd> dG;
-    exid::closedChainStateDerivatives(m, s.qa, s.qda, s.qdda, &q, &qd, &qdd, &G, &dG, &Dqd,
-                                      &Dqdd, &Dqdd_d);
+    exid::closedChainStateDerivatives(m, s.qa, s.qda, s.qdda, &q, &qd, &qdd, &G, &dG, &Dqd, &Dqdd,
+                                      &Dqdd_d);
     ASSERT_EQ(static_cast<int>(dG.size()), n);
     // the values are closedChainState's
     Eigen::VectorXd q2, qd2, qdd2;
@@ -80,7 +80,8 @@ TEST_P(ClosedChainGradient, StateDerivativesAgainstCentralDifferences) {
       const Eigen::MatrixXd fdG = (Gp - Gmi) / (2 * h);
       largest_dG = std::max(largest_dG, fdG.lpNorm<Eigen::Infinity>());
       worst = std::max(worst, relDiff(dG[static_cast<std::size_t>(k)], fdG));
-      EXPECT_LT(relDiff(dG[static_cast<std::size_t>(k)], fdG), 1e-7) << GetParam() << " dG/dqa" << k;
+      EXPECT_LT(relDiff(dG[static_cast<std::size_t>(k)], fdG), 1e-7)
+          << GetParam() << " dG/dqa" << k;
       EXPECT_LT(relDiff(Dqd.col(k), (qdp - qdm) / (2 * h)), 1e-7) << GetParam() << " dqd/dqa" << k;
       EXPECT_LT(relDiff(Dqdd.col(k), (qddp - qddm) / (2 * h)), 1e-7)
           << GetParam() << " dqdd/dqa" << k;
@@ -191,8 +192,8 @@ Design palletizerDesign(const std::string& criterion, double torque_margin) {
   xo.velocity_limits = d.traj->velocityLimits();
   xo.acceleration_limits = d.traj->accelerationLimits();
   xo.torque_margin = torque_margin;
-  d.problem = exid::makeExcitationProblem(
-      d.traj, d.model, exid_test::create<exid::Criterion>(criterion, "{}"), xo);
+  d.problem = exid::makeExcitationProblem(d.traj, d.model,
+                                          exid_test::create<exid::Criterion>(criterion, "{}"), xo);
   return d;
 }
 
@@ -234,8 +235,8 @@ TEST(ClosedChainExcitation, PalletizerShortDesignLowersTheCriterion) {
       exid_test::create<exid::Optimizer>(
           "nlopt", "{algorithm: LD_SLSQP, objective: log, starts: 1, max_evaluations: 60}")
           ->minimize(*d.problem, ctx);
-  std::cout << "  palletizer cond: " << r.criterion_initial << " -> " << r.criterion_final
-            << " (" << exid::stopReasonText(r) << ")\n";
+  std::cout << "  palletizer cond: " << r.criterion_initial << " -> " << r.criterion_final << " ("
+            << exid::stopReasonText(r) << ")\n";
   RecordProperty("cond_initial", std::to_string(r.criterion_initial));
   RecordProperty("cond_final", std::to_string(r.criterion_final));
   EXPECT_TRUE(r.feasible) << exid::stopReasonText(r);
@@ -252,8 +253,9 @@ TEST(ClosedChainExcitation, EnergyModelDesignVjpThroughTheLoops) {
         "integral", "{rotor_inertia: true, friction: true, offset: true, window_s: 0.2}");
     model->bind(r, ctx);
     auto traj = exid_test::create<exid::Trajectory>(
-        "fourier", "{period_s: 2, harmonics: 2, sample_period_s: 0.1, init: random, "
-                   "init_scale: 0.3}");
+        "fourier",
+        "{period_s: 2, harmonics: 2, sample_period_s: 0.1, init: random, "
+        "init_scale: 0.3}");
     traj->bind(r, ctx);
     const exid::Samples s = traj->evaluate(traj->initial());
     exid::DerivativeCheckOptions o;

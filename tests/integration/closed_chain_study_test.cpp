@@ -88,8 +88,8 @@ TEST(ClosedChainStudy, PalletizerIdentifiesWithDidimAndIvFromATrackingRecording)
   const std::filesystem::path dir = exid_cli::freshTempDir("exid_closed_study_", "loop");
   cltest::writeReference(ref, dir / "reference.csv");
   mtest::writeCsv(d, dir / "rec.csv");
-  const std::string loop = "reference_file: " + (dir / "reference.csv").string() + ", " +
-                           cltest::gains(d.meta);
+  const std::string loop =
+      "reference_file: " + (dir / "reference.csv").string() + ", " + cltest::gains(d.meta);
   for (const std::string est :
        {"{type: didim, params: {" + loop + ", rtol: 1e-12, atol: 1e-14, step_tolerance: 1e-12}}",
         "{type: iv, params: {" + loop + "}}"}) {
@@ -99,8 +99,8 @@ TEST(ClosedChainStudy, PalletizerIdentifiesWithDidimAndIvFromATrackingRecording)
         "offset: true, coulomb_smoothing_rad_s: [0.05]}}\n"
         "experiment: {type: csv, params: {file: " +
         (dir / "rec.csv").string() + "}}\nestimator: " + est + "\n";
-    exid::StudyConfig cfg = exid::parseStudy(study, "closed_loop.yaml", exid_test::sourceDir(),
-                                             exid_test::registry());
+    exid::StudyConfig cfg =
+        exid::parseStudy(study, "closed_loop.yaml", exid_test::sourceDir(), exid_test::registry());
     exid::RunOptions o;
     o.out_dir = dir / ("out_" + est.substr(7, 5));
     const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), o);
@@ -200,10 +200,11 @@ TEST(ClosedChainStudy, PalletizerVarproAndGainsLs) {
     const std::string exp =
         sim + (est == "{type: varpro}" ? ", coulomb: tanh, coulomb_velocity_scale: 0.05" : "") +
         "}}\n";
-    const std::string study = "robot: {type: palletizer}\nmodel: {type: differential, params: " +
-                              model + "}\n" + exp + "estimator: " + est + "\n";
-    exid::StudyConfig cfg = exid::parseStudy(study, "closed_nonlinear.yaml",
-                                             exid_test::sourceDir(), exid_test::registry());
+    const std::string study =
+        "robot: {type: palletizer}\nmodel: {type: differential, params: " + model + "}\n" + exp +
+        "estimator: " + est + "\n";
+    exid::StudyConfig cfg = exid::parseStudy(study, "closed_nonlinear.yaml", exid_test::sourceDir(),
+                                             exid_test::registry());
     const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), exid::RunOptions{});
     ASSERT_TRUE(r.ok) << est << ": " << r.message;
     std::ostringstream os;

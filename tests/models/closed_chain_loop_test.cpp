@@ -30,19 +30,19 @@ cltest::Loop palletizerTracking(double duration, const std::string& tmp_prefix) 
   ref.qd *= scale;
   ref.qdd *= scale;
   ref.q.col(2).array() += M_PI / 2;
-  s.data = mtest::simulate(s.robot,
-                           "{controller: pd_feedforward, kp: 4000, kd: 400, sample_period_s: 0.005, "
-                           "coulomb: tanh, coulomb_velocity_scale: 0.05, rtol: 1e-12, atol: 1e-14}",
-                           7, &ref);
+  s.data =
+      mtest::simulate(s.robot,
+                      "{controller: pd_feedforward, kp: 4000, kd: 400, sample_period_s: 0.005, "
+                      "coulomb: tanh, coulomb_velocity_scale: 0.05, rtol: 1e-12, atol: 1e-14}",
+                      7, &ref);
   const std::filesystem::path dir = exid_cli::freshTempDir(tmp_prefix, "ref");
   cltest::writeReference(ref, dir / "reference.csv");
   s.params = fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(),
                          cltest::gains(s.data.meta));
-  s.model = mtest::model(
-      "differential",
-      "{rotor_inertia: true, viscous: true, coulomb: true, offset: true, "
-      "coulomb_smoothing_rad_s: [0.05]}",
-      s.robot);
+  s.model = mtest::model("differential",
+                         "{rotor_inertia: true, viscous: true, coulomb: true, offset: true, "
+                         "coulomb_smoothing_rad_s: [0.05]}",
+                         s.robot);
   s.truth = s.model->baseNominal();
   return s;
 }

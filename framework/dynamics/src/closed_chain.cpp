@@ -9,7 +9,6 @@
 #include <cmath>
 #include <sstream>
 #include <utility>
-#include <utility>
 #include <vector>
 
 #include "exid/error.hpp"
@@ -459,7 +458,7 @@ Eigen::VectorXd loopConstraintJerk(const RobotModel& model, const Eigen::VectorX
     const V3 al0 = pa < 0 ? V3::Zero() : k.al[pa], a0 = pa < 0 ? V3::Zero() : k.a[pa];
     const V3 sw = k.sw[i], sv = k.sv[i];
     const V3 cw = w0.cross(sw), cv = w0.cross(sv) + v0.cross(sw);  // V x S
-    const V3 ddw = al0.cross(sw) + w0.cross(cw);                    // A x S + V x (V x S)
+    const V3 ddw = al0.cross(sw) + w0.cross(cw);                   // A x S + V x (V x S)
     const V3 ddv = al0.cross(sv) + a0.cross(sw) + w0.cross(cv) + v0.cross(cw);
     const double u = w[i];
     jw[static_cast<size_t>(i)] = (pa < 0 ? V3::Zero() : jw[static_cast<size_t>(pa)]) + ddw * u;
@@ -505,8 +504,8 @@ Eigen::VectorXd loopConstraintJerk(const RobotModel& model, const Eigen::VectorX
       for (int t = 0; t < 2; ++t) {
         V3 ae[3];
         vec(A.body, Ae[t], ae);
-        out[r + 3 + t] = ae[2].dot(Bu) + 3.0 * ae[1].dot(bu[0]) + 3.0 * ae[0].dot(bu[1]) +
-                         Ae[t].dot(bu[2]);
+        out[r + 3 + t] =
+            ae[2].dot(Bu) + 3.0 * ae[1].dot(bu[0]) + 3.0 * ae[0].dot(bu[1]) + Ae[t].dot(bu[2]);
       }
     }
     r += rowsOf(L);

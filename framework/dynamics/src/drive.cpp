@@ -45,7 +45,8 @@ void closedTorque(const RobotModel& model, DynamicsData& data, const Eigen::Vect
   std::vector<Eigen::MatrixXd> dG;
   Eigen::MatrixXd Dqd, Dqdd_a, Dqdd_ad;
   closedChainStateDerivatives(model, qm, qdm, qddm, &q, &qd, &qdd, &Gm, dq ? &dG : nullptr,
-                              dq ? &Dqd : nullptr, dq ? &Dqdd_a : nullptr, dqd ? &Dqdd_ad : nullptr);
+                              dq ? &Dqd : nullptr, dq ? &Dqdd_a : nullptr,
+                              dqd ? &Dqdd_ad : nullptr);
   Eigen::VectorXd tau;
   Eigen::MatrixXd Tq, Tqd, Tqdd;
   inverseDynamicsDerivatives(model, data, q, qd, qdd, pi, &tau, dq ? &Tq : nullptr, &Tqd, &Tqdd);
