@@ -2,7 +2,8 @@
 // the actuated coordinates (closedChainStateDerivatives, loopConstraintJerk) against central
 // differences of closedChainState, the actuated torque's derivatives and the actuated
 // regressor's VJP against differences of their values, on the shipped four-bar (a nonlinear G)
-// and palletiser (a parallelogram: G constant, the tree's dynamics nonlinear); then gradient-based
+// and palletiser (a parallelogram: G constant, the tree's dynamics nonlinear) and a planar
+// five-bar (two actuated cranks: G's cross derivatives); then gradient-based
 // excitation design on the palletiser: its gradient against differences, and a short design that
 // lowers the criterion.
 #include <gtest/gtest.h>
@@ -163,6 +164,101 @@ TEST_P(ClosedChainGradient, TorqueDerivativesAndRegressorVjpAgainstCentralDiffer
 
 INSTANTIATE_TEST_SUITE_P(ShippedClosedChains, ClosedChainGradient,
                          ::testing::Values("fourbar", "palletizer"));
+
+// A two-dof closed chain whose G depends on both actuated coordinates: a planar five-bar
+// (ground pivots 0.2 m apart, cranks 0.15 m, couplers 0.3 m, in the vertical x-y plane; actuated:
+// the two cranks; the cut joint where the couplers meet), so dG/dqa_k e_j, k != j, is exercised.
+exid::RobotModel fiveBar() {
+  const double a = 0.15, b = 0.3, d = 0.2, th1 = 2.0, th2 = 1.0;
+  exid::RobotModel m;
+  m.name = "five_bar";
+  m.gravity = Eigen::Vector3d(0, -9.81, 0);
+  std::vector<exid::Body> B(4);
+  B[0].name = "crank1", B[0].joint_name = "j1", B[0].parent = -1;
+  B[1].name = "coupler1", B[1].joint_name = "j2", B[1].parent = 0, B[1].pre.p = {a, 0.0, 0.0};
+  B[2].name = "crank2", B[2].joint_name = "j3", B[2].parent = -1, B[2].pre.p = {d, 0.0, 0.0};
+  B[3].name = "coupler2", B[3].joint_name = "j4", B[3].parent = 2, B[3].pre.p = {a, 0.0, 0.0};
+  for (int i = 0; i < 4; ++i) {
+    Eigen::Matrix<double, 10, 1> p;
+    p << 0.02 + 0.01 * i, 0.001, -0.002, 0.03, 0.0015, 0.025 + 0.005 * i, 0.1 + 0.05 * i, 0.01,
+        -0.02, 1.0 + 0.5 * i;
+    B[static_cast<std::size_t>(i)].inertia = p;
+  }
+  m.bodies = B;
+  exid::LoopJoint L;
+  L.name = "C";
+  L.body_a = 1, L.body_b = 3;
+  L.pose_a.p = {b, 0, 0};
+  L.pose_b.p = {b, 0, 0};
+  m.closed.loops = {L};
+  m.closed.actuated = {0, 2};
+  // the assembled reference: C on the circles of radius b about the cranks' ends
+  const Eigen::Vector2d B1(a * std::cos(th1), a * std::sin(th1)),
+      B2(d + a * std::cos(th2), a * std::sin(th2));
+  const Eigen::Vector2d u = (B2 - B1).normalized(), v(-u.y(), u.x());
+  const double l = (B2 - B1).norm();
+  const Eigen::Vector2d C = B1 + 0.5 * l * u + std::sqrt(b * b - 0.25 * l * l) * v;
+  m.closed.reference.resize(4);
+  m.closed.reference << th1, std::atan2(C.y() - B1.y(), C.x() - B1.x()) - th1, th2,
+      std::atan2(C.y() - B2.y(), C.x() - B2.x()) - th2;
+  m.limits.assign(2, exid::JointLimits{});
+  m.drives.assign(2, exid::Drive{});
+  m.validateStructure();
+  return m;
+}
+
+TEST(ClosedChainGradientTwoDof, FiveBarStateAndVjpAgainstCentralDifferences) {
+  const exid::RobotModel m = fiveBar();
+  const int n = m.dof();
+  ASSERT_EQ(n, 2);
+  std::mt19937 rng(5);
+  const double h = 1e-5;
+  double cross = 0.0;
+  exid::DriveColumns cols;
+  cols.viscous = true;
+  auto data = exid::makeDynamicsData(m);
+  const int P = exid::numParameters(m, cols);
+  for (int t = 0; t < 5; ++t) {
+    const State s = randomState(m, rng);
+    Eigen::MatrixXd G, Dqd, Dqdd, Dqdd_d;
+    std::vector<Eigen::MatrixXd> dG;
+    exid::closedChainStateDerivatives(m, s.qa, s.qda, s.qdda, nullptr, nullptr, nullptr, &G, &dG,
+                                      &Dqd, &Dqdd, &Dqdd_d);
+    const Eigen::MatrixXd W = Eigen::MatrixXd::Random(n, P);
+    Eigen::VectorXd gq, gqd, gqdd;
+    exid::actuatorRegressorVjp(m, *data, cols, s.qa, s.qda, s.qdda, W, &gq, &gqd, &gqdd);
+    auto inner = [&](const State& x) {
+      Eigen::MatrixXd Y(n, P);
+      exid::actuatorRegressor(m, *data, cols, x.qa, x.qda, x.qdda, Y);
+      return W.cwiseProduct(Y).sum();
+    };
+    for (int k = 0; k < n; ++k) {
+      State p = s, mi = s;
+      p.qa[k] += h, mi.qa[k] -= h;
+      Eigen::VectorXd qdp, qddp, qdm, qddm;
+      Eigen::MatrixXd Gp, Gmi;
+      exid::closedChainState(m, p.qa, &p.qda, &p.qdda, nullptr, &qdp, &qddp, &Gp, nullptr);
+      exid::closedChainState(m, mi.qa, &mi.qda, &mi.qdda, nullptr, &qdm, &qddm, &Gmi, nullptr);
+      const Eigen::MatrixXd fdG = (Gp - Gmi) / (2 * h);
+      cross = std::max(cross, fdG.col(1 - k).lpNorm<Eigen::Infinity>());
+      EXPECT_LT(relDiff(dG[static_cast<std::size_t>(k)], fdG), 1e-7) << "dG/dqa" << k;
+      EXPECT_LT(relDiff(Dqd.col(k), (qdp - qdm) / (2 * h)), 1e-7) << "dqd/dqa" << k;
+      EXPECT_LT(relDiff(Dqdd.col(k), (qddp - qddm) / (2 * h)), 1e-7) << "dqdd/dqa" << k;
+      const double fdv = (inner(p) - inner(mi)) / (2 * h);
+      EXPECT_LT(std::abs(gq[k] - fdv) / std::max(1.0, std::abs(fdv)), 1e-7) << "vjp qa" << k;
+      p = s, mi = s;
+      p.qda[k] += h, mi.qda[k] -= h;
+      exid::closedChainState(m, p.qa, &p.qda, &p.qdda, nullptr, nullptr, &qddp, nullptr, nullptr);
+      exid::closedChainState(m, mi.qa, &mi.qda, &mi.qdda, nullptr, nullptr, &qddm, nullptr,
+                             nullptr);
+      EXPECT_LT(relDiff(Dqdd_d.col(k), (qddp - qddm) / (2 * h)), 1e-7) << "dqdd/dqda" << k;
+      const double fdd = (inner(p) - inner(mi)) / (2 * h);
+      EXPECT_LT(std::abs(gqd[k] - fdd) / std::max(1.0, std::abs(fdd)), 1e-7) << "vjp qda" << k;
+    }
+  }
+  std::cout << "  five-bar: largest cross term |dG/dqa_k e_j|, k != j: " << cross << "\n";
+  EXPECT_GT(cross, 1e-2);  // the cross terms are exercised
+}
 
 // The palletiser's excitation problem: a Fourier trajectory of its four measured coordinates,
 // the differential model with drive columns, the torque limits as constraints (through the
