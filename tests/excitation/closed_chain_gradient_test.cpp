@@ -362,4 +362,28 @@ TEST(ClosedChainExcitation, EnergyModelDesignVjpThroughTheLoops) {
   }
 }
 
+TEST(ClosedChainExcitation, PayloadGainColumnsDesignVjpThroughTheLoops) {
+  // the `differential` model's drive-gain columns with a known payload (their design gradient
+  // projects the payload's torque through G, which depends on qa: the four-bar's does)
+  for (const char* robot : {"fourbar", "palletizer"}) {
+    exid::RunContext ctx;
+    auto r = exid_test::robot(robot);
+    auto model = exid_test::create<exid::ObservationModel>(
+        "differential",
+        "{offset: true, drive_gains: true, payload_mass_kg: 2.5, payload_com_m: [0.05, -0.02, "
+        "0.1], payload_inertia_kg_m2: [0.02, 0.001, 0, 0.03, -0.002, 0.015]}");
+    model->bind(r, ctx);
+    auto traj = exid_test::create<exid::Trajectory>(
+        "fourier",
+        "{period_s: 2, harmonics: 2, sample_period_s: 0.25, init: random, init_scale: 0.3}");
+    traj->bind(r, ctx);
+    const exid::Samples s = traj->evaluate(traj->initial());
+    exid::DerivativeCheckOptions o;
+    o.relative_step = 1e-4;  // (the position solve's residual over the step, as above)
+    const exid::DerivativeCheck c = exid::checkModel(*model, s, o);
+    std::cout << "  " << robot << ": " << c.message() << "\n";
+    EXPECT_TRUE(c.ok) << robot << ": " << c.message();
+  }
+}
+
 }  // namespace
