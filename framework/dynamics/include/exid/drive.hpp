@@ -75,7 +75,8 @@ EXID_API void actuatorRegressor(const RobotModel& model, DynamicsData& data,
                                 const DriveColumns& cols, const Eigen::VectorXd& qm,
                                 const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
                                 Eigen::Ref<Eigen::MatrixXd> Y);
-/// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative).
+/// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative); a closed
+/// chain's through the loop constraints (Y = G_c^T Y_tree with G_c = dq/dqa depending on qa).
 EXID_API void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data,
                                    const DriveColumns& cols, const Eigen::VectorXd& qm,
                                    const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
@@ -87,7 +88,8 @@ EXID_API Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& d
                                         const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
 /// actuatorTorque and its partial derivatives with respect to qm, qdm, qddm (n x n each, row i
 /// the gradient of tau_m,i; sign(qd) has zero derivative). Exact (inverseDynamicsDerivatives
-/// mapped through the transmission). The derivative outputs may be null.
+/// mapped through the transmission, or for a closed chain through the loop constraints:
+/// closedChainStateDerivatives). The derivative outputs may be null.
 EXID_API void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
                                         const DriveColumns& cols, const Eigen::VectorXd& qm,
                                         const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
