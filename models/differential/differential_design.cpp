@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <vector>
 
 #include "differential.hpp"
 #include "exid/closed_chain.hpp"
@@ -326,13 +327,34 @@ void DifferentialModel::payloadTorqueVjp(const exid::Samples& s, const Eigen::Ma
   Eigen::MatrixXd Gm(n, 10), G(n, 10);
   Eigen::VectorXd q, qd, qdd, gq, gqd, gqdd;
   for (int k = 1; k < K; k += 2) {
-    exid::measuredToJoint(R, s.q.row(k).transpose(), s.qd.row(k).transpose(),
-                          s.qdd.row(k).transpose(), &q, &qd, &qdd);
     Gm.setZero();
     for (int i = 0; i < m; ++i) {
       const int j = sel_[static_cast<std::size_t>(i)];
       Gm.row(j) -= dW(static_cast<Eigen::Index>(k) * m + i, P + j) * design_phi_.transpose();
     }
+    if (R.hasLoops()) {
+      // <Gm, Gc^T Yp(q, qd, qdd)> with Gc = dq/dqa: the tree VJP of Gc Gm, mapped by the chain
+      // rule, plus <dGc/dqa_l Gm, Yp> (the projection depends on qa too)
+      const Eigen::VectorXd a = s.q.row(k).transpose(), ad = s.qd.row(k).transpose(),
+                            add = s.qdd.row(k).transpose();
+      Eigen::MatrixXd Gc;
+      std::vector<Eigen::MatrixXd> dGc;
+      exid::closedChainStateDerivatives(R, a, ad, add, &q, &qd, &qdd, &Gc, &dGc, nullptr, nullptr,
+                                        nullptr);
+      const Eigen::MatrixXd Gt = Gc * Gm;
+      exid::payloadTorqueRegressorVjp(R, *data, q, qd, qdd, Gt, &gq, &gqd, &gqdd);
+      exid::jointGradientToMeasured(R, a, ad, add, &gq, &gqd, &gqdd);
+      Eigen::MatrixXd Yp(R.numJoints(), 10);
+      exid::payloadTorqueRegressor(R, *data, q, qd, qdd, Yp);
+      for (int l = 0; l < n; ++l)
+        gq[l] += (dGc[static_cast<std::size_t>(l)] * Gm).cwiseProduct(Yp).sum();
+      grad->q.row(k) += gq.transpose();
+      grad->qd.row(k) += gqd.transpose();
+      grad->qdd.row(k) += gqdd.transpose();
+      continue;
+    }
+    exid::measuredToJoint(R, s.q.row(k).transpose(), s.qd.row(k).transpose(),
+                          s.qdd.row(k).transpose(), &q, &qd, &qdd);
     if (R.hasTransmission())
       G.noalias() = R.transmission * Gm;
     else

@@ -185,8 +185,7 @@ class IntegralModel : public exid::ObservationModel {
       exid::measuredToJoint(Rb, qm, qdm, qdm, &q, &qd, nullptr);
       const Eigen::RowVectorXd G = dE.row(k).head(ni);
       exid::energyRegressorVjp(Rb, *data, q, qd, G, G, &gq, &gqd);
-      exid::models::jointGradToMeasured(Rb, &gq);
-      exid::models::jointGradToMeasured(Rb, &gqd);
+      exid::jointGradientToMeasured(Rb, qm, qdm, qdm, &gq, &gqd, nullptr);
       for (int j = 0; j < n; ++j) {
         int c = ni + nd * j;
         const double v = qdm[j];

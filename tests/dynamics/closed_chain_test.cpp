@@ -337,14 +337,25 @@ TEST(ClosedChain, Errors) {
     m.transmission = Eigen::MatrixXd::Identity(1, 1);
     EXPECT_THROW(m.validateStructure(), Error);
   }
-  {  // the regressor's gradient is refused, with the reason
+  {  // the regressor's gradient through the loops (tests/excitation/closed_chain_gradient_test):
+     // its inputs' sizes are checked
     auto d = makeDynamicsData(good);
     const DriveColumns none;
-    const Eigen::VectorXd z = Eigen::VectorXd::Zero(1);
+    const Eigen::VectorXd z = Eigen::VectorXd::Zero(1), z3 = Eigen::VectorXd::Zero(3);
     Eigen::VectorXd g1, g2, g3;
+    EXPECT_NO_THROW(actuatorRegressorVjp(good, *d, none, z, z, z,
+                                         Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1,
+                                         &g2, &g3));
+    EXPECT_EQ(g1.size(), 1);
+    EXPECT_THROW(actuatorRegressorVjp(good, *d, none, z, z, z,
+                                      Eigen::MatrixXd::Zero(1, numParameters(good, none) + 1), &g1,
+                                      &g2, &g3),
+                 Error);
     EXPECT_THROW(
-        actuatorRegressorVjp(good, *d, none, z, z, z,
+        actuatorRegressorVjp(good, *d, none, z3, z, z,
                              Eigen::MatrixXd::Zero(1, numParameters(good, none)), &g1, &g2, &g3),
         Error);
+    Eigen::VectorXd gq = z;  // a tree gradient has numJoints entries
+    EXPECT_THROW(jointGradientToMeasured(good, z, z, z, &gq, nullptr, nullptr), Error);
   }
 }

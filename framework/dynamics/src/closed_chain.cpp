@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <sstream>
+#include <utility>
 #include <vector>
 
 #include "exid/error.hpp"
@@ -438,6 +439,148 @@ void closedChainState(const RobotModel& m, const Eigen::VectorXd& qa, const Eige
     if (g_out) *g_out = g;
   }
   if (G_out) *G_out = G;
+}
+
+Eigen::VectorXd loopConstraintJerk(const RobotModel& model, const Eigen::VectorXd& q,
+                                   const Eigen::VectorXd& w) {
+  check(q.size() == model.numJoints() && w.size() == model.numJoints(),
+        "loopConstraintJerk: q and w must have numJoints entries");
+  const int n = model.numJoints();
+  Kin k;
+  kinematics(model, q, &w, nullptr, k);
+  // spatial jerk (d/dt of the spatial acceleration) at qdd = qddd = 0:
+  // Jk_i = Jk_parent + Sdd_i qd_i, Sdd_i = A_parent x S_i + V_parent x (V_parent x S_i)
+  // (motion cross product (w; v) x (sw; sv) = (w x sw; w x sv + v x sw))
+  std::vector<V3> jw(static_cast<size_t>(n)), jv(static_cast<size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    const int pa = model.bodies[static_cast<size_t>(i)].parent;
+    const V3 w0 = pa < 0 ? V3::Zero() : k.w[pa], v0 = pa < 0 ? V3::Zero() : k.v[pa];
+    const V3 al0 = pa < 0 ? V3::Zero() : k.al[pa], a0 = pa < 0 ? V3::Zero() : k.a[pa];
+    const V3 sw = k.sw[i], sv = k.sv[i];
+    const V3 cw = w0.cross(sw), cv = w0.cross(sv) + v0.cross(sw);  // V x S
+    const V3 ddw = al0.cross(sw) + w0.cross(cw);                   // A x S + V x (V x S)
+    const V3 ddv = al0.cross(sv) + a0.cross(sw) + w0.cross(cv) + v0.cross(cw);
+    const double u = w[i];
+    jw[static_cast<size_t>(i)] = (pa < 0 ? V3::Zero() : jw[static_cast<size_t>(pa)]) + ddw * u;
+    jv[static_cast<size_t>(i)] = (pa < 0 ? V3::Zero() : jv[static_cast<size_t>(pa)]) + ddv * u;
+  }
+  // a point x and a vector e fixed in body b, their first three time derivatives:
+  //   x3 = jv + jw x x + 2 al x x1 + w x x2,   e3 = jw x e + 2 al x e1 + w x e2
+  auto point = [&](int b, const V3& x, V3 d[3]) {
+    if (b < 0) {
+      d[0] = d[1] = d[2] = V3::Zero();
+      return;
+    }
+    const auto u = static_cast<size_t>(b);
+    d[0] = k.v[b] + k.w[b].cross(x);
+    d[1] = k.a[b] + k.al[b].cross(x) + k.w[b].cross(d[0]);
+    d[2] = jv[u] + jw[u].cross(x) + 2.0 * k.al[b].cross(d[0]) + k.w[b].cross(d[1]);
+  };
+  auto vec = [&](int b, const V3& e, V3 d[3]) {
+    if (b < 0) {
+      d[0] = d[1] = d[2] = V3::Zero();
+      return;
+    }
+    const auto u = static_cast<size_t>(b);
+    d[0] = k.w[b].cross(e);
+    d[1] = k.al[b].cross(e) + k.w[b].cross(d[0]);
+    d[2] = jw[u].cross(e) + 2.0 * k.al[b].cross(d[0]) + k.w[b].cross(d[1]);
+  };
+  Eigen::VectorXd out(numLoopConstraints(model));
+  int r = 0;
+  for (const LoopJoint& L : model.closed.loops) {
+    const Side A = side(model, k, L.body_a, L.pose_a), B = side(model, k, L.body_b, L.pose_b);
+    V3 da[3], db[3];
+    point(A.body, A.x, da);
+    point(B.body, B.x, db);
+    out.segment<3>(r) = db[2] - da[2];
+    if (L.kind == LoopJoint::Kind::Revolute) {
+      V3 e1, e2;
+      across(L.axis, &e1, &e2);
+      const V3 Bu = B.R * L.axis.normalized();
+      V3 bu[3];
+      vec(B.body, Bu, bu);
+      const V3 Ae[2] = {A.R * e1, A.R * e2};
+      for (int t = 0; t < 2; ++t) {
+        V3 ae[3];
+        vec(A.body, Ae[t], ae);
+        out[r + 3 + t] =
+            ae[2].dot(Bu) + 3.0 * ae[1].dot(bu[0]) + 3.0 * ae[0].dot(bu[1]) + Ae[t].dot(bu[2]);
+      }
+    }
+    r += rowsOf(L);
+  }
+  return out;
+}
+
+void closedChainStateDerivatives(const RobotModel& m, const Eigen::VectorXd& qa,
+                                 const Eigen::VectorXd& qda, const Eigen::VectorXd& qdda,
+                                 Eigen::VectorXd* q_out, Eigen::VectorXd* qd_out,
+                                 Eigen::VectorXd* qdd_out, Eigen::MatrixXd* G_out,
+                                 std::vector<Eigen::MatrixXd>* dG_out, Eigen::MatrixXd* dqd_dqa,
+                                 Eigen::MatrixXd* dqdd_dqa, Eigen::MatrixXd* dqdd_dqda) {
+  const int n = m.numJoints(), na = m.dof();
+  if (qda.size() != na || qdda.size() != na)
+    throw Error("closedChainStateDerivatives: qda and qdda must have " + std::to_string(na) +
+                " entries (the actuated joints of " + robotLabel(m) + ")");
+  Eigen::VectorXd q, qd, qdd;
+  Eigen::MatrixXd G;
+  closedChainState(m, qa, &qda, &qdda, &q, &qd, &qdd, &G, nullptr);
+  if (q_out) *q_out = q;
+  if (qd_out) *qd_out = qd;
+  if (qdd_out) *qdd_out = qdd;
+  if (G_out) *G_out = G;
+  if (!dG_out && !dqd_dqa && !dqdd_dqa && !dqdd_dqda) return;
+  const std::vector<int> passive = passiveJoints(m);
+  Eigen::MatrixXd J;
+  loopConstraint(m, q, nullptr, &J);
+  PassiveSolver S(columns(J, passive));
+  // y = -Jp^+ rhs, lifted to the tree (zero on the actuated joints)
+  auto lift = [&](const Eigen::VectorXd& rhs) {
+    const Eigen::VectorXd y = -S.cod.solve(rhs);
+    Eigen::VectorXd out = Eigen::VectorXd::Zero(n);
+    for (std::size_t r = 0; r < passive.size(); ++r)
+      out[passive[r]] = y[static_cast<Eigen::Index>(r)];
+    return out;
+  };
+  // the constraint's Hessian H(u, v) and third-derivative tensor T(u, v, v) by polarisation of
+  // the exactly quadratic bias H(w, w) and the exactly cubic jerk T(w, w, w)
+  auto H = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& v) -> Eigen::VectorXd {
+    return 0.25 * (loopConstraintBias(m, q, u + v) - loopConstraintBias(m, q, u - v));
+  };
+  auto T = [&](const Eigen::VectorXd& u, const Eigen::VectorXd& v) -> Eigen::VectorXd {
+    return (loopConstraintJerk(m, q, v + u) - loopConstraintJerk(m, q, v - u) -
+            2.0 * loopConstraintJerk(m, q, u)) /
+           6.0;
+  };
+  // J G = 0  =>  J (dG/dqa_k) e_j = -H(G e_k, G e_j)
+  std::vector<Eigen::MatrixXd> dG(static_cast<std::size_t>(na), Eigen::MatrixXd::Zero(n, na));
+  for (int kk = 0; kk < na; ++kk)
+    for (int j = kk; j < na; ++j) {
+      const Eigen::VectorXd col = lift(H(G.col(kk), G.col(j)));
+      dG[static_cast<std::size_t>(kk)].col(j) = col;
+      dG[static_cast<std::size_t>(j)].col(kk) = col;  // symmetric: d2 q / dqa_k dqa_j
+    }
+  Eigen::MatrixXd Dqd(n, na);
+  for (int kk = 0; kk < na; ++kk) Dqd.col(kk) = dG[static_cast<std::size_t>(kk)] * qda;
+  if (dqd_dqa) *dqd_dqa = Dqd;
+  if (dqdd_dqa) {
+    // qdd = G qdda + g with J g + H(qd, qd) = 0, so along qa_k (u_k = G e_k):
+    // J dg_k = -(H(u_k, g) + T(u_k, qd, qd) + 2 H(qd, dqd_k))
+    const Eigen::VectorXd gb = qdd - G * qdda;
+    dqdd_dqa->resize(n, na);
+    for (int kk = 0; kk < na; ++kk) {
+      const Eigen::VectorXd u = G.col(kk);
+      dqdd_dqa->col(kk) = dG[static_cast<std::size_t>(kk)] * qdda +
+                          lift(H(u, gb) + T(u, qd) + 2.0 * H(qd, Dqd.col(kk)));
+    }
+  }
+  if (dqdd_dqda) {
+    // J dg/dqda_j = -2 H(qd, G e_j)
+    dqdd_dqda->resize(n, na);
+    for (int j = 0; j < na; ++j) dqdd_dqda->col(j) = lift(2.0 * H(qd, G.col(j)));
+  }
+  if (dG_out) *dG_out = std::move(dG);
 }
 
 void validateClosedChain(const RobotModel& m) {

@@ -3,6 +3,7 @@
 
 #include <Eigen/LU>
 #include <string>
+#include <vector>
 
 #include "exid/closed_chain.hpp"
 #include "exid/error.hpp"
@@ -21,25 +22,86 @@ void checkMeasured(const RobotModel& m, const Eigen::VectorXd& x, const char* wh
                 " entries (expected " + std::to_string(m.dof()) + ")");
 }
 
-// A closed chain's actuated torque (G^T tau_tree) and mass matrix (G^T M G) with parameters pi
-// (null: the model's); derivatives in qm and qdm are not available (they need dG/dqa).
+// A closed chain's actuated torque tau_a = G^T tau_tree (pi null: the model's parameters), its
+// mass matrix G^T M G, and (dq, dqd) its derivatives in qa and qda through the loop constraints:
+//   d tau_a/d qa_k = dG_k^T tau + G^T (Tq G e_k + Tqd dqd_k + Tqdd dqdd_k)
+//   d tau_a/d qda  = G^T (Tqd G + Tqdd dqdd/dqda)
+// with Tq, Tqd, Tqdd the tree's inverse-dynamics derivatives.
 void closedTorque(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd* pi,
                   const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
                   const Eigen::VectorXd& qddm, Eigen::VectorXd* tau_m, Eigen::MatrixXd* dq,
                   Eigen::MatrixXd* dqd, Eigen::MatrixXd* dqdd, const char* fn) {
-  if (dq || dqd)
-    throw Error(std::string(fn) + ": robot '" + model.name +
-                "' is a closed chain; the torque's derivatives with respect to the measured "
-                "positions and velocities are not implemented for closed chains (only the mass "
-                "matrix, with respect to the accelerations)");
   checkMeasured(model, qm, "qm", fn);
   checkMeasured(model, qdm, "qdm", fn);
   checkMeasured(model, qddm, "qddm", fn);
   Eigen::VectorXd q, qd, qdd;
   Eigen::MatrixXd Gm;
-  closedChainState(model, qm, &qdm, &qddm, &q, &qd, &qdd, &Gm, nullptr);
-  *tau_m = Gm.transpose() * inverseDynamics(model, data, q, qd, qdd, pi);
-  if (dqdd) *dqdd = Gm.transpose() * massMatrix(model, data, q, pi) * Gm;
+  if (!dq && !dqd) {
+    closedChainState(model, qm, &qdm, &qddm, &q, &qd, &qdd, &Gm, nullptr);
+    *tau_m = Gm.transpose() * inverseDynamics(model, data, q, qd, qdd, pi);
+    if (dqdd) *dqdd = Gm.transpose() * massMatrix(model, data, q, pi) * Gm;
+    return;
+  }
+  std::vector<Eigen::MatrixXd> dG;
+  Eigen::MatrixXd Dqd, Dqdd_a, Dqdd_ad;
+  closedChainStateDerivatives(model, qm, qdm, qddm, &q, &qd, &qdd, &Gm, dq ? &dG : nullptr,
+                              dq ? &Dqd : nullptr, dq ? &Dqdd_a : nullptr,
+                              dqd ? &Dqdd_ad : nullptr);
+  Eigen::VectorXd tau;
+  Eigen::MatrixXd Tq, Tqd, Tqdd;
+  inverseDynamicsDerivatives(model, data, q, qd, qdd, pi, &tau, dq ? &Tq : nullptr, &Tqd, &Tqdd);
+  *tau_m = Gm.transpose() * tau;
+  if (dq) {
+    const int na = model.dof();
+    dq->resize(na, na);
+    const Eigen::MatrixXd inner = Tq * Gm + Tqd * Dqd + Tqdd * Dqdd_a;
+    dq->noalias() = Gm.transpose() * inner;
+    for (int k = 0; k < na; ++k) dq->col(k) += dG[static_cast<std::size_t>(k)].transpose() * tau;
+  }
+  if (dqd) *dqd = Gm.transpose() * (Tqd * Gm + Tqdd * Dqdd_ad);
+  if (dqdd) *dqdd = Gm.transpose() * Tqdd * Gm;
+}
+
+// actuatorRegressorVjp of a closed chain: Y = [Gm^T Yt(q, qd, qdd) | drive columns], so
+// <W, Y_rb> = <Gm W, Yt>; with vq, vqd, vqdd the tree VJP of Wt = Gm W_rb:
+//   d/dqa   = [<dG_k W_rb, Yt>]_k + Gm^T vq + (dqd/dqa)^T vqd + (dqdd/dqa)^T vqdd
+//   d/dqda  = Gm^T vqd + (dqdd/dqda)^T vqdd,   d/dqdda = Gm^T vqdd
+void closedRegressorVjp(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                        const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
+                        const Eigen::VectorXd& qddm, const Eigen::MatrixXd& W,
+                        Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm) {
+  const int n = model.dof(), nt = model.numJoints();
+  checkMeasured(model, qm, "qm", "actuatorRegressorVjp");
+  checkMeasured(model, qdm, "qdm", "actuatorRegressorVjp");
+  checkMeasured(model, qddm, "qddm", "actuatorRegressorVjp");
+  Eigen::VectorXd q, qd, qdd;
+  Eigen::MatrixXd Gm, Dqd, Dqdd_a, Dqdd_ad;
+  std::vector<Eigen::MatrixXd> dG;
+  closedChainStateDerivatives(model, qm, qdm, qddm, &q, &qd, &qdd, &Gm, d_qm ? &dG : nullptr,
+                              d_qm ? &Dqd : nullptr, d_qm ? &Dqdd_a : nullptr,
+                              d_qdm ? &Dqdd_ad : nullptr);
+  const Eigen::MatrixXd Wt = Gm * W.leftCols(10 * nt);
+  Eigen::VectorXd vq, vqd, vqdd;
+  torqueRegressorVjp(model, data, q, qd, qdd, Wt, &vq, &vqd, &vqdd);
+  if (d_qm) {
+    Eigen::MatrixXd Yt(nt, 10 * nt);
+    torqueRegressor(model, data, q, qd, qdd, Yt);
+    *d_qm = Gm.transpose() * vq + Dqd.transpose() * vqd + Dqdd_a.transpose() * vqdd;
+    for (int k = 0; k < n; ++k)
+      (*d_qm)[k] += (dG[static_cast<std::size_t>(k)] * W.leftCols(10 * nt)).cwiseProduct(Yt).sum();
+  }
+  if (d_qdm) *d_qdm = Gm.transpose() * vqd + Dqdd_ad.transpose() * vqdd;
+  if (d_qddm) *d_qddm = Gm.transpose() * vqdd;
+  const int k = cols.count();
+  for (int j = 0; j < n && k > 0; ++j) {
+    int c = 10 * nt + k * j;
+    if (cols.rotor_inertia) {
+      if (d_qddm) (*d_qddm)[j] += W(j, c);
+      ++c;
+    }
+    if (cols.coulomb) ++c;
+    if (cols.viscous && d_qdm) (*d_qdm)[j] += W(j, c);
+  }
 }
 
 }  // namespace
@@ -182,6 +244,43 @@ void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q, const Ei
   }
 }
 
+void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
+                             const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                             Eigen::VectorXd* gq, Eigen::VectorXd* gqd, Eigen::VectorXd* gqdd) {
+  check(gq != nullptr, "jointGradientToMeasured: gq must be given");
+  if (!model.hasLoops()) {
+    if (!model.hasTransmission()) return;
+    for (Eigen::VectorXd* g : {gq, gqd, gqdd})
+      if (g) *g = (model.transmission.transpose() * *g).eval();
+    return;
+  }
+  const int nt = model.numJoints();
+  for (Eigen::VectorXd* g : {gq, gqd, gqdd})
+    check(!g || g->size() == nt, "jointGradientToMeasured: robot '" + model.name +
+                                     "' (a closed chain): a gradient has " +
+                                     std::to_string(g ? g->size() : 0) + " entries (expected " +
+                                     std::to_string(nt) + ", the tree's joints)");
+  checkMeasured(model, qm, "qm", "jointGradientToMeasured");
+  checkMeasured(model, qdm, "qdm", "jointGradientToMeasured");
+  checkMeasured(model, qddm, "qddm", "jointGradientToMeasured");
+  Eigen::MatrixXd Gm, Dqd, Dqdd_a, Dqdd_ad;
+  closedChainStateDerivatives(model, qm, qdm, qddm, nullptr, nullptr, nullptr, &Gm, nullptr,
+                              gqd ? &Dqd : nullptr, gqdd ? &Dqdd_a : nullptr,
+                              gqdd ? &Dqdd_ad : nullptr);
+  // d/dqa = G^T gq + (dqd/dqa)^T gqd + (dqdd/dqa)^T gqdd, d/dqda = G^T gqd + (dqdd/dqda)^T gqdd,
+  // d/dqdda = G^T gqdd
+  Eigen::VectorXd a = Gm.transpose() * *gq;
+  if (gqd) a += Dqd.transpose() * *gqd;
+  if (gqdd) a += Dqdd_a.transpose() * *gqdd;
+  if (gqd) {
+    Eigen::VectorXd ad = Gm.transpose() * *gqd;
+    if (gqdd) ad += Dqdd_ad.transpose() * *gqdd;
+    *gqd = ad;
+  }
+  if (gqdd) *gqdd = (Gm.transpose() * *gqdd).eval();
+  *gq = a;
+}
+
 void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
                        const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
                        const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y) {
@@ -237,13 +336,12 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
                           const Eigen::VectorXd& qddm, const Eigen::MatrixXd& G,
                           Eigen::VectorXd* d_qm, Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm) {
   const int n = model.dof();
-  if (model.hasLoops())
-    throw Error("actuatorRegressorVjp: robot '" + model.name +
-                "' is a closed chain; the regressor's gradient through the loop constraints is "
-                "not implemented (excitation design by gradient is not available for closed "
-                "chains)");
   check(G.rows() == n && G.cols() == numParameters(model, cols),
         "actuatorRegressorVjp: G must be n x numParameters(model, cols)");
+  if (model.hasLoops()) {
+    closedRegressorVjp(model, data, cols, qm, qdm, qddm, G, d_qm, d_qdm, d_qddm);
+    return;
+  }
   Eigen::VectorXd& q = detail::scratchVector(data, 0);
   Eigen::VectorXd& qd = detail::scratchVector(data, 1);
   Eigen::VectorXd& qdd = detail::scratchVector(data, 2);

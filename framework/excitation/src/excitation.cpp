@@ -40,15 +40,6 @@ class Problem final : public ExcitationProblem {
     K_ = s.size();
     n_ = s.dof();
     const RobotModel& r = model_->robot();
-    // The design's gradient runs through the model's regressor VJP, which a closed chain does
-    // not have (it needs dG/dqa): refused here, by name, rather than inside the optimiser (which
-    // reads a failed evaluation as a bad point and would report a converged design).
-    check(!r.hasLoops(),
-          fmt::format("excitation: robot '{}' is a closed chain; excitation design is not "
-                      "available for closed chains (the design's gradient through the loop "
-                      "constraints is not implemented): leave out `excitation` (the simulate "
-                      "experiment draws its own reference) or give a trajectory file",
-                      r.name));
     r.requireFixedBase("excitation design (the fixed-contact floating-base case is not designed)");
     // Limits in measured coordinates equal joint limits when there is no transmission; with a
     // transmission, the joint-space limits are applied to q = T qm + q0 below.

@@ -15,6 +15,7 @@
 
 #include <Eigen/Core>
 #include <string>
+#include <vector>
 
 #include "exid/export.hpp"
 #include "exid/robot_model.hpp"
@@ -43,6 +44,27 @@ EXID_API void closedChainState(const RobotModel& model, const Eigen::VectorXd& q
                                const Eigen::VectorXd* qda, const Eigen::VectorXd* qdda,
                                Eigen::VectorXd* q, Eigen::VectorXd* qd, Eigen::VectorXd* qdd,
                                Eigen::MatrixXd* G, Eigen::VectorXd* g);
+
+/// The closed-chain state's derivatives with respect to the actuated coordinates, from the
+/// loop constraint's second and third derivatives (implicit differentiation of J G = 0 and
+/// J qdd + Jdot qd = 0; the constraint's Hessian and third-derivative tensor come from its exact
+/// time derivatives by polarisation, so the result is analytic, not a finite difference):
+///   dG[k] = dG/dqa_k (numJoints x dof; the actuated rows are zero),
+///   dqd_dqa = d qd/d qa (column k: dG[k] qda), and d qd/d qda = G,
+///   dqdd_dqa = d qdd/d qa, dqdd_dqda = d qdd/d qda, and d qdd/d qdda = G.
+/// q, qd, qdd, G as closedChainState. Any output may be null; the same errors.
+EXID_API void closedChainStateDerivatives(const RobotModel& model, const Eigen::VectorXd& qa,
+                                          const Eigen::VectorXd& qda, const Eigen::VectorXd& qdda,
+                                          Eigen::VectorXd* q, Eigen::VectorXd* qd,
+                                          Eigen::VectorXd* qdd, Eigen::MatrixXd* G,
+                                          std::vector<Eigen::MatrixXd>* dG,
+                                          Eigen::MatrixXd* dqd_dqa, Eigen::MatrixXd* dqdd_dqa,
+                                          Eigen::MatrixXd* dqdd_dqda);
+
+/// The constraint's third time derivative along q(t) with qd(t0) = w and qdd = qddd = 0: the
+/// third-derivative tensor of c(q) contracted three times with w (cubic in w).
+EXID_API Eigen::VectorXd loopConstraintJerk(const RobotModel& model, const Eigen::VectorXd& q,
+                                            const Eigen::VectorXd& w);
 
 /// The structural checks of a closed-chain description (called by validateStructure): indices,
 /// poses, the actuated joints, assembly at the reference configuration, and the rank test (the

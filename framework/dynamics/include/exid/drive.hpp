@@ -60,12 +60,23 @@ EXID_API void jointToMeasured(const RobotModel& model, const Eigen::VectorXd& q,
                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                               Eigen::VectorXd* qm, Eigen::VectorXd* qdm, Eigen::VectorXd* qddm);
 
+/// A scalar's gradient with respect to the joint coordinates (gq, gqd, gqdd: numJoints entries,
+/// of a function of q, qd, qdd) mapped in place to the measured coordinates at the sample (qm,
+/// qdm, qddm): through the transmission (T^T g), or for a closed chain by the chain rule through
+/// q = phi(qa), qd = G qda, qdd = G qdda + g(qa, qda) (closedChainStateDerivatives). gqdd null:
+/// the function does not depend on qdd; gqd null: nor on qd.
+EXID_API void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
+                                      const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
+                                      Eigen::VectorXd* gq, Eigen::VectorXd* gqd,
+                                      Eigen::VectorXd* gqdd);
+
 /// Y (n x numParameters) in measured coordinates: tau_m = Y * parameterValues(model, cols).
 EXID_API void actuatorRegressor(const RobotModel& model, DynamicsData& data,
                                 const DriveColumns& cols, const Eigen::VectorXd& qm,
                                 const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
                                 Eigen::Ref<Eigen::MatrixXd> Y);
-/// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative).
+/// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative); a closed
+/// chain's through the loop constraints (Y = G_c^T Y_tree with G_c = dq/dqa depending on qa).
 EXID_API void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data,
                                    const DriveColumns& cols, const Eigen::VectorXd& qm,
                                    const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
@@ -77,7 +88,8 @@ EXID_API Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& d
                                         const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm);
 /// actuatorTorque and its partial derivatives with respect to qm, qdm, qddm (n x n each, row i
 /// the gradient of tau_m,i; sign(qd) has zero derivative). Exact (inverseDynamicsDerivatives
-/// mapped through the transmission). The derivative outputs may be null.
+/// mapped through the transmission, or for a closed chain through the loop constraints:
+/// closedChainStateDerivatives). The derivative outputs may be null.
 EXID_API void actuatorTorqueDerivatives(const RobotModel& model, DynamicsData& data,
                                         const DriveColumns& cols, const Eigen::VectorXd& qm,
                                         const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,

@@ -63,11 +63,15 @@ inline std::vector<int> selectJoints(const std::vector<std::int64_t>& joints, in
 }
 
 /// A gradient with respect to joint coordinates mapped to measured coordinates (q = T qm + q0).
+/// A closed chain needs the sample (exid::jointGradientToMeasured); the callers left here (the
+/// load models) project torques through G, whose derivative their design gradients do not
+/// carry: refused.
 inline void jointGradToMeasured(const RobotModel& r, Eigen::VectorXd* g) {
   if (r.hasLoops())
     throw Error("robot '" + r.name +
-                "' is a closed chain: gradients through its loop constraints are not implemented "
-                "(gradient-based excitation design is not available for closed chains)");
+                "' is a closed chain: this model's design gradient through the loop constraints "
+                "is not implemented (the load models; the differential and integral models have "
+                "theirs)");
   if (g && r.hasTransmission()) *g = (r.transmission.transpose() * *g).eval();
 }
 
