@@ -173,11 +173,12 @@ struct VarPro::Held {
     const Eigen::Index f = qr.matrixQR().cols();
     Eigen::MatrixXd B(m, c + 1);
     const Eigen::VectorXd eta = vp.heldEta(lambda);
-    const Eigen::Index got = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
-      exid::check(at + r.W.rows() <= m, "varpro: the model's row count changed with eta");
-      for (int j = 0; j < c; ++j)
-        B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
-    });
+    const Eigen::Index got =
+        rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
+          exid::check(at + r.W.rows() <= m, "varpro: the model's row count changed with eta");
+          for (int j = 0; j < c; ++j)
+            B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
+        });
     exid::check(got == m, "varpro: the model's row count changed with eta");
     B.leftCols(c).applyOnTheLeft(qr.householderQ().adjoint());
     B.col(c) = qty;

@@ -26,8 +26,8 @@
 #include "exid/interfaces.hpp"
 #include "exid/recording.hpp"
 #include "exid/recording_stats.hpp"
-#include "exid/signal.hpp"
 #include "exid/segment.hpp"
+#include "exid/signal.hpp"
 
 namespace {
 
@@ -604,11 +604,10 @@ class BagReading {
                               "step {} s) around the joint-state sample at t = {} s: it is not "
                               "interpolated across it; cut the segment there (t_start_s/t_end_s; "
                               "max_gap_ratio = {})",
-                              pre_, bagname_, a.key, a.topic, len, a.msgs[w].msg,
-                              a.msgs[w + 1].msg, a.med, t, ratio_));
+                              pre_, bagname_, a.key, a.topic, len, a.msgs[w].msg, a.msgs[w + 1].msg,
+                              a.med, t, ratio_));
       const double f = (t - a.t[w]) / len;
-      for (int c = 0; c < 6; ++c)
-        out(k, c) = (1.0 - f) * a.msgs[w].v[c] + f * a.msgs[w + 1].v[c];
+      for (int c = 0; c < 6; ++c) out(k, c) = (1.0 - f) * a.msgs[w].v[c] + f * a.msgs[w + 1].v[c];
     }
     return out;
   }
@@ -636,10 +635,10 @@ class BagReading {
       const Eigen::MatrixXd alpha = exid::centralFirstDerivative(d.t, gyro);
       d.base.resize(d.size(), 9);
       for (Eigen::Index k = 0; k < d.size(); ++k)
-        d.base.row(k) = exid::baseMotionFromImu(imu_pose_, gyro.row(k).transpose(),
-                                                alpha.row(k).transpose(),
-                                                v.row(k).tail(3).transpose())
-                            .transpose();
+        d.base.row(k) =
+            exid::baseMotionFromImu(imu_pose_, gyro.row(k).transpose(), alpha.row(k).transpose(),
+                                    v.row(k).tail(3).transpose())
+                .transpose();
     }
   }
 
@@ -772,9 +771,10 @@ class BagReading {
             "drop_bad_messages)",
             pre_, bagname_, x.bad + x.dup, x.count, x.topic, x.bad, x.dup)));
       if (x.outside > 0)
-        w.push_back(exid::Json(fmt::format("{}{}: {} joint-state samples of the segment lie "
-                                           "outside the time range of {} '{}' and were cut",
-                                           pre_, bagname_, x.outside, x.key, x.topic)));
+        w.push_back(
+            exid::Json(fmt::format("{}{}: {} joint-state samples of the segment lie "
+                                   "outside the time range of {} '{}' and were cut",
+                                   pre_, bagname_, x.outside, x.key, x.topic)));
     }
     if (js_bad_ + js_dup_ > 0)
       w.push_back(exid::Json(

@@ -450,14 +450,13 @@ class PyRobot {
                             const py::object& pi_in) const {
     const char* method = regressor ? "floating_regressor" : "floating_inverse_dynamics";
     if (!r().floating_base)
-      throw py::value_error(
-          fmt::format("{}: robot '{}' has a fixed base (use rnea, inertial_regressor)", method,
-                      name()));
-    if (r().hasTransmission())
       throw py::value_error(fmt::format(
-          "{}: robot '{}' has a transmission; the floating-base functions take joint "
-          "coordinates",
-          method, name()));
+          "{}: robot '{}' has a fixed base (use rnea, inertial_regressor)", method, name()));
+    if (r().hasTransmission())
+      throw py::value_error(
+          fmt::format("{}: robot '{}' has a transmission; the floating-base functions take joint "
+                      "coordinates",
+                      method, name()));
     const int n = dof(), m = 6 + n, p = 10 * (n + 1);
     const SampleArg q = sampleArg(q_in, "q", n, method, name());
     const SampleArg qd = sampleArg(qd_in, "qd", n, method, name());
@@ -475,8 +474,7 @@ class PyRobot {
       pi = Eigen::Map<const Eigen::VectorXd>(a.data(), p);
     }
     const Eigen::Index K = q.rows;
-    OutArray out =
-        regressor ? newArray(K, q.single, {m, p}) : newArray(K, q.single, {m});
+    OutArray out = regressor ? newArray(K, q.single, {m, p}) : newArray(K, q.single, {m});
     double* o = out.mutable_data();
     {
       py::gil_scoped_release nogil;

@@ -91,8 +91,8 @@ fs::path floatingBag(const std::string& tag, int imu_from = 0, int imu_to = -1) 
 }
 
 exid::Dataset readFloating(const fs::path& bag, const std::string& extra) {
-  auto e = exid_test::create<exid::Experiment>("rosbag2", "{path: " + bag.string() + ", " + extra +
-                                                              "}");
+  auto e =
+      exid_test::create<exid::Experiment>("rosbag2", "{path: " + bag.string() + ", " + extra + "}");
   return e->run(humanoid(), nullptr, mtest::context());
 }
 
@@ -107,8 +107,8 @@ std::string floatingError(const fs::path& bag, const std::string& extra,
   return "(no error)";
 }
 
-const std::string kTopics = fmt::format(
-    "imu_topic: /imu, imu_pose_xyz_rpy: {}, contact_topics: [/foot_ft]", kImuPoseYaml);
+const std::string kTopics =
+    fmt::format("imu_topic: /imu, imu_pose_xyz_rpy: {}, contact_topics: [/foot_ft]", kImuPoseYaml);
 
 }  // namespace
 
@@ -151,8 +151,8 @@ TEST(Rosbag2Floating, TheImuAndTheContactGiveTheBaseMotionAndTheContactWrench) {
 // the humanoid's base parameters as closely as the same study of the simulation's own
 // signals with the positions differentiated alike.
 TEST(Rosbag2Floating, TheHumanoidIdentifiesFromTheBag) {
-  const exid::Dataset d = readFloating(
-      floatingBag("floating_id"), kTopics + ", differentiate_cutoff_hz: 40, trim_edges: 20");
+  const exid::Dataset d = readFloating(floatingBag("floating_id"),
+                                       kTopics + ", differentiate_cutoff_hz: 40, trim_edges: 20");
   auto m = mtest::model("floating_base", std::string("{") + kModel + "}", humanoid());
   const Eigen::VectorXd truth = m->baseNominal();
   const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")
@@ -162,10 +162,10 @@ TEST(Rosbag2Floating, TheHumanoidIdentifiesFromTheBag) {
               err);
   EXPECT_LT(err, 1e-3);
   // without the lever arm (the IMU said to sit at the base origin) the estimate is worse
-  const exid::Dataset wrong = readFloating(
-      floatingBag("floating_id_wrong"),
-      "imu_topic: /imu, imu_pose_xyz_rpy: [0, 0, 0, 0.3, -0.2, 0.5], contact_topics: "
-      "[/foot_ft], differentiate_cutoff_hz: 40, trim_edges: 20");
+  const exid::Dataset wrong =
+      readFloating(floatingBag("floating_id_wrong"),
+                   "imu_topic: /imu, imu_pose_xyz_rpy: [0, 0, 0, 0.3, -0.2, 0.5], contact_topics: "
+                   "[/foot_ft], differentiate_cutoff_hz: 40, trim_edges: 20");
   const exid::Estimate ew = exid_test::create<exid::Estimator>("batch_ls", "{}")
                                 ->estimate(*m, wrong, nullptr, mtest::context());
   const double err_w = (ew.value - truth).cwiseAbs().maxCoeff() / truth.cwiseAbs().maxCoeff();
