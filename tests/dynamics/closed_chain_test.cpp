@@ -66,7 +66,6 @@ RobotModel fourBarModel(const FourBar& f, std::mt19937& rng, FourBar* out) {
 
 V2 e(double p) { return {std::cos(p), std::sin(p)}; }
 V2 ep(double p) { return {-std::sin(p), std::cos(p)}; }
-double cross2(const V2& u, const V2& v) { return u.x() * v.y() - u.y() * v.x(); }
 
 // Closed-form kinematics: absolute angles, rates and accelerations of the three links.
 struct Planar {

@@ -90,7 +90,7 @@ TEST(ClosedChainStudy, PalletizerIdentifiesWithDidimAndIvFromATrackingRecording)
   mtest::writeCsv(d, dir / "rec.csv");
   const std::string loop =
       "reference_file: " + (dir / "reference.csv").string() + ", " + cltest::gains(d.meta);
-  for (const std::string est :
+  for (const std::string& est :
        {"{type: didim, params: {" + loop + ", rtol: 1e-12, atol: 1e-14, step_tolerance: 1e-12}}",
         "{type: iv, params: {" + loop + "}}"}) {
     const std::string study =
