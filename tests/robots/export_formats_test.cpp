@@ -31,7 +31,7 @@
 #include "exid_cli.hpp"
 
 #ifdef EXID_HAVE_MUJOCO
-#include <mujoco/mujoco.h>
+#include "mujoco_test_util.hpp"
 #endif
 #ifdef EXID_HAVE_SDFORMAT
 #include <sdf/Frame.hh>
@@ -225,34 +225,9 @@ TEST(ExportFormats, PhysicallyInconsistentBodiesAreRefused) {
 }
 
 #ifdef EXID_HAVE_MUJOCO
-struct MjModelPtr {
-  mjModel* m = nullptr;
-  ~MjModelPtr() {
-    if (m) mj_deleteModel(m);
-  }
-};
-struct MjDataPtr {
-  mjData* d = nullptr;
-  ~MjDataPtr() {
-    if (d) mj_deleteData(d);
-  }
-};
-
-/// MuJoCo's warnings on stdout (by default it appends them to MUJOCO_LOG.TXT in the working
-/// folder).
-void sayMujocoWarning(const char* text) { std::printf("MuJoCo warning: %s\n", text); }
-
-MjModelPtr loadMjcf(const std::string& name, const std::string& text, std::string* error) {
-  mju_user_warning = sayMujocoWarning;
-  const fs::path f = tempFile(name + ".xml");
-  writeText(f, text);
-  char err[1000] = "";
-  MjModelPtr p;
-  p.m = mj_loadXML(f.string().c_str(), nullptr, err, sizeof err);
-  fs::remove(f);
-  *error = err;
-  return p;
-}
+using mjtest::loadMjcf;
+using mjtest::MjDataPtr;
+using mjtest::MjModelPtr;
 #endif
 
 TEST(ExportFormats, MujocoInverseDynamicsEqualsExidWithDriveTerms) {
@@ -734,7 +709,7 @@ TEST(ExportFormats, ExidExportWritesWhatTheConsumersRead) {
   {
     char err[1000] = "";
     MjModelPtr mm;
-    mju_user_warning = sayMujocoWarning;
+    mju_user_warning = mjtest::sayMujocoWarning;
     mm.m = mj_loadXML((dir / "identified.mjcf").string().c_str(), nullptr, err, sizeof err);
     ASSERT_NE(mm.m, nullptr) << err;
     mm.m->opt.disableflags |= mjDSBL_FRICTIONLOSS | mjDSBL_LIMIT | mjDSBL_CONTACT;

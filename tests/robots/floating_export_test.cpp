@@ -26,7 +26,7 @@
 #include "exid_cli.hpp"
 
 #ifdef EXID_HAVE_MUJOCO
-#include <mujoco/mujoco.h>
+#include "mujoco_test_util.hpp"
 #endif
 #ifdef EXID_HAVE_SDFORMAT
 #include <sdf/Link.hh>
@@ -255,34 +255,8 @@ TEST(FloatingExport, TheRootOfEachFormat) {
 }
 
 #ifdef EXID_HAVE_MUJOCO
-namespace {
-struct MjModelPtr {
-  mjModel* m = nullptr;
-  ~MjModelPtr() {
-    if (m) mj_deleteModel(m);
-  }
-};
-struct MjDataPtr {
-  mjData* d = nullptr;
-  ~MjDataPtr() {
-    if (d) mj_deleteData(d);
-  }
-};
-void sayMujocoWarning(const char* text) { std::printf("MuJoCo warning: %s\n", text); }
-
-MjModelPtr loadInMujoco(const std::string& name, const std::string& text, std::string* error) {
-  mju_user_warning = sayMujocoWarning;
-  const fs::path f = fs::temp_directory_path() /
-                     ("exid_floating_export_" + std::to_string(::getpid()) + "_" + name + ".xml");
-  std::ofstream(f) << text;
-  char err[1000] = "";
-  MjModelPtr p;
-  p.m = mj_loadXML(f.string().c_str(), nullptr, err, sizeof err);
-  fs::remove(f);
-  *error = err;
-  return p;
-}
-}  // namespace
+using mjtest::MjDataPtr;
+using mjtest::MjModelPtr;
 #endif
 
 // MuJoCo's inverse dynamics of the exported MJCF, free joint included, equals exid's floating
@@ -307,7 +281,7 @@ TEST(FloatingExport, MujocoInverseDynamicsEqualsFloatingInverseDynamics) {
       m.drives[static_cast<std::size_t>(j)].viscous = 0.2 + 0.05 * j;
     }
     std::string err;
-    const MjModelPtr mm = loadInMujoco(name, exid::writeMjcf(m), &err);
+    const MjModelPtr mm = mjtest::loadMjcf(name, exid::writeMjcf(m), &err);
     ASSERT_NE(mm.m, nullptr) << err;
     EXPECT_EQ(err, "");
     ASSERT_EQ(mm.m->nq, 7 + n);
@@ -400,7 +374,7 @@ TEST(FloatingExport, MujocoPlacesTheBodiesAtTheReferencePose) {
     const RobotModel m = shipped(name);
     const int n = m.dof();
     std::string err;
-    const MjModelPtr mm = loadInMujoco(name, exid::writeMjcf(m), &err);
+    const MjModelPtr mm = mjtest::loadMjcf(name, exid::writeMjcf(m), &err);
     ASSERT_NE(mm.m, nullptr) << err;
     MjDataPtr md;
     md.d = mj_makeData(mm.m);  // qpos = qpos0

@@ -69,9 +69,9 @@ inline std::vector<int> selectJoints(const std::vector<std::int64_t>& joints, in
 inline void jointGradToMeasured(const RobotModel& r, Eigen::VectorXd* g) {
   if (r.hasLoops())
     throw Error("robot '" + r.name +
-                "' is a closed chain: this model's design gradient through the loop constraints "
-                "is not implemented (the load models; the differential and integral models have "
-                "theirs)");
+                "' is a closed chain: this model (a load model) has no design gradient through "
+                "the loop constraints, so gradient-based excitation design refuses it (the "
+                "differential and integral models have theirs)");
   if (g && r.hasTransmission()) *g = (r.transmission.transpose() * *g).eval();
 }
 
