@@ -99,10 +99,18 @@ std::vector<exid::ParamDecl> FilteredLs::params() {
                       "accumulation): memory is bounded by the chunk (plus the decimation "
                       "filter's settling margin at each side), not by the recording",
                       64, 1e8),
+      exid::param_double("chunk_memory_mb", 16.0, "MB",
+                         "the largest rows buffer of one chunk (per thread): a chunk's rows "
+                         "(every equation's base columns and measurement, its samples and the "
+                         "decimation margins) are filtered a block of columns at a time within "
+                         "it, the model's rows computed once per block (the same numbers for "
+                         "any value)",
+                         0.001, 1e6),
       exid::param_int(
           "threads", 0,
-          "threads building the chunks (0: the cores this process may run on, at most 8); the "
-          "chunks are merged in order, so the result is the same for any count",
+          "threads building the chunks (0: from the work, a thread per 4 chunks, at most the "
+          "cores this process may run on and 8); the chunks are merged in order, so the result "
+          "is the same for any count",
           0, 256),
       exid::estimators::rankToleranceParam(),
   };
@@ -123,6 +131,7 @@ FilteredLs::FilteredLs(const exid::ParamSet& p)
       standstill_min_s_(p.getDouble("standstill_min_s")),
       standstill_tol_(p.getDoubles("standstill_tolerance")),
       chunk_samples_(p.getInt("chunk_samples")),
+      chunk_memory_mb_(p.getDouble("chunk_memory_mb")),
       threads_(static_cast<int>(p.getInt("threads"))) {
   opt_.rank_tolerance = p.getDouble("rank_tolerance");
 }
@@ -154,6 +163,11 @@ exid::Estimate FilteredLs::estimate(const exid::ObservationModel& model, const e
   d["chunk_margin_samples"] = Json(static_cast<long long>(P.margin_samples));
   d["signal_margin_samples"] = Json(static_cast<long long>(P.signal_margin));
   d["threads"] = P.threads;
+  d["threads_from"] = threads_ == 0 ? "the work (threads: 0): a thread per 4 chunks, at most "
+                                      "the cores"
+                                    : "the study (threads)";
+  d["column_blocks"] = Json(static_cast<long long>(P.column_blocks));
+  d["chunk_buffer_mb"] = P.buffer_bytes / 1e6;
   d["memory"] =
       P.streamed ? "per chunk of chunk_samples: its samples (with both filters' margins at each "
                    "side) read, filtered, differentiated, turned into rows, decimated and "
@@ -270,7 +284,6 @@ void FilteredLs::describeFilters(const Processed& P, const exid::Dataset& data,
 /// details.standstill: the mode, and where samples stand still, how many and their rule.
 void FilteredLs::describeStandstill(const Processed& P, int K, exid::Json* dp) const {
   exid::Json& d = *dp;
-  const long trim = P.trim;
   {
     Json st = Json::object();
     st["mode"] = P.standstill;

@@ -43,6 +43,8 @@ class FilteredLs : public exid::Estimator {
     long chunk_samples = 0, margin_samples = 0, signal_margin = 0;
     long chunks = 0;
     int threads = 1;
+    long column_blocks = 1;    // most blocks of the rows' columns a chunk was filtered in
+    double buffer_bytes = 0;   // the largest rows buffer of one chunk (one per thread)
     double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
     bool filter_q = false, diff_qd = false, diff_qdd = false;
     long trim = 0, trim_transient = 0;
@@ -70,6 +72,8 @@ class FilteredLs : public exid::Estimator {
     exid::Rows rows;
     estimators::RowAccumulator acc;
     long slow = 0, kept = 0, rows_before = 0, rest = 0, rest_edge = 0, rest_removed = 0;
+    long column_blocks = 1;
+    double buffer_bytes = 0;
   };
 
   void chunkRows(const exid::ObservationModel& model, const Processed& P,
@@ -78,9 +82,10 @@ class FilteredLs : public exid::Estimator {
                  ChunkOut* o) const;
 
   /// The model's rows of the filtered samples f (from sample lo; chunk [ca, cb)) in one row of
-  /// s->M per sample: equation g's p base columns and its y at columns [g (p + 1), (g + 1)(p +
-  /// 1)), built a block of samples at a time (the model's rows of the whole chunk are never
-  /// held).
+  /// s->M per sample: of the columns where equation g's p base columns and its y lie at
+  /// [g (p + 1), (g + 1)(p + 1)), the block [c0, c0 + width) (clipped to the last column),
+  /// built a block of samples at a time (the model's rows of the whole chunk are never held).
+  /// The first block (c0 = 0) also sets the labels, the times and o->rows_before.
   struct SampleRows {
     estimators::LargeRows M;    // huge pages: written once, tens of MB
     std::vector<int> labels;    // equation label of each group, ascending
@@ -89,7 +94,7 @@ class FilteredLs : public exid::Estimator {
   };
   void sampleRows(const exid::ObservationModel& model, const Processed& P, const exid::Dataset& f,
                   long lo, long ca, long cb, bool keep_rows, const exid::RunContext& ctx,
-                  SampleRows* s, ChunkOut* o) const;
+                  Eigen::Index c0, Eigen::Index width, SampleRows* s, ChunkOut* o) const;
 
   std::vector<long> keptSamples(const exid::ObservationModel& model, const Processed& P,
                                 const exid::Dataset& f, const std::vector<char>& rest, long lo,
@@ -135,6 +140,7 @@ class FilteredLs : public exid::Estimator {
   double standstill_min_s_ = 0.0;
   std::vector<double> standstill_tol_;
   long chunk_samples_ = 8192;
+  double chunk_memory_mb_ = 16.0;
   int threads_ = 0;
   estimators::SolveOptions opt_;
 };

@@ -8,6 +8,7 @@
 #include <deque>
 #include <exception>
 #include <map>
+#include <limits>
 #include <thread>
 
 #include "exid/error.hpp"
@@ -233,41 +234,75 @@ void FilteredLs::chunkRows(const exid::ObservationModel& model, const Processed&
     if (keep_rows) o->rows = std::move(rows);
     return;
   }
+  // The rows buffer (one row of every equation's columns per sample of the chunk and its
+  // margins) is filled and filtered a block of columns at a time, so that it stays within
+  // chunk_memory_mb: the model's rows are computed once per block; each column is filtered on
+  // its own, so the blocks give the same numbers as one pass. The kept samples' rows of every
+  // block are gathered in K (one in R samples) and accumulated at the end.
+  const long L = hi - lo;
+  const bool drop_rest = P.standstill == "drop";
+  const std::vector<long> kept_samples = keptSamples(model, P, f, rest, lo, ca, cb, o);
+  const auto nk = static_cast<Eigen::Index>(kept_samples.size());
+  // (without decimation no column is filtered: one block, whose kept rows are read in place)
+  const bool filter = R > 1 && L >= 2;
+  const auto width =
+      filter ? static_cast<Eigen::Index>(std::max<double>(
+                   1.0, std::floor(chunk_memory_mb_ * 1e6 /
+                                   (8.0 * static_cast<double>(std::max<long>(L, 1))))))
+             : std::numeric_limits<Eigen::Index>::max() / 2;
   SampleRows s;
-  sampleRows(model, P, f, lo, ca, cb, keep_rows, ctx, &s, o);
+  exid::RowMajorMatrix K;
+  Eigen::Index cols = 0;
+  o->column_blocks = 0;
+  for (Eigen::Index c0 = 0; c0 == 0 || c0 < cols; c0 += width) {
+    sampleRows(model, P, f, lo, ca, cb, keep_rows, ctx, c0, width, &s, o);
+    if (c0 == 0) {
+      cols = static_cast<Eigen::Index>(s.labels.size()) * (p + 1);
+      if (filter) K.resize(nk, cols);
+    }
+    ++o->column_blocks;
+    auto M = s.M.map();
+    o->buffer_bytes = std::max(o->buffer_bytes, 8.0 * static_cast<double>(M.size()));
+    // Rows to be dropped are zero before the decimation filter (0 = 0 theta holds exactly):
+    // the filter would otherwise spread them into the kept rows beside a standstill (at its
+    // edges the positions are held while the robot may already move).
+    if (drop_rest)
+      for (long k = 0; k < L; ++k)
+        if (rest[static_cast<std::size_t>(k)]) M.row(k).setZero();
+    if (!filter) break;
+    estimators::filtfiltRowsInPlace(dsos, M);
+    for (Eigen::Index k = 0; k < nk; ++k)
+      K.row(k).segment(c0, M.cols()) = M.row(kept_samples[static_cast<std::size_t>(k)] - lo);
+    s.M = estimators::LargeRows();
+  }
+  const auto M = s.M.map();  // (without filtering: the one block; else empty)
+  auto keptRow = [&](Eigen::Index k) {
+    const double* row =
+        filter ? K.row(k).data() : M.row(kept_samples[static_cast<std::size_t>(k)] - lo).data();
+    return Eigen::Map<const Eigen::RowVectorXd>(row, cols);
+  };
   const std::vector<int>& labels = s.labels;
   const std::vector<double>& times = s.times;
   const exid::Rows& head = s.head;
-  const long L = hi - lo;
-  auto M = s.M.map();
-  const bool drop_rest = P.standstill == "drop";
-  // Rows to be dropped are zero before the decimation filter (0 = 0 theta holds exactly): the
-  // filter would otherwise spread them into the kept rows beside a standstill (at its edges
-  // the positions are held while the robot may already move).
-  if (drop_rest)
-    for (long k = 0; k < L; ++k)
-      if (rest[static_cast<std::size_t>(k)]) M.row(k).setZero();
-  if (R > 1 && L >= 2) estimators::filtfiltRowsInPlace(dsos, M);
-  const std::vector<long> kept_samples = keptSamples(model, P, f, rest, lo, ca, cb, o);
   const auto G = static_cast<Eigen::Index>(labels.size());
-  Eigen::MatrixXd W(static_cast<Eigen::Index>(kept_samples.size()) * G, p);
+  Eigen::MatrixXd W(nk * G, p);
   Eigen::VectorXd y(W.rows());
   exid::Rows out;
   out.numEquations = head.numEquations;
   out.equation_names = head.equation_names;
-  for (std::size_t k = 0; k < kept_samples.size(); ++k) {
-    const long local = kept_samples[k] - lo;
+  for (Eigen::Index k = 0; k < nk; ++k) {
+    const long local = kept_samples[static_cast<std::size_t>(k)] - lo;
     for (Eigen::Index g = 0; g < G; ++g) {
-      const Eigen::Index r = static_cast<Eigen::Index>(k) * G + g;
-      W.row(r) = M.row(local).segment(g * (p + 1), p);
-      y(r) = M(local, g * (p + 1) + p);
+      const Eigen::Index r = k * G + g;
+      W.row(r) = keptRow(k).segment(g * (p + 1), p);
+      y(r) = keptRow(k)(g * (p + 1) + p);
       if (keep_rows) {
         out.equation.push_back(labels[static_cast<std::size_t>(g)]);
         if (!times.empty()) out.t.push_back(times[static_cast<std::size_t>(local * G + g)]);
       }
     }
   }
-  o->kept = static_cast<long>(kept_samples.size());
+  o->kept = static_cast<long>(nk);
   o->acc = estimators::RowAccumulator(p);
   o->acc.add(W, y);
   if (keep_rows) {
@@ -279,7 +314,8 @@ void FilteredLs::chunkRows(const exid::ObservationModel& model, const Processed&
 
 void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed& P,
                             const exid::Dataset& f, long lo, long ca, long cb, bool keep_rows,
-                            const exid::RunContext& ctx, SampleRows* s, ChunkOut* o) const {
+                            const exid::RunContext& ctx, Eigen::Index c0, Eigen::Index width,
+                            SampleRows* s, ChunkOut* o) const {
   const int p = model.numBase();
   const long trim = P.trim, hi = lo + f.size();
   const long L = hi - lo;
@@ -293,7 +329,7 @@ void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed
     exid::Rows rows =
         model.rows(exid::sliceDataset(f, static_cast<int>(a - lo), static_cast<int>(b - lo)), ctx);
     estimators::checkRows(rows, p, kName, static_cast<int>(trim + a));
-    if (a == lo) {
+    if (a == lo && c0 == 0) {
       if (rows.equation.empty()) {
         labels = {0};
       } else {
@@ -301,7 +337,6 @@ void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed
         std::sort(labels.begin(), labels.end());
         labels.erase(std::unique(labels.begin(), labels.end()), labels.end());
       }
-      Mbuf = estimators::LargeRows(L, static_cast<Eigen::Index>(labels.size()) * (p + 1));
       const bool has_t = rows.t.size() == static_cast<std::size_t>(rows.y.size());
       if (keep_rows && has_t) times.resize(static_cast<std::size_t>(L) * labels.size());
       head.numEquations = rows.numEquations;
@@ -310,6 +345,8 @@ void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed
           static_cast<long>(std::min<long>(cb - ca, L) * std::max(1, rows.numEquations));
     }
     const auto G = labels.size();
+    const Eigen::Index c1 = std::min(static_cast<Eigen::Index>(G) * (p + 1), c0 + width);
+    if (a == lo) Mbuf = estimators::LargeRows(L, c1 - c0);
     auto M = Mbuf.map();
     std::vector<long> next(G, a - lo);  // per group: the next sample's row of M
     for (Eigen::Index i = 0; i < rows.y.size(); ++i) {
@@ -322,10 +359,12 @@ void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed
             "equation of its first samples (samples {}-{})",
             model.pluginName(), label, trim + a, trim + b - 1));
       const long sm = next[g]++;
-      const Eigen::Index c0 = static_cast<Eigen::Index>(g) * (p + 1);
-      M.row(sm).segment(c0, p) = rows.W.row(i);
-      M(sm, c0 + p) = rows.y(i);
-      if (!times.empty())
+      // equation g's columns [e0, e0 + p] within the block [c0, c1)
+      const Eigen::Index e0 = static_cast<Eigen::Index>(g) * (p + 1);
+      const Eigen::Index from = std::max(e0, c0), to = std::min(e0 + p, c1);
+      if (to > from) M.row(sm).segment(from - c0, to - from) = rows.W.row(i).segment(from - e0, to - from);
+      if (e0 + p >= c0 && e0 + p < c1) M(sm, e0 + p - c0) = rows.y(i);
+      if (c0 == 0 && !times.empty())
         times[static_cast<std::size_t>(sm) * G + g] = rows.t[static_cast<std::size_t>(i)];
     }
     for (std::size_t g = 0; g < G; ++g)
@@ -401,6 +440,8 @@ FilteredLs::Processed FilteredLs::process(const exid::ObservationModel& model,
     if (keep_rows) appendRows(&all.rows, P.rows, p);
     all.chunks += P.chunks;
     all.threads = std::max(all.threads, P.threads);
+    all.column_blocks = std::max(all.column_blocks, P.column_blocks);
+    all.buffer_bytes = std::max(all.buffer_bytes, P.buffer_bytes);
     all.jitter = std::max(all.jitter, P.jitter);
     all.rows_before += P.rows_before;
     all.slow_removed += P.slow_removed;
@@ -426,7 +467,12 @@ FilteredLs::Processed FilteredLs::processPart(const exid::ObservationModel& mode
   const long nchunks = (Kt + C - 1) / C;
   P.chunks = nchunks;
   const int p = model.numBase();
-  const int T = static_cast<int>(std::min<long>(exid::resolveThreads(threads_), nchunks));
+  // threads: 0 chooses from the work: a thread per 4 chunks at least (each thread holds its
+  // own chunk's buffers, and a chunk's margins are computed by both of its neighbours' threads:
+  // with fewer chunks the threads cost more memory than they save time), at most the cores.
+  const long per_thread = threads_ == 0 ? 4 : 1;
+  const int T = static_cast<int>(std::max<long>(
+      1, std::min<long>(exid::resolveThreads(threads_), nchunks / per_thread)));
   P.threads = T;
   // chunk c: trimmed samples [ca, cb), rows of [lo, hi), raw samples [rlo, rhi)
   struct Span {
@@ -471,6 +517,8 @@ FilteredLs::Processed FilteredLs::processPart(const exid::ObservationModel& mode
         ChunkOut& o = out(c);
         P.acc.merge(o.acc);
         P.rows_before += o.rows_before;
+        P.column_blocks = std::max(P.column_blocks, o.column_blocks);
+        P.buffer_bytes = std::max(P.buffer_bytes, o.buffer_bytes);
         P.slow_removed += o.slow;
         P.rest_samples += o.rest;
         P.rest_edge_samples += o.rest_edge;

@@ -9,6 +9,7 @@
 #include <random>
 
 #include "estimator_test_model.hpp"
+#include "exid/context.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid_test.hpp"
@@ -532,6 +533,78 @@ TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGives
   }
   EXPECT_EQ(c1.value, c3.value);  // bit for bit
   EXPECT_EQ(c1.std, c3.std);
+}
+
+TEST(Estimators, FilteredLsColumnBlocksKeepTheBufferWithinItsBudgetAndTheSameBits) {
+  // a chunk's rows filtered a block of columns at a time (chunk_memory_mb): the same numbers,
+  // bit for bit, as one block; the buffer within the budget
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 30000;
+  o.dt = 0.001;
+  o.q_noise = 1e-5;
+  o.tau_noise = {0.02, 0.02};
+  o.derivatives = false;
+  const exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  const exid::Estimate one =
+      make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 1, chunk_memory_mb: 1e4}")
+          ->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(one.details.find("column_blocks")->asInt(), 1);
+  const double whole_mb = one.details.find("chunk_buffer_mb")->asDouble();
+  const long C = one.details.find("chunk_samples")->asInt(),
+             margin = one.details.find("chunk_margin_samples")->asInt();
+  // one row per sample of the chunk and its margins, (p + 1) columns per equation (2 joints)
+  EXPECT_NEAR(whole_mb, 8.0 * static_cast<double>(C + 2 * margin) * 2 * (m->numBase() + 1) / 1e6,
+              1e-9);
+  for (const char* th : {"1", "2"}) {
+    const double budget = whole_mb / 3.5;
+    const exid::Estimate b =
+        make("filtered_ls", fmt::format("{{cutoff_hz: 10, chunk_samples: 64, threads: {}, "
+                                        "chunk_memory_mb: {}}}",
+                                        th, budget))
+            ->estimate(*m, d, nullptr, ctx);
+    EXPECT_EQ(b.details.find("column_blocks")->asInt(), 4) << th;
+    EXPECT_LE(b.details.find("chunk_buffer_mb")->asDouble(), budget) << th;
+    EXPECT_EQ(b.rows, one.rows);
+    EXPECT_EQ(b.value, one.value) << th;  // bit for bit
+    EXPECT_EQ(b.std, one.std) << th;
+  }
+  // without decimation nothing is filtered: one block, whatever the budget
+  const exid::Estimate nodec =
+      make("filtered_ls", "{cutoff_hz: 10, decimation: 1, threads: 1, chunk_memory_mb: 0.01}")
+          ->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(nodec.details.find("column_blocks")->asInt(), 1);
+}
+
+TEST(Estimators, FilteredLsChoosesItsThreadsFromTheWork) {
+  // threads: 0 gives a thread per 4 chunks at least: a recording of 2 chunks runs on 1 thread
+  auto m = makeModel(2);
+  DataOptions o;
+  o.samples = 30000;
+  o.dt = 0.001;
+  o.q_noise = 1e-5;
+  o.tau_noise = {0.02, 0.02};
+  o.derivatives = false;
+  const exid::Dataset d = makeData(*m, 2, o);
+  exid::RunContext ctx;
+  const exid::Estimate few = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000}")
+                                 ->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(few.details.find("chunks")->asInt(), 2);
+  EXPECT_EQ(few.details.find("threads")->asInt(), 1);
+  EXPECT_NE(few.details.find("threads_from")->asString().find("the work"), std::string::npos);
+  const exid::Estimate many = make("filtered_ls", "{cutoff_hz: 40, chunk_samples: 64}")
+                                  ->estimate(*m, d, nullptr, ctx);
+  const long chunks = many.details.find("chunks")->asInt();
+  ASSERT_GE(chunks, 8);
+  EXPECT_EQ(many.details.find("threads")->asInt(),
+            std::max(1L, std::min<long>(exid::resolveThreads(0), chunks / 4)));
+  // a count the study gives is kept
+  const exid::Estimate given = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000, "
+                                                   "threads: 2}")
+                                   ->estimate(*m, d, nullptr, ctx);
+  EXPECT_EQ(given.details.find("threads")->asInt(), 2);
+  EXPECT_EQ(given.value, few.value);
 }
 
 TEST(Estimators, BatchLsGivesTheSameBitsForAnyThreadCount) {
