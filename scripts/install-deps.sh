@@ -5,7 +5,8 @@ set -euo pipefail
 pkgs=(build-essential cmake pkg-config
       libeigen3-dev libboost-dev libboost-filesystem-dev libnlopt-cxx-dev libsundials-dev
       libfmt-dev libyaml-cpp-dev liburdfdom-dev libcli11-dev libgtest-dev libgmock-dev
-      libbenchmark-dev libsqlite3-dev libzstd-dev liblz4-dev libfcl-dev gnuplot-nox libopenmpi-dev openmpi-bin
+      libbenchmark-dev libsqlite3-dev libzstd-dev liblz4-dev libxxhash-dev libfcl-dev gnuplot-nox
+      libopenmpi-dev openmpi-bin
       # the Python package (docs/python.md), its tests and the notebooks they execute
       pybind11-dev python3-dev python3-numpy python3-pandas python3-pytest python3-matplotlib
       python3-nbconvert python3-nbclient python3-ipykernel python3-jupyter-client

@@ -279,7 +279,7 @@ TEST(Opener, TheRunsInputsAreInItsSummary) {
     ASSERT_TRUE(e);
     const std::string text = slurp(f);
     EXPECT_EQ(e->find("size_bytes")->asDouble(), static_cast<double>(text.size()));
-    EXPECT_EQ(e->find("fnv1a64")->asString(), exid::hashHex(exid::fnv1a64(text)));
+    EXPECT_EQ(e->find("xxh3_64")->asString(), exid::hashHex(exid::xxh3_64(text)));
   }
   // a built-in robot and simulated data: no input file
   std::ofstream(dir / "sim.yaml") << kPlanar
@@ -293,13 +293,27 @@ TEST(Opener, TheRunsInputsAreInItsSummary) {
   fs::remove_all(dir);
 }
 
-// The manifest in the library: FNV-1a 64 (its published test vectors), one entry per file
-// whether it is read whole or streamed, a file read again unchanged once; per thread (two runs
-// side by side keep their own); nothing recorded without one.
+// The manifest in the library: XXH3 64 (the reference's values for "" and "a", seed 0; a
+// file of several read blocks hashed in pieces as in one piece), one entry per file whether it
+// is read whole or streamed, a file read again unchanged once; per thread (two runs side by
+// side keep their own); nothing recorded without one. FNV-1a 64 (its published test vectors)
+// still hashes the configurations and the cells' keys.
 TEST(Opener, TheManifestRecordsEachFileOncePerRunAndThread) {
   EXPECT_EQ(exid::hashHex(exid::fnv1a64("")), "cbf29ce484222325");
   EXPECT_EQ(exid::hashHex(exid::fnv1a64("a")), "af63dc4c8601ec8c");
   EXPECT_EQ(exid::hashHex(exid::fnv1a64("foobar")), "85944171f73967e8");
+  EXPECT_EQ(exid::hashHex(exid::xxh3_64("")), "2d06800538d394c2");
+  EXPECT_EQ(exid::hashHex(exid::xxh3_64("a")), "e6c632b61e964e1f");
+  {
+    const fs::path big = tempDir("big") / "big.bin";
+    std::string bytes(3 * (std::size_t{1} << 20) + 12345, '\0');
+    for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<char>((i * 2654435761u) >> 13);
+    std::ofstream(big, std::ios::binary) << bytes;
+    EXPECT_EQ(exid::xxh3File(big), exid::xxh3_64(bytes));
+    bytes[bytes.size() / 2] ^= 1;
+    EXPECT_NE(exid::xxh3File(big), exid::xxh3_64(bytes));
+    fs::remove_all(big.parent_path());
+  }
   const fs::path dir = tempDir("lib");
   writeRecording(dir / "a.csv");
   std::ofstream(dir / "b.txt") << "bee";
@@ -321,10 +335,10 @@ TEST(Opener, TheManifestRecordsEachFileOncePerRunAndThread) {
   EXPECT_EQ(e1[0].path, (dir / "a.csv").string());
   EXPECT_EQ(e1[0].kind, "CSV");
   EXPECT_EQ(e1[0].size_bytes, fs::file_size(dir / "a.csv"));
-  EXPECT_EQ(e1[0].fnv1a64, exid::fnv1a64(slurp(dir / "a.csv")));
-  EXPECT_EQ(e1[0].fnv1a64, exid::fnv1a64File(dir / "a.csv"));
+  EXPECT_EQ(e1[0].xxh3_64, exid::xxh3_64(slurp(dir / "a.csv")));
+  EXPECT_EQ(e1[0].xxh3_64, exid::xxh3File(dir / "a.csv"));
   EXPECT_EQ(e1[1].path, (dir / "b.txt").string());
-  EXPECT_EQ(e1[1].fnv1a64, exid::fnv1a64("bee"));
+  EXPECT_EQ(e1[1].xxh3_64, exid::xxh3_64("bee"));
   const auto e2 = m2.entries();
   ASSERT_EQ(e2.size(), 1u);
   EXPECT_EQ(e2[0].kind, "other text");

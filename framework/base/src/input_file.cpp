@@ -3,6 +3,9 @@
 
 #include <fcntl.h>
 #include <unistd.h>
+// (the whole implementation, inline: the .deb needs no libxxhash0 at run time)
+#define XXH_INLINE_ALL
+#include <xxhash.h>
 
 #include <cerrno>
 #include <cstdio>
@@ -23,6 +26,8 @@ std::uint64_t fnv1a64(const void* data, std::size_t size, std::uint64_t h) {
   }
   return h;
 }
+
+std::uint64_t xxh3_64(const void* data, std::size_t size) { return XXH3_64bits(data, size); }
 
 std::string hashHex(std::uint64_t h) {
   char buf[17];
@@ -156,7 +161,8 @@ std::string manifestPath(const fs::path& path) {
 std::uint64_t hashDescriptor(int fd, const fs::path& path, const std::string& what,
                              std::uintmax_t* bytes) {
   std::vector<char> buf(std::size_t{1} << 20);
-  std::uint64_t h = kFnv1aOffset;
+  XXH3_state_t state;
+  XXH3_64bits_reset(&state);
   off_t at = 0;
   while (true) {
     const ssize_t n = ::pread(fd, buf.data(), buf.size(), at);
@@ -165,11 +171,11 @@ std::uint64_t hashDescriptor(int fd, const fs::path& path, const std::string& wh
       throw Error(path.string() + ": cannot read the " + what + " file (" + std::strerror(errno) +
                   ")");
     if (n == 0) break;
-    h = fnv1a64(buf.data(), static_cast<std::size_t>(n), h);
+    XXH3_64bits_update(&state, buf.data(), static_cast<std::size_t>(n));
     at += n;
   }
   *bytes = static_cast<std::uintmax_t>(at);
-  return h;
+  return XXH3_64bits_digest(&state);
 }
 
 // Records the file open on fd in the current manifest (if any), hashing it unless known.
@@ -181,7 +187,7 @@ void record(int fd, const struct stat& st, const fs::path& path, const std::stri
   InputRecord r;
   r.path = p;
   r.kind = what;
-  r.fnv1a64 = hashDescriptor(fd, path, what, &r.size_bytes);
+  r.xxh3_64 = hashDescriptor(fd, path, what, &r.size_bytes);
   m->add(r, st);
 }
 
@@ -239,7 +245,7 @@ std::string readInputFile(const fs::path& path, const std::string& what, std::ui
     r.path = manifestPath(path);
     r.kind = what;
     r.size_bytes = text.size();
-    r.fnv1a64 = fnv1a64(text);
+    r.xxh3_64 = xxh3_64(text);
     m->add(r, st);
   }
   return text;
@@ -249,7 +255,7 @@ void admitInputFile(const fs::path& path, const std::string& what, std::uintmax_
   ::close(openInputFile(path, what, max_bytes));
 }
 
-std::uint64_t fnv1a64File(const fs::path& path, const std::string& what) {
+std::uint64_t xxh3File(const fs::path& path, const std::string& what) {
   struct stat st {};
   const int fd = openChecked(path, what, kStreamedFileBytes, &st);
   std::uintmax_t bytes = 0;

@@ -106,15 +106,17 @@ std::string changedInput(const std::string& inputs_json, std::map<std::string, s
   for (std::size_t i = 0; i < inputs.size(); ++i) {
     const Json& e = inputs.at(i);
     const Json* path = e.find("path");
-    const Json* hash = e.find("fnv1a64");
+    const Json* hash = e.find("xxh3_64");
     const Json* size = e.find("size_bytes");
+    if (path && !hash && size && e.find("fnv1a64"))
+      return "its input manifest holds the hashes of an earlier exid (FNV-1a; now XXH3)";
     if (!path || !hash || !size) return "its input manifest cannot be read";
     const std::string& p = path->asString();
     auto it = now->find(p);
     if (it == now->end()) {
       std::string h;
       try {
-        h = hashHex(fnv1a64File(p));
+        h = hashHex(xxh3File(p));
       } catch (const Error&) {
         h = "(not a readable file)";
       }

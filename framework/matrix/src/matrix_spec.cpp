@@ -103,7 +103,7 @@ std::string cellKey(const StudyConfig& cfg, const std::string& config_hash, cons
     if (it == contents->end()) {
       std::string c;
       try {
-        c = hashHex(fnv1a64File(f));
+        c = hashHex(xxh3File(f));
       } catch (const Error&) {
         // unreadable (the cell will fail and say why), or a folder (a bag: what the cell read
         // in it is in its manifest, checked before the cell is skipped: cellsToRun)

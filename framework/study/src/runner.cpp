@@ -36,7 +36,7 @@ Json inputManifestJson(const InputManifest& m) {
     e["path"] = r.path;
     e["kind"] = r.kind;
     e["size_bytes"] = static_cast<long long>(r.size_bytes);
-    e["fnv1a64"] = hashHex(r.fnv1a64);
+    e["xxh3_64"] = hashHex(r.xxh3_64);
     out.push_back(std::move(e));
   }
   return out;
