@@ -223,6 +223,20 @@ axes:
   r = runExid({"-q", "matrix", "m.yaml", "--out", "o"}, dir);
   EXPECT_TRUE(contains(r.out, "2 skipped (finished before)")) << r.out;
   EXPECT_EQ(metric(dir, "residual_rms"), after);
+  // manifests an earlier exid wrote (FNV-1a hashes, key fnv1a64) cannot vouch for the files:
+  // the cells run again and say why
+  {
+    sqlite3* db = nullptr;
+    ASSERT_EQ(sqlite3_open((dir / "o" / "results.sqlite").string().c_str(), &db), SQLITE_OK);
+    sql(db, "UPDATE runs SET summary = replace(summary, '\"xxh3_64\"', '\"fnv1a64\"')");
+    sqlite3_close(db);
+  }
+  r = runExid({"matrix", "m.yaml", "--out", "o"}, dir);
+  EXPECT_EQ(r.code, 0) << r.out;
+  EXPECT_TRUE(contains(r.out, "2 ok, 0 failed, 0 timeout, 0 skipped")) << r.out;
+  EXPECT_TRUE(contains(r.out, "holds the hashes of an earlier exid (FNV-1a; now XXH3)")) << r.out;
+  r = runExid({"-q", "matrix", "m.yaml", "--out", "o"}, dir);
+  EXPECT_TRUE(contains(r.out, "2 skipped (finished before)")) << r.out;
   fs::remove_all(dir);
 }
 
