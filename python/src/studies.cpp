@@ -134,8 +134,8 @@ py::dict runStudy(const std::string& path, const std::string& text, const std::s
   std::shared_ptr<ProgressForwarder> forward;
   if (!progress.is_none()) {
     forward = std::make_shared<ProgressForwarder>(progress);
-    opt.progress = [forward](const std::string& stage, double f, const std::string& text) {
-      (*forward)(stage, f, text);
+    opt.progress = [forward](const std::string& at, double f, const std::string& what) {
+      (*forward)(at, f, what);
     };
   }
   exid::StudyResult r;

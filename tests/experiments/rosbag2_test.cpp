@@ -225,7 +225,7 @@ TEST(Rosbag2, SplitAndSegmentAsTheCsvExperiment) {
 // give the same samples to the bit and the same accounting.
 TEST(Rosbag2, TheFilterStepsAreTheCsvExperiments) {
   const fs::path dir = bagOf(kVariants[3]);
-  for (const std::string extra :
+  for (const std::string& extra :
        {std::string("differentiate_cutoff_hz: 20, filter_torque: true, decimation: 2"),
         std::string("measurement_delay_s: 0.012, differentiate_cutoff_hz: 15, trim_edges: 7"),
         std::string("resample_hz: 150, t_start_s: 1, t_end_s: 8")}) {
@@ -246,7 +246,9 @@ TEST(Rosbag2, TheFilterStepsAreTheCsvExperiments) {
     const exid::Json* fb = b.meta.find("differentiated");
     const exid::Json* fc = c.meta.find("differentiated");
     ASSERT_EQ(fb == nullptr, fc == nullptr);
-    if (fb) EXPECT_EQ(fb->dump(), fc->dump());
+    if (fb) {
+      EXPECT_EQ(fb->dump(), fc->dump());
+    }
     const exid::Json* db = b.meta.find("measurement_delay");
     const exid::Json* dc = c.meta.find("measurement_delay");
     ASSERT_EQ(db == nullptr, dc == nullptr);
