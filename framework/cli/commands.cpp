@@ -40,7 +40,8 @@ CLI::App* addRobotCommand(CLI::App& app, CommandArgs* st) {
   robot->require_subcommand(1);
   info->add_option("robot", st->robot, "robot plugin name, or a .urdf / DH .yaml file")->required();
   info->add_option("--model", st->model,
-                   "observation model that defines the columns (default differential)");
+                   "observation model that defines the columns (default: differential, or "
+                   "floating_base for a floating-base robot)");
   info->add_option("--model-params", st->model_params,
                    "its parameters as YAML, e.g. '{rotor_inertia: true}'");
   info->add_flag("--json", st->json, "print JSON");
@@ -184,7 +185,9 @@ Commands addCommands(CLI::App& app, Registry& registry) {
     if (*matrix)
       return matrixCommand(registry, st->matrix_args, st->out, st->jobs, st->shard, st->retry,
                            st->force, st->rows, st->cols, st->metric, cancelled());
-    if (*info) return robotInfo(registry, st->robot, st->model, st->model_params, st->json);
+    if (*info)
+      return robotInfo(registry, st->robot, info->get_option("--model")->count() ? st->model : "",
+                       st->model_params, st->json);
     if (*eval)
       return evalCommand(registry, st->robot, st->samples, st->what, st->out, st->rigid_body_only);
     if (*exp) return exportCommand(registry, st->robot, st->study, st->out, st->format);

@@ -25,6 +25,7 @@ Commands addCommands(CLI::App& app, Registry& registry);
 // The commands addCommands runs, each returning the exit code.
 // commands_robot.cpp: robot info, eval, check-trajectory, export.
 std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::string& robot);
+/// model_name empty: differential, or floating_base for a floating-base robot (said so).
 int robotInfo(const Registry& reg, const std::string& robot, const std::string& model_name,
               const std::string& model_params, bool json);
 int evalCommand(const Registry& reg, const std::string& robot, const std::string& samples,

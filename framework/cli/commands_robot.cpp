@@ -109,9 +109,12 @@ std::shared_ptr<const RobotModel> loadRobot(const Registry& reg, const std::stri
   return reg.create<Robot>(type, ps)->build(ctx);
 }
 
-int robotInfo(const Registry& reg, const std::string& robot, const std::string& model_name,
+int robotInfo(const Registry& reg, const std::string& robot, const std::string& model_given,
               const std::string& model_params, bool json) {
   auto r = loadRobot(reg, robot);
+  // (the fixed-base models refuse a floating base: its own model by default, and said so)
+  const std::string model_name =
+      !model_given.empty() ? model_given : r->floating_base ? "floating_base" : "differential";
   const PluginInfo& info = reg.get(PluginKind::Model, model_name);
   auto model = reg.create<ObservationModel>(
       model_name, resolveParams(info, model_params, "model " + model_name, fs::current_path()));
@@ -126,6 +129,10 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
     j["source"] = r->source;
     j["dof"] = r->dof();
     j["model"] = model_name;
+    if (model_given.empty())
+      j["model_rule"] = r->floating_base ? "floating_base: the robot has a floating base (--model "
+                                           "to choose another)"
+                                         : "differential: the default (--model to choose another)";
     j["parameters"] = Json(b.full_names);
     j["values"] = Json(std::vector<double>(nominal.data(), nominal.data() + nominal.size()));
     Json bp = Json::array();
@@ -163,7 +170,11 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
         body.parent + 1, L.q_min, L.q_max, L.qd_max);
   }
   std::cout << fmt::format(
-      "\nmodel {}: {} standard parameters, {} base parameters (tolerance {:g})\n\n", model_name,
+      "\nmodel {}{}: {} standard parameters, {} base parameters (tolerance {:g})\n\n",
+      model_name,
+      model_given.empty() && r->floating_base ? " (the robot has a floating base; --model to "
+                                                "choose another)"
+                                              : "",
       b.numFull(), b.rank(), b.tolerance);
   std::cout << "standard parameters:\n";
   for (int i = 0; i < b.numFull(); ++i)

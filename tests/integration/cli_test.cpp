@@ -135,6 +135,29 @@ TEST(Cli, RobotInfoPrintsBaseParametersAsJson) {
   EXPECT_EQ(j.find("base_parameters")->size(), 36u);  // the classical PUMA 560 count
 }
 
+// A floating-base robot's info uses the floating_base model unless --model says otherwise (the
+// fixed-base models refuse it), and says so; a fixed-base robot keeps differential, unsaid.
+TEST(Cli, RobotInfoOfAFloatingBaseUsesItsOwnModelAndSaysSo) {
+  CmdResult r = runExid("-q robot info humanoid --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  exid::Json j = exid::Json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_EQ(j.find("model")->asString(), "floating_base");
+  EXPECT_NE(j.find("model_rule")->asString().find("floating base"), std::string::npos);
+  EXPECT_EQ(j.find("parameters")->size(), 110u);  // the torso's 10 and 10 per body
+  r = runExid("-q robot info humanoid");
+  ASSERT_EQ(r.code, 0) << r.out;
+  EXPECT_NE(r.out.find("model floating_base (the robot has a floating base"), std::string::npos)
+      << r.out;
+  r = runExid("-q robot info humanoid --model differential");
+  EXPECT_EQ(r.code, 2) << r.out;
+  EXPECT_NE(r.out.find("floating_base observation model"), std::string::npos) << r.out;
+  r = runExid("-q robot info puma560 --json");
+  ASSERT_EQ(r.code, 0) << r.out;
+  j = exid::Json::parse(r.out.substr(r.out.find('{')));
+  EXPECT_EQ(j.find("model")->asString(), "differential");
+  EXPECT_EQ(j.find("model_rule")->asString().find("floating"), std::string::npos);
+}
+
 TEST(Cli, SimulateThenIdentifyReadsTheCsvBack) {
   fs::path dir = tempDir("stages");
   std::ofstream(dir / "s.yaml") << "robot: {type: planar2r}\nmodel: {type: differential, params: "
