@@ -192,25 +192,45 @@ MatrixXd ClosedLoop::jointRows(const MatrixXd& W) const {
   return out;
 }
 
-VectorXd ClosedLoop::contactTorque(const VectorXd& q, double t) const {
-  if (fb_contact_.cols() == 0) return VectorXd::Zero(n_);
-  // the model's rows at zero torque: their measured side is the contacts' part alone
+namespace {
+
+// One sample of a floating base's recording at zero torque: the model's rows there have the
+// contacts' part alone on their measured side.
+Dataset floatingSample(double t, const VectorXd& q, const VectorXd& qd, const VectorXd& qdd,
+                       const Eigen::RowVectorXd& base, const Eigen::RowVectorXd& contact,
+                       const std::string& who) {
   Dataset d;
   d.t = VectorXd::Constant(1, t);
   d.q = q.transpose();
-  d.qd = MatrixXd::Zero(1, n_);
-  d.qdd = MatrixXd::Zero(1, n_);
-  d.tau = MatrixXd::Zero(1, n_);
-  d.base = recordedAt(fb_base_, t);
-  d.contact = recordedAt(fb_contact_, t);
-  d.source = who_ + " (the closed loop's contact wrenches)";
-  const Rows r = model_->fullRowsAt(d, eta_, nullptr, RunContext{});
+  d.qd = qd.transpose();
+  d.qdd = qdd.transpose();
+  d.tau = MatrixXd::Zero(1, q.size());
+  d.base = base;
+  d.contact = contact;
+  d.source = who + " (the closed loop's contact wrenches)";
+  return d;
+}
+
+}  // namespace
+
+VectorXd ClosedLoop::contactTorque(const VectorXd& q, double t) const {
+  if (fb_contact_.cols() == 0) return VectorXd::Zero(n_);
+  const VectorXd z = VectorXd::Zero(n_);
+  const Rows r = model_->fullRowsAt(
+      floatingSample(t, q, z, z, recordedAt(fb_base_, t), recordedAt(fb_contact_, t), who_), eta_,
+      nullptr, RunContext{});
   return r.y.tail(n_);
 }
 
 VectorXd ClosedLoop::floatingTorque(const VectorXd& rest, double t, const VectorXd& q,
                                     const VectorXd& qd, const VectorXd& qdd,
                                     bool with_contact) const {
+  if (with_contact && fb_contact_.cols() > 0) {  // one pass of the model's rows: W phi - y
+    const Rows r = model_->fullRowsAt(
+        floatingSample(t, q, qd, qdd, recordedAt(fb_base_, t), recordedAt(fb_contact_, t), who_),
+        eta_, nullptr, RunContext{});
+    return (r.W * fullOf(rest) - r.y).tail(n_);
+  }
   Samples s;
   s.t = VectorXd::Constant(1, t);
   s.q = q.transpose();
