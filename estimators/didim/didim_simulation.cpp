@@ -65,7 +65,8 @@ void Didim::chooseSamples(const exid::ObservationModel& model, const exid::Datas
   for (std::size_t i = 0; i < keep.size(); ++i) {
     const Eigen::Index r0 = static_cast<Eigen::Index>(i) * per;
     y_.segment(r0, n) = Y.row(keep[i]);
-    if (nb_ > 0) y_.segment(r0 + n, nb_) = yb.segment(static_cast<Eigen::Index>(keep[i]) * per, nb_);
+    if (nb_ > 0)
+      y_.segment(r0 + n, nb_) = yb.segment(static_cast<Eigen::Index>(keep[i]) * per, nb_);
   }
 }
 

@@ -206,10 +206,10 @@ std::pair<double, double> replay(const Case& c, const exid::Dataset& d, const Ve
   tol.atol = 1e-14;
   loop.simulate(theta, d.t, tol, false, [&](int k, const VectorXd& x, const MatrixXd*) {
     eq = std::max(eq, (x.head(n) - c.loop.data.q.row(k).transpose()).cwiseAbs().maxCoeff());
-    et = std::max(et, (loop.control(d.t[k], x.head(n), x.tail(n)) -
-                       c.loop.data.tau.row(k).transpose())
-                          .cwiseAbs()
-                          .maxCoeff());
+    et = std::max(et,
+                  (loop.control(d.t[k], x.head(n), x.tail(n)) - c.loop.data.tau.row(k).transpose())
+                      .cwiseAbs()
+                      .maxCoeff());
   });
   return {eq, et};
 }
@@ -249,20 +249,22 @@ TEST(FloatingLoop, TheLoopReproducesAnIndependentRecording) {
   const double rk4 = (half.loop.data.q - c.loop.data.q).cwiseAbs().maxCoeff();
   const auto [eq, et] = replay(c, c.loop.data, c.loop.truth);
 
-  std::printf("humanoid loop at the truth: joints %.2e rad, torque %.2e N m off the recording "
-              "(RK4 step halved: %.2e rad); tracking error %.3f rad\n",
-              eq, et, rk4,
-              (c.loop.data.q - [&] {
-                MatrixXd r(c.loop.data.size(), n);
-                for (int k = 0; k < c.loop.data.size(); ++k) {
-                  VectorXd q, qd, qdd;
-                  referenceAt(c.loop.data.t[k], n, &q, &qd, &qdd);
-                  r.row(k) = q.transpose();
-                }
-                return r;
-              }())
-                  .cwiseAbs()
-                  .maxCoeff());
+  std::printf(
+      "humanoid loop at the truth: joints %.2e rad, torque %.2e N m off the recording "
+      "(RK4 step halved: %.2e rad); tracking error %.3f rad\n",
+      eq, et, rk4,
+      (c.loop.data.q -
+       [&] {
+         MatrixXd r(c.loop.data.size(), n);
+         for (int k = 0; k < c.loop.data.size(); ++k) {
+           VectorXd q, qd, qdd;
+           referenceAt(c.loop.data.t[k], n, &q, &qd, &qdd);
+           r.row(k) = q.transpose();
+         }
+         return r;
+       }())
+          .cwiseAbs()
+          .maxCoeff());
   EXPECT_LT(eq, 1e-10);
   EXPECT_LT(et, 1e-6);
   // the base's angular acceleration read as zero: the loop leaves the recording
@@ -289,9 +291,10 @@ TEST(FloatingLoop, DidimAndIvIdentifyTheHumanoid) {
     auto e = exid_test::create<exid::Estimator>(est, "{" + c.loop.params + extra + "}");
     const exid::Estimate r = e->estimate(*c.loop.model, c.loop.data, nullptr, mtest::context());
     const double err = scaledErr(r.value, c.loop.truth);
-    std::printf("[%s] humanoid, noise-free torques: largest error / largest parameter %.2e, "
-                "%s iterations\n",
-                est.c_str(), err, r.details.find("iterations")->dump().c_str());
+    std::printf(
+        "[%s] humanoid, noise-free torques: largest error / largest parameter %.2e, "
+        "%s iterations\n",
+        est.c_str(), err, r.details.find("iterations")->dump().c_str());
     RecordProperty(est, fmt::format("{:.3e}", err));
     EXPECT_LT(err, 1e-9) << est;
     if (est == "didim") {
@@ -301,4 +304,43 @@ TEST(FloatingLoop, DidimAndIvIdentifyTheHumanoid) {
       EXPECT_LT(grad, 1e-4);
     }
   }
+}
+
+// What the floating loop does not do is refused by name: the measurement delay (didim), the
+// positions fitted beside the base rows, a recording that starts after the reference (no base
+// motion to start from); the same estimators run with rows: joints (no base rows fitted).
+TEST(FloatingLoop, RefusalsNameWhy) {
+  const Case c = humanoidTracking(0.4, 2.5e-4);
+  auto msg = [&](const std::string& est, const std::string& extra, const exid::Dataset& d) {
+    try {
+      exid_test::create<exid::Estimator>(est, "{" + c.loop.params + extra + "}")
+          ->estimate(*c.loop.model, d, nullptr, mtest::context());
+    } catch (const exid::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  std::string m =
+      msg("didim", ", measurement_delay: true, measurement_delay_max_s: 0.01, max_iterations: 1",
+          c.loop.data);
+  EXPECT_NE(m.find("measurement_delay is not available on a floating base"), std::string::npos)
+      << m;
+  m = msg("didim", ", output: position, max_iterations: 1", c.loop.data);
+  EXPECT_NE(m.find("would fit positions and wrenches together"), std::string::npos) << m;
+  const exid::Dataset late = exid::sliceDataset(c.loop.data, 2, c.loop.data.size());
+  for (const char* est : {"didim", "iv"}) {
+    m = msg(est, ", max_iterations: 1", late);
+    EXPECT_NE(m.find("more than a sample after the reference's start"), std::string::npos)
+        << est << ": " << m;
+  }
+  // one sample late is read by the Lagrange polynomial of the first six: accepted
+  m = msg("iv", ", max_iterations: 1", exid::sliceDataset(c.loop.data, 1, c.loop.data.size()));
+  EXPECT_EQ(m, "no error");
+  // the joint rows alone: no base rows in didim's output
+  auto mj =
+      mtest::model("floating_base", std::string("{rows: joints, ") + kModel + "}", c.loop.robot);
+  const exid::Estimate e =
+      exid_test::create<exid::Estimator>("didim", "{" + c.loop.params + ", max_iterations: 1}")
+          ->estimate(*mj, c.loop.data, nullptr, mtest::context());
+  EXPECT_EQ(e.value.size(), mj->numBase());
 }

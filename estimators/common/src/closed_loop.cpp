@@ -162,8 +162,8 @@ void ClosedLoop::setUpFloating(const Dataset& data) {
                             who_, data.source, K));
   for (int k = 1; k < K; ++k)
     check(data.t[k] > data.t[k - 1],
-          fmt::format("{}: the recording's time is not strictly increasing at sample {} ({})",
-                      who_, k, data.source));
+          fmt::format("{}: the recording's time is not strictly increasing at sample {} ({})", who_,
+                      k, data.source));
   fb_t_ = data.t;
   fb_base_ = data.base;
   fb_contact_ = data.contact;
@@ -188,7 +188,8 @@ Eigen::RowVectorXd ClosedLoop::recordedAt(const MatrixXd& X, double t) const {
 MatrixXd ClosedLoop::jointRows(const MatrixXd& W) const {
   const Eigen::Index m = rows_per_sample_, K = W.rows() / m;
   MatrixXd out(K * n_, W.cols());
-  for (Eigen::Index k = 0; k < K; ++k) out.middleRows(k * n_, n_) = W.middleRows(k * m + m - n_, n_);
+  for (Eigen::Index k = 0; k < K; ++k)
+    out.middleRows(k * n_, n_) = W.middleRows(k * m + m - n_, n_);
   return out;
 }
 
@@ -456,8 +457,8 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
     h = f.head(n) - contactTorque(q, t);
     M.resize(n, n);
     for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - f.head(n);
-  } else if (!model_->fullTorqueAt(q, qd, VectorXd::Zero(n), eta_, fullOf(theta), &h, nullptr, nullptr,
-                            &M)) {
+  } else if (!model_->fullTorqueAt(q, qd, VectorXd::Zero(n), eta_, fullOf(theta), &h, nullptr,
+                                   nullptr, &M)) {
     for (int k = 0; k <= n; ++k) {
       s_.q.row(k) = q.transpose();
       s_.qd.row(k) = qd.transpose();

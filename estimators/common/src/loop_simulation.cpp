@@ -40,7 +40,7 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   if (B) {
     MatrixXd dWn;
     MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
-    if (floating_) {  // the joint rows
+    if (floating_) {                                                     // the joint rows
       w = jointRows(w);
       if (eta_sens_) dWn = jointRows(dWn);
     }
@@ -83,9 +83,9 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
       Tq.col(j) = (floatingTorque(rest, t, qp, qd, a) - floatingTorque(rest, t, qm, qd, a)) /
                   (qp[j] - qm[j]);
       // (the contact torque does not depend on qd)
-      Tqd.col(j) = (floatingTorque(rest, t, q, vp, a, false) -
-                    floatingTorque(rest, t, q, vm, a, false)) /
-                   (vp[j] - vm[j]);
+      Tqd.col(j) =
+          (floatingTorque(rest, t, q, vp, a, false) - floatingTorque(rest, t, q, vm, a, false)) /
+          (vp[j] - vm[j]);
     }
   } else if (!model_->fullTorqueAt(q, qd, a, eta_, fullOf(theta), &tau, &Tq, &Tqd, nullptr)) {
     MatrixXd G = MatrixXd::Zero(n, theta.size());
