@@ -244,6 +244,11 @@ TEST(FloatingLoop, TheLoopReproducesAnIndependentRecording) {
                                       .maxCoeff());
   }
   EXPECT_LT(worst_id, 1e-9);
+  // and the model's rows hold on the recording, base rows (balanced by the base sensor) and
+  // joint rows alike
+  const exid::Rows rows = c.loop.model->fullRows(c.loop.data, mtest::context());
+  const double res = (rows.W * c.loop.model->fullNominal() - rows.y).cwiseAbs().maxCoeff();
+  EXPECT_LT(res, 1e-10 * rows.y.cwiseAbs().maxCoeff()) << res;
   // the RK4 recording against one at half the step: its own error
   const Case half = humanoidTracking(2.0, 6.25e-5);
   const double rk4 = (half.loop.data.q - c.loop.data.q).cwiseAbs().maxCoeff();
