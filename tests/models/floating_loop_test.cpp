@@ -302,6 +302,9 @@ TEST(FloatingLoop, DidimAndIvIdentifyTheHumanoid) {
         est.c_str(), err, r.details.find("iterations")->dump().c_str());
     RecordProperty(est, fmt::format("{:.3e}", err));
     EXPECT_LT(err, 1e-9) << est;
+    EXPECT_NE(r.details.find("controller")->asString().find("recorded base motion"),
+              std::string::npos)
+        << est;
     if (est == "didim") {
       const double grad =
           r.details.find("gradient_check")->find("max_relative_difference")->asDouble();

@@ -384,6 +384,14 @@ std::string ClosedLoop::describe() const {
   if (open_)
     return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
            "samples)";
+  if (floating_)  // (the joints' loop on the recorded base motion)
+    return fmt::format(
+        "tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}; floating base: the joints simulated "
+        "on the recorded base motion and contact wrenches (degree-5 Lagrange between samples)",
+        ff_ ? "tau_ff(robot description's rigid bodies on the recorded base motion; qr, qdr, "
+              "qddr) + "
+            : "",
+        file_);
   return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",
                      ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "", file_);
 }
