@@ -188,9 +188,19 @@ exid::Estimate Didim::estimate(const exid::ObservationModel& model, const exid::
   loop_->setStop([stop = ctx.cancelled, deadline = ctx.deadline] {
     return deadline.expired() || (stop && stop());
   });
+  exid::check(!delay_ || !loop_->floatingBase(),
+              "didim: measurement_delay is not available on a floating base (the delay's "
+              "Jacobian column needs the command's rate, which the floating loop does not give)");
   const int p = model.numBase(), n = loop_->dof(), K = data.size();
   setPrior(model);
-  chooseSamples(data, n, K);
+  // a floating base with the base rows (rows: all): they are fitted too (the joint torques
+  // alone do not identify what only the base rows see)
+  nb_ = loop_->baseRowCount();
+  exid::check(nb_ == 0 || !position_,
+              "didim: output: position on a floating base whose model has the base rows (rows: "
+              "all) would fit positions and wrenches together: use output: torque (or rows: "
+              "joints)");
+  chooseSamples(model, data, n, K, ctx);
   const long m = y_.size();
   exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
   L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;

@@ -112,7 +112,8 @@ class Didim : public exid::Estimator {
       exid::estimators::ClosedLoop::Tolerances t, const std::string& how);
 
   // didim_simulation.cpp: the samples, the simulation, the least-squares starts
-  void chooseSamples(const exid::Dataset& data, int n, int K);
+  void chooseSamples(const exid::ObservationModel& model, const exid::Dataset& data, int n, int K,
+                     const exid::RunContext& ctx);
   VectorXd firstStart(const exid::ObservationModel& model, const exid::Dataset& data,
                       const exid::RunContext& ctx) const;
   VectorXd startFit(const exid::ObservationModel& model, const exid::Rows& R,
@@ -171,6 +172,7 @@ class Didim : public exid::Estimator {
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
   std::vector<StartParam> sp_;  // the parameters the starts move (startParams)
   VectorXd y_;
+  int nb_ = 0;  // a floating base's base rows fitted per sample after the joints' outputs
 };
 
 }  // namespace exid::didim

@@ -11,7 +11,8 @@
 namespace exid::didim {
 
 // The samples fitted (keep_t_, windows_, dropped_) and the measured output y_.
-void Didim::chooseSamples(const exid::Dataset& data, int n, int K) {
+void Didim::chooseSamples(const exid::ObservationModel& model, const exid::Dataset& data, int n,
+                          int K, const exid::RunContext& ctx) {
   // the samples fitted: all, or those whose t -+ measurement_delay_max_s lie in the
   // reference; with loop: open, the windows' samples after their starts
   keep_t_.clear();
@@ -45,13 +46,28 @@ void Didim::chooseSamples(const exid::Dataset& data, int n, int K) {
       }
   }
   dropped_ = K - static_cast<int>(keep.size());
-  // the measured output, sample-major
-  y_.resize(static_cast<Eigen::Index>(keep.size()) * n);
+  // the measured output, sample-major (n, or n + nb_: the base rows' measured side, the
+  // contact wrenches at the recorded positions, as the model's rows give it)
+  const int per = n + nb_;
+  y_.resize(static_cast<Eigen::Index>(keep.size()) * per);
   const MatrixXd& Y = position_ ? data.q : data.tau;
   exid::check(Y.rows() == K && Y.cols() == n,
               fmt::format("didim: the data has no {} of {} joints", position_ ? "q" : "torque", n));
-  for (std::size_t i = 0; i < keep.size(); ++i)
-    y_.segment(static_cast<Eigen::Index>(i) * n, n) = Y.row(keep[i]);
+  VectorXd yb;
+  if (nb_ > 0) {
+    const exid::Rows R = model.rows(data, ctx);
+    exid::check(R.y.size() == static_cast<Eigen::Index>(K) * per,
+                fmt::format("didim: the model gives {} rows for {} samples (expected {} per "
+                            "sample)",
+                            R.y.size(), K, per));
+    yb = R.y;
+  }
+  for (std::size_t i = 0; i < keep.size(); ++i) {
+    const Eigen::Index r0 = static_cast<Eigen::Index>(i) * per;
+    y_.segment(r0, n) = Y.row(keep[i]);
+    if (nb_ > 0)
+      y_.segment(r0 + n, nb_) = yb.segment(static_cast<Eigen::Index>(keep[i]) * per, nb_);
+  }
 }
 
 // The first start x = (theta, log eta, d): the inverse model's least squares (drive gains at
@@ -131,10 +147,16 @@ Didim::Sim Didim::simulate(const VectorXd& xv, const exid::Dataset& data, bool s
   VectorXd times(K);
   for (int k = 0; k < K; ++k) times[k] = keep_t_[static_cast<std::size_t>(k)] - d;
   Sim out;
-  out.y.resize(static_cast<Eigen::Index>(K) * n);
-  if (sens) out.J.resize(static_cast<Eigen::Index>(K) * n, p);
+  const int per = n + nb_;
+  out.y.resize(static_cast<Eigen::Index>(K) * per);
+  if (sens) out.J.resize(static_cast<Eigen::Index>(K) * per, p);
   auto at = [&](int k, const VectorXd& x, const MatrixXd* S) {
-    const Eigen::Index r0 = static_cast<Eigen::Index>(k) * n;
+    const Eigen::Index r0 = static_cast<Eigen::Index>(k) * per;
+    if (nb_ > 0) {  // a floating base's base rows at the simulated motion
+      MatrixXd Jb;
+      out.y.segment(r0 + n, nb_) = loop_->baseRows(theta, times[k], x, S, S ? &Jb : nullptr);
+      if (S) out.J.block(r0 + n, 0, nb_, S->cols()) = Jb;
+    }
     out.y.segment(r0, n) =
         position_ ? VectorXd(x.head(n)) : loop_->control(times[k], x.head(n), x.tail(n));
     if (S) {  // d tau_c / d theta = -Kp S_q - Kd S_qd, or d q / d theta = S_q

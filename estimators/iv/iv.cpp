@@ -95,6 +95,8 @@ class Iv : public exid::Estimator {
     exid::estimators::checkRows(R, p, kName, 0);
     const long m = R.y.size();
     exid::check(m > p, fmt::format("iv: {} rows for {} parameters", m, p));
+    // the rows of one sample (a floating base's model may add the base's six to the joints')
+    per_ = loop_->floatingBase() ? static_cast<int>(m / data.size()) : loop_->dof();
     // start: least squares
     VectorXd theta = startFit(model, R);
     exid::Json trace = exid::Json::array();
@@ -183,6 +185,12 @@ class Iv : public exid::Estimator {
     out.qdd.resize(K, n);
     out.tau = data.tau;
     out.source = "iv simulation";
+    // a floating base: the simulated joints on the recorded base motion, with the recorded
+    // contact wrenches (the rows' measured side)
+    if (loop_->floatingBase()) {
+      out.base = data.base;
+      out.contact = data.contact;
+    }
     loop_->simulate(
         theta, data.t, tol_loop_, false, [&](int k, const VectorXd& x, const MatrixXd*) {
           out.q.row(k) = x.head(n).transpose();
@@ -210,7 +218,7 @@ class Iv : public exid::Estimator {
     // rows of one sample and larger on some joints, so neither is assumed away.
     const MatrixXd& A = ZtWinv;
     const VectorXd res = R.y - R.W * theta;
-    const int per = loop_->dof();
+    const int per = per_;
     MatrixXd S = MatrixXd::Zero(p, p);
     for (long b = 0; b < m; b += per) {
       const VectorXd g = Z.middleRows(b, per).transpose() * res.segment(b, per);
@@ -263,6 +271,7 @@ class Iv : public exid::Estimator {
   double tol_;
   exid::estimators::ClosedLoop::Tolerances tol_loop_;
   std::unique_ptr<exid::estimators::ClosedLoop> loop_;
+  int per_ = 0;  // rows per sample
 };
 
 }  // namespace

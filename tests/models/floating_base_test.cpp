@@ -151,16 +151,29 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   auto m2 = mtest::model("floating_base", "{contact_links: [l_shank, r_shank]}", r);
   m = msg([&] { m2->fullRows(d, mtest::context()); });
   EXPECT_NE(m.find("declares 2 contact(s)"), std::string::npos) << m;
-  // closed-loop estimators and excitation design
+  // the closed-loop estimators (tests/models/floating_loop_test.cpp) simulate the joints from
+  // the joint rows on the recorded base motion: the base rows alone have none, a recording
+  // without base motion has nothing to run on; the torque-driven loop needs a fixed base
   auto fm = mtest::model("floating_base", std::string("{") + kModel + "}", r);
+  auto fb = mtest::model("floating_base", std::string("{rows: base, ") + kModel + "}", r);
+  exid::Dataset no_base = d;
+  no_base.base.resize(0, 0);
   for (const char* est : {"didim", "iv"}) {
-    m = msg([&] {
-      exid_test::create<exid::Estimator>(
-          est, "{reference_file: reference.csv, kp_Nm_per_rad: [100], kd_Nm_s_per_rad: [10]}")
-          ->estimate(*fm, d, nullptr, mtest::context());
-    });
-    EXPECT_NE(m.find("floating base"), std::string::npos) << est << ": " << m;
+    auto e = exid_test::create<exid::Estimator>(
+        est, "{reference_file: reference.csv, kp_Nm_per_rad: [100], kd_Nm_s_per_rad: [10]}");
+    m = msg([&] { e->estimate(*fb, d, nullptr, mtest::context()); });
+    EXPECT_NE(m.find("needs them (rows: all or joints, not base)"), std::string::npos)
+        << est << ": " << m;
+    m = msg([&] { e->estimate(*fm, no_base, nullptr, mtest::context()); });
+    EXPECT_NE(m.find("runs on the recorded base motion: the recording"), std::string::npos)
+        << est << ": " << m;
   }
+  m = msg([&] {
+    exid_test::create<exid::Estimator>("didim", "{loop: open, window_s: 0.2, output: position}")
+        ->estimate(*fm, d, nullptr, mtest::context());
+  });
+  EXPECT_NE(m.find("floating base"), std::string::npos) << m;
+  EXPECT_NE(m.find("torque-driven"), std::string::npos) << m;
 }
 
 // slice, resample, join, materialize and the recording's decimation carry the base motion and

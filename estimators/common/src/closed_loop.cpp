@@ -10,6 +10,7 @@
 #include "exid/delay.hpp"
 #include "exid/drive.hpp"
 #include "exid/error.hpp"
+#include "exid/floating_base.hpp"
 #include "exid/io.hpp"
 #include "exid/sampled_reference.hpp"
 
@@ -105,10 +106,14 @@ void ClosedLoop::checkParams(const ParamSet& p, const std::string& who) {
 ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const Dataset& data,
                        const RunContext& ctx, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who) {
-  robot_->requireFixedBase(who +
-                           " (its closed-loop simulation integrates the fixed-base forward "
-                           "dynamics)");
+  // a floating base: the joints' loop on the recorded base motion (a model of its own)
+  floating_ = robot_->floating_base && model.specs().floating_base;
+  if (!floating_)
+    robot_->requireFixedBase(who +
+                             " (its closed-loop simulation integrates the fixed-base forward "
+                             "dynamics)");
   checkParams(p, who);
+  if (floating_) setUpFloating(data);
   const std::string file = p.getString("reference_file");
   const std::vector<double> kp = p.getDoubles("kp_Nm_per_rad"),
                             kd = p.getDoubles("kd_Nm_s_per_rad");
@@ -131,13 +136,123 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
         fmt::format("{}: the recording's times [{}, {}] s are not within the reference's [{}, "
                     "{}] s ({}): the simulation is driven by the reference",
                     who, data.tFirst(), data.tLast(), ref_.t0(), ref_.t1(), file_));
-  dyn_ = makeDynamicsData(*robot_);
+  // the simulation starts at the reference's start: the base motion is read there (at most one
+  // sample period before the recording's first sample)
+  if (floating_)
+    check(data.t[0] <= ref_.t0() + (data.t[1] - data.t[0]),
+          fmt::format("{}: the recording starts at t = {} s, more than a sample after the "
+                      "reference's start {} s ({}): the simulated loop starts there and needs "
+                      "the recorded base motion from then",
+                      who, data.t[0], ref_.t0(), file_));
+  if (!floating_) dyn_ = makeDynamicsData(*robot_);
   setUpColumns(model, data);
+}
+
+void ClosedLoop::setUpFloating(const Dataset& data) {
+  const int K = data.size();
+  check(data.base.rows() == K && data.base.cols() == 9,
+        fmt::format("{}: on a floating base the closed loop runs on the recorded base motion: "
+                    "the recording ({}) has none (expected {} x 9: omega, alpha, f; found {} x {})",
+                    who_, data.source, K, data.base.rows(), data.base.cols()));
+  check(data.contact.size() == 0 || data.contact.rows() == K,
+        fmt::format("{}: the recording's contact wrenches have {} rows for {} samples ({})", who_,
+                    data.contact.rows(), K, data.source));
+  check(K >= 6, fmt::format("{}: on a floating base the recorded base motion is interpolated "
+                            "between six samples: the recording ({}) has {}",
+                            who_, data.source, K));
+  for (int k = 1; k < K; ++k)
+    check(data.t[k] > data.t[k - 1],
+          fmt::format("{}: the recording's time is not strictly increasing at sample {} ({})", who_,
+                      k, data.source));
+  fb_t_ = data.t;
+  fb_base_ = data.base;
+  fb_contact_ = data.contact;
+}
+
+Eigen::RowVectorXd ClosedLoop::recordedAt(const MatrixXd& X, double t) const {
+  const Eigen::Index K = fb_t_.size();
+  const double* b = fb_t_.data();
+  Eigen::Index i = static_cast<Eigen::Index>(std::upper_bound(b, b + K, t) - b) - 1;
+  i = std::max<Eigen::Index>(0, std::min<Eigen::Index>(i, K - 2));  // interval [t_i, t_i+1]
+  const Eigen::Index s0 = std::max<Eigen::Index>(0, std::min<Eigen::Index>(i - 2, K - 6));
+  Eigen::RowVectorXd out = Eigen::RowVectorXd::Zero(X.cols());
+  for (Eigen::Index m = 0; m < 6; ++m) {
+    double w = 1.0;
+    for (Eigen::Index l = 0; l < 6; ++l)
+      if (l != m) w *= (t - fb_t_[s0 + l]) / (fb_t_[s0 + m] - fb_t_[s0 + l]);
+    out += w * X.row(s0 + m);
+  }
+  return out;
+}
+
+MatrixXd ClosedLoop::jointRows(const MatrixXd& W) const {
+  const Eigen::Index m = rows_per_sample_, K = W.rows() / m;
+  MatrixXd out(K * n_, W.cols());
+  for (Eigen::Index k = 0; k < K; ++k)
+    out.middleRows(k * n_, n_) = W.middleRows(k * m + m - n_, n_);
+  return out;
+}
+
+namespace {
+
+// One sample of a floating base's recording at zero torque: the model's rows there have the
+// contacts' part alone on their measured side.
+Dataset floatingSample(double t, const VectorXd& q, const VectorXd& qd, const VectorXd& qdd,
+                       const Eigen::RowVectorXd& base, const Eigen::RowVectorXd& contact,
+                       const std::string& who) {
+  Dataset d;
+  d.t = VectorXd::Constant(1, t);
+  d.q = q.transpose();
+  d.qd = qd.transpose();
+  d.qdd = qdd.transpose();
+  d.tau = MatrixXd::Zero(1, q.size());
+  d.base = base;
+  d.contact = contact;
+  d.source = who + " (the closed loop's contact wrenches)";
+  return d;
+}
+
+}  // namespace
+
+VectorXd ClosedLoop::contactTorque(const VectorXd& q, double t) const {
+  if (fb_contact_.cols() == 0) return VectorXd::Zero(n_);
+  const VectorXd z = VectorXd::Zero(n_);
+  const Rows r = model_->fullRowsAt(
+      floatingSample(t, q, z, z, recordedAt(fb_base_, t), recordedAt(fb_contact_, t), who_), eta_,
+      nullptr, RunContext{});
+  return r.y.tail(n_);
+}
+
+VectorXd ClosedLoop::floatingTorque(const VectorXd& rest, double t, const VectorXd& q,
+                                    const VectorXd& qd, const VectorXd& qdd,
+                                    bool with_contact) const {
+  if (with_contact && fb_contact_.cols() > 0) {  // one pass of the model's rows: W phi - y
+    const Rows r = model_->fullRowsAt(
+        floatingSample(t, q, qd, qdd, recordedAt(fb_base_, t), recordedAt(fb_contact_, t), who_),
+        eta_, nullptr, RunContext{});
+    return (r.W * fullOf(rest) - r.y).tail(n_);
+  }
+  Samples s;
+  s.t = VectorXd::Constant(1, t);
+  s.q = q.transpose();
+  s.qd = qd.transpose();
+  s.qdd = qdd.transpose();
+  s.base = recordedAt(fb_base_, t);
+  const VectorXd w = jointRows(model_->designAt(s, eta_, nullptr)) * rest;
+  return with_contact ? VectorXd(w - contactTorque(q, t)) : w;
+}
+
+VectorXd ClosedLoop::floatingFeedforward(double t, const VectorXd& qr, const VectorXd& qdr,
+                                         const VectorXd& qddr) const {
+  const BaseMotion b = recordedAt(fb_base_, t).transpose();
+  return floatingInverseDynamics(*robot_, qr, qdr, qddr, b).tail(n_);
 }
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who), open_(true) {
-  robot_->requireFixedBase(who + " (its simulation integrates the fixed-base forward dynamics)");
+  robot_->requireFixedBase(who +
+                           " (its torque-driven simulation integrates the fixed-base forward "
+                           "dynamics)");
   setUpRows(model);
   check(data.size() >= 10 && data.tau.rows() == data.size() && data.tau.cols() == n_,
         fmt::format("{}: the torque-driven loop needs the recorded torque of all {} joints and "
@@ -180,6 +295,18 @@ void ClosedLoop::setUpRows(const ObservationModel& model) {
   s_.q = MatrixXd::Zero(n_ + 1, n_);
   s_.qd = MatrixXd::Zero(n_ + 1, n_);
   s_.qdd = MatrixXd::Zero(n_ + 1, n_);
+  if (floating_) {  // the model's rows per sample: the joint rows last (rows: all or joints)
+    s_.base = MatrixXd::Zero(n_ + 1, 9);
+    const Eigen::Index rows = model.design(s_).rows();
+    rows_per_sample_ = static_cast<int>(rows / (n_ + 1));
+    check(rows == static_cast<Eigen::Index>(n_ + 1) * rows_per_sample_ &&
+              (rows_per_sample_ == n_ || rows_per_sample_ == n_ + 6),
+          fmt::format("{}: model '{}' gives {} rows per sample on a floating base of {} joints: "
+                      "the closed loop simulates the joints from the joint rows, so the model "
+                      "needs them (rows: all or joints, not base)",
+                      who, model.pluginName(), rows_per_sample_, n_));
+    return;
+  }
   check(model.design(s_).rows() == static_cast<Eigen::Index>(n_ + 1) * n_,
         fmt::format("{}: model '{}' must give one row per joint of all {} joints (the "
                     "simulation needs every joint's torque; e.g. differential with every joint)",
@@ -257,6 +384,14 @@ std::string ClosedLoop::describe() const {
   if (open_)
     return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
            "samples)";
+  if (floating_)  // (the joints' loop on the recorded base motion)
+    return fmt::format(
+        "tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}; floating base: the joints simulated "
+        "on the recorded base motion and contact wrenches (degree-5 Lagrange between samples)",
+        ff_ ? "tau_ff(robot description's rigid bodies on the recorded base motion; qr, qdr, "
+              "qddr) + "
+            : "",
+        file_);
   return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",
                      ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "", file_);
 }
@@ -266,7 +401,9 @@ VectorXd ClosedLoop::control(double t, const VectorXd& q, const VectorXd& qd) co
   VectorXd qr, qdr, qddr;
   ref_.eval(t, &qr, &qdr, &qddr);
   VectorXd tau = Kp_.cwiseProduct(qr - q) + Kd_.cwiseProduct(qdr - qd);
-  if (ff_) {
+  if (ff_ && floating_) {
+    tau += floatingFeedforward(t, qr, qdr, qddr);
+  } else if (ff_) {
     DriveColumns all{true, true, true, true};
     tau += actuatorTorque(*robot_, *dyn_, all, qr, qdr, qddr);
   }
@@ -277,6 +414,7 @@ VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd
                                  const VectorXd& a) const {
   (void)q;
   check(!open_, who_ + ": the torque-driven loop's command rate is not defined");
+  check(!floating_, who_ + ": the command's rate is not available on a floating base");
   VectorXd qr, qdr, qddr;
   const double tc = std::min(std::max(t, ref_.t0()), ref_.t1());
   ref_.eval(tc, &qr, &qdr, &qddr);
@@ -313,8 +451,22 @@ VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorX
   // (n + 1) n torques of its rows (theta's torque columns, if any, act through delivered())
   VectorXd h;
   MatrixXd M;
-  if (!model_->fullTorqueAt(q, qd, VectorXd::Zero(n), eta_, fullOf(theta), &h, nullptr, nullptr,
-                            &M)) {
+  if (floating_) {
+    // the joint rows with the recorded base motion: h = w(q, qd, 0) theta - c(q, t), M e_i =
+    // w(q, qd, e_i) theta - w(q, qd, 0) theta
+    for (int k = 0; k <= n; ++k) {
+      s_.q.row(k) = q.transpose();
+      s_.qd.row(k) = qd.transpose();
+    }
+    s_.qdd.setZero();
+    for (int i = 0; i < n; ++i) s_.qdd(i + 1, i) = 1.0;
+    s_.base.rowwise() = recordedAt(fb_base_, t);
+    const VectorXd f = jointRows(model_->designAt(s_, eta_, nullptr)) * restOf(theta);
+    h = f.head(n) - contactTorque(q, t);
+    M.resize(n, n);
+    for (int i = 0; i < n; ++i) M.col(i) = f.segment((i + 1) * n, n) - f.head(n);
+  } else if (!model_->fullTorqueAt(q, qd, VectorXd::Zero(n), eta_, fullOf(theta), &h, nullptr,
+                                   nullptr, &M)) {
     for (int k = 0; k <= n; ++k) {
       s_.q.row(k) = q.transpose();
       s_.qd.row(k) = qd.transpose();

@@ -32,6 +32,7 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   s.q = q.transpose();
   s.qd = qd.transpose();
   s.qdd = a.transpose();
+  if (floating_) s.base = recordedAt(fb_base_, t);
   const Eigen::LDLT<MatrixXd> ldlt(M);
   VectorXd slope;
   delivered(theta, tau_c, qd, &slope);
@@ -39,6 +40,10 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   if (B) {
     MatrixXd dWn;
     MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
+    if (floating_) {                                                     // the joint rows
+      w = jointRows(w);
+      if (eta_sens_) dWn = jointRows(dWn);
+    }
     // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
     for (const TorqueColumn& c : tcol_) {
       w.col(c.base).setZero();
@@ -64,7 +69,25 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   // them, else the design's VJP with row i = theta (its part in w)
   MatrixXd Tq(n, n), Tqd(n, n);
   VectorXd tau;
-  if (!model_->fullTorqueAt(q, qd, a, eta_, fullOf(theta), &tau, &Tq, &Tqd, nullptr)) {
+  if (floating_) {
+    // central differences of w(q, qd, a) theta - c(q, t) (a floating model gives no design
+    // VJP): steps of cbrt(eps) times the coordinate's size, error ~1e-10 of the torque
+    const double e = std::cbrt(2.2e-16);
+    for (int j = 0; j < n; ++j) {
+      VectorXd qp = q, qm = q, vp = qd, vm = qd;
+      const double hq = e * std::max(1.0, std::abs(q[j])), hv = e * std::max(1.0, std::abs(qd[j]));
+      qp[j] += hq;
+      qm[j] -= hq;
+      vp[j] += hv;
+      vm[j] -= hv;
+      Tq.col(j) = (floatingTorque(rest, t, qp, qd, a) - floatingTorque(rest, t, qm, qd, a)) /
+                  (qp[j] - qm[j]);
+      // (the contact torque does not depend on qd)
+      Tqd.col(j) =
+          (floatingTorque(rest, t, q, vp, a, false) - floatingTorque(rest, t, q, vm, a, false)) /
+          (vp[j] - vm[j]);
+    }
+  } else if (!model_->fullTorqueAt(q, qd, a, eta_, fullOf(theta), &tau, &Tq, &Tqd, nullptr)) {
     MatrixXd G = MatrixXd::Zero(n, theta.size());
     Samples grad;
     for (int i = 0; i < n; ++i) {
@@ -78,6 +101,52 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
   // du/d(q, qd) = du/dtau_c dtau_c/d(q, qd) (sign(qd) has zero derivative)
   *A_q = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kp_).asDiagonal()) - Tq));
   *A_qd = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kd_).asDiagonal()) - Tqd));
+}
+
+VectorXd ClosedLoop::baseRows(const VectorXd& theta, double t, const VectorXd& x, const MatrixXd* S,
+                              MatrixXd* J) const {
+  const int n = n_, nb = baseRowCount();
+  check(nb > 0, who_ + ": the model gives no base rows (rows: all on a floating base)");
+  const VectorXd q = x.head(n), qd = x.tail(n);
+  const VectorXd a = acceleration(theta, t, q, qd);
+  const VectorXd rest = restOf(theta);
+  const Eigen::RowVectorXd b = recordedAt(fb_base_, t);
+  auto rows = [&](const VectorXd& qq, const VectorXd& vv, const VectorXd& aa) {
+    Samples s;
+    s.t = VectorXd::Constant(1, t);
+    s.q = qq.transpose();
+    s.qd = vv.transpose();
+    s.qdd = aa.transpose();
+    s.base = b;
+    return MatrixXd(model_->designAt(s, eta_, nullptr).topRows(nb));
+  };
+  MatrixXd Wb = rows(q, qd, a);
+  const VectorXd yb = Wb * rest;
+  if (S) {
+    check(!eta_sens_, who_ +
+                          ": the base rows' sensitivities to the model's nonlinear parameters "
+                          "are not available on a floating base");
+    MatrixXd A_q, A_qd, B;
+    linearize(theta, t, q, qd, &A_q, &A_qd, &B);
+    const MatrixXd da = A_q * S->topRows(n) + A_qd * S->bottomRows(n) + B;
+    MatrixXd Tq(nb, n), Tqd(nb, n), Ta(nb, n);
+    const VectorXd y0 = rows(q, qd, VectorXd::Zero(n)) * rest;
+    const double e = std::cbrt(2.2e-16);
+    for (int j = 0; j < n; ++j) {
+      VectorXd qp = q, qm = q, vp = qd, vm = qd;
+      qp[j] += e * std::max(1.0, std::abs(q[j]));
+      qm[j] -= e * std::max(1.0, std::abs(q[j]));
+      vp[j] += e * std::max(1.0, std::abs(qd[j]));
+      vm[j] -= e * std::max(1.0, std::abs(qd[j]));
+      Tq.col(j) = (rows(qp, qd, a) - rows(qm, qd, a)) * rest / (qp[j] - qm[j]);
+      Tqd.col(j) = (rows(q, vp, a) - rows(q, vm, a)) * rest / (vp[j] - vm[j]);
+      Ta.col(j) = rows(q, qd, VectorXd::Unit(n, j)) * rest - y0;
+    }
+    for (const TorqueColumn& c : tcol_) Wb.col(c.base).setZero();  // (not in w)
+    *J = Tq * S->topRows(n) + Tqd * S->bottomRows(n) + Ta * da;
+    J->leftCols(theta.size()) += Wb;
+  }
+  return yb;
 }
 
 namespace {

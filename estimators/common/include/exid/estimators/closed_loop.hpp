@@ -42,6 +42,20 @@ Reference readReference(const std::filesystem::path& file, const RobotModel& rob
 ///   u_j(tau_c) = tau_c,j (1 + dK_j) - FcL_j |tau_c,j| sign(qd_j)
 /// (a drive's true torque constant over the controller's nominal one; the gear's friction
 /// growing with the torque it carries), so M a + h = u(tau_c) with theta's other entries.
+///
+/// On a floating base (a model with ModelSpecs::floating_base, e.g. `floating_base` with rows
+/// all or joints) the base's motion is measured, not simulated: the loop is the joints'
+/// dynamics on a base moving as recorded (a manipulator on a moving platform),
+///   M_jj(q) qdd = u(tau_c) + c(q, t) - h_j(q, qd, b(t)),
+/// M_jj and h_j the model's joint rows with the base motion b(t) (Dataset::base) prescribed,
+/// c(q, t) the recorded contact wrenches' joint torque (sum_c J_c(q)^T w_c(t): the joint rows'
+/// measured side at zero torque, as the model's rows give it), b(t) and w_c(t) read between the
+/// recorded samples by the degree-5 Lagrange polynomial through the six nearest samples
+/// (sixth-order accurate; exact at the samples). The state is the joints' (q, qd) alone; the
+/// feed-forward is the joint rows of exid::floatingInverseDynamics at the reference with b(t)
+/// (the robot description's rigid bodies). The derivatives in theta are exact (the joint rows);
+/// those in q and qd are central differences of the joint rows' torque (floating models give
+/// no design VJP).
 class ClosedLoop {
  public:
   /// The controller and its inputs (parameters of the estimator `who`): reference_file,
@@ -55,6 +69,19 @@ class ClosedLoop {
   /// fifth-to-last sample (firstTime(), lastTime()).
   ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who);
   bool torqueDriven() const { return open_; }
+  /// Whether the loop runs on a floating base (the base's recorded motion prescribed).
+  bool floatingBase() const { return floating_; }
+  /// The model's base rows per sample on a floating base (6 with rows: all; else 0): they are
+  /// the first of each sample's rows.
+  int baseRowCount() const { return floating_ ? rows_per_sample_ - n_ : 0; }
+  /// On a floating base with base rows: their torque side at the simulated state x = (q, qd) at
+  /// t, w_b(q, qd, a) theta with a the loop's acceleration there (the measured side, the
+  /// contact wrenches, does not depend on theta); with S = dx/dtheta (not null) its derivative
+  /// in theta, *J = w_b + d(w_b theta)/d(q, qd) S + d(w_b theta)/dqdd da/dtheta (da/dtheta =
+  /// A_q S_q + A_qd S_qd + B: linearize()), the derivatives in q and qd by central
+  /// differences, in qdd exact (the rows are affine in it).
+  Eigen::VectorXd baseRows(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& x,
+                           const Eigen::MatrixXd* S, Eigen::MatrixXd* J) const;
   /// A stop request (RunContext::shouldStop) polled along every simulation and sensitivity
   /// pass, every few steps: when it turns true, the pass throws exid::Error("WHO: stopped").
   /// (One simulation of a long recording runs for seconds; a stop must not wait for it.)
@@ -179,6 +206,30 @@ class ClosedLoop {
   Eigen::VectorXd rec_t_;    // its time stamps
   Eigen::MatrixXd rec_tau_;  // and torques (K x n)
   Eigen::VectorXd recordedTorque(double t) const;
+  // floating base: the recorded base motion (K x 9) and contact wrenches (K x 6C) at their
+  // times, and the rows per sample of the model (the joint rows are the last n of them)
+  bool floating_ = false;
+  Eigen::VectorXd fb_t_;
+  Eigen::MatrixXd fb_base_, fb_contact_;
+  int rows_per_sample_ = 0;
+  // the recorded signal X (rows at fb_t_) at t: the degree-5 Lagrange polynomial through the
+  // six nearest samples
+  Eigen::RowVectorXd recordedAt(const Eigen::MatrixXd& X, double t) const;
+  // the floating base's recording checked and kept
+  void setUpFloating(const Dataset& data);
+  // the model's joint rows of W (the last n of each sample's rows_per_sample_)
+  Eigen::MatrixXd jointRows(const Eigen::MatrixXd& W) const;
+  // floating base: the recorded contact wrenches' joint torque at (q, t) (zero without contacts)
+  Eigen::VectorXd contactTorque(const Eigen::VectorXd& q, double t) const;
+  // floating base: the joint rows' torque at (q, qd, qdd) times rest(theta), minus the contact
+  // torque: w(q, qd, qdd) theta - c(q, t) (without c: with_contact false)
+  Eigen::VectorXd floatingTorque(const Eigen::VectorXd& rest, double t, const Eigen::VectorXd& q,
+                                 const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
+                                 bool with_contact = true) const;
+  // floating base: the feed-forward, floatingInverseDynamics' joint rows at the reference
+  Eigen::VectorXd floatingFeedforward(double t, const Eigen::VectorXd& qr,
+                                      const Eigen::VectorXd& qdr,
+                                      const Eigen::VectorXd& qddr) const;
   // the model checked (per sample, every joint's row) and the one-state samples s_
   void setUpRows(const ObservationModel& model);
   // the nonlinear parameters' and the torque columns' bookkeeping; a payload part refused
