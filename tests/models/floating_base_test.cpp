@@ -337,6 +337,51 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   auto m2 = mtest::model("floating_base", "{contact_links: [l_shank, r_shank]}", r);
   m = msg([&] { m2->fullRows(d, mtest::context()); });
   EXPECT_NE(m.find("declares 2 contact(s)"), std::string::npos) << m;
+  // the friction options' refusals
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
+  });
+  EXPECT_NE(m.find("needs coulomb: true"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_load: true, "
+                             "coulomb_smoothing_rad_s: [0.1]}}",
+                             kModel),
+                 r);
+  });
+  EXPECT_NE(m.find("not combined with coulomb_smoothing_rad_s"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1, 0.2]}}", kModel),
+                 r);
+  });
+  EXPECT_NE(m.find("2 values given for robot 'humanoid' of 10 joints"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [-0.1]}}", kModel), r);
+  });
+  EXPECT_NE(m.find("-0.1 is not a positive width"), std::string::npos) << m;
+  // without the columns they fit, varpro and gains_ls refuse the floating model, saying why
+  auto rigid = mtest::model("floating_base", std::string("{") + kModel + "}", r);
+  auto fitted = mtest::model(
+      "floating_base", fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1]}}", kModel),
+      r);
+  const exid::Dataset dd = simulated();
+  for (const auto& [est, what] : std::vector<std::pair<std::string, std::string>>{
+           {"varpro", "has no nonlinear parameter"},
+           {"gains_ls", "has no column of the recorded torque"}}) {
+    m = msg([&] {
+      exid_test::create<exid::Estimator>(est, "{}")->estimate(*rigid, dd, nullptr,
+                                                              mtest::context());
+    });
+    EXPECT_NE(m.find(what), std::string::npos) << est << ": " << m;
+  }
+  m = msg([&] {
+    exid_test::create<exid::Estimator>("gains_ls", "{}")->estimate(*fitted, dd, nullptr,
+                                                                   mtest::context());
+  });
+  EXPECT_NE(m.find("has no column of the recorded torque"), std::string::npos) << m;
   // closed-loop estimators and excitation design
   auto fm = mtest::model("floating_base", std::string("{") + kModel + "}", r);
   for (const char* est : {"didim", "iv"}) {
