@@ -87,20 +87,23 @@ class FloatingBaseModel : public exid::ObservationModel {
     load_ = p.getBool("coulomb_load");
     const std::string who = context_.empty() ? "model 'floating_base'" : context_;
     exid::check(eps_.empty() || cols_.coulomb,
-                who + ": coulomb_smoothing_rad_s shapes the Coulomb columns: it needs coulomb: "
-                      "true");
+                who +
+                    ": coulomb_smoothing_rad_s shapes the Coulomb columns: it needs coulomb: "
+                    "true");
     for (double v : eps_)
       exid::check(v > 0 && std::isfinite(v),
                   fmt::format("{}: coulomb_smoothing_rad_s: {} is not a positive width (leave "
                               "the list empty for sign(qd))",
                               who, v));
     exid::check(!load_ || eps_.empty(),
-                who + ": coulomb_load multiplies sign(qd): it is not combined with "
-                      "coulomb_smoothing_rad_s");
+                who +
+                    ": coulomb_load multiplies sign(qd): it is not combined with "
+                    "coulomb_smoothing_rad_s");
     exid::check((!hasFriction()) || rows_ != "base",
-                who + ": rows: base has no joint rows: the joint friction and drive columns "
-                      "(rotor_inertia, coulomb, viscous, offset, coulomb_load) need rows all or "
-                      "joints");
+                who +
+                    ": rows: base has no joint rows: the joint friction and drive columns "
+                    "(rotor_inertia, coulomb, viscous, offset, coulomb_load) need rows all or "
+                    "joints");
     smooth_ = !eps_.empty();
     if (smooth_) cols_.coulomb = false;  // the Coulomb columns are the smoothed ones
     exid::check(
@@ -149,9 +152,9 @@ class FloatingBaseModel : public exid::ObservationModel {
     const exid::RobotModel& R = robot();
     const int n = R.dof(), c0 = 10 * (n + 1) + cols_.count() * n;
     for (int j = 0; j < extraCount(); ++j) {
-      const char* unit =
-          R.bodies[static_cast<std::size_t>(j)].type == exid::JointType::Prismatic ? "m/s"
-                                                                                    : "rad/s";
+      const char* unit = R.bodies[static_cast<std::size_t>(j)].type == exid::JointType::Prismatic
+                             ? "m/s"
+                             : "rad/s";
       out.push_back({"eps" + std::to_string(j + 1), unit, epsOf(j), {c0 + j}});
     }
     return out;
@@ -268,9 +271,9 @@ class FloatingBaseModel : public exid::ObservationModel {
                             "expected {}",
                             eta.size(), L));
     for (int j = 0; j < L; ++j)
-      exid::check(eta[j] > 0 && std::isfinite(eta[j]),
-                  fmt::format("model 'floating_base': eps{} = {} (must be positive)", j + 1,
-                              eta[j]));
+      exid::check(
+          eta[j] > 0 && std::isfinite(eta[j]),
+          fmt::format("model 'floating_base': eps{} = {} (must be positive)", j + 1, eta[j]));
     const int m = rowsPerSample(), first = rows_ == "joints" ? 6 : 0;
     const int P0 = 10 * (n + 1), nd = cols_.count(), Pd = nd * n, Pl = P0 + Pd + L;
     const int P = Pl + loadCount();

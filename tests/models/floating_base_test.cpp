@@ -164,8 +164,8 @@ TEST(FloatingBaseModel, NoisyWithinSigma) {
 // fit those data.
 TEST(FloatingBaseModel, JointFrictionIdentifiesNoiseFree) {
   const auto r = humanoidWithDrives();
-  const exid::Dataset d = mtest::simulate(
-      r, fmt::format("{{duration_s: 6, sample_period_s: 0.01, {}}}", kContact), 7);
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 6, sample_period_s: 0.01, {}}}", kContact), 7);
   auto m = mtest::model("floating_base", fmt::format("{{{}, {}}}", kModel, kDrives), r);
   const std::vector<std::string> names = m->fullNames();
   ASSERT_EQ(static_cast<int>(names.size()), 110 + 4 * 10);
@@ -206,8 +206,8 @@ TEST(FloatingBaseModel, JointFrictionIdentifiesNoiseFree) {
 // them.
 TEST(FloatingBaseModel, FrictionLeavesTheBaseRowsUnchanged) {
   const auto r = humanoidWithDrives();
-  const exid::Dataset d = mtest::simulate(
-      r, fmt::format("{{duration_s: 2, sample_period_s: 0.01, {}}}", kContact), 7);
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 2, sample_period_s: 0.01, {}}}", kContact), 7);
   auto plain = mtest::model("floating_base", std::string("{") + kModel + "}", r);
   auto fric = mtest::model(
       "floating_base",
@@ -228,7 +228,8 @@ TEST(FloatingBaseModel, FrictionLeavesTheBaseRowsUnchanged) {
       EXPECT_EQ(b.W.block(base, 0, 6, 110), a.W.block(base, 0, 6, 110)) << k;
       EXPECT_EQ(b.W.block(base, 110, 6, b.W.cols() - 110).cwiseAbs().maxCoeff(), 0.0) << k;
       EXPECT_EQ(b.W.block(base + 6, 0, 10, 110), a.W.block(base + 6, 0, 10, 110)) << k;
-      joint_max = std::max(joint_max, b.W.block(base + 6, 110, 10, b.W.cols() - 110).cwiseAbs().maxCoeff());
+      joint_max =
+          std::max(joint_max, b.W.block(base + 6, 110, 10, b.W.cols() - 110).cwiseAbs().maxCoeff());
     }
     EXPECT_GT(joint_max, 0.5);  // the joint rows do carry the columns
   }
@@ -247,21 +248,22 @@ TEST(FloatingBaseModel, FrictionLeavesTheBaseRowsUnchanged) {
 // Fc3 = tanh(qd3 / eps), FcL3 = |tau3| sign(qd3); the width's derivative is exact.
 TEST(FloatingBaseModel, FrictionColumnsAreTheDifferentialModels) {
   const auto r = humanoidWithDrives();
-  const exid::Dataset d = mtest::simulate(
-      r, fmt::format("{{duration_s: 1, sample_period_s: 0.01, {}}}", kContact), 7);
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 1, sample_period_s: 0.01, {}}}", kContact), 7);
   auto fixed = std::make_shared<exid::RobotModel>(*r);
   fixed->floating_base = false;
   const double eps = 0.07;
-  const std::string tanh_opts =
-      fmt::format("rotor_inertia: true, viscous: true, offset: true, coulomb: true, "
-                  "coulomb_smoothing_rad_s: [{}]",
-                  eps);
+  const std::string tanh_opts = fmt::format(
+      "rotor_inertia: true, viscous: true, offset: true, coulomb: true, "
+      "coulomb_smoothing_rad_s: [{}]",
+      eps);
   for (const std::string& opts : {tanh_opts, std::string("coulomb_load: true, viscous: true")}) {
     auto fm = mtest::model("floating_base", fmt::format("{{{}, {}}}", kModel, opts), r);
-    auto dm = mtest::model(
-        "differential",
-        opts == tanh_opts ? "{" + opts + "}" : "{rotor_inertia: false, coulomb: false, " + opts + "}",
-        fixed);
+    auto dm =
+        mtest::model("differential",
+                     opts == tanh_opts ? "{" + opts + "}"
+                                       : "{rotor_inertia: false, coulomb: false, " + opts + "}",
+                     fixed);
     const exid::Rows fr = fm->fullRows(d, mtest::context());
     const exid::Rows dr = dm->fullRows(d, mtest::context());
     const std::vector<std::string> fn = fm->fullNames(), dn = dm->fullNames();
@@ -284,8 +286,8 @@ TEST(FloatingBaseModel, FrictionColumnsAreTheDifferentialModels) {
     const auto c = static_cast<Eigen::Index>(c3 - fn.begin());
     for (int k = 0; k < d.size(); ++k) {
       const double v = d.qd(k, 2);
-      const double want = opts == tanh_opts ? std::tanh(v / eps)
-                                            : std::abs(d.tau(k, 2)) * (v > 0 ? 1.0 : -1.0);
+      const double want =
+          opts == tanh_opts ? std::tanh(v / eps) : std::abs(d.tau(k, 2)) * (v > 0 ? 1.0 : -1.0);
       EXPECT_NEAR(fr.W(16 * k + 8, c), want, 1e-15 * std::max(1.0, std::abs(want))) << k;
     }
   }
@@ -339,8 +341,7 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   EXPECT_NE(m.find("declares 2 contact(s)"), std::string::npos) << m;
   // the friction options' refusals
   m = msg([&] {
-    mtest::model("floating_base",
-                 fmt::format("{{{}, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
+    mtest::model("floating_base", fmt::format("{{{}, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
   });
   EXPECT_NE(m.find("needs coulomb: true"), std::string::npos) << m;
   m = msg([&] {
@@ -364,9 +365,9 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   EXPECT_NE(m.find("-0.1 is not a positive width"), std::string::npos) << m;
   // without the columns they fit, varpro and gains_ls refuse the floating model, saying why
   auto rigid = mtest::model("floating_base", std::string("{") + kModel + "}", r);
-  auto fitted = mtest::model(
-      "floating_base", fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1]}}", kModel),
-      r);
+  auto fitted =
+      mtest::model("floating_base",
+                   fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
   const exid::Dataset dd = simulated();
   for (const auto& [est, what] : std::vector<std::pair<std::string, std::string>>{
            {"varpro", "has no nonlinear parameter"},
@@ -378,8 +379,8 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
     EXPECT_NE(m.find(what), std::string::npos) << est << ": " << m;
   }
   m = msg([&] {
-    exid_test::create<exid::Estimator>("gains_ls", "{}")->estimate(*fitted, dd, nullptr,
-                                                                   mtest::context());
+    exid_test::create<exid::Estimator>("gains_ls", "{}")
+        ->estimate(*fitted, dd, nullptr, mtest::context());
   });
   EXPECT_NE(m.find("has no column of the recorded torque"), std::string::npos) << m;
   // closed-loop estimators and excitation design
@@ -512,12 +513,14 @@ TEST(FloatingBaseModel, StudiesVarproAndGainsLsOnTheHumanoid) {
     std::ofstream f(ext);
     f << drivesExtension();
   }
-  const std::string robot =
-      fmt::format("robot: {{type: urdf, params: {{file: {}/robots/humanoid/humanoid.urdf, "
-                  "extension: {}}}}}\n",
-                  EXID_SOURCE_DIR, ext.string());
-  for (const auto& [est, model, plant] : std::vector<std::tuple<std::string, std::string, std::string>>{
-           {"varpro", "coulomb_smoothing_rad_s: [0.1]", "coulomb: tanh, coulomb_velocity_scale: 0.05"},
+  const std::string robot = fmt::format(
+      "robot: {{type: urdf, params: {{file: {}/robots/humanoid/humanoid.urdf, "
+      "extension: {}}}}}\n",
+      EXID_SOURCE_DIR, ext.string());
+  for (const auto& [est, model, plant] :
+       std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"varpro", "coulomb_smoothing_rad_s: [0.1]",
+            "coulomb: tanh, coulomb_velocity_scale: 0.05"},
            {"gains_ls", "coulomb_load: true", "coulomb_load_Nm_per_Nm: [0.03]"}}) {
     const std::string yaml = fmt::format(
         R"(name: floating_{}

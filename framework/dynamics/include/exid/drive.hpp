@@ -63,9 +63,7 @@ inline double smoothCoulombSign(double v, double eps, double* ds_deps = nullptr)
 }
 /// The load-dependent Coulomb column (the models' coulomb_load, FcL): |tau| sign(qdm), tau the
 /// torque the drive carries (recorded in rows; the nominal robot's in a design).
-inline double loadCoulombColumn(double tau, double qdm) {
-  return std::abs(tau) * coulombSign(qdm);
-}
+inline double loadCoulombColumn(double tau, double qdm) { return std::abs(tau) * coulombSign(qdm); }
 
 EXID_API std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
 EXID_API Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
