@@ -84,9 +84,11 @@ GainsLs::Sums GainsLs::accumulate(const exid::ObservationModel& model, const exi
                                 b));
               k = static_cast<int>(c);
             }
-          // the recorded torque: minus a gain column; else the measurement (no payload part
+          // the recorded torque: minus a gain column; else the model's (Rows::torque: a
+          // floating base's joint rows, y = tau + J^T w), or the measurement (no payload part
           // without gains)
-          double t = r.y[i], a = 0.0;
+          const bool given = !r.torque.empty();
+          double t = given ? r.torque[static_cast<std::size_t>(i)] : r.y[i], a = 0.0;
           if (k >= 0) {
             const double w = r.W(i, gain_cols_[static_cast<std::size_t>(k)]);
             if (is_gain_[static_cast<std::size_t>(k)]) {
@@ -104,6 +106,8 @@ GainsLs::Sums GainsLs::accumulate(const exid::ObservationModel& model, const exi
                       .names[static_cast<std::size_t>(gain_cols_[static_cast<std::size_t>(k)])]));
           } else if (has_gain) {
             t = 0.0;  // (a gain's equation with a zero recorded torque: p = -y)
+          } else if (given) {
+            t = r.y[i];  // (a row without a torque column: p = 0, as before)
           }
           tau_of[static_cast<std::size_t>(i)] = t;
           const auto key = std::make_tuple(eq, k, static_cast<int>(a));

@@ -307,7 +307,11 @@ class SimulateExperiment : public exid::Experiment {
   // component, alpha_b its exact derivative, the orientation R(t) integrated from omega_b
   // (midpoint exponential steps), f_b = R^T (a_w(t) - g) with a_w three harmonics per world
   // component and g = the robot's gravity (world frame). The wrench of ONE contact balances the
-  // base rows: w = (X*_c)^-1 Y_base pi; the joint torques are tau = Y_joint pi - J_c^T w.
+  // base rows: w = (X*_c)^-1 Y_base pi; the joint torques are tau = Y_joint pi - J_c^T w, plus
+  // the drive terms of the fixed-base plant (drive_terms: Ia qdd + friction, driveFriction; a
+  // joint's friction acts between its two bodies and leaves the base rows unchanged). With
+  // coulomb_load_Nm_per_Nm the drive delivers u = tau_c - FcL |tau_c| s(qd) of its command tau_c
+  // (recorded): tau_c = u / (1 - FcL s sign(u)).
   static void fourier3(const Eigen::Matrix<double, 3, 3>& A, const Eigen::Matrix<double, 3, 3>& P,
                        double w, double t, Eigen::Vector3d* x, Eigen::Vector3d* xd) {
     x->setZero();
@@ -362,6 +366,16 @@ class SimulateExperiment : public exid::Experiment {
         fmt::format("{}: noise_contact: expected 1, 2 or 6 numbers, found {}", who, nc.size()));
     n_ = R.dof();
     const int n = n_;
+    truth_ = R;  // (no payload on a floating base)
+    drive_terms_ = P_.getBool("drive_terms");
+    tanh_ = P_.getString("coulomb") == "tanh";
+    vs_ = P_.getDouble("coulomb_velocity_scale");
+    frictionOptions();
+    for (std::size_t j = 0; j < fcl_.size(); ++j)
+      exid::check(std::abs(fcl_[j]) < 1.0,
+                  fmt::format("{}: coulomb_load_Nm_per_Nm: {} (|FcL| < 1 expected: the drive "
+                              "must deliver a torque of the command's sign)",
+                              who, fcl_[j]));
     double duration = P_.getDouble("duration_s");
     const exid::Json refmeta = setUpReference(R, reference, ctx, &duration);
     const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
@@ -414,6 +428,17 @@ class SimulateExperiment : public exid::Experiment {
       qd.row(k) = qdv.transpose();
       qdd.row(k) = qddv.transpose();
       d.tau.row(k) = (id.tail(n) - C.bottomRows(n) * wc).transpose();
+      for (int j = 0; j < n && drive_terms_; ++j) {
+        const exid::Drive D = j < static_cast<int>(R.drives.size())
+                                  ? R.drives[static_cast<std::size_t>(j)]
+                                  : exid::Drive{};
+        d.tau(k, j) += D.rotor_inertia * qddv[j] + driveFriction(D, j, qdv[j]);
+      }
+      for (int j = 0; j < static_cast<int>(fcl_.size()); ++j) {
+        const double del = d.tau(k, j);  // what the drive delivers
+        const double fl = fcl_[static_cast<std::size_t>(j)] * coulombShape(qdv[j]);
+        d.tau(k, j) = del / (1.0 - fl * (del > 0 ? 1.0 : (del < 0 ? -1.0 : 0.0)));
+      }
       d.base.row(k) = b.transpose();
       d.contact.row(k) = wc.transpose();
       if (ctx.shouldStop() && k + 1 < N) {
@@ -459,7 +484,9 @@ class SimulateExperiment : public exid::Experiment {
     m["floating_base"] =
         "inverse-dynamics simulation: the joints follow the reference exactly; base motion "
         "prescribed (three harmonics of omega and of the world acceleration), orientation "
-        "integrated; the contact wrench balances the base rows; no drive terms";
+        "integrated; the contact wrench balances the base rows; the joint torques with the "
+        "drive terms (drive_terms) and the plant's friction options";
+    m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
     m["contact_link"] = link;
     m["reference"] = refmeta;
     m["sample_period_s"] = dt;
@@ -474,9 +501,7 @@ class SimulateExperiment : public exid::Experiment {
     m["recorded"] = P_.getBool("output_qd_qdd")
                         ? "t q qd qdd tau base contact (true states, noisy q)"
                         : "t q tau base contact (noisy q)";
-    exid::PlantTruth truth;
-    truth.drive_terms = false;
-    d.facts.simulated = truth;
+    d.facts.simulated = plantTruth();
     m["wall_s"] = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall0).count();
     return d;
   }
@@ -510,16 +535,21 @@ class SimulateExperiment : public exid::Experiment {
       const exid::Drive D = j < static_cast<int>(R.drives.size())
                                 ? R.drives[static_cast<std::size_t>(j)]
                                 : exid::Drive{};
-      const double v = qdm[j];
-      const double s = coulombShape(v);
       (*Mm)(j, j) += D.rotor_inertia;
-      const auto u = static_cast<std::size_t>(j);
-      const double coulomb =
-          fcn_.empty() ? D.coulomb * s : D.coulomb * 0.5 * (1 + s) - fcn_[u] * 0.5 * (1 - s);
-      const double stribeck =
-          fs_.empty() ? 0.0 : fs_[u] * s * std::exp(-std::pow(std::abs(v) / svs_[u], sdelta_));
-      (*hm)[j] += coulomb + stribeck + D.viscous * v + D.offset;
+      (*hm)[j] += driveFriction(D, j, qdm[j]);
     }
+  }
+
+  // The plant's friction torque of drive j (parameters D) at velocity v: Coulomb (symmetric,
+  // or asymmetric with coulomb_negative_Nm), Stribeck, viscous and offset.
+  double driveFriction(const exid::Drive& D, int j, double v) const {
+    const double s = coulombShape(v);
+    const auto u = static_cast<std::size_t>(j);
+    const double coulomb =
+        fcn_.empty() ? D.coulomb * s : D.coulomb * 0.5 * (1 + s) - fcn_[u] * 0.5 * (1 - s);
+    const double stribeck =
+        fs_.empty() ? 0.0 : fs_[u] * s * std::exp(-std::pow(std::abs(v) / svs_[u], sdelta_));
+    return coulomb + stribeck + D.viscous * v + D.offset;
   }
 
   // The plant's Coulomb law: sign(v) or tanh(v / coulomb_velocity_scale).

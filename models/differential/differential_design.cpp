@@ -54,7 +54,7 @@ exid::Rows DifferentialModel::fullRowsAt(const exid::Dataset& d, const Eigen::Ve
       double y = d.tau(k, j);
       if (friction_ == "subtract") y -= frictionTorque(j, d.qd(k, j));
       if (gains_) r.W(k * m + i, Pg + j) = -d.tau(k, j);
-      if (load_) r.W(k * m + i, Pl + j) = std::abs(d.tau(k, j)) * signum(d.qd(k, j));
+      if (load_) r.W(k * m + i, Pl + j) = exid::loadCoulombColumn(d.tau(k, j), d.qd(k, j));
       if (loaded) y -= tp[j];
       r.y[k * m + i] = y;
       r.equation[static_cast<std::size_t>(k * m + i)] = i;
@@ -90,7 +90,7 @@ bool DifferentialModel::fullTorqueAt(const Eigen::VectorXd& q, const Eigen::Vect
     const auto u = static_cast<std::size_t>(j);
     const auto g = phi.segment(P0 + E * j, E);
     const double v = qd[j], eps = f.eps[u];
-    const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
+    const double sg = exid::smoothCoulombSign(v, eps);
     double t = 0.0;
     int e = 0;
     if (coulomb_extra_ && !asym_) t += g[e++] * sg;
@@ -177,7 +177,7 @@ void DifferentialModel::loadColumns(const exid::Samples& s, Eigen::MatrixXd* W) 
     for (int i = 0; i < m; ++i) {
       const int j = sel_[static_cast<std::size_t>(i)];
       const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
-      (*W)(row, Pl + j) = std::abs(W->row(row).head(Pl).dot(nominal)) * signum(s.qd(k, j));
+      (*W)(row, Pl + j) = exid::loadCoulombColumn(W->row(row).head(Pl).dot(nominal), s.qd(k, j));
     }
 }
 
@@ -248,8 +248,8 @@ void DifferentialModel::extraColumns(const exid::Samples& s, const Friction& f, 
       const auto u = static_cast<std::size_t>(j);
       const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
       const double v = s.qd(k, j), eps = f.eps[u];
-      const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
-      const double ds_deps = eps > 0 ? -(v / (eps * eps)) * (1.0 - sg * sg) : 0.0;
+      double ds_deps = 0.0;
+      const double sg = exid::smoothCoulombSign(v, eps, &ds_deps);
       int c = P0 + E * j, l = deps[u];
       if (coulomb_extra_ && !asym_) {
         (*W)(row, c++) = sg;
@@ -401,7 +401,7 @@ double DifferentialModel::extraColumnsVjp(double v, const Friction& f, int j,
                                           const Eigen::Ref<const Eigen::RowVectorXd>& g) const {
   const auto u = static_cast<std::size_t>(j);
   const double eps = f.eps[u];
-  const double sg = eps > 0 ? std::tanh(v / eps) : signum(v);
+  const double sg = exid::smoothCoulombSign(v, eps);
   const double ds = eps > 0 ? (1.0 - sg * sg) / eps : 0.0;
   double out = 0.0;
   int e = 0;

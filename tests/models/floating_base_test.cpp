@@ -5,7 +5,10 @@
 // signals.
 #include "exid/floating_base.hpp"
 
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <tuple>
 
 #include "exid/exid.hpp"
@@ -34,6 +37,38 @@ exid::Dataset simulated(const std::string& extra = "", std::uint64_t seed = 7) {
 double scaledErr(const Eigen::VectorXd& th, const Eigen::VectorXd& tr) {
   return (th - tr).cwiseAbs().maxCoeff() / tr.cwiseAbs().maxCoeff();
 }
+
+// The humanoid with drives on its ten joints: rotor inertia, Coulomb, viscous friction and an
+// offset of plausible sizes, different per joint (the shipped one has none).
+exid::Drive driveOf(int j) {
+  exid::Drive D;
+  D.rotor_inertia = 0.05 + 0.01 * j;
+  D.coulomb = 1.5 + 0.2 * j;
+  D.viscous = 0.8 + 0.1 * j;
+  D.offset = 0.3 - 0.07 * j;
+  return D;
+}
+std::shared_ptr<const exid::RobotModel> humanoidWithDrives() {
+  auto r = std::make_shared<exid::RobotModel>(*humanoid());
+  r->drives.assign(static_cast<std::size_t>(r->dof()), exid::Drive{});
+  for (int j = 0; j < r->dof(); ++j) r->drives[static_cast<std::size_t>(j)] = driveOf(j);
+  return r;
+}
+// The same drives as a URDF <exid> extension of the shipped humanoid, for a study.
+std::string drivesExtension() {
+  const std::shared_ptr<const exid::RobotModel> r = humanoid();
+  std::string xml = "<exid>\n";
+  for (int j = 0; j < r->dof(); ++j) {
+    const exid::Drive D = driveOf(j);
+    xml += fmt::format(
+        "  <drive joint=\"{}\" rotor_inertia=\"{:.17g}\" coulomb=\"{:.17g}\" "
+        "viscous=\"{:.17g}\" offset=\"{:.17g}\"/>\n",
+        r->bodies[static_cast<std::size_t>(j)].joint_name, D.rotor_inertia, D.coulomb, D.viscous,
+        D.offset);
+  }
+  return xml + "</exid>\n";
+}
+const char* kDrives = "rotor_inertia: true, coulomb: true, viscous: true, offset: true";
 
 }  // namespace
 
@@ -124,6 +159,159 @@ TEST(FloatingBaseModel, NoisyWithinSigma) {
   }
 }
 
+// Joint friction and drive columns on the joint rows: the simulated plant's drive terms (its
+// robot's drives) identify noise-free to 1e-9 with batch_ls; the rigid-body model alone does not
+// fit those data.
+TEST(FloatingBaseModel, JointFrictionIdentifiesNoiseFree) {
+  const auto r = humanoidWithDrives();
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 6, sample_period_s: 0.01, {}}}", kContact), 7);
+  auto m = mtest::model("floating_base", fmt::format("{{{}, {}}}", kModel, kDrives), r);
+  const std::vector<std::string> names = m->fullNames();
+  ASSERT_EQ(static_cast<int>(names.size()), 110 + 4 * 10);
+  EXPECT_EQ(names[110], "Ia1");
+  EXPECT_EQ(names[111], "Fc1");
+  EXPECT_EQ(names[112], "Fv1");
+  EXPECT_EQ(names[113], "OFF1");
+  EXPECT_EQ(names[149], "OFF10");
+  EXPECT_EQ(m->fullNominal()[111], r->drives[0].coulomb);
+  ASSERT_TRUE(d.facts.simulated.has_value());
+  EXPECT_EQ(m->fullTruth(*d.facts.simulated), m->fullNominal());
+  const exid::Rows rows = m->fullRows(d, mtest::context());
+  const double res = (rows.W * m->fullNominal() - rows.y).cwiseAbs().maxCoeff();
+  EXPECT_LT(res, 1e-10 * rows.y.cwiseAbs().maxCoeff()) << res;
+  const exid::Estimate e = exid_test::create<exid::Estimator>("batch_ls", "{}")
+                               ->estimate(*m, d, nullptr, mtest::context());
+  const double err = scaledErr(e.value, m->baseNominal());
+  std::printf("humanoid with drives: %d base parameters, batch_ls largest error / largest %.2e\n",
+              m->numBase(), err);
+  EXPECT_LT(err, 1e-9);
+  EXPECT_EQ(m->numBase(), 80 + 40);  // every drive column is a base column
+  // without the drive columns the same data are not fitted: the drive terms are in tau
+  auto rigid = mtest::model("floating_base", std::string("{") + kModel + "}", r);
+  const exid::Rows rr = rigid->fullRows(d, mtest::context());
+  EXPECT_GT((rr.W * rigid->fullNominal() - rr.y).cwiseAbs().maxCoeff(), 0.1);
+  // drive_terms: false: the plant has none, the truth's drive columns are zero
+  const exid::Dataset d0 = mtest::simulate(
+      r, fmt::format("{{duration_s: 2, sample_period_s: 0.01, drive_terms: false, {}}}", kContact),
+      7);
+  const Eigen::VectorXd t0 = m->fullTruth(*d0.facts.simulated);
+  EXPECT_EQ(t0.tail(40), Eigen::VectorXd::Zero(40));
+  const exid::Rows r0 = m->fullRows(d0, mtest::context());
+  EXPECT_LT((r0.W * t0 - r0.y).cwiseAbs().maxCoeff(), 1e-10 * r0.y.cwiseAbs().maxCoeff());
+}
+
+// A joint's friction acts between its two bodies: the base rows are the same numbers with and
+// without the friction options (and zero in the friction columns); only the joint rows carry
+// them.
+TEST(FloatingBaseModel, FrictionLeavesTheBaseRowsUnchanged) {
+  const auto r = humanoidWithDrives();
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 2, sample_period_s: 0.01, {}}}", kContact), 7);
+  auto plain = mtest::model("floating_base", std::string("{") + kModel + "}", r);
+  auto fric = mtest::model(
+      "floating_base",
+      fmt::format("{{{}, rotor_inertia: true, viscous: true, offset: true, coulomb: true, "
+                  "coulomb_smoothing_rad_s: [0.05]}}",
+                  kModel),
+      r);
+  auto load = mtest::model("floating_base", fmt::format("{{{}, coulomb_load: true}}", kModel), r);
+  const exid::Rows a = plain->fullRows(d, mtest::context());
+  for (const auto* m : {fric.get(), load.get()}) {
+    const exid::Rows b = m->fullRows(d, mtest::context());
+    ASSERT_EQ(b.W.rows(), a.W.rows());
+    ASSERT_GT(b.W.cols(), a.W.cols());
+    EXPECT_EQ(b.y, a.y);
+    double joint_max = 0.0;
+    for (int k = 0; k < d.size(); ++k) {
+      const Eigen::Index base = 16 * k;
+      EXPECT_EQ(b.W.block(base, 0, 6, 110), a.W.block(base, 0, 6, 110)) << k;
+      EXPECT_EQ(b.W.block(base, 110, 6, b.W.cols() - 110).cwiseAbs().maxCoeff(), 0.0) << k;
+      EXPECT_EQ(b.W.block(base + 6, 0, 10, 110), a.W.block(base + 6, 0, 10, 110)) << k;
+      joint_max =
+          std::max(joint_max, b.W.block(base + 6, 110, 10, b.W.cols() - 110).cwiseAbs().maxCoeff());
+    }
+    EXPECT_GT(joint_max, 0.5);  // the joint rows do carry the columns
+  }
+  // rows: base has no joint row for them: refused, naming why
+  try {
+    mtest::model("floating_base", fmt::format("{{rows: base, {}, viscous: true}}", kModel), r);
+    ADD_FAILURE() << "no refusal";
+  } catch (const exid::Error& e) {
+    EXPECT_NE(std::string(e.what()).find("rows: base has no joint rows"), std::string::npos)
+        << e.what();
+  }
+}
+
+// The friction columns are the differential model's: on the same joint motion (the humanoid's
+// tree with its base held fixed) the columns of the same names are the same numbers, and by hand
+// Fc3 = tanh(qd3 / eps), FcL3 = |tau3| sign(qd3); the width's derivative is exact.
+TEST(FloatingBaseModel, FrictionColumnsAreTheDifferentialModels) {
+  const auto r = humanoidWithDrives();
+  const exid::Dataset d =
+      mtest::simulate(r, fmt::format("{{duration_s: 1, sample_period_s: 0.01, {}}}", kContact), 7);
+  auto fixed = std::make_shared<exid::RobotModel>(*r);
+  fixed->floating_base = false;
+  const double eps = 0.07;
+  const std::string tanh_opts = fmt::format(
+      "rotor_inertia: true, viscous: true, offset: true, coulomb: true, "
+      "coulomb_smoothing_rad_s: [{}]",
+      eps);
+  for (const std::string& opts : {tanh_opts, std::string("coulomb_load: true, viscous: true")}) {
+    auto fm = mtest::model("floating_base", fmt::format("{{{}, {}}}", kModel, opts), r);
+    auto dm =
+        mtest::model("differential",
+                     opts == tanh_opts ? "{" + opts + "}"
+                                       : "{rotor_inertia: false, coulomb: false, " + opts + "}",
+                     fixed);
+    const exid::Rows fr = fm->fullRows(d, mtest::context());
+    const exid::Rows dr = dm->fullRows(d, mtest::context());
+    const std::vector<std::string> fn = fm->fullNames(), dn = dm->fullNames();
+    int compared = 0;
+    for (std::size_t c = 110; c < fn.size(); ++c) {
+      const auto it = std::find(dn.begin(), dn.end(), fn[c]);
+      ASSERT_NE(it, dn.end()) << fn[c];
+      const auto dc = static_cast<Eigen::Index>(it - dn.begin());
+      for (int k = 0; k < d.size(); ++k)
+        for (int j = 0; j < 10; ++j)
+          ASSERT_EQ(fr.W(16 * k + 6 + j, static_cast<Eigen::Index>(c)), dr.W(10 * k + j, dc))
+              << fn[c] << " sample " << k << " joint " << j;
+      ++compared;
+    }
+    EXPECT_EQ(compared, static_cast<int>(fn.size()) - 110);
+    // by hand, joint 3
+    const std::vector<std::string>::const_iterator c3 =
+        std::find(fn.begin(), fn.end(), opts == tanh_opts ? "Fc3" : "FcL3");
+    ASSERT_NE(c3, fn.end());
+    const auto c = static_cast<Eigen::Index>(c3 - fn.begin());
+    for (int k = 0; k < d.size(); ++k) {
+      const double v = d.qd(k, 2);
+      const double want =
+          opts == tanh_opts ? std::tanh(v / eps) : std::abs(d.tau(k, 2)) * (v > 0 ? 1.0 : -1.0);
+      EXPECT_NEAR(fr.W(16 * k + 8, c), want, 1e-15 * std::max(1.0, std::abs(want))) << k;
+    }
+  }
+  // d/deps of the Fc columns: exact (against a central difference)
+  auto fm = mtest::model("floating_base", fmt::format("{{{}, {}}}", kModel, tanh_opts), r);
+  const std::vector<exid::NonlinearParameter> nl = fm->nonlinearParameters();
+  ASSERT_EQ(nl.size(), 10u);
+  EXPECT_EQ(nl[2].name, "eps3");
+  EXPECT_EQ(nl[2].value, eps);
+  Eigen::VectorXd eta = Eigen::VectorXd::Constant(10, eps);
+  Eigen::MatrixXd dW;
+  fm->fullRowsAt(d, eta, &dW, mtest::context());
+  ASSERT_EQ(dW.cols(), 10);
+  const double h = 1e-6;
+  eta[2] = eps + h;
+  const exid::Rows up = fm->fullRowsAt(d, eta, nullptr, mtest::context());
+  eta[2] = eps - h;
+  const exid::Rows dn = fm->fullRowsAt(d, eta, nullptr, mtest::context());
+  const Eigen::VectorXd fd = (up.W.col(nl[2].columns[0]) - dn.W.col(nl[2].columns[0])) / (2 * h);
+  EXPECT_LT((fd - dW.col(2)).cwiseAbs().maxCoeff(), 1e-6 * dW.col(2).cwiseAbs().maxCoeff());
+  EXPECT_GT(dW.col(2).cwiseAbs().maxCoeff(), 1.0);
+  EXPECT_EQ(dW.col(3).segment(8, 1)[0], 0.0);  // eps4 moves joint 4's rows only
+}
+
 TEST(FloatingBaseModel, RefusalsNameWhy) {
   const auto r = humanoid();
   auto msg = [](auto&& f) {
@@ -151,6 +339,50 @@ TEST(FloatingBaseModel, RefusalsNameWhy) {
   auto m2 = mtest::model("floating_base", "{contact_links: [l_shank, r_shank]}", r);
   m = msg([&] { m2->fullRows(d, mtest::context()); });
   EXPECT_NE(m.find("declares 2 contact(s)"), std::string::npos) << m;
+  // the friction options' refusals
+  m = msg([&] {
+    mtest::model("floating_base", fmt::format("{{{}, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
+  });
+  EXPECT_NE(m.find("needs coulomb: true"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_load: true, "
+                             "coulomb_smoothing_rad_s: [0.1]}}",
+                             kModel),
+                 r);
+  });
+  EXPECT_NE(m.find("not combined with coulomb_smoothing_rad_s"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1, 0.2]}}", kModel),
+                 r);
+  });
+  EXPECT_NE(m.find("2 values given for robot 'humanoid' of 10 joints"), std::string::npos) << m;
+  m = msg([&] {
+    mtest::model("floating_base",
+                 fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [-0.1]}}", kModel), r);
+  });
+  EXPECT_NE(m.find("-0.1 is not a positive width"), std::string::npos) << m;
+  // without the columns they fit, varpro and gains_ls refuse the floating model, saying why
+  auto rigid = mtest::model("floating_base", std::string("{") + kModel + "}", r);
+  auto fitted =
+      mtest::model("floating_base",
+                   fmt::format("{{{}, coulomb: true, coulomb_smoothing_rad_s: [0.1]}}", kModel), r);
+  const exid::Dataset dd = simulated();
+  for (const auto& [est, what] : std::vector<std::pair<std::string, std::string>>{
+           {"varpro", "has no nonlinear parameter"},
+           {"gains_ls", "has no column of the recorded torque"}}) {
+    m = msg([&] {
+      exid_test::create<exid::Estimator>(est, "{}")->estimate(*rigid, dd, nullptr,
+                                                              mtest::context());
+    });
+    EXPECT_NE(m.find(what), std::string::npos) << est << ": " << m;
+  }
+  m = msg([&] {
+    exid_test::create<exid::Estimator>("gains_ls", "{}")
+        ->estimate(*fitted, dd, nullptr, mtest::context());
+  });
+  EXPECT_NE(m.find("has no column of the recorded torque"), std::string::npos) << m;
   // the closed-loop estimators (tests/models/floating_loop_test.cpp) simulate the joints from
   // the joint rows on the recorded base motion: the base rows alone have none, a recording
   // without base motion has nothing to run on; the torque-driven loop needs a fixed base
@@ -276,6 +508,56 @@ TEST(FloatingBaseModel, CsvColumnsReadBackAndIdentify) {
     EXPECT_NE(std::string(e.what()).find("incomplete base motion: missing column(s) base_f_z"),
               std::string::npos)
         << e.what();
+  }
+  std::filesystem::remove_all(dir);
+}
+
+// varpro and gains_ls on the humanoid with drives (a URDF <exid> extension of the shipped one),
+// noise-free, to 1e-9 on the base parameters. varpro: the plant's Coulomb friction is tanh(qd /
+// 0.05) and the model's widths start at 0.1 (the nonlinear parameters eps1 .. eps10, fitted to
+// the plant's); gains_ls: the plant's drives deliver u = tau - FcL |tau| sign(qd) of the recorded
+// torque (FcL = 0.03 on every joint), the model's FcL columns carry the recorded torque and the
+// joint rows' measurement is tau + J^T w (Rows::torque tells gains_ls the recorded one).
+TEST(FloatingBaseModel, StudiesVarproAndGainsLsOnTheHumanoid) {
+  const auto dir = std::filesystem::temp_directory_path() / "exid_floating_drives";
+  std::filesystem::create_directories(dir);
+  const auto ext = dir / "humanoid_drives.xml";
+  {
+    std::ofstream f(ext);
+    f << drivesExtension();
+  }
+  const std::string robot = fmt::format(
+      "robot: {{type: urdf, params: {{file: {}/robots/humanoid/humanoid.urdf, "
+      "extension: {}}}}}\n",
+      EXID_SOURCE_DIR, ext.string());
+  for (const auto& [est, model, plant] :
+       std::vector<std::tuple<std::string, std::string, std::string>>{
+           {"varpro", "coulomb_smoothing_rad_s: [0.1]",
+            "coulomb: tanh, coulomb_velocity_scale: 0.05"},
+           {"gains_ls", "coulomb_load: true", "coulomb_load_Nm_per_Nm: [0.03]"}}) {
+    const std::string yaml = fmt::format(
+        R"(name: floating_{}
+seed: 3
+{}model: {{type: floating_base, params: {{{}, {}, {}}}}}
+experiment: {{type: simulate, params: {{duration_s: 8, sample_period_s: 0.01, {}, {}}}}}
+estimator: {{type: {}}}
+)",
+        est, robot, kModel, kDrives, model, kContact, plant, est);
+    const exid::StudyOutcome r =
+        exid::runStudyText(yaml, "floating_friction.yaml", ".", exid_test::registry());
+    ASSERT_TRUE(r.ok) << est << ": " << r.message;
+    const exid::Json* id = r.summary.find("identification");
+    const double e = id->find("param_rel_err")->asDouble();
+    std::printf("  study %s (%s): param_rel_err %.2e\n", est.c_str(), plant.c_str(), e);
+    EXPECT_LT(e, 1e-9) << est;
+    if (est == "varpro") {  // the widths: the plant's
+      const exid::Json* nl = id->find("nonlinear_parameters");
+      ASSERT_TRUE(nl && nl->isArray() && nl->size() == 10u);
+      for (std::size_t k = 0; k < nl->size(); ++k) {
+        EXPECT_NEAR(nl->at(k).find("value")->asDouble(), 0.05, 1e-9) << k;
+        EXPECT_EQ(nl->at(k).find("initial")->asDouble(), 0.1) << k;
+      }
+    }
   }
   std::filesystem::remove_all(dir);
 }

@@ -27,6 +27,9 @@ void checkRows(const Rows& rows, int p, const std::string& who, int begin) {
   if (!rows.equation.empty() && rows.equation.size() != static_cast<std::size_t>(rows.y.size()))
     throw Error(fmt::format("{}: the model returned {} equation labels for {} rows", who,
                             rows.equation.size(), rows.y.size()));
+  if (!rows.torque.empty() && rows.torque.size() != static_cast<std::size_t>(rows.y.size()))
+    throw Error(fmt::format("{}: the model returned {} recorded torques for {} rows", who,
+                            rows.torque.size(), rows.y.size()));
   // One vectorised sum is finite whenever every entry is (a NaN or inf propagates); only a
   // non-finite sum (or an overflow of finite entries) pays for the entry-by-entry search.
   if (!std::isfinite(rows.W.sum() + rows.y.sum()) && (!rows.W.allFinite() || !rows.y.allFinite())) {

@@ -323,11 +323,8 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
   if (k == 0) return;
   Y.rightCols(k * n).setZero();
   for (int j = 0; j < n; ++j) {
-    int c = 10 * nt + k * j;
-    if (cols.rotor_inertia) Y(j, c++) = qddm[j];
-    if (cols.coulomb) Y(j, c++) = sgn(qdm[j]);
-    if (cols.viscous) Y(j, c++) = qdm[j];
-    if (cols.offset) Y(j, c++) = 1.0;
+    const DriveColumnValues dv = driveColumnValues(cols, qdm[j], qddm[j]);
+    for (int e = 0; e < dv.count; ++e) Y(j, 10 * nt + k * j + e) = dv.v[e];
   }
 }
 

@@ -109,6 +109,7 @@ Rows baseRowsOf(const BaseParameters& base, Rows&& full) {
   out.numEquations = full.numEquations;
   out.t = std::move(full.t);
   out.equation_names = std::move(full.equation_names);
+  out.torque = std::move(full.torque);
   return out;
 }
 
@@ -146,6 +147,7 @@ Rows baseRowsByBlocks(const ObservationModel& model, const Dataset& data,
       out.y.segment(r0, nr) = full.y;
       out.equation.insert(out.equation.end(), full.equation.begin(), full.equation.end());
       out.t.insert(out.t.end(), full.t.begin(), full.t.end());
+      out.torque.insert(out.torque.end(), full.torque.begin(), full.torque.end());
     }
     return out;
   }

@@ -228,6 +228,9 @@ struct EXID_API Rows {
   int numEquations = 1;       // distinct values in `equation`
   std::vector<double> t;      // per row: time of its sample [s] (a window: its end); may be empty
   std::vector<std::string> equation_names;  // per equation, e.g. "tau joint 2 (shoulder)"
+  // per row: the recorded torque a torque column of the row (exid::torqueColumnKind: FcL) holds,
+  // where y is not that torque (a floating base's joint rows: y = tau + J^T w); empty: y is it
+  std::vector<double> torque;
 };
 
 }  // namespace exid

@@ -9,6 +9,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <cmath>
 #include <string>
 #include <vector>
 
@@ -36,6 +37,33 @@ struct EXID_API DriveColumns {
   bool offset = false;
   int count() const { return rotor_inertia + coulomb + viscous + offset; }
 };
+
+/// The enabled drive columns of one measured coordinate moving at qdm, qddm, in parameterNames'
+/// order: Ia (qddm), Fc (coulombSign(qdm)), Fv (qdm), OFF (1); v[0 .. count). The one definition
+/// of the drive columns (actuatorRegressor; the `floating_base` model's joint rows).
+struct DriveColumnValues {
+  double v[4] = {0.0, 0.0, 0.0, 0.0};
+  int count = 0;
+};
+inline DriveColumnValues driveColumnValues(const DriveColumns& cols, double qdm, double qddm) {
+  DriveColumnValues r;
+  if (cols.rotor_inertia) r.v[r.count++] = qddm;
+  if (cols.coulomb) r.v[r.count++] = coulombSign(qdm);
+  if (cols.viscous) r.v[r.count++] = qdm;
+  if (cols.offset) r.v[r.count++] = 1.0;
+  return r;
+}
+/// The sign in a smoothed Coulomb column (the models' coulomb_smoothing_rad_s): tanh(v / eps)
+/// for a width eps > 0, else coulombSign(v); *ds_deps (when given) its derivative with respect
+/// to eps (0 for the sign).
+inline double smoothCoulombSign(double v, double eps, double* ds_deps = nullptr) {
+  const double sg = eps > 0 ? std::tanh(v / eps) : coulombSign(v);
+  if (ds_deps) *ds_deps = eps > 0 ? -(v / (eps * eps)) * (1.0 - sg * sg) : 0.0;
+  return sg;
+}
+/// The load-dependent Coulomb column (the models' coulomb_load, FcL): |tau| sign(qdm), tau the
+/// torque the drive carries (recorded in rows; the nominal robot's in a design).
+inline double loadCoulombColumn(double tau, double qdm) { return std::abs(tau) * coulombSign(qdm); }
 
 EXID_API std::vector<std::string> parameterNames(const RobotModel& model, const DriveColumns& cols);
 EXID_API Eigen::VectorXd parameterValues(const RobotModel& model, const DriveColumns& cols);
