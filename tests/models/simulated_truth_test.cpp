@@ -46,8 +46,12 @@ TEST(SimulatedTruth, ThePlantsPayloadAndFrictionAreTheTruth) {
   const std::vector<std::string> names = model->fullNames();
   const Eigen::VectorXd full = model->fullTruth(*d.facts.simulated);
   for (std::size_t i = 0; i < names.size(); ++i) {
-    if (names[i] == "FcN2") EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 4.0);
-    if (names[i] == "Fs5") EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 1.0);
+    if (names[i] == "FcN2") {
+      EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 4.0);
+    }
+    if (names[i] == "Fs5") {
+      EXPECT_DOUBLE_EQ(full[static_cast<Eigen::Index>(i)], 1.0);
+    }
   }
 }
 
@@ -87,8 +91,12 @@ TEST(SimulatedTruth, GainsAndLoadTermsComeFromThePlantsTruth) {
   plant.drive_torque_gain = {1, 1.1, 1, 1, 1, 0.9};
   full = gains->fullTruth(plant);
   for (std::size_t i = 0; i < names.size(); ++i) {
-    if (names[i] == "dK2") EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], 0.1, 1e-15);
-    if (names[i] == "dK6") EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], -0.1, 1e-15);
+    if (names[i] == "dK2") {
+      EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], 0.1, 1e-15);
+    }
+    if (names[i] == "dK6") {
+      EXPECT_NEAR(full[static_cast<Eigen::Index>(i)], -0.1, 1e-15);
+    }
   }
   auto load = mtest::model("differential", "{coulomb_load: true}", r);
   plant = exid::PlantTruth();
