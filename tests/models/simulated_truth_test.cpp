@@ -63,8 +63,11 @@ TEST(SimulatedTruth, APlantWithoutDriveTermsHasNone) {
   auto model = mtest::model("differential", "{offset: true}", r);
   const Eigen::VectorXd full = model->fullTruth(*d.facts.simulated);
   const std::vector<std::string> names = model->fullNames();
-  for (std::size_t i = 0; i < names.size(); ++i)
-    if (exid::isDriveParameterName(names[i])) EXPECT_EQ(full[static_cast<Eigen::Index>(i)], 0.0);
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (exid::isDriveParameterName(names[i])) {
+      EXPECT_EQ(full[static_cast<Eigen::Index>(i)], 0.0);
+    }
+  }
   auto ls = exid_test::create<exid::Estimator>("batch_ls", "{}");
   const exid::Estimate e = ls->estimate(*model, d, nullptr, mtest::context());
   const Eigen::VectorXd truth = model->base().reduce(full);
