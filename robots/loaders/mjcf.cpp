@@ -109,7 +109,9 @@ struct Reader {
   std::vector<double> numbersOf(const TiXmlElement* e, const char* name, const std::string& cls,
                                 int count) const {
     const std::string v = attrOf(e, name, cls, true);
-    if (v.empty()) return {};
+    // (only a range may be absent: every other attribute has MuJoCo's default; one given empty,
+    // as axis="", is an error naming it, not an empty vector read from)
+    if (v.empty() && std::string(name) == "range") return {};
     return detail::parseNumbers(
         v, xmlAt(src, e) + ": <joint> '" + xmlAttr(e, "name") + "' attribute '" + name + "'",
         count);

@@ -123,6 +123,11 @@ TEST(MjcfErrors, WhatExidDoesNotModelIsRefusedWithItsLine) {
        "attribute 'range': expected a number, found 'x'"},
       {"<body name=\"b\"><joint name=\"j\" range=\"1 0\"/>" + kLink + "</body>\n", "",
        "range: the lower bound must be below the upper"},
+      // an attribute given empty (fuzz_xml_robots: axis="" was read as an empty vector)
+      {"<body name=\"b\"><joint name=\"j\" axis=\"\"/>" + kLink + "</body>\n", "",
+       "attribute 'axis': expected 3 number(s), found 0"},
+      {"<body name=\"b\"><joint name=\"j\" damping=\" \"/>" + kLink + "</body>\n", "",
+       "attribute 'damping': expected 1 number(s), found 0"},
       {"<body name=\"b\" quat=\"1 0 0 0\" euler=\"0 0 1\"><joint name=\"j\"/>" + kLink +
            "</body>\n",
        "", "more than one of quat, axisangle, euler"},
