@@ -43,8 +43,8 @@ class FilteredLs : public exid::Estimator {
     long chunk_samples = 0, margin_samples = 0, signal_margin = 0;
     long chunks = 0;
     int threads = 1;
-    long column_blocks = 1;    // most blocks of the rows' columns a chunk was filtered in
-    double buffer_bytes = 0;   // the largest rows buffer of one chunk (one per thread)
+    long column_blocks = 1;   // most blocks of the rows' columns a chunk was filtered in
+    double buffer_bytes = 0;  // the largest rows buffer of one chunk (one per thread)
     double fs = 0.0, jitter = 0.0, dec_cut = 0.0, kappa = 1.0;
     bool filter_q = false, diff_qd = false, diff_qdd = false;
     long trim = 0, trim_transient = 0;

@@ -7,8 +7,8 @@
 #include <cmath>
 #include <deque>
 #include <exception>
-#include <map>
 #include <limits>
+#include <map>
 #include <thread>
 
 #include "exid/error.hpp"
@@ -245,11 +245,11 @@ void FilteredLs::chunkRows(const exid::ObservationModel& model, const Processed&
   const auto nk = static_cast<Eigen::Index>(kept_samples.size());
   // (without decimation no column is filtered: one block, whose kept rows are read in place)
   const bool filter = R > 1 && L >= 2;
-  const auto width =
-      filter ? static_cast<Eigen::Index>(std::max<double>(
-                   1.0, std::floor(chunk_memory_mb_ * 1e6 /
-                                   (8.0 * static_cast<double>(std::max<long>(L, 1))))))
-             : std::numeric_limits<Eigen::Index>::max() / 2;
+  const auto width = filter
+                         ? static_cast<Eigen::Index>(std::max<double>(
+                               1.0, std::floor(chunk_memory_mb_ * 1e6 /
+                                               (8.0 * static_cast<double>(std::max<long>(L, 1))))))
+                         : std::numeric_limits<Eigen::Index>::max() / 2;
   SampleRows s;
   exid::RowMajorMatrix K;
   Eigen::Index cols = 0;
@@ -362,7 +362,8 @@ void FilteredLs::sampleRows(const exid::ObservationModel& model, const Processed
       // equation g's columns [e0, e0 + p] within the block [c0, c1)
       const Eigen::Index e0 = static_cast<Eigen::Index>(g) * (p + 1);
       const Eigen::Index from = std::max(e0, c0), to = std::min(e0 + p, c1);
-      if (to > from) M.row(sm).segment(from - c0, to - from) = rows.W.row(i).segment(from - e0, to - from);
+      if (to > from)
+        M.row(sm).segment(from - c0, to - from) = rows.W.row(i).segment(from - e0, to - from);
       if (e0 + p >= c0 && e0 + p < c1) M(sm, e0 + p - c0) = rows.y(i);
       if (c0 == 0 && !times.empty())
         times[static_cast<std::size_t>(sm) * G + g] = rows.t[static_cast<std::size_t>(i)];
@@ -471,8 +472,8 @@ FilteredLs::Processed FilteredLs::processPart(const exid::ObservationModel& mode
   // own chunk's buffers, and a chunk's margins are computed by both of its neighbours' threads:
   // with fewer chunks the threads cost more memory than they save time), at most the cores.
   const long per_thread = threads_ == 0 ? 4 : 1;
-  const int T = static_cast<int>(std::max<long>(
-      1, std::min<long>(exid::resolveThreads(threads_), nchunks / per_thread)));
+  const int T = static_cast<int>(
+      std::max<long>(1, std::min<long>(exid::resolveThreads(threads_), nchunks / per_thread)));
   P.threads = T;
   // chunk c: trimmed samples [ca, cb), rows of [lo, hi), raw samples [rlo, rhi)
   struct Span {

@@ -113,8 +113,9 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
               const std::string& model_params, bool json) {
   auto r = loadRobot(reg, robot);
   // (the fixed-base models refuse a floating base: its own model by default, and said so)
-  const std::string model_name =
-      !model_given.empty() ? model_given : r->floating_base ? "floating_base" : "differential";
+  const std::string model_name = !model_given.empty() ? model_given
+                                 : r->floating_base   ? "floating_base"
+                                                      : "differential";
   const PluginInfo& info = reg.get(PluginKind::Model, model_name);
   auto model = reg.create<ObservationModel>(
       model_name, resolveParams(info, model_params, "model " + model_name, fs::current_path()));
@@ -170,8 +171,7 @@ int robotInfo(const Registry& reg, const std::string& robot, const std::string& 
         body.parent + 1, L.q_min, L.q_max, L.qd_max);
   }
   std::cout << fmt::format(
-      "\nmodel {}{}: {} standard parameters, {} base parameters (tolerance {:g})\n\n",
-      model_name,
+      "\nmodel {}{}: {} standard parameters, {} base parameters (tolerance {:g})\n\n", model_name,
       model_given.empty() && r->floating_base ? " (the robot has a floating base; --model to "
                                                 "choose another)"
                                               : "",

@@ -588,20 +588,21 @@ TEST(Estimators, FilteredLsChoosesItsThreadsFromTheWork) {
   o.derivatives = false;
   const exid::Dataset d = makeData(*m, 2, o);
   exid::RunContext ctx;
-  const exid::Estimate few = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000}")
-                                 ->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate few =
+      make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000}")->estimate(*m, d, nullptr, ctx);
   EXPECT_EQ(few.details.find("chunks")->asInt(), 2);
   EXPECT_EQ(few.details.find("threads")->asInt(), 1);
   EXPECT_NE(few.details.find("threads_from")->asString().find("the work"), std::string::npos);
-  const exid::Estimate many = make("filtered_ls", "{cutoff_hz: 40, chunk_samples: 64}")
-                                  ->estimate(*m, d, nullptr, ctx);
+  const exid::Estimate many =
+      make("filtered_ls", "{cutoff_hz: 40, chunk_samples: 64}")->estimate(*m, d, nullptr, ctx);
   const long chunks = many.details.find("chunks")->asInt();
   ASSERT_GE(chunks, 8);
   EXPECT_EQ(many.details.find("threads")->asInt(),
             std::max(1L, std::min<long>(exid::resolveThreads(0), chunks / 4)));
   // a count the study gives is kept
-  const exid::Estimate given = make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000, "
-                                                   "threads: 2}")
+  const exid::Estimate given = make("filtered_ls",
+                                    "{cutoff_hz: 10, chunk_samples: 15000, "
+                                    "threads: 2}")
                                    ->estimate(*m, d, nullptr, ctx);
   EXPECT_EQ(given.details.find("threads")->asInt(), 2);
   EXPECT_EQ(given.value, few.value);

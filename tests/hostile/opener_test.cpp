@@ -307,7 +307,8 @@ TEST(Opener, TheManifestRecordsEachFileOncePerRunAndThread) {
   {
     const fs::path big = tempDir("big") / "big.bin";
     std::string bytes(3 * (std::size_t{1} << 20) + 12345, '\0');
-    for (std::size_t i = 0; i < bytes.size(); ++i) bytes[i] = static_cast<char>((i * 2654435761u) >> 13);
+    for (std::size_t i = 0; i < bytes.size(); ++i)
+      bytes[i] = static_cast<char>((i * 2654435761u) >> 13);
     std::ofstream(big, std::ios::binary) << bytes;
     EXPECT_EQ(exid::xxh3File(big), exid::xxh3_64(bytes));
     bytes[bytes.size() / 2] ^= 1;

@@ -50,7 +50,6 @@ TEST(ClosedChainStudy, FourbarIdentifies) {
   EXPECT_EQ(r.summary.find("robot")->find("n_base_parameters")->asDouble(), 8 + 3);
 }
 
-
 TEST(ClosedChainStudy, ExampleStudyRuns) {
   exid::StudyConfig cfg =
       exid::loadStudy(exid_test::sourceDir() / "examples/palletizer.yaml", exid_test::registry());
