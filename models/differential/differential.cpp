@@ -291,15 +291,7 @@ exid::Json DifferentialModel::describe() const {
       f["stribeck"] = "Fs_j s exp(-(|qdm_j| / vs_j)^delta)";
       f["stribeck_exponent"] = delta_;
     }
-    exid::Json nl = exid::Json::array();
-    for (const auto& p : nonlinearParameters()) {
-      exid::Json e = exid::Json::object();
-      e["name"] = p.name;
-      e["value"] = p.value;
-      e["unit"] = p.unit;
-      nl.push_back(e);
-    }
-    f["nonlinear_parameters"] = nl;
+    f["nonlinear_parameters"] = exid::models::nonlinearParametersJson(nonlinearParameters());
     j["nonlinear_friction"] = f;
   }
   if (gains_) {

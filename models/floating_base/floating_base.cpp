@@ -336,15 +336,7 @@ class FloatingBaseModel : public exid::ObservationModel {
             "FcL_j |tau_j| sign(qd_j): the recorded torque in rows, the nominal robot's (no "
             "contact) in a design";
       if (smooth_) {
-        exid::Json nl = exid::Json::array();
-        for (const auto& p : nonlinearParameters()) {
-          exid::Json e = exid::Json::object();
-          e["name"] = p.name;
-          e["value"] = p.value;
-          e["unit"] = p.unit;
-          nl.push_back(e);
-        }
-        f["nonlinear_parameters"] = nl;
+        f["nonlinear_parameters"] = exid::models::nonlinearParametersJson(nonlinearParameters());
       }
       j["joint_friction"] = f;
     }

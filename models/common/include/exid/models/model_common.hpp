@@ -13,6 +13,7 @@
 
 #include "exid/data.hpp"
 #include "exid/error.hpp"
+#include "exid/interfaces.hpp"
 #include "exid/json.hpp"
 #include "exid/params.hpp"
 #include "exid/payload.hpp"
@@ -88,6 +89,19 @@ inline void requireSignal(const Dataset& d, const Eigen::MatrixXd& m, const char
     throw Error(fmt::format("{}: the dataset ({}) signal '{}' is {} x {} (expected {} x {})", who,
                             d.source.empty() ? "unnamed" : d.source, name, m.rows(), m.cols(),
                             d.size(), cols));
+}
+
+/// A model's nonlinear parameters for its describe(): [{name, value, unit}, ...].
+inline Json nonlinearParametersJson(const std::vector<NonlinearParameter>& params) {
+  Json nl = Json::array();
+  for (const auto& p : params) {
+    Json e = Json::object();
+    e["name"] = p.name;
+    e["value"] = p.value;
+    e["unit"] = p.unit;
+    nl.push_back(e);
+  }
+  return nl;
 }
 
 /// The four signals of a torque model (q, qd, qdd, tau), each K x n.
