@@ -15,42 +15,15 @@
 #include <utility>
 #include <vector>
 
+#include "closed_chain_study_util.hpp"
 #include "closed_loop_test_util.hpp"
 #include "exid/config.hpp"
 #include "exid/error.hpp"
 #include "exid/runner.hpp"
 #include "exid_test.hpp"
 
-namespace {
-
-exid::StudyResult run(const std::string& robot, const std::string& estimator,
-                      const std::string& extra = "",
-                      const std::string& experiment =
-                          "{period_s: 10, harmonics: 5, "
-                          "duration_s: 10, sample_period_s: 0.005}") {
-  // noise-free: the simulated torques are the model's
-  const std::string study =
-      "robot: {type: " + robot +
-      "}\n"
-      "model: {type: differential, params: {rotor_inertia: true, viscous: true, coulomb: true, "
-      "offset: true}}\n"
-      "experiment: {type: simulate, params: " +
-      experiment +
-      "}\n"
-      "estimator: " +
-      estimator + "\n" + extra;
-  exid::StudyConfig cfg =
-      exid::parseStudy(study, "closed_chain.yaml", exid_test::sourceDir(), exid_test::registry());
-  return exid::runStudy(cfg, exid_test::registry(), exid::RunOptions{});
-}
-
-double relErr(const exid::StudyResult& r) {
-  const exid::Json* id = r.summary.find("identification");
-  if (!id || !id->find("param_rel_err")) return 1e300;
-  return id->find("param_rel_err")->asDouble();
-}
-
-}  // namespace
+using closed_study::relErr;
+using closed_study::run;
 
 TEST(ClosedChainStudy, PalletizerIdentifiesWithEveryEstimator) {
   // (rls with a wide prior: its default p0 = 1e6 leaves a prior bias of 3e-6 here, 1e-7 on the
