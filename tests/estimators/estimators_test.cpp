@@ -496,15 +496,24 @@ TEST(Estimators, FilteredLsDefaultTrimIsCappedAndMinSpeedRemovesSlowSamples) {
   EXPECT_LE(maxRelErr(e.value, m->baseNominal()), 1e-3);
 }
 
-TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGivesTheSameBits) {
-  auto m = makeModel(2);
+namespace {
+
+// 30 s of raw two-joint data at 1 kHz (q and tau noisy, no qd, qdd): filtered_ls's tests.
+exid::Dataset filteredLsData(const est_test::PendulumModel& m) {
   DataOptions o;
   o.samples = 30000;
   o.dt = 0.001;
   o.q_noise = 1e-5;
   o.tau_noise = {0.02, 0.02};
   o.derivatives = false;
-  const exid::Dataset d = makeData(*m, 2, o);
+  return makeData(m, 2, o);
+}
+
+}  // namespace
+
+TEST(Estimators, FilteredLsInChunksEqualsTheWholeRecordingAndAnyThreadCountGivesTheSameBits) {
+  auto m = makeModel(2);
+  const exid::Dataset d = filteredLsData(*m);
   exid::RunContext ctx;
   // one chunk holding the whole recording: the reference
   const exid::Estimate whole =
@@ -539,13 +548,7 @@ TEST(Estimators, FilteredLsColumnBlocksKeepTheBufferWithinItsBudgetAndTheSameBit
   // a chunk's rows filtered a block of columns at a time (chunk_memory_mb): the same numbers,
   // bit for bit, as one block; the buffer within the budget
   auto m = makeModel(2);
-  DataOptions o;
-  o.samples = 30000;
-  o.dt = 0.001;
-  o.q_noise = 1e-5;
-  o.tau_noise = {0.02, 0.02};
-  o.derivatives = false;
-  const exid::Dataset d = makeData(*m, 2, o);
+  const exid::Dataset d = filteredLsData(*m);
   exid::RunContext ctx;
   const exid::Estimate one =
       make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 64, threads: 1, chunk_memory_mb: 1e4}")
@@ -580,13 +583,7 @@ TEST(Estimators, FilteredLsColumnBlocksKeepTheBufferWithinItsBudgetAndTheSameBit
 TEST(Estimators, FilteredLsChoosesItsThreadsFromTheWork) {
   // threads: 0 gives a thread per 4 chunks at least: a recording of 2 chunks runs on 1 thread
   auto m = makeModel(2);
-  DataOptions o;
-  o.samples = 30000;
-  o.dt = 0.001;
-  o.q_noise = 1e-5;
-  o.tau_noise = {0.02, 0.02};
-  o.derivatives = false;
-  const exid::Dataset d = makeData(*m, 2, o);
+  const exid::Dataset d = filteredLsData(*m);
   exid::RunContext ctx;
   const exid::Estimate few =
       make("filtered_ls", "{cutoff_hz: 10, chunk_samples: 15000}")->estimate(*m, d, nullptr, ctx);
