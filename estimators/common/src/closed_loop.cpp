@@ -151,7 +151,7 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const ParamSet& p, const D
 void ClosedLoop::setUpFloating(const Dataset& data) {
   const int K = data.size();
   check(data.base.rows() == K && data.base.cols() == 9,
-        fmt::format("{}: on a floating base the closed loop runs on the recorded base motion: "
+        fmt::format("{}: on a floating base the simulated loop runs on the recorded base motion: "
                     "the recording ({}) has none (expected {} x 9: omega, alpha, f; found {} x {})",
                     who_, data.source, K, data.base.rows(), data.base.cols()));
   check(data.contact.size() == 0 || data.contact.rows() == K,
@@ -250,9 +250,14 @@ VectorXd ClosedLoop::floatingFeedforward(double t, const VectorXd& qr, const Vec
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who)
     : model_(&model), robot_(model.robotPtr()), n_(robot_->dof()), who_(who), open_(true) {
-  robot_->requireFixedBase(who +
-                           " (its torque-driven simulation integrates the fixed-base forward "
-                           "dynamics)");
+  // a floating base: the joints driven by the recorded torque on the recorded base motion and
+  // contact wrenches (a model of its own)
+  floating_ = robot_->floating_base && model.specs().floating_base;
+  if (!floating_)
+    robot_->requireFixedBase(who +
+                             " (its torque-driven simulation integrates the fixed-base forward "
+                             "dynamics)");
+  if (floating_) setUpFloating(data);
   setUpRows(model);
   check(data.size() >= 10 && data.tau.rows() == data.size() && data.tau.cols() == n_,
         fmt::format("{}: the torque-driven loop needs the recorded torque of all {} joints and "
@@ -264,7 +269,7 @@ ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const
   rec_t_ = data.t;
   rec_tau_ = data.tau;
   file_ = "the recorded torque";
-  dyn_ = makeDynamicsData(*robot_);
+  if (!floating_) dyn_ = makeDynamicsData(*robot_);
   setUpColumns(model, data);
 }
 
@@ -381,6 +386,10 @@ void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
 }
 
 std::string ClosedLoop::describe() const {
+  if (open_ && floating_)
+    return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
+           "samples); floating base: the joints simulated on the recorded base motion and "
+           "contact wrenches (degree-5 Lagrange between samples)";
   if (open_)
     return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
            "samples)";

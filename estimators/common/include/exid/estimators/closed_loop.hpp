@@ -66,7 +66,8 @@ class ClosedLoop {
   /// The torque-driven (open) loop: the drives' command is the recorded torque, read between
   /// the samples by the cubic Hermite spline of exid::shiftedRows (slopes from the five-point
   /// derivative: fourth order); no reference, no gains. Defined from the fourth to the
-  /// fifth-to-last sample (firstTime(), lastTime()).
+  /// fifth-to-last sample (firstTime(), lastTime()). On a floating base, the joints driven by
+  /// the recorded torque on the recorded base motion and contact wrenches (as above).
   ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who);
   bool torqueDriven() const { return open_; }
   /// Whether the loop runs on a floating base (the base's recorded motion prescribed).
