@@ -172,13 +172,8 @@ DifferentialModel::DifferentialModel(const exid::ParamSet& p)
 std::vector<std::string> DifferentialModel::fullNames() const {
   std::vector<std::string> names = exid::parameterNames(robot(), cols_);
   for (int j = 0; j < robot().dof(); ++j) {
-    const std::string k = std::to_string(j + 1);
-    if (coulomb_extra_ && !asym_) names.push_back("Fc" + k);
-    if (coulomb_extra_ && asym_) {
-      names.push_back("FcP" + k);
-      names.push_back("FcN" + k);
-    }
-    if (stribeck_) names.push_back("Fs" + k);
+    const std::vector<std::string> f = frictionColumns().names(j);
+    names.insert(names.end(), f.begin(), f.end());
   }
   for (int j = 0; j < loadCount(); ++j) names.push_back("FcL" + std::to_string(j + 1));
   for (int j = 0; j < gainCount(); ++j) names.push_back("dK" + std::to_string(j + 1));

@@ -185,7 +185,15 @@ class DifferentialModel : public exid::ObservationModel {
     }
     return out;
   }
-  int extraPerJoint() const { return (coulomb_extra_ ? (asym_ ? 2 : 1) : 0) + (stribeck_ ? 1 : 0); }
+  exid::FrictionColumns frictionColumns() const {
+    exid::FrictionColumns fc;
+    fc.coulomb = coulomb_extra_;
+    fc.asymmetric = asym_;
+    fc.stribeck = stribeck_;
+    fc.delta = delta_;
+    return fc;
+  }
+  int extraPerJoint() const { return frictionColumns().perJoint(); }
   double perJoint(const std::vector<double>& v, int j) const {
     if (v.size() != 1 && static_cast<int>(v.size()) != robot().dof())  // (a hot path)
       throw exid::Error(

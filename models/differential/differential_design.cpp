@@ -86,19 +86,15 @@ bool DifferentialModel::fullTorqueAt(const Eigen::VectorXd& q, const Eigen::Vect
     const Workspace data(*this);
     exid::actuatorTorqueWith(R, *data, cols_, phi.head(P0), q, qd, qdd, tau, d_q, d_qd, d_qdd);
   }
+  const exid::FrictionColumns fc = frictionColumns();
   for (int j = 0; j < n && E > 0; ++j) {  // the nonlinear friction columns (extraColumns)
     const auto u = static_cast<std::size_t>(j);
     const auto g = phi.segment(P0 + E * j, E);
-    const double v = qd[j], eps = f.eps[u];
-    const double sg = exid::smoothCoulombSign(v, eps);
+    const double v = qd[j];
+    double w[3];
+    fc.values(v, f.eps[u], f.vs[u], w);
     double t = 0.0;
-    int e = 0;
-    if (coulomb_extra_ && !asym_) t += g[e++] * sg;
-    if (coulomb_extra_ && asym_) {
-      t += g[e++] * 0.5 * (1.0 + sg);
-      t -= g[e++] * 0.5 * (1.0 - sg);
-    }
-    if (stribeck_) t += g[e] * sg * std::exp(-std::pow(std::abs(v) / f.vs[u], delta_));
+    for (int e = 0; e < E; ++e) t += g[e] * w[e];
     (*tau)[j] += t;
     if (d_qd) (*d_qd)(j, j) += extraColumnsVjp(v, f, j, g.transpose());
   }
@@ -236,39 +232,23 @@ void DifferentialModel::extraColumns(const exid::Samples& s, const Friction& f, 
   // where each drive's derivative columns start in dW (nonlinearParameters() order)
   std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
   int L = 0;
-  const int nc = coulomb_extra_ ? (asym_ ? 2 : 1) : 0;
-  for (const Slot& sl : slots()) {
+  for (const Slot& sl : slots()) {  // (a width moves every column of its joint; vs one)
     (sl.eps ? deps : dvs)[static_cast<std::size_t>(sl.joint)] = L;
-    L += sl.eps ? nc + (stribeck_ ? 1 : 0) : 1;
+    L += sl.eps ? E : 1;
   }
   if (dW) dW->setZero(W->rows(), L);
+  const exid::FrictionColumns fc = frictionColumns();
+  double w[3], dw_eps[3], dw_vs = 0.0;
   for (int k = 0; k < K; ++k)
     for (int i = 0; i < m; ++i) {
       const int j = sel_[static_cast<std::size_t>(i)];
       const auto u = static_cast<std::size_t>(j);
       const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
-      const double v = s.qd(k, j), eps = f.eps[u];
-      double ds_deps = 0.0;
-      const double sg = exid::smoothCoulombSign(v, eps, &ds_deps);
-      int c = P0 + E * j, l = deps[u];
-      if (coulomb_extra_ && !asym_) {
-        (*W)(row, c++) = sg;
-        if (dW && l >= 0) (*dW)(row, l++) = ds_deps;
-      } else if (coulomb_extra_) {
-        (*W)(row, c++) = 0.5 * (1.0 + sg);
-        (*W)(row, c++) = -0.5 * (1.0 - sg);
-        if (dW && l >= 0) {
-          (*dW)(row, l++) = 0.5 * ds_deps;
-          (*dW)(row, l++) = 0.5 * ds_deps;
-        }
-      }
-      if (stribeck_) {
-        const double r = std::abs(v) / f.vs[u];
-        const double rd = std::pow(r, delta_), g = std::exp(-rd);
-        (*W)(row, c) = sg * g;
-        if (dW && l >= 0) (*dW)(row, l) = ds_deps * g;
-        if (dW && dvs[u] >= 0) (*dW)(row, dvs[u]) = sg * g * delta_ * rd / f.vs[u];
-      }
+      fc.values(s.qd(k, j), f.eps[u], f.vs[u], w, dw_eps, &dw_vs);
+      for (int e = 0; e < E; ++e) (*W)(row, P0 + E * j + e) = w[e];
+      if (dW && deps[u] >= 0)
+        for (int e = 0; e < E; ++e) (*dW)(row, deps[u] + e) = dw_eps[e];
+      if (dW && dvs[u] >= 0) (*dW)(row, dvs[u]) = dw_vs;
     }
 }
 
@@ -400,23 +380,7 @@ void DifferentialModel::designVjpNoGains(const exid::Samples& s, const Friction&
 double DifferentialModel::extraColumnsVjp(double v, const Friction& f, int j,
                                           const Eigen::Ref<const Eigen::RowVectorXd>& g) const {
   const auto u = static_cast<std::size_t>(j);
-  const double eps = f.eps[u];
-  const double sg = exid::smoothCoulombSign(v, eps);
-  const double ds = eps > 0 ? (1.0 - sg * sg) / eps : 0.0;
-  double out = 0.0;
-  int e = 0;
-  if (coulomb_extra_ && !asym_) out += g[e++] * ds;
-  if (coulomb_extra_ && asym_) {
-    out += g[e++] * 0.5 * ds;
-    out += g[e++] * 0.5 * ds;
-  }
-  if (stribeck_) {
-    const double vs = f.vs[u], r = std::abs(v) / vs, rd = std::pow(r, delta_), gg = std::exp(-rd);
-    // d/dv [s g] = ds g + s g (-delta r^(delta-1) sign(v) / vs)
-    const double dr = v == 0.0 ? 0.0 : delta_ * std::pow(r, delta_ - 1.0) * (v > 0 ? 1 : -1) / vs;
-    out += g[e] * (ds * gg - sg * gg * dr);
-  }
-  return out;
+  return frictionColumns().velocityVjp(v, f.eps[u], f.vs[u], g.data());
 }
 
 }  // namespace exid::differential

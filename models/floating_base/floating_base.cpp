@@ -7,8 +7,10 @@
 // (torque-free identification, Ayusawa, Venture and Nakamura 2014).
 // Joint friction and drive columns (the `differential` model's options, names and columns, all
 // off by default), on the joint rows only, after pi_f: per joint Ia, Fc, Fv, OFF
-// (exid::driveColumnValues), then with coulomb_smoothing_rad_s the Coulomb column tanh(qd / eps)
-// (eps: a nonlinear parameter, fitted by `varpro`), then with coulomb_load FcL |tau| sign(qd)
+// (exid::driveColumnValues), then with coulomb_smoothing_rad_s, coulomb_asymmetric or stribeck the
+// nonlinear friction columns of exid::FrictionColumns (Fc shaped by tanh(qd / eps), or FcP and
+// FcN; Fs s exp(-(|qd| / vs)^delta); eps and vs nonlinear parameters, fitted by `varpro`), per
+// joint in that order, then with coulomb_load FcL |tau| sign(qd)
 // (the recorded torque in rows, Rows::torque; the torque column of `gains_ls`). A joint's
 // friction torque acts between its two bodies, equal and opposite: it cancels in the whole
 // robot's momentum balance, so the base rows have zeros there.
@@ -67,6 +69,16 @@ class FloatingBaseModel : public exid::ObservationModel {
                             "columns: eps per joint (one value: every joint); nonlinear "
                             "parameters eps_j, fitted by `varpro`; empty: sign (needs coulomb)",
                             0),
+        exid::param_bool("coulomb_asymmetric", false,
+                         "separate Coulomb levels for qd > 0 and qd < 0 (columns (1 + s)/2 and "
+                         "-(1 - s)/2: FcP_j, FcN_j; needs coulomb)"),
+        exid::param_bool("stribeck", false,
+                         "a Stribeck term Fs_j s exp(-(|qd_j| / vs_j)^stribeck_exponent) per joint "
+                         "(needs stribeck_velocity_rad_s)"),
+        exid::param_doubles("stribeck_velocity_rad_s", std::vector<double>{}, "rad/s",
+                            "the Stribeck velocity vs per joint (one value: every joint): the "
+                            "value rows use and varpro starts from; nonlinear parameters vs_j"),
+        exid::param_double("stribeck_exponent", 2.0, "", "the Stribeck exponent delta", 0.5, 4.0),
         exid::param_bool("coulomb_load", false,
                          "a load-dependent Coulomb term FcL_j |tau_j| sign(qd_j) per joint (FcL "
                          "dimensionless: Coulomb torque per N m carried; the recorded torque in "
@@ -85,16 +97,34 @@ class FloatingBaseModel : public exid::ObservationModel {
     cols_.offset = p.getBool("offset");
     eps_ = p.getDoubles("coulomb_smoothing_rad_s");
     load_ = p.getBool("coulomb_load");
+    vs_ = p.getDoubles("stribeck_velocity_rad_s");
+    const bool asym = p.getBool("coulomb_asymmetric");
+    fc_.asymmetric = asym;
+    fc_.stribeck = p.getBool("stribeck");
+    fc_.delta = p.getDouble("stribeck_exponent");
     const std::string who = context_.empty() ? "model 'floating_base'" : context_;
-    exid::check(eps_.empty() || cols_.coulomb,
+    exid::check((eps_.empty() && !asym) || cols_.coulomb,
                 who +
-                    ": coulomb_smoothing_rad_s shapes the Coulomb columns: it needs coulomb: "
-                    "true");
+                    ": coulomb_smoothing_rad_s and coulomb_asymmetric shape the Coulomb columns: "
+                    "they need coulomb: true");
+    exid::check(!fc_.stribeck || !vs_.empty(),
+                who +
+                    ": stribeck: true needs stribeck_velocity_rad_s (the Stribeck velocity of "
+                    "each joint, or one for all: the value rows use and varpro starts from; exid "
+                    "does not guess it)");
+    exid::check(fc_.stribeck || vs_.empty(),
+                who + ": stribeck_velocity_rad_s is given but stribeck is false");
+    exid::check(fc_.stribeck || fc_.delta == 2.0,
+                who + ": stribeck_exponent is given but stribeck is false");
     for (double v : eps_)
       exid::check(v > 0 && std::isfinite(v),
                   fmt::format("{}: coulomb_smoothing_rad_s: {} is not a positive width (leave "
                               "the list empty for sign(qd))",
                               who, v));
+    for (double v : vs_)
+      exid::check(
+          v > 0 && std::isfinite(v),
+          fmt::format("{}: stribeck_velocity_rad_s: {} is not a positive velocity", who, v));
     exid::check(!load_ || eps_.empty(),
                 who +
                     ": coulomb_load multiplies sign(qd): it is not combined with "
@@ -102,10 +132,10 @@ class FloatingBaseModel : public exid::ObservationModel {
     exid::check((!hasFriction()) || rows_ != "base",
                 who +
                     ": rows: base has no joint rows: the joint friction and drive columns "
-                    "(rotor_inertia, coulomb, viscous, offset, coulomb_load) need rows all or "
-                    "joints");
-    smooth_ = !eps_.empty();
-    if (smooth_) cols_.coulomb = false;  // the Coulomb columns are the smoothed ones
+                    "(rotor_inertia, coulomb, viscous, offset, coulomb_asymmetric, stribeck, "
+                    "coulomb_load) need rows all or joints");
+    fc_.coulomb = cols_.coulomb && (asym || !eps_.empty());
+    if (fc_.coulomb) cols_.coulomb = false;  // the Coulomb columns are the shaped ones
     exid::check(
         contact_pose_values_.empty() || contact_pose_values_.size() == 6 * contact_links_.size(),
         fmt::format("{}: contact_poses: {} numbers for {} contact link(s) (expected six "
@@ -120,7 +150,10 @@ class FloatingBaseModel : public exid::ObservationModel {
     // the drive columns' names as the differential model writes them (Ia1, Fc1, Fv1, OFF1, ...)
     const std::vector<std::string> drive = exid::parameterNames(R, cols_);
     names.insert(names.end(), drive.begin() + R.numInertialParameters(), drive.end());
-    for (int j = 0; j < (smooth_ ? R.dof() : 0); ++j) names.push_back("Fc" + std::to_string(j + 1));
+    for (int j = 0; j < (fc_.perJoint() > 0 ? R.dof() : 0); ++j) {
+      const std::vector<std::string> f = fc_.names(j);
+      names.insert(names.end(), f.begin(), f.end());
+    }
     for (int j = 0; j < (load_ ? R.dof() : 0); ++j) names.push_back("FcL" + std::to_string(j + 1));
     return names;
   }
@@ -130,32 +163,63 @@ class FloatingBaseModel : public exid::ObservationModel {
     Eigen::VectorXd out = Eigen::VectorXd::Zero(P0 + Pd + extraCount() + loadCount());  // FcL: 0
     out.head(P0) = exid::floatingParameters(R);
     out.segment(P0, Pd) = exid::parameterValues(R, cols_).tail(Pd);
-    for (int j = 0; j < extraCount(); ++j) out[P0 + Pd + j] = drive(j).coulomb;
+    const int E = fc_.perJoint();
+    for (int j = 0; j < n && E > 0; ++j) {
+      int c = P0 + Pd + E * j;
+      if (fc_.coulomb) out[c++] = drive(j).coulomb;  // (symmetric nominal: FcP = FcN = Fc)
+      if (fc_.coulomb && fc_.asymmetric) out[c++] = drive(j).coulomb;
+      if (fc_.stribeck) out[c] = 0.0;  // no Stribeck term in the robot description
+    }
     return out;
   }
 
   // The `simulate` experiment's plant (Dataset::facts.simulated): its drive terms (none with
-  // drive_terms: false) and its load-dependent Coulomb friction (coulomb_load_Nm_per_Nm).
+  // drive_terms: false), its friction beyond Coulomb + viscous (coulomb_negative_Nm,
+  // stribeck_Nm) and its load-dependent Coulomb friction (coulomb_load_Nm_per_Nm). What the model
+  // has no column for is left out.
   Eigen::VectorXd fullTruth(const exid::PlantTruth& plant) const override {
     Eigen::VectorXd out = fullNominal();
-    const int n = robot().dof(), P0 = 10 * (n + 1), Pd = cols_.count() * n;
+    const int n = robot().dof(), P0 = 10 * (n + 1), Pd = cols_.count() * n, E = fc_.perJoint();
     if (!plant.drive_terms) out.segment(P0, Pd + extraCount()).setZero();
-    const std::vector<double>& fcl = plant.coulomb_load_Nm_per_Nm;
-    if (load_ && (fcl.size() == 1 || static_cast<int>(fcl.size()) == n))
-      for (int j = 0; j < n; ++j)
-        out[P0 + Pd + extraCount() + j] = fcl[fcl.size() == 1 ? 0 : static_cast<std::size_t>(j)];
+    // one value (every joint) or one per joint; else none
+    auto perJoint = [&](const std::vector<double>& v, int j, double* x) {
+      if (!(v.size() == 1 || static_cast<int>(v.size()) == n)) return false;
+      *x = v[v.size() == 1 ? 0 : static_cast<std::size_t>(j)];
+      return true;
+    };
+    double x = 0.0;
+    for (int j = 0; j < n; ++j) {
+      const int c = P0 + Pd + E * j;
+      if (fc_.coulomb && fc_.asymmetric && perJoint(plant.coulomb_negative_Nm, j, &x))
+        out[c + 1] = x;
+      if (fc_.stribeck && perJoint(plant.stribeck_Nm, j, &x)) out[c + fc_.coulombCount()] = x;
+      if (load_ && perJoint(plant.coulomb_load_Nm_per_Nm, j, &x))
+        out[P0 + Pd + extraCount() + j] = x;
+    }
     return out;
   }
 
+  // Per joint (ascending) its width eps_j (moving every nonlinear friction column of the joint)
+  // then its Stribeck velocity vs_j (the Fs column).
   std::vector<exid::NonlinearParameter> nonlinearParameters() const override {
     std::vector<exid::NonlinearParameter> out;
     const exid::RobotModel& R = robot();
-    const int n = R.dof(), c0 = 10 * (n + 1) + cols_.count() * n;
-    for (int j = 0; j < extraCount(); ++j) {
+    const int n = R.dof(), c0 = 10 * (n + 1) + cols_.count() * n, E = fc_.perJoint();
+    for (const Slot& sl : slots()) {
+      const int j = sl.joint;
       const char* unit = R.bodies[static_cast<std::size_t>(j)].type == exid::JointType::Prismatic
                              ? "m/s"
                              : "rad/s";
-      out.push_back({"eps" + std::to_string(j + 1), unit, epsOf(j), {c0 + j}});
+      if (sl.eps) {
+        exid::NonlinearParameter e{"eps" + std::to_string(j + 1), unit, perJoint(eps_, j), {}};
+        for (int c = 0; c < E; ++c) e.columns.push_back(c0 + E * j + c);
+        out.push_back(e);
+      } else {
+        out.push_back({"vs" + std::to_string(j + 1),
+                       unit,
+                       perJoint(vs_, j),
+                       {c0 + E * j + fc_.coulombCount()}});
+      }
     }
     return out;
   }
@@ -253,9 +317,11 @@ class FloatingBaseModel : public exid::ObservationModel {
     return designAt(s, eta, dW);
   }
 
-  // The full design at the widths eta (nonlinearParameters() order); dW (optional): the
-  // derivatives of the smoothed Coulomb columns, one column per width. The FcL columns of a
-  // design: |the nominal robot's joint torque (no contact)| sign(qd); rows put the recorded one.
+  // The full design at the nonlinear parameters eta (nonlinearParameters() order); dW
+  // (optional): the derivatives of the columns each moves, in that order (a width: every
+  // nonlinear friction column of its joint; a Stribeck velocity: the Fs column). The FcL columns
+  // of a design: |the nominal robot's joint torque (no contact)| sign(qd); rows put the
+  // recorded one.
   Eigen::MatrixXd designAt(const exid::Samples& s, const Eigen::VectorXd& eta,
                            Eigen::MatrixXd* dW) const {
     const exid::RobotModel& R = robot();
@@ -265,21 +331,34 @@ class FloatingBaseModel : public exid::ObservationModel {
                 fmt::format("model 'floating_base': the samples have no base motion (9 columns: "
                             "omega, alpha, f in the base frame; found {} x {})",
                             s.base.rows(), s.base.cols()));
-    const int L = extraCount();
-    exid::check(eta.size() == L,
+    const std::vector<Slot> sl = slots();
+    exid::check(eta.size() == static_cast<Eigen::Index>(sl.size()),
                 fmt::format("model 'floating_base': {} nonlinear parameter values given, "
                             "expected {}",
-                            eta.size(), L));
-    for (int j = 0; j < L; ++j)
-      exid::check(
-          eta[j] > 0 && std::isfinite(eta[j]),
-          fmt::format("model 'floating_base': eps{} = {} (must be positive)", j + 1, eta[j]));
+                            eta.size(), sl.size()));
+    // each joint's width and Stribeck velocity, and where their derivative columns start
+    const int E = fc_.perJoint();
+    std::vector<double> eps(static_cast<std::size_t>(n), 0.0), vs(static_cast<std::size_t>(n), 1.0);
+    std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
+    int Ld = 0;
+    for (std::size_t k = 0; k < sl.size(); ++k) {
+      const double v = eta[static_cast<Eigen::Index>(k)];
+      const auto j = static_cast<std::size_t>(sl[k].joint);
+      exid::check(v > 0 && std::isfinite(v),
+                  fmt::format("model 'floating_base': {}{} = {} (must be positive)",
+                              sl[k].eps ? "eps" : "vs", j + 1, v));
+      (sl[k].eps ? eps : vs)[j] = v;
+      (sl[k].eps ? deps : dvs)[j] = Ld;
+      Ld += sl[k].eps ? E : 1;  // (a width moves every column of its joint; vs the Fs column)
+    }
+    const int L = extraCount();
     const int m = rowsPerSample(), first = rows_ == "joints" ? 6 : 0;
     const int P0 = 10 * (n + 1), nd = cols_.count(), Pd = nd * n, Pl = P0 + Pd + L;
     const int P = Pl + loadCount();
     Eigen::MatrixXd W(m * K, P), Y;
     if (P > P0) W.rightCols(P - P0).setZero();
-    if (dW) dW->setZero(m * K, L);
+    if (dW) dW->setZero(m * K, Ld);
+    double w[3], dw_eps[3], dw_vs = 0.0;
     const Eigen::VectorXd nominal = load_ ? fullNominal().head(Pl) : Eigen::VectorXd();
     for (int k = 0; k < K; ++k) {
       const exid::BaseMotion b = s.base.row(k).transpose();
@@ -293,10 +372,13 @@ class FloatingBaseModel : public exid::ObservationModel {
         const double v = s.qd(k, j);
         const exid::DriveColumnValues dv = exid::driveColumnValues(cols_, v, s.qdd(k, j));
         for (int e = 0; e < dv.count; ++e) W(row, P0 + nd * j + e) = dv.v[e];
-        if (L > 0) {
-          double ds = 0.0;
-          W(row, P0 + Pd + j) = exid::smoothCoulombSign(v, eta[j], &ds);
-          if (dW) (*dW)(row, j) = ds;
+        if (E > 0) {
+          const auto u = static_cast<std::size_t>(j);
+          fc_.values(v, eps[u], vs[u], w, dw_eps, &dw_vs);
+          for (int e = 0; e < E; ++e) W(row, P0 + Pd + E * j + e) = w[e];
+          if (dW && deps[u] >= 0)
+            for (int e = 0; e < E; ++e) (*dW)(row, deps[u] + e) = dw_eps[e];
+          if (dW && dvs[u] >= 0) (*dW)(row, dvs[u]) = dw_vs;
         }
         if (load_) W(row, Pl + j) = exid::loadCoulombColumn(W.row(row).head(Pl).dot(nominal), v);
       }
@@ -327,15 +409,20 @@ class FloatingBaseModel : public exid::ObservationModel {
       exid::Json f = exid::Json::object();
       f["rows"] = "the joint rows only (a joint's friction cancels in the base rows)";
       f["rotor_inertia"] = cols_.rotor_inertia;
-      f["coulomb"] = cols_.coulomb || smooth_;
+      f["coulomb"] = cols_.coulomb || fc_.coulomb;
+      f["coulomb_asymmetric"] = fc_.asymmetric;
       f["viscous"] = cols_.viscous;
       f["offset"] = cols_.offset;
-      f["sign"] = smooth_ ? "tanh(qd / eps_j)" : "sign(qd)";
+      f["sign"] = eps_.empty() ? "sign(qd)" : "tanh(qd / eps_j)";
+      if (fc_.stribeck) {
+        f["stribeck"] = "Fs_j s exp(-(|qd_j| / vs_j)^delta)";
+        f["stribeck_exponent"] = fc_.delta;
+      }
       if (load_)
         f["coulomb_load"] =
             "FcL_j |tau_j| sign(qd_j): the recorded torque in rows, the nominal robot's (no "
             "contact) in a design";
-      if (smooth_) {
+      if (!nonlinearParameters().empty()) {
         f["nonlinear_parameters"] = exid::models::nonlinearParametersJson(nonlinearParameters());
       }
       j["joint_friction"] = f;
@@ -352,7 +439,7 @@ class FloatingBaseModel : public exid::ObservationModel {
                             "modelled for a floating base: give joint coordinates)",
                             R.name));
     contactBodies();  // the links exist
-    studyEta();       // one width, or one per joint
+    studyEta();       // one width (Stribeck velocity), or one per joint
   }
 
  private:
@@ -383,30 +470,48 @@ class FloatingBaseModel : public exid::ObservationModel {
     return names;
   }
 
-  bool hasFriction() const { return cols_.count() > 0 || !eps_.empty() || load_; }
-  int extraCount() const { return smooth_ ? robot().dof() : 0; }
+  // The nonlinear parameters in order: per joint (ascending), its width then its Stribeck
+  // velocity.
+  struct Slot {
+    bool eps = false;
+    int joint = 0;
+  };
+  std::vector<Slot> slots() const {
+    std::vector<Slot> out;
+    for (int j = 0; j < robot().dof() && fc_.perJoint() > 0; ++j) {
+      if (!eps_.empty()) out.push_back({true, j});
+      if (fc_.stribeck) out.push_back({false, j});
+    }
+    return out;
+  }
+  bool hasFriction() const { return cols_.count() > 0 || fc_.perJoint() > 0 || load_; }
+  int extraCount() const { return fc_.perJoint() * robot().dof(); }
   int loadCount() const { return load_ ? robot().dof() : 0; }
   exid::Drive drive(int j) const {
     const auto& dr = robot().drives;
     return j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
   }
-  double epsOf(int j) const {
-    exid::check(eps_.size() == 1 || static_cast<int>(eps_.size()) == robot().dof(),
-                fmt::format("model 'floating_base': coulomb_smoothing_rad_s: {} values given for "
-                            "robot '{}' of {} joints (expected one, or one per joint)",
-                            eps_.size(), robot().name, robot().dof()));
-    return eps_.size() == 1 ? eps_[0] : eps_[static_cast<std::size_t>(j)];
+  // a per-joint list's value (coulomb_smoothing_rad_s, stribeck_velocity_rad_s)
+  double perJoint(const std::vector<double>& v, int j) const {
+    exid::check(v.size() == 1 || static_cast<int>(v.size()) == robot().dof(),
+                fmt::format("model 'floating_base': {}: {} values given for robot '{}' of {} "
+                            "joints (expected one, or one per joint)",
+                            &v == &eps_ ? "coulomb_smoothing_rad_s" : "stribeck_velocity_rad_s",
+                            v.size(), robot().name, robot().dof()));
+    return v.size() == 1 ? v[0] : v[static_cast<std::size_t>(j)];
   }
   Eigen::VectorXd studyEta() const {
-    Eigen::VectorXd eta(extraCount());
-    for (int j = 0; j < extraCount(); ++j) eta[j] = epsOf(j);
+    const std::vector<exid::NonlinearParameter> nl = nonlinearParameters();
+    Eigen::VectorXd eta(static_cast<Eigen::Index>(nl.size()));
+    for (std::size_t k = 0; k < nl.size(); ++k) eta[static_cast<Eigen::Index>(k)] = nl[k].value;
     return eta;
   }
 
   std::string rows_;
   exid::DriveColumns cols_;
-  std::vector<double> eps_;
-  bool smooth_ = false, load_ = false;
+  std::vector<double> eps_, vs_;
+  exid::FrictionColumns fc_;  // the nonlinear friction columns (coulomb: shaped Coulomb columns)
+  bool load_ = false;
   std::vector<std::string> contact_links_;
   std::vector<double> contact_pose_values_;
   std::string context_;

@@ -88,9 +88,10 @@ TEST(FloatingOpenLoop, TheTorqueDrivenLoopFollowsTheRecording) {
   exid::Dataset no_contact = d;
   no_contact.contact.setZero();
   const double bq = replay(*model, no_contact);
-  std::printf("[floating open loop] at the truth %.2e rad off the recording; contact read as "
-              "zero: %.2e rad\n",
-              eq, bq);
+  std::printf(
+      "[floating open loop] at the truth %.2e rad off the recording; contact read as "
+      "zero: %.2e rad\n",
+      eq, bq);
   EXPECT_LT(eq, 1e-7);
   EXPECT_GT(bq, 1e-4);
 }

@@ -61,6 +61,72 @@ inline double smoothCoulombSign(double v, double eps, double* ds_deps = nullptr)
   if (ds_deps) *ds_deps = eps > 0 ? -(v / (eps * eps)) * (1.0 - sg * sg) : 0.0;
   return sg;
 }
+/// The nonlinear friction columns of a drive (the `differential` and `floating_base` models'
+/// coulomb_asymmetric, coulomb_smoothing_rad_s and stribeck), per joint in this order: with
+/// `coulomb`, the Coulomb columns shaped by s = smoothCoulombSign(v, eps) (eps = 0: sign(v)):
+/// one, s (Fc), or with `asymmetric` two, (1 + s)/2 and -(1 - s)/2 (FcP, FcN: the levels for
+/// v > 0 and v < 0); then with `stribeck` one, s exp(-(|v| / vs)^delta) (Fs).
+struct FrictionColumns {
+  bool coulomb = false, asymmetric = false, stribeck = false;
+  double delta = 2.0;  // the Stribeck exponent
+
+  int coulombCount() const { return coulomb ? (asymmetric ? 2 : 1) : 0; }
+  int perJoint() const { return coulombCount() + (stribeck ? 1 : 0); }
+  /// The names of joint j's (0-based) columns.
+  std::vector<std::string> names(int j) const {
+    const std::string k = std::to_string(j + 1);
+    std::vector<std::string> out;
+    if (coulomb && !asymmetric) out.push_back("Fc" + k);
+    if (coulomb && asymmetric) {
+      out.push_back("FcP" + k);
+      out.push_back("FcN" + k);
+    }
+    if (stribeck) out.push_back("Fs" + k);
+    return out;
+  }
+  /// The columns at velocity v (w: perJoint() values); dw_eps (when given): their derivatives
+  /// with respect to eps; *dw_vs (when given): the Stribeck column's with respect to vs.
+  void values(double v, double eps, double vs, double* w, double* dw_eps = nullptr,
+              double* dw_vs = nullptr) const {
+    double ds_deps = 0.0;
+    const double sg = smoothCoulombSign(v, eps, &ds_deps);
+    int c = 0;
+    if (coulomb && !asymmetric) {
+      if (dw_eps) dw_eps[c] = ds_deps;
+      w[c++] = sg;
+    } else if (coulomb) {
+      if (dw_eps) dw_eps[c] = dw_eps[c + 1] = 0.5 * ds_deps;
+      w[c++] = 0.5 * (1.0 + sg);
+      w[c++] = -0.5 * (1.0 - sg);
+    }
+    if (stribeck) {
+      const double r = std::abs(v) / vs;
+      const double rd = std::pow(r, delta), g = std::exp(-rd);
+      w[c] = sg * g;
+      if (dw_eps) dw_eps[c] = ds_deps * g;
+      if (dw_vs) *dw_vs = sg * g * delta * rd / vs;
+    }
+  }
+  /// d/dv of sum_c g[c] w_c(v): the columns' vector-Jacobian product in the velocity.
+  double velocityVjp(double v, double eps, double vs, const double* g) const {
+    const double sg = smoothCoulombSign(v, eps);
+    const double ds = eps > 0 ? (1.0 - sg * sg) / eps : 0.0;
+    double out = 0.0;
+    int e = 0;
+    if (coulomb && !asymmetric) out += g[e++] * ds;
+    if (coulomb && asymmetric) {
+      out += g[e++] * 0.5 * ds;
+      out += g[e++] * 0.5 * ds;
+    }
+    if (stribeck) {
+      const double r = std::abs(v) / vs, rd = std::pow(r, delta), gg = std::exp(-rd);
+      // d/dv [s g] = ds g + s g (-delta r^(delta-1) sign(v) / vs)
+      const double dr = v == 0.0 ? 0.0 : delta * std::pow(r, delta - 1.0) * (v > 0 ? 1 : -1) / vs;
+      out += g[e] * (ds * gg - sg * gg * dr);
+    }
+    return out;
+  }
+};
 /// The load-dependent Coulomb column (the models' coulomb_load, FcL): |tau| sign(qdm), tau the
 /// torque the drive carries (recorded in rows; the nominal robot's in a design).
 inline double loadCoulombColumn(double tau, double qdm) { return std::abs(tau) * coulombSign(qdm); }
