@@ -15,6 +15,9 @@
 //   pd_feedforward:  tau_m = tau_ff(qr, qdr, qddr) + D0 (kp (qr - qm) + kd (qdr - qdm)),
 //                    tau_ff from the robot description WITHOUT payload (all drive terms),
 //                    D0 = diag(Mm) at the start of the reference.
+// A floating base (runFloating): the base's motion prescribed, the contact wrench solved with the
+// joints' accelerations; computed_torque an exact inverse-dynamics simulation, pd_feedforward
+// the joints' loop integrated as above.
 // The SUNDIALS integrator is integrator.hpp.
 #include <fmt/format.h>
 #include <fmt/ranges.h>
@@ -205,7 +208,8 @@ class SimulateExperiment : public exid::Experiment {
                      0.0),
         param_string("contact_link", std::string(""),
                      "floating base: the link whose contact (F/T sensor) wrench balances the base "
-                     "rows (the base link or a body's link)"),
+                     "rows (the base link or a body's link; with controller: pd_feedforward the "
+                     "base link)"),
         param_doubles("contact_pose", std::vector<double>{}, "m, rad",
                       "floating base: the contact sensor frame in its link's frame, x y z roll "
                       "pitch yaw (empty: identity)"),
