@@ -704,7 +704,6 @@ class SimulateExperiment : public exid::Experiment {
       MatrixXd A;
       VectorXd a;
       Eigen::Matrix<double, 6, 1> w;
-      D0_ = VectorXd::Zero(n);
       floatingSolve(t0, qr, qdr, baseAt(t0, Eigen::Matrix3d::Identity()), VectorXd::Zero(n), &a, &w,
                     &A);
       D0_ = A.diagonal();

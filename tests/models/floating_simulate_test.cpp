@@ -120,7 +120,7 @@ TEST(FloatingSimulate, HumanoidPdRecordingIdentifiesWithDidimAndIvThroughAStudy)
   const std::string loop =
       "reference_file: " + (dir / "reference.csv").string() + ", " + cltest::gains(d.meta);
   // (didim from the least-squares start, one step: each simulation with its sensitivities to
-  // the 90 base parameters takes seconds; fit_nonlinear: false keeps the model's Coulomb width,
+  // the 110 base parameters takes seconds; fit_nonlinear: false keeps the model's Coulomb width,
   // the plant's)
   const std::vector<std::pair<std::string, std::string>> estimators = {
       {"didim", "{type: didim, params: {" + loop +
