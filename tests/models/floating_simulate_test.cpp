@@ -107,7 +107,7 @@ std::string refusal(const std::string& params, const std::string& contact = kCon
 TEST(FloatingSimulate, HumanoidPdRecordingIdentifiesWithDidimAndIvThroughAStudy) {
   const Humanoid h = humanoidWithDrives();
   auto robot = h.robot;
-  const exid::Samples ref = humanoidReference(robot->dof(), 1.0);
+  const exid::Samples ref = humanoidReference(robot->dof(), 0.6);
   const exid::Dataset d =
       humanoidRecording(robot, ref,
                         std::string(kPlant) +
