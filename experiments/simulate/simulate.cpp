@@ -15,8 +15,12 @@
 //   pd_feedforward:  tau_m = tau_ff(qr, qdr, qddr) + D0 (kp (qr - qm) + kd (qdr - qdm)),
 //                    tau_ff from the robot description WITHOUT payload (all drive terms),
 //                    D0 = diag(Mm) at the start of the reference.
+// A floating base (runFloating): the base's motion prescribed, the contact wrench solved with the
+// joints' accelerations; computed_torque an exact inverse-dynamics simulation, pd_feedforward
+// the joints' loop integrated as above.
 // The SUNDIALS integrator is integrator.hpp.
 #include <fmt/format.h>
+#include <fmt/ranges.h>
 #include <sundials/sundials_config.h>
 
 #include <Eigen/Cholesky>
@@ -25,6 +29,7 @@
 #include <Eigen/LU>
 #include <chrono>
 #include <cmath>
+#include <initializer_list>
 #include <memory>
 #include <random>
 #include <string>
@@ -203,7 +208,8 @@ class SimulateExperiment : public exid::Experiment {
                      0.0),
         param_string("contact_link", std::string(""),
                      "floating base: the link whose contact (F/T sensor) wrench balances the base "
-                     "rows (the base link or a body's link)"),
+                     "rows (the base link or a body's link; with controller: pd_feedforward the "
+                     "base link)"),
         param_doubles("contact_pose", std::vector<double>{}, "m, rad",
                       "floating base: the contact sensor frame in its link's frame, x y z roll "
                       "pitch yaw (empty: identity)"),
@@ -301,17 +307,32 @@ class SimulateExperiment : public exid::Experiment {
     return d;
   }
 
+  struct Tracking {
+    double max_err = 0.0;  // the largest |qr - qm| at the samples
+    int recorded = 0;
+    bool stopped = false;  // cancelled or out of time
+  };
+
   // ---------------------------------------------------------------- floating base
-  // A floating-base robot: the joints follow the reference exactly and the base moves along
-  // prescribed smooth motions (an inverse-dynamics simulation): omega_b(t) three harmonics per
-  // component, alpha_b its exact derivative, the orientation R(t) integrated from omega_b
-  // (midpoint exponential steps), f_b = R^T (a_w(t) - g) with a_w three harmonics per world
-  // component and g = the robot's gravity (world frame). The wrench of ONE contact balances the
-  // base rows: w = (X*_c)^-1 Y_base pi; the joint torques are tau = Y_joint pi - J_c^T w, plus
-  // the drive terms of the fixed-base plant (drive_terms: Ia qdd + friction, driveFriction; a
-  // joint's friction acts between its two bodies and leaves the base rows unchanged). With
-  // coulomb_load_Nm_per_Nm the drive delivers u = tau_c - FcL |tau_c| s(qd) of its command tau_c
-  // (recorded): tau_c = u / (1 - FcL s sign(u)).
+  // A floating-base robot. The base moves along prescribed smooth motions: omega_b(t) three
+  // harmonics per component, alpha_b its exact derivative, the orientation R(t) integrated from
+  // omega_b, f_b = R^T (a_w(t) - g) with a_w three harmonics per world component and g = the
+  // robot's gravity (world frame). The wrench w of ONE contact balances the base rows. Rows:
+  // Y pi = [0; tau_delivered] + C w (exid/floating_base.hpp), plus the drive terms of the
+  // fixed-base plant on the joint rows (drive_terms: Ia qdd + friction, driveFriction; a joint's
+  // friction acts between its two bodies and leaves the base rows unchanged).
+  //   computed_torque: an inverse-dynamics simulation, the joints on the reference exactly (the
+  //     true model's computed torque from a state on the reference tracks it exactly; kp, kd act
+  //     on a zero error): w = (X*_c)^-1 Y_base pi, tau = Y_joint pi - J_c^T w + drive terms; the
+  //     orientation by midpoint exponential steps (20 per sample). With coulomb_load_Nm_per_Nm
+  //     the drive delivers u = tau_c - FcL |tau_c| s(qd) of its command tau_c (recorded):
+  //     tau_c = u / (1 - FcL s sign(u)).
+  //   pd_feedforward: the joints' closed loop integrated by SUNDIALS, state [q; qd; quaternion
+  //     of R]; at each instant qdd and w solve the base and joint rows together (floatingSolve);
+  //     tau_c = tau_ff(qr, qdr, qddr on the base motion; description, all drive terms) +
+  //     D0 (kp (qr - q) + kd (qdr - qd)), D0 = the diagonal of the joints' block of the floating
+  //     mass matrix (base acceleration prescribed) plus the rotor inertias, at the reference's
+  //     start.
   static void fourier3(const Eigen::Matrix<double, 3, 3>& A, const Eigen::Matrix<double, 3, 3>& P,
                        double w, double t, Eigen::Vector3d* x, Eigen::Vector3d* xd) {
     x->setZero();
@@ -323,16 +344,41 @@ class SimulateExperiment : public exid::Experiment {
       }
   }
 
-  exid::Dataset runFloating(std::shared_ptr<const exid::RobotModel> robot,
-                            const exid::Samples* reference, const exid::RunContext& ctx) {
-    const auto wall0 = std::chrono::steady_clock::now();
-    const exid::RobotModel& R = *robot;
-    const std::string who = "experiment 'simulate' (floating base)";
+  // The base motion at t with the base's orientation R_wb.
+  exid::BaseMotion baseAt(double t, const Eigen::Matrix3d& Rwb) const {
+    Eigen::Vector3d w, al, a, ad;
+    fourier3(fb_.Aw, fb_.Pw, fb_.wb, t - fb_.t0, &w, &al);
+    fourier3(fb_.Aa, fb_.Pa, fb_.wb, t - fb_.t0, &a, &ad);
+    exid::BaseMotion b;
+    b << w, al, Rwb.transpose() * (a - truth_.gravity);
+    return b;
+  }
+
+  // The keys among `keys` whose value is not the declared default.
+  std::vector<std::string> changedFromDefault(std::initializer_list<const char*> keys) const {
+    std::vector<std::string> out;
+    for (const exid::ParamDecl& d : params())
+      for (const char* k : keys) {
+        if (d.name != k || !d.default_value) continue;
+        const bool same = d.type == exid::ParamType::Double
+                              ? P_.getDouble(k) == std::get<double>(*d.default_value)
+                              : exid::formatValue(P_.at(k)) == exid::formatValue(*d.default_value);
+        if (!same) out.emplace_back(k);
+      }
+    return out;
+  }
+
+  // What a floating base does not simulate, refused by name.
+  void refuseOnFloatingBase(const exid::RobotModel& R, const std::string& who) const {
     exid::check(payload_.empty(), who + ": a payload is not simulated on a floating-base robot");
     exid::check(!P_.getBool("wrench"),
                 who +
                     ": the wrist wrench is not simulated on a floating-base robot (the "
                     "contact wrench is recorded: contact_link)");
+    for (double v : P_.getDoubles("noise_wrench"))
+      exid::check(v == 0.0, who +
+                                ": noise_wrench is the wrist wrench's noise, not recorded on a "
+                                "floating base: the contact wrench's is noise_contact");
     exid::check(!R.hasTransmission(), who + ": robot '" + R.name +
                                           "' has a transmission (not modelled for a floating "
                                           "base)");
@@ -342,18 +388,45 @@ class SimulateExperiment : public exid::Experiment {
                 who +
                     ": torque_delay_s, recorded_torque_gain and drive_torque_gain are for "
                     "fixed-base robots");
+    if (P_.getString("controller") == "computed_torque") {
+      const std::vector<std::string> c =
+          changedFromDefault({"integrator", "rtol", "atol", "max_steps"});
+      exid::check(c.empty(),
+                  fmt::format("{}: {} set, but controller: computed_torque on a floating base is "
+                              "an inverse-dynamics simulation (exact tracking, nothing "
+                              "integrated): the integrator's settings apply to controller: "
+                              "pd_feedforward",
+                              who, fmt::join(c, ", ")));
+    }
+  }
+
+  exid::Dataset runFloating(std::shared_ptr<const exid::RobotModel> robot,
+                            const exid::Samples* reference, const exid::RunContext& ctx) {
+    const auto wall0 = std::chrono::steady_clock::now();
+    const exid::RobotModel& R = *robot;
+    const std::string who = "experiment 'simulate' (floating base)";
+    refuseOnFloatingBase(R, who);
     const std::string link = P_.getString("contact_link");
     exid::check(!link.empty(),
                 who +
                     ": contact_link is needed: the wrench of one contact balances the base "
                     "rows (e.g. a foot's link)");
-    const int body = exid::floatingBodyIndex(R, link, who + ": contact_link");
+    fb_.body = exid::floatingBodyIndex(R, link, who + ": contact_link");
+    // a wrench on a limb's link reaches the base only through the joints, whose torques are the
+    // controller's: about the first joint's axis the base feels that joint's torque alone, so
+    // the prescribed base motion cannot be held by it (the rows are singular)
+    exid::check(P_.getString("controller") == "computed_torque" || fb_.body == -1,
+                fmt::format("{}: contact_link = '{}': controller: pd_feedforward needs the "
+                            "contact on the base link ('{}'): a wrench on another link reaches "
+                            "the base only through joints whose torques the controller sets, and "
+                            "cannot hold the prescribed base motion",
+                            who, link, R.base.link));
     const std::vector<double> cp = P_.getDoubles("contact_pose");
     exid::check(cp.empty() || cp.size() == 6,
                 fmt::format("{}: contact_pose: expected 6 numbers (x y z roll pitch yaw), found "
                             "{}",
                             who, cp.size()));
-    const exid::Pose sensor = cp.empty() ? exid::Pose{} : exid::poseFromXyzRpy(cp.data());
+    fb_.sensor = cp.empty() ? exid::Pose{} : exid::poseFromXyzRpy(cp.data());
     auto noise3 = [&](const char* key, int k) {
       const std::vector<double> v = P_.getDoubles(key);
       exid::check(v.size() == 1 || v.size() == 3,
@@ -364,8 +437,11 @@ class SimulateExperiment : public exid::Experiment {
     exid::check(
         nc.size() == 1 || nc.size() == 2 || nc.size() == 6,
         fmt::format("{}: noise_contact: expected 1, 2 or 6 numbers, found {}", who, nc.size()));
+    const std::vector<double> nb = {noise3("noise_base", 0), noise3("noise_base", 1),
+                                    noise3("noise_base", 2)};
     n_ = R.dof();
     const int n = n_;
+    nominal_ = robot;
     truth_ = R;  // (no payload on a floating base)
     drive_terms_ = P_.getBool("drive_terms");
     tanh_ = P_.getString("coulomb") == "tanh";
@@ -376,23 +452,26 @@ class SimulateExperiment : public exid::Experiment {
                   fmt::format("{}: coulomb_load_Nm_per_Nm: {} (|FcL| < 1 expected: the drive "
                               "must deliver a torque of the command's sign)",
                               who, fcl_[j]));
+    computed_torque_ = P_.getString("controller") == "computed_torque";
+    kp_ = P_.getDouble("kp");
+    kd_ = P_.getDouble("kd");
     double duration = P_.getDouble("duration_s");
     const exid::Json refmeta = setUpReference(R, reference, ctx, &duration);
-    const double dt = P_.getDouble("sample_period_s"), t0 = ref_->t0();
+    const double dt = P_.getDouble("sample_period_s");
     const int N = sampleCount(duration, dt);
     // the base's harmonics (seeded)
     std::mt19937_64 rng(ctx.seed ^ 0x243f6a8885a308d3ull);
     std::uniform_real_distribution<double> u(-1.0, 1.0);
-    Eigen::Matrix3d Aw, Pw, Aa, Pa;
     for (int c = 0; c < 3; ++c)
       for (int l = 0; l < 3; ++l) {
-        Aw(c, l) = P_.getDouble("base_omega_rad_s") * u(rng);
-        Pw(c, l) = M_PI * u(rng);
-        Aa(c, l) = P_.getDouble("base_acceleration_m_s2") * u(rng);
-        Pa(c, l) = M_PI * u(rng);
+        fb_.Aw(c, l) = P_.getDouble("base_omega_rad_s") * u(rng);
+        fb_.Pw(c, l) = M_PI * u(rng);
+        fb_.Aa(c, l) = P_.getDouble("base_acceleration_m_s2") * u(rng);
+        fb_.Pa(c, l) = M_PI * u(rng);
       }
     const double period = reference ? std::max(duration, 1e-9) : P_.getDouble("period_s");
-    const double wb = 2.0 * M_PI / period;
+    fb_.wb = 2.0 * M_PI / period;
+    fb_.t0 = ref_->t0();
     exid::Dataset d;
     d.t.resize(N);
     d.q.resize(N, n);
@@ -400,63 +479,22 @@ class SimulateExperiment : public exid::Experiment {
     d.tau.resize(N, n);
     d.base.resize(N, 9);
     d.contact.resize(N, 6);
-    Eigen::Matrix3d Rwb = Eigen::Matrix3d::Identity();
-    double t_prev = t0;
-    VectorXd q, qdv, qddv;
-    Eigen::Vector3d w, al, a, ad;
-    for (int k = 0; k < N; ++k) {
-      const double tk = t0 + k * dt;
-      // orientation: midpoint exponential steps from the previous sample
-      constexpr int kSub = 20;
-      const double h = (tk - t_prev) / kSub;
-      for (int s = 0; s < kSub && h > 0; ++s) {
-        fourier3(Aw, Pw, wb, t_prev + (s + 0.5) * h - t0, &w, &al);
-        const double ang = w.norm() * h;
-        if (ang > 0) Rwb = Rwb * Eigen::AngleAxisd(ang, w.normalized()).toRotationMatrix();
-      }
-      t_prev = tk;
-      fourier3(Aw, Pw, wb, tk - t0, &w, &al);
-      fourier3(Aa, Pa, wb, tk - t0, &a, &ad);
-      exid::BaseMotion b;
-      b << w, al, Rwb.transpose() * (a - R.gravity);
-      ref_->eval(tk, &q, &qdv, &qddv);
-      const VectorXd id = exid::floatingInverseDynamics(R, q, qdv, qddv, b);
-      const MatrixXd C = exid::contactMap(R, q, body, sensor);
-      const Eigen::Matrix<double, 6, 1> wc = C.topRows(6).partialPivLu().solve(id.head(6));
-      d.t[k] = tk;
-      d.q.row(k) = q.transpose();
-      qd.row(k) = qdv.transpose();
-      qdd.row(k) = qddv.transpose();
-      d.tau.row(k) = (id.tail(n) - C.bottomRows(n) * wc).transpose();
-      for (int j = 0; j < n && drive_terms_; ++j) {
-        const exid::Drive D = j < static_cast<int>(R.drives.size())
-                                  ? R.drives[static_cast<std::size_t>(j)]
-                                  : exid::Drive{};
-        d.tau(k, j) += D.rotor_inertia * qddv[j] + driveFriction(D, j, qdv[j]);
-      }
-      for (int j = 0; j < static_cast<int>(fcl_.size()); ++j) {
-        const double del = d.tau(k, j);  // what the drive delivers
-        const double fl = fcl_[static_cast<std::size_t>(j)] * coulombShape(qdv[j]);
-        d.tau(k, j) = del / (1.0 - fl * (del > 0 ? 1.0 : (del < 0 ? -1.0 : 0.0)));
-      }
-      d.base.row(k) = b.transpose();
-      d.contact.row(k) = wc.transpose();
-      if (ctx.shouldStop() && k + 1 < N) {
-        exid::logWarn(fmt::format("{}: stopped (cancelled or out of time) after {} of {} samples",
-                                  who, k + 1, N));
-        d = exid::sliceDataset(d, 0, k + 1);
-        qd.conservativeResize(k + 1, n);
-        qdd.conservativeResize(k + 1, n);
-        break;
-      }
+    exid::Json& m = d.meta;
+    const Tracking tr = computed_torque_
+                            ? recordFloatingExact(N, dt, ctx, &d, &qd, &qdd)
+                            : recordFloatingLoop(N, dt, duration, ctx, &d, &qd, &qdd, &m);
+    if (tr.recorded < N) {
+      exid::logWarn(fmt::format("{}: stopped (cancelled or out of time) after {} of {} samples",
+                                who, tr.recorded, N));
+      d = exid::sliceDataset(d, 0, tr.recorded);
+      qd.conservativeResize(tr.recorded, n);
+      qdd.conservativeResize(tr.recorded, n);
     }
     // measurement noise
     std::mt19937_64 nrng(ctx.seed ^ 0x5DEECE66Dull);
     std::normal_distribution<double> nd(0.0, 1.0);
     const double sq = P_.getDouble("noise_q_rad"), st = P_.getDouble("noise_tau_Nm"),
                  res = P_.getDouble("encoder_resolution_rad");
-    const std::vector<double> nb = {noise3("noise_base", 0), noise3("noise_base", 1),
-                                    noise3("noise_base", 2)};
     for (int k = 0; k < d.size(); ++k) {
       for (int j = 0; j < n; ++j) {
         if (sq > 0) d.q(k, j) += sq * nd(nrng);
@@ -478,14 +516,28 @@ class SimulateExperiment : public exid::Experiment {
       d.qdd = std::move(qdd);
     }
     d.source = fmt::format("simulate ({}, floating base, seed {})", R.name, ctx.seed);
-    exid::Json& m = d.meta;
     m["robot"] = R.name;
     m["seed"] = exid::Json(static_cast<long long>(ctx.seed));
+    m["controller"] = P_.getString("controller");
+    m["kp"] = kp_;
+    m["kd"] = kd_;
     m["floating_base"] =
-        "inverse-dynamics simulation: the joints follow the reference exactly; base motion "
-        "prescribed (three harmonics of omega and of the world acceleration), orientation "
-        "integrated; the contact wrench balances the base rows; the joint torques with the "
-        "drive terms (drive_terms) and the plant's friction options";
+        computed_torque_
+            ? "inverse-dynamics simulation (computed_torque: the true model's computed torque "
+              "from a state on the reference tracks it exactly; kp, kd act on a zero error): the "
+              "joints follow the reference exactly; base motion prescribed (three harmonics of "
+              "omega and of the world acceleration), orientation integrated; the contact wrench "
+              "balances the base rows; the joint torques with the drive terms (drive_terms) and "
+              "the plant's friction options"
+            : "closed loop (pd_feedforward) integrated by SUNDIALS on the prescribed base motion "
+              "(three harmonics of omega and of the world acceleration, orientation integrated "
+              "with the joints): at each instant the joints' accelerations and the contact wrench "
+              "solve the base and joint rows together; tau = tau_ff(reference on the base "
+              "motion; description, all drive terms) + D0 (kp (qr - q) + kd (qdr - qd)), D0 the "
+              "diagonal of the joints' block of the floating mass matrix plus the rotor inertias "
+              "at the reference's start";
+    m["max_tracking_error_rad"] = tr.max_err;
+    m["stopped_early"] = tr.stopped;
     m["coulomb"] = tanh_ ? fmt::format("tanh(qd / {})", vs_) : std::string("sign(qd)");
     m["contact_link"] = link;
     m["reference"] = refmeta;
@@ -506,6 +558,209 @@ class SimulateExperiment : public exid::Experiment {
     return d;
   }
 
+  // computed_torque on a floating base: the joints on the reference, the orientation by midpoint
+  // exponential steps, the contact wrench and the torques by inverse dynamics.
+  Tracking recordFloatingExact(int N, double dt, const exid::RunContext& ctx, exid::Dataset* d,
+                               MatrixXd* qd, MatrixXd* qdd) {
+    const exid::RobotModel& R = truth_;
+    const int n = n_;
+    const double t0 = fb_.t0;
+    Tracking tr;
+    Eigen::Matrix3d Rwb = Eigen::Matrix3d::Identity();
+    double t_prev = t0;
+    VectorXd q, qdv, qddv;
+    Eigen::Vector3d w, al;
+    for (int k = 0; k < N; ++k) {
+      if (k > 0 && ctx.shouldStop()) {
+        tr.stopped = true;
+        break;
+      }
+      const double tk = t0 + k * dt;
+      // orientation: midpoint exponential steps from the previous sample
+      constexpr int kSub = 20;
+      const double h = (tk - t_prev) / kSub;
+      for (int s = 0; s < kSub && h > 0; ++s) {
+        fourier3(fb_.Aw, fb_.Pw, fb_.wb, t_prev + (s + 0.5) * h - t0, &w, &al);
+        const double ang = w.norm() * h;
+        if (ang > 0) Rwb = Rwb * Eigen::AngleAxisd(ang, w.normalized()).toRotationMatrix();
+      }
+      t_prev = tk;
+      const exid::BaseMotion b = baseAt(tk, Rwb);
+      ref_->eval(tk, &q, &qdv, &qddv);
+      const VectorXd id = exid::floatingInverseDynamics(R, q, qdv, qddv, b);
+      const MatrixXd C = exid::contactMap(R, q, fb_.body, fb_.sensor);
+      const Eigen::Matrix<double, 6, 1> wc = C.topRows(6).partialPivLu().solve(id.head(6));
+      d->t[k] = tk;
+      d->q.row(k) = q.transpose();
+      qd->row(k) = qdv.transpose();
+      qdd->row(k) = qddv.transpose();
+      d->tau.row(k) = (id.tail(n) - C.bottomRows(n) * wc).transpose();
+      for (int j = 0; j < n && drive_terms_; ++j) {
+        const exid::Drive D = j < static_cast<int>(R.drives.size())
+                                  ? R.drives[static_cast<std::size_t>(j)]
+                                  : exid::Drive{};
+        d->tau(k, j) += D.rotor_inertia * qddv[j] + driveFriction(D, j, qdv[j]);
+      }
+      for (int j = 0; j < static_cast<int>(fcl_.size()); ++j) {
+        const double del = d->tau(k, j);  // what the drive delivers
+        const double fl = fcl_[static_cast<std::size_t>(j)] * coulombShape(qdv[j]);
+        d->tau(k, j) = del / (1.0 - fl * (del > 0 ? 1.0 : (del < 0 ? -1.0 : 0.0)));
+      }
+      d->base.row(k) = b.transpose();
+      d->contact.row(k) = wc.transpose();
+      ++tr.recorded;
+    }
+    return tr;
+  }
+
+  // The joints' accelerations qdd and the contact wrench w at (q, qd) on base motion b under the
+  // command tau_c: [A_b, -C_b; A_j + Ia, -C_j] [qdd; w] = [-h_b; u - h_j - friction], A and h
+  // from floatingInverseDynamics (exact: it is linear in qdd), u what the drives deliver.
+  // `A_joint`: the joint block of A with the rotor inertias (for D0).
+  void floatingSolve(double t, const VectorXd& q, const VectorXd& qd, const exid::BaseMotion& b,
+                     const VectorXd& tau_c, VectorXd* qdd, Eigen::Matrix<double, 6, 1>* w,
+                     MatrixXd* A_joint = nullptr) const {
+    const exid::RobotModel& R = truth_;
+    const int n = n_;
+    const VectorXd h0 = exid::floatingInverseDynamics(R, q, qd, VectorXd::Zero(n), b);
+    MatrixXd S(6 + n, n + 6);
+    for (int i = 0; i < n; ++i)
+      S.col(i) = exid::floatingInverseDynamics(R, q, qd, VectorXd::Unit(n, i), b) - h0;
+    S.rightCols(6) = -exid::contactMap(R, q, fb_.body, fb_.sensor);
+    VectorXd rhs = -h0;
+    for (int j = 0; j < n; ++j) {
+      const exid::Drive D = j < static_cast<int>(R.drives.size())
+                                ? R.drives[static_cast<std::size_t>(j)]
+                                : exid::Drive{};
+      if (drive_terms_) {
+        S(6 + j, j) += D.rotor_inertia;
+        rhs[6 + j] -= driveFriction(D, j, qd[j]);
+      }
+      double uj = tau_c[j];
+      if (!fcl_.empty())
+        uj -= fcl_[static_cast<std::size_t>(j)] * std::abs(tau_c[j]) * coulombShape(qd[j]);
+      rhs[6 + j] += uj;
+    }
+    if (A_joint) *A_joint = S.block(6, 0, n, n);
+    const Eigen::PartialPivLU<MatrixXd> lu(S);
+    const double rc = lu.rcond();
+    exid::check(rc > 1e-13,
+                fmt::format("experiment 'simulate' (floating base): the contact at '{}' cannot "
+                            "hold the prescribed base motion at t = {} s (the joint and base rows "
+                            "are singular in the joints' accelerations and the contact wrench: "
+                            "reciprocal condition {:.1e}); choose another contact_link",
+                            P_.getString("contact_link"), t, rc));
+    const VectorXd x = lu.solve(rhs);
+    *qdd = x.head(n);
+    *w = x.tail(6);
+  }
+
+  // The command of pd_feedforward on a floating base at (t, q, qd) on base motion b.
+  VectorXd floatingCommand(double t, const VectorXd& q, const VectorXd& qd,
+                           const exid::BaseMotion& b) const {
+    VectorXd qr, qdr, qddr;
+    ref_->eval(std::min(t, ref_->t1()), &qr, &qdr, &qddr);
+    VectorXd tau = exid::floatingInverseDynamics(*nominal_, qr, qdr, qddr, b).tail(n_);
+    for (int j = 0; j < n_ && drive_terms_; ++j) {  // the description's drive terms
+      const exid::Drive D = j < static_cast<int>(nominal_->drives.size())
+                                ? nominal_->drives[static_cast<std::size_t>(j)]
+                                : exid::Drive{};
+      const double s = qdr[j] > 0 ? 1.0 : (qdr[j] < 0 ? -1.0 : 0.0);
+      tau[j] += D.rotor_inertia * qddr[j] + D.coulomb * s + D.viscous * qdr[j] + D.offset;
+    }
+    return tau + D0_.cwiseProduct(kp_ * (qr - q) + kd_ * (qdr - qd));
+  }
+
+  // x = [q; qd; quaternion w x y z of R_wb] -> its rate (the quaternion's: q (x) (0, omega_b)/2).
+  void floatingRhs(double t, const double* x, double* xd) const {
+    const int n = n_;
+    Eigen::Map<const VectorXd> q(x, n), qd(x + n, n);
+    const Eigen::Quaterniond Q(x[2 * n], x[2 * n + 1], x[2 * n + 2], x[2 * n + 3]);
+    const exid::BaseMotion b = baseAt(t, Q.normalized().toRotationMatrix());
+    VectorXd qdd;
+    Eigen::Matrix<double, 6, 1> w;
+    floatingSolve(t, q, qd, b, floatingCommand(t, q, qd, b), &qdd, &w);
+    for (int j = 0; j < n; ++j) {
+      xd[j] = x[n + j];
+      xd[n + j] = qdd[j];
+    }
+    const Eigen::Vector3d om = b.head<3>(), v(Q.x(), Q.y(), Q.z());
+    const Eigen::Vector3d vd = 0.5 * (Q.w() * om + v.cross(om));
+    xd[2 * n] = -0.5 * v.dot(om);
+    xd[2 * n + 1] = vd[0];
+    xd[2 * n + 2] = vd[1];
+    xd[2 * n + 3] = vd[2];
+  }
+
+  // pd_feedforward on a floating base: the closed loop integrated from a state on the reference
+  // (and R_wb = I), sampled every dt; the integrator's and the gains' meta into *m.
+  Tracking recordFloatingLoop(int N, double dt, double duration, const exid::RunContext& ctx,
+                              exid::Dataset* d, MatrixXd* qd, MatrixXd* qdd, exid::Json* m) {
+    const int n = n_;
+    const double t0 = fb_.t0;
+    VectorXd qr, qdr, qddr;
+    ref_->eval(t0, &qr, &qdr, &qddr);
+    {  // D0: the joints' block of the floating mass matrix with the rotor inertias, at the start
+      MatrixXd A;
+      VectorXd a;
+      Eigen::Matrix<double, 6, 1> w;
+      floatingSolve(t0, qr, qdr, baseAt(t0, Eigen::Matrix3d::Identity()), VectorXd::Zero(n), &a, &w,
+                    &A);
+      D0_ = A.diagonal();
+    }
+    VectorXd x(2 * n + 4);
+    x << qr, qdr, 1.0, 0.0, 0.0, 0.0;
+    Integrator integ([this](double t, const double* y, double* yd) { floatingRhs(t, y, yd); }, x,
+                     t0, P_.getString("integrator"), P_.getDouble("rtol"), P_.getDouble("atol"),
+                     P_.getInt("max_steps"));
+    Tracking tr;
+    for (int k = 0; k < N; ++k) {
+      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
+      if (k > 0) {
+        if (ctx.shouldStop()) {
+          tr.stopped = true;
+          break;
+        }
+        integ.advance(tk, &x);
+      }
+      const VectorXd q = x.head(n), v = x.segment(n, n);
+      const Eigen::Quaterniond Q(x[2 * n], x[2 * n + 1], x[2 * n + 2], x[2 * n + 3]);
+      const exid::BaseMotion b = baseAt(tk, Q.normalized().toRotationMatrix());
+      const VectorXd tau = floatingCommand(tk, q, v, b);
+      VectorXd a;
+      Eigen::Matrix<double, 6, 1> w;
+      floatingSolve(tk, q, v, b, tau, &a, &w);
+      ref_->eval(std::min(tk, ref_->t1()), &qr, &qdr, &qddr);
+      tr.max_err = std::max(tr.max_err, (qr - q).cwiseAbs().maxCoeff());
+      d->t[k] = tk;
+      d->q.row(k) = q.transpose();
+      qd->row(k) = v.transpose();
+      qdd->row(k) = a.transpose();
+      d->tau.row(k) = tau.transpose();
+      d->base.row(k) = b.transpose();
+      d->contact.row(k) = w.transpose();
+      ++tr.recorded;
+      if (k % 50 == 0 || k == N - 1)
+        ctx.report(static_cast<double>(k + 1) / N,
+                   fmt::format("t = {:.3f} s of {:.3f} s", tk - t0, duration));
+    }
+    exid::Json& M = *m;
+    M["integrator"] = integ.description();
+    M["sundials_version"] = SUNDIALS_VERSION;
+    M["rtol"] = P_.getDouble("rtol");
+    M["atol"] = P_.getDouble("atol");
+    M["steps"] = exid::Json(static_cast<long long>(integ.steps()));
+    M["rhs_evaluations"] = exid::Json(static_cast<long long>(integ.rhsEvals()));
+    exid::Json g = exid::Json::object();  // the gains the PD applies: D0 kp, D0 kd
+    const VectorXd kp = D0_ * kp_, kd = D0_ * kd_;
+    g["kp_Nm_per_rad"] = exid::Json(std::vector<double>(kp.data(), kp.data() + kp.size()));
+    g["kd_Nm_s_per_rad"] = exid::Json(std::vector<double>(kd.data(), kd.data() + kd.size()));
+    g["scale"] =
+        "D0 = diagonal of the joints' block of the floating mass matrix (base acceleration "
+        "prescribed) plus the rotor inertias, at the reference's start";
+    M["pd_gains"] = g;
+    return tr;
+  }
   // ---------------------------------------------------------------- dynamics
   // Mm, hm of the plant at measured state (qm, qdm).
   void plantTerms(const VectorXd& qm, const VectorXd& qdm, MatrixXd* Mm, VectorXd* hm) {
@@ -801,12 +1056,6 @@ class SimulateExperiment : public exid::Experiment {
     return m;
   }
 
-  struct Tracking {
-    double max_err = 0.0;  // the largest |qr - qm| at the samples
-    int recorded = 0;
-    bool stopped = false;  // cancelled or out of time
-  };
-
   // The closed loop from state x at t0, sampled every dt (N samples; the last at most at the
   // reference's end): states, torques and (want_wrench) the wrist wrench into d, qd, qdd.
   Tracking record(Integrator& integ, VectorXd x, double t0, double dt, int N, double duration,
@@ -975,6 +1224,12 @@ class SimulateExperiment : public exid::Experiment {
   double sdelta_ = 2.0;
   VectorXd D0_;
   long rhs_calls_extra_ = 0;
+  struct FloatingBase {              // a floating base's prescribed motion and its contact
+    Eigen::Matrix3d Aw, Pw, Aa, Pa;  // harmonics' amplitudes and phases: omega, world acceleration
+    double wb = 0.0, t0 = 0.0;       // fundamental [rad/s], time origin [s]
+    int body = -1;                   // the contact's body (-1: the base link)
+    exid::Pose sensor;               // the contact sensor frame in its body's frame
+  } fb_;
 };
 
 }  // namespace

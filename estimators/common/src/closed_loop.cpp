@@ -245,7 +245,15 @@ VectorXd ClosedLoop::floatingTorque(const VectorXd& rest, double t, const Vector
 VectorXd ClosedLoop::floatingFeedforward(double t, const VectorXd& qr, const VectorXd& qdr,
                                          const VectorXd& qddr) const {
   const BaseMotion b = recordedAt(fb_base_, t).transpose();
-  return floatingInverseDynamics(*robot_, qr, qdr, qddr, b).tail(n_);
+  VectorXd tau = floatingInverseDynamics(*robot_, qr, qdr, qddr, b).tail(n_);
+  for (int j = 0; j < n_; ++j) {  // the description's drive terms (actuatorTorque's)
+    const Drive dr = j < static_cast<int>(robot_->drives.size())
+                         ? robot_->drives[static_cast<std::size_t>(j)]
+                         : Drive{};
+    const double s = qdr[j] > 0 ? 1.0 : (qdr[j] < 0 ? -1.0 : 0.0);
+    tau[j] += dr.rotor_inertia * qddr[j] + dr.coulomb * s + dr.viscous * qdr[j] + dr.offset;
+  }
+  return tau;
 }
 
 ClosedLoop::ClosedLoop(const ObservationModel& model, const Dataset& data, const std::string& who)
@@ -397,8 +405,8 @@ std::string ClosedLoop::describe() const {
     return fmt::format(
         "tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}; floating base: the joints simulated "
         "on the recorded base motion and contact wrenches (degree-5 Lagrange between samples)",
-        ff_ ? "tau_ff(robot description's rigid bodies on the recorded base motion; qr, qdr, "
-              "qddr) + "
+        ff_ ? "tau_ff(robot description, all drive terms, on the recorded base motion; qr, "
+              "qdr, qddr) + "
             : "",
         file_);
   return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",

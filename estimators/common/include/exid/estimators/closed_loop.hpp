@@ -227,7 +227,8 @@ class ClosedLoop {
   Eigen::VectorXd floatingTorque(const Eigen::VectorXd& rest, double t, const Eigen::VectorXd& q,
                                  const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                                  bool with_contact = true) const;
-  // floating base: the feed-forward, floatingInverseDynamics' joint rows at the reference
+  // floating base: the feed-forward, floatingInverseDynamics' joint rows at the reference on the
+  // recorded base motion plus the description's drive terms
   Eigen::VectorXd floatingFeedforward(double t, const Eigen::VectorXd& qr,
                                       const Eigen::VectorXd& qdr,
                                       const Eigen::VectorXd& qddr) const;
