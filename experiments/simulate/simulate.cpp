@@ -240,6 +240,15 @@ class SimulateExperiment : public exid::Experiment {
                     const exid::RunContext& ctx) override {
     exid::check(robot != nullptr, "experiment 'simulate': no robot");
     if (robot->floating_base) return runFloating(robot, reference, ctx);
+    // what only a floating base uses, refused by name (a fixed base has no base motion or
+    // contact wrench to record)
+    const std::vector<std::string> fb =
+        changedFromDefault({"base_omega_rad_s", "base_acceleration_m_s2", "contact_link",
+                            "contact_pose", "noise_base", "noise_contact"});
+    exid::check(fb.empty(),
+                fmt::format("experiment 'simulate': {} set, but robot '{}' has a fixed base: "
+                            "these are a floating base's (its base motion and contact wrench)",
+                            fmt::join(fb, ", "), robot->name));
     const auto wall0 = std::chrono::steady_clock::now();
     setUpPlant(robot);
     const int n = n_;

@@ -141,6 +141,26 @@ TEST(Simulate, ErrorsAreClear) {
   }
 }
 
+// A floating base's options on a fixed-base robot are refused by name (they would be ignored:
+// a fixed base has no base motion or contact wrench to record); their defaults are accepted.
+TEST(Simulate, AFloatingBasesOptionsAreRefusedOnAFixedBase) {
+  auto r = mtest::robot("puma560");
+  for (const char* opt :
+       {"contact_link: link3", "base_omega_rad_s: 1", "base_acceleration_m_s2: 0.5",
+        "contact_pose: [0, 0, 0.1, 0, 0, 0]", "noise_base: [0.01]", "noise_contact: [1, 0.1]"}) {
+    try {
+      mtest::simulate(r, std::string("{duration_s: 0.1, ") + opt + "}");
+      ADD_FAILURE() << opt << ": no error";
+    } catch (const exid::Error& e) {
+      const std::string key = std::string(opt).substr(0, std::string(opt).find(':'));
+      EXPECT_NE(std::string(e.what()).find(key + " set, but robot 'puma560' has a fixed base"),
+                std::string::npos)
+          << e.what();
+    }
+  }
+  EXPECT_NO_THROW(mtest::simulate(r, "{duration_s: 0.1, base_omega_rad_s: 0.5, noise_base: [0]}"));
+}
+
 TEST(Simulate, IntegralRowsOnArkodeData) {
   // The energy balance holds on ARKODE data too (the integrator's accuracy shows in the rows).
   auto r = mtest::robot("puma560");
