@@ -204,6 +204,11 @@ exid::Estimate Didim::estimate(const exid::ObservationModel& model, const exid::
   const long m = y_.size();
   exid::check(m > p, fmt::format("didim: {} rows for {} parameters", m, p));
   L_ = fit_nl_ ? static_cast<int>(loop_->nonlinear().size()) : 0;
+  exid::check(L_ == 0 || nb_ == 0,
+              fmt::format("didim: the model's nonlinear parameters ({}) beside a floating base's "
+                          "base rows (rows: all): the base rows' sensitivities to them are not "
+                          "available; use rows: joints, or fit_nonlinear: false to keep them",
+                          loop_->nonlinear().size()));
   D_ = delay_ ? 1 : 0;
   const VectorXd theta = firstStart(model, data, ctx);
   p_ = p;

@@ -342,6 +342,21 @@ TEST(FloatingLoop, RefusalsNameWhy) {
     EXPECT_NE(m.find("more than a sample after the reference's start"), std::string::npos)
         << est << ": " << m;
   }
+  // the model's nonlinear parameters beside the base rows: refused before anything is simulated
+  {
+    auto fm =
+        mtest::model("floating_base",
+                     std::string("{coulomb: true, coulomb_smoothing_rad_s: [0.1], ") + kModel + "}",
+                     c.loop.robot);
+    try {
+      exid_test::create<exid::Estimator>("didim", "{" + c.loop.params + ", max_iterations: 1}")
+          ->estimate(*fm, c.loop.data, nullptr, mtest::context());
+      ADD_FAILURE() << "no error";
+    } catch (const exid::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("beside a floating base's base rows"), std::string::npos)
+          << e.what();
+    }
+  }
   // one sample late is read by the Lagrange polynomial of the first six: accepted
   m = msg("iv", ", max_iterations: 1", exid::sliceDataset(c.loop.data, 1, c.loop.data.size()));
   EXPECT_EQ(m, "no error");
