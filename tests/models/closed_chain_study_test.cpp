@@ -80,20 +80,10 @@ TEST(ClosedChainStudy, PalletizerIdentifiesWithDidimAndIvFromATrackingRecording)
     const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), o);
     ASSERT_TRUE(r.ok) << est << ": " << r.message;
     // a recording carries no truth: the estimate against the robot's own (nominal) base
-    // parameters, which the plant simulated, from parameters.csv (name, index, value, std,
-    // rel_std_percent, nominal)
-    std::ifstream f(o.out_dir / "parameters.csv");
-    ASSERT_TRUE(f.good()) << (o.out_dir / "parameters.csv").string();
-    std::string line;
-    std::getline(f, line);
+    // parameters, which the plant simulated
     double err2 = 0, tru2 = 0;
     int count = 0;
-    while (std::getline(f, line)) {
-      std::vector<std::string> c;
-      std::stringstream ls(line);
-      for (std::string x; std::getline(ls, x, ',');) c.push_back(x);
-      ASSERT_EQ(c.size(), 6u) << line;
-      const double v = std::stod(c[2]), nom = std::stod(c[5]);
+    for (const auto& [v, nom] : cltest::estimateAndNominal(o.out_dir)) {
       err2 += (v - nom) * (v - nom);
       tru2 += nom * nom;
       ++count;

@@ -9,7 +9,10 @@
 #include <filesystem>
 #include <fstream>
 #include <memory>
+#include <sstream>
 #include <string>
+#include <utility>
+#include <vector>
 
 #include "exid/data.hpp"
 #include "exid/interfaces.hpp"
@@ -97,6 +100,28 @@ inline Loop pumaTracking(double duration, const std::string& tmp_prefix) {
   s.params =
       fmt::format("reference_file: {}, {}", (dir / "reference.csv").string(), gains(s.data.meta));
   return s;
+}
+
+/// A study's estimate and the robot's own (nominal) base parameters, from its parameters.csv
+/// (name, index, value, std, rel_std_percent, nominal): one (value, nominal) per base
+/// parameter. A recording carries no truth: the plant simulated the nominal parameters. An
+/// unreadable file or a malformed line is a test failure (and an empty result).
+inline std::vector<std::pair<double, double>> estimateAndNominal(
+    const std::filesystem::path& out_dir) {
+  std::vector<std::pair<double, double>> out;
+  std::ifstream f(out_dir / "parameters.csv");
+  EXPECT_TRUE(f.good()) << (out_dir / "parameters.csv").string();
+  std::string line;
+  std::getline(f, line);
+  while (std::getline(f, line)) {
+    std::vector<std::string> c;
+    std::stringstream ls(line);
+    for (std::string x; std::getline(ls, x, ',');) c.push_back(x);
+    EXPECT_EQ(c.size(), 6u) << line;
+    if (c.size() != 6u) return {};
+    out.emplace_back(std::stod(c[2]), std::stod(c[5]));
+  }
+  return out;
 }
 
 }  // namespace cltest

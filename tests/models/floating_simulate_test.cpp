@@ -138,20 +138,10 @@ TEST(FloatingSimulate, HumanoidPdRecordingIdentifiesWithDidimAndIvThroughAStudy)
     o.out_dir = dir / ("out_" + name);
     const exid::StudyResult r = exid::runStudy(cfg, exid_test::registry(), o);
     ASSERT_TRUE(r.ok) << est << ": " << r.message;
-    // the estimate against the robot's own base parameters (the plant's), from parameters.csv
-    // (name, index, value, std, rel_std_percent, nominal)
-    std::ifstream f(o.out_dir / "parameters.csv");
-    ASSERT_TRUE(f.good()) << (o.out_dir / "parameters.csv").string();
-    std::string line;
-    std::getline(f, line);
+    // the estimate against the robot's own base parameters (the plant's)
     double worst = 0.0, largest = 0.0;
     int count = 0;
-    while (std::getline(f, line)) {
-      std::vector<std::string> c;
-      std::stringstream ls(line);
-      for (std::string x; std::getline(ls, x, ',');) c.push_back(x);
-      ASSERT_EQ(c.size(), 6u) << line;
-      const double v = std::stod(c[2]), nom = std::stod(c[5]);
+    for (const auto& [v, nom] : cltest::estimateAndNominal(o.out_dir)) {
       worst = std::max(worst, std::abs(v - nom));
       largest = std::max(largest, std::abs(nom));
       ++count;
