@@ -180,7 +180,10 @@ struct VarPro::Held {
             B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
         });
     exid::check(got == m, "varpro: the model's row count changed with eta");
-    B.leftCols(c).applyOnTheLeft(qr.householderQ().adjoint());
+    // Q_h^T one column at a time: Eigen applies a sequence to several columns in blocks of up
+    // to 48 reflections, forming each block's triangular factor (O(m b^2) for a block of b,
+    // whatever the few columns); to one column it applies the reflections in turn (4 m f)
+    for (int j = 0; j < c; ++j) B.col(j).applyOnTheLeft(qr.householderQ().adjoint());
     B.col(c) = qty;
     const Eigen::HouseholderQR<Eigen::MatrixXd> small(B.bottomRows(m - f));
     const double r = small.matrixQR()(c, c);
