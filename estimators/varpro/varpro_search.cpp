@@ -180,7 +180,10 @@ struct VarPro::Held {
             B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
         });
     exid::check(got == m, "varpro: the model's row count changed with eta");
-    B.leftCols(c).applyOnTheLeft(qr.householderQ().adjoint());
+    // Q_h^T one column at a time: Eigen applies a sequence to several columns in blocks of up
+    // to 48 reflections, forming each block's triangular factor (O(m b^2) for a block of b,
+    // whatever the few columns); to one column it applies the reflections in turn (4 m f)
+    for (int j = 0; j < c; ++j) B.col(j).applyOnTheLeft(qr.householderQ().adjoint());
     B.col(c) = qty;
     const Eigen::HouseholderQR<Eigen::MatrixXd> small(B.bottomRows(m - f));
     const double r = small.matrixQR()(c, c);
@@ -333,6 +336,7 @@ VarPro::Run VarPro::levenbergMarquardt(const exid::ObservationModel& model,
       // finite is a rejected step, as one that raises the residual.
       Eval trial;
       bool ok = true;
+      int trial_regular = -1;  // the trial's joint problem regular (1) or not (0); -1: not tested
       if (delay_ && std::abs(ts_ * (lambda[q - 1] + delta[q - 1])) > delay_max_) {
         ok = false;  // outside the delays the kept rows allow
         ++rejected_bound_;
@@ -343,7 +347,8 @@ VarPro::Run VarPro::levenbergMarquardt(const exid::ObservationModel& model,
           // Stribeck velocity drifting so high that its term is a Coulomb term, or so low that
           // it vanishes) is rejected: there the nonlinear parameter is not determined, and
           // the run would wander where no start can bring it back
-          if (cur_regular && !regular(jointMatrix(model, trial))) {
+          if (cur_regular) trial_regular = regular(jointMatrix(model, trial)) ? 1 : 0;
+          if (trial_regular == 0) {
             ok = false;
             ++rejected_singular_;
           }
@@ -355,7 +360,8 @@ VarPro::Run VarPro::levenbergMarquardt(const exid::ObservationModel& model,
       ++evals;
       if (ok && std::isfinite(trial.rss) && trial.rss <= cur.rss) {
         lambda += delta;
-        cur_regular = regular(jointMatrix(model, trial));
+        // (tested above when the point it left was regular: one SVD per trial)
+        cur_regular = trial_regular >= 0 ? trial_regular == 1 : regular(jointMatrix(model, trial));
         decrease = (cur.rss - trial.rss) / std::max(cur.rss, 1e-300);
         cur = std::move(trial);
         record(cur);
