@@ -322,6 +322,20 @@ class SimulateExperiment : public exid::Experiment {
     bool stopped = false;  // cancelled or out of time
   };
 
+  // Sample k's time (the last clamped to the reference's end) into *tk and the state there into
+  // *x; false when the run is cancelled or out of time (tr->stopped).
+  bool toSample(exid::simulate_experiment::Integrator& integ, int k, int N, double t0, double dt,
+                const exid::RunContext& ctx, VectorXd* x, Tracking* tr, double* tk) const {
+    *tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
+    if (k == 0) return true;
+    if (ctx.shouldStop()) {
+      tr->stopped = true;
+      return false;
+    }
+    integ.advance(*tk, x);
+    return true;
+  }
+
   // ---------------------------------------------------------------- floating base
   // A floating-base robot. The base moves along prescribed smooth motions: omega_b(t) three
   // harmonics per component, alpha_b its exact derivative, the orientation R(t) integrated from
@@ -670,13 +684,8 @@ class SimulateExperiment : public exid::Experiment {
     VectorXd qr, qdr, qddr;
     ref_->eval(std::min(t, ref_->t1()), &qr, &qdr, &qddr);
     VectorXd tau = exid::floatingInverseDynamics(*nominal_, qr, qdr, qddr, b).tail(n_);
-    for (int j = 0; j < n_ && drive_terms_; ++j) {  // the description's drive terms
-      const exid::Drive D = j < static_cast<int>(nominal_->drives.size())
-                                ? nominal_->drives[static_cast<std::size_t>(j)]
-                                : exid::Drive{};
-      const double s = qdr[j] > 0 ? 1.0 : (qdr[j] < 0 ? -1.0 : 0.0);
-      tau[j] += D.rotor_inertia * qddr[j] + D.coulomb * s + D.viscous * qdr[j] + D.offset;
-    }
+    for (int j = 0; j < n_ && drive_terms_; ++j)  // the description's drive terms
+      tau[j] += exid::driveTorque(exid::driveAt(*nominal_, j), qdr[j], qddr[j]);
     return tau + D0_.cwiseProduct(kp_ * (qr - q) + kd_ * (qdr - qd));
   }
 
@@ -724,14 +733,8 @@ class SimulateExperiment : public exid::Experiment {
                      P_.getInt("max_steps"));
     Tracking tr;
     for (int k = 0; k < N; ++k) {
-      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
-      if (k > 0) {
-        if (ctx.shouldStop()) {
-          tr.stopped = true;
-          break;
-        }
-        integ.advance(tk, &x);
-      }
+      double tk = 0.0;
+      if (!toSample(integ, k, N, t0, dt, ctx, &x, &tr, &tk)) break;
       const VectorXd q = x.head(n), v = x.segment(n, n);
       const Eigen::Quaterniond Q(x[2 * n], x[2 * n + 1], x[2 * n + 2], x[2 * n + 3]);
       const exid::BaseMotion b = baseAt(tk, Q.normalized().toRotationMatrix());
@@ -1074,14 +1077,8 @@ class SimulateExperiment : public exid::Experiment {
     Tracking tr;
     VectorXd qr, qdr, qddr;
     for (int k = 0; k < N; ++k) {
-      const double tk = k == N - 1 ? std::min(t0 + k * dt, ref_->t1()) : t0 + k * dt;
-      if (k > 0) {
-        if (ctx.shouldStop()) {
-          tr.stopped = true;
-          break;
-        }
-        integ.advance(tk, &x);
-      }
+      double tk = 0.0;
+      if (!toSample(integ, k, N, t0, dt, ctx, &x, &tr, &tk)) break;
       const VectorXd qm = x.head(n), qdm = x.tail(n);
       VectorXd tau, acc;
       control(tk, qm, qdm, &tau, &acc);

@@ -320,10 +320,11 @@ TEST(FloatingLoop, DidimAndIvIdentifyTheHumanoid) {
 // motion to start from); the same estimators run with rows: joints (no base rows fitted).
 TEST(FloatingLoop, RefusalsNameWhy) {
   const Case c = humanoidTracking(0.4, 2.5e-4);
-  auto msg = [&](const std::string& est, const std::string& extra, const exid::Dataset& d) {
+  auto msg = [&](const std::string& est, const std::string& extra, const exid::Dataset& d,
+                 const exid::ObservationModel* model = nullptr) {
     try {
       exid_test::create<exid::Estimator>(est, "{" + c.loop.params + extra + "}")
-          ->estimate(*c.loop.model, d, nullptr, mtest::context());
+          ->estimate(model ? *model : *c.loop.model, d, nullptr, mtest::context());
     } catch (const exid::Error& e) {
       return std::string(e.what());
     }
@@ -356,6 +357,16 @@ TEST(FloatingLoop, RefusalsNameWhy) {
       EXPECT_NE(std::string(e.what()).find("beside a floating base's base rows"), std::string::npos)
           << e.what();
     }
+    // not refused: the same model with its nonlinear parameters kept, and with the joint rows
+    // alone (where they are fitted)
+    auto fj = mtest::model("floating_base",
+                           std::string("{rows: joints, coulomb: true, coulomb_smoothing_rad_s: "
+                                       "[0.1], ") +
+                               kModel + "}",
+                           c.loop.robot);
+    EXPECT_EQ(msg("didim", ", fit_nonlinear: false, max_iterations: 1", c.loop.data, fm.get()),
+              "no error");
+    EXPECT_EQ(msg("didim", ", max_iterations: 1", c.loop.data, fj.get()), "no error");
   }
   // one sample late is read by the Lagrange polynomial of the first six: accepted
   m = msg("iv", ", max_iterations: 1", exid::sliceDataset(c.loop.data, 1, c.loop.data.size()));

@@ -246,13 +246,8 @@ VectorXd ClosedLoop::floatingFeedforward(double t, const VectorXd& qr, const Vec
                                          const VectorXd& qddr) const {
   const BaseMotion b = recordedAt(fb_base_, t).transpose();
   VectorXd tau = floatingInverseDynamics(*robot_, qr, qdr, qddr, b).tail(n_);
-  for (int j = 0; j < n_; ++j) {  // the description's drive terms (actuatorTorque's)
-    const Drive dr = j < static_cast<int>(robot_->drives.size())
-                         ? robot_->drives[static_cast<std::size_t>(j)]
-                         : Drive{};
-    const double s = qdr[j] > 0 ? 1.0 : (qdr[j] < 0 ? -1.0 : 0.0);
-    tau[j] += dr.rotor_inertia * qddr[j] + dr.coulomb * s + dr.viscous * qdr[j] + dr.offset;
-  }
+  for (int j = 0; j < n_; ++j)  // the description's drive terms (actuatorTorque's)
+    tau[j] += driveTorque(driveAt(*robot_, j), qdr[j], qddr[j]);
   return tau;
 }
 

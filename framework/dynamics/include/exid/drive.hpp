@@ -53,6 +53,16 @@ inline DriveColumnValues driveColumnValues(const DriveColumns& cols, double qdm,
   if (cols.offset) r.v[r.count++] = 1.0;
   return r;
 }
+/// Drive j of the robot (0-based), or a drive without terms where the description gives none.
+inline Drive driveAt(const RobotModel& model, int j) {
+  return j < static_cast<int>(model.drives.size()) ? model.drives[static_cast<std::size_t>(j)]
+                                                   : Drive{};
+}
+/// A drive's own torque at qdm, qddm: Ia qddm + Fc coulombSign(qdm) + Fv qdm + OFF (every term
+/// of the description, as actuatorTorque adds them).
+inline double driveTorque(const Drive& d, double qdm, double qddm) {
+  return d.rotor_inertia * qddm + d.coulomb * coulombSign(qdm) + d.viscous * qdm + d.offset;
+}
 /// The sign in a smoothed Coulomb column (the models' coulomb_smoothing_rad_s): tanh(v / eps)
 /// for a width eps > 0, else coulombSign(v); *ds_deps (when given) its derivative with respect
 /// to eps (0 for the sign).
