@@ -619,9 +619,7 @@ class SimulateExperiment : public exid::Experiment {
       qdd->row(k) = qddv.transpose();
       d->tau.row(k) = (id.tail(n) - C.bottomRows(n) * wc).transpose();
       for (int j = 0; j < n && drive_terms_; ++j) {
-        const exid::Drive D = j < static_cast<int>(R.drives.size())
-                                  ? R.drives[static_cast<std::size_t>(j)]
-                                  : exid::Drive{};
+        const exid::Drive D = exid::driveAt(R, j);
         d->tau(k, j) += D.rotor_inertia * qddv[j] + driveFriction(D, j, qdv[j]);
       }
       for (int j = 0; j < static_cast<int>(fcl_.size()); ++j) {
@@ -652,9 +650,7 @@ class SimulateExperiment : public exid::Experiment {
     S.rightCols(6) = -exid::contactMap(R, q, fb_.body, fb_.sensor);
     VectorXd rhs = -h0;
     for (int j = 0; j < n; ++j) {
-      const exid::Drive D = j < static_cast<int>(R.drives.size())
-                                ? R.drives[static_cast<std::size_t>(j)]
-                                : exid::Drive{};
+      const exid::Drive D = exid::driveAt(R, j);
       if (drive_terms_) {
         S(6 + j, j) += D.rotor_inertia;
         rhs[6 + j] -= driveFriction(D, j, qd[j]);
@@ -799,9 +795,7 @@ class SimulateExperiment : public exid::Experiment {
     }
     if (!drive_terms_) return;
     for (int j = 0; j < n_; ++j) {
-      const exid::Drive D = j < static_cast<int>(R.drives.size())
-                                ? R.drives[static_cast<std::size_t>(j)]
-                                : exid::Drive{};
+      const exid::Drive D = exid::driveAt(R, j);
       (*Mm)(j, j) += D.rotor_inertia;
       (*hm)[j] += driveFriction(D, j, qdm[j]);
     }
