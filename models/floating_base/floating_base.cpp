@@ -211,13 +211,14 @@ class FloatingBaseModel : public exid::ObservationModel {
                              ? "m/s"
                              : "rad/s";
       if (sl.eps) {
-        exid::NonlinearParameter e{"eps" + std::to_string(j + 1), unit, perJoint(eps_, j), {}};
+        exid::NonlinearParameter e{
+            "eps" + std::to_string(j + 1), unit, listValue(eps_, "coulomb_smoothing_rad_s", j), {}};
         for (int c = 0; c < E; ++c) e.columns.push_back(c0 + E * j + c);
         out.push_back(e);
       } else {
         out.push_back({"vs" + std::to_string(j + 1),
                        unit,
-                       perJoint(vs_, j),
+                       listValue(vs_, "stribeck_velocity_rad_s", j),
                        {c0 + E * j + fc_.coulombCount()}});
       }
     }
@@ -492,12 +493,11 @@ class FloatingBaseModel : public exid::ObservationModel {
     return j < static_cast<int>(dr.size()) ? dr[static_cast<std::size_t>(j)] : exid::Drive{};
   }
   // a per-joint list's value (coulomb_smoothing_rad_s, stribeck_velocity_rad_s)
-  double perJoint(const std::vector<double>& v, int j) const {
+  double listValue(const std::vector<double>& v, const char* key, int j) const {
     exid::check(v.size() == 1 || static_cast<int>(v.size()) == robot().dof(),
                 fmt::format("model 'floating_base': {}: {} values given for robot '{}' of {} "
                             "joints (expected one, or one per joint)",
-                            &v == &eps_ ? "coulomb_smoothing_rad_s" : "stribeck_velocity_rad_s",
-                            v.size(), robot().name, robot().dof()));
+                            key, v.size(), robot().name, robot().dof()));
     return v.size() == 1 ? v[0] : v[static_cast<std::size_t>(j)];
   }
   Eigen::VectorXd studyEta() const {
