@@ -389,21 +389,23 @@ void ClosedLoop::setNonlinear(const VectorXd& eta, bool sensitivities) {
 }
 
 std::string ClosedLoop::describe() const {
-  if (open_ && floating_)
-    return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
-           "samples); floating base: the joints simulated on the recorded base motion and "
-           "contact wrenches (degree-5 Lagrange between samples)";
+  // (the joints' loop on the recorded base motion)
+  const char* floating = floating_ ? "; floating base: the joints simulated on the recorded base "
+                                     "motion and contact wrenches (degree-5 Lagrange between "
+                                     "samples)"
+                                   : "";
   if (open_)
-    return "torque-driven: the drives' command is the recorded torque (cubic Hermite between "
-           "samples)";
-  if (floating_)  // (the joints' loop on the recorded base motion)
+    return std::string(
+               "torque-driven: the drives' command is the recorded torque (cubic "
+               "Hermite between samples)") +
+           floating;
+  if (floating_)
     return fmt::format(
-        "tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}; floating base: the joints simulated "
-        "on the recorded base motion and contact wrenches (degree-5 Lagrange between samples)",
+        "tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}{}",
         ff_ ? "tau_ff(robot description, all drive terms, on the recorded base motion; qr, "
               "qdr, qddr) + "
             : "",
-        file_);
+        file_, floating);
   return fmt::format("tau = {}Kp (qr - q) + Kd (qdr - qd), reference {}",
                      ff_ ? "tau_ff(robot description; qr, qdr, qddr) + " : "", file_);
 }
