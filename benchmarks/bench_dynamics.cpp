@@ -169,7 +169,8 @@ BENCHMARK(BM_ForwardDynamics);
 
 // ---- the hot kernels, once per instruction set ----
 
-constexpr int kGramSamples = 10000;  // samples per iteration of the regressor + Gram benchmark
+constexpr int kGramSamples = 10000;
+constexpr int kBatch = 64;  // samples per call of torqueRegressors  // samples per iteration of the regressor + Gram benchmark
 
 // Operations of GramAccumulator::add(Y) for one sample: per row, its first non-zero column s
 // leaves m = 60 - s entries: m products for the weight, m(m + 1) / 2 multiply-adds for the lower
@@ -206,6 +207,8 @@ struct KernelInfo {
   double flops;  // per sample
   int sincos;
   double samples_per_iteration;
+  std::string label;     // the copy: "portable", "avx2", "lanes-sse2", "lanes-avx"
+  double per_cycle = 0;  // the copy's peak flops per cycle
 };
 std::map<std::string, KernelInfo>& kernelInfo() {
   static std::map<std::string, KernelInfo> m;
@@ -217,7 +220,7 @@ void registerKernel(const std::string& kernel, double flops, int sincos, Body bo
                     double samples = 1, benchmark::TimeUnit unit = benchmark::kNanosecond) {
   for (Isa isa : availableIsas()) {
     const std::string name = "BM_" + kernel + "/" + isaName(isa);
-    kernelInfo()[name] = {kernel, isa, flops, sincos, samples};
+    kernelInfo()[name] = {kernel, isa, flops, sincos, samples, isaName(isa), flopsPerCycle(isa)};
     benchmark::RegisterBenchmark(name.c_str(), [isa, body, flops, samples](benchmark::State& st) {
       setActiveIsa(isa);
       body(st);
@@ -250,6 +253,34 @@ void registerKernels() {
       k = (k + 1) & (Fixture::kSamples - 1);
     }
   });
+  // The same regressor, 64 samples per call of torqueRegressors (the portable kernels, four
+  // samples at once in the vector lanes: exid/isa.hpp's Lanes; the same bits). Peak: SSE2 as
+  // above; AVX without FMA 4 doubles x 2 (one add, one multiply) = 8.
+  for (Lanes lanes : availableLanes()) {
+    const std::string name = std::string("BM_TorqueRegressors/") + lanesName(lanes);
+    const bool avx = lanes == Lanes::Avx;
+    kernelInfo()[name] = {"TorqueRegressor", Isa::Portable, c.flops, c.sincos, kBatch,
+                          avx ? "lanes-avx" : "lanes-sse2", avx ? 8.0 : 4.0};
+    benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops](benchmark::State& st) {
+      setActiveIsa(Isa::Portable);
+      setActiveLanes(lanes);
+      Fixture& f = fx();
+      Eigen::MatrixXd Q(kBatch, 6), QD(kBatch, 6), QDD(kBatch, 6), Y(kBatch * 6, 60);
+      int k0 = 0;
+      for (auto _ : st) {
+        for (int s = 0; s < kBatch; ++s) {
+          Q.row(s) = f.q[static_cast<size_t>(k0 + s)].transpose();
+          QD.row(s) = f.qd[static_cast<size_t>(k0 + s)].transpose();
+          QDD.row(s) = f.qdd[static_cast<size_t>(k0 + s)].transpose();
+        }
+        torqueRegressors(f.model, *f.data, Q, QD, QDD, Y);
+        benchmark::DoNotOptimize(Y.data());
+        k0 = (k0 + kBatch) & (Fixture::kSamples - 1);
+      }
+      st.counters["flop/s"] =
+          benchmark::Counter(flops * kBatch, benchmark::Counter::kIsIterationInvariantRate);
+    });
+  }
   // Regressor + information matrix W^T W over 10,000 samples; the table gives the time per sample.
   {
     Eigen::MatrixXd Y(6, 60);
@@ -338,16 +369,16 @@ class KernelTableReporter : public benchmark::ConsoleReporter {
         "\nHot kernels, PUMA 560, per sample (clock %.2f GHz; peak %.1f GFlop/s portable "
         "(SSE2), %.1f GFlop/s avx2 (AVX2 + FMA))\n",
         ghz, ghz * flopsPerCycle(Isa::Portable), ghz * flopsPerCycle(Isa::Avx2));
-    std::printf("%-20s %-9s %8s %7s %10s %10s %8s %9s\n", "kernel", "isa", "flops", "sin/cos",
+    std::printf("%-20s %-10s %8s %7s %10s %10s %8s %9s\n", "kernel", "copy", "flops", "sin/cos",
                 "bound ns", "time ns", "ratio", "speed-up");
     std::map<std::string, double> portable_ns;
     for (const auto& [name, k] : kernelInfo())
-      if (k.isa == Isa::Portable && ns_.count(name)) portable_ns[k.kernel] = ns_[name];
+      if (k.label == "portable" && ns_.count(name)) portable_ns[k.kernel] = ns_[name];
     for (const auto& [name, k] : kernelInfo()) {
       if (!ns_.count(name)) continue;
-      const double bound = k.flops / (ghz * flopsPerCycle(k.isa));
+      const double bound = k.flops / (ghz * k.per_cycle);
       const double t = ns_[name];
-      std::printf("%-20s %-9s %8.0f %7d %10.1f %10.1f %8.2f", k.kernel.c_str(), isaName(k.isa),
+      std::printf("%-20s %-10s %8.0f %7d %10.1f %10.1f %8.2f", k.kernel.c_str(), k.label.c_str(),
                   k.flops, k.sincos, bound, t, t / bound);
       if (portable_ns.count(k.kernel))
         std::printf(" %9.2f\n", portable_ns[k.kernel] / t);

@@ -138,23 +138,26 @@ Eigen::MatrixXd DifferentialModel::designAt(const exid::Samples& s, const Fricti
   // One sample's rows are a block of m consecutive rows of W: each column receives m
   // contiguous numbers (cache friendly), and nothing is allocated per sample.
   Eigen::MatrixXd W(static_cast<Eigen::Index>(K) * m, P);
-  Eigen::MatrixXd Y(n, P0);
-  Eigen::VectorXd q(n), qd(n), qdd(n);
   bool all = m == n;
   for (int i = 0; all && i < m; ++i) all = sel_[static_cast<std::size_t>(i)] == i;
   const Workspace data(*this);
-  for (int k = 0; k < K; ++k) {
-    q = s.q.row(k).transpose();
-    qd = s.qd.row(k).transpose();
-    qdd = s.qdd.row(k).transpose();
-    if (all && E == 0) {
-      // Written in place (a strided block of W): no per-sample copy.
-      exid::actuatorRegressor(R, *data, cols_, q, qd, qdd,
-                              W.middleRows(static_cast<Eigen::Index>(k) * m, m).leftCols(P0));
-    } else {
-      exid::actuatorRegressor(R, *data, cols_, q, qd, qdd, Y);
-      for (int i = 0; i < m; ++i)
-        W.row(k * m + i).head(P0) = Y.row(sel_[static_cast<std::size_t>(i)]);
+  if (all) {
+    // Written in place, several samples per kernel call (actuatorRegressors: the same bits as
+    // one sample at a time).
+    exid::actuatorRegressors(R, *data, cols_, s.q, s.qd, s.qdd, W.leftCols(P0));
+  } else {
+    // a block of samples at a time, then the selected joints' rows
+    constexpr int kBlock = 64;
+    Eigen::MatrixXd Y(static_cast<Eigen::Index>(kBlock) * n, P0);
+    for (int k0 = 0; k0 < K; k0 += kBlock) {
+      const int b = std::min(kBlock, K - k0);
+      auto Yb = Y.topRows(static_cast<Eigen::Index>(b) * n);
+      exid::actuatorRegressors(R, *data, cols_, s.q.middleRows(k0, b), s.qd.middleRows(k0, b),
+                               s.qdd.middleRows(k0, b), Yb);
+      for (int k = 0; k < b; ++k)
+        for (int i = 0; i < m; ++i)
+          W.row(static_cast<Eigen::Index>(k0 + k) * m + i).head(P0) =
+              Yb.row(static_cast<Eigen::Index>(k) * n + sel_[static_cast<std::size_t>(i)]);
     }
   }
   if (E > 0) extraColumns(s, f, &W, dW);

@@ -3,12 +3,14 @@
 
 #include <gtest/gtest.h>
 
+#include <cstring>
 #include <random>
 
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
 #include "exid/dh.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/error.hpp"
 
 using namespace exid;
 using namespace exid::testing;
@@ -112,4 +114,41 @@ TEST(Drive, IdentityTransmissionMatchesTorqueRegressor) {
   torqueRegressor(m, *d, q, qd, qdd, Y);
   actuatorRegressor(m, *d, {}, q, qd, qdd, Ya);
   EXPECT_EQ((Y - Ya).cwiseAbs().maxCoeff(), 0.0);
+}
+
+// actuatorRegressors: the rows of K samples, each the bits actuatorRegressor gives for that
+// sample alone: with drive columns (the lane path) and with a coupled transmission (sample by
+// sample).
+TEST(Drive, ActuatorRegressorsSameBitsAsOneSampleAtATime) {
+  std::mt19937 rng(61);
+  RobotModel plain = panda();
+  for (std::size_t j = 0; j < plain.drives.size(); ++j) {
+    plain.drives[j].coulomb = 0.5;
+    plain.drives[j].viscous = 0.1;
+  }
+  const DriveColumns all{true, true, true, true};
+  for (const RobotModel& m : {plain, coupled3()}) {
+    auto d = makeDynamicsData(m);
+    const int n = m.dof(), P = numParameters(m, all);
+    const int K = 6;
+    Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+    for (int k = 0; k < K; ++k) {
+      Q.row(k) = randomVec(rng, n, 2.0).transpose();
+      QD.row(k) = randomVec(rng, n, 1.5).transpose();
+      QDD.row(k) = randomVec(rng, n, 4.0).transpose();
+    }
+    QD(2, 0) = 0.0;  // the Coulomb column's sign at rest
+    Eigen::MatrixXd one(K * n, P), Yk(n, P);
+    for (int k = 0; k < K; ++k) {
+      actuatorRegressor(m, *d, all, Q.row(k).transpose(), QD.row(k).transpose(),
+                        QDD.row(k).transpose(), Yk);
+      one.middleRows(k * n, n) = Yk;
+    }
+    Eigen::MatrixXd Y = Eigen::MatrixXd::Constant(K * n, P, 7.0);
+    actuatorRegressors(m, *d, all, Q, QD, QDD, Y);
+    EXPECT_EQ(0, std::memcmp(Y.data(), one.data(), sizeof(double) * Y.size()))
+        << m.name << ": largest difference " << (Y - one).cwiseAbs().maxCoeff();
+    Eigen::MatrixXd Ybad(K * n, P - 1);
+    EXPECT_THROW(actuatorRegressors(m, *d, all, Q, QD, QDD, Ybad), Error);
+  }
 }

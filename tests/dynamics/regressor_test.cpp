@@ -2,12 +2,14 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Cholesky>
+#include <cstring>
 #include <random>
 
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
+#include "exid/isa.hpp"
 
 using namespace exid;
 using namespace exid::testing;
@@ -135,4 +137,70 @@ TEST(TorqueRegressor, SharedWorkspaceAcrossModels) {
   const Eigen::VectorXd tau = inverseDynamics(b, *d, q, qd, qdd);
   EXPECT_LT(relErr(tau, refTorques(b, q, qd, qdd, b.inertialParameters())), 1e-10);
   EXPECT_THROW(inverseDynamics(a, *d, q, qd, qdd), Error);
+}
+
+// torqueRegressors computes several samples at once, one per vector lane (kernels_lanes.hpp):
+// on every instruction set and lane copy this CPU runs, each sample's rows are the bits
+// torqueRegressor gives for that sample alone, whatever the sample count (remainders of the lane
+// width included) and wherever the sample sits in the batch.
+TEST(TorqueRegressors, SameBitsAsOneSampleAtATime) {
+  std::mt19937 rng(11);
+  std::vector<RobotModel> robots = {puma560Standard(), panda()};
+  for (int t = 0; t < 6; ++t) robots.push_back(randomTree(rng, 2 + t, t % 2 == 0));
+  const Isa isa0 = activeIsa();
+  const Lanes lanes0 = activeLanes();
+  int compared = 0;
+  for (const RobotModel& m : robots) {
+    auto d = makeDynamicsData(m);
+    const int n = m.dof();
+    for (int K : {1, 2, 3, 4, 5, 7, 9}) {
+      Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+      for (int k = 0; k < K; ++k) {
+        Q.row(k) = randomVec(rng, n, 3.0).transpose();
+        QD.row(k) = randomVec(rng, n, 2.0).transpose();
+        QDD.row(k) = randomVec(rng, n, 5.0).transpose();
+      }
+      for (Isa isa : availableIsas()) {
+        setActiveIsa(isa);
+        Eigen::MatrixXd one(K * n, 10 * n);
+        Eigen::MatrixXd Yk(n, 10 * n);
+        for (int k = 0; k < K; ++k) {
+          torqueRegressor(m, *d, Q.row(k).transpose(), QD.row(k).transpose(),
+                          QDD.row(k).transpose(), Yk);
+          one.middleRows(k * n, n) = Yk;
+        }
+        for (Lanes lanes : availableLanes()) {
+          setActiveLanes(lanes);
+          Eigen::MatrixXd Y = Eigen::MatrixXd::Constant(K * n, 10 * n, 7.0);
+          torqueRegressors(m, *d, Q, QD, QDD, Y);
+          EXPECT_EQ(0, std::memcmp(Y.data(), one.data(), sizeof(double) * Y.size()))
+              << m.name << " K=" << K << " " << isaName(isa) << " " << lanesName(lanes)
+              << ": largest difference " << (Y - one).cwiseAbs().maxCoeff();
+          ++compared;
+        }
+      }
+      // and it is the torque regressor: tau = Y pi against the independent reference
+      const Eigen::VectorXd pi = m.inertialParameters();
+      Eigen::MatrixXd Y(K * n, 10 * n);
+      torqueRegressors(m, *d, Q, QD, QDD, Y);
+      for (int k = 0; k < K; ++k) {
+        const Eigen::VectorXd ref =
+            refTorques(m, Q.row(k).transpose(), QD.row(k).transpose(), QDD.row(k).transpose(), pi);
+        EXPECT_LT(relErr(Y.middleRows(k * n, n) * pi, ref), 1e-10) << m.name << " sample " << k;
+      }
+    }
+  }
+  setActiveIsa(isa0);
+  setActiveLanes(lanes0);
+  EXPECT_GE(compared, static_cast<int>(robots.size()) * 7);
+}
+
+TEST(TorqueRegressors, RefusesMismatchedSizes) {
+  const RobotModel m = puma560Standard();
+  auto d = makeDynamicsData(m);
+  Eigen::MatrixXd Q = Eigen::MatrixXd::Zero(3, 6), Y(18, 60);
+  EXPECT_THROW(torqueRegressors(m, *d, Q, Q, Eigen::MatrixXd::Zero(2, 6), Y), Error);
+  Eigen::MatrixXd Ybad(17, 60);
+  EXPECT_THROW(torqueRegressors(m, *d, Q, Q, Q, Ybad), Error);
+  EXPECT_NO_THROW(torqueRegressors(m, *d, Q, Q, Q, Y));
 }

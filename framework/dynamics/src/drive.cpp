@@ -281,6 +281,39 @@ void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
   *gq = a;
 }
 
+void actuatorRegressors(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                        const Eigen::Ref<const Eigen::MatrixXd>& Qm,
+                        const Eigen::Ref<const Eigen::MatrixXd>& QDm,
+                        const Eigen::Ref<const Eigen::MatrixXd>& QDDm,
+                        Eigen::Ref<Eigen::MatrixXd> Y) {
+  const int n = model.dof();
+  const Eigen::Index K = Qm.rows();
+  check(Qm.cols() == n && QDm.cols() == n && QDDm.cols() == n && QDm.rows() == K &&
+            QDDm.rows() == K,
+        "actuatorRegressors: Qm, QDm, QDDm must be K x n");
+  check(Y.rows() == K * n && Y.cols() == numParameters(model, cols),
+        "actuatorRegressors: Y must be K n x numParameters(model, cols)");
+  if (model.hasLoops() || model.hasTransmission() || model.transmission_offset.size() == n) {
+    Eigen::VectorXd qm(n), qdm(n), qddm(n);
+    for (Eigen::Index k = 0; k < K; ++k) {
+      qm = Qm.row(k).transpose();
+      qdm = QDm.row(k).transpose();
+      qddm = QDDm.row(k).transpose();
+      actuatorRegressor(model, data, cols, qm, qdm, qddm, Y.middleRows(k * n, n));
+    }
+    return;
+  }
+  torqueRegressors(model, data, Qm, QDm, QDDm, Y.leftCols(10 * n));
+  const int c = cols.count();
+  if (c == 0) return;
+  Y.rightCols(c * n).setZero();
+  for (Eigen::Index k = 0; k < K; ++k)
+    for (int j = 0; j < n; ++j) {
+      const DriveColumnValues dv = driveColumnValues(cols, QDm(k, j), QDDm(k, j));
+      for (int e = 0; e < dv.count; ++e) Y(k * n + j, 10 * n + c * j + e) = dv.v[e];
+    }
+}
+
 void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
                        const Eigen::VectorXd& qm, const Eigen::VectorXd& qdm,
                        const Eigen::VectorXd& qddm, Eigen::Ref<Eigen::MatrixXd> Y) {

@@ -174,6 +174,49 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   kernels().torqueRegressor(model, d, q.data(), qd.data(), qdd.data(), Y.data(), Y.outerStride());
 }
 
+void torqueRegressors(const RobotModel& model, DynamicsData& d,
+                      const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                      const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                      const Eigen::Ref<const Eigen::MatrixXd>& QDD, Eigen::Ref<Eigen::MatrixXd> Y) {
+  prepare(model, d);
+  const int n = d.n;
+  const Eigen::Index K = Q.rows();
+  check(Q.cols() == n && QD.cols() == n && QDD.cols() == n && QD.rows() == K && QDD.rows() == K,
+        "torqueRegressors: Q, QD, QDD must be K x n");
+  check(Y.rows() == K * n && Y.cols() == 10 * n, "torqueRegressors: Y must be K n x 10n");
+  // (the same stride for Q, QD, QDD: copies when they differ, which Eigen::Ref's rows never do
+  // for the blocks of one matrix)
+  const bool same = Q.outerStride() == QD.outerStride() && Q.outerStride() == QDD.outerStride();
+  Eigen::MatrixXd qc, qdc, qddc;
+  const double *q = Q.data(), *qd = QD.data(), *qdd = QDD.data();
+  long ld = static_cast<long>(Q.outerStride());
+  if (!same) {
+    qc = Q;
+    qdc = QD;
+    qddc = QDD;
+    q = qc.data();
+    qd = qdc.data();
+    qdd = qddc.data();
+    ld = static_cast<long>(K);
+  }
+  const TorqueRegressorsFn lanes = detail::activeLanes();
+  if (lanes) {
+    lanes(model, d, static_cast<int>(K), q, qd, qdd, ld, Y.data(), Y.outerStride(), n);
+    return;
+  }
+  // another copy of the kernels (EXID_ISA): its own torqueRegressor, sample by sample
+  Eigen::VectorXd qk(n), qdk(n), qddk(n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    for (int j = 0; j < n; ++j) {
+      qk[j] = q[k + ld * j];
+      qdk[j] = qd[k + ld * j];
+      qddk[j] = qdd[k + ld * j];
+    }
+    kernels().torqueRegressor(model, d, qk.data(), qdk.data(), qddk.data(),
+                              Y.data() + k * n, Y.outerStride());
+  }
+}
+
 void energyRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
                      const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
                      Eigen::Ref<Eigen::RowVectorXd> potential) {

@@ -16,6 +16,15 @@ namespace exid {
 
 namespace {
 
+bool cpuHasAvx() {
+#if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
+  __builtin_cpu_init();
+  return __builtin_cpu_supports("avx");
+#else
+  return false;
+#endif
+}
+
 bool cpuHasAvx2() {
 #if defined(__x86_64__) && (defined(__GNUC__) || defined(__clang__))
   __builtin_cpu_init();
@@ -57,11 +66,51 @@ std::atomic<const detail::Kernels*>& active() {
   return a;
 }
 
+detail::TorqueRegressorsFn lanesTable(Lanes lanes) {
+  if (lanes == Lanes::Baseline) return detail::portableLanesTorqueRegressors();
+  static const detail::TorqueRegressorsFn avx =
+      cpuHasAvx() ? detail::avxLanesTorqueRegressors() : nullptr;
+  return avx;
+}
+
+std::atomic<detail::TorqueRegressorsFn>& lanesInUse() {
+  static std::atomic<detail::TorqueRegressorsFn> a{lanesTable(Lanes::Avx)
+                                                       ? lanesTable(Lanes::Avx)
+                                                       : lanesTable(Lanes::Baseline)};
+  return a;
+}
+
 }  // namespace
 
 namespace detail {
 const Kernels& kernels() { return *active().load(std::memory_order_relaxed); }
+
+TorqueRegressorsFn activeLanes() {
+  if (kernels().isa != Isa::Portable) return nullptr;
+  return lanesInUse().load(std::memory_order_relaxed);
+}
 }  // namespace detail
+
+const char* lanesName(Lanes lanes) { return lanes == Lanes::Avx ? "avx" : "baseline"; }
+
+std::vector<Lanes> availableLanes() {
+  std::vector<Lanes> out{Lanes::Baseline};
+  if (lanesTable(Lanes::Avx)) out.push_back(Lanes::Avx);
+  return out;
+}
+
+Lanes activeLanes() {
+  return lanesInUse().load(std::memory_order_relaxed) == lanesTable(Lanes::Baseline)
+             ? Lanes::Baseline
+             : Lanes::Avx;
+}
+
+void setActiveLanes(Lanes lanes) {
+  const detail::TorqueRegressorsFn f = lanesTable(lanes);
+  check(f != nullptr, std::string("setActiveLanes: ") + lanesName(lanes) +
+                          " is not available on this CPU or in this build");
+  lanesInUse().store(f, std::memory_order_relaxed);
+}
 
 const char* isaName(Isa isa) { return isa == Isa::Avx2 ? "avx2" : "portable"; }
 

@@ -30,10 +30,26 @@ struct Kernels {
 };
 
 const Kernels& portableKernels();
+
+/// The torque regressors of `count` samples (kernels_lanes.hpp): sample k's q_j at
+/// q[k + ldx j] (likewise qd, qdd), its n x 10n regressor at Y + k strideY with leading
+/// dimension ldY. Every copy gives the same bits as the portable torqueRegressor.
+using TorqueRegressorsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
+                                    const double* qd, const double* qdd, long ldx, double* Y,
+                                    long ldY, long strideY);
+/// Two samples at once in the baseline's registers (SSE2).
+TorqueRegressorsFn portableLanesTorqueRegressors();
+/// Four samples at once in AVX registers; null when the build has no such copy (it does not
+/// check the CPU).
+TorqueRegressorsFn avxLanesTorqueRegressors();
 /// Null when the build has no AVX2 copy (not x86-64, or not GCC/Clang).
 const Kernels* avx2Kernels();
 
 /// The copy in use (EXID_ISA, else the best the CPU runs; setActiveIsa).
 const Kernels& kernels();
+
+/// The lane copy of torqueRegressors in use (setActiveLanes); null when the kernels in use are
+/// not the portable ones (their torqueRegressor runs sample by sample then).
+TorqueRegressorsFn activeLanes();
 
 }  // namespace exid::detail

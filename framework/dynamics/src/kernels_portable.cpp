@@ -23,6 +23,9 @@ inline void sinCos(int n, const double* q, double* s, double* c) {
 #define EXID_KERNEL_NS portable
 #define EXID_KERNEL
 #include "kernels.hpp"
+#define EXID_LANES_NS portable
+#define EXID_LANES_KERNEL
+#include "kernels_lanes.hpp"
 
 namespace exid::detail {
 
@@ -51,8 +54,22 @@ void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
   }
 }
 
+// One sample: the lane kernel on one lane (the same bits as every lane of the others).
+void torqueRegressorOne(const RobotModel& model, DynamicsData& d, const double* q,
+                        const double* qd, const double* qdd, double* Y, long ld) {
+  torqueRegressorsImpl<double>(model, d, 1, q, qd, qdd, 1, Y, ld, 0);
+}
+
+// Two samples at once: one SSE2 register each (four lanes in two registers each ran slower
+// than one sample at a time: twice the registers' pressure).
+void torqueRegressorsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                           const double* qd, const double* qdd, long ldx, double* Y, long ldY,
+                           long strideY) {
+  torqueRegressorsImpl<Lane2>(model, d, count, q, qd, qdd, ldx, Y, ldY, strideY);
+}
+
 const Kernels kTable = {Isa::Portable,
-                        &torqueRegressor,
+                        &torqueRegressorOne,
                         &inverseDynamics,
                         &energyRegressor,
                         &torqueRegressorVjp,
@@ -63,6 +80,8 @@ const Kernels kTable = {Isa::Portable,
 }  // namespace portable
 
 const Kernels& portableKernels() { return portable::kTable; }
+
+TorqueRegressorsFn portableLanesTorqueRegressors() { return &portable::torqueRegressorsLanes; }
 
 void forwardPass(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
                  const double* qdd, Level level, bool gravity) {

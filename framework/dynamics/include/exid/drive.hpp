@@ -179,6 +179,15 @@ EXID_API void actuatorRegressor(const RobotModel& model, DynamicsData& data,
                                 const DriveColumns& cols, const Eigen::VectorXd& qm,
                                 const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
                                 Eigen::Ref<Eigen::MatrixXd> Y);
+/// actuatorRegressor of K samples: sample k's measured state is row k of Qm, QDm, QDDm (K x n),
+/// its rows k n .. k n + n - 1 of Y (K n x numParameters). The same bits as actuatorRegressor
+/// sample by sample (torqueRegressors).
+EXID_API void actuatorRegressors(const RobotModel& model, DynamicsData& data,
+                                 const DriveColumns& cols,
+                                 const Eigen::Ref<const Eigen::MatrixXd>& Qm,
+                                 const Eigen::Ref<const Eigen::MatrixXd>& QDm,
+                                 const Eigen::Ref<const Eigen::MatrixXd>& QDDm,
+                                 Eigen::Ref<Eigen::MatrixXd> Y);
 /// Gradient of <G, Y> with respect to qm, qdm, qddm (sign(qd) has zero derivative); a closed
 /// chain's through the loop constraints (Y = G_c^T Y_tree with G_c = dq/dqa depending on qa).
 EXID_API void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data,

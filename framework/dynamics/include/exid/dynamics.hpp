@@ -34,6 +34,16 @@ EXID_API void torqueRegressor(const RobotModel& model, DynamicsData& data, const
                               const Eigen::VectorXd& qd, const Eigen::VectorXd& qdd,
                               Eigen::Ref<Eigen::MatrixXd> Y);
 
+/// The torque regressors of K samples: sample k's state is row k of Q, QD, QDD (K x n), its
+/// n x 10n regressor rows k n .. k n + n - 1 of Y (K n x 10n). The same bits as torqueRegressor
+/// called sample by sample; with the portable kernels (the default: exid/isa.hpp) several
+/// samples are computed at once, one per vector lane.
+EXID_API void torqueRegressors(const RobotModel& model, DynamicsData& data,
+                               const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                               const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                               const Eigen::Ref<const Eigen::MatrixXd>& QDD,
+                               Eigen::Ref<Eigen::MatrixXd> Y);
+
 /// Energy regressors (1 x 10n each): kinetic energy T = kinetic * pi, potential energy
 /// U = potential * pi with U = -sum_j M_j g^T c_j (c_j the centre of mass in the base frame).
 EXID_API void energyRegressor(const RobotModel& model, DynamicsData& data, const Eigen::VectorXd& q,

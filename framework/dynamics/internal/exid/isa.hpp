@@ -26,6 +26,20 @@ EXID_API Isa activeIsa();
 /// benchmarks: not to be called while another thread runs a kernel.
 EXID_API void setActiveIsa(Isa isa);
 
+/// Where torqueRegressors (exid/dynamics.hpp) computes several samples at once with the portable
+/// kernels: two in the baseline's vector registers (SSE2 on x86-64), or four in AVX registers where the
+/// build has that copy and the CPU runs it (the default then). Both give the same bits as the
+/// portable torqueRegressor, on every CPU.
+enum class Lanes { Baseline, Avx };
+/// "baseline" or "avx".
+EXID_API const char* lanesName(Lanes lanes);
+/// The lane copies this build has and this CPU can run, baseline first.
+EXID_API std::vector<Lanes> availableLanes();
+/// The lane copy in use.
+EXID_API Lanes activeLanes();
+/// Uses `lanes` from now on (throws exid::Error when not available); as setActiveIsa.
+EXID_API void setActiveLanes(Lanes lanes);
+
 /// The kernels whose operations kernelFlops() counts.
 enum class Kernel {
   TorqueRegressor,

@@ -1,0 +1,272 @@
+// exid — the torque regressor of several samples at once: one sample per vector lane (a structure
+// of arrays), so that the latency-bound 3-vector recursions of the forward pass run on 4 samples
+// (AVX) or 2 (SSE2) per instruction instead of 1 (docs/dynamics.md §6).
+//
+// Written once for a lane type T (double: one sample; a GCC vector of 2 or 4 doubles) and
+// compiled in kernels_portable.cpp (double, and 2 lanes in the baseline's SSE2 registers) and
+// kernels_lanes_avx.cpp (4 lanes in AVX registers). Every lane executes the same sequence of
+// IEEE additions, subtractions and multiplications, never contracted into fused multiply-adds
+// (those sources compile with -ffp-contract=off and without FMA), and the joint sines and
+// cosines are exid's own (exid/fmath.hpp): every lane width, and every CPU, gives the same bits.
+//
+// Each including source defines EXID_LANES_NS (the namespace of its copy) and EXID_LANES_KERNEL
+// (the attributes of its entry point) first. Everything here has internal linkage. Not a public
+// header.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+#include "exid/fmath.hpp"
+#include "rigid_body.hpp"
+
+#if !defined(EXID_LANES_NS) || !defined(EXID_LANES_KERNEL)
+#error "define EXID_LANES_NS and EXID_LANES_KERNEL before including kernels_lanes.hpp"
+#endif
+
+// (a 4-double vector passed by value between these internal functions: no ABI crosses here)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi"
+#endif
+
+namespace exid::detail::EXID_LANES_NS {
+namespace {
+
+typedef double Lane4 __attribute__((vector_size(32)));
+typedef double Lane2 __attribute__((vector_size(16)));
+
+template <class T>
+struct LaneTraits;
+template <>
+struct LaneTraits<double> {
+  static constexpr int kWidth = 1;
+  static double get(double x, int) { return x; }
+  static void set(double& x, int, double v) { x = v; }
+  static double broadcast(double v) { return v; }
+};
+template <>
+struct LaneTraits<Lane4> {
+  static constexpr int kWidth = 4;
+  static double get(const Lane4& x, int l) { return x[l]; }
+  static void set(Lane4& x, int l, double v) { x[l] = v; }
+  static Lane4 broadcast(double v) { return Lane4{v, v, v, v}; }
+};
+
+template <>
+struct LaneTraits<Lane2> {
+  static constexpr int kWidth = 2;
+  static double get(const Lane2& x, int l) { return x[l]; }
+  static void set(Lane2& x, int l, double v) { x[l] = v; }
+  static Lane2 broadcast(double v) { return Lane2{v, v}; }
+};
+
+template <class T>
+struct L3 {
+  T c[3];
+};
+template <class T>
+struct LS {  // spatial motion vector {angular, linear}
+  L3<T> w, v;
+};
+template <class T>
+struct LR {  // rotation, column-major: m[r + 3 c]
+  T m[9];
+};
+
+template <class T>
+inline L3<T> add(const L3<T>& a, const L3<T>& b) {
+  return {{a.c[0] + b.c[0], a.c[1] + b.c[1], a.c[2] + b.c[2]}};
+}
+template <class T>
+inline L3<T> cross(const L3<T>& a, const L3<T>& b) {
+  return {{a.c[1] * b.c[2] - a.c[2] * b.c[1], a.c[2] * b.c[0] - a.c[0] * b.c[2],
+           a.c[0] * b.c[1] - a.c[1] * b.c[0]}};
+}
+// R^T x
+template <class T>
+inline L3<T> rtMul(const LR<T>& R, const L3<T>& x) {
+  L3<T> o;
+  for (int i = 0; i < 3; ++i)
+    o.c[i] = R.m[3 * i] * x.c[0] + R.m[3 * i + 1] * x.c[1] + R.m[3 * i + 2] * x.c[2];
+  return o;
+}
+// the motion transform parent -> child (the child's pose (R, p) in the parent)
+template <class T>
+inline LS<T> xMotion(const LR<T>& R, const L3<T>& p, const LS<T>& m) {
+  return {rtMul(R, m.w), rtMul(R, add(m.v, cross(m.w, p)))};
+}
+template <class T>
+inline L3<T> constant3(const V3& x) {
+  using Tr = LaneTraits<T>;
+  return {{Tr::broadcast(x[0]), Tr::broadcast(x[1]), Tr::broadcast(x[2])}};
+}
+
+// The workspace of `width` lanes in d.lane_ws (aligned for T): per joint R, p, v, a, wd, ao; per
+// ancestor pair the subspace.
+template <class T>
+struct LaneWork {
+  LR<T>* R;
+  L3<T>* p;
+  LS<T>* v;
+  LS<T>* a;
+  L3<T>* ao;
+  LS<T>* s;
+};
+template <class T>
+inline LaneWork<T> laneWork(DynamicsData& d) {
+  const std::size_t n = static_cast<std::size_t>(d.n), P = d.anc_idx.size();
+  const std::size_t words = (9 + 3 + 6 + 6 + 3) * n + 6 * P;  // lanes of T
+  const std::size_t need = words * (sizeof(T) / sizeof(double)) + alignof(T) / sizeof(double);
+  if (d.lane_ws.size() < need) d.lane_ws.assign(need, 0.0);
+  auto addr = reinterpret_cast<std::uintptr_t>(d.lane_ws.data());
+  addr = (addr + alignof(T) - 1) & ~static_cast<std::uintptr_t>(alignof(T) - 1);
+  T* base = reinterpret_cast<T*>(addr);
+  LaneWork<T> w;
+  w.R = reinterpret_cast<LR<T>*>(base);
+  w.p = reinterpret_cast<L3<T>*>(base + 9 * n);
+  w.v = reinterpret_cast<LS<T>*>(base + 12 * n);
+  w.a = reinterpret_cast<LS<T>*>(base + 18 * n);
+  w.ao = reinterpret_cast<L3<T>*>(base + 24 * n);
+  w.s = reinterpret_cast<LS<T>*>(base + 27 * n);
+  return w;
+}
+
+// Torque regressors of `count` samples (see Kernels in kernel_table.hpp for the layout), T's
+// width at a time; the lanes past the last sample repeat it and are not written.
+template <class T>
+inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int count,
+                                 const double* q, const double* qd, const double* qdd, long ldx,
+                                 double* Y, long ldY, long strideY) {
+  using Tr = LaneTraits<T>;
+  constexpr int W = Tr::kWidth;
+  const int n = d.n;
+  const LaneWork<T> ws = laneWork<T>(d);
+  const L3<T> g0 = {{Tr::broadcast(-model.gravity[0]), Tr::broadcast(-model.gravity[1]),
+                     Tr::broadcast(-model.gravity[2])}};
+  const T zero = Tr::broadcast(0.0);
+  for (int k0 = 0; k0 < count; k0 += W) {
+    const int lanes = count - k0 < W ? count - k0 : W;
+    for (int j = 0; j < n; ++j) {
+      const JointC& c = d.J[static_cast<std::size_t>(j)];
+      T qj, qdj, qddj;
+      for (int l = 0; l < W; ++l) {
+        const long k = k0 + (l < lanes ? l : lanes - 1);
+        Tr::set(qj, l, q[k + ldx * j]);
+        Tr::set(qdj, l, qd[k + ldx * j]);
+        Tr::set(qddj, l, qdd[k + ldx * j]);
+      }
+      LR<T>& R = ws.R[j];
+      L3<T>& p = ws.p[j];
+      if (c.revolute) {
+        T sq, cq;
+        for (int l = 0; l < W; ++l) {
+          double s1, c1;
+          exid::fmath::sincos(Tr::get(qj, l), &s1, &c1);
+          Tr::set(sq, l, s1);
+          Tr::set(cq, l, c1);
+        }
+        LR<T> M;
+        for (int r = 0; r < 3; ++r) {
+          M.m[r] = c.Rpre(r, 0) * cq + c.Rpre(r, 1) * sq;
+          M.m[r + 3] = c.Rpre(r, 1) * cq - c.Rpre(r, 0) * sq;
+          M.m[r + 6] = Tr::broadcast(c.Rpre(r, 2));
+        }
+        if (c.post_R_id) {
+          R = M;
+        } else {
+          for (int col = 0; col < 3; ++col)
+            for (int r = 0; r < 3; ++r)
+              R.m[r + 3 * col] = M.m[r] * c.Rpost(0, col) + M.m[r + 3] * c.Rpost(1, col) +
+                                 M.m[r + 6] * c.Rpost(2, col);
+        }
+        for (int r = 0; r < 3; ++r) {
+          if (c.post_p_zero)
+            p.c[r] = Tr::broadcast(c.ppre[r]);
+          else
+            p.c[r] = c.ppre[r] + (M.m[r] * c.ppost[0] + M.m[r + 3] * c.ppost[1] +
+                                  M.m[r + 6] * c.ppost[2]);
+        }
+      } else {
+        for (int i = 0; i < 9; ++i) R.m[i] = Tr::broadcast(c.Rfix(i % 3, i / 3));
+        for (int r = 0; r < 3; ++r) p.c[r] = c.pfix[r] + c.Rpre(r, 2) * qj;
+      }
+      const int par = c.parent;
+      LS<T> xv;
+      if (par >= 0)
+        xv = xMotion(R, p, ws.v[par]);
+      else
+        xv = {{{zero, zero, zero}}, {{zero, zero, zero}}};
+      LS<T> u;
+      for (int r = 0; r < 3; ++r) {
+        u.w.c[r] = c.S.w[r] * qdj;
+        u.v.c[r] = c.S.v[r] * qdj;
+      }
+      LS<T>& v = ws.v[j];
+      v.w = add(xv.w, u.w);
+      v.v = add(xv.v, u.v);
+      const LS<T> a0 = {{{zero, zero, zero}}, g0};
+      const LS<T> xa = xMotion(R, p, par >= 0 ? ws.a[par] : a0);
+      // crm(v, u) = {v.w x u.w, v.w x u.v + v.v x u.w}
+      const L3<T> cw = cross(v.w, u.w);
+      const L3<T> cv = add(cross(v.w, u.v), cross(v.v, u.w));
+      LS<T>& a = ws.a[j];
+      for (int r = 0; r < 3; ++r) {
+        a.w.c[r] = xa.w.c[r] + c.S.w[r] * qddj + cw.c[r];
+        a.v.c[r] = xa.v.c[r] + c.S.v[r] * qddj + cv.c[r];
+      }
+      ws.ao[j] = add(a.v, cross(v.w, v.v));
+    }
+    // the ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own)
+    for (int j = 0; j < n; ++j) {
+      const JointC& c = d.J[static_cast<std::size_t>(j)];
+      const int oj = d.anc_off[static_cast<std::size_t>(j)];
+      ws.s[oj].w = constant3<T>(c.S.w);
+      ws.s[oj].v = constant3<T>(c.S.v);
+      const int par = c.parent;
+      if (par < 0) continue;
+      const int op = d.anc_off[static_cast<std::size_t>(par)];
+      const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+      for (int t = 1; t < cnt; ++t) ws.s[oj + t] = xMotion(ws.R[j], ws.p[j], ws.s[op + t - 1]);
+    }
+    // the rows: body j's ten columns, one row per ancestor i of j (pairRow in rigid_body.hpp)
+    for (int j = 0; j < n; ++j) {
+      const int oj = d.anc_off[static_cast<std::size_t>(j)];
+      const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+      const L3<T>& w = ws.v[j].w;
+      const L3<T>& wd = ws.a[j].w;
+      const L3<T>& ao = ws.ao[j];
+      for (int l = 0; l < lanes; ++l) {
+        double* Yj = Y + strideY * (k0 + l) + ldY * 10 * j;
+        for (int t = d.off_off[static_cast<std::size_t>(j)];
+             t < d.off_off[static_cast<std::size_t>(j) + 1]; ++t)
+          for (int col = 0; col < 10; ++col)
+            Yj[d.off_idx[static_cast<std::size_t>(t)] + ldY * col] = 0.0;
+      }
+      for (int t = 0; t < cnt; ++t) {
+        const int i = d.anc_idx[static_cast<std::size_t>(oj + t)];
+        const L3<T>& sw = ws.s[oj + t].w;
+        const L3<T>& sv = ws.s[oj + t].v;
+        const L3<T> x = cross(sw, w);
+        T out[10];
+        out[0] = sw.c[0] * wd.c[0] + x.c[0] * w.c[0];
+        out[1] = sw.c[0] * wd.c[1] + sw.c[1] * wd.c[0] + x.c[0] * w.c[1] + x.c[1] * w.c[0];
+        out[2] = sw.c[0] * wd.c[2] + sw.c[2] * wd.c[0] + x.c[0] * w.c[2] + x.c[2] * w.c[0];
+        out[3] = sw.c[1] * wd.c[1] + x.c[1] * w.c[1];
+        out[4] = sw.c[1] * wd.c[2] + sw.c[2] * wd.c[1] + x.c[1] * w.c[2] + x.c[2] * w.c[1];
+        out[5] = sw.c[2] * wd.c[2] + x.c[2] * w.c[2];
+        const L3<T> hc = add(add(cross(ao, sw), cross(sv, wd)), cross(cross(sv, w), w));
+        out[6] = hc.c[0];
+        out[7] = hc.c[1];
+        out[8] = hc.c[2];
+        out[9] = sv.c[0] * ao.c[0] + sv.c[1] * ao.c[1] + sv.c[2] * ao.c[2];
+        for (int l = 0; l < lanes; ++l) {
+          double* Yi = Y + strideY * (k0 + l) + ldY * 10 * j + i;
+          for (int col = 0; col < 10; ++col) Yi[ldY * col] = Tr::get(out[col], l);
+        }
+      }
+    }
+  }
+}
+
+}  // namespace
+}  // namespace exid::detail::EXID_LANES_NS

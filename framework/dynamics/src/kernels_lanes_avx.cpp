@@ -1,0 +1,39 @@
+// exid — the torque regressor of four samples at once in AVX registers (kernels_lanes.hpp).
+// framework/CMakeLists.txt compiles this source alone with -mavx -ffp-contract=off (no FMA), so
+// its lanes give the same bits as the portable copy's (kernels_portable.cpp); dynamics.cpp runs
+// it where the CPU has AVX. The entry point is flattened (all it calls, Eigen's accessors
+// included, is inlined into it) and has internal linkage: the only symbol this object defines is
+// exid::detail::avxLanesTorqueRegressors() (ctest dynamics.isa_symbols checks it with nm). Built
+// where EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without sanitizers, on x86-64.
+#if defined(__AVX__) && !defined(__FMA__)
+
+#define EXID_LANES_NS avx_lanes
+#define EXID_LANES_KERNEL __attribute__((flatten))
+#include "kernel_table.hpp"
+#include "kernels_lanes.hpp"
+
+namespace exid::detail {
+
+namespace avx_lanes {
+namespace {
+EXID_LANES_KERNEL void torqueRegressors(const RobotModel& model, DynamicsData& d, int count,
+                                        const double* q, const double* qd, const double* qdd,
+                                        long ldx, double* Y, long ldY, long strideY) {
+  torqueRegressorsImpl<Lane4>(model, d, count, q, qd, qdd, ldx, Y, ldY, strideY);
+}
+}  // namespace
+}  // namespace avx_lanes
+
+TorqueRegressorsFn avxLanesTorqueRegressors() { return &avx_lanes::torqueRegressors; }
+
+}  // namespace exid::detail
+
+#else
+
+#include "kernel_table.hpp"
+
+namespace exid::detail {
+TorqueRegressorsFn avxLanesTorqueRegressors() { return nullptr; }
+}  // namespace exid::detail
+
+#endif
