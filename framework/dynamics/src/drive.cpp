@@ -2,6 +2,7 @@
 #include "exid/drive.hpp"
 
 #include <Eigen/LU>
+#include <algorithm>
 #include <string>
 #include <vector>
 
@@ -281,6 +282,41 @@ void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
   *gq = a;
 }
 
+namespace {
+// out = T^T Yj for one sample's joint regressor Yj (n x 10n, leading dimension ldj) into out
+// (leading dimension ldo): each coefficient summed over k = 0 .. n - 1 in order, the zeros of
+// the transmission skipped (a transmission is mostly zeros). One definition for
+// actuatorRegressor and actuatorRegressors, so that both give the same bits.
+void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long ldj,
+                                double* out, long ldo) {
+  const int n = static_cast<int>(T.rows());
+  for (int i = 0; i < n; ++i) {
+    int nz[64];
+    double t[64];
+    int m = 0;
+    for (int k = 0; k < n; ++k)
+      if (T(k, i) != 0.0 && m < 64) {
+        nz[m] = k;
+        t[m++] = T(k, i);
+      }
+    if (m == 64 && n > 64) {  // (a dense transmission of more than 64 joints: every term)
+      for (int c = 0; c < 10 * n; ++c) {
+        double acc = 0.0;
+        for (int k = 0; k < n; ++k) acc += T(k, i) * Yj[k + ldj * c];
+        out[i + ldo * c] = acc;
+      }
+      continue;
+    }
+    for (int c = 0; c < 10 * n; ++c) {
+      const double* y = Yj + ldj * c;
+      double acc = 0.0;
+      for (int e = 0; e < m; ++e) acc += t[e] * y[nz[e]];
+      out[i + ldo * c] = acc;
+    }
+  }
+}
+}  // namespace
+
 void actuatorRegressors(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
                         const Eigen::Ref<const Eigen::MatrixXd>& Qm,
                         const Eigen::Ref<const Eigen::MatrixXd>& QDm,
@@ -293,8 +329,8 @@ void actuatorRegressors(const RobotModel& model, DynamicsData& data, const Drive
         "actuatorRegressors: Qm, QDm, QDDm must be K x n");
   check(Y.rows() == K * n && Y.cols() == numParameters(model, cols),
         "actuatorRegressors: Y must be K n x numParameters(model, cols)");
-  if (model.hasLoops() || model.hasTransmission() || model.transmission_offset.size() == n) {
-    Eigen::VectorXd qm(n), qdm(n), qddm(n);
+  Eigen::VectorXd qm(n), qdm(n), qddm(n);
+  if (model.hasLoops()) {
     for (Eigen::Index k = 0; k < K; ++k) {
       qm = Qm.row(k).transpose();
       qdm = QDm.row(k).transpose();
@@ -303,7 +339,38 @@ void actuatorRegressors(const RobotModel& model, DynamicsData& data, const Drive
     }
     return;
   }
-  torqueRegressors(model, data, Qm, QDm, QDDm, Y.leftCols(10 * n));
+  if (model.hasTransmission() || model.transmission_offset.size() == n) {
+    // A block of samples at a time: each one's joint state as actuatorRegressor computes it, the
+    // block's joint regressors at once, then each sample's through the transmission with the
+    // same function as there: the same bits.
+    constexpr Eigen::Index kBlock = 64;
+    const bool T = model.hasTransmission();
+    Eigen::MatrixXd Qj(kBlock, n), QDj(kBlock, n), QDDj(kBlock, n), Yb(kBlock * n, 10 * n);
+    Eigen::VectorXd q(n), qd(n), qdd(n);
+    for (Eigen::Index k0 = 0; k0 < K; k0 += kBlock) {
+      const Eigen::Index b = std::min(kBlock, K - k0);
+      for (Eigen::Index k = 0; k < b; ++k) {
+        qm = Qm.row(k0 + k).transpose();
+        qdm = QDm.row(k0 + k).transpose();
+        qddm = QDDm.row(k0 + k).transpose();
+        measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+        Qj.row(k) = q.transpose();
+        QDj.row(k) = qd.transpose();
+        QDDj.row(k) = qdd.transpose();
+      }
+      torqueRegressors(model, data, Qj.topRows(b), QDj.topRows(b), QDDj.topRows(b),
+                       Yb.topRows(b * n));
+      for (Eigen::Index k = 0; k < b; ++k) {
+        if (T)
+          transmissionTransposeTimes(model.transmission, Yb.data() + k * n, Yb.outerStride(),
+                                     Y.data() + (k0 + k) * n, Y.outerStride());
+        else
+          Y.middleRows((k0 + k) * n, n).leftCols(10 * n) = Yb.middleRows(k * n, n);
+      }
+    }
+  } else {
+    torqueRegressors(model, data, Qm, QDm, QDDm, Y.leftCols(10 * n));
+  }
   const int c = cols.count();
   if (c == 0) return;
   Y.rightCols(c * n).setZero();
@@ -343,9 +410,10 @@ void actuatorRegressor(const RobotModel& model, DynamicsData& data, const DriveC
       Eigen::MatrixXd& Yj = detail::scratchMatrix(data, 0);
       Yj.resize(n, 10 * n);
       torqueRegressor(model, data, q, qd, qdd, Yj);
-      // (a product of depth n: coefficient by coefficient; the blocked product packs its
-      // operands first, which costs more than it saves at this size)
-      Y.leftCols(10 * n).noalias() = model.transmission.transpose().lazyProduct(Yj);
+      // (a product of depth n, coefficient by coefficient over the transmission's non-zeros;
+      // the blocked product packs its operands first, which costs more than it saves here)
+      transmissionTransposeTimes(model.transmission, Yj.data(), Yj.outerStride(), Y.data(),
+                                 Y.outerStride());
     } else {
       torqueRegressor(model, data, q, qd, qdd, Y.leftCols(10 * n));
     }
