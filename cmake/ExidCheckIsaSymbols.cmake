@@ -1,3 +1,4 @@
+cmake_policy(SET CMP0057 NEW)  # if(... IN_LIST ...)
 # ctest dynamics.isa_symbols: the object of kernels_avx2.cpp (compiled with -mavx2 -mfma) defines
 # exid::detail::avx2Kernels() and nothing else outside itself: no weak or global symbol (an Eigen
 # or exid inline function compiled for AVX2) that the linker could pick instead of the baseline
@@ -26,7 +27,7 @@ foreach(line ${lines})
   if(line MATCHES "^[0-9a-fA-F]* ([A-Za-z]) (.*)$")
     set(type ${CMAKE_MATCH_1})
     set(name "${CMAKE_MATCH_2}")
-    if(name STREQUAL "${allowed}" AND type STREQUAL "T")
+    if(name IN_LIST allowed AND type STREQUAL "T")
       set(found TRUE)
     elseif(type MATCHES "^[A-Zu]$")
       string(APPEND bad "  ${type} ${name}\n")
@@ -42,4 +43,5 @@ endif()
 message(STATUS "${stem}: ${allowed} is its only global symbol")
 endfunction()
 check_object(kernels_avx2 "exid::detail::avx2Kernels()")
-check_object(kernels_lanes_avx "exid::detail::avxLanesTorqueRegressors()")
+check_object(kernels_lanes_avx
+  "exid::detail::avxLanesTorqueRegressors();exid::detail::avxLanesGram()")

@@ -10,6 +10,7 @@
 #include <limits>
 #include <numeric>
 
+#include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
@@ -122,7 +123,7 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
              labels.begin())]
         .push_back(i);
   std::vector<Eigen::Index> cols;
-  Eigen::MatrixXd A, G;
+  std::vector<double> B, G;
   for (const auto& idx : rows) {
     // the columns not zero in these rows (y always), ascending: the lower triangle of their
     // Gram matrix lands in the lower triangle of the whole one
@@ -137,17 +138,25 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
       if (nonzero) cols.push_back(c);
     }
     const auto q = static_cast<Eigen::Index>(cols.size());
-    A.resize(static_cast<Eigen::Index>(idx.size()), q + 1);
-    for (Eigen::Index k = 0; k < q; ++k)
-      for (std::size_t i = 0; i < idx.size(); ++i)
-        A(static_cast<Eigen::Index>(i), k) = W(idx[i], cols[static_cast<std::size_t>(k)]);
-    for (std::size_t i = 0; i < idx.size(); ++i) A(static_cast<Eigen::Index>(i), q) = y(idx[i]);
+    // the rows, row-major with the padding zero, and their Gram matrix by gramUpdate (the same
+    // bits on every CPU, in AVX registers where there are some)
+    const int m = static_cast<int>(q + 1), ld = (m + 3) & ~3;
+    const auto k = static_cast<Eigen::Index>(idx.size());
+    B.assign(static_cast<std::size_t>(k * ld), 0.0);
+    for (Eigen::Index c = 0; c < q; ++c) {
+      const double* w = W.col(cols[static_cast<std::size_t>(c)]).data();
+      for (Eigen::Index i = 0; i < k; ++i)
+        B[static_cast<std::size_t>(i * ld + c)] = w[idx[static_cast<std::size_t>(i)]];
+    }
+    for (Eigen::Index i = 0; i < k; ++i)
+      B[static_cast<std::size_t>(i * ld + q)] = y(idx[static_cast<std::size_t>(i)]);
     cols.push_back(p_);
-    G.setZero(q + 1, q + 1);
-    G.selfadjointView<Eigen::Lower>().rankUpdate(A.transpose());
-    for (Eigen::Index b = 0; b <= q; ++b)
-      for (Eigen::Index a = b; a <= q; ++a)
-        gram_(cols[static_cast<std::size_t>(a)], cols[static_cast<std::size_t>(b)]) += G(a, b);
+    G.assign(static_cast<std::size_t>(m * ld), 0.0);
+    exid::gramUpdate(G.data(), ld, B.data(), ld, static_cast<int>(k), m);
+    for (Eigen::Index a = 0; a <= q; ++a)
+      for (Eigen::Index b = 0; b <= a; ++b)
+        gram_(cols[static_cast<std::size_t>(a)], cols[static_cast<std::size_t>(b)]) +=
+            G[static_cast<std::size_t>(a * ld + b)];
   }
   m_ += r;
   dirty_ = true;

@@ -89,6 +89,24 @@ TorqueRegressorsFn activeLanes() {
   if (kernels().isa != Isa::Portable) return nullptr;
   return lanesInUse().load(std::memory_order_relaxed);
 }
+
+GramFn activeGram() {
+  if (kernels().isa != Isa::Portable) return kernels().gram;
+  static const GramFn avx = cpuHasAvx() ? avxLanesGram() : nullptr;
+  if (avx && lanesInUse().load(std::memory_order_relaxed) != lanesTable(Lanes::Baseline))
+    return avx;
+  return portableGram();
+}
+}  // namespace detail
+
+void gramUpdate(double* G, int ldg, const double* B, int ldb, int k, int m) {
+  check(m >= 0 && k >= 0 && ldb >= ((m + 3) & ~3) && ldg >= ((m + 3) & ~3),
+        "gramUpdate: leading dimensions below the sizes");
+  if (m == 0 || k == 0) return;
+  detail::activeGram()(G, ldg, B, ldb, k, m);
+}
+
+namespace detail {
 }  // namespace detail
 
 const char* lanesName(Lanes lanes) { return lanes == Lanes::Avx ? "avx" : "baseline"; }

@@ -45,6 +45,15 @@ TorqueRegressorsFn avxLanesTorqueRegressors();
 /// Null when the build has no AVX2 copy (not x86-64, or not GCC/Clang).
 const Kernels* avx2Kernels();
 
+/// The portable Gram block update (Kernels::gram's layout) compiled for AVX without FMA: the same
+/// bits as the portable one; null when the build has no such copy.
+using GramFn = void (*)(double* acc, int ld, const double* B, int ldb, int k, int m);
+GramFn avxLanesGram();
+GramFn portableGram();
+/// The gram update gramUpdate runs: the active copy's when it is not the portable one, else
+/// the AVX lanes' where the CPU has AVX (and the lane copy in use is AVX), else the portable.
+GramFn activeGram();
+
 /// The copy in use (EXID_ISA, else the best the CPU runs; setActiveIsa).
 const Kernels& kernels();
 

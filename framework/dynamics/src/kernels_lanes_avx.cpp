@@ -3,7 +3,8 @@
 // its lanes give the same bits as the portable copy's (kernels_portable.cpp); dynamics.cpp runs
 // it where the CPU has AVX. The entry point is flattened (all it calls, Eigen's accessors
 // included, is inlined into it) and has internal linkage: the only symbol this object defines is
-// exid::detail::avxLanesTorqueRegressors() (ctest dynamics.isa_symbols checks it with nm). Built
+// exid::detail::avxLanesTorqueRegressors() and avxLanesGram() (ctest dynamics.isa_symbols checks it
+// with nm). The Gram block update (gram_block.hpp) is here too, for the same reason. Built
 // where EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without sanitizers, on x86-64.
 #if defined(__AVX__) && !defined(__FMA__)
 
@@ -11,6 +12,8 @@
 #define EXID_LANES_KERNEL __attribute__((flatten))
 #include "kernel_table.hpp"
 #include "kernels_lanes.hpp"
+#define EXID_GRAM_NS avx_lanes
+#include "gram_block.hpp"
 
 namespace exid::detail {
 
@@ -21,10 +24,14 @@ EXID_LANES_KERNEL void torqueRegressors(const RobotModel& model, DynamicsData& d
                                         long ldx, double* Y, long ldY, long strideY) {
   torqueRegressorsImpl<Lane4>(model, d, count, q, qd, qdd, ldx, Y, ldY, strideY);
 }
+EXID_LANES_KERNEL void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
+  gramBlock(acc, ld, B, ldb, k, m);
+}
 }  // namespace
 }  // namespace avx_lanes
 
 TorqueRegressorsFn avxLanesTorqueRegressors() { return &avx_lanes::torqueRegressors; }
+GramFn avxLanesGram() { return &avx_lanes::gram; }
 
 }  // namespace exid::detail
 
@@ -34,6 +41,7 @@ TorqueRegressorsFn avxLanesTorqueRegressors() { return &avx_lanes::torqueRegress
 
 namespace exid::detail {
 TorqueRegressorsFn avxLanesTorqueRegressors() { return nullptr; }
+GramFn avxLanesGram() { return nullptr; }
 }  // namespace exid::detail
 
 #endif

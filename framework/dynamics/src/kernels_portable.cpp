@@ -26,32 +26,18 @@ inline void sinCos(int n, const double* q, double* s, double* c) {
 #define EXID_LANES_NS portable
 #define EXID_LANES_KERNEL
 #include "kernels_lanes.hpp"
+#define EXID_GRAM_NS portable
+#include "gram_block.hpp"
 
 namespace exid::detail {
 
 namespace portable {
 namespace {
 
-// GramAccumulator's block update (the compiler vectorises the inner loop with the baseline ISA).
+// GramAccumulator's block update (gram_block.hpp; the compiler vectorises the inner loop with
+// the baseline ISA).
 void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
-  for (int i = 0; i < m; ++i) {
-    double* A = acc + static_cast<long>(i) * ld;
-    const int len = i + 1;
-    int r = 0;
-    for (; r + 4 <= k; r += 4) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const double* B1 = B0 + ldb;
-      const double* B2 = B1 + ldb;
-      const double* B3 = B2 + ldb;
-      const double b0 = B0[i], b1 = B1[i], b2 = B2[i], b3 = B3[i];
-      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j] + b1 * B1[j] + b2 * B2[j] + b3 * B3[j];
-    }
-    for (; r < k; ++r) {
-      const double* B0 = B + static_cast<long>(r) * ldb;
-      const double b0 = B0[i];
-      for (int j = 0; j < len; ++j) A[j] += b0 * B0[j];
-    }
-  }
+  gramBlock(acc, ld, B, ldb, k, m);
 }
 
 // One sample: the lane kernel on one lane (the same bits as every lane of the others).
@@ -82,6 +68,8 @@ const Kernels kTable = {Isa::Portable,
 const Kernels& portableKernels() { return portable::kTable; }
 
 TorqueRegressorsFn portableLanesTorqueRegressors() { return &portable::torqueRegressorsLanes; }
+
+GramFn portableGram() { return &portable::gram; }
 
 void forwardPass(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
                  const double* qdd, Level level, bool gravity) {

@@ -119,6 +119,15 @@ EXID_API void payloadTorqueRegressorVjp(const RobotModel& model, DynamicsData& d
                                         Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd,
                                         Eigen::VectorXd* d_qdd);
 
+/// G += B^T B, lower triangle: G row-major (m x m, leading dimension ldg >= m rounded up to a
+/// multiple of 4), B row-major (k x m, leading dimension ldb >= m rounded up to a multiple of 4,
+/// the padding zeros; G's padding may be written). Each G(i, j), j <= i, adds
+/// the rows' products four rows at a time in row order, the same sequence of IEEE operations
+/// whatever the vector width (no FMA): with the portable kernels (exid/isa.hpp) the same bits
+/// on every CPU, in AVX registers where the CPU has them (otherwise SSE2); with EXID_ISA=avx2,
+/// that copy's FMA kernel. The entries above the diagonal are not touched.
+EXID_API void gramUpdate(double* G, int ldg, const double* B, int ldb, int k, int m);
+
 /// Information-matrix accumulation M = sum_k W_k^T W_k over many small row blocks W_k (e.g. one
 /// regressor per sample), much faster than a rank update per block: rows are grouped by their
 /// first non-zero column (the torque regressor of a chain is block upper triangular), buffered,
