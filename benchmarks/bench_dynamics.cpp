@@ -169,8 +169,8 @@ BENCHMARK(BM_ForwardDynamics);
 
 // ---- the hot kernels, once per instruction set ----
 
-constexpr int kGramSamples = 10000;
-constexpr int kBatch = 64;  // samples per call of torqueRegressors  // samples per iteration of the regressor + Gram benchmark
+constexpr int kGramSamples = 10000;  // samples per iteration of the regressor + Gram benchmark
+constexpr int kBatch = 64;           // samples per call of torqueRegressors
 
 // Operations of GramAccumulator::add(Y) for one sample: per row, its first non-zero column s
 // leaves m = 60 - s entries: m products for the weight, m(m + 1) / 2 multiply-adds for the lower
@@ -259,8 +259,9 @@ void registerKernels() {
   for (Lanes lanes : availableLanes()) {
     const std::string name = std::string("BM_TorqueRegressors/") + lanesName(lanes);
     const bool avx = lanes == Lanes::Avx;
-    kernelInfo()[name] = {"TorqueRegressor", Isa::Portable, c.flops, c.sincos, kBatch,
-                          avx ? "lanes-avx" : "lanes-sse2", avx ? 8.0 : 4.0};
+    kernelInfo()[name] = {"TorqueRegressor", Isa::Portable, c.flops,
+                          c.sincos,          kBatch,        avx ? "lanes-avx" : "lanes-sse2",
+                          avx ? 8.0 : 4.0};
     benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops](benchmark::State& st) {
       setActiveIsa(Isa::Portable);
       setActiveLanes(lanes);

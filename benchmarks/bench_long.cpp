@@ -2,9 +2,9 @@
 // outside (wall time and the child's maximum resident set size, from wait4), as a user sees it.
 //
 //   - recorded PUMA 560 CSV (t, q, qd, qdd, tau: 25 columns, 1 kHz) of 100 k and 1 M samples
-//     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M on 1 and 2 threads) -> batch_ls on 1 thread, and 1 M on 2 (the
-//     recording is streamed from the file: summary experiment.streamed; the experiment's
-//     scan of the time stamps uses as many threads as the estimator);
+//     (EXID_BENCH_LONG_SAMPLES=10000000 adds 10 M on 1 and 2 threads) -> batch_ls on 1 thread, and
+//     1 M on 2 (the recording is streamed from the file: summary experiment.streamed; the
+//     experiment's scan of the time stamps uses as many threads as the estimator);
 //   - the same 1 M samples without qd, qdd -> filtered_ls {cutoff_hz: 20} on 1 and 2 threads;
 //   - examples/real/tx40_filtered_ls.yaml (30 k samples at 5 kHz), tx40_varpro.yaml and
 //     tx40_didim_open.yaml (output error; wall and CPU time).

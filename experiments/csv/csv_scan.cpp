@@ -292,10 +292,9 @@ bool CsvStream::scanInPieces(const exid::CsvReader& like, std::vector<double>* r
           // doubling instead held the old and the new array at once (a 10 M-sample run's peak
           // memory rose by half); a low estimate only means growing as before
           const std::uint64_t bytes0 = std::max<std::uint64_t>(1, start[1] - start[0]);
-          const double per_byte =
-              static_cast<double>(m.t.size()) / static_cast<double>(bytes0);
-          raw->reserve(static_cast<std::size_t>(
-              1.01 * per_byte * static_cast<double>(size - begin) + 16.0));
+          const double per_byte = static_cast<double>(m.t.size()) / static_cast<double>(bytes0);
+          raw->reserve(
+              static_cast<std::size_t>(1.01 * per_byte * static_cast<double>(size - begin) + 16.0));
         }
         for (std::size_t i = 0; i < m.t.size() && increasing; ++i) {
           increasing = (rows == 0 && i == 0) || m.t[i] > prev;

@@ -287,8 +287,8 @@ namespace {
 // (leading dimension ldo): each coefficient summed over k = 0 .. n - 1 in order, the zeros of
 // the transmission skipped (a transmission is mostly zeros). One definition for
 // actuatorRegressor and actuatorRegressors, so that both give the same bits.
-void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long ldj,
-                                double* out, long ldo) {
+void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long ldj, double* out,
+                                long ldo) {
   const int n = static_cast<int>(T.rows());
   for (int i = 0; i < n; ++i) {
     int nz[64];
@@ -324,9 +324,9 @@ void actuatorRegressors(const RobotModel& model, DynamicsData& data, const Drive
                         Eigen::Ref<Eigen::MatrixXd> Y) {
   const int n = model.dof();
   const Eigen::Index K = Qm.rows();
-  check(Qm.cols() == n && QDm.cols() == n && QDDm.cols() == n && QDm.rows() == K &&
-            QDDm.rows() == K,
-        "actuatorRegressors: Qm, QDm, QDDm must be K x n");
+  check(
+      Qm.cols() == n && QDm.cols() == n && QDDm.cols() == n && QDm.rows() == K && QDDm.rows() == K,
+      "actuatorRegressors: Qm, QDm, QDDm must be K x n");
   check(Y.rows() == K * n && Y.cols() == numParameters(model, cols),
         "actuatorRegressors: Y must be K n x numParameters(model, cols)");
   Eigen::VectorXd qm(n), qdm(n), qddm(n);

@@ -212,8 +212,8 @@ void torqueRegressors(const RobotModel& model, DynamicsData& d,
       qdk[j] = qd[k + ld * j];
       qddk[j] = qdd[k + ld * j];
     }
-    kernels().torqueRegressor(model, d, qk.data(), qdk.data(), qddk.data(),
-                              Y.data() + k * n, Y.outerStride());
+    kernels().torqueRegressor(model, d, qk.data(), qdk.data(), qddk.data(), Y.data() + k * n,
+                              Y.outerStride());
   }
 }
 

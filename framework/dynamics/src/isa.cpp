@@ -74,9 +74,8 @@ detail::TorqueRegressorsFn lanesTable(Lanes lanes) {
 }
 
 std::atomic<detail::TorqueRegressorsFn>& lanesInUse() {
-  static std::atomic<detail::TorqueRegressorsFn> a{lanesTable(Lanes::Avx)
-                                                       ? lanesTable(Lanes::Avx)
-                                                       : lanesTable(Lanes::Baseline)};
+  static std::atomic<detail::TorqueRegressorsFn> a{
+      lanesTable(Lanes::Avx) ? lanesTable(Lanes::Avx) : lanesTable(Lanes::Baseline)};
   return a;
 }
 
@@ -106,8 +105,7 @@ void gramUpdate(double* G, int ldg, const double* B, int ldb, int k, int m) {
   detail::activeGram()(G, ldg, B, ldb, k, m);
 }
 
-namespace detail {
-}  // namespace detail
+namespace detail {}  // namespace detail
 
 const char* lanesName(Lanes lanes) { return lanes == Lanes::Avx ? "avx" : "baseline"; }
 

@@ -182,8 +182,8 @@ inline void reversePassImpl(DynamicsData& d, const double* qd, Level level, bool
 // (the portable table runs kernels_lanes.hpp's copy instead, on one lane: the same bits as its
 // lanes; this one is the AVX2 + FMA table's)
 [[maybe_unused]] EXID_KERNEL void torqueRegressor(const RobotModel& model, DynamicsData& d,
-                                                  const double* q,
-                                 const double* qd, const double* qdd, double* Y, long ld) {
+                                                  const double* q, const double* qd,
+                                                  const double* qdd, double* Y, long ld) {
   const int n = d.n;
   forwardPassImpl(model, d, q, qd, qdd, Level::Acceleration, true);
   ancestorSubspacesImpl(d);

@@ -183,8 +183,8 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
           if (c.post_p_zero)
             p.c[r] = Tr::broadcast(c.ppre[r]);
           else
-            p.c[r] = c.ppre[r] + (M.m[r] * c.ppost[0] + M.m[r + 3] * c.ppost[1] +
-                                  M.m[r + 6] * c.ppost[2]);
+            p.c[r] = c.ppre[r] +
+                     (M.m[r] * c.ppost[0] + M.m[r + 3] * c.ppost[1] + M.m[r + 6] * c.ppost[2]);
         }
       } else {
         for (int i = 0; i < 9; ++i) R.m[i] = Tr::broadcast(c.Rfix(i % 3, i / 3));

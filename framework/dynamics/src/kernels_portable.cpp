@@ -41,8 +41,8 @@ void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
 }
 
 // One sample: the lane kernel on one lane (the same bits as every lane of the others).
-void torqueRegressorOne(const RobotModel& model, DynamicsData& d, const double* q,
-                        const double* qd, const double* qdd, double* Y, long ld) {
+void torqueRegressorOne(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
+                        const double* qdd, double* Y, long ld) {
   torqueRegressorsImpl<double>(model, d, 1, q, qd, qdd, 1, Y, ld, 0);
 }
 

@@ -167,7 +167,7 @@ struct DynamicsData {
   detail::Kin ks;
   std::vector<detail::SV> ss, ssb;
   Eigen::VectorXd zero_n, tmp_n;
-  std::vector<double> cq, sq;  // cos q_j, sin q_j (revolute joints; forward pass)
+  std::vector<double> cq, sq;   // cos q_j, sin q_j (revolute joints; forward pass)
   std::vector<double> lane_ws;  // the lane kernels' workspace (kernels_lanes.hpp)
   // forward tangents of v, a and the body forces (3 x 3n each, columns dq_i dqd_i dqdd_i)
   std::vector<Eigen::Matrix<double, 3, Eigen::Dynamic>> tvw, tvv, taw, tav, tfw, tfv;

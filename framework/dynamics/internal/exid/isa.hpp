@@ -27,8 +27,8 @@ EXID_API Isa activeIsa();
 EXID_API void setActiveIsa(Isa isa);
 
 /// Where torqueRegressors (exid/dynamics.hpp) computes several samples at once with the portable
-/// kernels: two in the baseline's vector registers (SSE2 on x86-64), or four in AVX registers where the
-/// build has that copy and the CPU runs it (the default then). Both give the same bits as the
+/// kernels: two in the baseline's vector registers (SSE2 on x86-64), or four in AVX registers where
+/// the build has that copy and the CPU runs it (the default then). Both give the same bits as the
 /// portable torqueRegressor, on every CPU.
 enum class Lanes { Baseline, Avx };
 /// "baseline" or "avx".
