@@ -91,10 +91,8 @@ TorqueRegressorsFn activeLanes() {
 
 GramFn activeGram() {
   if (kernels().isa != Isa::Portable) return kernels().gram;
-  static const GramFn avx = cpuHasAvx() ? avxLanesGram() : nullptr;
-  if (avx && lanesInUse().load(std::memory_order_relaxed) != lanesTable(Lanes::Baseline))
-    return avx;
-  return portableGram();
+  // the lane copy in use decides (the AVX one is only ever chosen where the CPU has AVX)
+  return exid::activeLanes() == Lanes::Avx ? avxLanesGram() : portableGram();
 }
 }  // namespace detail
 
