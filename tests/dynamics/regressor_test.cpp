@@ -204,3 +204,62 @@ TEST(TorqueRegressors, RefusesMismatchedSizes) {
   EXPECT_THROW(torqueRegressors(m, *d, Q, Q, Q, Ybad), Error);
   EXPECT_NO_THROW(torqueRegressors(m, *d, Q, Q, Q, Y));
 }
+
+// The lanes take their joints' sines and cosines several at once (exid/fmath_kernels.hpp); each
+// lane's are the bits of exid::fmath::sincos whatever its neighbours: angles in every case the
+// sine distinguishes (zero, tiny, either side of pi/4, near multiples of pi/2 where the
+// reduction takes two or three rounds, and beyond the vector path, where the lanes go through the
+// scalar function), mixed in every lane position.
+TEST(TorqueRegressors, SameBitsAtEverySineAndCosineCase) {
+  const RobotModel m = puma560Standard();
+  auto d = makeDynamicsData(m);
+  const int n = m.dof();
+  const double pio2 = 1.5707963267948966;
+  const std::vector<double> angles = {0.0,
+                                      -0.0,
+                                      1e-300,
+                                      1e-9,
+                                      -0x1.6a09ep-27,
+                                      0x1.921fcp-1,
+                                      std::nextafter(0x1.921fcp-1, 0.0),
+                                      -M_PI / 4,
+                                      pio2,
+                                      -std::nextafter(pio2, 0.0),
+                                      M_PI,
+                                      3 * pio2,
+                                      1000 * pio2,
+                                      std::nextafter(0x1.921fbp+20, 0.0),
+                                      0x1.921fbp+20,
+                                      -1e7,
+                                      2.5,
+                                      -0.3};
+  const int K = 23;
+  std::mt19937 rng(12);
+  Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+  for (int k = 0; k < K; ++k) {
+    for (int j = 0; j < n; ++j)
+      Q(k, j) = angles[static_cast<std::size_t>(k * n + j) % angles.size()];
+    QD.row(k) = randomVec(rng, n, 2.0).transpose();
+    QDD.row(k) = randomVec(rng, n, 5.0).transpose();
+  }
+  Eigen::MatrixXd one(K * n, 10 * n), Yk(n, 10 * n);
+  for (int k = 0; k < K; ++k) {
+    torqueRegressor(m, *d, Q.row(k).transpose(), QD.row(k).transpose(), QDD.row(k).transpose(), Yk);
+    one.middleRows(k * n, n) = Yk;
+  }
+  const Lanes lanes0 = activeLanes();
+  for (Lanes lanes : availableLanes()) {
+    setActiveLanes(lanes);
+    // every window of the samples, so that each angle meets others in each lane position
+    for (int k0 = 0; k0 < 4; ++k0) {
+      const int cnt = K - k0;
+      Eigen::MatrixXd Y = Eigen::MatrixXd::Constant(cnt * n, 10 * n, 7.0);
+      torqueRegressors(m, *d, Q.bottomRows(cnt), QD.bottomRows(cnt), QDD.bottomRows(cnt), Y);
+      const Eigen::MatrixXd ref = one.bottomRows(cnt * n);
+      EXPECT_EQ(0, std::memcmp(Y.data(), ref.data(), sizeof(double) * Y.size()))
+          << lanesName(lanes) << " from sample " << k0 << ": largest difference "
+          << (Y - ref).cwiseAbs().maxCoeff();
+    }
+  }
+  setActiveLanes(lanes0);
+}

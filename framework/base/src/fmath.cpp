@@ -15,6 +15,8 @@
 #include <cstring>
 #include <limits>
 
+#include "exid/fmath_kernels.hpp"
+
 namespace exid::fmath {
 namespace {
 
@@ -33,71 +35,10 @@ inline std::uint32_t highWord(double x) { return static_cast<std::uint32_t>(bits
 inline double pow2(int k) { return fromBits(static_cast<std::uint64_t>(k + 1023) << 52); }
 
 // ---- sin, cos ----------------------------------------------------------------------------------
+// the kernels, the reduction and the constants are in exid/fmath_kernels.hpp, shared with the
+// vector lanes
 
-constexpr double S1 = -1.66666666666666324348e-01, S2 = 8.33333333332248946124e-03,
-                 S3 = -1.98412698298579493134e-04, S4 = 2.75573137070700676789e-06,
-                 S5 = -2.50507602534068634195e-08, S6 = 1.58969099521155010221e-10;
-constexpr double C1 = 4.16666666666666019037e-02, C2 = -1.38888888888741095749e-03,
-                 C3 = 2.48015872894767294178e-05, C4 = -2.75573143513906633035e-07,
-                 C5 = 2.08757232129817482790e-09, C6 = -1.13596475577881948265e-11;
-
-// sin(x + y) for |x + y| <= pi/4, y the tail of the reduced argument (0 if iy == 0)
-inline double kernelSin(double x, double y, bool iy) {
-  const double z = x * x, w = z * z;
-  const double r = S2 + z * (S3 + z * S4) + z * w * (S5 + z * S6);
-  const double v = z * x;
-  if (!iy) return x + v * (S1 + z * r);
-  return x - ((z * (0.5 * y - v * r) - y) - v * S1);
-}
-
-// cos(x + y) for |x + y| <= pi/4
-inline double kernelCos(double x, double y) {
-  const double z = x * x, w = z * z;
-  const double r = z * (C1 + z * (C2 + z * C3)) + w * w * (C4 + z * (C5 + z * C6));
-  const double hz = 0.5 * z, one_hz = 1.0 - hz;
-  return one_hz + (((1.0 - one_hz) - hz) + (z * r - x * y));
-}
-
-// pi/2 in pieces: pio2_1 has 33 significant bits, so n * pio2_1 is exact for |n| < 2^20; each
-// tail pio2_kt is pi/2 - (pio2_1 + ... + pio2_k) rounded.
-constexpr double kInvPio2 = 6.36619772367581382433e-01;  // 2/pi
-constexpr double kPio2_1 = 1.57079632673412561417e+00, kPio2_1t = 6.07710050650619224932e-11,
-                 kPio2_2 = 6.07710050630396597660e-11, kPio2_2t = 2.02226624879595063154e-21,
-                 kPio2_3 = 2.02226624871116645580e-21, kPio2_3t = 8.47842766036889956997e-32;
-constexpr double kToInt = 1.5 / 2.220446049250313080847e-16;  // 1.5 * 2^52: rounds to an integer
-
-// x = n pi/2 + y[0] + y[1] for pi/4 < |x| < 2^20 pi/2 (fdlibm's medium case: one, two or three
-// pieces of pi/2 as the cancellation requires); returns n.
-int remPio2(double x, double y[2]) {
-  const double fn = (x * kInvPio2 + kToInt) - kToInt;
-  const int n = static_cast<int>(fn);
-  double r = x - fn * kPio2_1;
-  double w = fn * kPio2_1t;  // first round: good to 85 bits
-  y[0] = r - w;
-  const int ex = static_cast<int>((highWord(x) >> 20) & 0x7ff);
-  int ey = static_cast<int>((highWord(y[0]) >> 20) & 0x7ff);
-  if (ex - ey > 16) {  // second round: good to 118 bits
-    double t = r;
-    w = fn * kPio2_2;
-    r = t - w;
-    w = fn * kPio2_2t - ((t - r) - w);
-    y[0] = r - w;
-    ey = static_cast<int>((highWord(y[0]) >> 20) & 0x7ff);
-    if (ex - ey > 49) {  // third round: 151 bits, enough for every double below 2^20 pi/2
-      t = r;
-      w = fn * kPio2_3;
-      r = t - w;
-      w = fn * kPio2_3t - ((t - r) - w);
-      y[0] = r - w;
-    }
-  }
-  y[1] = (r - y[0]) - w;
-  return n;
-}
-
-constexpr std::uint32_t kPio4High = 0x3fe921fb;    // |x| <= pi/4 (high word)
-constexpr std::uint32_t kTinyHigh = 0x3e46a09e;    // |x| < 2^-27 * sqrt(2): sin x = x, cos x = 1
-constexpr std::uint32_t kMediumHigh = 0x413921fb;  // |x| < 2^20 pi/2
+using namespace kernels;
 
 }  // namespace
 
@@ -109,7 +50,7 @@ void sincos(double x, double* s, double* c) {
       *c = 1.0;
       return;
     }
-    *s = kernelSin(x, 0.0, false);
+    *s = kernelSin(x);
     *c = kernelCos(x, 0.0);
     return;
   }
@@ -124,7 +65,7 @@ void sincos(double x, double* s, double* c) {
   }
   double y[2];
   const int n = remPio2(x, y);
-  const double ks = kernelSin(y[0], y[1], true), kc = kernelCos(y[0], y[1]);
+  const double ks = kernelSin(y[0], y[1]), kc = kernelCos(y[0], y[1]);
   switch (n & 3) {
     case 0:
       *s = ks;
@@ -147,18 +88,18 @@ void sincos(double x, double* s, double* c) {
 
 double sin(double x) {
   const std::uint32_t ix = highWord(x) & 0x7fffffffu;
-  if (ix <= kPio4High) return ix < kTinyHigh ? x : kernelSin(x, 0.0, false);
+  if (ix <= kPio4High) return ix < kTinyHigh ? x : kernelSin(x);
   if (ix >= 0x7ff00000u) return x - x;
   if (ix >= kMediumHigh) return std::sin(x);
   double y[2];
   const int n = remPio2(x, y);
   switch (n & 3) {
     case 0:
-      return kernelSin(y[0], y[1], true);
+      return kernelSin(y[0], y[1]);
     case 1:
       return kernelCos(y[0], y[1]);
     case 2:
-      return -kernelSin(y[0], y[1], true);
+      return -kernelSin(y[0], y[1]);
     default:
       return -kernelCos(y[0], y[1]);
   }
@@ -175,11 +116,11 @@ double cos(double x) {
     case 0:
       return kernelCos(y[0], y[1]);
     case 1:
-      return -kernelSin(y[0], y[1], true);
+      return -kernelSin(y[0], y[1]);
     case 2:
       return -kernelCos(y[0], y[1]);
     default:
-      return kernelSin(y[0], y[1], true);
+      return kernelSin(y[0], y[1]);
   }
 }
 

@@ -7,7 +7,8 @@
 // kernels_lanes_avx.cpp (4 lanes in AVX registers). Every lane executes the same sequence of
 // IEEE additions, subtractions and multiplications, never contracted into fused multiply-adds
 // (those sources compile with -ffp-contract=off and without FMA), and the joint sines and
-// cosines are exid's own (exid/fmath.hpp): every lane width, and every CPU, gives the same bits.
+// cosines are exid's own (exid/fmath.hpp, in vector lanes exid/fmath_kernels.hpp): every lane
+// width, and every CPU, gives the same bits.
 //
 // Each including source defines EXID_LANES_NS (the namespace of its copy) and EXID_LANES_KERNEL
 // (the attributes of its entry point) first. Everything here has internal linkage. Not a public
@@ -18,6 +19,7 @@
 #include <cstdint>
 
 #include "exid/fmath.hpp"
+#include "exid/fmath_kernels.hpp"
 #include "rigid_body.hpp"
 
 #if !defined(EXID_LANES_NS) || !defined(EXID_LANES_KERNEL)
@@ -34,6 +36,8 @@ namespace {
 
 typedef double Lane4 __attribute__((vector_size(32)));
 typedef double Lane2 __attribute__((vector_size(16)));
+typedef long long LaneInt4 __attribute__((vector_size(32)));  // lane masks and bit patterns
+typedef long long LaneInt2 __attribute__((vector_size(16)));
 
 template <class T>
 struct LaneTraits;
@@ -47,6 +51,7 @@ struct LaneTraits<double> {
 template <>
 struct LaneTraits<Lane4> {
   static constexpr int kWidth = 4;
+  using Int = LaneInt4;
   static double get(const Lane4& x, int l) { return x[l]; }
   static void set(Lane4& x, int l, double v) { x[l] = v; }
   static Lane4 broadcast(double v) { return Lane4{v, v, v, v}; }
@@ -55,10 +60,31 @@ struct LaneTraits<Lane4> {
 template <>
 struct LaneTraits<Lane2> {
   static constexpr int kWidth = 2;
+  using Int = LaneInt2;
   static double get(const Lane2& x, int l) { return x[l]; }
   static void set(Lane2& x, int l, double v) { x[l] = v; }
   static Lane2 broadcast(double v) { return Lane2{v, v}; }
 };
+
+// sin and cos of each lane: the bits of exid::fmath::sincos for that lane's value, computed for
+// all lanes at once (exid/fmath_kernels.hpp) unless a lane is beyond the vector path's range
+// (|q| >= 2^20 pi/2, inf, NaN: every lane then goes through the scalar function)
+inline void laneSincos(double x, double& s, double& c) { exid::fmath::sincos(x, &s, &c); }
+template <class T>
+inline void laneSincos(const T& x, T& s, T& c) {
+  using Tr = LaneTraits<T>;
+  using I = typename Tr::Int;
+  if (!exid::fmath::kernels::anyBeyondMedium<T, I, Tr::kWidth>(x)) {
+    exid::fmath::kernels::sincosVector<T, I, Tr::kWidth>(x, s, c);
+    return;
+  }
+  for (int l = 0; l < Tr::kWidth; ++l) {
+    double s1, c1;
+    exid::fmath::sincos(Tr::get(x, l), &s1, &c1);
+    Tr::set(s, l, s1);
+    Tr::set(c, l, c1);
+  }
+}
 
 template <class T>
 struct L3 {
@@ -159,12 +185,7 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
       L3<T>& p = ws.p[j];
       if (c.revolute) {
         T sq, cq;
-        for (int l = 0; l < W; ++l) {
-          double s1, c1;
-          exid::fmath::sincos(Tr::get(qj, l), &s1, &c1);
-          Tr::set(sq, l, s1);
-          Tr::set(cq, l, c1);
-        }
+        laneSincos(qj, sq, cq);
         LR<T> M;
         for (int r = 0; r < 3; ++r) {
           M.m[r] = c.Rpre(r, 0) * cq + c.Rpre(r, 1) * sq;

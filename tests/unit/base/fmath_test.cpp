@@ -14,6 +14,8 @@
 #include <random>
 #include <vector>
 
+#include "exid/fmath_kernels.hpp"  // the vector lanes (internal)
+
 namespace {
 
 // the spacing of doubles at |ref| (a subnormal's spacing below DBL_MIN)
@@ -117,6 +119,144 @@ TEST(Fmath, SinCosSpecialValues) {
     exid::fmath::sincos(x, &s, &c);
     EXPECT_TRUE(std::isnan(s) && std::isnan(c)) << x;
   }
+}
+
+// the vector lanes' sine and cosine (exid/fmath_kernels.hpp, which the torque regressors of
+// several samples use) give each lane the bits of the scalar sincos, in every case sincos
+// distinguishes: tiny, |x| <= pi/4 and either side of it, reductions with one, two and three
+// rounds, and the bound beyond which the caller must use the scalar function (which
+// anyBeyondMedium reports, and only then)
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wpsabi"  // 4-double vectors passed within this file
+#endif
+typedef double Lane2 __attribute__((vector_size(16)));
+typedef long long LaneInt2 __attribute__((vector_size(16)));
+typedef double Lane4 __attribute__((vector_size(32)));
+typedef long long LaneInt4 __attribute__((vector_size(32)));
+
+template <class T, class I, int W>
+void checkLanes(const std::vector<double>& xs, const char* what, std::size_t* compared,
+                std::size_t* refused) {
+  namespace K = exid::fmath::kernels;
+  for (std::size_t i = 0; i + W <= xs.size(); i += W) {
+    T x;
+    bool beyond = false;
+    for (int l = 0; l < W; ++l) {
+      x[l] = xs[i + static_cast<std::size_t>(l)];
+      beyond |= !(std::fabs(x[l]) < 0x1.921fbp+20);  // sincos's own bound: high word 0x413921fb
+    }
+    ASSERT_EQ((K::anyBeyondMedium<T, I, W>(x)), beyond) << what << " at " << x[0];
+    if (beyond) {
+      ++*refused;
+      continue;
+    }
+    T s, c;
+    K::sincosVector<T, I, W>(x, s, c);
+    for (int l = 0; l < W; ++l) {
+      double s1, c1;
+      exid::fmath::sincos(x[l], &s1, &c1);
+      const double sl = s[l], cl = c[l];
+      ASSERT_EQ(std::memcmp(&sl, &s1, sizeof s1), 0)
+          << what << ": sine of lane " << l << " at " << x[l] << ": " << sl << " vs " << s1;
+      ASSERT_EQ(std::memcmp(&cl, &c1, sizeof c1), 0)
+          << what << ": cosine of lane " << l << " at " << x[l] << ": " << cl << " vs " << c1;
+      ++*compared;
+    }
+  }
+}
+
+// the reduction x = n pi/2 + y0 + y1 of each lane is remPio2's, bit for bit, on both sides of
+// the exponent tests that choose its second and third rounds (|y0| near 2^-16 and 2^-49 of |x|)
+template <class T, class I, int W>
+void checkReduction(const std::vector<double>& xs, int* rounds) {
+  namespace K = exid::fmath::kernels;
+  for (std::size_t i = 0; i + W <= xs.size(); i += W) {
+    T x, fn, y0, y1;
+    for (int l = 0; l < W; ++l) x[l] = xs[i + static_cast<std::size_t>(l)];
+    K::remPio2Vector<T, I, W>(x, fn, y0, y1);
+    for (int l = 0; l < W; ++l) {
+      double y[2];
+      const int n = K::remPio2(x[l], y);
+      const double a0 = y0[l], a1 = y1[l];
+      ASSERT_EQ(static_cast<double>(n), fn[l]) << x[l];
+      ASSERT_EQ(std::memcmp(&a0, &y[0], sizeof a0), 0) << "y0 at " << x[l];
+      ASSERT_EQ(std::memcmp(&a1, &y[1], sizeof a1), 0) << "y1 at " << x[l];
+      const int ex = std::ilogb(x[l]), ey = y[0] == 0 ? -1100 : std::ilogb(y[0]);
+      ++rounds[ex - ey > 49 ? 2 : ex - ey > 16 ? 1 : 0];
+    }
+  }
+}
+
+TEST(Fmath, VectorReductionIsTheScalarOne) {
+  const long double pio2 = 1.570796326794896619231321691639751442L;
+  std::vector<double> xs;
+  for (int n = 1; n < 3000; n += 7)
+    for (double e :
+         {15.5, 16.0, 16.25, 16.5, 16.75, 17.0, 17.5, 48.5, 49.0, 49.25, 49.5, 49.75, 50.0, 50.5})
+      for (double sign : {1.0, -1.0}) {
+        const double x = static_cast<double>(n * pio2 * (1.0L + sign * std::exp2(-e)));
+        xs.push_back(x);
+        xs.push_back(-std::nextafter(x, HUGE_VAL));
+      }
+  for (double x : nearMultiplesOfHalfPi(500)) xs.push_back(x);
+  for (double x : uniform(-1.6e6, 1.6e6, 20000, 36)) xs.push_back(x);
+  std::vector<double> medium;  // remPio2's domain: pi/4 < |x| < 2^20 pi/2
+  for (double x : xs)
+    if (std::fabs(x) > M_PI / 4 && std::fabs(x) < 0x1.921fbp+20) medium.push_back(x);
+  int rounds[3] = {0, 0, 0};
+  checkReduction<Lane2, LaneInt2, 2>(medium, rounds);
+  checkReduction<Lane4, LaneInt4, 4>(medium, rounds);
+  // each number of rounds was taken, and beside the others in one vector
+  EXPECT_GT(rounds[0], 1000);
+  EXPECT_GT(rounds[1], 1000);
+  EXPECT_GT(rounds[2], 1000);
+}
+
+TEST(Fmath, VectorLanesGiveTheScalarBits) {
+  const double inf = std::numeric_limits<double>::infinity();
+  std::vector<double> edges = {0.0,
+                               -0.0,
+                               1e-300,
+                               -4.9e-324,
+                               0x1.6a09ep-27,
+                               -0x1.6a09ep-27,
+                               std::nextafter(0x1.6a09ep-27, 0.0),
+                               1e-9,
+                               0x1.921fcp-1,
+                               -0x1.921fcp-1,
+                               std::nextafter(0x1.921fcp-1, 0.0),
+                               M_PI / 4,
+                               -M_PI / 4,
+                               1.0,
+                               -2.5,
+                               M_PI,
+                               0x1.921fbp+20,
+                               std::nextafter(0x1.921fbp+20, 0.0),
+                               -0x1.921fbp+20,
+                               1e7,
+                               inf,
+                               -inf,
+                               std::numeric_limits<double>::quiet_NaN()};
+  std::vector<std::vector<double>> sets = {edges,
+                                           uniform(-M_PI / 4, M_PI / 4, 40000, 31),
+                                           uniform(-4.0, 4.0, 100000, 32),
+                                           uniform(-2000.0, 2000.0, 40000, 33),
+                                           uniform(-1.6e6, 1.6e6, 40000, 34),
+                                           uniform(-1e-6, 1e-6, 20000, 35),
+                                           nearMultiplesOfHalfPi(3000)};
+  // every case beside every other in one vector: each edge value in each lane with each other
+  std::vector<double> mixed;
+  for (double a : edges)
+    for (double b : edges)
+      for (double e : {a, b, 1.0, b, a, -3.0, a, b}) mixed.push_back(e);
+  sets.push_back(mixed);
+  std::size_t compared = 0, refused = 0;
+  for (const auto& xs : sets) {
+    checkLanes<Lane2, LaneInt2, 2>(xs, "2 lanes", &compared, &refused);
+    checkLanes<Lane4, LaneInt4, 4>(xs, "4 lanes", &compared, &refused);
+  }
+  EXPECT_GT(compared, 500000u);
+  EXPECT_GT(refused, 100u);  // the vectors holding 2^20 pi/2, 1e7, inf or NaN
 }
 
 TEST(Fmath, ExpWithinOneUlp) {
