@@ -230,6 +230,43 @@ void registerKernel(const std::string& kernel, double flops, int sincos, Body bo
   }
 }
 
+// kBatch samples of the fixture, as the several-samples kernels take them
+struct Batch {
+  Eigen::MatrixXd Q, QD, QDD;
+};
+
+// A kernel of several samples at once on each lane copy; the table gives the time per sample
+// against the copy's own peak.
+template <class Body>
+void registerLanes(const std::string& bench, const std::string& kernel, FlopCount c, Body body) {
+  for (Lanes lanes : availableLanes()) {
+    const std::string name = "BM_" + bench + "/" + lanesName(lanes);
+    const bool avx = lanes == Lanes::Avx;
+    kernelInfo()[name] = {kernel,         Isa::Portable, c.flops,
+                          c.sincos,       kBatch,        avx ? "lanes-avx" : "lanes-sse2",
+                          avx ? 8.0 : 4.0};
+    benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops,
+                                                body](benchmark::State& st) {
+      setActiveIsa(Isa::Portable);
+      setActiveLanes(lanes);
+      Fixture& f = fx();
+      Batch b{Eigen::MatrixXd(kBatch, 6), Eigen::MatrixXd(kBatch, 6), Eigen::MatrixXd(kBatch, 6)};
+      int k0 = 0;
+      for (auto _ : st) {
+        for (int s = 0; s < kBatch; ++s) {
+          b.Q.row(s) = f.q[static_cast<size_t>(k0 + s)].transpose();
+          b.QD.row(s) = f.qd[static_cast<size_t>(k0 + s)].transpose();
+          b.QDD.row(s) = f.qdd[static_cast<size_t>(k0 + s)].transpose();
+        }
+        body(b);
+        k0 = (k0 + kBatch) & (Fixture::kSamples - 1);
+      }
+      st.counters["flop/s"] =
+          benchmark::Counter(flops * kBatch, benchmark::Counter::kIsIterationInvariantRate);
+    });
+  }
+}
+
 void registerKernels() {
   const RobotModel& m = fx().model;
   const auto flops = [&](Kernel k) { return kernelFlops(m, k); };
@@ -255,33 +292,29 @@ void registerKernels() {
   });
   // The same regressor, 64 samples per call of torqueRegressors (the portable kernels, four
   // samples at once in the vector lanes: exid/isa.hpp's Lanes; the same bits). Peak: SSE2 as
-  // above; AVX without FMA 4 doubles x 2 (one add, one multiply) = 8.
-  for (Lanes lanes : availableLanes()) {
-    const std::string name = std::string("BM_TorqueRegressors/") + lanesName(lanes);
-    const bool avx = lanes == Lanes::Avx;
-    kernelInfo()[name] = {"TorqueRegressor", Isa::Portable, c.flops,
-                          c.sincos,          kBatch,        avx ? "lanes-avx" : "lanes-sse2",
-                          avx ? 8.0 : 4.0};
-    benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops](benchmark::State& st) {
-      setActiveIsa(Isa::Portable);
-      setActiveLanes(lanes);
-      Fixture& f = fx();
-      Eigen::MatrixXd Q(kBatch, 6), QD(kBatch, 6), QDD(kBatch, 6), Y(kBatch * 6, 60);
-      int k0 = 0;
-      for (auto _ : st) {
-        for (int s = 0; s < kBatch; ++s) {
-          Q.row(s) = f.q[static_cast<size_t>(k0 + s)].transpose();
-          QD.row(s) = f.qd[static_cast<size_t>(k0 + s)].transpose();
-          QDD.row(s) = f.qdd[static_cast<size_t>(k0 + s)].transpose();
-        }
-        torqueRegressors(f.model, *f.data, Q, QD, QDD, Y);
-        benchmark::DoNotOptimize(Y.data());
-        k0 = (k0 + kBatch) & (Fixture::kSamples - 1);
-      }
-      st.counters["flop/s"] =
-          benchmark::Counter(flops * kBatch, benchmark::Counter::kIsIterationInvariantRate);
-    });
-  }
+  // above; AVX without FMA 4 doubles x 2 (one add, one multiply) = 8. Likewise the RNEA
+  // (inverseDynamicsSamples) and the energy regressor (energyRegressors).
+  registerLanes("TorqueRegressors", "TorqueRegressor", c, [](const Batch& b) {
+    Fixture& f = fx();
+    static Eigen::MatrixXd Y(kBatch * 6, 60);
+    torqueRegressors(f.model, *f.data, b.Q, b.QD, b.QDD, Y);
+    benchmark::DoNotOptimize(Y.data());
+  });
+  registerLanes("InverseDynamicsSamples", "InverseDynamics", flops(Kernel::InverseDynamics),
+                [](const Batch& b) {
+                  Fixture& f = fx();
+                  static Eigen::MatrixXd T(kBatch, 6);
+                  inverseDynamicsSamples(f.model, *f.data, b.Q, b.QD, b.QDD, T);
+                  benchmark::DoNotOptimize(T.data());
+                });
+  registerLanes("EnergyRegressors", "EnergyRegressor", flops(Kernel::EnergyRegressor),
+                [](const Batch& b) {
+                  Fixture& f = fx();
+                  static Eigen::MatrixXd K(kBatch, 60), U(kBatch, 60);
+                  energyRegressors(f.model, *f.data, b.Q, b.QD, K, U);
+                  benchmark::DoNotOptimize(K.data());
+                  benchmark::DoNotOptimize(U.data());
+                });
   // Regressor + information matrix W^T W over 10,000 samples; the table gives the time per sample.
   {
     Eigen::MatrixXd Y(6, 60);

@@ -3,7 +3,7 @@ cmake_policy(SET CMP0057 NEW)  # if(... IN_LIST ...)
 # exid::detail::avx2Kernels() and nothing else outside itself: no weak or global symbol (an Eigen
 # or exid inline function compiled for AVX2) that the linker could pick instead of the baseline
 # copy of another source. Usage: cmake -DNM=<nm> -DOBJECTS=<objects;...> -P ExidCheckIsaSymbols.cmake
-# The same for kernels_lanes_avx.cpp (-mavx) and exid::detail::avxLanesTorqueRegressors().
+# The same for kernels_lanes_avx.cpp (-mavx) and exid::detail::avxLaneKernels().
 function(check_object stem allowed)
 set(avx2_object "")
 foreach(obj ${OBJECTS})
@@ -44,4 +44,4 @@ message(STATUS "${stem}: ${allowed} is its only global symbol")
 endfunction()
 check_object(kernels_avx2 "exid::detail::avx2Kernels()")
 check_object(kernels_lanes_avx
-  "exid::detail::avxLanesTorqueRegressors();exid::detail::avxLanesGram()")
+  "exid::detail::avxLaneKernels();exid::detail::avxLanesGram()")

@@ -322,13 +322,24 @@ class IntegralModel : public exid::ObservationModel {
     Eigen::MatrixXd E = Eigen::MatrixXd::Zero(K, P), F = Eigen::MatrixXd::Zero(K, P);
     auto data = exid::makeDynamicsData(Rb);
     Eigen::VectorXd qm, qdm, q, qd;
-    Eigen::RowVectorXd kin(ni), pot(ni);
+    // the energy regressors of a block of samples at once (exid::energyRegressors: several per
+    // vector register, the bits of one at a time)
+    constexpr int kBlock = 256;
+    const int nt = ni / 10;  // the tree's joints (measuredToJoint's q)
+    Eigen::MatrixXd Qb(kBlock, nt), QDb(kBlock, nt), kin(kBlock, ni), pot(kBlock, ni);
     for (int k = 0; k < K; ++k) {
       qm = s.q.row(k).transpose();
       qdm = s.qd.row(k).transpose();
+      const int b = k % kBlock;
       exid::measuredToJoint(Rb, qm, qdm, qdm, &q, &qd, nullptr);
-      exid::energyRegressor(Rb, *data, q, qd, kin, pot);
-      E.row(k).head(ni) = kin + pot;
+      Qb.row(b) = q.transpose();
+      QDb.row(b) = qd.transpose();
+      if (b == kBlock - 1 || k == K - 1) {
+        const int cnt = b + 1, k0 = k - b;
+        exid::energyRegressors(Rb, *data, Qb.topRows(cnt), QDb.topRows(cnt), kin.topRows(cnt),
+                               pot.topRows(cnt));
+        E.block(k0, 0, cnt, ni) = kin.topRows(cnt) + pot.topRows(cnt);
+      }
       for (int j = 0; j < n; ++j) {
         int c = ni + nd * j;
         const double v = qdm[j];

@@ -89,7 +89,9 @@ TEST(GramUpdate, LowerTriangleOfBtBWithTheSameBitsFromEveryLaneCopy) {
   }
   setActiveIsa(isa0);
   setActiveLanes(lanes0);
-  if (availableLanes().size() > 1) EXPECT_EQ(compared, 35);
+  if (availableLanes().size() > 1) {
+    EXPECT_EQ(compared, 35);
+  }
   std::vector<double> G(16), B(16);
   EXPECT_THROW(gramUpdate(G.data(), 3, B.data(), 4, 2, 3), Error);  // ld below 4
   EXPECT_THROW(gramUpdate(G.data(), 4, B.data(), 3, 2, 3), Error);

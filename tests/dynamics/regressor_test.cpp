@@ -195,6 +195,68 @@ TEST(TorqueRegressors, SameBitsAsOneSampleAtATime) {
   EXPECT_GE(compared, static_cast<int>(robots.size()) * 7);
 }
 
+// inverseDynamicsSamples likewise: each sample's torques are the bits inverseDynamics gives for
+// it alone (with the model's parameters and with others), on every copy; and they are the
+// torques of the independent reference.
+TEST(InverseDynamicsSamples, SameBitsAsOneSampleAtATime) {
+  std::mt19937 rng(13);
+  std::vector<RobotModel> robots = {puma560Standard(), panda()};
+  for (int t = 0; t < 6; ++t) robots.push_back(randomTree(rng, 2 + t, t % 2 == 0));
+  const Isa isa0 = activeIsa();
+  const Lanes lanes0 = activeLanes();
+  int compared = 0;
+  for (const RobotModel& m : robots) {
+    auto d = makeDynamicsData(m);
+    const int n = m.dof();
+    const Eigen::VectorXd other = 1.5 * m.inertialParameters();
+    for (int K : {1, 2, 3, 4, 5, 7, 9}) {
+      Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+      for (int k = 0; k < K; ++k) {
+        Q.row(k) = randomVec(rng, n, 3.0).transpose();
+        QD.row(k) = randomVec(rng, n, 2.0).transpose();
+        QDD.row(k) = randomVec(rng, n, 5.0).transpose();
+      }
+      for (const Eigen::VectorXd* pi : {static_cast<const Eigen::VectorXd*>(nullptr), &other})
+        for (Isa isa : availableIsas()) {
+          setActiveIsa(isa);
+          Eigen::MatrixXd one(K, n);
+          for (int k = 0; k < K; ++k)
+            one.row(k) = inverseDynamics(m, *d, Q.row(k).transpose(), QD.row(k).transpose(),
+                                         QDD.row(k).transpose(), pi)
+                             .transpose();
+          for (Lanes lanes : availableLanes()) {
+            setActiveLanes(lanes);
+            Eigen::MatrixXd T = Eigen::MatrixXd::Constant(K, n, 7.0);
+            inverseDynamicsSamples(m, *d, Q, QD, QDD, T, pi);
+            EXPECT_EQ(0, std::memcmp(T.data(), one.data(), sizeof(double) * T.size()))
+                << m.name << " K=" << K << " " << isaName(isa) << " " << lanesName(lanes)
+                << ": largest difference " << (T - one).cwiseAbs().maxCoeff();
+            ++compared;
+          }
+        }
+      Eigen::MatrixXd T(K, n);
+      inverseDynamicsSamples(m, *d, Q, QD, QDD, T, &other);
+      for (int k = 0; k < K; ++k) {
+        const Eigen::VectorXd ref = refTorques(m, Q.row(k).transpose(), QD.row(k).transpose(),
+                                               QDD.row(k).transpose(), other);
+        EXPECT_LT(relErr(T.row(k).transpose(), ref), 1e-10) << m.name << " sample " << k;
+      }
+    }
+  }
+  setActiveIsa(isa0);
+  setActiveLanes(lanes0);
+  EXPECT_GE(compared, static_cast<int>(robots.size()) * 7 * 2);
+  const RobotModel m = puma560Standard();
+  auto d = makeDynamicsData(m);
+  Eigen::MatrixXd Q = Eigen::MatrixXd::Zero(3, 6), T(3, 6);
+  EXPECT_THROW(inverseDynamicsSamples(m, *d, Q, Q, Eigen::MatrixXd::Zero(2, 6), T), Error);
+  Eigen::MatrixXd Tbad(3, 5);
+  EXPECT_THROW(inverseDynamicsSamples(m, *d, Q, Q, Q, Tbad), Error);
+  const Eigen::VectorXd short_pi = Eigen::VectorXd::Zero(59);
+  EXPECT_THROW(inverseDynamicsSamples(m, *d, Q, Q, Q, T, &short_pi), Error);
+  EXPECT_NO_THROW(inverseDynamicsSamples(m, *d, Q, Q, Q, T));
+}
+
 TEST(TorqueRegressors, RefusesMismatchedSizes) {
   const RobotModel m = puma560Standard();
   auto d = makeDynamicsData(m);

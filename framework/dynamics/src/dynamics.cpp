@@ -174,6 +174,49 @@ void torqueRegressor(const RobotModel& model, DynamicsData& d, const Eigen::Vect
   kernels().torqueRegressor(model, d, q.data(), qd.data(), qdd.data(), Y.data(), Y.outerStride());
 }
 
+namespace {
+// The samples' states as the lane kernels read them: state j of sample k at x[k + ld j], one ld
+// for the three (copies when the matrices' strides differ, which Eigen::Ref's blocks of one
+// matrix never do).
+struct SampleStates {
+  const double *q, *qd, *qdd;
+  long ld;
+  Eigen::MatrixXd qc, qdc, qddc;
+  SampleStates(const Eigen::Ref<const Eigen::MatrixXd>& Q,
+               const Eigen::Ref<const Eigen::MatrixXd>& QD,
+               const Eigen::Ref<const Eigen::MatrixXd>* QDD)
+      : q(Q.data()),
+        qd(QD.data()),
+        qdd(QDD ? QDD->data() : nullptr),
+        ld(static_cast<long>(Q.outerStride())) {
+    const bool same =
+        Q.outerStride() == QD.outerStride() && (!QDD || Q.outerStride() == QDD->outerStride());
+    if (same) return;
+    qc = Q;
+    qdc = QD;
+    q = qc.data();
+    qd = qdc.data();
+    if (QDD) {
+      qddc = *QDD;
+      qdd = qddc.data();
+    }
+    ld = static_cast<long>(Q.rows());
+  }
+  // sample k's states as vectors (the one-sample kernels of another copy)
+  void sample(Eigen::Index k, int n, Eigen::VectorXd& a, Eigen::VectorXd& b,
+              Eigen::VectorXd& c) const {
+    a.resize(n);
+    b.resize(n);
+    c.resize(n);
+    for (int j = 0; j < n; ++j) {
+      a[j] = q[k + ld * j];
+      b[j] = qd[k + ld * j];
+      c[j] = qdd ? qdd[k + ld * j] : 0.0;
+    }
+  }
+};
+}  // namespace
+
 void torqueRegressors(const RobotModel& model, DynamicsData& d,
                       const Eigen::Ref<const Eigen::MatrixXd>& Q,
                       const Eigen::Ref<const Eigen::MatrixXd>& QD,
@@ -184,36 +227,73 @@ void torqueRegressors(const RobotModel& model, DynamicsData& d,
   check(Q.cols() == n && QD.cols() == n && QDD.cols() == n && QD.rows() == K && QDD.rows() == K,
         "torqueRegressors: Q, QD, QDD must be K x n");
   check(Y.rows() == K * n && Y.cols() == 10 * n, "torqueRegressors: Y must be K n x 10n");
-  // (the same stride for Q, QD, QDD: copies when they differ, which Eigen::Ref's rows never do
-  // for the blocks of one matrix)
-  const bool same = Q.outerStride() == QD.outerStride() && Q.outerStride() == QDD.outerStride();
-  Eigen::MatrixXd qc, qdc, qddc;
-  const double *q = Q.data(), *qd = QD.data(), *qdd = QDD.data();
-  long ld = static_cast<long>(Q.outerStride());
-  if (!same) {
-    qc = Q;
-    qdc = QD;
-    qddc = QDD;
-    q = qc.data();
-    qd = qdc.data();
-    qdd = qddc.data();
-    ld = static_cast<long>(K);
-  }
-  const TorqueRegressorsFn lanes = detail::activeLanes();
-  if (lanes) {
-    lanes(model, d, static_cast<int>(K), q, qd, qdd, ld, Y.data(), Y.outerStride(), n);
+  const SampleStates x(Q, QD, &QDD);
+  if (const detail::LaneKernels* lanes = detail::activeLanes()) {
+    lanes->torqueRegressors(model, d, static_cast<int>(K), x.q, x.qd, x.qdd, x.ld, Y.data(),
+                            Y.outerStride(), n);
     return;
   }
   // another copy of the kernels (EXID_ISA): its own torqueRegressor, sample by sample
-  Eigen::VectorXd qk(n), qdk(n), qddk(n);
+  Eigen::VectorXd qk, qdk, qddk;
   for (Eigen::Index k = 0; k < K; ++k) {
-    for (int j = 0; j < n; ++j) {
-      qk[j] = q[k + ld * j];
-      qdk[j] = qd[k + ld * j];
-      qddk[j] = qdd[k + ld * j];
-    }
+    x.sample(k, n, qk, qdk, qddk);
     kernels().torqueRegressor(model, d, qk.data(), qdk.data(), qddk.data(), Y.data() + k * n,
                               Y.outerStride());
+  }
+}
+
+void inverseDynamicsSamples(const RobotModel& model, DynamicsData& d,
+                            const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                            const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                            const Eigen::Ref<const Eigen::MatrixXd>& QDD,
+                            Eigen::Ref<Eigen::MatrixXd> Tau, const Eigen::VectorXd* pi) {
+  prepare(model, d);
+  const int n = d.n;
+  const Eigen::Index K = Q.rows();
+  check(Q.cols() == n && QD.cols() == n && QDD.cols() == n && QD.rows() == K && QDD.rows() == K,
+        "inverseDynamicsSamples: Q, QD, QDD must be K x n");
+  check(Tau.rows() == K && Tau.cols() == n, "inverseDynamicsSamples: Tau must be K x n");
+  if (pi) checkSize(*pi, 10 * n, "pi", "inverseDynamicsSamples");
+  const SampleStates x(Q, QD, &QDD);
+  const double* p = pi ? pi->data() : nullptr;
+  if (const detail::LaneKernels* lanes = detail::activeLanes()) {
+    lanes->inverseDynamics(model, d, static_cast<int>(K), x.q, x.qd, x.qdd, x.ld, p, Tau.data(),
+                           Tau.outerStride());
+    return;
+  }
+  Eigen::VectorXd qk, qdk, qddk, tau(n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    x.sample(k, n, qk, qdk, qddk);
+    kernels().inverseDynamics(model, d, qk.data(), qdk.data(), qddk.data(), p, tau.data());
+    Tau.row(k) = tau.transpose();
+  }
+}
+
+void energyRegressors(const RobotModel& model, DynamicsData& d,
+                      const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                      const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                      Eigen::Ref<Eigen::MatrixXd> kinetic, Eigen::Ref<Eigen::MatrixXd> potential) {
+  prepare(model, d);
+  const int n = d.n;
+  const Eigen::Index K = Q.rows();
+  check(Q.cols() == n && QD.cols() == n && QD.rows() == K, "energyRegressors: Q, QD must be K x n");
+  check(kinetic.rows() == K && kinetic.cols() == 10 * n && potential.rows() == K &&
+            potential.cols() == 10 * n,
+        "energyRegressors: kinetic and potential must be K x 10n");
+  const SampleStates x(Q, QD, nullptr);
+  if (const detail::LaneKernels* lanes = detail::activeLanes();
+      lanes && kinetic.outerStride() == potential.outerStride()) {
+    lanes->energyRegressors(model, d, static_cast<int>(K), x.q, x.qd, x.ld, kinetic.data(),
+                            potential.data(), kinetic.outerStride());
+    return;
+  }
+  Eigen::VectorXd qk, qdk, unused;
+  Eigen::RowVectorXd kin(10 * n), pot(10 * n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    x.sample(k, n, qk, qdk, unused);
+    kernels().energyRegressor(model, d, qk.data(), qdk.data(), kin.data(), pot.data());
+    kinetic.row(k) = kin;
+    potential.row(k) = pot;
   }
 }
 

@@ -66,15 +66,14 @@ std::atomic<const detail::Kernels*>& active() {
   return a;
 }
 
-detail::TorqueRegressorsFn lanesTable(Lanes lanes) {
-  if (lanes == Lanes::Baseline) return detail::portableLanesTorqueRegressors();
-  static const detail::TorqueRegressorsFn avx =
-      cpuHasAvx() ? detail::avxLanesTorqueRegressors() : nullptr;
+const detail::LaneKernels* lanesTable(Lanes lanes) {
+  if (lanes == Lanes::Baseline) return detail::portableLaneKernels();
+  static const detail::LaneKernels* avx = cpuHasAvx() ? detail::avxLaneKernels() : nullptr;
   return avx;
 }
 
-std::atomic<detail::TorqueRegressorsFn>& lanesInUse() {
-  static std::atomic<detail::TorqueRegressorsFn> a{
+std::atomic<const detail::LaneKernels*>& lanesInUse() {
+  static std::atomic<const detail::LaneKernels*> a{
       lanesTable(Lanes::Avx) ? lanesTable(Lanes::Avx) : lanesTable(Lanes::Baseline)};
   return a;
 }
@@ -84,7 +83,7 @@ std::atomic<detail::TorqueRegressorsFn>& lanesInUse() {
 namespace detail {
 const Kernels& kernels() { return *active().load(std::memory_order_relaxed); }
 
-TorqueRegressorsFn activeLanes() {
+const LaneKernels* activeLanes() {
   if (kernels().isa != Isa::Portable) return nullptr;
   return lanesInUse().load(std::memory_order_relaxed);
 }
@@ -113,14 +112,10 @@ std::vector<Lanes> availableLanes() {
   return out;
 }
 
-Lanes activeLanes() {
-  return lanesInUse().load(std::memory_order_relaxed) == lanesTable(Lanes::Baseline)
-             ? Lanes::Baseline
-             : Lanes::Avx;
-}
+Lanes activeLanes() { return lanesInUse().load(std::memory_order_relaxed)->lanes; }
 
 void setActiveLanes(Lanes lanes) {
-  const detail::TorqueRegressorsFn f = lanesTable(lanes);
+  const detail::LaneKernels* f = lanesTable(lanes);
   check(f != nullptr, std::string("setActiveLanes: ") + lanesName(lanes) +
                           " is not available on this CPU or in this build");
   lanesInUse().store(f, std::memory_order_relaxed);

@@ -31,17 +31,33 @@ struct Kernels {
 
 const Kernels& portableKernels();
 
-/// The torque regressors of `count` samples (kernels_lanes.hpp): sample k's q_j at
-/// q[k + ldx j] (likewise qd, qdd), its n x 10n regressor at Y + k strideY with leading
-/// dimension ldY. Every copy gives the same bits as the portable torqueRegressor.
+/// The kernels of several samples at once (kernels_lanes.hpp), one sample per vector lane. Every
+/// copy gives the same bits as the portable one-sample kernel for each sample.
+/// torqueRegressors: sample k's q_j at q[k + ldx j] (likewise qd, qdd), its n x 10n regressor
+/// at Y + k strideY with leading dimension ldY.
 using TorqueRegressorsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
                                     const double* qd, const double* qdd, long ldx, double* Y,
                                     long ldY, long strideY);
+/// inverseDynamics (RNEA): sample k's tau_j at tau[k + ldt j]; pi as Kernels::inverseDynamics.
+using InverseDynamicsLanesFn = void (*)(const RobotModel&, DynamicsData&, int count,
+                                        const double* q, const double* qd, const double* qdd,
+                                        long ldx, const double* pi, double* tau, long ldt);
+/// energyRegressors: sample k's kinetic and potential rows at kinetic[k + ldk c] and
+/// potential[k + ldk c], c < 10n.
+using EnergyRegressorsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
+                                    const double* qd, long ldx, double* kinetic, double* potential,
+                                    long ldk);
+struct LaneKernels {
+  Lanes lanes;
+  TorqueRegressorsFn torqueRegressors;
+  InverseDynamicsLanesFn inverseDynamics;
+  EnergyRegressorsFn energyRegressors;
+};
 /// Two samples at once in the baseline's registers (SSE2).
-TorqueRegressorsFn portableLanesTorqueRegressors();
+const LaneKernels* portableLaneKernels();
 /// Four samples at once in AVX registers; null when the build has no such copy (it does not
 /// check the CPU).
-TorqueRegressorsFn avxLanesTorqueRegressors();
+const LaneKernels* avxLaneKernels();
 /// Null when the build has no AVX2 copy (not x86-64, or not GCC/Clang).
 const Kernels* avx2Kernels();
 
@@ -57,8 +73,8 @@ GramFn activeGram();
 /// The copy in use (EXID_ISA, else the best the CPU runs; setActiveIsa).
 const Kernels& kernels();
 
-/// The lane copy of torqueRegressors in use (setActiveLanes); null when the kernels in use are
-/// not the portable ones (their torqueRegressor runs sample by sample then).
-TorqueRegressorsFn activeLanes();
+/// The lane copy in use (setActiveLanes); null when the kernels in use are not the portable ones
+/// (theirs run sample by sample then).
+const LaneKernels* activeLanes();
 
 }  // namespace exid::detail

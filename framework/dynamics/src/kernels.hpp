@@ -203,15 +203,17 @@ inline void reversePassImpl(DynamicsData& d, const double* qd, Level level, bool
   }
 }
 
-EXID_KERNEL void inverseDynamics(const RobotModel& model, DynamicsData& d, const double* q,
-                                 const double* qd, const double* qdd, const double* pi,
-                                 double* tau) {
+[[maybe_unused]] EXID_KERNEL void inverseDynamics(const RobotModel& model, DynamicsData& d,
+                                                  const double* q, const double* qd,
+                                                  const double* qdd, const double* pi,
+                                                  double* tau) {
   forwardPassImpl(model, d, q, qd, qdd, Level::Acceleration, true);
   rneaBackwardImpl(model, d, pi, tau);
 }
 
-EXID_KERNEL void energyRegressor(const RobotModel& model, DynamicsData& d, const double* q,
-                                 const double* qd, double* kinetic, double* potential) {
+[[maybe_unused]] EXID_KERNEL void energyRegressor(const RobotModel& model, DynamicsData& d,
+                                                  const double* q, const double* qd,
+                                                  double* kinetic, double* potential) {
   const int n = d.n;
   forwardPassImpl(model, d, q, qd, nullptr, Level::Velocity, false);
   const V3& g = model.gravity;

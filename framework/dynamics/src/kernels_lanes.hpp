@@ -116,6 +116,20 @@ inline L3<T> rtMul(const LR<T>& R, const L3<T>& x) {
     o.c[i] = R.m[3 * i] * x.c[0] + R.m[3 * i + 1] * x.c[1] + R.m[3 * i + 2] * x.c[2];
   return o;
 }
+// R x
+template <class T>
+inline L3<T> rMul(const LR<T>& R, const L3<T>& x) {
+  L3<T> o;
+  for (int i = 0; i < 3; ++i) o.c[i] = R.m[i] * x.c[0] + R.m[i + 3] * x.c[1] + R.m[i + 6] * x.c[2];
+  return o;
+}
+// the symmetric 3 x 3 g[0..5] (XX XY XZ YY YZ ZZ) times x (symMul in rigid_body.hpp)
+template <class T>
+inline L3<T> symMul(const double* g, const L3<T>& x) {
+  return {{g[0] * x.c[0] + g[1] * x.c[1] + g[2] * x.c[2],
+           g[1] * x.c[0] + g[3] * x.c[1] + g[4] * x.c[2],
+           g[2] * x.c[0] + g[4] * x.c[1] + g[5] * x.c[2]}};
+}
 // the motion transform parent -> child (the child's pose (R, p) in the parent)
 template <class T>
 inline LS<T> xMotion(const LR<T>& R, const L3<T>& p, const LS<T>& m) {
@@ -127,8 +141,8 @@ inline L3<T> constant3(const V3& x) {
   return {{Tr::broadcast(x[0]), Tr::broadcast(x[1]), Tr::broadcast(x[2])}};
 }
 
-// The workspace of `width` lanes in d.lane_ws (aligned for T): per joint R, p, v, a, wd, ao; per
-// ancestor pair the subspace.
+// The workspace of `width` lanes in d.lane_ws (aligned for T): per joint R, p, v, a, ao, the
+// base pose (R0, p0) and the body force f; per ancestor pair the subspace.
 template <class T>
 struct LaneWork {
   LR<T>* R;
@@ -136,12 +150,15 @@ struct LaneWork {
   LS<T>* v;
   LS<T>* a;
   L3<T>* ao;
+  LR<T>* R0;
+  L3<T>* p0;
+  LS<T>* f;
   LS<T>* s;
 };
 template <class T>
 inline LaneWork<T> laneWork(DynamicsData& d) {
   const std::size_t n = static_cast<std::size_t>(d.n), P = d.anc_idx.size();
-  const std::size_t words = (9 + 3 + 6 + 6 + 3) * n + 6 * P;  // lanes of T
+  const std::size_t words = (9 + 3 + 6 + 6 + 3 + 9 + 3 + 6) * n + 6 * P;  // lanes of T
   const std::size_t need = words * (sizeof(T) / sizeof(double)) + alignof(T) / sizeof(double);
   if (d.lane_ws.size() < need) d.lane_ws.assign(need, 0.0);
   auto addr = reinterpret_cast<std::uintptr_t>(d.lane_ws.data());
@@ -153,8 +170,94 @@ inline LaneWork<T> laneWork(DynamicsData& d) {
   w.v = reinterpret_cast<LS<T>*>(base + 12 * n);
   w.a = reinterpret_cast<LS<T>*>(base + 18 * n);
   w.ao = reinterpret_cast<L3<T>*>(base + 24 * n);
-  w.s = reinterpret_cast<LS<T>*>(base + 27 * n);
+  w.R0 = reinterpret_cast<LR<T>*>(base + 27 * n);
+  w.p0 = reinterpret_cast<L3<T>*>(base + 36 * n);
+  w.f = reinterpret_cast<LS<T>*>(base + 39 * n);
+  w.s = reinterpret_cast<LS<T>*>(base + 45 * n);
   return w;
+}
+
+// The forward pass of the samples k0 .. k0 + lanes - 1 (the lanes past the last repeat it):
+// every joint's pose in its parent (R, p), and with `velocity` its body's spatial velocity v,
+// with `acceleration` also its acceleration a (gravity as the base's acceleration) and the
+// classical acceleration of its origin ao. The same operations, in the same order, as the
+// portable forward pass (kernels.hpp).
+template <class T>
+inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWork<T>& ws, int k0,
+                         int lanes, const double* q, const double* qd, const double* qdd, long ldx,
+                         bool acceleration) {
+  using Tr = LaneTraits<T>;
+  constexpr int W = Tr::kWidth;
+  const int n = d.n;
+  const L3<T> g0 = {{Tr::broadcast(-model.gravity[0]), Tr::broadcast(-model.gravity[1]),
+                     Tr::broadcast(-model.gravity[2])}};
+  const T zero = Tr::broadcast(0.0);
+  for (int j = 0; j < n; ++j) {
+    const JointC& c = d.J[static_cast<std::size_t>(j)];
+    T qj, qdj, qddj = zero;
+    for (int l = 0; l < W; ++l) {
+      const long k = k0 + (l < lanes ? l : lanes - 1);
+      Tr::set(qj, l, q[k + ldx * j]);
+      Tr::set(qdj, l, qd[k + ldx * j]);
+      if (acceleration) Tr::set(qddj, l, qdd[k + ldx * j]);
+    }
+    LR<T>& R = ws.R[j];
+    L3<T>& p = ws.p[j];
+    if (c.revolute) {
+      T sq, cq;
+      laneSincos(qj, sq, cq);
+      LR<T> M;
+      for (int r = 0; r < 3; ++r) {
+        M.m[r] = c.Rpre(r, 0) * cq + c.Rpre(r, 1) * sq;
+        M.m[r + 3] = c.Rpre(r, 1) * cq - c.Rpre(r, 0) * sq;
+        M.m[r + 6] = Tr::broadcast(c.Rpre(r, 2));
+      }
+      if (c.post_R_id) {
+        R = M;
+      } else {
+        for (int col = 0; col < 3; ++col)
+          for (int r = 0; r < 3; ++r)
+            R.m[r + 3 * col] = M.m[r] * c.Rpost(0, col) + M.m[r + 3] * c.Rpost(1, col) +
+                               M.m[r + 6] * c.Rpost(2, col);
+      }
+      for (int r = 0; r < 3; ++r) {
+        if (c.post_p_zero)
+          p.c[r] = Tr::broadcast(c.ppre[r]);
+        else
+          p.c[r] =
+              c.ppre[r] + (M.m[r] * c.ppost[0] + M.m[r + 3] * c.ppost[1] + M.m[r + 6] * c.ppost[2]);
+      }
+    } else {
+      for (int i = 0; i < 9; ++i) R.m[i] = Tr::broadcast(c.Rfix(i % 3, i / 3));
+      for (int r = 0; r < 3; ++r) p.c[r] = c.pfix[r] + c.Rpre(r, 2) * qj;
+    }
+    const int par = c.parent;
+    LS<T> xv;
+    if (par >= 0)
+      xv = xMotion(R, p, ws.v[par]);
+    else
+      xv = {{{zero, zero, zero}}, {{zero, zero, zero}}};
+    LS<T> u;
+    for (int r = 0; r < 3; ++r) {
+      u.w.c[r] = c.S.w[r] * qdj;
+      u.v.c[r] = c.S.v[r] * qdj;
+    }
+    LS<T>& v = ws.v[j];
+    v.w = add(xv.w, u.w);
+    v.v = add(xv.v, u.v);
+    if (!acceleration) continue;
+    const LS<T> a0 = {{{zero, zero, zero}}, g0};
+    const LS<T> xa = xMotion(R, p, par >= 0 ? ws.a[par] : a0);
+    // crm(v, u) = {v.w x u.w, v.w x u.v + v.v x u.w}
+    const L3<T> cw = cross(v.w, u.w);
+    const L3<T> cv = add(cross(v.w, u.v), cross(v.v, u.w));
+    LS<T>& a = ws.a[j];
+    for (int r = 0; r < 3; ++r) {
+      a.w.c[r] = xa.w.c[r] + c.S.w[r] * qddj + cw.c[r];
+      a.v.c[r] = xa.v.c[r] + c.S.v[r] * qddj + cv.c[r];
+    }
+    ws.ao[j] = add(a.v, cross(v.w, v.v));
+  }
 }
 
 // Torque regressors of `count` samples (see Kernels in kernel_table.hpp for the layout), T's
@@ -167,76 +270,9 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
   constexpr int W = Tr::kWidth;
   const int n = d.n;
   const LaneWork<T> ws = laneWork<T>(d);
-  const L3<T> g0 = {{Tr::broadcast(-model.gravity[0]), Tr::broadcast(-model.gravity[1]),
-                     Tr::broadcast(-model.gravity[2])}};
-  const T zero = Tr::broadcast(0.0);
   for (int k0 = 0; k0 < count; k0 += W) {
     const int lanes = count - k0 < W ? count - k0 : W;
-    for (int j = 0; j < n; ++j) {
-      const JointC& c = d.J[static_cast<std::size_t>(j)];
-      T qj, qdj, qddj;
-      for (int l = 0; l < W; ++l) {
-        const long k = k0 + (l < lanes ? l : lanes - 1);
-        Tr::set(qj, l, q[k + ldx * j]);
-        Tr::set(qdj, l, qd[k + ldx * j]);
-        Tr::set(qddj, l, qdd[k + ldx * j]);
-      }
-      LR<T>& R = ws.R[j];
-      L3<T>& p = ws.p[j];
-      if (c.revolute) {
-        T sq, cq;
-        laneSincos(qj, sq, cq);
-        LR<T> M;
-        for (int r = 0; r < 3; ++r) {
-          M.m[r] = c.Rpre(r, 0) * cq + c.Rpre(r, 1) * sq;
-          M.m[r + 3] = c.Rpre(r, 1) * cq - c.Rpre(r, 0) * sq;
-          M.m[r + 6] = Tr::broadcast(c.Rpre(r, 2));
-        }
-        if (c.post_R_id) {
-          R = M;
-        } else {
-          for (int col = 0; col < 3; ++col)
-            for (int r = 0; r < 3; ++r)
-              R.m[r + 3 * col] = M.m[r] * c.Rpost(0, col) + M.m[r + 3] * c.Rpost(1, col) +
-                                 M.m[r + 6] * c.Rpost(2, col);
-        }
-        for (int r = 0; r < 3; ++r) {
-          if (c.post_p_zero)
-            p.c[r] = Tr::broadcast(c.ppre[r]);
-          else
-            p.c[r] = c.ppre[r] +
-                     (M.m[r] * c.ppost[0] + M.m[r + 3] * c.ppost[1] + M.m[r + 6] * c.ppost[2]);
-        }
-      } else {
-        for (int i = 0; i < 9; ++i) R.m[i] = Tr::broadcast(c.Rfix(i % 3, i / 3));
-        for (int r = 0; r < 3; ++r) p.c[r] = c.pfix[r] + c.Rpre(r, 2) * qj;
-      }
-      const int par = c.parent;
-      LS<T> xv;
-      if (par >= 0)
-        xv = xMotion(R, p, ws.v[par]);
-      else
-        xv = {{{zero, zero, zero}}, {{zero, zero, zero}}};
-      LS<T> u;
-      for (int r = 0; r < 3; ++r) {
-        u.w.c[r] = c.S.w[r] * qdj;
-        u.v.c[r] = c.S.v[r] * qdj;
-      }
-      LS<T>& v = ws.v[j];
-      v.w = add(xv.w, u.w);
-      v.v = add(xv.v, u.v);
-      const LS<T> a0 = {{{zero, zero, zero}}, g0};
-      const LS<T> xa = xMotion(R, p, par >= 0 ? ws.a[par] : a0);
-      // crm(v, u) = {v.w x u.w, v.w x u.v + v.v x u.w}
-      const L3<T> cw = cross(v.w, u.w);
-      const L3<T> cv = add(cross(v.w, u.v), cross(v.v, u.w));
-      LS<T>& a = ws.a[j];
-      for (int r = 0; r < 3; ++r) {
-        a.w.c[r] = xa.w.c[r] + c.S.w[r] * qddj + cw.c[r];
-        a.v.c[r] = xa.v.c[r] + c.S.v[r] * qddj + cv.c[r];
-      }
-      ws.ao[j] = add(a.v, cross(v.w, v.v));
-    }
+    lanesForward(model, d, ws, k0, lanes, q, qd, qdd, ldx, true);
     // the ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own)
     for (int j = 0; j < n; ++j) {
       const JointC& c = d.J[static_cast<std::size_t>(j)];
@@ -284,6 +320,123 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
           double* Yi = Y + strideY * (k0 + l) + ldY * 10 * j + i;
           for (int col = 0; col < 10; ++col) Yi[ldY * col] = Tr::get(out[col], l);
         }
+      }
+    }
+  }
+}
+
+// Inverse dynamics (RNEA) of `count` samples: sample k's q_j at q[k + ldx j] (likewise qd, qdd),
+// its tau_j at tau[k + ldt j]; parameters pi (10 per body, pi order) or, when null, the
+// model's. The same operations, in the same order, as the portable RNEA (kernels.hpp:
+// newtonEuler and the backward pass of rigid_body.hpp).
+template <class T>
+inline void inverseDynamicsImpl(const RobotModel& model, DynamicsData& d, int count,
+                                const double* q, const double* qd, const double* qdd, long ldx,
+                                const double* pi, double* tau, long ldt) {
+  using Tr = LaneTraits<T>;
+  constexpr int W = Tr::kWidth;
+  const int n = d.n;
+  const LaneWork<T> ws = laneWork<T>(d);
+  for (int k0 = 0; k0 < count; k0 += W) {
+    const int lanes = count - k0 < W ? count - k0 : W;
+    lanesForward(model, d, ws, k0, lanes, q, qd, qdd, ldx, true);
+    for (int j = 0; j < n; ++j) {  // newtonEuler(g, kin)
+      const double* g = pi ? pi + 10 * j : model.bodies[static_cast<std::size_t>(j)].inertia.data();
+      const L3<T>& w = ws.v[j].w;
+      const L3<T>& wd = ws.a[j].w;
+      const L3<T>& ao = ws.ao[j];
+      const V3 h(g[6], g[7], g[8]);
+      const double m = g[9];
+      const L3<T> hl = constant3<T>(h);
+      const L3<T> wh = cross(w, hl);
+      const L3<T> Iwd = symMul(g, wd), Iw = symMul(g, w);
+      const L3<T> a1 = cross(w, Iw), a2 = cross(hl, ao), b1 = cross(wd, hl), b2 = cross(w, wh);
+      LS<T>& f = ws.f[j];
+      for (int r = 0; r < 3; ++r) {
+        f.w.c[r] = Iwd.c[r] + a1.c[r] + a2.c[r];
+        f.v.c[r] = m * ao.c[r] + b1.c[r] + b2.c[r];
+      }
+    }
+    for (int j = n - 1; j >= 0; --j) {
+      const JointC& c = d.J[static_cast<std::size_t>(j)];
+      const LS<T>& f = ws.f[j];
+      // dot(S, f) = S.w . f.w + S.v . f.v
+      const T t = (c.S.w[0] * f.w.c[0] + c.S.w[1] * f.w.c[1] + c.S.w[2] * f.w.c[2]) +
+                  (c.S.v[0] * f.v.c[0] + c.S.v[1] * f.v.c[1] + c.S.v[2] * f.v.c[2]);
+      for (int l = 0; l < lanes; ++l) tau[(k0 + l) + ldt * j] = Tr::get(t, l);
+      const int par = c.parent;
+      if (par < 0) continue;
+      // xForceT(R, p, f) = {R f.w + p x (R f.v), R f.v}, added to the parent's force
+      const LR<T>& R = ws.R[j];
+      const L3<T>& p = ws.p[j];
+      const L3<T> fv = rMul(R, f.v), Rfw = rMul(R, f.w);
+      const L3<T> pf = cross(p, fv);
+      LS<T>& fp = ws.f[par];
+      for (int r = 0; r < 3; ++r) {
+        fp.w.c[r] = fp.w.c[r] + (Rfw.c[r] + pf.c[r]);
+        fp.v.c[r] = fp.v.c[r] + fv.c[r];
+      }
+    }
+  }
+}
+
+// Energy regressors of `count` samples: sample k's kinetic row (1 x 10n) at kinetic[k + ldk c],
+// its potential row likewise. The same operations, in the same order, as the portable
+// energyRegressor (kernels.hpp).
+template <class T>
+inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int count,
+                                 const double* q, const double* qd, long ldx, double* kinetic,
+                                 double* potential, long ldk) {
+  using Tr = LaneTraits<T>;
+  constexpr int W = Tr::kWidth;
+  const int n = d.n;
+  const LaneWork<T> ws = laneWork<T>(d);
+  const V3& g = model.gravity;
+  for (int k0 = 0; k0 < count; k0 += W) {
+    const int lanes = count - k0 < W ? count - k0 : W;
+    lanesForward(model, d, ws, k0, lanes, q, qd, nullptr, ldx, false);
+    for (int j = 0; j < n; ++j) {
+      const L3<T>& w = ws.v[j].w;
+      const L3<T>& vl = ws.v[j].v;
+      T K[10];
+      K[0] = 0.5 * w.c[0] * w.c[0];
+      K[1] = w.c[0] * w.c[1];
+      K[2] = w.c[0] * w.c[2];
+      K[3] = 0.5 * w.c[1] * w.c[1];
+      K[4] = w.c[1] * w.c[2];
+      K[5] = 0.5 * w.c[2] * w.c[2];
+      const L3<T> hc = cross(vl, w);
+      K[6] = hc.c[0];
+      K[7] = hc.c[1];
+      K[8] = hc.c[2];
+      K[9] = 0.5 * (vl.c[0] * vl.c[0] + vl.c[1] * vl.c[1] + vl.c[2] * vl.c[2]);
+      // base pose of body j
+      const int par = d.J[static_cast<std::size_t>(j)].parent;
+      LR<T>& R0 = ws.R0[j];
+      L3<T>& p0 = ws.p0[j];
+      if (par >= 0) {
+        const LR<T>& Rp = ws.R0[par];
+        const LR<T>& R = ws.R[j];
+        for (int col = 0; col < 3; ++col)
+          for (int r = 0; r < 3; ++r)
+            R0.m[r + 3 * col] = Rp.m[r] * R.m[3 * col] + Rp.m[r + 3] * R.m[1 + 3 * col] +
+                                Rp.m[r + 6] * R.m[2 + 3 * col];
+        const L3<T> Rpp = rMul(Rp, ws.p[j]);
+        p0 = add(ws.p0[par], Rpp);
+      } else {
+        R0 = ws.R[j];
+        p0 = ws.p[j];
+      }
+      T U[4];
+      for (int i = 0; i < 3; ++i)  // -(R0^T g)
+        U[i] = -(R0.m[3 * i] * g[0] + R0.m[3 * i + 1] * g[1] + R0.m[3 * i + 2] * g[2]);
+      U[3] = -(g[0] * p0.c[0] + g[1] * p0.c[1] + g[2] * p0.c[2]);
+      for (int l = 0; l < lanes; ++l) {
+        double* Kr = kinetic + (k0 + l) + ldk * 10 * j;
+        double* Ur = potential + (k0 + l) + ldk * 10 * j;
+        for (int c = 0; c < 10; ++c) Kr[ldk * c] = Tr::get(K[c], l);
+        for (int c = 0; c < 6; ++c) Ur[ldk * c] = 0.0;
+        for (int c = 0; c < 4; ++c) Ur[ldk * (6 + c)] = Tr::get(U[c], l);
       }
     }
   }

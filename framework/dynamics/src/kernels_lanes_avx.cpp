@@ -1,11 +1,12 @@
-// exid — the torque regressor of four samples at once in AVX registers (kernels_lanes.hpp).
-// framework/CMakeLists.txt compiles this source alone with -mavx -ffp-contract=off (no FMA), so
-// its lanes give the same bits as the portable copy's (kernels_portable.cpp); dynamics.cpp runs
-// it where the CPU has AVX. The entry point is flattened (all it calls, Eigen's accessors
-// included, is inlined into it) and has internal linkage: the only symbol this object defines is
-// exid::detail::avxLanesTorqueRegressors() and avxLanesGram() (ctest dynamics.isa_symbols checks it
-// with nm). The Gram block update (gram_block.hpp) is here too, for the same reason. Built
-// where EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without sanitizers, on x86-64.
+// exid — the lane kernels (torque regressors, RNEA, energy regressors) of four samples at once in
+// AVX registers (kernels_lanes.hpp). framework/CMakeLists.txt compiles this source alone with -mavx
+// -ffp-contract=off (no FMA), so its lanes give the same bits as the portable copy's
+// (kernels_portable.cpp); dynamics.cpp runs it where the CPU has AVX. The entry point is flattened
+// (all it calls, Eigen's accessors included, is inlined into it) and has internal linkage: the only
+// symbol this object defines is exid::detail::avxLaneKernels() and avxLanesGram() (ctest
+// dynamics.isa_symbols checks it with nm). The Gram block update (gram_block.hpp) is here too, for
+// the same reason. Built where EXID_KERNELS_AVX2 (CMakeLists.txt): optimised builds without
+// sanitizers, on x86-64.
 #if defined(__AVX__) && !defined(__FMA__)
 
 #define EXID_LANES_NS avx_lanes
@@ -24,13 +25,24 @@ EXID_LANES_KERNEL void torqueRegressors(const RobotModel& model, DynamicsData& d
                                         long ldx, double* Y, long ldY, long strideY) {
   torqueRegressorsImpl<Lane4>(model, d, count, q, qd, qdd, ldx, Y, ldY, strideY);
 }
+EXID_LANES_KERNEL void inverseDynamics(const RobotModel& model, DynamicsData& d, int count,
+                                       const double* q, const double* qd, const double* qdd,
+                                       long ldx, const double* pi, double* tau, long ldt) {
+  inverseDynamicsImpl<Lane4>(model, d, count, q, qd, qdd, ldx, pi, tau, ldt);
+}
+EXID_LANES_KERNEL void energyRegressors(const RobotModel& model, DynamicsData& d, int count,
+                                        const double* q, const double* qd, long ldx,
+                                        double* kinetic, double* potential, long ldk) {
+  energyRegressorsImpl<Lane4>(model, d, count, q, qd, ldx, kinetic, potential, ldk);
+}
+const LaneKernels kLanes = {Lanes::Avx, &torqueRegressors, &inverseDynamics, &energyRegressors};
 EXID_LANES_KERNEL void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
   gramBlock(acc, ld, B, ldb, k, m);
 }
 }  // namespace
 }  // namespace avx_lanes
 
-TorqueRegressorsFn avxLanesTorqueRegressors() { return &avx_lanes::torqueRegressors; }
+const LaneKernels* avxLaneKernels() { return &avx_lanes::kLanes; }
 GramFn avxLanesGram() { return &avx_lanes::gram; }
 
 }  // namespace exid::detail
@@ -40,7 +52,7 @@ GramFn avxLanesGram() { return &avx_lanes::gram; }
 #include "kernel_table.hpp"
 
 namespace exid::detail {
-TorqueRegressorsFn avxLanesTorqueRegressors() { return nullptr; }
+const LaneKernels* avxLaneKernels() { return nullptr; }
 GramFn avxLanesGram() { return nullptr; }
 }  // namespace exid::detail
 

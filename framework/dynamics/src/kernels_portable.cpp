@@ -46,6 +46,16 @@ void torqueRegressorOne(const RobotModel& model, DynamicsData& d, const double* 
   torqueRegressorsImpl<double>(model, d, 1, q, qd, qdd, 1, Y, ld, 0);
 }
 
+void inverseDynamicsOne(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
+                        const double* qdd, const double* pi, double* tau) {
+  inverseDynamicsImpl<double>(model, d, 1, q, qd, qdd, 1, pi, tau, 1);
+}
+
+void energyRegressorOne(const RobotModel& model, DynamicsData& d, const double* q, const double* qd,
+                        double* kinetic, double* potential) {
+  energyRegressorsImpl<double>(model, d, 1, q, qd, 1, kinetic, potential, 1);
+}
+
 // Two samples at once: one SSE2 register each (four lanes in two registers each ran slower
 // than one sample at a time: twice the registers' pressure).
 void torqueRegressorsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
@@ -53,11 +63,26 @@ void torqueRegressorsLanes(const RobotModel& model, DynamicsData& d, int count, 
                            long strideY) {
   torqueRegressorsImpl<Lane2>(model, d, count, q, qd, qdd, ldx, Y, ldY, strideY);
 }
+void inverseDynamicsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                          const double* qd, const double* qdd, long ldx, const double* pi,
+                          double* tau, long ldt) {
+  inverseDynamicsImpl<Lane2>(model, d, count, q, qd, qdd, ldx, pi, tau, ldt);
+}
+void energyRegressorsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                           const double* qd, long ldx, double* kinetic, double* potential,
+                           long ldk) {
+  energyRegressorsImpl<Lane2>(model, d, count, q, qd, ldx, kinetic, potential, ldk);
+}
 
+const LaneKernels kLanes = {Lanes::Baseline, &torqueRegressorsLanes, &inverseDynamicsLanes,
+                            &energyRegressorsLanes};
+
+// The one-sample torque regressor, RNEA and energy regressor are the lane kernels on one lane
+// (the same bits as every lane of the others); the VJPs are kernels.hpp's.
 const Kernels kTable = {Isa::Portable,
                         &torqueRegressorOne,
-                        &inverseDynamics,
-                        &energyRegressor,
+                        &inverseDynamicsOne,
+                        &energyRegressorOne,
                         &torqueRegressorVjp,
                         &energyRegressorVjp,
                         &gram};
@@ -67,7 +92,7 @@ const Kernels kTable = {Isa::Portable,
 
 const Kernels& portableKernels() { return portable::kTable; }
 
-TorqueRegressorsFn portableLanesTorqueRegressors() { return &portable::torqueRegressorsLanes; }
+const LaneKernels* portableLaneKernels() { return &portable::kLanes; }
 
 GramFn portableGram() { return &portable::gram; }
 

@@ -50,6 +50,16 @@ EXID_API void energyRegressor(const RobotModel& model, DynamicsData& data, const
                               const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
                               Eigen::Ref<Eigen::RowVectorXd> potential);
 
+/// The energy regressors of K samples: sample k's state is row k of Q, QD (K x n), its kinetic
+/// and potential rows are row k of `kinetic` and `potential` (K x 10n). The same bits as
+/// energyRegressor called sample by sample (several samples per vector register, as
+/// torqueRegressors).
+EXID_API void energyRegressors(const RobotModel& model, DynamicsData& data,
+                               const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                               const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                               Eigen::Ref<Eigen::MatrixXd> kinetic,
+                               Eigen::Ref<Eigen::MatrixXd> potential);
+
 /// Wrench (6 x 10) that the sensor measures from a payload rigidly attached to the sensor frame:
 /// w = A(omega, alpha, a - g) * phi, all expressed in the sensor frame. w is the wrench the
 /// robot exerts on the payload (force, then moment about the sensor origin).
@@ -68,6 +78,16 @@ EXID_API Eigen::VectorXd inverseDynamics(const RobotModel& model, DynamicsData& 
                                          const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                          const Eigen::VectorXd& qdd,
                                          const Eigen::VectorXd* pi = nullptr);
+
+/// Inverse dynamics of K samples: sample k's state is row k of Q, QD, QDD (K x n), its torques
+/// row k of Tau (K x n); parameters as inverseDynamics. The same bits as inverseDynamics called
+/// sample by sample (several samples per vector register, as torqueRegressors).
+EXID_API void inverseDynamicsSamples(const RobotModel& model, DynamicsData& data,
+                                     const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                                     const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                                     const Eigen::Ref<const Eigen::MatrixXd>& QDD,
+                                     Eigen::Ref<Eigen::MatrixXd> Tau,
+                                     const Eigen::VectorXd* pi = nullptr);
 
 /// Partial derivatives of the inverse dynamics tau(q, qd, qdd) (as inverseDynamics: the model's
 /// own parameters, or pi): row i of each n x n matrix is the gradient of tau_i. Exact (forward
