@@ -17,6 +17,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <cstring>
 
 #include "exid/fmath.hpp"
 #include "exid/fmath_kernels.hpp"
@@ -65,6 +66,32 @@ struct LaneTraits<Lane2> {
   static void set(Lane2& x, int l, double v) { x[l] = v; }
   static Lane2 broadcast(double v) { return Lane2{v, v}; }
 };
+
+// Lanes 0 .. lanes - 1 from src[0 .. lanes - 1] (consecutive samples of one input column), the
+// lanes past them repeating the last: one vector load when every lane is a sample (built lane
+// by lane in memory, the vector would be read back through a stalled store forwarding).
+template <class T>
+inline T loadLanes(const double* src, int lanes) {
+  T v;
+  if (lanes == LaneTraits<T>::kWidth) {
+    std::memcpy(&v, src, sizeof(T));
+    return v;
+  }
+  for (int l = 0; l < LaneTraits<T>::kWidth; ++l)
+    LaneTraits<T>::set(v, l, src[l < lanes ? l : lanes - 1]);
+  return v;
+}
+
+// The first `lanes` lanes of v to dst[0 .. lanes - 1] (consecutive samples of one output
+// column): one vector store when every lane is a sample.
+template <class T>
+inline void storeLanes(double* dst, const T& v, int lanes) {
+  if (lanes == LaneTraits<T>::kWidth) {
+    std::memcpy(dst, &v, sizeof(T));
+    return;
+  }
+  for (int l = 0; l < lanes; ++l) dst[l] = LaneTraits<T>::get(v, l);
+}
 
 // sin and cos of each lane: the bits of exid::fmath::sincos for that lane's value, computed for
 // all lanes at once (exid/fmath_kernels.hpp) unless a lane is beyond the vector path's range
@@ -187,20 +214,15 @@ inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWor
                          int lanes, const double* q, const double* qd, const double* qdd, long ldx,
                          bool acceleration) {
   using Tr = LaneTraits<T>;
-  constexpr int W = Tr::kWidth;
   const int n = d.n;
   const L3<T> g0 = {{Tr::broadcast(-model.gravity[0]), Tr::broadcast(-model.gravity[1]),
                      Tr::broadcast(-model.gravity[2])}};
   const T zero = Tr::broadcast(0.0);
   for (int j = 0; j < n; ++j) {
     const JointC& c = d.J[static_cast<std::size_t>(j)];
-    T qj, qdj, qddj = zero;
-    for (int l = 0; l < W; ++l) {
-      const long k = k0 + (l < lanes ? l : lanes - 1);
-      Tr::set(qj, l, q[k + ldx * j]);
-      Tr::set(qdj, l, qd[k + ldx * j]);
-      if (acceleration) Tr::set(qddj, l, qdd[k + ldx * j]);
-    }
+    const T qj = loadLanes<T>(q + k0 + ldx * j, lanes);
+    const T qdj = loadLanes<T>(qd + k0 + ldx * j, lanes);
+    const T qddj = acceleration ? loadLanes<T>(qdd + k0 + ldx * j, lanes) : zero;
     LR<T>& R = ws.R[j];
     L3<T>& p = ws.p[j];
     if (c.revolute) {
@@ -363,7 +385,7 @@ inline void inverseDynamicsImpl(const RobotModel& model, DynamicsData& d, int co
       // dot(S, f) = S.w . f.w + S.v . f.v
       const T t = (c.S.w[0] * f.w.c[0] + c.S.w[1] * f.w.c[1] + c.S.w[2] * f.w.c[2]) +
                   (c.S.v[0] * f.v.c[0] + c.S.v[1] * f.v.c[1] + c.S.v[2] * f.v.c[2]);
-      for (int l = 0; l < lanes; ++l) tau[(k0 + l) + ldt * j] = Tr::get(t, l);
+      storeLanes(tau + k0 + ldt * j, t, lanes);
       const int par = c.parent;
       if (par < 0) continue;
       // xForceT(R, p, f) = {R f.w + p x (R f.v), R f.v}, added to the parent's force
@@ -392,6 +414,7 @@ inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
   const int n = d.n;
   const LaneWork<T> ws = laneWork<T>(d);
   const V3& g = model.gravity;
+  const T zero = Tr::broadcast(0.0);
   for (int k0 = 0; k0 < count; k0 += W) {
     const int lanes = count - k0 < W ? count - k0 : W;
     lanesForward(model, d, ws, k0, lanes, q, qd, nullptr, ldx, false);
@@ -431,13 +454,11 @@ inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
       for (int i = 0; i < 3; ++i)  // -(R0^T g)
         U[i] = -(R0.m[3 * i] * g[0] + R0.m[3 * i + 1] * g[1] + R0.m[3 * i + 2] * g[2]);
       U[3] = -(g[0] * p0.c[0] + g[1] * p0.c[1] + g[2] * p0.c[2]);
-      for (int l = 0; l < lanes; ++l) {
-        double* Kr = kinetic + (k0 + l) + ldk * 10 * j;
-        double* Ur = potential + (k0 + l) + ldk * 10 * j;
-        for (int c = 0; c < 10; ++c) Kr[ldk * c] = Tr::get(K[c], l);
-        for (int c = 0; c < 6; ++c) Ur[ldk * c] = 0.0;
-        for (int c = 0; c < 4; ++c) Ur[ldk * (6 + c)] = Tr::get(U[c], l);
-      }
+      double* Kr = kinetic + k0 + ldk * 10 * j;
+      double* Ur = potential + k0 + ldk * 10 * j;
+      for (int c = 0; c < 10; ++c) storeLanes(Kr + ldk * c, K[c], lanes);
+      for (int c = 0; c < 6; ++c) storeLanes(Ur + ldk * c, zero, lanes);
+      for (int c = 0; c < 4; ++c) storeLanes(Ur + ldk * (6 + c), U[c], lanes);
     }
   }
 }
