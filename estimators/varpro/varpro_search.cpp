@@ -173,12 +173,33 @@ struct VarPro::Held {
     const Eigen::Index f = qr.matrixQR().cols();
     Eigen::MatrixXd B(m, c + 1);
     const Eigen::VectorXd eta = vp.heldEta(lambda);
-    const Eigen::Index got =
-        rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
-          exid::check(at + r.W.rows() <= m, "varpro: the model's row count changed with eta");
-          for (int j = 0; j < c; ++j)
-            B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
-        });
+    Eigen::Index got = 0;
+    if (!vp.delay_) {
+      // the moved columns alone (ObservationModel::fullColumnsAt: a base column is the full
+      // column base().independent names), chunk by chunk as rows() reads them
+      std::vector<int> full(static_cast<std::size_t>(c));
+      for (int j = 0; j < c; ++j)
+        full[static_cast<std::size_t>(j)] =
+            model.base().independent[static_cast<std::size_t>(moved[static_cast<std::size_t>(j)])];
+      exid::SampleWindow window(data);
+      const int first = vp.margin_, last = data.size() - vp.margin_;
+      for (int b = first; b < last; b += vp.chunk_) {
+        const int end = std::min(last, b + vp.chunk_);
+        const Eigen::MatrixXd Wc = model.fullColumnsAt(window.span(b, end), eta, full, ctx);
+        exid::check(Wc.cols() == c && got + Wc.rows() <= m,
+                    "varpro: the model's row count changed with eta");
+        if (!Wc.allFinite())
+          throw exid::Error(fmt::format("varpro: a row from samples {}..{} is not finite", b, end));
+        B.block(got, 0, Wc.rows(), c) = Wc;
+        got += Wc.rows();
+      }
+    } else {
+      got = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
+        exid::check(at + r.W.rows() <= m, "varpro: the model's row count changed with eta");
+        for (int j = 0; j < c; ++j)
+          B.col(j).segment(at, r.W.rows()) = r.W.col(moved[static_cast<std::size_t>(j)]);
+      });
+    }
     exid::check(got == m, "varpro: the model's row count changed with eta");
     // Q_h^T one column at a time: Eigen applies a sequence to several columns in blocks of up
     // to 48 reflections, forming each block's triangular factor (O(m b^2) for a block of b,

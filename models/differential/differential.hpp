@@ -60,6 +60,9 @@ class DifferentialModel : public exid::ObservationModel {
   Eigen::MatrixXd fullDesign(const exid::Samples& s) const override {
     return designAt(s, frictionAt(studyEta()), nullptr);
   }
+  Eigen::MatrixXd fullColumnsAt(const exid::Dataset& d, const Eigen::VectorXd& eta,
+                                const std::vector<int>& columns,
+                                const exid::RunContext& ctx) const override;
   Eigen::MatrixXd fullDesignAt(const exid::Samples& s, const Eigen::VectorXd& eta,
                                Eigen::MatrixXd* dW) const override {
     return designAt(s, frictionAt(eta), dW);

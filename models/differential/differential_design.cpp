@@ -65,6 +65,41 @@ exid::Rows DifferentialModel::fullRowsAt(const exid::Dataset& d, const Eigen::Ve
   return r;
 }
 
+// The nonlinear friction columns alone (extraColumns' values, the same bits: FrictionColumns's
+// values do not depend on whether derivatives are asked for); any other column through
+// fullRowsAt.
+Eigen::MatrixXd DifferentialModel::fullColumnsAt(const exid::Dataset& d, const Eigen::VectorXd& eta,
+                                                 const std::vector<int>& columns,
+                                                 const exid::RunContext& ctx) const {
+  const int n = robot().dof(), P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();
+  bool friction_only = E > 0 && !columns.empty();
+  for (int c : columns) friction_only = friction_only && c >= P0 && c < P0 + E * n;
+  if (!friction_only) return ObservationModel::fullColumnsAt(d, eta, columns, ctx);
+  const std::string who = "model 'differential'";
+  requireTorqueSignals(d, n, who);
+  exid::models::requireSamples(d.samples(), n, true, who);
+  const Friction f = frictionAt(eta);
+  const int K = d.size(), m = static_cast<int>(sel_.size());
+  const auto C = static_cast<Eigen::Index>(columns.size());
+  Eigen::MatrixXd out = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(K) * m, C);
+  const exid::FrictionColumns fc = frictionColumns();
+  double w[3];
+  for (int i = 0; i < m; ++i) {
+    const int j = sel_[static_cast<std::size_t>(i)];
+    const auto u = static_cast<std::size_t>(j);
+    for (Eigen::Index c = 0; c < C; ++c) {
+      const int col = columns[static_cast<std::size_t>(c)] - P0;
+      if (col / E != j) continue;  // (a row has its own joint's friction columns only)
+      const int e = col % E;
+      for (int k = 0; k < K; ++k) {
+        fc.values(d.qd(k, j), f.eps[u], f.vs[u], w);
+        out(static_cast<Eigen::Index>(k) * m + i, c) = w[e];
+      }
+    }
+  }
+  return out;
+}
+
 bool DifferentialModel::fullTorqueAt(const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                      const Eigen::VectorXd& qdd, const Eigen::VectorXd& eta,
                                      const Eigen::VectorXd& phi, Eigen::VectorXd* tau,

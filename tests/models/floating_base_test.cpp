@@ -645,9 +645,10 @@ estimator: {{type: {}, params: {}}}
     ASSERT_TRUE(r.ok) << est << ": " << r.message;
     const exid::Json* id = r.summary.find("identification");
     // converged: no warning of a fit that stopped short (varpro says so where it does)
-    if (const exid::Json* w = r.summary.find("warnings"); w && w->isArray())
+    if (const exid::Json* w = r.summary.find("warnings"); w && w->isArray()) {
       for (std::size_t k = 0; k < w->size(); ++k)
         EXPECT_EQ(w->at(k).dump().find("not converged"), std::string::npos) << w->at(k).dump();
+    }
     const double e = id->find("param_rel_err")->asDouble();
     std::printf("  study %s (%s): param_rel_err %.2e\n", est.c_str(), plant.c_str(), e);
     EXPECT_LT(e, 1e-9) << est;

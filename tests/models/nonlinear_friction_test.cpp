@@ -178,6 +178,54 @@ TEST(NonlinearFriction, ColumnDerivativesEqualCentralDifferences) {
   EXPECT_LT(mtest::vjpError(*m, d.samples(), true), 1e-6);
 }
 
+// fullColumnsAt (what varpro's trial points read) gives the very numbers of fullRowsAt's
+// columns: the friction columns alone (the model's own path), with every joint's rows and with
+// a subset, at other nonlinear parameters, and any other mix of columns (through fullRowsAt);
+// a column out of range is refused.
+TEST(NonlinearFriction, FullColumnsAtAreTheRowsColumns) {
+  auto r = mtest::robot("puma560");
+  for (const std::string joints : {"", ", joints: [2, 3, 5]"}) {
+    auto m =
+        mtest::model("differential",
+                     "{coulomb_asymmetric: true, coulomb_smoothing_rad_s: [0.02], stribeck: true, "
+                     "stribeck_velocity_rad_s: [0.1]" +
+                         joints + "}",
+                     r);
+    const Truth T = truth(r->dof());
+    Eigen::VectorXd full, eta;
+    truthVectors(*m, T, &full, &eta);
+    eta = eta.cwiseProduct(Eigen::VectorXd::LinSpaced(eta.size(), 0.5, 3.0));
+    const exid::Dataset d = slowSamples(*r, 37, 6);
+    const Eigen::MatrixXd W = m->fullRowsAt(d, eta, nullptr, mtest::context()).W;
+    std::vector<int> friction;  // FcP, FcN, Fs of the 6 joints
+    const std::vector<std::string> names = m->fullNames();
+    for (std::size_t c = 0; c < names.size(); ++c)
+      if (names[c].rfind("FcP", 0) == 0 || names[c].rfind("FcN", 0) == 0 ||
+          names[c].rfind("Fs", 0) == 0)
+        friction.push_back(static_cast<int>(c));
+    ASSERT_EQ(friction.size(), 18u) << fmt::format("{}", fmt::join(names, " "));
+    std::vector<std::vector<int>> asks = {friction, {friction[4]}, {friction[17], friction[0]}};
+    asks.push_back({0, friction[3], 7});  // with rigid-body columns: through fullRowsAt
+    for (const std::vector<int>& cols : asks) {
+      const Eigen::MatrixXd C = m->fullColumnsAt(d, eta, cols, mtest::context());
+      ASSERT_EQ(C.rows(), W.rows());
+      ASSERT_EQ(C.cols(), static_cast<Eigen::Index>(cols.size()));
+      for (std::size_t i = 0; i < cols.size(); ++i) {
+        const Eigen::VectorXd a = C.col(static_cast<Eigen::Index>(i)), b = W.col(cols[i]);
+        EXPECT_EQ(0, std::memcmp(a.data(), b.data(), sizeof(double) * a.size()))
+            << "column " << cols[i] << joints << ": largest difference "
+            << (a - b).cwiseAbs().maxCoeff();
+      }
+    }
+    EXPECT_THROW(m->fullColumnsAt(d, eta, {static_cast<int>(W.cols())}, mtest::context()),
+                 exid::Error);
+    EXPECT_THROW(m->fullColumnsAt(d, eta, {-1}, mtest::context()), exid::Error);
+    Eigen::VectorXd bad = eta;
+    bad[0] = -1.0;  // a width must be positive, as for fullRowsAt
+    EXPECT_THROW(m->fullColumnsAt(d, bad, friction, mtest::context()), exid::Error);
+  }
+}
+
 TEST(NonlinearFriction, OptionsWithoutTheirValuesAreRefused) {
   for (const auto& [yaml, what] : std::vector<std::pair<std::string, std::string>>{
            {"{stribeck: true}", "needs stribeck_velocity_rad_s"},

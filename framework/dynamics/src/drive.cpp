@@ -285,10 +285,11 @@ void jointGradientToMeasured(const RobotModel& model, const Eigen::VectorXd& qm,
 namespace {
 // out = T^T Yj for one sample's joint regressor Yj (n x 10n, leading dimension ldj) into out
 // (leading dimension ldo): each coefficient summed over k = 0 .. n - 1 in order, the zeros of
-// the transmission skipped (a transmission is mostly zeros). One definition for
-// actuatorRegressor and actuatorRegressors, so that both give the same bits.
+// the transmission skipped (a transmission is mostly zeros). `count` consecutive samples (sample
+// s's n rows start at row s n of Yj and of out). One definition for actuatorRegressor and
+// actuatorRegressors, so that both give the same bits.
 void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long ldj, double* out,
-                                long ldo) {
+                                long ldo, int count = 1) {
   const int n = static_cast<int>(T.rows());
   for (int i = 0; i < n; ++i) {
     int nz[64];
@@ -300,18 +301,24 @@ void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long
         t[m++] = T(k, i);
       }
     if (m == 64 && n > 64) {  // (a dense transmission of more than 64 joints: every term)
-      for (int c = 0; c < 10 * n; ++c) {
-        double acc = 0.0;
-        for (int k = 0; k < n; ++k) acc += T(k, i) * Yj[k + ldj * c];
-        out[i + ldo * c] = acc;
-      }
+      for (int c = 0; c < 10 * n; ++c)
+        for (int s = 0; s < count; ++s) {
+          double acc = 0.0;
+          for (int k = 0; k < n; ++k) acc += T(k, i) * Yj[s * n + k + ldj * c];
+          out[s * n + i + ldo * c] = acc;
+        }
       continue;
     }
+    // column by column, the samples within (each column's outputs are written together: its
+    // cache lines once, whatever the stride between columns)
     for (int c = 0; c < 10 * n; ++c) {
       const double* y = Yj + ldj * c;
-      double acc = 0.0;
-      for (int e = 0; e < m; ++e) acc += t[e] * y[nz[e]];
-      out[i + ldo * c] = acc;
+      double* o = out + i + ldo * c;
+      for (int s = 0; s < count; ++s, y += n, o += n) {
+        double acc = 0.0;
+        for (int e = 0; e < m; ++e) acc += t[e] * y[nz[e]];
+        *o = acc;
+      }
     }
   }
 }
@@ -360,13 +367,11 @@ void actuatorRegressors(const RobotModel& model, DynamicsData& data, const Drive
       }
       torqueRegressors(model, data, Qj.topRows(b), QDj.topRows(b), QDDj.topRows(b),
                        Yb.topRows(b * n));
-      for (Eigen::Index k = 0; k < b; ++k) {
-        if (T)
-          transmissionTransposeTimes(model.transmission, Yb.data() + k * n, Yb.outerStride(),
-                                     Y.data() + (k0 + k) * n, Y.outerStride());
-        else
-          Y.middleRows((k0 + k) * n, n).leftCols(10 * n) = Yb.middleRows(k * n, n);
-      }
+      if (T)
+        transmissionTransposeTimes(model.transmission, Yb.data(), Yb.outerStride(),
+                                   Y.data() + k0 * n, Y.outerStride(), static_cast<int>(b));
+      else
+        Y.middleRows(k0 * n, b * n).leftCols(10 * n) = Yb.topRows(b * n);
     }
   } else {
     torqueRegressors(model, data, Qm, QDm, QDDm, Y.leftCols(10 * n));

@@ -174,6 +174,21 @@ Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& et
   return r;
 }
 
+Eigen::MatrixXd ObservationModel::fullColumnsAt(const Dataset& data, const Eigen::VectorXd& eta,
+                                                const std::vector<int>& columns,
+                                                const RunContext& ctx) const {
+  const Rows full = fullRowsAt(data, eta, nullptr, ctx);
+  Eigen::MatrixXd out(full.W.rows(), static_cast<Eigen::Index>(columns.size()));
+  for (std::size_t i = 0; i < columns.size(); ++i) {
+    const int c = columns[i];
+    if (c < 0 || c >= full.W.cols())
+      throw Error(fmt::format("model '{}': fullColumnsAt: column {} of {} full columns",
+                              pluginName(), c, full.W.cols()));
+    out.col(static_cast<Eigen::Index>(i)) = full.W.col(c);
+  }
+  return out;
+}
+
 namespace {
 
 // dJ/dW of the base columns as dJ/dW of the full ones (zero on the dependent columns).
