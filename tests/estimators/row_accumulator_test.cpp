@@ -5,8 +5,11 @@
 #include <Eigen/QR>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <random>
 
+#include "exid/dynamics.hpp"
+#include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 
 namespace estimators = exid::estimators;
@@ -137,4 +140,75 @@ TEST(RowAccumulator, ExplainsNullSpace) {
   const std::string s = estimators::explainNullSpace(N, r, {"Fc1", "OFF1", "MX1"}, 4);
   EXPECT_NE(s.find("0.707 Fc1 - 0.707 OFF1"), std::string::npos) << s;
   EXPECT_EQ(s.find("MX1"), std::string::npos) << s;
+}
+
+// addEquations gives the bits of one gramUpdate per equation (its rows in order, over its own
+// non-zero columns and y, ascending labels), written out here: pinned, so that a faster
+// gathering of the rows (in blocks, say) must keep the operations and their order. Equations
+// whose row counts are not multiples of four, not in turn, rows zero in whole columns.
+TEST(RowAccumulator, GivesTheBitsOfOneGramUpdatePerEquation) {
+  std::mt19937_64 rng(12);
+  std::normal_distribution<double> N(0, 1);
+  const int p = 11;
+  for (const int m : {64, 1023, 1025, 2500, 5003}) {
+    Eigen::MatrixXd W(m, p);
+    Eigen::VectorXd y(m);
+    std::vector<int> eq(static_cast<std::size_t>(m));
+    for (int i = 0; i < m; ++i) {
+      // five equations, not in turn: a run of one, then the others
+      const int g = (i % 7 == 3) ? 9 : (i * 7 / 5) % 4;
+      eq[static_cast<std::size_t>(i)] = g;
+      for (int j = 0; j < p; ++j) W(i, j) = (j < g || (g == 9 && j % 3 == 0)) ? 0.0 : N(rng);
+      y(i) = N(rng);
+    }
+    estimators::RowAccumulator acc(p, estimators::RowAccumulator::Method::Normal);
+    acc.addEquations(W, y, eq);
+    // the reference: per equation (ascending labels) its rows in order, its non-zero columns
+    // ascending and y, padded to a multiple of 4, one gramUpdate into a zero Gram matrix, added
+    // into the whole's lower triangle
+    Eigen::MatrixXd ref = Eigen::MatrixXd::Zero(p + 1, p + 1);
+    for (const int g : {0, 1, 2, 3, 9}) {
+      std::vector<int> rows, cols;
+      for (int i = 0; i < m; ++i)
+        if (eq[static_cast<std::size_t>(i)] == g) rows.push_back(i);
+      if (rows.empty()) continue;
+      for (int c = 0; c < p; ++c)
+        for (int i : rows)
+          if (W(i, c) != 0.0) {
+            cols.push_back(c);
+            break;
+          }
+      cols.push_back(p);
+      const int q = static_cast<int>(cols.size()), ld = (q + 3) & ~3;
+      std::vector<double> B(rows.size() * static_cast<std::size_t>(ld), 0.0),
+          G(static_cast<std::size_t>(q * ld), 0.0);
+      for (std::size_t k = 0; k < rows.size(); ++k)
+        for (int c = 0; c < q; ++c)
+          B[k * static_cast<std::size_t>(ld) + static_cast<std::size_t>(c)] =
+              cols[static_cast<std::size_t>(c)] == p
+                  ? y(rows[k])
+                  : W(rows[k], cols[static_cast<std::size_t>(c)]);
+      exid::gramUpdate(G.data(), ld, B.data(), ld, static_cast<int>(rows.size()), q);
+      for (int a = 0; a < q; ++a)
+        for (int b = 0; b <= a; ++b)
+          ref(cols[static_cast<std::size_t>(a)], cols[static_cast<std::size_t>(b)]) +=
+              G[static_cast<std::size_t>(a * ld + b)];
+    }
+    const Eigen::MatrixXd& got = acc.normalLower();
+    for (int a = 0; a <= p; ++a)
+      for (int b = 0; b <= a; ++b)
+        EXPECT_EQ(0, std::memcmp(&got(a, b), &ref(a, b), sizeof(double)))
+            << m << " rows: entry (" << a << ", " << b << "): " << got(a, b) << " vs " << ref(a, b);
+    // and it is [W y]^T [W y]
+    Eigen::MatrixXd A(m, p + 1);
+    A << W, y;
+    const Eigen::MatrixXd dense = A.transpose() * A;
+    EXPECT_LE((Eigen::MatrixXd(got.triangularView<Eigen::Lower>()) -
+               Eigen::MatrixXd(dense.triangularView<Eigen::Lower>()))
+                  .cwiseAbs()
+                  .maxCoeff(),
+              1e-12 * dense.cwiseAbs().maxCoeff());
+  }
+  estimators::RowAccumulator qr(3, estimators::RowAccumulator::Method::Qr);
+  EXPECT_THROW(qr.normalLower(), exid::Error);
 }

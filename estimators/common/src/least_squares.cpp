@@ -181,6 +181,13 @@ void RowAccumulator::merge(const RowAccumulator& other, double scale) {
   m_ = m;
 }
 
+const Eigen::MatrixXd& RowAccumulator::normalLower() const {
+  if (method_ != Method::Normal)
+    throw Error("RowAccumulator: normalLower() of a QR accumulator (it holds R, not W^T W)");
+  compress();
+  return gram_;
+}
+
 const Eigen::MatrixXd& RowAccumulator::factor() const {
   compress();
   if (!dirty_) return F_;

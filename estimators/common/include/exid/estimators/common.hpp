@@ -61,6 +61,9 @@ class RowAccumulator {
   Method method() const { return method_; }
   /// (p+1) x (p+1) factor with F^T F = [W y]^T [W y] (compresses pending rows first).
   const Eigen::MatrixXd& factor() const;
+  /// Normal: [W y]^T [W y] as accumulated, its lower triangle (compresses pending rows first;
+  /// the upper triangle is not kept). Qr: refused (exid::Error).
+  const Eigen::MatrixXd& normalLower() const;
   /// ||y - W theta||^2, exact from the factor: ||F [theta; -1]||^2.
   double residualSquared(const Eigen::VectorXd& theta) const;
   /// Euclidean norm of each column of W (p).
