@@ -282,6 +282,21 @@ inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWor
   }
 }
 
+// The samples T's width at a time: each block's forward pass (lanesForward), then
+// body(ws, k0, lanes) on it; the lanes past the last sample repeat it.
+template <class T, class Body>
+inline void forLaneBlocks(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                          const double* qd, const double* qdd, long ldx, bool acceleration,
+                          Body&& body) {
+  constexpr int W = LaneTraits<T>::kWidth;
+  const LaneWork<T> ws = laneWork<T>(d);
+  for (int k0 = 0; k0 < count; k0 += W) {
+    const int lanes = count - k0 < W ? count - k0 : W;
+    lanesForward(model, d, ws, k0, lanes, q, qd, qdd, ldx, acceleration);
+    body(ws, k0, lanes);
+  }
+}
+
 // Torque regressors of `count` samples (see Kernels in kernel_table.hpp for the layout), T's
 // width at a time; the lanes past the last sample repeat it and are not written.
 template <class T>
@@ -289,62 +304,59 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
                                  const double* q, const double* qd, const double* qdd, long ldx,
                                  double* Y, long ldY, long strideY) {
   using Tr = LaneTraits<T>;
-  constexpr int W = Tr::kWidth;
   const int n = d.n;
-  const LaneWork<T> ws = laneWork<T>(d);
-  for (int k0 = 0; k0 < count; k0 += W) {
-    const int lanes = count - k0 < W ? count - k0 : W;
-    lanesForward(model, d, ws, k0, lanes, q, qd, qdd, ldx, true);
-    // the ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own)
-    for (int j = 0; j < n; ++j) {
-      const JointC& c = d.J[static_cast<std::size_t>(j)];
-      const int oj = d.anc_off[static_cast<std::size_t>(j)];
-      ws.s[oj].w = constant3<T>(c.S.w);
-      ws.s[oj].v = constant3<T>(c.S.v);
-      const int par = c.parent;
-      if (par < 0) continue;
-      const int op = d.anc_off[static_cast<std::size_t>(par)];
-      const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
-      for (int t = 1; t < cnt; ++t) ws.s[oj + t] = xMotion(ws.R[j], ws.p[j], ws.s[op + t - 1]);
-    }
-    // the rows: body j's ten columns, one row per ancestor i of j (pairRow in rigid_body.hpp)
-    for (int j = 0; j < n; ++j) {
-      const int oj = d.anc_off[static_cast<std::size_t>(j)];
-      const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
-      const L3<T>& w = ws.v[j].w;
-      const L3<T>& wd = ws.a[j].w;
-      const L3<T>& ao = ws.ao[j];
-      for (int l = 0; l < lanes; ++l) {
-        double* Yj = Y + strideY * (k0 + l) + ldY * 10 * j;
-        for (int t = d.off_off[static_cast<std::size_t>(j)];
-             t < d.off_off[static_cast<std::size_t>(j) + 1]; ++t)
-          for (int col = 0; col < 10; ++col)
-            Yj[d.off_idx[static_cast<std::size_t>(t)] + ldY * col] = 0.0;
-      }
-      for (int t = 0; t < cnt; ++t) {
-        const int i = d.anc_idx[static_cast<std::size_t>(oj + t)];
-        const L3<T>& sw = ws.s[oj + t].w;
-        const L3<T>& sv = ws.s[oj + t].v;
-        const L3<T> x = cross(sw, w);
-        T out[10];
-        out[0] = sw.c[0] * wd.c[0] + x.c[0] * w.c[0];
-        out[1] = sw.c[0] * wd.c[1] + sw.c[1] * wd.c[0] + x.c[0] * w.c[1] + x.c[1] * w.c[0];
-        out[2] = sw.c[0] * wd.c[2] + sw.c[2] * wd.c[0] + x.c[0] * w.c[2] + x.c[2] * w.c[0];
-        out[3] = sw.c[1] * wd.c[1] + x.c[1] * w.c[1];
-        out[4] = sw.c[1] * wd.c[2] + sw.c[2] * wd.c[1] + x.c[1] * w.c[2] + x.c[2] * w.c[1];
-        out[5] = sw.c[2] * wd.c[2] + x.c[2] * w.c[2];
-        const L3<T> hc = add(add(cross(ao, sw), cross(sv, wd)), cross(cross(sv, w), w));
-        out[6] = hc.c[0];
-        out[7] = hc.c[1];
-        out[8] = hc.c[2];
-        out[9] = sv.c[0] * ao.c[0] + sv.c[1] * ao.c[1] + sv.c[2] * ao.c[2];
-        for (int l = 0; l < lanes; ++l) {
-          double* Yi = Y + strideY * (k0 + l) + ldY * 10 * j + i;
-          for (int col = 0; col < 10; ++col) Yi[ldY * col] = Tr::get(out[col], l);
+  forLaneBlocks<T>(
+      model, d, count, q, qd, qdd, ldx, true, [&](const LaneWork<T>& ws, int k0, int lanes) {
+        // the ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own)
+        for (int j = 0; j < n; ++j) {
+          const JointC& c = d.J[static_cast<std::size_t>(j)];
+          const int oj = d.anc_off[static_cast<std::size_t>(j)];
+          ws.s[oj].w = constant3<T>(c.S.w);
+          ws.s[oj].v = constant3<T>(c.S.v);
+          const int par = c.parent;
+          if (par < 0) continue;
+          const int op = d.anc_off[static_cast<std::size_t>(par)];
+          const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+          for (int t = 1; t < cnt; ++t) ws.s[oj + t] = xMotion(ws.R[j], ws.p[j], ws.s[op + t - 1]);
         }
-      }
-    }
-  }
+        // the rows: body j's ten columns, one row per ancestor i of j (pairRow in rigid_body.hpp)
+        for (int j = 0; j < n; ++j) {
+          const int oj = d.anc_off[static_cast<std::size_t>(j)];
+          const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+          const L3<T>& w = ws.v[j].w;
+          const L3<T>& wd = ws.a[j].w;
+          const L3<T>& ao = ws.ao[j];
+          for (int l = 0; l < lanes; ++l) {
+            double* Yj = Y + strideY * (k0 + l) + ldY * 10 * j;
+            for (int t = d.off_off[static_cast<std::size_t>(j)];
+                 t < d.off_off[static_cast<std::size_t>(j) + 1]; ++t)
+              for (int col = 0; col < 10; ++col)
+                Yj[d.off_idx[static_cast<std::size_t>(t)] + ldY * col] = 0.0;
+          }
+          for (int t = 0; t < cnt; ++t) {
+            const int i = d.anc_idx[static_cast<std::size_t>(oj + t)];
+            const L3<T>& sw = ws.s[oj + t].w;
+            const L3<T>& sv = ws.s[oj + t].v;
+            const L3<T> x = cross(sw, w);
+            T out[10];
+            out[0] = sw.c[0] * wd.c[0] + x.c[0] * w.c[0];
+            out[1] = sw.c[0] * wd.c[1] + sw.c[1] * wd.c[0] + x.c[0] * w.c[1] + x.c[1] * w.c[0];
+            out[2] = sw.c[0] * wd.c[2] + sw.c[2] * wd.c[0] + x.c[0] * w.c[2] + x.c[2] * w.c[0];
+            out[3] = sw.c[1] * wd.c[1] + x.c[1] * w.c[1];
+            out[4] = sw.c[1] * wd.c[2] + sw.c[2] * wd.c[1] + x.c[1] * w.c[2] + x.c[2] * w.c[1];
+            out[5] = sw.c[2] * wd.c[2] + x.c[2] * w.c[2];
+            const L3<T> hc = add(add(cross(ao, sw), cross(sv, wd)), cross(cross(sv, w), w));
+            out[6] = hc.c[0];
+            out[7] = hc.c[1];
+            out[8] = hc.c[2];
+            out[9] = sv.c[0] * ao.c[0] + sv.c[1] * ao.c[1] + sv.c[2] * ao.c[2];
+            for (int l = 0; l < lanes; ++l) {
+              double* Yi = Y + strideY * (k0 + l) + ldY * 10 * j + i;
+              for (int col = 0; col < 10; ++col) Yi[ldY * col] = Tr::get(out[col], l);
+            }
+          }
+        }
+      });
 }
 
 // Inverse dynamics (RNEA) of `count` samples: sample k's q_j at q[k + ldx j] (likewise qd, qdd),
@@ -355,51 +367,48 @@ template <class T>
 inline void inverseDynamicsImpl(const RobotModel& model, DynamicsData& d, int count,
                                 const double* q, const double* qd, const double* qdd, long ldx,
                                 const double* pi, double* tau, long ldt) {
-  using Tr = LaneTraits<T>;
-  constexpr int W = Tr::kWidth;
   const int n = d.n;
-  const LaneWork<T> ws = laneWork<T>(d);
-  for (int k0 = 0; k0 < count; k0 += W) {
-    const int lanes = count - k0 < W ? count - k0 : W;
-    lanesForward(model, d, ws, k0, lanes, q, qd, qdd, ldx, true);
-    for (int j = 0; j < n; ++j) {  // newtonEuler(g, kin)
-      const double* g = pi ? pi + 10 * j : model.bodies[static_cast<std::size_t>(j)].inertia.data();
-      const L3<T>& w = ws.v[j].w;
-      const L3<T>& wd = ws.a[j].w;
-      const L3<T>& ao = ws.ao[j];
-      const V3 h(g[6], g[7], g[8]);
-      const double m = g[9];
-      const L3<T> hl = constant3<T>(h);
-      const L3<T> wh = cross(w, hl);
-      const L3<T> Iwd = symMul(g, wd), Iw = symMul(g, w);
-      const L3<T> a1 = cross(w, Iw), a2 = cross(hl, ao), b1 = cross(wd, hl), b2 = cross(w, wh);
-      LS<T>& f = ws.f[j];
-      for (int r = 0; r < 3; ++r) {
-        f.w.c[r] = Iwd.c[r] + a1.c[r] + a2.c[r];
-        f.v.c[r] = m * ao.c[r] + b1.c[r] + b2.c[r];
-      }
-    }
-    for (int j = n - 1; j >= 0; --j) {
-      const JointC& c = d.J[static_cast<std::size_t>(j)];
-      const LS<T>& f = ws.f[j];
-      // dot(S, f) = S.w . f.w + S.v . f.v
-      const T t = (c.S.w[0] * f.w.c[0] + c.S.w[1] * f.w.c[1] + c.S.w[2] * f.w.c[2]) +
-                  (c.S.v[0] * f.v.c[0] + c.S.v[1] * f.v.c[1] + c.S.v[2] * f.v.c[2]);
-      storeLanes(tau + k0 + ldt * j, t, lanes);
-      const int par = c.parent;
-      if (par < 0) continue;
-      // xForceT(R, p, f) = {R f.w + p x (R f.v), R f.v}, added to the parent's force
-      const LR<T>& R = ws.R[j];
-      const L3<T>& p = ws.p[j];
-      const L3<T> fv = rMul(R, f.v), Rfw = rMul(R, f.w);
-      const L3<T> pf = cross(p, fv);
-      LS<T>& fp = ws.f[par];
-      for (int r = 0; r < 3; ++r) {
-        fp.w.c[r] = fp.w.c[r] + (Rfw.c[r] + pf.c[r]);
-        fp.v.c[r] = fp.v.c[r] + fv.c[r];
-      }
-    }
-  }
+  forLaneBlocks<T>(
+      model, d, count, q, qd, qdd, ldx, true, [&](const LaneWork<T>& ws, int k0, int lanes) {
+        for (int j = 0; j < n; ++j) {  // newtonEuler(g, kin)
+          const double* g =
+              pi ? pi + 10 * j : model.bodies[static_cast<std::size_t>(j)].inertia.data();
+          const L3<T>& w = ws.v[j].w;
+          const L3<T>& wd = ws.a[j].w;
+          const L3<T>& ao = ws.ao[j];
+          const V3 h(g[6], g[7], g[8]);
+          const double m = g[9];
+          const L3<T> hl = constant3<T>(h);
+          const L3<T> wh = cross(w, hl);
+          const L3<T> Iwd = symMul(g, wd), Iw = symMul(g, w);
+          const L3<T> a1 = cross(w, Iw), a2 = cross(hl, ao), b1 = cross(wd, hl), b2 = cross(w, wh);
+          LS<T>& f = ws.f[j];
+          for (int r = 0; r < 3; ++r) {
+            f.w.c[r] = Iwd.c[r] + a1.c[r] + a2.c[r];
+            f.v.c[r] = m * ao.c[r] + b1.c[r] + b2.c[r];
+          }
+        }
+        for (int j = n - 1; j >= 0; --j) {
+          const JointC& c = d.J[static_cast<std::size_t>(j)];
+          const LS<T>& f = ws.f[j];
+          // dot(S, f) = S.w . f.w + S.v . f.v
+          const T t = (c.S.w[0] * f.w.c[0] + c.S.w[1] * f.w.c[1] + c.S.w[2] * f.w.c[2]) +
+                      (c.S.v[0] * f.v.c[0] + c.S.v[1] * f.v.c[1] + c.S.v[2] * f.v.c[2]);
+          storeLanes(tau + k0 + ldt * j, t, lanes);
+          const int par = c.parent;
+          if (par < 0) continue;
+          // xForceT(R, p, f) = {R f.w + p x (R f.v), R f.v}, added to the parent's force
+          const LR<T>& R = ws.R[j];
+          const L3<T>& p = ws.p[j];
+          const L3<T> fv = rMul(R, f.v), Rfw = rMul(R, f.w);
+          const L3<T> pf = cross(p, fv);
+          LS<T>& fp = ws.f[par];
+          for (int r = 0; r < 3; ++r) {
+            fp.w.c[r] = fp.w.c[r] + (Rfw.c[r] + pf.c[r]);
+            fp.v.c[r] = fp.v.c[r] + fv.c[r];
+          }
+        }
+      });
 }
 
 // Energy regressors of `count` samples: sample k's kinetic row (1 x 10n) at kinetic[k + ldk c],
@@ -409,58 +418,54 @@ template <class T>
 inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int count,
                                  const double* q, const double* qd, long ldx, double* kinetic,
                                  double* potential, long ldk) {
-  using Tr = LaneTraits<T>;
-  constexpr int W = Tr::kWidth;
   const int n = d.n;
-  const LaneWork<T> ws = laneWork<T>(d);
   const V3& g = model.gravity;
-  const T zero = Tr::broadcast(0.0);
-  for (int k0 = 0; k0 < count; k0 += W) {
-    const int lanes = count - k0 < W ? count - k0 : W;
-    lanesForward(model, d, ws, k0, lanes, q, qd, nullptr, ldx, false);
-    for (int j = 0; j < n; ++j) {
-      const L3<T>& w = ws.v[j].w;
-      const L3<T>& vl = ws.v[j].v;
-      T K[10];
-      K[0] = 0.5 * w.c[0] * w.c[0];
-      K[1] = w.c[0] * w.c[1];
-      K[2] = w.c[0] * w.c[2];
-      K[3] = 0.5 * w.c[1] * w.c[1];
-      K[4] = w.c[1] * w.c[2];
-      K[5] = 0.5 * w.c[2] * w.c[2];
-      const L3<T> hc = cross(vl, w);
-      K[6] = hc.c[0];
-      K[7] = hc.c[1];
-      K[8] = hc.c[2];
-      K[9] = 0.5 * (vl.c[0] * vl.c[0] + vl.c[1] * vl.c[1] + vl.c[2] * vl.c[2]);
-      // base pose of body j
-      const int par = d.J[static_cast<std::size_t>(j)].parent;
-      LR<T>& R0 = ws.R0[j];
-      L3<T>& p0 = ws.p0[j];
-      if (par >= 0) {
-        const LR<T>& Rp = ws.R0[par];
-        const LR<T>& R = ws.R[j];
-        for (int col = 0; col < 3; ++col)
-          for (int r = 0; r < 3; ++r)
-            R0.m[r + 3 * col] = Rp.m[r] * R.m[3 * col] + Rp.m[r + 3] * R.m[1 + 3 * col] +
-                                Rp.m[r + 6] * R.m[2 + 3 * col];
-        const L3<T> Rpp = rMul(Rp, ws.p[j]);
-        p0 = add(ws.p0[par], Rpp);
-      } else {
-        R0 = ws.R[j];
-        p0 = ws.p[j];
-      }
-      T U[4];
-      for (int i = 0; i < 3; ++i)  // -(R0^T g)
-        U[i] = -(R0.m[3 * i] * g[0] + R0.m[3 * i + 1] * g[1] + R0.m[3 * i + 2] * g[2]);
-      U[3] = -(g[0] * p0.c[0] + g[1] * p0.c[1] + g[2] * p0.c[2]);
-      double* Kr = kinetic + k0 + ldk * 10 * j;
-      double* Ur = potential + k0 + ldk * 10 * j;
-      for (int c = 0; c < 10; ++c) storeLanes(Kr + ldk * c, K[c], lanes);
-      for (int c = 0; c < 6; ++c) storeLanes(Ur + ldk * c, zero, lanes);
-      for (int c = 0; c < 4; ++c) storeLanes(Ur + ldk * (6 + c), U[c], lanes);
-    }
-  }
+  const T zero = LaneTraits<T>::broadcast(0.0);
+  forLaneBlocks<T>(
+      model, d, count, q, qd, nullptr, ldx, false, [&](const LaneWork<T>& ws, int k0, int lanes) {
+        for (int j = 0; j < n; ++j) {
+          const L3<T>& w = ws.v[j].w;
+          const L3<T>& vl = ws.v[j].v;
+          T K[10];
+          K[0] = 0.5 * w.c[0] * w.c[0];
+          K[1] = w.c[0] * w.c[1];
+          K[2] = w.c[0] * w.c[2];
+          K[3] = 0.5 * w.c[1] * w.c[1];
+          K[4] = w.c[1] * w.c[2];
+          K[5] = 0.5 * w.c[2] * w.c[2];
+          const L3<T> hc = cross(vl, w);
+          K[6] = hc.c[0];
+          K[7] = hc.c[1];
+          K[8] = hc.c[2];
+          K[9] = 0.5 * (vl.c[0] * vl.c[0] + vl.c[1] * vl.c[1] + vl.c[2] * vl.c[2]);
+          // base pose of body j
+          const int par = d.J[static_cast<std::size_t>(j)].parent;
+          LR<T>& R0 = ws.R0[j];
+          L3<T>& p0 = ws.p0[j];
+          if (par >= 0) {
+            const LR<T>& Rp = ws.R0[par];
+            const LR<T>& R = ws.R[j];
+            for (int col = 0; col < 3; ++col)
+              for (int r = 0; r < 3; ++r)
+                R0.m[r + 3 * col] = Rp.m[r] * R.m[3 * col] + Rp.m[r + 3] * R.m[1 + 3 * col] +
+                                    Rp.m[r + 6] * R.m[2 + 3 * col];
+            const L3<T> Rpp = rMul(Rp, ws.p[j]);
+            p0 = add(ws.p0[par], Rpp);
+          } else {
+            R0 = ws.R[j];
+            p0 = ws.p[j];
+          }
+          T U[4];
+          for (int i = 0; i < 3; ++i)  // -(R0^T g)
+            U[i] = -(R0.m[3 * i] * g[0] + R0.m[3 * i + 1] * g[1] + R0.m[3 * i + 2] * g[2]);
+          U[3] = -(g[0] * p0.c[0] + g[1] * p0.c[1] + g[2] * p0.c[2]);
+          double* Kr = kinetic + k0 + ldk * 10 * j;
+          double* Ur = potential + k0 + ldk * 10 * j;
+          for (int c = 0; c < 10; ++c) storeLanes(Kr + ldk * c, K[c], lanes);
+          for (int c = 0; c < 6; ++c) storeLanes(Ur + ldk * c, zero, lanes);
+          for (int c = 0; c < 4; ++c) storeLanes(Ur + ldk * (6 + c), U[c], lanes);
+        }
+      });
 }
 
 }  // namespace
