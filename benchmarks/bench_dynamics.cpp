@@ -315,6 +315,28 @@ void registerKernels() {
                   benchmark::DoNotOptimize(K.data());
                   benchmark::DoNotOptimize(U.data());
                 });
+  // Their vector-Jacobian products of several samples (torqueRegressorVjps, energyRegressorVjps;
+  // the same bits as the one-sample VJPs of the portable copy), with fixed random G
+  registerLanes("TorqueRegressorVjps", "TorqueRegressorVjp", flops(Kernel::TorqueRegressorVjp),
+                [](const Batch& b) {
+                  Fixture& f = fx();
+                  static const Eigen::MatrixXd G = Eigen::MatrixXd::Random(kBatch * 6, 60);
+                  static Eigen::MatrixXd gq, gqd, gqdd;
+                  torqueRegressorVjps(f.model, *f.data, b.Q, b.QD, b.QDD, G, &gq, &gqd, &gqdd);
+                  benchmark::DoNotOptimize(gq.data());
+                  benchmark::DoNotOptimize(gqd.data());
+                  benchmark::DoNotOptimize(gqdd.data());
+                });
+  registerLanes("EnergyRegressorVjps", "EnergyRegressorVjp", flops(Kernel::EnergyRegressorVjp),
+                [](const Batch& b) {
+                  Fixture& f = fx();
+                  static const Eigen::MatrixXd Gk = Eigen::MatrixXd::Random(kBatch, 60),
+                                               Gu = Eigen::MatrixXd::Random(kBatch, 60);
+                  static Eigen::MatrixXd gq, gqd;
+                  energyRegressorVjps(f.model, *f.data, b.Q, b.QD, Gk, Gu, &gq, &gqd);
+                  benchmark::DoNotOptimize(gq.data());
+                  benchmark::DoNotOptimize(gqd.data());
+                });
   // Regressor + information matrix W^T W over 10,000 samples; the table gives the time per sample.
   {
     Eigen::MatrixXd Y(6, 60);

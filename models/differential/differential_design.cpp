@@ -394,23 +394,31 @@ void DifferentialModel::designVjpNoGains(const exid::Samples& s, const Friction&
   const int n = R.dof(), K = s.size(), m = static_cast<int>(sel_.size());
   const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
   exid::models::zeroGrad(s, grad);
-  Eigen::MatrixXd G = Eigen::MatrixXd::Zero(n, P0);
-  Eigen::VectorXd gq, gqd, gqdd;
+  // a block of samples at a time (actuatorRegressorVjps: several samples per vector register,
+  // the bits of one at a time)
+  constexpr int kBlock = 256;
+  Eigen::MatrixXd G(static_cast<Eigen::Index>(kBlock) * n, P0), gq, gqd, gqdd;
   const Workspace data(*this);
-  for (int k = 0; k < K; ++k) {
-    G.setZero();
-    for (int i = 0; i < m; ++i)
-      G.row(sel_[static_cast<std::size_t>(i)]) = dW.row(k * m + i).head(P0);
-    exid::actuatorRegressorVjp(R, *data, cols_, s.q.row(k).transpose(), s.qd.row(k).transpose(),
-                               s.qdd.row(k).transpose(), G, &gq, &gqd, &gqdd);
-    for (int i = 0; i < m && P > P0; ++i) {  // the extra columns' derivatives in qdm_j
-      const int j = sel_[static_cast<std::size_t>(i)];
-      gqd[j] += extraColumnsVjp(
-          s.qd(k, j), f, j, dW.row(k * m + i).segment(P0 + extraPerJoint() * j, extraPerJoint()));
-    }
-    grad->q.row(k) = gq.transpose();
-    grad->qd.row(k) = gqd.transpose();
-    grad->qdd.row(k) = gqdd.transpose();
+  for (int k0 = 0; k0 < K; k0 += kBlock) {
+    const int b = std::min(kBlock, K - k0);
+    auto Gb = G.topRows(static_cast<Eigen::Index>(b) * n);
+    Gb.setZero();
+    for (int k = 0; k < b; ++k)
+      for (int i = 0; i < m; ++i)
+        Gb.row(static_cast<Eigen::Index>(k) * n + sel_[static_cast<std::size_t>(i)]) =
+            dW.row(static_cast<Eigen::Index>(k0 + k) * m + i).head(P0);
+    exid::actuatorRegressorVjps(R, *data, cols_, s.q.middleRows(k0, b), s.qd.middleRows(k0, b),
+                                s.qdd.middleRows(k0, b), Gb, &gq, &gqd, &gqdd);
+    for (int k = 0; k < b; ++k)
+      for (int i = 0; i < m && P > P0; ++i) {  // the extra columns' derivatives in qdm_j
+        const int j = sel_[static_cast<std::size_t>(i)];
+        gqd(k, j) += extraColumnsVjp(s.qd(k0 + k, j), f, j,
+                                     dW.row(static_cast<Eigen::Index>(k0 + k) * m + i)
+                                         .segment(P0 + extraPerJoint() * j, extraPerJoint()));
+      }
+    grad->q.middleRows(k0, b) = gq;
+    grad->qd.middleRows(k0, b) = gqd;
+    grad->qdd.middleRows(k0, b) = gqdd;
   }
 }
 

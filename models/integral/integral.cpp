@@ -179,12 +179,27 @@ class IntegralModel : public exid::ObservationModel {
     }
     auto data = exid::makeDynamicsData(Rb);
     Eigen::VectorXd qm, qdm, q, qd, gq, gqd;
+    // the energies' VJPs of every sample at once (energyRegressorVjps: several samples per
+    // vector register, the bits of one at a time), in the tree's coordinates
+    Eigen::MatrixXd Qj, QDj, GQ, GQD;
     for (int k = 0; k < K; ++k) {
       qm = s.q.row(k).transpose();
       qdm = s.qd.row(k).transpose();
       exid::measuredToJoint(Rb, qm, qdm, qdm, &q, &qd, nullptr);
-      const Eigen::RowVectorXd G = dE.row(k).head(ni);
-      exid::energyRegressorVjp(Rb, *data, q, qd, G, G, &gq, &gqd);
+      if (k == 0) {
+        Qj.resize(K, q.size());
+        QDj.resize(K, qd.size());
+      }
+      Qj.row(k) = q.transpose();
+      QDj.row(k) = qd.transpose();
+    }
+    if (K > 0)
+      exid::energyRegressorVjps(Rb, *data, Qj, QDj, dE.leftCols(ni), dE.leftCols(ni), &GQ, &GQD);
+    for (int k = 0; k < K; ++k) {
+      qm = s.q.row(k).transpose();
+      qdm = s.qd.row(k).transpose();
+      gq = GQ.row(k).transpose();
+      gqd = GQD.row(k).transpose();
       exid::jointGradientToMeasured(Rb, qm, qdm, qdm, &gq, &gqd, nullptr);
       for (int j = 0; j < n; ++j) {
         int c = ni + nd * j;

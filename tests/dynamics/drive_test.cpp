@@ -5,6 +5,7 @@
 
 #include <cstring>
 #include <random>
+#include <tuple>
 
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
@@ -150,5 +151,62 @@ TEST(Drive, ActuatorRegressorsSameBitsAsOneSampleAtATime) {
         << m.name << ": largest difference " << (Y - one).cwiseAbs().maxCoeff();
     Eigen::MatrixXd Ybad(K * n, P - 1);
     EXPECT_THROW(actuatorRegressors(m, *d, all, Q, QD, QDD, Ybad), Error);
+  }
+}
+
+// actuatorRegressorVjps: each sample's gradients the bits actuatorRegressorVjp gives for that
+// sample alone, with drive columns and with a coupled transmission, whatever the sample count
+// (past a block of 64 too); null outputs are skipped.
+TEST(Drive, ActuatorRegressorVjpsSameBitsAsOneSampleAtATime) {
+  std::mt19937 rng(62);
+  RobotModel plain = panda();
+  for (std::size_t j = 0; j < plain.drives.size(); ++j) {
+    plain.drives[j].coulomb = 0.5;
+    plain.drives[j].viscous = 0.1;
+  }
+  const DriveColumns all{true, true, true, true};
+  for (const RobotModel& m : {plain, coupled3()}) {
+    auto d = makeDynamicsData(m);
+    const int n = m.dof(), P = numParameters(m, all);
+    for (int K : {1, 5, 67}) {
+      Eigen::MatrixXd Q(K, n), QD(K, n), QDD(K, n);
+      for (int k = 0; k < K; ++k) {
+        Q.row(k) = randomVec(rng, n, 2.0).transpose();
+        QD.row(k) = randomVec(rng, n, 1.5).transpose();
+        QDD.row(k) = randomVec(rng, n, 4.0).transpose();
+      }
+      const Eigen::MatrixXd G =
+          Eigen::MatrixXd::NullaryExpr(K * n, P, [&] { return randomVec(rng, 1)[0]; });
+      Eigen::MatrixXd a1(K, n), b1(K, n), c1(K, n);
+      Eigen::VectorXd a, b, c;
+      for (int k = 0; k < K; ++k) {
+        const Eigen::MatrixXd Gk = G.middleRows(k * n, n);
+        actuatorRegressorVjp(m, *d, all, Q.row(k).transpose(), QD.row(k).transpose(),
+                             QDD.row(k).transpose(), Gk, &a, &b, &c);
+        a1.row(k) = a.transpose();
+        b1.row(k) = b.transpose();
+        c1.row(k) = c.transpose();
+      }
+      Eigen::MatrixXd A, B, C;
+      actuatorRegressorVjps(m, *d, all, Q, QD, QDD, G, &A, &B, &C);
+      for (const auto& [x, y, what] :
+           {std::tuple(&A, &a1, "qm"), std::tuple(&B, &b1, "qdm"), std::tuple(&C, &c1, "qddm")}) {
+        ASSERT_EQ(x->rows(), K);
+        EXPECT_EQ(0, std::memcmp(x->data(), y->data(), sizeof(double) * y->size()))
+            << m.name << " K=" << K << " d/d" << what << ": largest difference "
+            << (*x - *y).cwiseAbs().maxCoeff();
+      }
+      Eigen::MatrixXd only;
+      actuatorRegressorVjps(m, *d, all, Q, QD, QDD, G, nullptr, nullptr, &only);
+      EXPECT_EQ(0, std::memcmp(only.data(), c1.data(), sizeof(double) * c1.size())) << m.name;
+    }
+    Eigen::MatrixXd out;
+    const Eigen::MatrixXd Z = Eigen::MatrixXd::Zero(2, n);
+    EXPECT_THROW(actuatorRegressorVjps(m, *d, all, Z, Z, Z, Eigen::MatrixXd::Zero(2 * n, P - 1),
+                                       &out, nullptr, nullptr),
+                 Error);
+    EXPECT_THROW(actuatorRegressorVjps(m, *d, all, Z, Eigen::MatrixXd::Zero(3, n), Z,
+                                       Eigen::MatrixXd::Zero(2 * n, P), &out, nullptr, nullptr),
+                 Error);
   }
 }

@@ -125,7 +125,10 @@ TEST(ClosedChainStudy, ExcitationDesignByGradientRunsThroughTheLoops) {
       "excitation:\n"
       "  trajectory: {type: fourier, params: {harmonics: 2, period_s: 4}}\n"
       "  criterion: {type: cond}\n"
-      "  optimizer: {type: nlopt, params: {max_evaluations: 20}}\n";
+      "  optimizer: {type: nlopt, params: {max_evaluations: 20, objective: log}}\n";
+  // (objective: log, the scaling docs/excitation.md advises for cond: on J itself, NLopt's SLSQP
+  // returns FTOL_REACHED after its first evaluation of this start with some last bits of the
+  // kernels, and goes on with others)
   const exid::StudyResult r = run("palletizer", "{type: batch_ls}", exc, "{duration_s: 3.9}");
   ASSERT_TRUE(r.ok) << r.message;
   EXPECT_LT(relErr(r), 1e-9);

@@ -476,6 +476,90 @@ void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data, const Dri
   }
 }
 
+void actuatorRegressorVjps(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+                           const Eigen::Ref<const Eigen::MatrixXd>& Qm,
+                           const Eigen::Ref<const Eigen::MatrixXd>& QDm,
+                           const Eigen::Ref<const Eigen::MatrixXd>& QDDm,
+                           const Eigen::Ref<const Eigen::MatrixXd>& G, Eigen::MatrixXd* d_qm,
+                           Eigen::MatrixXd* d_qdm, Eigen::MatrixXd* d_qddm) {
+  const int n = model.dof();
+  const Eigen::Index K = Qm.rows();
+  check(
+      Qm.cols() == n && QDm.cols() == n && QDDm.cols() == n && QDm.rows() == K && QDDm.rows() == K,
+      "actuatorRegressorVjps: Qm, QDm, QDDm must be K x n");
+  check(G.rows() == K * n && G.cols() == numParameters(model, cols),
+        "actuatorRegressorVjps: G must be K n x numParameters(model, cols)");
+  Eigen::MatrixXd* outs[3] = {d_qm, d_qdm, d_qddm};
+  for (Eigen::MatrixXd* x : outs)
+    if (x) x->resize(K, n);
+  Eigen::VectorXd qm(n), qdm(n), qddm(n), g[3];
+  if (model.hasLoops()) {  // (sample by sample: the loop constraints)
+    Eigen::MatrixXd Gk;
+    for (Eigen::Index k = 0; k < K; ++k) {
+      qm = Qm.row(k).transpose();
+      qdm = QDm.row(k).transpose();
+      qddm = QDDm.row(k).transpose();
+      Gk = G.middleRows(k * n, n);
+      actuatorRegressorVjp(model, data, cols, qm, qdm, qddm, Gk, d_qm ? &g[0] : nullptr,
+                           d_qdm ? &g[1] : nullptr, d_qddm ? &g[2] : nullptr);
+      for (int r = 0; r < 3; ++r)
+        if (outs[r]) outs[r]->row(k) = g[r].transpose();
+    }
+    return;
+  }
+  // A block of samples at a time: each one's joint state and joint-space G as
+  // actuatorRegressorVjp computes them, the block's VJPs at once, then each sample's gradients
+  // through the transmission and the drive columns as there: the same bits.
+  constexpr Eigen::Index kBlock = 64;
+  const bool T = model.hasTransmission();
+  const int nt = n;  // (a tree: one joint per coordinate)
+  Eigen::MatrixXd Qj(kBlock, nt), QDj(kBlock, nt), QDDj(kBlock, nt), Gj(kBlock * nt, 10 * nt);
+  Eigen::MatrixXd B[3];
+  Eigen::VectorXd q(nt), qd(nt), qdd(nt), tmp(n);
+  for (Eigen::Index k0 = 0; k0 < K; k0 += kBlock) {
+    const Eigen::Index b = std::min(kBlock, K - k0);
+    for (Eigen::Index k = 0; k < b; ++k) {
+      qm = Qm.row(k0 + k).transpose();
+      qdm = QDm.row(k0 + k).transpose();
+      qddm = QDDm.row(k0 + k).transpose();
+      measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+      Qj.row(k) = q.transpose();
+      QDj.row(k) = qd.transpose();
+      QDDj.row(k) = qdd.transpose();
+      const auto Gs = G.block((k0 + k) * n, 0, n, 10 * nt);
+      if (T)  // <G, T^T Y> = <T G, Y>
+        Gj.middleRows(k * nt, nt).noalias() = model.transmission.lazyProduct(Gs);
+      else
+        Gj.middleRows(k * nt, nt) = Gs;
+    }
+    torqueRegressorVjps(model, data, Qj.topRows(b), QDj.topRows(b), QDDj.topRows(b),
+                        Gj.topRows(b * nt), d_qm ? &B[0] : nullptr, d_qdm ? &B[1] : nullptr,
+                        d_qddm ? &B[2] : nullptr);
+    for (int r = 0; r < 3; ++r) {
+      if (!outs[r]) continue;
+      for (Eigen::Index k = 0; k < b; ++k) {
+        g[r] = B[r].row(k).transpose();
+        if (T) {
+          tmp.noalias() = model.transmission.transpose() * g[r];
+          g[r] = tmp;
+        }
+        outs[r]->row(k0 + k) = g[r].transpose();
+      }
+    }
+  }
+  const int k = cols.count();
+  for (Eigen::Index s = 0; s < K && k > 0; ++s)
+    for (int j = 0; j < n; ++j) {
+      int c = 10 * n + k * j;
+      if (cols.rotor_inertia) {
+        if (d_qddm) (*d_qddm)(s, j) += G(s * n + j, c);
+        ++c;
+      }
+      if (cols.coulomb) ++c;
+      if (cols.viscous && d_qdm) (*d_qdm)(s, j) += G(s * n + j, c);
+    }
+}
+
 Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
                                const DriveColumns& cols, const Eigen::VectorXd& qm,
                                const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm) {

@@ -297,6 +297,75 @@ void energyRegressors(const RobotModel& model, DynamicsData& d,
   }
 }
 
+void torqueRegressorVjps(const RobotModel& model, DynamicsData& d,
+                         const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                         const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                         const Eigen::Ref<const Eigen::MatrixXd>& QDD,
+                         const Eigen::Ref<const Eigen::MatrixXd>& G, Eigen::MatrixXd* d_q,
+                         Eigen::MatrixXd* d_qd, Eigen::MatrixXd* d_qdd) {
+  prepare(model, d);
+  const int n = d.n;
+  const Eigen::Index K = Q.rows();
+  check(Q.cols() == n && QD.cols() == n && QDD.cols() == n && QD.rows() == K && QDD.rows() == K,
+        "torqueRegressorVjps: Q, QD, QDD must be K x n");
+  check(G.rows() == K * n && G.cols() == 10 * n, "torqueRegressorVjps: G must be K n x 10n");
+  for (Eigen::MatrixXd* x : {d_q, d_qd, d_qdd})
+    if (x) x->resize(K, n);
+  auto out = [](Eigen::MatrixXd* x) { return x ? x->data() : nullptr; };
+  const SampleStates x(Q, QD, &QDD);
+  if (const detail::LaneKernels* lanes = detail::activeLanes()) {
+    lanes->torqueRegressorVjps(model, d, static_cast<int>(K), x.q, x.qd, x.qdd, x.ld, G.data(),
+                               G.outerStride(), n, out(d_q), out(d_qd), out(d_qdd), K);
+    return;
+  }
+  // another copy of the kernels (EXID_ISA): its own torqueRegressorVjp, sample by sample
+  Eigen::VectorXd qk, qdk, qddk, gq(n), gqd(n), gqdd(n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    x.sample(k, n, qk, qdk, qddk);
+    kernels().torqueRegressorVjp(model, d, qk.data(), qdk.data(), qddk.data(), G.data() + k * n,
+                                 G.outerStride(), gq.data(), gqd.data(), gqdd.data());
+    if (d_q) d_q->row(k) = gq.transpose();
+    if (d_qd) d_qd->row(k) = gqd.transpose();
+    if (d_qdd) d_qdd->row(k) = gqdd.transpose();
+  }
+}
+
+void energyRegressorVjps(const RobotModel& model, DynamicsData& d,
+                         const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                         const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                         const Eigen::Ref<const Eigen::MatrixXd>& Gk,
+                         const Eigen::Ref<const Eigen::MatrixXd>& Gu, Eigen::MatrixXd* d_q,
+                         Eigen::MatrixXd* d_qd) {
+  prepare(model, d);
+  const int n = d.n;
+  const Eigen::Index K = Q.rows();
+  check(Q.cols() == n && QD.cols() == n && QD.rows() == K,
+        "energyRegressorVjps: Q, QD must be K x n");
+  check(Gk.rows() == K && Gk.cols() == 10 * n && Gu.rows() == K && Gu.cols() == 10 * n,
+        "energyRegressorVjps: Gk and Gu must be K x 10n");
+  for (Eigen::MatrixXd* x : {d_q, d_qd})
+    if (x) x->resize(K, n);
+  auto out = [](Eigen::MatrixXd* x) { return x ? x->data() : nullptr; };
+  const SampleStates x(Q, QD, nullptr);
+  const detail::LaneKernels* lanes = detail::activeLanes();
+  if (lanes && Gk.outerStride() == Gu.outerStride()) {
+    lanes->energyRegressorVjps(model, d, static_cast<int>(K), x.q, x.qd, x.ld, Gk.data(), Gu.data(),
+                               Gk.outerStride(), out(d_q), out(d_qd), K);
+    return;
+  }
+  Eigen::VectorXd qk, qdk, unused, gq(n), gqd(n);
+  Eigen::RowVectorXd gk(10 * n), gu(10 * n);
+  for (Eigen::Index k = 0; k < K; ++k) {
+    x.sample(k, n, qk, qdk, unused);
+    gk = Gk.row(k);
+    gu = Gu.row(k);
+    kernels().energyRegressorVjp(model, d, qk.data(), qdk.data(), gk.data(), gu.data(),
+                                 d_q ? gq.data() : nullptr, gqd.data());
+    if (d_q) d_q->row(k) = gq.transpose();
+    if (d_qd) d_qd->row(k) = gqd.transpose();
+  }
+}
+
 void energyRegressor(const RobotModel& model, DynamicsData& d, const Eigen::VectorXd& q,
                      const Eigen::VectorXd& qd, Eigen::Ref<Eigen::RowVectorXd> kinetic,
                      Eigen::Ref<Eigen::RowVectorXd> potential) {

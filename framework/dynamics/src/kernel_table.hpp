@@ -47,11 +47,25 @@ using InverseDynamicsLanesFn = void (*)(const RobotModel&, DynamicsData&, int co
 using EnergyRegressorsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
                                     const double* qd, long ldx, double* kinetic, double* potential,
                                     long ldk);
+/// torqueRegressorVjps: sample k's G (n x 10n, leading dimension ldG) at G + k strideG, its
+/// gradients at gq[k + ldo j] (likewise gqd, gqdd; null: not computed).
+using TorqueRegressorVjpsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
+                                       const double* qd, const double* qdd, long ldx,
+                                       const double* G, long ldG, long strideG, double* gq,
+                                       double* gqd, double* gqdd, long ldo);
+/// energyRegressorVjps: sample k's Gk and Gu at Gk[k + ldg c], Gu[k + ldg c], c < 10n; its
+/// gradients at gq[k + ldo j], gqd[k + ldo j] (null: not computed).
+using EnergyRegressorVjpsFn = void (*)(const RobotModel&, DynamicsData&, int count, const double* q,
+                                       const double* qd, long ldx, const double* Gk,
+                                       const double* Gu, long ldg, double* gq, double* gqd,
+                                       long ldo);
 struct LaneKernels {
   Lanes lanes;
   TorqueRegressorsFn torqueRegressors;
   InverseDynamicsLanesFn inverseDynamics;
   EnergyRegressorsFn energyRegressors;
+  TorqueRegressorVjpsFn torqueRegressorVjps;
+  EnergyRegressorVjpsFn energyRegressorVjps;
 };
 /// Two samples at once in the baseline's registers (SSE2).
 const LaneKernels* portableLaneKernels();

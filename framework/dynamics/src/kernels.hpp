@@ -179,8 +179,8 @@ inline void reversePassImpl(DynamicsData& d, const double* qd, Level level, bool
 
 // ---- entry points (Kernels in isa.hpp; the arguments are checked by the callers) ----
 
-// (the portable table runs kernels_lanes.hpp's copy instead, on one lane: the same bits as its
-// lanes; this one is the AVX2 + FMA table's)
+// (the portable table runs kernels_lanes.hpp's copies of these kernels instead, on one lane: the
+// same bits as their lanes; these are the AVX2 + FMA table's)
 [[maybe_unused]] EXID_KERNEL void torqueRegressor(const RobotModel& model, DynamicsData& d,
                                                   const double* q, const double* qd,
                                                   const double* qdd, double* Y, long ld) {
@@ -254,9 +254,10 @@ inline void reversePassImpl(DynamicsData& d, const double* qd, Level level, bool
   }
 }
 
-EXID_KERNEL void torqueRegressorVjp(const RobotModel& model, DynamicsData& d, const double* q,
-                                    const double* qd, const double* qdd, const double* G, long ld,
-                                    double* gq, double* gqd, double* gqdd) {
+[[maybe_unused]] EXID_KERNEL void torqueRegressorVjp(const RobotModel& model, DynamicsData& d,
+                                                     const double* q, const double* qd,
+                                                     const double* qdd, const double* G, long ld,
+                                                     double* gq, double* gqd, double* gqdd) {
   const int n = d.n;
   forwardPassImpl(model, d, q, qd, qdd, Level::Acceleration, true);
   ancestorSubspacesImpl(d);
@@ -278,9 +279,10 @@ EXID_KERNEL void torqueRegressorVjp(const RobotModel& model, DynamicsData& d, co
   reversePassImpl(d, qd, Level::Acceleration, true, gq, gqd, gqdd);
 }
 
-EXID_KERNEL void energyRegressorVjp(const RobotModel& model, DynamicsData& d, const double* q,
-                                    const double* qd, const double* Gk, const double* Gu,
-                                    double* gq, double* gqd) {
+[[maybe_unused]] EXID_KERNEL void energyRegressorVjp(const RobotModel& model, DynamicsData& d,
+                                                     const double* q, const double* qd,
+                                                     const double* Gk, const double* Gu, double* gq,
+                                                     double* gqd) {
   const int n = d.n;
   // Kinetic part: reverse mode through the velocity recursion.
   forwardPassImpl(model, d, q, qd, nullptr, Level::Velocity, false);

@@ -168,8 +168,68 @@ inline L3<T> constant3(const V3& x) {
   return {{Tr::broadcast(x[0]), Tr::broadcast(x[1]), Tr::broadcast(x[2])}};
 }
 
+template <class T>
+inline L3<T> sub(const L3<T>& a, const L3<T>& b) {
+  return {{a.c[0] - b.c[0], a.c[1] - b.c[1], a.c[2] - b.c[2]}};
+}
+template <class T>
+inline T dot3(const L3<T>& a, const L3<T>& b) {
+  return a.c[0] * b.c[0] + a.c[1] * b.c[1] + a.c[2] * b.c[2];
+}
+// dot(S, m) for a constant S: S.w . m.w + S.v . m.v
+template <class T>
+inline T dotS(const SV& S, const LS<T>& m) {
+  return (S.w[0] * m.w.c[0] + S.w[1] * m.w.c[1] + S.w[2] * m.w.c[2]) +
+         (S.v[0] * m.v.c[0] + S.v[1] * m.v.c[1] + S.v[2] * m.v.c[2]);
+}
+// dotCrm(S, b, c) = c . (S x b) (motion cross) for a constant S
+template <class T>
+inline T dotCrmS(const SV& S, const LS<T>& b, const LS<T>& c) {
+  const L3<T> sw = constant3<T>(S.w), sv = constant3<T>(S.v);
+  return dot3(c.w, cross(sw, b.w)) + dot3(c.v, add(cross(sw, b.v), cross(sv, b.w)));
+}
+// the force transform child -> parent: {R f.w + p x (R f.v), R f.v}
+template <class T>
+inline LS<T> xForceT(const LR<T>& R, const L3<T>& p, const LS<T>& f) {
+  const L3<T> fv = rMul(R, f.v);
+  return {add(rMul(R, f.w), cross(p, fv)), fv};
+}
+template <class T>
+inline void addTo(LS<T>& a, const LS<T>& b) {
+  a.w = add(a.w, b.w);
+  a.v = add(a.v, b.v);
+}
+// the symmetric 3 x 3 of lanes g[0..5] times x
+template <class T>
+inline L3<T> symMulL(const T* g, const L3<T>& x) {
+  return {{g[0] * x.c[0] + g[1] * x.c[1] + g[2] * x.c[2],
+           g[1] * x.c[0] + g[3] * x.c[1] + g[4] * x.c[2],
+           g[2] * x.c[0] + g[4] * x.c[1] + g[5] * x.c[2]}};
+}
+template <class T>
+inline L3<T> scale(const T& s, const L3<T>& x) {
+  return {{s * x.c[0], s * x.c[1], s * x.c[2]}};
+}
+// Newton-Euler wrench of a body with parameters g (ten lanes, pi order) and kinematics (w, wd,
+// ao): the operations of newtonEuler (rigid_body.hpp) and of inverseDynamicsImpl's.
+template <class T>
+inline LS<T> newtonEulerL(const T* g, const L3<T>& w, const L3<T>& wd, const L3<T>& ao) {
+  const L3<T> hl = {{g[6], g[7], g[8]}};
+  const L3<T> wh = cross(w, hl);
+  const L3<T> Iwd = symMulL(g, wd), Iw = symMulL(g, w);
+  const L3<T> a1 = cross(w, Iw), a2 = cross(hl, ao), b1 = cross(wd, hl), b2 = cross(w, wh);
+  LS<T> f;
+  for (int r = 0; r < 3; ++r) {
+    f.w.c[r] = Iwd.c[r] + a1.c[r] + a2.c[r];
+    f.v.c[r] = g[9] * ao.c[r] + b1.c[r] + b2.c[r];
+  }
+  return f;
+}
+
 // The workspace of `width` lanes in d.lane_ws (aligned for T): per joint R, p, v, a, ao, the
-// base pose (R0, p0) and the body force f; per ancestor pair the subspace.
+// base pose (R0, p0), the body force f, the parent's motion and acceleration carried into the
+// body's frame (xv, xa) and the adjoints of the reverse pass (vb, ab; wb, wdb, aob); per ancestor
+// pair the subspace s and its adjoint sb.
 template <class T>
 struct LaneWork {
   LR<T>* R;
@@ -181,11 +241,21 @@ struct LaneWork {
   L3<T>* p0;
   LS<T>* f;
   LS<T>* s;
+  LS<T>* xv;
+  LS<T>* xa;
+  LS<T>* vb;
+  LS<T>* ab;
+  L3<T>* wb;
+  L3<T>* wdb;
+  L3<T>* aob;
+  LS<T>* sb;
+  T* tq;  // four lane vectors per joint (the VJPs' gradients: tq[j + n r], r < 4)
 };
 template <class T>
 inline LaneWork<T> laneWork(DynamicsData& d) {
   const std::size_t n = static_cast<std::size_t>(d.n), P = d.anc_idx.size();
-  const std::size_t words = (9 + 3 + 6 + 6 + 3 + 9 + 3 + 6) * n + 6 * P;  // lanes of T
+  constexpr std::size_t kPerJoint = 9 + 3 + 6 + 6 + 3 + 9 + 3 + 6 + 6 + 6 + 6 + 6 + 3 + 3 + 3 + 4;
+  const std::size_t words = kPerJoint * n + 12 * P;  // lanes of T
   const std::size_t need = words * (sizeof(T) / sizeof(double)) + alignof(T) / sizeof(double);
   if (d.lane_ws.size() < need) d.lane_ws.assign(need, 0.0);
   auto addr = reinterpret_cast<std::uintptr_t>(d.lane_ws.data());
@@ -200,11 +270,21 @@ inline LaneWork<T> laneWork(DynamicsData& d) {
   w.R0 = reinterpret_cast<LR<T>*>(base + 27 * n);
   w.p0 = reinterpret_cast<L3<T>*>(base + 36 * n);
   w.f = reinterpret_cast<LS<T>*>(base + 39 * n);
-  w.s = reinterpret_cast<LS<T>*>(base + 45 * n);
+  w.xv = reinterpret_cast<LS<T>*>(base + 45 * n);
+  w.xa = reinterpret_cast<LS<T>*>(base + 51 * n);
+  w.vb = reinterpret_cast<LS<T>*>(base + 57 * n);
+  w.ab = reinterpret_cast<LS<T>*>(base + 63 * n);
+  w.wb = reinterpret_cast<L3<T>*>(base + 69 * n);
+  w.wdb = reinterpret_cast<L3<T>*>(base + 72 * n);
+  w.aob = reinterpret_cast<L3<T>*>(base + 75 * n);
+  w.tq = base + 78 * n;
+  w.s = reinterpret_cast<LS<T>*>(base + kPerJoint * n);
+  w.sb = reinterpret_cast<LS<T>*>(base + kPerJoint * n + 6 * P);
   return w;
 }
 
-// The forward pass of the samples k0 .. k0 + lanes - 1 (the lanes past the last repeat it):
+// The forward pass of the samples k0 .. k0 + lanes - 1 (the lanes past the last repeat it; a
+// null qd or qdd: zero, at rest):
 // every joint's pose in its parent (R, p), and with `velocity` its body's spatial velocity v,
 // with `acceleration` also its acceleration a (gravity as the base's acceleration) and the
 // classical acceleration of its origin ao. The same operations, in the same order, as the
@@ -221,8 +301,8 @@ inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWor
   for (int j = 0; j < n; ++j) {
     const JointC& c = d.J[static_cast<std::size_t>(j)];
     const T qj = loadLanes<T>(q + k0 + ldx * j, lanes);
-    const T qdj = loadLanes<T>(qd + k0 + ldx * j, lanes);
-    const T qddj = acceleration ? loadLanes<T>(qdd + k0 + ldx * j, lanes) : zero;
+    const T qdj = qd ? loadLanes<T>(qd + k0 + ldx * j, lanes) : zero;
+    const T qddj = acceleration && qdd ? loadLanes<T>(qdd + k0 + ldx * j, lanes) : zero;
     LR<T>& R = ws.R[j];
     L3<T>& p = ws.p[j];
     if (c.revolute) {
@@ -254,7 +334,7 @@ inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWor
       for (int r = 0; r < 3; ++r) p.c[r] = c.pfix[r] + c.Rpre(r, 2) * qj;
     }
     const int par = c.parent;
-    LS<T> xv;
+    LS<T>& xv = ws.xv[j];
     if (par >= 0)
       xv = xMotion(R, p, ws.v[par]);
     else
@@ -269,7 +349,8 @@ inline void lanesForward(const RobotModel& model, DynamicsData& d, const LaneWor
     v.v = add(xv.v, u.v);
     if (!acceleration) continue;
     const LS<T> a0 = {{{zero, zero, zero}}, g0};
-    const LS<T> xa = xMotion(R, p, par >= 0 ? ws.a[par] : a0);
+    LS<T>& xa = ws.xa[j];
+    xa = xMotion(R, p, par >= 0 ? ws.a[par] : a0);
     // crm(v, u) = {v.w x u.w, v.w x u.v + v.v x u.w}
     const L3<T> cw = cross(v.w, u.w);
     const L3<T> cv = add(cross(v.w, u.v), cross(v.v, u.w));
@@ -297,6 +378,23 @@ inline void forLaneBlocks(const RobotModel& model, DynamicsData& d, int count, c
   }
 }
 
+// The ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own), after
+// lanesForward (ancestorSubspacesImpl in kernels.hpp).
+template <class T>
+inline void laneSubspaces(const DynamicsData& d, const LaneWork<T>& ws) {
+  for (int j = 0; j < d.n; ++j) {
+    const JointC& c = d.J[static_cast<std::size_t>(j)];
+    const int oj = d.anc_off[static_cast<std::size_t>(j)];
+    ws.s[oj].w = constant3<T>(c.S.w);
+    ws.s[oj].v = constant3<T>(c.S.v);
+    const int par = c.parent;
+    if (par < 0) continue;
+    const int op = d.anc_off[static_cast<std::size_t>(par)];
+    const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+    for (int t = 1; t < cnt; ++t) ws.s[oj + t] = xMotion(ws.R[j], ws.p[j], ws.s[op + t - 1]);
+  }
+}
+
 // Torque regressors of `count` samples (see Kernels in kernel_table.hpp for the layout), T's
 // width at a time; the lanes past the last sample repeat it and are not written.
 template <class T>
@@ -307,18 +405,7 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
   const int n = d.n;
   forLaneBlocks<T>(
       model, d, count, q, qd, qdd, ldx, true, [&](const LaneWork<T>& ws, int k0, int lanes) {
-        // the ancestors' subspaces in every body's frame (s[anc_off[j]] is the joint's own)
-        for (int j = 0; j < n; ++j) {
-          const JointC& c = d.J[static_cast<std::size_t>(j)];
-          const int oj = d.anc_off[static_cast<std::size_t>(j)];
-          ws.s[oj].w = constant3<T>(c.S.w);
-          ws.s[oj].v = constant3<T>(c.S.v);
-          const int par = c.parent;
-          if (par < 0) continue;
-          const int op = d.anc_off[static_cast<std::size_t>(par)];
-          const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
-          for (int t = 1; t < cnt; ++t) ws.s[oj + t] = xMotion(ws.R[j], ws.p[j], ws.s[op + t - 1]);
-        }
+        laneSubspaces(d, ws);
         // the rows: body j's ten columns, one row per ancestor i of j (pairRow in rigid_body.hpp)
         for (int j = 0; j < n; ++j) {
           const int oj = d.anc_off[static_cast<std::size_t>(j)];
@@ -466,6 +553,191 @@ inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
           for (int c = 0; c < 4; ++c) storeLanes(Ur + ldk * (6 + c), U[c], lanes);
         }
       });
+}
+
+// The RNEA's backward pass with per-sample parameters g (10 lanes per body; after lanesForward at
+// acceleration): every joint's torque into tau[j] (lanes), the body forces into ws.f.
+template <class T, class Params>
+inline void laneRneaBackward(const DynamicsData& d, const LaneWork<T>& ws, Params&& params,
+                             T* tau) {
+  const int n = d.n;
+  for (int j = 0; j < n; ++j) {
+    T g[10];
+    params(j, g);
+    ws.f[j] = newtonEulerL(g, ws.v[j].w, ws.a[j].w, ws.ao[j]);
+  }
+  for (int j = n - 1; j >= 0; --j) {
+    const JointC& c = d.J[static_cast<std::size_t>(j)];
+    tau[j] = dotS(c.S, ws.f[j]);
+    if (c.parent >= 0) addTo(ws.f[c.parent], xForceT(ws.R[j], ws.p[j], ws.f[j]));
+  }
+}
+
+// The reverse pass (reversePassImpl in kernels.hpp) from the adjoints in ws (wb, wdb, aob, vb,
+// ab, and sb with `subspaces`) to the gradients in q, qd, qdd of each joint (lanes; null: not
+// kept). `acceleration`: the kinematics' adjoints include the accelerations'.
+template <class T>
+inline void laneReverse(const DynamicsData& d, const LaneWork<T>& ws, int k0, int lanes,
+                        const double* qd, long ldx, bool acceleration, bool subspaces, T* gq,
+                        T* gqd, T* gqdd) {
+  const T zero = LaneTraits<T>::broadcast(0.0);
+  for (int j = d.n - 1; j >= 0; --j) {
+    const JointC& c = d.J[static_cast<std::size_t>(j)];
+    const SV& S = c.S;
+    const LS<T>& v = ws.v[j];
+    LS<T>& vb = ws.vb[j];
+    LS<T>& ab = ws.ab[j];
+    T dq = zero, dqd = zero, dqdd = zero;
+    if (acceleration) {
+      ab.w = add(ab.w, ws.wdb[j]);
+      ab.v = add(ab.v, ws.aob[j]);
+      vb.w = add(vb.w, add(ws.wb[j], cross(v.v, ws.aob[j])));
+      vb.v = add(vb.v, cross(ws.aob[j], v.w));
+      dqdd = dotS(S, ab);
+      const T qdj = loadLanes<T>(qd + k0 + ldx * j, lanes);
+      const L3<T> uw = scale(qdj, constant3<T>(S.w)), uv = scale(qdj, constant3<T>(S.v));
+      vb.w = add(vb.w, add(cross(uw, ab.w), cross(uv, ab.v)));
+      vb.v = add(vb.v, cross(uw, ab.v));
+      const LS<T> ub = {add(cross(ab.w, v.w), cross(ab.v, v.v)), cross(ab.v, v.w)};
+      dqd = dqd + dotS(S, ub);
+      dq = dq - dotCrmS(S, ws.xa[j], ab);
+    } else {
+      vb.w = add(vb.w, ws.wb[j]);
+    }
+    dqd = dqd + dotS(S, vb);
+    dq = dq - dotCrmS(S, ws.xv[j], vb);
+    const int par = c.parent;
+    const int oj = d.anc_off[static_cast<std::size_t>(j)];
+    const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+    if (subspaces)
+      for (int k = 1; k < cnt; ++k) dq = dq - dotCrmS(S, ws.s[oj + k], ws.sb[oj + k]);
+    if (par >= 0) {
+      const LR<T>& R = ws.R[j];
+      const L3<T>& p = ws.p[j];
+      addTo(ws.vb[par], xForceT(R, p, vb));
+      if (acceleration) addTo(ws.ab[par], xForceT(R, p, ab));
+      if (subspaces) {
+        const int op = d.anc_off[static_cast<std::size_t>(par)];
+        for (int k = 1; k < cnt; ++k) addTo(ws.sb[op + k - 1], xForceT(R, p, ws.sb[oj + k]));
+      }
+    }
+    if (gq) gq[j] = dq;
+    if (gqd) gqd[j] = dqd;
+    if (gqdd) gqdd[j] = dqdd;
+  }
+}
+
+template <class T>
+inline void clearLaneAdjoints(const DynamicsData& d, const LaneWork<T>& ws, bool subspaces) {
+  const T zero = LaneTraits<T>::broadcast(0.0);
+  const L3<T> z3 = {{zero, zero, zero}};
+  for (int j = 0; j < d.n; ++j) {
+    ws.vb[j] = {z3, z3};
+    ws.ab[j] = {z3, z3};
+    ws.wb[j] = z3;
+    ws.wdb[j] = z3;
+    ws.aob[j] = z3;
+  }
+  if (subspaces)
+    for (std::size_t t = 0; t < d.anc_idx.size(); ++t) ws.sb[t] = {z3, z3};
+}
+
+// The gradients of <Gk_k, kinetic_k> + <Gu_k, potential_k> (energyRegressorsImpl's rows) in q_k
+// (gq, may be null) and qd_k (gqd) of `count` samples: sample k's Gk at Gk[k + ldg c], c < 10n,
+// likewise Gu; its gradients at gq[k + ldo j], gqd[k + ldo j]. The operations of the portable
+// energyRegressorVjp (kernels.hpp) in every lane.
+template <class T>
+inline void energyRegressorVjpsImpl(const RobotModel& model, DynamicsData& d, int count,
+                                    const double* q, const double* qd, long ldx, const double* Gk,
+                                    const double* Gu, long ldg, double* gq, double* gqd, long ldo) {
+  const int n = d.n;
+  forLaneBlocks<T>(model, d, count, q, qd, nullptr, ldx, false,
+                   [&](const LaneWork<T>& ws, int k0, int lanes) {
+                     // the kinetic part: reverse mode through the velocity recursion
+                     clearLaneAdjoints(d, ws, false);
+                     for (int j = 0; j < n; ++j) {
+                       T g[10];
+                       for (int c = 0; c < 10; ++c)
+                         g[c] = loadLanes<T>(Gk + k0 + ldg * (10 * j + c), lanes);
+                       const L3<T> h = {{g[6], g[7], g[8]}};
+                       const L3<T>& w = ws.v[j].w;
+                       const L3<T>& vl = ws.v[j].v;
+                       ws.vb[j].w = add(symMulL(g, w), cross(h, vl));
+                       ws.vb[j].v = add(cross(w, h), scale(g[9], vl));
+                     }
+                     T* tq = ws.tq;
+                     T* gv = ws.tq + n;
+                     laneReverse<T>(d, ws, k0, lanes, qd, ldx, false, false, tq, gv, nullptr);
+                     if (gqd)
+                       for (int j = 0; j < n; ++j) storeLanes(gqd + k0 + ldo * j, gv[j], lanes);
+                     if (!gq) return;
+                     // the potential part: <Gu, potential> = U(q; pi = Gu), whose gradient is the
+                     // gravity torque (the RNEA at rest with parameters Gu)
+                     lanesForward(model, d, ws, k0, lanes, q, nullptr, nullptr, ldx, true);
+                     laneRneaBackward(
+                         d, ws,
+                         [&](int j, T* g) {
+                           for (int c = 0; c < 10; ++c)
+                             g[c] = loadLanes<T>(Gu + k0 + ldg * (10 * j + c), lanes);
+                         },
+                         gv);
+                     for (int j = 0; j < n; ++j)
+                       storeLanes(gq + k0 + ldo * j, gv[j] + tq[j], lanes);
+                   });
+}
+
+// The gradients of <G_k, Y_k> (torqueRegressorsImpl's n x 10n regressor) in q_k, qd_k and qdd_k
+// of `count` samples: sample k's G at G + k strideG with leading dimension ldG; its gradients at
+// gq[k + ldo j] (likewise gqd, gqdd; null: not kept). The operations of the portable
+// torqueRegressorVjp (kernels.hpp) in every lane.
+template <class T>
+inline void torqueRegressorVjpsImpl(const RobotModel& model, DynamicsData& d, int count,
+                                    const double* q, const double* qd, const double* qdd, long ldx,
+                                    const double* G, long ldG, long strideG, double* gq,
+                                    double* gqd, double* gqdd, long ldo) {
+  using Tr = LaneTraits<T>;
+  const int n = d.n;
+  forLaneBlocks<T>(model, d, count, q, qd, qdd, ldx, true,
+                   [&](const LaneWork<T>& ws, int k0, int lanes) {
+                     laneSubspaces(d, ws);
+                     clearLaneAdjoints(d, ws, true);
+                     for (int j = 0; j < n; ++j) {
+                       const int oj = d.anc_off[static_cast<std::size_t>(j)];
+                       const int cnt = d.anc_off[static_cast<std::size_t>(j) + 1] - oj;
+                       const L3<T>& w = ws.v[j].w;
+                       const L3<T>& wd = ws.a[j].w;
+                       const L3<T>& ao = ws.ao[j];
+                       for (int t = 0; t < cnt; ++t) {
+                         const int i = d.anc_idx[static_cast<std::size_t>(oj + t)];
+                         T g[10];
+                         for (int c = 0; c < 10; ++c) {
+                           const double* src = G + strideG * k0 + i + ldG * (10 * j + c);
+                           for (int l = 0; l < Tr::kWidth; ++l)
+                             Tr::set(g[c], l, src[strideG * (l < lanes ? l : lanes - 1)]);
+                         }
+                         // pairKinGrad (rigid_body.hpp): the gradient of s^T NE(g, k) in (w, wd,
+                         // ao)
+                         const L3<T> h = {{g[6], g[7], g[8]}};
+                         const L3<T>& sw = ws.s[oj + t].w;
+                         const L3<T>& sv = ws.s[oj + t].v;
+                         ws.wdb[j] = add(ws.wdb[j], add(symMulL(g, sw), cross(h, sv)));
+                         ws.aob[j] = add(ws.aob[j], add(cross(sw, h), scale(g[9], sv)));
+                         const L3<T> e1 = cross(symMulL(g, w), sw);
+                         const L3<T> e2 = symMulL(g, cross(sw, w));
+                         const L3<T> e3 = cross(h, cross(sv, w));
+                         const L3<T> e4 = cross(cross(w, h), sv);
+                         ws.wb[j] = add(ws.wb[j], add(add(add(e1, e2), e3), e4));
+                         if (t > 0) ws.sb[oj + t] = newtonEulerL(g, w, wd, ao);
+                       }
+                     }
+                     T *a = ws.tq, *b = ws.tq + n, *c = ws.tq + 2 * n;
+                     laneReverse<T>(d, ws, k0, lanes, qd, ldx, true, true, a, b, c);
+                     for (int j = 0; j < n; ++j) {
+                       if (gq) storeLanes(gq + k0 + ldo * j, a[j], lanes);
+                       if (gqd) storeLanes(gqd + k0 + ldo * j, b[j], lanes);
+                       if (gqdd) storeLanes(gqdd + k0 + ldo * j, c[j], lanes);
+                     }
+                   });
 }
 
 }  // namespace

@@ -35,7 +35,21 @@ EXID_LANES_KERNEL void energyRegressors(const RobotModel& model, DynamicsData& d
                                         double* kinetic, double* potential, long ldk) {
   energyRegressorsImpl<Lane4>(model, d, count, q, qd, ldx, kinetic, potential, ldk);
 }
-const LaneKernels kLanes = {Lanes::Avx, &torqueRegressors, &inverseDynamics, &energyRegressors};
+EXID_LANES_KERNEL void torqueRegressorVjps(const RobotModel& model, DynamicsData& d, int count,
+                                           const double* q, const double* qd, const double* qdd,
+                                           long ldx, const double* G, long ldG, long strideG,
+                                           double* gq, double* gqd, double* gqdd, long ldo) {
+  torqueRegressorVjpsImpl<Lane4>(model, d, count, q, qd, qdd, ldx, G, ldG, strideG, gq, gqd, gqdd,
+                                 ldo);
+}
+EXID_LANES_KERNEL void energyRegressorVjps(const RobotModel& model, DynamicsData& d, int count,
+                                           const double* q, const double* qd, long ldx,
+                                           const double* Gk, const double* Gu, long ldg, double* gq,
+                                           double* gqd, long ldo) {
+  energyRegressorVjpsImpl<Lane4>(model, d, count, q, qd, ldx, Gk, Gu, ldg, gq, gqd, ldo);
+}
+const LaneKernels kLanes = {Lanes::Avx,        &torqueRegressors,    &inverseDynamics,
+                            &energyRegressors, &torqueRegressorVjps, &energyRegressorVjps};
 EXID_LANES_KERNEL void gram(double* acc, int ld, const double* B, int ldb, int k, int m) {
   gramBlock(acc, ld, B, ldb, k, m);
 }

@@ -74,17 +74,42 @@ void energyRegressorsLanes(const RobotModel& model, DynamicsData& d, int count, 
   energyRegressorsImpl<Lane2>(model, d, count, q, qd, ldx, kinetic, potential, ldk);
 }
 
-const LaneKernels kLanes = {Lanes::Baseline, &torqueRegressorsLanes, &inverseDynamicsLanes,
-                            &energyRegressorsLanes};
+void torqueRegressorVjpsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                              const double* qd, const double* qdd, long ldx, const double* G,
+                              long ldG, long strideG, double* gq, double* gqd, double* gqdd,
+                              long ldo) {
+  torqueRegressorVjpsImpl<Lane2>(model, d, count, q, qd, qdd, ldx, G, ldG, strideG, gq, gqd, gqdd,
+                                 ldo);
+}
+void energyRegressorVjpsLanes(const RobotModel& model, DynamicsData& d, int count, const double* q,
+                              const double* qd, long ldx, const double* Gk, const double* Gu,
+                              long ldg, double* gq, double* gqd, long ldo) {
+  energyRegressorVjpsImpl<Lane2>(model, d, count, q, qd, ldx, Gk, Gu, ldg, gq, gqd, ldo);
+}
 
-// The one-sample torque regressor, RNEA and energy regressor are the lane kernels on one lane
-// (the same bits as every lane of the others); the VJPs are kernels.hpp's.
+void torqueRegressorVjpOne(const RobotModel& model, DynamicsData& d, const double* q,
+                           const double* qd, const double* qdd, const double* G, long ld,
+                           double* gq, double* gqd, double* gqdd) {
+  torqueRegressorVjpsImpl<double>(model, d, 1, q, qd, qdd, 1, G, ld, 0, gq, gqd, gqdd, 1);
+}
+void energyRegressorVjpOne(const RobotModel& model, DynamicsData& d, const double* q,
+                           const double* qd, const double* Gk, const double* Gu, double* gq,
+                           double* gqd) {
+  energyRegressorVjpsImpl<double>(model, d, 1, q, qd, 1, Gk, Gu, 1, gq, gqd, 1);
+}
+
+const LaneKernels kLanes = {Lanes::Baseline,           &torqueRegressorsLanes,
+                            &inverseDynamicsLanes,     &energyRegressorsLanes,
+                            &torqueRegressorVjpsLanes, &energyRegressorVjpsLanes};
+
+// The one-sample torque regressor, RNEA, energy regressor and their VJPs are the lane kernels on
+// one lane (the same bits as every lane of the others).
 const Kernels kTable = {Isa::Portable,
                         &torqueRegressorOne,
                         &inverseDynamicsOne,
                         &energyRegressorOne,
-                        &torqueRegressorVjp,
-                        &energyRegressorVjp,
+                        &torqueRegressorVjpOne,
+                        &energyRegressorVjpOne,
                         &gram};
 
 }  // namespace

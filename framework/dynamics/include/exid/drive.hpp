@@ -195,6 +195,15 @@ EXID_API void actuatorRegressorVjp(const RobotModel& model, DynamicsData& data,
                                    const Eigen::VectorXd& qdm, const Eigen::VectorXd& qddm,
                                    const Eigen::MatrixXd& G, Eigen::VectorXd* d_qm,
                                    Eigen::VectorXd* d_qdm, Eigen::VectorXd* d_qddm);
+/// actuatorRegressorVjp of K samples: sample k's state is row k of Qm, QDm, QDDm (K x n), its G
+/// the rows k n .. k n + n - 1 of G (K n x numParameters, actuatorRegressors' layout); its
+/// gradients row k of *d_qm, *d_qdm, *d_qddm (resized to K x n; null: not computed). The same
+/// bits as actuatorRegressorVjp sample by sample (torqueRegressorVjps).
+EXID_API void actuatorRegressorVjps(
+    const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
+    const Eigen::Ref<const Eigen::MatrixXd>& Qm, const Eigen::Ref<const Eigen::MatrixXd>& QDm,
+    const Eigen::Ref<const Eigen::MatrixXd>& QDDm, const Eigen::Ref<const Eigen::MatrixXd>& G,
+    Eigen::MatrixXd* d_qm, Eigen::MatrixXd* d_qdm, Eigen::MatrixXd* d_qddm);
 /// Full actuator torque with the model's own parameters (rigid body + drives).
 EXID_API Eigen::VectorXd actuatorTorque(const RobotModel& model, DynamicsData& data,
                                         const DriveColumns& cols, const Eigen::VectorXd& qm,

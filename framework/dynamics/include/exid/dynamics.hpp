@@ -126,6 +126,25 @@ EXID_API void energyRegressorVjp(const RobotModel& model, DynamicsData& data,
                                  const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
                                  const Eigen::RowVectorXd& Gk, const Eigen::RowVectorXd& Gu,
                                  Eigen::VectorXd* d_q, Eigen::VectorXd* d_qd);
+/// The torque regressor's VJPs of K samples: sample k's state is row k of Q, QD, QDD (K x n),
+/// its G the rows k n .. k n + n - 1 of G (K n x 10n, torqueRegressors' layout); its gradients
+/// row k of *d_q, *d_qd, *d_qdd (resized to K x n; null: not computed). The same bits as
+/// torqueRegressorVjp called sample by sample (several samples per vector register).
+EXID_API void torqueRegressorVjps(const RobotModel& model, DynamicsData& data,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& QDD,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& G, Eigen::MatrixXd* d_q,
+                                  Eigen::MatrixXd* d_qd, Eigen::MatrixXd* d_qdd);
+/// The energy regressors' VJPs of K samples: sample k's state is row k of Q, QD (K x n), its Gk
+/// and Gu row k of Gk, Gu (K x 10n); its gradients row k of *d_q, *d_qd (resized to K x n; null:
+/// not computed). The same bits as energyRegressorVjp called sample by sample.
+EXID_API void energyRegressorVjps(const RobotModel& model, DynamicsData& data,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& Q,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& QD,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& Gk,
+                                  const Eigen::Ref<const Eigen::MatrixXd>& Gu, Eigen::MatrixXd* d_q,
+                                  Eigen::MatrixXd* d_qd);
 /// Gradient of <G, A> (G 6 x 10) with respect to q, qd, qdd.
 EXID_API void wrenchRegressorVjp(const RobotModel& model, DynamicsData& data,
                                  const Eigen::VectorXd& q, const Eigen::VectorXd& qd,
