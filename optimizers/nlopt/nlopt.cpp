@@ -371,6 +371,7 @@ class NloptOptimizer final : public exid::Optimizer {
     nlopt::srand(static_cast<unsigned long>(seed));
     std::mt19937_64 rng(seed);
     exid::StopReason reason = exid::StopReason::Converged;
+    bool stepped = false;  // a start's run that took a step (not "no progress")
     int iterations = 0;
     exid::Json runs = exid::Json::array();
     const bool aggregated = cmode_ == "aggregated" && lim.size() > 0;
@@ -434,7 +435,11 @@ class NloptOptimizer final : public exid::Optimizer {
       runs.push_back(run_info);
       tr.progress(fmt::format("start {}/{} {}", s + 1, starts_, r));
       if (const exid::StopReason b = budgetNamed(r); b != exid::StopReason::None) reason = b;
+      stepped = stepped || !noProgress(r);
     }
+    // "converged" only when some start's run converged after a step of its own
+    if (reason == exid::StopReason::Converged && !stepped && runs.size() > 0)
+      reason = exid::StopReason::NoProgress;
     if (aggregated && final_polish_ > 0 && !tr.shouldStop() && tr.hasFeasible()) {
       // The KS aggregate keeps the iterates a little inside the limits (up to log(K)/rho):
       // polish the best point first with a 10x sharper aggregate (half the polish time), then
@@ -495,6 +500,7 @@ class NloptOptimizer final : public exid::Optimizer {
     std::vector<bool> in(static_cast<std::size_t>(lim.size()), false);
     Eigen::VectorXd x = x0, g;
     std::string r;
+    bool stepped = false;  // (a later round that stops at an earlier one's end is no start)
     for (int round = 0; round < 30; ++round) {
       lim.eval(x, &g);
       const std::size_t before = rows.size();
@@ -515,6 +521,7 @@ class NloptOptimizer final : public exid::Optimizer {
       if (round > 0 && rows.size() == before) break;  // feasible, or nothing new to add
       if (tr.elapsed() >= end.wall || tr.cpuElapsed() >= end.cpu || tr.shouldStop()) break;
       r = runOnce(problem, lim, tr, alg, name, x, end, iterations, &rows, &x, 0.0, obj);
+      stepped = stepped || !noProgress(r);
       if (lim.maxViolation(x) <= budget_.feasibility_tol && r != "roundoff_limited") {
         lim.eval(x, &g);
         bool near_new = false;
@@ -522,6 +529,10 @@ class NloptOptimizer final : public exid::Optimizer {
           near_new = !in[static_cast<std::size_t>(i)] && g(i) > -0.1 * ws_margin_;
         if (!near_new) break;
       }
+    }
+    if (stepped && noProgress(r)) {  // NLopt's own result, as before the relabelling
+      const std::size_t a = r.find("NLopt's ") + 8;
+      r = r.substr(a, r.find(' ', a) - a);
     }
     return r + fmt::format(" (working set {} of {} rows)", rows.size(), lim.size());
   }
@@ -639,7 +650,17 @@ class NloptOptimizer final : public exid::Optimizer {
     }
     *iterations += static_cast<int>(c.evals);
     if (xout) *xout = Eigen::Map<const Eigen::VectorXd>(x.data(), n);  // z without a, b
+    // A convergence result after the run's first evaluation is none: NLopt's ftol and xtol tests
+    // compare successive iterates, and its SLSQP returns FTOL_REACHED there (its relaxed test of
+    // the start against itself) when the first search direction does not descend.
+    if (c.evals <= 1 && (r == "SUCCESS" || r == "FTOL_REACHED" || r == "XTOL_REACHED"))
+      r = fmt::format("{}: NLopt's {} after one evaluation",
+                      exid::toString(exid::StopReason::NoProgress), r);
     return r;
+  }
+
+  static bool noProgress(const std::string& r) {
+    return r.rfind(exid::toString(exid::StopReason::NoProgress), 0) == 0;
   }
 
   // The budget a run's result text names: runOnce reports a run ended by a budget by the

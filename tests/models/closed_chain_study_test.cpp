@@ -139,6 +139,22 @@ TEST(ClosedChainStudy, ExcitationDesignByGradientRunsThroughTheLoops) {
   RecordProperty("cond_final", std::to_string(x->find("criterion_final")->asDouble()));
   const exid::StudyResult tree = run("irp6", "{type: batch_ls}", exc, "{duration_s: 3.9}");
   EXPECT_TRUE(tree.ok) << tree.message;
+  // on J itself SLSQP stops at this start (tests/excitation/optimizers_test.cpp,
+  // Nlopt.ConvergedOnlyAfterAStep): the study says so, as a stop reason and a warning, never
+  // "converged"; the design above has no such warning
+  auto noProgressWarning = [](const exid::StudyResult& s) {
+    const exid::Json* w = s.summary.find("warnings");
+    return w && w->dump(0).find("made no progress") != std::string::npos;
+  };
+  EXPECT_FALSE(noProgressWarning(r)) << r.summary.find("warnings")->dump(0);
+  std::string on_j = exc;
+  on_j.replace(on_j.find(", objective: log"), 16, "");
+  const exid::StudyResult stuck = run("palletizer", "{type: batch_ls}", on_j, "{duration_s: 3.9}");
+  ASSERT_TRUE(stuck.ok) << stuck.message;
+  EXPECT_TRUE(noProgressWarning(stuck)) << stuck.summary.find("warnings")->dump(0);
+  EXPECT_EQ(
+      stuck.summary.find("excitation")->find("stop_reason")->asString().rfind("no progress", 0),
+      0u);
 }
 
 TEST(ClosedChainStudy, PalletizerVarproAndGainsLs) {

@@ -373,6 +373,8 @@ std::string toString(StopReason r) {
       return "deadline";
     case StopReason::Cancelled:
       return "cancelled";
+    case StopReason::NoProgress:
+      return "no progress (stopped at the start: its first search direction did not descend)";
   }
   return "";
 }

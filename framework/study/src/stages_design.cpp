@@ -233,6 +233,12 @@ ExcitationStageOut excitationStage(const StageEnv& env, const RobotStageOut& rob
   x.stop_reason_text = stopReasonText(r);
   // A run cut by time gives another answer on another (or a busier) machine.
   x.reproducible = !stoppedByTime(r.stop_reason);
+  if (r.stop_reason == StopReason::NoProgress)
+    out.warnings.push_back(fmt::format(
+        "excitation: optimizer '{}' made no progress: it stopped at its start ({} -> {}) after "
+        "{} evaluations, its first search direction not descending; the designed trajectory is "
+        "the initial one (try objective: log, other starts or another algorithm)",
+        cfg.optimizer->type, r.criterion_initial, r.criterion_final, r.evaluations));
   if (known.matrix.size() > 0)
     out.known_information = knownInformationJson(known, W_initial, W_best);
   if (!x.reproducible)

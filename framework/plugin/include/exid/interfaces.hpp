@@ -323,6 +323,8 @@ enum class StopReason {
   MaxCpu,          // "max_cpu_s"
   Deadline,        // "deadline": the study's time budget
   Cancelled,       // "cancelled"
+  NoProgress,      // "no progress": every run ended at its start, claiming convergence without a
+                   // step (NLopt's SLSQP when its first search direction does not descend)
 };
 EXID_API std::string toString(StopReason r);
 EXID_API std::ostream& operator<<(std::ostream& os, StopReason r);
