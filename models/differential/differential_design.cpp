@@ -395,8 +395,9 @@ void DifferentialModel::designVjpNoGains(const exid::Samples& s, const Friction&
   const int P0 = exid::numParameters(R, cols_), P = P0 + extraPerJoint() * n;
   exid::models::zeroGrad(s, grad);
   // a block of samples at a time (actuatorRegressorVjps: several samples per vector register,
-  // the bits of one at a time)
-  constexpr int kBlock = 256;
+  // the bits of one at a time); small blocks keep the buffers small (a buffer of a whole
+  // trajectory's G is new memory, page faults and all, at every gradient)
+  constexpr int kBlock = 16;
   Eigen::MatrixXd G(static_cast<Eigen::Index>(kBlock) * n, P0), gq, gqd, gqdd;
   const Workspace data(*this);
   for (int k0 = 0; k0 < K; k0 += kBlock) {

@@ -156,7 +156,7 @@ TEST(Drive, ActuatorRegressorsSameBitsAsOneSampleAtATime) {
 
 // actuatorRegressorVjps: each sample's gradients the bits actuatorRegressorVjp gives for that
 // sample alone, with drive columns and with a coupled transmission, whatever the sample count
-// (past a block of 64 too); null outputs are skipped.
+// (over several blocks of 16 too); null outputs are skipped.
 TEST(Drive, ActuatorRegressorVjpsSameBitsAsOneSampleAtATime) {
   std::mt19937 rng(62);
   RobotModel plain = panda();

@@ -509,8 +509,9 @@ void actuatorRegressorVjps(const RobotModel& model, DynamicsData& data, const Dr
   }
   // A block of samples at a time: each one's joint state and joint-space G as
   // actuatorRegressorVjp computes them, the block's VJPs at once, then each sample's gradients
-  // through the transmission and the drive columns as there: the same bits.
-  constexpr Eigen::Index kBlock = 64;
+  // through the transmission and the drive columns as there: the same bits. (16 samples: the
+  // buffers stay small, reused memory rather than new pages at every call.)
+  constexpr Eigen::Index kBlock = 16;
   const bool T = model.hasTransmission();
   const int nt = n;  // (a tree: one joint per coordinate)
   Eigen::MatrixXd Qj(kBlock, nt), QDj(kBlock, nt), QDDj(kBlock, nt), Gj(kBlock * nt, 10 * nt);
