@@ -324,6 +324,26 @@ void transmissionTransposeTimes(const Eigen::MatrixXd& T, const double* Yj, long
 }
 }  // namespace
 
+namespace {
+// The joint states of the samples k0 .. k0 + b - 1 (rows of Qm, QDm, QDDm), as measuredToJoint
+// gives each, into the first b rows of *Qj, *QDj, *QDDj (a tree's: one joint per coordinate).
+void jointStates(const RobotModel& model, const Eigen::Ref<const Eigen::MatrixXd>& Qm,
+                 const Eigen::Ref<const Eigen::MatrixXd>& QDm,
+                 const Eigen::Ref<const Eigen::MatrixXd>& QDDm, Eigen::Index k0, Eigen::Index b,
+                 Eigen::MatrixXd* Qj, Eigen::MatrixXd* QDj, Eigen::MatrixXd* QDDj) {
+  Eigen::VectorXd qm, qdm, qddm, q, qd, qdd;
+  for (Eigen::Index k = 0; k < b; ++k) {
+    qm = Qm.row(k0 + k).transpose();
+    qdm = QDm.row(k0 + k).transpose();
+    qddm = QDDm.row(k0 + k).transpose();
+    measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
+    Qj->row(k) = q.transpose();
+    QDj->row(k) = qd.transpose();
+    QDDj->row(k) = qdd.transpose();
+  }
+}
+}  // namespace
+
 void actuatorRegressors(const RobotModel& model, DynamicsData& data, const DriveColumns& cols,
                         const Eigen::Ref<const Eigen::MatrixXd>& Qm,
                         const Eigen::Ref<const Eigen::MatrixXd>& QDm,
@@ -353,18 +373,9 @@ void actuatorRegressors(const RobotModel& model, DynamicsData& data, const Drive
     constexpr Eigen::Index kBlock = 64;
     const bool T = model.hasTransmission();
     Eigen::MatrixXd Qj(kBlock, n), QDj(kBlock, n), QDDj(kBlock, n), Yb(kBlock * n, 10 * n);
-    Eigen::VectorXd q(n), qd(n), qdd(n);
     for (Eigen::Index k0 = 0; k0 < K; k0 += kBlock) {
       const Eigen::Index b = std::min(kBlock, K - k0);
-      for (Eigen::Index k = 0; k < b; ++k) {
-        qm = Qm.row(k0 + k).transpose();
-        qdm = QDm.row(k0 + k).transpose();
-        qddm = QDDm.row(k0 + k).transpose();
-        measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
-        Qj.row(k) = q.transpose();
-        QDj.row(k) = qd.transpose();
-        QDDj.row(k) = qdd.transpose();
-      }
+      jointStates(model, Qm, QDm, QDDm, k0, b, &Qj, &QDj, &QDDj);
       torqueRegressors(model, data, Qj.topRows(b), QDj.topRows(b), QDDj.topRows(b),
                        Yb.topRows(b * n));
       if (T)
@@ -516,17 +527,11 @@ void actuatorRegressorVjps(const RobotModel& model, DynamicsData& data, const Dr
   const int nt = n;  // (a tree: one joint per coordinate)
   Eigen::MatrixXd Qj(kBlock, nt), QDj(kBlock, nt), QDDj(kBlock, nt), Gj(kBlock * nt, 10 * nt);
   Eigen::MatrixXd B[3];
-  Eigen::VectorXd q(nt), qd(nt), qdd(nt), tmp(n);
+  Eigen::VectorXd tmp(n);
   for (Eigen::Index k0 = 0; k0 < K; k0 += kBlock) {
     const Eigen::Index b = std::min(kBlock, K - k0);
+    jointStates(model, Qm, QDm, QDDm, k0, b, &Qj, &QDj, &QDDj);
     for (Eigen::Index k = 0; k < b; ++k) {
-      qm = Qm.row(k0 + k).transpose();
-      qdm = QDm.row(k0 + k).transpose();
-      qddm = QDDm.row(k0 + k).transpose();
-      measuredToJoint(model, qm, qdm, qddm, &q, &qd, &qdd);
-      Qj.row(k) = q.transpose();
-      QDj.row(k) = qd.transpose();
-      QDDj.row(k) = qdd.transpose();
       const auto Gs = G.block((k0 + k) * n, 0, n, 10 * nt);
       if (T)  // <G, T^T Y> = <T G, Y>
         Gj.middleRows(k * nt, nt).noalias() = model.transmission.lazyProduct(Gs);

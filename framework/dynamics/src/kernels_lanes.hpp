@@ -150,9 +150,10 @@ inline L3<T> rMul(const LR<T>& R, const L3<T>& x) {
   for (int i = 0; i < 3; ++i) o.c[i] = R.m[i] * x.c[0] + R.m[i + 3] * x.c[1] + R.m[i + 6] * x.c[2];
   return o;
 }
-// the symmetric 3 x 3 g[0..5] (XX XY XZ YY YZ ZZ) times x (symMul in rigid_body.hpp)
-template <class T>
-inline L3<T> symMul(const double* g, const L3<T>& x) {
+// the symmetric 3 x 3 g[0..5] (XX XY XZ YY YZ ZZ; constants or lanes) times x (symMul in
+// rigid_body.hpp)
+template <class G, class T>
+inline L3<T> symMul(const G* g, const L3<T>& x) {
   return {{g[0] * x.c[0] + g[1] * x.c[1] + g[2] * x.c[2],
            g[1] * x.c[0] + g[3] * x.c[1] + g[4] * x.c[2],
            g[2] * x.c[0] + g[4] * x.c[1] + g[5] * x.c[2]}};
@@ -199,13 +200,6 @@ inline void addTo(LS<T>& a, const LS<T>& b) {
   a.w = add(a.w, b.w);
   a.v = add(a.v, b.v);
 }
-// the symmetric 3 x 3 of lanes g[0..5] times x
-template <class T>
-inline L3<T> symMulL(const T* g, const L3<T>& x) {
-  return {{g[0] * x.c[0] + g[1] * x.c[1] + g[2] * x.c[2],
-           g[1] * x.c[0] + g[3] * x.c[1] + g[4] * x.c[2],
-           g[2] * x.c[0] + g[4] * x.c[1] + g[5] * x.c[2]}};
-}
 template <class T>
 inline L3<T> scale(const T& s, const L3<T>& x) {
   return {{s * x.c[0], s * x.c[1], s * x.c[2]}};
@@ -216,7 +210,7 @@ template <class T>
 inline LS<T> newtonEulerL(const T* g, const L3<T>& w, const L3<T>& wd, const L3<T>& ao) {
   const L3<T> hl = {{g[6], g[7], g[8]}};
   const L3<T> wh = cross(w, hl);
-  const L3<T> Iwd = symMulL(g, wd), Iw = symMulL(g, w);
+  const L3<T> Iwd = symMul(g, wd), Iw = symMul(g, w);
   const L3<T> a1 = cross(w, Iw), a2 = cross(hl, ao), b1 = cross(wd, hl), b2 = cross(w, wh);
   LS<T> f;
   for (int r = 0; r < 3; ++r) {
@@ -662,7 +656,7 @@ inline void energyRegressorVjpsImpl(const RobotModel& model, DynamicsData& d, in
                        const L3<T> h = {{g[6], g[7], g[8]}};
                        const L3<T>& w = ws.v[j].w;
                        const L3<T>& vl = ws.v[j].v;
-                       ws.vb[j].w = add(symMulL(g, w), cross(h, vl));
+                       ws.vb[j].w = add(symMul(g, w), cross(h, vl));
                        ws.vb[j].v = add(cross(w, h), scale(g[9], vl));
                      }
                      T* tq = ws.tq;
@@ -720,10 +714,10 @@ inline void torqueRegressorVjpsImpl(const RobotModel& model, DynamicsData& d, in
                          const L3<T> h = {{g[6], g[7], g[8]}};
                          const L3<T>& sw = ws.s[oj + t].w;
                          const L3<T>& sv = ws.s[oj + t].v;
-                         ws.wdb[j] = add(ws.wdb[j], add(symMulL(g, sw), cross(h, sv)));
+                         ws.wdb[j] = add(ws.wdb[j], add(symMul(g, sw), cross(h, sv)));
                          ws.aob[j] = add(ws.aob[j], add(cross(sw, h), scale(g[9], sv)));
-                         const L3<T> e1 = cross(symMulL(g, w), sw);
-                         const L3<T> e2 = symMulL(g, cross(sw, w));
+                         const L3<T> e1 = cross(symMul(g, w), sw);
+                         const L3<T> e2 = symMul(g, cross(sw, w));
                          const L3<T> e3 = cross(h, cross(sv, w));
                          const L3<T> e4 = cross(cross(w, h), sv);
                          ws.wb[j] = add(ws.wb[j], add(add(add(e1, e2), e3), e4));
