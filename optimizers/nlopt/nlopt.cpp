@@ -530,10 +530,7 @@ class NloptOptimizer final : public exid::Optimizer {
         if (!near_new) break;
       }
     }
-    if (stepped && noProgress(r)) {  // NLopt's own result, as before the relabelling
-      const std::size_t a = r.find("NLopt's ") + 8;
-      r = r.substr(a, r.find(' ', a) - a);
-    }
+    if (stepped && noProgress(r)) r = nlopt_result_;  // NLopt's own, as before the relabelling
     return r + fmt::format(" (working set {} of {} rows)", rows.size(), lim.size());
   }
 
@@ -653,6 +650,7 @@ class NloptOptimizer final : public exid::Optimizer {
     // A convergence result after the run's first evaluation is none: NLopt's ftol and xtol tests
     // compare successive iterates, and its SLSQP returns FTOL_REACHED there (its relaxed test of
     // the start against itself) when the first search direction does not descend.
+    nlopt_result_ = r;
     if (c.evals <= 1 && (r == "SUCCESS" || r == "FTOL_REACHED" || r == "XTOL_REACHED"))
       r = fmt::format("{}: NLopt's {} after one evaluation",
                       exid::toString(exid::StopReason::NoProgress), r);
@@ -682,6 +680,7 @@ class NloptOptimizer final : public exid::Optimizer {
   }
 
   bool time_cut_ = false;
+  std::string nlopt_result_;  // the last runOnce's result as NLopt gave it
   exid::optimizers::Budget budget_;
   std::string alg_name_, local_name_;
   nlopt::algorithm alg_, local_;
