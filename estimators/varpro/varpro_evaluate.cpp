@@ -180,7 +180,7 @@ VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::D
           fmt::format("varpro: a row from samples {}..{} is not finite at eta = "
                       "[{}]",
                       b, end, fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
-    acc.add(A, r.y);
+    acc.addEquations(A, r.y, r.equation);  // (each joint's rows over its own columns first)
   }
   e.m = acc.rows();
   // R of [W D y] (any factor F with F^T F = [W D y]^T [W D y] gives the same R)

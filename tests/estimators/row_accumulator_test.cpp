@@ -44,7 +44,7 @@ TEST(RowAccumulator, NormalEquationsByEquationEqualTheDenseGramMatrix) {
   by_eq.addEquations(W.topRows(600), y.head(600), std::vector<int>(eq.begin(), eq.begin() + 600));
   by_eq.addEquations(W.bottomRows(300), y.tail(300), {});  // no labels: add()
   dense.add(W, y);
-  qr.addEquations(W, y, eq);  // Qr: add()
+  qr.addEquations(W, y, eq);  // Qr: each equation's own factor first (below)
   EXPECT_EQ(by_eq.rows(), m);
   for (const estimators::RowAccumulator* a : {&by_eq, &dense, &qr}) {
     const Eigen::MatrixXd& F = a->factor();
@@ -130,6 +130,65 @@ TEST(RowAccumulator, QrFactorMatchesDenseAndKeepsConditioning) {
   EXPECT_LE((F2.transpose() * F2 - A2.transpose() * A2).cwiseAbs().maxCoeff(),
             1e-9 * (A2.transpose() * A2).cwiseAbs().maxCoeff());
   EXPECT_EQ(b2.rows(), 100);
+}
+
+// Qr by equation: each equation's rows over its own non-zero columns reduced to their triangular
+// factor first. The factor has the Gram matrix of the rows and the solve their least-squares
+// solution, also for badly scaled, nearly collinear columns (where the normal equations would
+// lose digits); an equation with fewer rows than its columns in a block, a block of fewer than
+// 64 rows (add()) and a row of zeros are taken alike.
+TEST(RowAccumulator, QrByEquationKeepsTheRowsGramMatrixAndConditioning) {
+  std::mt19937_64 rng(5);
+  std::normal_distribution<double> N(0, 1);
+  const int m = 1500, p = 10;
+  Eigen::MatrixXd W(m, p);
+  Eigen::VectorXd y(m);
+  std::vector<int> eq(m);
+  for (int i = 0; i < m; ++i) {
+    // joint-like equations: label g's rows are zero in the columns before 3 g (a joint's torque
+    // does not depend on the links before it), and its own drive column is 7 + g
+    const int g = i % 3;
+    eq[static_cast<std::size_t>(i)] = g;
+    for (int j = 0; j < p; ++j) W(i, j) = (j < 7 && j >= 3 * g) || j == 7 + g ? N(rng) : 0.0;
+    y(i) = N(rng);
+  }
+  W.col(6) = W.col(5) + 1e-7 * W.col(6);  // nearly collinear where both are non-zero
+  W.col(4) *= 1e4;
+  W.row(31).setZero();
+  Eigen::MatrixXd A(m, p + 1);
+  A << W, y;
+  const Eigen::MatrixXd G = A.transpose() * A;
+  using M = estimators::RowAccumulator::Method;
+  estimators::RowAccumulator by_eq(p, M::Qr), dense(p, M::Qr);
+  int b = 0;
+  for (const int len : {600, 40, 300, 70, 490}) {  // (40: add(); 70 rows: 3 rows of label 2...)
+    std::vector<int> labels(eq.begin() + b, eq.begin() + b + len);
+    if (len == 70)  // ...except 3 rows of label 5: fewer rows than its columns
+      for (int i = 0; i < 3; ++i) labels[static_cast<std::size_t>(3 * i)] = 5;
+    by_eq.addEquations(W.middleRows(b, len), y.segment(b, len), labels);
+    b += len;
+  }
+  ASSERT_EQ(b, m);
+  dense.add(W, y);
+  EXPECT_EQ(by_eq.rows(), m);
+  const Eigen::MatrixXd& F = by_eq.factor();
+  EXPECT_TRUE(F.triangularView<Eigen::StrictlyLower>().toDenseMatrix().isZero(0.0));
+  EXPECT_LE((F.transpose() * F - G).cwiseAbs().maxCoeff(), 1e-12 * G.cwiseAbs().maxCoeff());
+  estimators::SolveOptions opt;
+  opt.rank_tolerance = 1e-12;
+  const estimators::LsSolution a = estimators::solveLeastSquares(by_eq, {}, opt, "test");
+  const estimators::LsSolution d = estimators::solveLeastSquares(dense, {}, opt, "test");
+  using MatL = Eigen::Matrix<long double, Eigen::Dynamic, Eigen::Dynamic>;
+  using VecL = Eigen::Matrix<long double, Eigen::Dynamic, 1>;
+  const Eigen::VectorXd ref =
+      MatL(W.cast<long double>()).colPivHouseholderQr().solve(VecL(y.cast<long double>())).cast<double>();
+  const double err = (a.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
+  const double err_dense = (d.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
+  std::printf("Qr by equation: relative error vs long double %.2e (the rows' own QR %.2e)\n", err,
+              err_dense);
+  EXPECT_LE(err, 1e-7);
+  EXPECT_NEAR(a.rss, (y - W * ref).squaredNorm(), 1e-9 * a.rss);
+  EXPECT_NEAR(by_eq.minimumResidualSquared(), a.rss, 1e-9 * a.rss);
 }
 
 TEST(RowAccumulator, ExplainsNullSpace) {
