@@ -3,6 +3,7 @@
 // lambda = log(eta) from each start (see varpro.cpp).
 #include <fmt/format.h>
 
+#include <Eigen/Eigenvalues>
 #include <Eigen/QR>
 #include <Eigen/SVD>
 #include <algorithm>
@@ -80,20 +81,27 @@ VarPro::Grid VarPro::searchGrid(const exid::ObservationModel& model, const exid:
 }
 
 // The residual at points that move only the base columns of some nonlinear parameters (one
-// group of the grid, one parameter of a scan), the others held at `lambda`: the Householder QR
-// of the held columns' rows [W_h] is computed once, and at each point only the moved columns'
-// rows W_m are projected onto its complement, rss = ||(I - P_[W_h W_m]) y||^2 from the small QR
-// of [Q_h^T W_m, Q_h^T y] below the held rows. The same residual as a whole evaluation's, at the
-// cost of the model's rows and (p - c) reflections of c + 1 columns instead of the QR of all
-// p + L + 1 columns, and without the SVD of the solve. A delay is held too (the grid does not
-// move it; the rows are read at t_k - d as evaluate reads them). Unused (every point a whole
-// evaluation) when the held rows would exceed kHeldBytes, or when the held columns are not of
-// full rank (their complement is not defined).
+// group of the grid, one parameter of a scan), the others held at `lambda`. The held columns'
+// rows A and y are kept (row by row) with the triangular factor [R z; 0 rho] of [A y] (each
+// joint's rows over its own columns first: RowAccumulator::addEquations); at each point only the
+// moved columns B are computed, and with u = R^-T A^T B (A^T B over B's non-zero rows: a
+// friction column lives on one joint's rows)
+//   rss = rho^2 - b^T G^-1 b,  G = B^T B - u^T u,  b = B^T y - u^T z,
+// the residual of y on [A B] (the Gram matrix of B's part orthogonal to A, and its projection
+// of y). A semi-normal form: its rounding is eps ||B||^2 / ||B_perp||^2 of G, far below what
+// separates the grid's points, and a point it takes is then evaluated in full (tryPoint); it
+// costs the model's B and 2 f nnz(B) flops instead of the QR of all p + L + 1 columns and the
+// SVD of the solve. A delay is held too (the grid does not move it; the rows are read at
+// t_k - d as evaluate reads them). Unused (every point a whole evaluation) when the held rows
+// would exceed kHeldBytes, or when the held columns are not of full rank.
 struct VarPro::Held {
   bool ok = false;
   std::vector<int> moved;  // base columns recomputed at each point (ascending)
-  Eigen::HouseholderQR<Eigen::MatrixXd> qr;
-  Eigen::VectorXd qty;  // Q_h^T y
+  Eigen::MatrixXd At;      // f x m: the held columns' rows, one column each
+  Eigen::VectorXd y;       // m
+  Eigen::MatrixXd R;       // f x f upper triangular: R^T R = A^T A
+  Eigen::VectorXd z;       // R^-T A^T y
+  double rho2 = 0.0;       // ||y||^2 - ||z||^2: the residual on A alone
   Eigen::Index m = 0;
 
   Held(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
@@ -114,9 +122,9 @@ struct VarPro::Held {
       else
         held.push_back(j);
     }
-    Eigen::MatrixXd A;
-    Eigen::VectorXd y;
     const Eigen::VectorXd eta = vp.heldEta(lambda);
+    RowAccumulator acc(f, RowAccumulator::Method::Qr);
+    Eigen::MatrixXd Ah;
     bool fits = true;
     m = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
       if (!fits) return;
@@ -125,22 +133,26 @@ struct VarPro::Held {
         fits = false;
         return;
       }
-      if (need > A.rows()) {  // (grown geometrically: the row count is known at the end)
-        const Eigen::Index cap = std::max<Eigen::Index>(need, 2 * A.rows());
-        A.conservativeResize(cap, f);
+      if (need > At.cols()) {  // (grown geometrically: the row count is known at the end)
+        const Eigen::Index cap = std::max<Eigen::Index>(need, 2 * At.cols());
+        At.conservativeResize(f, cap);
         y.conservativeResize(cap);
       }
-      for (int j = 0; j < f; ++j)
-        A.col(j).segment(at, r.W.rows()) = r.W.col(held[static_cast<std::size_t>(j)]);
+      Ah.resize(r.W.rows(), f);
+      for (int j = 0; j < f; ++j) Ah.col(j) = r.W.col(held[static_cast<std::size_t>(j)]);
+      At.middleCols(at, r.W.rows()) = Ah.transpose();
       y.segment(at, r.W.rows()) = r.y;
+      acc.addEquations(Ah, r.y, r.equation);
     });
     if (!fits || m <= p) return;
-    A.conservativeResize(m, f);
+    At.conservativeResize(f, m);
     y.conservativeResize(m);
-    qr.compute(A);
-    const Eigen::VectorXd d = qr.matrixQR().diagonal().cwiseAbs();
+    const Eigen::MatrixXd& F = acc.factor();
+    R = F.topLeftCorner(f, f).triangularView<Eigen::Upper>();
+    const Eigen::VectorXd d = R.diagonal().cwiseAbs();
     if (!(d.minCoeff() > 1e-12 * d.maxCoeff())) return;  // held columns of deficient rank
-    qty = qr.householderQ().adjoint() * y;
+    z = F.col(f).head(f);
+    rho2 = F(f, f) * F(f, f);
     ok = true;
   }
 
@@ -170,8 +182,8 @@ struct VarPro::Held {
   double rss(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
              const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const {
     const int c = static_cast<int>(moved.size());
-    const Eigen::Index f = qr.matrixQR().cols();
-    Eigen::MatrixXd B(m, c + 1);
+    const Eigen::Index f = R.cols();
+    Eigen::MatrixXd B(m, c);
     const Eigen::VectorXd eta = vp.heldEta(lambda);
     Eigen::Index got = 0;
     if (!vp.delay_) {
@@ -201,14 +213,40 @@ struct VarPro::Held {
       });
     }
     exid::check(got == m, "varpro: the model's row count changed with eta");
-    // Q_h^T one column at a time: Eigen applies a sequence to several columns in blocks of up
-    // to 48 reflections, forming each block's triangular factor (O(m b^2) for a block of b,
-    // whatever the few columns); to one column it applies the reflections in turn (4 m f)
-    for (int j = 0; j < c; ++j) B.col(j).applyOnTheLeft(qr.householderQ().adjoint());
-    B.col(c) = qty;
-    const Eigen::HouseholderQR<Eigen::MatrixXd> small(B.bottomRows(m - f));
-    const double r = small.matrixQR()(c, c);
-    return r * r;
+    // A^T B, B^T B and B^T y over B's non-zero rows
+    Eigen::MatrixXd AtB = Eigen::MatrixXd::Zero(f, c), G(c, c);
+    Eigen::VectorXd b(c);
+    std::vector<Eigen::Index> nz;
+    for (int j = 0; j < c; ++j) {
+      nz.clear();
+      for (Eigen::Index i = 0; i < m; ++i)
+        if (B(i, j) != 0.0) nz.push_back(i);
+      double by = 0.0;
+      for (const Eigen::Index i : nz) {
+        AtB.col(j).noalias() += B(i, j) * At.col(i);
+        by += B(i, j) * y[i];
+      }
+      b[j] = by;
+      for (int l = 0; l <= j; ++l) {
+        double s = 0.0;
+        for (const Eigen::Index i : nz) s += B(i, j) * B(i, l);
+        G(j, l) = s;
+        G(l, j) = s;
+      }
+    }
+    const Eigen::MatrixXd u = R.transpose().triangularView<Eigen::Lower>().solve(AtB);
+    G.noalias() -= u.transpose() * u;
+    b.noalias() -= u.transpose() * z;
+    // G^-1 b by the eigen-decomposition (B's part orthogonal to A may be deficient: its
+    // directions below the rank tolerance do not lower the residual)
+    Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd> es(G);
+    const Eigen::VectorXd ev = es.eigenvalues();
+    const Eigen::VectorXd v = es.eigenvectors().transpose() * b;
+    const double top = std::max(ev.cwiseAbs().maxCoeff(), 0.0);
+    double fitted = 0.0;
+    for (int j = 0; j < c; ++j)
+      if (ev[j] > 1e-12 * top) fitted += v[j] * v[j] / ev[j];
+    return std::max(0.0, rho2 - fitted);
   }
 };
 
