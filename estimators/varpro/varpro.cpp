@@ -216,7 +216,7 @@ exid::Estimate VarPro::finish(const exid::ObservationModel& model, const std::ve
   const Eigen::VectorXd& lambda = run.lambda;
   const int p = model.numBase(), q = static_cast<int>(nl_.size());
   exid::Estimate e;
-  exid::estimators::fillEstimate(&e, model, cur.ls, cur.rss, cur.m);
+  exid::estimators::fillEstimate(&e, model, solve(model, cur, true), cur.rss, cur.m);
   e.rows = cur.m;
   e.details["rows"] = static_cast<long long>(cur.m);
   const Eigen::MatrixXd& M = run.M;

@@ -49,7 +49,7 @@ class VarPro : public exid::Estimator {
     Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
     Eigen::VectorXd Jtr;    // q
     Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
-    exid::estimators::LsSolution ls;
+    exid::estimators::LsSolution ls;  // (without its statistics: solve(.., true))
     long m = 0;
   };
 
@@ -127,6 +127,8 @@ class VarPro : public exid::Estimator {
                        const exid::RunContext& ctx) const;
   Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
                 const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const;
+  exid::estimators::LsSolution solve(const exid::ObservationModel& model, const Eval& e,
+                                     bool statistics) const;
   std::vector<std::string> names() const;
 
   int max_evals_;

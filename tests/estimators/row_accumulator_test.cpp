@@ -191,6 +191,46 @@ TEST(RowAccumulator, QrByEquationKeepsTheRowsGramMatrixAndConditioning) {
   EXPECT_NEAR(by_eq.minimumResidualSquared(), a.rss, 1e-9 * a.rss);
 }
 
+// The solve without statistics (varpro's trial points): the same theta and rss as the full solve
+// (another SVD of the same scaled factor), no covariance; a rank-deficient problem is refused
+// alike, naming the direction.
+TEST(RowAccumulator, SolveWithoutStatisticsGivesTheSameFitAndRefusesTheSame) {
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> N(0, 1);
+  const int m = 400, p = 7;
+  Eigen::MatrixXd W(m, p);
+  Eigen::VectorXd y(m);
+  for (int i = 0; i < m; ++i) {
+    for (int j = 0; j < p; ++j) W(i, j) = N(rng) * (j == 2 ? 1e3 : 1.0);
+    y(i) = N(rng);
+  }
+  W.col(5) = W.col(4) + 1e-5 * W.col(5);
+  estimators::RowAccumulator acc(p);
+  acc.add(W, y);
+  estimators::SolveOptions full, lean;
+  lean.statistics = false;
+  const estimators::LsSolution a = estimators::solveLeastSquares(acc, {}, full, "test");
+  const estimators::LsSolution b = estimators::solveLeastSquares(acc, {}, lean, "test");
+  EXPECT_LE((a.theta - b.theta).cwiseAbs().maxCoeff(), 1e-9 * a.theta.cwiseAbs().maxCoeff());
+  EXPECT_NEAR(a.rss, b.rss, 1e-12 * a.rss);
+  EXPECT_NEAR(a.cond_W_scaled, b.cond_W_scaled, 1e-9 * a.cond_W_scaled);
+  EXPECT_EQ(a.std.size(), p);
+  EXPECT_EQ(b.std.size(), 0);
+  EXPECT_EQ(b.covariance.size(), 0);
+  W.col(6) = 2.0 * W.col(3);  // rank deficient
+  estimators::RowAccumulator bad(p);
+  bad.add(W, y);
+  for (const estimators::SolveOptions& o : {full, lean}) {
+    try {
+      estimators::solveLeastSquares(bad, {"a", "b", "c", "d", "e", "f", "g"}, o, "test");
+      ADD_FAILURE() << "a rank-deficient problem was solved";
+    } catch (const exid::Error& e) {
+      EXPECT_NE(std::string(e.what()).find("numerical rank 6 of 7"), std::string::npos) << e.what();
+      EXPECT_NE(std::string(e.what()).find("d"), std::string::npos) << e.what();
+    }
+  }
+}
+
 TEST(RowAccumulator, ExplainsNullSpace) {
   Eigen::MatrixXd N(3, 1);
   N << 0.7071, -0.7071, 0.001;
