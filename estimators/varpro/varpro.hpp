@@ -6,6 +6,7 @@
 
 #include <Eigen/Core>
 #include <chrono>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -127,6 +128,11 @@ class VarPro : public exid::Estimator {
                        const exid::RunContext& ctx) const;
   Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
                 const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const;
+  // The fixed columns' (those no nonlinear parameter moves) per-equation factors, kept from one
+  // evaluation to the next (varpro_evaluate.cpp): reset by setUp.
+  struct FixedFactors;
+  void addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
+                const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const;
   exid::estimators::LsSolution solve(const exid::ObservationModel& model, const Eval& e,
                                      bool statistics) const;
   std::vector<std::string> names() const;
@@ -173,6 +179,7 @@ class VarPro : public exid::Estimator {
   double delay0_ = 0.0, delay_max_ = 0.0;
   double ts_ = 1.0;  // [s] the median sample period (the delay's lambda unit)
   int margin_ = 0;   // samples at each end without rows (measurement_delay)
+  mutable std::shared_ptr<FixedFactors> fixed_;
 };
 
 }  // namespace exid::varpro
