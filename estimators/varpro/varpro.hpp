@@ -5,6 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
+#include <Eigen/QR>
 #include <chrono>
 #include <memory>
 #include <string>
@@ -128,9 +129,25 @@ class VarPro : public exid::Estimator {
                        const exid::RunContext& ctx) const;
   Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
                 const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const;
-  // The fixed columns' (those no nonlinear parameter moves) per-equation factors, kept from one
-  // evaluation to the next (varpro_evaluate.cpp): reset by setUp.
-  struct FixedFactors;
+  // The fixed columns' (those no nonlinear parameter moves) rows and per-equation factors, kept
+  // from one evaluation to the next (varpro_evaluate.cpp: addChunk), and read by the grid's held
+  // rows (varpro_search.cpp: Held); reset by setUp.
+  struct FixedFactors {
+    struct Equation {
+      std::vector<Eigen::Index> rows;            // the chunk's rows of this equation
+      std::vector<int> cols;                     // F's columns (base) in these rows
+      Eigen::MatrixXd F;                         // k x f, as the rows gave it
+      Eigen::HouseholderQR<Eigen::MatrixXd> qr;  // of F
+    };
+    struct Chunk {
+      std::vector<Equation> eqs;  // in label order
+      Eigen::VectorXd y;
+      std::vector<int> equation;  // each row's label
+      bool whole = false;         // every equation's F kept
+    };
+    std::vector<Chunk> chunks;
+    double bytes = 0.0;
+  };
   void addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                 const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const;
   exid::estimators::LsSolution solve(const exid::ObservationModel& model, const Eval& e,

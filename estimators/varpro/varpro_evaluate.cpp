@@ -173,17 +173,6 @@ exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWi
 // "fixed" columns moved gets a new factor). With a delay every column moves, with
 // accumulate: normal or more than kHeldBytes of F there is nothing kept:
 // RowAccumulator::addEquations.
-struct VarPro::FixedFactors {
-  struct Equation {
-    std::vector<Eigen::Index> rows;
-    std::vector<int> cols;                     // F's columns in these rows
-    Eigen::MatrixXd F;                         // k x f, as the rows gave it
-    Eigen::HouseholderQR<Eigen::MatrixXd> qr;  // of F
-  };
-  std::vector<std::vector<Equation>> chunks;   // [chunk][equation, in label order]
-  double bytes = 0.0;
-};
-
 void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                       const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const {
   const Eigen::Index r = A.rows(), nc = A.cols();
@@ -213,8 +202,12 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   if (!fixed_) fixed_ = std::make_shared<FixedFactors>();
   FixedFactors& ff = *fixed_;
   if (ff.chunks.size() <= chunk) ff.chunks.resize(chunk + 1);
-  std::vector<FixedFactors::Equation>& eqs = ff.chunks[chunk];
+  FixedFactors::Chunk& ch = ff.chunks[chunk];
+  std::vector<FixedFactors::Equation>& eqs = ch.eqs;
   if (eqs.size() != rows.size()) eqs.assign(rows.size(), {});
+  ch.y = y;
+  ch.equation = equation;
+  ch.whole = true;
   const long m = acc->rows() + r;
   std::vector<int> fcols, xcols;
   Eigen::MatrixXd F, X, E;
@@ -249,6 +242,8 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
           ye[i] = y[idx[static_cast<std::size_t>(i)]];
         }
         acc->addEquations(Ae, ye, std::vector<int>(static_cast<std::size_t>(k), labels[u]));
+        ch.whole = false;
+        e.rows.clear();
         continue;
       }
       ff.bytes += 2.0 * sizeof(double) * k * f;

@@ -125,6 +125,10 @@ struct VarPro::Held {
     const Eigen::VectorXd eta = vp.heldEta(lambda);
     RowAccumulator acc(f, RowAccumulator::Method::Qr);
     Eigen::MatrixXd Ah;
+    if (fromKept(vp, model, data, eta, held, ctx, &acc)) {
+      finish(acc, p, f);
+      return;
+    }
     bool fits = true;
     m = rows(vp, model, data, eta, ctx, [&](const exid::Rows& r, Eigen::Index at) {
       if (!fits) return;
@@ -144,9 +148,79 @@ struct VarPro::Held {
       y.segment(at, r.W.rows()) = r.y;
       acc.addEquations(Ah, r.y, r.equation);
     });
-    if (!fits || m <= p) return;
+    if (!fits) return;
     At.conservativeResize(f, m);
     y.conservativeResize(m);
+    finish(acc, p, f);
+  }
+
+  // The held rows from the fixed columns evaluate() keeps (VarPro::FixedFactors: the same values
+  // at every eta) and the other groups' moved columns from the model (fullColumnsAt), instead of
+  // the model's whole rows; false (nothing done) when nothing is kept for every chunk.
+  bool fromKept(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
+                const Eigen::VectorXd& eta, const std::vector<int>& held,
+                const exid::RunContext& ctx, RowAccumulator* acc) {
+    if (vp.delay_ || !vp.fixed_) return false;
+    const std::vector<FixedFactors::Chunk>& chunks = vp.fixed_->chunks;
+    const int first = vp.margin_, last = data.size() - vp.margin_;
+    const auto count = static_cast<std::size_t>((last - first + vp.chunk_ - 1) / vp.chunk_);
+    if (chunks.size() != count) return false;
+    Eigen::Index total = 0;
+    for (const FixedFactors::Chunk& ch : chunks) {
+      if (!ch.whole) return false;
+      total += ch.y.size();
+    }
+    const auto f = static_cast<Eigen::Index>(held.size());
+    if (static_cast<double>(total) * (f + 1) * sizeof(double) > kHeldBytes) return false;
+    const int p = model.numBase();
+    std::vector<int> pos(static_cast<std::size_t>(p), -1), others, full;
+    std::vector<bool> moves(static_cast<std::size_t>(p), false);
+    for (const int c : vp.base_col_) moves[static_cast<std::size_t>(c)] = true;
+    for (Eigen::Index j = 0; j < f; ++j) {
+      const int c = held[static_cast<std::size_t>(j)];
+      pos[static_cast<std::size_t>(c)] = static_cast<int>(j);
+      if (moves[static_cast<std::size_t>(c)]) {
+        others.push_back(c);
+        full.push_back(model.base().independent[static_cast<std::size_t>(c)]);
+      }
+    }
+    At.setZero(f, total);
+    y.resize(total);
+    exid::SampleWindow window(data);
+    Eigen::Index at = 0;
+    Eigen::MatrixXd Ah;
+    for (std::size_t c = 0; c < chunks.size(); ++c) {
+      const FixedFactors::Chunk& ch = chunks[c];
+      const int b = first + static_cast<int>(c) * vp.chunk_, end = std::min(last, b + vp.chunk_);
+      const Eigen::Index r = ch.y.size();
+      for (const FixedFactors::Equation& e : ch.eqs)
+        for (std::size_t a = 0; a < e.cols.size(); ++a) {
+          const int j = pos[static_cast<std::size_t>(e.cols[a])];
+          exid::check(j >= 0, "varpro: a fixed column is not held");
+          for (std::size_t i = 0; i < e.rows.size(); ++i)
+            At(j, at + e.rows[i]) = e.F(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(a));
+        }
+      if (!others.empty()) {
+        const Eigen::MatrixXd Wc = model.fullColumnsAt(window.span(b, end), eta, full, ctx);
+        exid::check(Wc.rows() == r && Wc.cols() == static_cast<Eigen::Index>(others.size()),
+                    "varpro: the model's row count changed with eta");
+        if (!Wc.allFinite())
+          throw exid::Error(fmt::format("varpro: a row from samples {}..{} is not finite", b, end));
+        for (std::size_t o = 0; o < others.size(); ++o)
+          At.row(pos[static_cast<std::size_t>(others[o])]).segment(at, r) =
+              Wc.col(static_cast<Eigen::Index>(o)).transpose();
+      }
+      y.segment(at, r) = ch.y;
+      Ah = At.middleCols(at, r).transpose();
+      acc->addEquations(Ah, ch.y, ch.equation);
+      at += r;
+    }
+    m = total;
+    return true;
+  }
+
+  void finish(const RowAccumulator& acc, int p, Eigen::Index f) {
+    if (m <= p) return;
     const Eigen::MatrixXd& F = acc.factor();
     R = F.topLeftCorner(f, f).triangularView<Eigen::Upper>();
     const Eigen::VectorXd d = R.diagonal().cwiseAbs();
