@@ -306,6 +306,12 @@ void VarPro::describeSearch(const std::vector<Run>& runs, int won, const Grid& g
     G["sweeps"] = grid.sweeps;
     G["sweeps_around_the_best_end"] = grid.checks;
     G["singular_points"] = grid.singular;
+    // the projected residuals of the points taken against their whole evaluations (relative
+    // to ||y||^2: a fit can be exact)
+    exid::Json P = exid::Json::object();
+    P["points"] = grid.projected_checked;
+    P["max_difference_relative_to_yy"] = grid.projected_difference;
+    G["projected_against_whole"] = P;
     G["best_rss"] = grid.best_eval.rss;
     G["best_eta"] =
         exid::Json(std::vector<double>(grid.best_eval.eta.data(), grid.best_eval.eta.data() + q));

@@ -80,6 +80,10 @@ class VarPro : public exid::Estimator {
     std::vector<double> multipliers;
     int evaluations = 0, singular = 0, sweeps = 0;
     int checks = 0;          // sweeps around the best end
+    // the projected residual (Held::rss) against the whole evaluation at every point taken:
+    // how many, and their largest difference relative to ||y||^2
+    int projected_checked = 0;
+    double projected_difference = 0.0;
     long sample_stride = 1;  // points compared on every sample_stride-th sample
   };
 

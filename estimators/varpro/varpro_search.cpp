@@ -330,11 +330,17 @@ void VarPro::tryPoint(const exid::ObservationModel& model, const exid::Dataset& 
   Grid& g = *gp;
   ++g.evaluations;
   try {
+    double r = NAN;
     if (held.ok) {
-      const double r = held.rss(*this, model, data, lambda, ctx);
+      r = held.rss(*this, model, data, lambda, ctx);
       if (!(std::isfinite(r) && r < g.best_eval.rss)) return;  // (not taken: no check needed)
     }
     Eval e = evaluate(model, data, lambda, ctx);
+    if (held.ok && std::isfinite(e.rss)) {
+      ++g.projected_checked;
+      g.projected_difference = std::max(g.projected_difference,
+                                        std::abs(r - e.rss) / std::max(e.yy, 1e-300));
+    }
     if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
       g.best = lambda;
       g.best_eval = std::move(e);
