@@ -437,6 +437,14 @@ TEST(Varpro, RecoversEveryParameterFromNoiseFreeData) {
   EXPECT_LT(theta_err, 1e-6);
   EXPECT_EQ(e.nonlinear_names[0], "eps1");
   EXPECT_EQ(e.nonlinear_names[1], "vs1");
+  // accumulated as normal equations (no factors kept across evaluations: each equation's Gram
+  // matrix) and in chunks of 500 samples (several chunks of kept factors): the same fit
+  for (const char* yaml : {"{accumulate: normal}", "{chunk_samples: 500}"}) {
+    const exid::Estimate o = exid_test::create<exid::Estimator>("varpro", yaml)
+                                 ->estimate(*m, d, nullptr, mtest::context());
+    EXPECT_LT(((o.nonlinear - eta).array() / eta.array()).abs().maxCoeff(), 1e-6) << yaml;
+    EXPECT_LT((o.value - theta).cwiseAbs().maxCoeff() / theta.cwiseAbs().maxCoeff(), 1e-6) << yaml;
+  }
   // a linear fit at the study's (wrong) values is far off: the nonlinear fit matters here
   auto b = exid_test::create<exid::Estimator>("batch_ls", "{}");
   const exid::Estimate eb = b->estimate(*m, d, nullptr, mtest::context());
