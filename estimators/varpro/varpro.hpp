@@ -131,8 +131,12 @@ class VarPro : public exid::Estimator {
   exid::Rows chunkRows(const exid::ObservationModel& model, exid::SampleWindow& window, int b,
                        int end, const Eigen::VectorXd& eta, Eigen::MatrixXd* D,
                        const exid::RunContext& ctx) const;
+  // rank_checked: the caller tests the joint problem's regularity (regular(), which implies
+  // W's at the same tolerance) and rejects the point otherwise: theta by back substitution in
+  // R11 instead of the rank-revealing SVD (a theta that is not finite is refused as singular).
   Eval evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
-                const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const;
+                const Eigen::VectorXd& lambda, const exid::RunContext& ctx,
+                bool rank_checked = false) const;
   // The fixed columns' (those no nonlinear parameter moves) rows and per-equation factors, kept
   // from one evaluation to the next (varpro_evaluate.cpp: addChunk), and read by the grid's held
   // rows (varpro_search.cpp: Held); reset by setUp.

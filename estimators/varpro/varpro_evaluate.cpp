@@ -278,7 +278,8 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
 }
 
 VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
-                              const Eigen::VectorXd& lambda, const exid::RunContext& ctx) const {
+                              const Eigen::VectorXd& lambda, const exid::RunContext& ctx,
+                              bool rank_checked) const {
   const int p = model.numBase(), L = static_cast<int>(keep_.size()),
             q = static_cast<int>(nl_.size());
   Eval e;
@@ -307,8 +308,15 @@ VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::D
   e.R = qr.matrixQR().triangularView<Eigen::Upper>();
   // theta: the rank-revealing solve of [W y] (without its statistics: the estimate's come
   // from solve(.., true) at the end)
-  e.ls = solve(model, e, false);
-  e.theta = e.ls.theta;
+  if (rank_checked) {
+    e.theta = e.R.topLeftCorner(p, p).triangularView<Eigen::Upper>().solve(e.R.col(p + L).head(p));
+    if (!e.theta.allFinite())
+      throw exid::Error(fmt::format("varpro: the fit at eta = [{}] is singular",
+                                    fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
+  } else {
+    e.ls = solve(model, e, false);
+    e.theta = e.ls.theta;
+  }
   e.rss = e.R.col(p + L).tail(L + 1).squaredNorm();
   e.yy = e.R.col(p + L).head(p + L + 1).squaredNorm();
   // V = D Theta in lambda: dW/dlambda_k = eta_k dW/deta_k; the delay: d = ts lambda

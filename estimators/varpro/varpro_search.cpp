@@ -481,7 +481,8 @@ VarPro::Run VarPro::levenbergMarquardt(const exid::ObservationModel& model,
         ++rejected_bound_;
       } else {
         try {
-          trial = evaluate(model, data, lambda + delta, ctx);
+          // (from a regular point the trial's regularity is tested below: no SVD in its solve)
+          trial = evaluate(model, data, lambda + delta, ctx, cur_regular);
           // a step from a regular point into one where the joint problem is singular (a
           // Stribeck velocity drifting so high that its term is a Coulomb term, or so low that
           // it vanishes) is rejected: there the nonlinear parameter is not determined, and
