@@ -152,12 +152,16 @@ class VarPro : public exid::Estimator {
       Eigen::VectorXd y;
       std::vector<int> equation;  // each row's label
       bool whole = false;         // every equation's F kept
+      bool confirmed = false;     // and found again, with the same y, by a later evaluation
     };
     std::vector<Chunk> chunks;
     double bytes = 0.0;
   };
   void addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                 const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const;
+  void addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& Xall,
+                    const std::vector<int>& cols, Eigen::Index nc) const;
+  bool fixedConfirmed(std::size_t chunks) const;
   exid::estimators::LsSolution solve(const exid::ObservationModel& model, const Eval& e,
                                      bool statistics) const;
   std::vector<std::string> names() const;

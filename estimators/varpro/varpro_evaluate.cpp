@@ -173,6 +173,35 @@ exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWi
 // "fixed" columns moved gets a new factor). With a delay every column moves, with
 // accumulate: normal or more than kHeldBytes of F there is nothing kept:
 // RowAccumulator::addEquations.
+namespace {
+
+// One equation's factor rows from its kept factor of F (qr, F's columns fcols) and its other
+// columns X (k x x; xcols: their columns among nc, the last one y's, = nc): Q_F^T X, the part
+// below R_F factored, into acc as [R_F, (Q_F^T X)_top; 0, R_X].
+void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixXd>& qr,
+                  const std::vector<int>& fcols, Eigen::MatrixXd* Xp, const std::vector<int>& xcols,
+                  Eigen::Index nc, Eigen::MatrixXd* Ep) {
+  Eigen::MatrixXd& X = *Xp;
+  Eigen::MatrixXd& E = *Ep;
+  const Eigen::Index k = X.rows(), x = X.cols(), f = static_cast<Eigen::Index>(fcols.size());
+  X.applyOnTheLeft(qr.householderQ().adjoint());
+  Eigen::Ref<Eigen::MatrixXd> below = X.bottomRows(k - f);
+  Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qx(below);  // in place
+  const Eigen::Index rx = std::min(k - f, x);
+  E.setZero(f + rx, nc + 1);
+  for (Eigen::Index c = 0; c < f; ++c)
+    E.col(fcols[static_cast<std::size_t>(c)]).head(c + 1) = qr.matrixQR().col(c).head(c + 1);
+  for (Eigen::Index c = 0; c < x; ++c) {
+    const Eigen::Index to = xcols[static_cast<std::size_t>(c)];
+    E.col(to).head(f) = X.col(c).head(f);
+    // (R_X's upper triangle: its strictly lower part holds the reflections)
+    E.col(to).segment(f, std::min(c + 1, rx)) = X.col(c).segment(f, std::min(c + 1, rx));
+  }
+  acc->add(E.leftCols(nc), E.col(nc));
+}
+
+}  // namespace
+
 void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                       const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const {
   const Eigen::Index r = A.rows(), nc = A.cols();
@@ -205,6 +234,9 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   FixedFactors::Chunk& ch = ff.chunks[chunk];
   std::vector<FixedFactors::Equation>& eqs = ch.eqs;
   if (eqs.size() != rows.size()) eqs.assign(rows.size(), {});
+  // (confirmed: every equation's F and y are the kept ones, the second time they are seen)
+  ch.confirmed = ch.y.size() == y.size() && ch.equation == equation &&
+                 std::memcmp(ch.y.data(), y.data(), sizeof(double) * y.size()) == 0;
   ch.y = y;
   ch.equation = equation;
   ch.whole = true;
@@ -233,6 +265,7 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
     const bool kept = e.rows == idx && e.cols == fcols && e.F.rows() == k && e.F.cols() == f &&
                       (f == 0 || std::memcmp(e.F.data(), F.data(), sizeof(double) * k * f) == 0);
     if (!kept) {
+      ch.confirmed = false;
       if (ff.bytes + 2.0 * sizeof(double) * k * f > kHeldBytes || k <= f + x || f == 0) {
         // (nothing kept: this equation's rows as addEquations takes them)
         Eigen::MatrixXd Ae(k, nc);
@@ -256,25 +289,50 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
     for (Eigen::Index c = 0; c + 1 < x; ++c)
       for (Eigen::Index i = 0; i < k; ++i) X(i, c) = A(idx[static_cast<std::size_t>(i)], xcols[static_cast<std::size_t>(c)]);
     for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = y[idx[static_cast<std::size_t>(i)]];
-    X.applyOnTheLeft(e.qr.householderQ().adjoint());
-    Eigen::Ref<Eigen::MatrixXd> below = X.bottomRows(k - f);
-    Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qx(below);  // in place
-    const Eigen::Index rx = std::min(k - f, x);
-    E.setZero(f + rx, nc + 1);
-    const Eigen::MatrixXd RF = e.qr.matrixQR().topRows(f).triangularView<Eigen::Upper>();
-    for (Eigen::Index c = 0; c < f; ++c) E.col(fcols[static_cast<std::size_t>(c)]).head(f) = RF.col(c);
-    for (Eigen::Index c = 0; c < x; ++c) {
-      const Eigen::Index to = c + 1 < x ? xcols[static_cast<std::size_t>(c)] : nc;
-      E.col(to).head(f) = X.col(c).head(f);
-      E.col(to).segment(f, rx) = X.col(c).segment(f, rx);
-    }
-    for (Eigen::Index c = 0; c < x; ++c) {  // R_X's strictly lower part is not R's
-      const Eigen::Index to = c + 1 < x ? xcols[static_cast<std::size_t>(c)] : nc;
-      for (Eigen::Index i = c + 1; i < rx; ++i) E(f + i, to) = 0.0;
-    }
-    acc->add(E.leftCols(nc), E.col(nc));
+    xcols.push_back(static_cast<int>(nc));  // (y)
+    emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
   }
   acc->setRowCount(m);
+}
+
+
+// The chunk's rows through the kept factors alone, the chunk's other columns given (Xall: the
+// moved base columns and D, their columns among nc in cols): the rows' F and y are the kept
+// ones (fixedConfirmed()).
+void VarPro::addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& Xall,
+                          const std::vector<int>& cols, Eigen::Index nc) const {
+  const FixedFactors::Chunk& ch = fixed_->chunks[chunk];
+  const long m = acc->rows() + ch.y.size();
+  std::vector<int> xcols, src;
+  Eigen::MatrixXd X, E;
+  for (const FixedFactors::Equation& e : ch.eqs) {
+    const std::vector<Eigen::Index>& idx = e.rows;
+    const auto k = static_cast<Eigen::Index>(idx.size());
+    xcols.clear();
+    src.clear();
+    for (Eigen::Index a = 0; a < Xall.cols(); ++a)
+      for (const Eigen::Index i : idx)
+        if (Xall(i, a) != 0.0) {
+          xcols.push_back(cols[static_cast<std::size_t>(a)]);
+          src.push_back(static_cast<int>(a));
+          break;
+        }
+    const auto x = static_cast<Eigen::Index>(xcols.size()) + 1;
+    X.resize(k, x);
+    for (Eigen::Index c = 0; c + 1 < x; ++c)
+      for (Eigen::Index i = 0; i < k; ++i) X(i, c) = Xall(idx[static_cast<std::size_t>(i)], src[static_cast<std::size_t>(c)]);
+    for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = ch.y[idx[static_cast<std::size_t>(i)]];
+    xcols.push_back(static_cast<int>(nc));  // (y)
+    emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
+  }
+  acc->setRowCount(m);
+}
+
+bool VarPro::fixedConfirmed(std::size_t chunks) const {
+  if (!fixed_ || fixed_->chunks.size() != chunks) return false;
+  for (const FixedFactors::Chunk& ch : fixed_->chunks)
+    if (!ch.whole || !ch.confirmed) return false;
+  return true;
 }
 
 VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::Dataset& data,
@@ -288,7 +346,39 @@ VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::D
   const int first = margin_, last = data.size() - margin_;
   exid::SampleWindow window(data);
   Eigen::MatrixXd D, A;
-  for (int b = first; b < last; b += chunk_) {
+  // Once the fixed columns' factors and y are kept and confirmed (fixedConfirmed), only the
+  // moved base columns and their derivatives are asked of the model (fullColumnsAt), not its
+  // whole rows.
+  const auto chunks = static_cast<std::size_t>((last - first + chunk_ - 1) / chunk_);
+  const bool columns_only = !delay_ && fixedConfirmed(chunks);
+  if (columns_only) {
+    std::vector<int> moved(base_col_.begin(), base_col_.end()), full, cols;
+    std::sort(moved.begin(), moved.end());
+    moved.erase(std::unique(moved.begin(), moved.end()), moved.end());
+    for (const int c : moved) {
+      full.push_back(model.base().independent[static_cast<std::size_t>(c)]);
+      cols.push_back(c);
+    }
+    for (int l = 0; l < L; ++l) cols.push_back(p + l);
+    const auto cm = static_cast<Eigen::Index>(moved.size());
+    Eigen::MatrixXd dW, Xall;
+    for (int b = first; b < last; b += chunk_) {
+      const int end = std::min(last, b + chunk_);
+      const std::size_t c = static_cast<std::size_t>((b - first) / chunk_);
+      const Eigen::MatrixXd Wc = model.fullColumnsAt(window.span(b, end), e.eta, full, ctx, &dW);
+      exid::check(Wc.rows() == fixed_->chunks[c].y.size() && dW.rows() == Wc.rows(),
+                  "varpro: the model's row count changed with eta");
+      Xall.resize(Wc.rows(), cm + L);
+      Xall.leftCols(cm) = Wc;
+      for (int l = 0; l < L; ++l) Xall.col(cm + l) = dW.col(keep_[static_cast<std::size_t>(l)]);
+      if (!Xall.allFinite())
+        throw exid::Error(fmt::format(
+            "varpro: a row from samples {}..{} is not finite at eta = [{}]", b, end,
+            fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
+      addChunkKept(&acc, c, Xall, cols, p + L);
+    }
+  }
+  for (int b = first; b < last && !columns_only; b += chunk_) {
     const int end = std::min(last, b + chunk_);
     const exid::Rows r = chunkRows(model, window, b, end, e.eta, &D, ctx);
     exid::estimators::checkRows(r, p, kName, b);

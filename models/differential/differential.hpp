@@ -61,8 +61,8 @@ class DifferentialModel : public exid::ObservationModel {
     return designAt(s, frictionAt(studyEta()), nullptr);
   }
   Eigen::MatrixXd fullColumnsAt(const exid::Dataset& d, const Eigen::VectorXd& eta,
-                                const std::vector<int>& columns,
-                                const exid::RunContext& ctx) const override;
+                                const std::vector<int>& columns, const exid::RunContext& ctx,
+                                Eigen::MatrixXd* dW = nullptr) const override;
   Eigen::MatrixXd fullDesignAt(const exid::Samples& s, const Eigen::VectorXd& eta,
                                Eigen::MatrixXd* dW) const override {
     return designAt(s, frictionAt(eta), dW);

@@ -65,16 +65,17 @@ exid::Rows DifferentialModel::fullRowsAt(const exid::Dataset& d, const Eigen::Ve
   return r;
 }
 
-// The nonlinear friction columns alone (extraColumns' values, the same bits: FrictionColumns's
-// values do not depend on whether derivatives are asked for); any other column through
-// fullRowsAt.
+// The nonlinear friction columns alone (extraColumns' values and derivatives, the same bits:
+// FrictionColumns's values do not depend on whether derivatives are asked for); any other
+// column through fullRowsAt.
 Eigen::MatrixXd DifferentialModel::fullColumnsAt(const exid::Dataset& d, const Eigen::VectorXd& eta,
                                                  const std::vector<int>& columns,
-                                                 const exid::RunContext& ctx) const {
+                                                 const exid::RunContext& ctx,
+                                                 Eigen::MatrixXd* dW) const {
   const int n = robot().dof(), P0 = exid::numParameters(robot(), cols_), E = extraPerJoint();
   bool friction_only = E > 0 && !columns.empty();
   for (int c : columns) friction_only = friction_only && c >= P0 && c < P0 + E * n;
-  if (!friction_only) return ObservationModel::fullColumnsAt(d, eta, columns, ctx);
+  if (!friction_only) return ObservationModel::fullColumnsAt(d, eta, columns, ctx, dW);
   const std::string who = "model 'differential'";
   requireTorqueSignals(d, n, who);
   exid::models::requireSamples(d.samples(), n, true, who);
@@ -94,6 +95,28 @@ Eigen::MatrixXd DifferentialModel::fullColumnsAt(const exid::Dataset& d, const E
       for (int k = 0; k < K; ++k) {
         fc.values(d.qd(k, j), f.eps[u], f.vs[u], w);
         out(static_cast<Eigen::Index>(k) * m + i, c) = w[e];
+      }
+    }
+  }
+  if (dW) {  // (extraColumns' derivative columns, in nonlinearParameters() order)
+    std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
+    int L = 0;
+    for (const Slot& sl : slots()) {
+      (sl.eps ? deps : dvs)[static_cast<std::size_t>(sl.joint)] = L;
+      L += sl.eps ? E : 1;
+    }
+    dW->setZero(static_cast<Eigen::Index>(K) * m, L);
+    double dw_eps[3], dw_vs = 0.0;
+    for (int i = 0; i < m; ++i) {
+      const int j = sel_[static_cast<std::size_t>(i)];
+      const auto u = static_cast<std::size_t>(j);
+      if (deps[u] < 0 && dvs[u] < 0) continue;
+      for (int k = 0; k < K; ++k) {
+        const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+        fc.values(d.qd(k, j), f.eps[u], f.vs[u], w, dw_eps, &dw_vs);
+        if (deps[u] >= 0)
+          for (int e = 0; e < E; ++e) (*dW)(row, deps[u] + e) = dw_eps[e];
+        if (dvs[u] >= 0) (*dW)(row, dvs[u]) = dw_vs;
       }
     }
   }

@@ -196,7 +196,8 @@ TEST(NonlinearFriction, FullColumnsAtAreTheRowsColumns) {
     truthVectors(*m, T, &full, &eta);
     eta = eta.cwiseProduct(Eigen::VectorXd::LinSpaced(eta.size(), 0.5, 3.0));
     const exid::Dataset d = slowSamples(*r, 37, 6);
-    const Eigen::MatrixXd W = m->fullRowsAt(d, eta, nullptr, mtest::context()).W;
+    Eigen::MatrixXd dW_rows;
+    const Eigen::MatrixXd W = m->fullRowsAt(d, eta, &dW_rows, mtest::context()).W;
     std::vector<int> friction;  // FcP, FcN, Fs of the 6 joints
     const std::vector<std::string> names = m->fullNames();
     for (std::size_t c = 0; c < names.size(); ++c)
@@ -208,6 +209,17 @@ TEST(NonlinearFriction, FullColumnsAtAreTheRowsColumns) {
     asks.push_back({0, friction[3], 7});  // with rigid-body columns: through fullRowsAt
     for (const std::vector<int>& cols : asks) {
       const Eigen::MatrixXd C = m->fullColumnsAt(d, eta, cols, mtest::context());
+      // with the derivatives: the same columns, and fullRowsAt's dW itself
+      Eigen::MatrixXd dW;
+      const Eigen::MatrixXd Cd = m->fullColumnsAt(d, eta, cols, mtest::context(), &dW);
+      ASSERT_EQ(Cd.rows(), C.rows());
+      ASSERT_EQ(Cd.cols(), C.cols());
+      EXPECT_EQ(0, std::memcmp(Cd.data(), C.data(), sizeof(double) * C.size()));
+      ASSERT_EQ(dW.rows(), dW_rows.rows());
+      ASSERT_EQ(dW.cols(), dW_rows.cols());
+      ASSERT_EQ(dW.cols(), joints.empty() ? 24 : 12);  // (eps: FcP, FcN, Fs; vs: Fs)
+      EXPECT_EQ(0, std::memcmp(dW.data(), dW_rows.data(), sizeof(double) * dW.size()))
+          << joints << ": largest difference " << (dW - dW_rows).cwiseAbs().maxCoeff();
       ASSERT_EQ(C.rows(), W.rows());
       ASSERT_EQ(C.cols(), static_cast<Eigen::Index>(cols.size()));
       for (std::size_t i = 0; i < cols.size(); ++i) {

@@ -176,8 +176,8 @@ Rows ObservationModel::fullRowsAt(const Dataset& data, const Eigen::VectorXd& et
 
 Eigen::MatrixXd ObservationModel::fullColumnsAt(const Dataset& data, const Eigen::VectorXd& eta,
                                                 const std::vector<int>& columns,
-                                                const RunContext& ctx) const {
-  const Rows full = fullRowsAt(data, eta, nullptr, ctx);
+                                                const RunContext& ctx, Eigen::MatrixXd* dW) const {
+  const Rows full = fullRowsAt(data, eta, dW, ctx);
   Eigen::MatrixXd out(full.W.rows(), static_cast<Eigen::Index>(columns.size()));
   for (std::size_t i = 0; i < columns.size(); ++i) {
     const int c = columns[i];

@@ -109,13 +109,14 @@ class EXID_API ObservationModel : public PluginObject {
   virtual Rows fullRowsAt(const Dataset& data, const Eigen::VectorXd& eta, Eigen::MatrixXd* dW,
                           const RunContext& ctx) const;
   /// The full columns `columns` (indices into fullNames()) of fullRowsAt(data, eta): rows x
-  /// columns.size(), the same numbers in the same rows. For an estimator that needs only the
-  /// columns the nonlinear parameters move (varpro's trial points). Default: fullRowsAt's
-  /// columns; a model whose moved columns cost far less than its rows gives them alone (the
+  /// columns.size(), the same numbers in the same rows; with dW, also fullRowsAt's dW (rows x
+  /// L, every moved column's derivatives). For an estimator that needs only the columns the
+  /// nonlinear parameters move (varpro's trial points and evaluations). Default: fullRowsAt's;
+  /// a model whose moved columns cost far less than its rows gives them alone (the
   /// `differential` model's friction columns).
   virtual Eigen::MatrixXd fullColumnsAt(const Dataset& data, const Eigen::VectorXd& eta,
-                                        const std::vector<int>& columns,
-                                        const RunContext& ctx) const;
+                                        const std::vector<int>& columns, const RunContext& ctx,
+                                        Eigen::MatrixXd* dW = nullptr) const;
   /// fullDesign with the nonlinear parameters at eta and, when dW is given, the derivatives of
   /// the columns they move (as fullRowsAt: rows x L). Exact. Default (no nonlinear parameter):
   /// fullDesign, eta empty.
