@@ -18,6 +18,18 @@ namespace exid::estimators {
 
 namespace {
 std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
+
+// The columns of W not zero in the rows idx, ascending.
+void nonzeroColumns(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                    const std::vector<Eigen::Index>& idx, std::vector<Eigen::Index>* cols) {
+  cols->clear();
+  for (Eigen::Index c = 0; c < W.cols(); ++c)
+    for (const Eigen::Index i : idx)
+      if (W(i, c) != 0.0) {
+        cols->push_back(c);
+        break;
+      }
+}
 }  // namespace
 
 // ---------------------------------------------------------------- RowAccumulator
@@ -131,16 +143,7 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
   for (const auto& idx : rows) {
     // the columns not zero in these rows (y always), ascending: the lower triangle of their
     // Gram matrix lands in the lower triangle of the whole one
-    cols.clear();
-    for (Eigen::Index c = 0; c < p_; ++c) {
-      bool nonzero = false;
-      for (Eigen::Index i : idx)
-        if (W(i, c) != 0.0) {
-          nonzero = true;
-          break;
-        }
-      if (nonzero) cols.push_back(c);
-    }
+    nonzeroColumns(W, idx, &cols);
     const auto q = static_cast<Eigen::Index>(cols.size());
     // the rows, row-major with the padding zero, and their Gram matrix by gramUpdate (the same
     // bits on every CPU, in AVX registers where there are some)
@@ -177,16 +180,7 @@ void RowAccumulator::addEquationsQr(const Eigen::Ref<const Eigen::MatrixXd>& W,
   std::vector<Eigen::Index> cols;
   Eigen::MatrixXd C, E;
   for (const auto& idx : rows) {
-    cols.clear();
-    for (Eigen::Index c = 0; c < p_; ++c) {
-      bool nonzero = false;
-      for (Eigen::Index i : idx)
-        if (W(i, c) != 0.0) {
-          nonzero = true;
-          break;
-        }
-      if (nonzero) cols.push_back(c);
-    }
+    nonzeroColumns(W, idx, &cols);
     const auto q = static_cast<Eigen::Index>(cols.size());
     const auto k = static_cast<Eigen::Index>(idx.size());
     C.resize(k, q + 1);
