@@ -46,11 +46,11 @@ class VarPro : public exid::Estimator {
   struct Eval {
     Eigen::VectorXd eta, theta;
     double rss = 0.0;
-    double yy = 0.0;        // ||y||^2
-    Eigen::MatrixXd R;      // (p + L + 1)^2 triangular factor of [W D y]
-    Eigen::MatrixXd JtJ;    // q x q (Kaufman), in lambda = log(eta)
-    Eigen::VectorXd Jtr;    // q
-    Eigen::MatrixXd Theta;  // L x q: V = D Theta = d(W theta)/d lambda
+    double yy = 0.0;                  // ||y||^2
+    Eigen::MatrixXd R;                // (p + L + 1)^2 triangular factor of [W D y]
+    Eigen::MatrixXd JtJ;              // q x q (Kaufman), in lambda = log(eta)
+    Eigen::VectorXd Jtr;              // q
+    Eigen::MatrixXd Theta;            // L x q: V = D Theta = d(W theta)/d lambda
     exid::estimators::LsSolution ls;  // (without its statistics: solve(.., true))
     long m = 0;
   };
@@ -79,7 +79,7 @@ class VarPro : public exid::Estimator {
     std::vector<std::vector<int>> groups;
     std::vector<double> multipliers;
     int evaluations = 0, singular = 0, sweeps = 0;
-    int checks = 0;          // sweeps around the best end
+    int checks = 0;  // sweeps around the best end
     // the projected residual (Held::rss) against the whole evaluation at every point taken:
     // how many, and their largest difference relative to ||y||^2
     int projected_checked = 0;

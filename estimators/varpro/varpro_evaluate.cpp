@@ -224,9 +224,9 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   }
   std::vector<std::vector<Eigen::Index>> rows(labels.size());
   for (Eigen::Index i = 0; i < r; ++i)
-    rows[static_cast<std::size_t>(std::lower_bound(labels.begin(), labels.end(),
-                                                   equation[static_cast<std::size_t>(i)]) -
-                                  labels.begin())]
+    rows[static_cast<std::size_t>(
+             std::lower_bound(labels.begin(), labels.end(), equation[static_cast<std::size_t>(i)]) -
+             labels.begin())]
         .push_back(i);
   if (!fixed_) fixed_ = std::make_shared<FixedFactors>();
   FixedFactors& ff = *fixed_;
@@ -255,12 +255,15 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
           nonzero = true;
           break;
         }
-      if (nonzero) (fixed[static_cast<std::size_t>(c)] ? fcols : xcols).push_back(static_cast<int>(c));
+      if (nonzero)
+        (fixed[static_cast<std::size_t>(c)] ? fcols : xcols).push_back(static_cast<int>(c));
     }
-    const auto f = static_cast<Eigen::Index>(fcols.size()), x = static_cast<Eigen::Index>(xcols.size()) + 1;
+    const auto f = static_cast<Eigen::Index>(fcols.size()),
+               x = static_cast<Eigen::Index>(xcols.size()) + 1;
     F.resize(k, f);
     for (Eigen::Index c = 0; c < f; ++c)
-      for (Eigen::Index i = 0; i < k; ++i) F(i, c) = A(idx[static_cast<std::size_t>(i)], fcols[static_cast<std::size_t>(c)]);
+      for (Eigen::Index i = 0; i < k; ++i)
+        F(i, c) = A(idx[static_cast<std::size_t>(i)], fcols[static_cast<std::size_t>(c)]);
     FixedFactors::Equation& e = eqs[u];
     const bool kept = e.rows == idx && e.cols == fcols && e.F.rows() == k && e.F.cols() == f &&
                       (f == 0 || std::memcmp(e.F.data(), F.data(), sizeof(double) * k * f) == 0);
@@ -287,14 +290,14 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
     }
     X.resize(k, x);
     for (Eigen::Index c = 0; c + 1 < x; ++c)
-      for (Eigen::Index i = 0; i < k; ++i) X(i, c) = A(idx[static_cast<std::size_t>(i)], xcols[static_cast<std::size_t>(c)]);
+      for (Eigen::Index i = 0; i < k; ++i)
+        X(i, c) = A(idx[static_cast<std::size_t>(i)], xcols[static_cast<std::size_t>(c)]);
     for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = y[idx[static_cast<std::size_t>(i)]];
     xcols.push_back(static_cast<int>(nc));  // (y)
     emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
   }
   acc->setRowCount(m);
 }
-
 
 // The chunk's rows through the kept factors alone, the chunk's other columns given (Xall: the
 // moved base columns and D, their columns among nc in cols): the rows' F and y are the kept
@@ -320,7 +323,8 @@ void VarPro::addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::M
     const auto x = static_cast<Eigen::Index>(xcols.size()) + 1;
     X.resize(k, x);
     for (Eigen::Index c = 0; c + 1 < x; ++c)
-      for (Eigen::Index i = 0; i < k; ++i) X(i, c) = Xall(idx[static_cast<std::size_t>(i)], src[static_cast<std::size_t>(c)]);
+      for (Eigen::Index i = 0; i < k; ++i)
+        X(i, c) = Xall(idx[static_cast<std::size_t>(i)], src[static_cast<std::size_t>(c)]);
     for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = ch.y[idx[static_cast<std::size_t>(i)]];
     xcols.push_back(static_cast<int>(nc));  // (y)
     emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
@@ -372,9 +376,9 @@ VarPro::Eval VarPro::evaluate(const exid::ObservationModel& model, const exid::D
       Xall.leftCols(cm) = Wc;
       for (int l = 0; l < L; ++l) Xall.col(cm + l) = dW.col(keep_[static_cast<std::size_t>(l)]);
       if (!Xall.allFinite())
-        throw exid::Error(fmt::format(
-            "varpro: a row from samples {}..{} is not finite at eta = [{}]", b, end,
-            fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
+        throw exid::Error(
+            fmt::format("varpro: a row from samples {}..{} is not finite at eta = [{}]", b, end,
+                        fmt::join(e.eta.data(), e.eta.data() + q, ", ")));
       addChunkKept(&acc, c, Xall, cols, p + L);
     }
   }

@@ -338,8 +338,8 @@ void VarPro::tryPoint(const exid::ObservationModel& model, const exid::Dataset& 
     Eval e = evaluate(model, data, lambda, ctx);
     if (held.ok && std::isfinite(e.rss)) {
       ++g.projected_checked;
-      g.projected_difference = std::max(g.projected_difference,
-                                        std::abs(r - e.rss) / std::max(e.yy, 1e-300));
+      g.projected_difference =
+          std::max(g.projected_difference, std::abs(r - e.rss) / std::max(e.yy, 1e-300));
     }
     if (std::isfinite(e.rss) && e.rss < g.best_eval.rss) {
       g.best = lambda;

@@ -180,8 +180,10 @@ TEST(RowAccumulator, QrByEquationKeepsTheRowsGramMatrixAndConditioning) {
   const estimators::LsSolution d = estimators::solveLeastSquares(dense, {}, opt, "test");
   using MatL = Eigen::Matrix<long double, Eigen::Dynamic, Eigen::Dynamic>;
   using VecL = Eigen::Matrix<long double, Eigen::Dynamic, 1>;
-  const Eigen::VectorXd ref =
-      MatL(W.cast<long double>()).colPivHouseholderQr().solve(VecL(y.cast<long double>())).cast<double>();
+  const Eigen::VectorXd ref = MatL(W.cast<long double>())
+                                  .colPivHouseholderQr()
+                                  .solve(VecL(y.cast<long double>()))
+                                  .cast<double>();
   const double err = (a.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   const double err_dense = (d.theta - ref).cwiseAbs().maxCoeff() / ref.cwiseAbs().maxCoeff();
   std::printf("Qr by equation: relative error vs long double %.2e (the rows' own QR %.2e)\n", err,

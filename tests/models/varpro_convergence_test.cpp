@@ -322,7 +322,8 @@ TEST(VarproConvergence, ProjectedGridPointsTakeTheSamePointsAsWholeEvaluations) 
   // rows come from the kept fixed columns and the other joints' moved columns)
   const exid::Json& pw = *gp.find("projected_against_whole");
   std::printf("[varpro] projected against whole: %s points, largest difference %.2e of ||y||^2\n",
-              pw.find("points")->dump().c_str(), pw.find("max_difference_relative_to_yy")->asDouble());
+              pw.find("points")->dump().c_str(),
+              pw.find("max_difference_relative_to_yy")->asDouble());
   EXPECT_GT(pw.find("points")->asInt(), 5);
   EXPECT_LT(pw.find("max_difference_relative_to_yy")->asDouble(), 1e-12);
   EXPECT_EQ(gw.find("projected_against_whole")->find("points")->asInt(), 0);

@@ -422,10 +422,12 @@ LsSolution solveLeastSquares(const RowAccumulator& acc, const std::vector<std::s
     if (!(d(j) > 0.0)) d(j) = 1.0;  // zero column: stays zero, found as a null direction
   const Eigen::MatrixXd Fs = Fw * d.cwiseInverse().asDiagonal();
   if (!opt.statistics)  // (about half the time of Jacobi's at p = 64; the same values to 1e-14)
-    return solveFromSvd(Eigen::BDCSVD<Eigen::MatrixXd>(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV),
-                        Fw, fy, d, m, names, opt, who);
-  return solveFromSvd(Eigen::JacobiSVD<Eigen::MatrixXd>(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV),
-                      Fw, fy, d, m, names, opt, who);
+    return solveFromSvd(
+        Eigen::BDCSVD<Eigen::MatrixXd>(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV), Fw, fy, d, m,
+        names, opt, who);
+  return solveFromSvd(
+      Eigen::JacobiSVD<Eigen::MatrixXd>(Fs, Eigen::ComputeThinU | Eigen::ComputeThinV), Fw, fy, d,
+      m, names, opt, who);
 }
 
 // ---------------------------------------------------------------- Estimate
