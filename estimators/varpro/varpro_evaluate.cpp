@@ -214,20 +214,11 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   for (int c = 0; c < p; ++c) fixed[static_cast<std::size_t>(c)] = true;
   for (const int c : base_col_) fixed[static_cast<std::size_t>(c)] = false;
   std::vector<int> labels;
-  for (const int l : equation) {
-    const auto at = std::lower_bound(labels.begin(), labels.end(), l);
-    if (at == labels.end() || *at != l) labels.insert(at, l);
-  }
-  if (labels.size() > 64) {
+  std::vector<std::vector<Eigen::Index>> rows;
+  if (!exid::estimators::rowsByEquation(equation, &labels, &rows)) {
     acc->addEquations(A, y, equation);
     return;
   }
-  std::vector<std::vector<Eigen::Index>> rows(labels.size());
-  for (Eigen::Index i = 0; i < r; ++i)
-    rows[static_cast<std::size_t>(
-             std::lower_bound(labels.begin(), labels.end(), equation[static_cast<std::size_t>(i)]) -
-             labels.begin())]
-        .push_back(i);
   if (!fixed_) fixed_ = std::make_shared<FixedFactors>();
   FixedFactors& ff = *fixed_;
   if (ff.chunks.size() <= chunk) ff.chunks.resize(chunk + 1);
@@ -242,22 +233,16 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   ch.whole = true;
   const long m = acc->rows() + r;
   std::vector<int> fcols, xcols;
+  std::vector<Eigen::Index> nz;
   Eigen::MatrixXd F, X, E;
   for (std::size_t u = 0; u < rows.size(); ++u) {
     const std::vector<Eigen::Index>& idx = rows[u];
     const auto k = static_cast<Eigen::Index>(idx.size());
     fcols.clear();
     xcols.clear();
-    for (Eigen::Index c = 0; c < nc; ++c) {
-      bool nonzero = false;
-      for (const Eigen::Index i : idx)
-        if (A(i, c) != 0.0) {
-          nonzero = true;
-          break;
-        }
-      if (nonzero)
-        (fixed[static_cast<std::size_t>(c)] ? fcols : xcols).push_back(static_cast<int>(c));
-    }
+    exid::estimators::nonzeroColumns(A, idx, &nz);
+    for (const Eigen::Index c : nz)
+      (fixed[static_cast<std::size_t>(c)] ? fcols : xcols).push_back(static_cast<int>(c));
     const auto f = static_cast<Eigen::Index>(fcols.size()),
                x = static_cast<Eigen::Index>(xcols.size()) + 1;
     F.resize(k, f);
@@ -306,20 +291,15 @@ void VarPro::addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::M
                           const std::vector<int>& cols, Eigen::Index nc) const {
   const FixedFactors::Chunk& ch = fixed_->chunks[chunk];
   const long m = acc->rows() + ch.y.size();
-  std::vector<int> xcols, src;
+  std::vector<int> xcols;
+  std::vector<Eigen::Index> src;
   Eigen::MatrixXd X, E;
   for (const FixedFactors::Equation& e : ch.eqs) {
     const std::vector<Eigen::Index>& idx = e.rows;
     const auto k = static_cast<Eigen::Index>(idx.size());
+    exid::estimators::nonzeroColumns(Xall, idx, &src);
     xcols.clear();
-    src.clear();
-    for (Eigen::Index a = 0; a < Xall.cols(); ++a)
-      for (const Eigen::Index i : idx)
-        if (Xall(i, a) != 0.0) {
-          xcols.push_back(cols[static_cast<std::size_t>(a)]);
-          src.push_back(static_cast<int>(a));
-          break;
-        }
+    for (const Eigen::Index a : src) xcols.push_back(cols[static_cast<std::size_t>(a)]);
     const auto x = static_cast<Eigen::Index>(xcols.size()) + 1;
     X.resize(k, x);
     for (Eigen::Index c = 0; c + 1 < x; ++c)

@@ -19,7 +19,8 @@ namespace exid::estimators {
 namespace {
 std::vector<double> toStd(const Eigen::VectorXd& v) { return {v.data(), v.data() + v.size()}; }
 
-// The columns of W not zero in the rows idx, ascending.
+}  // namespace
+
 void nonzeroColumns(const Eigen::Ref<const Eigen::MatrixXd>& W,
                     const std::vector<Eigen::Index>& idx, std::vector<Eigen::Index>* cols) {
   cols->clear();
@@ -30,7 +31,25 @@ void nonzeroColumns(const Eigen::Ref<const Eigen::MatrixXd>& W,
         break;
       }
 }
-}  // namespace
+
+bool rowsByEquation(const std::vector<int>& equation, std::vector<int>* labels,
+                    std::vector<std::vector<Eigen::Index>>* rows) {
+  // (labels are few: joints, wrench components; found by a search among those seen, not by
+  // sorting every row's label)
+  labels->clear();
+  for (const int l : equation) {
+    const auto at = std::lower_bound(labels->begin(), labels->end(), l);
+    if (at != labels->end() && *at == l) continue;
+    if (labels->size() == 64) return false;
+    labels->insert(at, l);
+  }
+  rows->assign(labels->size(), {});
+  for (std::size_t i = 0; i < equation.size(); ++i)
+    (*rows)[static_cast<std::size_t>(std::lower_bound(labels->begin(), labels->end(), equation[i]) -
+                                     labels->begin())]
+        .push_back(static_cast<Eigen::Index>(i));
+  return true;
+}
 
 // ---------------------------------------------------------------- RowAccumulator
 RowAccumulator::RowAccumulator(int p, Method method, int block_rows)
@@ -116,24 +135,13 @@ void RowAccumulator::addEquations(const Eigen::Ref<const Eigen::MatrixXd>& W,
         fmt::format("RowAccumulator: rows of {} x {} and y of {}, expected {} columns "
                     "and one y per row",
                     r, W.cols(), y.size(), p_));
-  // the rows of each equation, in order (labels are few: joints, wrench components; found by
-  // a search among those seen, not by sorting every row's label)
+  // the rows of each equation, in order
   std::vector<int> labels;
-  for (const int l : equation) {
-    const auto at = std::lower_bound(labels.begin(), labels.end(), l);
-    if (at != labels.end() && *at == l) continue;
-    if (labels.size() == 64) {
-      add(W, y);
-      return;
-    }
-    labels.insert(at, l);
+  std::vector<std::vector<Eigen::Index>> rows;
+  if (!rowsByEquation(equation, &labels, &rows)) {
+    add(W, y);
+    return;
   }
-  std::vector<std::vector<Eigen::Index>> rows(labels.size());
-  for (Eigen::Index i = 0; i < r; ++i)
-    rows[static_cast<std::size_t>(
-             std::lower_bound(labels.begin(), labels.end(), equation[static_cast<std::size_t>(i)]) -
-             labels.begin())]
-        .push_back(i);
   std::vector<Eigen::Index> cols;
   if (method_ == Method::Qr) {
     addEquationsQr(W, y, rows);

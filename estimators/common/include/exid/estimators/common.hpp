@@ -97,6 +97,14 @@ class RowAccumulator {
   mutable bool dirty_ = true;
 };
 
+/// The columns of W not zero in the rows idx, ascending.
+void nonzeroColumns(const Eigen::Ref<const Eigen::MatrixXd>& W,
+                    const std::vector<Eigen::Index>& idx, std::vector<Eigen::Index>* cols);
+/// The rows of each equation label (ascending labels, each label's rows in order); false
+/// (nothing meant) when there are more than 64 labels.
+bool rowsByEquation(const std::vector<int>& equation, std::vector<int>* labels,
+                    std::vector<std::vector<Eigen::Index>>* rows);
+
 struct SolveOptions {
   /// A direction is unidentifiable when its singular value of the column-scaled W is below
   /// rank_tolerance * the largest (same convention as the base parameters, 1e-8).
