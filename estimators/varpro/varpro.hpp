@@ -19,6 +19,14 @@ namespace exid::varpro {
 
 using exid::estimators::RowAccumulator;
 
+// One equation's factor rows from its kept factor of F (qr, F's columns at fcols) and its other
+// columns X (k x x; xcols: their columns among nc, the last one y's, = nc; k - f >= x): Q_F^T X,
+// the part below R_F factored in place, into acc as [R_F, (Q_F^T X)_top; 0, R_X]: rows with
+// the Gram matrix of the equation's rows (varpro_evaluate.cpp).
+void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixXd>& qr,
+                  const std::vector<int>& fcols, Eigen::MatrixXd* Xp, const std::vector<int>& xcols,
+                  Eigen::Index nc, Eigen::MatrixXd* Ep);
+
 class VarPro : public exid::Estimator {
  public:
   static constexpr const char* kName = "varpro";

@@ -173,11 +173,6 @@ exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWi
 // "fixed" columns moved gets a new factor). With a delay every column moves, with
 // accumulate: normal or more than kHeldBytes of F there is nothing kept:
 // RowAccumulator::addEquations.
-namespace {
-
-// One equation's factor rows from its kept factor of F (qr, F's columns fcols) and its other
-// columns X (k x x; xcols: their columns among nc, the last one y's, = nc): Q_F^T X, the part
-// below R_F factored, into acc as [R_F, (Q_F^T X)_top; 0, R_X].
 void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixXd>& qr,
                   const std::vector<int>& fcols, Eigen::MatrixXd* Xp, const std::vector<int>& xcols,
                   Eigen::Index nc, Eigen::MatrixXd* Ep) {
@@ -199,8 +194,6 @@ void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixX
   }
   acc->add(E.leftCols(nc), E.col(nc));
 }
-
-}  // namespace
 
 void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                       const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const {

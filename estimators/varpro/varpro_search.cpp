@@ -83,7 +83,8 @@ VarPro::Grid VarPro::searchGrid(const exid::ObservationModel& model, const exid:
 // The residual at points that move only the base columns of some nonlinear parameters (one
 // group of the grid, one parameter of a scan), the others held at `lambda`. The held columns'
 // rows A and y are kept (row by row) with the triangular factor [R z; 0 rho] of [A y] (each
-// joint's rows over its own columns first: RowAccumulator::addEquations); at each point only the
+// joint's rows over its own columns first: from the kept factors of the fixed columns, or
+// RowAccumulator::addEquations); at each point only the
 // moved columns B are computed, and with u = R^-T A^T B (A^T B over B's non-zero rows: a
 // friction column lives on one joint's rows)
 //   rss = rho^2 - b^T G^-1 b,  G = B^T B - u^T u,  b = B^T y - u^T z,
@@ -156,7 +157,9 @@ struct VarPro::Held {
 
   // The held rows from the fixed columns evaluate() keeps (VarPro::FixedFactors: the same values
   // at every eta) and the other groups' moved columns from the model (fullColumnsAt), instead of
-  // the model's whole rows; false (nothing done) when nothing is kept for every chunk.
+  // the model's whole rows; each equation's factor from F's kept Householder factor, reflecting
+  // only the other groups' moved columns and y (emitEquation). False (nothing done) when
+  // nothing is kept for every chunk.
   bool fromKept(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
                 const Eigen::VectorXd& eta, const std::vector<int>& held,
                 const exid::RunContext& ctx, RowAccumulator* acc) {
@@ -188,20 +191,15 @@ struct VarPro::Held {
     y.resize(total);
     exid::SampleWindow window(data);
     Eigen::Index at = 0;
-    Eigen::MatrixXd Ah;
+    Eigen::MatrixXd Wc, X, E;
+    std::vector<int> fpos, xpos;
+    std::vector<Eigen::Index> src;
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       const FixedFactors::Chunk& ch = chunks[c];
       const int b = first + static_cast<int>(c) * vp.chunk_, end = std::min(last, b + vp.chunk_);
       const Eigen::Index r = ch.y.size();
-      for (const FixedFactors::Equation& e : ch.eqs)
-        for (std::size_t a = 0; a < e.cols.size(); ++a) {
-          const int j = pos[static_cast<std::size_t>(e.cols[a])];
-          exid::check(j >= 0, "varpro: a fixed column is not held");
-          for (std::size_t i = 0; i < e.rows.size(); ++i)
-            At(j, at + e.rows[i]) = e.F(static_cast<Eigen::Index>(i), static_cast<Eigen::Index>(a));
-        }
       if (!others.empty()) {
-        const Eigen::MatrixXd Wc = model.fullColumnsAt(window.span(b, end), eta, full, ctx);
+        Wc = model.fullColumnsAt(window.span(b, end), eta, full, ctx);
         exid::check(Wc.rows() == r && Wc.cols() == static_cast<Eigen::Index>(others.size()),
                     "varpro: the model's row count changed with eta");
         if (!Wc.allFinite())
@@ -209,12 +207,39 @@ struct VarPro::Held {
         for (std::size_t o = 0; o < others.size(); ++o)
           At.row(pos[static_cast<std::size_t>(others[o])]).segment(at, r) =
               Wc.col(static_cast<Eigen::Index>(o)).transpose();
+      } else {
+        Wc.resize(r, 0);
       }
       y.segment(at, r) = ch.y;
-      Ah = At.middleCols(at, r).transpose();
-      acc->addEquations(Ah, ch.y, ch.equation);
+      // each equation's factor from F's kept one: Q_F^T applied to the other groups' moved
+      // columns (those non-zero in its rows) and y alone (emitEquation, as evaluate does)
+      for (const FixedFactors::Equation& e : ch.eqs) {
+        const std::vector<Eigen::Index>& idx = e.rows;
+        const auto k = static_cast<Eigen::Index>(idx.size());
+        fpos.clear();
+        for (std::size_t a = 0; a < e.cols.size(); ++a) {
+          const int j = pos[static_cast<std::size_t>(e.cols[a])];
+          exid::check(j >= 0, "varpro: a fixed column is not held");
+          fpos.push_back(j);
+          for (Eigen::Index i = 0; i < k; ++i)
+            At(j, at + idx[static_cast<std::size_t>(i)]) = e.F(i, static_cast<Eigen::Index>(a));
+        }
+        exid::estimators::nonzeroColumns(Wc, idx, &src);
+        xpos.clear();
+        const auto x = static_cast<Eigen::Index>(src.size()) + 1;
+        X.resize(k, x);
+        for (Eigen::Index o = 0; o + 1 < x; ++o) {
+          const Eigen::Index w = src[static_cast<std::size_t>(o)];
+          xpos.push_back(pos[static_cast<std::size_t>(others[static_cast<std::size_t>(w)])]);
+          for (Eigen::Index i = 0; i < k; ++i) X(i, o) = Wc(idx[static_cast<std::size_t>(i)], w);
+        }
+        for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = ch.y[idx[static_cast<std::size_t>(i)]];
+        xpos.push_back(static_cast<int>(f));  // (y)
+        emitEquation(acc, e.qr, fpos, &X, xpos, f, &E);
+      }
       at += r;
     }
+    acc->setRowCount(total);
     m = total;
     return true;
   }
