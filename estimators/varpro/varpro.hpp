@@ -19,13 +19,24 @@ namespace exid::varpro {
 
 using exid::estimators::RowAccumulator;
 
-// One equation's factor rows from its kept factor of F (qr, F's columns at fcols) and its other
+// A kept Householder factor F = Q [R; 0] (F k x f, k >= f) in the compact WY form
+// Q = H_1 ... H_f = I - V T V^T (V k x f unit lower trapezoidal, T f x f upper triangular: the
+// forward accumulation of LAPACK's dlarft), so that applying Q^T to a few columns is two
+// matrix products instead of f rank-one updates (varpro_evaluate.cpp).
+struct KeptFactor {
+  Eigen::MatrixXd V, T, R;
+  void compute(const Eigen::MatrixXd& F);
+  // X <- Q^T X (X: k rows)
+  void applyTransposeTo(Eigen::MatrixXd* X, Eigen::MatrixXd* work) const;
+};
+
+// One equation's factor rows from its kept factor of F (F's columns at fcols) and its other
 // columns X (k x x; xcols: their columns among nc, the last one y's, = nc; k - f >= x): Q_F^T X,
 // the part below R_F factored in place, into acc as [R_F, (Q_F^T X)_top; 0, R_X]: rows with
 // the Gram matrix of the equation's rows (varpro_evaluate.cpp).
-void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixXd>& qr,
-                  const std::vector<int>& fcols, Eigen::MatrixXd* Xp, const std::vector<int>& xcols,
-                  Eigen::Index nc, Eigen::MatrixXd* Ep);
+void emitEquation(RowAccumulator* acc, const KeptFactor& qf, const std::vector<int>& fcols,
+                  Eigen::MatrixXd* Xp, const std::vector<int>& xcols, Eigen::Index nc,
+                  Eigen::MatrixXd* Ep);
 
 class VarPro : public exid::Estimator {
  public:
@@ -153,7 +164,7 @@ class VarPro : public exid::Estimator {
       std::vector<Eigen::Index> rows;            // the chunk's rows of this equation
       std::vector<int> cols;                     // F's columns (base) in these rows
       Eigen::MatrixXd F;                         // k x f, as the rows gave it
-      Eigen::HouseholderQR<Eigen::MatrixXd> qr;  // of F
+      KeptFactor qr;                             // of F
     };
     struct Chunk {
       std::vector<Equation> eqs;  // in label order

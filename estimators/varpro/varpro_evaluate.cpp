@@ -169,23 +169,50 @@ exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWi
 // to X alone and factors what lies below R_F, so that the equation's factor is
 // [R_F, (Q_F^T X)_top; 0, R_X]: the same R^T R as of its rows, with 4 k f x flops for the
 // reflections instead of 2 k (f + x)^2 for a QR of all its columns (a 6-joint arm's first
-// joint: about 4x fewer). The kept F is compared with each evaluation's (a model whose
+// joint: about 4x fewer), applied as two matrix products (KeptFactor: the compact WY form). The kept F is compared with each evaluation's (a model whose
 // "fixed" columns moved gets a new factor). With a delay every column moves, with
 // accumulate: normal or more than kHeldBytes of F there is nothing kept:
 // RowAccumulator::addEquations.
-void emitEquation(RowAccumulator* acc, const Eigen::HouseholderQR<Eigen::MatrixXd>& qr,
-                  const std::vector<int>& fcols, Eigen::MatrixXd* Xp, const std::vector<int>& xcols,
-                  Eigen::Index nc, Eigen::MatrixXd* Ep) {
+void KeptFactor::compute(const Eigen::MatrixXd& F) {
+  const Eigen::HouseholderQR<Eigen::MatrixXd> qr(F);
+  const Eigen::Index k = F.rows(), f = F.cols();
+  R = qr.matrixQR().topRows(f).triangularView<Eigen::Upper>();
+  V = qr.matrixQR().triangularView<Eigen::StrictlyLower>();
+  V.diagonal().setOnes();
+  const Eigen::VectorXd& tau = qr.hCoeffs();
+  T.setZero(f, f);
+  for (Eigen::Index i = 0; i < f; ++i) {
+    // T(0:i, i) = -tau_i T(0:i, 0:i) V(:, 0:i)^T v_i (v_i is zero above row i)
+    if (i > 0) {
+      const Eigen::VectorXd w = V.bottomLeftCorner(k - i, i).transpose() * V.col(i).tail(k - i);
+      const Eigen::VectorXd tw = T.topLeftCorner(i, i).triangularView<Eigen::Upper>() * w;
+      T.col(i).head(i) = -tau[i] * tw;
+    }
+    T(i, i) = tau[i];
+  }
+}
+
+void KeptFactor::applyTransposeTo(Eigen::MatrixXd* X, Eigen::MatrixXd* work) const {
+  // Q^T X = X - V T^T (V^T X)
+  Eigen::MatrixXd& W = *work;
+  W.noalias() = V.transpose() * *X;
+  W = T.transpose().triangularView<Eigen::Lower>() * W;
+  X->noalias() -= V * W;
+}
+
+void emitEquation(RowAccumulator* acc, const KeptFactor& qf, const std::vector<int>& fcols,
+                  Eigen::MatrixXd* Xp, const std::vector<int>& xcols, Eigen::Index nc,
+                  Eigen::MatrixXd* Ep) {
   Eigen::MatrixXd& X = *Xp;
   Eigen::MatrixXd& E = *Ep;
   const Eigen::Index k = X.rows(), x = X.cols(), f = static_cast<Eigen::Index>(fcols.size());
-  X.applyOnTheLeft(qr.householderQ().adjoint());
+  qf.applyTransposeTo(&X, &E);
   Eigen::Ref<Eigen::MatrixXd> below = X.bottomRows(k - f);
   Eigen::HouseholderQR<Eigen::Ref<Eigen::MatrixXd>> qx(below);  // in place
   const Eigen::Index rx = std::min(k - f, x);
   E.setZero(f + rx, nc + 1);
   for (Eigen::Index c = 0; c < f; ++c)
-    E.col(fcols[static_cast<std::size_t>(c)]).head(c + 1) = qr.matrixQR().col(c).head(c + 1);
+    E.col(fcols[static_cast<std::size_t>(c)]).head(c + 1) = qf.R.col(c).head(c + 1);
   for (Eigen::Index c = 0; c < x; ++c) {
     const Eigen::Index to = xcols[static_cast<std::size_t>(c)];
     E.col(to).head(f) = X.col(c).head(f);
