@@ -167,7 +167,9 @@ class VarPro : public exid::Estimator {
       KeptFactor qr;                             // of F
     };
     struct Chunk {
-      std::vector<Equation> eqs;  // in label order
+      // in label order; each kept factor immutable once made (a new one replaces it), so that
+      // the grid's held rows can share it (Held's parts)
+      std::vector<std::shared_ptr<const Equation>> eqs;
       Eigen::VectorXd y;
       std::vector<int> equation;  // each row's label
       bool whole = false;         // every equation's F kept

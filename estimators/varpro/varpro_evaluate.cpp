@@ -11,6 +11,7 @@
 
 #include "exid/delay.hpp"
 #include "exid/error.hpp"
+#include "exid/estimators/rank.hpp"
 #include "varpro.hpp"
 
 namespace exid::varpro {
@@ -34,11 +35,9 @@ Eigen::VectorXd VarPro::columnScale(const Eigen::MatrixXd& M) {
 }
 
 bool VarPro::regular(const Eigen::MatrixXd& M) const {
-  // (divide and conquer: the singular values to about 1e-14 of the largest, far below the
-  // rank tolerance; about twice as fast as Jacobi's)
-  Eigen::BDCSVD<Eigen::MatrixXd> svd(M * columnScale(M).asDiagonal());
-  const Eigen::VectorXd sv = svd.singularValues();
-  return sv.size() > 0 && sv[sv.size() - 1] > opt_.rank_tolerance * sv[0];
+  // (the decision of the column-scaled SVD; bounds from the triangular factor settle it without
+  // one away from the tolerance)
+  return exid::estimators::aboveRankTolerance(M * columnScale(M).asDiagonal(), opt_.rank_tolerance);
 }
 
 void VarPro::setUp(const exid::ObservationModel& model, const exid::Dataset& data) {
@@ -243,8 +242,8 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
   FixedFactors& ff = *fixed_;
   if (ff.chunks.size() <= chunk) ff.chunks.resize(chunk + 1);
   FixedFactors::Chunk& ch = ff.chunks[chunk];
-  std::vector<FixedFactors::Equation>& eqs = ch.eqs;
-  if (eqs.size() != rows.size()) eqs.assign(rows.size(), {});
+  std::vector<std::shared_ptr<const FixedFactors::Equation>>& eqs = ch.eqs;
+  if (eqs.size() != rows.size()) eqs.assign(rows.size(), nullptr);
   // (confirmed: every equation's F and y are the kept ones, the second time they are seen)
   ch.confirmed = ch.y.size() == y.size() && ch.equation == equation &&
                  std::memcmp(ch.y.data(), y.data(), sizeof(double) * y.size()) == 0;
@@ -269,9 +268,10 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
     for (Eigen::Index c = 0; c < f; ++c)
       for (Eigen::Index i = 0; i < k; ++i)
         F(i, c) = A(idx[static_cast<std::size_t>(i)], fcols[static_cast<std::size_t>(c)]);
-    FixedFactors::Equation& e = eqs[u];
-    const bool kept = e.rows == idx && e.cols == fcols && e.F.rows() == k && e.F.cols() == f &&
-                      (f == 0 || std::memcmp(e.F.data(), F.data(), sizeof(double) * k * f) == 0);
+    const FixedFactors::Equation* e = eqs[u].get();
+    const bool kept = e && e->rows == idx && e->cols == fcols && e->F.rows() == k &&
+                      e->F.cols() == f &&
+                      (f == 0 || std::memcmp(e->F.data(), F.data(), sizeof(double) * k * f) == 0);
     if (!kept) {
       ch.confirmed = false;
       if (ff.bytes + 2.0 * sizeof(double) * k * f > kHeldBytes || k <= f + x || f == 0) {
@@ -284,14 +284,17 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
         }
         acc->addEquations(Ae, ye, std::vector<int>(static_cast<std::size_t>(k), labels[u]));
         ch.whole = false;
-        e.rows.clear();
+        eqs[u].reset();
         continue;
       }
       ff.bytes += 2.0 * sizeof(double) * k * f;
-      e.rows = idx;
-      e.cols = fcols;
-      e.F = F;
-      e.qr.compute(F);
+      auto made = std::make_shared<FixedFactors::Equation>();
+      made->rows = idx;
+      made->cols = fcols;
+      made->F = F;
+      made->qr.compute(F);
+      e = made.get();
+      eqs[u] = std::move(made);
     }
     X.resize(k, x);
     for (Eigen::Index c = 0; c + 1 < x; ++c)
@@ -299,7 +302,7 @@ void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::Matri
         X(i, c) = A(idx[static_cast<std::size_t>(i)], xcols[static_cast<std::size_t>(c)]);
     for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = y[idx[static_cast<std::size_t>(i)]];
     xcols.push_back(static_cast<int>(nc));  // (y)
-    emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
+    emitEquation(acc, e->qr, e->cols, &X, xcols, nc, &E);
   }
   acc->setRowCount(m);
 }
@@ -314,7 +317,8 @@ void VarPro::addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::M
   std::vector<int> xcols;
   std::vector<Eigen::Index> src;
   Eigen::MatrixXd X, E;
-  for (const FixedFactors::Equation& e : ch.eqs) {
+  for (const auto& ep : ch.eqs) {
+    const FixedFactors::Equation& e = *ep;
     const std::vector<Eigen::Index>& idx = e.rows;
     const auto k = static_cast<Eigen::Index>(idx.size());
     exid::estimators::nonzeroColumns(Xall, idx, &src);

@@ -82,28 +82,40 @@ VarPro::Grid VarPro::searchGrid(const exid::ObservationModel& model, const exid:
 
 // The residual at points that move only the base columns of some nonlinear parameters (one
 // group of the grid, one parameter of a scan), the others held at `lambda`. The held columns'
-// rows A and y are kept (row by row) with the triangular factor [R z; 0 rho] of [A y] (each
-// joint's rows over its own columns first: from the kept factors of the fixed columns, or
-// RowAccumulator::addEquations); at each point only the
-// moved columns B are computed, and with u = R^-T A^T B (A^T B over B's non-zero rows: a
-// friction column lives on one joint's rows)
+// rows A and y are kept with the triangular factor [R z; 0 rho] of [A y] (each joint's rows over
+// its own columns first: from the kept factors of the fixed columns, or
+// RowAccumulator::addEquations); at each point only the moved columns B are computed, and with
+// u = R^-T A^T B (A^T B over B's non-zero rows: a friction column lives on one joint's rows)
 //   rss = rho^2 - b^T G^-1 b,  G = B^T B - u^T u,  b = B^T y - u^T z,
 // the residual of y on [A B] (the Gram matrix of B's part orthogonal to A, and its projection
 // of y). A semi-normal form: its rounding is eps ||B||^2 / ||B_perp||^2 of G, far below what
 // separates the grid's points, and a point it takes is then evaluated in full (tryPoint); it
 // costs the model's B and 2 f nnz(B) flops instead of the QR of all p + L + 1 columns and the
-// SVD of the solve. A delay is held too (the grid does not move it; the rows are read at
-// t_k - d as evaluate reads them). Unused (every point a whole evaluation) when the held rows
-// would exceed kHeldBytes, or when the held columns are not of full rank.
+// SVD of the solve. With the kept factors, A is kept by equation (Part: the kept F and the
+// other groups' columns), and A^T B is a product per equation where B is non-zero; otherwise
+// row by row (At). A delay is held too (the grid does not move it; the rows are read at t_k - d
+// as evaluate reads them). Unused (every point a whole evaluation) when the held rows would
+// exceed kHeldBytes, or when the held columns are not of full rank.
 struct VarPro::Held {
   bool ok = false;
   std::vector<int> moved;  // base columns recomputed at each point (ascending)
-  Eigen::MatrixXd At;      // f x m: the held columns' rows, one column each
-  Eigen::VectorXd y;       // m
+  Eigen::MatrixXd At;      // f x m: the held columns' rows, one column each (without parts)
+  Eigen::VectorXd y;       // m (without parts)
   Eigen::MatrixXd R;       // f x f upper triangular: R^T R = A^T A
   Eigen::VectorXd z;       // R^-T A^T y
   double rho2 = 0.0;       // ||y||^2 - ||z||^2: the residual on A alone
   Eigen::Index m = 0;
+  // From the kept factors (fromKept), the held rows by equation instead of At: F's kept rows
+  // (shared with evaluate's FixedFactors) at the held positions fpos, and the other groups'
+  // moved columns non-zero in them (O, at opos); At is then empty.
+  struct Part {
+    std::shared_ptr<const FixedFactors::Equation> e;
+    Eigen::Index offset = 0;  // the chunk's first row among the m
+    std::vector<int> fpos, opos;
+    Eigen::MatrixXd O;  // k x o
+    Eigen::VectorXd y;  // k
+  };
+  std::vector<Part> parts;
 
   Held(const VarPro& vp, const exid::ObservationModel& model, const exid::Dataset& data,
        const Eigen::VectorXd& lambda, const std::vector<int>& params, const exid::RunContext& ctx) {
@@ -187,12 +199,11 @@ struct VarPro::Held {
         full.push_back(model.base().independent[static_cast<std::size_t>(c)]);
       }
     }
-    At.setZero(f, total);
-    y.resize(total);
+    parts.clear();
     exid::SampleWindow window(data);
     Eigen::Index at = 0;
     Eigen::MatrixXd Wc, X, E;
-    std::vector<int> fpos, xpos;
+    std::vector<int> xpos;
     std::vector<Eigen::Index> src;
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       const FixedFactors::Chunk& ch = chunks[c];
@@ -204,38 +215,38 @@ struct VarPro::Held {
                     "varpro: the model's row count changed with eta");
         if (!Wc.allFinite())
           throw exid::Error(fmt::format("varpro: a row from samples {}..{} is not finite", b, end));
-        for (std::size_t o = 0; o < others.size(); ++o)
-          At.row(pos[static_cast<std::size_t>(others[o])]).segment(at, r) =
-              Wc.col(static_cast<Eigen::Index>(o)).transpose();
       } else {
         Wc.resize(r, 0);
       }
-      y.segment(at, r) = ch.y;
       // each equation's factor from F's kept one: Q_F^T applied to the other groups' moved
       // columns (those non-zero in its rows) and y alone (emitEquation, as evaluate does)
-      for (const FixedFactors::Equation& e : ch.eqs) {
-        const std::vector<Eigen::Index>& idx = e.rows;
+      for (const auto& ep : ch.eqs) {
+        Part pt;
+        pt.e = ep;
+        pt.offset = at;
+        const std::vector<Eigen::Index>& idx = ep->rows;
         const auto k = static_cast<Eigen::Index>(idx.size());
-        fpos.clear();
-        for (std::size_t a = 0; a < e.cols.size(); ++a) {
-          const int j = pos[static_cast<std::size_t>(e.cols[a])];
+        for (std::size_t a = 0; a < ep->cols.size(); ++a) {
+          const int j = pos[static_cast<std::size_t>(ep->cols[a])];
           exid::check(j >= 0, "varpro: a fixed column is not held");
-          fpos.push_back(j);
-          for (Eigen::Index i = 0; i < k; ++i)
-            At(j, at + idx[static_cast<std::size_t>(i)]) = e.F(i, static_cast<Eigen::Index>(a));
+          pt.fpos.push_back(j);
         }
         exid::estimators::nonzeroColumns(Wc, idx, &src);
-        xpos.clear();
         const auto x = static_cast<Eigen::Index>(src.size()) + 1;
         X.resize(k, x);
         for (Eigen::Index o = 0; o + 1 < x; ++o) {
           const Eigen::Index w = src[static_cast<std::size_t>(o)];
-          xpos.push_back(pos[static_cast<std::size_t>(others[static_cast<std::size_t>(w)])]);
+          pt.opos.push_back(pos[static_cast<std::size_t>(others[static_cast<std::size_t>(w)])]);
           for (Eigen::Index i = 0; i < k; ++i) X(i, o) = Wc(idx[static_cast<std::size_t>(i)], w);
         }
-        for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = ch.y[idx[static_cast<std::size_t>(i)]];
+        pt.y.resize(k);
+        for (Eigen::Index i = 0; i < k; ++i) pt.y[i] = ch.y[idx[static_cast<std::size_t>(i)]];
+        X.col(x - 1) = pt.y;
+        pt.O = X.leftCols(x - 1);
+        xpos = pt.opos;
         xpos.push_back(static_cast<int>(f));  // (y)
-        emitEquation(acc, e.qr, fpos, &X, xpos, f, &E);
+        emitEquation(acc, ep->qr, pt.fpos, &X, xpos, f, &E);
+        parts.push_back(std::move(pt));
       }
       at += r;
     }
@@ -312,27 +323,63 @@ struct VarPro::Held {
       });
     }
     exid::check(got == m, "varpro: the model's row count changed with eta");
-    // A^T B, B^T B and B^T y over B's non-zero rows
-    Eigen::MatrixXd AtB = Eigen::MatrixXd::Zero(f, c), G(c, c);
-    Eigen::VectorXd b(c);
-    std::vector<Eigen::Index> nz;
-    for (int j = 0; j < c; ++j) {
-      nz.clear();
-      for (Eigen::Index i = 0; i < m; ++i)
-        if (B(i, j) != 0.0) nz.push_back(i);
-      double by = 0.0;
-      for (const Eigen::Index i : nz) {
-        AtB.col(j).noalias() += B(i, j) * At.col(i);
-        by += B(i, j) * y[i];
+    Eigen::MatrixXd AtB = Eigen::MatrixXd::Zero(f, c), G = Eigen::MatrixXd::Zero(c, c);
+    Eigen::VectorXd b = Eigen::VectorXd::Zero(c);
+    if (!parts.empty()) {
+      // by equation: A's rows there are F's kept rows and the other groups' columns O, so
+      // A^T B = sum over the equations where B is non-zero of [F O]^T B_e (two small products)
+      Eigen::MatrixXd Be, P;
+      for (const Part& pt : parts) {
+        const std::vector<Eigen::Index>& idx = pt.e->rows;
+        const auto k = static_cast<Eigen::Index>(idx.size());
+        Be.resize(k, c);
+        for (int j = 0; j < c; ++j)
+          for (Eigen::Index i = 0; i < k; ++i)
+            Be(i, j) = B(pt.offset + idx[static_cast<std::size_t>(i)], j);
+        if (Be.isZero(0.0)) continue;
+        P.noalias() = pt.e->F.transpose() * Be;
+        for (std::size_t a = 0; a < pt.fpos.size(); ++a)
+          AtB.row(pt.fpos[a]) += P.row(static_cast<Eigen::Index>(a));
+        if (pt.O.cols() > 0) {
+          P.noalias() = pt.O.transpose() * Be;
+          for (std::size_t a = 0; a < pt.opos.size(); ++a)
+            AtB.row(pt.opos[a]) += P.row(static_cast<Eigen::Index>(a));
+        }
+        b.noalias() += Be.transpose() * pt.y;
+        G.noalias() += Be.transpose() * Be;
       }
-      b[j] = by;
+      return residual(AtB, G, b);
+    }
+    // A^T B, B^T B and B^T y over B's non-zero rows: each held row (a column of At) read once
+    // for every moved column non-zero there (each sum still over its rows in ascending order)
+    std::vector<Eigen::Index> any;
+    for (Eigen::Index i = 0; i < m; ++i)
+      for (int j = 0; j < c; ++j)
+        if (B(i, j) != 0.0) {
+          any.push_back(i);
+          break;
+        }
+    for (const Eigen::Index i : any)
+      for (int j = 0; j < c; ++j) {
+        const double bij = B(i, j);
+        if (bij == 0.0) continue;
+        AtB.col(j).noalias() += bij * At.col(i);
+        b[j] += bij * y[i];
+      }
+    for (int j = 0; j < c; ++j)
       for (int l = 0; l <= j; ++l) {
         double s = 0.0;
-        for (const Eigen::Index i : nz) s += B(i, j) * B(i, l);
+        for (const Eigen::Index i : any)
+          if (B(i, j) != 0.0) s += B(i, j) * B(i, l);
         G(j, l) = s;
         G(l, j) = s;
       }
-    }
+    return residual(AtB, G, b);
+  }
+
+  // rho^2 - b^T G^-1 b after the projection on A (u = R^-T A^T B)
+  double residual(const Eigen::MatrixXd& AtB, Eigen::MatrixXd G, Eigen::VectorXd b) const {
+    const auto c = static_cast<int>(G.rows());
     const Eigen::MatrixXd u = R.transpose().triangularView<Eigen::Lower>().solve(AtB);
     G.noalias() -= u.transpose() * u;
     b.noalias() -= u.transpose() * z;

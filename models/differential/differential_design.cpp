@@ -84,40 +84,38 @@ Eigen::MatrixXd DifferentialModel::fullColumnsAt(const exid::Dataset& d, const E
   const auto C = static_cast<Eigen::Index>(columns.size());
   Eigen::MatrixXd out = Eigen::MatrixXd::Zero(static_cast<Eigen::Index>(K) * m, C);
   const exid::FrictionColumns fc = frictionColumns();
-  double w[3];
-  for (int i = 0; i < m; ++i) {
-    const int j = sel_[static_cast<std::size_t>(i)];
-    const auto u = static_cast<std::size_t>(j);
-    for (Eigen::Index c = 0; c < C; ++c) {
-      const int col = columns[static_cast<std::size_t>(c)] - P0;
-      if (col / E != j) continue;  // (a row has its own joint's friction columns only)
-      const int e = col % E;
-      for (int k = 0; k < K; ++k) {
-        fc.values(d.qd(k, j), f.eps[u], f.vs[u], w);
-        out(static_cast<Eigen::Index>(k) * m + i, c) = w[e];
-      }
-    }
-  }
-  if (dW) {  // (extraColumns' derivative columns, in nonlinearParameters() order)
-    std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
+  // (extraColumns' derivative columns, in nonlinearParameters() order)
+  std::vector<int> deps(static_cast<std::size_t>(n), -1), dvs(static_cast<std::size_t>(n), -1);
+  if (dW) {
     int L = 0;
     for (const Slot& sl : slots()) {
       (sl.eps ? deps : dvs)[static_cast<std::size_t>(sl.joint)] = L;
       L += sl.eps ? E : 1;
     }
     dW->setZero(static_cast<Eigen::Index>(K) * m, L);
-    double dw_eps[3], dw_vs = 0.0;
-    for (int i = 0; i < m; ++i) {
-      const int j = sel_[static_cast<std::size_t>(i)];
-      const auto u = static_cast<std::size_t>(j);
-      if (deps[u] < 0 && dvs[u] < 0) continue;
-      for (int k = 0; k < K; ++k) {
-        const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
-        fc.values(d.qd(k, j), f.eps[u], f.vs[u], w, dw_eps, &dw_vs);
-        if (deps[u] >= 0)
-          for (int e = 0; e < E; ++e) (*dW)(row, deps[u] + e) = dw_eps[e];
-        if (dvs[u] >= 0) (*dW)(row, dvs[u]) = dw_vs;
-      }
+  }
+  // each row's columns (and derivatives) from one evaluation of its joint's friction per sample
+  double w[3], dw_eps[3], dw_vs = 0.0;
+  std::vector<std::pair<Eigen::Index, int>> own;  // (output column, the joint's column e)
+  for (int i = 0; i < m; ++i) {
+    const int j = sel_[static_cast<std::size_t>(i)];
+    const auto u = static_cast<std::size_t>(j);
+    own.clear();
+    for (Eigen::Index c = 0; c < C; ++c) {
+      const int col = columns[static_cast<std::size_t>(c)] - P0;
+      if (col / E == j) own.emplace_back(c, col % E);  // (a row has its own joint's only)
+    }
+    const bool derivatives = dW && (deps[u] >= 0 || dvs[u] >= 0);
+    if (own.empty() && !derivatives) continue;
+    for (int k = 0; k < K; ++k) {
+      const Eigen::Index row = static_cast<Eigen::Index>(k) * m + i;
+      fc.values(d.qd(k, j), f.eps[u], f.vs[u], w, derivatives ? dw_eps : nullptr,
+                derivatives ? &dw_vs : nullptr);
+      for (const auto& [c, e] : own) out(row, c) = w[e];
+      if (!derivatives) continue;
+      if (deps[u] >= 0)
+        for (int e = 0; e < E; ++e) (*dW)(row, deps[u] + e) = dw_eps[e];
+      if (dvs[u] >= 0) (*dW)(row, dvs[u]) = dw_vs;
     }
   }
   return out;

@@ -1,8 +1,10 @@
 // The estimators' streaming least squares (exid/estimators/common.hpp): normal equations and QR
-// accumulated by equation, the solution and the explained null space.
+// accumulated by equation, the solution and the explained null space; the rank test at a
+// relative tolerance (exid/estimators/rank.hpp).
 #include <gtest/gtest.h>
 
 #include <Eigen/QR>
+#include <Eigen/SVD>
 #include <cmath>
 #include <cstdio>
 #include <cstring>
@@ -11,6 +13,7 @@
 #include "exid/dynamics.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
+#include "exid/estimators/rank.hpp"
 
 namespace estimators = exid::estimators;
 
@@ -312,4 +315,63 @@ TEST(RowAccumulator, GivesTheBitsOfOneGramUpdatePerEquation) {
   }
   estimators::RowAccumulator qr(3, estimators::RowAccumulator::Method::Qr);
   EXPECT_THROW(qr.normalLower(), exid::Error);
+}
+
+TEST(RankTolerance, DecidesAsTheSvdDoesAndNeedsItOnlyNearTheTolerance) {
+  // Matrices with prescribed singular values 1 .. rho (graded), rho from 1e-12 to 0.5 around
+  // tol = 1e-8, and columns scaled by up to 1e6: the test's answer against sigma_min / sigma_max
+  // > tol from Jacobi's SVD, and whether it took the SVD.
+  std::mt19937_64 rng(9);
+  std::normal_distribution<double> N(0, 1);
+  auto gaussian = [&](Eigen::Index r, Eigen::Index c) {
+    Eigen::MatrixXd A(r, c);
+    for (Eigen::Index j = 0; j < c; ++j)
+      for (Eigen::Index i = 0; i < r; ++i) A(i, j) = N(rng);
+    return A;
+  };
+  const double tol = 1e-8;
+  int by_bounds = 0, by_svd_near = 0;
+  for (const Eigen::Index n : {5, 30, 76})
+    for (const double rho : {1e-12, 1e-10, 3e-9, 6e-9, 9e-9, 1.1e-8, 2e-8, 1e-7, 1e-6, 1e-3, 0.5}) {
+      const Eigen::Index m = n + 12;
+      const Eigen::JacobiSVD<Eigen::MatrixXd> q(gaussian(m, n),
+                                                Eigen::ComputeThinU | Eigen::ComputeThinV);
+      Eigen::VectorXd s(n);
+      for (Eigen::Index i = 0; i < n; ++i)
+        s[i] = std::pow(rho, static_cast<double>(i) / static_cast<double>(n - 1));
+      const Eigen::MatrixXd A = q.matrixU() * s.asDiagonal() * q.matrixV().transpose();
+      const Eigen::VectorXd ref = Eigen::JacobiSVD<Eigen::MatrixXd>(A).singularValues();
+      const bool expected = ref[n - 1] > tol * ref[0];
+      bool by_svd = false;
+      SCOPED_TRACE(testing::Message() << "n " << n << " rho " << rho);
+      EXPECT_EQ(estimators::aboveRankTolerance(A, tol, &by_svd), expected);
+      // far from the tolerance (beyond the bounds' factor n and the margin 2) no SVD is taken
+      const double ratio = ref[n - 1] / ref[0];
+      if (ratio > 2.0 * n * tol || ratio < 0.5 * tol / n) {
+        EXPECT_FALSE(by_svd);
+        ++by_bounds;
+      }
+      if (ratio > 0.5 * tol && ratio < 2.0 * tol) {
+        EXPECT_TRUE(by_svd);  // within the margin: the bounds cannot settle it
+        ++by_svd_near;
+      }
+    }
+  EXPECT_GE(by_bounds, 12);
+  EXPECT_GE(by_svd_near, 6);
+  // an exactly deficient matrix (a zero column: R singular) and a wide one go to the SVD
+  Eigen::MatrixXd Z = gaussian(20, 6);
+  Z.col(2).setZero();
+  bool by_svd = false;
+  EXPECT_FALSE(estimators::aboveRankTolerance(Z, tol, &by_svd));
+  EXPECT_TRUE(by_svd);
+  const Eigen::MatrixXd wide = gaussian(4, 9);
+  EXPECT_TRUE(estimators::aboveRankTolerance(wide, tol, &by_svd));
+  EXPECT_TRUE(by_svd);
+  // columns of very different sizes, unscaled: cond about 1e12, below the tolerance
+  const Eigen::MatrixXd scaled =
+      gaussian(40, 8) *
+      Eigen::VectorXd::LinSpaced(8, 0, 12).unaryExpr([](double e) { return std::pow(10.0, e); })
+          .asDiagonal();
+  EXPECT_FALSE(estimators::aboveRankTolerance(scaled, tol, &by_svd));
+  EXPECT_FALSE(by_svd);
 }
