@@ -315,6 +315,10 @@ TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
   const double av = v.summary.find("validation")->find("relative_error")->asDouble();
   std::printf("held-out relative error: wls %.4f, varpro %.4f\n", aw, av);
   EXPECT_LT(av, 0.75 * aw);
+  // the grid and its scans reach the lower end (0.0591), not the local minimum at 0.0608: a
+  // projected residual that misjudges points (the screen skips what it should take) ends there
+  // (the coupled wrist joints 5 and 6 share rows, so the other groups' columns enter A^T B)
+  EXPECT_LT(av, 0.0600);
   const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");
   const exid::Json& rv = *v.summary.find("validation")->find("relative_error_per_joint");
   for (std::size_t j = 0; j < 6; ++j)
