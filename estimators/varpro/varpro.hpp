@@ -161,10 +161,10 @@ class VarPro : public exid::Estimator {
   // rows (varpro_search.cpp: Held); reset by setUp.
   struct FixedFactors {
     struct Equation {
-      std::vector<Eigen::Index> rows;            // the chunk's rows of this equation
-      std::vector<int> cols;                     // F's columns (base) in these rows
-      Eigen::MatrixXd F;                         // k x f, as the rows gave it
-      KeptFactor qr;                             // of F
+      std::vector<Eigen::Index> rows;  // the chunk's rows of this equation
+      std::vector<int> cols;           // F's columns (base) in these rows
+      Eigen::MatrixXd F;               // k x f, as the rows gave it
+      KeptFactor qr;                   // of F
     };
     struct Chunk {
       // in label order; each kept factor immutable once made (a new one replaces it), so that

@@ -168,10 +168,11 @@ exid::Rows VarPro::chunkRows(const exid::ObservationModel& model, exid::SampleWi
 // to X alone and factors what lies below R_F, so that the equation's factor is
 // [R_F, (Q_F^T X)_top; 0, R_X]: the same R^T R as of its rows, with 4 k f x flops for the
 // reflections instead of 2 k (f + x)^2 for a QR of all its columns (a 6-joint arm's first
-// joint: about 4x fewer), applied as two matrix products (KeptFactor: the compact WY form). The kept F is compared with each evaluation's (a model whose
-// "fixed" columns moved gets a new factor). With a delay every column moves, with
-// accumulate: normal or more than kHeldBytes of F there is nothing kept:
-// RowAccumulator::addEquations.
+// joint: about 4x fewer), applied as two matrix products (KeptFactor: the compact WY form).
+// The kept F is compared with each evaluation's (a model whose "fixed" columns moved gets a new
+// factor, which replaces the kept one: the grid's held rows may share the old). With a delay
+// every column moves, with accumulate: normal or more than kHeldBytes of F there is nothing
+// kept: RowAccumulator::addEquations.
 void KeptFactor::compute(const Eigen::MatrixXd& F) {
   const Eigen::HouseholderQR<Eigen::MatrixXd> qr(F);
   const Eigen::Index k = F.rows(), f = F.cols();

@@ -369,9 +369,9 @@ TEST(RankTolerance, DecidesAsTheSvdDoesAndNeedsItOnlyNearTheTolerance) {
   EXPECT_TRUE(by_svd);
   // columns of very different sizes, unscaled: cond about 1e12, below the tolerance
   const Eigen::MatrixXd scaled =
-      gaussian(40, 8) *
-      Eigen::VectorXd::LinSpaced(8, 0, 12).unaryExpr([](double e) { return std::pow(10.0, e); })
-          .asDiagonal();
+      gaussian(40, 8) * Eigen::VectorXd::LinSpaced(8, 0, 12)
+                            .unaryExpr([](double e) { return std::pow(10.0, e); })
+                            .asDiagonal();
   EXPECT_FALSE(estimators::aboveRankTolerance(scaled, tol, &by_svd));
   EXPECT_FALSE(by_svd);
 }
