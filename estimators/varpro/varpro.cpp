@@ -180,6 +180,9 @@ exid::Estimate VarPro::estimate(const exid::ObservationModel& model, const exid:
     axisScan(model, *gd, centre, &around, ctx);
     grid.evaluations += around.evaluations + (gd == &data ? 0 : 1);
     grid.singular += around.singular;
+    grid.projected_checked += around.projected_checked;
+    grid.held_checked += around.held_checked;
+    grid.projected_difference = std::max(grid.projected_difference, around.projected_difference);
     ++grid.checks;
     if (around.best == centre) break;  // no point around it is lower
     if (gd != &data) ++grid.evaluations;
@@ -306,10 +309,12 @@ void VarPro::describeSearch(const std::vector<Run>& runs, int won, const Grid& g
     G["sweeps"] = grid.sweeps;
     G["sweeps_around_the_best_end"] = grid.checks;
     G["singular_points"] = grid.singular;
-    // the projected residuals of the points taken against their whole evaluations (relative
-    // to ||y||^2: a fit can be exact)
+    // the projected residuals of the points taken, and of each held rows' own point (never
+    // taken by the screen), against their whole evaluations (relative to ||y||^2: a fit can be
+    // exact); the sweeps around the best end included
     exid::Json P = exid::Json::object();
     P["points"] = grid.projected_checked;
+    P["held_points"] = grid.held_checked;
     P["max_difference_relative_to_yy"] = grid.projected_difference;
     G["projected_against_whole"] = P;
     G["best_rss"] = grid.best_eval.rss;

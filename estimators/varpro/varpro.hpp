@@ -102,6 +102,9 @@ class VarPro : public exid::Estimator {
     // the projected residual (Held::rss) against the whole evaluation at every point taken:
     // how many, and their largest difference relative to ||y||^2
     int projected_checked = 0;
+    // and at each held rows' own point (which the screen never takes: its whole evaluation is
+    // the grid's best so far), how many; their differences are in projected_difference too
+    int held_checked = 0;
     double projected_difference = 0.0;
     long sample_stride = 1;  // points compared on every sample_stride-th sample
   };
@@ -135,6 +138,10 @@ class VarPro : public exid::Estimator {
   // the fit confirmed by a whole evaluation there (which also refuses a singular fit).
   void tryPoint(const exid::ObservationModel& model, const exid::Dataset& data, const Held& held,
                 const Eigen::VectorXd& lambda, Grid* gp, const exid::RunContext& ctx) const;
+  // The held rows' projected residual at their own point (lambda: the grid's best) against its
+  // whole evaluation (gp->best_eval), into projected_difference.
+  void checkHeld(const exid::ObservationModel& model, const exid::Dataset& data, const Held& held,
+                 const Eigen::VectorXd& lambda, Grid* gp, const exid::RunContext& ctx) const;
   static exid::Dataset strided(const exid::Dataset& d, long stride);
   Run levenbergMarquardt(const exid::ObservationModel& model, const exid::Dataset& data,
                          Eigen::VectorXd lambda, Eval cur, const std::string& origin,

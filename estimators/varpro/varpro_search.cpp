@@ -422,6 +422,19 @@ void VarPro::tryPoint(const exid::ObservationModel& model, const exid::Dataset& 
   }
 }
 
+void VarPro::checkHeld(const exid::ObservationModel& model, const exid::Dataset& data,
+                       const Held& held, const Eigen::VectorXd& lambda, Grid* gp,
+                       const exid::RunContext& ctx) const {
+  Grid& g = *gp;
+  if (!held.ok || !std::isfinite(g.best_eval.rss)) return;
+  // (its columns are those of the best point's whole evaluation: an error here is the
+  // held rows' own, as in the constructor)
+  const double r = held.rss(*this, model, data, lambda, ctx);
+  ++g.held_checked;
+  g.projected_difference = std::max(
+      g.projected_difference, std::abs(r - g.best_eval.rss) / std::max(g.best_eval.yy, 1e-300));
+}
+
 void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& data,
                    const Eigen::VectorXd& lambda0, Grid* gp, const exid::RunContext& ctx) {
   Grid& g = *gp;
@@ -432,6 +445,7 @@ void VarPro::sweep(const exid::ObservationModel& model, const exid::Dataset& dat
     const long combos = common ? S : static_cast<long>(std::lround(std::pow(S, n)));
     const Eigen::VectorXd base = g.best;
     const Held held(*this, model, data, base, grp, ctx);
+    checkHeld(model, data, held, base, &g, ctx);
     for (long c = 0; c < combos; ++c) {
       if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
       Eigen::VectorXd lambda = base;
@@ -458,6 +472,7 @@ void VarPro::axisScan(const exid::ObservationModel& model, const exid::Dataset& 
     // (the other parameters stay at g.best's values while k is scanned: a point taken moves
     // only k)
     const Held held(*this, model, data, g.best, {k}, ctx);
+    checkHeld(model, data, held, g.best, &g, ctx);
     for (double mult : kAxisMultipliers) {
       if (ctx.shouldStop()) throw exid::Error("varpro: stopped");
       Eigen::VectorXd lambda = g.best;

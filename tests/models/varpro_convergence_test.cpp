@@ -321,10 +321,15 @@ TEST(VarproConvergence, ProjectedGridPointsTakeTheSamePointsAsWholeEvaluations) 
   // every point the projection took was evaluated whole: the two residuals agree (the held
   // rows come from the kept fixed columns and the other joints' moved columns)
   const exid::Json& pw = *gp.find("projected_against_whole");
-  std::printf("[varpro] projected against whole: %s points, largest difference %.2e of ||y||^2\n",
-              pw.find("points")->dump().c_str(),
-              pw.find("max_difference_relative_to_yy")->asDouble());
+  // (and each held rows' own point, which the screen never takes: the grid's best so far)
+  std::printf(
+      "[varpro] projected against whole: %s points, %s held points, largest difference %.2e of "
+      "||y||^2\n",
+      pw.find("points")->dump().c_str(), pw.find("held_points")->dump().c_str(),
+      pw.find("max_difference_relative_to_yy")->asDouble());
   EXPECT_GT(pw.find("points")->asInt(), 5);
+  EXPECT_GT(pw.find("held_points")->asInt(), 5);
   EXPECT_LT(pw.find("max_difference_relative_to_yy")->asDouble(), 1e-12);
   EXPECT_EQ(gw.find("projected_against_whole")->find("points")->asInt(), 0);
+  EXPECT_EQ(gw.find("projected_against_whole")->find("held_points")->asInt(), 0);
 }

@@ -319,6 +319,17 @@ TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
   // projected residual that misjudges points (the screen skips what it should take) ends there
   // (the coupled wrist joints 5 and 6 share rows, so the other groups' columns enter A^T B)
   EXPECT_LT(av, 0.0600);
+  // and the projection checked where it is used: every point taken and each held rows' own
+  // point (the coupled wrist's groups among them) against their whole evaluations. Measured
+  // 6.7e-9 of ||y||^2, at the scan of vs3 around the winning end (vs3 2.4e4 to 6.8e4 rad/s:
+  // joint 3's Stribeck column is nearly its Coulomb columns there, and the semi-normal form's
+  // rounding grows as eps ||B||^2 / ||B_perp||^2); without the other groups' columns in
+  // A^T B, 1.8e-3
+  const exid::Json& pw = *v.summary.find("identification")->find("details")->find("grid")->find(
+      "projected_against_whole");
+  EXPECT_GT(pw.find("points")->asInt(), 5);
+  EXPECT_GE(pw.find("held_points")->asInt(), 12);
+  EXPECT_LT(pw.find("max_difference_relative_to_yy")->asDouble(), 1e-7) << pw.dump();
   const exid::Json& rw = *w.summary.find("validation")->find("relative_error_per_joint");
   const exid::Json& rv = *v.summary.find("validation")->find("relative_error_per_joint");
   for (std::size_t j = 0; j < 6; ++j)
