@@ -325,8 +325,10 @@ TEST(RealTx40, VarproFrictionLowersTheHeldOutErrorOfEveryJoint) {
   // joint 3's Stribeck column is nearly its Coulomb columns there, and the semi-normal form's
   // rounding grows as eps ||B||^2 / ||B_perp||^2); without the other groups' columns in
   // A^T B, 1.8e-3
-  const exid::Json& pw = *v.summary.find("identification")->find("details")->find("grid")->find(
-      "projected_against_whole");
+  const exid::Json& pw = *v.summary.find("identification")
+                              ->find("details")
+                              ->find("grid")
+                              ->find("projected_against_whole");
   EXPECT_GT(pw.find("points")->asInt(), 5);
   EXPECT_GE(pw.find("held_points")->asInt(), 12);
   EXPECT_LT(pw.find("max_difference_relative_to_yy")->asDouble(), 1e-7) << pw.dump();
