@@ -15,6 +15,7 @@
 // header.
 #pragma once
 
+#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <cstring>
@@ -501,7 +502,10 @@ inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
                                  double* potential, long ldk) {
   const int n = d.n;
   const V3& g = model.gravity;
-  const T zero = LaneTraits<T>::broadcast(0.0);
+  // the potential row's first six entries of every body are zero: each such column written
+  // once over all the samples (contiguous), not four lanes at a time beside the others
+  for (int j = 0; j < n; ++j)
+    for (int c = 0; c < 6; ++c) std::fill_n(potential + ldk * (10 * j + c), count, 0.0);
   forLaneBlocks<T>(
       model, d, count, q, qd, nullptr, ldx, false, [&](const LaneWork<T>& ws, int k0, int lanes) {
         for (int j = 0; j < n; ++j) {
@@ -543,7 +547,6 @@ inline void energyRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
           double* Kr = kinetic + k0 + ldk * 10 * j;
           double* Ur = potential + k0 + ldk * 10 * j;
           for (int c = 0; c < 10; ++c) storeLanes(Kr + ldk * c, K[c], lanes);
-          for (int c = 0; c < 6; ++c) storeLanes(Ur + ldk * c, zero, lanes);
           for (int c = 0; c < 4; ++c) storeLanes(Ur + ldk * (6 + c), U[c], lanes);
         }
       });
