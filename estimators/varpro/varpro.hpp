@@ -38,6 +38,13 @@ void emitEquation(RowAccumulator* acc, const KeptFactor& qf, const std::vector<i
                   Eigen::MatrixXd* Xp, const std::vector<int>& xcols, Eigen::Index nc,
                   Eigen::MatrixXd* Ep);
 
+// One kept equation's other columns: X = [the columns of Xall non-zero in its rows, y], each
+// row of X one of `rows`; *xcols their columns among nc (colmap of Xall's column, then y's:
+// nc), as emitEquation takes them (varpro_evaluate.cpp).
+void gatherEquation(const Eigen::MatrixXd& Xall, const std::vector<int>& colmap,
+                    const Eigen::VectorXd& y, const std::vector<Eigen::Index>& rows,
+                    Eigen::Index nc, Eigen::MatrixXd* Xp, std::vector<int>* xcols);
+
 class VarPro : public exid::Estimator {
  public:
   static constexpr const char* kName = "varpro";

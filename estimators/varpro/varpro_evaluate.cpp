@@ -222,6 +222,25 @@ void emitEquation(RowAccumulator* acc, const KeptFactor& qf, const std::vector<i
   acc->add(E.leftCols(nc), E.col(nc));
 }
 
+void gatherEquation(const Eigen::MatrixXd& Xall, const std::vector<int>& colmap,
+                    const Eigen::VectorXd& y, const std::vector<Eigen::Index>& rows,
+                    Eigen::Index nc, Eigen::MatrixXd* Xp, std::vector<int>* xcols) {
+  std::vector<Eigen::Index> src;
+  exid::estimators::nonzeroColumns(Xall, rows, &src);
+  const auto k = static_cast<Eigen::Index>(rows.size()),
+             x = static_cast<Eigen::Index>(src.size()) + 1;
+  Eigen::MatrixXd& X = *Xp;
+  X.resize(k, x);
+  xcols->clear();
+  for (Eigen::Index c = 0; c + 1 < x; ++c) {
+    const Eigen::Index a = src[static_cast<std::size_t>(c)];
+    xcols->push_back(colmap[static_cast<std::size_t>(a)]);
+    for (Eigen::Index i = 0; i < k; ++i) X(i, c) = Xall(rows[static_cast<std::size_t>(i)], a);
+  }
+  for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = y[rows[static_cast<std::size_t>(i)]];
+  xcols->push_back(static_cast<int>(nc));  // (y)
+}
+
 void VarPro::addChunk(RowAccumulator* acc, std::size_t chunk, const Eigen::MatrixXd& A,
                       const Eigen::VectorXd& y, const std::vector<int>& equation, int p) const {
   const Eigen::Index r = A.rows(), nc = A.cols();
@@ -316,23 +335,10 @@ void VarPro::addChunkKept(RowAccumulator* acc, std::size_t chunk, const Eigen::M
   const FixedFactors::Chunk& ch = fixed_->chunks[chunk];
   const long m = acc->rows() + ch.y.size();
   std::vector<int> xcols;
-  std::vector<Eigen::Index> src;
   Eigen::MatrixXd X, E;
   for (const auto& ep : ch.eqs) {
-    const FixedFactors::Equation& e = *ep;
-    const std::vector<Eigen::Index>& idx = e.rows;
-    const auto k = static_cast<Eigen::Index>(idx.size());
-    exid::estimators::nonzeroColumns(Xall, idx, &src);
-    xcols.clear();
-    for (const Eigen::Index a : src) xcols.push_back(cols[static_cast<std::size_t>(a)]);
-    const auto x = static_cast<Eigen::Index>(xcols.size()) + 1;
-    X.resize(k, x);
-    for (Eigen::Index c = 0; c + 1 < x; ++c)
-      for (Eigen::Index i = 0; i < k; ++i)
-        X(i, c) = Xall(idx[static_cast<std::size_t>(i)], src[static_cast<std::size_t>(c)]);
-    for (Eigen::Index i = 0; i < k; ++i) X(i, x - 1) = ch.y[idx[static_cast<std::size_t>(i)]];
-    xcols.push_back(static_cast<int>(nc));  // (y)
-    emitEquation(acc, e.qr, e.cols, &X, xcols, nc, &E);
+    gatherEquation(Xall, cols, ch.y, ep->rows, nc, &X, &xcols);
+    emitEquation(acc, ep->qr, ep->cols, &X, xcols, nc, &E);
   }
   acc->setRowCount(m);
 }

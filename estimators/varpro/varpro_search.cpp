@@ -203,8 +203,8 @@ struct VarPro::Held {
     exid::SampleWindow window(data);
     Eigen::Index at = 0;
     Eigen::MatrixXd Wc, X, E;
-    std::vector<int> xpos;
-    std::vector<Eigen::Index> src;
+    std::vector<int> xpos, opos_of;  // (opos_of: each of Wc's columns' held position)
+    for (const int o : others) opos_of.push_back(pos[static_cast<std::size_t>(o)]);
     for (std::size_t c = 0; c < chunks.size(); ++c) {
       const FixedFactors::Chunk& ch = chunks[c];
       const int b = first + static_cast<int>(c) * vp.chunk_, end = std::min(last, b + vp.chunk_);
@@ -225,26 +225,15 @@ struct VarPro::Held {
         pt.e = ep;
         pt.offset = at;
         const std::vector<Eigen::Index>& idx = ep->rows;
-        const auto k = static_cast<Eigen::Index>(idx.size());
         for (std::size_t a = 0; a < ep->cols.size(); ++a) {
           const int j = pos[static_cast<std::size_t>(ep->cols[a])];
           exid::check(j >= 0, "varpro: a fixed column is not held");
           pt.fpos.push_back(j);
         }
-        exid::estimators::nonzeroColumns(Wc, idx, &src);
-        const auto x = static_cast<Eigen::Index>(src.size()) + 1;
-        X.resize(k, x);
-        for (Eigen::Index o = 0; o + 1 < x; ++o) {
-          const Eigen::Index w = src[static_cast<std::size_t>(o)];
-          pt.opos.push_back(pos[static_cast<std::size_t>(others[static_cast<std::size_t>(w)])]);
-          for (Eigen::Index i = 0; i < k; ++i) X(i, o) = Wc(idx[static_cast<std::size_t>(i)], w);
-        }
-        pt.y.resize(k);
-        for (Eigen::Index i = 0; i < k; ++i) pt.y[i] = ch.y[idx[static_cast<std::size_t>(i)]];
-        X.col(x - 1) = pt.y;
-        pt.O = X.leftCols(x - 1);
-        xpos = pt.opos;
-        xpos.push_back(static_cast<int>(f));  // (y)
+        gatherEquation(Wc, opos_of, ch.y, idx, f, &X, &xpos);
+        pt.opos.assign(xpos.begin(), xpos.end() - 1);
+        pt.O = X.leftCols(X.cols() - 1);
+        pt.y = X.col(X.cols() - 1);
         emitEquation(acc, ep->qr, pt.fpos, &X, xpos, f, &E);
         parts.push_back(std::move(pt));
       }
