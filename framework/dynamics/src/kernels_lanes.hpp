@@ -94,6 +94,74 @@ inline void storeLanes(double* dst, const T& v, int lanes) {
   for (int l = 0; l < lanes; ++l) dst[l] = LaneTraits<T>::get(v, l);
 }
 
+// Two vectors' lanes interleaved as the indices say (0 .. W-1: a's lanes, W .. 2W-1: b's): GCC's
+// and clang's spelling of one shuffle.
+template <int I0, int I1, int I2, int I3>
+inline Lane4 shuffle4(const Lane4& a, const Lane4& b) {
+#if defined(__clang__)
+  return __builtin_shufflevector(a, b, I0, I1, I2, I3);
+#else
+  return __builtin_shuffle(a, b, LaneInt4{I0, I1, I2, I3});
+#endif
+}
+template <int I0, int I1>
+inline Lane2 shuffle2(const Lane2& a, const Lane2& b) {
+#if defined(__clang__)
+  return __builtin_shufflevector(a, b, I0, I1);
+#else
+  return __builtin_shuffle(a, b, LaneInt2{I0, I1});
+#endif
+}
+
+// Lane l of rows[0 .. m - 1] to dst[stride l .. stride l + m - 1] for every lane l (a block of
+// whole lanes): the m x W block transposed in registers, four rows (AVX) or two (SSE2) at a time,
+// and written with one vector store per lane and group of rows, where a store of each lane
+// alone would extract every element and compute its address.
+inline void storeTransposed(const double* rows, int m, double* dst, long) {
+  std::memcpy(dst, rows, sizeof(double) * static_cast<std::size_t>(m));
+}
+inline void storeTransposed(const Lane2* rows, int m, double* dst, long stride) {
+  int i = 0;
+  for (; i + 2 <= m; i += 2) {
+    const Lane2 r0 = shuffle2<0, 2>(rows[i], rows[i + 1]);
+    const Lane2 r1 = shuffle2<1, 3>(rows[i], rows[i + 1]);
+    std::memcpy(dst + i, &r0, sizeof(Lane2));
+    std::memcpy(dst + stride + i, &r1, sizeof(Lane2));
+  }
+  if (i < m) {
+    dst[i] = rows[i][0];
+    dst[stride + i] = rows[i][1];
+  }
+}
+inline void storeTransposed(const Lane4* rows, int m, double* dst, long stride) {
+  int i = 0;
+  for (; i + 4 <= m; i += 4) {
+    const Lane4 t0 = shuffle4<0, 4, 2, 6>(rows[i], rows[i + 1]);      // a0 b0 a2 b2
+    const Lane4 t1 = shuffle4<1, 5, 3, 7>(rows[i], rows[i + 1]);      // a1 b1 a3 b3
+    const Lane4 t2 = shuffle4<0, 4, 2, 6>(rows[i + 2], rows[i + 3]);  // c0 d0 c2 d2
+    const Lane4 t3 = shuffle4<1, 5, 3, 7>(rows[i + 2], rows[i + 3]);  // c1 d1 c3 d3
+    const Lane4 r0 = shuffle4<0, 1, 4, 5>(t0, t2), r1 = shuffle4<0, 1, 4, 5>(t1, t3);
+    const Lane4 r2 = shuffle4<2, 3, 6, 7>(t0, t2), r3 = shuffle4<2, 3, 6, 7>(t1, t3);
+    std::memcpy(dst + i, &r0, sizeof(Lane4));
+    std::memcpy(dst + stride + i, &r1, sizeof(Lane4));
+    std::memcpy(dst + 2 * stride + i, &r2, sizeof(Lane4));
+    std::memcpy(dst + 3 * stride + i, &r3, sizeof(Lane4));
+  }
+  if (i + 2 <= m) {
+    const Lane4 u0 = shuffle4<0, 4, 2, 6>(rows[i], rows[i + 1]);  // lane 0's pair, lane 2's
+    const Lane4 u1 = shuffle4<1, 5, 3, 7>(rows[i], rows[i + 1]);  // lane 1's, lane 3's
+    const Lane2 p0 = {u0[0], u0[1]}, p1 = {u1[0], u1[1]}, p2 = {u0[2], u0[3]},
+                p3 = {u1[2], u1[3]};
+    std::memcpy(dst + i, &p0, sizeof(Lane2));
+    std::memcpy(dst + stride + i, &p1, sizeof(Lane2));
+    std::memcpy(dst + 2 * stride + i, &p2, sizeof(Lane2));
+    std::memcpy(dst + 3 * stride + i, &p3, sizeof(Lane2));
+    i += 2;
+  }
+  if (i < m)
+    for (int l = 0; l < 4; ++l) dst[stride * l + i] = rows[i][l];
+}
+
 // sin and cos of each lane: the bits of exid::fmath::sincos for that lane's value, computed for
 // all lanes at once (exid/fmath_kernels.hpp) unless a lane is beyond the vector path's range
 // (|q| >= 2^20 pi/2, inf, NaN: every lane then goes through the scalar function)
@@ -245,11 +313,13 @@ struct LaneWork {
   L3<T>* aob;
   LS<T>* sb;
   T* tq;  // four lane vectors per joint (the VJPs' gradients: tq[j + n r], r < 4)
+  T* col;  // ten lane vectors per joint (a body's ten regressor columns, row i of column c at
+           // col[n c + i], before storeTransposed)
 };
 template <class T>
 inline LaneWork<T> laneWork(DynamicsData& d) {
   const std::size_t n = static_cast<std::size_t>(d.n), P = d.anc_idx.size();
-  constexpr std::size_t kPerJoint = 9 + 3 + 6 + 6 + 3 + 9 + 3 + 6 + 6 + 6 + 6 + 6 + 3 + 3 + 3 + 4;
+  constexpr std::size_t kPerJoint = 9 + 3 + 6 + 6 + 3 + 9 + 3 + 6 + 6 + 6 + 6 + 6 + 3 + 3 + 3 + 4 + 10;
   const std::size_t words = kPerJoint * n + 12 * P;  // lanes of T
   const std::size_t need = words * (sizeof(T) / sizeof(double)) + alignof(T) / sizeof(double);
   if (d.lane_ws.size() < need) d.lane_ws.assign(need, 0.0);
@@ -273,6 +343,7 @@ inline LaneWork<T> laneWork(DynamicsData& d) {
   w.wdb = reinterpret_cast<L3<T>*>(base + 72 * n);
   w.aob = reinterpret_cast<L3<T>*>(base + 75 * n);
   w.tq = base + 78 * n;
+  w.col = base + 82 * n;
   w.s = reinterpret_cast<LS<T>*>(base + kPerJoint * n);
   w.sb = reinterpret_cast<LS<T>*>(base + kPerJoint * n + 6 * P);
   return w;
@@ -408,12 +479,19 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
           const L3<T>& w = ws.v[j].w;
           const L3<T>& wd = ws.a[j].w;
           const L3<T>& ao = ws.ao[j];
-          for (int l = 0; l < lanes; ++l) {
-            double* Yj = Y + strideY * (k0 + l) + ldY * 10 * j;
-            for (int t = d.off_off[static_cast<std::size_t>(j)];
-                 t < d.off_off[static_cast<std::size_t>(j) + 1]; ++t)
+          // a block of whole lanes: the ten columns' rows gathered in ws.col, then written a
+          // column at a time, transposed (every row of a column: its ancestors' and the zeros)
+          const bool whole = lanes == Tr::kWidth;
+          for (int t = d.off_off[static_cast<std::size_t>(j)];
+               t < d.off_off[static_cast<std::size_t>(j) + 1]; ++t) {
+            const int i = d.off_idx[static_cast<std::size_t>(t)];
+            if (whole) {
+              for (int col = 0; col < 10; ++col) ws.col[n * col + i] = Tr::broadcast(0.0);
+              continue;
+            }
+            for (int l = 0; l < lanes; ++l)
               for (int col = 0; col < 10; ++col)
-                Yj[d.off_idx[static_cast<std::size_t>(t)] + ldY * col] = 0.0;
+                Y[strideY * (k0 + l) + ldY * (10 * j + col) + i] = 0.0;
           }
           for (int t = 0; t < cnt; ++t) {
             const int i = d.anc_idx[static_cast<std::size_t>(oj + t)];
@@ -432,11 +510,19 @@ inline void torqueRegressorsImpl(const RobotModel& model, DynamicsData& d, int c
             out[7] = hc.c[1];
             out[8] = hc.c[2];
             out[9] = sv.c[0] * ao.c[0] + sv.c[1] * ao.c[1] + sv.c[2] * ao.c[2];
+            if (whole) {
+              for (int col = 0; col < 10; ++col) ws.col[n * col + i] = out[col];
+              continue;
+            }
             for (int l = 0; l < lanes; ++l) {
               double* Yi = Y + strideY * (k0 + l) + ldY * 10 * j + i;
               for (int col = 0; col < 10; ++col) Yi[ldY * col] = Tr::get(out[col], l);
             }
           }
+          if (whole)
+            for (int col = 0; col < 10; ++col)
+              storeTransposed(ws.col + n * col, n, Y + strideY * k0 + ldY * (10 * j + col),
+                              strideY);
         }
       });
 }
