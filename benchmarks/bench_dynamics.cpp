@@ -3,11 +3,12 @@
 //
 // The hot kernels (exid/isa.hpp) run once per instruction set this CPU has (BM_<kernel>/portable,
 // BM_<kernel>/avx2, one after the other), each with its operations per call (kernelFlops: counted
-// from the source), the machine's peak for that instruction set, the resulting lower bound and
-// the ratio of the measured time to it; the table at the end gives them per kernel (medians when
-// run with --benchmark_repetitions). Peak: clock x flops per cycle, SSE2 (portable) 2 doubles x 2
-// (one add, one multiply) = 4, AVX2 + FMA 4 doubles x 2 FMA units x 2 = 16; the clock is the
-// highest "cpu MHz" of /proc/cpuinfo, or EXID_BENCH_GHZ.
+// from the source; the joints' sines and cosines, exid's own code, with the fewest operations any
+// angle takes: those of |q| <= pi/4), the machine's peak for that instruction set, the resulting
+// lower bound and the ratio of the measured time to it; the table at the end gives them per kernel
+// (medians when run with --benchmark_repetitions). Peak: clock x flops per cycle, SSE2 (portable) 2
+// doubles x 2 (one add, one multiply) = 4, AVX2 + FMA 4 doubles x 2 FMA units x 2 = 16; the clock
+// is the highest "cpu MHz" of /proc/cpuinfo, or EXID_BENCH_GHZ.
 //
 // PUMA 560: standard DH and inertial data as in Corke's Robotics Toolbox (mdl_puma560.m):
 // I = [Ixx Iyy Izz Ixy Iyz Ixz] about the COM r.
@@ -204,8 +205,9 @@ double flopsPerCycle(Isa isa) { return isa == Isa::Avx2 ? 16.0 : 4.0; }
 struct KernelInfo {
   std::string kernel;
   Isa isa;
-  double flops;  // per sample
+  double flops;  // per sample: the rigid-body algorithm's
   int sincos;
+  double sincos_flops;  // the sines' and cosines' (each pair's fewest: |q| <= pi/4)
   double samples_per_iteration;
   std::string label;     // the copy: "portable", "avx2", "lanes-sse2", "lanes-avx"
   double per_cycle = 0;  // the copy's peak flops per cycle
@@ -216,11 +218,13 @@ std::map<std::string, KernelInfo>& kernelInfo() {
 }
 
 template <class Body>
-void registerKernel(const std::string& kernel, double flops, int sincos, Body body,
-                    double samples = 1, benchmark::TimeUnit unit = benchmark::kNanosecond) {
+void registerKernel(const std::string& kernel, FlopCount c, Body body, double samples = 1,
+                    benchmark::TimeUnit unit = benchmark::kNanosecond) {
+  const double flops = c.flops + c.sincos_flops;
   for (Isa isa : availableIsas()) {
     const std::string name = "BM_" + kernel + "/" + isaName(isa);
-    kernelInfo()[name] = {kernel, isa, flops, sincos, samples, isaName(isa), flopsPerCycle(isa)};
+    kernelInfo()[name] = {kernel,         isa,     c.flops,      c.sincos,
+                          c.sincos_flops, samples, isaName(isa), flopsPerCycle(isa)};
     benchmark::RegisterBenchmark(name.c_str(), [isa, body, flops, samples](benchmark::State& st) {
       setActiveIsa(isa);
       body(st);
@@ -242,10 +246,15 @@ void registerLanes(const std::string& bench, const std::string& kernel, FlopCoun
   for (Lanes lanes : availableLanes()) {
     const std::string name = "BM_" + bench + "/" + lanesName(lanes);
     const bool avx = lanes == Lanes::Avx;
-    kernelInfo()[name] = {kernel,         Isa::Portable, c.flops,
-                          c.sincos,       kBatch,        avx ? "lanes-avx" : "lanes-sse2",
+    kernelInfo()[name] = {kernel,
+                          Isa::Portable,
+                          c.flops,
+                          c.sincos,
+                          c.sincos_flops,
+                          kBatch,
+                          avx ? "lanes-avx" : "lanes-sse2",
                           avx ? 8.0 : 4.0};
-    benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops,
+    benchmark::RegisterBenchmark(name.c_str(), [lanes, flops = c.flops + c.sincos_flops,
                                                 body](benchmark::State& st) {
       setActiveIsa(Isa::Portable);
       setActiveLanes(lanes);
@@ -271,7 +280,7 @@ void registerKernels() {
   const RobotModel& m = fx().model;
   const auto flops = [&](Kernel k) { return kernelFlops(m, k); };
   FlopCount c = flops(Kernel::InverseDynamics);
-  registerKernel("InverseDynamics", c.flops, c.sincos, [](benchmark::State& st) {
+  registerKernel("InverseDynamics", c, [](benchmark::State& st) {
     Fixture& f = fx();
     int k = 0;
     for (auto _ : st) {
@@ -280,7 +289,7 @@ void registerKernels() {
     }
   });
   c = flops(Kernel::TorqueRegressor);
-  registerKernel("TorqueRegressor", c.flops, c.sincos, [](benchmark::State& st) {
+  registerKernel("TorqueRegressor", c, [](benchmark::State& st) {
     Fixture& f = fx();
     Eigen::MatrixXd Y(6, 60);
     int k = 0;
@@ -342,7 +351,7 @@ void registerKernels() {
     Eigen::MatrixXd Y(6, 60);
     torqueRegressor(m, *fx().data, fx().q[0], fx().qd[0], fx().qdd[0], Y);
     registerKernel(
-        "RegressorPlusGram", c.flops + gramFlops(Y), c.sincos,
+        "RegressorPlusGram", FlopCount{c.flops + gramFlops(Y), c.sincos, c.sincos_flops},
         [](benchmark::State& st) {
           Fixture& f = fx();
           Eigen::MatrixXd Y(6, 60);
@@ -361,7 +370,7 @@ void registerKernels() {
         kGramSamples, benchmark::kMillisecond);
   }
   c = flops(Kernel::EnergyRegressor);
-  registerKernel("EnergyRegressor", c.flops, c.sincos, [](benchmark::State& st) {
+  registerKernel("EnergyRegressor", c, [](benchmark::State& st) {
     Fixture& f = fx();
     Eigen::RowVectorXd K(60), U(60);
     int k = 0;
@@ -373,7 +382,7 @@ void registerKernels() {
     }
   });
   c = flops(Kernel::TorqueRegressorVjp);
-  registerKernel("TorqueRegressorVjp", c.flops, c.sincos, [](benchmark::State& st) {
+  registerKernel("TorqueRegressorVjp", c, [](benchmark::State& st) {
     Fixture& f = fx();
     const Eigen::MatrixXd G = Eigen::MatrixXd::Random(6, 60);
     Eigen::VectorXd a(6), b(6), cc(6);
@@ -385,7 +394,7 @@ void registerKernels() {
     }
   });
   c = flops(Kernel::EnergyRegressorVjp);
-  registerKernel("EnergyRegressorVjp", c.flops, c.sincos, [](benchmark::State& st) {
+  registerKernel("EnergyRegressorVjp", c, [](benchmark::State& st) {
     Fixture& f = fx();
     const Eigen::RowVectorXd Gk = Eigen::RowVectorXd::Random(60),
                              Gu = Eigen::RowVectorXd::Random(60);
@@ -425,17 +434,17 @@ class KernelTableReporter : public benchmark::ConsoleReporter {
         "\nHot kernels, PUMA 560, per sample (clock %.2f GHz; peak %.1f GFlop/s portable "
         "(SSE2), %.1f GFlop/s avx2 (AVX2 + FMA))\n",
         ghz, ghz * flopsPerCycle(Isa::Portable), ghz * flopsPerCycle(Isa::Avx2));
-    std::printf("%-20s %-10s %8s %7s %10s %10s %8s %9s\n", "kernel", "copy", "flops", "sin/cos",
-                "bound ns", "time ns", "ratio", "speed-up");
+    std::printf("%-20s %-10s %8s %7s %9s %10s %10s %8s %9s\n", "kernel", "copy", "flops", "sin/cos",
+                "their ops", "bound ns", "time ns", "ratio", "speed-up");
     std::map<std::string, double> portable_ns;
     for (const auto& [name, k] : kernelInfo())
       if (k.label == "portable" && ns_.count(name)) portable_ns[k.kernel] = ns_[name];
     for (const auto& [name, k] : kernelInfo()) {
       if (!ns_.count(name)) continue;
-      const double bound = k.flops / (ghz * k.per_cycle);
+      const double bound = (k.flops + k.sincos_flops) / (ghz * k.per_cycle);
       const double t = ns_[name];
-      std::printf("%-20s %-10s %8.0f %7d %10.1f %10.1f %8.2f", k.kernel.c_str(), k.label.c_str(),
-                  k.flops, k.sincos, bound, t, t / bound);
+      std::printf("%-20s %-10s %8.0f %7d %9.0f %10.1f %10.1f %8.2f", k.kernel.c_str(),
+                  k.label.c_str(), k.flops, k.sincos, k.sincos_flops, bound, t, t / bound);
       if (portable_ns.count(k.kernel))
         std::printf(" %9.2f\n", portable_ns[k.kernel] / t);
       else

@@ -9,6 +9,7 @@
 #include <string>
 
 #include "exid/error.hpp"
+#include "exid/fmath_kernels.hpp"  // kSincosSmallFlops
 #include "kernel_table.hpp"
 #include "rigid_body.hpp"
 
@@ -155,6 +156,7 @@ void forwardPassFlops(const DynamicsData& d, Level level, FlopCount& c) {
   for (const detail::JointC& J : d.J) {
     if (J.revolute) {
       c.sincos += 2;
+      c.sincos_flops += fmath::kernels::kSincosSmallFlops;
       c.flops += 18;                      // the rotated columns of M
       if (!J.post_R_id) c.flops += 45;    // M Rpost
       if (!J.post_p_zero) c.flops += 18;  // ppre + M ppost

@@ -150,8 +150,7 @@ inline void storeTransposed(const Lane4* rows, int m, double* dst, long stride) 
   if (i + 2 <= m) {
     const Lane4 u0 = shuffle4<0, 4, 2, 6>(rows[i], rows[i + 1]);  // lane 0's pair, lane 2's
     const Lane4 u1 = shuffle4<1, 5, 3, 7>(rows[i], rows[i + 1]);  // lane 1's, lane 3's
-    const Lane2 p0 = {u0[0], u0[1]}, p1 = {u1[0], u1[1]}, p2 = {u0[2], u0[3]},
-                p3 = {u1[2], u1[3]};
+    const Lane2 p0 = {u0[0], u0[1]}, p1 = {u1[0], u1[1]}, p2 = {u0[2], u0[3]}, p3 = {u1[2], u1[3]};
     std::memcpy(dst + i, &p0, sizeof(Lane2));
     std::memcpy(dst + stride + i, &p1, sizeof(Lane2));
     std::memcpy(dst + 2 * stride + i, &p2, sizeof(Lane2));
@@ -312,14 +311,15 @@ struct LaneWork {
   L3<T>* wdb;
   L3<T>* aob;
   LS<T>* sb;
-  T* tq;  // four lane vectors per joint (the VJPs' gradients: tq[j + n r], r < 4)
+  T* tq;   // four lane vectors per joint (the VJPs' gradients: tq[j + n r], r < 4)
   T* col;  // ten lane vectors per joint (a body's ten regressor columns, row i of column c at
            // col[n c + i], before storeTransposed)
 };
 template <class T>
 inline LaneWork<T> laneWork(DynamicsData& d) {
   const std::size_t n = static_cast<std::size_t>(d.n), P = d.anc_idx.size();
-  constexpr std::size_t kPerJoint = 9 + 3 + 6 + 6 + 3 + 9 + 3 + 6 + 6 + 6 + 6 + 6 + 3 + 3 + 3 + 4 + 10;
+  constexpr std::size_t kPerJoint =
+      9 + 3 + 6 + 6 + 3 + 9 + 3 + 6 + 6 + 6 + 6 + 6 + 3 + 3 + 3 + 4 + 10;
   const std::size_t words = kPerJoint * n + 12 * P;  // lanes of T
   const std::size_t need = words * (sizeof(T) / sizeof(double)) + alignof(T) / sizeof(double);
   if (d.lane_ws.size() < need) d.lane_ws.assign(need, 0.0);

@@ -259,6 +259,39 @@ TEST(Fmath, VectorLanesGiveTheScalarBits) {
   EXPECT_GT(refused, 100u);  // the vectors holding 2^20 pi/2, 1e7, inf or NaN
 }
 
+// A number that counts the +, - and * made on it (the flop count of the kernels' templates)
+struct Counted {
+  double v = 0;
+  static int& ops() {
+    static int n = 0;
+    return n;
+  }
+};
+Counted operator+(Counted a, Counted b) { return ++Counted::ops(), Counted{a.v + b.v}; }
+Counted operator-(Counted a, Counted b) { return ++Counted::ops(), Counted{a.v - b.v}; }
+Counted operator*(Counted a, Counted b) { return ++Counted::ops(), Counted{a.v * b.v}; }
+Counted operator+(double a, Counted b) { return Counted{a} + b; }
+Counted operator-(double a, Counted b) { return Counted{a} - b; }
+Counted operator*(double a, Counted b) { return Counted{a} * b; }
+Counted operator*(Counted a, double b) { return a * Counted{b}; }
+
+// kSincosSmallFlops, which the benchmarks' bound adds per joint angle, is the operations of the
+// small case's two kernels (and their values are the scalar sin and cos's there)
+TEST(Fmath, SmallCaseOperationCountIsTheKernelsOwn) {
+  namespace k = exid::fmath::kernels;
+  const double x = 0.7;
+  Counted::ops() = 0;
+  const Counted s = k::kernelSin(Counted{x});
+  const int sin_ops = Counted::ops();
+  const Counted c = k::kernelCos(Counted{x}, Counted{});
+  EXPECT_EQ(sin_ops, 16);
+  EXPECT_EQ(Counted::ops(), k::kSincosSmallFlops);
+  double s1, c1;
+  exid::fmath::sincos(x, &s1, &c1);
+  EXPECT_EQ(s.v, s1);
+  EXPECT_EQ(c.v, c1);
+}
+
 TEST(Fmath, ExpWithinOneUlp) {
   Worst w, wl;
   auto check = [&](const std::vector<double>& xs) {

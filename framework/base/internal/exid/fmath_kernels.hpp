@@ -10,8 +10,8 @@
 //   Permission to use, copy, modify, and distribute this software is freely granted, provided
 //   that this notice is preserved.
 //
-// Every source that includes this header compiles with -ffp-contract=off (no fused multiply-add
-// may round a step differently). Not installed: internal to the build.
+// Every source that computes with these kernels compiles with -ffp-contract=off (no fused
+// multiply-add may round a step differently). Not installed: internal to the build.
 #pragma once
 
 #include <cstdint>
@@ -58,6 +58,12 @@ inline T kernelCos(T x, T y) {
   const T hz = 0.5 * z, one_hz = 1.0 - hz;
   return one_hz + (((1.0 - one_hz) - hz) + (z * r - x * y));
 }
+
+// The +, - and * of kernelSin(x) and kernelCos(x, 0) together (16 + 23): a sine and cosine of
+// |x| <= pi/4, the fewest operations sincos takes for any argument but the tiny ones (beyond
+// pi/4 the reduction and both kernels with a tail take more). The benchmarks' flop count adds it
+// per joint angle (exid::kernelFlops); tests/unit/base/fmath_test.cpp counts it on the kernels.
+constexpr int kSincosSmallFlops = 39;
 
 // pi/2 in pieces: pio2_1 has 33 significant bits, so n * pio2_1 is exact for |n| < 2^20; each
 // tail pio2_kt is pi/2 - (pio2_1 + ... + pio2_k) rounded.

@@ -51,10 +51,12 @@ enum class Kernel {
 
 /// Floating-point operations of one call of a kernel on `model`, counted from the source: every
 /// +, -, * and / the code executes (an FMA is two), walking the same joint structure as the
-/// kernel (joint types, ancestors, which fixed transforms are the identity); sin and cos apart.
+/// kernel (joint types, ancestors, which fixed transforms are the identity); the joints' sines
+/// and cosines (exid's own, exid/fmath.hpp) apart.
 struct FlopCount {
-  double flops = 0;  ///< +, -, *, /
-  int sincos = 0;    ///< calls of std::sin and std::cos
+  double flops = 0;         ///< +, -, *, / of the rigid-body algorithm
+  int sincos = 0;           ///< sines and cosines (one of each per revolute joint angle)
+  double sincos_flops = 0;  ///< their +, -, *: the fewest any angle takes (|q| <= pi/4), each pair
 };
 EXID_API FlopCount kernelFlops(const RobotModel& model, Kernel kernel);
 
