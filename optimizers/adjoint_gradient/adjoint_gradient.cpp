@@ -110,6 +110,7 @@ class AdjointGradient final : public exid::Optimizer {
         break;
       }
       const bool inner_converged = innerSolve(problem, lim, tr, &z, &iters);
+      const bool stationary = pass_end_ == PassEnd::Stationary;
       if (tr.shouldStop()) {
         reason = tr.stopCause();
         break;
@@ -135,7 +136,10 @@ class AdjointGradient final : public exid::Optimizer {
       prev_J = feasible ? J : prev_J;
       prev_v = v;
       if (m == 0 && inner_converged) {
-        reason = exid::StopReason::ConvergedGtol;
+        // "converged (gtol)" says the projected gradient is within gtol: only where the pass
+        // ended on that test; a pass that ended without decrease (or below 1e-12 relative) ends
+        // the run too, on the ftol kind of test, and says so
+        reason = stationary ? exid::StopReason::ConvergedGtol : exid::StopReason::ConvergedFtol;
         break;
       }
     }
@@ -143,6 +147,10 @@ class AdjointGradient final : public exid::Optimizer {
     r.details["step"] = paper_ ? "paper" : "lbfgs";
     r.details["constraints"] = mode_;
     r.details["rho"] = rho_;
+    // how the last pass ended, and its first-order test (the merit: J with the constraint terms)
+    r.details["last_pass_end"] = passEndText(pass_end_);
+    r.details["projected_gradient_max"] = pg_max_;
+    r.details["stationarity_tol"] = pg_tol_;
     return r;
   }
 
@@ -240,21 +248,57 @@ class AdjointGradient final : public exid::Optimizer {
                    : 0);
   }
 
-  // One pass of at most inner_ iterations on the current merit. Returns true when converged.
+  // How a pass of innerSolve ended (pass_end_). Only Stationary passed the first-order test.
+  enum class PassEnd { Running, Stationary, NoDecrease, TinyDecrease, NotFinite };
+  static const char* passEndText(PassEnd e) {
+    switch (e) {
+      case PassEnd::Running:
+        return "iterations or budget ran out";
+      case PassEnd::Stationary:
+        return "stationary: max|projected gradient| <= gtol max(1, |merit|)";
+      case PassEnd::NoDecrease:
+        return "no decrease along the search direction (projected gradient above gtol)";
+      case PassEnd::TinyDecrease:
+        return "a step decreased the merit by less than 1e-12 relative (projected gradient "
+               "above gtol)";
+      case PassEnd::NotFinite:
+        return "the merit is not finite at the pass's start";
+    }
+    return "";
+  }
+
+  // One pass of at most inner_ iterations on the current merit. Returns true when the pass ended
+  // (stationary, or no further decrease: pass_end_ says which, pg_max_ and pg_tol_ its last
+  // first-order test), false when its iterations ran out or a stop was asked for.
   bool innerSolve(exid::ExcitationProblem& p, Limits& lim, Tracker& tr, Eigen::VectorXd* zp,
                   int* iters) {
     Eigen::VectorXd& z = *zp;
     Eigen::VectorXd g;
     double phi = merit(p, lim, tr, z, &g);
     cur_J_ = cur_J_trial_;
+    pass_end_ = PassEnd::NotFinite;
+    pg_max_ = HUGE_VAL;
+    pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
     if (!std::isfinite(phi)) return true;
     exid::optimizers::LbfgsMemory mem(mem_);
     Eigen::MatrixXd A(0, z.size());  // held velocity rows: steps keep A dz = 0
+    // the first-order test at z (in the tangent space of the held velocity rows)
+    const auto firstOrder = [&]() {
+      pg_max_ = tangent(A, projectedGradient(z, g)).cwiseAbs().maxCoeff();
+      pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
+      return pg_max_ <= pg_tol_;  // false for a NaN
+    };
+    pass_end_ = PassEnd::Running;
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (tr.shouldStop()) return false;
       Eigen::VectorXd pg = tangent(A, projectedGradient(z, g));
       const double gmax = pg.cwiseAbs().maxCoeff();
-      if (gmax <= gtol_ * std::max(1.0, std::abs(phi))) return true;
+      pg_max_ = gmax;
+      pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
+      if (gmax <= pg_tol_) {
+        pass_end_ = PassEnd::Stationary;
+        return true;
+      }
       Eigen::VectorXd d;
       double alpha;
       if (paper_ || mem.empty()) {
@@ -295,13 +339,18 @@ class AdjointGradient final : public exid::Optimizer {
           mem.clear();
           continue;
         }
-        return true;  // no decrease possible along the direction
+        pass_end_ = PassEnd::NoDecrease;  // (pg_max_: z's test above, not passed)
+        return true;
       }
       ++*iters;
       if (paper_) paper_gain_ = std::min(paper_gain_ * 1.5, 1e6 * gain_);
       cur_J_ = cur_J_trial_;
-      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) return true;
+      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) {
+        pass_end_ = firstOrder() ? PassEnd::Stationary : PassEnd::TinyDecrease;
+        return true;
+      }
     }
+    firstOrder();
     return false;
   }
 
@@ -313,6 +362,8 @@ class AdjointGradient final : public exid::Optimizer {
   double paper_gain_ = 1.0;
   Eigen::VectorXd lo_, hi_, mu_;
   double rho_ = 1.0, cur_J_ = 0.0, cur_J_trial_ = 0.0;
+  PassEnd pass_end_ = PassEnd::Running;
+  double pg_max_ = HUGE_VAL, pg_tol_ = 0.0;  // the last first-order test
 };
 
 }  // namespace

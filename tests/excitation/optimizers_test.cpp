@@ -464,6 +464,97 @@ TEST(Nlopt, ConvergedOnlyAfterAStep) {
   EXPECT_LT(done.criterion_final, done.criterion_initial);
 }
 
+// A problem without constraints whose J is given (a wrapper of a real problem for its
+// trajectory, model and criterion, which the optimisers may ask for): J = 1e6 + sum_i w_i f(z_i
+// - c_i), f smooth (x^2) or with a kink at the minimum (|x|).
+class GivenProblem : public exid::ExcitationProblem {
+ public:
+  GivenProblem(exid::ExcitationProblem& real, bool kink) : real_(real), kink_(kink) {
+    c_ = real.initial().array() + 0.3;
+    w_ = Eigen::VectorXd::LinSpaced(c_.size(), 1.0, 10.0);
+  }
+  int numVariables() const override { return real_.numVariables(); }
+  Eigen::VectorXd initial() const override { return real_.initial(); }
+  void bounds(Eigen::VectorXd* lo, Eigen::VectorXd* hi) const override {
+    *lo = Eigen::VectorXd::Constant(numVariables(), -1e9);
+    *hi = Eigen::VectorXd::Constant(numVariables(), 1e9);
+  }
+  double value(const Eigen::VectorXd& z, Eigen::VectorXd* grad) override {
+    ++evaluations_;
+    const Eigen::ArrayXd d = z - c_;
+    if (grad) {
+      if (kink_)
+        *grad = (w_.array() * d.sign()).matrix();
+      else
+        *grad = (2.0 * w_.array() * d).matrix();
+    }
+    return 1e6 + (kink_ ? (w_.array() * d.abs()).sum() : (w_.array() * d.square()).sum());
+  }
+  Eigen::MatrixXd information(const Eigen::VectorXd& z) override { return real_.information(z); }
+  Eigen::MatrixXd informationGradients(const Eigen::VectorXd& z,
+                                       const std::vector<Eigen::MatrixXd>& dM) override {
+    return real_.informationGradients(z, dM);
+  }
+  int numConstraints() const override { return 0; }
+  void constraints(const Eigen::VectorXd&, Eigen::VectorXd* g, Eigen::MatrixXd* jac) override {
+    if (g) g->resize(0);
+    if (jac) jac->resize(0, numVariables());
+  }
+  const exid::Trajectory& trajectory() const override { return real_.trajectory(); }
+  const exid::ObservationModel& model() const override { return real_.model(); }
+  const exid::Criterion& criterion() const override { return real_.criterion(); }
+  long evaluations() const override { return evaluations_; }
+
+ private:
+  exid::ExcitationProblem& real_;
+  bool kink_;
+  Eigen::VectorXd c_, w_;
+  long evaluations_ = 0;
+};
+
+// adjoint_gradient says "converged (gtol)" only where its first-order test passed: on a smooth J
+// it ends at a point whose projected gradient is within gtol max(1, |J|) and says so; on a J
+// with a kink at its minimum its line search stops with the gradient's entries at w_i (1..10),
+// and it says "converged (ftol_rel)" with how the pass ended, never "gtol".
+TEST(AdjointGradient, ConvergedGtolOnlyWhereTheProjectedGradientIsWithinGtol) {
+  XSetup s = make("planar2r", "fourier", kFourier, "cond", "{}");
+  exid::RunContext ctx;
+  ctx.seed = 3;
+  const auto run = [&](bool kink) {
+    GivenProblem p(*s.problem, kink);
+    // one pass (no constraints: the run ends with its first pass's end)
+    return exid_test::create<exid::Optimizer>("adjoint_gradient",
+                                              "{max_iterations: 2000, inner_iterations: 2000}")
+        ->minimize(p, ctx);
+  };
+  const exid::OptimizerResult smooth = run(false);
+  ASSERT_TRUE(smooth.details.find("projected_gradient_max") &&
+              smooth.details.find("stationarity_tol") && smooth.details.find("last_pass_end"))
+      << smooth.details.dump();
+  ASSERT_EQ(smooth.stop_reason, exid::StopReason::ConvergedGtol) << smooth.details.dump();
+  const double pg = smooth.details.find("projected_gradient_max")->asDouble();
+  const double tol = smooth.details.find("stationarity_tol")->asDouble();
+  EXPECT_LE(pg, tol);
+  EXPECT_NEAR(tol, 1e-8 * smooth.criterion_final, 1e-12);
+  EXPECT_NE(smooth.details.find("last_pass_end")->asString().find("stationary"), std::string::npos);
+  // within gtol of a convex quadratic's minimum: J - J* = sum_i g_i^2 / (4 w_i) <= n tol^2 / 4
+  EXPECT_LE(smooth.criterion_final - 1e6, s.problem->numVariables() * tol * tol / 4.0);
+  EXPECT_LT(smooth.criterion_final, smooth.criterion_initial);
+
+  const exid::OptimizerResult kinked = run(true);
+  ASSERT_TRUE(kinked.details.find("projected_gradient_max") &&
+              kinked.details.find("stationarity_tol") && kinked.details.find("last_pass_end"))
+      << kinked.details.dump();
+  EXPECT_EQ(kinked.stop_reason, exid::StopReason::ConvergedFtol) << kinked.details.dump();
+  EXPECT_GE(kinked.details.find("projected_gradient_max")->asDouble(), 1.0);
+  EXPECT_GT(kinked.details.find("projected_gradient_max")->asDouble(),
+            kinked.details.find("stationarity_tol")->asDouble());
+  EXPECT_EQ(kinked.details.find("last_pass_end")->asString().find("stationary"), std::string::npos)
+      << kinked.details.find("last_pass_end")->asString();
+  EXPECT_LT(kinked.criterion_final, kinked.criterion_initial);
+  EXPECT_LT(kinked.iterations, 2000);  // ended by its pass, not by the iterations
+}
+
 }  // namespace
 
 // NLopt's failure texts are said in exid's words, NLopt's own quoted, never as a bare
