@@ -18,7 +18,10 @@
 #include <cstring>
 
 // (vectors passed by value between inline functions: no ABI crosses here)
-#if defined(__GNUC__) && !defined(__clang__)
+#if defined(__clang__)
+#pragma clang diagnostic push
+#pragma clang diagnostic ignored "-Wpsabi"
+#elif defined(__GNUC__)
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wpsabi"
 #endif
@@ -228,6 +231,8 @@ inline bool anyBeyondMedium(const T& x) {
 
 }  // namespace exid::fmath::kernels
 
-#if defined(__GNUC__) && !defined(__clang__)
+#if defined(__clang__)
+#pragma clang diagnostic pop
+#elif defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
