@@ -27,7 +27,7 @@ TEST(Plot, GnuplotChildDoesNotRepeatTheParentsBufferedOutput) {
     if (!std::freopen(out.c_str(), "w", stdout)) ::_exit(3);
     std::printf("before the plots\n");  // buffered, not yet written
     exid::PlotSpec s;
-    s.series.push_back({"y", {0.0, 1.0, 2.0}, {1.0, 2.0, 0.5}, "lines", {}, {}});
+    s.series.push_back(exid::plotLine("y", {0.0, 1.0, 2.0}, {1.0, 2.0, 0.5}));
     for (int i = 0; i < 3; ++i) {
       s.name = "p" + std::to_string(i);
       exid::drawPlot(s, dir);
