@@ -282,23 +282,23 @@ class AdjointGradient final : public exid::Optimizer {
     if (!std::isfinite(phi)) return true;
     exid::optimizers::LbfgsMemory mem(mem_);
     Eigen::MatrixXd A(0, z.size());  // held velocity rows: steps keep A dz = 0
-    // the first-order test at z (in the tangent space of the held velocity rows)
-    const auto firstOrder = [&]() {
-      pg_max_ = tangent(A, projectedGradient(z, g)).cwiseAbs().maxCoeff();
+    // the gradient at z projected on the box and the tangent space of the held velocity rows
+    const auto projected = [&]() { return Eigen::VectorXd(tangent(A, projectedGradient(z, g))); };
+    // the first-order test of such a gradient (recorded in pg_max_, pg_tol_)
+    const auto firstOrder = [&](const Eigen::VectorXd& pg) {
+      pg_max_ = pg.cwiseAbs().maxCoeff();
       pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
       return pg_max_ <= pg_tol_;  // false for a NaN
     };
     pass_end_ = PassEnd::Running;
     for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
       if (tr.shouldStop()) return false;
-      Eigen::VectorXd pg = tangent(A, projectedGradient(z, g));
-      const double gmax = pg.cwiseAbs().maxCoeff();
-      pg_max_ = gmax;
-      pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
-      if (gmax <= pg_tol_) {
+      Eigen::VectorXd pg = projected();
+      if (firstOrder(pg)) {
         pass_end_ = PassEnd::Stationary;
         return true;
       }
+      const double gmax = pg_max_;
       Eigen::VectorXd d;
       double alpha;
       if (paper_ || mem.empty()) {
@@ -346,11 +346,11 @@ class AdjointGradient final : public exid::Optimizer {
       if (paper_) paper_gain_ = std::min(paper_gain_ * 1.5, 1e6 * gain_);
       cur_J_ = cur_J_trial_;
       if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) {
-        pass_end_ = firstOrder() ? PassEnd::Stationary : PassEnd::TinyDecrease;
+        pass_end_ = firstOrder(projected()) ? PassEnd::Stationary : PassEnd::TinyDecrease;
         return true;
       }
     }
-    firstOrder();
+    firstOrder(projected());
     return false;
   }
 
