@@ -331,8 +331,8 @@ std::string Didim::startName(int i) const {
 
 // The starts after the first (whose run is done): each run for start_iterations at most at
 // the first's final prior weight; the lowest of them continued to max_iterations when it is
-// below the first's end; the lowest objective kept (a later start only beyond the
-// simulation's rounding). Returns the kept run's index.
+// below the first's end; the lowest objective kept (a later start only below the earlier by
+// more than the first-order test's region: lowest()). Returns the kept run's index.
 int Didim::multiStart(const exid::ObservationModel& model, const exid::Dataset& data,
                       const exid::RunContext& ctx, std::vector<Run>* runs) const {
   if (starts_ <= 1 || sp_.empty()) return 0;
@@ -372,15 +372,25 @@ int Didim::multiStart(const exid::ObservationModel& model, const exid::Dataset& 
   return best;
 }
 // The run of lowest objective (rss plus the prior's terms at the weight sigma); a later one
-// only below the earlier by more than the simulation's rounding.
+// only below the earlier by more than the first-order test's region: first_order_std^2 s^2
+// (s^2 = rss / (m - p - L - D) of the earlier), the objective's rise at that many standard
+// deviations from a minimum. Two runs ending in the same minimum, each passing the test, differ
+// by up to about that much (with the simulation's error), which tells no start from another.
 int Didim::lowest(const std::vector<Run>& runs, double sigma) const {
   const double floor = 1e-12 * y_.squaredNorm();
   int best = -1;  // (none: every start failed)
   auto objective = [&](const Run& r) { return r.cur.rss + priorRss(r.x, sigma); };
+  const double dof = static_cast<double>(std::max(m_ - (p_ + L_ + D_), 1L));
   for (std::size_t i = 0; i < runs.size(); ++i) {
     if (!runs[i].error.empty()) continue;
-    const double ob = best < 0 ? 0.0 : objective(runs[static_cast<std::size_t>(best)]);
-    if (best < 0 || objective(runs[i]) < ob - 1e-7 * ob - floor) best = static_cast<int>(i);
+    if (best < 0) {
+      best = static_cast<int>(i);
+      continue;
+    }
+    const Run& kept = runs[static_cast<std::size_t>(best)];
+    const double ob = objective(kept);
+    const double region = first_order_std_ * first_order_std_ * kept.cur.rss / dof;
+    if (objective(runs[i]) < ob - region - 1e-7 * ob - floor) best = static_cast<int>(i);
   }
   return best;
 }

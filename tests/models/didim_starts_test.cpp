@@ -112,6 +112,30 @@ TEST(DidimStarts, AFirstStartThatConvergesIsKept) {
   EXPECT_EQ((e.nonlinear - e1.nonlinear).norm(), 0.0);
 }
 
+// The other side of the rule above: a later start lower than the first by more than the
+// first-order test's region (first_order_std^2 s^2, s^2 = rss / (m - p - L - D)) replaces it.
+// Two iterations from widths x2 leave the first start short of its minimum; the second starts at
+// the plant's widths and ends below it by far more than the region.
+TEST(DidimStarts, ALaterStartLowerByMoreThanTheFirstOrderRegionIsKept) {
+  const Loop s = setup(6.0);
+  const exid::Dataset d = noisyTorques(s.data, 0.1, 12);
+  auto model = widthsAt(s, 0.1);
+  const exid::Estimate e =
+      exid_test::create<exid::Estimator>("didim", "{" + s.params + ", max_iterations: 2}")
+          ->estimate(*model, d, nullptr, mtest::context());
+  std::printf("[didim starts] two iterations from widths x2: best start %s\n%s",
+              e.details.find("best_start")->dump().c_str(), startsSummary(e).c_str());
+  const exid::Json& st = *e.details.find("starts");
+  ASSERT_GE(st.size(), 2u);
+  ASSERT_TRUE(st.at(0).find("objective") && st.at(1).find("objective"));
+  const double first = st.at(0).find("objective")->asDouble();
+  const double second = st.at(1).find("objective")->asDouble();
+  const double m = static_cast<double>(e.rows);
+  const double region = first / (m - static_cast<double>(e.value.size() + e.nonlinear.size()));
+  EXPECT_LT(second, first - 10 * region);  // (first_order_std: 1, the default)
+  EXPECT_EQ(e.details.find("best_start")->asDouble(), 2.0);
+}
+
 // Stopped early, the warning says which start it kept and where it stopped.
 TEST(DidimStarts, ANotConvergedWarningNamesTheStart) {
   const Loop s = setup(6.0);

@@ -288,11 +288,11 @@ VectorXd ClosedLoop::recordedTorque(double t) const {
     throw Error(fmt::format("{}: t = {} s is outside the recorded torque's span [{}, {}] s", who_,
                             t, rec_t_[3], rec_t_[K - 5]));
   // eight samples about t: the spline's interval [t_k, t_k+1] and its slopes' neighbours
-  const VectorXd tl = rec_t_.segment(k - 3, 8);
-  const MatrixXd Xl = rec_tau_.middleRows(k - 3, 8);
-  MatrixXd out;
-  shiftedRows(tl, Xl, 1, t - rec_t_[k], 3, 4, &out, nullptr);
-  return out.row(0).transpose();
+  // (read at every step: the scratch keeps its room)
+  rec_tl_ = rec_t_.segment(k - 3, 8);
+  rec_Xl_ = rec_tau_.middleRows(k - 3, 8);
+  shiftedRows(rec_tl_, rec_Xl_, 1, t - rec_t_[k], 3, 4, &rec_out_, nullptr);
+  return rec_out_.row(0).transpose();
 }
 
 void ClosedLoop::setUpRows(const ObservationModel& model) {
@@ -450,12 +450,16 @@ VectorXd ClosedLoop::controlRate(double t, const VectorXd& q, const VectorXd& qd
   return rate;
 }
 
-VectorXd ClosedLoop::fullOf(const VectorXd& theta) const {
+const VectorXd& ClosedLoop::fullOf(const VectorXd& theta) const {
+  // (asked at every step of a simulation for the same theta: kept)
+  if (full_key_.size() == theta.size() && full_key_ == theta) return full_phi_;
   const BaseParameters& B = model_->base();
   VectorXd phi = VectorXd::Zero(B.numFull());
   const VectorXd rest = restOf(theta);
   for (int i = 0; i < B.rank(); ++i) phi[B.independent[static_cast<std::size_t>(i)]] = rest[i];
-  return phi;
+  full_phi_ = std::move(phi);
+  full_key_ = theta;
+  return full_phi_;
 }
 
 VectorXd ClosedLoop::acceleration(const VectorXd& theta, double t, const VectorXd& q,

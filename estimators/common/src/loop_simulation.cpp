@@ -21,53 +21,67 @@ namespace exid::estimators {
 using Eigen::MatrixXd;
 using Eigen::VectorXd;
 
-void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, const VectorXd& qd,
-                           MatrixXd* A_q, MatrixXd* A_qd, MatrixXd* B) const {
+MatrixXd ClosedLoop::sensitivityRows(const VectorXd& theta, const VectorXd& t, const MatrixXd& q,
+                                     const MatrixXd& qd, const MatrixXd& a,
+                                     const MatrixXd& tau_c) const {
   const int n = n_;
-  MatrixXd M;
-  VectorXd tau_c;
-  const VectorXd a = acceleration(theta, t, q, qd, &M, &tau_c);
+  const Eigen::Index N = q.rows();
   Samples s;
-  s.t = VectorXd::Zero(1);
-  s.q = q.transpose();
-  s.qd = qd.transpose();
-  s.qdd = a.transpose();
-  if (floating_) s.base = recordedAt(fb_base_, t);
-  const Eigen::LDLT<MatrixXd> ldlt(M);
+  s.t = t;
+  s.q = q;
+  s.qd = qd;
+  s.qdd = a;
+  if (floating_) {
+    s.base.resize(N, fb_base_.cols());
+    for (Eigen::Index k = 0; k < N; ++k) s.base.row(k) = recordedAt(fb_base_, t[k]);
+  }
+  MatrixXd dWn;
+  MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // N n x p at (q, qd, a)
+  if (floating_) {                                                     // the joint rows
+    w = jointRows(w);
+    if (eta_sens_) dWn = jointRows(dWn);
+  }
+  // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
+  for (const TorqueColumn& c : tcol_) {
+    w.col(c.base).setZero();
+    for (Eigen::Index k = 0; k < N; ++k) {
+      const double sq = exid::coulombSign(qd(k, c.joint)), tj = tau_c(k, c.joint);
+      w(k * n + c.joint, c.base) = c.kind == 1 ? -tj : std::abs(tj) * sq;
+    }
+  }
+  if (!eta_sens_) return w;
+  // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
+  const VectorXd rest = restOf(theta);
+  MatrixXd wn(w.rows(), theta.size() + eta_.size());
+  wn.leftCols(theta.size()) = w;
+  wn.rightCols(eta_.size()).setZero();
+  for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
+    const int b = nl_base_[static_cast<std::size_t>(l)];
+    if (b >= 0)
+      wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * rest[b];
+  }
+  return wn;
+}
+
+void ClosedLoop::linearParts(const VectorXd& theta, double t, const VectorXd& q, const VectorXd& qd,
+                             bool with_w, LinearParts* out) const {
+  const int n = n_;
+  MatrixXd& M = out->M;
+  VectorXd& tau_c = out->tau_c;
+  VectorXd& a = out->a;
+  a = acceleration(theta, t, q, qd, &M, &tau_c);
   VectorXd slope;
   delivered(theta, tau_c, qd, &slope);
   const VectorXd rest = restOf(theta);
-  if (B) {
-    MatrixXd dWn;
-    MatrixXd w = model_->designAt(s, eta_, eta_sens_ ? &dWn : nullptr);  // n x p at (q, qd, a)
-    if (floating_) {                                                     // the joint rows
-      w = jointRows(w);
-      if (eta_sens_) dWn = jointRows(dWn);
-    }
-    // The torque columns: M a + h = u(tau_c); d/dtheta of -(M a + h - u) = u's column, minus w's.
-    for (const TorqueColumn& c : tcol_) {
-      w.col(c.base).setZero();
-      const double sq = exid::coulombSign(qd[c.joint]);
-      w(c.joint, c.base) = c.kind == 1 ? -tau_c[c.joint] : std::abs(tau_c[c.joint]) * sq;
-    }
-    if (eta_sens_) {
-      // d(w theta)/d eta_k: the moved full columns that are base columns, times their theta
-      MatrixXd wn(n, theta.size() + eta_.size());
-      wn.leftCols(theta.size()) = w;
-      wn.rightCols(eta_.size()).setZero();
-      for (Eigen::Index l = 0; l < dWn.cols(); ++l) {
-        const int b = nl_base_[static_cast<std::size_t>(l)];
-        if (b >= 0)
-          wn.col(theta.size() + nl_param_[static_cast<std::size_t>(l)]) += dWn.col(l) * rest[b];
-      }
-      *B = -ldlt.solve(wn);
-    } else {
-      *B = -ldlt.solve(w);
-    }
-  }
+  if (with_w)
+    out->W = sensitivityRows(theta, VectorXd::Constant(1, t), q.transpose(), qd.transpose(),
+                             a.transpose(), tau_c.transpose());
   // d(w theta)_i / d(q, qd) at fixed a: the model's torque derivatives at theta when it gives
   // them, else the design's VJP with row i = theta (its part in w)
-  MatrixXd Tq(n, n), Tqd(n, n);
+  MatrixXd& Tq = out->Gq;
+  MatrixXd& Tqd = out->Gqd;
+  Tq.resize(n, n);
+  Tqd.resize(n, n);
   VectorXd tau;
   if (floating_) {
     // central differences of w(q, qd, a) theta - c(q, t) (a floating model gives no design
@@ -88,6 +102,11 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
           (vp[j] - vm[j]);
     }
   } else if (!model_->fullTorqueAt(q, qd, a, eta_, fullOf(theta), &tau, &Tq, &Tqd, nullptr)) {
+    Samples s;
+    s.t = VectorXd::Zero(1);
+    s.q = q.transpose();
+    s.qd = qd.transpose();
+    s.qdd = a.transpose();
     MatrixXd G = MatrixXd::Zero(n, theta.size());
     Samples grad;
     for (int i = 0; i < n; ++i) {
@@ -98,9 +117,19 @@ void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, c
       Tqd.row(i) = grad.qd.row(0);
     }
   }
-  // du/d(q, qd) = du/dtau_c dtau_c/d(q, qd) (sign(qd) has zero derivative)
-  *A_q = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kp_).asDiagonal()) - Tq));
-  *A_qd = ldlt.solve(MatrixXd(-MatrixXd(slope.cwiseProduct(Kd_).asDiagonal()) - Tqd));
+  // du/d(q, qd) = du/dtau_c dtau_c/d(q, qd) (sign(qd) has zero derivative): G = T + slope K
+  Tq.diagonal() += slope.cwiseProduct(Kp_);
+  Tqd.diagonal() += slope.cwiseProduct(Kd_);
+}
+
+void ClosedLoop::linearize(const VectorXd& theta, double t, const VectorXd& q, const VectorXd& qd,
+                           MatrixXd* A_q, MatrixXd* A_qd, MatrixXd* B) const {
+  LinearParts P;
+  linearParts(theta, t, q, qd, B != nullptr, &P);
+  const Eigen::LDLT<MatrixXd> ldlt(P.M);
+  if (B) *B = -ldlt.solve(P.W);
+  *A_q = -ldlt.solve(P.Gq);
+  *A_qd = -ldlt.solve(P.Gqd);
 }
 
 VectorXd ClosedLoop::baseRows(const VectorXd& theta, double t, const VectorXd& x, const MatrixXd* S,
@@ -258,27 +287,39 @@ void ClosedLoop::simulate(
 // Between steps S is read by the cubic Hermite interpolant of S and S' at the steps' ends.
 namespace {
 
+// A step's end: S and S' there (row-major: the products with n x n matrices run along rows of
+// p entries).
+using RowMatrix = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::RowMajor>;
 struct SensStep {
-  MatrixXd A_q, A_qd, B;  // at the step's end
-  MatrixXd S, Sd;         // S and S' there
+  RowMatrix S, Sd;
 };
 
-void sensDerivative(SensStep* e) {
-  const Eigen::Index n = e->A_q.rows();
-  e->Sd.resize(e->S.rows(), e->S.cols());
-  e->Sd.topRows(n) = e->S.bottomRows(n);
-  e->Sd.bottomRows(n).noalias() = e->A_q * e->S.topRows(n) + e->B;
-  e->Sd.bottomRows(n).noalias() += e->A_qd * e->S.bottomRows(n);
-}
-
-// (I - g J) X = R for X = [Xq; Xv]: Xq = Rq + g Xv, (I - g A_qd - g^2 A_q) Xv = Rv + g A_q Rq.
-MatrixXd solveShifted(const SensStep& e, double g, const MatrixXd& R) {
-  const Eigen::Index n = e.A_q.rows();
-  MatrixXd A = MatrixXd::Identity(n, n) - g * e.A_qd - (g * g) * e.A_q;
-  MatrixXd X(R.rows(), R.cols());
-  X.bottomRows(n) = A.partialPivLu().solve(R.bottomRows(n) + g * (e.A_q * R.topRows(n)));
-  X.topRows(n) = R.topRows(n) + g * X.bottomRows(n);
-  return X;
+// Y (+)= alpha A X for a small A (n x n) and X, Y n x p row-major: each row of Y is summed in
+// registers eight entries at a time over the n rows of X (contiguous; a coefficient-wise product
+// runs down X's strided columns, Eigen's blocked product packs its operands first).
+template <class XBlock>
+void rowProduct(double alpha, const MatrixXd& A, const XBlock& X, RowMatrix* Y, bool accumulate) {
+  const Eigen::Index n = A.rows(), m = A.cols(), p = X.cols();
+  if (!accumulate) Y->resize(n, p);
+  for (Eigen::Index i = 0; i < n; ++i) {
+    double* y = Y->row(i).data();
+    Eigen::Index c = 0;
+    for (; c + 8 <= p; c += 8) {
+      double acc[8];
+      for (int j = 0; j < 8; ++j) acc[j] = accumulate ? y[c + j] : 0.0;
+      for (Eigen::Index k = 0; k < m; ++k) {
+        const double a = alpha * A(i, k);
+        const double* x = X.row(k).data() + c;
+        for (int j = 0; j < 8; ++j) acc[j] += a * x[j];
+      }
+      for (int j = 0; j < 8; ++j) y[c + j] = acc[j];
+    }
+    for (; c < p; ++c) {
+      double acc = accumulate ? y[c] : 0.0;
+      for (Eigen::Index k = 0; k < m; ++k) acc += (alpha * A(i, k)) * X(k, c);
+      y[c] = acc;
+    }
+  }
 }
 
 // CVODES set up for the state from t0 (BDF, dense Newton with the exact Jacobian, silent: the
@@ -446,34 +487,81 @@ void ClosedLoop::sensitivitiesAlong(
             path.samples.rows() == 2 * n && path.samples.cols() == times.size(),
         who_ + ": sensitivitiesAlong: not the path of a whole simulation");
   SensStep cur, next;
-  MatrixXd S_prev, S_k;
-  cur.S = MatrixXd::Zero(2 * n, p);  // the start does not depend on theta
-  linearize(theta, path.t0, path.x0.head(n), path.x0.tail(n), &cur.A_q, &cur.A_qd, &cur.B);
-  sensDerivative(&cur);
+  RowMatrix S_prev, R0, rhs, Xv;
+  MatrixXd S_k;
+  // the start does not depend on theta: S = 0, S' = (0; B) = (0; -M^-1 W)
+  cur.S = RowMatrix::Zero(2 * n, p);
+  {
+    LinearParts P0;
+    linearParts(theta, path.t0, path.x0.head(n), path.x0.tail(n), true, &P0);
+    cur.Sd = RowMatrix::Zero(2 * n, p);
+    cur.Sd.bottomRows(n) = -Eigen::LDLT<MatrixXd>(P0.M).solve(P0.W);
+  }
   double tn = path.t0, h_prev = 0.0;
   Eigen::Index k = 0;
+  S_k = MatrixXd::Zero(2 * n, p);
   for (; k < times.size() && times[k] <= path.t0; ++k)
-    at_sample(static_cast<int>(k), path.samples.col(k), &cur.S);
+    at_sample(static_cast<int>(k), path.samples.col(k), &S_k);
   unsigned long steps = 0;
+  next.S.resize(2 * n, p);
+  next.Sd.resize(2 * n, p);
+  // The steps in blocks: each step's state part (M, G, a, the command), then the model's rows
+  // of the whole block in one call (its kernels take several samples at once).
+  constexpr std::size_t kBlock = 32;
+  std::vector<LinearParts> parts(kBlock);
+  MatrixXd Wb, qb, qdb, ab, cb;
+  VectorXd tb;
+  std::size_t block_start = 0, block_end = 0;
   for (std::size_t i = 0; i < path.t.size() && k < times.size(); ++i) {
     pollStop(&steps);
-    const double t1 = path.t[i], h = t1 - tn;
-    const Eigen::Map<const VectorXd> xe(path.x.data() + 2 * n * i, 2 * n);
-    linearize(theta, t1, xe.head(n), xe.tail(n), &next.A_q, &next.A_qd, &next.B);
-    MatrixXd R;
-    const double w = h_prev > 0.0 ? h / h_prev : 0.0;
-    if (w > 0.0 && w <= 2.0) {  // BDF2 with steps h_prev, h
-      const double c = (1 + w) * (1 + w) / (1 + 2 * w), d = w * w / (1 + 2 * w),
-                   beta = (1 + w) / (1 + 2 * w);
-      R = c * cur.S - d * S_prev;
-      R.bottomRows(n) += (beta * h) * next.B;
-      next.S = solveShifted(next, beta * h, R);
-    } else {  // backward Euler
-      R = cur.S;
-      R.bottomRows(n) += h * next.B;
-      next.S = solveShifted(next, h, R);
+    if (i == block_end) {
+      block_start = i;
+      block_end = std::min(path.t.size(), i + kBlock);
+      const Eigen::Index N = static_cast<Eigen::Index>(block_end - block_start);
+      qb.resize(N, n);
+      qdb.resize(N, n);
+      ab.resize(N, n);
+      cb.resize(N, n);
+      tb.resize(N);
+      for (std::size_t j = block_start; j < block_end; ++j) {
+        const Eigen::Index r = static_cast<Eigen::Index>(j - block_start);
+        const Eigen::Map<const VectorXd> xj(path.x.data() + 2 * n * j, 2 * n);
+        LinearParts& Pj = parts[j - block_start];
+        linearParts(theta, path.t[j], xj.head(n), xj.tail(n), false, &Pj);
+        tb[r] = path.t[j];
+        qb.row(r) = xj.head(n).transpose();
+        qdb.row(r) = xj.tail(n).transpose();
+        ab.row(r) = Pj.a.transpose();
+        cb.row(r) = Pj.tau_c.transpose();
+      }
+      Wb = sensitivityRows(theta, tb, qb, qdb, ab, cb);
     }
-    sensDerivative(&next);
+    const LinearParts& P = parts[i - block_start];
+    const auto W = Wb.middleRows(static_cast<Eigen::Index>(i - block_start) * n, n);
+    const double t1 = path.t[i], h = t1 - tn;
+    // S_1 = R0 + g f(S_1), f(S) = J S + B: BDF2 with steps h_prev, h (R0 = c S_0 - d S_-1,
+    // g = beta h), else backward Euler (R0 = S_0, g = h)
+    const double w = h_prev > 0.0 ? h / h_prev : 0.0;
+    double g = h;
+    if (w > 0.0 && w <= 2.0) {
+      const double c = (1 + w) * (1 + w) / (1 + 2 * w), d = w * w / (1 + 2 * w);
+      g = (1 + w) / (1 + 2 * w) * h;
+      R0 = c * cur.S - d * S_prev;
+    } else {
+      R0 = cur.S;
+    }
+    // With M: S_1v = R0v + g M^-1 (-Gq S_1q - Gqd S_1v - W) and S_1q = R0q + g S_1v, so
+    // (M + g Gqd + g^2 Gq) S_1v = M R0v - g (W + Gq R0q): one n x n solve, no M^-1 W.
+    const MatrixXd Kg = P.M + g * P.Gqd + (g * g) * P.Gq;
+    rhs = -g * W;
+    rowProduct(1.0, P.M, R0.bottomRows(n), &rhs, true);
+    rowProduct(-g, P.Gq, R0.topRows(n), &rhs, true);
+    rowProduct(1.0, Kg.partialPivLu().inverse(), rhs, &Xv, false);
+    next.S.topRows(n) = R0.topRows(n) + g * Xv;
+    next.S.bottomRows(n) = Xv;
+    // S' there from the formula itself: f(S_1) = (S_1 - R0) / g
+    next.Sd.topRows(n) = Xv;
+    next.Sd.bottomRows(n) = (Xv - R0.bottomRows(n)) / g;
     for (; k < times.size() && times[k] <= t1; ++k) {  // S between the steps' ends: Hermite
       const double tk = times[k];
       if (tk == t1) {
@@ -487,6 +575,8 @@ void ClosedLoop::sensitivitiesAlong(
     }
     S_prev.swap(cur.S);
     std::swap(cur, next);
+    if (next.S.rows() != 2 * n) next.S.resize(2 * n, p);
+    if (next.Sd.rows() != 2 * n) next.Sd.resize(2 * n, p);
     tn = t1;
     h_prev = h;
   }

@@ -207,6 +207,8 @@ class ClosedLoop {
   Eigen::VectorXd rec_t_;    // its time stamps
   Eigen::MatrixXd rec_tau_;  // and torques (K x n)
   Eigen::VectorXd recordedTorque(double t) const;
+  mutable Eigen::VectorXd rec_tl_;  // recordedTorque's scratch: the eight samples about t
+  mutable Eigen::MatrixXd rec_Xl_, rec_out_;
   // floating base: the recorded base motion (K x 9) and contact wrenches (K x 6C) at their
   // times, and the rows per sample of the model (the joint rows are the last n of them)
   bool floating_ = false;
@@ -241,9 +243,25 @@ class ClosedLoop {
   Eigen::VectorXd restOf(const Eigen::VectorXd& theta) const;
   /// The full parameters of restOf(theta): its base columns' entries, zero elsewhere (the model's
   /// rows times it are the rows in base columns times restOf(theta)).
-  Eigen::VectorXd fullOf(const Eigen::VectorXd& theta) const;
+  const Eigen::VectorXd& fullOf(const Eigen::VectorXd& theta) const;
+  mutable Eigen::VectorXd full_key_, full_phi_;  // fullOf's last theta and its answer
   Eigen::VectorXd delivered(const Eigen::VectorXd& theta, const Eigen::VectorXd& tau_c,
                             const Eigen::VectorXd& qd, Eigen::VectorXd* slope) const;
+  // The linearisation before its solves with M: A_q = -M^-1 Gq, A_qd = -M^-1 Gqd, B = -M^-1 W
+  // (G = d(w theta)/d(q, qd) at fixed a plus the command's slope times Kp, Kd; W = w with the
+  // torque columns' and, with eta's sensitivities, eta's columns: linearize()).
+  // a and tau_c: the loop's acceleration and command there.
+  struct LinearParts {
+    Eigen::MatrixXd M, Gq, Gqd, W;
+    Eigen::VectorXd a, tau_c;
+  };
+  void linearParts(const Eigen::VectorXd& theta, double t, const Eigen::VectorXd& q,
+                   const Eigen::VectorXd& qd, bool with_w, LinearParts* out) const;
+  // W of several states at once (one per row of q, qd, a, the commands tau_c; times t): n rows
+  // each, the model's rows of all of them from one call.
+  Eigen::MatrixXd sensitivityRows(const Eigen::VectorXd& theta, const Eigen::VectorXd& t,
+                                  const Eigen::MatrixXd& q, const Eigen::MatrixXd& qd,
+                                  const Eigen::MatrixXd& a, const Eigen::MatrixXd& tau_c) const;
 };
 
 }  // namespace exid::estimators
