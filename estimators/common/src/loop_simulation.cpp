@@ -284,7 +284,9 @@ void ClosedLoop::simulate(
 // 2n x p matrix, by the variable-step BDF2 formula (backward Euler on a first step and where a
 // step grows more than twice: BDF2's stability bound is 1 + sqrt 2), both L-stable: the loop's
 // fast modes (the friction's slope through a light link) are damped as they are, at any step.
-// Between steps S is read by the cubic Hermite interpolant of S and S' at the steps' ends.
+// Between steps S is read by the cubic Hermite interpolant of S and S' at the steps' ends. Each
+// step is solved multiplied through by M (no M^-1 W: sensitivitiesAlong), and S' at its end is
+// the formula's own (S - R0) / g.
 namespace {
 
 // A step's end: S and S' there (row-major: the products with n x n matrices run along rows of
