@@ -38,6 +38,8 @@
 namespace {
 
 using exid::optimizers::Limits;
+using exid::optimizers::PassEnd;
+using exid::optimizers::passEndText;
 using exid::optimizers::Tracker;
 
 class AdjointGradient final : public exid::Optimizer {
@@ -246,25 +248,6 @@ class AdjointGradient final : public exid::Optimizer {
     return qr.rank() >
            (r0 > 0 ? Eigen::ColPivHouseholderQR<Eigen::MatrixXd>(A->topRows(r0).transpose()).rank()
                    : 0);
-  }
-
-  // How a pass of innerSolve ended (pass_end_). Only Stationary passed the first-order test.
-  enum class PassEnd { Running, Stationary, NoDecrease, TinyDecrease, NotFinite };
-  static const char* passEndText(PassEnd e) {
-    switch (e) {
-      case PassEnd::Running:
-        return "iterations or budget ran out";
-      case PassEnd::Stationary:
-        return "stationary: max|projected gradient| <= gtol max(1, |merit|)";
-      case PassEnd::NoDecrease:
-        return "no decrease along the search direction (projected gradient above gtol)";
-      case PassEnd::TinyDecrease:
-        return "a step decreased the merit by less than 1e-12 relative (projected gradient "
-               "above gtol)";
-      case PassEnd::NotFinite:
-        return "the merit is not finite at the pass's start";
-    }
-    return "";
   }
 
   // One pass of at most inner_ iterations on the current merit. Returns true when the pass ended

@@ -50,6 +50,9 @@
 
 namespace {
 
+using exid::optimizers::PassEnd;
+using exid::optimizers::passEndText;
+
 // ---------------------------------------------------------------- the trajectory in time
 /// The trajectory as a function of time, through the Trajectory interface (a trajectory whose
 /// specs() say `continuous`: evaluateAt, vjpAt). The moving joints are the ODE's state; the held
@@ -501,6 +504,8 @@ class SundialsOptimizer final : public exid::Optimizer {
                                    true));
     p.push_back(exid::param_double(
         "ftol_rel", 1e-7, "", "stop when a pass improves J by less than this (relative)", 0.0));
+    p.push_back(exid::param_double(
+        "gtol", 1e-12, "", "inner stop: max|projected gradient| <= gtol max(1, |merit|)", 0.0));
     p.push_back(
         exid::param_int("checkpoint_steps", 200, "CVODES adjoint: steps between checkpoints", 1.0));
     p.push_back(
@@ -522,6 +527,7 @@ class SundialsOptimizer final : public exid::Optimizer {
         gain_(p.getDouble("step_gain")),
         rho_rel_(p.getDouble("penalty_weight")),
         ftol_(p.getDouble("ftol_rel")),
+        gtol_(p.getDouble("gtol")),
         check_grad_(p.getBool("check_gradient")),
         fd_step_(p.getDouble("fd_step")) {
     cs_.rtol = p.getDouble("rtol");
@@ -583,7 +589,11 @@ class SundialsOptimizer final : public exid::Optimizer {
         break;
       }
       if (feasible && converged && lim.size() == 0) {
-        reason = exid::StopReason::Converged;
+        // "converged (gtol)" says the projected gradient is within gtol: only where the pass
+        // ended on that test; a pass that ended without decrease (or below 1e-12 relative)
+        // ends the run too, on the ftol kind of test, and says so (adjoint_gradient's rule)
+        reason = pass_end_ == PassEnd::Stationary ? exid::StopReason::ConvergedGtol
+                                                  : exid::StopReason::ConvergedFtol;
         break;
       }
       if (feasible) prev_J = cur_J_;
@@ -616,6 +626,10 @@ class SundialsOptimizer final : public exid::Optimizer {
     r.details["cvodes_steps_backward"] = Json(static_cast<long long>(cc.stepsBackward()));
     r.details["rtol"] = cs_.rtol;
     r.details["rho"] = rho_;
+    // how the last pass ended, and its first-order test (the merit: J with the penalty)
+    r.details["last_pass_end"] = passEndText(pass_end_);
+    r.details["projected_gradient_max"] = pg_max_;
+    r.details["stationarity_tol"] = pg_tol_;
     if (check_grad_) r.details["gradient_check"] = gcheck;
     r.details["discrete_criterion_initial"] = problem.value(zs, nullptr);
     r.details["discrete_criterion_final"] = problem.value(r.z, nullptr);
@@ -713,21 +727,41 @@ class SundialsOptimizer final : public exid::Optimizer {
     return phi;
   }
 
+  // One pass of at most inner_ iterations on the current merit. Returns true when the pass ended
+  // (stationary, or no further decrease: pass_end_ says which, pg_max_ and pg_tol_ its last
+  // first-order test), false when its iterations ran out or a stop was asked for.
   bool inner(ContinuousCriterion& cc, exid::optimizers::Limits& lim, Eigen::VectorXd* zp,
              int* iters) {
     Eigen::VectorXd& z = *zp;
     Eigen::VectorXd g;
     double phi = merit(cc, lim, z, &g);
     cur_J_ = trial_J_;
+    pass_end_ = PassEnd::NotFinite;
+    pg_max_ = HUGE_VAL;
+    pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
     if (!std::isfinite(phi)) return true;
-    exid::optimizers::LbfgsMemory mem(mem_);
-    for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
-      if (stop()) return false;
+    // the gradient at z projected on the box, and its first-order test (pg_max_, pg_tol_)
+    const auto projected = [&]() {
       Eigen::VectorXd pg = g;
       for (Eigen::Index i = 0; i < z.size(); ++i)
         if ((z(i) <= lo_(i) && g(i) > 0) || (z(i) >= hi_(i) && g(i) < 0)) pg(i) = 0.0;
-      const double gmax = pg.cwiseAbs().maxCoeff();
-      if (gmax <= 1e-12 * std::max(1.0, std::abs(phi))) return true;
+      return pg;
+    };
+    const auto firstOrder = [&](const Eigen::VectorXd& pg) {
+      pg_max_ = pg.cwiseAbs().maxCoeff();
+      pg_tol_ = gtol_ * std::max(1.0, std::abs(phi));
+      return pg_max_ <= pg_tol_;  // false for a NaN
+    };
+    exid::optimizers::LbfgsMemory mem(mem_);
+    pass_end_ = PassEnd::Running;
+    for (int it = 0; it < inner_ && *iters < max_iter_; ++it) {
+      if (stop()) return false;
+      const Eigen::VectorXd pg = projected();
+      if (firstOrder(pg)) {
+        pass_end_ = PassEnd::Stationary;
+        return true;
+      }
+      const double gmax = pg_max_;
       Eigen::VectorXd d;
       double alpha = 1.0;
       if (mem.empty()) {
@@ -755,11 +789,18 @@ class SundialsOptimizer final : public exid::Optimizer {
         if (stop()) return false;
         alpha *= 0.5;
       }
-      if (!accepted) return true;
+      if (!accepted) {
+        pass_end_ = PassEnd::NoDecrease;  // (pg_max_: z's test above, not passed)
+        return true;
+      }
       ++*iters;
       cur_J_ = trial_J_;
-      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) return true;
+      if (exid::optimizers::takeStep(mem, z, g, phi, zn, gn, phin)) {
+        pass_end_ = firstOrder(projected()) ? PassEnd::Stationary : PassEnd::TinyDecrease;
+        return true;
+      }
     }
+    firstOrder(projected());
     return false;
   }
 
@@ -767,7 +808,7 @@ class SundialsOptimizer final : public exid::Optimizer {
   static constexpr double kGradientTolerance = 1e-4;
   exid::optimizers::Budget budget_;
   int max_iter_, inner_, mem_;
-  double gain_, rho_rel_, ftol_;
+  double gain_, rho_rel_, ftol_, gtol_;
   bool check_grad_;
   double fd_step_;
   CvodesSettings cs_;
@@ -780,6 +821,8 @@ class SundialsOptimizer final : public exid::Optimizer {
   double best_J_ = HUGE_VAL, best_inf_J_ = HUGE_VAL, best_inf_v_ = HUGE_VAL;
   Eigen::VectorXd best_z_, best_inf_z_;
   std::vector<double> ht_, hv_;
+  PassEnd pass_end_ = PassEnd::Running;
+  double pg_max_ = HUGE_VAL, pg_tol_ = 0.0;  // the last first-order test
 };
 
 }  // namespace

@@ -555,6 +555,51 @@ TEST(AdjointGradient, ConvergedGtolOnlyWhereTheProjectedGradientIsWithinGtol) {
   EXPECT_LT(kinked.iterations, 2000);  // ended by its pass, not by the iterations
 }
 
+// sundials says "converged (gtol)" on the same rule (before, every ending of its pass without
+// constraints was the generic "converged"). The real continuous criteria of the planar 2R,
+// without constraints (GivenProblem's bounds and constraints; the real trajectory, model and
+// criterion, which sundials integrates itself):
+// - frobenius_cond (smooth) with gtol 1e-3: its L-BFGS reaches the test and says "gtol";
+// - the same at the default gtol (1e-12 of the merit, below what CVODES's quadratures resolve):
+//   the line search stops first, "converged (ftol_rel)", the gradient above the tolerance;
+// - cond with gtol 1e-3: the line search stalls at a gradient of about 8 (cond is not smooth
+//   where singular values meet), which it called "converged" before: "converged (ftol_rel)",
+//   never "gtol".
+TEST(Sundials, ConvergedGtolOnlyWhereTheProjectedGradientIsWithinGtol) {
+  exid::RunContext ctx;
+  const auto run = [&](const std::string& crit, const std::string& gtol, bool stationary) {
+    XSetup s = make("planar2r", "fourier", kFourier, crit, "{}");
+    GivenProblem p(*s.problem, false);
+    const exid::OptimizerResult r =
+        exid_test::create<exid::Optimizer>(
+            "sundials", "{max_iterations: 400, inner_iterations: 400" + gtol + "}")
+            ->minimize(p, ctx);
+    ASSERT_TRUE(r.details.find("projected_gradient_max") && r.details.find("stationarity_tol") &&
+                r.details.find("last_pass_end"))
+        << r.details.dump();
+    const double pg = r.details.find("projected_gradient_max")->asDouble();
+    const double tol = r.details.find("stationarity_tol")->asDouble();
+    const std::string end = r.details.find("last_pass_end")->asString();
+    std::printf("[sundials] %s%s: %s, %d iterations, J %.6g -> %.6g, max|pg| %.3g, tol %.3g: %s\n",
+                crit.c_str(), gtol.c_str(), exid::toString(r.stop_reason).c_str(), r.iterations,
+                r.criterion_initial, r.criterion_final, pg, tol, end.c_str());
+    EXPECT_LT(r.criterion_final, r.criterion_initial);
+    EXPECT_LT(r.iterations, 400);  // ended by its pass, not by the iterations
+    if (stationary) {
+      EXPECT_EQ(r.stop_reason, exid::StopReason::ConvergedGtol) << end;
+      EXPECT_LE(pg, tol);
+      EXPECT_NE(end.find("stationary"), std::string::npos) << end;
+    } else {
+      EXPECT_EQ(r.stop_reason, exid::StopReason::ConvergedFtol) << end;
+      EXPECT_GT(pg, tol);
+      EXPECT_EQ(end.find("stationary"), std::string::npos) << end;
+    }
+  };
+  run("frobenius_cond", ", gtol: 1.0e-3", true);
+  run("frobenius_cond", "", false);
+  run("cond", ", gtol: 1.0e-3", false);
+}
+
 }  // namespace
 
 // NLopt's failure texts are said in exid's words, NLopt's own quoted, never as a bare

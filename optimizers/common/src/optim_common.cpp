@@ -295,6 +295,23 @@ bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& 
   return rel < 1e-12;
 }
 
+const char* passEndText(PassEnd e) {
+  switch (e) {
+    case PassEnd::Running:
+      return "iterations or budget ran out";
+    case PassEnd::Stationary:
+      return "stationary: max|projected gradient| <= gtol max(1, |merit|)";
+    case PassEnd::NoDecrease:
+      return "no decrease along the search direction (projected gradient above gtol)";
+    case PassEnd::TinyDecrease:
+      return "a step decreased the merit by less than 1e-12 relative (projected gradient above "
+             "gtol)";
+    case PassEnd::NotFinite:
+      return "the merit is not finite at the pass's start";
+  }
+  return "";
+}
+
 std::string nloptFailureText(const std::string& what) {
   if (what.rfind("bug: more than iter SQP iterations", 0) == 0)
     return fmt::format(

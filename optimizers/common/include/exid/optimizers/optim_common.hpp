@@ -126,6 +126,13 @@ class LbfgsMemory {
 bool takeStep(LbfgsMemory& mem, Eigen::VectorXd& z, Eigen::VectorXd& g, double& phi,
               const Eigen::VectorXd& zn, const Eigen::VectorXd& gn, double phin);
 
+/// How an inner pass of the projected L-BFGS optimisers (adjoint_gradient, sundials) ended:
+/// only Stationary passed the first-order test (max|projected gradient| <= gtol max(1, |merit|)).
+/// Their results say "converged (gtol)" after a Stationary pass alone.
+enum class PassEnd { Running, Stationary, NoDecrease, TinyDecrease, NotFinite };
+/// The text of a PassEnd (the results' details.last_pass_end).
+const char* passEndText(PassEnd e);
+
 Eigen::VectorXd perturbedStart(ExcitationProblem& p, Limits& lim, const Eigen::VectorXd& z0,
                                double perturbation, std::mt19937_64& rng);
 
