@@ -72,7 +72,6 @@ void ClosedLoop::linearParts(const VectorXd& theta, double t, const VectorXd& q,
   a = acceleration(theta, t, q, qd, &M, &tau_c);
   VectorXd slope;
   delivered(theta, tau_c, qd, &slope);
-  const VectorXd rest = restOf(theta);
   if (with_w)
     out->W = sensitivityRows(theta, VectorXd::Constant(1, t), q.transpose(), qd.transpose(),
                              a.transpose(), tau_c.transpose());
@@ -86,6 +85,7 @@ void ClosedLoop::linearParts(const VectorXd& theta, double t, const VectorXd& q,
   if (floating_) {
     // central differences of w(q, qd, a) theta - c(q, t) (a floating model gives no design
     // VJP): steps of cbrt(eps) times the coordinate's size, error ~1e-10 of the torque
+    const VectorXd rest = restOf(theta);
     const double e = std::cbrt(2.2e-16);
     for (int j = 0; j < n; ++j) {
       VectorXd qp = q, qm = q, vp = qd, vm = qd;
@@ -107,6 +107,7 @@ void ClosedLoop::linearParts(const VectorXd& theta, double t, const VectorXd& q,
     s.q = q.transpose();
     s.qd = qd.transpose();
     s.qdd = a.transpose();
+    const VectorXd rest = restOf(theta);
     MatrixXd G = MatrixXd::Zero(n, theta.size());
     Samples grad;
     for (int i = 0; i < n; ++i) {
