@@ -219,3 +219,67 @@ TEST(BaseParameters, APreferredColumnThatIsDependentOrUnknownIsAnErrorNamingIt) 
   const std::string twice = message({"ZZ1", "ZZ1"});
   EXPECT_NE(twice.find("'ZZ1' is named twice"), std::string::npos) << twice;
 }
+
+// Rule::Pivoted keeps the columns of a QR with column pivoting on the unit-norm columns: on a
+// stack without close residuals, the set Eigen's ColPivHouseholderQR (norm downdating, an
+// independent implementation) keeps; and where a later column's residual is larger than an
+// earlier one's by rounding alone, the earlier one.
+TEST(BaseParameters, PivotedRuleKeepsTheColumnPivotedQrsColumns) {
+  std::mt19937 rng(46);
+  // Rank 7 in 12 columns of very different scales.
+  auto randomMatrix = [&](int r, int c) {
+    Eigen::MatrixXd M(r, c);
+    for (int k = 0; k < c; ++k) M.col(k) = randomVec(rng, r, 1.0);
+    return M;
+  };
+  const Eigen::MatrixXd G = randomMatrix(200, 7), H = randomMatrix(7, 12);
+  Eigen::MatrixXd W = G * H;
+  for (int k = 0; k < W.cols(); ++k) W.col(k) *= std::pow(10.0, (k % 5) - 2);
+  const std::vector<int> order = pivotedBaseColumns(W);
+  ASSERT_EQ(order.size(), 7u);
+  // Every unit-norm column ties at the first step: the lowest index is kept. Eigen's QR picks
+  // by the rounding of its norms there, so that column is made larger by 1e-6 for it (which
+  // leaves every later residual as it was).
+  EXPECT_EQ(order[0], 0);
+  Eigen::MatrixXd A = W;
+  for (int k = 0; k < A.cols(); ++k) A.col(k).normalize();
+  A.col(0) *= 1.0 + 1e-6;
+  const Eigen::ColPivHouseholderQR<Eigen::MatrixXd> qr(A);
+  for (int k = 0; k < 7; ++k) EXPECT_EQ(order[k], qr.colsPermutation().indices()[k]) << k;
+
+  // Where the rules differ: x, x + 1e-3 y, y. The natural order keeps the first two; pivoting
+  // keeps x, then y (residual 1 against 1e-3).
+  Eigen::MatrixXd D(50, 3);
+  D.col(0) = randomVec(rng, 50, 1.0);
+  D.col(2) = randomVec(rng, 50, 1.0);
+  D.col(2) -= D.col(0) * (D.col(0).dot(D.col(2)) / D.col(0).squaredNorm());
+  D.col(1) = D.col(0) + 1e-3 * D.col(2);
+  EXPECT_EQ(pivotedBaseColumns(D), (std::vector<int>{0, 2}));
+  BaseParameterOptions o;
+  o.rule = BaseParameterOptions::Rule::Pivoted;
+  const BaseParameters piv = computeBaseParameters(D, {"x", "x2", "y"}, o);
+  EXPECT_EQ(piv.independent, (std::vector<int>{0, 2}));
+  EXPECT_EQ(computeBaseParameters(D, {"x", "x2", "y"}).independent, (std::vector<int>{0, 1}));
+
+  // Equal residuals: a, then b + 1e-5 a and b. After a, the first's residual is 1 - 5e-11 of
+  // the second's: rounding's size, not structure. The lower index is kept.
+  Eigen::MatrixXd T(50, 3);
+  T.col(0) = randomVec(rng, 50, 1.0);
+  T.col(2) = randomVec(rng, 50, 1.0);
+  T.col(2) -= T.col(0) * (T.col(0).dot(T.col(2)) / T.col(0).squaredNorm());
+  T.col(2) *= T.col(0).norm() / T.col(2).norm();
+  T.col(1) = T.col(2) + 1e-5 * T.col(0);
+  EXPECT_EQ(pivotedBaseColumns(T), (std::vector<int>{0, 1}));
+  // ... and a real difference (1 - 5e-7) is not a tie.
+  T.col(1) = T.col(2) + 1e-3 * T.col(0);
+  EXPECT_EQ(pivotedBaseColumns(T), (std::vector<int>{0, 2}));
+
+  // The PUMA 560: 36 base parameters, exact, and with named columns it is an error.
+  const RobotModel puma = puma560Standard();
+  const Eigen::MatrixXd Wp = stack(puma, {}, 150, rng);
+  const BaseParameters bp = computeBaseParameters(Wp, parameterNames(puma, {}), o);
+  EXPECT_EQ(bp.rank(), 36);
+  checkExact(puma, {}, bp, rng);
+  o.preferred = {"ZZ1"};
+  EXPECT_THROW(computeBaseParameters(Wp, parameterNames(puma, {}), o), exid::Error);
+}

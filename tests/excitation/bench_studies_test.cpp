@@ -64,6 +64,9 @@ Outcome runBench(const std::string& file, double vcap, int starts = 0, int start
       exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
   auto model = exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type,
                                                                     cfg.models[0].params);
+  if (!cfg.base_columns.empty()) model->preferBaseColumns(cfg.base_columns);
+  if (cfg.base_columns_pivoted)
+    model->baseColumnRule(exid::BaseParameterOptions::Rule::Pivoted);
   model->bind(robot, ctx);
   const int n = robot->dof();
   exid::Samples s;

@@ -82,3 +82,36 @@ TEST(BaseColumns, ADependentOrUnknownColumnFailsTheModelStageNamingIt) {
     EXPECT_NE(m.find("base_columns: expected a non-empty list"), std::string::npos) << m;
   }
 }
+
+// `base_columns: pivoted`: the columns of a QR with column pivoting on unit-norm columns (the
+// rule of scipy.linalg.qr(pivoting=True) baselines). The same space and fit as the natural
+// order, other base columns, and the rule is part of the study.
+TEST(BaseColumns, PivotedRuleKeepsOtherColumnsAndTheFitIsTheSame) {
+  const exid::StudyResult nat = run("");
+  const exid::StudyResult piv = run("base_columns: pivoted\n");
+  ASSERT_TRUE(nat.ok) << nat.message;
+  ASSERT_TRUE(piv.ok) << piv.message;
+  const auto n0 = baseNames(nat), n1 = baseNames(piv);
+  EXPECT_EQ(n0.size(), n1.size());
+  EXPECT_NE(n0, n1) << ::testing::PrintToString(n1);
+  const double r0 = nat.headline.identification->residual_rms;
+  const double r1 = piv.headline.identification->residual_rms;
+  EXPECT_NEAR(r1, r0, 1e-9 * r0);
+  const std::string yaml = "robot: {type: planar2r}\nmodel: {type: differential}\n";
+  const auto c0 = exid::parseStudy(yaml, "a.yaml", exid_test::sourceDir(), exid_test::registry());
+  const auto c1 = exid::parseStudy(yaml + "base_columns: pivoted\n", "a.yaml",
+                                   exid_test::sourceDir(), exid_test::registry());
+  EXPECT_NE(c0.hash(), c1.hash());
+  EXPECT_NE(c1.resolvedYaml().find("base_columns: pivoted"), std::string::npos)
+      << c1.resolvedYaml();
+  // Another word is an error naming the key, its line and both forms.
+  try {
+    exid::parseStudy(yaml + "base_columns: pivot\n", "bad.yaml", exid_test::sourceDir(),
+                     exid_test::registry());
+    ADD_FAILURE() << "no error";
+  } catch (const exid::Error& e) {
+    const std::string m = e.what();
+    EXPECT_NE(m.find("bad.yaml:3"), std::string::npos) << m;
+    EXPECT_NE(m.find("or `pivoted`"), std::string::npos) << m;
+  }
+}

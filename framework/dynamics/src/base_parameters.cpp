@@ -131,9 +131,19 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
   check(static_cast<Eigen::Index>(names.size()) == W_stacked.cols(),
         "computeBaseParameters: " + std::to_string(names.size()) + " names for " +
             std::to_string(W_stacked.cols()) + " columns");
+  if (opt.rule == BaseParameterOptions::Rule::Pivoted) {
+    check(opt.preferred.empty(),
+          "base columns: named columns and the pivoted rule were both given (choose one)");
+    BaseParameterOptions o = opt;
+    o.rule = BaseParameterOptions::Rule::Natural;
+    for (const int k : pivotedBaseColumns(W_stacked, opt.tolerance))
+      o.preferred.push_back(names[static_cast<size_t>(k)]);
+    return preferredFirst(W_stacked, names, o);
+  }
   if (!opt.preferred.empty()) return preferredFirst(W_stacked, names, opt);
   return naturalOrder(W_stacked, names, opt);
 }
+
 
 namespace {
 
@@ -393,6 +403,47 @@ BaseParameters computeBaseParameters(
   for (int k = 0; k < samples; ++k)
     rows(k, W.middleRows(static_cast<Eigen::Index>(k) * rows_per_sample, rows_per_sample));
   return computeBaseParameters(W, names, opt);
+}
+
+std::vector<int> pivotedBaseColumns(const Eigen::MatrixXd& W_stacked, double tolerance) {
+  check(W_stacked.allFinite(),
+        "computeBaseParameters: the stacked regressor contains non-finite numbers");
+  check(tolerance > 0.0 && tolerance < 1.0, "computeBaseParameters: tolerance must be in (0, 1)");
+  bool triangular = false;
+  Eigen::MatrixXd A = compressedRows(W_stacked, &triangular);  // the same column norms as W
+  const Eigen::Index N = A.rows(), p = A.cols();
+  const Eigen::VectorXd norms = A.colwise().norm().transpose();
+  const double max_norm = p > 0 ? norms.maxCoeff() : 0.0;
+  std::vector<char> out(static_cast<size_t>(p), 0);  // zero, or kept already
+  for (Eigen::Index k = 0; k < p; ++k) {
+    out[static_cast<size_t>(k)] = !(norms[k] > tolerance * max_norm) || max_norm == 0.0;
+    if (!out[static_cast<size_t>(k)]) A.col(k) /= norms[k];
+  }
+  // Residual norms recomputed at every step (no downdating, whose rounding would decide the
+  // ties): O(N p) a step, O(p^3) on the compressed rows.
+  constexpr double kTie = 1e-9;
+  std::vector<int> order;
+  Eigen::VectorXd res(p), essential;
+  Eigen::VectorXd work(p);
+  double r00 = -1.0;
+  for (Eigen::Index r = 0; r < std::min(N, p); ++r) {
+    double best = 0.0;
+    for (Eigen::Index k = 0; k < p; ++k) {
+      res[k] = out[static_cast<size_t>(k)] ? -1.0 : A.col(k).tail(N - r).norm();
+      best = std::max(best, res[k]);
+    }
+    if (r00 < 0.0) r00 = best;
+    if (!(best > tolerance * r00)) break;
+    Eigen::Index pick = 0;
+    while (!(res[pick] >= best * (1.0 - kTie))) ++pick;
+    double tau = 0.0, beta = 0.0;
+    essential.resize(N - r - 1);
+    A.col(pick).tail(N - r).makeHouseholder(essential, tau, beta);
+    out[static_cast<size_t>(pick)] = 1;
+    order.push_back(static_cast<int>(pick));
+    A.bottomRows(N - r).applyHouseholderOnTheLeft(essential, tau, work.data());
+  }
+  return order;
 }
 
 }  // namespace exid

@@ -218,10 +218,14 @@ bool expandSplit(const YAML::Node& root, const fs::path& base_dir, const Registr
 // `base_columns:` (StudyConfig::base_columns).
 void parseBaseColumns(const YAML::Node& root, Problems& pr, StudyConfig& cfg) {
   if (const YAML::Node b = root["base_columns"]) {
-    if (!b.IsSequence() || b.size() == 0) {
+    if (b.IsScalar() && b.Scalar() == "pivoted") {
+      cfg.base_columns_pivoted = true;
+      if (!root["model"]) pr.add(b, "base_columns: needs a model section");
+    } else if (!b.IsSequence() || b.size() == 0) {
       pr.add(b,
              "base_columns: expected a non-empty list of full parameter names (e.g. [ZZ1, "
-             "XX2, MX2]); leave the key out for the natural order");
+             "XX2, MX2]) or `pivoted` (QR with column pivoting on unit-norm columns); leave the "
+             "key out for the natural order");
     } else {
       for (std::size_t i = 0; i < b.size(); ++i) {
         if (!b[i].IsScalar() || b[i].Scalar().empty())

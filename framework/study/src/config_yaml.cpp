@@ -144,6 +144,8 @@ std::string StudyConfig::resolvedYaml() const {
   }
   if (!base_columns.empty()) {
     e << YAML::Key << "base_columns" << YAML::Value << YAML::Flow << base_columns;
+  } else if (base_columns_pivoted) {
+    e << YAML::Key << "base_columns" << YAML::Value << "pivoted";
   }
 
   if (hasExcitation()) {
@@ -233,6 +235,7 @@ Json StudyConfig::resolvedJson() const {
     j["model"] = m;
   }
   if (!base_columns.empty()) j["base_columns"] = Json(base_columns);
+  if (base_columns_pivoted) j["base_columns"] = Json("pivoted");
   if (hasExcitation()) {
     j["excitation"]["trajectory"] = specJson(*trajectory);
     j["excitation"]["criterion"] = specJson(*criterion);

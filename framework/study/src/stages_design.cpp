@@ -62,6 +62,7 @@ ModelStageOut modelStage(const StageEnv& env, const RobotStageOut& robot_out) {
     }
   }
   if (!cfg.base_columns.empty()) model->preferBaseColumns(cfg.base_columns);
+  if (cfg.base_columns_pivoted) model->baseColumnRule(BaseParameterOptions::Rule::Pivoted);
   model->bind(robot, env.ctx);
   checkFinite(model->fullNominal(),
               fmt::format("model '{}': the robot's nominal parameter", model->pluginName()),

@@ -44,7 +44,22 @@ struct EXID_API BaseParameterOptions {
   /// lexicographically lowest set). The identifiable space is the same for any choice; the
   /// base columns, their regrouping and the unscaled cond(W) are not.
   std::vector<std::string> preferred;
+  /// How the independent columns are chosen when `preferred` is empty.
+  ///  - Natural: visited in their natural order (the lexicographically lowest set, above).
+  ///  - Pivoted: QR with column pivoting on the unit-norm columns (Businger-Golub): at each step
+  ///    the column with the largest residual on the columns already kept, the rule of
+  ///    scipy.linalg.qr(pivoting=True) baselines. Residuals within a relative 1e-9 of the
+  ///    largest are equal (structurally equal columns, whose order rounding would otherwise
+  ///    decide) and the lowest natural index is kept. The kept columns depend on the stack's
+  ///    samples wherever two residuals are close (docs/base_parameters.md). With `preferred`
+  ///    named, computeBaseParameters throws (the named columns are a choice of their own).
+  enum class Rule { Natural, Pivoted };
+  Rule rule = Rule::Natural;
 };
+
+/// The columns `Rule::Pivoted` keeps, in their pivot order (indices into the columns of W).
+EXID_API std::vector<int> pivotedBaseColumns(const Eigen::MatrixXd& W,
+                                             double tolerance = 1e-8);
 
 /// From a stacked full regressor and its column names.
 EXID_API BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,

@@ -73,6 +73,9 @@ class EXID_API ObservationModel : public PluginObject {
   void preferBaseColumns(std::vector<std::string> names) {
     base_options_.preferred = std::move(names);
   }
+  /// How bind() chooses the base columns when none are named (the study key `base_columns:
+  /// pivoted`; BaseParameterOptions::rule). Call before bind().
+  void baseColumnRule(BaseParameterOptions::Rule rule) { base_options_.rule = rule; }
   const Eigen::VectorXd& heldPositions() const { return held_; }
   const RobotModel& robot() const { return *robot_; }
   std::shared_ptr<const RobotModel> robotPtr() const { return robot_; }

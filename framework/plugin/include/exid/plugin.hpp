@@ -84,7 +84,7 @@ PluginInfo describePlugin() {
 extern "C" {
 
 /// Bump when the manifest layout or any interface in interfaces.hpp changes incompatibly.
-#define EXID_PLUGIN_ABI_VERSION 17
+#define EXID_PLUGIN_ABI_VERSION 18
 
 struct exid_build_fingerprint {
   const char* compiler;       // e.g. "GNU 12.2.0"

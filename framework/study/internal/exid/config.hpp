@@ -94,6 +94,9 @@ struct EXID_API StudyConfig {
   /// base_columns: full parameters the model keeps as base columns, in this order before the
   /// others (BaseParameterOptions::preferred; docs/base_parameters.md); empty: the natural order.
   std::vector<std::string> base_columns;
+  /// base_columns: pivoted (BaseParameterOptions::Rule::Pivoted): QR with column pivoting on the
+  /// unit-norm columns instead of the natural order; base_columns is then empty.
+  bool base_columns_pivoted = false;
   std::optional<PluginSpec> trajectory, criterion, optimizer;  // excitation (all or none)
   /// excitation.constraints (excitationConstraintParams(); every key has its default when the
   /// section is absent).
