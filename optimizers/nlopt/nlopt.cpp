@@ -372,6 +372,12 @@ class NloptOptimizer final : public exid::Optimizer {
     std::mt19937_64 rng(seed);
     exid::StopReason reason = exid::StopReason::Converged;
     bool stepped = false;  // a start's run that took a step (not "no progress")
+    // NLopt's result of the run whose point is returned (the last run that lowered the best
+    // value): the verdict names the test that ended it.
+    std::string best_end;
+    auto noteBest = [&](double before, const std::string& r) {
+      if (tr.bestValue() < before) best_end = noProgress(r) ? std::string("no progress") : nlopt_result_;
+    };
     int iterations = 0;
     exid::Json runs = exid::Json::array();
     const bool aggregated = cmode_ == "aggregated" && lim.size() > 0;
@@ -418,15 +424,19 @@ class NloptOptimizer final : public exid::Optimizer {
       RunEnd end{std::isfinite(W0) ? std::min(f_starts * W0, tr.elapsed() + cap * W0) : HUGE_VAL,
                  std::isfinite(C0) ? std::min(f_starts * C0, tr.cpuElapsed() + cap * C0) : HUGE_VAL,
                  1.0, eval_end};
+      double before = tr.bestValue();
       std::string r = run(problem, lim, tr, alg_, alg_name_, x0, end, &iterations,
                           aggregated ? ks_rho_ : 0.0, objective_);
+      noteBest(before, r);
       noteTimeCut(r);
       exid::Json run_info = exid::Json::object();
       run_info["start"] = s;
       run_info["result"] = r;
       if (isGlobal(alg_name_) && polish_ && !tr.shouldStop() && tr.hasFeasible()) {
+        before = tr.bestValue();
         r = run(problem, lim, tr, local_, local_name_, tr.best(), end, &iterations,
                 aggregated ? ks_rho_ : 0.0, polish_objective_);
+        noteBest(before, r);
         noteTimeCut(r);
         run_info["polish"] = r;
       }
@@ -449,19 +459,27 @@ class NloptOptimizer final : public exid::Optimizer {
                        std::isfinite(C0) ? f_mid * C0 : HUGE_VAL, 0.5};
       const RunEnd last{HUGE_VAL, HUGE_VAL, 1.0};
       exid::Json run_info = exid::Json::object();
+      double before = tr.bestValue();
       run_info["polish_sharper_ks"] =
           runOnce(problem, lim, tr, local_, local_name_, tr.best(), mid, &iterations, nullptr,
                   nullptr, 10.0 * ks_rho_, polish_objective_);
+      noteBest(before, run_info["polish_sharper_ks"].asString());
       noteTimeCut(run_info["polish_sharper_ks"].asString());
       if (!tr.shouldStop()) {
+        before = tr.bestValue();
         run_info["final_polish"] = runOnce(problem, lim, tr, local_, local_name_, tr.best(), last,
                                            &iterations, nullptr, nullptr, 0.0, polish_objective_);
+        noteBest(before, run_info["final_polish"].asString());
         noteTimeCut(run_info["final_polish"].asString());
       }
       run_info["best_so_far"] = tr.bestValue();
       run_info["cpu_s"] = tr.cpuElapsed();
       runs.push_back(run_info);
     }
+    // "converged" names NLopt's test that ended the run whose point is returned; that run cut by
+    // its share of the evaluations, ended on rounding or a failure, or no run that lowered the
+    // start's value, is not "converged".
+    if (reason == exid::StopReason::Converged) reason = verdictOf(best_end);
     if (tr.shouldStop()) reason = tr.stopCause();
     // A run cut by time (NLopt's own time limit, or a start's share of the time) makes the
     // result depend on the machine even when a later run converged: say so.
@@ -475,6 +493,8 @@ class NloptOptimizer final : public exid::Optimizer {
     res.details["objective"] = objective_;
     res.details["polish_objective"] = polish_objective_;
     res.details["runs"] = runs;
+    res.details["ending"] = best_end.empty() ? std::string("no run lowered the start's value")
+                                             : best_end;
     return res;
   }
 
@@ -655,6 +675,14 @@ class NloptOptimizer final : public exid::Optimizer {
       r = fmt::format("{}: NLopt's {} after one evaluation",
                       exid::toString(exid::StopReason::NoProgress), r);
     return r;
+  }
+
+  static exid::StopReason verdictOf(const std::string& ending) {
+    if (ending == "FTOL_REACHED") return exid::StopReason::ConvergedFtol;
+    if (ending == "XTOL_REACHED") return exid::StopReason::ConvergedXtol;
+    if (ending == "SUCCESS" || ending == "STOPVAL_REACHED") return exid::StopReason::Converged;
+    if (ending == "MAXEVAL_REACHED") return exid::StopReason::MaxEvaluations;
+    return exid::StopReason::Stalled;
   }
 
   static bool noProgress(const std::string& r) {

@@ -407,7 +407,9 @@ TEST(Optimizers, StopReasonTexts) {
       {StopReason::Deadline, "deadline"},
       {StopReason::Cancelled, "cancelled"},
       {StopReason::NoProgress,
-       "no progress (stopped at the start: its first search direction did not descend)"}};
+       "no progress (stopped at the start: its first search direction did not descend)"},
+      {StopReason::ConvergedXtol, "converged (xtol_rel)"},
+      {StopReason::Stalled, "stalled (no convergence test passed)"}};
   for (const auto& [r, text] : texts) {
     EXPECT_EQ(exid::toString(r), text);
     EXPECT_EQ(exid::stoppedByTime(r),
@@ -459,9 +461,38 @@ TEST(Nlopt, ConvergedOnlyAfterAStep) {
   const exid::OptimizerResult done =
       exid_test::create<exid::Optimizer>("nlopt", "{max_evaluations: 500, objective: log}")
           ->minimize(*s.problem, ctx);
-  EXPECT_EQ(done.stop_reason, exid::StopReason::Converged) << exid::toString(done.stop_reason);
+  EXPECT_TRUE(done.stop_reason == exid::StopReason::ConvergedFtol ||
+              done.stop_reason == exid::StopReason::ConvergedXtol)
+      << exid::toString(done.stop_reason);
   EXPECT_GT(done.evaluations, 2);
   EXPECT_LT(done.criterion_final, done.criterion_initial);
+}
+
+// nlopt's "converged" names the test NLopt ended the returned point's run on: "(ftol_rel)" where
+// J changed by less than ftol_rel, "(xtol_rel)" where z moved by less than xtol_rel. A run cut
+// by its share of the evaluations is not converged, though the budget is far from used (it said
+// the generic "converged" after any run that was not cut by the whole budget).
+TEST(Nlopt, ConvergedNamesTheTestThatEndedTheReturnedRun) {
+  exid::RunContext ctx;
+  ctx.seed = 1;
+  XSetup s = make("planar2r", "fourier", "{period_s: 4, harmonics: 2, sample_period_s: 0.05}");
+  auto run = [&](const std::string& params) {
+    return exid_test::create<exid::Optimizer>("nlopt", params)->minimize(*s.problem, ctx);
+  };
+  const exid::OptimizerResult f =
+      run("{max_evaluations: 500, objective: log, xtol_rel: 0, ftol_rel: 1e-3}");
+  EXPECT_EQ(f.stop_reason, exid::StopReason::ConvergedFtol) << exid::toString(f.stop_reason);
+  EXPECT_EQ(f.details.find("ending")->asString(), "FTOL_REACHED");
+  const exid::OptimizerResult x =
+      run("{max_evaluations: 500, objective: log, xtol_rel: 1e-2, ftol_rel: 0}");
+  EXPECT_EQ(x.stop_reason, exid::StopReason::ConvergedXtol) << exid::toString(x.stop_reason);
+  EXPECT_EQ(x.details.find("ending")->asString(), "XTOL_REACHED");
+  const exid::OptimizerResult cut =
+      run("{max_evaluations: 500, objective: log, starts: 2, start_evaluations: 6}");
+  EXPECT_LT(cut.evaluations, 500);
+  EXPECT_LT(cut.criterion_final, cut.criterion_initial);
+  EXPECT_EQ(cut.stop_reason, exid::StopReason::MaxEvaluations) << exid::toString(cut.stop_reason);
+  EXPECT_EQ(cut.details.find("ending")->asString(), "MAXEVAL_REACHED");
 }
 
 // A problem without constraints whose J is given (a wrapper of a real problem for its

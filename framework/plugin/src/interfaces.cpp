@@ -373,6 +373,10 @@ std::string toString(StopReason r) {
       return "deadline";
     case StopReason::Cancelled:
       return "cancelled";
+    case StopReason::ConvergedXtol:
+      return "converged (xtol_rel)";
+    case StopReason::Stalled:
+      return "stalled (no convergence test passed)";
     case StopReason::NoProgress:
       return "no progress (stopped at the start: its first search direction did not descend)";
   }

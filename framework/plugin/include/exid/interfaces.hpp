@@ -329,6 +329,9 @@ enum class StopReason {
   Cancelled,       // "cancelled"
   NoProgress,      // "no progress": every run ended at its start, claiming convergence without a
                    // step (NLopt's SLSQP when its first search direction does not descend)
+  ConvergedXtol,   // "converged (xtol_rel)": the last step changed z by less than xtol_rel
+  Stalled,         // "stalled": the run whose point is returned ended on none of the tests above
+                   // (NLopt's ROUNDOFF_LIMITED or a failure after steps)
 };
 EXID_API std::string toString(StopReason r);
 EXID_API std::ostream& operator<<(std::ostream& os, StopReason r);
