@@ -376,7 +376,8 @@ class NloptOptimizer final : public exid::Optimizer {
     // value): the verdict names the test that ended it.
     std::string best_end;
     auto noteBest = [&](double before, const std::string& r) {
-      if (tr.bestValue() < before) best_end = noProgress(r) ? std::string("no progress") : nlopt_result_;
+      if (tr.bestValue() < before)
+        best_end = noProgress(r) ? std::string("no progress") : nlopt_result_;
     };
     int iterations = 0;
     exid::Json runs = exid::Json::array();
@@ -493,8 +494,8 @@ class NloptOptimizer final : public exid::Optimizer {
     res.details["objective"] = objective_;
     res.details["polish_objective"] = polish_objective_;
     res.details["runs"] = runs;
-    res.details["ending"] = best_end.empty() ? std::string("no run lowered the start's value")
-                                             : best_end;
+    res.details["ending"] =
+        best_end.empty() ? std::string("no run lowered the start's value") : best_end;
     return res;
   }
 

@@ -29,6 +29,9 @@ fi
 cmake -S "$src/examples/out_of_tree_plugin" -B "$work/plugin" -DCMAKE_BUILD_TYPE=Release \
   -DCMAKE_PREFIX_PATH="$prefix" "${cxx[@]}" >/dev/null
 cmake --build "$work/plugin" --parallel "${CMAKE_BUILD_PARALLEL_LEVEL:-2}" >/dev/null
+# The plugins' Eigen products block as exid's own (EIGEN_NO_CPUID from exid::dynamics' interface):
+# their bits do not follow the CPU's cache sizes
+grep -rq -- "-DEIGEN_NO_CPUID" "$work/plugin" --include=flags.make
 lib=$(find "$work/plugin" -name 'libexid_plugin_a_optimal.so' | head -n 1)
 test -n "$lib"
 dir=$(dirname "$lib")

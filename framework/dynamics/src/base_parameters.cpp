@@ -144,7 +144,6 @@ BaseParameters computeBaseParameters(const Eigen::MatrixXd& W_stacked,
   return naturalOrder(W_stacked, names, opt);
 }
 
-
 namespace {
 
 // Cost for large chains (p = 14 n columns for n joints with drives): every step of naturalOrder

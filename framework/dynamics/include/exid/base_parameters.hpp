@@ -58,8 +58,7 @@ struct EXID_API BaseParameterOptions {
 };
 
 /// The columns `Rule::Pivoted` keeps, in their pivot order (indices into the columns of W).
-EXID_API std::vector<int> pivotedBaseColumns(const Eigen::MatrixXd& W,
-                                             double tolerance = 1e-8);
+EXID_API std::vector<int> pivotedBaseColumns(const Eigen::MatrixXd& W, double tolerance = 1e-8);
 
 /// From a stacked full regressor and its column names.
 EXID_API BaseParameters computeBaseParameters(const Eigen::MatrixXd& W,
