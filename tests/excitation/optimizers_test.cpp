@@ -500,8 +500,10 @@ TEST(Nlopt, ConvergedNamesTheTestThatEndedTheReturnedRun) {
 // - c_i), f smooth (x^2) or with a kink at the minimum (|x|).
 class GivenProblem : public exid::ExcitationProblem {
  public:
-  GivenProblem(exid::ExcitationProblem& real, bool kink) : real_(real), kink_(kink) {
-    c_ = real.initial().array() + 0.3;
+  // offset: the minimum c lies at the initial point plus offset in every coordinate
+  GivenProblem(exid::ExcitationProblem& real, bool kink, double offset = 0.3)
+      : real_(real), kink_(kink) {
+    c_ = real.initial().array() + offset;
     w_ = Eigen::VectorXd::LinSpaced(c_.size(), 1.0, 10.0);
   }
   int numVariables() const override { return real_.numVariables(); }
@@ -647,4 +649,25 @@ TEST(NloptWords, AFailureIsSaidInExidsWords) {
   EXPECT_EQ(other.rfind("stopped: NLopt failed (\"nlopt invalid argument\")", 0), 0u) << other;
   for (const std::string& t : {sqp, generic, other})
     EXPECT_EQ(t.find("failure: "), std::string::npos) << t;
+}
+
+// "stalled" where no run lowered the start's value though runs took steps: J's minimum is the
+// initial point itself; the first start ends there at once ("no progress"), the second, from a
+// perturbed point, steps towards it and ends above it. The point returned is the start, and no
+// convergence test ended a run that produced it: neither "converged" nor "no progress".
+TEST(Nlopt, StalledWhereNoRunLoweredTheStart) {
+  exid::RunContext ctx;
+  ctx.seed = 1;
+  XSetup s = make("planar2r", "fourier", "{period_s: 4, harmonics: 2, sample_period_s: 0.05}");
+  GivenProblem at_start(*s.problem, false, 0.0);
+  const exid::OptimizerResult r =
+      exid_test::create<exid::Optimizer>(
+          "nlopt",
+          "{max_evaluations: 500, starts: 2, start_mode: perturb, start_perturbation: 0.01}")
+          ->minimize(at_start, ctx);
+  EXPECT_EQ(r.stop_reason, exid::StopReason::Stalled)
+      << exid::toString(r.stop_reason) << " " << r.details.dump();
+  EXPECT_EQ(r.details.find("ending")->asString(), "no run lowered the start's value");
+  EXPECT_EQ(r.criterion_final, r.criterion_initial);
+  EXPECT_GT(r.evaluations, 3) << r.details.dump();  // the second start stepped
 }
