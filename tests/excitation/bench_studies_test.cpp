@@ -55,6 +55,21 @@ exid::Samples writtenTrajectory(const exid::CsvTable& T, int n) {
   return s;
 }
 
+// The study's model bound to its robot as the study binds it (seed, base columns).
+std::shared_ptr<exid::ObservationModel> boundModel(const exid::StudyConfig& cfg) {
+  exid::RunContext ctx;
+  ctx.seed = cfg.seed;
+  auto robot =
+      exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
+  std::shared_ptr<exid::ObservationModel> model =
+      exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type,
+                                                           cfg.models[0].params);
+  if (!cfg.base_columns.empty()) model->preferBaseColumns(cfg.base_columns);
+  if (cfg.base_columns_pivoted) model->baseColumnRule(exid::BaseParameterOptions::Rule::Pivoted);
+  model->bind(robot, ctx);
+  return model;
+}
+
 // pivoted: the study on `base_columns: pivoted` (the baselines' rule).
 Outcome runBench(const std::string& file, double vcap, int starts = 0, int start_evaluations = 0,
                  int max_evaluations = 0, const std::string& suffix = "", bool pivoted = false) {
@@ -88,23 +103,16 @@ Outcome runBench(const std::string& file, double vcap, int starts = 0, int start
     o.cpu_s = x->find("details")->find("cpu_s")->asDouble();
   // recompute from the CSV with a freshly bound model
   exid::CsvTable T = exid::readCsv(out / "trajectory_optimal.csv");
-  exid::RunContext ctx;
-  ctx.seed = cfg.seed;
-  auto robot =
-      exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
-  auto model = exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type,
-                                                                    cfg.models[0].params);
-  if (!cfg.base_columns.empty()) model->preferBaseColumns(cfg.base_columns);
-  if (cfg.base_columns_pivoted) model->baseColumnRule(exid::BaseParameterOptions::Rule::Pivoted);
-  model->bind(robot, ctx);
-  const int n = robot->dof();
+  const auto model = boundModel(cfg);
+  const exid::RobotModel& robot_model = model->robot();
+  const int n = robot_model.dof();
   const exid::Samples s = writtenTrajectory(T, n);
   EXPECT_EQ(s.size(), 100);
   o.cond = exid::conditionNumber(model->design(s));
   double v = 0;
   const double margin = cfg.trajectory->params.getDouble("position_margin_rad");
   for (int j = 0; j < n; ++j) {
-    const auto& L = robot->limits[static_cast<std::size_t>(j)];
+    const auto& L = robot_model.limits[static_cast<std::size_t>(j)];
     v = std::max(v, s.q.col(j).maxCoeff() - (L.q_max - margin));
     v = std::max(v, (L.q_min + margin) - s.q.col(j).minCoeff());
     if (L.qd_max < 1e299) v = std::max(v, s.qd.col(j).cwiseAbs().maxCoeff() - L.qd_max);
@@ -184,16 +192,9 @@ TEST(BenchStudies, Puma560FourierOnThePivotedColumns) {
   EXPECT_LE(o.violation, 1e-9);
   Outcome natural_cols;
   {
-    const exid::StudyConfig cfg =
+    const auto model = boundModel(
         exid::loadStudy(exid_test::sourceDir() / "examples" / "bench" / "puma560_fourier.yaml",
-                        exid_test::registry());
-    exid::RunContext ctx;
-    ctx.seed = cfg.seed;
-    auto robot =
-        exid_test::registry().create<exid::Robot>(cfg.robot->type, cfg.robot->params)->build(ctx);
-    auto model = exid_test::registry().create<exid::ObservationModel>(cfg.models[0].type,
-                                                                      cfg.models[0].params);
-    model->bind(robot, ctx);
+                        exid_test::registry()));
     const exid::CsvTable T =
         exid::readCsv(std::filesystem::temp_directory_path() /
                       "exid_bench_puma560_fourier_pivoted" / "trajectory_optimal.csv");
