@@ -75,20 +75,11 @@ def _build_tree() -> Path:
                     "-DEXID_BUILD_PYTHON=ON", f"-DPython3_EXECUTABLE={_interpreter()}",
                 ]
             )
-    _run(["cmake", "--build", str(build), "-j", os.environ.get("EXID_JOBS", "2"), "--target"]
-         + _installed_targets(build))
+    # exid_installed_parts (CMakeLists.txt): the program, the module and every plugin, not the
+    # tests and benchmarks of a full build tree, in one pass of make over the tree
+    _run(["cmake", "--build", str(build), "-j", os.environ.get("EXID_JOBS", "2"), "--target",
+          "exid_installed_parts"])
     return build
-
-
-def _installed_targets(build: Path) -> List[str]:
-    """What `cmake --install` installs: the program, the Python module and every plugin (the
-    libraries they link come with them), not the tests and benchmarks of a full build tree."""
-    text = subprocess.run(
-        ["cmake", "--build", str(build), "--target", "help"], check=True, capture_output=True,
-        text=True,
-    ).stdout
-    plugins = sorted(set(re.findall(r"\b(exid_plugin_[A-Za-z0-9_]+)\b", text)))
-    return ["exid", "exid_python"] + plugins
 
 
 def _soname(lib: Path) -> Optional[str]:
