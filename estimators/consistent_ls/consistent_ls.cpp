@@ -13,9 +13,7 @@
 // cross-validation or evidence, exid/estimators/prior_scale.hpp). See docs/consistent.md.
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <limits>

@@ -5,8 +5,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <nlopt.hpp>
 

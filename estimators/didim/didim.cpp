@@ -27,7 +27,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cmath>

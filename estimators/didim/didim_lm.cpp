@@ -3,7 +3,7 @@
 // starts on both sides of the first (see didim.cpp).
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 

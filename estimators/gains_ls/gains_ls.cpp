@@ -31,9 +31,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <map>

@@ -3,9 +3,7 @@
 // gains_ls.cpp).
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <map>
 #include <tuple>

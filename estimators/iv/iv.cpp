@@ -17,10 +17,7 @@
 // - h), tau_c = tau_ff(qr, qdr, qddr) + Kp (qr - q) + Kd (qdr - qd).
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/LU>
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cmath>

@@ -18,8 +18,7 @@
 // estimate is noise_std^2 P_K (the state model's, not a refit of sigma).
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 

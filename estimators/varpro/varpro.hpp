@@ -5,7 +5,7 @@
 #pragma once
 
 #include <Eigen/Core>
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <memory>
 #include <string>

@@ -3,8 +3,7 @@
 // the joint problem [W V] of the covariance (see varpro.cpp).
 #include <fmt/format.h>
 
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstring>

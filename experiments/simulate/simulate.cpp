@@ -23,10 +23,9 @@
 #include <fmt/ranges.h>
 #include <sundials/sundials_config.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <Eigen/Core>
 #include <Eigen/Geometry>
-#include <Eigen/LU>
 #include <chrono>
 #include <cmath>
 #include <initializer_list>

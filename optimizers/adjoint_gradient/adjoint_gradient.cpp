@@ -28,7 +28,7 @@
 // A dz = 0 of those samples (projected gradient, L-BFGS memory reset) for the rest of the pass.
 #include <fmt/format.h>
 
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 

@@ -9,7 +9,7 @@
 #include <fmt/format.h>
 #include <nlopt.h>
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <limits>

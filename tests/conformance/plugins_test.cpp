@@ -2,7 +2,7 @@
 // (none refused), declares well-formed parameters, and behaves as its kind promises.
 #include <gtest/gtest.h>
 
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <random>
 #include <set>
 #include <sstream>

@@ -3,7 +3,7 @@
 
 #include <gtest/gtest.h>
 
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <random>
 

@@ -5,7 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <random>
 #include <sstream>

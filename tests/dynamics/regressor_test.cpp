@@ -1,7 +1,7 @@
 // Torque regressor, RNEA, CRBA and forward dynamics against the independent reference.
 #include <gtest/gtest.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <cstring>
 #include <random>
 

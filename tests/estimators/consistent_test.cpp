@@ -6,8 +6,7 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include <Eigen/LU>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <array>
 #include <cmath>
 #include <cstdio>

@@ -3,8 +3,7 @@
 // relative tolerance (exid/estimators/rank.hpp).
 #include <gtest/gtest.h>
 
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 #include <cstring>

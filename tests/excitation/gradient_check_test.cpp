@@ -7,7 +7,7 @@
 
 #include <gtest/gtest.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <iostream>
 

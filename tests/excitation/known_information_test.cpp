@@ -5,7 +5,7 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <filesystem>
 #include <fstream>

@@ -2,7 +2,7 @@
 // finite differences; the optimisers reduce cond and return feasible points.
 #include <gtest/gtest.h>
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <cstdlib>

@@ -12,8 +12,7 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <filesystem>
 #include <random>

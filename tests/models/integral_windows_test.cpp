@@ -2,7 +2,7 @@
 // deviations for several window lengths side by side (printed), and the differential model on
 // the same data for reference. Asserts only what must hold: every estimate within 4 sigma of
 // the truth where the rows are independent (disjoint short windows, differential rows).
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <vector>
 

@@ -3,7 +3,7 @@
 // four-bar, the numerical rank for both); the DH YAML `closed_chain` keys and their errors.
 #include <gtest/gtest.h>
 
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 #include <fstream>

@@ -7,9 +7,8 @@
 // dependencies (scripts/install-deps.sh); without one its tests skip, naming the package.
 #include <gtest/gtest.h>
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
-#include <Eigen/LU>
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

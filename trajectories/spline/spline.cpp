@@ -12,7 +12,7 @@
 // a basis times z.
 #include <fmt/format.h>
 
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <random>
 

@@ -3,7 +3,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 

@@ -4,9 +4,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/Eigenvalues>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 
 #include "exid/error.hpp"

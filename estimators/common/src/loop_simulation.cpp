@@ -7,8 +7,7 @@
 #include <sunlinsol/sunlinsol_dense.h>
 #include <sunmatrix/sunmatrix_dense.h>
 
-#include <Eigen/Cholesky>
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <vector>
 

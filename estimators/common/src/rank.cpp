@@ -1,8 +1,7 @@
 // exid — the rank test of exid/estimators/rank.hpp.
 #include "exid/estimators/rank.hpp"
 
-#include <Eigen/QR>
-#include <Eigen/SVD>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 
 namespace exid::estimators {

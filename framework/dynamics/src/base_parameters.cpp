@@ -10,8 +10,7 @@
 // disagree (ill-conditioned stack) the pivoted set is used instead.
 #include "exid/base_parameters.hpp"
 
-#include <Eigen/Householder>
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>

@@ -4,7 +4,7 @@
 #include "exid/closed_chain.hpp"
 
 #include <Eigen/Geometry>
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <sstream>

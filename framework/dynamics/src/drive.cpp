@@ -1,7 +1,7 @@
 // exid — actuator-side regressor: rigid-body columns through the transmission plus drive columns.
 #include "exid/drive.hpp"
 
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <string>
 #include <vector>

@@ -6,7 +6,7 @@
 // rigid_body.hpp.
 #include "exid/dynamics.hpp"
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
 #include <cmath>
 #include <string>

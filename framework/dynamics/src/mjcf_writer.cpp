@@ -1,7 +1,7 @@
 // exid — RobotModel -> MJCF text (see mjcf_writer.hpp).
 #include "exid/mjcf_writer.hpp"
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>

@@ -2,7 +2,7 @@
 #include "model_text.hpp"
 
 #include <Eigen/Geometry>
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 

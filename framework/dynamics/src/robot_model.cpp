@@ -1,7 +1,7 @@
 // exid — RobotModel helpers: parameter names, validation, inertial conversions and checks.
 #include "exid/robot_model.hpp"
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <set>

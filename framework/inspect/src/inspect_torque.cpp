@@ -27,7 +27,7 @@
 
 #include <fmt/format.h>
 
-#include <Eigen/QR>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <map>

@@ -1,7 +1,7 @@
 // exid — the study-level prior (StudyConfig::prior) on a model's base parameters.
 #include <fmt/format.h>
 
-#include <Eigen/Cholesky>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <filesystem>

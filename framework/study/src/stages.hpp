@@ -13,7 +13,7 @@
 #include <stdio.h>
 #include <unistd.h>
 
-#include <Eigen/Eigenvalues>
+#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <atomic>
 #include <chrono>

@@ -6,7 +6,7 @@
 #include <fmt/format.h>
 
 #include <Eigen/Core>
-#include <Eigen/LU>
+#include "exid/eigen_instances.hpp"
 #include <cstdint>
 #include <string>
 #include <vector>
