@@ -1,7 +1,8 @@
 // An out-of-tree criterion: A-optimality, J = trace(M^-1) (the mean variance of the estimates
 // for unit noise). dJ/dM = -M^-2. Built with find_package(exid) + exid_add_plugin.
-#include <Eigen/Cholesky>
-
+// exid/eigen_instances.hpp in place of <Eigen/Cholesky>: the LLT of a MatrixXd is the one
+// libexid_dynamics compiled (docs/architecture.md, "Eigen's decompositions, compiled once").
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 

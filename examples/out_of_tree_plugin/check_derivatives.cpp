@@ -5,11 +5,11 @@
 // as exid loads them (the registry, from the folder given), so the libraries built here are the
 // ones checked. Last, the check is shown to catch a wrong dJ/dM. Registered as a ctest
 // (CMakeLists.txt): `ctest --test-dir build`. Exit 0 when every check passes.
-#include <Eigen/LU>
 #include <iostream>
 #include <memory>
 #include <string>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/exid.hpp"
 #include "exid/gradient_check.hpp"
 #include "exid/interfaces.hpp"
