@@ -1,5 +1,5 @@
 cmake_policy(SET CMP0057 NEW)  # if(... IN_LIST ...)
-# ctest base.eigen_instances: Eigen's dense decompositions of MatrixXd are compiled once
+# ctest unit.eigen_instances: Eigen's dense decompositions of MatrixXd are compiled once
 # (exid/eigen_instances.hpp) and stay so.
 #  1. No source of the project includes <Eigen/SVD>, <Eigen/QR>, <Eigen/Cholesky>, <Eigen/LU>,
 #     <Eigen/Eigenvalues>, <Eigen/Householder> or <Eigen/Dense> itself: it includes
