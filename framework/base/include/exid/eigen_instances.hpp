@@ -4,9 +4,11 @@
 // factors, the symmetric eigensolver) is instantiated once in libexid_dynamics
 // (framework/base/instances/) and declared here as an explicit instantiation, so a
 // file that uses them no longer instantiates and compiles them again. Measured with g++ 12 -O3
-// (docs/architecture.md, "Build time"): estimators/common/src/least_squares.cpp 42.7 s -> 17.5 s,
-// rank.cpp 25.5 s -> 2.1 s. The code is the same, compiled with the same flags as the files that
-// used to instantiate it: the same results, bit for bit.
+// one file at a time (docs/architecture.md, "Eigen's decompositions, compiled once"):
+// estimators/common/src/least_squares.cpp 42.7 s -> 17.5 s,
+// rank.cpp 25.5 s -> 2.1 s; a whole build, about 5 % of its compile CPU. The code is the same,
+// compiled with the same flags as the files that used to instantiate it: the same results, bit
+// for bit.
 //
 // Only the double, dynamic-size matrices are here: fixed-size decompositions (Matrix3d, ...) stay
 // inline, where the compiler unrolls them. Decompositions of expressions (e.g. `(A * B).ldlt()`
