@@ -13,7 +13,6 @@
 // cross-validation or evidence, exid/estimators/prior_scale.hpp). See docs/consistent.md.
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <limits>
@@ -23,6 +22,7 @@
 
 #include "consistent_problem.hpp"
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/estimators/consistent.hpp"

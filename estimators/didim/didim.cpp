@@ -27,12 +27,12 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 #include <utility>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid::didim {

@@ -3,13 +3,13 @@
 // starts on both sides of the first (see didim.cpp).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 
 #include "didim.hpp"
 #include "exid/delay.hpp"
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid::didim {

@@ -31,13 +31,13 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <map>
 #include <tuple>
 
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"

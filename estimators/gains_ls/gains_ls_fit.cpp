@@ -3,12 +3,12 @@
 // gains_ls.cpp).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <map>
 #include <tuple>
 
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "gains_ls.hpp"
 

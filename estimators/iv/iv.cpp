@@ -17,7 +17,6 @@
 // - h), tau_c = tau_ff(qr, qdr, qddr) + Kp (qr - q) + Kd (qdr - qd).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
@@ -25,6 +24,7 @@
 
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 #include "exid/estimators/common.hpp"

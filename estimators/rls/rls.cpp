@@ -18,10 +18,10 @@
 // estimate is noise_std^2 P_K (the state model's, not a refit of sigma).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"

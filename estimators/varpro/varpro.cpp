@@ -30,12 +30,12 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <chrono>
 #include <cmath>
 
 #include "exid/delay.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid::varpro {

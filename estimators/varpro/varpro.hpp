@@ -5,12 +5,12 @@
 #pragma once
 
 #include <Eigen/Core>
-#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <memory>
 #include <string>
 #include <vector>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/signal.hpp"

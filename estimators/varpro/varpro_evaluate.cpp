@@ -3,12 +3,12 @@
 // the joint problem [W V] of the covariance (see varpro.cpp).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstring>
 
 #include "exid/delay.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/rank.hpp"
 #include "varpro.hpp"

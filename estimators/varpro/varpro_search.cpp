@@ -3,11 +3,11 @@
 // lambda = log(eta) from each start (see varpro.cpp).
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <limits>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "varpro.hpp"
 

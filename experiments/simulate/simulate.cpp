@@ -23,7 +23,6 @@
 #include <fmt/ranges.h>
 #include <sundials/sundials_config.h>
 
-#include "exid/eigen_instances.hpp"
 #include <Eigen/Core>
 #include <Eigen/Geometry>
 #include <chrono>
@@ -37,6 +36,7 @@
 #include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/floating_base.hpp"
 #include "exid/interfaces.hpp"

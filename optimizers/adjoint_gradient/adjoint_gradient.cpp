@@ -28,10 +28,10 @@
 // A dz = 0 of those samples (projected gradient, L-BFGS memory reset) for the rest of the pass.
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/optimizers/optim_common.hpp"
 

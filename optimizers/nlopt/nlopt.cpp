@@ -9,13 +9,13 @@
 #include <fmt/format.h>
 #include <nlopt.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <nlopt.hpp>
 #include <random>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/fmath.hpp"
 #include "exid/optimizers/optim_common.hpp"

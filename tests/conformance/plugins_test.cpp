@@ -2,12 +2,12 @@
 // (none refused), declares well-formed parameters, and behaves as its kind promises.
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <random>
 #include <set>
 #include <sstream>
 
 #include "exid/config.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/registry.hpp"

@@ -3,7 +3,6 @@
 
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <random>
 
@@ -11,6 +10,7 @@
 #include "dyn_robots.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 using namespace exid;

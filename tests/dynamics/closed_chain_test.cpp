@@ -5,7 +5,6 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <random>
 #include <sstream>
@@ -13,6 +12,7 @@
 #include "dyn_reference.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 using namespace exid;

@@ -1,13 +1,13 @@
 // Torque regressor, RNEA, CRBA and forward dynamics against the independent reference.
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cstring>
 #include <random>
 
 #include "dyn_reference.hpp"
 #include "dyn_robots.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/isa.hpp"
 

@@ -6,7 +6,6 @@
 #include <sys/wait.h>
 #include <unistd.h>
 
-#include "exid/eigen_instances.hpp"
 #include <array>
 #include <cmath>
 #include <cstdio>
@@ -18,6 +17,7 @@
 #include "exid/config.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/prior_scale.hpp"
 #include "exid/io.hpp"

@@ -2,12 +2,12 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <random>
 
 #include "estimator_test_model.hpp"
 #include "exid/context.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid_test.hpp"

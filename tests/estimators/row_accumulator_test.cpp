@@ -3,13 +3,13 @@
 // relative tolerance (exid/estimators/rank.hpp).
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 #include <cstring>
 #include <random>
 
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 #include "exid/estimators/rank.hpp"

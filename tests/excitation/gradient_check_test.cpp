@@ -7,10 +7,10 @@
 
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <iostream>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
 #include "exid_test.hpp"

@@ -5,13 +5,13 @@
 #include <gtest/gtest.h>
 #include <unistd.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <random>
 
 #include "exid/config.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
 #include "exid/interfaces.hpp"

@@ -2,13 +2,13 @@
 // finite differences; the optimisers reduce cond and return feasible points.
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
 #include <filesystem>
 #include <random>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
 #include "exid/interfaces.hpp"

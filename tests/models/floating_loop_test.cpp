@@ -12,13 +12,13 @@
 #include <fmt/format.h>
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <filesystem>
 #include <random>
 #include <string>
 
 #include "closed_loop_test_util.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 #include "exid/floating_base.hpp"

@@ -2,10 +2,10 @@
 // deviations for several window lengths side by side (printed), and the differential model on
 // the same data for reference. Asserts only what must hold: every estimate within 4 sigma of
 // the truth where the rows are independent (disjoint short windows, differential rows).
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <vector>
 
+#include "exid/eigen_instances.hpp"
 #include "model_test_util.hpp"
 
 namespace {

@@ -3,7 +3,6 @@
 // four-bar, the numerical rank for both); the DH YAML `closed_chain` keys and their errors.
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -14,6 +13,7 @@
 #include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/robot_loaders.hpp"
 

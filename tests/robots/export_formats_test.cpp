@@ -7,7 +7,6 @@
 // dependencies (scripts/install-deps.sh); without one its tests skip, naming the package.
 #include <gtest/gtest.h>
 
-#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
@@ -22,6 +21,7 @@
 #include "exid/closed_chain.hpp"
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/mjcf_writer.hpp"
 #include "exid/robot_loaders.hpp"

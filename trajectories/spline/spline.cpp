@@ -12,10 +12,10 @@
 // a basis times z.
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <random>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/trajectories/traj_common.hpp"
 

@@ -3,7 +3,6 @@
 #include <fmt/format.h>
 
 #include "exid/eigen_instances.hpp"
-
 #include "exid/error.hpp"
 
 namespace exid::criteria {

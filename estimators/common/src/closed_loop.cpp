@@ -3,12 +3,12 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 
 #include "exid/delay.hpp"
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/floating_base.hpp"
 #include "exid/io.hpp"

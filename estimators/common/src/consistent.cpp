@@ -4,9 +4,9 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid::estimators {

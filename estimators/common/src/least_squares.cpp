@@ -1,13 +1,13 @@
 // Streaming QR / normal-equation accumulation and the rank-revealing least-squares solve.
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <numeric>
 
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/common.hpp"
 

@@ -7,11 +7,11 @@
 #include <sunlinsol/sunlinsol_dense.h>
 #include <sunmatrix/sunmatrix_dense.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <vector>
 
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/closed_loop.hpp"
 

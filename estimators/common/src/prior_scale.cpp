@@ -4,10 +4,10 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <limits>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/estimators/consistent.hpp"
 

@@ -1,8 +1,9 @@
 // exid — the rank test of exid/estimators/rank.hpp.
 #include "exid/estimators/rank.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
+
+#include "exid/eigen_instances.hpp"
 
 namespace exid::estimators {
 

@@ -10,11 +10,11 @@
 // disagree (ill-conditioned stack) the pivoted set is used instead.
 #include "exid/base_parameters.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid {

@@ -4,13 +4,13 @@
 #include "exid/closed_chain.hpp"
 
 #include <Eigen/Geometry>
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <sstream>
 #include <utility>
 #include <vector>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid {

@@ -1,12 +1,12 @@
 // exid — actuator-side regressor: rigid-body columns through the transmission plus drive columns.
 #include "exid/drive.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <string>
 #include <vector>
 
 #include "exid/closed_chain.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "internal.hpp"
 

@@ -6,12 +6,12 @@
 // rigid_body.hpp.
 #include "exid/dynamics.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
 #include <cmath>
 #include <string>
 #include <vector>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "internal.hpp"
 #include "kernel_table.hpp"

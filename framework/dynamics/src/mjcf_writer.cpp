@@ -1,13 +1,13 @@
 // exid — RobotModel -> MJCF text (see mjcf_writer.hpp).
 #include "exid/mjcf_writer.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <Eigen/Geometry>
 #include <algorithm>
 #include <cmath>
 #include <set>
 #include <sstream>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "model_text.hpp"
 

@@ -2,11 +2,11 @@
 #include "model_text.hpp"
 
 #include <Eigen/Geometry>
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 #include <cstdio>
 
 #include "exid/closed_chain.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid::detail {

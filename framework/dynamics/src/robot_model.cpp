@@ -1,13 +1,13 @@
 // exid — RobotModel helpers: parameter names, validation, inertial conversions and checks.
 #include "exid/robot_model.hpp"
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <set>
 #include <sstream>
 
 #include "exid/closed_chain.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid {

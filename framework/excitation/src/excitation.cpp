@@ -2,10 +2,10 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <cmath>
 
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid {

@@ -3,7 +3,6 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <future>
@@ -13,6 +12,7 @@
 
 #include "exid/drive.hpp"
 #include "exid/dynamics.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "inspect_torque.hpp"

@@ -27,13 +27,13 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <map>
 #include <memory>
 #include <numeric>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/inspect.hpp"
 
 namespace exid::inspect_torque {

@@ -2,12 +2,12 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <limits>
 #include <random>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 
 namespace exid {

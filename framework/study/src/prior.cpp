@@ -1,7 +1,6 @@
 // exid — the study-level prior (StudyConfig::prior) on a model's base parameters.
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <filesystem>
@@ -11,6 +10,7 @@
 
 #include "exid/base_parameters.hpp"
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/input_file.hpp"
 #include "exid/interfaces.hpp"

@@ -2,12 +2,12 @@
 
 #include <fmt/format.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <cmath>
 #include <fstream>
 #include <sstream>
 
+#include "exid/eigen_instances.hpp"
 #include "exid/io.hpp"
 #include "exid/runner.hpp"
 #include "figures.hpp"

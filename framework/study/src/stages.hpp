@@ -13,7 +13,6 @@
 #include <stdio.h>
 #include <unistd.h>
 
-#include "exid/eigen_instances.hpp"
 #include <algorithm>
 #include <atomic>
 #include <chrono>
@@ -31,6 +30,7 @@
 
 #include "exid/delay.hpp"
 #include "exid/drive.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/excitation.hpp"
 #include "exid/export.hpp"

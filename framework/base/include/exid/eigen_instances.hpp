@@ -41,7 +41,8 @@
   EXTERN template class EXID_API Eigen::PartialPivLU<Eigen::MatrixXd>;                             \
   EXTERN template class EXID_API Eigen::FullPivLU<Eigen::MatrixXd>;                                \
   EXTERN template EXID_API Eigen::LDLT<Eigen::MatrixXd>&                                           \
-  Eigen::LDLT<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(const Eigen::EigenBase<Eigen::MatrixXd>&);\
+  Eigen::LDLT<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(                                          \
+      const Eigen::EigenBase<Eigen::MatrixXd>&);                                                   \
   EXTERN template EXID_API Eigen::LLT<Eigen::MatrixXd>&                                            \
   Eigen::LLT<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(const Eigen::EigenBase<Eigen::MatrixXd>&); \
   EXTERN template EXID_API Eigen::ColPivHouseholderQR<Eigen::MatrixXd>&                            \
@@ -51,12 +52,12 @@
   Eigen::HouseholderQR<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(                                 \
       const Eigen::EigenBase<Eigen::MatrixXd>&);
 
-#define EXID_EIGEN_SPECTRAL(EXTERN)                                                                \
-  EXTERN template class EXID_API Eigen::JacobiSVD<Eigen::MatrixXd>;                                \
-  EXTERN template class EXID_API Eigen::BDCSVD<Eigen::MatrixXd>;                                   \
-  EXTERN template class EXID_API Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>;                   \
-  EXTERN template EXID_API Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>&                         \
-  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(                        \
+#define EXID_EIGEN_SPECTRAL(EXTERN)                                              \
+  EXTERN template class EXID_API Eigen::JacobiSVD<Eigen::MatrixXd>;              \
+  EXTERN template class EXID_API Eigen::BDCSVD<Eigen::MatrixXd>;                 \
+  EXTERN template class EXID_API Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>; \
+  EXTERN template EXID_API Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>&       \
+  Eigen::SelfAdjointEigenSolver<Eigen::MatrixXd>::compute<Eigen::MatrixXd>(      \
       const Eigen::EigenBase<Eigen::MatrixXd>&, int);
 
 #ifdef EXID_EIGEN_DEFINE_FACTORS

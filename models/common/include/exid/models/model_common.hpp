@@ -6,12 +6,12 @@
 #include <fmt/format.h>
 
 #include <Eigen/Core>
-#include "exid/eigen_instances.hpp"
 #include <cstdint>
 #include <string>
 #include <vector>
 
 #include "exid/data.hpp"
+#include "exid/eigen_instances.hpp"
 #include "exid/error.hpp"
 #include "exid/interfaces.hpp"
 #include "exid/json.hpp"
